@@ -1,1 +1,11 @@
+//! # sim-bridge
+//!
+//! Stands in for the robots' hardware: it publishes each robot's state every control tick
+//! and applies the torques that come back (DESIGN.md §2 steps 1 and 5).
+//!
+//! * [`plant`]: what is simulated (the [`plant::Plant`] trait).
+//! * [`lockstep`]: the lockstep loop over Zenoh: a tick advances only when every robot's
+//!   torques for it have arrived; a missing robot is named in a timeout error.
 
+pub mod lockstep;
+pub mod plant;

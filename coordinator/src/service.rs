@@ -1,0 +1,162 @@
+//! The coordinator service over Zenoh: membership, tick assembly, solving, publishing.
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use protocol::keys::{self, RobotTopic};
+use protocol::transport::{self, decode_sample, MemberEvent, Qos, TransportError, TypedPublisher};
+use protocol::{CoordinatorMode, CoordinatorStatus, DynamicsTerms, Header, TorqueCommand};
+use tokio::sync::watch;
+use zenoh::Session;
+
+use crate::assembly::{TickAssembler, TickOutcome};
+use crate::membership::Membership;
+use crate::TeamController;
+
+/// Settings of the coordinator service.
+#[derive(Debug, Clone)]
+pub struct CoordinatorConfig {
+    pub team: String,
+    /// How long a tick may wait for every member's terms before it is abandoned.
+    pub tick_deadline: Duration,
+}
+
+/// Counters of the service, returned when it stops.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct CoordinatorCounters {
+    pub ticks: u64,
+    pub commands_sent: u64,
+    pub deadline_misses: u64,
+    pub rejected_terms: u64,
+    pub controller_errors: u64,
+}
+
+/// Run the coordinator until `stop` turns true.
+pub async fn run(
+    session: &Session,
+    cfg: CoordinatorConfig,
+    mut controller: impl TeamController,
+    mut stop: watch::Receiver<bool>,
+) -> Result<CoordinatorCounters, TransportError> {
+    let dynamics = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Dynamics)?).await?;
+    let members_q = transport::watch_members(session, &cfg.team).await?;
+    let mut status_pub: TypedPublisher<CoordinatorStatus> =
+        TypedPublisher::declare(session, keys::coordinator_status(&cfg.team)?, Qos::Telemetry).await?;
+    let mut command_pubs: BTreeMap<String, TypedPublisher<TorqueCommand>> = BTreeMap::new();
+    tracing::info!(team = %cfg.team, controller = controller.name(), "coordinator running");
+
+    let mut members = Membership::default();
+    let mut assembler = TickAssembler::new(cfg.tick_deadline);
+    let mut counters = CoordinatorCounters::default();
+    let mut commands = Vec::new();
+    let mut status_tick = 0u64;
+    let mut housekeeping = tokio::time::interval(cfg.tick_deadline.max(Duration::from_millis(10)));
+    let mut detail = String::from("waiting for members");
+    loop {
+        let mut membership_changed = false;
+        let mut publish_status = false;
+        tokio::select! {
+            _ = stop.changed() => { if *stop.borrow() { break; } }
+            m = members_q.recv_async() => {
+                let Ok(sample) = m else { break };
+                if let Some(ev) = MemberEvent::from_sample(&sample) {
+                    membership_changed = members.apply(&ev);
+                    if let MemberEvent::Left(r) = &ev {
+                        command_pubs.remove(r);
+                    }
+                    detail = match &ev {
+                        MemberEvent::Joined(r) => format!("robot {r} joined"),
+                        MemberEvent::Left(r) => format!("robot {r} left"),
+                    };
+                }
+            }
+            d = dynamics.recv_async() => {
+                let Ok(sample) = d else { break };
+                let terms = match decode_sample::<DynamicsTerms>(&sample) {
+                    Ok(t) => t,
+                    Err(e) => {
+                        counters.rejected_terms += 1;
+                        tracing::warn!(key = %sample.key_expr(), "rejected dynamics terms: {e}");
+                        continue;
+                    }
+                };
+                match assembler.add(terms, &members) {
+                    TickOutcome::Complete(tick, terms) => {
+                        solve_and_publish(session, &cfg, &mut controller, tick, &terms, &mut commands, &mut command_pubs, &mut counters).await?;
+                        status_tick = tick;
+                    }
+                    TickOutcome::NotAMember(r) => {
+                        counters.rejected_terms += 1;
+                        tracing::warn!(robot = %r, "dynamics from a robot that is not a member (no liveliness token)");
+                    }
+                    TickOutcome::Stale(t) => tracing::debug!(tick = t, "late dynamics terms dropped"),
+                    TickOutcome::Pending => {}
+                }
+            }
+            _ = housekeeping.tick() => {
+                for (tick, missing) in assembler.expire(&members) {
+                    counters.deadline_misses += 1;
+                    tracing::warn!(tick, ?missing, "tick abandoned: terms missing at the deadline");
+                }
+                publish_status = true;
+            }
+        }
+        if membership_changed {
+            // A robot that left no longer holds up the ticks it had not sent.
+            for tick in assembler.pending_ticks() {
+                if let TickOutcome::Complete(t, terms) = assembler.try_complete(tick, &members) {
+                    solve_and_publish(session, &cfg, &mut controller, t, &terms, &mut commands, &mut command_pubs, &mut counters).await?;
+                    status_tick = t;
+                }
+            }
+        }
+        if membership_changed || publish_status {
+            let status = CoordinatorStatus {
+                header: Header::new(&cfg.team, None, status_tick, protocol::wall_clock_ns()),
+                mode: if members.is_empty() { CoordinatorMode::WaitingForMembers } else { CoordinatorMode::Running },
+                members: members.to_vec(),
+                ticks: counters.ticks,
+                commands_sent: counters.commands_sent,
+                deadline_misses: counters.deadline_misses,
+                fallbacks: 0,
+                detail: detail.clone(),
+            };
+            status_pub.put(&status).await?;
+        }
+    }
+    tracing::info!(?counters, "coordinator stopped");
+    Ok(counters)
+}
+
+#[allow(clippy::too_many_arguments)]
+async fn solve_and_publish(
+    session: &Session,
+    cfg: &CoordinatorConfig,
+    controller: &mut impl TeamController,
+    tick: u64,
+    terms: &[DynamicsTerms],
+    commands: &mut Vec<TorqueCommand>,
+    command_pubs: &mut BTreeMap<String, TypedPublisher<TorqueCommand>>,
+    counters: &mut CoordinatorCounters,
+) -> Result<(), TransportError> {
+    let started = Instant::now();
+    if let Err(e) = controller.solve(terms, commands) {
+        counters.controller_errors += 1;
+        tracing::error!(tick, "controller failed: {e}");
+        return Ok(());
+    }
+    for cmd in commands.iter() {
+        let robot = cmd.header.robot_id();
+        if !command_pubs.contains_key(robot) {
+            let key = keys::robot(&cfg.team, robot, RobotTopic::Command)?;
+            command_pubs.insert(robot.to_string(), TypedPublisher::declare(session, key, Qos::HotPath).await?);
+        }
+        let publisher = command_pubs.get_mut(robot).expect("declared above");
+        publisher.put(cmd).await?;
+        counters.commands_sent += 1;
+    }
+    counters.ticks += 1;
+    tracing::trace!(tick, us = started.elapsed().as_micros() as u64, "tick solved");
+    Ok(())
+}
+

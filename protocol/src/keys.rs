@@ -1,0 +1,130 @@
+//! Key expressions, built here and nowhere else.
+//!
+//! The tree (see the crate docs for who publishes what):
+//!
+//! ```text
+//! team/{team}/robot/{robot}/{state|dynamics|command|torque|status|description}
+//! team/{team}/member/{robot}                  liveliness tokens
+//! team/{team}/coordinator/{status|diagnostics}
+//! team/{team}/references
+//! team/{team}/perturbation
+//! ```
+
+use crate::{validate_id, ProtocolError};
+
+const ROOT: &str = "team";
+
+/// What a robot publishes or receives on its own sub-tree.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RobotTopic {
+    State,
+    Dynamics,
+    Command,
+    Torque,
+    Status,
+    Description,
+}
+
+impl RobotTopic {
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            RobotTopic::State => "state",
+            RobotTopic::Dynamics => "dynamics",
+            RobotTopic::Command => "command",
+            RobotTopic::Torque => "torque",
+            RobotTopic::Status => "status",
+            RobotTopic::Description => "description",
+        }
+    }
+}
+
+/// `team/{team}/robot/{robot}/{topic}`.
+pub fn robot(team: &str, robot: &str, topic: RobotTopic) -> Result<String, ProtocolError> {
+    validate_id("team", team)?;
+    validate_id("robot", robot)?;
+    Ok(format!("{ROOT}/{team}/robot/{robot}/{}", topic.as_str()))
+}
+
+/// `team/{team}/robot/*/{topic}`: every robot's topic.
+pub fn all_robots(team: &str, topic: RobotTopic) -> Result<String, ProtocolError> {
+    validate_id("team", team)?;
+    Ok(format!("{ROOT}/{team}/robot/*/{}", topic.as_str()))
+}
+
+/// `team/{team}/member/{robot}`: the liveliness token of a member.
+pub fn member(team: &str, robot: &str) -> Result<String, ProtocolError> {
+    validate_id("team", team)?;
+    validate_id("robot", robot)?;
+    Ok(format!("{ROOT}/{team}/member/{robot}"))
+}
+
+/// `team/{team}/member/*`: every member's liveliness token.
+pub fn all_members(team: &str) -> Result<String, ProtocolError> {
+    validate_id("team", team)?;
+    Ok(format!("{ROOT}/{team}/member/*"))
+}
+
+/// `team/{team}/coordinator/status`.
+pub fn coordinator_status(team: &str) -> Result<String, ProtocolError> {
+    validate_id("team", team)?;
+    Ok(format!("{ROOT}/{team}/coordinator/status"))
+}
+
+/// `team/{team}/coordinator/diagnostics`.
+pub fn diagnostics(team: &str) -> Result<String, ProtocolError> {
+    validate_id("team", team)?;
+    Ok(format!("{ROOT}/{team}/coordinator/diagnostics"))
+}
+
+/// `team/{team}/references`.
+pub fn references(team: &str) -> Result<String, ProtocolError> {
+    validate_id("team", team)?;
+    Ok(format!("{ROOT}/{team}/references"))
+}
+
+/// `team/{team}/perturbation`.
+pub fn perturbation(team: &str) -> Result<String, ProtocolError> {
+    validate_id("team", team)?;
+    Ok(format!("{ROOT}/{team}/perturbation"))
+}
+
+/// The robot id in a key of the form `team/{team}/robot/{robot}/...` or
+/// `team/{team}/member/{robot}`, if the key has that form.
+pub fn robot_of(key: &str) -> Option<&str> {
+    let mut parts = key.split('/');
+    if parts.next()? != ROOT {
+        return None;
+    }
+    let _team = parts.next()?;
+    match parts.next()? {
+        "robot" | "member" => {
+            let id = parts.next()?;
+            validate_id("robot", id).ok().map(|_| id)
+        }
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_have_the_documented_shape() {
+        assert_eq!(robot("t1", "r2", RobotTopic::Dynamics).unwrap(), "team/t1/robot/r2/dynamics");
+        assert_eq!(all_robots("t1", RobotTopic::State).unwrap(), "team/t1/robot/*/state");
+        assert_eq!(member("t1", "r2").unwrap(), "team/t1/member/r2");
+        assert_eq!(robot_of("team/t1/member/r2"), Some("r2"));
+        assert_eq!(robot_of("team/t1/robot/r9/command"), Some("r9"));
+        assert_eq!(robot_of("team/t1/coordinator/status"), None);
+        assert_eq!(robot_of("other/t1/robot/r9/command"), None);
+    }
+
+    #[test]
+    fn ids_that_would_break_the_tree_are_rejected() {
+        for bad in ["", "a/b", "*", "**", "a b", "r$1", &"x".repeat(65)] {
+            assert!(robot("t", bad, RobotTopic::State).is_err(), "{bad:?} accepted");
+            assert!(member(bad, "r").is_err(), "{bad:?} accepted as team");
+        }
+    }
+}

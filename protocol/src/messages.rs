@@ -1,0 +1,541 @@
+//! The messages. Every one starts with a [`Header`]; every one implements [`Validate`].
+//!
+//! Per-robot vectors of joints are in the robot's **velocity order** of actuated joints as its
+//! [`RobotDescription::joint_names`] lists them; generalized vectors (`nv` long) put the six
+//! base coordinates first (see [`crate::conventions`]).
+
+use serde::{Deserialize, Serialize};
+
+use crate::validate::{check_finite, check_len, check_rotation, check_unit_quaternion, validate_id, Validate};
+use crate::{Matrix, ProtocolError, PROTOCOL_VERSION};
+
+/// Carried by every message.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Header {
+    /// [`PROTOCOL_VERSION`] of the sender.
+    pub version: u16,
+    /// Team identifier.
+    pub team: String,
+    /// Robot identifier, where the message concerns one robot.
+    pub robot: Option<String>,
+    /// Control tick the message belongs to.
+    pub tick: u64,
+    /// Sender's clock when the message was made, nanoseconds (simulated or wall time; the
+    /// components of a team share one clock source, see the README).
+    pub stamp_ns: u64,
+}
+
+impl Header {
+    pub fn new(team: &str, robot: Option<&str>, tick: u64, stamp_ns: u64) -> Self {
+        Header {
+            version: PROTOCOL_VERSION,
+            team: team.to_string(),
+            robot: robot.map(str::to_string),
+            tick,
+            stamp_ns,
+        }
+    }
+
+    fn check(&self, needs_robot: bool) -> Result<(), ProtocolError> {
+        if self.version != PROTOCOL_VERSION {
+            return Err(ProtocolError::VersionMismatch { found: self.version, expected: PROTOCOL_VERSION });
+        }
+        validate_id("team", &self.team)?;
+        match (&self.robot, needs_robot) {
+            (Some(r), _) => validate_id("robot", r),
+            (None, true) => Err(ProtocolError::invalid("header.robot", "missing robot id")),
+            (None, false) => Ok(()),
+        }
+    }
+
+    /// The robot id; only call on messages whose validation requires one.
+    pub fn robot_id(&self) -> &str {
+        self.robot.as_deref().unwrap_or("")
+    }
+}
+
+/// A pose: position in the world and orientation `(w, x, y, z)`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Pose {
+    pub position: [f64; 3],
+    pub orientation: [f64; 4],
+}
+
+impl Pose {
+    pub const IDENTITY: Pose = Pose { position: [0.0; 3], orientation: [1.0, 0.0, 0.0, 0.0] };
+
+    fn check(&self, field: &str) -> Result<(), ProtocolError> {
+        check_finite(&format!("{field}.position"), &self.position)?;
+        check_unit_quaternion(&format!("{field}.orientation"), &self.orientation)
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// State source -> agent
+
+/// One robot's measured state at a tick (DESIGN.md §2 step 1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RobotState {
+    pub header: Header,
+    /// Base position (world) and orientation `(w, x, y, z)`.
+    pub base_pose: Pose,
+    /// Base twist `[v; omega]`, both in the base frame (the protocol's convention).
+    pub base_twist: [f64; 6],
+    /// Joint positions, velocity order.
+    pub joint_positions: Vec<f64>,
+    /// Joint velocities, velocity order.
+    pub joint_velocities: Vec<f64>,
+    /// Simulated (or hardware) time of the measurement, seconds.
+    pub time: f64,
+}
+
+impl Validate for RobotState {
+    fn validate(&self) -> Result<(), ProtocolError> {
+        self.header.check(true)?;
+        self.base_pose.check("base_pose")?;
+        check_finite("base_twist", &self.base_twist)?;
+        check_finite("joint_positions", &self.joint_positions)?;
+        check_len("joint_velocities", &self.joint_velocities, self.joint_positions.len())?;
+        check_finite("joint_velocities", &self.joint_velocities)?;
+        check_finite("time", &[self.time])
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Agent -> coordinator
+
+/// What a frame is for in the team problem.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum FrameRole {
+    /// A point foot in stance: 3 contact constraints.
+    StanceFoot,
+    /// A foot in swing: a 3-D position task.
+    SwingFoot,
+    /// The flat hand: 6 constraints when in grasp.
+    Hand,
+    /// The torso: a 6-D pose task.
+    Torso,
+}
+
+impl FrameRole {
+    /// Rows of this frame's Jacobian: 3 for point feet, 6 otherwise.
+    pub const fn dim(self) -> usize {
+        match self {
+            FrameRole::StanceFoot | FrameRole::SwingFoot => 3,
+            FrameRole::Hand | FrameRole::Torso => 6,
+        }
+    }
+}
+
+/// Kinematic terms of one frame: pose, Jacobian and `Jdot*v`, at the frame origin with
+/// world-aligned axes, rows `[linear; angular]` (only linear rows for point feet).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameTerms {
+    pub name: String,
+    pub role: FrameRole,
+    pub position: [f64; 3],
+    /// Rotation of the frame in the world, row-major.
+    pub rotation: [f64; 9],
+    /// `role.dim() x nv`.
+    pub jacobian: Matrix,
+    /// `role.dim()` entries: the frame's acceleration at zero generalized acceleration.
+    pub jdot_v: Vec<f64>,
+}
+
+/// A robot's dynamics terms at a tick (DESIGN.md §2 step 2).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DynamicsTerms {
+    pub header: Header,
+    /// Whether the first 6 generalized coordinates are an unactuated floating base
+    /// (the selection matrix S of the paper); the remaining `nv - 6` are actuated joints.
+    pub floating_base: bool,
+    /// Generalized velocity dimension (6 + joints for a floating base).
+    pub nv: u32,
+    /// Mass matrix `M(q)`, `nv x nv`.
+    pub mass_matrix: Matrix,
+    /// Bias `h(q, v) = C(q, v) v + g(q)`, `nv` entries.
+    pub bias: Vec<f64>,
+    /// The generalized velocity the terms were computed at, `nv` entries.
+    pub velocity: Vec<f64>,
+    /// The frames the team problem uses this tick: stance feet, swing feet, hand, torso.
+    pub frames: Vec<FrameTerms>,
+    /// Whether the hand is in the grasp (its 6 constraints are active).
+    pub hand_in_grasp: bool,
+    /// Tick of the state the terms were computed from.
+    pub state_tick: u64,
+}
+
+impl DynamicsTerms {
+    pub fn nv(&self) -> usize {
+        self.nv as usize
+    }
+
+    /// Number of actuated joints: `nv - 6` with a floating base, `nv` without.
+    pub fn actuated(&self) -> usize {
+        self.nv().saturating_sub(if self.floating_base { 6 } else { 0 })
+    }
+
+    /// Frames with the given role, in message order.
+    pub fn frames_with(&self, role: FrameRole) -> impl Iterator<Item = &FrameTerms> {
+        self.frames.iter().filter(move |f| f.role == role)
+    }
+}
+
+impl Validate for DynamicsTerms {
+    fn validate(&self) -> Result<(), ProtocolError> {
+        self.header.check(true)?;
+        let nv = self.nv();
+        if nv == 0 || (self.floating_base && nv <= 6) {
+            return Err(ProtocolError::invalid("nv", format!("{nv} degrees of freedom leave no actuated joint")));
+        }
+        self.mass_matrix.check("mass_matrix", Some(nv), Some(nv))?;
+        check_len("bias", &self.bias, nv)?;
+        check_finite("bias", &self.bias)?;
+        check_len("velocity", &self.velocity, nv)?;
+        check_finite("velocity", &self.velocity)?;
+        let mut hands = 0;
+        let mut torsos = 0;
+        for (i, f) in self.frames.iter().enumerate() {
+            let field = format!("frames[{i}]({})", f.name);
+            if f.name.is_empty() {
+                return Err(ProtocolError::invalid(field, "empty frame name"));
+            }
+            check_finite(&format!("{field}.position"), &f.position)?;
+            check_rotation(&format!("{field}.rotation"), &f.rotation)?;
+            f.jacobian.check(&format!("{field}.jacobian"), Some(f.role.dim()), Some(nv))?;
+            check_len(&format!("{field}.jdot_v"), &f.jdot_v, f.role.dim())?;
+            check_finite(&format!("{field}.jdot_v"), &f.jdot_v)?;
+            if self.frames[..i].iter().any(|g| g.name == f.name && g.role == f.role) {
+                return Err(ProtocolError::invalid(field, "frame listed twice"));
+            }
+            hands += (f.role == FrameRole::Hand) as usize;
+            torsos += (f.role == FrameRole::Torso) as usize;
+        }
+        if hands > 1 || torsos > 1 {
+            return Err(ProtocolError::invalid("frames", "at most one hand and one torso per robot"));
+        }
+        if self.hand_in_grasp && hands == 0 {
+            return Err(ProtocolError::invalid("hand_in_grasp", "hand in grasp but no hand frame sent"));
+        }
+        Ok(())
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Coordinator -> agent -> torque sink
+
+/// Joint torques for one robot's actuated joints, velocity order (DESIGN.md §2 step 3).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TorqueCommand {
+    pub header: Header,
+    /// One torque per actuated joint, N·m (or N for prismatic joints).
+    pub tau: Vec<f64>,
+}
+
+impl Validate for TorqueCommand {
+    fn validate(&self) -> Result<(), ProtocolError> {
+        self.header.check(true)?;
+        if self.tau.is_empty() {
+            return Err(ProtocolError::invalid("tau", "empty torque vector"));
+        }
+        check_finite("tau", &self.tau)
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Scenario runner -> coordinator
+
+/// Desired pose, twist and acceleration of a 6-D task (object, torso).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PoseReference {
+    pub pose: Pose,
+    /// `[v; omega]` in the world frame.
+    pub twist: [f64; 6],
+    /// `[a; alpha]` in the world frame.
+    pub acceleration: [f64; 6],
+}
+
+impl PoseReference {
+    fn check(&self, field: &str) -> Result<(), ProtocolError> {
+        self.pose.check(&format!("{field}.pose"))?;
+        check_finite(&format!("{field}.twist"), &self.twist)?;
+        check_finite(&format!("{field}.acceleration"), &self.acceleration)
+    }
+}
+
+/// Desired position, velocity and acceleration of a 3-D task (swing foot).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PointReference {
+    pub position: [f64; 3],
+    pub velocity: [f64; 3],
+    pub acceleration: [f64; 3],
+}
+
+/// A torso reference for one robot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TorsoReference {
+    pub robot: String,
+    pub reference: PoseReference,
+}
+
+/// A swing-foot reference for one robot's foot frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SwingFootReference {
+    pub robot: String,
+    pub frame: String,
+    pub reference: PointReference,
+}
+
+/// Task references for a tick: the object, each torso, each swing foot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TaskReferences {
+    pub header: Header,
+    pub object: Option<PoseReference>,
+    pub torsos: Vec<TorsoReference>,
+    pub swing_feet: Vec<SwingFootReference>,
+}
+
+impl Validate for TaskReferences {
+    fn validate(&self) -> Result<(), ProtocolError> {
+        self.header.check(false)?;
+        if let Some(o) = &self.object {
+            o.check("object")?;
+        }
+        for (i, t) in self.torsos.iter().enumerate() {
+            validate_id("robot", &t.robot)?;
+            t.reference.check(&format!("torsos[{i}]"))?;
+        }
+        for (i, s) in self.swing_feet.iter().enumerate() {
+            validate_id("robot", &s.robot)?;
+            let f = format!("swing_feet[{i}]");
+            check_finite(&format!("{f}.position"), &s.reference.position)?;
+            check_finite(&format!("{f}.velocity"), &s.reference.velocity)?;
+            check_finite(&format!("{f}.acceleration"), &s.reference.acceleration)?;
+        }
+        Ok(())
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Tools -> sim-bridge
+
+/// What an external wrench acts on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum PerturbationTarget {
+    /// The carried object, at its centre of mass.
+    Object,
+    /// A body of a robot, at the body's origin.
+    RobotBody { robot: String, body: String },
+}
+
+/// A timed external wrench `[force; moment]` in the world frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PerturbationRequest {
+    pub header: Header,
+    pub target: PerturbationTarget,
+    pub wrench: [f64; 6],
+    /// Simulated start time, s; `None` means as soon as received.
+    pub start: Option<f64>,
+    /// Duration, s (> 0).
+    pub duration: f64,
+}
+
+impl Validate for PerturbationRequest {
+    fn validate(&self) -> Result<(), ProtocolError> {
+        self.header.check(false)?;
+        if let PerturbationTarget::RobotBody { robot, body } = &self.target {
+            validate_id("robot", robot)?;
+            if body.is_empty() {
+                return Err(ProtocolError::invalid("target.body", "empty body name"));
+            }
+        }
+        check_finite("wrench", &self.wrench)?;
+        if let Some(s) = self.start {
+            check_finite("start", &[s])?;
+        }
+        if !(self.duration.is_finite() && self.duration > 0.0) {
+            return Err(ProtocolError::invalid("duration", format!("{} is not a positive duration", self.duration)));
+        }
+        Ok(())
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Status and diagnostics
+
+/// What the coordinator is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum CoordinatorMode {
+    /// Not all expected members are present.
+    WaitingForMembers,
+    /// Solving the team problem every tick.
+    Running,
+    /// The last tick used the fallback (see [`QpStatus`]).
+    Fallback,
+}
+
+/// Outcome of the contact-force QP of a tick.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum QpStatus {
+    Solved,
+    AlmostSolved,
+    Infeasible,
+    MaxIterations,
+    NumericalError,
+    /// No QP this tick (e.g. placeholder controller, or missing members).
+    NotRun,
+}
+
+/// The coordinator's status, published every tick.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CoordinatorStatus {
+    pub header: Header,
+    pub mode: CoordinatorMode,
+    /// Present members (liveliness), sorted.
+    pub members: Vec<String>,
+    /// Ticks completed, commands sent, ticks that missed their deadline, fallbacks used.
+    pub ticks: u64,
+    pub commands_sent: u64,
+    pub deadline_misses: u64,
+    pub fallbacks: u64,
+    /// Human-readable reason for the current mode.
+    pub detail: String,
+}
+
+impl Validate for CoordinatorStatus {
+    fn validate(&self) -> Result<(), ProtocolError> {
+        self.header.check(false)?;
+        self.members.iter().try_for_each(|m| validate_id("robot", m))
+    }
+}
+
+/// A predicted contact wrench of one contact of one robot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ContactWrench {
+    pub robot: String,
+    pub frame: String,
+    /// 3 entries (point foot force) or 6 (hand wrench `[f; m]`), world-aligned.
+    pub wrench: Vec<f64>,
+}
+
+/// Per-tick diagnostics of the team controller.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TickDiagnostics {
+    pub header: Header,
+    pub qp_status: QpStatus,
+    pub qp_iterations: u32,
+    pub qp_solve_us: f64,
+    pub assembly_us: f64,
+    pub total_us: f64,
+    /// Predicted real contact wrenches lambda (eq. relation_between_lambda_and_Fc).
+    pub contacts: Vec<ContactWrench>,
+    /// `|J_c v|`: how far the measured motion violates the contact constraints.
+    pub constraint_residual: f64,
+    /// Object pose inferred from the hands.
+    pub object_estimate: Option<Pose>,
+}
+
+impl Validate for TickDiagnostics {
+    fn validate(&self) -> Result<(), ProtocolError> {
+        self.header.check(false)?;
+        check_finite("timings", &[self.qp_solve_us, self.assembly_us, self.total_us, self.constraint_residual])?;
+        for (i, c) in self.contacts.iter().enumerate() {
+            validate_id("robot", &c.robot)?;
+            if c.wrench.len() != 3 && c.wrench.len() != 6 {
+                return Err(ProtocolError::dim(format!("contacts[{i}].wrench"), "3 or 6", c.wrench.len()));
+            }
+            check_finite(&format!("contacts[{i}].wrench"), &c.wrench)?;
+        }
+        if let Some(p) = &self.object_estimate {
+            p.check("object_estimate")?;
+        }
+        Ok(())
+    }
+}
+
+/// What a robot-agent is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum AgentMode {
+    /// No state received yet.
+    WaitingForState,
+    /// Applying the coordinator's commands.
+    Commanded,
+    /// No valid command in time: holding its posture locally.
+    SafeMode,
+}
+
+/// A robot-agent's status.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AgentStatus {
+    pub header: Header,
+    pub mode: AgentMode,
+    pub states_received: u64,
+    pub dynamics_published: u64,
+    pub commands_applied: u64,
+    pub commands_rejected: u64,
+    pub commands_clamped: u64,
+    pub safe_mode_entries: u64,
+    pub last_applied_tick: Option<u64>,
+    /// Time from state received to dynamics published, last tick, µs.
+    pub dynamics_latency_us: f64,
+    /// Time from dynamics published to command received, last tick, µs.
+    pub command_latency_us: f64,
+    /// Reason of the last rejection, if any.
+    pub last_rejection: Option<String>,
+}
+
+impl Validate for AgentStatus {
+    fn validate(&self) -> Result<(), ProtocolError> {
+        self.header.check(true)?;
+        check_finite("latencies", &[self.dynamics_latency_us, self.command_latency_us])
+    }
+}
+
+/// What the team needs to know of a robot, published once and on request.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RobotDescription {
+    pub header: Header,
+    /// Actuated joints in velocity order.
+    pub joint_names: Vec<String>,
+    /// Symmetric torque limit of each actuated joint, > 0.
+    pub torque_limits: Vec<f64>,
+    /// Whether the robot has a 6-DoF floating base (unactuated).
+    pub floating_base: bool,
+    pub nq: u32,
+    pub nv: u32,
+    pub foot_frames: Vec<String>,
+    pub hand_frame: String,
+    pub torso_frame: String,
+    /// Foot friction coefficient.
+    pub foot_mu: f64,
+    /// Hand friction coefficient, torsional friction coefficient xi and patch half-sizes
+    /// (delta_x, delta_y) of eq. moment_constraint.
+    pub hand_mu: f64,
+    pub hand_xi: f64,
+    pub hand_half_size: [f64; 2],
+    pub total_mass: f64,
+}
+
+impl Validate for RobotDescription {
+    fn validate(&self) -> Result<(), ProtocolError> {
+        self.header.check(true)?;
+        let n = self.joint_names.len();
+        check_len("torque_limits", &self.torque_limits, n)?;
+        check_finite("torque_limits", &self.torque_limits)?;
+        if let Some(i) = self.torque_limits.iter().position(|t| *t <= 0.0) {
+            return Err(ProtocolError::invalid(format!("torque_limits[{i}]"), "must be positive"));
+        }
+        let base = if self.floating_base { 6 } else { 0 };
+        if self.nv as usize != n + base {
+            return Err(ProtocolError::dim("nv", n + base, self.nv));
+        }
+        check_finite(
+            "contact parameters",
+            &[self.foot_mu, self.hand_mu, self.hand_xi, self.hand_half_size[0], self.hand_half_size[1], self.total_mass],
+        )?;
+        if self.foot_mu <= 0.0 || self.hand_mu <= 0.0 || self.hand_xi < 0.0 || self.hand_half_size.iter().any(|d| *d <= 0.0) {
+            return Err(ProtocolError::invalid("contact parameters", "friction and patch sizes must be positive"));
+        }
+        Ok(())
+    }
+}

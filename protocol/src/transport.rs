@@ -1,0 +1,324 @@
+//! The one place that opens a Zenoh session, and typed publishers and subscribers on it.
+//!
+//! A session comes from a Zenoh JSON5 configuration file (`--zenoh-config`), from flags
+//! (`--mode peer|client`, `--listen`, `--connect`), or from the safe single-machine default:
+//! peer mode, multicast scouting off, loopback TCP only. In the default topology one component
+//! (the [`Role::Hub`], normally the coordinator) listens on [`DEFAULT_ENDPOINT`] and the others
+//! ([`Role::Member`]) connect to it and retry until it is there; they listen on a random
+//! loopback port, and gossip lets peers meet and connect directly (peers do not route for each
+//! other). Across hosts, give members a routable `--listen` (e.g. `tcp/0.0.0.0:0`) or use a
+//! Zenoh router and client mode.
+//! Flags override the file; the file overrides the defaults.
+//!
+//! Hot-path messages (state, dynamics, command, torque) are published with
+//! [`Qos::HotPath`]: express (no batching), real-time priority, and congestion control
+//! `Block` so that a lockstep tick never loses a message. Status and diagnostics use
+//! [`Qos::Telemetry`]: data priority, dropped under congestion.
+
+use std::marker::PhantomData;
+use std::path::PathBuf;
+
+use thiserror::Error;
+use zenoh::pubsub::{Publisher, Subscriber};
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::sample::{Sample, SampleKind};
+use zenoh::Session;
+
+use crate::{decode, keys, Message, ProtocolError};
+
+/// The default rendezvous of a single-machine team.
+pub const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7447";
+
+/// Errors opening a session or talking on it.
+#[derive(Debug, Error)]
+pub enum TransportError {
+    #[error("cannot read Zenoh configuration {path}: {reason}")]
+    ConfigFile { path: PathBuf, reason: String },
+    #[error("invalid Zenoh setting {key} = {value}: {reason}")]
+    ConfigValue { key: String, value: String, reason: String },
+    #[error("cannot open the Zenoh session: {0}")]
+    Open(String),
+    #[error("Zenoh {op} on {key}: {reason}")]
+    Zenoh { op: &'static str, key: String, reason: String },
+    #[error(transparent)]
+    Protocol(#[from] ProtocolError),
+}
+
+/// Zenoh session mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Mode {
+    Peer,
+    Client,
+}
+
+/// Which side of the default topology a component takes when no endpoint is given.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// Listens on [`DEFAULT_ENDPOINT`].
+    Hub,
+    /// Connects to [`DEFAULT_ENDPOINT`].
+    Member,
+    /// Neither listens nor connects unless told to: every component in one process on one
+    /// session (the embedded mode).
+    Alone,
+}
+
+/// The Zenoh flags every binary shares.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct ZenohArgs {
+    /// Zenoh JSON5 configuration file (peer/client mode, endpoints, TLS, access control).
+    /// The flags below override what it says.
+    #[arg(long = "zenoh-config", value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Session mode.
+    #[arg(long, value_enum)]
+    pub mode: Option<Mode>,
+    /// Endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub listen: Vec<String>,
+    /// Endpoint to connect to, e.g. tcp/10.0.0.2:7447 (repeatable).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub connect: Vec<String>,
+}
+
+impl ZenohArgs {
+    /// Arguments that listen on one endpoint (tests give every test its own port).
+    pub fn listening(endpoint: &str) -> Self {
+        ZenohArgs { listen: vec![endpoint.to_string()], ..Default::default() }
+    }
+
+    /// Arguments that connect to one endpoint.
+    pub fn connecting(endpoint: &str) -> Self {
+        ZenohArgs { connect: vec![endpoint.to_string()], ..Default::default() }
+    }
+
+    /// The flags as command-line arguments, to start another process with the same settings.
+    pub fn to_cli(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if let Some(c) = &self.config {
+            out.extend(["--zenoh-config".to_string(), c.display().to_string()]);
+        }
+        if let Some(m) = self.mode {
+            out.extend(["--mode".to_string(), if m == Mode::Peer { "peer" } else { "client" }.to_string()]);
+        }
+        for l in &self.listen {
+            out.extend(["--listen".to_string(), l.clone()]);
+        }
+        for c in &self.connect {
+            out.extend(["--connect".to_string(), c.clone()]);
+        }
+        out
+    }
+
+    /// The Zenoh configuration these arguments describe.
+    pub fn to_config(&self, role: Role) -> Result<zenoh::Config, TransportError> {
+        let mut config = match &self.config {
+            Some(path) => zenoh::Config::from_file(path)
+                .map_err(|e| TransportError::ConfigFile { path: path.clone(), reason: e.to_string() })?,
+            None => {
+                let mut c = zenoh::Config::default();
+                set(&mut c, "mode", "\"peer\"")?;
+                set(&mut c, "scouting/multicast/enabled", "false")?;
+                // Loopback only, unless told otherwise. Members listen on a random loopback
+                // port so that peers met through gossip can connect to them directly.
+                let listen: &[&str] = match role {
+                    Role::Hub => &[DEFAULT_ENDPOINT],
+                    Role::Member => &["tcp/127.0.0.1:0"],
+                    Role::Alone => &[],
+                };
+                set(&mut c, "listen/endpoints", &json_list(listen))?;
+                if role == Role::Member {
+                    set(&mut c, "connect/endpoints", &json_list(&[DEFAULT_ENDPOINT]))?;
+                }
+                c
+            }
+        };
+        // Retry quickly: components of a team start within moments of each other.
+        set(&mut config, "connect/retry", "{period_init_ms: 50, period_max_ms: 500, period_increase_factor: 2}")?;
+        if let Some(m) = self.mode {
+            set(&mut config, "mode", if m == Mode::Peer { "\"peer\"" } else { "\"client\"" })?;
+        }
+        if !self.listen.is_empty() {
+            set(&mut config, "listen/endpoints", &json_list(&self.listen))?;
+        }
+        if !self.connect.is_empty() {
+            set(&mut config, "connect/endpoints", &json_list(&self.connect))?;
+        }
+        Ok(config)
+    }
+}
+
+fn json_list<S: AsRef<str>>(items: &[S]) -> String {
+    let quoted: Vec<String> = items.iter().map(|s| format!("{:?}", s.as_ref())).collect();
+    format!("[{}]", quoted.join(","))
+}
+
+fn set(c: &mut zenoh::Config, key: &str, value: &str) -> Result<(), TransportError> {
+    c.insert_json5(key, value).map_err(|e| TransportError::ConfigValue {
+        key: key.to_string(),
+        value: value.to_string(),
+        reason: e.to_string(),
+    })
+}
+
+/// Open a session from the arguments. The only function in the project that opens one.
+pub async fn open(args: &ZenohArgs, role: Role) -> Result<Session, TransportError> {
+    let config = args.to_config(role)?;
+    let session = zenoh::open(config).await.map_err(|e| TransportError::Open(e.to_string()))?;
+    tracing::debug!(zid = %session.zid(), ?role, "zenoh session open");
+    Ok(session)
+}
+
+/// Quality of service of a publisher.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Qos {
+    /// State, dynamics, commands, torques: express, real-time priority, never dropped.
+    HotPath,
+    /// Status and diagnostics: data priority, may be dropped under congestion.
+    Telemetry,
+}
+
+/// A publisher of one message type that encodes into a reused buffer.
+pub struct TypedPublisher<M> {
+    publisher: Publisher<'static>,
+    buffer: Vec<u8>,
+    _message: PhantomData<fn(&M)>,
+}
+
+impl<M: Message> TypedPublisher<M> {
+    /// Declare a publisher on `key`.
+    pub async fn declare(session: &Session, key: String, qos: Qos) -> Result<Self, TransportError> {
+        let builder = session.declare_publisher(key.clone());
+        let builder = match qos {
+            Qos::HotPath => builder
+                .express(true)
+                .priority(Priority::RealTime)
+                .congestion_control(CongestionControl::Block),
+            Qos::Telemetry => builder.priority(Priority::Data).congestion_control(CongestionControl::Drop),
+        };
+        let publisher = builder.await.map_err(|e| zenoh_err("declare_publisher", &key, e))?;
+        Ok(TypedPublisher { publisher, buffer: Vec::with_capacity(1024), _message: PhantomData })
+    }
+
+    /// Validate, encode and publish.
+    pub async fn put(&mut self, msg: &M) -> Result<(), TransportError> {
+
+        msg.validate()?;
+        crate::codec::encode_into(msg, &mut self.buffer)?;
+        let key = self.publisher.key_expr().to_string();
+        self.publisher
+            .put(self.buffer.as_slice())
+            .await
+            .map_err(|e| zenoh_err("put", &key, e))
+    }
+
+    pub fn key(&self) -> String {
+        self.publisher.key_expr().to_string()
+    }
+}
+
+/// A subscriber queue (FIFO) on a key expression.
+pub type SampleQueue = Subscriber<zenoh::handlers::FifoChannelHandler<Sample>>;
+
+/// Subscribe to `key` with a FIFO queue.
+pub async fn subscribe(session: &Session, key: String) -> Result<SampleQueue, TransportError> {
+    session.declare_subscriber(key.clone()).await.map_err(|e| zenoh_err("declare_subscriber", &key, e))
+}
+
+/// Decode a sample's payload as `M`, naming the key in the error.
+pub fn decode_sample<M: Message>(sample: &Sample) -> Result<M, ProtocolError> {
+    let bytes = sample.payload().to_bytes();
+    decode::<M>(&bytes)
+}
+
+/// A membership change seen through liveliness.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum MemberEvent {
+    Joined(String),
+    Left(String),
+}
+
+impl MemberEvent {
+    /// The event a liveliness sample describes, if its key is a member token.
+    pub fn from_sample(sample: &Sample) -> Option<Self> {
+        let robot = keys::robot_of(sample.key_expr().as_str())?.to_string();
+        Some(match sample.kind() {
+            SampleKind::Put => MemberEvent::Joined(robot),
+            SampleKind::Delete => MemberEvent::Left(robot),
+        })
+    }
+}
+
+/// Declare this robot's membership token; membership lasts as long as the token lives.
+pub async fn declare_member(
+    session: &Session,
+    team: &str,
+    robot: &str,
+) -> Result<zenoh::liveliness::LivelinessToken, TransportError> {
+    let key = keys::member(team, robot)?;
+    session.liveliness().declare_token(key.clone()).await.map_err(|e| zenoh_err("declare_token", &key, e))
+}
+
+/// Watch the team's membership: current members first (history), then joins and leaves.
+pub async fn watch_members(session: &Session, team: &str) -> Result<SampleQueue, TransportError> {
+    let key = keys::all_members(team)?;
+    session
+        .liveliness()
+        .declare_subscriber(key.clone())
+        .history(true)
+        .await
+        .map_err(|e| zenoh_err("liveliness subscriber", &key, e))
+}
+
+fn zenoh_err(op: &'static str, key: &str, e: impl std::fmt::Display) -> TransportError {
+    TransportError::Zenoh { op, key: key.to_string(), reason: e.to_string() }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_is_loopback_peer_without_multicast() {
+        let hub = ZenohArgs::default().to_config(Role::Hub).unwrap();
+        let s = format!("{hub:?}");
+        assert!(s.contains("127.0.0.1:7447"));
+        let json = hub.get_json("scouting/multicast/enabled").unwrap();
+        assert_eq!(json, "false");
+        assert_eq!(hub.get_json("mode").unwrap(), "\"peer\"");
+        let member = ZenohArgs::default().to_config(Role::Member).unwrap();
+        assert!(member.get_json("connect/endpoints").unwrap().contains("127.0.0.1:7447"));
+        assert_eq!(member.get_json("listen/endpoints").unwrap(), "[\"tcp/127.0.0.1:0\"]");
+        let alone = ZenohArgs::default().to_config(Role::Alone).unwrap();
+        assert_eq!(alone.get_json("listen/endpoints").unwrap(), "[]");
+        assert_eq!(alone.get_json("connect/endpoints").unwrap(), "[]");
+    }
+
+    #[test]
+    fn flags_override_and_bad_values_are_errors() {
+        let a = ZenohArgs { mode: Some(Mode::Client), connect: vec!["tcp/10.0.0.2:7447".into()], ..Default::default() };
+        let c = a.to_config(Role::Hub).unwrap();
+        assert_eq!(c.get_json("mode").unwrap(), "\"client\"");
+        assert!(c.get_json("connect/endpoints").unwrap().contains("10.0.0.2"));
+        let bad = ZenohArgs { listen: vec!["not an endpoint".into()], ..Default::default() };
+        assert!(bad.to_config(Role::Hub).is_err());
+        let missing = ZenohArgs { config: Some("/nonexistent/zenoh.json5".into()), ..Default::default() };
+        assert!(matches!(missing.to_config(Role::Hub), Err(TransportError::ConfigFile { .. })));
+        let round = ZenohArgs::from_cli_for_test(&a.to_cli());
+        assert_eq!(round.connect, a.connect);
+    }
+
+    impl ZenohArgs {
+        fn from_cli_for_test(args: &[String]) -> ZenohArgs {
+            use clap::Parser;
+            #[derive(clap::Parser)]
+            struct Cli {
+                #[command(flatten)]
+                z: ZenohArgs,
+            }
+            let mut v = vec!["x".to_string()];
+            v.extend_from_slice(args);
+            Cli::parse_from(v).z
+        }
+    }
+}

@@ -1,0 +1,227 @@
+//! Decoding never panics and says what is wrong: random bytes, truncated and oversized
+//! payloads, wrong versions, NaN and infinity, mismatched dimensions.
+
+use proptest::prelude::*;
+use protocol::codec::encode_into;
+use protocol::*;
+
+fn header(robot: bool) -> Header {
+    Header::new("team1", robot.then_some("r1"), 42, 1_000_000)
+}
+
+fn state(nj: usize) -> RobotState {
+    RobotState {
+        header: header(true),
+        base_pose: Pose { position: [0.1, 0.2, 0.5], orientation: [1.0, 0.0, 0.0, 0.0] },
+        base_twist: [0.0, 0.1, 0.0, 0.0, 0.0, 0.2],
+        joint_positions: (0..nj).map(|i| i as f64 * 0.1).collect(),
+        joint_velocities: vec![0.01; nj],
+        time: 0.5,
+    }
+}
+
+fn frame(name: &str, role: FrameRole, nv: usize) -> FrameTerms {
+    let d = role.dim();
+    FrameTerms {
+        name: name.into(),
+        role,
+        position: [0.3, 0.0, 0.0],
+        rotation: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        jacobian: Matrix { rows: d as u32, cols: nv as u32, data: (0..d * nv).map(|i| (i as f64 * 0.7).sin()).collect() },
+        jdot_v: vec![0.5; d],
+    }
+}
+
+fn dynamics(nv: usize) -> DynamicsTerms {
+    let mut m = Matrix::zeros(nv, nv);
+    for i in 0..nv {
+        for j in 0..nv {
+            m.data[i * nv + j] = if i == j { 1.0 + i as f64 / 3.0 } else { 0.01 * ((i * nv + j) as f64).cos() };
+        }
+    }
+    DynamicsTerms {
+        header: header(true),
+        floating_base: true,
+        nv: nv as u32,
+        mass_matrix: m,
+        bias: vec![9.81; nv],
+        velocity: vec![0.0; nv],
+        frames: vec![
+            frame("LF_FOOT", FrameRole::StanceFoot, nv),
+            frame("hand_contact", FrameRole::Hand, nv),
+            frame("base", FrameRole::Torso, nv),
+        ],
+        hand_in_grasp: true,
+        state_tick: 42,
+    }
+}
+
+fn command(n: usize) -> TorqueCommand {
+    TorqueCommand { header: header(true), tau: vec![1.5; n] }
+}
+
+fn raw<M: Message>(m: &M) -> Vec<u8> {
+    let mut out = Vec::new();
+    encode_into(m, &mut out).unwrap();
+    out
+}
+
+#[test]
+fn valid_messages_round_trip_in_both_encodings() {
+    let s = state(18);
+    assert_eq!(decode::<RobotState>(&encode(&s).unwrap()).unwrap(), s);
+    assert_eq!(from_json::<RobotState>(&to_json(&s).unwrap()).unwrap(), s);
+    let d = dynamics(24);
+    assert_eq!(decode::<DynamicsTerms>(&encode(&d).unwrap()).unwrap(), d);
+    assert_eq!(from_json::<DynamicsTerms>(&to_json(&d).unwrap()).unwrap(), d);
+    let c = command(18);
+    assert_eq!(decode::<TorqueCommand>(&encode(&c).unwrap()).unwrap(), c);
+}
+
+#[test]
+fn binary_is_compact() {
+    // A 24-DoF dynamics message: the numbers alone are 8 bytes each.
+    let d = dynamics(24);
+    let numbers = 24 * 24 + 24 + 24 + 3 * (3 + 9) + (3 + 6 + 6) * 24 + 3 + 6 + 6;
+    let bytes = encode(&d).unwrap().len();
+    assert!(bytes < numbers * 8 + 200, "{bytes} bytes for {numbers} numbers");
+    // The same message printed as JSON is much larger.
+    assert!(to_json(&d).unwrap().len() > 2 * bytes);
+}
+
+#[test]
+fn wrong_version_kind_and_magic_are_named() {
+    let mut b = encode(&state(3)).unwrap();
+    b[2] = 99;
+    assert!(matches!(decode::<RobotState>(&b), Err(ProtocolError::VersionMismatch { found: 99, .. })));
+    let b = encode(&state(3)).unwrap();
+    assert!(matches!(decode::<TorqueCommand>(&b), Err(ProtocolError::WrongKind { .. })));
+    let mut b = encode(&state(3)).unwrap();
+    b[0] = b'X';
+    assert!(matches!(decode::<RobotState>(&b), Err(ProtocolError::BadMagic { .. })));
+    let mut s = state(3);
+    s.header.version = 7;
+    let json = serde_json::to_string(&s).unwrap();
+    assert!(matches!(from_json::<RobotState>(&json), Err(ProtocolError::VersionMismatch { found: 7, .. })));
+}
+
+#[test]
+fn every_truncation_is_an_error() {
+    let b = encode(&dynamics(8)).unwrap();
+    for n in 0..b.len() {
+        assert!(decode::<DynamicsTerms>(&b[..n]).is_err(), "prefix of {n} bytes accepted");
+    }
+}
+
+#[test]
+fn trailing_and_oversized_payloads_are_rejected() {
+    let mut b = encode(&command(4)).unwrap();
+    b.push(0);
+    assert!(matches!(decode::<TorqueCommand>(&b), Err(ProtocolError::Malformed { .. })));
+    let huge = vec![0u8; MAX_MESSAGE_BYTES + 1];
+    assert!(matches!(decode::<TorqueCommand>(&huge), Err(ProtocolError::Oversized { .. })));
+    // A length prefix that claims 2^62 entries must not allocate them.
+    let mut b = encode(&command(1)).unwrap();
+    let tau_len_at = b.len() - 9; // varint length 1 byte + one f64
+    b.truncate(tau_len_at);
+    b.push(255); // varint marker for a u64 follows
+    b.extend_from_slice(&(1u64 << 62).to_le_bytes());
+    assert!(decode::<TorqueCommand>(&b).is_err());
+}
+
+#[test]
+fn non_finite_numbers_are_named() {
+    for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        let mut c = command(5);
+        c.tau[3] = bad;
+        assert!(encode(&c).is_err(), "encode validates");
+        match decode::<TorqueCommand>(&raw(&c)) {
+            Err(ProtocolError::NonFinite { field, index, .. }) => assert_eq!((field.as_str(), index), ("tau", 3)),
+            other => panic!("expected NonFinite, got {other:?}"),
+        }
+        let mut d = dynamics(8);
+        d.frames[1].jacobian.data[7] = bad;
+        assert!(matches!(decode::<DynamicsTerms>(&raw(&d)), Err(ProtocolError::NonFinite { .. })));
+        let json = serde_json::to_string(&d).unwrap(); // serde_json writes NaN as null
+        assert!(from_json::<DynamicsTerms>(&json).is_err());
+    }
+}
+
+#[test]
+fn mismatched_dimensions_are_named() {
+    let mut d = dynamics(8);
+    d.mass_matrix.data.pop();
+    assert!(matches!(decode::<DynamicsTerms>(&raw(&d)), Err(ProtocolError::Dimension { .. })));
+    let mut d = dynamics(8);
+    d.bias.push(0.0);
+    assert!(matches!(decode::<DynamicsTerms>(&raw(&d)), Err(ProtocolError::Dimension { field, .. }) if field == "bias"));
+    let mut d = dynamics(8);
+    d.frames[0] = frame("LF_FOOT", FrameRole::StanceFoot, 9);
+    assert!(matches!(decode::<DynamicsTerms>(&raw(&d)), Err(ProtocolError::Dimension { .. })));
+    let mut d = dynamics(8);
+    d.frames[1].jdot_v.truncate(3);
+    assert!(matches!(decode::<DynamicsTerms>(&raw(&d)), Err(ProtocolError::Dimension { .. })));
+    let mut s = state(4);
+    s.joint_velocities.pop();
+    assert!(matches!(decode::<RobotState>(&raw(&s)), Err(ProtocolError::Dimension { .. })));
+    let mut s = state(4);
+    s.base_pose.orientation = [0.5, 0.0, 0.0, 0.0];
+    assert!(matches!(decode::<RobotState>(&raw(&s)), Err(ProtocolError::Invalid { .. })));
+    let mut s = state(4);
+    s.header.robot = Some("r/1".into());
+    assert!(matches!(decode::<RobotState>(&raw(&s)), Err(ProtocolError::BadId { .. })));
+}
+
+fn any_kind_decode(bytes: &[u8]) {
+    // Each must return (Ok or Err) without panicking.
+    let _ = decode::<RobotState>(bytes);
+    let _ = decode::<DynamicsTerms>(bytes);
+    let _ = decode::<TorqueCommand>(bytes);
+    let _ = decode::<TaskReferences>(bytes);
+    let _ = decode::<PerturbationRequest>(bytes);
+    let _ = decode::<CoordinatorStatus>(bytes);
+    let _ = decode::<TickDiagnostics>(bytes);
+    let _ = decode::<AgentStatus>(bytes);
+    let _ = decode::<RobotDescription>(bytes);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+
+    #[test]
+    fn random_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..512)) {
+        any_kind_decode(&bytes);
+        prop_assert!(decode::<TorqueCommand>(&bytes).is_err() || bytes.starts_with(b"TQ"));
+    }
+
+    #[test]
+    fn random_bytes_behind_a_valid_envelope_never_panic(kind in 1u8..10, body in proptest::collection::vec(any::<u8>(), 0..512)) {
+        let mut bytes = vec![b'T', b'Q', PROTOCOL_VERSION as u8, 0, kind, 0];
+        bytes.extend_from_slice(&body);
+        any_kind_decode(&bytes);
+    }
+
+    #[test]
+    fn flipped_bytes_of_a_valid_message_never_panic(pos in 0usize..4096, val in any::<u8>()) {
+        let mut b = encode(&dynamics(8)).unwrap();
+        let p = pos % b.len();
+        b[p] = val;
+        any_kind_decode(&b);
+    }
+
+    #[test]
+    fn a_bad_number_anywhere_is_caught(idx in 0usize..4096, which in 0usize..3) {
+        let bad = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY][which];
+        let mut d = dynamics(8);
+        let n = d.mass_matrix.data.len();
+        d.mass_matrix.data[idx % n] = bad;
+        let is_non_finite = matches!(decode::<DynamicsTerms>(&raw(&d)), Err(ProtocolError::NonFinite { .. }));
+        prop_assert!(is_non_finite);
+    }
+
+    #[test]
+    fn random_json_never_panics(s in ".{0,200}") {
+        let _ = from_json::<RobotState>(&s);
+        let _ = from_json::<TaskReferences>(&s);
+    }
+}

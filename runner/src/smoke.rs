@@ -1,0 +1,184 @@
+//! The smoke run: every component, real messages, placeholder physics.
+
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use coordinator::service::{self as coordinator_service, CoordinatorConfig};
+use coordinator::JointDamping;
+use protocol::transport::{self, Role, ZenohArgs};
+use robot_agent::agent::{self as robot_agent_loop, AgentConfig, PlaceholderDynamics};
+use sim_bridge::lockstep::{self, LockstepConfig, LockstepReport};
+use sim_bridge::plant::PlaceholderPlant;
+use thiserror::Error;
+use tokio::sync::watch;
+
+/// Errors of a smoke run.
+#[derive(Debug, Error)]
+pub enum SmokeError {
+    #[error(transparent)]
+    Transport(#[from] protocol::transport::TransportError),
+    #[error(transparent)]
+    Bridge(#[from] sim_bridge::lockstep::BridgeError),
+    #[error("agent {robot}: {source}")]
+    Agent { robot: String, source: robot_agent::agent::AgentError },
+    #[error("cannot start {what} ({path}): {reason}")]
+    Spawn { what: String, path: PathBuf, reason: String },
+    #[error("{what} exited with {status}")]
+    ProcessFailed { what: String, status: String },
+    #[error("no free loopback port: {0}")]
+    NoPort(String),
+}
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct SmokeConfig {
+    pub team: String,
+    pub robots: Vec<String>,
+    pub joints: usize,
+    pub ticks: u64,
+    pub dt: f64,
+    /// Joint damping of the placeholder controller.
+    pub damping: f64,
+    /// Initial joint velocity of the placeholder plant.
+    pub v0: f64,
+}
+
+impl SmokeConfig {
+    /// The joint velocity the closed loop must end at: the plant integrates
+    /// `v <- v - dt * d * v` once per tick (semi-implicit Euler of `qdd = -d qd`).
+    pub fn expected_final_velocity(&self) -> f64 {
+        self.v0 * (1.0 - self.dt * self.damping).powi(self.ticks as i32)
+    }
+
+    fn lockstep(&self) -> LockstepConfig {
+        LockstepConfig {
+            team: self.team.clone(),
+            ticks: self.ticks,
+            start_timeout: Duration::from_secs(20),
+            command_timeout: Duration::from_secs(5),
+            resend_every: Duration::from_millis(50),
+            progress_every: (self.ticks / 10).max(1),
+        }
+    }
+}
+
+/// Result of a smoke run.
+#[derive(Debug, Clone)]
+pub struct SmokeOutcome {
+    pub report: LockstepReport,
+    /// Final joint velocity of each robot's first joint (embedded mode only).
+    pub final_velocities: Vec<f64>,
+}
+
+/// Every component in this process, on one Zenoh session.
+pub async fn run_embedded(cfg: &SmokeConfig) -> Result<SmokeOutcome, SmokeError> {
+    let session = transport::open(&ZenohArgs::default(), Role::Alone).await?;
+    let (stop_tx, stop_rx) = watch::channel(false);
+
+    let coord_cfg = CoordinatorConfig { team: cfg.team.clone(), tick_deadline: Duration::from_millis(500) };
+    let coordinator = {
+        let session = session.clone();
+        let rx = stop_rx.clone();
+        let damping = cfg.damping;
+        tokio::spawn(async move { coordinator_service::run(&session, coord_cfg, JointDamping { damping }, rx).await })
+    };
+    let mut agents = Vec::new();
+    for r in &cfg.robots {
+        let session = session.clone();
+        let rx = stop_rx.clone();
+        let acfg = AgentConfig { team: cfg.team.clone(), robot: r.clone(), joints: cfg.joints, floating_base: true };
+        let source = PlaceholderDynamics { joints: cfg.joints, nv: acfg.nv() };
+        let robot = r.clone();
+        agents.push((robot, tokio::spawn(async move { robot_agent_loop::run(&session, acfg, source, rx).await })));
+    }
+
+    let mut plant = PlaceholderPlant::new(cfg.robots.clone(), cfg.joints, cfg.v0, cfg.dt);
+    let result = lockstep::run(&session, &cfg.lockstep(), &mut plant, stop_rx.clone()).await;
+    let _ = stop_tx.send(true);
+    let _ = coordinator.await;
+    for (robot, handle) in agents {
+        if let Ok(Err(source)) = handle.await {
+            return Err(SmokeError::Agent { robot, source });
+        }
+    }
+    let _ = session.close().await;
+    let report = result?;
+    let final_velocities = (0..cfg.robots.len()).map(|i| plant.velocities(i)[0]).collect();
+    Ok(SmokeOutcome { report, final_velocities })
+}
+
+/// A free TCP port on loopback (bound, then released for the child to take).
+pub fn free_port() -> Result<u16, SmokeError> {
+    let l = TcpListener::bind("127.0.0.1:0").map_err(|e| SmokeError::NoPort(e.to_string()))?;
+    l.local_addr().map(|a| a.port()).map_err(|e| SmokeError::NoPort(e.to_string()))
+}
+
+/// The directory of this executable, where cargo also puts the other binaries.
+pub fn sibling_binary(name: &str) -> PathBuf {
+    let exe = std::env::current_exe().unwrap_or_default();
+    let dir = exe.parent().map(Path::to_path_buf).unwrap_or_default();
+    // Test executables live one level deeper, in deps/.
+    let dir = if dir.ends_with("deps") { dir.parent().map(Path::to_path_buf).unwrap_or(dir) } else { dir };
+    dir.join(name)
+}
+
+/// A child process that is killed when dropped.
+pub struct ChildGuard {
+    pub what: String,
+    pub child: Child,
+}
+
+impl Drop for ChildGuard {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Start one of the team's binaries with arguments.
+pub fn spawn(bin: &str, args: &[String], what: &str) -> Result<ChildGuard, SmokeError> {
+    let path = sibling_binary(bin);
+    let child = Command::new(&path)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::inherit())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .map_err(|e| SmokeError::Spawn {
+            what: what.to_string(),
+            path: path.clone(),
+            reason: format!("{e} (build the binaries first: cargo build --release --bins)"),
+        })?;
+    Ok(ChildGuard { what: what.to_string(), child })
+}
+
+/// Every component its own process, on loopback: the coordinator listens on a free port,
+/// the agents and the sim-bridge connect to it.
+pub fn run_distributed(cfg: &SmokeConfig) -> Result<(), SmokeError> {
+    let port = free_port()?;
+    let hub = format!("tcp/127.0.0.1:{port}");
+    let listen = ZenohArgs::listening(&hub).to_cli();
+    let connect = ZenohArgs::connecting(&hub).to_cli();
+    let mut args = vec!["run".to_string(), "--team".into(), cfg.team.clone(), "--damping".into(), cfg.damping.to_string()];
+    args.extend(listen);
+    let _coordinator = spawn("coordinator", &args, "coordinator")?;
+    let mut agents = Vec::new();
+    for r in &cfg.robots {
+        let mut args = vec!["run".to_string(), "--id".into(), r.clone(), "--team".into(), cfg.team.clone()];
+        args.extend(["--joints".into(), cfg.joints.to_string()]);
+        args.extend(connect.clone());
+        agents.push(spawn("robot-agent", &args, &format!("robot-agent {r}"))?);
+    }
+    let mut args = vec!["smoke".to_string(), "--team".into(), cfg.team.clone(), "--robots".into(), cfg.robots.join(",")];
+    args.extend(["--joints".into(), cfg.joints.to_string(), "--ticks".into(), cfg.ticks.to_string()]);
+    args.extend(["--dt".into(), cfg.dt.to_string()]);
+    args.extend(connect);
+    let mut bridge = spawn("sim-bridge", &args, "sim-bridge")?;
+    let status = bridge.child.wait().map_err(|e| SmokeError::ProcessFailed { what: "sim-bridge".into(), status: e.to_string() })?;
+    if !status.success() {
+        return Err(SmokeError::ProcessFailed { what: "sim-bridge".into(), status: status.to_string() });
+    }
+    Ok(())
+}

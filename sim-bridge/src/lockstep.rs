@@ -1,0 +1,178 @@
+//! The lockstep loop: publish every robot's state of tick k, wait for every robot's torques
+//! of tick k, apply them, step. Deterministic for a deterministic plant.
+
+use std::collections::BTreeSet;
+use std::time::{Duration, Instant};
+
+use protocol::keys::{self, RobotTopic};
+use protocol::transport::{self, decode_sample, MemberEvent, Qos, TransportError, TypedPublisher};
+use protocol::{RobotState, TorqueCommand};
+use thiserror::Error;
+use tokio::sync::watch;
+use zenoh::Session;
+
+use crate::plant::{empty_state, Plant};
+
+/// Errors of the bridge loop.
+#[derive(Debug, Error)]
+pub enum BridgeError {
+    #[error(transparent)]
+    Transport(#[from] TransportError),
+    #[error(transparent)]
+    Protocol(#[from] protocol::ProtocolError),
+    #[error("robots {missing:?} did not join the team within {waited:?}")]
+    MembersMissing { missing: Vec<String>, waited: Duration },
+    #[error("no torques from robot(s) {missing:?} for tick {tick} within {waited:?}")]
+    TorqueTimeout { tick: u64, missing: Vec<String>, waited: Duration },
+    #[error("stopped")]
+    Stopped,
+}
+
+/// Settings of the lockstep loop.
+#[derive(Debug, Clone)]
+pub struct LockstepConfig {
+    pub team: String,
+    pub ticks: u64,
+    /// How long to wait for every robot to join before the first tick.
+    pub start_timeout: Duration,
+    /// How long a tick may wait for torques before the run fails, naming the robot.
+    pub command_timeout: Duration,
+    /// While waiting, the states of the tick are sent again this often (a component that
+    /// joined late may have missed them); agents and coordinator treat repeats as repeats.
+    pub resend_every: Duration,
+    /// Log progress every this many ticks (0: never).
+    pub progress_every: u64,
+}
+
+/// What a lockstep run did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LockstepReport {
+    pub ticks: u64,
+    pub sim_time: f64,
+    pub wall_time: Duration,
+    pub resends: u64,
+    pub rejected_torques: u64,
+}
+
+/// Run `cfg.ticks` lockstep ticks of `plant`.
+pub async fn run(
+    session: &Session,
+    cfg: &LockstepConfig,
+    plant: &mut impl Plant,
+    stop: watch::Receiver<bool>,
+) -> Result<LockstepReport, BridgeError> {
+    let robots: Vec<String> = plant.robots().to_vec();
+    let torques = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Torque)?).await?;
+    let members_q = transport::watch_members(session, &cfg.team).await?;
+    let mut state_pubs = Vec::new();
+    let mut states = Vec::new();
+    for r in &robots {
+        let key = keys::robot(&cfg.team, r, RobotTopic::State)?;
+        state_pubs.push(TypedPublisher::<RobotState>::declare(session, key, Qos::HotPath).await?);
+        states.push(empty_state(&cfg.team, r));
+    }
+
+    // Wait for every robot to be present.
+    let started = Instant::now();
+    let mut present = BTreeSet::new();
+    while !robots.iter().all(|r| present.contains(r)) {
+        if *stop.borrow() {
+            return Err(BridgeError::Stopped);
+        }
+        let left = cfg.start_timeout.saturating_sub(started.elapsed());
+        match tokio::time::timeout(left, members_q.recv_async()).await {
+            Ok(Ok(sample)) => match MemberEvent::from_sample(&sample) {
+                Some(MemberEvent::Joined(r)) => {
+                    present.insert(r);
+                }
+                Some(MemberEvent::Left(r)) => {
+                    present.remove(&r);
+                }
+                None => {}
+            },
+            _ => {
+                let missing = robots.iter().filter(|r| !present.contains(*r)).cloned().collect();
+                return Err(BridgeError::MembersMissing { missing, waited: cfg.start_timeout });
+            }
+        }
+    }
+    tracing::info!(robots = ?robots, "all robots present, lockstep starts");
+
+    let run_started = Instant::now();
+    let mut resends = 0u64;
+    let mut rejected = 0u64;
+    let mut got = vec![false; robots.len()];
+    for tick in 0..cfg.ticks {
+        if *stop.borrow() {
+            return Err(BridgeError::Stopped);
+        }
+        let now = protocol::wall_clock_ns();
+        for (i, s) in states.iter_mut().enumerate() {
+            plant.state(i, s);
+            s.header.tick = tick;
+            s.header.stamp_ns = now;
+        }
+        for (p, s) in state_pubs.iter_mut().zip(&states) {
+            p.put(s).await?;
+        }
+        got.iter_mut().for_each(|g| *g = false);
+        let tick_started = Instant::now();
+        let mut last_send = Instant::now();
+        while !got.iter().all(|g| *g) {
+            let waited = tick_started.elapsed();
+            let timeout = if tick == 0 { cfg.command_timeout.max(cfg.start_timeout) } else { cfg.command_timeout };
+            if waited >= timeout {
+                let missing = robots.iter().zip(&got).filter(|(_, g)| !**g).map(|(r, _)| r.clone()).collect();
+                return Err(BridgeError::TorqueTimeout { tick, missing, waited });
+            }
+            let wait = cfg.resend_every.saturating_sub(last_send.elapsed()).min(timeout - waited);
+            match tokio::time::timeout(wait, torques.recv_async()).await {
+                Ok(Ok(sample)) => {
+                    let cmd = match decode_sample::<TorqueCommand>(&sample) {
+                        Ok(c) => c,
+                        Err(e) => {
+                            rejected += 1;
+                            tracing::warn!(key = %sample.key_expr(), "rejected torques: {e}");
+                            continue;
+                        }
+                    };
+                    if cmd.header.tick != tick {
+                        continue; // a repeat of an earlier tick
+                    }
+                    let Some(i) = robots.iter().position(|r| r == cmd.header.robot_id()) else { continue };
+                    if cmd.tau.len() != plant.joints(i) {
+                        rejected += 1;
+                        tracing::warn!(robot = %robots[i], "torques of the wrong size: {} for {} joints", cmd.tau.len(), plant.joints(i));
+                        continue;
+                    }
+                    if !got[i] {
+                        plant.set_torques(i, &cmd.tau);
+                        got[i] = true;
+                    }
+                }
+                Ok(Err(_)) => return Err(BridgeError::Stopped),
+                Err(_) => {
+                    if last_send.elapsed() >= cfg.resend_every {
+                        for (p, s) in state_pubs.iter_mut().zip(&states) {
+                            p.put(s).await?;
+                        }
+                        resends += 1;
+                        last_send = Instant::now();
+                    }
+                }
+            }
+        }
+        plant.step();
+        if cfg.progress_every > 0 && (tick + 1) % cfg.progress_every == 0 {
+            tracing::info!(tick = tick + 1, of = cfg.ticks, sim_time = plant.time(), "progress");
+        }
+    }
+    Ok(LockstepReport {
+        ticks: cfg.ticks,
+        sim_time: plant.time(),
+        wall_time: run_started.elapsed(),
+        resends,
+        rejected_torques: rejected,
+    })
+}
+

@@ -1,0 +1,100 @@
+//! What the bridge simulates.
+
+use protocol::{Header, Pose, RobotState};
+
+/// A simulated team: states out, torques in, step.
+pub trait Plant: Send {
+    /// Robot ids in a fixed order.
+    fn robots(&self) -> &[String];
+    /// Actuated joints of a robot.
+    fn joints(&self, robot: usize) -> usize;
+    /// Write the state of robot `robot` (header fields other than tick/stamp are the caller's).
+    fn state(&self, robot: usize, out: &mut RobotState);
+    /// Set the torques of robot `robot` for the next step (already checked for size).
+    fn set_torques(&mut self, robot: usize, tau: &[f64]);
+    /// Advance one control period.
+    fn step(&mut self);
+    /// Simulated time, s.
+    fn time(&self) -> f64;
+}
+
+/// Smoke-run stand-in for the simulator (until the MuJoCo world lands): every joint is a unit
+/// inertia, `qdd = tau`, integrated with semi-implicit Euler; the bases stay where they are.
+/// It closes the loop so that the message flow can be checked against an analytic answer.
+pub struct PlaceholderPlant {
+    robots: Vec<String>,
+    q: Vec<Vec<f64>>,
+    v: Vec<Vec<f64>>,
+    tau: Vec<Vec<f64>>,
+    dt: f64,
+    steps: u64,
+}
+
+impl PlaceholderPlant {
+    /// `robots` with `joints` joints each, all starting at `q = 0` and `qdot = v0`.
+    pub fn new(robots: Vec<String>, joints: usize, v0: f64, dt: f64) -> Self {
+        let n = robots.len();
+        PlaceholderPlant {
+            robots,
+            q: vec![vec![0.0; joints]; n],
+            v: vec![vec![v0; joints]; n],
+            tau: vec![vec![0.0; joints]; n],
+            dt,
+            steps: 0,
+        }
+    }
+
+    pub fn velocities(&self, robot: usize) -> &[f64] {
+        &self.v[robot]
+    }
+}
+
+impl Plant for PlaceholderPlant {
+    fn robots(&self) -> &[String] {
+        &self.robots
+    }
+
+    fn joints(&self, robot: usize) -> usize {
+        self.q[robot].len()
+    }
+
+    fn state(&self, robot: usize, out: &mut RobotState) {
+        out.base_pose = Pose { position: [2.0 * robot as f64, 0.0, 0.55], orientation: [1.0, 0.0, 0.0, 0.0] };
+        out.base_twist = [0.0; 6];
+        out.joint_positions.clear();
+        out.joint_positions.extend_from_slice(&self.q[robot]);
+        out.joint_velocities.clear();
+        out.joint_velocities.extend_from_slice(&self.v[robot]);
+        out.time = self.time();
+    }
+
+    fn set_torques(&mut self, robot: usize, tau: &[f64]) {
+        self.tau[robot].copy_from_slice(tau);
+    }
+
+    fn step(&mut self) {
+        for r in 0..self.robots.len() {
+            for j in 0..self.q[r].len() {
+                self.v[r][j] += self.dt * self.tau[r][j];
+                self.q[r][j] += self.dt * self.v[r][j];
+            }
+        }
+        self.steps += 1;
+    }
+
+    fn time(&self) -> f64 {
+        self.steps as f64 * self.dt
+    }
+}
+
+/// An empty state to be filled by [`Plant::state`].
+pub fn empty_state(team: &str, robot: &str) -> RobotState {
+    RobotState {
+        header: Header::new(team, Some(robot), 0, 0),
+        base_pose: Pose::IDENTITY,
+        base_twist: [0.0; 6],
+        joint_positions: Vec::new(),
+        joint_velocities: Vec::new(),
+        time: 0.0,
+    }
+}
