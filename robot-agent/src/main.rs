@@ -1,0 +1,91 @@
+//! robot-agent binary: thin command-line front end; the logic lives in the library.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand};
+use robot_agent::inspect::{self, Attach, InspectArgs};
+
+#[derive(Parser)]
+#[command(name = "robot-agent", version, about = "A robot's agent: model, dynamics terms, commands")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Print a robot's model summary and dynamics terms at one state.
+    Inspect(InspectCmd),
+}
+
+#[derive(Args)]
+struct InspectCmd {
+    /// URDF of the robot.
+    #[arg(long)]
+    urdf: PathBuf,
+    /// Give the root link a 6-DoF floating joint.
+    #[arg(long)]
+    floating_base: bool,
+    /// URDF to attach (e.g. an arm).
+    #[arg(long, requires = "at")]
+    attach: Option<PathBuf>,
+    /// Frame (link) of the first robot to attach to.
+    #[arg(long, requires = "attach")]
+    at: Option<String>,
+    /// Pose of the attached root in that frame: x,y,z,roll,pitch,yaw.
+    #[arg(long, requires = "attach", allow_hyphen_values = true, default_value = "0,0,0,0,0,0")]
+    pose: String,
+    /// Prefix for the attached robot's joint and frame names.
+    #[arg(long, requires = "attach", default_value = "")]
+    prefix: String,
+    /// State file {"q": [...], "v": [...]}; default neutral configuration, zero velocity.
+    #[arg(long)]
+    state: Option<PathBuf>,
+    /// Frame to report (repeatable).
+    #[arg(long = "frame")]
+    frames: Vec<String>,
+    /// Print the full report as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+fn run_inspect(cmd: InspectCmd) -> anyhow::Result<String> {
+    let attach = match (cmd.attach, cmd.at) {
+        (Some(urdf), Some(at)) => Some(Attach { urdf, at, pose: inspect::parse_pose(&cmd.pose)?, prefix: cmd.prefix }),
+        _ => None,
+    };
+    let args = InspectArgs { urdf: cmd.urdf, floating_base: cmd.floating_base, attach, state: cmd.state, frames: cmd.frames };
+    let report = inspect::inspect(&args)?;
+    Ok(if cmd.json { serde_json::to_string_pretty(&report)? + "\n" } else { inspect::summary(&report) })
+}
+
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) if !e.use_stderr() => {
+            let _ = e.print(); // --help, --version
+            return ExitCode::SUCCESS;
+        }
+        Err(e) => {
+            // one line: clap's message up to its usage section, which starts "error: ..."
+            let msg = e.to_string();
+            let lines: Vec<&str> = msg.lines().take_while(|l| !l.starts_with("Usage:")).map(str::trim).filter(|l| !l.is_empty()).collect();
+            eprintln!("{}", lines.join(" "));
+            return ExitCode::from(2);
+        }
+    };
+    let result = match cli.command {
+        Command::Inspect(cmd) => run_inspect(cmd),
+    };
+    match result {
+        Ok(out) => {
+            print!("{out}");
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {}", e.to_string().replace('\n', " "));
+            ExitCode::from(2)
+        }
+    }
+}
