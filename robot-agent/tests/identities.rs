@@ -163,7 +163,7 @@ fn jacobians_and_jdot_match_differentiated_kinematics() {
                 let ang = vee_log(&(xp.rot * xm.rot.transpose())) / (2.0 * dt);
                 let fd = Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z);
                 let jv = &j * &v;
-                assert!((jv.clone() - fd).norm() < 1e-7 * fd.norm().max(1.0), "{name} frame {f}: J v vs FD {jv:?} {fd:?}");
+                assert!((jv - fd).norm() < 1e-7 * fd.norm().max(1.0), "{name} frame {f}: J v vs FD {jv:?} {fd:?}");
                 let vel = frame_velocity(&model, &data, f).unwrap().to_vector6();
                 assert!((jv - vel).norm() < 1e-13 * vel.norm().max(1.0));
                 // Jdot (analytic) vs FD of J along v; Jdot v vs Jdot * v

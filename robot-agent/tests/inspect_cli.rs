@@ -1,5 +1,6 @@
 //! The `robot-agent inspect` binary: output checked against the library, bad input gives one
 //! `error: ...` line and exit status 2.
+#![allow(clippy::needless_range_loop)]
 
 mod common;
 

@@ -314,6 +314,7 @@ impl ModelBuilder {
             }
         }
         let total_mass = self.links.iter().map(|l| l.inertia.mass).sum();
+        tracing::debug!(robot = %self.name, nq, nv, bodies = bodies.len(), frames = frames.len(), total_mass, "dynamics model built");
         Ok(Model {
             name: self.name.clone(),
             bodies,

@@ -95,13 +95,16 @@ pub fn rel_err_v(a: &[f64], b: &[f64]) -> f64 {
     d / n.max(1.0)
 }
 
+/// Position, rotation, Jacobian [jacp; jacr] and Jdot v [lin; ang] of one frame.
+pub type FrameTerms = (Vector3<f64>, Matrix3<f64>, Matrix6xX<f64>, Vector6<f64>);
+
 /// MuJoCo's terms at one state, converted into our conventions.
 pub struct MjTerms {
     pub m: DMatrix<f64>,
     pub h: DVector<f64>,
     pub g: DVector<f64>,
     /// Per requested frame: position, rotation, Jacobian [jacp; jacr], Jdot v [lin; ang].
-    pub frames: Vec<(Vector3<f64>, Matrix3<f64>, Matrix6xX<f64>, Vector6<f64>)>,
+    pub frames: Vec<FrameTerms>,
 }
 
 /// The same robot loaded into MuJoCo 3.17 from the same URDF text.
