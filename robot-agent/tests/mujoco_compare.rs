@@ -1,7 +1,7 @@
 //! Our dynamics against MuJoCo 3.17 on the same URDF, on seeded random states:
 //! M vs `mj_fullM`, h vs `qfrc_bias`, g vs `qfrc_bias` at v = 0, frame placements vs
-//! `xpos`/`xmat`, frame Jacobians vs `mj_jacBody`, Jdot v vs `mj_objectAcceleration` after
-//! `mj_rnePostConstraint` at qacc = 0. Relative error = |a - b| / max(1, |b|) < 1e-8.
+//! `xpos`/`xmat`, frame Jacobians vs `mj_jacBody`, Jdot v vs `mj_jacDot` and vs
+//! `mj_objectAcceleration(mjOBJ_XBODY)` after `mj_rnePostConstraint` (see tests/common). Relative error = |a - b| / max(1, |b|) < 1e-8.
 
 mod common;
 
@@ -20,7 +20,7 @@ fn compare(name: &str, model: &Model, mj: &MjRobot, seed: u64) {
     assert!((mj_mass - model.total_mass).abs() < 1e-12 * model.total_mass, "{name}: mass {mj_mass} vs {}", model.total_mass);
     let mut data = Data::new(model);
     let mut rng = rng(seed);
-    let mut worst = [0.0f64; 6];
+    let mut worst = [0.0f64; 7];
     let mut jac = Matrix6xX::zeros(model.nv);
     for s in 0..SAMPLES {
         let (q, v) = random_state(model, &mut rng);
@@ -29,22 +29,23 @@ fn compare(name: &str, model: &Model, mj: &MjRobot, seed: u64) {
         let e_m = rel_err(&data.m, &mj_terms.m);
         let e_h = rel_err_v(data.h.as_slice(), mj_terms.h.as_slice());
         let e_g = rel_err_v(data.g.as_slice(), mj_terms.g.as_slice());
-        let (mut e_p, mut e_j, mut e_a) = (0.0f64, 0.0f64, 0.0f64);
-        for (f, (pos, rot, j_mj, jdv_mj)) in mj_terms.frames.iter().enumerate() {
+        let (mut e_p, mut e_j, mut e_a, mut e_c) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        for (f, mjf) in mj_terms.frames.iter().enumerate() {
             let x = frame_placement(model, &data, f).unwrap();
-            e_p = e_p.max((x.trans - pos).norm()).max((x.rot - rot).norm());
+            e_p = e_p.max((x.trans - mjf.pos).norm()).max((x.rot - mjf.rot).norm());
             frame_jacobian(model, &data, f, &mut jac).unwrap();
-            e_j = e_j.max((&jac - j_mj).norm() / j_mj.norm().max(1.0));
+            e_j = e_j.max((&jac - &mjf.jac).norm() / mjf.jac.norm().max(1.0));
             let jdv = frame_jdot_v(model, &data, f).unwrap();
-            e_a = e_a.max((jdv - jdv_mj).norm() / jdv_mj.norm().max(1.0));
+            e_a = e_a.max((jdv - mjf.jdot_v).norm() / mjf.jdot_v.norm().max(1.0));
+            e_c = e_c.max((jdv - mjf.acc).norm() / mjf.acc.norm().max(1.0));
         }
-        let errs = [e_m, e_h, e_g, e_p, e_j, e_a];
+        let errs = [e_m, e_h, e_g, e_p, e_j, e_a, e_c];
         for (w, e) in worst.iter_mut().zip(errs) {
             *w = w.max(e);
         }
-        assert!(errs.iter().all(|e| *e < TOL), "{name} sample {s}: errors M, h, g, pose, J, Jdot*v = {errs:?}");
+        assert!(errs.iter().all(|e| *e < TOL), "{name} sample {s}: errors M, h, g, pose, J, Jdot*v (jacDot), Jdot*v (cacc) = {errs:?}");
     }
-    println!("{name}: {SAMPLES} samples, {} frames; worst relative errors M {:.1e}, h {:.1e}, g {:.1e}, pose {:.1e}, J {:.1e}, Jdot*v {:.1e}", frames.len(), worst[0], worst[1], worst[2], worst[3], worst[4], worst[5]);
+    println!("{name}: {SAMPLES} samples, {} frames; worst relative errors M {:.1e}, h {:.1e}, g {:.1e}, pose {:.1e}, J {:.1e}, Jdot*v vs mj_jacDot {:.1e}, vs cacc {:.1e}", frames.len(), worst[0], worst[1], worst[2], worst[3], worst[4], worst[5], worst[6]);
 }
 
 #[test]

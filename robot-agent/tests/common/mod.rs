@@ -95,8 +95,18 @@ pub fn rel_err_v(a: &[f64], b: &[f64]) -> f64 {
     d / n.max(1.0)
 }
 
-/// Position, rotation, Jacobian [jacp; jacr] and Jdot v [lin; ang] of one frame.
-pub type FrameTerms = (Vector3<f64>, Matrix3<f64>, Matrix6xX<f64>, Vector6<f64>);
+/// MuJoCo's view of one frame (a body's regular frame), in our conventions.
+pub struct FrameTerms {
+    pub pos: Vector3<f64>,
+    pub rot: Matrix3<f64>,
+    /// [jacp; jacr] from `mj_jacBody`.
+    pub jac: Matrix6xX<f64>,
+    /// Classical Jdot v [lin; ang] from `mj_jacDot`: `J_mj c + Jdot_mj qvel`.
+    pub jdot_v: Vector6<f64>,
+    /// The same from `mj_objectAcceleration(mjOBJ_XBODY)` after `mj_rnePostConstraint` with
+    /// `qacc = c` and gravity off.
+    pub acc: Vector6<f64>,
+}
 
 /// MuJoCo's terms at one state, converted into our conventions.
 pub struct MjTerms {
@@ -114,10 +124,14 @@ pub struct MjTerms {
 /// and `inertiafromgeom="false"` (inertias exactly as written), visuals removed (no meshes),
 /// armature, damping and friction loss set to 0 after compiling (asserted), gravity
 /// (0, 0, -9.81). A floating base gets a free joint added to the root body with mjSpec.
-/// `Jdot v` comes from `mj_jacDot` (with the free joint's `qacc` that corresponds to our zero
-/// base acceleration, see `base_acceleration_to_mujoco`).
+/// `Jdot v` comes from `mj_jacDot`, and independently from MuJoCo's body accelerations
+/// (`cacc` of `mj_rnePostConstraint`, read with `mj_objectAcceleration` on `mjOBJ_XBODY`, the
+/// body's regular frame; `mjOBJ_BODY` would be its inertial frame) in a second copy with
+/// gravity off; both with the free joint's `qacc` that corresponds to our zero base
+/// acceleration (`base_acceleration_to_mujoco`).
 pub struct MjRobot {
     pub model: mujoco_rs::prelude::MjModel,
+    pub model0: mujoco_rs::prelude::MjModel,
 }
 
 pub fn mujoco_urdf(urdf: &str) -> String {
@@ -143,7 +157,8 @@ impl MjRobot {
             spec.compile().expect("MuJoCo compiles the URDF")
         };
         let mut model = compile();
-        for m in [&mut model] {
+        let mut model0 = compile();
+        for m in [&mut model, &mut model0] {
             let raw = unsafe { m.ffi_mut() };
             for k in 0..raw.nv as usize {
                 unsafe {
@@ -154,7 +169,8 @@ impl MjRobot {
             }
         }
         assert_eq!(model.ffi().opt.gravity, [0.0, 0.0, -9.81]);
-        Self { model }
+        unsafe { model0.ffi_mut() }.opt.gravity = [0.0; 3];
+        Self { model, model0 }
     }
 
     /// Sum of MuJoCo's body masses, and its number of bodies (world included).
@@ -280,7 +296,7 @@ impl MjRobot {
             jd.view_mut((0, 0), (3, nv)).copy_from(&DMatrix::from_row_slice(3, nv, &dp));
             jd.view_mut((3, 0), (3, nv)).copy_from(&DMatrix::from_row_slice(3, nv, &dr));
             let a = &jac_mj * &c + jd * &qvel;
-            terms.frames.push((pos, rot, jac6, Vector6::from_column_slice(a.as_slice())));
+            terms.frames.push(FrameTerms { pos, rot, jac: jac6, jdot_v: Vector6::from_column_slice(a.as_slice()), acc: Vector6::zeros() });
         }
         // g: zero velocity
         let zero = vec![0.0; nv];
@@ -288,6 +304,24 @@ impl MjRobot {
         unsafe { mj_forward(m, d) };
         let bias = DVector::from_column_slice(unsafe { std::slice::from_raw_parts((*d).qfrc_bias, nv) });
         terms.g = t.transpose() * bias;
+        // body accelerations at qacc = c without gravity
+        let mut data0 = self.model0.make_data();
+        let d0 = unsafe { data0.ffi_mut() } as *mut mjData;
+        let m0 = self.model0.ffi() as *const mjModel;
+        set(d0, qvel.as_slice());
+        unsafe {
+            mj_forward(m0, d0);
+            std::ptr::copy_nonoverlapping(c.as_ptr(), (*d0).qacc, nv);
+            mj_rnePostConstraint(m0, d0);
+        }
+        for (k, name) in frames.iter().enumerate() {
+            let b = self.id(mjtObj::mjOBJ_BODY, name);
+            let mut res = [0.0; 6];
+            unsafe { mj_objectAcceleration(m0, d0, mjtObj::mjOBJ_XBODY as i32, b as i32, &mut res, 0) };
+            // MuJoCo: [angular; linear] -> ours [linear; angular]
+            terms.frames[k].acc = Vector6::new(res[3], res[4], res[5], res[0], res[1], res[2]);
+        }
+        drop(data0);
         drop(data);
         terms
     }
