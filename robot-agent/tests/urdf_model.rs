@@ -205,3 +205,43 @@ fn bad_states_give_typed_errors() {
     let mut ok = nalgebra::Matrix6xX::zeros(m.nv);
     assert!(matches!(frame_jacobian(&m, &d, 999, &mut ok), Err(DynamicsError::FrameOutOfRange { .. })));
 }
+
+#[test]
+fn mutated_urdf_text_never_panics() {
+    use rand::Rng;
+    let mut r = rng(99);
+    let bytes = QUADRUPED.as_bytes();
+    let replacements: [&str; 8] = ["", "x", "-", "nan", "inf", "1e400", "\"", "<"];
+    let (mut ok, mut failed) = (0, 0);
+    for _ in 0..400 {
+        let mut text = String::from_utf8_lossy(bytes).into_owned();
+        for _ in 0..r.random_range(1..4) {
+            let at = r.random_range(0..text.len());
+            if !text.is_char_boundary(at) {
+                continue;
+            }
+            let end = (at + r.random_range(0..6)).min(text.len());
+            if !text.is_char_boundary(end) {
+                continue;
+            }
+            text.replace_range(at..end, replacements[r.random_range(0..replacements.len())]);
+        }
+        let result = std::panic::catch_unwind(|| Model::from_urdf_str(&text, FloatingBase::Yes).map(|m| {
+            // a model that loads must also evaluate
+            let mut d = Data::new(&m);
+            let q = m.neutral();
+            compute_all_terms(&m, &mut d, q.as_slice(), DVector::zeros(m.nv).as_slice()).map(|_| d.m.iter().all(|x| x.is_finite()))
+        }));
+        match result {
+            Ok(Ok(Ok(finite))) => {
+                assert!(finite, "a loaded model gave non-finite M");
+                ok += 1
+            }
+            Ok(Ok(Err(e))) => panic!("loaded model failed to evaluate: {e}"),
+            Ok(Err(_)) => failed += 1,
+            Err(_) => panic!("panic on mutated URDF:\n{text}"),
+        }
+    }
+    // both outcomes occur, so the mutations exercise the error paths
+    assert!(ok > 0 && failed > 0, "ok {ok}, failed {failed}");
+}
