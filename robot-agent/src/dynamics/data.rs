@@ -41,7 +41,7 @@ pub struct Data {
     pub h: DVector<f64>,
     /// Generalized gravity `g(q)`.
     pub g: DVector<f64>,
-    /// Output of [`super::rnea`].
+    /// Output of [`super::rnea()`].
     pub tau: DVector<f64>,
     /// Coriolis matrix `C(q, v)` of [`super::coriolis_matrix`] (`Mdot - 2C` skew).
     pub c: DMatrix<f64>,
