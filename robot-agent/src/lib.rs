@@ -4,6 +4,11 @@
 //! needs (DESIGN.md §2 step 2), checks the torque commands it receives and hands them to its
 //! torque sink (step 4).
 //!
+//! * [`dynamics`]: the robot's model from URDF and its rigid-body algorithms (Pinocchio-style
+//!   immutable `Model` and preallocated `Data`, one algorithm per file).
+//! * [`inspect`]: the `robot-agent inspect` report of a model at one state.
 //! * [`agent`]: the agent loop over Zenoh and the checks of incoming commands.
 
 pub mod agent;
+pub mod dynamics;
+pub mod inspect;
