@@ -6,9 +6,11 @@
 //!
 //! * [`dynamics`]: the robot's model from URDF and its rigid-body algorithms (Pinocchio-style
 //!   immutable `Model` and preallocated `Data`, one algorithm per file).
+//! * [`description`]: a robot's description (TOML beside its URDF), checked against the URDF.
 //! * [`inspect`]: the `robot-agent inspect` report of a model at one state.
 //! * [`agent`]: the agent loop over Zenoh and the checks of incoming commands.
 
 pub mod agent;
+pub mod description;
 pub mod dynamics;
 pub mod inspect;
