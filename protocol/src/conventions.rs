@@ -50,6 +50,19 @@ pub fn base_twist_to_mujoco(orientation_wxyz: [f64; 4], twist: [f64; 6]) -> [f64
     [v_world.x, v_world.y, v_world.z, twist[3], twist[4], twist[5]]
 }
 
+/// MuJoCo free-joint acceleration (`qacc[0..6]`) that corresponds to the protocol's base
+/// acceleration `accel` (the time derivative of the base twist `[v; omega]`, both in the base
+/// frame) at base twist `twist`: `[R (a_v + omega x v); a_omega]`, because the world-frame
+/// linear velocity `R v` also turns with the base. Needed to compare `h` with MuJoCo's
+/// `qfrc_bias`: `h = T^T (qfrc_bias + M_mj c)` with `c` this function at zero acceleration.
+pub fn base_acceleration_to_mujoco(orientation_wxyz: [f64; 4], twist: [f64; 6], accel: [f64; 6]) -> [f64; 6] {
+    let r = quat_from_wxyz(orientation_wxyz);
+    let v = Vector3::new(twist[0], twist[1], twist[2]);
+    let w = Vector3::new(twist[3], twist[4], twist[5]);
+    let lin = r.transform_vector(&(Vector3::new(accel[0], accel[1], accel[2]) + w.cross(&v)));
+    [lin.x, lin.y, lin.z, accel[3], accel[4], accel[5]]
+}
+
 /// A wrench `[force; moment]` as a fixed-size vector.
 pub fn wrench(force: Vector3<f64>, moment: Vector3<f64>) -> Vector6<f64> {
     Vector6::new(force.x, force.y, force.z, moment.x, moment.y, moment.z)

@@ -7,6 +7,7 @@ mod common;
 
 use common::*;
 use nalgebra::Matrix6xX;
+use protocol::conventions::{base_twist_from_mujoco as base_velocity_from_mujoco, base_twist_to_mujoco as base_velocity_to_mujoco};
 use robot_agent::dynamics::*;
 
 const SAMPLES: usize = 60;

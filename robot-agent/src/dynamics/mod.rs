@@ -8,7 +8,8 @@
 //!   `nq = 7 + nj`; `v = [base linear velocity in the BASE frame; base angular velocity in the
 //!   BASE frame; joint velocities]` (Pinocchio's convention), `nv = 6 + nj`.
 //!   MuJoCo's free joint differs (linear velocity in the WORLD frame, angular in the body
-//!   frame): convert only with [`base_velocity_from_mujoco`] / [`base_velocity_to_mujoco`].
+//!   frame): convert only with `protocol::conventions` (`base_twist_from_mujoco`,
+//!   `base_twist_to_mujoco`, `base_acceleration_to_mujoco`), the project's one place for it.
 //! * Fixed base: `q` = joint positions, `v` = joint velocities.
 //! * Joint (velocity) order: depth-first traversal of the URDF link tree, children in the
 //!   order their joints appear in the file. Revolute and continuous joints have one
@@ -65,30 +66,4 @@ pub fn compute_all_terms(model: &Model, data: &mut Data, q: &[f64], v: &[f64]) -
     crba::crba_from_kinematics(model, data);
     rnea::bias_from_kinematics(model, data);
     Ok(())
-}
-
-/// MuJoCo free-joint velocity `[v (world); w (body)]` -> ours `[v (body); w (body)]`, given
-/// the base quaternion `(w, x, y, z)`. The only place the two conventions meet.
-pub fn base_velocity_from_mujoco(quat_wxyz: [f64; 4], v_mujoco: [f64; 6]) -> [f64; 6] {
-    let r = model::quaternion_to_matrix(quat_wxyz[0], quat_wxyz[1], quat_wxyz[2], quat_wxyz[3]);
-    let lin = r.transpose() * nalgebra::Vector3::new(v_mujoco[0], v_mujoco[1], v_mujoco[2]);
-    [lin.x, lin.y, lin.z, v_mujoco[3], v_mujoco[4], v_mujoco[5]]
-}
-
-/// MuJoCo free-joint `qacc` that corresponds to our base acceleration `a_ours` (the time
-/// derivative of `[v (body); w (body)]`) at base velocity `v_ours`:
-/// `[R (a_v + w x v); a_w]` (the world-frame linear velocity `R v` also turns with the base).
-pub fn base_acceleration_to_mujoco(quat_wxyz: [f64; 4], v_ours: [f64; 6], a_ours: [f64; 6]) -> [f64; 6] {
-    let r = model::quaternion_to_matrix(quat_wxyz[0], quat_wxyz[1], quat_wxyz[2], quat_wxyz[3]);
-    let v = nalgebra::Vector3::new(v_ours[0], v_ours[1], v_ours[2]);
-    let w = nalgebra::Vector3::new(v_ours[3], v_ours[4], v_ours[5]);
-    let lin = r * (nalgebra::Vector3::new(a_ours[0], a_ours[1], a_ours[2]) + w.cross(&v));
-    [lin.x, lin.y, lin.z, a_ours[3], a_ours[4], a_ours[5]]
-}
-
-/// Ours `[v (body); w (body)]` -> MuJoCo free-joint velocity `[v (world); w (body)]`.
-pub fn base_velocity_to_mujoco(quat_wxyz: [f64; 4], v_ours: [f64; 6]) -> [f64; 6] {
-    let r = model::quaternion_to_matrix(quat_wxyz[0], quat_wxyz[1], quat_wxyz[2], quat_wxyz[3]);
-    let lin = r * nalgebra::Vector3::new(v_ours[0], v_ours[1], v_ours[2]);
-    [lin.x, lin.y, lin.z, v_ours[3], v_ours[4], v_ours[5]]
 }

@@ -16,7 +16,7 @@ use super::spatial::{Inertia, SE3};
 pub type FrameId = usize;
 
 /// Gravity used by the model: 9.81 m/s^2 along -z (DESIGN.md §3).
-pub const GRAVITY: [f64; 3] = [0.0, 0.0, -9.81];
+pub const GRAVITY: [f64; 3] = [0.0, 0.0, -protocol::conventions::GRAVITY];
 
 /// Whether the root link is attached to the world through a 6-DoF floating joint.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

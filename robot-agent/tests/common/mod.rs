@@ -5,7 +5,8 @@ use std::ffi::CString;
 
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix6xX, Vector3, Vector6};
 use rand::{rngs::StdRng, Rng, SeedableRng};
-use robot_agent::dynamics::{base_acceleration_to_mujoco, base_velocity_to_mujoco, FloatingBase, Model, ModelBuilder, SE3};
+use protocol::conventions::{base_acceleration_to_mujoco, base_twist_to_mujoco as base_velocity_to_mujoco};
+use robot_agent::dynamics::{FloatingBase, Model, ModelBuilder, SE3};
 
 pub const ARM: &str = include_str!("../data/arm.urdf");
 pub const QUADRUPED: &str = include_str!("../data/quadruped.urdf");
