@@ -8,9 +8,11 @@
 //!   immutable `Model` and preallocated `Data`, one algorithm per file).
 //! * [`description`]: a robot's description (TOML beside its URDF), checked against the URDF.
 //! * [`inspect`]: the `robot-agent inspect` report of a model at one state.
+//! * [`terms`]: the per-tick dynamics terms (M, h, frame Jacobians and Jdot*v) from the model.
 //! * [`agent`]: the agent loop over Zenoh and the checks of incoming commands.
 
 pub mod agent;
 pub mod description;
 pub mod dynamics;
 pub mod inspect;
+pub mod terms;

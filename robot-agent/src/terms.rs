@@ -1,0 +1,200 @@
+//! The dynamics terms a robot publishes each tick (DESIGN.md §2 step 2), computed from its
+//! model: `M`, `h`, and for the frames of its current contact set (stance feet, swing feet,
+//! hand, torso) the pose, the world-aligned Jacobian and `Jdot*v`.
+
+use nalgebra::{DVector, Matrix6xX};
+use protocol::{DynamicsTerms, FrameRole, FrameTerms, Header, Matrix, RobotState};
+use thiserror::Error;
+
+use crate::description::Robot;
+use crate::dynamics::{compute_all_terms, frame_jacobian, frame_jdot_v, Data, DynamicsError, FrameId};
+
+/// Errors turning a state into terms.
+#[derive(Debug, Error)]
+pub enum TermsError {
+    #[error("state has {got} joint {what}, the robot has {expected} joints")]
+    StateSize { what: &'static str, expected: usize, got: usize },
+    #[error("the robot has no floating base but the state is for one")]
+    Base,
+    #[error(transparent)]
+    Dynamics(#[from] DynamicsError),
+    #[error(transparent)]
+    Model(#[from] crate::dynamics::ModelError),
+}
+
+/// Which contacts are closed: per foot of the description (same order), stance or not, and
+/// whether the hand holds the object.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ContactSet {
+    pub stance: Vec<bool>,
+    pub hand_in_grasp: bool,
+}
+
+impl ContactSet {
+    /// Every foot on the ground, hand in grasp: the paper's manipulation scenarios.
+    pub fn all_stance(robot: &Robot) -> Self {
+        ContactSet { stance: vec![true; robot.foot_frames.len()], hand_in_grasp: true }
+    }
+}
+
+/// Preallocated workspace that fills [`DynamicsTerms`] from a robot's state.
+pub struct TermsBuilder {
+    data: Data,
+    q: DVector<f64>,
+    v: DVector<f64>,
+    jac: Matrix6xX<f64>,
+    feet: Vec<(String, FrameId, bool)>,
+    hand: (String, FrameId),
+    torso: (String, FrameId),
+}
+
+impl TermsBuilder {
+    pub fn new(robot: &Robot) -> Result<Self, TermsError> {
+        let m = &robot.model;
+        let id = |name: &str| m.frame_id(name).map_err(TermsError::Model);
+        let feet = robot
+            .foot_frames
+            .iter()
+            .map(|f| Ok((f.clone(), id(f)?, robot.swing_foot_frames.contains(f))))
+            .collect::<Result<Vec<_>, TermsError>>()?;
+        Ok(TermsBuilder {
+            data: Data::new(m),
+            q: DVector::zeros(m.nq),
+            v: DVector::zeros(m.nv),
+            jac: Matrix6xX::zeros(m.nv),
+            feet,
+            hand: (robot.hand_frame.clone(), id(&robot.hand_frame)?),
+            torso: (robot.torso_frame.clone(), id(&robot.torso_frame)?),
+        })
+    }
+
+    /// The model's `(q, v)` for a protocol state (joint vectors in velocity order).
+    pub fn load_state(&mut self, robot: &Robot, state: &RobotState) -> Result<(), TermsError> {
+        let m = &robot.model;
+        let nj = m.joint_names.len();
+        if state.joint_positions.len() != nj {
+            return Err(TermsError::StateSize { what: "positions", expected: nj, got: state.joint_positions.len() });
+        }
+        if state.joint_velocities.len() != nj {
+            return Err(TermsError::StateSize { what: "velocities", expected: nj, got: state.joint_velocities.len() });
+        }
+        if m.floating_base {
+            self.q.as_mut_slice()[0..3].copy_from_slice(&state.base_pose.position);
+            self.q.as_mut_slice()[3..7].copy_from_slice(&state.base_pose.orientation);
+            self.q.as_mut_slice()[7..].copy_from_slice(&state.joint_positions);
+            self.v.as_mut_slice()[0..6].copy_from_slice(&state.base_twist);
+            self.v.as_mut_slice()[6..].copy_from_slice(&state.joint_velocities);
+        } else {
+            self.q.as_mut_slice().copy_from_slice(&state.joint_positions);
+            self.v.as_mut_slice().copy_from_slice(&state.joint_velocities);
+        }
+        Ok(())
+    }
+
+    /// The configuration and velocity last loaded.
+    pub fn q_v(&self) -> (&DVector<f64>, &DVector<f64>) {
+        (&self.q, &self.v)
+    }
+
+    /// Compute the terms at the loaded state into `out` (reusing its allocations).
+    pub fn compute(&mut self, robot: &Robot, contacts: &ContactSet, out: &mut DynamicsTerms) -> Result<(), TermsError> {
+        let m = &robot.model;
+        compute_all_terms(m, &mut self.data, self.q.as_slice(), self.v.as_slice())?;
+        let nv = m.nv;
+        out.floating_base = m.floating_base;
+        out.nv = nv as u32;
+        out.mass_matrix.copy_from_dmatrix(&self.data.m);
+        out.bias.clear();
+        out.bias.extend_from_slice(self.data.h.as_slice());
+        out.velocity.clear();
+        out.velocity.extend_from_slice(self.v.as_slice());
+        out.hand_in_grasp = contacts.hand_in_grasp;
+        let mut used = 0;
+        for (k, (name, id, can_swing)) in self.feet.iter().enumerate() {
+            let role = if contacts.stance.get(k).copied().unwrap_or(true) {
+                FrameRole::StanceFoot
+            } else if *can_swing {
+                FrameRole::SwingFoot
+            } else {
+                continue;
+            };
+            fill_frame(m, &self.data, &mut self.jac, name, *id, role, out, used)?;
+            used += 1;
+        }
+        let (hand, torso) = (self.hand.clone(), self.torso.clone());
+        fill_frame(m, &self.data, &mut self.jac, &hand.0, hand.1, FrameRole::Hand, out, used)?;
+        fill_frame(m, &self.data, &mut self.jac, &torso.0, torso.1, FrameRole::Torso, out, used + 1)?;
+        out.frames.truncate(used + 2);
+        Ok(())
+    }
+
+    /// Mass matrix, bias and gravity of the last computation.
+    pub fn data(&self) -> &Data {
+        &self.data
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn fill_frame(
+    m: &crate::dynamics::Model,
+    data: &Data,
+    jac: &mut Matrix6xX<f64>,
+    name: &str,
+    id: FrameId,
+    role: FrameRole,
+    out: &mut DynamicsTerms,
+    slot: usize,
+) -> Result<(), TermsError> {
+    frame_jacobian(m, data, id, jac)?;
+    let jdv = frame_jdot_v(m, data, id)?;
+    let pose = &data.o_m_f[id];
+    let rows = role.dim();
+    if out.frames.len() <= slot {
+        out.frames.push(FrameTerms {
+            name: String::new(),
+            role,
+            position: [0.0; 3],
+            rotation: [0.0; 9],
+            jacobian: Matrix::zeros(rows, m.nv),
+            jdot_v: vec![0.0; rows],
+        });
+    }
+    let f = &mut out.frames[slot];
+    if f.name != name {
+        f.name.clear();
+        f.name.push_str(name);
+    }
+    f.role = role;
+    f.position = [pose.trans.x, pose.trans.y, pose.trans.z];
+    for i in 0..3 {
+        for j in 0..3 {
+            f.rotation[3 * i + j] = pose.rot[(i, j)];
+        }
+    }
+    f.jacobian.rows = rows as u32;
+    f.jacobian.cols = m.nv as u32;
+    f.jacobian.data.resize(rows * m.nv, 0.0);
+    for i in 0..rows {
+        for j in 0..m.nv {
+            f.jacobian.data[i * m.nv + j] = jac[(i, j)];
+        }
+    }
+    f.jdot_v.resize(rows, 0.0);
+    f.jdot_v.copy_from_slice(&jdv.as_slice()[..rows]);
+    Ok(())
+}
+
+/// An empty terms message for robot `id` of team `team`, to be filled by [`TermsBuilder`].
+pub fn empty_terms(team: &str, id: &str) -> DynamicsTerms {
+    DynamicsTerms {
+        header: Header::new(team, Some(id), 0, 0),
+        floating_base: true,
+        nv: 0,
+        mass_matrix: Matrix::zeros(0, 0),
+        bias: Vec::new(),
+        velocity: Vec::new(),
+        frames: Vec::new(),
+        hand_in_grasp: false,
+        state_tick: 0,
+    }
+}
