@@ -1,0 +1,315 @@
+//! Reference trajectories of the scenarios: holds, sinusoids, circles and sequences of them,
+//! for positions and for orientations, with exact velocities and accelerations.
+//!
+//! A [`Motion`] is an offset `x(t)` in R^3 from the task's initial value with `x(0) = 0`, so a
+//! scenario starts without a jump. A position reference is `p0 + x(t)`; an orientation
+//! reference is `exp([x(t)]) R0` (`x` a rotation vector in the world frame), whose angular
+//! velocity is `J_l(x) xdot` (the left Jacobian of SO(3)).
+
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use protocol::conventions::quat_to_wxyz;
+use protocol::{Pose, PoseReference};
+use serde::Deserialize;
+use std::f64::consts::TAU;
+
+/// Plane of a circle, as the two world axes it spans.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Plane {
+    Xy,
+    Xz,
+    Yz,
+}
+
+impl Plane {
+    fn axes(self) -> (usize, usize) {
+        match self {
+            Plane::Xy => (0, 1),
+            Plane::Xz => (0, 2),
+            Plane::Yz => (1, 2),
+        }
+    }
+}
+
+/// One segment of a [`Motion::Sequence`].
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Segment {
+    /// Length of the segment, s.
+    pub duration: f64,
+    pub motion: Motion,
+}
+
+/// An offset trajectory in R^3 with `x(0) = 0`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Motion {
+    /// Stay at the initial value.
+    #[default]
+    Hold,
+    /// Per axis `A sin(2 pi f t + phi) - A sin(phi)`.
+    Sinusoid {
+        amplitude: [f64; 3],
+        /// Hz.
+        frequency: [f64; 3],
+        /// rad.
+        #[serde(default)]
+        phase: [f64; 3],
+    },
+    /// A circle of `radius` in `plane`, starting at the current point and turning at
+    /// `frequency` Hz: `r (cos(wt + phi) - cos(phi), sin(wt + phi) - sin(phi))`.
+    Circle {
+        radius: f64,
+        frequency: f64,
+        plane: Plane,
+        #[serde(default)]
+        phase: f64,
+    },
+    /// Motions one after another; each starts from where the previous one ended.
+    Sequence { segments: Vec<Segment> },
+}
+
+/// Value, first and second time derivative of an offset.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sample {
+    pub x: Vector3<f64>,
+    pub xd: Vector3<f64>,
+    pub xdd: Vector3<f64>,
+}
+
+impl Sample {
+    const ZERO: Sample = Sample { x: Vector3::new(0.0, 0.0, 0.0), xd: Vector3::new(0.0, 0.0, 0.0), xdd: Vector3::new(0.0, 0.0, 0.0) };
+}
+
+/// What is wrong with a motion's parameters.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct MotionError(pub String);
+
+impl Motion {
+    /// Finite numbers, non-negative frequencies and durations.
+    pub fn check(&self, what: &str) -> Result<(), MotionError> {
+        let bad = |m: String| Err(MotionError(format!("{what}: {m}")));
+        match self {
+            Motion::Hold => Ok(()),
+            Motion::Sinusoid { amplitude, frequency, phase } => {
+                if amplitude.iter().chain(frequency).chain(phase).any(|x| !x.is_finite()) {
+                    return bad("non-finite sinusoid parameter".into());
+                }
+                if frequency.iter().any(|f| *f < 0.0) {
+                    return bad("negative frequency".into());
+                }
+                Ok(())
+            }
+            Motion::Circle { radius, frequency, phase, .. } => {
+                if ![*radius, *frequency, *phase].iter().all(|x| x.is_finite()) || *frequency < 0.0 {
+                    return bad("circle radius, frequency and phase must be finite, frequency >= 0".into());
+                }
+                Ok(())
+            }
+            Motion::Sequence { segments } => {
+                for (i, s) in segments.iter().enumerate() {
+                    if !(s.duration.is_finite() && s.duration > 0.0) {
+                        return bad(format!("segment {i} has duration {}", s.duration));
+                    }
+                    s.motion.check(&format!("{what}.segments[{i}]"))?;
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// The offset and its derivatives at time `t` (s, from the scenario start).
+    pub fn sample(&self, t: f64) -> Sample {
+        match self {
+            Motion::Hold => Sample::ZERO,
+            Motion::Sinusoid { amplitude, frequency, phase } => {
+                let mut s = Sample::ZERO;
+                for i in 0..3 {
+                    let w = TAU * frequency[i];
+                    let (a, ph) = (amplitude[i], phase[i]);
+                    s.x[i] = a * (w * t + ph).sin() - a * ph.sin();
+                    s.xd[i] = a * w * (w * t + ph).cos();
+                    s.xdd[i] = -a * w * w * (w * t + ph).sin();
+                }
+                s
+            }
+            Motion::Circle { radius, frequency, plane, phase } => {
+                let (u, v) = plane.axes();
+                let w = TAU * frequency;
+                let th = w * t + phase;
+                let mut s = Sample::ZERO;
+                s.x[u] = radius * (th.cos() - phase.cos());
+                s.x[v] = radius * (th.sin() - phase.sin());
+                s.xd[u] = -radius * w * th.sin();
+                s.xd[v] = radius * w * th.cos();
+                s.xdd[u] = -radius * w * w * th.cos();
+                s.xdd[v] = -radius * w * w * th.sin();
+                s
+            }
+            Motion::Sequence { segments } => {
+                let mut start = 0.0;
+                let mut base = Vector3::zeros();
+                for seg in segments {
+                    let end = start + seg.duration;
+                    if t < end {
+                        let mut s = seg.motion.sample(t - start);
+                        s.x += base;
+                        return s;
+                    }
+                    base += seg.motion.sample(seg.duration).x;
+                    start = end;
+                }
+                Sample { x: base, ..Sample::ZERO }
+            }
+        }
+    }
+}
+
+/// A pose task's reference: position and orientation motions about the initial pose.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct PoseMotion {
+    #[serde(default)]
+    pub position: Motion,
+    /// Rotation-vector offset in the world frame, rad.
+    #[serde(default)]
+    pub orientation: Motion,
+}
+
+impl PoseMotion {
+    pub fn check(&self, what: &str) -> Result<(), MotionError> {
+        self.position.check(&format!("{what}.position"))?;
+        self.orientation.check(&format!("{what}.orientation"))
+    }
+
+    /// The reference at time `t` about the initial pose `(p0, r0)`.
+    pub fn reference(&self, p0: &Vector3<f64>, r0: &UnitQuaternion<f64>, t: f64) -> PoseReference {
+        let p = self.position.sample(t);
+        let (rot, w, wd) = orientation(&self.orientation, t);
+        let q = UnitQuaternion::from_rotation_matrix(&rot) * r0;
+        let pos = p0 + p.x;
+        PoseReference {
+            pose: Pose { position: [pos.x, pos.y, pos.z], orientation: quat_to_wxyz(&q) },
+            twist: [p.xd.x, p.xd.y, p.xd.z, w.x, w.y, w.z],
+            acceleration: [p.xdd.x, p.xdd.y, p.xdd.z, wd.x, wd.y, wd.z],
+        }
+    }
+}
+
+fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
+/// Left Jacobian of SO(3): the world angular velocity of `exp([x])` is `J_l(x) xdot`.
+pub fn left_jacobian(x: &Vector3<f64>) -> Matrix3<f64> {
+    let a = x.norm();
+    let k = skew(x);
+    let (c1, c2) = if a < 1e-4 {
+        (0.5 - a * a / 24.0, 1.0 / 6.0 - a * a / 120.0)
+    } else {
+        ((1.0 - a.cos()) / (a * a), (a - a.sin()) / (a * a * a))
+    };
+    Matrix3::identity() + c1 * k + c2 * k * k
+}
+
+/// Rotation, angular velocity and angular acceleration (world frame) of `exp([x(t)])`. The
+/// acceleration is the central difference of the exact angular velocity (step 1e-5 s; error
+/// of order 1e-10 for the scenario's frequencies).
+fn orientation(m: &Motion, t: f64) -> (Rotation3<f64>, Vector3<f64>, Vector3<f64>) {
+    let omega = |t: f64| {
+        let s = m.sample(t);
+        left_jacobian(&s.x) * s.xd
+    };
+    let s = m.sample(t);
+    let rot = Rotation3::new(s.x);
+    let h = 1e-5;
+    let wd = (omega(t + h) - omega(t - h)) / (2.0 * h);
+    (rot, omega(t), wd)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fd(m: &Motion, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        let h = 1e-6;
+        let (a, b, c) = (m.sample(t - h).x, m.sample(t).x, m.sample(t + h).x);
+        ((c - a) / (2.0 * h), (c - 2.0 * b + a) / (h * h))
+    }
+
+    fn motions() -> Vec<Motion> {
+        vec![
+            Motion::Sinusoid { amplitude: [0.03, 0.0, 0.02], frequency: [0.25, 0.5, 0.4], phase: [0.0, 1.0, 1.5] },
+            Motion::Circle { radius: 0.05, frequency: 0.2, plane: Plane::Xz, phase: 0.3 },
+            Motion::Sequence {
+                segments: vec![
+                    Segment { duration: 2.0, motion: Motion::Sinusoid { amplitude: [0.1, 0.0, 0.0], frequency: [0.5, 0.0, 0.0], phase: [0.0; 3] } },
+                    Segment { duration: 1.5, motion: Motion::Circle { radius: 0.02, frequency: 1.0, plane: Plane::Xy, phase: 0.0 } },
+                ],
+            },
+        ]
+    }
+
+    #[test]
+    fn offsets_start_at_zero_and_derivatives_match_finite_differences() {
+        for m in motions() {
+            assert!(m.sample(0.0).x.norm() < 1e-15, "{m:?}");
+            for t in [0.3, 1.1, 2.7, 3.2] {
+                let s = m.sample(t);
+                let (v, a) = fd(&m, t);
+                assert!((s.xd - v).norm() < 1e-6, "{m:?} at {t}: {} vs {}", s.xd, v);
+                assert!((s.xdd - a).norm() < 1e-3, "{m:?} at {t}: {} vs {}", s.xdd, a);
+            }
+        }
+    }
+
+    #[test]
+    fn a_sequence_continues_from_where_the_previous_segment_ended() {
+        let m = &motions()[2];
+        let before = m.sample(2.0 - 1e-9).x;
+        let after = m.sample(2.0 + 1e-9).x;
+        assert!((before - after).norm() < 1e-7);
+        // After the last segment it holds the end point.
+        assert_eq!(m.sample(10.0).x, m.sample(3.5).x);
+    }
+
+    #[test]
+    fn orientation_reference_has_the_right_angular_velocity() {
+        let pm = PoseMotion {
+            position: Motion::Hold,
+            orientation: Motion::Sinusoid { amplitude: [0.17, 0.1, 0.15], frequency: [0.3, 0.2, 0.25], phase: [0.0, 0.5, 1.0] },
+        };
+        let r0 = UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3);
+        let p0 = Vector3::new(1.0, 0.0, 0.6);
+        for t in [0.0, 0.7, 2.3] {
+            let h = 1e-6;
+            let q = |t: f64| protocol::conventions::quat_from_wxyz(pm.reference(&p0, &r0, t).pose.orientation);
+            // World angular velocity: log(R(t+h) R(t-h)^T) / 2h.
+            let dq = q(t + h) * q(t - h).inverse();
+            let w_fd = dq.scaled_axis() / (2.0 * h);
+            let r = pm.reference(&p0, &r0, t);
+            let w = Vector3::new(r.twist[3], r.twist[4], r.twist[5]);
+            assert!((w - w_fd).norm() < 1e-6, "t {t}: {w} vs {w_fd}");
+            // Angular acceleration against a finite difference of the angular velocity.
+            let wv = |t: f64| {
+                let r = pm.reference(&p0, &r0, t);
+                Vector3::new(r.twist[3], r.twist[4], r.twist[5])
+            };
+            let a_fd = (wv(t + 1e-4) - wv(t - 1e-4)) / 2e-4;
+            let a = Vector3::new(r.acceleration[3], r.acceleration[4], r.acceleration[5]);
+            assert!((a - a_fd).norm() < 1e-5, "t {t}: {a} vs {a_fd}");
+        }
+        // At t = 0 the reference is the initial pose.
+        let r = pm.reference(&p0, &r0, 0.0);
+        assert!(protocol::conventions::quat_from_wxyz(r.pose.orientation).angle_to(&r0) < 1e-12);
+    }
+
+    #[test]
+    fn bad_parameters_are_named() {
+        let m = Motion::Sinusoid { amplitude: [f64::NAN, 0.0, 0.0], frequency: [1.0; 3], phase: [0.0; 3] };
+        assert!(m.check("object.position").unwrap_err().0.contains("object.position"));
+        let m = Motion::Sequence { segments: vec![Segment { duration: -1.0, motion: Motion::Hold }] };
+        assert!(m.check("x").is_err());
+    }
+}

@@ -1,0 +1,344 @@
+//! Scenario files: the robots and their poses, the object, the references, the gains per task,
+//! the perturbations, duration, rates and seed (DESIGN.md §7). Every number is a parameter,
+//! and `--set key=value` overrides any of them: `key` is a dotted path into the TOML
+//! (`gains.object.stiffness`, `robots.1.base_position`, `duration`), `value` a TOML value
+//! (`12.5`, `[1, 2, 3]`, `"paper"`).
+//!
+//! Left open for what comes next: `controller` names the team controller (`paper` today; the
+//! baseline `mqp` comparison will add its own), and `contacts` will hold contact schedules
+//! for walking (today every foot stays in stance and every hand in grasp).
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use thiserror::Error;
+
+use crate::reference::PoseMotion;
+
+/// What can be wrong with a scenario.
+#[derive(Debug, Error)]
+pub enum ScenarioError {
+    #[error("cannot read scenario {path}: {reason}")]
+    Io { path: PathBuf, reason: String },
+    #[error("malformed scenario {path}: {reason}")]
+    Toml { path: PathBuf, reason: String },
+    #[error("--set {0:?}: expected key=value")]
+    OverrideSyntax(String),
+    #[error("--set {key}: {reason}")]
+    Override { key: String, reason: String },
+    #[error("scenario {path}: {reason}")]
+    Invalid { path: PathBuf, reason: String },
+}
+
+/// A whole scenario.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    /// Scenario duration after settling, s.
+    pub duration: f64,
+    /// Time the team settles under the controller before the scenario clock starts, s.
+    #[serde(default = "default_settle")]
+    pub settle: f64,
+    pub control_hz: f64,
+    pub physics_hz: f64,
+    pub seed: u64,
+    /// Team controller: `paper`.
+    #[serde(default = "default_controller")]
+    pub controller: String,
+    /// Minimum normal force of every contact in the QP, N.
+    #[serde(default = "default_min_normal_force")]
+    pub min_normal_force: f64,
+    pub object: ObjectSpec,
+    pub robots: Vec<RobotSpec>,
+    pub gains: Gains,
+    #[serde(default)]
+    pub references: References,
+    #[serde(default)]
+    pub perturbations: Vec<Perturbation>,
+}
+
+fn default_settle() -> f64 {
+    1.0
+}
+fn default_controller() -> String {
+    "paper".into()
+}
+fn default_min_normal_force() -> f64 {
+    5.0
+}
+
+/// The carried box.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObjectSpec {
+    /// Full edge lengths, m.
+    pub size: [f64; 3],
+    pub mass: f64,
+    pub friction: f64,
+    /// Initial centre position, m (world).
+    pub position: [f64; 3],
+}
+
+/// One robot of the team.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotSpec {
+    pub id: String,
+    /// Robot description (TOML beside its URDF), relative to the repository root or absolute.
+    pub description: PathBuf,
+    /// Base position on the ground plane (x, y), m; the height comes from the standing pose.
+    pub base_xy: [f64; 2],
+    /// Heading about z, rad.
+    pub yaw: f64,
+}
+
+/// Stiffness and damping of a task, per axis (`[x, y, z, rx, ry, rz]`, or 3 for feet).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TaskGains {
+    pub stiffness: Vec<f64>,
+    pub damping: Vec<f64>,
+}
+
+/// Gains of every task kind.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Gains {
+    pub object: TaskGains,
+    pub torso: TaskGains,
+    pub feet: Option<TaskGains>,
+}
+
+/// References about the settled initial poses.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct References {
+    #[serde(default)]
+    pub object: PoseMotion,
+    #[serde(default)]
+    pub torsos: Vec<TorsoMotion>,
+}
+
+/// A torso's reference.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TorsoMotion {
+    pub robot: String,
+    #[serde(flatten)]
+    pub motion: PoseMotion,
+}
+
+/// What a push acts on.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PushTarget {
+    /// `object`, or a robot id.
+    pub on: String,
+    /// Body of the robot (ignored for the object).
+    #[serde(default)]
+    pub body: Option<String>,
+}
+
+/// A timed external wrench `[f; m]` in the world frame.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Perturbation {
+    #[serde(flatten)]
+    pub target: PushTarget,
+    /// Start, s after the scenario clock starts.
+    pub start: f64,
+    pub duration: f64,
+    pub wrench: [f64; 6],
+}
+
+impl Scenario {
+    /// Load a scenario file and apply `--set` overrides (`key=value`).
+    pub fn load(path: impl AsRef<Path>, overrides: &[String]) -> Result<Scenario, ScenarioError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| ScenarioError::Io { path: path.to_path_buf(), reason: e.to_string() })?;
+        Self::from_str_with(&text, path, overrides)
+    }
+
+    /// Parse scenario text (named `path` in errors) and apply overrides.
+    pub fn from_str_with(text: &str, path: &Path, overrides: &[String]) -> Result<Scenario, ScenarioError> {
+        let toml_err = |e: String| ScenarioError::Toml { path: path.to_path_buf(), reason: e };
+        let mut value: toml::Value = toml::from_str(text).map_err(|e| toml_err(e.to_string()))?;
+        for o in overrides {
+            apply_override(&mut value, o)?;
+        }
+        let s: Scenario = value.try_into().map_err(|e: toml::de::Error| toml_err(e.to_string()))?;
+        s.check().map_err(|reason| ScenarioError::Invalid { path: path.to_path_buf(), reason })?;
+        Ok(s)
+    }
+
+    /// Number of control ticks of the scenario proper (after settling).
+    pub fn ticks(&self) -> u64 {
+        (self.duration * self.control_hz).round() as u64
+    }
+
+    fn check(&self) -> Result<(), String> {
+        let pos = |what: &str, x: f64| if x.is_finite() && x > 0.0 { Ok(()) } else { Err(format!("{what} = {x} must be positive")) };
+        pos("duration", self.duration)?;
+        pos("control_hz", self.control_hz)?;
+        pos("physics_hz", self.physics_hz)?;
+        if !(self.settle.is_finite() && self.settle >= 0.0) {
+            return Err(format!("settle = {} must be non-negative", self.settle));
+        }
+        let ratio = self.physics_hz / self.control_hz;
+        if (ratio - ratio.round()).abs() > 1e-9 || ratio < 1.0 {
+            return Err(format!("physics_hz ({}) must be a whole multiple of control_hz ({})", self.physics_hz, self.control_hz));
+        }
+        if self.controller != "paper" {
+            return Err(format!("controller {:?} is not known (known: paper)", self.controller));
+        }
+        if !(self.min_normal_force.is_finite() && self.min_normal_force >= 0.0) {
+            return Err("min_normal_force must be non-negative".into());
+        }
+        pos("object.mass", self.object.mass)?;
+        pos("object.friction", self.object.friction)?;
+        for (i, s) in self.object.size.iter().enumerate() {
+            pos(&format!("object.size[{i}]"), *s)?;
+        }
+        if self.object.position.iter().any(|x| !x.is_finite()) {
+            return Err("object.position must be finite".into());
+        }
+        if self.robots.len() < 2 {
+            return Err("a team needs at least two robots to hold the object".into());
+        }
+        for (i, r) in self.robots.iter().enumerate() {
+            protocol::validate_id("robot", &r.id).map_err(|e| format!("robots[{i}].id: {e}"))?;
+            if self.robots[..i].iter().any(|o| o.id == r.id) {
+                return Err(format!("robot id {:?} is used twice", r.id));
+            }
+            if r.base_xy.iter().chain([&r.yaw]).any(|x| !x.is_finite()) {
+                return Err(format!("robots[{i}] pose must be finite"));
+            }
+        }
+        check_gains("gains.object", &self.gains.object, 6)?;
+        check_gains("gains.torso", &self.gains.torso, 6)?;
+        if let Some(f) = &self.gains.feet {
+            check_gains("gains.feet", f, 3)?;
+        }
+        self.references.object.check("references.object").map_err(|e| e.0)?;
+        for (i, t) in self.references.torsos.iter().enumerate() {
+            if !self.robots.iter().any(|r| r.id == t.robot) {
+                return Err(format!("references.torsos[{i}] names unknown robot {:?}", t.robot));
+            }
+            t.motion.check(&format!("references.torsos[{i}]")).map_err(|e| e.0)?;
+        }
+        for (i, p) in self.perturbations.iter().enumerate() {
+            if p.target.on != "object" && !self.robots.iter().any(|r| r.id == p.target.on) {
+                return Err(format!("perturbations[{i}] acts on unknown {:?} (object or a robot id)", p.target.on));
+            }
+            if !(p.start.is_finite() && p.start >= 0.0 && p.duration.is_finite() && p.duration > 0.0) {
+                return Err(format!("perturbations[{i}] needs start >= 0 and duration > 0"));
+            }
+            if p.wrench.iter().any(|x| !x.is_finite()) {
+                return Err(format!("perturbations[{i}].wrench must be finite"));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn check_gains(what: &str, g: &TaskGains, n: usize) -> Result<(), String> {
+    if g.stiffness.len() != n || g.damping.len() != n {
+        return Err(format!("{what} needs {n} stiffness and {n} damping values"));
+    }
+    if g.stiffness.iter().chain(&g.damping).any(|x| !(x.is_finite() && *x >= 0.0)) {
+        return Err(format!("{what} gains must be finite and non-negative"));
+    }
+    Ok(())
+}
+
+/// Apply one `key=value` override to a TOML tree. Array elements are addressed by index
+/// (`robots.1.yaw`); the key must exist, so a typo is an error rather than a silent no-op.
+pub fn apply_override(root: &mut toml::Value, assignment: &str) -> Result<(), ScenarioError> {
+    let (key, raw) = assignment.split_once('=').ok_or_else(|| ScenarioError::OverrideSyntax(assignment.to_string()))?;
+    let key = key.trim();
+    let err = |reason: String| ScenarioError::Override { key: key.to_string(), reason };
+    // Parse the value as TOML; a bare word that is not TOML is taken as a string.
+    let value: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {}", raw.trim())) {
+        Ok(mut t) => t.remove("v").ok_or_else(|| err("no value".into()))?,
+        Err(_) => toml::Value::String(raw.trim().to_string()),
+    };
+    let mut node = root;
+    let parts: Vec<&str> = key.split('.').collect();
+    if parts.iter().any(|p| p.is_empty()) {
+        return Err(err("empty key segment".into()));
+    }
+    for (i, part) in parts.iter().enumerate() {
+        let last = i == parts.len() - 1;
+        node = match node {
+            toml::Value::Table(t) => {
+                if !t.contains_key(*part) {
+                    return Err(err(format!("no such key {part:?} (known: {})", t.keys().cloned().collect::<Vec<_>>().join(", "))));
+                }
+                if last {
+                    t.insert(part.to_string(), value);
+                    return Ok(());
+                }
+                t.get_mut(*part).expect("checked")
+            }
+            toml::Value::Array(a) => {
+                let idx: usize = part.parse().map_err(|_| err(format!("{part:?} is not an index into an array")))?;
+                let len = a.len();
+                let slot = a.get_mut(idx).ok_or_else(|| err(format!("index {idx} out of range ({len} elements)")))?;
+                if last {
+                    *slot = value;
+                    return Ok(());
+                }
+                slot
+            }
+            _ => return Err(err(format!("{part:?} goes into a value that has no fields"))),
+        };
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scenarios_dir() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
+    }
+
+    #[test]
+    fn every_shipped_scenario_loads() {
+        for name in ["s1_torso_and_object.toml", "s4_object_circle.toml", "s5_object_orientation.toml", "s6_impedance.toml"] {
+            let s = Scenario::load(scenarios_dir().join(name), &[]).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(s.robots.len(), 2, "{name}");
+            assert!(s.ticks() > 0);
+        }
+    }
+
+    #[test]
+    fn overrides_change_any_number_and_refuse_typos() {
+        let p = scenarios_dir().join("s1_torso_and_object.toml");
+        let s = Scenario::load(&p, &["duration=2.5".into(), "gains.object.stiffness=[1,2,3,4,5,6]".into(), "robots.1.yaw=0.5".into()]).unwrap();
+        assert_eq!(s.duration, 2.5);
+        assert_eq!(s.gains.object.stiffness, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert_eq!(s.robots[1].yaw, 0.5);
+        for bad in ["duraton=3", "robots.7.yaw=1", "duration", "gains.object.stiffness=[1,2]", "duration=-1", "controller=mpc"] {
+            assert!(Scenario::load(&p, &[bad.to_string()]).is_err(), "{bad} accepted");
+        }
+    }
+
+    #[test]
+    fn broken_files_say_what_is_wrong() {
+        let p = Path::new("x.toml");
+        assert!(matches!(Scenario::from_str_with("name = ", p, &[]), Err(ScenarioError::Toml { .. })));
+        let good = std::fs::read_to_string(scenarios_dir().join("s4_object_circle.toml")).unwrap();
+        let e = Scenario::from_str_with(&good.replace("physics_hz = 2000.0", "physics_hz = 1500.0"), p, &[]).unwrap_err();
+        assert!(e.to_string().contains("whole multiple"), "{e}");
+        let s6 = std::fs::read_to_string(scenarios_dir().join("s6_impedance.toml")).unwrap();
+        let e = Scenario::from_str_with(&s6.replacen("on = \"object\"", "on = \"r9\"", 1), p, &[]).unwrap_err();
+        assert!(e.to_string().contains("r9"), "{e}");
+        assert!(Scenario::load("/nonexistent.toml", &[]).is_err());
+    }
+}
