@@ -65,6 +65,33 @@ fn bench(c: &mut Criterion) {
     });
     g.finish();
     black_box((&jacs, &jdvs));
+
+    // The agent's real per-tick work on the project's default robot: state in, the protocol's
+    // DynamicsTerms (M, h, 4 feet, hand, torso with Jacobians and Jdot*v) out.
+    use robot_agent::description::{default_robot_path, Robot};
+    use robot_agent::terms::{empty_terms, ContactSet, TermsBuilder};
+    let robot = Robot::load(default_robot_path()).unwrap();
+    let mut builder = TermsBuilder::new(&robot).unwrap();
+    let sq = robot.standing_q.as_slice();
+    let state = protocol::RobotState {
+        header: protocol::Header::new("bench", Some("r1"), 0, 0),
+        base_pose: protocol::Pose { position: [sq[0], sq[1], sq[2]], orientation: [sq[3], sq[4], sq[5], sq[6]] },
+        base_twist: [0.1, -0.05, 0.02, 0.1, 0.2, -0.1],
+        joint_positions: sq[7..].to_vec(),
+        joint_velocities: (0..18).map(|i| 0.1 * (i as f64).sin()).collect(),
+        time: 0.0,
+    };
+    let contacts = ContactSet::all_stance(&robot);
+    let mut terms = empty_terms("bench", "r1");
+    let mut g = c.benchmark_group("default_robot");
+    g.bench_function("state_to_dynamics_terms", |b| {
+        b.iter(|| {
+            builder.load_state(&robot, black_box(&state)).unwrap();
+            builder.compute(&robot, &contacts, &mut terms).unwrap();
+        })
+    });
+    g.finish();
+    black_box(&terms);
 }
 
 criterion_group! {

@@ -84,3 +84,13 @@ fn mujoco_velocity_conversion_round_trips() {
     assert_eq!(&mj[3..], &v[3..]);
     assert!((mj[0] - v[0]).abs() > 1e-3);
 }
+
+#[test]
+fn default_legged_manipulator_matches_mujoco() {
+    // The project's own robot (robot-agent/models), as the agents run it.
+    let robot = robot_agent::description::Robot::load(robot_agent::description::default_robot_path()).unwrap();
+    assert_eq!(robot.model.nv, 24);
+    let urdf = std::fs::read_to_string(&robot.urdf_path).unwrap();
+    let mj = MjRobot::new(&urdf, Some("base"));
+    compare("default legged manipulator", &robot.model, &mj, 4);
+}
