@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Run every test of the workspace, on a fresh machine too: provisions MuJoCo, builds the
 # binaries the multi-process tests start, then runs all tests in release mode (numeric code
-# and simulations are slow unoptimised). Extra arguments go to `cargo test`.
+# and simulations are slow unoptimised). Building bins and tests in one invocation gives
+# them the same feature set, so `cargo test` reuses the build. Extra arguments go to `cargo test`.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 ./scripts/setup-mujoco.sh
-cargo build --release --workspace --bins --locked
+cargo build --release --workspace --bins --tests --locked
 cargo test --release --workspace --locked "$@"
