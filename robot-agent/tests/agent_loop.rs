@@ -392,3 +392,30 @@ async fn enters_safe_mode_by_time_without_new_states() {
     h.status_where(|s| s.mode == AgentMode::Commanded).await;
     h.stop().await;
 }
+
+/// The posture hold without Zenoh: at zero error and zero velocity the hold torque is the
+/// gravity of the actuated joints, the oracle being the model's RNEA, not the agent's terms.
+#[test]
+fn posture_hold_at_the_standing_pose_is_gravity_compensation() {
+    use robot_agent::agent::{DynamicsSource, PostureHold};
+    use robot_agent::terms::{empty_terms, ContactSet as Contacts};
+    let robot = robot();
+    let state = standing_state(&robot, "t", 0, 0.0, 0.0);
+    let oracle = gravity_oracle(&robot, &state);
+    let limits = robot.torque_limits.clone();
+    let contacts = Contacts::all_stance(&robot);
+    let mut source = ModelDynamics::new(robot).unwrap();
+    let mut terms = empty_terms("t", ID);
+    source.compute(&state, &contacts, &mut terms).unwrap();
+    let mut g = vec![0.0; limits.len()];
+    source.actuated_gravity(&mut g);
+    let mut hold = PostureHold::new(HoldGains::from_torque_limits(&limits), limits.clone());
+    hold.hold(&state.joint_positions);
+    let mut tau = Vec::new();
+    assert_eq!(hold.torques(&state.joint_positions, &state.joint_velocities, &g, &mut tau), 0);
+    for i in 0..tau.len() {
+        assert!((tau[i] - oracle[i]).abs() < 1e-9, "joint {i}: {} vs {}", tau[i], oracle[i]);
+    }
+    // The arm's shoulder carries the arm: clearly non-zero, within its limit.
+    assert!(oracle[13].abs() > 5.0 && oracle[13].abs() < limits[13], "arm_joint_2 gravity {}", oracle[13]);
+}
