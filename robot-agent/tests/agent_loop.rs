@@ -364,6 +364,7 @@ async fn enters_safe_mode_by_time_without_new_states() {
     let robot = robot();
     let mut h = Harness::start("loop4", |mut c| {
         c.deadline = CommandDeadline { ticks: 0, time: Some(Duration::from_millis(50)) };
+        c.max_command_age = Duration::from_secs(5);
         c
     })
     .await;
