@@ -3,7 +3,7 @@
 //! The tree (see the crate docs for who publishes what):
 //!
 //! ```text
-//! team/{team}/robot/{robot}/{state|dynamics|command|torque|status|description}
+//! team/{team}/robot/{robot}/{state|dynamics|command|torque|status|description|contacts}
 //! team/{team}/member/{robot}                  liveliness tokens
 //! team/{team}/coordinator/{status|diagnostics}
 //! team/{team}/references
@@ -23,6 +23,7 @@ pub enum RobotTopic {
     Torque,
     Status,
     Description,
+    Contacts,
 }
 
 impl RobotTopic {
@@ -34,6 +35,7 @@ impl RobotTopic {
             RobotTopic::Torque => "torque",
             RobotTopic::Status => "status",
             RobotTopic::Description => "description",
+            RobotTopic::Contacts => "contacts",
         }
     }
 }
@@ -105,6 +107,11 @@ pub fn robot_of(key: &str) -> Option<&str> {
     }
 }
 
+/// `team/{team}/robot/{robot}/contacts`: the robot's contact set ([`crate::ContactSet`]).
+pub fn contacts(team: &str, robot_id: &str) -> Result<String, ProtocolError> {
+    robot(team, robot_id, RobotTopic::Contacts)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -126,5 +133,11 @@ mod tests {
             assert!(robot("t", bad, RobotTopic::State).is_err(), "{bad:?} accepted");
             assert!(member(bad, "r").is_err(), "{bad:?} accepted as team");
         }
+    }
+
+    #[test]
+    fn contacts_key() {
+        assert_eq!(contacts("t1", "r2").unwrap(), "team/t1/robot/r2/contacts");
+        assert!(contacts("t1", "a/b").is_err());
     }
 }

@@ -539,3 +539,51 @@ impl Validate for RobotDescription {
         Ok(())
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Tools, scenario runner or gait planner -> agent
+
+/// Longest accepted frame name in a [`ContactSet`].
+pub const MAX_FRAME_NAME_LEN: usize = 128;
+
+/// Most feet a [`ContactSet`] may name (bounds what a malformed message can make a receiver
+/// look up).
+pub const MAX_CONTACT_FEET: usize = 16;
+
+/// Which contacts of a robot are closed from now on: the feet in stance (the other feet of its
+/// description are in swing) and whether its hand holds the object. Published on
+/// `team/{team}/robot/{robot}/contacts` (see [`crate::keys::contacts`]); the agent checks the
+/// names against its own description and refuses unknown feet.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ContactSet {
+    pub header: Header,
+    /// Foot frames in stance, each at most once.
+    pub stance_feet: Vec<String>,
+    /// Whether the hand is in the grasp (its 6 constraints are active).
+    pub hand_in_grasp: bool,
+}
+
+impl Validate for ContactSet {
+    fn validate(&self) -> Result<(), ProtocolError> {
+        self.header.check(true)?;
+        if self.stance_feet.len() > MAX_CONTACT_FEET {
+            return Err(ProtocolError::invalid(
+                "stance_feet",
+                format!("{} feet, at most {MAX_CONTACT_FEET} are accepted", self.stance_feet.len()),
+            ));
+        }
+        for (i, f) in self.stance_feet.iter().enumerate() {
+            let field = format!("stance_feet[{i}]");
+            if f.is_empty() || f.len() > MAX_FRAME_NAME_LEN {
+                return Err(ProtocolError::invalid(field, format!("frame name must have 1 to {MAX_FRAME_NAME_LEN} bytes")));
+            }
+            if !f.bytes().all(|b| b.is_ascii_graphic()) {
+                return Err(ProtocolError::invalid(field, "frame name must be printable ASCII without spaces"));
+            }
+            if self.stance_feet[..i].contains(f) {
+                return Err(ProtocolError::invalid(field, format!("foot {f:?} listed twice")));
+            }
+        }
+        Ok(())
+    }
+}

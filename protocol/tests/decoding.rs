@@ -225,3 +225,26 @@ proptest! {
         let _ = from_json::<TaskReferences>(&s);
     }
 }
+
+fn contact_set(feet: &[&str]) -> ContactSet {
+    ContactSet { header: header(true), stance_feet: feet.iter().map(|f| f.to_string()).collect(), hand_in_grasp: true }
+}
+
+#[test]
+fn contact_set_round_trips_and_refuses_duplicates_and_bad_names() {
+    let c = contact_set(&["LF_FOOT", "RH_FOOT"]);
+    assert_eq!(decode::<ContactSet>(&encode(&c).unwrap()).unwrap(), c);
+    assert_eq!(from_json::<ContactSet>(&to_json(&c).unwrap()).unwrap(), c);
+    assert_eq!(MessageKind::ContactSet as u8, 10);
+    assert_eq!(keys::contacts("team1", "r1").unwrap(), "team/team1/robot/r1/contacts");
+    for bad in [contact_set(&["LF_FOOT", "LF_FOOT"]), contact_set(&[""]), contact_set(&["a foot"])] {
+        let mut bytes = Vec::new();
+        encode_into(&bad, &mut bytes).unwrap();
+        assert!(matches!(decode::<ContactSet>(&bytes), Err(ProtocolError::Invalid { .. })), "{bad:?} accepted");
+    }
+    let mut no_robot = contact_set(&[]);
+    no_robot.header.robot = None;
+    assert!(encode(&no_robot).is_err());
+    // Another kind's bytes are not a contact set.
+    assert!(matches!(decode::<ContactSet>(&encode(&command(3)).unwrap()), Err(ProtocolError::WrongKind { .. })));
+}

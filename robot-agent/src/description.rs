@@ -37,6 +37,22 @@ pub enum DescriptionError {
     BadValue { path: PathBuf, what: String, value: f64, rule: &'static str },
     #[error("robot description {path}: {what}")]
     Invalid { path: PathBuf, what: String },
+    #[error(
+        "robot description {path}: at standing the URDF puts {frame} at {actual_position:?} (base frame), \
+         quaternion {actual_orientation:?}, but standing.hand_position = {position:?} and \
+         standing.hand_orientation = {orientation:?}: {distance_mm:.3} mm and {angle_deg:.3} deg apart \
+         (tolerance 1 mm, 0.5 deg)"
+    )]
+    HandPose {
+        path: PathBuf,
+        frame: String,
+        position: [f64; 3],
+        orientation: [f64; 4],
+        actual_position: [f64; 3],
+        actual_orientation: [f64; 4],
+        distance_mm: f64,
+        angle_deg: f64,
+    },
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -102,8 +118,17 @@ pub struct HandContact {
 struct StandingSection {
     base_position: [f64; 3],
     base_orientation: [f64; 4],
+    /// Where the hand frame is at standing, in the base (root link) frame: position (m) and
+    /// orientation `(w, x, y, z)`. Checked against the URDF's forward kinematics at load.
+    hand_position: [f64; 3],
+    hand_orientation: [f64; 4],
     joints: BTreeMap<String, f64>,
 }
+
+/// How far the URDF's hand frame at standing may be from the description's: 1 mm.
+pub const HAND_POSITION_TOLERANCE: f64 = 1e-3;
+/// ... and 0.5 degree.
+pub const HAND_ANGLE_TOLERANCE_DEG: f64 = 0.5;
 
 /// A loaded, checked robot: its model and what the team needs to know about it.
 #[derive(Debug, Clone)]
@@ -128,6 +153,10 @@ pub struct Robot {
     pub torque_limits: Vec<f64>,
     /// Standing configuration `q` (nq entries, the model's convention).
     pub standing_q: DVector<f64>,
+    /// The hand frame at standing in the base frame, as the description says (and the URDF
+    /// agrees within 1 mm and 0.5 deg): position (m) and orientation `(w, x, y, z)`.
+    pub standing_hand_position: [f64; 3],
+    pub standing_hand_orientation: [f64; 4],
 }
 
 impl Robot {
@@ -250,7 +279,12 @@ fn check(file: File, model: Model, path: &Path, urdf_path: PathBuf) -> Result<Ro
 
     // Standing configuration.
     let s = &file.standing;
-    for (what, xs) in [("standing.base_position", &s.base_position[..]), ("standing.base_orientation", &s.base_orientation[..])] {
+    for (what, xs) in [
+        ("standing.base_position", &s.base_position[..]),
+        ("standing.base_orientation", &s.base_orientation[..]),
+        ("standing.hand_position", &s.hand_position[..]),
+        ("standing.hand_orientation", &s.hand_orientation[..]),
+    ] {
         if let Some(x) = xs.iter().find(|x| !x.is_finite()) {
             return Err(DescriptionError::BadValue { path: p(), what: what.into(), value: *x, rule: "finite" });
         }
@@ -261,6 +295,15 @@ fn check(file: File, model: Model, path: &Path, urdf_path: PathBuf) -> Result<Ro
             path: p(),
             what: "norm of standing.base_orientation".into(),
             value: qn,
+            rule: "1 (a unit quaternion w, x, y, z)",
+        });
+    }
+    let hn = s.hand_orientation.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if (hn - 1.0).abs() > 1e-6 {
+        return Err(DescriptionError::BadValue {
+            path: p(),
+            what: "norm of standing.hand_orientation".into(),
+            value: hn,
             rule: "1 (a unit quaternion w, x, y, z)",
         });
     }
@@ -296,7 +339,11 @@ fn check(file: File, model: Model, path: &Path, urdf_path: PathBuf) -> Result<Ro
         standing_q[qbase + k] = value;
     }
 
+    check_standing_hand(&model, &standing_q, &file.frames.hand, s, path)?;
+
     Ok(Robot {
+        standing_hand_position: s.hand_position,
+        standing_hand_orientation: s.hand_orientation,
         path: p(),
         urdf_path,
         name: file.robot.name,
@@ -311,5 +358,60 @@ fn check(file: File, model: Model, path: &Path, urdf_path: PathBuf) -> Result<Ro
         torque_limits,
         standing_q,
         model,
+    })
+}
+
+/// The hand frame at the standing configuration, relative to the root link, against what the
+/// description says.
+fn check_standing_hand(
+    model: &Model,
+    standing_q: &DVector<f64>,
+    hand: &str,
+    s: &StandingSection,
+    path: &Path,
+) -> Result<(), DescriptionError> {
+    use nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
+    let fk_err = |e: crate::dynamics::DynamicsError| DescriptionError::Invalid {
+        path: path.to_path_buf(),
+        what: format!("forward kinematics at the standing configuration: {e}"),
+    };
+    let mut data = crate::dynamics::Data::new(model);
+    let v = vec![0.0; model.nv];
+    crate::dynamics::forward_kinematics(model, &mut data, standing_q.as_slice(), &v).map_err(fk_err)?;
+    let id = model.frame_id(hand).map_err(|_| DescriptionError::UnknownFrame {
+        path: path.to_path_buf(),
+        what: "frames.hand".into(),
+        frame: hand.to_string(),
+    })?;
+    let hand_w = *crate::dynamics::frame_placement(model, &data, id).map_err(fk_err)?;
+    // The root link's pose in the world: the floating base's (position, quaternion) or identity.
+    let (base_rot, base_pos) = if model.floating_base {
+        let q = standing_q.as_slice();
+        let uq = UnitQuaternion::from_quaternion(Quaternion::new(q[3], q[4], q[5], q[6]));
+        (uq.to_rotation_matrix().into_inner(), Vector3::new(q[0], q[1], q[2]))
+    } else {
+        (nalgebra::Matrix3::identity(), Vector3::zeros())
+    };
+    let rel_pos = base_rot.transpose() * (hand_w.trans - base_pos);
+    let rel_rot = Rotation3::from_matrix_unchecked(base_rot.transpose() * hand_w.rot);
+    let actual_q = UnitQuaternion::from_rotation_matrix(&rel_rot);
+    let o = s.hand_orientation;
+    let said_q = UnitQuaternion::from_quaternion(Quaternion::new(o[0], o[1], o[2], o[3]));
+    let said_p = Vector3::from(s.hand_position);
+    let distance = (rel_pos - said_p).norm();
+    let angle = said_q.angle_to(&actual_q);
+    if distance <= HAND_POSITION_TOLERANCE && angle.to_degrees() <= HAND_ANGLE_TOLERANCE_DEG {
+        return Ok(());
+    }
+    let aq = actual_q.quaternion();
+    Err(DescriptionError::HandPose {
+        path: path.to_path_buf(),
+        frame: hand.to_string(),
+        position: s.hand_position,
+        orientation: s.hand_orientation,
+        actual_position: [rel_pos.x, rel_pos.y, rel_pos.z],
+        actual_orientation: [aq.w, aq.i, aq.j, aq.k],
+        distance_mm: distance * 1e3,
+        angle_deg: angle.to_degrees(),
     })
 }

@@ -9,10 +9,23 @@
 //! * [`description`]: a robot's description (TOML beside its URDF), checked against the URDF.
 //! * [`inspect`]: the `robot-agent inspect` report of a model at one state.
 //! * [`terms`]: the per-tick dynamics terms (M, h, frame Jacobians and Jdot*v) from the model.
-//! * [`agent`]: the agent loop over Zenoh and the checks of incoming commands.
+//! * [`agent`]: the agent loop over Zenoh, wiring the modules below together.
+//! * [`source`]: where states come from ([`source::StateSource`]; Zenoh today, hardware later).
+//! * [`sink`]: where checked torques go ([`sink::TorqueSink`]; the robot's `torque` key).
+//! * [`dynamics_source`]: state to dynamics terms ([`dynamics_source::ModelDynamics`] over the
+//!   robot's model; [`dynamics_source::PlaceholderDynamics`] for the smoke run only).
+//! * [`gate`]: the checks of incoming commands and clamping to the torque limits.
+//! * [`safe_mode`]: the watchdog and the posture hold of safe mode.
+//! * [`status`]: the agent's status message and counters.
 
 pub mod agent;
 pub mod description;
 pub mod dynamics;
+pub mod dynamics_source;
+pub mod gate;
 pub mod inspect;
+pub mod safe_mode;
+pub mod sink;
+pub mod source;
+pub mod status;
 pub mod terms;

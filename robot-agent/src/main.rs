@@ -3,10 +3,12 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::time::Duration;
 
 use clap::{Args, Parser, Subcommand};
 use protocol::transport::{self, Role, ZenohArgs};
-use robot_agent::agent::{self, AgentConfig, PlaceholderDynamics};
+use robot_agent::agent::{self, AgentConfig, ModelDynamics, PlaceholderDynamics};
+use robot_agent::description::{default_robot_path, Robot};
 use robot_agent::inspect::{self, Attach, InspectArgs};
 
 #[derive(Parser)]
@@ -26,35 +28,65 @@ enum Command {
 
 #[derive(Args)]
 struct RunCmd {
+    /// Robot description (TOML beside its URDF); default: the project's legged manipulator.
+    #[arg(long, value_name = "FILE.toml")]
+    robot: Option<PathBuf>,
     /// Robot id (letters, digits, '_' and '-').
     #[arg(long)]
     id: String,
     /// Team id.
     #[arg(long, default_value = "team")]
     team: String,
-    /// Actuated joints (smoke run: placeholder dynamics of this size).
-    #[arg(long, default_value_t = 18)]
-    joints: usize,
+    /// Without a valid command for this long the agent enters safe mode; commands older than
+    /// this are refused.
+    #[arg(long, value_name = "MS", default_value_t = 25)]
+    command_deadline_ms: u64,
+    /// Without a valid command for this many state ticks the agent enters safe mode (0: off).
+    #[arg(long, value_name = "TICKS", default_value_t = 5)]
+    command_deadline_ticks: u64,
+    /// Smoke run only: placeholder dynamics (unit mass matrix, no frames, no limits) of this
+    /// many joints instead of a robot model.
+    #[arg(long, value_name = "N", conflicts_with = "robot", hide = true)]
+    placeholder_joints: Option<usize>,
     #[command(flatten)]
     zenoh: ZenohArgs,
 }
 
 fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
+    // Bad input is refused before anything starts: one error line, exit status 2.
+    protocol::validate_id("robot", &cmd.id)?;
+    protocol::validate_id("team", &cmd.team)?;
+    anyhow::ensure!(cmd.command_deadline_ms > 0, "--command-deadline-ms must be positive");
+    enum Source {
+        Model(ModelDynamics),
+        Placeholder(PlaceholderDynamics),
+    }
+    let source = match cmd.placeholder_joints {
+        Some(0) => anyhow::bail!("--placeholder-joints must be positive"),
+        Some(n) => Source::Placeholder(PlaceholderDynamics::floating(n)),
+        None => {
+            let path = cmd.robot.clone().unwrap_or_else(default_robot_path);
+            Source::Model(ModelDynamics::new(Robot::load(&path)?)?)
+        }
+    };
     tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
         .with_writer(std::io::stderr)
         .init();
+    let mut cfg = AgentConfig::new(&cmd.team, &cmd.id).with_deadline_time(Duration::from_millis(cmd.command_deadline_ms));
+    cfg.deadline.ticks = cmd.command_deadline_ticks;
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async move {
         let session = transport::open(&cmd.zenoh, Role::Member).await?;
-        let cfg = AgentConfig { team: cmd.team, robot: cmd.id, joints: cmd.joints, floating_base: true };
-        let source = PlaceholderDynamics { joints: cmd.joints, nv: cfg.nv() };
         let (tx, rx) = tokio::sync::watch::channel(false);
         tokio::spawn(async move {
             let _ = tokio::signal::ctrl_c().await;
             let _ = tx.send(true);
         });
-        agent::run(&session, cfg, source, rx).await?;
+        match source {
+            Source::Model(s) => agent::run(&session, cfg, s, rx).await?,
+            Source::Placeholder(s) => agent::run(&session, cfg, s, rx).await?,
+        };
         session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
         Ok(String::new())
     })

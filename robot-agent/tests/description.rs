@@ -80,3 +80,87 @@ fn terms_of_the_standing_robot_are_consistent_with_the_model() {
     b.compute(&robot, &contacts, &mut terms).unwrap();
     assert_eq!(terms.frames.len(), 6);
 }
+
+#[test]
+fn the_hand_frame_is_where_the_description_says() {
+    use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+    let robot = Robot::load(default_robot_path()).unwrap();
+    // What the description says (and the models README documents).
+    assert_eq!(robot.standing_hand_position, [0.85, 0.0, 0.05118]);
+    assert_eq!(robot.standing_hand_orientation, [0.5, 0.5, 0.5, 0.5]);
+    // Independent of the load check: forward kinematics at standing, hand relative to the base.
+    let mut data = Data::new(&robot.model);
+    forward_kinematics(&robot.model, &mut data, robot.standing_q.as_slice(), &vec![0.0; robot.model.nv]).unwrap();
+    let base = *frame_placement(&robot.model, &data, robot.model.frame_id(&robot.torso_frame).unwrap()).unwrap();
+    let hand = *frame_placement(&robot.model, &data, robot.model.frame_id(&robot.hand_frame).unwrap()).unwrap();
+    let p = base.rot.transpose() * (hand.trans - base.trans);
+    assert!((p - Vector3::from(robot.standing_hand_position)).norm() < 1e-3, "hand at {p:?}");
+    // The palm normal (hand z) points along the base's +x, the hand's x along the base's +y.
+    let r = base.rot.transpose() * hand.rot;
+    assert!((r.column(2) - Vector3::x()).norm() < 1e-3, "palm normal {:?}", r.column(2));
+    assert!((r.column(0) - Vector3::y()).norm() < 1e-3);
+    let said = UnitQuaternion::from_quaternion(Quaternion::new(0.5, 0.5, 0.5, 0.5));
+    assert!((said.to_rotation_matrix().into_inner() - r).amax() < 1e-3);
+}
+
+#[test]
+fn a_wrong_standing_hand_pose_is_named_with_both_poses() {
+    // 2 mm off in x: beyond the 1 mm tolerance.
+    let e = load_modified(|s| s.replace("hand_position = [0.85, 0.0, 0.05118]", "hand_position = [0.852, 0.0, 0.05118]")).unwrap_err();
+    match &e {
+        DescriptionError::HandPose { frame, distance_mm, angle_deg, actual_position, .. } => {
+            assert_eq!(frame, "hand_contact");
+            assert!((distance_mm - 2.0).abs() < 0.05, "{distance_mm}");
+            assert!(*angle_deg < 0.01);
+            assert!((actual_position[0] - 0.85).abs() < 1e-4);
+        }
+        other => panic!("expected HandPose, got {other}"),
+    }
+    let msg = e.to_string();
+    assert!(msg.contains("hand_contact") && msg.contains("standing.hand_position") && msg.contains("mm"), "{msg}");
+    // 0.5 mm off is within tolerance.
+    load_modified(|s| s.replace("hand_position = [0.85, 0.0, 0.05118]", "hand_position = [0.8505, 0.0, 0.05118]")).unwrap();
+    // A rotation of 1 degree about the palm normal: beyond 0.5 deg.
+    let (c, s1) = ((0.5f64.to_radians()).cos(), (0.5f64.to_radians()).sin());
+    // q = q_said * (cos(a/2), 0, 0, sin(a/2)) with q_said = (0.5, 0.5, 0.5, 0.5), a = 1 deg.
+    let q = [0.5 * c - 0.5 * s1, 0.5 * c + 0.5 * s1, 0.5 * c - 0.5 * s1, 0.5 * c + 0.5 * s1];
+    let line = format!("hand_orientation = [{}, {}, {}, {}]", q[0], q[1], q[2], q[3]);
+    let e = load_modified(|s| s.replace("hand_orientation = [0.5, 0.5, 0.5, 0.5]", &line)).unwrap_err();
+    assert!(matches!(&e, DescriptionError::HandPose { angle_deg, .. } if (angle_deg - 1.0).abs() < 0.01), "{e}");
+    // Not a unit quaternion.
+    let e = load_modified(|s| s.replace("hand_orientation = [0.5, 0.5, 0.5, 0.5]", "hand_orientation = [1.0, 0.5, 0.5, 0.5]")).unwrap_err();
+    assert!(matches!(&e, DescriptionError::BadValue { what, .. } if what.contains("hand_orientation")), "{e}");
+    // Missing: the description must say where the hand is.
+    let e = load_modified(|s| s.replace("hand_position = [0.85, 0.0, 0.05118]\n", "")).unwrap_err();
+    assert!(matches!(&e, DescriptionError::Toml { reason, .. } if reason.contains("hand_position")), "{e}");
+}
+
+#[test]
+fn non_positive_limits_and_wrong_standing_length_are_named() {
+    for (from, to) in [("LF_KFE = 80.0", "LF_KFE = 0.0"), ("arm_joint_6 = 9.0", "arm_joint_6 = -1.0"), ("LF_HAA = 80.0", "LF_HAA = inf")] {
+        let e = load_modified(|s| s.replacen(from, to, 1)).unwrap_err();
+        let joint = from.split(' ').next().unwrap();
+        assert!(
+            matches!(&e, DescriptionError::BadValue { what, .. } if what == &format!("torque_limits.{joint}")),
+            "{from} -> {to}: {e}"
+        );
+    }
+    // Contact parameters too.
+    let e = load_modified(|s| s.replace("half_size_y = 0.05", "half_size_y = 0.0")).unwrap_err();
+    assert!(matches!(&e, DescriptionError::BadValue { what, .. } if what == "contact.hand.half_size_y"), "{e}");
+    // Standing configuration of the wrong length: a joint too few, or a joint the URDF does not have.
+    let e = load_modified(|s| s.replace("arm_joint_6 = 1.570296\n", "")).unwrap_err();
+    assert!(matches!(&e, DescriptionError::MissingJoints { what, missing, .. } if what == "standing.joints" && missing == &vec!["arm_joint_6".to_string()]), "{e}");
+    let e = load_modified(|s| s.replace("arm_joint_6 = 1.570296\n", "arm_joint_6 = 1.570296\narm_joint_7 = 0.0\n")).unwrap_err();
+    assert!(matches!(&e, DescriptionError::UnknownJoint { joint, .. } if joint == "arm_joint_7"), "{e}");
+    // Base position of the wrong length is a format error that names the field.
+    let e = load_modified(|s| s.replace("base_position = [0.0, 0.0, 0.54882015]", "base_position = [0.0, 0.54882015]")).unwrap_err();
+    assert!(matches!(&e, DescriptionError::Toml { reason, .. } if reason.contains("base_position")), "{e}");
+    // A torque limit for a joint that is not actuated, and the messages name file and joint.
+    let e = load_modified(|s| s.replace("[torque_limits]\n", "[torque_limits]\nLF_FOOT_fixed = 1.0\n")).unwrap_err();
+    assert!(matches!(&e, DescriptionError::UnknownJoint { joint, .. } if joint == "LF_FOOT_fixed"), "{e}");
+    assert!(e.to_string().contains("legged_manipulator.toml"), "{e}");
+    // The standing configuration outside the joint limits.
+    let e = load_modified(|s| s.replace("arm_joint_2 = 1.628906", "arm_joint_2 = 3.0")).unwrap_err();
+    assert!(matches!(&e, DescriptionError::Invalid { what, .. } if what.contains("arm_joint_2")), "{e}");
+}

@@ -9,6 +9,10 @@ use coordinator::service::{self as coordinator_service, CoordinatorConfig};
 use coordinator::JointDamping;
 use protocol::transport::{self, Role, ZenohArgs};
 use robot_agent::agent::{self as robot_agent_loop, AgentConfig, PlaceholderDynamics};
+
+/// The smoke run's agents wait as long as the bridge does for a command before they hold
+/// their posture: a lockstep tick that is merely slow must not see safe-mode torques.
+pub const SMOKE_COMMAND_DEADLINE: Duration = Duration::from_secs(5);
 use sim_bridge::lockstep::{self, LockstepConfig, LockstepReport};
 use sim_bridge::plant::PlaceholderPlant;
 use thiserror::Error;
@@ -88,8 +92,8 @@ pub async fn run_embedded(cfg: &SmokeConfig) -> Result<SmokeOutcome, SmokeError>
     for r in &cfg.robots {
         let session = session.clone();
         let rx = stop_rx.clone();
-        let acfg = AgentConfig { team: cfg.team.clone(), robot: r.clone(), joints: cfg.joints, floating_base: true };
-        let source = PlaceholderDynamics { joints: cfg.joints, nv: acfg.nv() };
+        let acfg = AgentConfig::new(&cfg.team, r).with_deadline_time(SMOKE_COMMAND_DEADLINE);
+        let source = PlaceholderDynamics::floating(cfg.joints);
         let robot = r.clone();
         agents.push((robot, tokio::spawn(async move { robot_agent_loop::run(&session, acfg, source, rx).await })));
     }
@@ -167,7 +171,8 @@ pub fn run_distributed(cfg: &SmokeConfig) -> Result<(), SmokeError> {
     let mut agents = Vec::new();
     for r in &cfg.robots {
         let mut args = vec!["run".to_string(), "--id".into(), r.clone(), "--team".into(), cfg.team.clone()];
-        args.extend(["--joints".into(), cfg.joints.to_string()]);
+        args.extend(["--placeholder-joints".into(), cfg.joints.to_string()]);
+        args.extend(["--command-deadline-ms".into(), SMOKE_COMMAND_DEADLINE.as_millis().to_string()]);
         args.extend(connect.clone());
         agents.push(spawn("robot-agent", &args, &format!("robot-agent {r}"))?);
     }

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Role, ZenohArgs};
 use protocol::{CoordinatorStatus, TorqueCommand};
-use team_runner::smoke::{free_port, spawn};
+use team_runner::smoke::{free_port, spawn, SMOKE_COMMAND_DEADLINE};
 
 fn team_args(team: &str) -> Vec<String> {
     vec!["--team".into(), team.into()]
@@ -43,7 +43,8 @@ async fn processes_exchange_messages_and_a_killed_agent_is_reported_leaving() {
 
     let mut agents = Vec::new();
     for r in ["r1", "r2"] {
-        let mut args = vec!["run".to_string(), "--id".into(), r.into(), "--joints".into(), "6".into()];
+        let mut args = vec!["run".to_string(), "--id".into(), r.into(), "--placeholder-joints".into(), "6".into()];
+        args.extend(["--command-deadline-ms".into(), SMOKE_COMMAND_DEADLINE.as_millis().to_string()]);
         args.extend(team_args(team));
         args.extend(connect.to_cli());
         agents.push(spawn("robot-agent", &args, r).unwrap());
@@ -94,7 +95,7 @@ async fn lockstep_names_the_robot_that_never_joined() {
     args.extend(team_args(team));
     args.extend(ZenohArgs::listening(&hub).to_cli());
     let _coordinator = spawn("coordinator", &args, "coordinator").unwrap();
-    let mut args = vec!["run".to_string(), "--id".into(), "r1".into(), "--joints".into(), "3".into()];
+    let mut args = vec!["run".to_string(), "--id".into(), "r1".into(), "--placeholder-joints".into(), "3".into()];
     args.extend(team_args(team));
     args.extend(connect.to_cli());
     let _agent = spawn("robot-agent", &args, "r1").unwrap();

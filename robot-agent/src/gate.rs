@@ -1,0 +1,223 @@
+//! Checks of an incoming torque command (DESIGN.md §2 step 4): robot id, tick (not older than
+//! the last applied, not from the future), age against a deadline, size, finite numbers; then
+//! clamping to the torque limits with a report of which joints were clamped.
+
+use std::collections::VecDeque;
+use std::time::{Duration, Instant};
+
+use protocol::TorqueCommand;
+use thiserror::Error;
+
+/// How many recent states the gate remembers (tick, stamp, arrival) to date commands.
+const RECENT_STATES: usize = 64;
+
+/// Why a command was refused. The command is dropped; nothing of it is applied.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum CommandRejection {
+    #[error("command for robot {got:?} received by robot {expected:?}")]
+    WrongRobot { expected: String, got: String },
+    #[error("command for tick {tick} is not newer than the last applied tick {last}")]
+    Stale { tick: u64, last: u64 },
+    #[error("command for tick {tick} is from the future (latest state is tick {latest})")]
+    FromTheFuture { tick: u64, latest: u64 },
+    #[error("command has {got} torques, the robot has {expected} actuated joints")]
+    WrongSize { expected: usize, got: usize },
+    #[error("command torque {index} is not finite ({value})")]
+    NonFinite { index: usize, value: f64 },
+    #[error("command for tick {tick} is {age_us} us old, the deadline is {max_us} us")]
+    TooOld { tick: u64, age_us: u64, max_us: u64 },
+    #[error("command arrived before any state")]
+    NoState,
+    #[error("command for tick {tick} was made before safe mode was entered at tick {entered}; safe mode is left only on a fresh tick")]
+    BeforeSafeMode { tick: u64, entered: u64 },
+    #[error("undecodable command: {0}")]
+    Undecodable(String),
+}
+
+#[derive(Debug, Clone, Copy)]
+struct SeenState {
+    tick: u64,
+    stamp_ns: u64,
+    at: Instant,
+}
+
+/// Tick and age bookkeeping plus the limits: accepts or refuses commands, clamps accepted ones.
+#[derive(Debug, Clone)]
+pub struct CommandGate {
+    robot: String,
+    limits: Vec<f64>,
+    max_age: Duration,
+    recent: VecDeque<SeenState>,
+    last_applied_tick: Option<u64>,
+    clamped: Vec<usize>,
+}
+
+impl CommandGate {
+    /// A gate for robot `robot` with one symmetric torque limit per actuated joint (use
+    /// `f64::INFINITY` for none) and a maximum command age.
+    pub fn new(robot: &str, limits: Vec<f64>, max_age: Duration) -> Self {
+        let n = limits.len();
+        CommandGate {
+            robot: robot.to_string(),
+            limits,
+            max_age,
+            recent: VecDeque::with_capacity(RECENT_STATES),
+            last_applied_tick: None,
+            clamped: Vec::with_capacity(n),
+        }
+    }
+
+    /// Number of actuated joints a command must have.
+    pub fn joints(&self) -> usize {
+        self.limits.len()
+    }
+
+    pub fn limits(&self) -> &[f64] {
+        &self.limits
+    }
+
+    /// A state arrived. Repeats of a tick keep the first arrival (a command answering it is as
+    /// old as the first copy). Returns false for a state older than the latest (out of order).
+    pub fn on_state(&mut self, tick: u64, stamp_ns: u64, at: Instant) -> bool {
+        match self.recent.back() {
+            Some(last) if tick < last.tick => return false,
+            Some(last) if tick == last.tick => return true,
+            _ => {}
+        }
+        if self.recent.len() == RECENT_STATES {
+            self.recent.pop_front();
+        }
+        self.recent.push_back(SeenState { tick, stamp_ns, at });
+        true
+    }
+
+    /// Tick of the latest state.
+    pub fn latest_state_tick(&self) -> Option<u64> {
+        self.recent.back().map(|s| s.tick)
+    }
+
+    pub fn last_applied_tick(&self) -> Option<u64> {
+        self.last_applied_tick
+    }
+
+    /// Check `cmd` at local time `now`; on success write the (clamped) torques into `out` and
+    /// return how many joints were clamped (their indices: [`CommandGate::clamped`]). The command
+    /// does not become the last applied one until [`CommandGate::mark_applied`].
+    ///
+    /// Age: the command must arrive within `max_age` of the arrival of the state of its tick
+    /// (the agent's clock), and, when the sender stamped it (`stamp_ns > 0`), its stamp must not
+    /// be more than `max_age` older than the latest state's stamp (the state source's clock,
+    /// which the team shares). A stamp of 0 means unstamped: only the local check applies.
+    pub fn check(&mut self, cmd: &TorqueCommand, now: Instant, out: &mut Vec<f64>) -> Result<usize, CommandRejection> {
+        let got = cmd.header.robot_id();
+        if got != self.robot {
+            return Err(CommandRejection::WrongRobot { expected: self.robot.clone(), got: got.to_string() });
+        }
+        let latest = *self.recent.back().ok_or(CommandRejection::NoState)?;
+        let tick = cmd.header.tick;
+        if tick > latest.tick {
+            return Err(CommandRejection::FromTheFuture { tick, latest: latest.tick });
+        }
+        if let Some(last) = self.last_applied_tick {
+            if tick <= last {
+                return Err(CommandRejection::Stale { tick, last });
+            }
+        }
+        if cmd.tau.len() != self.limits.len() {
+            return Err(CommandRejection::WrongSize { expected: self.limits.len(), got: cmd.tau.len() });
+        }
+        if let Some(index) = cmd.tau.iter().position(|t| !t.is_finite()) {
+            return Err(CommandRejection::NonFinite { index, value: cmd.tau[index] });
+        }
+        let max_us = self.max_age.as_micros() as u64;
+        let too_old = |age: Duration| CommandRejection::TooOld { tick, age_us: age.as_micros() as u64, max_us };
+        match self.recent.iter().rev().find(|s| s.tick == tick) {
+            Some(s) => {
+                let age = now.saturating_duration_since(s.at);
+                if age > self.max_age {
+                    return Err(too_old(age));
+                }
+            }
+            // Older than anything remembered: far beyond any deadline of a few ticks.
+            None => return Err(too_old(now.saturating_duration_since(self.recent.front().map_or(now, |s| s.at)))),
+        }
+        if cmd.header.stamp_ns > 0 {
+            let age_ns = latest.stamp_ns.saturating_sub(cmd.header.stamp_ns);
+            if age_ns > self.max_age.as_nanos() as u64 {
+                return Err(too_old(Duration::from_nanos(age_ns)));
+            }
+        }
+        out.clear();
+        self.clamped.clear();
+        for (i, (&t, &l)) in cmd.tau.iter().zip(&self.limits).enumerate() {
+            let c = t.clamp(-l, l);
+            if c != t {
+                self.clamped.push(i);
+            }
+            out.push(c);
+        }
+        Ok(self.clamped.len())
+    }
+
+    /// Indices of the joints clamped by the last successful [`CommandGate::check`].
+    pub fn clamped(&self) -> &[usize] {
+        &self.clamped
+    }
+
+    /// The checked command of `tick` was handed to the torque sink.
+    pub fn mark_applied(&mut self, tick: u64) {
+        self.last_applied_tick = Some(tick);
+    }
+}
+
+/// Clamp `tau` in place to `±limits`; returns how many entries changed.
+pub fn clamp_to_limits(tau: &mut [f64], limits: &[f64]) -> usize {
+    let mut n = 0;
+    for (t, &l) in tau.iter_mut().zip(limits) {
+        let c = t.clamp(-l, l);
+        n += (c != *t) as usize;
+        *t = c;
+    }
+    n
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::Header;
+
+    fn cmd(robot: &str, tick: u64, tau: Vec<f64>) -> TorqueCommand {
+        TorqueCommand { header: Header::new("t", Some(robot), tick, 0), tau }
+    }
+
+    #[test]
+    fn gate_checks_robot_tick_size_finiteness_age_and_clamps() {
+        let t0 = Instant::now();
+        let ms = Duration::from_millis;
+        let mut g = CommandGate::new("r1", vec![10.0, 10.0, 2.0], ms(25));
+        let mut out = Vec::new();
+        assert_eq!(g.check(&cmd("r1", 0, vec![0.0; 3]), t0, &mut out), Err(CommandRejection::NoState));
+        assert!(g.on_state(5, 1_000_000_000, t0));
+        assert!(matches!(g.check(&cmd("r2", 5, vec![0.0; 3]), t0, &mut out), Err(CommandRejection::WrongRobot { .. })));
+        assert!(matches!(g.check(&cmd("r1", 6, vec![0.0; 3]), t0, &mut out), Err(CommandRejection::FromTheFuture { .. })));
+        assert!(matches!(g.check(&cmd("r1", 5, vec![0.0; 4]), t0, &mut out), Err(CommandRejection::WrongSize { .. })));
+        assert!(matches!(
+            g.check(&cmd("r1", 5, vec![0.0, f64::NAN, 0.0]), t0, &mut out),
+            Err(CommandRejection::NonFinite { index: 1, .. })
+        ));
+        assert!(matches!(g.check(&cmd("r1", 5, vec![0.0; 3]), t0 + ms(30), &mut out), Err(CommandRejection::TooOld { .. })));
+        // Stamped 30 ms before the latest state: too old by the shared clock.
+        let mut stamped = cmd("r1", 5, vec![0.0; 3]);
+        stamped.header.stamp_ns = 1_000_000_000 - 30_000_000;
+        assert!(matches!(g.check(&stamped, t0, &mut out), Err(CommandRejection::TooOld { .. })));
+        assert_eq!(g.check(&cmd("r1", 5, vec![12.0, -3.0, -2.5]), t0 + ms(1), &mut out), Ok(2));
+        assert_eq!(out, vec![10.0, -3.0, -2.0]);
+        assert_eq!(g.clamped(), &[0, 2]);
+        g.mark_applied(5);
+        assert!(matches!(g.check(&cmd("r1", 5, vec![0.0; 3]), t0, &mut out), Err(CommandRejection::Stale { .. })));
+        assert!(g.on_state(6, 1_005_000_000, t0 + ms(5)));
+        assert!(!g.on_state(4, 0, t0 + ms(5)), "out-of-order state accepted");
+        assert_eq!(g.check(&cmd("r1", 6, vec![1.0; 3]), t0 + ms(6), &mut out), Ok(0));
+        assert!(g.clamped().is_empty());
+    }
+}

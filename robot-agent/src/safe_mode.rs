@@ -1,0 +1,202 @@
+//! The watchdog and the safe mode.
+//!
+//! Without a valid command within the deadline (a number of state ticks, or a time, whichever
+//! comes first) the agent enters safe mode: a locally computed joint-space posture hold with
+//! damping and gravity compensation,
+//!
+//! ```text
+//! tau = clamp( Kp (q_hold - q) - Kd qdot + g_a(q), -tau_max, tau_max )
+//! ```
+//!
+//! on the actuated joints, where `q_hold` are the joint positions when safe mode was entered and
+//! `g_a(q)` the actuated rows of the model's generalized gravity at the current state. It leaves
+//! safe mode only on a valid command whose tick is newer than the latest state tick at entry.
+
+use std::time::{Duration, Instant};
+
+/// When a missing command sends the agent to safe mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CommandDeadline {
+    /// State ticks without a valid command (0: no tick deadline).
+    pub ticks: u64,
+    /// Time without a valid command (`None`: no time deadline).
+    pub time: Option<Duration>,
+}
+
+impl Default for CommandDeadline {
+    /// 5 ticks or 25 ms (5 ticks of a 200 Hz loop).
+    fn default() -> Self {
+        CommandDeadline { ticks: 5, time: Some(Duration::from_millis(25)) }
+    }
+}
+
+/// Watches for the deadline; knows the tick at which safe mode was entered.
+#[derive(Debug, Clone)]
+pub struct Watchdog {
+    deadline: CommandDeadline,
+    /// Tick and time from which the deadline runs: the first state, then every valid command.
+    reference: Option<(u64, Instant)>,
+    in_safe_mode: Option<u64>,
+}
+
+impl Watchdog {
+    pub fn new(deadline: CommandDeadline) -> Self {
+        Watchdog { deadline, reference: None, in_safe_mode: None }
+    }
+
+    pub fn deadline(&self) -> CommandDeadline {
+        self.deadline
+    }
+
+    /// A state arrived: the first one arms the watchdog.
+    pub fn on_state(&mut self, tick: u64, now: Instant) {
+        if self.reference.is_none() {
+            self.reference = Some((tick, now));
+        }
+    }
+
+    /// Whether the deadline has passed at the latest state tick `latest_tick` and time `now`
+    /// (false before the first state and while in safe mode).
+    pub fn expired(&self, latest_tick: u64, now: Instant) -> bool {
+        let Some((tick, at)) = self.reference else { return false };
+        if self.in_safe_mode.is_some() {
+            return false;
+        }
+        let by_ticks = self.deadline.ticks > 0 && latest_tick.saturating_sub(tick) >= self.deadline.ticks;
+        let by_time = self.deadline.time.is_some_and(|d| now.saturating_duration_since(at) > d);
+        by_ticks || by_time
+    }
+
+    /// Enter safe mode at latest state tick `tick`.
+    pub fn enter(&mut self, tick: u64) {
+        self.in_safe_mode = Some(tick);
+    }
+
+    /// Latest state tick when safe mode was entered, if in safe mode.
+    pub fn safe_mode_since(&self) -> Option<u64> {
+        self.in_safe_mode
+    }
+
+    /// May a (checked) command of `tick` be applied? In safe mode only if it is newer than the
+    /// entry tick; `Err(entry tick)` otherwise.
+    pub fn admits(&self, tick: u64) -> Result<(), u64> {
+        match self.in_safe_mode {
+            Some(entered) if tick <= entered => Err(entered),
+            _ => Ok(()),
+        }
+    }
+
+    /// A valid command of `tick` was applied at `now`: the deadline restarts; returns true if
+    /// this left safe mode.
+    pub fn on_applied(&mut self, tick: u64, now: Instant) -> bool {
+        self.reference = Some((tick, now));
+        self.in_safe_mode.take().is_some()
+    }
+}
+
+/// Gains of the posture hold, per actuated joint.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HoldGains {
+    pub kp: Vec<f64>,
+    pub kd: Vec<f64>,
+}
+
+impl HoldGains {
+    /// Gains that scale with each joint's torque limit: the limit is reached at 0.5 rad of
+    /// error (`Kp = limit / 0.5 rad`) and `Kd = Kp * 25 ms`. For the default robot: legs
+    /// 160 Nm/rad and 4 Nm s/rad, arm joints 1-3 78 and 1.95, joints 4-6 18 and 0.45. A joint
+    /// without a finite limit gets 100 Nm/rad and 2.5 Nm s/rad.
+    pub fn from_torque_limits(limits: &[f64]) -> Self {
+        let kp: Vec<f64> = limits.iter().map(|l| if l.is_finite() { l / 0.5 } else { 100.0 }).collect();
+        let kd = kp.iter().map(|k| k * 0.025).collect();
+        HoldGains { kp, kd }
+    }
+}
+
+/// The posture-hold law with its held configuration.
+#[derive(Debug, Clone)]
+pub struct PostureHold {
+    gains: HoldGains,
+    limits: Vec<f64>,
+    q_hold: Vec<f64>,
+}
+
+impl PostureHold {
+    pub fn new(gains: HoldGains, limits: Vec<f64>) -> Self {
+        let n = limits.len();
+        PostureHold { gains, limits, q_hold: Vec::with_capacity(n) }
+    }
+
+    pub fn gains(&self) -> &HoldGains {
+        &self.gains
+    }
+
+    /// Hold these joint positions from now on.
+    pub fn hold(&mut self, q: &[f64]) {
+        self.q_hold.clear();
+        self.q_hold.extend_from_slice(q);
+    }
+
+    pub fn q_hold(&self) -> &[f64] {
+        &self.q_hold
+    }
+
+    /// `tau = clamp(Kp (q_hold - q) - Kd qdot + g, ±limit)` into `out`; returns how many joints
+    /// were clamped. Lengths must agree (the agent checks states against its size first);
+    /// missing entries are treated as zero error, zero velocity, zero gravity.
+    pub fn torques(&self, q: &[f64], qdot: &[f64], gravity: &[f64], out: &mut Vec<f64>) -> usize {
+        out.clear();
+        let mut clamped = 0;
+        for i in 0..self.limits.len() {
+            let e = match (self.q_hold.get(i), q.get(i)) {
+                (Some(h), Some(q)) => h - q,
+                _ => 0.0,
+            };
+            let t = self.gains.kp[i] * e - self.gains.kd[i] * qdot.get(i).copied().unwrap_or(0.0)
+                + gravity.get(i).copied().unwrap_or(0.0);
+            let l = self.limits[i];
+            let c = t.clamp(-l, l);
+            clamped += (c != t) as usize;
+            out.push(c);
+        }
+        clamped
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn deadline_by_ticks_or_time_and_leaving_only_on_a_fresh_tick() {
+        let t0 = Instant::now();
+        let mut w = Watchdog::new(CommandDeadline { ticks: 5, time: Some(Duration::from_millis(25)) });
+        assert!(!w.expired(100, t0 + Duration::from_secs(1)), "expired before any state");
+        w.on_state(10, t0);
+        assert!(!w.expired(14, t0 + Duration::from_millis(20)));
+        assert!(w.expired(15, t0), "5 ticks without a command");
+        assert!(w.expired(11, t0 + Duration::from_millis(26)), "25 ms without a command");
+        assert!(!w.on_applied(12, t0 + Duration::from_millis(10)));
+        assert!(!w.expired(16, t0 + Duration::from_millis(30)));
+        w.enter(17);
+        assert!(!w.expired(30, t0 + Duration::from_secs(1)), "already in safe mode");
+        assert_eq!(w.admits(17), Err(17));
+        assert_eq!(w.admits(18), Ok(()));
+        assert!(w.on_applied(18, t0 + Duration::from_millis(40)));
+        assert_eq!(w.safe_mode_since(), None);
+        let no_time = Watchdog::new(CommandDeadline { ticks: 0, time: None });
+        assert!(!no_time.expired(u64::MAX, t0 + Duration::from_secs(100)));
+    }
+
+    #[test]
+    fn hold_law_is_pd_plus_gravity_clamped() {
+        let mut h = PostureHold::new(HoldGains { kp: vec![100.0, 10.0], kd: vec![2.0, 1.0] }, vec![80.0, 9.0]);
+        h.hold(&[0.5, -0.2]);
+        let mut out = Vec::new();
+        assert_eq!(h.torques(&[0.4, -0.2], &[1.0, 0.0], &[3.0, 8.5], &mut out), 0);
+        assert!((out[0] - (10.0 - 2.0 + 3.0)).abs() < 1e-12);
+        assert!((out[1] - 8.5).abs() < 1e-12);
+        assert_eq!(h.torques(&[0.4, -0.3], &[0.0, 0.0], &[3.0, 8.5], &mut out), 1);
+        assert_eq!(out[1], 9.0);
+    }
+}
