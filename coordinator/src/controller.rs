@@ -358,8 +358,18 @@ impl PaperController {
         if !tau.iter().all(|x| x.is_finite()) {
             return Err(ControllerError::NonFinite { robot: "team".into(), what: "torque".into() });
         }
-        let lambda = &rho * &f_c + &eta;
-        let lambda_real = &rho * &f_c + &eta_real;
+        let (lambda, lambda_real) = if fallback.is_some() {
+            // The clamped torque is not tau_0 + Y F_c: predict lambda from the torque actually
+            // sent (eq. constraint_force).
+            let s_tau = tau.component_mul(&team.s_diag);
+            let inner = &proj.ip * (&proj.mbar * (&proj.p * &s_tau - &proj.p * &team.bias + &proj.pdot_v) + &team.bias - &s_tau)
+                + &k * &load;
+            let lambda = &proj.jct_pinv * inner;
+            let real = &lambda + (&eta_real - &eta);
+            (lambda, real)
+        } else {
+            (&rho * &f_c + &eta, &rho * &f_c + &eta_real)
+        };
         let timing = Timing {
             assembly_us: t_asm,
             projections_us: t_proj - t_asm,
