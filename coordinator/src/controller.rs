@@ -52,6 +52,9 @@ pub struct ControllerConfig {
     /// Added to the diagonal of the semi-definite QP objective.
     pub regularisation: f64,
     pub qp_max_iter: u32,
+    /// Solve the QP with the dense interior-point method first, Clarabel when it does not
+    /// converge (or always Clarabel when false). See `qp::dense_ipm`.
+    pub dense_qp: bool,
     /// `S = I` (treat the base as actuated): the [Lin2018] comparison only.
     pub fully_actuated: bool,
 }
@@ -70,6 +73,7 @@ impl Default for ControllerConfig {
             f_min: 5.0,
             regularisation: 1e-6,
             qp_max_iter: 50,
+            dense_qp: true,
             fully_actuated: false,
         }
     }
@@ -342,6 +346,7 @@ impl PaperController {
             tau0: &tau0,
             f_min: cfg.f_min,
             regularisation: cfg.regularisation,
+            dense_first: cfg.dense_qp,
         };
         let qp = qp::solve(&input, cfg.qp_max_iter);
         let t_qp = t_start.elapsed().as_secs_f64() * 1e6;

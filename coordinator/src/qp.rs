@@ -86,6 +86,8 @@ pub struct QpInput<'a> {
     pub tau0: &'a DVector<f64>,
     pub f_min: f64,
     pub regularisation: f64,
+    /// Try [`dense_ipm`] first (Clarabel if it does not converge).
+    pub dense_first: bool,
 }
 
 /// The QP's outcome.
@@ -97,6 +99,8 @@ pub struct QpOutcome {
     pub solve_us: f64,
     pub setup_us: f64,
     pub rows: usize,
+    /// Which solver produced the answer: "dense-ipm" or "clarabel".
+    pub solver: &'static str,
 }
 
 /// Dense column-major matrix to Clarabel's CSC, keeping only the upper triangle if `triu`.
@@ -169,13 +173,19 @@ pub fn solve(inp: &QpInput, max_iter: u32) -> QpOutcome {
     h *= 2.0;
     let (a, b) = constraints(inp);
     let rows = a.nrows();
+    if inp.dense_first && b.iter().all(|x| x.is_finite()) && h.iter().all(|x| x.is_finite()) && a.iter().all(|x| x.is_finite()) {
+        if let Some((x, it)) = dense_ipm(&h, &a, &b, max_iter, 1e-8) {
+            let us = t0.elapsed().as_secs_f64() * 1e6;
+            return QpOutcome { status: QpStatus::Solved, iterations: it, f: x, solve_us: us, setup_us: 0.0, rows, solver: "dense-ipm" };
+        }
+    }
     let p = to_csc(&h, true);
     let a_csc = to_csc(&a, false);
     let q = vec![0.0; m];
     let cones = [NonnegativeConeT(rows)];
     let settings = DefaultSettings::<f64> { verbose: false, max_iter, presolve_enable: false, ..DefaultSettings::default() };
     let setup_start = Instant::now();
-    let fail = |status| QpOutcome { status, iterations: 0, f: DVector::zeros(m), solve_us: 0.0, setup_us: 0.0, rows };
+    let fail = |status| QpOutcome { status, iterations: 0, f: DVector::zeros(m), solve_us: 0.0, setup_us: 0.0, rows, solver: "clarabel" };
     if !b.iter().all(|x| x.is_finite()) || !h.iter().all(|x| x.is_finite()) || !a.iter().all(|x| x.is_finite()) {
         return fail(QpStatus::NumericalError);
     }
@@ -194,5 +204,80 @@ pub fn solve(inp: &QpInput, max_iter: u32) -> QpOutcome {
     };
     let f = DVector::from_column_slice(&sol.x);
     let f = if f.iter().all(|x| x.is_finite()) { f } else { DVector::zeros(m) };
-    QpOutcome { status, iterations: sol.iterations, f, solve_us: t0.elapsed().as_secs_f64() * 1e6, setup_us, rows }
+    QpOutcome { status, iterations: sol.iterations, f, solve_us: t0.elapsed().as_secs_f64() * 1e6, setup_us, rows, solver: "clarabel" }
+}
+
+/// A dense primal-dual interior-point method (Mehrotra predictor-corrector, normal equations
+/// `P + A^T (Z/S) A` by Cholesky) for `min 1/2 x^T P x  s.t.  A x <= b`: the QP is small and
+/// dense, where Clarabel's sparse LDL of the (n + m)-sized KKT system is slow. Returns
+/// `(x, iterations)` only when it converged to the tolerances; otherwise the caller runs
+/// Clarabel (which also certifies infeasibility).
+pub fn dense_ipm(p: &DMatrix<f64>, a: &DMatrix<f64>, b: &DVector<f64>, max_iter: u32, tol: f64) -> Option<(DVector<f64>, u32)> {
+    let (m, n) = a.shape();
+    let mut x = DVector::zeros(n);
+    let mut s = DVector::from_fn(m, |i, _| b[i].max(1.0));
+    let mut z = DVector::from_element(m, 1.0);
+    let at = a.transpose();
+    let bnorm = 1.0 + b.amax();
+    let mut wa = a.clone();
+    for it in 0..max_iter {
+        let rd = p * &x + &at * &z;
+        let rp = a * &x + &s - b;
+        let mu = s.dot(&z) / m as f64;
+        if rp.amax() <= tol * bnorm && rd.amax() <= tol * (1.0 + p.amax() * x.amax()) && mu <= tol * bnorm {
+            return Some((x, it));
+        }
+        if std::env::var_os("COORD_IPM_DEBUG").is_some() {
+            eprintln!("ipm {it}: rp {:.2e} rd {:.2e} mu {:.2e}", rp.amax(), rd.amax(), mu);
+        }
+        // K = P + A^T W A, W = z / s.
+        for i in 0..m {
+            let w = z[i] / s[i];
+            for j in 0..n {
+                wa[(i, j)] = a[(i, j)] * w;
+            }
+        }
+        let mut k = p + &at * &wa;
+        let reg = 1e-12 * k.diagonal().amax();
+        for i in 0..n {
+            k[(i, i)] += reg;
+        }
+        let chol = k.cholesky()?;
+        let solve = |rc: &DVector<f64>| {
+            // dz = S^{-1}(-rc + Z (rp + A dx)); K dx = -rd - A^T S^{-1}(-rc + Z rp)
+            let t = DVector::from_fn(m, |i, _| (-rc[i] + z[i] * rp[i]) / s[i]);
+            let dx = chol.solve(&(-&rd - &at * &t));
+            let adx = a * &dx;
+            let ds = DVector::from_fn(m, |i, _| -rp[i] - adx[i]);
+            let dz = DVector::from_fn(m, |i, _| (-rc[i] - z[i] * ds[i]) / s[i]);
+            (dx, ds, dz)
+        };
+        let step = |ds: &DVector<f64>, dz: &DVector<f64>| {
+            let mut alpha: f64 = 1.0;
+            for i in 0..m {
+                if ds[i] < 0.0 {
+                    alpha = alpha.min(-s[i] / ds[i]);
+                }
+                if dz[i] < 0.0 {
+                    alpha = alpha.min(-z[i] / dz[i]);
+                }
+            }
+            alpha
+        };
+        let rc_aff = s.component_mul(&z);
+        let (_, ds_a, dz_a) = solve(&rc_aff);
+        let alpha_a = step(&ds_a, &dz_a);
+        let mu_aff = (&s + alpha_a * &ds_a).dot(&(&z + alpha_a * &dz_a)) / m as f64;
+        let sigma = (mu_aff / mu).powi(3).clamp(0.0, 1.0);
+        let rc = DVector::from_fn(m, |i, _| s[i] * z[i] + ds_a[i] * dz_a[i] - sigma * mu);
+        let (dx, ds, dz) = solve(&rc);
+        let alpha = (0.99 * step(&ds, &dz)).min(1.0);
+        x += alpha * dx;
+        s += alpha * ds;
+        z += alpha * dz;
+        if !(x.iter().all(|v| v.is_finite()) && s.iter().all(|v| v.is_finite() && *v > 0.0) && z.iter().all(|v| v.is_finite() && *v > 0.0)) {
+            return None;
+        }
+    }
+    None
 }

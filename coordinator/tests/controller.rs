@@ -256,6 +256,16 @@ fn static_team_holds_the_object() {
     let d = c.diagnostics().expect("diagnostics");
     assert_eq!(d.contacts.len(), 10);
     assert!(d.object_estimate.is_some());
+    // The dense interior-point method and Clarabel agree on the same QP.
+    let solver = r.qp.solver;
+    let tau_a = r.tau.clone();
+    let mut cc = controller(&descs, ControllerConfig { dense_qp: false, ..ControllerConfig::default() });
+    cc.set_references(&refs);
+    let rc = cc.compute(&terms).expect("tick");
+    let d_tau = (&rc.tau - &tau_a).amax();
+    println!("{solver} vs {} ({:?}, {} iterations): |tau difference| {d_tau:.2e} Nm", rc.qp.solver, rc.qp.status, rc.qp.iterations);
+    assert_eq!(solver, "dense-ipm");
+    assert!(d_tau < 1e-4);
 }
 
 #[test]
