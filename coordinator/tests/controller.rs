@@ -22,9 +22,11 @@ fn max_abs(m: &DMatrix<f64>) -> f64 {
     m.iter().fold(0.0, |a, x| a.max(x.abs()))
 }
 
+type RandomTeam = (Vec<DynamicsTerms>, Vec<DVector<f64>>, Vec<DVector<f64>>, PaperController);
+
 /// A 2-robot team at a random perturbed configuration with a velocity that keeps the
 /// contacts (v in the null space of J_c), and the controller that captured the grasp.
-fn random_team(fx: &mut Fixture, seed: u64, amp: f64, vel: f64) -> (Vec<DynamicsTerms>, Vec<DVector<f64>>, Vec<DVector<f64>>, PaperController) {
+fn random_team(fx: &mut Fixture, seed: u64, amp: f64, vel: f64) -> RandomTeam {
     let mut rng = common::rng(seed);
     let nv = fx.robot.model.nv;
     let qs: Vec<DVector<f64>> = (0..2).map(|k| fx.perturbed_q(k, 2, amp, &mut rng)).collect();
