@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, MemberEvent, Qos, TransportError, TypedPublisher};
-use protocol::{CoordinatorMode, CoordinatorStatus, DynamicsTerms, Header, TorqueCommand};
+use protocol::{CoordinatorMode, CoordinatorStatus, DynamicsTerms, Header, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
 use tokio::sync::watch;
 use zenoh::Session;
 
@@ -29,6 +29,10 @@ pub struct CoordinatorCounters {
     pub deadline_misses: u64,
     pub rejected_terms: u64,
     pub controller_errors: u64,
+    /// Ticks whose command came from the controller's fallback.
+    pub fallbacks: u64,
+    /// Ticks skipped because the controller was not ready (e.g. descriptions missing).
+    pub not_ready: u64,
 }
 
 /// Run the coordinator until `stop` turns true.
@@ -40,6 +44,10 @@ pub async fn run(
 ) -> Result<CoordinatorCounters, TransportError> {
     let dynamics = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Dynamics)?).await?;
     let members_q = transport::watch_members(session, &cfg.team).await?;
+    let descriptions = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Description)?).await?;
+    let references = transport::subscribe(session, keys::references(&cfg.team)?).await?;
+    let mut diag_pub: TypedPublisher<TickDiagnostics> =
+        TypedPublisher::declare(session, keys::diagnostics(&cfg.team)?, Qos::Telemetry).await?;
     let mut status_pub: TypedPublisher<CoordinatorStatus> =
         TypedPublisher::declare(session, keys::coordinator_status(&cfg.team)?, Qos::Telemetry).await?;
     let mut command_pubs: BTreeMap<String, TypedPublisher<TorqueCommand>> = BTreeMap::new();
@@ -61,6 +69,7 @@ pub async fn run(
                 let Ok(sample) = m else { break };
                 if let Some(ev) = MemberEvent::from_sample(&sample) {
                     membership_changed = members.apply(&ev);
+                    controller.set_members(&members.to_vec());
                     if let MemberEvent::Left(r) = &ev {
                         command_pubs.remove(r);
                     }
@@ -68,6 +77,23 @@ pub async fn run(
                         MemberEvent::Joined(r) => format!("robot {r} joined"),
                         MemberEvent::Left(r) => format!("robot {r} left"),
                     };
+                }
+            }
+            d = descriptions.recv_async() => {
+                let Ok(sample) = d else { break };
+                match decode_sample::<RobotDescription>(&sample) {
+                    Ok(desc) => {
+                        tracing::info!(robot = desc.header.robot_id(), "robot description received");
+                        controller.set_description(&desc);
+                    }
+                    Err(e) => tracing::warn!(key = %sample.key_expr(), "rejected description: {e}"),
+                }
+            }
+            r = references.recv_async() => {
+                let Ok(sample) = r else { break };
+                match decode_sample::<TaskReferences>(&sample) {
+                    Ok(refs) => controller.set_references(&refs),
+                    Err(e) => tracing::warn!(key = %sample.key_expr(), "rejected references: {e}"),
                 }
             }
             d = dynamics.recv_async() => {
@@ -82,7 +108,7 @@ pub async fn run(
                 };
                 match assembler.add(terms, &members) {
                     TickOutcome::Complete(tick, terms) => {
-                        solve_and_publish(session, &cfg, &mut controller, tick, &terms, &mut commands, &mut command_pubs, &mut counters).await?;
+                        solve_and_publish(session, &cfg, &mut controller, tick, &terms, &mut commands, &mut command_pubs, &mut diag_pub, &mut counters).await?;
                         status_tick = tick;
                     }
                     TickOutcome::NotAMember(r) => {
@@ -105,7 +131,7 @@ pub async fn run(
             // A robot that left no longer holds up the ticks it had not sent.
             for tick in assembler.pending_ticks() {
                 if let TickOutcome::Complete(t, terms) = assembler.try_complete(tick, &members) {
-                    solve_and_publish(session, &cfg, &mut controller, t, &terms, &mut commands, &mut command_pubs, &mut counters).await?;
+                    solve_and_publish(session, &cfg, &mut controller, t, &terms, &mut commands, &mut command_pubs, &mut diag_pub, &mut counters).await?;
                     status_tick = t;
                 }
             }
@@ -113,13 +139,19 @@ pub async fn run(
         if membership_changed || publish_status {
             let status = CoordinatorStatus {
                 header: Header::new(&cfg.team, None, status_tick, protocol::wall_clock_ns()),
-                mode: if members.is_empty() { CoordinatorMode::WaitingForMembers } else { CoordinatorMode::Running },
+                mode: if members.is_empty() || controller.not_ready(&members.to_vec()).is_some() {
+                    CoordinatorMode::WaitingForMembers
+                } else if controller.used_fallback() {
+                    CoordinatorMode::Fallback
+                } else {
+                    CoordinatorMode::Running
+                },
                 members: members.to_vec(),
                 ticks: counters.ticks,
                 commands_sent: counters.commands_sent,
                 deadline_misses: counters.deadline_misses,
-                fallbacks: 0,
-                detail: detail.clone(),
+                fallbacks: counters.fallbacks,
+                detail: controller.not_ready(&members.to_vec()).unwrap_or_else(|| detail.clone()),
             };
             status_pub.put(&status).await?;
         }
@@ -137,13 +169,28 @@ async fn solve_and_publish(
     terms: &[DynamicsTerms],
     commands: &mut Vec<TorqueCommand>,
     command_pubs: &mut BTreeMap<String, TypedPublisher<TorqueCommand>>,
+    diag_pub: &mut TypedPublisher<TickDiagnostics>,
     counters: &mut CoordinatorCounters,
 ) -> Result<(), TransportError> {
     let started = Instant::now();
+    let ids: Vec<String> = terms.iter().map(|t| t.header.robot_id().to_string()).collect();
+    if let Some(why) = controller.not_ready(&ids) {
+        counters.not_ready += 1;
+        tracing::debug!(tick, "controller not ready: {why}");
+        return Ok(());
+    }
     if let Err(e) = controller.solve(terms, commands) {
         counters.controller_errors += 1;
         tracing::error!(tick, "controller failed: {e}");
         return Ok(());
+    }
+    if controller.used_fallback() {
+        counters.fallbacks += 1;
+    }
+    if let Some(d) = controller.diagnostics() {
+        if let Err(e) = diag_pub.put(d).await {
+            tracing::warn!(tick, "diagnostics not published: {e}");
+        }
     }
     for cmd in commands.iter() {
         let robot = cmd.header.robot_id();

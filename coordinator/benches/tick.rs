@@ -1,0 +1,57 @@
+//! One full tick of the paper's controller (assembly, projections, impedance, QP) for 2, 4
+//! and 8 robots built from the real default robot. Besides criterion's estimates it prints
+//! p50/p99 of the total and of each stage over 600/N ticks.
+
+#[path = "../tests/common/mod.rs"]
+mod common;
+
+use coordinator::{ControllerConfig, PaperController};
+use criterion::{criterion_group, criterion_main, Criterion};
+
+fn pct(v: &mut [f64], p: f64) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[((p / 100.0) * (v.len() - 1) as f64).round() as usize]
+}
+
+fn bench(c: &mut Criterion) {
+    let mut fx = common::Fixture::new();
+    for &count in &[2usize, 4, 8] {
+        let (terms, descs) = fx.static_team(count);
+        let mut ctl = PaperController::new(ControllerConfig::default());
+        for d in &descs {
+            ctl.set_description(d);
+        }
+        ctl.compute(&terms).expect("tick");
+        // Percentiles and breakdown.
+        let mut stages: Vec<Vec<f64>> = vec![Vec::new(); 6];
+        for _ in 0..(600 / count) {
+            let r = ctl.compute(&terms).expect("tick");
+            let t = &r.timing;
+            for (k, x) in [t.total_us, t.assembly_us, t.projections_us, t.impedance_us, t.qp_build_us, t.qp_us].into_iter().enumerate() {
+                stages[k].push(x);
+            }
+        }
+        let r = ctl.last().expect("last");
+        let names = ["total", "assembly", "projections", "impedance", "QP build", "QP solve"];
+        println!(
+            "robots {count}: n {} F_c {} QP rows {} status {:?} iterations {}",
+            r.team.n,
+            r.j_c.nrows(),
+            r.qp.rows,
+            r.qp.status,
+            r.qp.iterations
+        );
+        for (k, name) in names.iter().enumerate() {
+            let (p50, p99) = (pct(&mut stages[k], 50.0), pct(&mut stages[k], 99.0));
+            println!("  {name:12} p50 {p50:9.1} us  p99 {p99:9.1} us");
+        }
+        c.bench_function(&format!("tick/{count}_robots"), |b| b.iter(|| ctl.compute(&terms).map(|r| r.tau[0]).unwrap_or(0.0)));
+    }
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default().sample_size(30).measurement_time(std::time::Duration::from_secs(4));
+    targets = bench
+}
+criterion_main!(benches);

@@ -1,0 +1,214 @@
+//! Assembly of the team matrices (paper §III-A) from one tick's dynamics terms, sorted by
+//! robot id: block-diagonal `M`, stacked `h` and `v`, the selection `S`, the stance-foot
+//! Jacobian `J_cf`, the hand Jacobian `J_ee`, the `Jdot*v` stacks, task frames, index maps.
+//!
+//! Any number of robots and stance feet; the contact set may change from tick to tick (the
+//! assembly is redone every tick). Allocates per tick (team-sized matrices, a few µs).
+
+use nalgebra::{DMatrix, DVector, Rotation3, Vector3};
+use protocol::{DynamicsTerms, FrameRole, FrameTerms};
+
+use crate::linalg::rotation_from_row_major;
+use crate::ControllerError;
+
+/// One robot's block in the team vectors.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotBlock {
+    pub id: String,
+    /// First team velocity index of the robot and its `nv`.
+    pub offset: usize,
+    pub nv: usize,
+    /// Team velocity indices of its actuated joints (velocity order).
+    pub actuated: Vec<usize>,
+    pub floating_base: bool,
+}
+
+/// A frame used as a task or a contact.
+#[derive(Debug, Clone)]
+pub struct TeamFrame {
+    pub robot: usize,
+    pub name: String,
+    pub position: Vector3<f64>,
+    pub rotation: Rotation3<f64>,
+    /// `dim x n` team Jacobian (world-aligned, rows `[linear; angular]`).
+    pub jacobian: DMatrix<f64>,
+    pub jdot_v: DVector<f64>,
+}
+
+/// The team of one tick.
+#[derive(Debug, Clone)]
+pub struct Team {
+    pub robots: Vec<RobotBlock>,
+    /// Team velocity dimension.
+    pub n: usize,
+    pub mass: DMatrix<f64>,
+    pub bias: DVector<f64>,
+    pub velocity: DVector<f64>,
+    /// Diagonal of the selection matrix `S` (eq. js_dynamics): 0 on floating-base rows.
+    pub s_diag: DVector<f64>,
+    /// Stance feet (3 rows each) and hands in grasp (6 rows each), in robot order.
+    pub feet: Vec<TeamFrame>,
+    pub hands: Vec<TeamFrame>,
+    pub torsos: Vec<TeamFrame>,
+    pub swing_feet: Vec<TeamFrame>,
+    /// `J_cf` (3 nf x n) and its `Jdot*v`; `J_ee` (6 B x n) and its `Jdot*v`.
+    pub j_cf: DMatrix<f64>,
+    pub jdv_cf: DVector<f64>,
+    pub j_ee: DMatrix<f64>,
+    pub jdv_ee: DVector<f64>,
+}
+
+impl Team {
+    /// Assemble from one tick's terms. `expected` (sorted ids), when given, must match the
+    /// robots of the tick. `fully_actuated` sets `S = I` (the [Lin2018] comparison).
+    pub fn assemble(
+        tick: &[DynamicsTerms],
+        expected: Option<&[String]>,
+        fully_actuated: bool,
+    ) -> Result<Team, ControllerError> {
+        if tick.is_empty() {
+            return Err(ControllerError::Dimension { what: "tick".into(), detail: "no robot in the tick".into() });
+        }
+        if let Some(exp) = expected {
+            for id in exp {
+                if !tick.iter().any(|t| t.header.robot_id() == id) {
+                    return Err(ControllerError::MissingRobot { robot: id.clone() });
+                }
+            }
+            for t in tick {
+                if !exp.iter().any(|e| e == t.header.robot_id()) {
+                    return Err(ControllerError::UnknownRobot { robot: t.header.robot_id().to_string() });
+                }
+            }
+        }
+        for t in tick {
+            check_terms(t)?;
+        }
+        let n: usize = tick.iter().map(|t| t.nv()).sum();
+        let mut robots = Vec::with_capacity(tick.len());
+        let mut mass = DMatrix::zeros(n, n);
+        let mut bias = DVector::zeros(n);
+        let mut velocity = DVector::zeros(n);
+        let mut s_diag = DVector::from_element(n, 1.0);
+        let (mut feet, mut hands, mut torsos, mut swing_feet) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut off = 0;
+        for (k, t) in tick.iter().enumerate() {
+            let nv = t.nv();
+            for i in 0..nv {
+                for j in 0..nv {
+                    mass[(off + i, off + j)] = t.mass_matrix.data[i * nv + j];
+                }
+                bias[off + i] = t.bias[i];
+                velocity[off + i] = t.velocity[i];
+            }
+            let base = if t.floating_base { 6 } else { 0 };
+            if !fully_actuated {
+                for i in 0..base {
+                    s_diag[off + i] = 0.0;
+                }
+            }
+            robots.push(RobotBlock {
+                id: t.header.robot_id().to_string(),
+                offset: off,
+                nv,
+                actuated: (off + base..off + nv).collect(),
+                floating_base: t.floating_base,
+            });
+            for f in &t.frames {
+                let tf = team_frame(k, f, off, n);
+                match f.role {
+                    FrameRole::StanceFoot => feet.push(tf),
+                    FrameRole::SwingFoot => swing_feet.push(tf),
+                    FrameRole::Hand if t.hand_in_grasp => hands.push(tf),
+                    FrameRole::Hand => {}
+                    FrameRole::Torso => torsos.push(tf),
+                }
+            }
+            off += nv;
+        }
+        let j_cf = stack(&feet, 3, n);
+        let jdv_cf = stack_v(&feet, 3);
+        let j_ee = stack(&hands, 6, n);
+        let jdv_ee = stack_v(&hands, 6);
+        Ok(Team { robots, n, mass, bias, velocity, s_diag, feet, hands, torsos, swing_feet, j_cf, jdv_cf, j_ee, jdv_ee })
+    }
+
+    /// Rows of `J_c`: 3 per stance foot, 6 per hand in grasp (eq. jacobian_c).
+    pub fn contact_rows(&self) -> usize {
+        3 * self.feet.len() + 6 * self.hands.len()
+    }
+
+    /// Number of actuated joints of the team.
+    pub fn actuated(&self) -> usize {
+        self.robots.iter().map(|r| r.actuated.len()).sum()
+    }
+}
+
+fn check_terms(t: &DynamicsTerms) -> Result<(), ControllerError> {
+    let robot = t.header.robot_id().to_string();
+    let nv = t.nv();
+    let dim = |what: &str, detail: String| ControllerError::Dimension { what: format!("{robot}: {what}"), detail };
+    if nv == 0 || (t.floating_base && nv <= 6) {
+        return Err(dim("nv", format!("{nv} leaves no actuated joint")));
+    }
+    if t.mass_matrix.rows() != nv || t.mass_matrix.cols() != nv || t.mass_matrix.data.len() != nv * nv {
+        return Err(dim("mass_matrix", format!("{}x{} for nv {nv}", t.mass_matrix.rows(), t.mass_matrix.cols())));
+    }
+    if t.bias.len() != nv || t.velocity.len() != nv {
+        return Err(dim("bias/velocity", format!("{}/{} for nv {nv}", t.bias.len(), t.velocity.len())));
+    }
+    let finite = |x: &[f64]| x.iter().all(|v| v.is_finite());
+    if !finite(&t.mass_matrix.data) || !finite(&t.bias) || !finite(&t.velocity) {
+        return Err(ControllerError::NonFinite { robot, what: "M, h or v".into() });
+    }
+    let mut hands = 0;
+    for f in &t.frames {
+        let d = f.role.dim();
+        if f.jacobian.rows() != d || f.jacobian.cols() != nv || f.jacobian.data.len() != d * nv || f.jdot_v.len() != d {
+            return Err(dim(&format!("frame {}", f.name), format!("jacobian {}x{}, jdot_v {} for a {d}-row frame and nv {nv}", f.jacobian.rows(), f.jacobian.cols(), f.jdot_v.len())));
+        }
+        if !finite(&f.jacobian.data) || !finite(&f.jdot_v) || !finite(&f.position) || !finite(&f.rotation) {
+            return Err(ControllerError::NonFinite { robot, what: format!("frame {}", f.name) });
+        }
+        hands += (f.role == FrameRole::Hand) as usize;
+    }
+    if t.hand_in_grasp && hands != 1 {
+        return Err(dim("hand", format!("hand in grasp with {hands} hand frames")));
+    }
+    Ok(())
+}
+
+fn team_frame(robot: usize, f: &FrameTerms, off: usize, n: usize) -> TeamFrame {
+    let d = f.role.dim();
+    let nv = f.jacobian.cols();
+    let mut jacobian = DMatrix::zeros(d, n);
+    for i in 0..d {
+        for j in 0..nv {
+            jacobian[(i, off + j)] = f.jacobian.data[i * nv + j];
+        }
+    }
+    TeamFrame {
+        robot,
+        name: f.name.clone(),
+        position: Vector3::from_row_slice(&f.position),
+        rotation: rotation_from_row_major(&f.rotation),
+        jacobian,
+        jdot_v: DVector::from_row_slice(&f.jdot_v),
+    }
+}
+
+fn stack(frames: &[TeamFrame], d: usize, n: usize) -> DMatrix<f64> {
+    let mut j = DMatrix::zeros(d * frames.len(), n);
+    for (k, f) in frames.iter().enumerate() {
+        j.rows_mut(d * k, d).copy_from(&f.jacobian);
+    }
+    j
+}
+
+fn stack_v(frames: &[TeamFrame], d: usize) -> DVector<f64> {
+    let mut v = DVector::zeros(d * frames.len());
+    for (k, f) in frames.iter().enumerate() {
+        v.rows_mut(d * k, d).copy_from(&f.jdot_v);
+    }
+    v
+}

@@ -1,0 +1,108 @@
+//! Team states from the real default robot (robot_agent's model and TermsBuilder).
+#![allow(dead_code)]
+
+use nalgebra::DVector;
+use protocol::{DynamicsTerms, Header, Pose, RobotDescription, RobotState};
+use rand::{Rng, SeedableRng};
+use robot_agent::description::{default_robot_path, Robot};
+use robot_agent::terms::{empty_terms, ContactSet, TermsBuilder};
+
+pub const TEAM: &str = "t";
+
+pub struct Fixture {
+    pub robot: Robot,
+    pub builder: TermsBuilder,
+}
+
+impl Fixture {
+    pub fn new() -> Self {
+        let robot = Robot::load(default_robot_path()).expect("default robot");
+        let builder = TermsBuilder::new(&robot).expect("builder");
+        Fixture { robot, builder }
+    }
+
+    pub fn description(&self, id: &str) -> RobotDescription {
+        self.robot.summary(TEAM, id)
+    }
+
+    /// Standing `q` of robot `k` of `count` placed on a circle facing the centre. For two
+    /// robots: robot 0 at the origin facing +x, robot 1 at x = 2.3 m rotated 180° about z.
+    pub fn standing_q(&self, k: usize, count: usize) -> DVector<f64> {
+        let mut q = self.robot.standing_q.clone();
+        let (x, y, yaw) = place(k, count);
+        q[0] = x;
+        q[1] = y;
+        q[3] = (yaw / 2.0).cos();
+        q[4] = 0.0;
+        q[5] = 0.0;
+        q[6] = (yaw / 2.0).sin();
+        q
+    }
+
+    /// Terms of robot `id` at `(q, v)` with every foot in stance and the hand in grasp.
+    pub fn terms(&mut self, id: &str, q: &DVector<f64>, v: &DVector<f64>, tick: u64) -> DynamicsTerms {
+        self.terms_with(id, q, v, tick, &ContactSet::all_stance(&self.robot))
+    }
+
+    pub fn terms_with(&mut self, id: &str, q: &DVector<f64>, v: &DVector<f64>, tick: u64, contacts: &ContactSet) -> DynamicsTerms {
+        let state = RobotState {
+            header: Header::new(TEAM, Some(id), tick, 0),
+            base_pose: Pose { position: [q[0], q[1], q[2]], orientation: [q[3], q[4], q[5], q[6]] },
+            base_twist: [v[0], v[1], v[2], v[3], v[4], v[5]],
+            joint_positions: q.as_slice()[7..].to_vec(),
+            joint_velocities: v.as_slice()[6..].to_vec(),
+            time: 0.0,
+        };
+        self.builder.load_state(&self.robot, &state).expect("state");
+        let mut out = empty_terms(TEAM, id);
+        out.header.tick = tick;
+        self.builder.compute(&self.robot, contacts, &mut out).expect("terms");
+        out
+    }
+
+    /// A static team of `count` robots at their standing pose.
+    pub fn static_team(&mut self, count: usize) -> (Vec<DynamicsTerms>, Vec<RobotDescription>) {
+        let nv = self.robot.model.nv;
+        let mut terms = Vec::new();
+        let mut descs = Vec::new();
+        for k in 0..count {
+            let id = robot_id(k);
+            let q = self.standing_q(k, count);
+            terms.push(self.terms(&id, &q, &DVector::zeros(nv), 1));
+            descs.push(self.description(&id));
+        }
+        (terms, descs)
+    }
+
+    /// A randomly perturbed configuration (joints +-amp rad, base +-amp/10 m and rad).
+    pub fn perturbed_q(&self, k: usize, count: usize, amp: f64, rng: &mut impl Rng) -> DVector<f64> {
+        let q0 = self.standing_q(k, count);
+        let nv = self.robot.model.nv;
+        let mut dv = DVector::zeros(nv);
+        for i in 0..nv {
+            let a = if i < 6 { amp / 10.0 } else { amp };
+            dv[i] = rng.random_range(-a..a);
+        }
+        self.robot.model.integrate(q0.as_slice(), dv.as_slice(), 1.0)
+    }
+}
+
+pub fn robot_id(k: usize) -> String {
+    format!("r{}", k + 1)
+}
+
+/// Robot `k` of `count` on a circle (radius 1.15 m) around the object at (1.15, 0), facing it.
+pub fn place(k: usize, count: usize) -> (f64, f64, f64) {
+    let theta = std::f64::consts::PI + 2.0 * std::f64::consts::PI * k as f64 / count as f64;
+    let (cx, r) = (1.15, 1.15);
+    let x = cx + r * theta.cos();
+    let y = r * theta.sin();
+    let yaw = theta - std::f64::consts::PI;
+    // Clean up round-off so that the 2-robot team sits exactly at x = 0 and 2.3.
+    let clean = |a: f64| if a.abs() < 1e-12 { 0.0 } else { a };
+    (clean(x), clean(y), yaw)
+}
+
+pub fn rng(seed: u64) -> rand::rngs::StdRng {
+    rand::rngs::StdRng::seed_from_u64(seed)
+}

@@ -1,0 +1,350 @@
+//! The paper's controller on team states built from the real default robot.
+
+mod common;
+
+use common::{robot_id, Fixture};
+use coordinator::linalg::pinv;
+use coordinator::qp::contact_rows;
+use coordinator::{ControllerConfig, ControllerError, PaperController, TeamController};
+use nalgebra::{DMatrix, DVector, Vector3};
+use protocol::{DynamicsTerms, QpStatus};
+use robot_agent::terms::ContactSet;
+
+fn controller(descs: &[protocol::RobotDescription], cfg: ControllerConfig) -> PaperController {
+    let mut c = PaperController::new(cfg);
+    for d in descs {
+        c.set_description(d);
+    }
+    c
+}
+
+fn max_abs(m: &DMatrix<f64>) -> f64 {
+    m.iter().fold(0.0, |a, x| a.max(x.abs()))
+}
+
+type RandomTeam = (Vec<DynamicsTerms>, Vec<DVector<f64>>, Vec<DVector<f64>>, PaperController);
+
+/// A 2-robot team at a random perturbed configuration with a velocity that keeps the
+/// contacts (v in the null space of J_c), and the controller that captured the grasp.
+fn random_team(fx: &mut Fixture, seed: u64, amp: f64, vel: f64) -> RandomTeam {
+    let mut rng = common::rng(seed);
+    let nv = fx.robot.model.nv;
+    let qs: Vec<DVector<f64>> = (0..2).map(|k| fx.perturbed_q(k, 2, amp, &mut rng)).collect();
+    let descs: Vec<_> = (0..2).map(|k| fx.description(&robot_id(k))).collect();
+    let terms0: Vec<_> = (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &DVector::zeros(nv), 1)).collect();
+    let mut c = controller(&descs, ControllerConfig::default());
+    let p = c.compute(&terms0).expect("tick").proj.p.clone();
+    use rand::Rng;
+    let v_rand = DVector::from_fn(2 * nv, |_, _| rng.random_range(-vel..vel));
+    let v = &p * v_rand;
+    let vs: Vec<DVector<f64>> = (0..2).map(|k| v.rows(k * nv, nv).into_owned()).collect();
+    let terms: Vec<_> = (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &vs[k], 2)).collect();
+    (terms, qs, vs, c)
+}
+
+#[test]
+fn projection_identities_on_random_states() {
+    let mut fx = Fixture::new();
+    let mut worst = [0.0f64; 5];
+    for seed in 0..5 {
+        let (terms, _, _, mut c) = random_team(&mut fx, seed, 0.15, 0.5);
+        let r = c.compute(&terms).expect("tick");
+        let p = &r.proj.p;
+        let n = p.nrows();
+        worst[0] = worst[0].max(max_abs(&(p - p.transpose())));
+        worst[1] = worst[1].max(max_abs(&(p * p - p)));
+        worst[2] = worst[2].max(max_abs(&(p * r.j_c.transpose())));
+        worst[3] = worst[3].max(max_abs(&(&r.proj.mc * &r.proj.mc_inv - DMatrix::identity(n, n))));
+        // P v = v for v in N(J_c): the constraint-consistent velocity.
+        worst[4] = worst[4].max((p * &r.team.velocity - &r.team.velocity).amax());
+        // rank J_c = 3 * 8 feet + 6 (B - 1) for B = 2 hands.
+        assert_eq!(r.proj.jc_rank, 24 + 6, "rank of J_c");
+        // J_c,ee constrains only relative hand motion: G^T-directions are free.
+        let g = r.grasp.as_ref().expect("grasp");
+        assert!(max_abs(&(&g.n * g.g.transpose())) < 1e-10);
+    }
+    println!("worst |P-P^T| {:.2e}, |PP-P| {:.2e}, |P J_c^T| {:.2e}, |M_c M_c^-1 - I| {:.2e}, |Pv - v| {:.2e}", worst[0], worst[1], worst[2], worst[3], worst[4]);
+    assert!(worst[0] < 1e-12 && worst[1] < 1e-10 && worst[2] < 1e-9 && worst[3] < 1e-9 && worst[4] < 1e-9, "{worst:?}");
+}
+
+#[test]
+fn pdot_v_against_finite_difference_in_time() {
+    let mut fx = Fixture::new();
+    let mut worst = 0.0f64;
+    for seed in 10..13 {
+        let (terms, qs, vs, mut c) = random_team(&mut fx, seed, 0.15, 0.5);
+        let r = c.compute(&terms).expect("tick");
+        let analytic = r.proj.pdot_v.clone();
+        let v = r.team.velocity.clone();
+        let nv = fx.robot.model.nv;
+        let dt = 1e-6;
+        let mut p_at = |sign: f64, c: &mut PaperController| {
+            let t: Vec<_> = (0..2)
+                .map(|k| {
+                    let q = fx.robot.model.integrate(qs[k].as_slice(), vs[k].as_slice(), sign * dt);
+                    fx.terms(&robot_id(k), &q, &DVector::zeros(nv), 3)
+                })
+                .collect();
+            c.compute(&t).expect("tick").proj.p.clone()
+        };
+        let pp = p_at(1.0, &mut c);
+        let pm = p_at(-1.0, &mut c);
+        let fd = (pp - pm) / (2.0 * dt) * &v;
+        let err = (&fd - &analytic).amax() / analytic.amax().max(1e-3);
+        println!("seed {seed}: |Pdot v| {:.3e}, relative error vs FD {:.2e}", analytic.amax(), err);
+        worst = worst.max(err);
+    }
+    assert!(worst < 1e-4, "worst relative error {worst:.2e}");
+}
+
+/// Independent constrained forward dynamics: the KKT system with min-norm lambda.
+fn kkt(m: &DMatrix<f64>, j_c: &DMatrix<f64>, rhs: &DVector<f64>, jdv: &DVector<f64>) -> (DVector<f64>, DVector<f64>) {
+    let (n, k) = (m.nrows(), j_c.nrows());
+    let mut a = DMatrix::zeros(n + k, n + k);
+    a.view_mut((0, 0), (n, n)).copy_from(m);
+    a.view_mut((0, n), (n, k)).copy_from(&(-j_c.transpose()));
+    a.view_mut((n, 0), (k, n)).copy_from(j_c);
+    let mut b = DVector::zeros(n + k);
+    b.rows_mut(0, n).copy_from(rhs);
+    b.rows_mut(n, k).copy_from(&(-jdv));
+    let (ai, _) = pinv(&a, 1e-11).expect("svd");
+    let x = ai * b;
+    (x.rows(0, n).into_owned(), x.rows(n, k).into_owned())
+}
+
+#[test]
+fn lambda_relation_matches_constrained_forward_dynamics() {
+    let mut fx = Fixture::new();
+    let mut worst = (0.0f64, 0.0f64);
+    for seed in 20..24 {
+        let (terms, _, _, mut c) = random_team(&mut fx, seed, 0.1, 0.3);
+        let r = c.compute(&terms).expect("tick");
+        let s_tau = r.tau.component_mul(&r.team.s_diag);
+        let rhs = &s_tau - &r.team.bias + &r.load;
+        let (qdd, lambda) = kkt(&r.team.mass, &r.j_c, &rhs, &r.jdv_c);
+        // eq. aghili_25
+        let p = &r.proj.p;
+        let qdd_25 = &r.proj.mc_inv * (p * &s_tau - p * &r.team.bias + &r.proj.pdot_v + p * &r.load);
+        let e_q = (&qdd - &qdd_25).amax() / qdd.amax().max(1.0);
+        let e_l = (&lambda - &r.lambda).amax() / lambda.amax().max(1.0);
+        println!("seed {seed}: |lambda| {:.1}, rel err lambda {:.2e}, qdd {:.2e} (QP {:?})", lambda.amax(), e_l, e_q, r.qp.status);
+        worst = (worst.0.max(e_l), worst.1.max(e_q));
+    }
+    assert!(worst.0 < 1e-6 && worst.1 < 1e-6, "{worst:?}");
+}
+
+#[test]
+fn fully_actuated_reduces_to_lin2018() {
+    let mut fx = Fixture::new();
+    let (terms, _, _, _) = random_team(&mut fx, 30, 0.02, 0.05);
+    let descs: Vec<_> = (0..2).map(|k| fx.description(&robot_id(k))).collect();
+    let cfg = ControllerConfig { fully_actuated: true, ..ControllerConfig::default() };
+    let mut c = controller(&descs, cfg);
+    let r = c.compute(&terms).expect("tick");
+    let n = r.team.n;
+    let id = DMatrix::<f64>::identity(n, n);
+    let p = &r.proj.p;
+    assert!(max_abs(&(&r.proj.b - &id)) < 1e-12, "B = I");
+    // [P S]^+ P = P^+ P = P.
+    assert!(max_abs(&(&r.proj.ps_pinv * p - p)) < 1e-9);
+    // [Lin2018]: tau = P tau_M + (I - P) tau_C with (I - P) tau_C = J_c^T F_c.
+    let tau_lin = p * &r.tau_m + &r.j_c.transpose() * &r.f_c;
+    let e_tau = (&r.tau - &tau_lin).amax();
+    // [Lin2018]'s contact wrench: lambda = (J_c^T)^+ [(I-P)(Mbar (P tau - P h + Pdot v) + h - tau)] with the load.
+    let ip = &id - p;
+    let lam_lin = &r.proj.jct_pinv
+        * (&ip * (&r.proj.mbar * (p * &r.tau - p * &r.team.bias + &r.proj.pdot_v + p * &r.load) + &r.team.bias - &r.tau - &r.load));
+    let e_lam = (&lam_lin - &r.lambda).amax();
+    // rho = -(J_c^T)^+ J_c^T when S = B = I.
+    let e_rho = max_abs(&(&r.rho + &r.proj.jct_pinv * r.j_c.transpose()));
+    println!("S = I: |tau - tau_Lin| {e_tau:.2e}, |lambda - lambda_Lin| {e_lam:.2e}, |rho + Jc^T+ Jc^T| {e_rho:.2e}, QP {:?}", r.qp.status);
+    assert!(e_tau < 1e-8 && e_lam < 1e-6 && e_rho < 1e-9);
+}
+
+/// Check every friction, moment and torque row on the predicted real wrenches.
+fn worst_violation(r: &coordinator::controller::TickReport, f_min: f64) -> (f64, f64) {
+    let mut worst_c = f64::NEG_INFINITY;
+    for (start, kind) in &r.contacts {
+        let d = if matches!(kind, coordinator::qp::ContactKind::Foot { .. }) { 3 } else { 6 };
+        let lam = r.lambda_real.rows(*start, d);
+        for (c, lo) in contact_rows(kind, f_min) {
+            worst_c = worst_c.max(lo - DVector::from_vec(c).dot(&lam));
+        }
+    }
+    let mut worst_t = f64::NEG_INFINITY;
+    for (&j, &lim) in r.actuated.iter().zip(&r.limits) {
+        worst_t = worst_t.max(r.tau[j].abs() - lim);
+    }
+    (worst_c, worst_t)
+}
+
+#[test]
+fn static_team_holds_the_object() {
+    let mut fx = Fixture::new();
+    let (terms, descs) = fx.static_team(2);
+    let cfg = ControllerConfig::default();
+    let f_min = cfg.f_min;
+    let mut c = controller(&descs, cfg);
+    // References equal to the current poses: first tick captures, then explicit references.
+    c.compute(&terms).expect("tick");
+    let (obj, torsos) = {
+        let r = c.last().expect("last");
+        let g = r.grasp.as_ref().expect("grasp");
+        (g.object, r.team.torsos.iter().map(|t| (r.team.robots[t.robot].id.clone(), t.position, t.rotation)).collect::<Vec<_>>())
+    };
+    let pose = |p: Vector3<f64>, q: [f64; 4]| protocol::Pose { position: p.into(), orientation: q };
+    let refs = protocol::TaskReferences {
+        header: protocol::Header::new(common::TEAM, None, 1, 0),
+        object: Some(protocol::PoseReference {
+            pose: pose(obj.translation.vector, coordinator::linalg::quat_wxyz(&obj.rotation.to_rotation_matrix())),
+            twist: [0.0; 6],
+            acceleration: [0.0; 6],
+        }),
+        torsos: torsos
+            .iter()
+            .map(|(id, p, r)| protocol::TorsoReference {
+                robot: id.clone(),
+                reference: protocol::PoseReference { pose: pose(*p, coordinator::linalg::quat_wxyz(r)), twist: [0.0; 6], acceleration: [0.0; 6] },
+            })
+            .collect(),
+        swing_feet: vec![],
+    };
+    c.set_references(&refs);
+    let mut cmds = Vec::new();
+    c.solve(&terms, &mut cmds).expect("tick");
+    let r = c.last().expect("last");
+    assert_eq!(r.qp.status, QpStatus::Solved, "{:?}", r.fallback);
+    assert_eq!(cmds.len(), 2);
+    assert!(cmds.iter().all(|c| c.tau.len() == 18));
+    let (wc, wt) = worst_violation(r, f_min);
+    println!("QP {:?} in {} iterations, {} rows; worst constraint violation {wc:.2e} N, worst torque excess {wt:.2e} Nm", r.qp.status, r.qp.iterations, r.qp.rows);
+    assert!(wc < 1e-5 && wt < 1e-5);
+    // Net hand wrench on the object balances its weight: hands push with -lambda.
+    let g = r.grasp.as_ref().expect("grasp");
+    let nf = r.team.feet.len();
+    let hands = r.lambda_real.rows(3 * nf, 12).into_owned();
+    let net = -(&g.g * hands);
+    let weight = DVector::from_vec(vec![0.0, 0.0, 9.81, 0.0, 0.0, 0.0]);
+    println!("net hand wrench on the object {:?}", net.as_slice());
+    assert!((&net - &weight).amax() < 1e-8);
+    // Feet carry robots + object: sum of vertical foot forces vs total weight.
+    let fz: f64 = (0..nf).map(|k| r.lambda_real[3 * k + 2]).sum();
+    let total = 9.81 * (descs.iter().map(|d| d.total_mass).sum::<f64>() + 1.0);
+    // Predicted accelerations: in a static hold with zero task errors they vanish up to the
+    // QP's tolerance; the force balance then holds up to (total mass) * |CoM acceleration|.
+    let s_tau = r.tau.component_mul(&r.team.s_diag);
+    let p = &r.proj.p;
+    let qdd = &r.proj.mc_inv * (p * &s_tau - p * &r.team.bias + &r.proj.pdot_v + p * &r.load);
+    println!("sum f_z {fz:.6} N vs weight {total:.6} N (diff {:.2e}); |qdd| {:.2e}", fz - total, qdd.amax());
+    for c in &r.contacts {
+        println!("  contact at {}: {:?}", c.0, r.lambda_real.rows(c.0, if c.0 < 3 * nf { 3 } else { 6 }).iter().map(|x| (x * 100.0).round() / 100.0).collect::<Vec<_>>());
+    }
+    // The contact-force torque does not reach the motion space (P S B J_c^T F_c = 0: B does
+    // its job, checked below), but the superposition of the object and torso impedances
+    // (eqn. joint_space_tau_M, each with its own Lambda_c) does not cancel P h exactly when
+    // the tasks are dynamically coupled, so the predicted qdd is small but not zero. The feet
+    // then carry the weight plus the predicted rate of change of the robots' linear momentum:
+    // the base rows of M qdd (v = 0), rotated to the world.
+    let leak = (&r.proj.mc_inv * (p * (r.y.clone() * &r.f_c).component_mul(&r.team.s_diag))).amax();
+    let mut momentum_z = 0.0;
+    for (rb, torso) in r.team.robots.iter().zip(&r.team.torsos) {
+        let mq = (&r.team.mass * &qdd).rows(rb.offset, 3).into_owned();
+        momentum_z += (torso.rotation * Vector3::new(mq[0], mq[1], mq[2])).z;
+    }
+    println!("qdd from F_c {leak:.2e}; predicted momentum rate z {momentum_z:.4} N; balance error {:.2e} N", fz - total - momentum_z);
+    assert!(leak < 1e-9, "F_c must not accelerate the motion space");
+    assert!((fz - total - momentum_z).abs() < 1e-6 * total);
+    assert!(momentum_z.abs() < 0.01 * total, "the leak stays small: {momentum_z} N");
+    let d = c.diagnostics().expect("diagnostics");
+    assert_eq!(d.contacts.len(), 10);
+    assert!(d.object_estimate.is_some());
+    // The dense interior-point method and Clarabel agree on the same QP.
+    let solver = r.qp.solver;
+    let tau_a = r.tau.clone();
+    let mut cc = controller(&descs, ControllerConfig { dense_qp: false, ..ControllerConfig::default() });
+    cc.set_references(&refs);
+    let rc = cc.compute(&terms).expect("tick");
+    let d_tau = (&rc.tau - &tau_a).amax();
+    println!("{solver} vs {} ({:?}, {} iterations): |tau difference| {d_tau:.2e} Nm", rc.qp.solver, rc.qp.status, rc.qp.iterations);
+    assert_eq!(solver, "dense-ipm");
+    assert!(d_tau < 1e-4);
+}
+
+#[test]
+fn bad_input_is_an_error_or_fallback_never_a_panic() {
+    let mut fx = Fixture::new();
+    let (terms, descs) = fx.static_team(2);
+    let mut out = Vec::new();
+    // Missing robot.
+    let mut c = controller(&descs, ControllerConfig::default());
+    c.set_expected(Some(vec!["r1".into(), "r2".into()]));
+    assert!(matches!(c.solve(&terms[..1], &mut out), Err(ControllerError::MissingRobot { .. })));
+    // No description.
+    let mut c2 = controller(&descs[..1], ControllerConfig::default());
+    assert!(matches!(c2.solve(&terms, &mut out), Err(ControllerError::MissingDescription { .. })));
+    // Dimensions that disagree.
+    let mut bad = terms.clone();
+    bad[1].bias.pop();
+    assert!(matches!(c.solve(&bad, &mut out), Err(ControllerError::Dimension { .. })));
+    let mut bad = terms.clone();
+    bad[0].frames[0].jacobian.cols -= 1;
+    assert!(matches!(c.solve(&bad, &mut out), Err(ControllerError::Dimension { .. })));
+    // Non-finite numbers.
+    let mut bad = terms.clone();
+    bad[0].mass_matrix.data[5] = f64::NAN;
+    assert!(matches!(c.solve(&bad, &mut out), Err(ControllerError::NonFinite { .. })));
+    // Singular: a zero mass matrix (M_c = I - P is singular).
+    let mut bad = terms.clone();
+    bad[0].mass_matrix.data.iter_mut().for_each(|x| *x = 0.0);
+    let res = c.solve(&bad, &mut out);
+    println!("zero mass matrix: {res:?}");
+    assert!(res.is_err() || c.used_fallback() || out.iter().all(|o| o.tau.iter().all(|t| t.is_finite())));
+    // Singular kinematics: both hands at the same point with zero Jacobians.
+    let mut bad = terms.clone();
+    for t in bad.iter_mut() {
+        for f in t.frames.iter_mut() {
+            f.jacobian.data.iter_mut().for_each(|x| *x = 0.0);
+        }
+    }
+    let res = c.solve(&bad, &mut out);
+    println!("zero Jacobians: {res:?}, fallback {}", c.used_fallback());
+    // Infeasible QP (absurd minimum normal force): the fallback, within the torque limits.
+    let mut c3 = controller(&descs, ControllerConfig { f_min: 1e5, ..ControllerConfig::default() });
+    c3.solve(&terms, &mut out).expect("fallback, not an error");
+    let r = c3.last().expect("last");
+    println!("f_min 1e5: QP {:?}, fallback: {:?}", r.qp.status, r.fallback);
+    assert!(c3.used_fallback());
+    assert_ne!(r.qp.status, QpStatus::Solved);
+    let (_, wt) = worst_violation(r, 0.0);
+    assert!(wt <= 1e-9);
+    assert_eq!(c3.diagnostics().expect("diag").qp_status, r.qp.status);
+}
+
+#[test]
+fn contact_set_changes_and_more_robots() {
+    let mut fx = Fixture::new();
+    // One foot in swing on robot 1, hand released on robot 2 -> hands: 1.
+    let (mut terms, descs) = fx.static_team(2);
+    let nv = fx.robot.model.nv;
+    let q = fx.standing_q(0, 2);
+    let cs = ContactSet { stance: vec![false, true, true, true], hand_in_grasp: true };
+    terms[0] = fx.terms_with("r1", &q, &DVector::zeros(nv), 1, &cs);
+    let mut c = controller(&descs, ControllerConfig::default());
+    let r = c.compute(&terms).expect("tick");
+    assert_eq!(r.team.feet.len(), 7);
+    assert_eq!(r.team.swing_feet.len(), 1);
+    assert_eq!(r.j_c.nrows(), 21 + 12);
+    println!("swing foot: QP {:?}", r.qp.status);
+    // Back to all stance: the next tick reassembles.
+    let (terms, _) = fx.static_team(2);
+    let r = c.compute(&terms).expect("tick");
+    assert_eq!(r.j_c.nrows(), 36);
+    // 4 robots on a circle.
+    let (terms, descs) = fx.static_team(4);
+    let mut c = controller(&descs, ControllerConfig::default());
+    let mut out = Vec::new();
+    c.solve(&terms, &mut out).expect("tick");
+    let r = c.last().expect("last");
+    println!("4 robots: n {} m {} QP {:?} rows {} in {:.0} us", r.team.n, r.j_c.nrows(), r.qp.status, r.qp.rows, r.timing.total_us);
+    assert_eq!(out.len(), 4);
+}
