@@ -6,6 +6,13 @@
 //! * [`plant`]: what is simulated (the [`plant::Plant`] trait).
 //! * [`lockstep`]: the lockstep loop over Zenoh: a tick advances only when every robot's
 //!   torques for it have arrived; a missing robot is named in a timeout error.
+//! * [`world`]: the MuJoCo world built from the robots' URDFs with mjSpec, checked against
+//!   the robots' own models.
+//! * [`mujoco_plant`]: the [`plant::Plant`] over that world.
+//! * [`perturbation`]: timed external wrenches.
 
 pub mod lockstep;
+pub mod mujoco_plant;
+pub mod perturbation;
 pub mod plant;
+pub mod world;
