@@ -15,4 +15,5 @@ pub mod lockstep;
 pub mod mujoco_plant;
 pub mod perturbation;
 pub mod plant;
+pub mod standing;
 pub mod world;
