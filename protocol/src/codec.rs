@@ -27,6 +27,7 @@ pub enum MessageKind {
     TickDiagnostics = 7,
     AgentStatus = 8,
     RobotDescription = 9,
+    GroundTruth = 11,
 }
 
 /// A message that travels: it has a kind, a header and can validate itself.
@@ -56,6 +57,7 @@ message!(CoordinatorStatus);
 message!(TickDiagnostics);
 message!(AgentStatus);
 message!(RobotDescription);
+message!(GroundTruth);
 
 fn options() -> impl Options {
     bincode::DefaultOptions::new()

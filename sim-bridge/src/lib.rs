@@ -11,6 +11,8 @@
 //! * [`mujoco_plant`]: the [`plant::Plant`] over that world.
 //! * [`perturbation`]: timed external wrenches.
 
+pub mod ground_truth;
+pub mod ik;
 pub mod lockstep;
 pub mod mujoco_plant;
 pub mod perturbation;

@@ -6,11 +6,12 @@ use std::time::{Duration, Instant};
 
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, MemberEvent, Qos, TransportError, TypedPublisher};
-use protocol::{RobotState, TorqueCommand};
+use protocol::{GroundTruth, PerturbationRequest, RobotState, TorqueCommand};
 use thiserror::Error;
 use tokio::sync::watch;
 use zenoh::Session;
 
+use crate::ground_truth::Recorder;
 use crate::plant::{empty_state, Plant};
 
 /// Errors of the bridge loop.
@@ -54,6 +55,20 @@ pub struct LockstepReport {
     pub rejected_torques: u64,
 }
 
+/// What the loop does besides states and torques.
+#[derive(Debug, Default)]
+pub struct Extras {
+    /// Publish the plant's ground truth on `team/{team}/ground-truth` after every step.
+    pub publish_ground_truth: bool,
+    /// Keep the ground truth in memory (every `Recorder::every` ticks).
+    pub recorder: Option<Recorder>,
+    /// Take perturbation requests from `team/{team}/perturbation`.
+    pub perturbation_key: bool,
+    /// Perturbation requests taken and refused.
+    pub perturbations_taken: u64,
+    pub perturbations_refused: u64,
+}
+
 /// Run `cfg.ticks` lockstep ticks of `plant`.
 pub async fn run(
     session: &Session,
@@ -61,6 +76,24 @@ pub async fn run(
     plant: &mut impl Plant,
     stop: watch::Receiver<bool>,
 ) -> Result<LockstepReport, BridgeError> {
+    run_with(session, cfg, plant, &mut Extras::default(), stop).await
+}
+
+/// Run `cfg.ticks` lockstep ticks of `plant`, with ground truth and perturbations as `extras` says.
+pub async fn run_with(
+    session: &Session,
+    cfg: &LockstepConfig,
+    plant: &mut impl Plant,
+    extras: &mut Extras,
+    stop: watch::Receiver<bool>,
+) -> Result<LockstepReport, BridgeError> {
+    let mut truth_pub = if extras.publish_ground_truth {
+        Some(TypedPublisher::<GroundTruth>::declare(session, keys::ground_truth(&cfg.team)?, Qos::Telemetry).await?)
+    } else {
+        None
+    };
+    let perturbations = if extras.perturbation_key { Some(transport::subscribe(session, keys::perturbation(&cfg.team)?).await?) } else { None };
+    let mut truth = crate::ground_truth::empty(&cfg.team);
     let robots: Vec<String> = plant.robots().to_vec();
     let torques = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Torque)?).await?;
     let members_q = transport::watch_members(session, &cfg.team).await?;
@@ -162,7 +195,26 @@ pub async fn run(
                 }
             }
         }
+        if let Some(q) = &perturbations {
+            while let Ok(Some(sample)) = q.try_recv() {
+                match decode_sample::<PerturbationRequest>(&sample).map_err(|e| e.to_string()).and_then(|r| plant.perturb(&r)) {
+                    Ok(()) => extras.perturbations_taken += 1,
+                    Err(e) => {
+                        extras.perturbations_refused += 1;
+                        tracing::warn!("refused perturbation: {e}");
+                    }
+                }
+            }
+        }
         plant.step();
+        if (truth_pub.is_some() || extras.recorder.is_some()) && plant.ground_truth(&cfg.team, tick, &mut truth) {
+            if let Some(p) = truth_pub.as_mut() {
+                p.put(&truth).await?;
+            }
+            if let Some(r) = extras.recorder.as_mut() {
+                r.offer(&truth);
+            }
+        }
         if cfg.progress_every > 0 && (tick + 1) % cfg.progress_every == 0 {
             tracing::info!(tick = tick + 1, of = cfg.ticks, sim_time = plant.time(), "progress");
         }

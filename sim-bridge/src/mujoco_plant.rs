@@ -7,7 +7,7 @@
 use mujoco_rs::mujoco_c::{self, mjData, mjModel};
 use mujoco_rs::prelude::*;
 use protocol::conventions::{base_twist_from_mujoco, base_twist_to_mujoco};
-use protocol::{Pose, RobotState};
+use protocol::{GroundTruth, PerturbationRequest, Pose, RobotState};
 
 use crate::perturbation::Perturbations;
 use crate::plant::Plant;
@@ -178,5 +178,15 @@ impl Plant for MujocoPlant {
 
     fn time(&self) -> f64 {
         self.data.ffi().time
+    }
+
+    fn ground_truth(&self, team: &str, tick: u64, out: &mut GroundTruth) -> bool {
+        crate::ground_truth::compute(&self.world, self.data.ffi(), team, tick, out);
+        true
+    }
+
+    fn perturb(&mut self, req: &PerturbationRequest) -> Result<(), String> {
+        let now = self.time();
+        self.perturbations.add_request(&self.world, req, now).map_err(|e| e.to_string())
     }
 }

@@ -148,6 +148,7 @@ pub async fn serve(
     }
     let mut latest: Vec<Option<RobotState>> = vec![None; robots.len()];
     let mut sent: Vec<Option<u64>> = vec![None; robots.len()];
+    let mut seen: Vec<Option<u64>> = vec![None; robots.len()];
     let mut cmd = TorqueCommand { header: Header::new(team, Some(&robots[0].0), 0, 0), tau: Vec::new() };
     let mut count = 0u64;
     loop {
@@ -159,7 +160,9 @@ pub async fn serve(
                     Ok(st) => {
                         let i = robots.iter().position(|(id, _)| id == st.header.robot_id());
                         let tick = st.header.tick;
-                        if let Some(i) = i { latest[i] = Some(st); if direct { Some((i, tick)) } else { None } } else { None }
+                        // Ready when the agent has shown it has the state too (its dynamics of
+                        // this tick may arrive before or after the state reaches us).
+                        if let Some(i) = i { latest[i] = Some(st); if direct || seen[i] == Some(tick) { Some((i, tick)) } else { None } } else { None }
                     }
                     Err(e) => { tracing::warn!("standing controller dropped a state: {e}"); None }
                 }
@@ -167,7 +170,7 @@ pub async fn serve(
             d = dynamics.recv_async() => {
                 let Ok(sample) = d else { break };
                 match decode_sample::<DynamicsTerms>(&sample) {
-                    Ok(t) if !direct => robots.iter().position(|(id, _)| id == t.header.robot_id()).map(|i| (i, t.state_tick)),
+                    Ok(t) if !direct => robots.iter().position(|(id, _)| id == t.header.robot_id()).map(|i| { seen[i] = Some(t.state_tick); (i, t.state_tick) }),
                     _ => None,
                 }
             }
