@@ -17,5 +17,6 @@ pub mod lockstep;
 pub mod mujoco_plant;
 pub mod perturbation;
 pub mod plant;
+pub mod realtime;
 pub mod standing;
 pub mod world;

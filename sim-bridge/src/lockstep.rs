@@ -96,7 +96,6 @@ pub async fn run_with(
     let mut truth = crate::ground_truth::empty(&cfg.team);
     let robots: Vec<String> = plant.robots().to_vec();
     let torques = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Torque)?).await?;
-    let members_q = transport::watch_members(session, &cfg.team).await?;
     let mut state_pubs = Vec::new();
     let mut states = Vec::new();
     for r in &robots {
@@ -105,30 +104,7 @@ pub async fn run_with(
         states.push(empty_state(&cfg.team, r));
     }
 
-    // Wait for every robot to be present.
-    let started = Instant::now();
-    let mut present = BTreeSet::new();
-    while !robots.iter().all(|r| present.contains(r)) {
-        if *stop.borrow() {
-            return Err(BridgeError::Stopped);
-        }
-        let left = cfg.start_timeout.saturating_sub(started.elapsed());
-        match tokio::time::timeout(left, members_q.recv_async()).await {
-            Ok(Ok(sample)) => match MemberEvent::from_sample(&sample) {
-                Some(MemberEvent::Joined(r)) => {
-                    present.insert(r);
-                }
-                Some(MemberEvent::Left(r)) => {
-                    present.remove(&r);
-                }
-                None => {}
-            },
-            _ => {
-                let missing = robots.iter().filter(|r| !present.contains(*r)).cloned().collect();
-                return Err(BridgeError::MembersMissing { missing, waited: cfg.start_timeout });
-            }
-        }
-    }
+    wait_for_members(session, cfg, &robots, &stop).await?;
     tracing::info!(robots = ?robots, "all robots present, lockstep starts");
 
     let run_started = Instant::now();
@@ -228,3 +204,37 @@ pub async fn run_with(
     })
 }
 
+
+/// Wait until every robot of `robots` has a liveliness token, or fail naming the missing ones.
+pub(crate) async fn wait_for_members(
+    session: &Session,
+    cfg: &LockstepConfig,
+    robots: &[String],
+    stop: &watch::Receiver<bool>,
+) -> Result<(), BridgeError> {
+    let members_q = transport::watch_members(session, &cfg.team).await?;
+    let started = Instant::now();
+    let mut present = BTreeSet::new();
+    while !robots.iter().all(|r| present.contains(r)) {
+        if *stop.borrow() {
+            return Err(BridgeError::Stopped);
+        }
+        let left = cfg.start_timeout.saturating_sub(started.elapsed());
+        match tokio::time::timeout(left, members_q.recv_async()).await {
+            Ok(Ok(sample)) => match MemberEvent::from_sample(&sample) {
+                Some(MemberEvent::Joined(r)) => {
+                    present.insert(r);
+                }
+                Some(MemberEvent::Left(r)) => {
+                    present.remove(&r);
+                }
+                None => {}
+            },
+            _ => {
+                let missing = robots.iter().filter(|r| !present.contains(*r)).cloned().collect();
+                return Err(BridgeError::MembersMissing { missing, waited: cfg.start_timeout });
+            }
+        }
+    }
+    Ok(())
+}
