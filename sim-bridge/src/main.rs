@@ -95,6 +95,9 @@ struct RunArgs {
     /// run for speed figures. Without it, the agents and coordinator must be running.
     #[arg(long)]
     standing_controller: bool,
+    /// With --standing-controller and an object: the force each hand squeezes it with, N.
+    #[arg(long, default_value_t = 40.0)]
+    squeeze: f64,
     /// Write the recorded ground truth (every --record-every ticks) as CSV here.
     #[arg(long)]
     ground_truth_csv: Option<std::path::PathBuf>,
@@ -143,6 +146,7 @@ async fn main() -> Result<()> {
 
 async fn run(a: RunArgs) -> Result<()> {
     use sim_bridge::world::{ObjectSpec, RobotPlacement, World, WorldSpec};
+    anyhow::ensure!(a.squeeze.is_finite() && a.squeeze >= 0.0, "--squeeze must be a non-negative number");
     anyhow::ensure!(!a.robots.is_empty(), "--robots must name at least one robot");
     anyhow::ensure!(a.spacing.is_finite() && a.spacing > 0.0, "--spacing must be a positive number");
     anyhow::ensure!(a.command_timeout.is_finite() && a.command_timeout > 0.0, "--command-timeout must be positive");
@@ -187,9 +191,14 @@ async fn run(a: RunArgs) -> Result<()> {
             .map(|r| {
                 let off = r.robot.model.nq - r.robot.joints();
                 let q_ref = r.initial_q[off..].to_vec();
-                sim_bridge::standing::StandingController::new(r.robot.clone(), Some(q_ref), Default::default()).map(|c| (r.id.clone(), c))
+                let c = sim_bridge::standing::StandingController::new(r.robot.clone(), Some(q_ref), Default::default())?;
+                let c = match spec.object {
+                    Some(o) if a.grasp_ik => c.with_hand_load(sim_bridge::standing::HandLoad { squeeze: a.squeeze, carry: o.mass * protocol::conventions::GRAVITY / n as f64 })?,
+                    _ => c,
+                };
+                Ok((r.id.clone(), c))
             })
-            .collect::<Result<Vec<_>, _>>()
+            .collect::<Result<Vec<_>, String>>()
             .map_err(|e| anyhow::anyhow!(e))?
     } else {
         Vec::new()

@@ -33,8 +33,17 @@ impl Default for StandingGains {
     }
 }
 
+/// A force the hand applies to the held object (world frame): `squeeze` newtons along the
+/// palm normal plus `carry` newtons upward (a share of the object's weight).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HandLoad {
+    pub squeeze: f64,
+    pub carry: f64,
+}
+
 /// PD + stance-feet gravity compensation for one robot.
 pub struct StandingController {
+    hand: Option<(FrameId, HandLoad)>,
     robot: Robot,
     data: Data,
     feet: Vec<FrameId>,
@@ -71,7 +80,15 @@ impl StandingController {
         let data = Data::new(&robot.model);
         let nq = robot.model.nq;
         let nv = robot.model.nv;
-        Ok(StandingController { robot, data, feet, q_ref, kp, kd, q: vec![0.0; nq], jac: Matrix6xX::zeros(nv) })
+        Ok(StandingController { hand: None, robot, data, feet, q_ref, kp, kd, q: vec![0.0; nq], jac: Matrix6xX::zeros(nv) })
+    }
+
+    /// Also push on a held object with the hand (feed-forward through the hand Jacobian, its
+    /// reaction carried by the feet).
+    pub fn with_hand_load(mut self, load: HandLoad) -> Result<Self, String> {
+        let f = self.robot.model.frame_id(&self.robot.hand_frame).map_err(|e| e.to_string())?;
+        self.hand = Some((f, load));
+        Ok(self)
     }
 
     pub fn joints(&self) -> usize {
@@ -104,13 +121,21 @@ impl StandingController {
                 frame_jacobian(model, &self.data, f, &mut self.jac).map_err(|e| e.to_string())?;
                 jc.view_mut((3 * i, 0), (3, model.nv)).copy_from(&self.jac.rows(0, 3));
             }
-            // J_c,base^T f = g_base, minimum norm.
+            // Hand wrench W on the object: g = S^T tau + J_c^T f - J_h^T W at rest.
+            let mut jh_w = DVector::zeros(model.nv);
+            if let Some((hf, load)) = self.hand {
+                frame_jacobian(model, &self.data, hf, &mut self.jac).map_err(|e| e.to_string())?;
+                let z = self.data.o_m_f[hf].rot.column(2).into_owned();
+                let w = z * load.squeeze + nalgebra::Vector3::z() * load.carry;
+                jh_w = self.jac.rows(0, 3).transpose() * w;
+            }
+            // J_c,base^T f = g_base + J_h,base^T W, minimum norm.
             let a: DMatrix<f64> = jc.columns(0, nb).transpose();
-            let gb = DVector::from_column_slice(&g.as_slice()[..nb]);
+            let gb = DVector::from_column_slice(&g.as_slice()[..nb]) + jh_w.rows(0, nb);
             let f = a.clone().svd(true, true).solve(&gb, 1e-9).map_err(|e| e.to_string())?;
             let jt_f = jc.transpose() * f;
             for k in 0..nj {
-                tau_g[k] -= jt_f[nb + k];
+                tau_g[k] += jh_w[nb + k] - jt_f[nb + k];
             }
         }
         tau.clear();
