@@ -79,31 +79,40 @@ pub async fn run(
             if left.is_zero() {
                 break;
             }
-            match tokio::time::timeout(left, torques.recv_async()).await {
-                Ok(Ok(sample)) => {
-                    let cmd = match decode_sample::<TorqueCommand>(&sample) {
-                        Ok(c) => c,
-                        Err(e) => {
-                            rejected += 1;
-                            tracing::warn!("rejected torques: {e}");
-                            continue;
-                        }
-                    };
-                    let Some(i) = robots.iter().position(|r| r == cmd.header.robot_id()) else { continue };
-                    if cmd.header.tick > tick || last_tick[i].is_some_and(|t| cmd.header.tick <= t) {
-                        continue;
-                    }
-                    if cmd.tau.len() != plant.joints(i) {
-                        rejected += 1;
-                        continue;
-                    }
-                    plant.set_torques(i, &cmd.tau);
-                    last_tick[i] = Some(cmd.header.tick);
-                    got[i] = cmd.header.tick == tick;
+            // Tokio's timers have 1 ms resolution, as long as a 1 kHz period: wait on the queue
+            // only while more than 2 ms are left, then poll and yield until the deadline.
+            let sample = match torques.try_recv() {
+                Ok(Some(s)) => s,
+                Ok(None) if left > Duration::from_millis(2) => match tokio::time::timeout(left - Duration::from_millis(1), torques.recv_async()).await {
+                    Ok(Ok(s)) => s,
+                    Ok(Err(_)) => return Err(BridgeError::Stopped),
+                    Err(_) => continue,
+                },
+                Ok(None) => {
+                    tokio::task::yield_now().await;
+                    continue;
                 }
-                Ok(Err(_)) => return Err(BridgeError::Stopped),
-                Err(_) => break,
+                Err(_) => return Err(BridgeError::Stopped),
+            };
+            let cmd = match decode_sample::<TorqueCommand>(&sample) {
+                Ok(c) => c,
+                Err(e) => {
+                    rejected += 1;
+                    tracing::warn!("rejected torques: {e}");
+                    continue;
+                }
+            };
+            let Some(i) = robots.iter().position(|r| r == cmd.header.robot_id()) else { continue };
+            if cmd.header.tick > tick || last_tick[i].is_some_and(|t| cmd.header.tick <= t) {
+                continue;
             }
+            if cmd.tau.len() != plant.joints(i) {
+                rejected += 1;
+                continue;
+            }
+            plant.set_torques(i, &cmd.tau);
+            last_tick[i] = Some(cmd.header.tick);
+            got[i] = cmd.header.tick == tick;
         }
         for (i, g) in got.iter().enumerate() {
             if !g {
@@ -131,11 +140,15 @@ pub async fn run(
             }
         }
         // Pace: wait for the end of the period (the torques may all have come early).
-        let now = Instant::now();
-        if now > deadline {
+        if Instant::now() > deadline {
             overruns += 1;
-        } else {
-            tokio::time::sleep_until(deadline.into()).await;
+        }
+        while let Some(left) = deadline.checked_duration_since(Instant::now()).filter(|d| !d.is_zero()) {
+            if left > Duration::from_millis(2) {
+                tokio::time::sleep(left - Duration::from_millis(1)).await;
+            } else {
+                tokio::task::yield_now().await;
+            }
         }
         if cfg.progress_every > 0 && (tick + 1) % cfg.progress_every == 0 {
             tracing::info!(tick = tick + 1, of = cfg.ticks, sim_time = plant.time(), missed = ?missed, "progress (real time)");

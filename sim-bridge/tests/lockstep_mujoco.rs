@@ -159,3 +159,34 @@ async fn a_silent_robot_is_named_in_the_timeout() {
     }
     assert!(err.to_string().contains("r2") && !err.to_string().contains("r1"), "{err}");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn realtime_holds_and_counts_missing_torques() {
+    let team = "rt";
+    let session = transport::open(&ZenohArgs::default(), Role::Alone).await.unwrap();
+    // 100 Hz control (physics 1 kHz, 10 substeps) so that the pace is well above timer jitter.
+    let mut spec = WorldSpec::paper_pair();
+    spec.object = None;
+    spec.control_hz = 100.0;
+    let world = World::build(&spec).unwrap();
+    assert_eq!(world.substeps, 10);
+    let ctl = controllers(&world, &["r1"]);
+    let _r2 = transport::declare_member(&session, team, "r2").await.unwrap();
+    let mut plant = MujocoPlant::new(world).unwrap();
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let s = session.clone();
+    let rx = stop_rx.clone();
+    let coord = tokio::spawn(async move { standing::serve(&s, team, ctl, true, rx).await });
+    let started = std::time::Instant::now();
+    let report = sim_bridge::realtime::run(&session, &cfg(team, 100), Duration::from_millis(10), &mut plant, &mut Extras::default(), stop_rx)
+        .await
+        .unwrap();
+    let wall = started.elapsed();
+    stop_tx.send(true).unwrap();
+    coord.await.unwrap().unwrap();
+    assert!((report.sim_time - 1.0).abs() < 1e-9);
+    // Paced by the clock: 100 ticks of 10 ms take about 1 s, not the few ms of lockstep.
+    assert!(wall >= Duration::from_millis(990) && wall < Duration::from_secs(3), "{wall:?}");
+    assert_eq!(report.missed[1], ("r2".to_string(), 100), "r2 never sends: every tick missed");
+    assert!(report.missed[0].1 < 20, "r1 is served: {:?}", report.missed);
+}
