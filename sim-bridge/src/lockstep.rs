@@ -67,6 +67,9 @@ pub struct Extras {
     /// Perturbation requests taken and refused.
     pub perturbations_taken: u64,
     pub perturbations_refused: u64,
+    /// Number of the first tick (a run that continues an earlier one, e.g. after settling,
+    /// continues its tick numbers: agents refuse ticks older than the last they applied).
+    pub first_tick: u64,
 }
 
 /// Run `cfg.ticks` lockstep ticks of `plant`.
@@ -111,7 +114,7 @@ pub async fn run_with(
     let mut resends = 0u64;
     let mut rejected = 0u64;
     let mut got = vec![false; robots.len()];
-    for tick in 0..cfg.ticks {
+    for tick in extras.first_tick..extras.first_tick + cfg.ticks {
         if *stop.borrow() {
             return Err(BridgeError::Stopped);
         }
@@ -129,7 +132,7 @@ pub async fn run_with(
         let mut last_send = Instant::now();
         while !got.iter().all(|g| *g) {
             let waited = tick_started.elapsed();
-            let timeout = if tick == 0 { cfg.command_timeout.max(cfg.start_timeout) } else { cfg.command_timeout };
+            let timeout = if tick == extras.first_tick { cfg.command_timeout.max(cfg.start_timeout) } else { cfg.command_timeout };
             if waited >= timeout {
                 let missing = robots.iter().zip(&got).filter(|(_, g)| !**g).map(|(r, _)| r.clone()).collect();
                 return Err(BridgeError::TorqueTimeout { tick, missing, waited });
@@ -191,7 +194,7 @@ pub async fn run_with(
                 r.offer(&truth);
             }
         }
-        if cfg.progress_every > 0 && (tick + 1) % cfg.progress_every == 0 {
+        if cfg.progress_every > 0 && (tick + 1 - extras.first_tick) % cfg.progress_every == 0 {
             tracing::info!(tick = tick + 1, of = cfg.ticks, sim_time = plant.time(), "progress");
         }
     }

@@ -103,6 +103,10 @@ struct RunArgs {
     ground_truth_csv: Option<std::path::PathBuf>,
     #[arg(long, default_value_t = 10)]
     record_every: u64,
+    /// Ticks of settling under the controller (lockstep) before the scenario clock starts at 0;
+    /// tick numbers continue so that the agents keep accepting commands.
+    #[arg(long, default_value_t = 0)]
+    settle_ticks: u64,
     #[command(flatten)]
     zenoh: ZenohArgs,
 }
@@ -229,6 +233,13 @@ async fn run(a: RunArgs) -> Result<()> {
         recorder: a.ground_truth_csv.as_ref().map(|_| sim_bridge::ground_truth::Recorder::new(a.record_every)),
         ..Default::default()
     };
+    if a.settle_ticks > 0 {
+        let settle = LockstepConfig { ticks: a.settle_ticks, progress_every: 0, ..cfg.clone() };
+        let r = lockstep::run_with(&session, &settle, &mut plant, &mut lockstep::Extras::default(), stop_rx.clone()).await?;
+        plant.restart_clock();
+        extras.first_tick = a.settle_ticks;
+        println!("settled for {} ticks ({:.3} s wall); the scenario clock starts now", r.ticks, r.wall_time.as_secs_f64());
+    }
     let (sim_time, wall) = if a.realtime {
         let period = Duration::from_secs_f64(1.0 / a.control_hz);
         let r = sim_bridge::realtime::run(&session, &cfg, period, &mut plant, &mut extras, stop_rx.clone()).await?;

@@ -59,11 +59,11 @@ pub async fn run(
     let mut overruns = 0u64;
     let mut rejected = 0u64;
     let started = Instant::now();
-    for tick in 0..cfg.ticks {
+    for tick in extras.first_tick..extras.first_tick + cfg.ticks {
         if *stop.borrow() {
             return Err(BridgeError::Stopped);
         }
-        let deadline = started + period.mul_f64((tick + 1) as f64);
+        let deadline = started + period.mul_f64((tick - extras.first_tick + 1) as f64);
         let now = protocol::wall_clock_ns();
         for (i, s) in states.iter_mut().enumerate() {
             plant.state(i, s);
@@ -150,7 +150,7 @@ pub async fn run(
                 tokio::task::yield_now().await;
             }
         }
-        if cfg.progress_every > 0 && (tick + 1) % cfg.progress_every == 0 {
+        if cfg.progress_every > 0 && (tick + 1 - extras.first_tick) % cfg.progress_every == 0 {
             tracing::info!(tick = tick + 1, of = cfg.ticks, sim_time = plant.time(), missed = ?missed, "progress (real time)");
         }
     }

@@ -59,15 +59,18 @@ async fn default_robot_stands_5_s_under_its_agent() {
     let s3 = session.clone();
     let rx = stop_rx.clone();
     let coord = tokio::spawn(async move { standing::serve(&s3, team, ctl, false, rx).await });
-    let mut extras = Extras { recorder: Some(Recorder::new(10)), publish_ground_truth: true, ..Default::default() };
+    // Settle 200 ticks, restart the scenario clock, then 5 s with tick numbers continuing.
+    lockstep::run(&session, &cfg(team, 200), &mut plant, stop_rx.clone()).await.unwrap();
+    plant.restart_clock();
+    let mut extras = Extras { recorder: Some(Recorder::new(10)), publish_ground_truth: true, first_tick: 200, ..Default::default() };
     let report = lockstep::run_with(&session, &cfg(team, 5000), &mut plant, &mut extras, stop_rx.clone()).await.unwrap();
     stop_tx.send(true).unwrap();
     let counters = agent.await.unwrap().unwrap();
     let sent = coord.await.unwrap().unwrap();
     assert_eq!(report.ticks, 5000);
     assert!((report.sim_time - 5.0).abs() < 1e-9);
-    assert!(counters.applied >= 5000, "{counters:?}");
-    assert!(sent >= 5000);
+    assert!(counters.applied >= 5200 && counters.rejected == 0, "{counters:?}");
+    assert!(sent >= 5200);
     let rec = extras.recorder.unwrap();
     assert_eq!(rec.records.len(), 500);
     let (mut dz, mut tilt) = (0.0f64, 0.0f64);
