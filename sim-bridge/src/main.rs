@@ -40,6 +40,10 @@ enum Command {
     /// Run the team in MuJoCo: robots from their description files, the object, lockstep
     /// (default) or real time. Prints the real-time factor at the end.
     Run(RunArgs),
+    /// Only the test-side standing controller (same world arguments as `run`), in its own
+    /// process, publishing on the robots' torque keys; pair with `run` without
+    /// --standing-controller for process-separated speed figures.
+    Stand(RunArgs),
 }
 
 #[derive(clap::Args)]
@@ -144,11 +148,38 @@ async fn main() -> Result<()> {
             session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
         }
         Command::Run(args) => run(args).await?,
+        Command::Stand(args) => stand(args).await?,
     }
     Ok(())
 }
 
 async fn run(a: RunArgs) -> Result<()> {
+    let (spec, world) = build_world(&a)?;
+    let n = spec.robots.len();
+    let controllers = if a.standing_controller { controllers(&a, &spec, &world)? } else { Vec::new() };
+    run_world(a, spec, world, controllers, n).await
+}
+
+/// Only the test-side standing controller, in its own process, acting as the agents on the
+/// torque keys (for process-separated speed figures). Listens on the default endpoint unless
+/// told otherwise; stops on Ctrl-C.
+async fn stand(a: RunArgs) -> Result<()> {
+    let (spec, world) = build_world(&a)?;
+    let ctl = controllers(&a, &spec, &world)?;
+    let session = transport::open(&a.zenoh, Role::Hub).await?;
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let team = a.team.clone();
+    let s = session.clone();
+    let task = tokio::spawn(async move { sim_bridge::standing::serve(&s, &team, ctl, true, stop_rx).await });
+    tokio::signal::ctrl_c().await?;
+    stop_tx.send(true).ok();
+    let sent = task.await??;
+    println!("standing controller sent {sent} torque commands");
+    session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
+    Ok(())
+}
+
+fn build_world(a: &RunArgs) -> Result<(sim_bridge::world::WorldSpec, sim_bridge::world::World)> {
     use sim_bridge::world::{ObjectSpec, RobotPlacement, World, WorldSpec};
     anyhow::ensure!(a.squeeze.is_finite() && a.squeeze >= 0.0, "--squeeze must be a non-negative number");
     anyhow::ensure!(!a.robots.is_empty(), "--robots must name at least one robot");
@@ -188,8 +219,16 @@ async fn run(a: RunArgs) -> Result<()> {
     }
     let world = World::build(&spec)?;
     tracing::info!(robots = n, nq = world.model.ffi().nq, nv = world.model.ffi().nv, substeps = world.substeps, "world built and checked against the robots' models");
-    let controllers = if a.standing_controller {
-        world
+    Ok((spec, world))
+}
+
+fn controllers(
+    a: &RunArgs,
+    spec: &sim_bridge::world::WorldSpec,
+    world: &sim_bridge::world::World,
+) -> Result<Vec<(String, sim_bridge::standing::StandingController)>> {
+    let n = spec.robots.len();
+    Ok(world
             .robots
             .iter()
             .map(|r| {
@@ -203,10 +242,17 @@ async fn run(a: RunArgs) -> Result<()> {
                 Ok((r.id.clone(), c))
             })
             .collect::<Result<Vec<_>, String>>()
-            .map_err(|e| anyhow::anyhow!(e))?
-    } else {
-        Vec::new()
-    };
+            .map_err(|e| anyhow::anyhow!(e))?)
+}
+
+async fn run_world(
+    a: RunArgs,
+    spec: sim_bridge::world::WorldSpec,
+    world: sim_bridge::world::World,
+    controllers: Vec<(String, sim_bridge::standing::StandingController)>,
+    n: usize,
+) -> Result<()> {
+    let _ = &spec;
     let mut plant = sim_bridge::mujoco_plant::MujocoPlant::new(world)?;
     let role = if a.standing_controller && a.zenoh.listen.is_empty() && a.zenoh.connect.is_empty() && a.zenoh.config.is_none() { Role::Alone } else { Role::Member };
     let session = transport::open(&a.zenoh, role).await?;
