@@ -11,6 +11,10 @@
 //! * [`mujoco_plant`]: the [`plant::Plant`] over that world.
 //! * [`perturbation`]: timed external wrenches.
 
+// Index loops over MuJoCo's raw arrays read more plainly than iterator chains; the crate's
+// rust-version (1.85) predates `is_multiple_of`.
+#![allow(clippy::needless_range_loop, clippy::manual_is_multiple_of, unknown_lints)]
+
 pub mod ground_truth;
 pub mod ik;
 pub mod lockstep;

@@ -228,7 +228,7 @@ fn controllers(
     world: &sim_bridge::world::World,
 ) -> Result<Vec<(String, sim_bridge::standing::StandingController)>> {
     let n = spec.robots.len();
-    Ok(world
+    world
             .robots
             .iter()
             .map(|r| {
@@ -242,7 +242,7 @@ fn controllers(
                 Ok((r.id.clone(), c))
             })
             .collect::<Result<Vec<_>, String>>()
-            .map_err(|e| anyhow::anyhow!(e))?)
+            .map_err(|e| anyhow::anyhow!(e))
 }
 
 async fn run_world(
