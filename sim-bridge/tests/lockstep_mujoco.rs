@@ -193,3 +193,45 @@ async fn realtime_holds_and_counts_missing_torques() {
     assert_eq!(report.missed[1], ("r2".to_string(), 100), "r2 never sends: every tick missed");
     assert!(report.missed[0].1 < 20, "r1 is served: {:?}", report.missed);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_perturbation_from_the_key_pushes_the_object() {
+    use protocol::keys;
+    use protocol::transport::{Qos, TypedPublisher};
+    use protocol::{Header, PerturbationRequest, PerturbationTarget};
+    let team = "push";
+    let session = transport::open(&ZenohArgs::default(), Role::Alone).await.unwrap();
+    let mut spec = WorldSpec::paper_pair();
+    spec.robots.truncate(1);
+    spec.object.as_mut().unwrap().position = [0.5, 2.0, 0.3];
+    let world = World::build(&spec).unwrap();
+    let ctl = controllers(&world, &["r1"]);
+    let mut plant = MujocoPlant::new(world).unwrap();
+    let (stop_tx, stop_rx) = watch::channel(false);
+    // The loop starts first (it subscribes to the perturbation key, then waits for members);
+    // the request is sent while it waits; the robot joins after that.
+    let s = session.clone();
+    let rx = stop_rx.clone();
+    let run = tokio::spawn(async move {
+        let mut extras = Extras { perturbation_key: true, recorder: Some(Recorder::new(1)), ..Default::default() };
+        lockstep::run_with(&s, &cfg(team, 500), &mut plant, &mut extras, rx).await.map(|_| extras)
+    });
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let mut p = TypedPublisher::<PerturbationRequest>::declare(&session, keys::perturbation(team).unwrap(), Qos::HotPath).await.unwrap();
+    let bad = PerturbationRequest { header: Header::new(team, None, 0, 0), target: PerturbationTarget::RobotBody { robot: "r1".into(), body: "no_such_link".into() }, wrench: [1.0; 6], start: None, duration: 0.1 };
+    p.put(&bad).await.unwrap();
+    let r = PerturbationRequest { header: Header::new(team, None, 0, 0), target: PerturbationTarget::Object, wrench: [30.0, 0.0, 0.0, 0.0, 0.0, 0.0], start: Some(0.0), duration: 0.2 };
+    p.put(&r).await.unwrap();
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let s = session.clone();
+    let rx = stop_rx.clone();
+    let coord = tokio::spawn(async move { standing::serve(&s, team, ctl, true, rx).await });
+    let extras = run.await.unwrap().unwrap();
+    stop_tx.send(true).unwrap();
+    coord.await.unwrap().unwrap();
+    assert_eq!((extras.perturbations_taken, extras.perturbations_refused), (1, 1));
+    let rec = extras.recorder.unwrap();
+    let x0 = rec.records.first().unwrap().object.as_ref().unwrap().pose.position[0];
+    let x1 = rec.records.last().unwrap().object.as_ref().unwrap().pose.position[0];
+    assert!(x1 - x0 > 0.05, "pushed object moved {} m", x1 - x0);
+}
