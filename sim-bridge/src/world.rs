@@ -51,7 +51,7 @@ pub struct RobotPlacement {
     pub id: String,
     /// Path of the robot's description TOML (`robot_agent::description`).
     pub description: PathBuf,
-    /// Base position in the world; `None`: the description's standing position.
+    /// Base position in the world (the default robot stands with its base at z = 0.54882015).
     pub base_position: [f64; 3],
     /// Base yaw about world z, rad.
     pub base_yaw: f64,
