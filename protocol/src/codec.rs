@@ -28,6 +28,7 @@ pub enum MessageKind {
     AgentStatus = 8,
     RobotDescription = 9,
     ContactSet = 10,
+    GroundTruth = 11,
 }
 
 /// A message that travels: it has a kind, a header and can validate itself.
@@ -58,6 +59,7 @@ message!(TickDiagnostics);
 message!(AgentStatus);
 message!(RobotDescription);
 message!(ContactSet);
+message!(GroundTruth);
 
 fn options() -> impl Options {
     bincode::DefaultOptions::new()

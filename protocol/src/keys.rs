@@ -8,6 +8,7 @@
 //! team/{team}/coordinator/{status|diagnostics}
 //! team/{team}/references
 //! team/{team}/perturbation
+//! team/{team}/ground-truth
 //! ```
 
 use crate::{validate_id, ProtocolError};
@@ -88,6 +89,12 @@ pub fn references(team: &str) -> Result<String, ProtocolError> {
 pub fn perturbation(team: &str) -> Result<String, ProtocolError> {
     validate_id("team", team)?;
     Ok(format!("{ROOT}/{team}/perturbation"))
+}
+
+/// `team/{team}/ground-truth`: the simulator's ground truth, for evaluation only.
+pub fn ground_truth(team: &str) -> Result<String, ProtocolError> {
+    validate_id("team", team)?;
+    Ok(format!("{ROOT}/{team}/ground-truth"))
 }
 
 /// The robot id in a key of the form `team/{team}/robot/{robot}/...` or

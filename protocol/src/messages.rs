@@ -582,6 +582,68 @@ impl Validate for ContactSet {
             }
             if self.stance_feet[..i].contains(f) {
                 return Err(ProtocolError::invalid(field, format!("foot {f:?} listed twice")));
+
+// Sim-bridge -> evaluation (ground truth; a controller never reads it)
+
+/// A rigid body's pose and twist in the world: `twist = [v; omega]`, the linear velocity of the
+/// body frame's origin and the angular velocity, **both in the world frame** (ground truth is for
+/// evaluation, so it uses the world frame throughout).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BodyTruth {
+    /// `"object"`, or the robot id for a torso.
+    pub name: String,
+    pub pose: Pose,
+    pub twist: [f64; 6],
+}
+
+/// Where a contact touches and what it transmits, world frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ContactTruth {
+    pub robot: String,
+    /// The robot's body that touches (MuJoCo body name without the robot prefix).
+    pub body: String,
+    /// Contact point, world frame.
+    pub position: [f64; 3],
+    /// Wrench `[force; moment]` in the world frame about `position`: for a hand, what the hand
+    /// applies to the object; for a foot, what the ground applies to the foot.
+    pub wrench: [f64; 6],
+}
+
+/// Ground truth of one control tick, from the simulator: published on
+/// `team/{team}/ground-truth` and recorded for reports.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GroundTruth {
+    pub header: Header,
+    /// Simulated time, s.
+    pub time: f64,
+    pub object: Option<BodyTruth>,
+    pub torsos: Vec<BodyTruth>,
+    /// Every hand-object contact point (a flat palm on a box gives several).
+    pub hand_contacts: Vec<ContactTruth>,
+    /// Every foot-ground contact point.
+    pub foot_contacts: Vec<ContactTruth>,
+}
+
+impl Validate for GroundTruth {
+    fn validate(&self) -> Result<(), ProtocolError> {
+        self.header.check(false)?;
+        check_finite("time", &[self.time])?;
+        let bodies = self.object.iter().map(|b| ("object", b)).chain(self.torsos.iter().map(|b| ("torsos", b)));
+        for (field, b) in bodies {
+            if b.name.is_empty() {
+                return Err(ProtocolError::invalid(field, "empty body name"));
+            }
+            b.pose.check(&format!("{field}({}).pose", b.name))?;
+            check_finite(&format!("{field}({}).twist", b.name), &b.twist)?;
+        }
+        for t in &self.torsos {
+            validate_id("robot", &t.name)?;
+        }
+        for (field, list) in [("hand_contacts", &self.hand_contacts), ("foot_contacts", &self.foot_contacts)] {
+            for (i, c) in list.iter().enumerate() {
+                validate_id("robot", &c.robot)?;
+                check_finite(&format!("{field}[{i}].position"), &c.position)?;
+                check_finite(&format!("{field}[{i}].wrench"), &c.wrench)?;
             }
         }
         Ok(())

@@ -6,6 +6,21 @@
 //! * [`plant`]: what is simulated (the [`plant::Plant`] trait).
 //! * [`lockstep`]: the lockstep loop over Zenoh: a tick advances only when every robot's
 //!   torques for it have arrived; a missing robot is named in a timeout error.
+//! * [`world`]: the MuJoCo world built from the robots' URDFs with mjSpec, checked against
+//!   the robots' own models.
+//! * [`mujoco_plant`]: the [`plant::Plant`] over that world.
+//! * [`perturbation`]: timed external wrenches.
 
+// Index loops over MuJoCo's raw arrays read more plainly than iterator chains; the crate's
+// rust-version (1.85) predates `is_multiple_of`.
+#![allow(clippy::needless_range_loop, clippy::manual_is_multiple_of, unknown_lints)]
+
+pub mod ground_truth;
+pub mod ik;
 pub mod lockstep;
+pub mod mujoco_plant;
+pub mod perturbation;
 pub mod plant;
+pub mod realtime;
+pub mod standing;
+pub mod world;

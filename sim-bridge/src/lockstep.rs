@@ -6,11 +6,12 @@ use std::time::{Duration, Instant};
 
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, MemberEvent, Qos, TransportError, TypedPublisher};
-use protocol::{RobotState, TorqueCommand};
+use protocol::{GroundTruth, PerturbationRequest, RobotState, TorqueCommand};
 use thiserror::Error;
 use tokio::sync::watch;
 use zenoh::Session;
 
+use crate::ground_truth::Recorder;
 use crate::plant::{empty_state, Plant};
 
 /// Errors of the bridge loop.
@@ -54,6 +55,23 @@ pub struct LockstepReport {
     pub rejected_torques: u64,
 }
 
+/// What the loop does besides states and torques.
+#[derive(Debug, Default)]
+pub struct Extras {
+    /// Publish the plant's ground truth on `team/{team}/ground-truth` after every step.
+    pub publish_ground_truth: bool,
+    /// Keep the ground truth in memory (every `Recorder::every` ticks).
+    pub recorder: Option<Recorder>,
+    /// Take perturbation requests from `team/{team}/perturbation`.
+    pub perturbation_key: bool,
+    /// Perturbation requests taken and refused.
+    pub perturbations_taken: u64,
+    pub perturbations_refused: u64,
+    /// Number of the first tick (a run that continues an earlier one, e.g. after settling,
+    /// continues its tick numbers: agents refuse ticks older than the last they applied).
+    pub first_tick: u64,
+}
+
 /// Run `cfg.ticks` lockstep ticks of `plant`.
 pub async fn run(
     session: &Session,
@@ -61,9 +79,26 @@ pub async fn run(
     plant: &mut impl Plant,
     stop: watch::Receiver<bool>,
 ) -> Result<LockstepReport, BridgeError> {
+    run_with(session, cfg, plant, &mut Extras::default(), stop).await
+}
+
+/// Run `cfg.ticks` lockstep ticks of `plant`, with ground truth and perturbations as `extras` says.
+pub async fn run_with(
+    session: &Session,
+    cfg: &LockstepConfig,
+    plant: &mut impl Plant,
+    extras: &mut Extras,
+    stop: watch::Receiver<bool>,
+) -> Result<LockstepReport, BridgeError> {
+    let mut truth_pub = if extras.publish_ground_truth {
+        Some(TypedPublisher::<GroundTruth>::declare(session, keys::ground_truth(&cfg.team)?, Qos::Telemetry).await?)
+    } else {
+        None
+    };
+    let perturbations = if extras.perturbation_key { Some(transport::subscribe(session, keys::perturbation(&cfg.team)?).await?) } else { None };
+    let mut truth = crate::ground_truth::empty(&cfg.team);
     let robots: Vec<String> = plant.robots().to_vec();
     let torques = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Torque)?).await?;
-    let members_q = transport::watch_members(session, &cfg.team).await?;
     let mut state_pubs = Vec::new();
     let mut states = Vec::new();
     for r in &robots {
@@ -72,37 +107,14 @@ pub async fn run(
         states.push(empty_state(&cfg.team, r));
     }
 
-    // Wait for every robot to be present.
-    let started = Instant::now();
-    let mut present = BTreeSet::new();
-    while !robots.iter().all(|r| present.contains(r)) {
-        if *stop.borrow() {
-            return Err(BridgeError::Stopped);
-        }
-        let left = cfg.start_timeout.saturating_sub(started.elapsed());
-        match tokio::time::timeout(left, members_q.recv_async()).await {
-            Ok(Ok(sample)) => match MemberEvent::from_sample(&sample) {
-                Some(MemberEvent::Joined(r)) => {
-                    present.insert(r);
-                }
-                Some(MemberEvent::Left(r)) => {
-                    present.remove(&r);
-                }
-                None => {}
-            },
-            _ => {
-                let missing = robots.iter().filter(|r| !present.contains(*r)).cloned().collect();
-                return Err(BridgeError::MembersMissing { missing, waited: cfg.start_timeout });
-            }
-        }
-    }
+    wait_for_members(session, cfg, &robots, &stop).await?;
     tracing::info!(robots = ?robots, "all robots present, lockstep starts");
 
     let run_started = Instant::now();
     let mut resends = 0u64;
     let mut rejected = 0u64;
     let mut got = vec![false; robots.len()];
-    for tick in 0..cfg.ticks {
+    for tick in extras.first_tick..extras.first_tick + cfg.ticks {
         if *stop.borrow() {
             return Err(BridgeError::Stopped);
         }
@@ -120,7 +132,7 @@ pub async fn run(
         let mut last_send = Instant::now();
         while !got.iter().all(|g| *g) {
             let waited = tick_started.elapsed();
-            let timeout = if tick == 0 { cfg.command_timeout.max(cfg.start_timeout) } else { cfg.command_timeout };
+            let timeout = if tick == extras.first_tick { cfg.command_timeout.max(cfg.start_timeout) } else { cfg.command_timeout };
             if waited >= timeout {
                 let missing = robots.iter().zip(&got).filter(|(_, g)| !**g).map(|(r, _)| r.clone()).collect();
                 return Err(BridgeError::TorqueTimeout { tick, missing, waited });
@@ -162,8 +174,27 @@ pub async fn run(
                 }
             }
         }
+        if let Some(q) = &perturbations {
+            while let Ok(Some(sample)) = q.try_recv() {
+                match decode_sample::<PerturbationRequest>(&sample).map_err(|e| e.to_string()).and_then(|r| plant.perturb(&r)) {
+                    Ok(()) => extras.perturbations_taken += 1,
+                    Err(e) => {
+                        extras.perturbations_refused += 1;
+                        tracing::warn!("refused perturbation: {e}");
+                    }
+                }
+            }
+        }
         plant.step();
-        if cfg.progress_every > 0 && (tick + 1) % cfg.progress_every == 0 {
+        if (truth_pub.is_some() || extras.recorder.is_some()) && plant.ground_truth(&cfg.team, tick, &mut truth) {
+            if let Some(p) = truth_pub.as_mut() {
+                p.put(&truth).await?;
+            }
+            if let Some(r) = extras.recorder.as_mut() {
+                r.offer(&truth);
+            }
+        }
+        if cfg.progress_every > 0 && (tick + 1 - extras.first_tick) % cfg.progress_every == 0 {
             tracing::info!(tick = tick + 1, of = cfg.ticks, sim_time = plant.time(), "progress");
         }
     }
@@ -176,3 +207,37 @@ pub async fn run(
     })
 }
 
+
+/// Wait until every robot of `robots` has a liveliness token, or fail naming the missing ones.
+pub(crate) async fn wait_for_members(
+    session: &Session,
+    cfg: &LockstepConfig,
+    robots: &[String],
+    stop: &watch::Receiver<bool>,
+) -> Result<(), BridgeError> {
+    let members_q = transport::watch_members(session, &cfg.team).await?;
+    let started = Instant::now();
+    let mut present = BTreeSet::new();
+    while !robots.iter().all(|r| present.contains(r)) {
+        if *stop.borrow() {
+            return Err(BridgeError::Stopped);
+        }
+        let left = cfg.start_timeout.saturating_sub(started.elapsed());
+        match tokio::time::timeout(left, members_q.recv_async()).await {
+            Ok(Ok(sample)) => match MemberEvent::from_sample(&sample) {
+                Some(MemberEvent::Joined(r)) => {
+                    present.insert(r);
+                }
+                Some(MemberEvent::Left(r)) => {
+                    present.remove(&r);
+                }
+                None => {}
+            },
+            _ => {
+                let missing = robots.iter().filter(|r| !present.contains(*r)).cloned().collect();
+                return Err(BridgeError::MembersMissing { missing, waited: cfg.start_timeout });
+            }
+        }
+    }
+    Ok(())
+}

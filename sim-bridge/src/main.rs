@@ -37,6 +37,82 @@ enum Command {
         #[command(flatten)]
         zenoh: ZenohArgs,
     },
+    /// Run the team in MuJoCo: robots from their description files, the object, lockstep
+    /// (default) or real time. Prints the real-time factor at the end.
+    Run(RunArgs),
+    /// Only the test-side standing controller (same world arguments as `run`), in its own
+    /// process, publishing on the robots' torque keys; pair with `run` without
+    /// --standing-controller for process-separated speed figures.
+    Stand(RunArgs),
+}
+
+#[derive(clap::Args)]
+struct RunArgs {
+    /// Robot ids, comma separated; they stand on a circle of radius --spacing/2 around the
+    /// object, facing it (two robots: the paper's pair, 2.3 m apart).
+    #[arg(long, value_delimiter = ',', default_value = "r1,r2")]
+    robots: Vec<String>,
+    /// Robot description (TOML) used for every robot; default: the default robot.
+    #[arg(long)]
+    description: Option<std::path::PathBuf>,
+    /// Distance between facing robots' bases, m.
+    #[arg(long, default_value_t = 2.3)]
+    spacing: f64,
+    #[arg(long, default_value = "team")]
+    team: String,
+    /// No object in the world.
+    #[arg(long)]
+    no_object: bool,
+    /// Object box edge lengths, m (x,y,z).
+    #[arg(long, value_delimiter = ',', default_value = "0.6,0.6,0.6")]
+    object_size: Vec<f64>,
+    #[arg(long, default_value_t = 1.0)]
+    object_mass: f64,
+    /// Object centre, m (x,y,z).
+    #[arg(long, value_delimiter = ',', default_value = "0,0,0.6")]
+    object_position: Vec<f64>,
+    /// Put the hands flat on the object by IK on the robots' models (default when there is an object).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    grasp_ik: bool,
+    #[arg(long, default_value_t = 1000.0)]
+    control_hz: f64,
+    #[arg(long, default_value_t = 1000.0)]
+    physics_hz: f64,
+    #[arg(long, default_value_t = 5000)]
+    ticks: u64,
+    /// Paced by the wall clock; a missing torque holds the last one and is counted.
+    #[arg(long)]
+    realtime: bool,
+    /// Seconds a lockstep tick may wait for torques before the run fails naming the robot.
+    #[arg(long, default_value_t = 2.0)]
+    command_timeout: f64,
+    /// Seconds to wait for every robot to join.
+    #[arg(long, default_value_t = 30.0)]
+    start_timeout: f64,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Standard deviation of initial joint noise, rad.
+    #[arg(long, default_value_t = 0.0)]
+    joint_noise: f64,
+    /// Run the test-side standing controller in this process (PD + gravity compensation from
+    /// the robots' own models, sent on the torque keys as the agents would): a self-contained
+    /// run for speed figures. Without it, the agents and coordinator must be running.
+    #[arg(long)]
+    standing_controller: bool,
+    /// With --standing-controller and an object: the force each hand squeezes it with, N.
+    #[arg(long, default_value_t = 40.0)]
+    squeeze: f64,
+    /// Write the recorded ground truth (every --record-every ticks) as CSV here.
+    #[arg(long)]
+    ground_truth_csv: Option<std::path::PathBuf>,
+    #[arg(long, default_value_t = 10)]
+    record_every: u64,
+    /// Ticks of settling under the controller (lockstep) before the scenario clock starts at 0;
+    /// tick numbers continue so that the agents keep accepting commands.
+    #[arg(long, default_value_t = 0)]
+    settle_ticks: u64,
+    #[command(flatten)]
+    zenoh: ZenohArgs,
 }
 
 #[tokio::main]
@@ -71,6 +147,177 @@ async fn main() -> Result<()> {
             );
             session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
         }
+        Command::Run(args) => run(args).await?,
+        Command::Stand(args) => stand(args).await?,
     }
+    Ok(())
+}
+
+async fn run(a: RunArgs) -> Result<()> {
+    let (spec, world) = build_world(&a)?;
+    let n = spec.robots.len();
+    let controllers = if a.standing_controller { controllers(&a, &spec, &world)? } else { Vec::new() };
+    run_world(a, spec, world, controllers, n).await
+}
+
+/// Only the test-side standing controller, in its own process, acting as the agents on the
+/// torque keys (for process-separated speed figures). Listens on the default endpoint unless
+/// told otherwise; stops on Ctrl-C.
+async fn stand(a: RunArgs) -> Result<()> {
+    let (spec, world) = build_world(&a)?;
+    let ctl = controllers(&a, &spec, &world)?;
+    let session = transport::open(&a.zenoh, Role::Hub).await?;
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let team = a.team.clone();
+    let s = session.clone();
+    let task = tokio::spawn(async move { sim_bridge::standing::serve(&s, &team, ctl, true, stop_rx).await });
+    tokio::signal::ctrl_c().await?;
+    stop_tx.send(true).ok();
+    let sent = task.await??;
+    println!("standing controller sent {sent} torque commands");
+    session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
+    Ok(())
+}
+
+fn build_world(a: &RunArgs) -> Result<(sim_bridge::world::WorldSpec, sim_bridge::world::World)> {
+    use sim_bridge::world::{ObjectSpec, RobotPlacement, World, WorldSpec};
+    anyhow::ensure!(a.squeeze.is_finite() && a.squeeze >= 0.0, "--squeeze must be a non-negative number");
+    anyhow::ensure!(!a.robots.is_empty(), "--robots must name at least one robot");
+    anyhow::ensure!(a.spacing.is_finite() && a.spacing > 0.0, "--spacing must be a positive number");
+    anyhow::ensure!(a.command_timeout.is_finite() && a.command_timeout > 0.0, "--command-timeout must be positive");
+    anyhow::ensure!(a.start_timeout.is_finite() && a.start_timeout > 0.0, "--start-timeout must be positive");
+    anyhow::ensure!(a.object_size.len() == 3 && a.object_position.len() == 3, "--object-size and --object-position take three numbers");
+    let mut spec = WorldSpec::single("r1");
+    spec.robots.clear();
+    let n = a.robots.len();
+    for (i, id) in a.robots.iter().enumerate() {
+        let th = std::f64::consts::PI + 2.0 * std::f64::consts::PI * i as f64 / n as f64;
+        let r = if n == 1 { 0.0 } else { a.spacing / 2.0 };
+        let yaw = (th + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI);
+        let yaw = if yaw > std::f64::consts::PI { yaw - 2.0 * std::f64::consts::PI } else { yaw };
+        let mut p = RobotPlacement::default_robot(id, r * th.cos(), r * th.sin(), yaw);
+        if let Some(d) = &a.description {
+            p.description = d.clone();
+        }
+        spec.robots.push(p);
+    }
+    if !a.no_object {
+        let mut o = ObjectSpec::paper_cube([a.object_position[0], a.object_position[1], a.object_position[2]]);
+        o.size = [a.object_size[0], a.object_size[1], a.object_size[2]];
+        o.mass = a.object_mass;
+        spec.object = Some(o);
+    }
+    spec.control_hz = a.control_hz;
+    spec.physics_hz = a.physics_hz;
+    spec.seed = a.seed;
+    spec.initial_joint_noise = a.joint_noise;
+    spec.substeps()?;
+    if spec.object.is_some() && a.grasp_ik {
+        for s in sim_bridge::ik::place_hands(&mut spec)? {
+            tracing::info!(position_error = s.position_error, angle_error = s.angle_error, iterations = s.iterations, "hand placed by IK");
+        }
+    }
+    let world = World::build(&spec)?;
+    tracing::info!(robots = n, nq = world.model.ffi().nq, nv = world.model.ffi().nv, substeps = world.substeps, "world built and checked against the robots' models");
+    Ok((spec, world))
+}
+
+fn controllers(
+    a: &RunArgs,
+    spec: &sim_bridge::world::WorldSpec,
+    world: &sim_bridge::world::World,
+) -> Result<Vec<(String, sim_bridge::standing::StandingController)>> {
+    let n = spec.robots.len();
+    world
+            .robots
+            .iter()
+            .map(|r| {
+                let off = r.robot.model.nq - r.robot.joints();
+                let q_ref = r.initial_q[off..].to_vec();
+                let c = sim_bridge::standing::StandingController::new(r.robot.clone(), Some(q_ref), Default::default())?;
+                let c = match spec.object {
+                    Some(o) if a.grasp_ik => c.with_hand_load(sim_bridge::standing::HandLoad { squeeze: a.squeeze, carry: o.mass * protocol::conventions::GRAVITY / n as f64 })?,
+                    _ => c,
+                };
+                Ok((r.id.clone(), c))
+            })
+            .collect::<Result<Vec<_>, String>>()
+            .map_err(|e| anyhow::anyhow!(e))
+}
+
+async fn run_world(
+    a: RunArgs,
+    spec: sim_bridge::world::WorldSpec,
+    world: sim_bridge::world::World,
+    controllers: Vec<(String, sim_bridge::standing::StandingController)>,
+    n: usize,
+) -> Result<()> {
+    let _ = &spec;
+    let mut plant = sim_bridge::mujoco_plant::MujocoPlant::new(world)?;
+    let role = if a.standing_controller && a.zenoh.listen.is_empty() && a.zenoh.connect.is_empty() && a.zenoh.config.is_none() { Role::Alone } else { Role::Member };
+    let session = transport::open(&a.zenoh, role).await?;
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let ctl_task = if a.standing_controller {
+        let s = session.clone();
+        let team = a.team.clone();
+        let rx = stop_rx.clone();
+        Some(tokio::spawn(async move { sim_bridge::standing::serve(&s, &team, controllers, true, rx).await }))
+    } else {
+        None
+    };
+    let cfg = LockstepConfig {
+        team: a.team.clone(),
+        ticks: a.ticks,
+        start_timeout: Duration::from_secs_f64(a.start_timeout),
+        command_timeout: Duration::from_secs_f64(a.command_timeout),
+        resend_every: Duration::from_millis(50),
+        progress_every: (a.ticks / 10).max(1),
+    };
+    let mut extras = lockstep::Extras {
+        publish_ground_truth: true,
+        perturbation_key: true,
+        recorder: a.ground_truth_csv.as_ref().map(|_| sim_bridge::ground_truth::Recorder::new(a.record_every)),
+        ..Default::default()
+    };
+    if a.settle_ticks > 0 {
+        let settle = LockstepConfig { ticks: a.settle_ticks, progress_every: 0, ..cfg.clone() };
+        let r = lockstep::run_with(&session, &settle, &mut plant, &mut lockstep::Extras::default(), stop_rx.clone()).await?;
+        plant.restart_clock();
+        extras.first_tick = a.settle_ticks;
+        println!("settled for {} ticks ({:.3} s wall); the scenario clock starts now", r.ticks, r.wall_time.as_secs_f64());
+    }
+    let (sim_time, wall) = if a.realtime {
+        let period = Duration::from_secs_f64(1.0 / a.control_hz);
+        let r = sim_bridge::realtime::run(&session, &cfg, period, &mut plant, &mut extras, stop_rx.clone()).await?;
+        println!("real time: {} ticks, missed torques per robot {:?}, {} overruns", r.ticks, r.missed, r.overruns);
+        (r.sim_time, r.wall_time)
+    } else {
+        let r = lockstep::run_with(&session, &cfg, &mut plant, &mut extras, stop_rx.clone()).await?;
+        println!("lockstep: {} ticks, {} resends, {} rejected torques", r.ticks, r.resends, r.rejected_torques);
+        (r.sim_time, r.wall_time)
+    };
+    println!(
+        "{:.3} s simulated in {:.3} s wall: real-time factor {:.2} ({:.0} ticks/s, {} robots, control {} Hz, physics {} Hz)",
+        sim_time,
+        wall.as_secs_f64(),
+        sim_time / wall.as_secs_f64(),
+        a.ticks as f64 / wall.as_secs_f64(),
+        n,
+        a.control_hz,
+        a.physics_hz
+    );
+    if extras.perturbations_taken + extras.perturbations_refused > 0 {
+        println!("perturbations: {} taken, {} refused", extras.perturbations_taken, extras.perturbations_refused);
+    }
+    stop_tx.send(true).ok();
+    if let Some(t) = ctl_task {
+        t.await??;
+    }
+    if let (Some(path), Some(rec)) = (&a.ground_truth_csv, &extras.recorder) {
+        let f = std::fs::File::create(path).map_err(|e| anyhow::anyhow!("creating {}: {e}", path.display()))?;
+        rec.write_csv(std::io::BufWriter::new(f))?;
+        println!("ground truth: {} records in {}", rec.records.len(), path.display());
+    }
+    session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
     Ok(())
 }

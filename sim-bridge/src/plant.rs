@@ -1,6 +1,6 @@
 //! What the bridge simulates.
 
-use protocol::{Header, Pose, RobotState};
+use protocol::{GroundTruth, Header, PerturbationRequest, Pose, RobotState};
 
 /// A simulated team: states out, torques in, step.
 pub trait Plant: Send {
@@ -16,6 +16,14 @@ pub trait Plant: Send {
     fn step(&mut self);
     /// Simulated time, s.
     fn time(&self) -> f64;
+    /// Fill `out` with the ground truth of the current state; `false` if the plant has none.
+    fn ground_truth(&self, _team: &str, _tick: u64, _out: &mut GroundTruth) -> bool {
+        false
+    }
+    /// Take a perturbation request (an external wrench); an error says why it was refused.
+    fn perturb(&mut self, _req: &PerturbationRequest) -> Result<(), String> {
+        Err("this plant takes no perturbations".into())
+    }
 }
 
 /// Smoke-run stand-in for the simulator (until the MuJoCo world lands): every joint is a unit

@@ -1,0 +1,41 @@
+//! The GroundTruth message: round trip in both encodings, kind 11, non-finite numbers and bad
+//! ids refused.
+
+use protocol::{decode, encode, from_json, to_json, BodyTruth, ContactTruth, GroundTruth, Header, MessageKind, Pose};
+
+fn sample() -> GroundTruth {
+    GroundTruth {
+        header: Header::new("t1", None, 42, 7),
+        time: 0.042,
+        object: Some(BodyTruth { name: "object".into(), pose: Pose::IDENTITY, twist: [0.1, 0.0, 0.0, 0.0, 0.0, 0.2] }),
+        torsos: vec![BodyTruth { name: "r1".into(), pose: Pose { position: [-1.15, 0.0, 0.55], orientation: [1.0, 0.0, 0.0, 0.0] }, twist: [0.0; 6] }],
+        hand_contacts: vec![ContactTruth { robot: "r1".into(), body: "hand".into(), position: [-0.3, 0.0, 0.6], wrench: [40.0, 0.0, 4.9, 0.0, 0.0, 0.0] }],
+        foot_contacts: vec![ContactTruth { robot: "r1".into(), body: "LF_SHANK".into(), position: [0.0; 3], wrench: [0.0, 0.0, 150.0, 0.0, 0.0, 0.0] }],
+    }
+}
+
+#[test]
+fn ground_truth_round_trips_and_is_kind_11() {
+    let g = sample();
+    let bytes = encode(&g).unwrap();
+    assert_eq!(bytes[4], MessageKind::GroundTruth as u8);
+    assert_eq!(MessageKind::GroundTruth as u8, 11);
+    assert_eq!(decode::<GroundTruth>(&bytes).unwrap(), g);
+    assert_eq!(from_json::<GroundTruth>(&to_json(&g).unwrap()).unwrap(), g);
+}
+
+#[test]
+fn ground_truth_with_nan_or_bad_ids_is_refused() {
+    let mut g = sample();
+    g.hand_contacts[0].wrench[3] = f64::NAN;
+    assert!(encode(&g).is_err());
+    let mut g = sample();
+    g.torsos[0].name = "a/b".into();
+    assert!(encode(&g).is_err());
+    let mut g = sample();
+    g.object.as_mut().unwrap().pose.orientation = [2.0, 0.0, 0.0, 0.0];
+    assert!(encode(&g).is_err());
+    let mut g = sample();
+    g.time = f64::INFINITY;
+    assert!(encode(&g).is_err());
+}

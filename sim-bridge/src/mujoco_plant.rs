@@ -1,0 +1,192 @@
+//! A [`Plant`] over MuJoCo: the team's world of [`crate::world`], stepped `substeps` physics
+//! steps per control tick. States are written in the protocol's convention (base twist in the
+//! base frame, converted only through `protocol::conventions`); torques go to the motors of the
+//! actuated joints (MuJoCo clamps them to `ctrlrange` = the torque limits). Every index comes
+//! from the world's name maps.
+
+use mujoco_rs::mujoco_c::{self, mjData, mjModel};
+use mujoco_rs::prelude::*;
+use protocol::conventions::{base_twist_from_mujoco, base_twist_to_mujoco};
+use protocol::{GroundTruth, PerturbationRequest, Pose, RobotState};
+
+use crate::perturbation::Perturbations;
+use crate::plant::Plant;
+use crate::world::{World, WorldError};
+
+/// The team in MuJoCo.
+pub struct MujocoPlant {
+    pub world: World,
+    data: MjData<std::sync::Arc<MjModel>>,
+    ids: Vec<String>,
+    ticks: u64,
+    /// Timed external wrenches, applied through `xfrc_applied` at every physics step.
+    pub perturbations: Perturbations,
+}
+
+// SAFETY: MjData owns its buffers and its boxed model; nothing is shared between threads.
+unsafe impl Send for MujocoPlant {}
+
+impl MujocoPlant {
+    /// A plant at the world's initial condition (robots at their standing configuration with
+    /// overrides and noise, zero velocities, object at its pose), forward-evaluated.
+    pub fn new(world: World) -> Result<Self, WorldError> {
+        let model = world.model.clone();
+        let data = MjData::new(model);
+        let ids = world.robots.iter().map(|r| r.id.clone()).collect();
+        let mut p = MujocoPlant { world, data, ids, ticks: 0, perturbations: Perturbations::default() };
+        for i in 0..p.world.robots.len() {
+            let q = p.world.robots[i].initial_q.clone();
+            p.set_configuration(i, &q, None);
+        }
+        p.forward();
+        Ok(p)
+    }
+
+    pub fn raw(&self) -> (&mjModel, &mjData) {
+        (self.world.model.ffi(), self.data.ffi())
+    }
+
+    pub fn data_ptr(&mut self) -> *mut mjData {
+        unsafe { self.data.ffi_mut() as *mut mjData }
+    }
+
+    /// Set robot `i`'s configuration `q` (our convention: `[p; quat wxyz; joints]`) and,
+    /// optionally, velocity `v` (`[v_B; omega_B; joint velocities]`, base frame).
+    pub fn set_configuration(&mut self, i: usize, q: &[f64], v: Option<&[f64]>) {
+        let r = &self.world.robots[i];
+        let d = unsafe { self.data.ffi_mut() };
+        let off_q = r.robot.model.nq - r.joint_qpos.len();
+        let off_v = r.robot.model.nv - r.joint_dof.len();
+        unsafe {
+            for k in 0..7 {
+                *d.qpos.add(r.free_qpos + k) = q[k];
+            }
+            for (k, &a) in r.joint_qpos.iter().enumerate() {
+                *d.qpos.add(a) = q[off_q + k];
+            }
+            let quat = [q[3], q[4], q[5], q[6]];
+            let (tw, jv) = match v {
+                Some(v) => ([v[0], v[1], v[2], v[3], v[4], v[5]], &v[off_v..]),
+                None => ([0.0; 6], &[][..]),
+            };
+            let mj = base_twist_to_mujoco(quat, tw);
+            for k in 0..6 {
+                *d.qvel.add(r.free_dof + k) = mj[k];
+            }
+            for (k, &a) in r.joint_dof.iter().enumerate() {
+                *d.qvel.add(a) = jv.get(k).copied().unwrap_or(0.0);
+            }
+        }
+    }
+
+    /// Robot `i`'s configuration in our convention.
+    pub fn configuration(&self, i: usize) -> Vec<f64> {
+        let r = &self.world.robots[i];
+        let d = self.data.ffi();
+        let mut q = vec![0.0; 7 + r.joint_qpos.len()];
+        unsafe {
+            for k in 0..7 {
+                q[k] = *d.qpos.add(r.free_qpos + k);
+            }
+            for (k, &a) in r.joint_qpos.iter().enumerate() {
+                q[7 + k] = *d.qpos.add(a);
+            }
+        }
+        q
+    }
+
+    /// Run MuJoCo's forward pass (positions, contacts, forces) without stepping.
+    pub fn forward(&mut self) {
+        self.data.forward();
+    }
+
+    /// Full MuJoCo state for comparisons: qpos then qvel.
+    pub fn full_state(&self) -> Vec<f64> {
+        let (m, d) = self.raw();
+        let mut out = Vec::with_capacity((m.nq + m.nv) as usize);
+        unsafe {
+            out.extend_from_slice(std::slice::from_raw_parts(d.qpos, m.nq as usize));
+            out.extend_from_slice(std::slice::from_raw_parts(d.qvel, m.nv as usize));
+        }
+        out
+    }
+
+    /// Control ticks done since construction.
+    pub fn ticks(&self) -> u64 {
+        self.ticks
+    }
+
+    /// Reset the tick count and simulated time (after settling): the scenario clock starts.
+    pub fn restart_clock(&mut self) {
+        self.ticks = 0;
+        unsafe { self.data.ffi_mut() }.time = 0.0;
+    }
+}
+
+impl Plant for MujocoPlant {
+    fn robots(&self) -> &[String] {
+        &self.ids
+    }
+
+    fn joints(&self, robot: usize) -> usize {
+        self.world.robots[robot].joint_qpos.len()
+    }
+
+    fn state(&self, robot: usize, out: &mut RobotState) {
+        let r = &self.world.robots[robot];
+        let d = self.data.ffi();
+        unsafe {
+            let a = r.free_qpos;
+            let position = [*d.qpos.add(a), *d.qpos.add(a + 1), *d.qpos.add(a + 2)];
+            let mut quat = [*d.qpos.add(a + 3), *d.qpos.add(a + 4), *d.qpos.add(a + 5), *d.qpos.add(a + 6)];
+            let n = quat.iter().map(|x| x * x).sum::<f64>().sqrt();
+            quat.iter_mut().for_each(|x| *x /= n);
+            out.base_pose = Pose { position, orientation: quat };
+            let mut mj = [0.0; 6];
+            for k in 0..6 {
+                mj[k] = *d.qvel.add(r.free_dof + k);
+            }
+            out.base_twist = base_twist_from_mujoco(quat, mj);
+            out.joint_positions.clear();
+            out.joint_velocities.clear();
+            for (&qa, &va) in r.joint_qpos.iter().zip(&r.joint_dof) {
+                out.joint_positions.push(*d.qpos.add(qa));
+                out.joint_velocities.push(*d.qvel.add(va));
+            }
+        }
+        out.time = self.time();
+    }
+
+    fn set_torques(&mut self, robot: usize, tau: &[f64]) {
+        let r = &self.world.robots[robot];
+        let d = unsafe { self.data.ffi_mut() };
+        for (&a, &t) in r.actuator.iter().zip(tau) {
+            unsafe { *d.ctrl.add(a) = if t.is_finite() { t } else { 0.0 } };
+        }
+    }
+
+    fn step(&mut self) {
+        let m = self.world.model.ffi() as *const mjModel;
+        for _ in 0..self.world.substeps {
+            let t = self.data.ffi().time;
+            let d = unsafe { self.data.ffi_mut() as *mut mjData };
+            unsafe { self.perturbations.apply(&*m, &mut *d, &self.world, t) };
+            unsafe { mujoco_c::mj_step(m, d) };
+        }
+        self.ticks += 1;
+    }
+
+    fn time(&self) -> f64 {
+        self.data.ffi().time
+    }
+
+    fn ground_truth(&self, team: &str, tick: u64, out: &mut GroundTruth) -> bool {
+        crate::ground_truth::compute(&self.world, self.data.ffi(), team, tick, out);
+        true
+    }
+
+    fn perturb(&mut self, req: &PerturbationRequest) -> Result<(), String> {
+        let now = self.time();
+        self.perturbations.add_request(&self.world, req, now).map_err(|e| e.to_string())
+    }
+}

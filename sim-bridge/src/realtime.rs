@@ -1,0 +1,165 @@
+//! Real-time mode: the simulation is paced by the wall clock, one control tick per control
+//! period. Each tick publishes every robot's state, collects torques until the tick's wall-clock
+//! deadline, and steps. A robot whose torques for the tick did not arrive in time keeps its last
+//! torques (zero before the first), and the miss is counted per robot. Torques of older ticks
+//! that arrive late are taken as the newest available, also counted as misses of the tick.
+
+use std::time::{Duration, Instant};
+
+use protocol::keys::{self, RobotTopic};
+use protocol::transport::{self, decode_sample, Qos, TypedPublisher};
+use protocol::{GroundTruth, PerturbationRequest, RobotState, TorqueCommand};
+use tokio::sync::watch;
+use zenoh::Session;
+
+use crate::lockstep::{wait_for_members, BridgeError, Extras, LockstepConfig};
+use crate::plant::{empty_state, Plant};
+
+/// What a real-time run did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RealtimeReport {
+    pub ticks: u64,
+    pub sim_time: f64,
+    pub wall_time: Duration,
+    /// Per robot (plant order): ticks stepped without that tick's torques.
+    pub missed: Vec<(String, u64)>,
+    /// Ticks whose own work (states, stepping) overran the control period.
+    pub overruns: u64,
+    pub rejected_torques: u64,
+}
+
+/// Run `cfg.ticks` ticks of `plant` in real time with control period `period`.
+pub async fn run(
+    session: &Session,
+    cfg: &LockstepConfig,
+    period: Duration,
+    plant: &mut impl Plant,
+    extras: &mut Extras,
+    stop: watch::Receiver<bool>,
+) -> Result<RealtimeReport, BridgeError> {
+    let robots: Vec<String> = plant.robots().to_vec();
+    let torques = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Torque)?).await?;
+    let mut state_pubs = Vec::new();
+    let mut states = Vec::new();
+    for r in &robots {
+        state_pubs.push(TypedPublisher::<RobotState>::declare(session, keys::robot(&cfg.team, r, RobotTopic::State)?, Qos::HotPath).await?);
+        states.push(empty_state(&cfg.team, r));
+    }
+    let mut truth_pub = if extras.publish_ground_truth {
+        Some(TypedPublisher::<GroundTruth>::declare(session, keys::ground_truth(&cfg.team)?, Qos::Telemetry).await?)
+    } else {
+        None
+    };
+    let perturbations = if extras.perturbation_key { Some(transport::subscribe(session, keys::perturbation(&cfg.team)?).await?) } else { None };
+    let mut truth = crate::ground_truth::empty(&cfg.team);
+    wait_for_members(session, cfg, &robots, &stop).await?;
+
+    let mut missed = vec![0u64; robots.len()];
+    let mut last_tick: Vec<Option<u64>> = vec![None; robots.len()];
+    let mut overruns = 0u64;
+    let mut rejected = 0u64;
+    let started = Instant::now();
+    for tick in extras.first_tick..extras.first_tick + cfg.ticks {
+        if *stop.borrow() {
+            return Err(BridgeError::Stopped);
+        }
+        let deadline = started + period.mul_f64((tick - extras.first_tick + 1) as f64);
+        let now = protocol::wall_clock_ns();
+        for (i, s) in states.iter_mut().enumerate() {
+            plant.state(i, s);
+            s.header.tick = tick;
+            s.header.stamp_ns = now;
+        }
+        for (p, s) in state_pubs.iter_mut().zip(&states) {
+            p.put(s).await?;
+        }
+        let mut got = vec![false; robots.len()];
+        while !got.iter().all(|g| *g) {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                break;
+            }
+            // Tokio's timers have 1 ms resolution, as long as a 1 kHz period: wait on the queue
+            // only while more than 2 ms are left, then poll and yield until the deadline.
+            let sample = match torques.try_recv() {
+                Ok(Some(s)) => s,
+                Ok(None) if left > Duration::from_millis(2) => match tokio::time::timeout(left - Duration::from_millis(1), torques.recv_async()).await {
+                    Ok(Ok(s)) => s,
+                    Ok(Err(_)) => return Err(BridgeError::Stopped),
+                    Err(_) => continue,
+                },
+                Ok(None) => {
+                    tokio::task::yield_now().await;
+                    continue;
+                }
+                Err(_) => return Err(BridgeError::Stopped),
+            };
+            let cmd = match decode_sample::<TorqueCommand>(&sample) {
+                Ok(c) => c,
+                Err(e) => {
+                    rejected += 1;
+                    tracing::warn!("rejected torques: {e}");
+                    continue;
+                }
+            };
+            let Some(i) = robots.iter().position(|r| r == cmd.header.robot_id()) else { continue };
+            if cmd.header.tick > tick || last_tick[i].is_some_and(|t| cmd.header.tick <= t) {
+                continue;
+            }
+            if cmd.tau.len() != plant.joints(i) {
+                rejected += 1;
+                continue;
+            }
+            plant.set_torques(i, &cmd.tau);
+            last_tick[i] = Some(cmd.header.tick);
+            got[i] = cmd.header.tick == tick;
+        }
+        for (i, g) in got.iter().enumerate() {
+            if !g {
+                missed[i] += 1;
+            }
+        }
+        if let Some(q) = &perturbations {
+            while let Ok(Some(sample)) = q.try_recv() {
+                match decode_sample::<PerturbationRequest>(&sample).map_err(|e| e.to_string()).and_then(|r| plant.perturb(&r)) {
+                    Ok(()) => extras.perturbations_taken += 1,
+                    Err(e) => {
+                        extras.perturbations_refused += 1;
+                        tracing::warn!("refused perturbation: {e}");
+                    }
+                }
+            }
+        }
+        plant.step();
+        if (truth_pub.is_some() || extras.recorder.is_some()) && plant.ground_truth(&cfg.team, tick, &mut truth) {
+            if let Some(p) = truth_pub.as_mut() {
+                p.put(&truth).await?;
+            }
+            if let Some(r) = extras.recorder.as_mut() {
+                r.offer(&truth);
+            }
+        }
+        // Pace: wait for the end of the period (the torques may all have come early).
+        if Instant::now() > deadline {
+            overruns += 1;
+        }
+        while let Some(left) = deadline.checked_duration_since(Instant::now()).filter(|d| !d.is_zero()) {
+            if left > Duration::from_millis(2) {
+                tokio::time::sleep(left - Duration::from_millis(1)).await;
+            } else {
+                tokio::task::yield_now().await;
+            }
+        }
+        if cfg.progress_every > 0 && (tick + 1 - extras.first_tick) % cfg.progress_every == 0 {
+            tracing::info!(tick = tick + 1, of = cfg.ticks, sim_time = plant.time(), missed = ?missed, "progress (real time)");
+        }
+    }
+    Ok(RealtimeReport {
+        ticks: cfg.ticks,
+        sim_time: plant.time(),
+        wall_time: started.elapsed(),
+        missed: robots.into_iter().zip(missed).collect(),
+        overruns,
+        rejected_torques: rejected,
+    })
+}
