@@ -582,7 +582,13 @@ impl Validate for ContactSet {
             }
             if self.stance_feet[..i].contains(f) {
                 return Err(ProtocolError::invalid(field, format!("foot {f:?} listed twice")));
+            }
+        }
+        Ok(())
+    }
+}
 
+// ---------------------------------------------------------------------------------------------
 // Sim-bridge -> evaluation (ground truth; a controller never reads it)
 
 /// A rigid body's pose and twist in the world: `twist = [v; omega]`, the linear velocity of the

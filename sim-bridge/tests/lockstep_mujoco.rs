@@ -5,7 +5,7 @@
 use std::time::Duration;
 
 use protocol::transport::{self, Role, ZenohArgs};
-use robot_agent::agent::{self, AgentConfig, PlaceholderDynamics};
+use robot_agent::agent::{self, AgentConfig, ModelDynamics};
 use sim_bridge::ground_truth::Recorder;
 use sim_bridge::lockstep::{self, BridgeError, Extras, LockstepConfig};
 use sim_bridge::mujoco_plant::MujocoPlant;
@@ -47,14 +47,17 @@ async fn default_robot_stands_5_s_under_its_agent() {
     let ctl = controllers(&world, &["r1"]);
     let mut plant = MujocoPlant::new(world).unwrap();
     let (stop_tx, stop_rx) = watch::channel(false);
-    // The real agent loop (its dynamics are still the placeholder; the test-side coordinator
-    // computes the torques from the robot's own model and sends them as commands, which the
-    // agent checks and forwards to the bridge).
+    // The real agent loop with the robot's model (it publishes the dynamics terms); the
+    // test-side coordinator computes the torques from the robot's own model and sends them as
+    // commands, which the agent checks and forwards to the bridge.
     let s2 = session.clone();
     let rx = stop_rx.clone();
     let agent = tokio::spawn(async move {
-        let cfg = AgentConfig { team: team.into(), robot: "r1".into(), joints: 18, floating_base: true };
-        agent::run(&s2, cfg, PlaceholderDynamics { joints: 18, nv: 24 }, rx).await
+        // A generous command deadline: lockstep ticks can be slow on a loaded machine, and safe
+        // mode is not what this test is about.
+        let cfg = AgentConfig::new(team, "r1").with_deadline_time(Duration::from_secs(2));
+        let robot = robot_agent::description::Robot::load(robot_agent::description::default_robot_path()).unwrap();
+        agent::run(&s2, cfg, ModelDynamics::new(robot).unwrap(), rx).await
     });
     let s3 = session.clone();
     let rx = stop_rx.clone();
