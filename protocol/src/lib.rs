@@ -30,6 +30,8 @@
 //! | `team/{team}/coordinator/diagnostics` | [`TickDiagnostics`] | coordinator → reports |
 //! | `team/{team}/references` | [`TaskReferences`] | scenario runner → coordinator |
 //! | `team/{team}/perturbation` | [`PerturbationRequest`] | tools → sim-bridge |
+//! | `team/{team}/robot/{robot}/contacts` | [`ContactSet`] | runner, gait planner → agent |
+//! | `team/{team}/ground-truth` | [`GroundTruth`] | sim-bridge → evaluation (never the controller) |
 //!
 //! Wildcards for subscribers (`team/{team}/robot/*/dynamics`, `team/{team}/member/*`) come
 //! from the same module.
