@@ -90,13 +90,7 @@ pub async fn run_with(
     extras: &mut Extras,
     stop: watch::Receiver<bool>,
 ) -> Result<LockstepReport, BridgeError> {
-    let mut truth_pub = if extras.publish_ground_truth {
-        Some(TypedPublisher::<GroundTruth>::declare(session, keys::ground_truth(&cfg.team)?, Qos::Telemetry).await?)
-    } else {
-        None
-    };
-    let perturbations = if extras.perturbation_key { Some(transport::subscribe(session, keys::perturbation(&cfg.team)?).await?) } else { None };
-    let mut truth = crate::ground_truth::empty(&cfg.team);
+    let mut side = TickSide::open(session, &cfg.team, extras).await?;
     let robots: Vec<String> = plant.robots().to_vec();
     let torques = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Torque)?).await?;
     let mut state_pubs = Vec::new();
@@ -174,26 +168,7 @@ pub async fn run_with(
                 }
             }
         }
-        if let Some(q) = &perturbations {
-            while let Ok(Some(sample)) = q.try_recv() {
-                match decode_sample::<PerturbationRequest>(&sample).map_err(|e| e.to_string()).and_then(|r| plant.perturb(&r)) {
-                    Ok(()) => extras.perturbations_taken += 1,
-                    Err(e) => {
-                        extras.perturbations_refused += 1;
-                        tracing::warn!("refused perturbation: {e}");
-                    }
-                }
-            }
-        }
-        plant.step();
-        if (truth_pub.is_some() || extras.recorder.is_some()) && plant.ground_truth(&cfg.team, tick, &mut truth) {
-            if let Some(p) = truth_pub.as_mut() {
-                p.put(&truth).await?;
-            }
-            if let Some(r) = extras.recorder.as_mut() {
-                r.offer(&truth);
-            }
-        }
+        side.step(plant, &cfg.team, tick, extras).await?;
         if cfg.progress_every > 0 && (tick + 1 - extras.first_tick) % cfg.progress_every == 0 {
             tracing::info!(tick = tick + 1, of = cfg.ticks, sim_time = plant.time(), "progress");
         }
@@ -240,4 +215,50 @@ pub(crate) async fn wait_for_members(
         }
     }
     Ok(())
+}
+
+/// What the lockstep and real-time loops do around every physics step: take the perturbation
+/// requests that arrived on the Zenoh key, step the plant, then publish and record the ground
+/// truth, as [`Extras`] asks.
+pub(crate) struct TickSide {
+    truth_pub: Option<TypedPublisher<GroundTruth>>,
+    perturbations: Option<transport::SampleQueue>,
+    truth: GroundTruth,
+}
+
+impl TickSide {
+    pub(crate) async fn open(session: &Session, team: &str, extras: &Extras) -> Result<Self, BridgeError> {
+        let truth_pub = if extras.publish_ground_truth {
+            Some(TypedPublisher::<GroundTruth>::declare(session, keys::ground_truth(team)?, Qos::Telemetry).await?)
+        } else {
+            None
+        };
+        let perturbations = if extras.perturbation_key { Some(transport::subscribe(session, keys::perturbation(team)?).await?) } else { None };
+        Ok(TickSide { truth_pub, perturbations, truth: crate::ground_truth::empty(team) })
+    }
+
+    /// Perturbations in, one plant step, ground truth out.
+    pub(crate) async fn step(&mut self, plant: &mut impl Plant, team: &str, tick: u64, extras: &mut Extras) -> Result<(), BridgeError> {
+        if let Some(q) = &self.perturbations {
+            while let Ok(Some(sample)) = q.try_recv() {
+                match decode_sample::<PerturbationRequest>(&sample).map_err(|e| e.to_string()).and_then(|r| plant.perturb(&r)) {
+                    Ok(()) => extras.perturbations_taken += 1,
+                    Err(e) => {
+                        extras.perturbations_refused += 1;
+                        tracing::warn!("refused perturbation: {e}");
+                    }
+                }
+            }
+        }
+        plant.step();
+        if (self.truth_pub.is_some() || extras.recorder.is_some()) && plant.ground_truth(team, tick, &mut self.truth) {
+            if let Some(p) = self.truth_pub.as_mut() {
+                p.put(&self.truth).await?;
+            }
+            if let Some(r) = extras.recorder.as_mut() {
+                r.offer(&self.truth);
+            }
+        }
+        Ok(())
+    }
 }

@@ -8,11 +8,11 @@ use std::time::{Duration, Instant};
 
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, TypedPublisher};
-use protocol::{GroundTruth, PerturbationRequest, RobotState, TorqueCommand};
+use protocol::{RobotState, TorqueCommand};
 use tokio::sync::watch;
 use zenoh::Session;
 
-use crate::lockstep::{wait_for_members, BridgeError, Extras, LockstepConfig};
+use crate::lockstep::{wait_for_members, BridgeError, Extras, LockstepConfig, TickSide};
 use crate::plant::{empty_state, Plant};
 
 /// What a real-time run did.
@@ -45,13 +45,7 @@ pub async fn run(
         state_pubs.push(TypedPublisher::<RobotState>::declare(session, keys::robot(&cfg.team, r, RobotTopic::State)?, Qos::HotPath).await?);
         states.push(empty_state(&cfg.team, r));
     }
-    let mut truth_pub = if extras.publish_ground_truth {
-        Some(TypedPublisher::<GroundTruth>::declare(session, keys::ground_truth(&cfg.team)?, Qos::Telemetry).await?)
-    } else {
-        None
-    };
-    let perturbations = if extras.perturbation_key { Some(transport::subscribe(session, keys::perturbation(&cfg.team)?).await?) } else { None };
-    let mut truth = crate::ground_truth::empty(&cfg.team);
+    let mut side = TickSide::open(session, &cfg.team, extras).await?;
     wait_for_members(session, cfg, &robots, &stop).await?;
 
     let mut missed = vec![0u64; robots.len()];
@@ -119,26 +113,7 @@ pub async fn run(
                 missed[i] += 1;
             }
         }
-        if let Some(q) = &perturbations {
-            while let Ok(Some(sample)) = q.try_recv() {
-                match decode_sample::<PerturbationRequest>(&sample).map_err(|e| e.to_string()).and_then(|r| plant.perturb(&r)) {
-                    Ok(()) => extras.perturbations_taken += 1,
-                    Err(e) => {
-                        extras.perturbations_refused += 1;
-                        tracing::warn!("refused perturbation: {e}");
-                    }
-                }
-            }
-        }
-        plant.step();
-        if (truth_pub.is_some() || extras.recorder.is_some()) && plant.ground_truth(&cfg.team, tick, &mut truth) {
-            if let Some(p) = truth_pub.as_mut() {
-                p.put(&truth).await?;
-            }
-            if let Some(r) = extras.recorder.as_mut() {
-                r.offer(&truth);
-            }
-        }
+        side.step(plant, &cfg.team, tick, extras).await?;
         // Pace: wait for the end of the period (the torques may all have come early).
         if Instant::now() > deadline {
             overruns += 1;
