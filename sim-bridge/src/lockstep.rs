@@ -93,13 +93,7 @@ pub async fn run_with(
     let mut side = TickSide::open(session, &cfg.team, extras).await?;
     let robots: Vec<String> = plant.robots().to_vec();
     let torques = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Torque)?).await?;
-    let mut state_pubs = Vec::new();
-    let mut states = Vec::new();
-    for r in &robots {
-        let key = keys::robot(&cfg.team, r, RobotTopic::State)?;
-        state_pubs.push(TypedPublisher::<RobotState>::declare(session, key, Qos::HotPath).await?);
-        states.push(empty_state(&cfg.team, r));
-    }
+    let mut states = StateOut::declare(session, &cfg.team, &robots).await?;
 
     wait_for_members(session, cfg, &robots, &stop).await?;
     tracing::info!(robots = ?robots, "all robots present, lockstep starts");
@@ -112,15 +106,7 @@ pub async fn run_with(
         if *stop.borrow() {
             return Err(BridgeError::Stopped);
         }
-        let now = protocol::wall_clock_ns();
-        for (i, s) in states.iter_mut().enumerate() {
-            plant.state(i, s);
-            s.header.tick = tick;
-            s.header.stamp_ns = now;
-        }
-        for (p, s) in state_pubs.iter_mut().zip(&states) {
-            p.put(s).await?;
-        }
+        states.publish(plant, tick).await?;
         got.iter_mut().for_each(|g| *g = false);
         let tick_started = Instant::now();
         let mut last_send = Instant::now();
@@ -159,9 +145,7 @@ pub async fn run_with(
                 Ok(Err(_)) => return Err(BridgeError::Stopped),
                 Err(_) => {
                     if last_send.elapsed() >= cfg.resend_every {
-                        for (p, s) in state_pubs.iter_mut().zip(&states) {
-                            p.put(s).await?;
-                        }
+                        states.republish().await?;
                         resends += 1;
                         last_send = Instant::now();
                     }
@@ -258,6 +242,43 @@ impl TickSide {
             if let Some(r) = extras.recorder.as_mut() {
                 r.offer(&self.truth);
             }
+        }
+        Ok(())
+    }
+}
+
+/// Every robot's state publisher and reused state message, for the lockstep and real-time loops.
+pub(crate) struct StateOut {
+    pubs: Vec<TypedPublisher<RobotState>>,
+    states: Vec<RobotState>,
+}
+
+impl StateOut {
+    pub(crate) async fn declare(session: &Session, team: &str, robots: &[String]) -> Result<Self, BridgeError> {
+        let mut out = StateOut { pubs: Vec::new(), states: Vec::new() };
+        for r in robots {
+            let key = keys::robot(team, r, RobotTopic::State)?;
+            out.pubs.push(TypedPublisher::<RobotState>::declare(session, key, Qos::HotPath).await?);
+            out.states.push(empty_state(team, r));
+        }
+        Ok(out)
+    }
+
+    /// Fill every robot's state of `tick` from the plant and publish it.
+    pub(crate) async fn publish(&mut self, plant: &impl Plant, tick: u64) -> Result<(), BridgeError> {
+        let now = protocol::wall_clock_ns();
+        for (i, s) in self.states.iter_mut().enumerate() {
+            plant.state(i, s);
+            s.header.tick = tick;
+            s.header.stamp_ns = now;
+        }
+        self.republish().await
+    }
+
+    /// Publish the last states again, unchanged.
+    pub(crate) async fn republish(&mut self) -> Result<(), BridgeError> {
+        for (p, s) in self.pubs.iter_mut().zip(&self.states) {
+            p.put(s).await?;
         }
         Ok(())
     }

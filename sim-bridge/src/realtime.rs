@@ -7,13 +7,13 @@
 use std::time::{Duration, Instant};
 
 use protocol::keys::{self, RobotTopic};
-use protocol::transport::{self, decode_sample, Qos, TypedPublisher};
-use protocol::{RobotState, TorqueCommand};
+use protocol::transport::{self, decode_sample};
+use protocol::TorqueCommand;
 use tokio::sync::watch;
 use zenoh::Session;
 
-use crate::lockstep::{wait_for_members, BridgeError, Extras, LockstepConfig, TickSide};
-use crate::plant::{empty_state, Plant};
+use crate::lockstep::{wait_for_members, BridgeError, Extras, LockstepConfig, StateOut, TickSide};
+use crate::plant::Plant;
 
 /// What a real-time run did.
 #[derive(Debug, Clone, PartialEq)]
@@ -39,16 +39,12 @@ pub async fn run(
 ) -> Result<RealtimeReport, BridgeError> {
     let robots: Vec<String> = plant.robots().to_vec();
     let torques = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Torque)?).await?;
-    let mut state_pubs = Vec::new();
-    let mut states = Vec::new();
-    for r in &robots {
-        state_pubs.push(TypedPublisher::<RobotState>::declare(session, keys::robot(&cfg.team, r, RobotTopic::State)?, Qos::HotPath).await?);
-        states.push(empty_state(&cfg.team, r));
-    }
+    let mut states = StateOut::declare(session, &cfg.team, &robots).await?;
     let mut side = TickSide::open(session, &cfg.team, extras).await?;
     wait_for_members(session, cfg, &robots, &stop).await?;
 
     let mut missed = vec![0u64; robots.len()];
+    let mut got = vec![false; robots.len()];
     let mut last_tick: Vec<Option<u64>> = vec![None; robots.len()];
     let mut overruns = 0u64;
     let mut rejected = 0u64;
@@ -58,16 +54,8 @@ pub async fn run(
             return Err(BridgeError::Stopped);
         }
         let deadline = started + period.mul_f64((tick - extras.first_tick + 1) as f64);
-        let now = protocol::wall_clock_ns();
-        for (i, s) in states.iter_mut().enumerate() {
-            plant.state(i, s);
-            s.header.tick = tick;
-            s.header.stamp_ns = now;
-        }
-        for (p, s) in state_pubs.iter_mut().zip(&states) {
-            p.put(s).await?;
-        }
-        let mut got = vec![false; robots.len()];
+        states.publish(plant, tick).await?;
+        got.iter_mut().for_each(|g| *g = false);
         while !got.iter().all(|g| *g) {
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
