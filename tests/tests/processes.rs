@@ -14,17 +14,20 @@ fn team_args(team: &str) -> Vec<String> {
     vec!["--team".into(), team.into()]
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn processes_exchange_messages_and_a_killed_agent_is_reported_leaving() {
-    let team = "proc1";
-    let port = free_port().unwrap();
-    let hub = format!("tcp/127.0.0.1:{port}");
-    let connect = ZenohArgs::connecting(&hub);
 
+/// A coordinator process listening on a free loopback port, and the arguments that reach it.
+fn start_coordinator(team: &str) -> (team_runner::smoke::ChildGuard, ZenohArgs) {
+    let hub = format!("tcp/127.0.0.1:{}", free_port().unwrap());
     let mut args = vec!["run".to_string()];
     args.extend(team_args(team));
     args.extend(ZenohArgs::listening(&hub).to_cli());
-    let _coordinator = spawn("coordinator", &args, "coordinator").unwrap();
+    (spawn("coordinator", &args, "coordinator").unwrap(), ZenohArgs::connecting(&hub))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn processes_exchange_messages_and_a_killed_agent_is_reported_leaving() {
+    let team = "proc1";
+    let (_coordinator, connect) = start_coordinator(team);
 
     // The test watches from its own session, as any tool would.
     let session = transport::open(&connect, Role::Member).await.unwrap();
@@ -88,13 +91,7 @@ async fn processes_exchange_messages_and_a_killed_agent_is_reported_leaving() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn lockstep_names_the_robot_that_never_joined() {
     let team = "proc2";
-    let port = free_port().unwrap();
-    let hub = format!("tcp/127.0.0.1:{port}");
-    let connect = ZenohArgs::connecting(&hub);
-    let mut args = vec!["run".to_string()];
-    args.extend(team_args(team));
-    args.extend(ZenohArgs::listening(&hub).to_cli());
-    let _coordinator = spawn("coordinator", &args, "coordinator").unwrap();
+    let (_coordinator, connect) = start_coordinator(team);
     let mut args = vec!["run".to_string(), "--id".into(), "r1".into(), "--placeholder-joints".into(), "3".into()];
     args.extend(team_args(team));
     args.extend(connect.to_cli());
