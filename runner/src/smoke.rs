@@ -1,8 +1,5 @@
 //! The smoke run: every component, real messages, placeholder physics.
 
-use std::net::TcpListener;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
 use coordinator::service::{self as coordinator_service, CoordinatorConfig};
@@ -14,6 +11,8 @@ use robot_agent::agent::{self as robot_agent_loop, AgentConfig, PlaceholderDynam
 /// their posture: a lockstep tick that is merely slow must not see safe-mode torques.
 pub const SMOKE_COMMAND_DEADLINE: Duration = Duration::from_secs(5);
 use sim_bridge::lockstep::{self, LockstepConfig, LockstepReport};
+
+use crate::processes::{free_port, spawn};
 use sim_bridge::plant::PlaceholderPlant;
 use thiserror::Error;
 use tokio::sync::watch;
@@ -27,12 +26,8 @@ pub enum SmokeError {
     Bridge(#[from] sim_bridge::lockstep::BridgeError),
     #[error("agent {robot}: {source}")]
     Agent { robot: String, source: robot_agent::agent::AgentError },
-    #[error("cannot start {what} ({path}): {reason}")]
-    Spawn { what: String, path: PathBuf, reason: String },
-    #[error("{what} exited with {status}")]
-    ProcessFailed { what: String, status: String },
-    #[error("no free loopback port: {0}")]
-    NoPort(String),
+    #[error(transparent)]
+    Process(#[from] crate::processes::ProcessError),
 }
 
 /// What to run.
@@ -113,51 +108,6 @@ pub async fn run_embedded(cfg: &SmokeConfig) -> Result<SmokeOutcome, SmokeError>
     Ok(SmokeOutcome { report, final_velocities })
 }
 
-/// A free TCP port on loopback (bound, then released for the child to take).
-pub fn free_port() -> Result<u16, SmokeError> {
-    let l = TcpListener::bind("127.0.0.1:0").map_err(|e| SmokeError::NoPort(e.to_string()))?;
-    l.local_addr().map(|a| a.port()).map_err(|e| SmokeError::NoPort(e.to_string()))
-}
-
-/// The directory of this executable, where cargo also puts the other binaries.
-pub fn sibling_binary(name: &str) -> PathBuf {
-    let exe = std::env::current_exe().unwrap_or_default();
-    let dir = exe.parent().map(Path::to_path_buf).unwrap_or_default();
-    // Test executables live one level deeper, in deps/.
-    let dir = if dir.ends_with("deps") { dir.parent().map(Path::to_path_buf).unwrap_or(dir) } else { dir };
-    dir.join(name)
-}
-
-/// A child process that is killed when dropped.
-pub struct ChildGuard {
-    pub what: String,
-    pub child: Child,
-}
-
-impl Drop for ChildGuard {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-/// Start one of the team's binaries with arguments.
-pub fn spawn(bin: &str, args: &[String], what: &str) -> Result<ChildGuard, SmokeError> {
-    let path = sibling_binary(bin);
-    let child = Command::new(&path)
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::inherit())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .map_err(|e| SmokeError::Spawn {
-            what: what.to_string(),
-            path: path.clone(),
-            reason: format!("{e} (build the binaries first: cargo build --release --bins)"),
-        })?;
-    Ok(ChildGuard { what: what.to_string(), child })
-}
-
 /// Every component its own process, on loopback: the coordinator listens on a free port,
 /// the agents and the sim-bridge connect to it.
 pub fn run_distributed(cfg: &SmokeConfig) -> Result<(), SmokeError> {
@@ -181,9 +131,6 @@ pub fn run_distributed(cfg: &SmokeConfig) -> Result<(), SmokeError> {
     args.extend(["--dt".into(), cfg.dt.to_string()]);
     args.extend(connect);
     let mut bridge = spawn("sim-bridge", &args, "sim-bridge")?;
-    let status = bridge.child.wait().map_err(|e| SmokeError::ProcessFailed { what: "sim-bridge".into(), status: e.to_string() })?;
-    if !status.success() {
-        return Err(SmokeError::ProcessFailed { what: "sim-bridge".into(), status: status.to_string() });
-    }
+    bridge.wait_success()?;
     Ok(())
 }

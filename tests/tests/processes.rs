@@ -8,7 +8,8 @@ use std::time::{Duration, Instant};
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Role, ZenohArgs};
 use protocol::{CoordinatorStatus, TorqueCommand};
-use team_runner::smoke::{free_port, spawn, SMOKE_COMMAND_DEADLINE};
+use team_runner::processes::{free_port, spawn, ChildGuard};
+use team_runner::smoke::SMOKE_COMMAND_DEADLINE;
 
 fn team_args(team: &str) -> Vec<String> {
     vec!["--team".into(), team.into()]
@@ -16,7 +17,7 @@ fn team_args(team: &str) -> Vec<String> {
 
 
 /// A coordinator process listening on a free loopback port, and the arguments that reach it.
-fn start_coordinator(team: &str) -> (team_runner::smoke::ChildGuard, ZenohArgs) {
+fn start_coordinator(team: &str) -> (ChildGuard, ZenohArgs) {
     let hub = format!("tcp/127.0.0.1:{}", free_port().unwrap());
     let mut args = vec!["run".to_string()];
     args.extend(team_args(team));

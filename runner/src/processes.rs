@@ -1,0 +1,75 @@
+//! The team's binaries as child processes on loopback: free ports, spawning a sibling
+//! binary, and a guard that kills the child when dropped (the distributed runs and tests).
+
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+use thiserror::Error;
+
+/// Errors starting or waiting for a child process.
+#[derive(Debug, Error)]
+pub enum ProcessError {
+    #[error("cannot start {what} ({path}): {reason}")]
+    Spawn { what: String, path: PathBuf, reason: String },
+    #[error("{what} exited with {status}")]
+    Failed { what: String, status: String },
+    #[error("no free loopback port: {0}")]
+    NoPort(String),
+}
+
+/// A free TCP port on loopback (bound, then released for the child to take).
+pub fn free_port() -> Result<u16, ProcessError> {
+    let l = TcpListener::bind("127.0.0.1:0").map_err(|e| ProcessError::NoPort(e.to_string()))?;
+    l.local_addr().map(|a| a.port()).map_err(|e| ProcessError::NoPort(e.to_string()))
+}
+
+/// The directory of this executable, where cargo also puts the other binaries.
+pub fn sibling_binary(name: &str) -> PathBuf {
+    let exe = std::env::current_exe().unwrap_or_default();
+    let dir = exe.parent().map(Path::to_path_buf).unwrap_or_default();
+    // Test executables live one level deeper, in deps/.
+    let dir = if dir.ends_with("deps") { dir.parent().map(Path::to_path_buf).unwrap_or(dir) } else { dir };
+    dir.join(name)
+}
+
+/// A child process that is killed when dropped.
+pub struct ChildGuard {
+    pub what: String,
+    pub child: Child,
+}
+
+impl Drop for ChildGuard {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Start one of the team's binaries with arguments.
+pub fn spawn(bin: &str, args: &[String], what: &str) -> Result<ChildGuard, ProcessError> {
+    let path = sibling_binary(bin);
+    let child = Command::new(&path)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::inherit())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .map_err(|e| ProcessError::Spawn {
+            what: what.to_string(),
+            path: path.clone(),
+            reason: format!("{e} (build the binaries first: cargo build --release --bins)"),
+        })?;
+    Ok(ChildGuard { what: what.to_string(), child })
+}
+
+impl ChildGuard {
+    /// Wait for the child to exit; an error unless it exited successfully.
+    pub fn wait_success(&mut self) -> Result<(), ProcessError> {
+        let status = self.child.wait().map_err(|e| ProcessError::Failed { what: self.what.clone(), status: e.to_string() })?;
+        if !status.success() {
+            return Err(ProcessError::Failed { what: self.what.clone(), status: status.to_string() });
+        }
+        Ok(())
+    }
+}
