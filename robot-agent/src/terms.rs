@@ -118,12 +118,15 @@ impl TermsBuilder {
             } else {
                 continue;
             };
-            fill_frame(m, &self.data, &mut self.jac, name, *id, role, out, used)?;
+            // A stance foot is a rolling sphere: its contact point, `radius` below the centre,
+            // is what stays on the ground; a swing foot is tracked at its centre.
+            let below = if role == FrameRole::StanceFoot { robot.feet.radius } else { 0.0 };
+            fill_frame(m, &self.data, &mut self.jac, name, *id, role, below, out, used)?;
             used += 1;
         }
         let (hand, torso) = (self.hand.clone(), self.torso.clone());
-        fill_frame(m, &self.data, &mut self.jac, &hand.0, hand.1, FrameRole::Hand, out, used)?;
-        fill_frame(m, &self.data, &mut self.jac, &torso.0, torso.1, FrameRole::Torso, out, used + 1)?;
+        fill_frame(m, &self.data, &mut self.jac, &hand.0, hand.1, FrameRole::Hand, 0.0, out, used)?;
+        fill_frame(m, &self.data, &mut self.jac, &torso.0, torso.1, FrameRole::Torso, 0.0, out, used + 1)?;
         out.frames.truncate(used + 2);
         Ok(())
     }
@@ -134,6 +137,13 @@ impl TermsBuilder {
     }
 }
 
+/// Fill frame `slot` of `out`. `below > 0` (stance feet): the point `below` metres under the
+/// frame origin along world z instead of the origin, the contact point of a foot sphere of that
+/// radius on flat ground: `p_c = p - r e_z`, `v_c = v + omega x (-r e_z) = v + r e_z x omega`,
+/// so `J_c = J_v + r [e_z]x J_omega` and `Jdot_c v = Jdot_v v + r e_z x (Jdot_omega v)`
+/// (`r e_z` is constant in the world). Constraining the sphere's centre instead forbids the
+/// rolling the simulator (and the real foot) allows: the team then settles off its torso
+/// reference (5 mm with the paper's gains) while the controller believes the feet hold still.
 #[allow(clippy::too_many_arguments)]
 fn fill_frame(
     m: &crate::dynamics::Model,
@@ -142,11 +152,23 @@ fn fill_frame(
     name: &str,
     id: FrameId,
     role: FrameRole,
+    below: f64,
     out: &mut DynamicsTerms,
     slot: usize,
 ) -> Result<(), TermsError> {
     frame_jacobian(m, data, id, jac)?;
-    let jdv = frame_jdot_v(m, data, id)?;
+    let mut jdv = frame_jdot_v(m, data, id)?;
+    if below != 0.0 {
+        // e_z x w = (-w_y, w_x, 0) for the angular rows 3..6.
+        for j in 0..m.nv {
+            let (wx, wy) = (jac[(3, j)], jac[(4, j)]);
+            jac[(0, j)] -= below * wy;
+            jac[(1, j)] += below * wx;
+        }
+        let (ax, ay) = (jdv[3], jdv[4]);
+        jdv[0] -= below * ay;
+        jdv[1] += below * ax;
+    }
     let pose = &data.o_m_f[id];
     let rows = role.dim();
     if out.frames.len() <= slot {
@@ -165,7 +187,7 @@ fn fill_frame(
         f.name.push_str(name);
     }
     f.role = role;
-    f.position = [pose.trans.x, pose.trans.y, pose.trans.z];
+    f.position = [pose.trans.x, pose.trans.y, pose.trans.z - below];
     for i in 0..3 {
         for j in 0..3 {
             f.rotation[3 * i + j] = pose.rot[(i, j)];

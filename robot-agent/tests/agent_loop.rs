@@ -168,9 +168,10 @@ async fn publishes_dynamics_for_each_state_for_its_contact_set_and_its_descripti
                 ("base", FrameRole::Torso),
             ]
         );
-        // Feet on the ground (foot frame = sphere centre, 3 cm up), hand where the description says.
+        // Stance feet on the ground (the contact point, the sphere's bottom), hand where the
+        // description says.
         for f in &terms.frames[..4] {
-            assert!((f.position[2] - 0.03).abs() < 1e-3, "{} at {:?}", f.name, f.position);
+            assert!(f.position[2].abs() < 1e-3, "{} at {:?}", f.name, f.position);
             assert_eq!(f.jacobian.rows(), 3);
         }
         let hand = &terms.frames[4];
