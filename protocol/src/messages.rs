@@ -628,13 +628,16 @@ pub struct GroundTruth {
     pub hand_contacts: Vec<ContactTruth>,
     /// Every foot-ground contact point.
     pub foot_contacts: Vec<ContactTruth>,
+    /// Each robot's palm contact frame (named by robot id): where the hand is on the object
+    /// (slip is measured from it).
+    pub hands: Vec<BodyTruth>,
 }
 
 impl Validate for GroundTruth {
     fn validate(&self) -> Result<(), ProtocolError> {
         self.header.check(false)?;
         check_finite("time", &[self.time])?;
-        let bodies = self.object.iter().map(|b| ("object", b)).chain(self.torsos.iter().map(|b| ("torsos", b)));
+        let bodies = self.object.iter().map(|b| ("object", b)).chain(self.torsos.iter().map(|b| ("torsos", b))).chain(self.hands.iter().map(|b| ("hands", b)));
         for (field, b) in bodies {
             if b.name.is_empty() {
                 return Err(ProtocolError::invalid(field, "empty body name"));
@@ -642,7 +645,7 @@ impl Validate for GroundTruth {
             b.pose.check(&format!("{field}({}).pose", b.name))?;
             check_finite(&format!("{field}({}).twist", b.name), &b.twist)?;
         }
-        for t in &self.torsos {
+        for t in self.torsos.iter().chain(&self.hands) {
             validate_id("robot", &t.name)?;
         }
         for (field, list) in [("hand_contacts", &self.hand_contacts), ("foot_contacts", &self.foot_contacts)] {

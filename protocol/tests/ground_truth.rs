@@ -11,6 +11,7 @@ fn sample() -> GroundTruth {
         torsos: vec![BodyTruth { name: "r1".into(), pose: Pose { position: [-1.15, 0.0, 0.55], orientation: [1.0, 0.0, 0.0, 0.0] }, twist: [0.0; 6] }],
         hand_contacts: vec![ContactTruth { robot: "r1".into(), body: "hand".into(), position: [-0.3, 0.0, 0.6], wrench: [40.0, 0.0, 4.9, 0.0, 0.0, 0.0] }],
         foot_contacts: vec![ContactTruth { robot: "r1".into(), body: "LF_SHANK".into(), position: [0.0; 3], wrench: [0.0, 0.0, 150.0, 0.0, 0.0, 0.0] }],
+        hands: vec![BodyTruth { name: "r1".into(), pose: Pose { position: [-0.3, 0.0, 0.6], orientation: [1.0, 0.0, 0.0, 0.0] }, twist: [0.0; 6] }],
     }
 }
 
@@ -34,6 +35,9 @@ fn ground_truth_with_nan_or_bad_ids_is_refused() {
     assert!(encode(&g).is_err());
     let mut g = sample();
     g.object.as_mut().unwrap().pose.orientation = [2.0, 0.0, 0.0, 0.0];
+    assert!(encode(&g).is_err());
+    let mut g = sample();
+    g.hands[0].pose.position[1] = f64::NAN;
     assert!(encode(&g).is_err());
     let mut g = sample();
     g.time = f64::INFINITY;

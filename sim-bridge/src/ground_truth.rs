@@ -38,8 +38,10 @@ pub fn compute(world: &World, d: &mjData, team: &str, tick: u64, out: &mut Groun
     out.time = d.time;
     out.object = world.object.map(|(b, _, _)| body_truth(m, d, b, "object"));
     out.torsos.clear();
+    out.hands.clear();
     for r in &world.robots {
         out.torsos.push(body_truth(m, d, r.base_body, &r.id));
+        out.hands.push(body_truth(m, d, r.hand_contact_body, &r.id));
     }
     out.hand_contacts.clear();
     out.foot_contacts.clear();
@@ -82,7 +84,7 @@ pub fn compute(world: &World, d: &mjData, team: &str, tick: u64, out: &mut Groun
 
 /// An empty ground-truth message.
 pub fn empty(team: &str) -> GroundTruth {
-    GroundTruth { header: Header::new(team, None, 0, 0), time: 0.0, object: None, torsos: Vec::new(), hand_contacts: Vec::new(), foot_contacts: Vec::new() }
+    GroundTruth { header: Header::new(team, None, 0, 0), time: 0.0, object: None, torsos: Vec::new(), hand_contacts: Vec::new(), foot_contacts: Vec::new(), hands: Vec::new() }
 }
 
 /// Ground truth kept in memory, every `every` ticks.

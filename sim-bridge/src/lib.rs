@@ -22,5 +22,6 @@ pub mod mujoco_plant;
 pub mod perturbation;
 pub mod plant;
 pub mod realtime;
+pub mod scene;
 pub mod standing;
 pub mod world;

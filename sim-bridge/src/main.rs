@@ -44,6 +44,14 @@ enum Command {
     /// process, publishing on the robots' torque keys; pair with `run` without
     /// --standing-controller for process-separated speed figures.
     Stand(RunArgs),
+    /// Run a scene file (world, pushes, settle and run lengths) as `team run --distributed`
+    /// writes it into its report folder; lockstep, ground truth published every tick.
+    Scene {
+        /// The scene file (TOML, `sim_bridge::scene::Scene`).
+        path: std::path::PathBuf,
+        #[command(flatten)]
+        zenoh: ZenohArgs,
+    },
 }
 
 #[derive(clap::Args)]
@@ -149,6 +157,23 @@ async fn main() -> Result<()> {
         }
         Command::Run(args) => run(args).await?,
         Command::Stand(args) => stand(args).await?,
+        Command::Scene { path, zenoh } => {
+            let scene = sim_bridge::scene::Scene::load(&path)?;
+            let session = transport::open(&zenoh, Role::Member).await?;
+            let (_tx, rx) = tokio::sync::watch::channel(false);
+            let r = sim_bridge::scene::run(&session, &scene, rx).await?;
+            println!(
+                "scene {}: settled {} ticks in {:.3} s wall, ran {} ticks ({:.3} s simulated) in {:.3} s wall: real-time factor {:.3}",
+                path.display(),
+                r.settle.ticks,
+                r.settle.wall_time.as_secs_f64(),
+                r.run.ticks,
+                r.run.sim_time,
+                r.run.wall_time.as_secs_f64(),
+                r.run.sim_time / r.run.wall_time.as_secs_f64()
+            );
+            session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
+        }
     }
     Ok(())
 }

@@ -9,7 +9,8 @@ use protocol::{PerturbationRequest, PerturbationTarget};
 use crate::world::{name2id, World, WorldError};
 
 /// One wrench on one body over `[start, start + duration)` of simulated time.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Perturbation {
     pub target: PerturbationTarget,
     /// `[f_x, f_y, f_z, m_x, m_y, m_z]`, world frame, at the body's centre of mass.

@@ -45,7 +45,8 @@ pub enum WorldError {
 }
 
 /// A robot of the scenario.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct RobotPlacement {
     /// Robot id (protocol id rules), also the MuJoCo name prefix `{id}/`.
     pub id: String,
@@ -73,7 +74,8 @@ impl RobotPlacement {
 }
 
 /// The carried object: a box.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ObjectSpec {
     /// Edge lengths, m.
     pub size: [f64; 3],
@@ -104,7 +106,8 @@ impl ObjectSpec {
 }
 
 /// Contact parameters (see README: why these).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ContactParams {
     /// Feet: sliding friction (torsional/rolling unused with condim 3).
     pub foot_friction: f64,
@@ -132,12 +135,13 @@ impl Default for ContactParams {
 }
 
 /// Solver settings of the world.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct SolverParams {
     /// `implicitfast` (default) or `RK4` or `Euler`.
-    pub integrator: &'static str,
+    pub integrator: String,
     /// `elliptic` (default: needed for a sensible condim-6 patch) or `pyramidal`.
-    pub cone: &'static str,
+    pub cone: String,
     pub impratio: f64,
     pub iterations: u32,
     pub tolerance: f64,
@@ -145,12 +149,13 @@ pub struct SolverParams {
 
 impl Default for SolverParams {
     fn default() -> Self {
-        SolverParams { integrator: "implicitfast", cone: "elliptic", impratio: 10.0, iterations: 100, tolerance: 1e-10 }
+        SolverParams { integrator: "implicitfast".into(), cone: "elliptic".into(), impratio: 10.0, iterations: 100, tolerance: 1e-10 }
     }
 }
 
 /// Everything the world is built from.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct WorldSpec {
     pub robots: Vec<RobotPlacement>,
     pub object: Option<ObjectSpec>,
@@ -248,7 +253,7 @@ impl WorldSpec {
         if !(self.initial_joint_noise.is_finite() && self.initial_joint_noise >= 0.0) {
             return Err(WorldError::Invalid("initial joint noise must be >= 0".into()));
         }
-        if !["implicitfast", "implicit", "RK4", "Euler"].contains(&self.solver.integrator) || !["elliptic", "pyramidal"].contains(&self.solver.cone) {
+        if !["implicitfast", "implicit", "RK4", "Euler"].contains(&self.solver.integrator.as_str()) || !["elliptic", "pyramidal"].contains(&self.solver.cone.as_str()) {
             return Err(WorldError::Invalid("unknown integrator or cone".into()));
         }
         finite("solver", &[self.solver.impratio, self.solver.tolerance])?;

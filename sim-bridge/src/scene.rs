@@ -1,0 +1,119 @@
+//! A scenario's run as the bridge sees it, in one file: the world (robots already placed,
+//! hands already on the object), the timed pushes, how long to settle and how long to run.
+//! The runner (`team run`) writes it into the report folder; `sim-bridge run --scene FILE`
+//! reads it when the bridge runs as its own process, and the embedded run calls [`run`] with
+//! the same value, so both modes simulate the same thing.
+//!
+//! The run: build the world, settle `settle_ticks` lockstep ticks under the controller (the
+//! scenario clock then restarts at 0, tick numbers continue), add the pushes (their `start`
+//! is on the scenario clock), run `ticks` lockstep ticks. Ground truth is published on
+//! `team/{team}/ground-truth` after every tick of both phases (the runner records it and
+//! drives its progress bar from it).
+
+use std::path::Path;
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+use tokio::sync::watch;
+use zenoh::Session;
+
+use crate::lockstep::{self, BridgeError, Extras, LockstepConfig};
+use crate::mujoco_plant::MujocoPlant;
+use crate::perturbation::Perturbation;
+use crate::world::{World, WorldError, WorldSpec};
+
+/// Everything the bridge needs for a scenario run.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    pub team: String,
+    pub world: WorldSpec,
+    /// Pushes, `start` in seconds on the scenario clock.
+    #[serde(default)]
+    pub perturbations: Vec<Perturbation>,
+    pub settle_ticks: u64,
+    pub ticks: u64,
+    /// Seconds a lockstep tick may wait for torques before the run fails naming the robot.
+    pub command_timeout: f64,
+    /// Seconds to wait for every robot to join.
+    pub start_timeout: f64,
+}
+
+/// What a scene run did.
+#[derive(Debug, Clone)]
+pub struct SceneReport {
+    pub settle: lockstep::LockstepReport,
+    pub run: lockstep::LockstepReport,
+    pub perturbations_applied_steps: u64,
+}
+
+impl Scene {
+    /// Read a scene file (TOML).
+    pub fn load(path: &Path) -> Result<Scene, WorldError> {
+        let text = std::fs::read_to_string(path).map_err(|e| WorldError::Invalid(format!("reading scene {}: {e}", path.display())))?;
+        let s: Scene = toml::from_str(&text).map_err(|e| WorldError::Invalid(format!("scene {}: {e}", path.display())))?;
+        s.check()?;
+        Ok(s)
+    }
+
+    /// Write it as TOML.
+    pub fn save(&self, path: &Path) -> Result<(), WorldError> {
+        let text = toml::to_string(self).map_err(|e| WorldError::Invalid(format!("scene: {e}")))?;
+        std::fs::write(path, text).map_err(|e| WorldError::Invalid(format!("writing scene {}: {e}", path.display())))
+    }
+
+    fn check(&self) -> Result<(), WorldError> {
+        protocol::validate_id("team", &self.team).map_err(|e| WorldError::Invalid(format!("scene team: {e}")))?;
+        for (what, x) in [("command_timeout", self.command_timeout), ("start_timeout", self.start_timeout)] {
+            if !(x.is_finite() && x > 0.0) {
+                return Err(WorldError::Invalid(format!("scene {what} = {x} must be positive")));
+            }
+        }
+        if self.ticks == 0 {
+            return Err(WorldError::Invalid("scene ticks must be positive".into()));
+        }
+        self.world.substeps()?;
+        Ok(())
+    }
+
+    fn lockstep(&self, ticks: u64) -> LockstepConfig {
+        LockstepConfig {
+            team: self.team.clone(),
+            ticks,
+            start_timeout: Duration::from_secs_f64(self.start_timeout),
+            command_timeout: Duration::from_secs_f64(self.command_timeout),
+            resend_every: Duration::from_millis(50),
+            progress_every: 0,
+        }
+    }
+}
+
+/// Errors of a scene run.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error(transparent)]
+    World(#[from] WorldError),
+    #[error(transparent)]
+    Bridge(#[from] BridgeError),
+}
+
+/// Build the world and run the scene in lockstep (see the module docs).
+pub async fn run(session: &Session, scene: &Scene, stop: watch::Receiver<bool>) -> Result<SceneReport, SceneError> {
+    scene.check()?;
+    let world = World::build(&scene.world)?;
+    let mut plant = MujocoPlant::new(world)?;
+    let mut extras = Extras { publish_ground_truth: true, perturbation_key: true, ..Default::default() };
+    let settle = if scene.settle_ticks > 0 {
+        let r = lockstep::run_with(session, &scene.lockstep(scene.settle_ticks), &mut plant, &mut extras, stop.clone()).await?;
+        plant.restart_clock();
+        r
+    } else {
+        lockstep::LockstepReport { ticks: 0, sim_time: 0.0, wall_time: Duration::ZERO, resends: 0, rejected_torques: 0 }
+    };
+    for p in &scene.perturbations {
+        plant.perturbations.add(&plant.world, p.clone())?;
+    }
+    extras.first_tick = scene.settle_ticks;
+    let run = lockstep::run_with(session, &scene.lockstep(scene.ticks), &mut plant, &mut extras, stop).await?;
+    Ok(SceneReport { settle, run, perturbations_applied_steps: plant.perturbations.applied_steps })
+}
