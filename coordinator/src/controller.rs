@@ -15,9 +15,12 @@
 //! object is `-G (G^+ F_x) = w_ff`: it balances the weight in a static hold.
 //!
 //! **Fallback.** When the QP is infeasible or fails (status other than Solved/AlmostSolved),
-//! `F_c = 0`: plain projected inverse dynamics `tau = [P S]^+ P tau_M` (still consistent with
-//! the contact constraints, without the force optimisation), clamped to the torque limits.
-//! The diagnostics keep the QP's status; [`TickReport::fallback`] says why.
+//! `F_c` comes from the least-violation relaxation ([`qp::solve_least_violation`]: every row
+//! softened by a heavily penalised slack), which keeps the squeeze and the friction rows as
+//! far as they can be kept; if even that fails, `F_c = 0` (plain projected inverse dynamics
+//! `tau = [P S]^+ P tau_M`). Either way the torques are clamped to the limits. The
+//! diagnostics keep the QP's status; [`TickReport::fallback`] says what was done. (`F_c = 0`
+//! drops the internal wrench, hence the squeeze: one infeasible tick lost the object.)
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -26,7 +29,7 @@ use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Translation3, UnitQuaternio
 use protocol::{ContactWrench, DynamicsTerms, Header, PoseReference, QpStatus, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
 
 use crate::grasp::{centroid_pose, GraspOffsets, GraspTerms};
-use crate::impedance::{pose_error, task_wrench, Gains, MotionSpace, TaskError};
+use crate::impedance::{pose_error, Gains, MotionSpace, TaskError, TaskStack};
 use crate::linalg::{quat_wxyz, rotation_from_wxyz};
 use crate::projection::Projections;
 use crate::qp::{self, ContactKind, QpInput};
@@ -36,8 +39,11 @@ use crate::{ControllerError, TeamController};
 /// Gravity vector (world), protocol convention.
 const GRAVITY: [f64; 3] = [0.0, 0.0, -9.81];
 
-/// Parameters of the controller.
-#[derive(Debug, Clone)]
+/// Parameters of the controller. A TOML file of these fields (any subset; the rest keep
+/// their defaults) is what `coordinator run --controller paper --controller-config FILE` reads,
+/// see [`ControllerConfig::from_toml`].
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct ControllerConfig {
     pub object_gains: Gains,
     pub torso_gains: Gains,
@@ -47,8 +53,20 @@ pub struct ControllerConfig {
     pub object_inertia: Matrix3<f64>,
     /// Object pose when the grasp first closes; `None`: the hands' centroid, world axes.
     pub object_pose_at_grasp: Option<Isometry3<f64>>,
-    /// Minimum normal force of every contact, N.
-    pub f_min: f64,
+    /// Minimum normal force of every stance foot, N.
+    pub f_min_foot: f64,
+    /// Minimum normal force of every hand (the least squeeze), N. The torque-optimal grasp
+    /// otherwise sits on the friction limit (weight / mu), where any disturbance slips it.
+    pub f_min_hand: f64,
+    /// Share of each contact's friction the QP may use (`mu` and `xi` are scaled by it). The
+    /// paper's pyramid `|f_x|, |f_y| <= mu f_n` reaches `sqrt(2) mu f_n` at its corners, outside
+    /// the real (circular) cone; `1/sqrt(2)` makes it the inscribed pyramid.
+    pub friction_margin: f64,
+    /// Share of the palm's half-sizes the centre of pressure may use (the tilt rows of eqn.
+    /// moment_constraint). At 1 the optimal grasp puts the whole squeeze on one palm edge,
+    /// where the palm starts to roll on the object (seen in MuJoCo: the palm rolled 27 deg
+    /// about its top edge within 3 s).
+    pub patch_margin: f64,
     /// Added to the diagonal of the semi-definite QP objective.
     pub regularisation: f64,
     pub qp_max_iter: u32,
@@ -70,12 +88,59 @@ impl Default for ControllerConfig {
             object_mass: 1.0,
             object_inertia: Matrix3::identity() * (1.0 * (0.36 + 0.36) / 12.0),
             object_pose_at_grasp: None,
-            f_min: 5.0,
+            f_min_foot: 5.0,
+            f_min_hand: 30.0,
+            friction_margin: std::f64::consts::FRAC_1_SQRT_2,
+            patch_margin: 0.5,
             regularisation: 1e-6,
             qp_max_iter: 50,
             dense_qp: true,
             fully_actuated: false,
         }
+    }
+}
+
+impl ControllerConfig {
+    /// Parse a TOML controller configuration and check it.
+    pub fn from_toml(text: &str) -> Result<Self, ControllerError> {
+        let c: ControllerConfig = toml::from_str(text).map_err(|e| ControllerError::Config(e.to_string()))?;
+        c.check()?;
+        Ok(c)
+    }
+
+    /// The TOML text of this configuration.
+    pub fn to_toml(&self) -> Result<String, ControllerError> {
+        toml::to_string(self).map_err(|e| ControllerError::Config(e.to_string()))
+    }
+
+    /// Gains of the right sizes, finite and non-negative; masses, forces and limits sane.
+    pub fn check(&self) -> Result<(), ControllerError> {
+        let bad = |what: &str, why: String| Err(ControllerError::Config(format!("{what}: {why}")));
+        for (what, g, n) in [("object_gains", &self.object_gains, 6), ("torso_gains", &self.torso_gains, 6), ("swing_gains", &self.swing_gains, 3)] {
+            if g.kp.len() != n || g.kd.len() != n {
+                return bad(what, format!("needs {n} stiffness and {n} damping values, has {} and {}", g.kp.len(), g.kd.len()));
+            }
+            if g.kp.iter().chain(&g.kd).any(|x| !(x.is_finite() && *x >= 0.0)) {
+                return bad(what, "gains must be finite and non-negative".into());
+            }
+        }
+        if !(self.object_mass.is_finite() && self.object_mass >= 0.0) || self.object_inertia.iter().any(|x| !x.is_finite()) {
+            return bad("object", "mass and inertia must be finite, mass non-negative".into());
+        }
+        for (what, x) in [("f_min_foot", self.f_min_foot), ("f_min_hand", self.f_min_hand), ("regularisation", self.regularisation)] {
+            if !(x.is_finite() && x >= 0.0) {
+                return bad(what, format!("{x} must be finite and non-negative"));
+            }
+        }
+        for (what, x) in [("friction_margin", self.friction_margin), ("patch_margin", self.patch_margin)] {
+            if !(x.is_finite() && x > 0.0 && x <= 1.0) {
+                return bad(what, format!("{x} must be in (0, 1]"));
+            }
+        }
+        if self.qp_max_iter == 0 {
+            return bad("qp_max_iter", "must be positive".into());
+        }
+        Ok(())
     }
 }
 
@@ -240,9 +305,11 @@ impl PaperController {
         let mcinv_bias = &proj.mc_inv * (&proj.p * &team.bias - &proj.pdot_v);
         let t_proj = t_start.elapsed().as_secs_f64() * 1e6;
 
-        // tau_M: superposition of the impedance tasks (eqn. joint_space_tau_M).
+        // tau_M: superposition of the impedance tasks (eqn. joint_space_tau_M), with the
+        // operational-space inertia and non-linear terms of eq. control_law computed for the
+        // team's task space as a whole (every task's rows stacked; see `impedance`).
         let ms = MotionSpace { mcinv_p: &mcinv_p, mcinv_bias: &mcinv_bias };
-        let mut tau_m = DVector::zeros(n);
+        let mut tasks = TaskStack::with_capacity(n);
         let mut load = DVector::zeros(n);
         let mut f_x = DVector::zeros(6);
         let refs = self.references.clone();
@@ -252,7 +319,6 @@ impl PaperController {
                 None => (*self.held_object.get_or_insert(g.object), [0.0; 6], [0.0; 6]),
             };
             let err = pose_error(&g.object, &g.object_twist, &x_d, &tw_d, &acc_d);
-            let mut f = task_wrench(&g.j_o, &g.jdv_o, &ms, &err, &cfg.object_gains)?;
             // Object load feed-forward w_ff and the load F_x = -w_ff on the robots.
             let r_o = g.object.rotation.to_rotation_matrix();
             let i_w = r_o.matrix() * cfg.object_inertia * r_o.matrix().transpose();
@@ -264,8 +330,9 @@ impl PaperController {
                 f_x[i] = -force[i];
                 f_x[3 + i] = -moment[i];
             }
-            f -= &f_x;
-            tau_m += g.j_o.transpose() * f;
+            let mut ff = f_x.clone();
+            ff.neg_mut();
+            tasks.push(&g.j_o, &g.jdv_o, &err, &cfg.object_gains, Some(ff));
             load = g.j_o.transpose() * &f_x;
         }
         for tf in &team.torsos {
@@ -277,8 +344,7 @@ impl PaperController {
             };
             let twist = &tf.jacobian * &team.velocity;
             let err = pose_error(&x, &twist, &x_d, &tw_d, &acc_d);
-            let f = task_wrench(&tf.jacobian, &tf.jdot_v, &ms, &err, &cfg.torso_gains)?;
-            tau_m += tf.jacobian.transpose() * f;
+            tasks.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.torso_gains, None);
         }
         for tf in &team.swing_feet {
             let id = &team.robots[tf.robot].id;
@@ -293,9 +359,9 @@ impl PaperController {
                 edot: DVector::from_iterator(3, (0..3).map(|i| vel[i] - v_d[i])),
                 acc_d: DVector::from_row_slice(&a_d),
             };
-            let f = task_wrench(&tf.jacobian, &tf.jdot_v, &ms, &err, &cfg.swing_gains)?;
-            tau_m += tf.jacobian.transpose() * f;
+            tasks.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.swing_gains, None);
         }
+        let tau_m = tasks.joint_torque(&ms, n)?;
         let tau0 = &proj.ps_pinv * (&proj.p * &tau_m);
         let t_imp = t_start.elapsed().as_secs_f64() * 1e6;
 
@@ -325,14 +391,18 @@ impl PaperController {
         let mut contacts = Vec::with_capacity(nf + team.hands.len());
         for (k, f) in team.feet.iter().enumerate() {
             let d = &self.descriptions[&team.robots[f.robot].id];
-            contacts.push((3 * k, ContactKind::Foot { mu: d.foot_mu }));
+            contacts.push((3 * k, ContactKind::Foot { mu: d.foot_mu * cfg.friction_margin, f_min: cfg.f_min_foot }));
         }
         for (k, h) in team.hands.iter().enumerate() {
             let d = &self.descriptions[&team.robots[h.robot].id];
             let r = h.rotation.matrix();
             contacts.push((
                 3 * nf + 6 * k,
-                ContactKind::Hand { tx: r.column(0).into(), ty: r.column(1).into(), n: r.column(2).into(), mu: d.hand_mu, xi: d.hand_xi, half: d.hand_half_size },
+                ContactKind::Hand { tx: r.column(0).into(), ty: r.column(1).into(), n: r.column(2).into(), mu: d.hand_mu * cfg.friction_margin,
+                    xi: d.hand_xi * cfg.friction_margin,
+                    half: [d.hand_half_size[0] * cfg.patch_margin, d.hand_half_size[1] * cfg.patch_margin],
+                    f_min: cfg.f_min_hand,
+                },
             ));
         }
         let t_build = t_start.elapsed().as_secs_f64() * 1e6;
@@ -344,7 +414,6 @@ impl PaperController {
             actuated: &actuated,
             limits: &limits,
             tau0: &tau0,
-            f_min: cfg.f_min,
             regularisation: cfg.regularisation,
             dense_first: cfg.dense_qp,
         };
@@ -352,7 +421,10 @@ impl PaperController {
         let t_qp = t_start.elapsed().as_secs_f64() * 1e6;
         let (f_c, fallback) = match qp.status {
             QpStatus::Solved | QpStatus::AlmostSolved => (qp.f.clone(), None),
-            s => (DVector::zeros(m), Some(format!("QP {s:?}: F_c = 0, tau = [P S]^+ P tau_M clamped to the torque limits"))),
+            s => match qp::solve_least_violation(&input, cfg.qp_max_iter) {
+                Some((f, worst)) => (f, Some(format!("QP {s:?}: least-violation F_c (worst row violated by {worst:.3}), torques clamped to the limits"))),
+                None => (DVector::zeros(m), Some(format!("QP {s:?}: F_c = 0, tau = [P S]^+ P tau_M clamped to the torque limits"))),
+            },
         };
         let mut tau = &tau0 + &y * &f_c;
         if fallback.is_some() {

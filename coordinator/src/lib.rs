@@ -63,6 +63,8 @@ pub enum ControllerError {
     NonFinite { robot: String, what: String },
     #[error("singular {what}")]
     Singular { what: String },
+    #[error("controller configuration: {0}")]
+    Config(String),
 }
 
 /// Smoke-run stand-in for the team controller (until the paper's controller lands): joint

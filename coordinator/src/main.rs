@@ -38,12 +38,19 @@ enum Command {
         /// Joint damping of the smoke controller, N·m·s/rad.
         #[arg(long, default_value_t = 2.0)]
         damping: f64,
-        /// Minimum normal force of every contact (paper controller), N.
+        /// Minimum normal force of every stance foot (paper controller), N.
         #[arg(long, default_value_t = 5.0)]
-        min_normal_force: f64,
+        min_foot_force: f64,
+        /// Minimum normal force of every hand in grasp, the least squeeze (paper controller), N.
+        #[arg(long, default_value_t = 30.0)]
+        min_hand_force: f64,
         /// Mass of the carried object (paper controller), kg.
         #[arg(long, default_value_t = 1.0)]
         object_mass: f64,
+        /// Paper controller configuration (TOML: gains, object, minimum forces, see
+        /// `ControllerConfig`); replaces --min-foot-force, --min-hand-force and --object-mass.
+        #[arg(long)]
+        controller_config: Option<std::path::PathBuf>,
         #[command(flatten)]
         zenoh: ZenohArgs,
     },
@@ -56,7 +63,7 @@ async fn main() -> Result<()> {
         .with_writer(std::io::stderr)
         .init();
     match Cli::parse().command {
-        Command::Run { team, tick_deadline_ms, controller, damping, min_normal_force, object_mass, zenoh } => {
+        Command::Run { team, tick_deadline_ms, controller, damping, min_foot_force, min_hand_force, object_mass, controller_config, zenoh } => {
             anyhow::ensure!(damping.is_finite() && damping >= 0.0, "--damping must be a finite non-negative number");
             let session = transport::open(&zenoh, Role::Hub).await?;
             let cfg = CoordinatorConfig { team, tick_deadline: Duration::from_millis(tick_deadline_ms) };
@@ -70,11 +77,21 @@ async fn main() -> Result<()> {
                     service::run(&session, cfg, JointDamping { damping }, rx).await?;
                 }
                 ControllerKind::Paper => {
-                    anyhow::ensure!(min_normal_force.is_finite() && min_normal_force >= 0.0, "--min-normal-force must be >= 0");
+                    anyhow::ensure!(min_foot_force.is_finite() && min_foot_force >= 0.0, "--min-foot-force must be >= 0");
+                    anyhow::ensure!(min_hand_force.is_finite() && min_hand_force >= 0.0, "--min-hand-force must be >= 0");
                     anyhow::ensure!(object_mass.is_finite() && object_mass >= 0.0, "--object-mass must be >= 0");
-                    let mut pc = ControllerConfig { f_min: min_normal_force, ..ControllerConfig::default() };
-                    pc.object_inertia *= if pc.object_mass > 0.0 { object_mass / pc.object_mass } else { 0.0 };
-                    pc.object_mass = object_mass;
+                    let pc = match &controller_config {
+                        Some(path) => {
+                            let text = std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+                            ControllerConfig::from_toml(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?
+                        }
+                        None => {
+                            let mut pc = ControllerConfig { f_min_foot: min_foot_force, f_min_hand: min_hand_force, ..ControllerConfig::default() };
+                            pc.object_inertia *= if pc.object_mass > 0.0 { object_mass / pc.object_mass } else { 0.0 };
+                            pc.object_mass = object_mass;
+                            pc
+                        }
+                    };
                     service::run(&session, cfg, PaperController::new(pc), rx).await?;
                 }
             }

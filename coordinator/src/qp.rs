@@ -13,6 +13,7 @@
 //!
 //! Sign conventions of the constraint rows (all in the contact's own frame):
 //! * feet: `n = e_z` (world), `f_z >= f_min`, `|f_x|, |f_y| <= mu f_z` (ground pushes up).
+//!   Feet and hands have their own `f_min` (a hand's is the squeeze it keeps at least).
 //! * hands: `hand_contact` +z `n` is the palm's OUTWARD normal, pointing into the object; the
 //!   object pushes the palm back, so the force on the robot has `n . f <= 0`. With the normal
 //!   force `f_n = -n . f >= f_min`: `|t_x . f|, |t_y . f| <= mu f_n`, `|n . m| <= xi f_n`,
@@ -32,22 +33,23 @@ use protocol::QpStatus;
 #[derive(Debug, Clone)]
 pub enum ContactKind {
     /// Point foot: friction coefficient.
-    Foot { mu: f64 },
-    /// Flat hand: frame axes (world), friction, torsional coefficient, patch half-sizes.
-    Hand { tx: Vector3<f64>, ty: Vector3<f64>, n: Vector3<f64>, mu: f64, xi: f64, half: [f64; 2] },
+    Foot { mu: f64, f_min: f64 },
+    /// Flat hand: frame axes (world), friction, torsional coefficient, patch half-sizes,
+    /// minimum normal force.
+    Hand { tx: Vector3<f64>, ty: Vector3<f64>, n: Vector3<f64>, mu: f64, xi: f64, half: [f64; 2], f_min: f64 },
 }
 
 /// Rows `c . lambda_k >= lo` of one contact (3 or 6 columns).
-pub fn contact_rows(kind: &ContactKind, f_min: f64) -> Vec<(Vec<f64>, f64)> {
+pub fn contact_rows(kind: &ContactKind) -> Vec<(Vec<f64>, f64)> {
     match kind {
-        ContactKind::Foot { mu } => vec![
+        ContactKind::Foot { mu, f_min } => vec![
             (vec![-1.0, 0.0, *mu], 0.0),
             (vec![1.0, 0.0, *mu], 0.0),
             (vec![0.0, -1.0, *mu], 0.0),
             (vec![0.0, 1.0, *mu], 0.0),
-            (vec![0.0, 0.0, 1.0], f_min),
+            (vec![0.0, 0.0, 1.0], *f_min),
         ],
-        ContactKind::Hand { tx, ty, n, mu, xi, half } => {
+        ContactKind::Hand { tx, ty, n, mu, xi, half, f_min } => {
             let row = |f: Vector3<f64>, m: Vector3<f64>| vec![f.x, f.y, f.z, m.x, m.y, m.z];
             let z = Vector3::zeros();
             vec![
@@ -56,7 +58,7 @@ pub fn contact_rows(kind: &ContactKind, f_min: f64) -> Vec<(Vec<f64>, f64)> {
                 (row(-*mu * n + tx, z), 0.0),
                 (row(-*mu * n - ty, z), 0.0),
                 (row(-*mu * n + ty, z), 0.0),
-                (row(-n, z), f_min),
+                (row(-n, z), *f_min),
                 // torsion |n.m| <= xi f_n
                 (row(-*xi * n, -n), 0.0),
                 (row(-*xi * n, *n), 0.0),
@@ -84,7 +86,6 @@ pub struct QpInput<'a> {
     pub limits: &'a [f64],
     /// `tau_0 = [P S]^+ P tau_M`.
     pub tau0: &'a DVector<f64>,
-    pub f_min: f64,
     pub regularisation: f64,
     /// Try [`dense_ipm`] first (Clarabel if it does not converge).
     pub dense_first: bool,
@@ -136,7 +137,7 @@ pub fn constraints(inp: &QpInput) -> (DMatrix<f64>, DVector<f64>) {
         };
         let rho_k = inp.rho.rows(*start, d);
         let eta_k = inp.eta.rows(*start, d);
-        for (c, lo) in contact_rows(kind, inp.f_min) {
+        for (c, lo) in contact_rows(kind) {
             let c = DVector::from_vec(c);
             // c.(rho F + eta) >= lo  <=>  -(c^T rho) F <= c.eta - lo
             rows_a.push(-(rho_k.transpose() * &c));
@@ -205,6 +206,45 @@ pub fn solve(inp: &QpInput, max_iter: u32) -> QpOutcome {
     let f = DVector::from_column_slice(&sol.x);
     let f = if f.iter().all(|x| x.is_finite()) { f } else { DVector::zeros(m) };
     QpOutcome { status, iterations: sol.iterations, f, solve_us: t0.elapsed().as_secs_f64() * 1e6, setup_us, rows, solver: "clarabel" }
+}
+
+/// Weight of the slacks in [`solve_least_violation`] (per N^2 of violation, against the
+/// torque objective in (N m)^2).
+pub const VIOLATION_WEIGHT: f64 = 1e6;
+
+/// The fallback when the QP is infeasible: every row `A F <= b` gets a slack `t >= 0`,
+/// `A F - t <= b`, and `F^T H F + w |t|^2` is minimised. Always feasible; it keeps what can be
+/// kept (above all the hands' squeeze) instead of dropping every contact force. Returns `F`
+/// and the largest violation `max t`, or `None` when even this does not converge.
+pub fn solve_least_violation(inp: &QpInput, max_iter: u32) -> Option<(DVector<f64>, f64)> {
+    let m = inp.rho.ncols();
+    let (a, b) = constraints(inp);
+    let r = a.nrows();
+    let mut h = DMatrix::zeros(m + r, m + r);
+    let mut hf = inp.y.transpose() * inp.y;
+    for i in 0..m {
+        hf[(i, i)] += inp.regularisation;
+    }
+    h.view_mut((0, 0), (m, m)).copy_from(&(2.0 * hf));
+    for i in 0..r {
+        h[(m + i, m + i)] = 2.0 * VIOLATION_WEIGHT;
+    }
+    // [A -I; 0 -I] [F; t] <= [b; 0]
+    let mut aa = DMatrix::zeros(2 * r, m + r);
+    aa.view_mut((0, 0), (r, m)).copy_from(&a);
+    for i in 0..r {
+        aa[(i, m + i)] = -1.0;
+        aa[(r + i, m + i)] = -1.0;
+    }
+    let mut bb = DVector::zeros(2 * r);
+    bb.rows_mut(0, r).copy_from(&b);
+    if !(bb.iter().all(|x| x.is_finite()) && aa.iter().all(|x| x.is_finite()) && h.iter().all(|x| x.is_finite())) {
+        return None;
+    }
+    let (x, _) = dense_ipm(&h, &aa, &bb, max_iter.max(100), 1e-7)?;
+    let f = x.rows(0, m).into_owned();
+    let worst = (&a * &f - &b).iter().copied().fold(0.0, f64::max);
+    Some((f, worst))
 }
 
 /// A dense primal-dual interior-point method (Mehrotra predictor-corrector, normal equations

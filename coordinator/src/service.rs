@@ -60,6 +60,7 @@ pub async fn run(
     let mut status_tick = 0u64;
     let mut housekeeping = tokio::time::interval(cfg.tick_deadline.max(Duration::from_millis(10)));
     let mut detail = String::from("waiting for members");
+    let mut refs = ReferenceBuffer::default();
     loop {
         let mut membership_changed = false;
         let mut publish_status = false;
@@ -91,10 +92,7 @@ pub async fn run(
             }
             r = references.recv_async() => {
                 let Ok(sample) = r else { break };
-                match decode_sample::<TaskReferences>(&sample) {
-                    Ok(refs) => controller.set_references(&refs),
-                    Err(e) => tracing::warn!(key = %sample.key_expr(), "rejected references: {e}"),
-                }
+                refs.take(&sample);
             }
             d = dynamics.recv_async() => {
                 let Ok(sample) = d else { break };
@@ -108,6 +106,8 @@ pub async fn run(
                 };
                 match assembler.add(terms, &members) {
                     TickOutcome::Complete(tick, terms) => {
+                        refs.drain(&references);
+                        refs.apply(tick, &mut controller);
                         solve_and_publish(session, &cfg, &mut controller, tick, &terms, &mut commands, &mut command_pubs, &mut diag_pub, &mut counters).await?;
                         status_tick = tick;
                     }
@@ -131,6 +131,8 @@ pub async fn run(
             // A robot that left no longer holds up the ticks it had not sent.
             for tick in assembler.pending_ticks() {
                 if let TickOutcome::Complete(t, terms) = assembler.try_complete(tick, &members) {
+                    refs.drain(&references);
+                    refs.apply(t, &mut controller);
                     solve_and_publish(session, &cfg, &mut controller, t, &terms, &mut commands, &mut command_pubs, &mut diag_pub, &mut counters).await?;
                     status_tick = t;
                 }
@@ -158,6 +160,42 @@ pub async fn run(
     }
     tracing::info!(?counters, "coordinator stopped");
     Ok(counters)
+}
+
+/// Task references by tick. A planner may publish references ahead of time (a scenario
+/// driver does, a few ticks ahead of the simulation); tick `k` is solved with the newest
+/// reference whose tick is at most `k`. References still queued when a tick completes are
+/// taken first, so a reference published before the tick's states is never a tick late.
+#[derive(Default)]
+struct ReferenceBuffer {
+    by_tick: BTreeMap<u64, TaskReferences>,
+}
+
+impl ReferenceBuffer {
+    fn take(&mut self, sample: &zenoh::sample::Sample) {
+        match decode_sample::<TaskReferences>(sample) {
+            Ok(r) => {
+                self.by_tick.insert(r.header.tick, r);
+            }
+            Err(e) => tracing::warn!(key = %sample.key_expr(), "rejected references: {e}"),
+        }
+    }
+
+    fn drain(&mut self, q: &transport::SampleQueue) {
+        while let Ok(Some(sample)) = q.try_recv() {
+            self.take(&sample);
+        }
+    }
+
+    /// Hand the controller the reference for `tick` (if a newer one than it has arrived).
+    fn apply(&mut self, tick: u64, controller: &mut impl TeamController) {
+        let Some((&t, _)) = self.by_tick.range(..=tick).next_back() else { return };
+        // Older entries are no longer needed; the applied one is removed once used.
+        self.by_tick = self.by_tick.split_off(&t);
+        if let Some(r) = self.by_tick.remove(&t) {
+            controller.set_references(&r);
+        }
+    }
 }
 
 #[allow(clippy::too_many_arguments)]

@@ -162,12 +162,12 @@ fn fully_actuated_reduces_to_lin2018() {
 }
 
 /// Check every friction, moment and torque row on the predicted real wrenches.
-fn worst_violation(r: &coordinator::controller::TickReport, f_min: f64) -> (f64, f64) {
+fn worst_violation(r: &coordinator::controller::TickReport) -> (f64, f64) {
     let mut worst_c = f64::NEG_INFINITY;
     for (start, kind) in &r.contacts {
         let d = if matches!(kind, coordinator::qp::ContactKind::Foot { .. }) { 3 } else { 6 };
         let lam = r.lambda_real.rows(*start, d);
-        for (c, lo) in contact_rows(kind, f_min) {
+        for (c, lo) in contact_rows(kind) {
             worst_c = worst_c.max(lo - DVector::from_vec(c).dot(&lam));
         }
     }
@@ -183,7 +183,6 @@ fn static_team_holds_the_object() {
     let mut fx = Fixture::new();
     let (terms, descs) = fx.static_team(2);
     let cfg = ControllerConfig::default();
-    let f_min = cfg.f_min;
     let mut c = controller(&descs, cfg);
     // References equal to the current poses: first tick captures, then explicit references.
     c.compute(&terms).expect("tick");
@@ -216,7 +215,7 @@ fn static_team_holds_the_object() {
     assert_eq!(r.qp.status, QpStatus::Solved, "{:?}", r.fallback);
     assert_eq!(cmds.len(), 2);
     assert!(cmds.iter().all(|c| c.tau.len() == 18));
-    let (wc, wt) = worst_violation(r, f_min);
+    let (wc, wt) = worst_violation(r);
     println!("QP {:?} in {} iterations, {} rows; worst constraint violation {wc:.2e} N, worst torque excess {wt:.2e} Nm", r.qp.status, r.qp.iterations, r.qp.rows);
     assert!(wc < 1e-5 && wt < 1e-5);
     // Net hand wrench on the object balances its weight: hands push with -lambda.
@@ -309,13 +308,13 @@ fn bad_input_is_an_error_or_fallback_never_a_panic() {
     let res = c.solve(&bad, &mut out);
     println!("zero Jacobians: {res:?}, fallback {}", c.used_fallback());
     // Infeasible QP (absurd minimum normal force): the fallback, within the torque limits.
-    let mut c3 = controller(&descs, ControllerConfig { f_min: 1e5, ..ControllerConfig::default() });
+    let mut c3 = controller(&descs, ControllerConfig { f_min_foot: 1e5, ..ControllerConfig::default() });
     c3.solve(&terms, &mut out).expect("fallback, not an error");
     let r = c3.last().expect("last");
-    println!("f_min 1e5: QP {:?}, fallback: {:?}", r.qp.status, r.fallback);
+    println!("f_min_foot 1e5: QP {:?}, fallback: {:?}", r.qp.status, r.fallback);
     assert!(c3.used_fallback());
     assert_ne!(r.qp.status, QpStatus::Solved);
-    let (_, wt) = worst_violation(r, 0.0);
+    let (_, wt) = worst_violation(r);
     assert!(wt <= 1e-9);
     assert_eq!(c3.diagnostics().expect("diag").qp_status, r.qp.status);
 }
