@@ -6,14 +6,22 @@
 //!   real Zenoh messages, embedded (every component in one process on one session) or
 //!   distributed (every component its own process, on loopback).
 //! * [`processes`]: the team's binaries as child processes on loopback.
+//! * [`plan`]: a scenario turned into what each component runs (scene, controller, references).
+//! * [`run`]: `team run`: the scenario with the whole stack, embedded or distributed.
+//! * [`driver`]: the runner's participant during a run: references out, records in, progress.
+//! * [`evaluate`]: metrics, time series, plots and acceptance checks of a run.
 //! * [`scenario`]: scenario files (TOML) with `--set key=value` overrides.
 //! * [`reference`]: the scenarios' reference trajectories.
 //! * [`metrics`]: the measures of success of DESIGN.md §8.
 //! * [`report`]: CSV time series, `metrics.json` and plots of a run.
 
+pub mod driver;
+pub mod evaluate;
 pub mod metrics;
+pub mod plan;
 pub mod processes;
 pub mod reference;
 pub mod report;
+pub mod run;
 pub mod scenario;
 pub mod smoke;

@@ -2,6 +2,12 @@
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
+use std::path::{Path, PathBuf};
+
+use team_runner::evaluate;
+use team_runner::plan;
+use team_runner::run::{self as scenario_run, RunOptions};
+use team_runner::scenario::Scenario;
 use team_runner::smoke::{self, SmokeConfig};
 
 #[derive(Parser)]
@@ -13,6 +19,25 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run a scenario (scenarios/*.toml) with the whole stack in the loop: MuJoCo, one agent
+    /// per robot, the paper's coordinator. Writes a report folder (metrics.json, CSV time
+    /// series, SVG plots) and prints a summary; exits with an error if an acceptance check fails.
+    Run {
+        /// Scenario file (TOML).
+        scenario: PathBuf,
+        /// Override any number of the scenario: --set duration=5 --set gains.object.stiffness=[...]
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// Run every component as its own process on loopback instead of one process.
+        #[arg(long)]
+        distributed: bool,
+        /// Report folder (default: reports/<scenario file name>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// No progress bar or progress lines.
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Smoke run of the whole stack: sim-bridge, agents and coordinator exchange real
     /// messages over Zenoh for N ticks (placeholder physics and controller).
     Smoke {
@@ -35,6 +60,28 @@ fn main() -> Result<()> {
         .with_writer(std::io::stderr)
         .init();
     match Cli::parse().command {
+        Command::Run { scenario, set, distributed, out, quiet } => {
+            let s = Scenario::load(&scenario, &set)?;
+            let stem = scenario.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scenario".into());
+            let dir = out.unwrap_or_else(|| PathBuf::from("reports").join(stem));
+            std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
+            let root = repo_root();
+            eprintln!("{}: planning (hands placed on the object by IK)...", s.name);
+            let plan = plan::plan(&s, &root)?;
+            eprintln!(
+                "{}: settling {:.1} s, then {:.1} s of scenario at {} Hz ({} mode)",
+                s.name,
+                s.settle,
+                s.duration,
+                s.control_hz,
+                if distributed { "distributed" } else { "embedded" }
+            );
+            let records = scenario_run::run(&plan, &RunOptions { distributed, progress: !quiet }, &dir)?;
+            let eval = evaluate::evaluate(&plan, &records, if distributed { "distributed" } else { "embedded" });
+            evaluate::write_report(&plan, &eval, &dir)?;
+            print!("{}", evaluate::summary(&eval.metrics, &dir));
+            anyhow::ensure!(eval.metrics.passed, "acceptance checks failed (see {})", dir.join("metrics.json").display());
+        }
         Command::Smoke { robots, ticks, joints, distributed } => {
             anyhow::ensure!((1..=64).contains(&robots), "--robots must be between 1 and 64");
             anyhow::ensure!(joints > 0, "--joints must be positive");
@@ -72,4 +119,14 @@ fn main() -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Where relative robot description paths of a scenario are resolved: the current directory
+/// when it holds them (a checkout), else the repository this binary was built from.
+fn repo_root() -> PathBuf {
+    let cwd = std::env::current_dir().unwrap_or_default();
+    if cwd.join("robot-agent/models").is_dir() {
+        return cwd;
+    }
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or(cwd)
 }

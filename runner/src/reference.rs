@@ -38,6 +38,44 @@ pub struct Segment {
     /// Length of the segment, s.
     pub duration: f64,
     pub motion: Motion,
+    /// Fade the segment's offset in over its first `ramp` seconds and out over its last (a
+    /// smooth window: the segment starts and ends with zero offset, velocity and
+    /// acceleration), so that switching segments does not step the velocity. 0: no window.
+    #[serde(default)]
+    pub ramp: f64,
+}
+
+/// Quintic smoothstep `S(u)` on [0, 1] (0 before, 1 after) and its first two derivatives in `u`.
+fn smoothstep(u: f64) -> (f64, f64, f64) {
+    if u <= 0.0 {
+        (0.0, 0.0, 0.0)
+    } else if u >= 1.0 {
+        (1.0, 0.0, 0.0)
+    } else {
+        let (u2, u3) = (u * u, u * u * u);
+        (10.0 * u3 - 15.0 * u2 * u2 + 6.0 * u3 * u2, 30.0 * u2 - 60.0 * u3 + 30.0 * u2 * u2, 60.0 * u - 180.0 * u2 + 120.0 * u3)
+    }
+}
+
+/// The window `w(t)`, `w'`, `w''`: a fade-in over `[0, ramp]` and, with `end = Some(d)`, a
+/// fade-out over `[d - ramp, d]`. `ramp <= 0`: no window.
+fn window(t: f64, ramp: f64, end: Option<f64>) -> (f64, f64, f64) {
+    if ramp <= 0.0 {
+        return (1.0, 0.0, 0.0);
+    }
+    let (a, ad, add) = smoothstep(t / ramp);
+    let (ad, add) = (ad / ramp, add / (ramp * ramp));
+    let Some(d) = end else { return (a, ad, add) };
+    let (b, bd, bdd) = smoothstep((d - t) / ramp);
+    let (bd, bdd) = (-bd / ramp, bdd / (ramp * ramp));
+    (a * b, ad * b + a * bd, add * b + 2.0 * ad * bd + a * bdd)
+}
+
+impl Sample {
+    /// `w(t) x(t)` with its derivatives, for a window `(w, w', w'')`.
+    fn windowed(self, (w, wd, wdd): (f64, f64, f64)) -> Sample {
+        Sample { x: w * self.x, xd: wd * self.x + w * self.xd, xdd: wdd * self.x + 2.0 * wd * self.xd + w * self.xdd }
+    }
 }
 
 /// An offset trajectory in R^3 with `x(0) = 0`.
@@ -112,6 +150,9 @@ impl Motion {
                     if !(s.duration.is_finite() && s.duration > 0.0) {
                         return bad(format!("segment {i} has duration {}", s.duration));
                     }
+                    if !(s.ramp.is_finite() && s.ramp >= 0.0) {
+                        return bad(format!("segment {i} has ramp {}", s.ramp));
+                    }
                     s.motion.check(&format!("{what}.segments[{i}]"))?;
                 }
                 Ok(())
@@ -153,11 +194,11 @@ impl Motion {
                 for seg in segments {
                     let end = start + seg.duration;
                     if t < end {
-                        let mut s = seg.motion.sample(t - start);
+                        let mut s = seg.motion.sample(t - start).windowed(window(t - start, seg.ramp, Some(seg.duration)));
                         s.x += base;
                         return s;
                     }
-                    base += seg.motion.sample(seg.duration).x;
+                    base += seg.motion.sample(seg.duration).windowed(window(seg.duration, seg.ramp, Some(seg.duration))).x;
                     start = end;
                 }
                 Sample { x: base, ..Sample::ZERO }
@@ -183,10 +224,12 @@ impl PoseMotion {
         self.orientation.check(&format!("{what}.orientation"))
     }
 
-    /// The reference at time `t` about the initial pose `(p0, r0)`.
-    pub fn reference(&self, p0: &Vector3<f64>, r0: &UnitQuaternion<f64>, t: f64) -> PoseReference {
-        let p = self.position.sample(t);
-        let (rot, w, wd) = orientation(&self.orientation, t);
+    /// The reference at time `t` about the initial pose `(p0, r0)`, both motions faded in over
+    /// the first `ramp` seconds (a smooth window; 0: none): a motion that starts with a
+    /// velocity (a sinusoid) would otherwise step the reference velocity at `t = 0`.
+    pub fn reference(&self, p0: &Vector3<f64>, r0: &UnitQuaternion<f64>, t: f64, ramp: f64) -> PoseReference {
+        let p = self.position.sample(t).windowed(window(t, ramp, None));
+        let (rot, w, wd) = orientation(|t| self.orientation.sample(t).windowed(window(t, ramp, None)), t);
         let q = UnitQuaternion::from_rotation_matrix(&rot) * r0;
         let pos = p0 + p.x;
         PoseReference {
@@ -216,12 +259,12 @@ pub fn left_jacobian(x: &Vector3<f64>) -> Matrix3<f64> {
 /// Rotation, angular velocity and angular acceleration (world frame) of `exp([x(t)])`. The
 /// acceleration is the central difference of the exact angular velocity (step 1e-5 s; error
 /// of order 1e-10 for the scenario's frequencies).
-fn orientation(m: &Motion, t: f64) -> (Rotation3<f64>, Vector3<f64>, Vector3<f64>) {
+fn orientation(sample: impl Fn(f64) -> Sample, t: f64) -> (Rotation3<f64>, Vector3<f64>, Vector3<f64>) {
     let omega = |t: f64| {
-        let s = m.sample(t);
+        let s = sample(t);
         left_jacobian(&s.x) * s.xd
     };
-    let s = m.sample(t);
+    let s = sample(t);
     let rot = Rotation3::new(s.x);
     let h = 1e-5;
     let wd = (omega(t + h) - omega(t - h)) / (2.0 * h);
@@ -244,8 +287,8 @@ mod tests {
             Motion::Circle { radius: 0.05, frequency: 0.2, plane: Plane::Xz, phase: 0.3 },
             Motion::Sequence {
                 segments: vec![
-                    Segment { duration: 2.0, motion: Motion::Sinusoid { amplitude: [0.1, 0.0, 0.0], frequency: [0.5, 0.0, 0.0], phase: [0.0; 3] } },
-                    Segment { duration: 1.5, motion: Motion::Circle { radius: 0.02, frequency: 1.0, plane: Plane::Xy, phase: 0.0 } },
+                    Segment { duration: 2.0, motion: Motion::Sinusoid { amplitude: [0.1, 0.0, 0.0], frequency: [0.5, 0.0, 0.0], phase: [0.0; 3] }, ramp: 0.0 },
+                    Segment { duration: 1.5, motion: Motion::Circle { radius: 0.02, frequency: 1.0, plane: Plane::Xy, phase: 0.0 }, ramp: 0.4 },
                 ],
             },
         ]
@@ -284,16 +327,16 @@ mod tests {
         let p0 = Vector3::new(1.0, 0.0, 0.6);
         for t in [0.0, 0.7, 2.3] {
             let h = 1e-6;
-            let q = |t: f64| protocol::conventions::quat_from_wxyz(pm.reference(&p0, &r0, t).pose.orientation);
+            let q = |t: f64| protocol::conventions::quat_from_wxyz(pm.reference(&p0, &r0, t, 0.5).pose.orientation);
             // World angular velocity: log(R(t+h) R(t-h)^T) / 2h.
             let dq = q(t + h) * q(t - h).inverse();
             let w_fd = dq.scaled_axis() / (2.0 * h);
-            let r = pm.reference(&p0, &r0, t);
+            let r = pm.reference(&p0, &r0, t, 0.5);
             let w = Vector3::new(r.twist[3], r.twist[4], r.twist[5]);
             assert!((w - w_fd).norm() < 1e-6, "t {t}: {w} vs {w_fd}");
             // Angular acceleration against a finite difference of the angular velocity.
             let wv = |t: f64| {
-                let r = pm.reference(&p0, &r0, t);
+                let r = pm.reference(&p0, &r0, t, 0.5);
                 Vector3::new(r.twist[3], r.twist[4], r.twist[5])
             };
             let a_fd = (wv(t + 1e-4) - wv(t - 1e-4)) / 2e-4;
@@ -301,15 +344,40 @@ mod tests {
             assert!((a - a_fd).norm() < 1e-5, "t {t}: {a} vs {a_fd}");
         }
         // At t = 0 the reference is the initial pose.
-        let r = pm.reference(&p0, &r0, 0.0);
+        let r = pm.reference(&p0, &r0, 0.0, 0.5);
         assert!(protocol::conventions::quat_from_wxyz(r.pose.orientation).angle_to(&r0) < 1e-12);
+    }
+
+    #[test]
+    fn ramps_start_and_end_segments_at_rest_with_exact_derivatives() {
+        // A faded-in sinusoid starts with zero velocity and acceleration, reaches the plain
+        // sinusoid after the ramp, and its derivatives match finite differences inside the ramp.
+        let pm = PoseMotion { position: Motion::Sinusoid { amplitude: [0.03, 0.0, 0.02], frequency: [0.2, 0.0, 0.25], phase: [0.0; 3] }, orientation: Motion::Hold };
+        let (p0, r0) = (Vector3::new(1.0, 0.0, 0.6), UnitQuaternion::identity());
+        let r = pm.reference(&p0, &r0, 0.0, 1.0);
+        assert!(r.twist.iter().chain(&r.acceleration).all(|x| x.abs() < 1e-15), "{r:?}");
+        let late = pm.reference(&p0, &r0, 1.5, 1.0);
+        let plain = pm.reference(&p0, &r0, 1.5, 0.0);
+        assert_eq!(late, plain);
+        for t in [0.2, 0.5, 0.9] {
+            let h = 1e-6;
+            let x = |t: f64| Vector3::from(pm.reference(&p0, &r0, t, 1.0).pose.position);
+            let v = Vector3::from_row_slice(&pm.reference(&p0, &r0, t, 1.0).twist[..3]);
+            let a = Vector3::from_row_slice(&pm.reference(&p0, &r0, t, 1.0).acceleration[..3]);
+            assert!((v - (x(t + h) - x(t - h)) / (2.0 * h)).norm() < 1e-8, "t {t}");
+            assert!((a - (x(t + 1e-4) - 2.0 * x(t) + x(t - 1e-4)) / 1e-8).norm() < 1e-5, "t {t}");
+        }
+        // A windowed segment ends at rest: no velocity step into the next one.
+        let m = &motions()[2];
+        let end = m.sample(3.5 - 1e-9);
+        assert!(end.xd.norm() < 1e-6 && end.xdd.norm() < 1e-3, "{end:?}");
     }
 
     #[test]
     fn bad_parameters_are_named() {
         let m = Motion::Sinusoid { amplitude: [f64::NAN, 0.0, 0.0], frequency: [1.0; 3], phase: [0.0; 3] };
         assert!(m.check("object.position").unwrap_err().0.contains("object.position"));
-        let m = Motion::Sequence { segments: vec![Segment { duration: -1.0, motion: Motion::Hold }] };
+        let m = Motion::Sequence { segments: vec![Segment { duration: -1.0, motion: Motion::Hold, ramp: 0.0 }] };
         assert!(m.check("x").is_err());
     }
 }

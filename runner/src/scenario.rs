@@ -48,9 +48,12 @@ pub struct Scenario {
     /// Team controller: `paper`.
     #[serde(default = "default_controller")]
     pub controller: String,
-    /// Minimum normal force of every contact in the QP, N.
-    #[serde(default = "default_min_normal_force")]
-    pub min_normal_force: f64,
+    /// Minimum normal force of every stance foot in the QP, N.
+    #[serde(default = "default_min_foot_force")]
+    pub min_foot_force: f64,
+    /// Minimum normal force of every hand in the QP (the least squeeze), N.
+    #[serde(default = "default_min_hand_force")]
+    pub min_hand_force: f64,
     pub object: ObjectSpec,
     pub robots: Vec<RobotSpec>,
     pub gains: Gains,
@@ -63,11 +66,23 @@ pub struct Scenario {
 fn default_settle() -> f64 {
     1.0
 }
+impl Default for References {
+    fn default() -> Self {
+        References { ramp: default_ramp(), object: PoseMotion::default(), torsos: Vec::new() }
+    }
+}
+
+fn default_ramp() -> f64 {
+    1.0
+}
 fn default_controller() -> String {
     "paper".into()
 }
-fn default_min_normal_force() -> f64 {
+fn default_min_foot_force() -> f64 {
     5.0
+}
+fn default_min_hand_force() -> f64 {
+    30.0
 }
 
 /// The carried box.
@@ -113,9 +128,13 @@ pub struct Gains {
 }
 
 /// References about the settled initial poses.
-#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct References {
+    /// Every task's motion fades in over the first `ramp` seconds of the scenario (a smooth
+    /// window), so that motions starting with a velocity do not step the reference velocity.
+    #[serde(default = "default_ramp")]
+    pub ramp: f64,
     #[serde(default)]
     pub object: PoseMotion,
     #[serde(default)]
@@ -195,8 +214,10 @@ impl Scenario {
         if self.controller != "paper" {
             return Err(format!("controller {:?} is not known (known: paper)", self.controller));
         }
-        if !(self.min_normal_force.is_finite() && self.min_normal_force >= 0.0) {
-            return Err("min_normal_force must be non-negative".into());
+        for (what, f) in [("min_foot_force", self.min_foot_force), ("min_hand_force", self.min_hand_force)] {
+            if !(f.is_finite() && f >= 0.0) {
+                return Err(format!("{what} = {f} must be non-negative"));
+            }
         }
         pos("object.mass", self.object.mass)?;
         pos("object.friction", self.object.friction)?;
@@ -222,6 +243,9 @@ impl Scenario {
         check_gains("gains.torso", &self.gains.torso, 6)?;
         if let Some(f) = &self.gains.feet {
             check_gains("gains.feet", f, 3)?;
+        }
+        if !(self.references.ramp.is_finite() && self.references.ramp >= 0.0) {
+            return Err(format!("references.ramp = {} must be non-negative", self.references.ramp));
         }
         self.references.object.check("references.object").map_err(|e| e.0)?;
         for (i, t) in self.references.torsos.iter().enumerate() {

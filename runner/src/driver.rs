@@ -1,0 +1,177 @@
+//! The scenario driver: the runner's own Zenoh participant during a run. It publishes the
+//! task references a few ticks ahead of the simulation (the coordinator solves tick `k` with
+//! the newest reference of tick `<= k`), records what the evaluation needs (ground truth,
+//! the torques the agents applied, the coordinator's diagnostics and status) and shows the
+//! progress. It never talks to the controller other than by references: the ground truth it
+//! records is for evaluation only.
+
+use std::collections::BTreeMap;
+use std::io::IsTerminal;
+use std::time::{Duration, Instant};
+
+use indicatif::{ProgressBar, ProgressStyle};
+use protocol::keys::{self, RobotTopic};
+use protocol::transport::{self, decode_sample, Qos, SampleQueue, TransportError, TypedPublisher};
+use protocol::{CoordinatorStatus, GroundTruth, TaskReferences, TickDiagnostics, TorqueCommand};
+use tokio::sync::watch;
+use zenoh::Session;
+
+use crate::plan::{ReferencePlan, TEAM};
+
+/// References are published this many ticks ahead of the last simulated tick.
+pub const LOOKAHEAD: u64 = 50;
+
+/// What a run recorded (scenario ticks only; settling is not evaluated).
+#[derive(Debug, Clone, Default)]
+pub struct Records {
+    pub truth: Vec<GroundTruth>,
+    /// Applied torques per robot: (tick, torques in actuated-joint order).
+    pub torques: BTreeMap<String, Vec<(u64, Vec<f64>)>>,
+    pub diagnostics: Vec<TickDiagnostics>,
+    pub last_status: Option<CoordinatorStatus>,
+    /// Wall time of the settling and of the scenario proper.
+    pub settle_wall: Duration,
+    pub run_wall: Duration,
+    /// Ticks seen (ground truth), settling included.
+    pub ticks_seen: u64,
+}
+
+/// The driver's subscriptions and publisher, declared before any other component starts.
+pub struct Driver {
+    truth: SampleQueue,
+    torques: SampleQueue,
+    diagnostics: SampleQueue,
+    status: SampleQueue,
+    refs_pub: TypedPublisher<TaskReferences>,
+    plan: ReferencePlan,
+    total: u64,
+    progress: ProgressBar,
+    log_progress: bool,
+}
+
+impl Driver {
+    /// Declare everything on `session`. `show_progress`: a progress bar on a terminal, log
+    /// lines every 10 % otherwise.
+    pub async fn start(session: &Session, plan: ReferencePlan, total_ticks: u64, show_progress: bool) -> Result<Driver, TransportError> {
+        let truth = transport::subscribe(session, keys::ground_truth(TEAM)?).await?;
+        let torques = transport::subscribe(session, keys::all_robots(TEAM, RobotTopic::Torque)?).await?;
+        let diagnostics = transport::subscribe(session, keys::diagnostics(TEAM)?).await?;
+        let status = transport::subscribe(session, keys::coordinator_status(TEAM)?).await?;
+        let refs_pub = TypedPublisher::declare(session, keys::references(TEAM)?, Qos::HotPath).await?;
+        let terminal = std::io::stderr().is_terminal();
+        let progress = if show_progress && terminal {
+            let pb = ProgressBar::new(total_ticks);
+            pb.set_style(
+                ProgressStyle::with_template("{prefix:>8} [{bar:40}] {pos}/{len} ticks  {msg}  eta {eta}")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar())
+                    .progress_chars("=> "),
+            );
+            pb.set_prefix("settling");
+            pb
+        } else {
+            ProgressBar::hidden()
+        };
+        Ok(Driver { truth, torques, diagnostics, status, refs_pub, plan, total: total_ticks, progress, log_progress: show_progress && !terminal })
+    }
+
+    async fn publish_refs(&mut self, from: u64, to: u64) -> Result<(), TransportError> {
+        for tick in from..to.min(self.total) {
+            self.refs_pub.put(&self.plan.for_tick(TEAM, tick)).await?;
+        }
+        Ok(())
+    }
+
+    /// Run until the ground truth of the last tick arrived, or `stop` turns true.
+    pub async fn run(mut self, mut stop: watch::Receiver<bool>) -> Result<Records, TransportError> {
+        let mut rec = Records::default();
+        let settle = self.plan.settle_ticks;
+        let mut next_ref = 0u64;
+        let started = Instant::now();
+        let mut run_started: Option<Instant> = None;
+        let mut last_logged = 0u64;
+        // The first window goes out now and again when the coordinator is first heard of
+        // (it may not have subscribed yet); the controller holds the start poses until then.
+        self.publish_refs(0, LOOKAHEAD).await?;
+        let mut coordinator_heard = false;
+        loop {
+            tokio::select! {
+                _ = stop.changed() => { if *stop.borrow() { break; } }
+                s = self.status.recv_async() => {
+                    let Ok(sample) = s else { break };
+                    if let Ok(st) = decode_sample::<CoordinatorStatus>(&sample) {
+                        rec.last_status = Some(st);
+                        if !coordinator_heard {
+                            coordinator_heard = true;
+                            self.publish_refs(0, next_ref.max(LOOKAHEAD)).await?;
+                        }
+                    }
+                }
+                s = self.truth.recv_async() => {
+                    let Ok(sample) = s else { break };
+                    let gt = match decode_sample::<GroundTruth>(&sample) {
+                        Ok(g) => g,
+                        Err(e) => { tracing::warn!("rejected ground truth: {e}"); continue; }
+                    };
+                    let tick = gt.header.tick;
+                    rec.ticks_seen = rec.ticks_seen.max(tick + 1);
+                    let ahead = (tick + 1 + LOOKAHEAD).max(next_ref);
+                    self.publish_refs(next_ref.max(tick + 1), ahead).await?;
+                    next_ref = ahead;
+                    if tick >= settle {
+                        if run_started.is_none() {
+                            rec.settle_wall = started.elapsed();
+                            run_started = Some(Instant::now());
+                            self.progress.set_prefix("running");
+                        }
+                        rec.truth.push(gt);
+                    }
+                    self.progress.set_position(tick + 1);
+                    if tick % 200 == 0 {
+                        self.progress.set_message(format!("t = {:.2} s", self.plan.time_of_tick(tick).unwrap_or(0.0)));
+                    }
+                    if self.log_progress && (tick + 1) * 10 / self.total > last_logged {
+                        last_logged = (tick + 1) * 10 / self.total;
+                        tracing::info!("progress {}% ({}/{} ticks, {:.1} s wall)", last_logged * 10, tick + 1, self.total, started.elapsed().as_secs_f64());
+                    }
+                    if tick + 1 >= self.total {
+                        break;
+                    }
+                }
+                s = self.torques.recv_async() => {
+                    let Ok(sample) = s else { break };
+                    if let Ok(cmd) = decode_sample::<TorqueCommand>(&sample) {
+                        if cmd.header.tick >= settle {
+                            rec.torques.entry(cmd.header.robot_id().to_string()).or_default().push((cmd.header.tick, cmd.tau));
+                        }
+                    }
+                }
+                s = self.diagnostics.recv_async() => {
+                    let Ok(sample) = s else { break };
+                    if let Ok(d) = decode_sample::<TickDiagnostics>(&sample) {
+                        if d.header.tick >= settle {
+                            rec.diagnostics.push(d);
+                        }
+                    }
+                }
+            }
+        }
+        // Whatever else already arrived (torques and diagnostics of the last ticks).
+        while let Ok(Some(sample)) = self.torques.try_recv() {
+            if let Ok(cmd) = decode_sample::<TorqueCommand>(&sample) {
+                if cmd.header.tick >= settle {
+                    rec.torques.entry(cmd.header.robot_id().to_string()).or_default().push((cmd.header.tick, cmd.tau));
+                }
+            }
+        }
+        while let Ok(Some(sample)) = self.diagnostics.try_recv() {
+            if let Ok(d) = decode_sample::<TickDiagnostics>(&sample) {
+                if d.header.tick >= settle {
+                    rec.diagnostics.push(d);
+                }
+            }
+        }
+        rec.run_wall = run_started.map(|s| s.elapsed()).unwrap_or_default();
+        self.progress.finish_and_clear();
+        Ok(rec)
+    }
+}

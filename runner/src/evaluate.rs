@@ -1,0 +1,498 @@
+//! From a run's records to the report: every measure of DESIGN.md §8 (`metrics.json`), the
+//! time series (`timeseries.csv`, `torques.csv`), the paper-style plots (SVG) and the
+//! acceptance checks of the team demo. Measured values come from the ground truth only.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use protocol::{GroundTruth, Pose, PoseReference};
+use serde::Serialize;
+
+use crate::driver::Records;
+use crate::metrics::{self, DropReport, Percentiles};
+use crate::plan::Plan;
+use crate::report::{self, Panel, ReportError, TimeSeries};
+
+/// Bounds of the acceptance checks (issue: the team demo).
+pub const MAX_SLIP: f64 = 0.005;
+pub const MAX_OBJECT_POSITION_RMS: f64 = 0.01;
+pub const MAX_OBJECT_ORIENTATION_RMS_DEG: f64 = 2.0;
+pub const MAX_TORSO_POSITION_RMS: f64 = 0.01;
+pub const MAX_RECOVERY_ERROR: f64 = 0.01;
+/// Recovery is judged this long after a push ends, s.
+pub const RECOVERY_AFTER: f64 = 2.0;
+/// The CSV time series and plots keep at most this many samples per second (the metrics use
+/// every tick).
+pub const SERIES_HZ: f64 = 200.0;
+
+/// Tracking of one pose task.
+#[derive(Debug, Clone, Serialize)]
+pub struct Tracking {
+    pub position_rms_m: f64,
+    pub position_max_m: f64,
+    pub orientation_rms_deg: f64,
+    pub orientation_max_deg: f64,
+}
+
+/// Recovery after one push.
+#[derive(Debug, Clone, Serialize)]
+pub struct Recovery {
+    pub on: String,
+    pub push_end_s: f64,
+    /// Largest object position error from `push_end + 2 s` until the next push starts (or the
+    /// end), m.
+    pub object_error_after_m: Option<f64>,
+    /// Same for the pushed torso (pushes on a robot).
+    pub torso_error_after_m: Option<f64>,
+}
+
+/// One acceptance check.
+#[derive(Debug, Clone, Serialize)]
+pub struct Check {
+    pub name: String,
+    pub value: f64,
+    pub bound: f64,
+    pub passed: bool,
+}
+
+/// Everything `metrics.json` holds.
+#[derive(Debug, Clone, Serialize)]
+pub struct Metrics {
+    pub scenario: String,
+    pub mode: String,
+    pub duration_s: f64,
+    pub control_hz: f64,
+    pub physics_hz: f64,
+    pub samples: usize,
+    pub object: Tracking,
+    pub torsos: BTreeMap<String, Tracking>,
+    pub drop: DropReport,
+    /// Largest displacement of each palm on the object surface, m.
+    pub slip_m: BTreeMap<String, f64>,
+    /// Mean normal force of each hand on the object, N.
+    pub mean_squeeze_n: BTreeMap<String, f64>,
+    /// Torque RMS per joint, by robot then joint name, N m.
+    pub torque_rms: BTreeMap<String, Vec<(String, f64)>>,
+    pub qp_status: BTreeMap<String, u64>,
+    pub qp_iterations: Percentiles,
+    pub qp_solve_us: Percentiles,
+    pub controller_tick_us: Percentiles,
+    pub coordinator_deadline_misses: Option<u64>,
+    pub coordinator_fallbacks: Option<u64>,
+    pub recoveries: Vec<Recovery>,
+    pub settle_wall_s: f64,
+    pub run_wall_s: f64,
+    pub real_time_factor: f64,
+    pub checks: Vec<Check>,
+    pub passed: bool,
+}
+
+fn iso(p: &Pose) -> Isometry3<f64> {
+    let [w, x, y, z] = p.orientation;
+    Isometry3::from_parts(Translation3::from(Vector3::from(p.position)), UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)))
+}
+
+fn ref_iso(r: &PoseReference) -> Isometry3<f64> {
+    iso(&r.pose)
+}
+
+/// Rotation vector of `q` relative to `q0` in the world frame (`log(q q0^-1)`), for plots.
+fn rotvec(q: &UnitQuaternion<f64>, q0: &UnitQuaternion<f64>) -> Vector3<f64> {
+    (q * q0.inverse()).scaled_axis()
+}
+
+/// The evaluated run.
+pub struct Evaluation {
+    pub metrics: Metrics,
+    pub series: TimeSeries,
+    pub torques: TimeSeries,
+}
+
+/// Evaluate the records of a run of `plan`.
+pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
+    let refs = &plan.references;
+    let robots: Vec<String> = plan.robots.iter().map(|(id, _)| id.clone()).collect();
+    let truth: Vec<&GroundTruth> = records.truth.iter().filter(|g| g.object.is_some()).collect();
+    let (o_p0, o_q0) = refs.object_start;
+
+    // Time series: references at the ground truth's time (the end of the tick's step).
+    let mut names: Vec<String> = Vec::new();
+    for a in ["x", "y", "z", "rx", "ry", "rz"] {
+        names.push(format!("object_{a}_des"));
+        names.push(format!("object_{a}_mrt"));
+    }
+    for r in &robots {
+        for a in ["x", "y", "z"] {
+            names.push(format!("{r}_torso_{a}_des"));
+            names.push(format!("{r}_torso_{a}_mrt"));
+        }
+    }
+    for r in &robots {
+        names.push(format!("{r}_hand_normal_force"));
+        names.push(format!("{r}_palm_slip"));
+        names.push(format!("{r}_palm_turn_deg"));
+        names.push(format!("{r}_hand_contacts"));
+    }
+    names.push("object_position_error".into());
+    names.push("object_orientation_error_deg".into());
+    let mut series = TimeSeries::with_columns(&names);
+
+    let mut obj_pos_err = Vec::new();
+    let mut obj_ang_err = Vec::new();
+    let mut torso_pos_err: Vec<Vec<f64>> = vec![Vec::new(); robots.len()];
+    let mut torso_ang_err: Vec<Vec<f64>> = vec![Vec::new(); robots.len()];
+    let mut times = Vec::new();
+    let mut object_z = Vec::new();
+    let mut hand_contact: Vec<Vec<bool>> = Vec::new();
+    let mut palm_in_object: Vec<Vec<Vector3<f64>>> = vec![Vec::new(); robots.len()];
+    let mut palm_rot0: Vec<Option<UnitQuaternion<f64>>> = vec![None; robots.len()];
+    let mut squeeze_sum = vec![0.0; robots.len()];
+    let every = ((plan.scenario.control_hz / SERIES_HZ).round() as usize).max(1);
+    for (sample, g) in truth.iter().enumerate() {
+        let t = g.time;
+        let o = iso(&g.object.as_ref().expect("filtered").pose);
+        let od = ref_iso(&refs.object_at(Some(t)));
+        let ep = (o.translation.vector - od.translation.vector).norm();
+        let ea = metrics::geodesic_angle(&o.rotation, &od.rotation);
+        obj_pos_err.push(ep);
+        obj_ang_err.push(ea);
+        times.push(t);
+        object_z.push(o.translation.vector.z);
+        let mut row = Vec::with_capacity(names.len());
+        let (rd, rm) = (rotvec(&od.rotation, &o_q0), rotvec(&o.rotation, &o_q0));
+        for a in 0..3 {
+            row.push(od.translation.vector[a]);
+            row.push(o.translation.vector[a]);
+        }
+        for a in 0..3 {
+            row.push(rd[a]);
+            row.push(rm[a]);
+        }
+        for (i, r) in robots.iter().enumerate() {
+            let tr = ref_iso(&refs.torso_at(i, Some(t)));
+            let tm = g.torsos.iter().find(|b| &b.name == r).map(|b| iso(&b.pose)).unwrap_or(tr);
+            torso_pos_err[i].push((tm.translation.vector - tr.translation.vector).norm());
+            torso_ang_err[i].push(metrics::geodesic_angle(&tm.rotation, &tr.rotation));
+            for a in 0..3 {
+                row.push(tr.translation.vector[a]);
+                row.push(tm.translation.vector[a]);
+            }
+        }
+        let mut flags = Vec::with_capacity(robots.len());
+        for (i, r) in robots.iter().enumerate() {
+            // Normal force: along the palm's outward normal (hand frame z), what the hand
+            // applies to the object.
+            let palm = g.hands.iter().find(|b| &b.name == r).map(|b| iso(&b.pose));
+            let n = palm.map(|p| p.rotation * Vector3::z()).unwrap_or_else(Vector3::zeros);
+            let f: f64 = g.hand_contacts.iter().filter(|c| &c.robot == r).map(|c| n.dot(&Vector3::new(c.wrench[0], c.wrench[1], c.wrench[2]))).sum();
+            row.push(f);
+            squeeze_sum[i] += f;
+            flags.push(g.hand_contacts.iter().any(|c| &c.robot == r));
+            // Where the palm is on the object, and how far it turned on it, since the start.
+            let (mut slip_now, mut turn_now) = (0.0, 0.0);
+            if let Some(p) = palm {
+                let local = o.inverse_transform_point(&p.translation.vector.into()).coords;
+                slip_now = palm_in_object[i].first().map_or(0.0, |p0| (local - p0).norm());
+                palm_in_object[i].push(local);
+                let rel = o.rotation.inverse() * p.rotation;
+                turn_now = metrics::geodesic_angle(palm_rot0[i].get_or_insert(rel), &rel).to_degrees();
+            }
+            row.push(slip_now);
+            row.push(turn_now);
+            row.push(g.hand_contacts.iter().filter(|c| &c.robot == r).count() as f64);
+        }
+        hand_contact.push(flags);
+        row.push(ep);
+        row.push(ea.to_degrees());
+        if sample % every == 0 {
+            series.push(t, &row);
+        }
+    }
+    let tracking = |pe: &[f64], ae: &[f64]| Tracking {
+        position_rms_m: metrics::rms(pe.iter().copied()),
+        position_max_m: pe.iter().copied().fold(0.0, f64::max),
+        orientation_rms_deg: metrics::rms(ae.iter().copied()).to_degrees(),
+        orientation_max_deg: ae.iter().copied().fold(0.0, f64::max).to_degrees(),
+    };
+    let object = tracking(&obj_pos_err, &obj_ang_err);
+    let torsos: BTreeMap<String, Tracking> = robots.iter().enumerate().map(|(i, r)| (r.clone(), tracking(&torso_pos_err[i], &torso_ang_err[i]))).collect();
+    let mut drop = metrics::detect_drop(&times, &object_z, &hand_contact, 0.05, 0.10);
+    if object_z.first().is_some_and(|z| (z - o_p0.z).abs() > 0.05) {
+        // The drop height is from the object's start pose, not from the first sample.
+        drop.largest_fall = drop.largest_fall.max(o_p0.z - object_z.iter().copied().fold(f64::INFINITY, f64::min));
+    }
+    let slip_m: BTreeMap<String, f64> = robots.iter().enumerate().map(|(i, r)| (r.clone(), metrics::slip(&palm_in_object[i]))).collect();
+    let n = truth.len().max(1) as f64;
+    let mean_squeeze_n = robots.iter().enumerate().map(|(i, r)| (r.clone(), squeeze_sum[i] / n)).collect();
+
+    // Torques: one sample per tick (the first applied for it), in joint order.
+    let mut torque_rms = BTreeMap::new();
+    let mut torque_names = Vec::new();
+    let mut per_robot: Vec<BTreeMap<u64, &Vec<f64>>> = Vec::new();
+    for (id, path) in &plan.robots {
+        let joints = robot_agent::description::Robot::load(path).map(|r| r.actuated_joints.clone()).unwrap_or_default();
+        let by_tick: BTreeMap<u64, &Vec<f64>> = records.torques.get(id).map(|v| v.iter().rev().map(|(t, tau)| (*t, tau)).collect()).unwrap_or_default();
+        let samples: Vec<Vec<f64>> = by_tick.values().map(|v| (*v).clone()).collect();
+        let rms = metrics::torque_rms(&samples);
+        torque_rms.insert(id.clone(), joints.iter().cloned().zip(rms).collect::<Vec<_>>());
+        torque_names.extend(joints.iter().map(|j| format!("{id}_{j}")));
+        per_robot.push(by_tick);
+    }
+    let mut torques = TimeSeries::with_columns(&torque_names);
+    if let Some(first) = per_robot.first() {
+        for (&tick, _) in first.iter().step_by(every) {
+            let mut row = Vec::with_capacity(torque_names.len());
+            let complete = per_robot.iter().all(|m| m.contains_key(&tick));
+            if !complete {
+                continue;
+            }
+            for m in &per_robot {
+                row.extend(m[&tick].iter().copied());
+            }
+            if row.len() == torque_names.len() {
+                torques.push(refs.time_of_tick(tick).unwrap_or(0.0), &row);
+            }
+        }
+    }
+
+    let mut qp_status = BTreeMap::new();
+    for d in &records.diagnostics {
+        *qp_status.entry(format!("{:?}", d.qp_status)).or_insert(0u64) += 1;
+    }
+    let qp_iterations = metrics::percentiles(&records.diagnostics.iter().map(|d| d.qp_iterations as f64).collect::<Vec<_>>());
+    let qp_solve_us = metrics::percentiles(&records.diagnostics.iter().map(|d| d.qp_solve_us).collect::<Vec<_>>());
+    let controller_tick_us = metrics::percentiles(&records.diagnostics.iter().map(|d| d.total_us).collect::<Vec<_>>());
+
+    // Recovery after each push: from push end + 2 s until the next push starts.
+    let pushes = &plan.scene.perturbations;
+    let mut recoveries = Vec::new();
+    for p in pushes {
+        let end = p.start + p.duration;
+        let next = pushes.iter().map(|q| q.start).filter(|s| *s > p.start).fold(f64::INFINITY, f64::min);
+        let window = (next - end - RECOVERY_AFTER).max(0.0);
+        let (on, torso_err) = match &p.target {
+            protocol::PerturbationTarget::Object => ("object".to_string(), None),
+            protocol::PerturbationTarget::RobotBody { robot, body } => {
+                let i = robots.iter().position(|r| r == robot);
+                (format!("{robot}/{body}"), i.and_then(|i| metrics::recovery_error(&times, &torso_pos_err[i], end, RECOVERY_AFTER, window)))
+            }
+        };
+        recoveries.push(Recovery {
+            on,
+            push_end_s: end,
+            object_error_after_m: metrics::recovery_error(&times, &obj_pos_err, end, RECOVERY_AFTER, window),
+            torso_error_after_m: torso_err,
+        });
+    }
+
+    // Acceptance.
+    let mut checks = Vec::new();
+    let mut check = |name: String, value: f64, bound: f64| checks.push(Check { passed: value < bound, name, value, bound });
+    check("object never dropped (1 = dropped)".into(), if drop.dropped { 1.0 } else { 0.0 }, 0.5);
+    for (r, s) in &slip_m {
+        check(format!("{r} palm slip [m]"), *s, MAX_SLIP);
+    }
+    check("object position RMS [m]".into(), object.position_rms_m, MAX_OBJECT_POSITION_RMS);
+    check("object orientation RMS [deg]".into(), object.orientation_rms_deg, MAX_OBJECT_ORIENTATION_RMS_DEG);
+    for (r, t) in &torsos {
+        check(format!("{r} torso position RMS [m]"), t.position_rms_m, MAX_TORSO_POSITION_RMS);
+    }
+    for rec in &recoveries {
+        if let Some(e) = rec.object_error_after_m {
+            check(format!("object error {RECOVERY_AFTER} s after the push on {} ending at {:.1} s [m]", rec.on, rec.push_end_s), e, MAX_RECOVERY_ERROR);
+        }
+    }
+    let passed = checks.iter().all(|c| c.passed);
+    let sim = plan.scene.ticks as f64 / plan.scenario.control_hz;
+    let metrics = Metrics {
+        scenario: plan.scenario.name.clone(),
+        mode: mode.to_string(),
+        duration_s: plan.scenario.duration,
+        control_hz: plan.scenario.control_hz,
+        physics_hz: plan.scenario.physics_hz,
+        samples: truth.len(),
+        object,
+        torsos,
+        drop,
+        slip_m,
+        mean_squeeze_n,
+        torque_rms,
+        qp_status,
+        qp_iterations,
+        qp_solve_us,
+        controller_tick_us,
+        coordinator_deadline_misses: records.last_status.as_ref().map(|s| s.deadline_misses),
+        coordinator_fallbacks: records.last_status.as_ref().map(|s| s.fallbacks),
+        recoveries,
+        settle_wall_s: records.settle_wall.as_secs_f64(),
+        run_wall_s: records.run_wall.as_secs_f64(),
+        real_time_factor: if records.run_wall.is_zero() { 0.0 } else { sim / records.run_wall.as_secs_f64() },
+        checks,
+        passed,
+    };
+    Evaluation { metrics, series, torques }
+}
+
+/// Write the report folder: `metrics.json`, `timeseries.csv`, `torques.csv` and the plots.
+pub fn write_report(plan: &Plan, eval: &Evaluation, dir: &Path) -> Result<(), ReportError> {
+    report::write_json(&eval.metrics, &dir.join("metrics.json"))?;
+    eval.series.write_csv(&dir.join("timeseries.csv"))?;
+    eval.torques.write_csv(&dir.join("torques.csv"))?;
+    if eval.series.time.is_empty() {
+        return Ok(());
+    }
+    let robots: Vec<String> = plan.robots.iter().map(|(id, _)| id.clone()).collect();
+    let col = |a: &str| (format!("object_{a}_des"), format!("object_{a}_mrt"));
+    let (xd, xm) = col("x");
+    let (yd, ym) = col("y");
+    let (zd, zm) = col("z");
+    let (rxd, rxm) = col("rx");
+    let (ryd, rym) = col("ry");
+    let (rzd, rzm) = col("rz");
+    report::plot_panels(
+        &eval.series,
+        &[
+            Panel { title: "object position", y_label: "m", pairs: vec![("x", &xd, &xm), ("y", &yd, &ym), ("z", &zd, &zm)] },
+            Panel { title: "object orientation (rotation vector from the start)", y_label: "rad", pairs: vec![("roll", &rxd, &rxm), ("pitch", &ryd, &rym), ("yaw", &rzd, &rzm)] },
+        ],
+        &dir.join("object.svg"),
+    )?;
+    let torso_cols: Vec<Vec<(String, String, String)>> = robots
+        .iter()
+        .map(|r| ["x", "y", "z"].iter().map(|a| (a.to_string(), format!("{r}_torso_{a}_des"), format!("{r}_torso_{a}_mrt"))).collect())
+        .collect();
+    let titles: Vec<String> = robots.iter().map(|r| format!("torso of {r}")).collect();
+    let panels: Vec<Panel> = torso_cols
+        .iter()
+        .zip(&titles)
+        .map(|(cols, title)| Panel { title, y_label: "m", pairs: cols.iter().map(|(l, d, m)| (l.as_str(), d.as_str(), m.as_str())).collect() })
+        .collect();
+    report::plot_panels(&eval.series, &panels, &dir.join("torsos.svg"))?;
+    let mut labels = Vec::new();
+    let mut values = Vec::new();
+    for (r, joints) in &eval.metrics.torque_rms {
+        for (j, v) in joints {
+            labels.push(format!("{r} {j}"));
+            values.push(*v);
+        }
+    }
+    report::plot_bars("commanded torque RMS per joint", "N m", &labels, &values, &dir.join("torque_rms.svg"))?;
+    Ok(())
+}
+
+/// A short human summary of the metrics.
+pub fn summary(m: &Metrics, dir: &Path) -> String {
+    let mut s = String::new();
+    s.push_str(&format!("{} ({} mode, {:.1} s at {} Hz control, {} Hz physics)\n", m.scenario, m.mode, m.duration_s, m.control_hz, m.physics_hz));
+    s.push_str(&format!(
+        "  object: position RMS {:.2} mm (max {:.2} mm), orientation RMS {:.3} deg (max {:.3} deg), dropped: {}\n",
+        m.object.position_rms_m * 1e3,
+        m.object.position_max_m * 1e3,
+        m.object.orientation_rms_deg,
+        m.object.orientation_max_deg,
+        if m.drop.dropped { "YES" } else { "no" }
+    ));
+    for (r, t) in &m.torsos {
+        s.push_str(&format!("  torso {r}: position RMS {:.2} mm, orientation RMS {:.3} deg\n", t.position_rms_m * 1e3, t.orientation_rms_deg));
+    }
+    for (r, x) in &m.slip_m {
+        s.push_str(&format!("  palm {r}: slip {:.3} mm, mean squeeze {:.1} N\n", x * 1e3, m.mean_squeeze_n.get(r).copied().unwrap_or(0.0)));
+    }
+    s.push_str(&format!(
+        "  QP: {:?}, solve p50 {:.0} us p99 {:.0} us; controller tick p50 {:.0} us p99 {:.0} us; real-time factor {:.3}\n",
+        m.qp_status, m.qp_solve_us.p50, m.qp_solve_us.p99, m.controller_tick_us.p50, m.controller_tick_us.p99, m.real_time_factor
+    ));
+    for r in &m.recoveries {
+        if let Some(e) = r.object_error_after_m {
+            s.push_str(&format!("  push on {} ending at {:.1} s: object error {:.2} mm after {} s\n", r.on, r.push_end_s, e * 1e3, RECOVERY_AFTER));
+        }
+    }
+    let failed: Vec<&Check> = m.checks.iter().filter(|c| !c.passed).collect();
+    if failed.is_empty() {
+        s.push_str(&format!("  acceptance: all {} checks passed\n", m.checks.len()));
+    } else {
+        for c in failed {
+            s.push_str(&format!("  acceptance FAILED: {} = {:.4} (bound {})\n", c.name, c.value, c.bound));
+        }
+    }
+    s.push_str(&format!("  report: {}\n", dir.display()));
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plan;
+    use crate::scenario::Scenario;
+    use protocol::{BodyTruth, ContactTruth, Header};
+
+    fn s4_plan() -> Plan {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf();
+        let s = Scenario::load(root.join("scenarios/s4_object_circle.toml"), &["duration=1.0".into(), "settle=0.0".into()]).unwrap();
+        plan::plan(&s, &root).unwrap()
+    }
+
+    fn body(name: &str, p: Vector3<f64>, q: UnitQuaternion<f64>) -> BodyTruth {
+        BodyTruth { name: name.into(), pose: Pose { position: p.into(), orientation: protocol::conventions::quat_to_wxyz(&q) }, twist: [0.0; 6] }
+    }
+
+    /// Ground truth that follows the references exactly, palms fixed on the object; `fall(t)`
+    /// lowers the object (and the palms with it) and `contact(t)` says whether the hands touch.
+    fn records(plan: &Plan, fall: impl Fn(f64) -> f64, contact: impl Fn(f64) -> bool) -> Records {
+        let mut rec = Records::default();
+        let refs = &plan.references;
+        for k in 0..plan.scene.ticks {
+            let t = (k + 1) as f64 / plan.scenario.control_hz;
+            let o = refs.object_at(Some(t));
+            let mut op = Vector3::from(o.pose.position);
+            op.z -= fall(t);
+            let oq = protocol::conventions::quat_from_wxyz(o.pose.orientation);
+            let mut g = sim_bridge::ground_truth::empty("team");
+            g.header = Header::new("team", None, k, 0);
+            g.time = t;
+            g.object = Some(body("object", op, oq));
+            for (i, (id, ..)) in refs.torsos.iter().enumerate() {
+                let r = refs.torso_at(i, Some(t));
+                g.torsos.push(body(id, Vector3::from(r.pose.position), protocol::conventions::quat_from_wxyz(r.pose.orientation)));
+                let side = if i == 0 { -0.3 } else { 0.3 };
+                g.hands.push(body(id, op + oq * Vector3::new(side, 0.0, 0.0), oq));
+                if contact(t) {
+                    g.hand_contacts.push(ContactTruth { robot: id.clone(), body: "hand".into(), position: (op + Vector3::new(side, 0.0, 0.0)).into(), wrench: [-side * 100.0, 0.0, 4.9, 0.0, 0.0, 0.0] });
+                }
+            }
+            rec.truth.push(g);
+        }
+        rec.ticks_seen = plan.scene.ticks;
+        rec
+    }
+
+    #[test]
+    fn perfect_tracking_passes_and_a_drop_fails() {
+        let plan = s4_plan();
+        let good = evaluate(&plan, &records(&plan, |_| 0.0, |_| true), "embedded");
+        let m = &good.metrics;
+        assert!(m.passed, "{:?}", m.checks);
+        assert!(m.object.position_rms_m < 1e-12 && m.object.orientation_rms_deg < 1e-9);
+        assert!(m.slip_m.values().all(|s| *s < 1e-12));
+        assert!(!m.drop.dropped);
+        // The object slides down 15 cm after 0.5 s and the hands lose it for 0.1 s: dropped,
+        // slip and position checks fail.
+        let bad = evaluate(&plan, &records(&plan, |t| if t > 0.5 { (t - 0.5) * 0.5 } else { 0.0 }, |t| !(0.6..0.7).contains(&t)), "embedded");
+        let m = &bad.metrics;
+        assert!(m.drop.dropped, "{:?}", m.drop);
+        assert!(!m.passed);
+        let failed: Vec<&str> = m.checks.iter().filter(|c| !c.passed).map(|c| c.name.as_str()).collect();
+        assert!(failed.iter().any(|n| n.contains("dropped")) && failed.iter().any(|n| n.contains("object position RMS")), "{failed:?}");
+        // Writing the report works and gives the plots.
+        let dir = std::env::temp_dir().join(format!("evaluate-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        write_report(&plan, &bad, &dir).unwrap();
+        for f in ["metrics.json", "timeseries.csv", "torques.csv", "object.svg", "torsos.svg", "torque_rms.svg"] {
+            assert!(dir.join(f).exists(), "{f}");
+        }
+        let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+        assert_eq!(json["passed"], false);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

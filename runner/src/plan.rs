@@ -1,0 +1,213 @@
+//! From a [`Scenario`] to what every component runs: the bridge's [`Scene`] (world with the
+//! hands placed on the object by IK, pushes, settle and run lengths), the coordinator's
+//! [`ControllerConfig`] (the scenario's gains, object and minimum forces), the agents'
+//! description files, and the [`ReferencePlan`] that turns ticks into task references.
+
+use std::path::{Path, PathBuf};
+
+use coordinator::controller::ControllerConfig;
+use coordinator::impedance::Gains;
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use protocol::conventions::quat_to_wxyz;
+use protocol::{Header, Pose, PoseReference, TaskReferences, TorsoReference};
+use robot_agent::description::Robot;
+use sim_bridge::perturbation::Perturbation;
+use sim_bridge::scene::Scene;
+use sim_bridge::world::{ContactParams, ObjectSpec, RobotPlacement, SolverParams, WorldSpec};
+use thiserror::Error;
+
+use crate::reference::PoseMotion;
+use crate::scenario::Scenario;
+
+/// The team name every scenario run uses on the bus.
+pub const TEAM: &str = "team";
+
+/// What can go wrong turning a scenario into a run.
+#[derive(Debug, Error)]
+pub enum PlanError {
+    #[error("robot {robot}: {source}")]
+    Description { robot: String, source: robot_agent::description::DescriptionError },
+    #[error("placing the hands on the object: {0}")]
+    Ik(#[from] sim_bridge::ik::IkError),
+    #[error(transparent)]
+    World(#[from] sim_bridge::world::WorldError),
+    #[error("controller: {0}")]
+    Controller(#[from] coordinator::ControllerError),
+}
+
+/// Everything a scenario run needs, for either mode.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    pub scenario: Scenario,
+    pub scene: Scene,
+    pub controller: ControllerConfig,
+    /// Robot id and absolute description path, in scenario order.
+    pub robots: Vec<(String, PathBuf)>,
+    pub references: ReferencePlan,
+}
+
+impl Plan {
+    /// Ticks of the whole run (settling included).
+    pub fn total_ticks(&self) -> u64 {
+        self.scene.settle_ticks + self.scene.ticks
+    }
+}
+
+/// Build the plan; relative description paths are taken from `root` (the repository).
+pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
+    let mut placements = Vec::new();
+    let mut robots = Vec::new();
+    for r in &s.robots {
+        let path = if r.description.is_absolute() { r.description.clone() } else { root.join(&r.description) };
+        let robot = Robot::load(&path).map_err(|source| PlanError::Description { robot: r.id.clone(), source })?;
+        // The base stands at the description's standing height.
+        let z = robot.standing_q[2];
+        placements.push(RobotPlacement {
+            id: r.id.clone(),
+            description: path.clone(),
+            base_position: [r.base_xy[0], r.base_xy[1], z],
+            base_yaw: r.yaw,
+            joint_overrides: Default::default(),
+        });
+        robots.push((r.id.clone(), path));
+    }
+    let object = ObjectSpec {
+        size: s.object.size,
+        mass: s.object.mass,
+        inertia: None,
+        friction: [s.object.friction, 0.005, 0.0001],
+        position: s.object.position,
+        orientation: [1.0, 0.0, 0.0, 0.0],
+    };
+    let mut world = WorldSpec {
+        robots: placements,
+        object: Some(object),
+        control_hz: s.control_hz,
+        physics_hz: s.physics_hz,
+        contact: ContactParams::default(),
+        solver: SolverParams::default(),
+        seed: s.seed,
+        initial_joint_noise: 0.0,
+    };
+    world.substeps()?;
+    sim_bridge::ik::place_hands(&mut world)?;
+
+    let perturbations = s
+        .perturbations
+        .iter()
+        .map(|p| Perturbation {
+            target: if p.target.on == "object" {
+                protocol::PerturbationTarget::Object
+            } else {
+                protocol::PerturbationTarget::RobotBody { robot: p.target.on.clone(), body: p.target.body.clone().unwrap_or_else(|| "base".into()) }
+            },
+            wrench: p.wrench,
+            start: p.start,
+            duration: p.duration,
+        })
+        .collect();
+    let settle_ticks = (s.settle * s.control_hz).round() as u64;
+    let scene = Scene {
+        team: TEAM.into(),
+        world,
+        perturbations,
+        settle_ticks,
+        ticks: s.ticks(),
+        // Lockstep waits this long for a tick's torques: generous, a loaded machine is slow
+        // but a missing robot is still named.
+        command_timeout: 30.0,
+        start_timeout: 60.0,
+    };
+
+    let principal = object.principal_inertia();
+    let controller = ControllerConfig {
+        object_gains: Gains::new(&s.gains.object.stiffness, &s.gains.object.damping),
+        torso_gains: Gains::new(&s.gains.torso.stiffness, &s.gains.torso.damping),
+        swing_gains: s.gains.feet.as_ref().map(|f| Gains::new(&f.stiffness, &f.damping)).unwrap_or_else(|| ControllerConfig::default().swing_gains),
+        object_mass: s.object.mass,
+        object_inertia: Matrix3::from_diagonal(&Vector3::from(principal)),
+        object_pose_at_grasp: None,
+        f_min_foot: s.min_foot_force,
+        f_min_hand: s.min_hand_force,
+        ..ControllerConfig::default()
+    };
+    controller.check()?;
+
+    let torso_start = |i: usize| {
+        let p = &scene.world.robots[i];
+        (Vector3::from(p.base_position), UnitQuaternion::from_axis_angle(&Vector3::z_axis(), p.base_yaw))
+    };
+    let references = ReferencePlan {
+        settle_ticks,
+        control_hz: s.control_hz,
+        ramp: s.references.ramp,
+        object: s.references.object.clone(),
+        object_start: (Vector3::from(s.object.position), UnitQuaternion::identity()),
+        torsos: s
+            .robots
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let motion = s.references.torsos.iter().find(|t| t.robot == r.id).map(|t| t.motion.clone()).unwrap_or_default();
+                let (p, q) = torso_start(i);
+                (r.id.clone(), motion, p, q)
+            })
+            .collect(),
+    };
+    Ok(Plan { scenario: s.clone(), scene, controller, robots, references })
+}
+
+/// The scenario's references as a function of the tick: during settling every task holds its
+/// start pose (the pose the world starts in, which the controller also holds before any
+/// reference arrives); afterwards `motion(t)` about the start pose, `t` on the scenario clock.
+#[derive(Debug, Clone)]
+pub struct ReferencePlan {
+    pub settle_ticks: u64,
+    pub control_hz: f64,
+    /// Fade-in of every motion, s.
+    pub ramp: f64,
+    pub object: PoseMotion,
+    pub object_start: (Vector3<f64>, UnitQuaternion<f64>),
+    /// Robot id, motion, start position and orientation of each torso.
+    pub torsos: Vec<(String, PoseMotion, Vector3<f64>, UnitQuaternion<f64>)>,
+}
+
+fn hold(p: &Vector3<f64>, q: &UnitQuaternion<f64>) -> PoseReference {
+    PoseReference { pose: Pose { position: (*p).into(), orientation: quat_to_wxyz(q) }, twist: [0.0; 6], acceleration: [0.0; 6] }
+}
+
+impl ReferencePlan {
+    /// Scenario time of a tick's state (`None` while settling).
+    pub fn time_of_tick(&self, tick: u64) -> Option<f64> {
+        (tick >= self.settle_ticks).then(|| (tick - self.settle_ticks) as f64 / self.control_hz)
+    }
+
+    /// Object reference at scenario time `t` (`None`: the settling hold).
+    pub fn object_at(&self, t: Option<f64>) -> PoseReference {
+        let (p, q) = &self.object_start;
+        match t {
+            Some(t) => self.object.reference(p, q, t, self.ramp),
+            None => hold(p, q),
+        }
+    }
+
+    /// Reference of torso `i` at scenario time `t`.
+    pub fn torso_at(&self, i: usize, t: Option<f64>) -> PoseReference {
+        let (_, m, p, q) = &self.torsos[i];
+        match t {
+            Some(t) => m.reference(p, q, t, self.ramp),
+            None => hold(p, q),
+        }
+    }
+
+    /// The TaskReferences message of `tick`.
+    pub fn for_tick(&self, team: &str, tick: u64) -> TaskReferences {
+        let t = self.time_of_tick(tick);
+        TaskReferences {
+            header: Header::new(team, None, tick, protocol::wall_clock_ns()),
+            object: Some(self.object_at(t)),
+            torsos: (0..self.torsos.len()).map(|i| TorsoReference { robot: self.torsos[i].0.clone(), reference: self.torso_at(i, t) }).collect(),
+            swing_feet: Vec::new(),
+        }
+    }
+}
