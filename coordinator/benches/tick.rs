@@ -1,12 +1,33 @@
 //! One full tick of the paper's controller (assembly, projections, impedance, QP) for 2, 4
 //! and 8 robots built from the real default robot. Besides criterion's estimates it prints
-//! p50/p99 of the total and of each stage over 600/N ticks.
+//! p50/p99 of the total and of each stage over 600/N ticks. `CLARABEL_ONLY=1` solves the QP
+//! with Clarabel alone (`ControllerConfig::dense_qp = false`).
 
 #[path = "../tests/common/mod.rs"]
 mod common;
 
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+
 use coordinator::{ControllerConfig, PaperController};
 use criterion::{criterion_group, criterion_main, Criterion};
+
+/// Counts heap allocations, to report what one tick allocates.
+struct Counting;
+static ALLOCS: AtomicU64 = AtomicU64::new(0);
+static BYTES: AtomicU64 = AtomicU64::new(0);
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        ALLOCS.fetch_add(1, Relaxed);
+        BYTES.fetch_add(l.size() as u64, Relaxed);
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        unsafe { System.dealloc(p, l) }
+    }
+}
+#[global_allocator]
+static GLOBAL: Counting = Counting;
 
 fn pct(v: &mut [f64], p: f64) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
@@ -17,7 +38,7 @@ fn bench(c: &mut Criterion) {
     let mut fx = common::Fixture::new();
     for &count in &[2usize, 4, 8] {
         let (terms, descs) = fx.static_team(count);
-        let mut ctl = PaperController::new(ControllerConfig::default());
+        let mut ctl = PaperController::new(ControllerConfig { dense_qp: std::env::var_os("CLARABEL_ONLY").is_none(), ..ControllerConfig::default() });
         for d in &descs {
             ctl.set_description(d);
         }
@@ -31,6 +52,10 @@ fn bench(c: &mut Criterion) {
                 stages[k].push(x);
             }
         }
+        let (a0, b0) = (ALLOCS.load(Relaxed), BYTES.load(Relaxed));
+        ctl.compute(&terms).expect("tick");
+        let (a1, b1) = (ALLOCS.load(Relaxed), BYTES.load(Relaxed));
+        println!("robots {count}: one tick allocates {} times, {:.0} kB in all", a1 - a0, (b1 - b0) as f64 / 1024.0);
         let r = ctl.last().expect("last");
         let names = ["total", "assembly", "projections", "impedance", "QP build", "QP solve"];
         println!(
