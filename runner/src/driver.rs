@@ -36,6 +36,26 @@ pub struct Records {
     pub ticks_seen: u64,
 }
 
+impl Records {
+    /// Keep an applied torque command of a scenario tick (settling ticks are not evaluated).
+    fn take_torques(&mut self, sample: &zenoh::sample::Sample, settle: u64) {
+        if let Ok(cmd) = decode_sample::<TorqueCommand>(sample) {
+            if cmd.header.tick >= settle {
+                self.torques.entry(cmd.header.robot_id().to_string()).or_default().push((cmd.header.tick, cmd.tau));
+            }
+        }
+    }
+
+    /// Keep the coordinator's diagnostics of a scenario tick.
+    fn take_diagnostics(&mut self, sample: &zenoh::sample::Sample, settle: u64) {
+        if let Ok(d) = decode_sample::<TickDiagnostics>(sample) {
+            if d.header.tick >= settle {
+                self.diagnostics.push(d);
+            }
+        }
+    }
+}
+
 /// The driver's subscriptions and publisher, declared before any other component starts.
 pub struct Driver {
     truth: SampleQueue,
@@ -139,36 +159,20 @@ impl Driver {
                 }
                 s = self.torques.recv_async() => {
                     let Ok(sample) = s else { break };
-                    if let Ok(cmd) = decode_sample::<TorqueCommand>(&sample) {
-                        if cmd.header.tick >= settle {
-                            rec.torques.entry(cmd.header.robot_id().to_string()).or_default().push((cmd.header.tick, cmd.tau));
-                        }
-                    }
+                    rec.take_torques(&sample, settle);
                 }
                 s = self.diagnostics.recv_async() => {
                     let Ok(sample) = s else { break };
-                    if let Ok(d) = decode_sample::<TickDiagnostics>(&sample) {
-                        if d.header.tick >= settle {
-                            rec.diagnostics.push(d);
-                        }
-                    }
+                    rec.take_diagnostics(&sample, settle);
                 }
             }
         }
         // Whatever else already arrived (torques and diagnostics of the last ticks).
         while let Ok(Some(sample)) = self.torques.try_recv() {
-            if let Ok(cmd) = decode_sample::<TorqueCommand>(&sample) {
-                if cmd.header.tick >= settle {
-                    rec.torques.entry(cmd.header.robot_id().to_string()).or_default().push((cmd.header.tick, cmd.tau));
-                }
-            }
+            rec.take_torques(&sample, settle);
         }
         while let Ok(Some(sample)) = self.diagnostics.try_recv() {
-            if let Ok(d) = decode_sample::<TickDiagnostics>(&sample) {
-                if d.header.tick >= settle {
-                    rec.diagnostics.push(d);
-                }
-            }
+            rec.take_diagnostics(&sample, settle);
         }
         rec.run_wall = run_started.map(|s| s.elapsed()).unwrap_or_default();
         self.progress.finish_and_clear();
