@@ -245,3 +245,52 @@ async fn solve_and_publish(
     Ok(())
 }
 
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ControllerError;
+
+    /// Records the ticks of the references it is handed.
+    #[derive(Default)]
+    struct Recorder(Vec<u64>);
+
+    impl TeamController for Recorder {
+        fn name(&self) -> &'static str {
+            "recorder"
+        }
+        fn solve(&mut self, _tick: &[DynamicsTerms], _out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError> {
+            Ok(())
+        }
+        fn set_references(&mut self, r: &TaskReferences) {
+            self.0.push(r.header.tick);
+        }
+    }
+
+    fn refs(tick: u64) -> TaskReferences {
+        TaskReferences { header: Header::new("t", None, tick, 0), object: None, torsos: Vec::new(), swing_feet: Vec::new() }
+    }
+
+    #[test]
+    fn a_tick_is_solved_with_the_newest_reference_not_after_it() {
+        let mut b = ReferenceBuffer::default();
+        let mut c = Recorder::default();
+        b.apply(0, &mut c); // nothing yet: the controller keeps what it holds
+        assert!(c.0.is_empty());
+        for t in [5, 3, 4, 9] {
+            b.by_tick.insert(t, refs(t));
+        }
+        b.apply(2, &mut c); // every reference is for a later tick
+        assert!(c.0.is_empty());
+        b.apply(4, &mut c); // 3 and 4 are due: 4, and 3 is dropped
+        assert_eq!(c.0, vec![4]);
+        b.apply(4, &mut c); // already handed over
+        assert_eq!(c.0, vec![4]);
+        b.apply(8, &mut c); // 5 is the newest not after 8
+        assert_eq!(c.0, vec![4, 5]);
+        assert_eq!(b.by_tick.keys().copied().collect::<Vec<_>>(), vec![9]);
+        b.apply(100, &mut c);
+        assert_eq!(c.0, vec![4, 5, 9]);
+        assert!(b.by_tick.is_empty());
+    }
+}

@@ -347,3 +347,30 @@ fn contact_set_changes_and_more_robots() {
     println!("4 robots: n {} m {} QP {:?} rows {} in {:.0} us", r.team.n, r.j_c.nrows(), r.qp.status, r.qp.rows, r.timing.total_us);
     assert_eq!(out.len(), 4);
 }
+
+#[test]
+fn controller_configuration_from_toml_keeps_defaults_and_refuses_bad_values() {
+    let c = ControllerConfig::from_toml("f_min_hand = 20.0\n[object_gains]\nkp = [1, 2, 3, 4, 5, 6]\nkd = [6, 5, 4, 3, 2, 1]\n").expect("partial file");
+    assert_eq!(c.f_min_hand, 20.0);
+    assert_eq!(c.object_gains.kp, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+    let d = ControllerConfig::default();
+    assert_eq!(c.torso_gains, d.torso_gains);
+    assert_eq!(c.f_min_foot, d.f_min_foot);
+    // A whole configuration round trips.
+    let back = ControllerConfig::from_toml(&d.to_toml().unwrap()).unwrap();
+    assert_eq!(back.object_inertia, d.object_inertia);
+    assert_eq!((back.friction_margin, back.patch_margin), (d.friction_margin, d.patch_margin));
+    for (bad, says) in [
+        ("[object_gains]\nkp = [1, 2]\nkd = [1, 2]\n", "object_gains"),
+        ("f_min_hand = -1.0\n", "f_min_hand"),
+        ("patch_margin = 1.5\n", "patch_margin"),
+        ("friction_margin = 0.0\n", "friction_margin"),
+        ("qp_max_iter = 0\n", "qp_max_iter"),
+        ("object_mass = nan\n", "object"),
+        ("gain = 3\n", "gain"),
+        ("f_min_hand = \"a lot\"\n", "f_min_hand"),
+    ] {
+        let e = ControllerConfig::from_toml(bad).expect_err(bad).to_string();
+        assert!(e.contains(says), "{bad}: {e}");
+    }
+}

@@ -343,30 +343,25 @@ pub fn write_report(plan: &Plan, eval: &Evaluation, dir: &Path) -> Result<(), Re
         return Ok(());
     }
     let robots: Vec<String> = plan.robots.iter().map(|(id, _)| id.clone()).collect();
-    let col = |a: &str| (format!("object_{a}_des"), format!("object_{a}_mrt"));
-    let (xd, xm) = col("x");
-    let (yd, ym) = col("y");
-    let (zd, zm) = col("z");
-    let (rxd, rxm) = col("rx");
-    let (ryd, rym) = col("ry");
-    let (rzd, rzm) = col("rz");
-    report::plot_panels(
-        &eval.series,
-        &[
-            Panel { title: "object position", y_label: "m", pairs: vec![("x", &xd, &xm), ("y", &yd, &ym), ("z", &zd, &zm)] },
-            Panel { title: "object orientation (rotation vector from the start)", y_label: "rad", pairs: vec![("roll", &rxd, &rxm), ("pitch", &ryd, &rym), ("yaw", &rzd, &rzm)] },
-        ],
-        &dir.join("object.svg"),
-    )?;
-    let torso_cols: Vec<Vec<(String, String, String)>> = robots
+    // One panel per axis, each with its own range (centimetre motions about a 1 m position
+    // would be flat lines on a shared axis), as the paper's figures do.
+    let axes = [("x", "m"), ("y", "m"), ("z", "m"), ("rx", "rad"), ("ry", "rad"), ("rz", "rad")];
+    let object_cols: Vec<(String, String, String, &str)> = axes
         .iter()
-        .map(|r| ["x", "y", "z"].iter().map(|a| (a.to_string(), format!("{r}_torso_{a}_des"), format!("{r}_torso_{a}_mrt"))).collect())
+        .map(|(a, unit)| (format!("object {a}"), format!("object_{a}_des"), format!("object_{a}_mrt"), *unit))
         .collect();
-    let titles: Vec<String> = robots.iter().map(|r| format!("torso of {r}")).collect();
+    let panels: Vec<Panel> = object_cols
+        .iter()
+        .map(|(title, d, m, unit)| Panel { title: title.as_str(), y_label: unit, pairs: vec![(title.as_str(), d.as_str(), m.as_str())] })
+        .collect();
+    report::plot_panels(&eval.series, &panels, &dir.join("object.svg"))?;
+    let torso_cols: Vec<(String, String, String)> = robots
+        .iter()
+        .flat_map(|r| ["x", "y", "z"].iter().map(move |a| (format!("torso {r} {a}"), format!("{r}_torso_{a}_des"), format!("{r}_torso_{a}_mrt"))))
+        .collect();
     let panels: Vec<Panel> = torso_cols
         .iter()
-        .zip(&titles)
-        .map(|(cols, title)| Panel { title, y_label: "m", pairs: cols.iter().map(|(l, d, m)| (l.as_str(), d.as_str(), m.as_str())).collect() })
+        .map(|(title, d, m)| Panel { title: title.as_str(), y_label: "m", pairs: vec![(title.as_str(), d.as_str(), m.as_str())] })
         .collect();
     report::plot_panels(&eval.series, &panels, &dir.join("torsos.svg"))?;
     let mut labels = Vec::new();

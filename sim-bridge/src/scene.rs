@@ -117,3 +117,45 @@ pub async fn run(session: &Session, scene: &Scene, stop: watch::Receiver<bool>) 
     let run = lockstep::run_with(session, &scene.lockstep(scene.ticks), &mut plant, &mut extras, stop).await?;
     Ok(SceneReport { settle, run, perturbations_applied_steps: plant.perturbations.applied_steps })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::world::WorldSpec;
+
+    fn scene() -> Scene {
+        Scene { team: "team".into(), world: WorldSpec::paper_pair(), perturbations: Vec::new(), settle_ticks: 10, ticks: 20, command_timeout: 1.0, start_timeout: 1.0 }
+    }
+
+    #[test]
+    fn a_scene_file_round_trips_and_broken_ones_say_why() {
+        let dir = std::env::temp_dir().join(format!("scene-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("scene.toml");
+        let mut s = scene();
+        s.perturbations.push(Perturbation { target: protocol::PerturbationTarget::Object, wrench: [0.0, 0.0, 10.0, 0.0, 0.0, 0.0], start: 1.0, duration: 0.3 });
+        s.save(&path).unwrap();
+        let back = Scene::load(&path).unwrap();
+        assert_eq!(back.perturbations, s.perturbations);
+        assert_eq!(back.world.robots.len(), 2);
+        assert_eq!(back.world.robots[1].base_position, s.world.robots[1].base_position);
+        assert_eq!(back.world.object, s.world.object);
+        assert_eq!((back.settle_ticks, back.ticks), (10, 20));
+        // Broken files: each error names what is wrong.
+        let text = std::fs::read_to_string(&path).unwrap();
+        for (bad, says) in [
+            (text.replace("ticks = 20", "ticks = 0"), "ticks"),
+            (text.replace("command_timeout = 1.0", "command_timeout = -1.0"), "command_timeout"),
+            (text.replace("team = \"team\"", "team = \"a/b\""), "team"),
+            (text.replacen("control_hz = 1000.0", "control_hz = 0.0", 1), "rates"),
+            (text.replace("settle_ticks = 10", "settle_ticks = 10\nsurprise = 1"), "surprise"),
+            ("not toml [".to_string(), "scene"),
+        ] {
+            std::fs::write(&path, &bad).unwrap();
+            let e = Scene::load(&path).unwrap_err().to_string();
+            assert!(e.contains(says), "{says}: {e}");
+        }
+        assert!(Scene::load(&dir.join("missing.toml")).unwrap_err().to_string().contains("missing.toml"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
