@@ -217,11 +217,7 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
     };
     let object = tracking(&obj_pos_err, &obj_ang_err);
     let torsos: BTreeMap<String, Tracking> = robots.iter().enumerate().map(|(i, r)| (r.clone(), tracking(&torso_pos_err[i], &torso_ang_err[i]))).collect();
-    let mut drop = metrics::detect_drop(&times, &object_z, &hand_contact, 0.05, 0.10);
-    if object_z.first().is_some_and(|z| (z - o_p0.z).abs() > 0.05) {
-        // The drop height is from the object's start pose, not from the first sample.
-        drop.largest_fall = drop.largest_fall.max(o_p0.z - object_z.iter().copied().fold(f64::INFINITY, f64::min));
-    }
+    let drop = metrics::detect_drop(&times, &object_z, o_p0.z, &hand_contact, 0.05, 0.10);
     let slip_m: BTreeMap<String, f64> = robots.iter().enumerate().map(|(i, r)| (r.clone(), metrics::slip(&palm_in_object[i]))).collect();
     let n = truth.len().max(1) as f64;
     let mean_squeeze_n = robots.iter().enumerate().map(|(i, r)| (r.clone(), squeeze_sum[i] / n)).collect();

@@ -47,10 +47,10 @@ pub struct DropReport {
     pub largest_fall: f64,
 }
 
-/// Drop detection over samples `(t, object z, per-hand contact flags)`.
-pub fn detect_drop(times: &[f64], object_z: &[f64], hand_contact: &[Vec<bool>], max_gap: f64, max_fall: f64) -> DropReport {
+/// Drop detection over samples `(t, object z, per-hand contact flags)`; `z0` is the object's
+/// start height (the fall is measured from it, not from the first sample).
+pub fn detect_drop(times: &[f64], object_z: &[f64], z0: f64, hand_contact: &[Vec<bool>], max_gap: f64, max_fall: f64) -> DropReport {
     let mut report = DropReport { dropped: false, at: None, reason: None, longest_gap: 0.0, largest_fall: 0.0 };
-    let Some(&z0) = object_z.first() else { return report };
     let hands = hand_contact.first().map_or(0, Vec::len);
     let mut lost_since: Vec<Option<f64>> = vec![None; hands];
     for (k, &t) in times.iter().enumerate() {
@@ -166,19 +166,23 @@ mod tests {
         for flags in c.iter_mut().take(90).skip(50) {
             flags[1] = false;
         }
-        let r = detect_drop(&t, &z, &c, 0.05, 0.1);
+        let r = detect_drop(&t, &z, 0.6, &c, 0.05, 0.1);
         assert!(!r.dropped && (r.longest_gap - 0.039).abs() < 1e-9, "{r:?}");
         // 60 ms: a drop, at the time the gap passed 50 ms.
         for flags in c.iter_mut().take(110).skip(50) {
             flags[1] = false;
         }
-        let r = detect_drop(&t, &z, &c, 0.05, 0.1);
+        let r = detect_drop(&t, &z, 0.6, &c, 0.05, 0.1);
         assert!(r.dropped && (r.at.unwrap() - 0.101).abs() < 1e-9, "{r:?}");
         // A fall of 11 cm with both hands on: a drop.
         let c: Vec<Vec<bool>> = (0..200).map(|_| vec![true, true]).collect();
         let z: Vec<f64> = (0..200).map(|k| 0.6 - k as f64 * 0.001).collect();
-        let r = detect_drop(&t, &z, &c, 0.05, 0.1);
+        let r = detect_drop(&t, &z, 0.6, &c, 0.05, 0.1);
         assert!(r.dropped && r.reason.unwrap().contains("below"));
+        // Already 11 cm low at the first sample (fell while settling): a drop too.
+        let z = vec![0.49; 200];
+        assert!(detect_drop(&t, &z, 0.6, &c, 0.05, 0.1).dropped);
+        assert!(!detect_drop(&t, &z, 0.5, &c, 0.05, 0.1).dropped);
     }
 
     #[test]

@@ -46,6 +46,8 @@ pub enum RunError {
     Incomplete { seen: u64, expected: u64 },
     #[error("controller configuration: {0}")]
     Controller(#[from] coordinator::ControllerError),
+    #[error("{what}: {reason}")]
+    Task { what: String, reason: String },
 }
 
 /// How to run.
@@ -59,7 +61,7 @@ pub struct RunOptions {
 /// Run the plan; `out` is the report folder (the distributed run writes its component files
 /// there).
 pub fn run(plan: &Plan, opts: &RunOptions, out: &Path) -> Result<Records, RunError> {
-    let rt = tokio::runtime::Runtime::new().map_err(|e| RunError::Write { path: "tokio runtime".into(), reason: e.to_string() })?;
+    let rt = tokio::runtime::Runtime::new().map_err(|e| RunError::Task { what: "starting the async runtime".into(), reason: e.to_string() })?;
     let records = if opts.distributed { rt.block_on(run_distributed(plan, opts, out))? } else { rt.block_on(run_embedded(plan, opts))? };
     if records.ticks_seen < plan.total_ticks() {
         return Err(RunError::Incomplete { seen: records.ticks_seen, expected: plan.total_ticks() });
@@ -94,7 +96,7 @@ pub async fn run_embedded(plan: &Plan, opts: &RunOptions) -> Result<Records, Run
     if bridge.is_err() {
         let _ = stop_tx.send(true);
     }
-    let records = driver_task.await.map_err(|e| RunError::Agent { robot: "driver".into(), reason: e.to_string() })?;
+    let records = driver_task.await.map_err(|e| RunError::Task { what: "the scenario driver".into(), reason: e.to_string() })?;
     let _ = stop_tx.send(true);
     let _ = coordinator.await;
     for (robot, handle) in agents {
@@ -145,11 +147,11 @@ pub async fn run_distributed(plan: &Plan, opts: &RunOptions, out: &Path) -> Resu
         (r, bridge)
     })
     .await
-    .map_err(|e| RunError::Agent { robot: "sim-bridge".into(), reason: e.to_string() })?;
+    .map_err(|e| RunError::Task { what: "waiting for the sim-bridge process".into(), reason: e.to_string() })?;
     // Give the driver a moment for the last messages, then stop it.
     tokio::time::sleep(Duration::from_millis(200)).await;
     let _ = stop_tx.send(true);
-    let records = driver_task.await.map_err(|e| RunError::Agent { robot: "driver".into(), reason: e.to_string() })??;
+    let records = driver_task.await.map_err(|e| RunError::Task { what: "the scenario driver".into(), reason: e.to_string() })??;
     tracing::debug!(wall = ?started.elapsed(), "distributed run ended");
     let _ = session.close().await;
     bridge_result.0?;
