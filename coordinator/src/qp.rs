@@ -218,41 +218,55 @@ pub const DENSE_TOL: f64 = 1e-7;
 /// Relative tolerance of a reduced-accuracy (AlmostSolved) answer of [`dense_ipm`].
 pub const REDUCED_TOL: f64 = 1e-5;
 
-/// Weight of the slacks in [`solve_least_violation`] (per N^2 of violation, against the
+/// Price of a violated row in [`solve_least_violation`] (per N^2 of violation, against the
 /// torque objective in (N m)^2).
 pub const VIOLATION_WEIGHT: f64 = 1e6;
 
-/// The fallback when the QP is infeasible: every row `A F <= b` gets a slack `t >= 0`,
-/// `A F - t <= b`, and `F^T H F + w |t|^2` is minimised. Always feasible; it keeps what can be
-/// kept (above all the hands' squeeze) instead of dropping every contact force. Returns `F`
-/// and the largest violation `max t`, or `None` when even this does not converge.
+/// The fallback when the QP is infeasible: every row `A F <= b` may be violated at a price,
+/// `min F^T H F + w sum_i max(0, a_i F - b_i)^2`. Always solvable; it keeps what can be kept
+/// (above all the hands' squeeze) instead of dropping every contact force. Solved by the
+/// active-set Newton method of this piecewise quadratic: with the violated rows `V`,
+/// `(H + w A_V^T A_V) F = w A_V^T b_V`, until `V` repeats (a few 36 x 36 solves; a first
+/// version put a slack per row into the interior-point method, 170 variables, and took a
+/// second per tick). Returns `F` and the largest violation, or `None` if a solve fails.
 pub fn solve_least_violation(inp: &QpInput, max_iter: u32) -> Option<(DVector<f64>, f64)> {
     let m = inp.rho.ncols();
     let (a, b) = constraints(inp);
-    let r = a.nrows();
-    let mut h = DMatrix::zeros(m + r, m + r);
-    let mut hf = inp.y.transpose() * inp.y;
+    let mut h = inp.y.transpose() * inp.y;
     for i in 0..m {
-        hf[(i, i)] += inp.regularisation;
+        h[(i, i)] += inp.regularisation;
     }
-    h.view_mut((0, 0), (m, m)).copy_from(&(2.0 * hf));
-    for i in 0..r {
-        h[(m + i, m + i)] = 2.0 * VIOLATION_WEIGHT;
-    }
-    // [A -I; 0 -I] [F; t] <= [b; 0]
-    let mut aa = DMatrix::zeros(2 * r, m + r);
-    aa.view_mut((0, 0), (r, m)).copy_from(&a);
-    for i in 0..r {
-        aa[(i, m + i)] = -1.0;
-        aa[(r + i, m + i)] = -1.0;
-    }
-    let mut bb = DVector::zeros(2 * r);
-    bb.rows_mut(0, r).copy_from(&b);
-    if !(bb.iter().all(|x| x.is_finite()) && aa.iter().all(|x| x.is_finite()) && h.iter().all(|x| x.is_finite())) {
+    if !(b.iter().all(|x| x.is_finite()) && a.iter().all(|x| x.is_finite()) && h.iter().all(|x| x.is_finite())) {
         return None;
     }
-    let (x, _, _) = dense_ipm(&h, &aa, &bb, max_iter.max(100), 1e-7)?;
-    let f = x.rows(0, m).into_owned();
+    let cost = |f: &DVector<f64>| f.dot(&(&h * f)) + VIOLATION_WEIGHT * (&a * f - &b).iter().map(|v| v.max(0.0).powi(2)).sum::<f64>();
+    let mut f = DVector::zeros(m);
+    let mut best = (cost(&f), f.clone());
+    let mut active: Vec<usize> = Vec::new();
+    for _ in 0..max_iter.max(30) {
+        let r = &a * &f - &b;
+        let now: Vec<usize> = (0..r.len()).filter(|&i| r[i] > 0.0).collect();
+        if !active.is_empty() && now == active {
+            break;
+        }
+        active = now;
+        let mut k = h.clone();
+        let mut rhs = DVector::zeros(m);
+        for &i in &active {
+            let ai = a.row(i);
+            k += VIOLATION_WEIGHT * ai.transpose() * ai;
+            rhs += VIOLATION_WEIGHT * b[i] * ai.transpose();
+        }
+        f = k.cholesky()?.solve(&rhs);
+        let c = cost(&f);
+        if c < best.0 {
+            best = (c, f.clone());
+        }
+        if active.is_empty() {
+            break;
+        }
+    }
+    let f = best.1;
     let worst = (&a * &f - &b).iter().copied().fold(0.0, f64::max);
     Some((f, worst))
 }

@@ -13,6 +13,9 @@ use crate::assembly::{TickAssembler, TickOutcome};
 use crate::membership::Membership;
 use crate::TeamController;
 
+/// Capacity of the references queue, samples.
+pub const REFERENCE_QUEUE: usize = 1 << 16;
+
 /// Settings of the coordinator service.
 #[derive(Debug, Clone)]
 pub struct CoordinatorConfig {
@@ -45,7 +48,8 @@ pub async fn run(
     let dynamics = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Dynamics)?).await?;
     let members_q = transport::watch_members(session, &cfg.team).await?;
     let descriptions = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Description)?).await?;
-    let references = transport::subscribe(session, keys::references(&cfg.team)?).await?;
+    // A planner may send many ticks' references at once (the scenario driver does).
+    let references = transport::subscribe_with_capacity(session, keys::references(&cfg.team)?, REFERENCE_QUEUE).await?;
     let mut diag_pub: TypedPublisher<TickDiagnostics> =
         TypedPublisher::declare(session, keys::diagnostics(&cfg.team)?, Qos::Telemetry).await?;
     let mut status_pub: TypedPublisher<CoordinatorStatus> =
@@ -61,6 +65,7 @@ pub async fn run(
     let mut housekeeping = tokio::time::interval(cfg.tick_deadline.max(Duration::from_millis(10)));
     let mut detail = String::from("waiting for members");
     let mut refs = ReferenceBuffer::default();
+    let mut described = std::collections::BTreeSet::new();
     loop {
         let mut membership_changed = false;
         let mut publish_status = false;
@@ -84,7 +89,12 @@ pub async fn run(
                 let Ok(sample) = d else { break };
                 match decode_sample::<RobotDescription>(&sample) {
                     Ok(desc) => {
-                        tracing::info!(robot = desc.header.robot_id(), "robot description received");
+                        // Agents repeat their description every second: log the first only.
+                        if described.insert(desc.header.robot_id().to_string()) {
+                            tracing::info!(robot = desc.header.robot_id(), "robot description received");
+                        } else {
+                            tracing::debug!(robot = desc.header.robot_id(), "robot description received again");
+                        }
                         controller.set_description(&desc);
                     }
                     Err(e) => tracing::warn!(key = %sample.key_expr(), "rejected description: {e}"),
@@ -162,8 +172,8 @@ pub async fn run(
     Ok(counters)
 }
 
-/// Task references by tick. A planner may publish references ahead of time (a scenario
-/// driver does, a few ticks ahead of the simulation); tick `k` is solved with the newest
+/// Task references by tick. A planner may publish references ahead of time (the scenario
+/// driver publishes 20,000 ticks ahead); tick `k` is solved with the newest
 /// reference whose tick is at most `k`. References still queued when a tick completes are
 /// taken first, so a reference published before the tick's states is never a tick late.
 #[derive(Default)]
@@ -191,7 +201,9 @@ impl ReferenceBuffer {
     fn apply(&mut self, tick: u64, controller: &mut impl TeamController) {
         let Some((&t, _)) = self.by_tick.range(..=tick).next_back() else { return };
         // Older entries are no longer needed; the applied one is removed once used.
-        self.by_tick = self.by_tick.split_off(&t);
+        while self.by_tick.first_key_value().is_some_and(|(&k, _)| k < t) {
+            self.by_tick.pop_first();
+        }
         if let Some(r) = self.by_tick.remove(&t) {
             controller.set_references(&r);
         }

@@ -225,6 +225,16 @@ pub async fn subscribe(session: &Session, key: String) -> Result<SampleQueue, Tr
     session.declare_subscriber(key.clone()).await.map_err(|e| zenoh_err("declare_subscriber", &key, e))
 }
 
+/// Subscribe to `key` with a FIFO queue of `capacity` samples (the default holds 256; a
+/// publisher that sends a burst, such as a whole run's references, needs more).
+pub async fn subscribe_with_capacity(session: &Session, key: String, capacity: usize) -> Result<SampleQueue, TransportError> {
+    session
+        .declare_subscriber(key.clone())
+        .with(zenoh::handlers::FifoChannel::new(capacity))
+        .await
+        .map_err(|e| zenoh_err("declare_subscriber", &key, e))
+}
+
 /// Decode a sample's payload as `M`, naming the key in the error.
 pub fn decode_sample<M: Message>(sample: &Sample) -> Result<M, ProtocolError> {
     let bytes = sample.payload().to_bytes();

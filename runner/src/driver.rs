@@ -1,6 +1,9 @@
 //! The scenario driver: the runner's own Zenoh participant during a run. It publishes the
-//! task references a few ticks ahead of the simulation (the coordinator solves tick `k` with
-//! the newest reference of tick `<= k`), records what the evaluation needs (ground truth,
+//! task references [`LOOKAHEAD`] ticks ahead of the simulation, the first window before the
+//! run starts (the coordinator solves tick `k` with the newest reference of tick `<= k`), so
+//! that what the controller tracks does not depend on how fast this process keeps up with the
+//! simulation (a lagging driver with a 50-tick window let the references freeze and then jump
+//! on a loaded machine). It records what the evaluation needs (ground truth,
 //! the torques the agents applied, the coordinator's diagnostics and status) and shows the
 //! progress. It never talks to the controller other than by references: the ground truth it
 //! records is for evaluation only.
@@ -18,8 +21,9 @@ use zenoh::Session;
 
 use crate::plan::{ReferencePlan, TEAM};
 
-/// References are published this many ticks ahead of the last simulated tick.
-pub const LOOKAHEAD: u64 = 50;
+/// References are published this many ticks ahead of the last simulated tick (10 s at 2 kHz;
+/// below the coordinator's reference queue, `coordinator::service::REFERENCE_QUEUE`).
+pub const LOOKAHEAD: u64 = 20_000;
 
 /// What a run recorded (scenario ticks only; settling is not evaluated).
 #[derive(Debug, Clone, Default)]
@@ -105,13 +109,14 @@ impl Driver {
     pub async fn run(mut self, mut stop: watch::Receiver<bool>) -> Result<Records, TransportError> {
         let mut rec = Records::default();
         let settle = self.plan.settle_ticks;
-        let mut next_ref = 0u64;
         let started = Instant::now();
         let mut run_started: Option<Instant> = None;
         let mut last_logged = 0u64;
-        // The first window goes out now and again when the coordinator is first heard of
-        // (it may not have subscribed yet); the controller holds the start poses until then.
-        self.publish_refs(0, LOOKAHEAD).await?;
+        // The first window goes out now, and again when the coordinator is first heard of (it
+        // may not have subscribed yet): the settling ticks hold the start poses, which is also
+        // what the controller holds before any reference arrives.
+        let mut next_ref = LOOKAHEAD.min(self.total);
+        self.publish_refs(0, next_ref).await?;
         let mut coordinator_heard = false;
         loop {
             tokio::select! {
@@ -122,7 +127,7 @@ impl Driver {
                         rec.last_status = Some(st);
                         if !coordinator_heard {
                             coordinator_heard = true;
-                            self.publish_refs(0, next_ref.max(LOOKAHEAD)).await?;
+                            self.publish_refs(0, next_ref).await?;
                         }
                     }
                 }
@@ -134,9 +139,11 @@ impl Driver {
                     };
                     let tick = gt.header.tick;
                     rec.ticks_seen = rec.ticks_seen.max(tick + 1);
-                    let ahead = (tick + 1 + LOOKAHEAD).max(next_ref);
-                    self.publish_refs(next_ref.max(tick + 1), ahead).await?;
-                    next_ref = ahead;
+                    let ahead = (tick + 1 + LOOKAHEAD).min(self.total);
+                    if ahead > next_ref {
+                        self.publish_refs(next_ref, ahead).await?;
+                        next_ref = ahead;
+                    }
                     if tick >= settle {
                         if run_started.is_none() {
                             rec.settle_wall = started.elapsed();
