@@ -62,7 +62,8 @@ pub async fn run(
     let mut counters = CoordinatorCounters::default();
     let mut commands = Vec::new();
     let mut status_tick = 0u64;
-    let mut housekeeping = tokio::time::interval(cfg.tick_deadline.max(Duration::from_millis(10)));
+    // Expired ticks are looked for, and the status published, at least every second.
+    let mut housekeeping = tokio::time::interval(cfg.tick_deadline.clamp(Duration::from_millis(10), Duration::from_secs(1)));
     let mut detail = String::from("waiting for members");
     let mut refs = ReferenceBuffer::default();
     let mut described = std::collections::BTreeSet::new();
@@ -92,6 +93,8 @@ pub async fn run(
                         // Agents repeat their description every second: log the first only.
                         if described.insert(desc.header.robot_id().to_string()) {
                             tracing::info!(robot = desc.header.robot_id(), "robot description received");
+                            // Readiness may have changed: say so now (a lockstep bridge waits for it).
+                            publish_status = true;
                         } else {
                             tracing::debug!(robot = desc.header.robot_id(), "robot description received again");
                         }

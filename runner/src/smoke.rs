@@ -59,6 +59,7 @@ impl SmokeConfig {
             command_timeout: Duration::from_secs(5),
             resend_every: Duration::from_millis(50),
             progress_every: (self.ticks / 10).max(1),
+            wait_for_coordinator: false,
         }
     }
 }

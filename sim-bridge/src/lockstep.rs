@@ -23,6 +23,8 @@ pub enum BridgeError {
     Protocol(#[from] protocol::ProtocolError),
     #[error("robots {missing:?} did not join the team within {waited:?}")]
     MembersMissing { missing: Vec<String>, waited: Duration },
+    #[error("the coordinator was not ready for the team within {waited:?} (last status: {last})")]
+    CoordinatorNotReady { last: String, waited: Duration },
     #[error("no torques from robot(s) {missing:?} for tick {tick} within {waited:?}")]
     TorqueTimeout { tick: u64, missing: Vec<String>, waited: Duration },
     #[error("stopped")]
@@ -43,6 +45,11 @@ pub struct LockstepConfig {
     pub resend_every: Duration,
     /// Log progress every this many ticks (0: never).
     pub progress_every: u64,
+    /// Also wait, before the first tick, until the coordinator's status lists every robot as a
+    /// member and it is ready to command them (descriptions received). The coordinator learns
+    /// of members through liveliness, which may reach it after a robot's first dynamics: a tick
+    /// it then completed without that robot was never commanded for it.
+    pub wait_for_coordinator: bool,
 }
 
 /// What a lockstep run did.
@@ -175,6 +182,7 @@ pub(crate) async fn wait_for_members(
     stop: &watch::Receiver<bool>,
 ) -> Result<(), BridgeError> {
     let members_q = transport::watch_members(session, &cfg.team).await?;
+    let status_q = if cfg.wait_for_coordinator { Some(transport::subscribe(session, keys::coordinator_status(&cfg.team)?).await?) } else { None };
     let started = Instant::now();
     let mut present = BTreeSet::new();
     while !robots.iter().all(|r| present.contains(r)) {
@@ -195,6 +203,26 @@ pub(crate) async fn wait_for_members(
             _ => {
                 let missing = robots.iter().filter(|r| !present.contains(*r)).cloned().collect();
                 return Err(BridgeError::MembersMissing { missing, waited: cfg.start_timeout });
+            }
+        }
+    }
+    if let Some(q) = status_q {
+        let mut last = String::from("no status heard");
+        loop {
+            if *stop.borrow() {
+                return Err(BridgeError::Stopped);
+            }
+            let left = cfg.start_timeout.saturating_sub(started.elapsed());
+            match tokio::time::timeout(left, q.recv_async()).await {
+                Ok(Ok(sample)) => {
+                    let Ok(st) = decode_sample::<protocol::CoordinatorStatus>(&sample) else { continue };
+                    let all = robots.iter().all(|r| st.members.contains(r));
+                    if all && st.mode != protocol::CoordinatorMode::WaitingForMembers {
+                        break;
+                    }
+                    last = format!("members {:?}, mode {:?}: {}", st.members, st.mode, st.detail);
+                }
+                _ => return Err(BridgeError::CoordinatorNotReady { last, waited: cfg.start_timeout }),
             }
         }
     }

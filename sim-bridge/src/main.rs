@@ -141,6 +141,7 @@ async fn main() -> Result<()> {
                 command_timeout: Duration::from_secs_f64(command_timeout),
                 resend_every: Duration::from_millis(50),
                 progress_every: (ticks / 10).max(1),
+                wait_for_coordinator: false,
             };
             let mut plant = PlaceholderPlant::new(robots, joints, 0.5, dt);
             let (_tx, rx) = tokio::sync::watch::channel(false);
@@ -297,6 +298,7 @@ async fn run_world(
         command_timeout: Duration::from_secs_f64(a.command_timeout),
         resend_every: Duration::from_millis(50),
         progress_every: (a.ticks / 10).max(1),
+        wait_for_coordinator: false,
     };
     let mut extras = lockstep::Extras {
         publish_ground_truth: true,

@@ -84,6 +84,7 @@ impl Scene {
             command_timeout: Duration::from_secs_f64(self.command_timeout),
             resend_every: Duration::from_millis(50),
             progress_every: 0,
+            wait_for_coordinator: true,
         }
     }
 }

@@ -21,6 +21,7 @@ fn cfg(team: &str, ticks: u64) -> LockstepConfig {
         command_timeout: Duration::from_secs(2),
         resend_every: Duration::from_millis(50),
         progress_every: 0,
+        wait_for_coordinator: false,
     }
 }
 

@@ -107,6 +107,7 @@ async fn lockstep_names_the_robot_that_never_joined() {
         command_timeout: Duration::from_secs(1),
         resend_every: Duration::from_millis(50),
         progress_every: 0,
+        wait_for_coordinator: false,
     };
     let mut plant = sim_bridge::plant::PlaceholderPlant::new(vec!["r1".into(), "ghost".into()], 3, 0.0, 0.001);
     let (_tx, rx) = tokio::sync::watch::channel(false);
