@@ -117,11 +117,8 @@ impl ControllerConfig {
     pub fn check(&self) -> Result<(), ControllerError> {
         let bad = |what: &str, why: String| Err(ControllerError::Config(format!("{what}: {why}")));
         for (what, g, n) in [("object_gains", &self.object_gains, 6), ("torso_gains", &self.torso_gains, 6), ("swing_gains", &self.swing_gains, 3)] {
-            if g.kp.len() != n || g.kd.len() != n {
-                return bad(what, format!("needs {n} stiffness and {n} damping values, has {} and {}", g.kp.len(), g.kd.len()));
-            }
-            if g.kp.iter().chain(&g.kd).any(|x| !(x.is_finite() && *x >= 0.0)) {
-                return bad(what, "gains must be finite and non-negative".into());
+            if let Err(why) = g.check(n) {
+                return bad(what, why);
             }
         }
         if !(self.object_mass.is_finite() && self.object_mass >= 0.0) || self.object_inertia.iter().any(|x| !x.is_finite()) {

@@ -32,6 +32,17 @@ impl Gains {
     pub fn new(kp: &[f64], kd: &[f64]) -> Self {
         Gains { kp: kp.to_vec(), kd: kd.to_vec() }
     }
+
+    /// `n` stiffness and `n` damping values, finite and non-negative; the error says which.
+    pub fn check(&self, n: usize) -> Result<(), String> {
+        if self.kp.len() != n || self.kd.len() != n {
+            return Err(format!("needs {n} stiffness and {n} damping values, has {} and {}", self.kp.len(), self.kd.len()));
+        }
+        if self.kp.iter().chain(&self.kd).any(|x| !(x.is_finite() && *x >= 0.0)) {
+            return Err("gains must be finite and non-negative".into());
+        }
+        Ok(())
+    }
 }
 
 /// Per-tick quantities shared by every task: `M_c^{-1} P` and `M_c^{-1} (P h - Pdot v)`.

@@ -162,16 +162,21 @@ pub fn constraints(inp: &QpInput) -> (DMatrix<f64>, DVector<f64>) {
     (a, b)
 }
 
+/// `H = Y^T Y + eps I`: the objective `F^T H F` of eq. wrench_optim2, regularised.
+fn objective(inp: &QpInput) -> DMatrix<f64> {
+    let mut h = inp.y.transpose() * inp.y;
+    for i in 0..h.nrows() {
+        h[(i, i)] += inp.regularisation;
+    }
+    h
+}
+
 /// Solve the QP. Never panics; a solver error is a `NumericalError` status with `F = 0`.
 pub fn solve(inp: &QpInput, max_iter: u32) -> QpOutcome {
     let t0 = Instant::now();
     let m = inp.rho.ncols();
-    let mut h = inp.y.transpose() * inp.y;
-    for i in 0..m {
-        h[(i, i)] += inp.regularisation;
-    }
     // Clarabel minimises 1/2 x^T P x: P = 2 H.
-    h *= 2.0;
+    let h = objective(inp) * 2.0;
     let (a, b) = constraints(inp);
     let rows = a.nrows();
     if inp.dense_first && b.iter().all(|x| x.is_finite()) && h.iter().all(|x| x.is_finite()) && a.iter().all(|x| x.is_finite()) {
@@ -232,10 +237,7 @@ pub const VIOLATION_WEIGHT: f64 = 1e6;
 pub fn solve_least_violation(inp: &QpInput, max_iter: u32) -> Option<(DVector<f64>, f64)> {
     let m = inp.rho.ncols();
     let (a, b) = constraints(inp);
-    let mut h = inp.y.transpose() * inp.y;
-    for i in 0..m {
-        h[(i, i)] += inp.regularisation;
-    }
+    let h = objective(inp);
     if !(b.iter().all(|x| x.is_finite()) && a.iter().all(|x| x.is_finite()) && h.iter().all(|x| x.is_finite())) {
         return None;
     }

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use protocol::{GroundTruth, Pose, PoseReference};
 use serde::Serialize;
 
@@ -89,8 +89,7 @@ pub struct Metrics {
 }
 
 fn iso(p: &Pose) -> Isometry3<f64> {
-    let [w, x, y, z] = p.orientation;
-    Isometry3::from_parts(Translation3::from(Vector3::from(p.position)), UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)))
+    Isometry3::from_parts(Translation3::from(Vector3::from(p.position)), protocol::conventions::quat_from_wxyz(p.orientation))
 }
 
 fn ref_iso(r: &PoseReference) -> Isometry3<f64> {
@@ -112,7 +111,7 @@ pub struct Evaluation {
 /// Evaluate the records of a run of `plan`.
 pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
     let refs = &plan.references;
-    let robots: Vec<String> = plan.robots.iter().map(|(id, _)| id.clone()).collect();
+    let robots: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
     let truth: Vec<&GroundTruth> = records.truth.iter().filter(|g| g.object.is_some()).collect();
     let (o_p0, o_q0) = refs.object_start;
 
@@ -226,8 +225,8 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
     let mut torque_rms = BTreeMap::new();
     let mut torque_names = Vec::new();
     let mut per_robot: Vec<BTreeMap<u64, &Vec<f64>>> = Vec::new();
-    for (id, path) in &plan.robots {
-        let joints = robot_agent::description::Robot::load(path).map(|r| r.actuated_joints.clone()).unwrap_or_default();
+    for r in &plan.robots {
+        let (id, joints) = (&r.id, &r.joints);
         let by_tick: BTreeMap<u64, &Vec<f64>> = records.torques.get(id).map(|v| v.iter().rev().map(|(t, tau)| (*t, tau)).collect()).unwrap_or_default();
         let samples: Vec<Vec<f64>> = by_tick.values().map(|v| (*v).clone()).collect();
         let rms = metrics::torque_rms(&samples);
@@ -338,7 +337,7 @@ pub fn write_report(plan: &Plan, eval: &Evaluation, dir: &Path) -> Result<(), Re
     if eval.series.time.is_empty() {
         return Ok(());
     }
-    let robots: Vec<String> = plan.robots.iter().map(|(id, _)| id.clone()).collect();
+    let robots: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
     // One panel per axis, each with its own range (centimetre motions about a 1 m position
     // would be flat lines on a shared axis), as the paper's figures do.
     let axes = [("x", "m"), ("y", "m"), ("z", "m"), ("rx", "rad"), ("ry", "rad"), ("rz", "rad")];

@@ -6,7 +6,6 @@
 use std::path::{Path, PathBuf};
 
 use coordinator::controller::ControllerConfig;
-use coordinator::impedance::Gains;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use protocol::conventions::quat_to_wxyz;
 use protocol::{Header, Pose, PoseReference, TaskReferences, TorsoReference};
@@ -41,9 +40,19 @@ pub struct Plan {
     pub scenario: Scenario,
     pub scene: Scene,
     pub controller: ControllerConfig,
-    /// Robot id and absolute description path, in scenario order.
-    pub robots: Vec<(String, PathBuf)>,
+    /// The robots, in scenario order.
+    pub robots: Vec<PlannedRobot>,
     pub references: ReferencePlan,
+}
+
+/// A robot of the plan.
+#[derive(Debug, Clone)]
+pub struct PlannedRobot {
+    pub id: String,
+    /// Absolute path of its description (TOML).
+    pub description: PathBuf,
+    /// Its actuated joints, in the order of its torque commands.
+    pub joints: Vec<String>,
 }
 
 impl Plan {
@@ -69,7 +78,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
             base_yaw: r.yaw,
             joint_overrides: Default::default(),
         });
-        robots.push((r.id.clone(), path));
+        robots.push(PlannedRobot { id: r.id.clone(), description: path, joints: robot.actuated_joints.clone() });
     }
     let object = ObjectSpec {
         size: s.object.size,
@@ -121,9 +130,9 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
 
     let principal = object.principal_inertia();
     let controller = ControllerConfig {
-        object_gains: Gains::new(&s.gains.object.stiffness, &s.gains.object.damping),
-        torso_gains: Gains::new(&s.gains.torso.stiffness, &s.gains.torso.damping),
-        swing_gains: s.gains.feet.as_ref().map(|f| Gains::new(&f.stiffness, &f.damping)).unwrap_or_else(|| ControllerConfig::default().swing_gains),
+        object_gains: s.gains.object.gains(),
+        torso_gains: s.gains.torso.gains(),
+        swing_gains: s.gains.feet.as_ref().map(|f| f.gains()).unwrap_or_else(|| ControllerConfig::default().swing_gains),
         object_mass: s.object.mass,
         object_inertia: Matrix3::from_diagonal(&Vector3::from(principal)),
         object_pose_at_grasp: None,
@@ -185,15 +194,16 @@ impl ReferencePlan {
     /// Object reference at scenario time `t` (`None`: the settling hold).
     pub fn object_at(&self, t: Option<f64>) -> PoseReference {
         let (p, q) = &self.object_start;
-        match t {
-            Some(t) => self.object.reference(p, q, t, self.ramp),
-            None => hold(p, q),
-        }
+        self.pose_at(&self.object, p, q, t)
     }
 
     /// Reference of torso `i` at scenario time `t`.
     pub fn torso_at(&self, i: usize, t: Option<f64>) -> PoseReference {
         let (_, m, p, q) = &self.torsos[i];
+        self.pose_at(m, p, q, t)
+    }
+
+    fn pose_at(&self, m: &PoseMotion, p: &Vector3<f64>, q: &UnitQuaternion<f64>, t: Option<f64>) -> PoseReference {
         match t {
             Some(t) => m.reference(p, q, t, self.ramp),
             None => hold(p, q),

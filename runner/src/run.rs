@@ -83,8 +83,9 @@ pub async fn run_embedded(plan: &Plan, opts: &RunOptions) -> Result<Records, Run
         tokio::spawn(async move { coordinator_service::run(&session, cfg, controller, rx).await })
     };
     let mut agents = Vec::new();
-    for (id, path) in &plan.robots {
-        let robot = Robot::load(path).map_err(|e| RunError::Agent { robot: id.clone(), reason: e.to_string() })?;
+    for r in &plan.robots {
+        let id = &r.id;
+        let robot = Robot::load(&r.description).map_err(|e| RunError::Agent { robot: id.clone(), reason: e.to_string() })?;
         let source = ModelDynamics::new(robot).map_err(|e| RunError::Agent { robot: id.clone(), reason: e.to_string() })?;
         let acfg = AgentConfig::new(TEAM, id).with_deadline_time(AGENT_COMMAND_DEADLINE);
         let session = session.clone();
@@ -130,8 +131,9 @@ pub async fn run_distributed(plan: &Plan, opts: &RunOptions, out: &Path) -> Resu
     let (stop_tx, stop_rx) = watch::channel(false);
     let driver = Driver::start(&session, plan.references.clone(), plan.total_ticks(), opts.progress).await?;
     let mut agents = Vec::new();
-    for (id, path) in &plan.robots {
-        let mut args = vec![s("run"), s("--team"), s(TEAM), s("--id"), id.clone(), s("--robot"), path.display().to_string()];
+    for r in &plan.robots {
+        let id = &r.id;
+        let mut args = vec![s("run"), s("--team"), s(TEAM), s("--id"), id.clone(), s("--robot"), r.description.display().to_string()];
         args.extend([s("--command-deadline-ms"), AGENT_COMMAND_DEADLINE.as_millis().to_string()]);
         args.extend(connect.clone());
         agents.push(spawn("robot-agent", &args, &format!("robot-agent {id}"))?);

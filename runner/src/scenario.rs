@@ -270,13 +270,14 @@ impl Scenario {
 }
 
 fn check_gains(what: &str, g: &TaskGains, n: usize) -> Result<(), String> {
-    if g.stiffness.len() != n || g.damping.len() != n {
-        return Err(format!("{what} needs {n} stiffness and {n} damping values"));
+    g.gains().check(n).map_err(|why| format!("{what}: {why}"))
+}
+
+impl TaskGains {
+    /// The coordinator's gains of this task.
+    pub fn gains(&self) -> coordinator::impedance::Gains {
+        coordinator::impedance::Gains::new(&self.stiffness, &self.damping)
     }
-    if g.stiffness.iter().chain(&g.damping).any(|x| !(x.is_finite() && *x >= 0.0)) {
-        return Err(format!("{what} gains must be finite and non-negative"));
-    }
-    Ok(())
 }
 
 /// Apply one `key=value` override to a TOML tree. Array elements are addressed by index
