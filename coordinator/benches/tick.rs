@@ -12,14 +12,19 @@ use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use coordinator::{ControllerConfig, PaperController};
 use criterion::{criterion_group, criterion_main, Criterion};
 
-/// Counts heap allocations, to report what one tick allocates.
+/// Counts heap allocations, to report what one tick allocates: in all, and inside faer's
+/// decompositions (`coordinator::linalg::in_decomposition`).
 struct Counting;
 static ALLOCS: AtomicU64 = AtomicU64::new(0);
 static BYTES: AtomicU64 = AtomicU64::new(0);
+static DECOMPOSITION_ALLOCS: AtomicU64 = AtomicU64::new(0);
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, l: Layout) -> *mut u8 {
         ALLOCS.fetch_add(1, Relaxed);
         BYTES.fetch_add(l.size() as u64, Relaxed);
+        if coordinator::linalg::in_decomposition() {
+            DECOMPOSITION_ALLOCS.fetch_add(1, Relaxed);
+        }
         unsafe { System.alloc(l) }
     }
     unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
@@ -52,10 +57,15 @@ fn bench(c: &mut Criterion) {
                 stages[k].push(x);
             }
         }
-        let (a0, b0) = (ALLOCS.load(Relaxed), BYTES.load(Relaxed));
+        let (a0, b0, d0) = (ALLOCS.load(Relaxed), BYTES.load(Relaxed), DECOMPOSITION_ALLOCS.load(Relaxed));
         ctl.compute(&terms).expect("tick");
-        let (a1, b1) = (ALLOCS.load(Relaxed), BYTES.load(Relaxed));
-        println!("robots {count}: one tick allocates {} times, {:.0} kB in all", a1 - a0, (b1 - b0) as f64 / 1024.0);
+        let (a1, b1, d1) = (ALLOCS.load(Relaxed), BYTES.load(Relaxed), DECOMPOSITION_ALLOCS.load(Relaxed));
+        println!(
+            "robots {count}: one tick allocates {} times, {:.0} kB in all; {} of them inside faer's SVD/LU",
+            a1 - a0,
+            (b1 - b0) as f64 / 1024.0,
+            d1 - d0
+        );
         let r = ctl.last().expect("last");
         let names = ["total", "assembly", "projections", "impedance", "QP build", "QP solve"];
         println!(

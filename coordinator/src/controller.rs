@@ -25,13 +25,13 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3, Vector6};
 use protocol::{ContactWrench, DynamicsTerms, Header, PoseReference, QpStatus, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
 
 use crate::grasp::{centroid_pose, GraspOffsets, GraspTerms};
-use crate::impedance::{pose_error, Gains, MotionSpace, TaskError, TaskStack};
-use crate::linalg::{quat_wxyz, rotation_from_wxyz};
-use crate::projection::Projections;
+use crate::impedance::{point_error, pose_error, Gains, MotionSpace, TaskStack};
+use crate::linalg::{add_product, mat, product, quat_wxyz, rotation_from_wxyz, zeros, zeros_v};
+use crate::projection::{ProjectionWorkspace, Projections};
 use crate::qp::{self, ContactKind, QpInput};
 use crate::team::Team;
 use crate::{ControllerError, TeamController};
@@ -71,7 +71,7 @@ pub struct ControllerConfig {
     pub regularisation: f64,
     pub qp_max_iter: u32,
     /// Solve the QP with the dense interior-point method first, Clarabel when it does not
-    /// converge (or always Clarabel when false). See `qp::dense_ipm`.
+    /// converge (or always Clarabel when false). See `qp::DenseIpm`.
     pub dense_qp: bool,
     /// `S = I` (treat the base as actuated): the [Lin2018] comparison only.
     pub fully_actuated: bool,
@@ -141,8 +141,10 @@ impl ControllerConfig {
     }
 }
 
-/// Everything computed in the last tick (kept for tests and reports).
-#[derive(Debug, Clone)]
+/// Everything computed in the last tick (kept for tests and reports). It is also the tick's
+/// workspace: every matrix is overwritten in place by the next tick, so a tick allocates
+/// nothing once the team's shape is set (see [`PaperController::compute`]).
+#[derive(Debug, Clone, Default)]
 pub struct TickReport {
     pub team: Team,
     pub grasp: Option<GraspTerms>,
@@ -155,7 +157,7 @@ pub struct TickReport {
     /// `J_x^T F_x`: the object's load on the robots (n).
     pub load: DVector<f64>,
     /// `F_x` at the object centre.
-    pub f_x: DVector<f64>,
+    pub f_x: Vector6<f64>,
     pub f_c: DVector<f64>,
     pub rho: DMatrix<f64>,
     /// `eta` of eq. relation_between_lambda_and_Fc (without the hand-load offset).
@@ -185,6 +187,26 @@ pub struct Timing {
     pub total_us: f64,
 }
 
+/// Scratch of a tick that the report does not keep: the decompositions' and solvers'
+/// workspaces and the intermediate products.
+#[derive(Default)]
+struct Workspace {
+    proj: ProjectionWorkspace,
+    tasks: TaskStack,
+    qp: qp::QpWorkspace,
+    /// `M_c^{-1} P` and `M_c^{-1} (P h - Pdot v)`.
+    mcinv_p: DMatrix<f64>,
+    mcinv_bias: DVector<f64>,
+    /// `S Y` and the products of `rho = (J_c^T)^+ (I - P)(Mbar P - I) S Y` (n x m).
+    sy: DMatrix<f64>,
+    t_a: DMatrix<f64>,
+    t_b: DMatrix<f64>,
+    /// Team-sized vectors.
+    v1: DVector<f64>,
+    v2: DVector<f64>,
+    v3: DVector<f64>,
+}
+
 /// The paper's team controller.
 pub struct PaperController {
     pub config: ControllerConfig,
@@ -192,11 +214,15 @@ pub struct PaperController {
     expected: Option<Vec<String>>,
     references: Option<TaskReferences>,
     held_torsos: BTreeMap<String, Isometry3<f64>>,
-    held_feet: BTreeMap<(String, String), Vector3<f64>>,
+    /// (robot, frame, position) of swing feet without a reference.
+    held_feet: Vec<(String, String, Vector3<f64>)>,
     held_object: Option<Isometry3<f64>>,
     offsets: Option<GraspOffsets>,
     last_object: Option<Isometry3<f64>>,
-    last: Option<TickReport>,
+    report: TickReport,
+    /// Whether `report` holds a completed tick.
+    valid: bool,
+    ws: Workspace,
     diagnostics: Option<TickDiagnostics>,
 }
 
@@ -208,11 +234,13 @@ impl PaperController {
             expected: None,
             references: None,
             held_torsos: BTreeMap::new(),
-            held_feet: BTreeMap::new(),
+            held_feet: Vec::new(),
             held_object: None,
             offsets: None,
             last_object: None,
-            last: None,
+            report: TickReport::default(),
+            valid: false,
+            ws: Workspace::default(),
             diagnostics: None,
         }
     }
@@ -233,7 +261,10 @@ impl PaperController {
 
     /// Task references. Tasks without a reference hold the pose they had when first seen.
     pub fn set_references(&mut self, r: &TaskReferences) {
-        self.references = Some(r.clone());
+        match &mut self.references {
+            Some(old) => old.clone_from(r),
+            None => self.references = Some(r.clone()),
+        }
     }
 
     /// Forget the grasp (offsets are captured again when the hands next close).
@@ -242,160 +273,191 @@ impl PaperController {
         self.held_object = None;
     }
 
+    /// The last tick, if it completed (a tick that ended in an error leaves none).
     pub fn last(&self) -> Option<&TickReport> {
-        self.last.as_ref()
+        self.valid.then_some(&self.report)
     }
 
     /// Run one tick: the full team torque and every intermediate.
+    ///
+    /// **Allocations.** Every matrix and vector of the tick lives in the report or in the
+    /// controller's workspace and is overwritten in place: once a team's shape (robots, stance
+    /// feet, grasp) has been seen, a tick allocates nothing (`tests/allocations.rs` counts).
+    /// What still allocates: a change of shape (buffers are resized), capturing a new grasp,
+    /// errors and fallback messages, and Clarabel when it has to finish a tick the dense
+    /// interior-point method did not.
     pub fn compute(&mut self, tick: &[DynamicsTerms]) -> Result<&TickReport, ControllerError> {
+        self.valid = false;
         let t_start = Instant::now();
-        let cfg = self.config.clone();
-        let team = Team::assemble(tick, self.expected.as_deref(), cfg.fully_actuated)?;
+        let PaperController { config: cfg, descriptions, expected, references, held_torsos, held_feet, held_object, offsets, last_object, report: r, ws, valid, .. } = self;
+        r.team.assemble_into(tick, expected.as_deref(), cfg.fully_actuated)?;
+        let team = &r.team;
         let n = team.n;
         // Limits and contact parameters.
-        let mut limits = Vec::new();
-        let mut actuated = Vec::new();
-        for r in &team.robots {
-            let d = self.descriptions.get(&r.id).ok_or_else(|| ControllerError::MissingDescription { robot: r.id.clone() })?;
-            if d.torque_limits.len() != r.actuated.len() || d.nv as usize != r.nv {
+        r.limits.clear();
+        r.actuated.clear();
+        for rb in &team.robots {
+            let d = descriptions.get(&rb.id).ok_or_else(|| ControllerError::MissingDescription { robot: rb.id.clone() })?;
+            if d.torque_limits.len() != rb.actuated.len() || d.nv as usize != rb.nv {
                 return Err(ControllerError::Dimension {
-                    what: format!("{}: description", r.id),
-                    detail: format!("{} limits / nv {} vs {} actuated joints / nv {}", d.torque_limits.len(), d.nv, r.actuated.len(), r.nv),
+                    what: format!("{}: description", rb.id),
+                    detail: format!("{} limits / nv {} vs {} actuated joints / nv {}", d.torque_limits.len(), d.nv, rb.actuated.len(), rb.nv),
                 });
             }
             if cfg.fully_actuated {
-                let base = r.nv - r.actuated.len();
-                actuated.extend(r.offset..r.offset + base);
-                limits.extend(std::iter::repeat_n(1e9, base));
+                let base = rb.nv - rb.actuated.len();
+                r.actuated.extend(rb.offset..rb.offset + base);
+                r.limits.extend(std::iter::repeat_n(1e9, base));
             }
-            actuated.extend(&r.actuated);
-            limits.extend(&d.torque_limits);
+            r.actuated.extend(&rb.actuated);
+            r.limits.extend(&d.torque_limits);
         }
         // Grasp: offsets captured when the set of grasping hands changes.
-        let grasp = if team.hands.is_empty() {
-            self.offsets = None;
-            None
+        if team.hands.is_empty() {
+            *offsets = None;
+            r.grasp = None;
         } else {
-            if !self.offsets.as_ref().is_some_and(|o| o.matches(&team)) {
-                let at = self.last_object.or(cfg.object_pose_at_grasp).unwrap_or_else(|| centroid_pose(&team));
-                self.offsets = Some(GraspOffsets::capture(&team, &at));
+            if !offsets.as_ref().is_some_and(|o| o.matches(team)) {
+                let at = last_object.or(cfg.object_pose_at_grasp).unwrap_or_else(|| centroid_pose(team));
+                *offsets = Some(GraspOffsets::capture(team, &at));
             }
-            let pose = self.offsets.as_ref().expect("set above").object_pose(&team);
-            self.last_object = Some(pose);
-            Some(GraspTerms::compute(&team, pose).ok_or_else(|| ControllerError::Singular { what: "grasp matrix".into() })?)
-        };
+            let pose = offsets.as_ref().expect("set above").object_pose(team);
+            *last_object = Some(pose);
+            let g = r.grasp.get_or_insert_with(GraspTerms::default);
+            g.compute_into(team, pose).ok_or_else(|| ControllerError::Singular { what: "grasp matrix".into() })?;
+        }
         // J_c = [J_cf; J_c,ee] (eq. jacobian_c).
         let nf = team.feet.len();
         let m = team.contact_rows();
-        let mut j_c = DMatrix::zeros(m, n);
-        let mut jdv_c = DVector::zeros(m);
-        j_c.rows_mut(0, 3 * nf).copy_from(&team.j_cf);
-        jdv_c.rows_mut(0, 3 * nf).copy_from(&team.jdv_cf);
-        if let Some(g) = &grasp {
-            j_c.rows_mut(3 * nf, g.j_cee.nrows()).copy_from(&g.j_cee);
-            jdv_c.rows_mut(3 * nf, g.j_cee.nrows()).copy_from(&g.jdv_cee);
+        zeros(&mut r.j_c, m, n);
+        zeros_v(&mut r.jdv_c, m);
+        r.j_c.rows_mut(0, 3 * nf).copy_from(&team.j_cf);
+        r.jdv_c.rows_mut(0, 3 * nf).copy_from(&team.jdv_cf);
+        if let Some(g) = &r.grasp {
+            r.j_c.rows_mut(3 * nf, g.j_cee.nrows()).copy_from(&g.j_cee);
+            r.jdv_c.rows_mut(3 * nf, g.j_cee.nrows()).copy_from(&g.jdv_cee);
         }
         let t_asm = t_start.elapsed().as_secs_f64() * 1e6;
 
-        let proj = Projections::compute(&team.mass, &team.s_diag, &j_c, &jdv_c)?;
-        let mcinv_p = &proj.mc_inv * &proj.p;
-        let mcinv_bias = &proj.mc_inv * (&proj.p * &team.bias - &proj.pdot_v);
+        r.proj.compute_into(&mut ws.proj, team, &r.j_c, &r.jdv_c)?;
+        let proj = &r.proj;
+        product(&mut ws.mcinv_p, mat(&proj.mc_inv), mat(&proj.p));
+        zeros_v(&mut ws.v1, n);
+        ws.v1.copy_from(&proj.pdot_v);
+        ws.v1.gemv(1.0, &proj.p, &team.bias, -1.0); // P h - Pdot v
+        zeros_v(&mut ws.mcinv_bias, n);
+        ws.mcinv_bias.gemv(1.0, &proj.mc_inv, &ws.v1, 0.0);
         let t_proj = t_start.elapsed().as_secs_f64() * 1e6;
 
         // tau_M: superposition of the impedance tasks (eqn. joint_space_tau_M), with the
         // operational-space inertia and non-linear terms of eq. control_law computed for the
         // team's task space as a whole (every task's rows stacked; see `impedance`).
-        let ms = MotionSpace { mcinv_p: &mcinv_p, mcinv_bias: &mcinv_bias };
-        let mut tasks = TaskStack::with_capacity(n);
-        let mut load = DVector::zeros(n);
-        let mut f_x = DVector::zeros(6);
-        let refs = self.references.clone();
-        if let Some(g) = &grasp {
-            let (x_d, tw_d, acc_d) = match refs.as_ref().and_then(|r| r.object.as_ref()) {
+        let k_rows = r.grasp.as_ref().map_or(0, |g| g.j_o.nrows()) + team.torsos.iter().chain(&team.swing_feet).map(|t| t.jacobian.nrows()).sum::<usize>();
+        ws.tasks.begin(k_rows, n);
+        zeros_v(&mut r.load, n);
+        r.f_x = Vector6::zeros();
+        let refs = references.as_ref();
+        if let Some(g) = &r.grasp {
+            let (x_d, tw_d, acc_d) = match refs.and_then(|r| r.object.as_ref()) {
                 Some(r) => pose_ref(r),
-                None => (*self.held_object.get_or_insert(g.object), [0.0; 6], [0.0; 6]),
+                None => (*held_object.get_or_insert(g.object), [0.0; 6], [0.0; 6]),
             };
             let err = pose_error(&g.object, &g.object_twist, &x_d, &tw_d, &acc_d);
             // Object load feed-forward w_ff and the load F_x = -w_ff on the robots.
             let r_o = g.object.rotation.to_rotation_matrix();
             let i_w = r_o.matrix() * cfg.object_inertia * r_o.matrix().transpose();
-            let w = Vector3::new(g.object_twist[3], g.object_twist[4], g.object_twist[5]);
+            let w = g.object_twist.fixed_rows::<3>(3).into_owned();
             let alpha = Vector3::new(acc_d[3], acc_d[4], acc_d[5]);
             let force = cfg.object_mass * (Vector3::new(acc_d[0], acc_d[1], acc_d[2]) - Vector3::from(GRAVITY));
             let moment = i_w * alpha + w.cross(&(i_w * w));
-            for i in 0..3 {
-                f_x[i] = -force[i];
-                f_x[3 + i] = -moment[i];
-            }
-            let mut ff = f_x.clone();
-            ff.neg_mut();
-            tasks.push(&g.j_o, &g.jdv_o, &err, &cfg.object_gains, Some(ff));
-            load = g.j_o.transpose() * &f_x;
+            let w_ff = Vector6::new(force.x, force.y, force.z, moment.x, moment.y, moment.z);
+            r.f_x = -w_ff;
+            ws.tasks.push(&g.j_o, &g.jdv_o, &err, &cfg.object_gains, Some(&w_ff))?;
+            r.load.gemv_tr(1.0, &g.j_o, &r.f_x, 0.0);
         }
         for tf in &team.torsos {
             let id = &team.robots[tf.robot].id;
             let x = Isometry3::from_parts(Translation3::from(tf.position), UnitQuaternion::from_rotation_matrix(&tf.rotation));
-            let (x_d, tw_d, acc_d) = match refs.as_ref().and_then(|r| r.torsos.iter().find(|t| &t.robot == id)) {
+            let (x_d, tw_d, acc_d) = match refs.and_then(|r| r.torsos.iter().find(|t| &t.robot == id)) {
                 Some(t) => pose_ref(&t.reference),
-                None => (*self.held_torsos.entry(id.clone()).or_insert(x), [0.0; 6], [0.0; 6]),
+                None => match held_torsos.get(id) {
+                    Some(h) => (*h, [0.0; 6], [0.0; 6]),
+                    None => (*held_torsos.entry(id.clone()).or_insert(x), [0.0; 6], [0.0; 6]),
+                },
             };
-            let twist = &tf.jacobian * &team.velocity;
+            let mut twist = Vector6::zeros();
+            twist.gemv(1.0, &tf.jacobian, &team.velocity, 0.0);
             let err = pose_error(&x, &twist, &x_d, &tw_d, &acc_d);
-            tasks.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.torso_gains, None);
+            ws.tasks.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.torso_gains, None)?;
         }
         for tf in &team.swing_feet {
             let id = &team.robots[tf.robot].id;
-            let key = (id.clone(), tf.name.clone());
-            let (p_d, v_d, a_d) = match refs.as_ref().and_then(|r| r.swing_feet.iter().find(|s| &s.robot == id && s.frame == tf.name)) {
+            let (p_d, v_d, a_d) = match refs.and_then(|r| r.swing_feet.iter().find(|s| &s.robot == id && s.frame == tf.name)) {
                 Some(s) => (Vector3::from(s.reference.position), s.reference.velocity, s.reference.acceleration),
-                None => (*self.held_feet.entry(key).or_insert(tf.position), [0.0; 3], [0.0; 3]),
+                None => match held_feet.iter().find(|(r, f, _)| r == id && *f == tf.name) {
+                    Some((_, _, p)) => (*p, [0.0; 3], [0.0; 3]),
+                    None => {
+                        held_feet.push((id.clone(), tf.name.clone(), tf.position));
+                        (tf.position, [0.0; 3], [0.0; 3])
+                    }
+                },
             };
-            let vel = &tf.jacobian * &team.velocity;
-            let err = TaskError {
-                e: DVector::from_iterator(3, (tf.position - p_d).iter().cloned()),
-                edot: DVector::from_iterator(3, (0..3).map(|i| vel[i] - v_d[i])),
-                acc_d: DVector::from_row_slice(&a_d),
-            };
-            tasks.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.swing_gains, None);
+            let mut vel = Vector3::zeros();
+            vel.gemv(1.0, &tf.jacobian, &team.velocity, 0.0);
+            let err = point_error(&tf.position, &vel, &p_d, &v_d, &a_d);
+            ws.tasks.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.swing_gains, None)?;
         }
-        let tau_m = tasks.joint_torque(&ms, n)?;
-        let tau0 = &proj.ps_pinv * (&proj.p * &tau_m);
+        let ms = MotionSpace { mcinv_p: &ws.mcinv_p, mcinv_bias: &ws.mcinv_bias };
+        ws.tasks.joint_torque(&ms, &mut r.tau_m)?;
+        ws.v1.gemv(1.0, &proj.p, &r.tau_m, 0.0);
+        zeros_v(&mut r.tau0, n);
+        r.tau0.gemv(1.0, &proj.ps_pinv, &ws.v1, 0.0);
         let t_imp = t_start.elapsed().as_secs_f64() * 1e6;
 
-        // eq. relation_between_lambda_and_Fc: lambda = rho F_c + eta.
-        let y = &proj.b * j_c.transpose(); // B J_c^T
-        let s_scale = |mut x: DMatrix<f64>| {
-            for i in 0..n {
-                x.row_mut(i).scale_mut(team.s_diag[i]);
-            }
-            x
-        };
-        let mut mbar_p_i = &proj.mbar * &proj.p;
+        // eq. relation_between_lambda_and_Fc: lambda = rho F_c + eta, with
+        // K = (I - P)(Mbar P - I), rho = (J_c^T)^+ K S Y and
+        // eta = (J_c^T)^+ [K (S tau_0 + J_x^T F_x) + (I - P)(Mbar (Pdot v - P h) + h)]
+        // (see `Projections::contact_wrench`). rho is formed right to left, without K.
+        product(&mut r.y, mat(&proj.b), mat(&r.j_c).transpose()); // Y = B J_c^T
+        zeros(&mut ws.sy, n, m);
+        ws.sy.copy_from(&r.y);
         for i in 0..n {
-            mbar_p_i[(i, i)] -= 1.0;
+            ws.sy.row_mut(i).scale_mut(team.s_diag[i]);
         }
-        let k = &proj.ip * &mbar_p_i; // (I - P)(Mbar P - I)
-        let rho = &proj.jct_pinv * (&k * s_scale(y.clone()));
-        let s_tau0 = tau0.component_mul(&team.s_diag);
-        let eta_inner = &k * (s_tau0 + &load) + &proj.ip * (&proj.mbar * (&proj.pdot_v - &proj.p * &team.bias) + &team.bias);
-        let eta = &proj.jct_pinv * eta_inner;
-        let mut eta_real = eta.clone();
-        if let Some(g) = &grasp {
-            let dist = &g.g_pinv * &f_x;
-            { let mut rows = eta_real.rows_mut(3 * nf, dist.len()); rows += &dist; }
+        product(&mut ws.t_a, mat(&proj.p), mat(&ws.sy)); // P S Y
+        zeros(&mut ws.t_b, n, m);
+        ws.t_b -= &ws.sy;
+        add_product(&mut ws.t_b, 1.0, mat(&proj.mbar), mat(&ws.t_a)); // (Mbar P - I) S Y
+        product(&mut ws.t_a, mat(&proj.ip), mat(&ws.t_b)); // K S Y
+        product(&mut r.rho, mat(&proj.jct_pinv), mat(&ws.t_a));
+        zeros_v(&mut ws.v1, n);
+        ws.v1.copy_from(&r.tau0);
+        ws.v1.component_mul_assign(&team.s_diag);
+        ws.v1 += &r.load; // S tau_0 + J_x^T F_x
+        proj.contact_wrench(&team.bias, &ws.v1, &mut r.eta, &mut ws.v2, &mut ws.v3);
+        // eta_real: the hand rows carry the object's load distribution G^+ F_x.
+        zeros_v(&mut r.lambda_real, m);
+        r.lambda_real.copy_from(&r.eta);
+        if let Some(g) = &r.grasp {
+            let mut rows = r.lambda_real.rows_mut(3 * nf, g.g_pinv.nrows());
+            rows.gemv(1.0, &g.g_pinv, &r.f_x, 1.0);
         }
         // Contacts for the QP.
-        let mut contacts = Vec::with_capacity(nf + team.hands.len());
+        r.contacts.clear();
         for (k, f) in team.feet.iter().enumerate() {
-            let d = &self.descriptions[&team.robots[f.robot].id];
-            contacts.push((3 * k, ContactKind::Foot { mu: d.foot_mu * cfg.friction_margin, f_min: cfg.f_min_foot }));
+            let d = &descriptions[&team.robots[f.robot].id];
+            r.contacts.push((3 * k, ContactKind::Foot { mu: d.foot_mu * cfg.friction_margin, f_min: cfg.f_min_foot }));
         }
         for (k, h) in team.hands.iter().enumerate() {
-            let d = &self.descriptions[&team.robots[h.robot].id];
-            let r = h.rotation.matrix();
-            contacts.push((
+            let d = &descriptions[&team.robots[h.robot].id];
+            let rot = h.rotation.matrix();
+            r.contacts.push((
                 3 * nf + 6 * k,
-                ContactKind::Hand { tx: r.column(0).into(), ty: r.column(1).into(), n: r.column(2).into(), mu: d.hand_mu * cfg.friction_margin,
+                ContactKind::Hand {
+                    tx: rot.column(0).into(),
+                    ty: rot.column(1).into(),
+                    n: rot.column(2).into(),
+                    mu: d.hand_mu * cfg.friction_margin,
                     xi: d.hand_xi * cfg.friction_margin,
                     half: [d.hand_half_size[0] * cfg.patch_margin, d.hand_half_size[1] * cfg.patch_margin],
                     f_min: cfg.f_min_hand,
@@ -403,48 +465,57 @@ impl PaperController {
             ));
         }
         let t_build = t_start.elapsed().as_secs_f64() * 1e6;
+        // lambda_real holds eta_real here: the QP constrains the real wrenches.
         let input = QpInput {
-            y: &y,
-            rho: &rho,
-            eta: &eta_real,
-            contacts: &contacts,
-            actuated: &actuated,
-            limits: &limits,
-            tau0: &tau0,
+            y: &r.y,
+            rho: &r.rho,
+            eta: &r.lambda_real,
+            contacts: &r.contacts,
+            actuated: &r.actuated,
+            limits: &r.limits,
+            tau0: &r.tau0,
             regularisation: cfg.regularisation,
             dense_first: cfg.dense_qp,
         };
-        let qp = qp::solve(&input, cfg.qp_max_iter);
+        r.qp = qp::solve(&mut ws.qp, &input, cfg.qp_max_iter, &mut r.f_c);
         let t_qp = t_start.elapsed().as_secs_f64() * 1e6;
-        let (f_c, fallback) = match qp.status {
-            QpStatus::Solved | QpStatus::AlmostSolved => (qp.f.clone(), None),
-            s => match qp::solve_least_violation(&input, cfg.qp_max_iter) {
-                Some((f, worst)) => (f, Some(format!("QP {s:?}: least-violation F_c (worst row violated by {worst:.3}), torques clamped to the limits"))),
-                None => (DVector::zeros(m), Some(format!("QP {s:?}: F_c = 0, tau = [P S]^+ P tau_M clamped to the torque limits"))),
+        r.fallback = match r.qp.status {
+            QpStatus::Solved | QpStatus::AlmostSolved => None,
+            s => match qp::solve_least_violation(&mut ws.qp, &input, cfg.qp_max_iter, &mut r.f_c) {
+                Some(worst) => Some(format!("QP {s:?}: least-violation F_c (worst row violated by {worst:.3}), torques clamped to the limits")),
+                None => {
+                    r.f_c.fill(0.0);
+                    Some(format!("QP {s:?}: F_c = 0, tau = [P S]^+ P tau_M clamped to the torque limits"))
+                }
             },
         };
-        let mut tau = &tau0 + &y * &f_c;
-        if fallback.is_some() {
-            for (&j, &lim) in actuated.iter().zip(&limits) {
-                tau[j] = tau[j].clamp(-lim, lim);
+        zeros_v(&mut r.tau, n);
+        r.tau.copy_from(&r.tau0);
+        r.tau.gemv(1.0, &r.y, &r.f_c, 1.0);
+        if r.fallback.is_some() {
+            for (&j, &lim) in r.actuated.iter().zip(&r.limits) {
+                r.tau[j] = r.tau[j].clamp(-lim, lim);
             }
         }
-        if !tau.iter().all(|x| x.is_finite()) {
+        if !r.tau.iter().all(|x| x.is_finite()) {
             return Err(ControllerError::NonFinite { robot: "team".into(), what: "torque".into() });
         }
-        let (lambda, lambda_real) = if fallback.is_some() {
+        zeros_v(&mut r.lambda, m);
+        if r.fallback.is_some() {
             // The clamped torque is not tau_0 + Y F_c: predict lambda from the torque actually
             // sent (eq. constraint_force).
-            let s_tau = tau.component_mul(&team.s_diag);
-            let inner = &proj.ip * (&proj.mbar * (&proj.p * &s_tau - &proj.p * &team.bias + &proj.pdot_v) + &team.bias - &s_tau)
-                + &k * &load;
-            let lambda = &proj.jct_pinv * inner;
-            let real = &lambda + (&eta_real - &eta);
-            (lambda, real)
+            ws.v1.copy_from(&r.tau);
+            ws.v1.component_mul_assign(&team.s_diag);
+            ws.v1 += &r.load; // S tau + J_x^T F_x
+            proj.contact_wrench(&team.bias, &ws.v1, &mut r.lambda, &mut ws.v2, &mut ws.v3);
         } else {
-            (&rho * &f_c + &eta, &rho * &f_c + &eta_real)
-        };
-        let timing = Timing {
+            r.lambda.copy_from(&r.eta);
+            r.lambda.gemv(1.0, &r.rho, &r.f_c, 1.0);
+        }
+        // lambda_real = lambda + (eta_real - eta).
+        r.lambda_real -= &r.eta;
+        r.lambda_real += &r.lambda;
+        r.timing = Timing {
             assembly_us: t_asm,
             projections_us: t_proj - t_asm,
             impedance_us: t_imp - t_proj,
@@ -452,47 +523,92 @@ impl PaperController {
             qp_us: t_qp - t_build,
             total_us: t_start.elapsed().as_secs_f64() * 1e6,
         };
-        self.last = Some(TickReport {
-            team, grasp, j_c, jdv_c, proj, tau_m, tau0, load, f_x, f_c, rho, eta, lambda, lambda_real, tau, y, contacts, limits, actuated, qp, fallback, timing,
-        });
-        Ok(self.last.as_ref().expect("set above"))
+        *valid = true;
+        Ok(&self.report)
     }
 
+    /// Each robot's torque slice into `out` and the tick's diagnostics, reusing the previous
+    /// tick's messages (their strings and vectors) when the team is the same.
     fn fill_outputs(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) {
-        let Some(rep) = &self.last else { return };
-        out.clear();
-        for (r, t) in rep.team.robots.iter().zip(tick) {
-            out.push(TorqueCommand {
-                header: Header::new(&t.header.team, Some(&r.id), t.header.tick, 0),
-                tau: r.actuated.iter().map(|&j| rep.tau[j]).collect(),
-            });
+        if !self.valid {
+            return;
         }
-        let team_id = tick.first().map(|t| t.header.team.clone()).unwrap_or_default();
-        let tick_no = tick.first().map(|t| t.header.tick).unwrap_or(0);
-        let mut contacts = Vec::new();
-        for (k, f) in rep.team.feet.iter().enumerate() {
-            contacts.push(ContactWrench { robot: rep.team.robots[f.robot].id.clone(), frame: f.name.clone(), wrench: rep.lambda_real.rows(3 * k, 3).iter().cloned().collect() });
+        let rep = &self.report;
+        let (team_id, tick_no) = match tick.first() {
+            Some(t) => (t.header.team.as_str(), t.header.tick),
+            None => ("", 0),
+        };
+        out.truncate(rep.team.robots.len());
+        for (k, (r, t)) in rep.team.robots.iter().zip(tick).enumerate() {
+            if k == out.len() {
+                out.push(TorqueCommand { header: Header::new(&t.header.team, Some(&r.id), 0, 0), tau: Vec::new() });
+            }
+            let cmd = &mut out[k];
+            set_header(&mut cmd.header, &t.header.team, Some(&r.id), t.header.tick, 0);
+            cmd.tau.clear();
+            cmd.tau.extend(r.actuated.iter().map(|&j| rep.tau[j]));
         }
+        let d = self.diagnostics.get_or_insert_with(|| TickDiagnostics {
+            header: Header::new("", None, 0, 0),
+            qp_status: QpStatus::NotRun,
+            qp_iterations: 0,
+            qp_solve_us: 0.0,
+            assembly_us: 0.0,
+            total_us: 0.0,
+            contacts: Vec::new(),
+            constraint_residual: 0.0,
+            object_estimate: None,
+        });
+        set_header(&mut d.header, team_id, None, tick_no, protocol::wall_clock_ns());
         let nf = rep.team.feet.len();
-        for (k, h) in rep.team.hands.iter().enumerate() {
-            contacts.push(ContactWrench { robot: rep.team.robots[h.robot].id.clone(), frame: h.name.clone(), wrench: rep.lambda_real.rows(3 * nf + 6 * k, 6).iter().cloned().collect() });
+        let frames = rep.team.feet.iter().map(|f| (f, 3)).chain(rep.team.hands.iter().map(|h| (h, 6)));
+        d.contacts.truncate(nf + rep.team.hands.len());
+        let mut row = 0;
+        for (k, (f, dim)) in frames.enumerate() {
+            if k == d.contacts.len() {
+                d.contacts.push(ContactWrench { robot: String::new(), frame: String::new(), wrench: Vec::new() });
+            }
+            let c = &mut d.contacts[k];
+            set_string(&mut c.robot, &rep.team.robots[f.robot].id);
+            set_string(&mut c.frame, &f.name);
+            c.wrench.clear();
+            c.wrench.extend(rep.lambda_real.rows(row, dim).iter());
+            row += dim;
         }
-        let residual = (&rep.j_c * &rep.team.velocity).norm();
-        self.diagnostics = Some(TickDiagnostics {
-            header: Header::new(&team_id, None, tick_no, protocol::wall_clock_ns()),
-            qp_status: rep.qp.status,
-            qp_iterations: rep.qp.iterations,
-            qp_solve_us: rep.qp.solve_us,
-            assembly_us: rep.timing.assembly_us,
-            total_us: rep.timing.total_us,
-            contacts,
-            constraint_residual: if residual.is_finite() { residual } else { f64::MAX },
-            object_estimate: rep.grasp.as_ref().map(|g| protocol::Pose {
-                position: g.object.translation.vector.into(),
-                orientation: quat_wxyz(&g.object.rotation.to_rotation_matrix()),
-            }),
+        // |J_c v|, without forming J_c v.
+        let v = &rep.team.velocity;
+        let residual = (0..rep.j_c.nrows()).map(|i| (0..v.len()).map(|j| rep.j_c[(i, j)] * v[j]).sum::<f64>().powi(2)).sum::<f64>().sqrt();
+        d.qp_status = rep.qp.status;
+        d.qp_iterations = rep.qp.iterations;
+        d.qp_solve_us = rep.qp.solve_us;
+        d.assembly_us = rep.timing.assembly_us;
+        d.total_us = rep.timing.total_us;
+        d.constraint_residual = if residual.is_finite() { residual } else { f64::MAX };
+        d.object_estimate = rep.grasp.as_ref().map(|g| protocol::Pose {
+            position: g.object.translation.vector.into(),
+            orientation: quat_wxyz(&g.object.rotation.to_rotation_matrix()),
         });
     }
+}
+
+/// `s = value`, keeping `s`'s buffer.
+fn set_string(s: &mut String, value: &str) {
+    if s != value {
+        s.clear();
+        s.push_str(value);
+    }
+}
+
+/// A header's fields set in place (no new strings when they are unchanged).
+fn set_header(h: &mut Header, team: &str, robot: Option<&str>, tick: u64, stamp_ns: u64) {
+    h.version = protocol::PROTOCOL_VERSION;
+    set_string(&mut h.team, team);
+    match (robot, &mut h.robot) {
+        (Some(r), Some(old)) => set_string(old, r),
+        (r, old) => *old = r.map(str::to_string),
+    }
+    h.tick = tick;
+    h.stamp_ns = stamp_ns;
 }
 
 fn pose_ref(r: &PoseReference) -> (Isometry3<f64>, [f64; 6], [f64; 6]) {
@@ -516,7 +632,7 @@ impl TeamController for PaperController {
     }
 
     fn used_fallback(&self) -> bool {
-        self.last.as_ref().is_some_and(|l| l.fallback.is_some())
+        self.last().is_some_and(|l| l.fallback.is_some())
     }
 
     fn set_description(&mut self, d: &RobotDescription) {

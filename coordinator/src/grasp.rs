@@ -12,9 +12,9 @@
 //! `G^T (G^+)^T = G^+ G`). The object's weight and inertia enter as a known external wrench
 //! at the object centre (the paper's `J_x^T F_x` term with `J_x = J_o`), see `controller.rs`.
 
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix6, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, DVector, Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 
-use crate::linalg::skew;
+use crate::linalg::{mat, product, skew, zeros, zeros_v};
 use crate::team::Team;
 
 /// Grasp offsets captured when the grasp closed: each hand's rotation to the object's, and
@@ -83,11 +83,11 @@ pub fn centroid_pose(team: &Team) -> Isometry3<f64> {
 
 
 /// The grasp quantities of one tick.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct GraspTerms {
     /// Object pose estimate and twist `J_o v` (world, at the object centre).
     pub object: Isometry3<f64>,
-    pub object_twist: DVector<f64>,
+    pub object_twist: Vector6<f64>,
     /// `G` (6 x 6B) and `G^+` (6B x 6).
     pub g: DMatrix<f64>,
     pub g_pinv: DMatrix<f64>,
@@ -99,56 +99,114 @@ pub struct GraspTerms {
     /// `J_o = (G^+)^T J_ee` (eq. obj_jacobian) and `d/dt(J_o) v`.
     pub j_o: DMatrix<f64>,
     pub jdv_o: DVector<f64>,
+    /// Scratch: `J_ee v`.
+    ee_twist: DVector<f64>,
+}
+
+/// Partial grasp matrix `G_i = [[I, 0], [skew(r_i), I]]` (eq. graspmatrix), world-aligned.
+fn partial_grasp(r: &Vector3<f64>) -> Matrix6<f64> {
+    let mut gi = Matrix6::identity();
+    gi.fixed_view_mut::<3, 3>(3, 0).copy_from(&skew(r));
+    gi
 }
 
 /// Partial grasp matrices side by side (eq. graspmatrix), world-aligned contact frames.
 pub fn grasp_matrix(r: &[Vector3<f64>]) -> DMatrix<f64> {
     let mut g = DMatrix::zeros(6, 6 * r.len());
     for (i, ri) in r.iter().enumerate() {
-        let mut gi = Matrix6::identity();
-        gi.fixed_view_mut::<3, 3>(3, 0).copy_from(&skew(ri));
-        g.view_mut((0, 6 * i), (6, 6)).copy_from(&gi);
+        g.view_mut((0, 6 * i), (6, 6)).copy_from(&partial_grasp(ri));
     }
     g
-}
-
-/// `G^+ = G^T (G G^T)^{-1}` (G has full row rank 6 for B >= 1: its blocks contain I).
-fn g_pinv_of(g: &DMatrix<f64>) -> Option<(DMatrix<f64>, DMatrix<f64>)> {
-    let w = (g * g.transpose()).try_inverse()?;
-    Some((g.transpose() * &w, w))
 }
 
 impl GraspTerms {
     /// Compute for the hands of `team` (B >= 1) with the object at `object`.
     pub fn compute(team: &Team, object: Isometry3<f64>) -> Option<GraspTerms> {
+        let mut g = GraspTerms::default();
+        g.compute_into(team, object)?;
+        Some(g)
+    }
+
+    /// [`GraspTerms::compute`] into this value's buffers. `None` without hands or when `G G^T`
+    /// is singular.
+    ///
+    /// Everything is done by 6 x 6 blocks (hand `i`'s block `G_i` of `G`):
+    /// `G^+ = G^T W` with `W = (G G^T)^{-1}` (G has full row rank 6 for B >= 1: its blocks
+    /// contain I), `rdot_i = v_i - v_o`, `Gdot_i = [[0, 0], [skew(rdot_i), 0]]`,
+    /// `d(G^+) = Gdot^T W - G^T W (Gdot G^T + G Gdot^T) W`, `Ndot = -(d(G^+) G + G^+ Gdot)`.
+    pub fn compute_into(&mut self, team: &Team, object: Isometry3<f64>) -> Option<()> {
         let b = team.hands.len();
         if b == 0 {
             return None;
         }
+        let n = team.n;
         let po = object.translation.vector;
-        let r: Vec<Vector3<f64>> = team.hands.iter().map(|h| h.position - po).collect();
-        let g = grasp_matrix(&r);
-        let (g_pinv, w) = g_pinv_of(&g)?;
-        let n = DMatrix::identity(6 * b, 6 * b) - &g_pinv * &g;
-        let j_ee = &team.j_ee;
-        let ee_twist = j_ee * &team.velocity;
-        let j_o = g_pinv.transpose() * j_ee;
-        let object_twist = &j_o * &team.velocity;
-        // rdot_i = v_i - v_o; Gdot_i = [[0, 0], [skew(rdot_i), 0]].
-        let vo = Vector3::new(object_twist[0], object_twist[1], object_twist[2]);
-        let mut gdot = DMatrix::zeros(6, 6 * b);
+        let gi = |i: usize| partial_grasp(&(team.hands[i].position - po));
+        let mut ggt = Matrix6::zeros();
         for i in 0..b {
-            let vi = Vector3::new(ee_twist[6 * i], ee_twist[6 * i + 1], ee_twist[6 * i + 2]);
-            let s: Matrix3<f64> = skew(&(vi - vo));
-            gdot.view_mut((3, 6 * i), (3, 3)).copy_from(&s);
+            let g = gi(i);
+            ggt += g * g.transpose();
         }
-        // d(G^+) = Gdot^T W - G^T W (Gdot G^T + G Gdot^T) W;  Ndot = -(d(G^+) G + G^+ Gdot).
-        let gt = g.transpose();
-        let dgp = gdot.transpose() * &w - &gt * &w * (&gdot * &gt + &g * gdot.transpose()) * &w;
-        let ndot = -(&dgp * &g + &g_pinv * &gdot);
-        let j_cee = &n * j_ee;
-        let jdv_cee = &ndot * &ee_twist + &n * &team.jdv_ee;
-        let jdv_o = dgp.transpose() * &ee_twist + g_pinv.transpose() * &team.jdv_ee;
-        Some(GraspTerms { object, object_twist, g, g_pinv, n, j_cee, jdv_cee, j_o, jdv_o })
+        let w = ggt.try_inverse()?;
+        zeros(&mut self.g, 6, 6 * b);
+        zeros(&mut self.g_pinv, 6 * b, 6);
+        for i in 0..b {
+            let g = gi(i);
+            self.g.fixed_view_mut::<6, 6>(0, 6 * i).copy_from(&g);
+            self.g_pinv.fixed_view_mut::<6, 6>(6 * i, 0).copy_from(&(g.transpose() * w));
+        }
+        // N = I - G^+ G.
+        zeros(&mut self.n, 6 * b, 6 * b);
+        for i in 0..b {
+            let gp_i: Matrix6<f64> = self.g_pinv.fixed_view::<6, 6>(6 * i, 0).into_owned();
+            for j in 0..b {
+                let mut blk = -(gp_i * gi(j));
+                if i == j {
+                    blk += Matrix6::identity();
+                }
+                self.n.fixed_view_mut::<6, 6>(6 * i, 6 * j).copy_from(&blk);
+            }
+        }
+        let j_ee = &team.j_ee;
+        zeros_v(&mut self.ee_twist, 6 * b);
+        self.ee_twist.gemv(1.0, j_ee, &team.velocity, 0.0);
+        product(&mut self.j_o, mat(&self.g_pinv).transpose(), mat(j_ee));
+        self.object_twist.gemv(1.0, &self.j_o, &team.velocity, 0.0);
+        self.object = object;
+        let vo = self.object_twist.fixed_rows::<3>(0).into_owned();
+        let gdot = |i: usize| {
+            let vi = self.ee_twist.fixed_rows::<3>(6 * i).into_owned();
+            let mut gd = Matrix6::zeros();
+            gd.fixed_view_mut::<3, 3>(3, 0).copy_from(&skew(&(vi - vo)));
+            gd
+        };
+        // X = W (Gdot G^T + G Gdot^T) W, so d(G^+)_i = Gdot_i^T W - G_i^T X.
+        let mut x = Matrix6::zeros();
+        for i in 0..b {
+            let (g, gd) = (gi(i), gdot(i));
+            x += gd * g.transpose() + g * gd.transpose();
+        }
+        let x = w * x * w;
+        let dgp = |i: usize| gdot(i).transpose() * w - gi(i).transpose() * x;
+        // jdv_cee = Ndot (J_ee v) + N Jdot_ee v; jdv_o = d(G^+)^T (J_ee v) + (G^+)^T Jdot_ee v.
+        zeros_v(&mut self.jdv_cee, 6 * b);
+        zeros_v(&mut self.jdv_o, 6);
+        for i in 0..b {
+            let gp_i: Matrix6<f64> = self.g_pinv.fixed_view::<6, 6>(6 * i, 0).into_owned();
+            let dgp_i = dgp(i);
+            let mut acc = Vector6::zeros();
+            for j in 0..b {
+                let ndot_ij = -(dgp_i * gi(j) + gp_i * gdot(j));
+                acc += ndot_ij * self.ee_twist.fixed_rows::<6>(6 * j) + self.n.fixed_view::<6, 6>(6 * i, 6 * j) * team.jdv_ee.fixed_rows::<6>(6 * j);
+            }
+            self.jdv_cee.fixed_rows_mut::<6>(6 * i).copy_from(&acc);
+            let ee_i = self.ee_twist.fixed_rows::<6>(6 * i);
+            let jdv_i = team.jdv_ee.fixed_rows::<6>(6 * i);
+            let mut o = self.jdv_o.fixed_rows_mut::<6>(0);
+            o += dgp_i.transpose() * ee_i + gp_i.transpose() * jdv_i;
+        }
+        product(&mut self.j_cee, mat(&self.n), mat(j_ee));
+        debug_assert_eq!(self.j_cee.ncols(), n);
+        Some(())
     }
 }

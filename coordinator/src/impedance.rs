@@ -15,9 +15,9 @@
 //! paper's S1 gains. With the stacked terms and tasks that span the motion space (two torsos
 //! and the object: 18 = 48 - 24 foot rows - 6 grasp rows) a static team has no such error.
 
-use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
+use nalgebra::{DMatrix, DVector, Isometry3, Vector3, Vector6};
 
-use crate::linalg::{pinv, rotation_error, RANK_TOL};
+use crate::linalg::{mat, product, rotation_error, zeros, zeros_v, Pinv, RANK_TOL};
 use crate::ControllerError;
 
 /// Diagonal stiffness and damping of one task (3 or 6 entries).
@@ -51,91 +51,118 @@ pub struct MotionSpace<'a> {
     pub mcinv_bias: &'a DVector<f64>,
 }
 
-/// Task errors: `e` and `edot` (current minus desired), and the desired acceleration.
+/// Task errors: `e` and `edot` (current minus desired), and the desired acceleration. A task
+/// has `dim` rows (6 for a pose, 3 for a point); the rest of the entries are unused.
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TaskError {
-    pub e: DVector<f64>,
-    pub edot: DVector<f64>,
-    pub acc_d: DVector<f64>,
+    pub dim: usize,
+    pub e: Vector6<f64>,
+    pub edot: Vector6<f64>,
+    pub acc_d: Vector6<f64>,
 }
 
 /// 6-D pose error `[p - p_d; log(R R_d^T)]` and twist error.
-pub fn pose_error(x: &Isometry3<f64>, twist: &DVector<f64>, x_d: &Isometry3<f64>, twist_d: &[f64; 6], acc_d: &[f64; 6]) -> TaskError {
+pub fn pose_error(x: &Isometry3<f64>, twist: &Vector6<f64>, x_d: &Isometry3<f64>, twist_d: &[f64; 6], acc_d: &[f64; 6]) -> TaskError {
     let dp: Vector3<f64> = x.translation.vector - x_d.translation.vector;
     let dr = rotation_error(&x.rotation.to_rotation_matrix(), &x_d.rotation.to_rotation_matrix());
-    let e = DVector::from_iterator(6, dp.iter().chain(dr.iter()).cloned());
-    let edot = DVector::from_iterator(6, (0..6).map(|i| twist[i] - twist_d[i]));
-    TaskError { e, edot, acc_d: DVector::from_row_slice(acc_d) }
+    let e = Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z);
+    TaskError { dim: 6, e, edot: twist - Vector6::from_row_slice(twist_d), acc_d: Vector6::from_row_slice(acc_d) }
 }
 
-/// Task wrench `F` of eq. control_law for Jacobian `j_x` (k x n) with `Jdot_x v`.
-pub fn task_wrench(
-    j_x: &DMatrix<f64>,
-    jdv_x: &DVector<f64>,
-    ms: &MotionSpace,
-    err: &TaskError,
-    gains: &Gains,
-) -> Result<DVector<f64>, ControllerError> {
-    let k = j_x.nrows();
-    if gains.kp.len() != k || gains.kd.len() != k || err.e.len() != k || err.edot.len() != k || err.acc_d.len() != k {
-        return Err(ControllerError::Dimension { what: "impedance task".into(), detail: format!("{k}-D task with gains {}/{}", gains.kp.len(), gains.kd.len()) });
-    }
-    let lambda_inv = j_x * ms.mcinv_p * j_x.transpose();
-    let (lambda, _) = pinv(&lambda_inv, RANK_TOL).ok_or_else(|| ControllerError::Singular { what: "operational-space inertia".into() })?;
-    let mu = &lambda * (j_x * ms.mcinv_bias - jdv_x);
-    let mut f = mu + &lambda * &err.acc_d;
-    for i in 0..k {
-        f[i] -= gains.kd[i] * err.edot[i] + gains.kp[i] * err.e[i];
-    }
-    Ok(f)
+/// 3-D point error `p - p_d` and velocity error.
+pub fn point_error(p: &Vector3<f64>, vel: &Vector3<f64>, p_d: &Vector3<f64>, v_d: &[f64; 3], a_d: &[f64; 3]) -> TaskError {
+    let pad = |v: Vector3<f64>| Vector6::new(v.x, v.y, v.z, 0.0, 0.0, 0.0);
+    TaskError { dim: 3, e: pad(p - p_d), edot: pad(vel - Vector3::from_row_slice(v_d)), acc_d: pad(Vector3::from_row_slice(a_d)) }
 }
 
-/// Every task of a tick, stacked (see the module docs).
+/// Every task of a tick, stacked (see the module docs), in buffers kept between ticks.
+///
+/// [`TaskStack::begin`] sizes the stack for the tick's `k` task rows, [`TaskStack::push`]
+/// copies each task in, [`TaskStack::joint_torque`] computes `tau_M = J^T F` with `F` of eq.
+/// control_law for the stacked task space.
 #[derive(Default)]
 pub struct TaskStack {
-    rows: Vec<(DMatrix<f64>, DVector<f64>, TaskError, Gains, Option<DVector<f64>>)>,
+    n: usize,
+    at: usize,
+    j: DMatrix<f64>,
+    jdv: DVector<f64>,
+    e: DVector<f64>,
+    edot: DVector<f64>,
+    acc_d: DVector<f64>,
+    kp: DVector<f64>,
+    kd: DVector<f64>,
+    ff: DVector<f64>,
+    // Scratch of `joint_torque`.
+    j_mcinv_p: DMatrix<f64>,
+    lambda_inv: DMatrix<f64>,
+    lambda: DMatrix<f64>,
+    pinv: Pinv,
+    u: DVector<f64>,
+    f: DVector<f64>,
 }
 
 impl TaskStack {
-    pub fn with_capacity(n: usize) -> Self {
-        TaskStack { rows: Vec::with_capacity(n) }
+    /// Start a tick with `k` task rows in total and `n` team velocities.
+    pub fn begin(&mut self, k: usize, n: usize) {
+        self.n = n;
+        self.at = 0;
+        zeros(&mut self.j, k, n);
+        for v in [&mut self.jdv, &mut self.e, &mut self.edot, &mut self.acc_d, &mut self.kp, &mut self.kd, &mut self.ff] {
+            zeros_v(v, k);
+        }
     }
 
-    /// Add a task: Jacobian `j_x`, `Jdot_x v`, its errors and gains, and an optional
+    /// Add a task: Jacobian `j_x` (d x n), `Jdot_x v`, its errors and gains, and an optional
     /// feed-forward wrench added to its `F` (the object's load).
-    pub fn push(&mut self, j_x: &DMatrix<f64>, jdv_x: &DVector<f64>, err: &TaskError, gains: &Gains, feed_forward: Option<DVector<f64>>) {
-        self.rows.push((j_x.clone(), jdv_x.clone(), TaskError { e: err.e.clone(), edot: err.edot.clone(), acc_d: err.acc_d.clone() }, gains.clone(), feed_forward));
+    pub fn push(&mut self, j_x: &DMatrix<f64>, jdv_x: &DVector<f64>, err: &TaskError, gains: &Gains, feed_forward: Option<&Vector6<f64>>) -> Result<(), ControllerError> {
+        let d = j_x.nrows();
+        if j_x.ncols() != self.n || jdv_x.len() != d || err.dim != d || gains.kp.len() != d || gains.kd.len() != d || self.at + d > self.j.nrows() {
+            return Err(ControllerError::Dimension {
+                what: "impedance task".into(),
+                detail: format!("{d}-row task with {} columns, error {}, gains {}/{}, {} of {} rows used", j_x.ncols(), err.dim, gains.kp.len(), gains.kd.len(), self.at, self.j.nrows()),
+            });
+        }
+        let at = self.at;
+        self.j.rows_mut(at, d).copy_from(j_x);
+        self.jdv.rows_mut(at, d).copy_from(jdv_x);
+        self.e.rows_mut(at, d).copy_from(&err.e.rows(0, d));
+        self.edot.rows_mut(at, d).copy_from(&err.edot.rows(0, d));
+        self.acc_d.rows_mut(at, d).copy_from(&err.acc_d.rows(0, d));
+        self.kp.rows_mut(at, d).copy_from_slice(&gains.kp);
+        self.kd.rows_mut(at, d).copy_from_slice(&gains.kd);
+        if let Some(f) = feed_forward {
+            self.ff.rows_mut(at, d).copy_from(&f.rows(0, d));
+        }
+        self.at += d;
+        Ok(())
     }
 
-    /// `tau_M = J^T F` (n) for the stacked tasks.
-    pub fn joint_torque(&self, ms: &MotionSpace, n: usize) -> Result<DVector<f64>, ControllerError> {
-        let k: usize = self.rows.iter().map(|r| r.0.nrows()).sum();
+    /// `tau_M = J^T F` (n) for the stacked tasks, `F = mu_c + Lambda_c a_d - K_d edot - K_p e`
+    /// (eq. control_law) plus the feed-forward.
+    pub fn joint_torque(&mut self, ms: &MotionSpace, tau_m: &mut DVector<f64>) -> Result<(), ControllerError> {
+        let k = self.j.nrows();
+        zeros_v(tau_m, self.n);
+        if self.at != k {
+            return Err(ControllerError::Dimension { what: "impedance tasks".into(), detail: format!("{} of {k} task rows filled", self.at) });
+        }
         if k == 0 {
-            return Ok(DVector::zeros(n));
+            return Ok(());
         }
-        let mut j = DMatrix::zeros(k, n);
-        let mut jdv = DVector::zeros(k);
-        let mut err = TaskError { e: DVector::zeros(k), edot: DVector::zeros(k), acc_d: DVector::zeros(k) };
-        let mut gains = Gains { kp: Vec::with_capacity(k), kd: Vec::with_capacity(k) };
-        let mut ff = DVector::zeros(k);
-        let mut at = 0;
-        for (jx, jdvx, e, g, f) in &self.rows {
-            let d = jx.nrows();
-            if jx.ncols() != n || jdvx.len() != d || e.e.len() != d || g.kp.len() != d || g.kd.len() != d || f.as_ref().is_some_and(|f| f.len() != d) {
-                return Err(ControllerError::Dimension { what: "impedance task".into(), detail: format!("{d}-row task with {} columns, gains {}/{}", jx.ncols(), g.kp.len(), g.kd.len()) });
-            }
-            j.rows_mut(at, d).copy_from(jx);
-            jdv.rows_mut(at, d).copy_from(jdvx);
-            err.e.rows_mut(at, d).copy_from(&e.e);
-            err.edot.rows_mut(at, d).copy_from(&e.edot);
-            err.acc_d.rows_mut(at, d).copy_from(&e.acc_d);
-            gains.kp.extend(&g.kp);
-            gains.kd.extend(&g.kd);
-            if let Some(f) = f {
-                ff.rows_mut(at, d).copy_from(f);
-            }
-            at += d;
+        // Lambda_c = (J M_c^{-1} P J^T)^+.
+        product(&mut self.j_mcinv_p, mat(&self.j), mat(ms.mcinv_p));
+        product(&mut self.lambda_inv, mat(&self.j_mcinv_p), mat(&self.j).transpose());
+        self.pinv.compute(mat(&self.lambda_inv), RANK_TOL, &mut self.lambda).ok_or_else(|| ControllerError::Singular { what: "operational-space inertia".into() })?;
+        // u = J M_c^{-1} (P h - Pdot v) - Jdot v + a_d; F = Lambda u - K_d edot - K_p e + ff.
+        zeros_v(&mut self.u, k);
+        self.u.copy_from(&self.acc_d);
+        self.u -= &self.jdv;
+        self.u.gemv(1.0, &self.j, ms.mcinv_bias, 1.0);
+        zeros_v(&mut self.f, k);
+        self.f.gemv(1.0, &self.lambda, &self.u, 0.0);
+        for i in 0..k {
+            self.f[i] += self.ff[i] - self.kd[i] * self.edot[i] - self.kp[i] * self.e[i];
         }
-        let f = task_wrench(&j, &jdv, ms, &err, &gains)? + ff;
-        Ok(j.transpose() * f)
+        tau_m.gemv_tr(1.0, &self.j, &self.f, 0.0);
+        Ok(())
     }
 }

@@ -1,27 +1,253 @@
-//! Small linear-algebra helpers: rank-revealing pseudo-inverse (DESIGN.md §4), SO(3) maps.
+//! Linear algebra of the tick: rank-revealing pseudo-inverse (DESIGN.md §4), LU inverse and
+//! matrix products into preallocated buffers, SO(3) maps.
+//!
+//! The team's matrices are nalgebra `DMatrix` (column-major); the decompositions run in faer
+//! on zero-copy views of them ([`mat`], [`mat_mut`]), because faer's decompositions take
+//! their scratch memory from a caller-owned buffer. [`Pinv`] and [`Inverse`] keep that buffer
+//! and their factors between ticks. Products go through [`gemm`] (nano-gemm's kernels), which
+//! needs no memory at all.
+//!
+//! **What still allocates.** Inside faer's SVD and LU, the blocked Householder and triangular
+//! updates call the `gemm` crate, which allocates its packing buffers on every call above
+//! 16^3 flops; no faer setting avoids it. Those are the only allocations of a steady tick:
+//! [`in_decomposition`] tells an allocation counter when they happen (`tests/allocations.rs`
+//! asserts that nothing else allocates; the tick bench prints both counts).
 
-use nalgebra::{DMatrix, Matrix3, Rotation3, UnitQuaternion, Vector3};
+use std::cell::Cell;
+
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::linalg::svd::{svd, svd_scratch, ComputeSvdVectors};
+use faer::{ColMut, MatMut, MatRef, Par};
+use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, UnitQuaternion, Vector3};
 
 /// Relative tolerance of the pseudo-inverses: singular values below `RANK_TOL * sigma_max`
 /// are treated as zero. `J_c,ee` has rank `6(B-1)` (not `6B`), so this matters.
 pub const RANK_TOL: f64 = 1e-9;
 
-/// Moore-Penrose pseudo-inverse by SVD with a relative rank tolerance; also returns the rank.
-/// `None` when the SVD fails to converge or the input is not finite.
-pub fn pinv(a: &DMatrix<f64>, rel_tol: f64) -> Option<(DMatrix<f64>, usize)> {
+/// Smallest LU pivot, relative to the largest, of a matrix [`Inverse`] accepts as regular.
+pub const PIVOT_TOL: f64 = 1e-13;
+
+thread_local! {
+    static IN_DECOMPOSITION: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Whether this thread is inside one of faer's decompositions (SVD, LU), whose internal
+/// products allocate (see the module docs). For allocation counters.
+pub fn in_decomposition() -> bool {
+    IN_DECOMPOSITION.try_with(Cell::get).unwrap_or(false)
+}
+
+/// Marks a decomposition for [`in_decomposition`] while it lives.
+struct Decomposition;
+
+impl Decomposition {
+    fn start() -> Self {
+        IN_DECOMPOSITION.with(|c| c.set(true));
+        Decomposition
+    }
+}
+
+impl Drop for Decomposition {
+    fn drop(&mut self) {
+        IN_DECOMPOSITION.with(|c| c.set(false));
+    }
+}
+
+/// faer view of a column-major nalgebra matrix.
+pub fn mat(a: &DMatrix<f64>) -> MatRef<'_, f64> {
+    MatRef::from_column_major_slice(a.as_slice(), a.nrows(), a.ncols())
+}
+
+/// Mutable faer view of a column-major nalgebra matrix.
+pub fn mat_mut(a: &mut DMatrix<f64>) -> MatMut<'_, f64> {
     let (r, c) = a.shape();
-    if r == 0 || c == 0 {
-        return Some((DMatrix::zeros(c, r), 0));
+    MatMut::from_column_major_slice_mut(a.as_mut_slice(), r, c)
+}
+
+/// faer view of a vector as an `n x 1` matrix.
+pub fn vec_mat(v: &DVector<f64>) -> MatRef<'_, f64> {
+    MatRef::from_column_major_slice(v.as_slice(), v.len(), 1)
+}
+
+/// Make `a` an `r x c` matrix of zeros; the buffer is reallocated only when the shape changes
+/// (a new team, a contact set that changed).
+pub fn zeros(a: &mut DMatrix<f64>, r: usize, c: usize) {
+    if a.shape() == (r, c) {
+        a.fill(0.0);
+    } else {
+        *a = DMatrix::zeros(r, c);
     }
-    if !a.iter().all(|x| x.is_finite()) {
-        return None;
+}
+
+/// Make `v` a zero vector of length `n`, reallocating only when the length changes.
+pub fn zeros_v(v: &mut DVector<f64>, n: usize) {
+    if v.len() == n {
+        v.fill(0.0);
+    } else {
+        *v = DVector::zeros(n);
     }
-    let svd = a.clone().try_svd(true, true, 1e-14, 500)?;
-    let smax = svd.singular_values.iter().cloned().fold(0.0, f64::max);
-    let eps = (rel_tol * smax).max(1e-300);
-    let rank = svd.singular_values.iter().filter(|s| **s > eps).count();
-    let pinv = svd.pseudo_inverse(eps).ok()?;
-    Some((pinv, rank))
+}
+
+/// `out = a b` (shaped to fit, see [`zeros`]). `a` and `b` are views: `mat(x).transpose()`
+/// multiplies by a transpose without forming it.
+pub fn product(out: &mut DMatrix<f64>, a: MatRef<'_, f64>, b: MatRef<'_, f64>) {
+    zeros(out, a.nrows(), b.ncols());
+    gemm(mat_mut(out), 0.0, 1.0, a, b);
+}
+
+/// `out += alpha a b` (`out` already of the right shape).
+pub fn add_product(out: &mut DMatrix<f64>, alpha: f64, a: MatRef<'_, f64>, b: MatRef<'_, f64>) {
+    gemm(mat_mut(out), 1.0, alpha, a, b);
+}
+
+/// `dst = beta dst + alpha a b` by nano-gemm's register-blocked kernels, which need no packing
+/// buffer: faer's and nalgebra's own products pack their operands into memory they allocate
+/// on every call above a few thousand flops.
+///
+/// Panics if the shapes disagree (a programming error: every caller sizes its operands).
+pub fn gemm(dst: MatMut<'_, f64>, beta: f64, alpha: f64, a: MatRef<'_, f64>, b: MatRef<'_, f64>) {
+    let (m, n, k) = (a.nrows(), b.ncols(), a.ncols());
+    assert!(dst.nrows() == m && dst.ncols() == n && b.nrows() == k, "gemm: {}x{} = {}x{} * {}x{}", dst.nrows(), dst.ncols(), m, k, b.nrows(), n);
+    if m == 0 || n == 0 {
+        return;
+    }
+    // SAFETY: the three views are valid for their shapes and strides (checked to agree
+    // above), `dst` is borrowed mutably so it aliases neither operand, and nano-gemm reads
+    // and writes exactly the `m x k`, `k x n` and `m x n` elements those describe. With
+    // `k == 0` it only scales `dst` by `beta`.
+    unsafe {
+        nano_gemm::planless::execute_f64(
+            m,
+            n,
+            k,
+            dst.as_ptr_mut(),
+            dst.row_stride(),
+            dst.col_stride(),
+            a.as_ptr(),
+            a.row_stride(),
+            a.col_stride(),
+            b.as_ptr(),
+            b.row_stride(),
+            b.col_stride(),
+            beta,
+            alpha,
+            false,
+            false,
+        );
+    }
+}
+
+/// Moore-Penrose pseudo-inverse by SVD with a relative rank tolerance, allocating its
+/// result. For tests and one-off use; the tick uses [`Pinv`]. Also returns the rank; `None`
+/// when the SVD fails to converge or the input is not finite.
+pub fn pinv(a: &DMatrix<f64>, rel_tol: f64) -> Option<(DMatrix<f64>, usize)> {
+    let mut out = DMatrix::zeros(0, 0);
+    let rank = Pinv::default().compute(mat(a), rel_tol, &mut out)?;
+    Some((out, rank))
+}
+
+/// Workspace of a pseudo-inverse `A^+ = V diag(1/s) U^T` (thin SVD, singular values below
+/// `rel_tol * s_max` dropped), kept between ticks.
+#[derive(Default)]
+pub struct Pinv {
+    shape: (usize, usize),
+    u: DMatrix<f64>,
+    v: DMatrix<f64>,
+    s: Vec<f64>,
+    buf: Option<MemBuffer>,
+}
+
+impl Pinv {
+    /// `out = a^+` (shaped `cols x rows`); returns the rank. `None` when `a` is not finite or
+    /// the SVD does not converge.
+    pub fn compute(&mut self, a: MatRef<'_, f64>, rel_tol: f64, out: &mut DMatrix<f64>) -> Option<usize> {
+        let (r, c) = (a.nrows(), a.ncols());
+        zeros(out, c, r);
+        let k = r.min(c);
+        if k == 0 {
+            return Some(0);
+        }
+        for j in 0..c {
+            if !a.col(j).iter().all(|x| x.is_finite()) {
+                return None;
+            }
+        }
+        if self.shape != (r, c) || self.buf.is_none() {
+            let req = svd_scratch::<f64>(r, c, ComputeSvdVectors::Thin, ComputeSvdVectors::Thin, Par::Seq, Default::default());
+            self.buf = Some(MemBuffer::new(req.or(StackReq::EMPTY)));
+            self.u = DMatrix::zeros(r, k);
+            self.v = DMatrix::zeros(c, k);
+            self.s = vec![0.0; k];
+            self.shape = (r, c);
+        }
+        let stack = MemStack::new(self.buf.as_mut().expect("allocated above"));
+        let scope = Decomposition::start();
+        let result = svd(
+            a,
+            ColMut::from_slice_mut(&mut self.s).as_diagonal_mut(),
+            Some(mat_mut(&mut self.u)),
+            Some(mat_mut(&mut self.v)),
+            Par::Seq,
+            stack,
+            Default::default(),
+        );
+        drop(scope);
+        result.ok()?;
+        let smax = self.s.iter().cloned().fold(0.0, f64::max);
+        let eps = (rel_tol * smax).max(1e-300);
+        let mut rank = 0;
+        for (j, s) in self.s.iter().enumerate() {
+            let inv = if *s > eps {
+                rank += 1;
+                1.0 / s
+            } else {
+                0.0
+            };
+            self.v.column_mut(j).scale_mut(inv);
+        }
+        gemm(mat_mut(out), 0.0, 1.0, mat(&self.v), mat(&self.u).transpose());
+        Some(rank)
+    }
+}
+
+/// Workspace of an inverse by LU with partial pivoting, kept between ticks.
+#[derive(Default)]
+pub struct Inverse {
+    lu: DMatrix<f64>,
+    perm: Vec<usize>,
+    perm_inv: Vec<usize>,
+    buf: Option<MemBuffer>,
+}
+
+impl Inverse {
+    /// `out = a^{-1}`. `None` when `a` is not square or finite, or a pivot is below
+    /// [`PIVOT_TOL`] times the largest (numerically singular).
+    pub fn compute(&mut self, a: &DMatrix<f64>, out: &mut DMatrix<f64>) -> Option<()> {
+        use faer::linalg::lu::partial_pivoting::{factor, inverse};
+        let n = a.nrows();
+        if a.ncols() != n || !a.iter().all(|x| x.is_finite()) {
+            return None;
+        }
+        zeros(out, n, n);
+        if self.lu.shape() != (n, n) || self.buf.is_none() {
+            let req = factor::lu_in_place_scratch::<usize, f64>(n, n, Par::Seq, Default::default())
+                .or(inverse::inverse_scratch::<usize, f64>(n, Par::Seq));
+            self.buf = Some(MemBuffer::new(req));
+            self.lu = DMatrix::zeros(n, n);
+            self.perm = vec![0; n];
+            self.perm_inv = vec![0; n];
+        }
+        self.lu.copy_from(a);
+        let buf = self.buf.as_mut().expect("allocated above");
+        let _scope = Decomposition::start();
+        let (_, perm) = factor::lu_in_place(mat_mut(&mut self.lu), &mut self.perm, &mut self.perm_inv, Par::Seq, MemStack::new(buf), Default::default());
+        let (lo, hi) = (0..n).map(|i| self.lu[(i, i)].abs()).fold((f64::INFINITY, 0.0f64), |(lo, hi), p| (lo.min(p), hi.max(p)));
+        if !(hi.is_finite() && lo > PIVOT_TOL * hi) {
+            return None;
+        }
+        inverse::inverse(mat_mut(out), mat(&self.lu), mat(&self.lu), perm, Par::Seq, MemStack::new(buf));
+        out.iter().all(|x| x.is_finite()).then_some(())
+    }
 }
 
 /// Cross-product matrix: `skew(a) b = a x b`.
@@ -48,4 +274,48 @@ pub fn quat_wxyz(r: &Rotation3<f64>) -> [f64; 4] {
 /// Rotation of a quaternion `(w, x, y, z)` (normalised first).
 pub fn rotation_from_wxyz(q: &[f64; 4]) -> Rotation3<f64> {
     UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3])).to_rotation_matrix()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Against nalgebra's own SVD and the Moore-Penrose conditions, on a rank-deficient matrix.
+    #[test]
+    fn pinv_meets_the_penrose_conditions_and_reports_the_rank() {
+        let b = DMatrix::<f64>::from_fn(7, 3, |i, j| ((i * 5 + j * 3) % 7) as f64 - 2.5);
+        let c = DMatrix::<f64>::from_fn(3, 9, |i, j| ((i * 2 + j * 7) % 5) as f64 - 1.5);
+        let a = &b * &c; // 7 x 9, rank 3
+        let mut ws = Pinv::default();
+        let mut x = DMatrix::zeros(0, 0);
+        assert_eq!(ws.compute(mat(&a), RANK_TOL, &mut x), Some(3));
+        assert_eq!(x.shape(), (9, 7));
+        assert!((&a * &x * &a - &a).amax() < 1e-10);
+        assert!((&x * &a * &x - &x).amax() < 1e-10);
+        assert!(((&a * &x).transpose() - &a * &x).amax() < 1e-10);
+        assert!(((&x * &a).transpose() - &x * &a).amax() < 1e-10);
+        let oracle = a.clone().svd(true, true).pseudo_inverse(1e-9).unwrap();
+        assert!((&x - oracle).amax() < 1e-10);
+        // Same workspace, another shape, then a non-finite input.
+        let a2 = a.transpose();
+        assert_eq!(ws.compute(mat(&a2), RANK_TOL, &mut x), Some(3));
+        assert!((&a2 * &x * &a2 - &a2).amax() < 1e-10);
+        let mut bad = a.clone();
+        bad[(1, 1)] = f64::NAN;
+        assert_eq!(ws.compute(mat(&bad), RANK_TOL, &mut x), None);
+    }
+
+    #[test]
+    fn inverse_by_lu_and_singular_matrices() {
+        let a = DMatrix::<f64>::from_fn(6, 6, |i, j| if i == j { 4.0 } else { ((i + 2 * j) % 3) as f64 - 1.0 });
+        let mut ws = Inverse::default();
+        let mut x = DMatrix::zeros(0, 0);
+        ws.compute(&a, &mut x).expect("regular");
+        assert!((&a * &x - DMatrix::identity(6, 6)).amax() < 1e-12);
+        let mut s = a.clone();
+        let r0 = s.row(0).into_owned();
+        s.row_mut(3).copy_from(&(r0 * 2.0));
+        assert!(ws.compute(&s, &mut x).is_none(), "rank-deficient");
+        assert!(ws.compute(&DMatrix::zeros(4, 4), &mut x).is_none());
+    }
 }

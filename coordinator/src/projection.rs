@@ -1,14 +1,18 @@
 //! The projections of PIDC (paper §II-B..D): `P` (eq. aghili_21), `Pdot v`, `M_c` and the
 //! constraint inertia `Mbar = M M_c^{-1}` (eq. aghili_25, constraint_force), `[P S]^+` and
 //! `B` (eqs. ua_solution, bmatrix), all with rank-revealing pseudo-inverses (DESIGN.md §4).
+//!
+//! Computed into the previous tick's buffers ([`Projections::compute_into`]); `M` is
+//! block-diagonal (one block per robot), so `P M` and `M M_c^{-1}` are products by blocks.
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::linalg::{pinv, RANK_TOL};
+use crate::linalg::{gemm, mat, mat_mut, product, zeros, zeros_v, Inverse, Pinv, RANK_TOL};
+use crate::team::Team;
 use crate::ControllerError;
 
 /// The projected quantities of one tick.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Projections {
     /// `J_c^+` (n x m) and the rank of `J_c`.
     pub jc_pinv: DMatrix<f64>,
@@ -19,7 +23,7 @@ pub struct Projections {
     pub p: DMatrix<f64>,
     /// `I - P`.
     pub ip: DMatrix<f64>,
-    /// `Pdot v = -J_c^+ (Jdot_c v)`, exact when `J_c v = 0` (see [`pdot_v`]).
+    /// `Pdot v = -J_c^+ (Jdot_c v)`, exact when `J_c v = 0` (see below).
     pub pdot_v: DVector<f64>,
     /// `M_c = P M + I - P` and its inverse (eq. aghili_25).
     pub mc: DMatrix<f64>,
@@ -32,59 +36,115 @@ pub struct Projections {
     pub b: DMatrix<f64>,
 }
 
-/// `Pdot v` from `J_c`'s pseudo-inverse and `Jdot_c v`.
-///
-/// `P = I - J^+ J`, so `Pdot v = -(d/dt J^+) (J v) - J^+ (Jdot v)`. While the contacts hold
-/// (`J_c v = 0`, eq. contact_constraint) the first term vanishes and `Pdot v = -J^+ Jdot v`
-/// exactly; this needs only `Jdot*v` (what the agents send), not `Jdot`. The measured
-/// `|J_c v|` is reported in the diagnostics. Checked against a finite difference of `P` in
-/// time in `tests/identities.rs`.
-pub fn pdot_v(jc_pinv: &DMatrix<f64>, jdv_c: &DVector<f64>) -> DVector<f64> {
-    -(jc_pinv * jdv_c)
+/// Scratch of [`Projections::compute_into`]: the decompositions' workspaces and the reduced
+/// matrices whose pseudo-inverses give `[P S]^+` and `B`.
+#[derive(Default)]
+pub struct ProjectionWorkspace {
+    jc: Pinv,
+    ps: Pinv,
+    x: Pinv,
+    mc: Inverse,
+    pa: DMatrix<f64>,
+    pa_pinv: DMatrix<f64>,
+    xr: DMatrix<f64>,
+    xr_pinv: DMatrix<f64>,
 }
 
 impl Projections {
-    pub fn compute(
-        mass: &DMatrix<f64>,
-        s_diag: &DVector<f64>,
-        j_c: &DMatrix<f64>,
-        jdv_c: &DVector<f64>,
-    ) -> Result<Projections, ControllerError> {
-        let n = mass.nrows();
+    /// The contact wrenches of eq. constraint_force for a generalized force `u` (actuation
+    /// `S tau` plus external `J_x^T F_x`): with `K = (I - P)(Mbar P - I)`,
+    /// `lambda = (J_c^T)^+ [K u + (I - P)(Mbar (Pdot v - P h) + h)]
+    ///         = (J_c^T)^+ (I - P) [Mbar (P (u - h) + Pdot v) + h - u]`, into `out`.
+    /// `t1`, `t2` are team-sized scratch.
+    pub fn contact_wrench(&self, h: &DVector<f64>, u: &DVector<f64>, out: &mut DVector<f64>, t1: &mut DVector<f64>, t2: &mut DVector<f64>) {
+        let n = h.len();
+        zeros_v(t1, n);
+        zeros_v(t2, n);
+        t2.copy_from(u);
+        *t2 -= h;
+        t1.copy_from(&self.pdot_v);
+        t1.gemv(1.0, &self.p, t2, 1.0); // P (u - h) + Pdot v
+        t2.copy_from(h);
+        *t2 -= u;
+        t2.gemv(1.0, &self.mbar, t1, 1.0); // Mbar (...) + h - u
+        t1.gemv(1.0, &self.ip, t2, 0.0);
+        zeros_v(out, self.jct_pinv.nrows());
+        out.gemv(1.0, &self.jct_pinv, t1, 0.0);
+    }
+
+    /// All projections of the team with contact Jacobian `j_c` and its `Jdot*v`.
+    ///
+    /// `Pdot v`: `P = I - J^+ J`, so `Pdot v = -(d/dt J^+) (J v) - J^+ (Jdot v)`. While the
+    /// contacts hold (`J_c v = 0`, eq. contact_constraint) the first term vanishes and
+    /// `Pdot v = -J^+ Jdot v` exactly; this needs only `Jdot*v` (what the agents send), not
+    /// `Jdot`. The measured `|J_c v|` is reported in the diagnostics. Checked against a finite
+    /// difference of `P` in time in `tests/controller.rs`.
+    pub fn compute_into(&mut self, ws: &mut ProjectionWorkspace, team: &Team, j_c: &DMatrix<f64>, jdv_c: &DVector<f64>) -> Result<(), ControllerError> {
+        let n = team.n;
+        let m = j_c.nrows();
         let singular = |what: &str| ControllerError::Singular { what: what.to_string() };
-        let (jc_pinv, jc_rank) = pinv(j_c, RANK_TOL).ok_or_else(|| singular("SVD of J_c"))?;
-        let jct_pinv = jc_pinv.transpose();
-        let id = DMatrix::<f64>::identity(n, n);
-        let mut p = &id - &jc_pinv * j_c;
-        // Symmetrise away round-off (P is symmetric in exact arithmetic).
-        let pt = p.transpose();
-        p = (&p + pt) * 0.5;
-        let ip = &id - &p;
-        let pdot_v = pdot_v(&jc_pinv, jdv_c);
-        let mc = &p * mass + &ip;
-        let mc_inv = mc.clone().lu().try_inverse().ok_or_else(|| singular("M_c"))?;
-        if !mc_inv.iter().all(|x| x.is_finite()) {
-            return Err(singular("M_c"));
+        self.jc_rank = ws.jc.compute(mat(j_c), RANK_TOL, &mut self.jc_pinv).ok_or_else(|| singular("SVD of J_c"))?;
+        zeros(&mut self.jct_pinv, m, n);
+        self.jc_pinv.transpose_to(&mut self.jct_pinv);
+        // P = I - J^+ J, symmetrised (P is symmetric in exact arithmetic).
+        product(&mut self.p, mat(&self.jc_pinv), mat(j_c));
+        self.p.neg_mut();
+        for i in 0..n {
+            self.p[(i, i)] += 1.0;
+            for j in 0..i {
+                let s = 0.5 * (self.p[(i, j)] + self.p[(j, i)]);
+                self.p[(i, j)] = s;
+                self.p[(j, i)] = s;
+            }
         }
-        let mbar = mass * &mc_inv;
+        zeros(&mut self.ip, n, n);
+        self.ip -= &self.p;
+        for i in 0..n {
+            self.ip[(i, i)] += 1.0;
+        }
+        zeros_v(&mut self.pdot_v, n);
+        self.pdot_v.gemv(-1.0, &self.jc_pinv, jdv_c, 0.0);
+        // M_c = P M + I - P, by M's diagonal blocks.
+        zeros(&mut self.mc, n, n);
+        self.mc.copy_from(&self.ip);
+        for r in &team.robots {
+            let (o, k) = (r.offset, r.nv);
+            let m_blk = mat(&team.mass).submatrix(o, o, k, k);
+            gemm(mat_mut(&mut self.mc).subcols_mut(o, k), 1.0, 1.0, mat(&self.p).subcols(o, k), m_blk);
+        }
+        ws.mc.compute(&self.mc, &mut self.mc_inv).ok_or_else(|| singular("M_c"))?;
+        // Mbar = M M_c^{-1}, by M's diagonal blocks.
+        zeros(&mut self.mbar, n, n);
+        for r in &team.robots {
+            let (o, k) = (r.offset, r.nv);
+            let m_blk = mat(&team.mass).submatrix(o, o, k, k);
+            gemm(mat_mut(&mut self.mbar).subrows_mut(o, k), 0.0, 1.0, m_blk, mat(&self.mc_inv).subrows(o, k));
+        }
         // [P S]^+: S is a 0/1 diagonal, so P S keeps P's actuated columns; the pseudo-inverse
         // of the column-reduced matrix, placed on the actuated rows, is [P S]^+.
-        let act: Vec<usize> = (0..n).filter(|&j| s_diag[j] != 0.0).collect();
-        let pa = p.select_columns(&act);
-        let (pa_pinv, _) = pinv(&pa, RANK_TOL).ok_or_else(|| singular("SVD of P S"))?;
-        let mut ps_pinv = DMatrix::zeros(n, n);
-        for (k, &j) in act.iter().enumerate() {
-            ps_pinv.row_mut(j).copy_from(&pa_pinv.row(k));
+        let s = &team.s_diag;
+        let na = s.iter().filter(|x| **x != 0.0).count();
+        zeros(&mut ws.pa, n, na);
+        for (k, j) in (0..n).filter(|&j| s[j] != 0.0).enumerate() {
+            ws.pa.column_mut(k).copy_from(&self.p.column(j));
+        }
+        ws.ps.compute(mat(&ws.pa), RANK_TOL, &mut ws.pa_pinv).ok_or_else(|| singular("SVD of P S"))?;
+        zeros(&mut self.ps_pinv, n, n);
+        for (k, j) in (0..n).filter(|&j| s[j] != 0.0).enumerate() {
+            self.ps_pinv.row_mut(j).copy_from(&ws.pa_pinv.row(k));
         }
         // [(I - S)(I - P)]^+: only the unactuated rows of (I - P) survive; same trick on rows.
-        let un: Vec<usize> = (0..n).filter(|&i| s_diag[i] == 0.0).collect();
-        let xr = ip.select_rows(&un);
-        let (xr_pinv, _) = pinv(&xr, RANK_TOL).ok_or_else(|| singular("SVD of (I-S)(I-P)"))?;
-        let mut x_pinv = DMatrix::zeros(n, n);
-        for (k, &i) in un.iter().enumerate() {
-            x_pinv.column_mut(i).copy_from(&xr_pinv.column(k));
+        zeros(&mut ws.xr, n - na, n);
+        for (k, i) in (0..n).filter(|&i| s[i] == 0.0).enumerate() {
+            ws.xr.row_mut(k).copy_from(&self.ip.row(i));
         }
-        let b = &id - x_pinv;
-        Ok(Projections { jc_pinv, jc_rank, jct_pinv, p, ip, pdot_v, mc, mc_inv, mbar, ps_pinv, b })
+        ws.x.compute(mat(&ws.xr), RANK_TOL, &mut ws.xr_pinv).ok_or_else(|| singular("SVD of (I-S)(I-P)"))?;
+        zeros(&mut self.b, n, n);
+        self.b.fill_with_identity();
+        for (k, i) in (0..n).filter(|&i| s[i] == 0.0).enumerate() {
+            let mut col = self.b.column_mut(i);
+            col -= &ws.xr_pinv.column(k);
+        }
+        Ok(())
     }
 }

@@ -3,12 +3,14 @@
 //! Jacobian `J_cf`, the hand Jacobian `J_ee`, the `Jdot*v` stacks, task frames, index maps.
 //!
 //! Any number of robots and stance feet; the contact set may change from tick to tick (the
-//! assembly is redone every tick). Allocates per tick (team-sized matrices, a few µs).
+//! assembly is redone every tick). [`Team::assemble_into`] writes into the buffers of the
+//! previous tick's team: it allocates only when the team's shape (robots, frames, contact
+//! set) changes.
 
 use nalgebra::{DMatrix, DVector, Rotation3, Vector3};
 use protocol::{DynamicsTerms, FrameRole, FrameTerms};
 
-use crate::linalg::rotation_from_row_major;
+use crate::linalg::{rotation_from_row_major, zeros, zeros_v};
 use crate::ControllerError;
 
 /// One robot's block in the team vectors.
@@ -24,7 +26,7 @@ pub struct RobotBlock {
 }
 
 /// A frame used as a task or a contact.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct TeamFrame {
     pub robot: usize,
     pub name: String,
@@ -36,7 +38,7 @@ pub struct TeamFrame {
 }
 
 /// The team of one tick.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Team {
     pub robots: Vec<RobotBlock>,
     /// Team velocity dimension.
@@ -61,11 +63,15 @@ pub struct Team {
 impl Team {
     /// Assemble from one tick's terms. `expected` (sorted ids), when given, must match the
     /// robots of the tick. `fully_actuated` sets `S = I` (the [Lin2018] comparison).
-    pub fn assemble(
-        tick: &[DynamicsTerms],
-        expected: Option<&[String]>,
-        fully_actuated: bool,
-    ) -> Result<Team, ControllerError> {
+    pub fn assemble(tick: &[DynamicsTerms], expected: Option<&[String]>, fully_actuated: bool) -> Result<Team, ControllerError> {
+        let mut team = Team::default();
+        team.assemble_into(tick, expected, fully_actuated)?;
+        Ok(team)
+    }
+
+    /// [`Team::assemble`] into this team's buffers (the previous tick's). Every check runs
+    /// before anything is written: on an error the team is unchanged.
+    pub fn assemble_into(&mut self, tick: &[DynamicsTerms], expected: Option<&[String]>, fully_actuated: bool) -> Result<(), ControllerError> {
         if tick.is_empty() {
             return Err(ControllerError::Dimension { what: "tick".into(), detail: "no robot in the tick".into() });
         }
@@ -85,52 +91,64 @@ impl Team {
             check_terms(t)?;
         }
         let n: usize = tick.iter().map(|t| t.nv()).sum();
-        let mut robots = Vec::with_capacity(tick.len());
-        let mut mass = DMatrix::zeros(n, n);
-        let mut bias = DVector::zeros(n);
-        let mut velocity = DVector::zeros(n);
-        let mut s_diag = DVector::from_element(n, 1.0);
-        let (mut feet, mut hands, mut torsos, mut swing_feet) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        self.n = n;
+        zeros(&mut self.mass, n, n);
+        zeros_v(&mut self.bias, n);
+        zeros_v(&mut self.velocity, n);
+        zeros_v(&mut self.s_diag, n);
+        self.s_diag.fill(1.0);
+        self.robots.truncate(tick.len());
+        let (mut feet, mut hands, mut torsos, mut swing) = (0, 0, 0, 0);
         let mut off = 0;
         for (k, t) in tick.iter().enumerate() {
             let nv = t.nv();
-            for i in 0..nv {
-                for j in 0..nv {
-                    mass[(off + i, off + j)] = t.mass_matrix.data[i * nv + j];
+            for j in 0..nv {
+                for i in 0..nv {
+                    self.mass[(off + i, off + j)] = t.mass_matrix.data[i * nv + j];
                 }
-                bias[off + i] = t.bias[i];
-                velocity[off + i] = t.velocity[i];
             }
+            self.bias.rows_mut(off, nv).copy_from_slice(&t.bias);
+            self.velocity.rows_mut(off, nv).copy_from_slice(&t.velocity);
             let base = if t.floating_base { 6 } else { 0 };
             if !fully_actuated {
-                for i in 0..base {
-                    s_diag[off + i] = 0.0;
-                }
+                self.s_diag.rows_mut(off, base).fill(0.0);
             }
-            robots.push(RobotBlock {
-                id: t.header.robot_id().to_string(),
-                offset: off,
-                nv,
-                actuated: (off + base..off + nv).collect(),
-                floating_base: t.floating_base,
-            });
+            if k == self.robots.len() {
+                self.robots.push(RobotBlock { id: String::new(), offset: 0, nv: 0, actuated: Vec::new(), floating_base: false });
+            }
+            let rb = &mut self.robots[k];
+            if rb.id != t.header.robot_id() {
+                rb.id.clear();
+                rb.id.push_str(t.header.robot_id());
+            }
+            rb.offset = off;
+            rb.nv = nv;
+            rb.actuated.clear();
+            rb.actuated.extend(off + base..off + nv);
+            rb.floating_base = t.floating_base;
             for f in &t.frames {
-                let tf = team_frame(k, f, off, n);
-                match f.role {
-                    FrameRole::StanceFoot => feet.push(tf),
-                    FrameRole::SwingFoot => swing_feet.push(tf),
-                    FrameRole::Hand if t.hand_in_grasp => hands.push(tf),
-                    FrameRole::Hand => {}
-                    FrameRole::Torso => torsos.push(tf),
+                let (list, count) = match f.role {
+                    FrameRole::StanceFoot => (&mut self.feet, &mut feet),
+                    FrameRole::SwingFoot => (&mut self.swing_feet, &mut swing),
+                    FrameRole::Hand if t.hand_in_grasp => (&mut self.hands, &mut hands),
+                    FrameRole::Hand => continue,
+                    FrameRole::Torso => (&mut self.torsos, &mut torsos),
+                };
+                if *count == list.len() {
+                    list.push(TeamFrame::default());
                 }
+                team_frame_into(&mut list[*count], k, f, off, n);
+                *count += 1;
             }
             off += nv;
         }
-        let j_cf = stack(&feet, 3, n);
-        let jdv_cf = stack_v(&feet, 3);
-        let j_ee = stack(&hands, 6, n);
-        let jdv_ee = stack_v(&hands, 6);
-        Ok(Team { robots, n, mass, bias, velocity, s_diag, feet, hands, torsos, swing_feet, j_cf, jdv_cf, j_ee, jdv_ee })
+        self.feet.truncate(feet);
+        self.hands.truncate(hands);
+        self.torsos.truncate(torsos);
+        self.swing_feet.truncate(swing);
+        stack(&self.feet, 3, n, &mut self.j_cf, &mut self.jdv_cf);
+        stack(&self.hands, 6, n, &mut self.j_ee, &mut self.jdv_ee);
+        Ok(())
     }
 
     /// Rows of `J_c`: 3 per stance foot, 6 per hand in grasp (eq. jacobian_c).
@@ -145,7 +163,7 @@ impl Team {
 }
 
 fn check_terms(t: &DynamicsTerms) -> Result<(), ControllerError> {
-    let robot = t.header.robot_id().to_string();
+    let robot = t.header.robot_id();
     let nv = t.nv();
     let dim = |what: &str, detail: String| ControllerError::Dimension { what: format!("{robot}: {what}"), detail };
     if nv == 0 || (t.floating_base && nv <= 6) {
@@ -159,7 +177,7 @@ fn check_terms(t: &DynamicsTerms) -> Result<(), ControllerError> {
     }
     let finite = |x: &[f64]| x.iter().all(|v| v.is_finite());
     if !finite(&t.mass_matrix.data) || !finite(&t.bias) || !finite(&t.velocity) {
-        return Err(ControllerError::NonFinite { robot, what: "M, h or v".into() });
+        return Err(ControllerError::NonFinite { robot: robot.to_string(), what: "M, h or v".into() });
     }
     let mut hands = 0;
     for f in &t.frames {
@@ -168,7 +186,7 @@ fn check_terms(t: &DynamicsTerms) -> Result<(), ControllerError> {
             return Err(dim(&format!("frame {}", f.name), format!("jacobian {}x{}, jdot_v {} for a {d}-row frame and nv {nv}", f.jacobian.rows(), f.jacobian.cols(), f.jdot_v.len())));
         }
         if !finite(&f.jacobian.data) || !finite(&f.jdot_v) || !finite(&f.position) || !finite(&f.rotation) {
-            return Err(ControllerError::NonFinite { robot, what: format!("frame {}", f.name) });
+            return Err(ControllerError::NonFinite { robot: robot.to_string(), what: format!("frame {}", f.name) });
         }
         hands += (f.role == FrameRole::Hand) as usize;
     }
@@ -178,37 +196,31 @@ fn check_terms(t: &DynamicsTerms) -> Result<(), ControllerError> {
     Ok(())
 }
 
-fn team_frame(robot: usize, f: &FrameTerms, off: usize, n: usize) -> TeamFrame {
+fn team_frame_into(tf: &mut TeamFrame, robot: usize, f: &FrameTerms, off: usize, n: usize) {
     let d = f.role.dim();
     let nv = f.jacobian.cols();
-    let mut jacobian = DMatrix::zeros(d, n);
+    zeros(&mut tf.jacobian, d, n);
     for i in 0..d {
         for j in 0..nv {
-            jacobian[(i, off + j)] = f.jacobian.data[i * nv + j];
+            tf.jacobian[(i, off + j)] = f.jacobian.data[i * nv + j];
         }
     }
-    TeamFrame {
-        robot,
-        name: f.name.clone(),
-        position: Vector3::from_row_slice(&f.position),
-        rotation: rotation_from_row_major(&f.rotation),
-        jacobian,
-        jdot_v: DVector::from_row_slice(&f.jdot_v),
+    tf.robot = robot;
+    if tf.name != f.name {
+        tf.name.clone_from(&f.name);
     }
+    tf.position = Vector3::from_row_slice(&f.position);
+    tf.rotation = rotation_from_row_major(&f.rotation);
+    zeros_v(&mut tf.jdot_v, d);
+    tf.jdot_v.copy_from_slice(&f.jdot_v);
 }
 
-fn stack(frames: &[TeamFrame], d: usize, n: usize) -> DMatrix<f64> {
-    let mut j = DMatrix::zeros(d * frames.len(), n);
+/// Frames' Jacobians and `Jdot*v` stacked (`d` rows each) into `j` and `jdv`.
+fn stack(frames: &[TeamFrame], d: usize, n: usize, j: &mut DMatrix<f64>, jdv: &mut DVector<f64>) {
+    zeros(j, d * frames.len(), n);
+    zeros_v(jdv, d * frames.len());
     for (k, f) in frames.iter().enumerate() {
         j.rows_mut(d * k, d).copy_from(&f.jacobian);
+        jdv.rows_mut(d * k, d).copy_from(&f.jdot_v);
     }
-    j
-}
-
-fn stack_v(frames: &[TeamFrame], d: usize) -> DVector<f64> {
-    let mut v = DVector::zeros(d * frames.len());
-    for (k, f) in frames.iter().enumerate() {
-        v.rows_mut(d * k, d).copy_from(&f.jdot_v);
-    }
-    v
 }

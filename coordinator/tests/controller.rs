@@ -167,8 +167,8 @@ fn worst_violation(r: &coordinator::controller::TickReport) -> (f64, f64) {
     for (start, kind) in &r.contacts {
         let d = if matches!(kind, coordinator::qp::ContactKind::Foot { .. }) { 3 } else { 6 };
         let lam = r.lambda_real.rows(*start, d);
-        for (c, lo) in contact_rows(kind) {
-            worst_c = worst_c.max(lo - DVector::from_vec(c).dot(&lam));
+        for (c, lo) in contact_rows(kind).iter() {
+            worst_c = worst_c.max(lo - c.iter().zip(lam.iter()).map(|(a, b)| a * b).sum::<f64>());
         }
     }
     let mut worst_t = f64::NEG_INFINITY;
