@@ -110,25 +110,9 @@ fn partial_grasp(r: &Vector3<f64>) -> Matrix6<f64> {
     gi
 }
 
-/// Partial grasp matrices side by side (eq. graspmatrix), world-aligned contact frames.
-pub fn grasp_matrix(r: &[Vector3<f64>]) -> DMatrix<f64> {
-    let mut g = DMatrix::zeros(6, 6 * r.len());
-    for (i, ri) in r.iter().enumerate() {
-        g.view_mut((0, 6 * i), (6, 6)).copy_from(&partial_grasp(ri));
-    }
-    g
-}
-
 impl GraspTerms {
-    /// Compute for the hands of `team` (B >= 1) with the object at `object`.
-    pub fn compute(team: &Team, object: Isometry3<f64>) -> Option<GraspTerms> {
-        let mut g = GraspTerms::default();
-        g.compute_into(team, object)?;
-        Some(g)
-    }
-
-    /// [`GraspTerms::compute`] into this value's buffers. `None` without hands or when `G G^T`
-    /// is singular.
+    /// Compute for the hands of `team` (B >= 1) with the object at `object`, into this value's
+    /// buffers. `None` without hands or when `G G^T` is singular.
     ///
     /// Everything is done by 6 x 6 blocks (hand `i`'s block `G_i` of `G`):
     /// `G^+ = G^T W` with `W = (G G^T)^{-1}` (G has full row rank 6 for B >= 1: its blocks

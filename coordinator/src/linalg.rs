@@ -64,11 +64,6 @@ pub fn mat_mut(a: &mut DMatrix<f64>) -> MatMut<'_, f64> {
     MatMut::from_column_major_slice_mut(a.as_mut_slice(), r, c)
 }
 
-/// faer view of a vector as an `n x 1` matrix.
-pub fn vec_mat(v: &DVector<f64>) -> MatRef<'_, f64> {
-    MatRef::from_column_major_slice(v.as_slice(), v.len(), 1)
-}
-
 /// Make `a` an `r x c` matrix of zeros; the buffer is reallocated only when the shape changes
 /// (a new team, a contact set that changed).
 pub fn zeros(a: &mut DMatrix<f64>, r: usize, c: usize) {

@@ -320,7 +320,8 @@ pub const VIOLATION_WEIGHT: f64 = 1e6;
 /// `(H + w A_V^T A_V) F = w A_V^T b_V`, until `V` repeats (a few 36 x 36 solves; a first
 /// version put a slack per row into the interior-point method, 170 variables, and took a
 /// second per tick). Writes `F` into `f` and returns the largest violation, or `None` if a
-/// solve fails. Uses the matrices [`solve`] left in `ws` for the same input.
+/// solve fails. It builds `H`, `A` and `b` into `ws` itself (as [`solve`] does), so it does
+/// not depend on what ran before; on this rare path that is cheap next to its solves.
 pub fn solve_least_violation(ws: &mut QpWorkspace, inp: &QpInput, max_iter: u32, f: &mut DVector<f64>) -> Option<f64> {
     let m = inp.rho.ncols();
     objective_into(inp, &mut ws.h);

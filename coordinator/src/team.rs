@@ -61,16 +61,10 @@ pub struct Team {
 }
 
 impl Team {
-    /// Assemble from one tick's terms. `expected` (sorted ids), when given, must match the
-    /// robots of the tick. `fully_actuated` sets `S = I` (the [Lin2018] comparison).
-    pub fn assemble(tick: &[DynamicsTerms], expected: Option<&[String]>, fully_actuated: bool) -> Result<Team, ControllerError> {
-        let mut team = Team::default();
-        team.assemble_into(tick, expected, fully_actuated)?;
-        Ok(team)
-    }
-
-    /// [`Team::assemble`] into this team's buffers (the previous tick's). Every check runs
-    /// before anything is written: on an error the team is unchanged.
+    /// Assemble from one tick's terms, into this team's buffers (the previous tick's).
+    /// `expected` (sorted ids), when given, must match the robots of the tick.
+    /// `fully_actuated` sets `S = I` (the [Lin2018] comparison). Every check runs before
+    /// anything is written: on an error the team is unchanged.
     pub fn assemble_into(&mut self, tick: &[DynamicsTerms], expected: Option<&[String]>, fully_actuated: bool) -> Result<(), ControllerError> {
         if tick.is_empty() {
             return Err(ControllerError::Dimension { what: "tick".into(), detail: "no robot in the tick".into() });
