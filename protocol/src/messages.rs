@@ -580,11 +580,8 @@ impl Validate for ContactSet {
             if !f.bytes().all(|b| b.is_ascii_graphic()) {
                 return Err(ProtocolError::invalid(field, "frame name must be printable ASCII without spaces"));
             }
-            if self.stance_feet[..i].contains(f) {
-                return Err(ProtocolError::invalid(field, format!("foot {f:?} listed twice")));
-            }
         }
-        Ok(())
+        crate::validate::check_unique("stance_feet", self.stance_feet.iter().map(String::as_str))
     }
 }
 
