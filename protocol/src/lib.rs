@@ -66,10 +66,12 @@ pub mod keys;
 pub mod matrix;
 pub mod messages;
 pub mod validate;
+pub mod clock;
 #[cfg(feature = "transport")]
 pub mod transport;
 
 pub use codec::{decode, encode, from_json, to_json, Message, MessageKind, MAX_MESSAGE_BYTES};
+pub use clock::RunClock;
 pub use error::ProtocolError;
 pub use matrix::Matrix;
 pub use messages::*;
