@@ -161,7 +161,8 @@ fn fully_actuated_reduces_to_lin2018() {
     assert!(e_tau < 1e-8 && e_lam < 1e-6 && e_rho < 1e-9);
 }
 
-/// Check every friction, moment and torque row on the predicted real wrenches.
+/// Check every friction, moment and torque row on the predicted real wrenches. (The rows
+/// themselves are checked against the physical constraints in `tests/qp_rows.rs`.)
 fn worst_violation(r: &coordinator::controller::TickReport) -> (f64, f64) {
     let mut worst_c = f64::NEG_INFINITY;
     for (start, kind) in &r.contacts {
@@ -297,7 +298,10 @@ fn bad_input_is_an_error_or_fallback_never_a_panic() {
     bad[0].mass_matrix.data.iter_mut().for_each(|x| *x = 0.0);
     let res = c.solve(&bad, &mut out);
     println!("zero mass matrix: {res:?}");
-    assert!(res.is_err() || c.used_fallback() || out.iter().all(|o| o.tau.iter().all(|t| t.is_finite())));
+    // Refused as a singular M_c (measured: `Singular { what: "M_c" }`); every tick of this
+    // controller so far was refused, so nothing was sent.
+    assert!(matches!(res, Err(ControllerError::Singular { .. })), "zero mass matrix: {res:?}");
+    assert!(out.is_empty(), "no command for refused ticks");
     // Singular kinematics: both hands at the same point with zero Jacobians.
     let mut bad = terms.clone();
     for t in bad.iter_mut() {
@@ -307,6 +311,25 @@ fn bad_input_is_an_error_or_fallback_never_a_panic() {
     }
     let res = c.solve(&bad, &mut out);
     println!("zero Jacobians: {res:?}, fallback {}", c.used_fallback());
+    // Solved through the fallback: with J_c = 0 no contact force reaches the hands, so the QP
+    // is infeasible (the hands' squeeze rows) and the least-violation F_c misses each hand's
+    // f_min_hand (30 N) by all of it (measured 29.9999988 N: the object's load has a 1e-6 N
+    // normal part); no task or contact torque reaches the joints (measured exactly 0), so the
+    // commands sit inside every limit (the smallest is 9 N m).
+    assert!(res.is_ok(), "zero Jacobians: {res:?}");
+    assert!(c.used_fallback());
+    let r = c.last().expect("last");
+    assert_eq!(r.qp.status, QpStatus::Infeasible);
+    let (wc, wt) = worst_violation(r);
+    let f_min_hand = ControllerConfig::default().f_min_hand;
+    assert!((wc - f_min_hand).abs() < 1e-3, "worst row violated by {wc} N, expected f_min_hand {f_min_hand} N");
+    assert!(wt <= -1.0, "torques at least 1 N m inside the limits: {wt}");
+    assert_eq!(out.len(), 2, "one command per robot");
+    for (o, d) in out.iter().zip(&descs) {
+        assert_eq!(o.tau.len(), d.torque_limits.len());
+        assert!(o.tau.iter().zip(&d.torque_limits).all(|(t, lim)| t.is_finite() && t.abs() <= *lim), "{:?}", o.tau);
+        assert!(o.tau.iter().all(|t| t.abs() < 1e-9), "nothing to command without Jacobians: {:?}", o.tau);
+    }
     // Infeasible QP (absurd minimum normal force): the fallback, within the torque limits.
     let mut c3 = controller(&descs, ControllerConfig { f_min_foot: 1e5, ..ControllerConfig::default() });
     c3.solve(&terms, &mut out).expect("fallback, not an error");

@@ -1,0 +1,100 @@
+//! The fallback when the QP is infeasible or fails: the least-violation relaxation, solved
+//! by an active-set Newton method.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::problem::{all_finite, QpInput, QpProblem};
+use super::settings::QpSettings;
+use super::QpWorkspace;
+use crate::linalg::{zeros, zeros_v};
+
+/// Scratch of [`solve_least_violation`], kept between ticks in the [`QpWorkspace`].
+#[derive(Default)]
+pub(crate) struct LeastViolation {
+    k: DMatrix<f64>,
+    rhs: DVector<f64>,
+    r: DVector<f64>,
+    hf: DVector<f64>,
+    best: DVector<f64>,
+    active: Vec<bool>,
+    now: Vec<bool>,
+}
+
+/// The fallback when the QP is infeasible: every row `A F <= b` may be violated at a price,
+/// `min F^T H F + w sum_i max(0, a_i F - b_i)^2` (`w` = [`super::VIOLATION_WEIGHT`]). Always
+/// solvable; it keeps what can be kept (above all the hands' squeeze) instead of dropping every
+/// contact force. Solved by the active-set Newton method of this piecewise quadratic: with the
+/// violated rows `V`, `(H + w A_V^T A_V) F = w A_V^T b_V`, until `V` repeats (a few 36 x 36
+/// solves; a first version put a slack per row into the interior-point method, 170 variables,
+/// and took a second per tick). Writes `F` into `f` and returns the largest violation, or
+/// `None` if a solve fails. It builds `H`, `A` and `b` into `ws` itself (as [`super::solve`]
+/// does), so it does not depend on what ran before; on this rare path that is cheap next to
+/// its solves.
+pub fn solve_least_violation(ws: &mut QpWorkspace, inp: &QpInput, max_iter: u32, f: &mut DVector<f64>) -> Option<f64> {
+    solve_least_violation_with(ws, inp, &QpSettings::new(max_iter, inp.dense_first), f)
+}
+
+/// [`solve_least_violation`] with explicit settings (`max_iter`, `violation_weight`,
+/// `least_violation_min_iter`).
+pub fn solve_least_violation_with(ws: &mut QpWorkspace, inp: &QpInput, settings: &QpSettings, f: &mut DVector<f64>) -> Option<f64> {
+    let m = inp.rho.ncols();
+    let w = settings.violation_weight;
+    ws.problem.assemble(inp);
+    let QpWorkspace { problem: QpProblem { h, a, b, .. }, lv, .. } = ws;
+    let LeastViolation { k: lv_k, rhs: lv_rhs, r: lv_r, hf: lv_hf, best: lv_best, active: lv_active, now: lv_now } = lv;
+    if !(all_finite(b.iter()) && all_finite(a.iter()) && all_finite(h.iter())) {
+        return None;
+    }
+    let rows = a.nrows();
+    // Cost of F; leaves the residual A F - b in `r`.
+    let cost = |f: &DVector<f64>, r: &mut DVector<f64>, hf: &mut DVector<f64>| {
+        r.copy_from(b);
+        r.gemv(1.0, a, f, -1.0);
+        hf.gemv(1.0, h, f, 0.0);
+        f.dot(hf) + w * r.iter().map(|v| v.max(0.0).powi(2)).sum::<f64>()
+    };
+    zeros_v(f, m);
+    zeros_v(lv_r, rows);
+    zeros_v(lv_hf, m);
+    zeros_v(lv_rhs, m);
+    zeros_v(lv_best, m);
+    let mut best = cost(f, lv_r, lv_hf);
+    lv_active.clear();
+    lv_active.resize(rows, false);
+    let mut first = true;
+    for _ in 0..settings.max_iter.max(settings.least_violation_min_iter) {
+        lv_now.clear();
+        lv_now.extend(lv_r.iter().map(|r| *r > 0.0));
+        let any = lv_now.iter().any(|x| *x);
+        if !first && lv_now == lv_active {
+            break;
+        }
+        first = false;
+        std::mem::swap(lv_active, lv_now);
+        // K = H + w A_V^T A_V, rhs = w A_V^T b_V.
+        zeros(lv_k, m, m);
+        lv_k.copy_from(h);
+        lv_rhs.fill(0.0);
+        for i in (0..rows).filter(|&i| lv_active[i]) {
+            let ai = a.row(i);
+            lv_k.ger(w, &ai.transpose(), &ai.transpose(), 1.0);
+            lv_rhs.axpy(w * b[i], &ai.transpose(), 1.0);
+        }
+        let k = std::mem::replace(lv_k, DMatrix::zeros(0, 0));
+        let chol = k.cholesky()?;
+        f.copy_from(lv_rhs);
+        chol.solve_mut(f);
+        *lv_k = chol.unpack_dirty();
+        let c = cost(f, lv_r, lv_hf);
+        if c < best {
+            best = c;
+            lv_best.copy_from(f);
+        }
+        if !any {
+            break;
+        }
+    }
+    f.copy_from(lv_best);
+    cost(f, lv_r, lv_hf);
+    Some(lv_r.iter().copied().fold(0.0, f64::max))
+}

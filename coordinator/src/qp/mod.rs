@@ -1,0 +1,118 @@
+//! The contact-force QP (eq. wrench_optim2):
+//!
+//! ```text
+//! min_F  F^T (J_c B^T B J_c^T + eps I) F
+//! s.t.   C_k (rho F + eta)_k >= d_k     friction pyramid + unilateral (eqn. unilateral_and_friction_cone_constraint)
+//!                                       and hand moments (eqn. moment_constraint), per contact k
+//!        tau_min - tau_0 <= Xi F <= tau_max - tau_0     (eq. real_torque_limit, Xi = S_ns^T B J_c^T)
+//! ```
+//!
+//! where `lambda = rho F + eta` (eq. relation_between_lambda_and_Fc) are the predicted real
+//! contact wrenches ON the robots (world-aligned, at the contact frame origins; for hands the
+//! offset of the object load is already in `eta`, see `controller.rs`).
+//!
+//! Laid out as Clarabel is, data apart from solvers, one file per concept:
+//!
+//! | file | job |
+//! | --- | --- |
+//! | [`rows`] | one contact's rows `c . lambda_k >= lo` ([`ContactKind`], [`contact_rows`]); the sign conventions and the tilt-moment pairing that deviates from the paper |
+//! | [`problem`] | the controller's terms ([`QpInput`]) and the assembled `min 1/2 F^T P F, A F <= b` ([`QpProblem`], [`constraints_into`], [`objective_into`]) |
+//! | [`settings`] | [`QpSettings`]: dense first or not, iterations, tolerances, the fallback's price |
+//! | [`dense_ipm`] | [`DenseIpm`], the dense interior-point method tried first |
+//! | [`clarabel`] | [`Clarabel`], the adapter to Clarabel 0.11 ([`to_csc`]) |
+//! | [`least_violation`] | [`solve_least_violation`], the fallback when the QP is infeasible |
+//! | here | the [`QpSolver`] interface, [`QpOutcome`], [`QpWorkspace`] and [`solve`] (dense, then Clarabel) |
+
+pub mod clarabel;
+pub mod dense_ipm;
+pub mod least_violation;
+pub mod problem;
+pub mod rows;
+pub mod settings;
+
+use std::time::Instant;
+
+use nalgebra::DVector;
+pub use protocol::QpStatus;
+
+pub use clarabel::{to_csc, Clarabel};
+pub use dense_ipm::DenseIpm;
+pub use least_violation::{solve_least_violation, solve_least_violation_with};
+pub use problem::{constraints_into, objective_into, QpInput, QpProblem};
+pub use rows::{contact_rows, ContactKind, ContactRows, MAX_CONTACT_ROWS};
+pub use settings::{QpSettings, DENSE_TOL, LEAST_VIOLATION_MIN_ITER, REDUCED_TOL, VIOLATION_WEIGHT};
+
+use crate::linalg::zeros_v;
+use least_violation::LeastViolation;
+
+/// A solver of the assembled QP `min 1/2 x^T P x  s.t.  A x <= b` ([`QpProblem`]).
+pub trait QpSolver {
+    /// What [`QpOutcome::solver`] reports.
+    fn name(&self) -> &'static str;
+    /// Solve `problem` under `settings` into `x` (sized to `problem.n()` if it is not). Each
+    /// solver says when it writes `x`; the outcome's `solve_us` is the solver's own time.
+    fn solve_problem(&mut self, problem: &QpProblem, settings: &QpSettings, x: &mut DVector<f64>) -> QpOutcome;
+}
+
+/// The QP's outcome (the forces are written to the caller's vector).
+#[derive(Debug, Clone, Copy)]
+pub struct QpOutcome {
+    pub status: QpStatus,
+    pub iterations: u32,
+    pub solve_us: f64,
+    pub setup_us: f64,
+    pub rows: usize,
+    /// Which solver produced the answer: "dense-ipm" or "clarabel".
+    pub solver: &'static str,
+}
+
+impl Default for QpOutcome {
+    fn default() -> Self {
+        QpOutcome { status: QpStatus::NotRun, iterations: 0, solve_us: 0.0, setup_us: 0.0, rows: 0, solver: "none" }
+    }
+}
+
+/// The QP's matrices and its solvers' scratch, kept between ticks.
+#[derive(Default)]
+pub struct QpWorkspace {
+    problem: QpProblem,
+    ipm: DenseIpm,
+    lv: LeastViolation,
+}
+
+impl QpWorkspace {
+    /// The problem last assembled by [`solve`] or [`solve_least_violation`].
+    pub fn problem(&self) -> &QpProblem {
+        &self.problem
+    }
+}
+
+/// Solve the QP into `f` (length m), with [`QpSettings::new`]`(max_iter, inp.dense_first)`.
+/// Never panics; a solver error is a `NumericalError` status with `F = 0`.
+///
+/// The dense interior-point method runs in `ws` and allocates nothing once the team's shape
+/// is set; Clarabel, when it has to finish a tick, builds its problem anew (it allocates).
+pub fn solve(ws: &mut QpWorkspace, inp: &QpInput, max_iter: u32, f: &mut DVector<f64>) -> QpOutcome {
+    solve_with(ws, inp, &QpSettings::new(max_iter, inp.dense_first), f)
+}
+
+/// [`solve`] with explicit settings (`inp.dense_first` is not read: `settings.dense_first`
+/// decides). [`DenseIpm`] first if `settings.dense_first`; [`Clarabel`] when it does not
+/// converge. `solve_us` is the whole call's time, assembly included.
+pub fn solve_with(ws: &mut QpWorkspace, inp: &QpInput, settings: &QpSettings, f: &mut DVector<f64>) -> QpOutcome {
+    let t0 = Instant::now();
+    zeros_v(f, inp.rho.ncols());
+    ws.problem.assemble(inp);
+    if !ws.problem.is_finite() {
+        let rows = ws.problem.rows();
+        return QpOutcome { status: QpStatus::NumericalError, iterations: 0, solve_us: 0.0, setup_us: 0.0, rows, solver: "clarabel" };
+    }
+    if settings.dense_first {
+        let out = ws.ipm.solve_problem(&ws.problem, settings, f);
+        if matches!(out.status, QpStatus::Solved | QpStatus::AlmostSolved) {
+            return QpOutcome { solve_us: t0.elapsed().as_secs_f64() * 1e6, ..out };
+        }
+    }
+    let out = Clarabel.solve_problem(&ws.problem, settings, f);
+    QpOutcome { solve_us: t0.elapsed().as_secs_f64() * 1e6, ..out }
+}

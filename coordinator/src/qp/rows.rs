@@ -1,0 +1,113 @@
+//! The constraint rows of one contact, `c . lambda_k >= lo` on its wrench `lambda_k` (world-
+//! aligned, at the contact frame's origin, acting ON the robot): eqn.
+//! unilateral_and_friction_cone_constraint and eqn. moment_constraint.
+//!
+//! Sign conventions (each in the contact's own frame):
+//! * feet: `n = e_z` (world), `f_z >= f_min`, `|f_x|, |f_y| <= mu f_z` (ground pushes up).
+//!   Feet and hands have their own `f_min` (a hand's is the squeeze it keeps at least).
+//! * hands: `hand_contact` +z `n` is the palm's OUTWARD normal, pointing into the object; the
+//!   object pushes the palm back, so the force on the robot has `n . f <= 0`. With the normal
+//!   force `f_n = -n . f >= f_min`: `|t_x . f|, |t_y . f| <= mu f_n`, `|n . m| <= xi f_n`,
+//!   and the tilt moments.
+//!
+//! **Tilt moments: the physical pairing, which DEVIATES from the paper.** The matrix of eqn.
+//! moment_constraint pairs `delta_x` with `m_x`. A centre of pressure at `(p_x, p_y)` in the
+//! patch carries the normal force `-f_n n` on the palm, whose moment is `m_x = -p_y f_n`,
+//! `m_y = p_x f_n`: the moment about `t_x` comes from pressure displaced along `t_y`. The
+//! centre of pressure stays in the patch `|p_x| <= delta_x`, `|p_y| <= delta_y` iff
+//! `|t_x . m| <= delta_y f_n` and `|t_y . m| <= delta_x f_n`. `tests/qp_rows.rs` checks every
+//! row against this statement written out independently.
+
+use nalgebra::Vector3;
+
+/// What a contact's rows need.
+#[derive(Debug, Clone, Copy)]
+pub enum ContactKind {
+    /// Point foot: friction coefficient.
+    Foot { mu: f64, f_min: f64 },
+    /// Flat hand: frame axes (world), friction, torsional coefficient, patch half-sizes
+    /// `[delta_x, delta_y]` (along `tx`, along `ty`), minimum normal force.
+    Hand { tx: Vector3<f64>, ty: Vector3<f64>, n: Vector3<f64>, mu: f64, xi: f64, half: [f64; 2], f_min: f64 },
+}
+
+impl ContactKind {
+    /// Rows of the contact's wrench in `lambda`: 3 for a foot, 6 for a hand.
+    pub fn dim(&self) -> usize {
+        match self {
+            ContactKind::Foot { .. } => 3,
+            ContactKind::Hand { .. } => 6,
+        }
+    }
+}
+
+/// Most constraint rows of one contact (a hand's 11).
+pub const MAX_CONTACT_ROWS: usize = 11;
+
+/// The rows `c . lambda_k >= lo` of one contact, `c` with [`ContactKind::dim`] entries.
+#[derive(Debug, Clone, Copy)]
+pub struct ContactRows {
+    dim: usize,
+    len: usize,
+    rows: [([f64; 6], f64); MAX_CONTACT_ROWS],
+}
+
+impl ContactRows {
+    fn new(dim: usize) -> Self {
+        ContactRows { dim, len: 0, rows: [([0.0; 6], 0.0); MAX_CONTACT_ROWS] }
+    }
+
+    fn push(&mut self, c: [f64; 6], lo: f64) {
+        self.rows[self.len] = (c, lo);
+        self.len += 1;
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Each row's `c` (its first `dim` entries) and `lo`.
+    pub fn iter(&self) -> impl Iterator<Item = (&[f64], f64)> + '_ {
+        self.rows[..self.len].iter().map(move |(c, lo)| (&c[..self.dim], *lo))
+    }
+}
+
+/// Rows `c . lambda_k >= lo` of one contact (3 or 6 columns): a foot's 5 (friction pyramid,
+/// normal force), a hand's 11 (friction pyramid, normal force, torsion, tilt).
+pub fn contact_rows(kind: &ContactKind) -> ContactRows {
+    let mut rows = ContactRows::new(kind.dim());
+    match kind {
+        ContactKind::Foot { mu, f_min } => {
+            // eqn. unilateral_and_friction_cone_constraint, n = e_z
+            let row = |x: f64, y: f64, z: f64| [x, y, z, 0.0, 0.0, 0.0];
+            rows.push(row(-1.0, 0.0, *mu), 0.0);
+            rows.push(row(1.0, 0.0, *mu), 0.0);
+            rows.push(row(0.0, -1.0, *mu), 0.0);
+            rows.push(row(0.0, 1.0, *mu), 0.0);
+            rows.push(row(0.0, 0.0, 1.0), *f_min);
+        }
+        ContactKind::Hand { tx, ty, n, mu, xi, half, f_min } => {
+            let row = |f: Vector3<f64>, m: Vector3<f64>| [f.x, f.y, f.z, m.x, m.y, m.z];
+            let z = Vector3::zeros();
+            // eqn. unilateral_and_friction_cone_constraint on f_n = -n.f
+            rows.push(row(-*mu * n - tx, z), 0.0);
+            rows.push(row(-*mu * n + tx, z), 0.0);
+            rows.push(row(-*mu * n - ty, z), 0.0);
+            rows.push(row(-*mu * n + ty, z), 0.0);
+            rows.push(row(-n, z), *f_min);
+            // eqn. moment_constraint, torsion: |n.m| <= xi f_n
+            rows.push(row(-*xi * n, -n), 0.0);
+            rows.push(row(-*xi * n, *n), 0.0);
+            // eqn. moment_constraint, tilt: |t_x.m| <= delta_y f_n, |t_y.m| <= delta_x f_n
+            // (physical pairing, see the module's docs)
+            rows.push(row(-half[1] * n, -tx), 0.0);
+            rows.push(row(-half[1] * n, *tx), 0.0);
+            rows.push(row(-half[0] * n, -ty), 0.0);
+            rows.push(row(-half[0] * n, *ty), 0.0);
+        }
+    }
+    rows
+}

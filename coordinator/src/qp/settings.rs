@@ -1,0 +1,59 @@
+//! [`QpSettings`]: how the QP is solved (which solver first, iterations, tolerances, the
+//! fallback's price), apart from what is solved ([`super::problem`]). Clarabel's
+//! `DefaultSettings` plays the same part for Clarabel; [`super::clarabel`] builds it from these.
+
+/// Relative tolerance of [`super::DenseIpm`] on the QP (residuals and complementarity). At 1e-8
+/// the dual residual stalled at round-off on 12 % of S1's ticks (the normal equations'
+/// condition grows as complementarity vanishes) and Clarabel had to finish them; 1e-7 is a
+/// torque error of about 1e-5 N m.
+pub const DENSE_TOL: f64 = 1e-7;
+
+/// Relative tolerance of a reduced-accuracy (AlmostSolved) answer of [`super::DenseIpm`].
+pub const REDUCED_TOL: f64 = 1e-5;
+
+/// Price of a violated row in [`super::solve_least_violation`] (per N^2 of violation, against
+/// the torque objective in (N m)^2).
+pub const VIOLATION_WEIGHT: f64 = 1e6;
+
+/// Fewest active-set iterations [`super::solve_least_violation`] may take, whatever
+/// `max_iter` says.
+pub const LEAST_VIOLATION_MIN_ITER: u32 = 30;
+
+/// How the contact-force QP is solved.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct QpSettings {
+    /// Iteration limit of each solver (the least-violation fallback takes at least
+    /// [`QpSettings::least_violation_min_iter`]).
+    pub max_iter: u32,
+    /// Try [`super::DenseIpm`] first (Clarabel if it does not converge); Clarabel alone if false.
+    pub dense_first: bool,
+    /// [`DENSE_TOL`].
+    pub dense_tol: f64,
+    /// [`REDUCED_TOL`].
+    pub reduced_tol: f64,
+    /// [`VIOLATION_WEIGHT`].
+    pub violation_weight: f64,
+    /// [`LEAST_VIOLATION_MIN_ITER`].
+    pub least_violation_min_iter: u32,
+}
+
+impl QpSettings {
+    /// The defaults with the controller's two choices (`ControllerConfig::qp_max_iter`,
+    /// `ControllerConfig::dense_qp`).
+    pub fn new(max_iter: u32, dense_first: bool) -> Self {
+        QpSettings { max_iter, dense_first, ..QpSettings::default() }
+    }
+}
+
+impl Default for QpSettings {
+    fn default() -> Self {
+        QpSettings {
+            max_iter: 50,
+            dense_first: true,
+            dense_tol: DENSE_TOL,
+            reduced_tol: REDUCED_TOL,
+            violation_weight: VIOLATION_WEIGHT,
+            least_violation_min_iter: LEAST_VIOLATION_MIN_ITER,
+        }
+    }
+}
