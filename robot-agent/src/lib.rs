@@ -13,10 +13,12 @@
 //!   `on_contacts`, `on_timer`, each returning what to send or apply).
 //! * [`agent`]: the Zenoh shell: receives, calls the core, publishes and applies what it
 //!   returns (`robot-agent run`, the simulated robot).
-//! * [`hardware`]: where the robot is: the simulated robot over Zenoh
+//! * [`hardware`]: the robot behind a ros2_control-style [`hardware::RobotHardware`] trait,
+//!   the synchronous loop that drives it at the robot's rate ([`hardware::driver`]), its Zenoh
+//!   link, an in-memory mock robot, and the simulated robot over Zenoh
 //!   ([`hardware::zenoh_sim`]).
 //! * [`dynamics_source`]: state to dynamics terms ([`dynamics_source::ModelDynamics`] over the
-//!   robot's model; [`dynamics_source::PlaceholderDynamics`] for the smoke run only).
+//!   robot's model; [`dynamics_source::PlaceholderDynamics`] for the smoke run and the mock).
 //! * [`gate`]: the checks of incoming commands and clamping to the torque limits.
 //! * [`safe_mode`]: the watchdog and the posture hold of safe mode.
 //! * [`status`]: the agent's status message and counters.
