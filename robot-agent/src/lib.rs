@@ -1,31 +1,36 @@
 //! # robot-agent
 //!
 //! One robot of the team. It turns its measured state into the dynamics terms the coordinator
-//! needs (DESIGN.md §2 step 2), checks the torque commands it receives and hands them to its
-//! torque sink (step 4).
+//! needs (DESIGN.md §2 step 2), checks the torque commands it receives and hands them to the
+//! robot (step 4).
 //!
 //! * [`dynamics`]: the robot's model from URDF and its rigid-body algorithms (Pinocchio-style
 //!   immutable `Model` and preallocated `Data`, one algorithm per file).
 //! * [`description`]: a robot's description (TOML beside its URDF), checked against the URDF.
 //! * [`inspect`]: the `robot-agent inspect` report of a model at one state.
 //! * [`terms`]: the per-tick dynamics terms (M, h, frame Jacobians and Jdot*v) from the model.
-//! * [`agent`]: the agent loop over Zenoh, wiring the modules below together.
-//! * [`source`]: where states come from ([`source::StateSource`]; Zenoh today, hardware later).
-//! * [`sink`]: where checked torques go ([`sink::TorqueSink`]; the robot's `torque` key).
+//! * [`core`]: the agent's logic without I/O ([`core::AgentCore`]: `on_state`, `on_command`,
+//!   `on_contacts`, `on_timer`, each returning what to send or apply).
+//! * [`agent`]: the Zenoh shell: receives, calls the core, publishes and applies what it
+//!   returns (`robot-agent run`, the simulated robot).
+//! * [`hardware`]: the robot behind a ros2_control-style [`hardware::RobotHardware`] trait,
+//!   the synchronous loop that drives it at the robot's rate ([`hardware::driver`]), its Zenoh
+//!   link, an in-memory mock robot, and the simulated robot over Zenoh
+//!   ([`hardware::zenoh_sim`]).
 //! * [`dynamics_source`]: state to dynamics terms ([`dynamics_source::ModelDynamics`] over the
-//!   robot's model; [`dynamics_source::PlaceholderDynamics`] for the smoke run only).
+//!   robot's model; [`dynamics_source::PlaceholderDynamics`] for the smoke run and the mock).
 //! * [`gate`]: the checks of incoming commands and clamping to the torque limits.
 //! * [`safe_mode`]: the watchdog and the posture hold of safe mode.
 //! * [`status`]: the agent's status message and counters.
 
 pub mod agent;
+pub mod core;
 pub mod description;
 pub mod dynamics;
 pub mod dynamics_source;
 pub mod gate;
+pub mod hardware;
 pub mod inspect;
 pub mod safe_mode;
-pub mod sink;
-pub mod source;
 pub mod status;
 pub mod terms;

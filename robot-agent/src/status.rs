@@ -52,11 +52,10 @@ impl StatusBoard {
         }
     }
 
-    /// Copy the counters and the latest tick into the message and stamp it.
-    pub fn refresh(&mut self, c: &AgentCounters, latest_tick: Option<u64>, last_applied: Option<u64>) -> &AgentStatus {
+    /// Copy the counters and the latest tick into the message (the sender stamps it).
+    pub fn refresh(&mut self, c: &AgentCounters, latest_tick: Option<u64>, last_applied: Option<u64>) -> &mut AgentStatus {
         let s = &mut self.status;
         s.header.tick = latest_tick.unwrap_or(0);
-        s.header.stamp_ns = protocol::wall_clock_ns();
         s.states_received = c.states;
         s.dynamics_published = c.dynamics;
         s.commands_applied = c.applied;
@@ -64,6 +63,6 @@ impl StatusBoard {
         s.commands_clamped = c.clamped;
         s.safe_mode_entries = c.safe_mode_entries;
         s.last_applied_tick = last_applied;
-        &self.status
+        &mut self.status
     }
 }

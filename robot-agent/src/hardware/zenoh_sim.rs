@@ -1,11 +1,15 @@
-//! Where the agent's state comes from: a [`StateSource`]. Today the sim-bridge over Zenoh
-//! ([`ZenohStateSource`]); a hardware driver implements the same trait.
+//! The simulated robot over Zenoh, as the asynchronous Zenoh shell ([`crate::agent`]) drives it:
+//! states come from the sim-bridge on `team/{team}/robot/{id}/state` ([`ZenohStateSource`]),
+//! checked torques go to `team/{team}/robot/{id}/torque`, which the sim-bridge applies
+//! ([`ZenohTorqueSink`]). The traits [`StateSource`] and [`TorqueSink`] are the shell's
+//! asynchronous counterparts of [`super::RobotHardware::read`] and
+//! [`super::RobotHardware::write`].
 
 use std::future::Future;
 
 use protocol::keys::{self, RobotTopic};
-use protocol::transport::{self, decode_sample, SampleQueue, TransportError};
-use protocol::RobotState;
+use protocol::transport::{self, decode_sample, Qos, SampleQueue, TransportError, TypedPublisher};
+use protocol::{RobotState, TorqueCommand};
 use zenoh::Session;
 
 /// What a state source yields.
@@ -24,6 +28,11 @@ pub trait StateSource: Send {
     /// The next state. Must be cancel-safe: the agent awaits it in a `select!` with its other
     /// inputs, and a state must not be lost when another input wins.
     fn next(&mut self) -> impl Future<Output = StateEvent> + Send;
+}
+
+/// Takes checked, clamped torques (commanded or safe mode) and applies them.
+pub trait TorqueSink: Send {
+    fn apply(&mut self, torques: &TorqueCommand) -> impl Future<Output = Result<(), TransportError>> + Send;
 }
 
 /// States published by the sim-bridge (or any state source) on `team/{team}/robot/{id}/state`.
@@ -48,5 +57,23 @@ impl StateSource for ZenohStateSource {
             },
             Err(_) => StateEvent::Closed,
         }
+    }
+}
+
+/// Publishes the torques on `team/{team}/robot/{id}/torque` (hot-path QoS).
+pub struct ZenohTorqueSink {
+    publisher: TypedPublisher<TorqueCommand>,
+}
+
+impl ZenohTorqueSink {
+    pub async fn declare(session: &Session, team: &str, robot: &str) -> Result<Self, TransportError> {
+        let key = keys::robot(team, robot, RobotTopic::Torque)?;
+        Ok(ZenohTorqueSink { publisher: TypedPublisher::declare(session, key, Qos::HotPath).await? })
+    }
+}
+
+impl TorqueSink for ZenohTorqueSink {
+    async fn apply(&mut self, torques: &TorqueCommand) -> Result<(), TransportError> {
+        self.publisher.put(torques).await
     }
 }

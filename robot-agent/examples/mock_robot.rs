@@ -1,0 +1,46 @@
+//! The synchronous hardware loop with the in-memory mock robot (three unit-inertia joints at
+//! 1 kHz) against a coordinator, as a lab's robot would run:
+//!
+//! ```sh
+//! coordinator run --controller smoke --damping 5                  # listens on tcp/127.0.0.1:7447
+//! cargo run --release -p robot-agent --example mock_robot         # Ctrl-C stops it
+//! ```
+//!
+//! The mock's joint velocities decay as `(1 - dt d)^k`; stop the coordinator and the agent
+//! enters safe mode within its deadline. A lab's robot replaces `MockHardware` with its own
+//! `RobotHardware` and `PlaceholderDynamics` with its model (robot-agent README, "Plugging in
+//! a robot").
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use protocol::transport::{self, Role, ZenohArgs};
+use robot_agent::core::{AgentConfig, AgentCore};
+use robot_agent::dynamics_source::PlaceholderDynamics;
+use robot_agent::hardware::{driver, DriverConfig, MockConfig, MockHardware, ZenohLink};
+
+fn main() -> anyhow::Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
+        .with_writer(std::io::stderr)
+        .init();
+    let joints = 3;
+    let rate = DriverConfig::new(Duration::from_millis(1));
+    let cfg = AgentConfig::new("team", "r1");
+    let mut core = AgentCore::new(&cfg, PlaceholderDynamics { joints, nv: joints })?;
+    let mut robot = MockHardware::new(MockConfig::new(joints, 0.5, rate.period.as_secs_f64()));
+
+    let rt = tokio::runtime::Runtime::new()?;
+    let session = rt.block_on(transport::open(&ZenohArgs::default(), Role::Member))?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let on_signal = stop.clone();
+    rt.spawn(async move {
+        let _ = tokio::signal::ctrl_c().await;
+        on_signal.store(true, Ordering::Release);
+    });
+    let mut link = ZenohLink::declare(&session, &cfg.team, &cfg.robot)?;
+    let report = driver::run(&mut core, &mut robot, &mut link, &rate, &stop)?;
+    println!("{report:?}\nfinal joint velocities {:?}", robot.velocities());
+    Ok(())
+}

@@ -1,0 +1,523 @@
+//! The agent's logic without I/O: [`AgentCore`].
+//!
+//! The core owns the robot's dynamics source, the command gate, the watchdog and posture hold,
+//! the contact set and the status. Each input is a method call with the time it arrived
+//! (`now`; the core never reads a clock):
+//!
+//! | call | when | what it may return |
+//! | --- | --- | --- |
+//! | [`AgentCore::start`] | once, after the caller can send | the description, the status |
+//! | [`AgentCore::on_state`] | a measured state | terms to publish; hold torques in safe mode |
+//! | [`AgentCore::on_command`] | a torque command | checked, clamped torques to apply |
+//! | [`AgentCore::on_contacts`] | a contact set | nothing (used from the next state on) |
+//! | [`AgentCore::on_timer`] | housekeeping, a few times per deadline | hold torques on entering safe mode, status, description |
+//!
+//! Each returns [`Outputs`]: references into the core's preallocated buffers that the caller
+//! stamps (`header.stamp_ns`) and sends or applies, in the field order, then reports back with
+//! [`AgentCore::sent`] (for the latencies and counters) and, if `status` is set, publishes
+//! [`AgentCore::status`]. The Zenoh shell ([`crate::agent`]) and the synchronous hardware
+//! loop ([`crate::hardware::driver`]) are the two callers; tests drive the core tick by tick.
+
+use std::time::{Duration, Instant};
+
+use protocol::{AgentMode, AgentStatus, DynamicsTerms, Header, RobotDescription, RobotState, TorqueCommand};
+use thiserror::Error;
+
+use crate::dynamics_source::DynamicsSource;
+use crate::gate::{CommandGate, CommandRejection};
+use crate::safe_mode::{CommandDeadline, HoldGains, PostureHold, Watchdog};
+use crate::status::{AgentCounters, StatusBoard};
+use crate::terms::{empty_terms, ContactSet};
+
+/// Identity and timing of an agent. The robot itself (size, limits, frames) comes from its
+/// [`DynamicsSource`].
+#[derive(Debug, Clone)]
+pub struct AgentConfig {
+    pub team: String,
+    pub robot: String,
+    /// Without a valid command for this long (ticks or time) the agent enters safe mode.
+    pub deadline: CommandDeadline,
+    /// A command older than this is refused (see [`CommandGate::check`]).
+    pub max_command_age: Duration,
+    /// Gains of the posture hold; default [`HoldGains::from_torque_limits`].
+    pub hold_gains: Option<HoldGains>,
+    /// Status is published this often, and on every mode change.
+    pub status_period: Duration,
+    /// The robot description is published at start and this often.
+    pub description_period: Duration,
+}
+
+impl AgentConfig {
+    /// Defaults: deadline 5 ticks or 25 ms, maximum command age 25 ms, status every 100 ms,
+    /// description every second.
+    pub fn new(team: &str, robot: &str) -> Self {
+        let deadline = CommandDeadline::default();
+        AgentConfig {
+            team: team.to_string(),
+            robot: robot.to_string(),
+            max_command_age: deadline.time.unwrap_or(Duration::from_millis(25)),
+            deadline,
+            hold_gains: None,
+            status_period: Duration::from_millis(100),
+            description_period: Duration::from_secs(1),
+        }
+    }
+
+    /// Set the time deadline and the maximum command age together (the `--command-deadline-ms`
+    /// flag).
+    pub fn with_deadline_time(mut self, d: Duration) -> Self {
+        self.deadline.time = Some(d);
+        self.max_command_age = d;
+        self
+    }
+
+    /// How often the caller should call [`AgentCore::on_timer`]: a fifth of the time deadline,
+    /// between 1 and 20 ms (20 ms without a time deadline).
+    pub fn housekeeping_period(&self) -> Duration {
+        self.deadline.time.map_or(Duration::from_millis(20), |d| d / 5).clamp(Duration::from_millis(1), Duration::from_millis(20))
+    }
+}
+
+/// A configuration the core cannot run with.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum CoreError {
+    #[error("agent configuration: {0}")]
+    Config(String),
+}
+
+/// Why a state was dropped. It is counted (`states_rejected`) and logged by the core.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum StateRejection {
+    #[error("dropped state: {0}")]
+    Undecodable(String),
+    #[error("dropped state of another robot ({got:?})")]
+    OtherRobot { got: String },
+    #[error("dropped state of tick {tick} with {got} joint positions or velocities, the robot has {expected} joints")]
+    WrongSize { tick: u64, expected: usize, got: usize },
+    #[error("dropped out-of-order state of tick {tick} (latest {latest:?})")]
+    OutOfOrder { tick: u64, latest: Option<u64> },
+}
+
+/// Why a contact set was refused. It is counted (`contacts_rejected`) and logged by the core;
+/// the contact set stays as it was.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ContactRejection {
+    #[error("undecodable contact set: {0}")]
+    Undecodable(String),
+    #[error("contact set for robot {got:?} received by robot {robot:?}")]
+    OtherRobot { robot: String, got: String },
+    #[error("unknown foot frame(s) {unknown:?}; this robot's feet are {feet:?}")]
+    UnknownFeet { unknown: Vec<String>, feet: Vec<String> },
+}
+
+/// What the caller sends or applies after a core call, in this order: publish `terms` on the
+/// robot's `dynamics` key, `description` on its `description` key, apply `torques` (a checked
+/// command or the posture hold; the caller stamps each before sending), then publish
+/// [`AgentCore::status`] if `status` is set. The status comes last and is fetched then because
+/// it carries the latency of the terms the caller has just published.
+#[derive(Debug, Default)]
+pub struct Outputs<'a> {
+    pub terms: Option<&'a mut DynamicsTerms>,
+    pub description: Option<&'a mut RobotDescription>,
+    pub torques: Option<&'a mut TorqueCommand>,
+    /// Publish the status: the mode changed, or its period is due.
+    pub status: bool,
+}
+
+/// What the caller did with [`Outputs`], reported back with [`AgentCore::sent`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Sent {
+    /// When the terms had been published (for the state-to-dynamics latency).
+    pub terms_at: Option<Instant>,
+    /// The description was published.
+    pub description: bool,
+}
+
+/// Which torques a call yields.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Apply {
+    Nothing,
+    /// The command just checked (in `torques`).
+    Command,
+    /// The posture hold at the latest state.
+    Hold,
+}
+
+/// The agent's decisions, without I/O. See the module documentation for the calls.
+pub struct AgentCore<S: DynamicsSource> {
+    team: String,
+    robot: String,
+    source: S,
+    joints: usize,
+    feet: Vec<String>,
+    gate: CommandGate,
+    watchdog: Watchdog,
+    hold: PostureHold,
+    contacts: ContactSet,
+    terms: DynamicsTerms,
+    torques: TorqueCommand,
+    description: Option<RobotDescription>,
+    q: Vec<f64>,
+    qdot: Vec<f64>,
+    gravity: Vec<f64>,
+    counters: AgentCounters,
+    board: StatusBoard,
+    /// Arrival of the latest accepted state, for the state-to-dynamics latency.
+    state_at: Option<Instant>,
+    /// Tick and publication time of the latest terms, for the dynamics-to-command latency.
+    last_dynamics: Option<(u64, Instant)>,
+    status_period: Duration,
+    description_period: Duration,
+    last_status: Option<Instant>,
+    last_description: Option<Instant>,
+}
+
+impl<S: DynamicsSource> AgentCore<S> {
+    /// A core for `cfg.robot` over `source`. Every per-tick buffer is allocated here.
+    pub fn new(cfg: &AgentConfig, source: S) -> Result<Self, CoreError> {
+        let (team, robot) = (cfg.team.as_str(), cfg.robot.as_str());
+        let joints = source.joints();
+        let limits = source.torque_limits();
+        if limits.len() != joints {
+            return Err(CoreError::Config(format!("{} torque limits for {joints} joints", limits.len())));
+        }
+        let gains = cfg.hold_gains.clone().unwrap_or_else(|| HoldGains::from_torque_limits(&limits));
+        if gains.kp.len() != joints || gains.kd.len() != joints {
+            return Err(CoreError::Config(format!(
+                "posture-hold gains have {} kp and {} kd for {joints} joints",
+                gains.kp.len(),
+                gains.kd.len()
+            )));
+        }
+        let feet: Vec<String> = source.foot_frames().to_vec();
+        Ok(AgentCore {
+            team: team.to_string(),
+            robot: robot.to_string(),
+            description: source.description(team, robot),
+            joints,
+            gate: CommandGate::new(robot, limits.clone(), cfg.max_command_age),
+            watchdog: Watchdog::new(cfg.deadline),
+            hold: PostureHold::new(gains, limits),
+            contacts: ContactSet { stance: vec![true; feet.len()], hand_in_grasp: true },
+            feet,
+            terms: empty_terms(team, robot),
+            torques: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints) },
+            q: vec![0.0; joints],
+            qdot: vec![0.0; joints],
+            gravity: vec![0.0; joints],
+            counters: AgentCounters::default(),
+            board: StatusBoard::new(team, robot),
+            state_at: None,
+            last_dynamics: None,
+            status_period: cfg.status_period,
+            description_period: cfg.description_period,
+            last_status: None,
+            last_description: None,
+            source,
+        })
+    }
+
+    /// The agent has joined its team: publish the description (if the source has one) and the
+    /// first status.
+    pub fn start(&mut self, now: Instant) -> Outputs<'_> {
+        self.last_description = Some(now);
+        self.last_status = Some(now);
+        Outputs { description: self.description.as_mut(), status: true, ..Outputs::default() }
+    }
+
+    /// A measured state arrived at `now`: checks (robot id, size, order), the terms for the
+    /// current contact set, the watchdog by ticks, and the posture hold while in safe mode.
+    pub fn on_state(&mut self, state: &RobotState, now: Instant) -> Result<Outputs<'_>, StateRejection> {
+        let mode_before = self.board.status.mode;
+        let tick = state.header.tick;
+        if let Err(r) = self.admit_state(state, now) {
+            self.counters.states_rejected += 1;
+            tracing::warn!(robot = %self.robot, "{r}");
+            return Err(r);
+        }
+        self.counters.states += 1;
+        self.state_at = Some(now);
+        self.watchdog.on_state(tick, now);
+        self.q.copy_from_slice(&state.joint_positions);
+        self.qdot.copy_from_slice(&state.joint_velocities);
+        let terms = match self.source.compute(state, &self.contacts, &mut self.terms) {
+            Ok(()) => {
+                self.terms.header.tick = tick;
+                self.terms.state_tick = tick;
+                self.counters.dynamics += 1;
+                true
+            }
+            Err(e) => {
+                tracing::warn!(robot = %self.robot, tick, "no dynamics for this tick: {e}");
+                false
+            }
+        };
+        self.source.actuated_gravity(&mut self.gravity);
+        if self.watchdog.expired(tick, now) {
+            self.enter_safe_mode_at(tick, "no valid command in time");
+        }
+        let apply = if self.watchdog.safe_mode_since().is_some() { Apply::Hold } else { Apply::Nothing };
+        Ok(self.outputs(now, mode_before, terms, apply, false))
+    }
+
+    fn admit_state(&mut self, state: &RobotState, now: Instant) -> Result<(), StateRejection> {
+        let tick = state.header.tick;
+        if state.header.robot_id() != self.robot {
+            return Err(StateRejection::OtherRobot { got: state.header.robot_id().to_string() });
+        }
+        for got in [state.joint_positions.len(), state.joint_velocities.len()] {
+            if got != self.joints {
+                return Err(StateRejection::WrongSize { tick, expected: self.joints, got });
+            }
+        }
+        if !self.gate.on_state(tick, state.header.stamp_ns, now) {
+            return Err(StateRejection::OutOfOrder { tick, latest: self.gate.latest_state_tick() });
+        }
+        Ok(())
+    }
+
+    /// Something arrived where states come from that is not a state.
+    pub fn on_undecodable_state(&mut self, reason: &str) {
+        self.counters.states_rejected += 1;
+        tracing::warn!(robot = %self.robot, "{}", StateRejection::Undecodable(reason.to_string()));
+    }
+
+    /// A torque command arrived at `now`: the gate's checks and clamping, then the watchdog
+    /// (in safe mode only a command of a tick newer than the entry is admitted).
+    pub fn on_command(&mut self, cmd: &TorqueCommand, now: Instant) -> Result<Outputs<'_>, CommandRejection> {
+        let mode_before = self.board.status.mode;
+        let clamped = match self.gate.check(cmd, now, &mut self.torques.tau) {
+            Ok(n) => n,
+            Err(r) => return Err(self.reject(r)),
+        };
+        let tick = cmd.header.tick;
+        if let Err(entered) = self.watchdog.admits(tick) {
+            return Err(self.reject(CommandRejection::BeforeSafeMode { tick, entered }));
+        }
+        self.torques.header.tick = tick;
+        self.gate.mark_applied(tick);
+        self.counters.applied += 1;
+        if clamped > 0 {
+            self.counters.clamped += 1;
+            let (robot, joints, times) = (&self.robot, self.gate.clamped(), self.counters.clamped);
+            if times.is_power_of_two() {
+                tracing::warn!(%robot, tick, ?joints, times, "command clamped to the torque limits");
+            } else {
+                tracing::debug!(%robot, tick, ?joints, "command clamped to the torque limits");
+            }
+        }
+        if let Some((t, at)) = self.last_dynamics {
+            if t == tick {
+                self.board.status.command_latency_us = now.saturating_duration_since(at).as_secs_f64() * 1e6;
+            }
+        }
+        if self.watchdog.on_applied(tick, now) {
+            tracing::info!(robot = %self.robot, tick, "left safe mode: the coordinator commands again");
+        }
+        self.board.status.mode = AgentMode::Commanded;
+        Ok(self.outputs(now, mode_before, false, Apply::Command, false))
+    }
+
+    /// Something arrived on the command key that is not a command.
+    pub fn on_undecodable_command(&mut self, reason: &str) -> CommandRejection {
+        self.reject(CommandRejection::Undecodable(reason.to_string()))
+    }
+
+    fn reject(&mut self, r: CommandRejection) -> CommandRejection {
+        self.counters.rejected += 1;
+        tracing::warn!(robot = %self.robot, "rejected command: {r}");
+        self.board.status.last_rejection = Some(r.to_string());
+        r
+    }
+
+    /// A contact set arrived: checked against this robot's id and feet, used from the next
+    /// state on.
+    pub fn on_contacts(&mut self, msg: &protocol::ContactSet) -> Result<(), ContactRejection> {
+        match self.contact_set(msg) {
+            Ok(set) => {
+                tracing::info!(robot = %self.robot, stance = ?set.stance, hand_in_grasp = set.hand_in_grasp, "contact set changed");
+                self.contacts = set;
+                self.counters.contacts_applied += 1;
+                Ok(())
+            }
+            Err(r) => Err(self.reject_contacts(r)),
+        }
+    }
+
+    /// Something arrived on the contacts key that is not a contact set.
+    pub fn on_undecodable_contacts(&mut self, reason: &str) -> ContactRejection {
+        self.reject_contacts(ContactRejection::Undecodable(reason.to_string()))
+    }
+
+    fn reject_contacts(&mut self, r: ContactRejection) -> ContactRejection {
+        self.counters.contacts_rejected += 1;
+        tracing::warn!(robot = %self.robot, "rejected contact set: {r}");
+        r
+    }
+
+    /// The contact set `msg` asks for, checked against this robot's id and feet.
+    fn contact_set(&self, msg: &protocol::ContactSet) -> Result<ContactSet, ContactRejection> {
+        if msg.header.robot_id() != self.robot {
+            return Err(ContactRejection::OtherRobot { robot: self.robot.clone(), got: msg.header.robot_id().to_string() });
+        }
+        let unknown: Vec<String> = msg.stance_feet.iter().filter(|f| !self.feet.contains(f)).cloned().collect();
+        if !unknown.is_empty() {
+            return Err(ContactRejection::UnknownFeet { unknown, feet: self.feet.clone() });
+        }
+        let stance = self.feet.iter().map(|f| msg.stance_feet.contains(f)).collect();
+        Ok(ContactSet { stance, hand_in_grasp: msg.hand_in_grasp })
+    }
+
+    /// Housekeeping at `now`: the watchdog by time (entering safe mode yields the hold torques
+    /// of the latest state), the periodic status and description.
+    pub fn on_timer(&mut self, now: Instant) -> Outputs<'_> {
+        let mode_before = self.board.status.mode;
+        let mut apply = Apply::Nothing;
+        if let Some(tick) = self.gate.latest_state_tick() {
+            if self.watchdog.expired(tick, now) {
+                self.enter_safe_mode_at(tick, "no valid command in time");
+                apply = Apply::Hold;
+            }
+        }
+        let status_due = self.last_status.is_none_or(|t| now.duration_since(t) >= self.status_period);
+        if status_due {
+            self.last_status = Some(now);
+        }
+        let description_due = self.last_description.is_none_or(|t| now.duration_since(t) >= self.description_period);
+        if description_due {
+            self.last_description = Some(now);
+        }
+        let mut out = self.outputs(now, mode_before, false, apply, description_due);
+        out.status |= status_due;
+        out
+    }
+
+    /// Enter safe mode now, for a reason outside the core (the hardware asked to deactivate or
+    /// failed). Yields the hold torques of the latest state, if there is one; nothing if
+    /// already in safe mode.
+    pub fn enter_safe_mode(&mut self, why: &str, now: Instant) -> Outputs<'_> {
+        let mode_before = self.board.status.mode;
+        if self.watchdog.safe_mode_since().is_some() {
+            return Outputs::default();
+        }
+        let apply = match self.gate.latest_state_tick() {
+            Some(tick) => {
+                self.enter_safe_mode_at(tick, why);
+                Apply::Hold
+            }
+            None => {
+                // No state to hold: announce it; commands need a state anyway.
+                self.watchdog.enter(0);
+                self.counters.safe_mode_entries += 1;
+                self.board.status.mode = AgentMode::SafeMode;
+                tracing::warn!(robot = %self.robot, "entering safe mode before any state: {why}");
+                Apply::Nothing
+            }
+        };
+        self.outputs(now, mode_before, false, apply, false)
+    }
+
+    fn enter_safe_mode_at(&mut self, tick: u64, why: &str) {
+        self.watchdog.enter(tick);
+        self.hold.hold(&self.q);
+        self.counters.safe_mode_entries += 1;
+        self.board.status.mode = AgentMode::SafeMode;
+        tracing::warn!(robot = %self.robot, tick, "entering safe mode (posture hold): {why}");
+    }
+
+    /// The outputs of a call: the terms if computed, the torques to apply (the checked command,
+    /// or the hold torques of the latest state), the description if due, the status if the mode
+    /// changed.
+    fn outputs(&mut self, now: Instant, mode_before: AgentMode, terms: bool, apply: Apply, description: bool) -> Outputs<'_> {
+        let mut torques = None;
+        match apply {
+            Apply::Nothing => {}
+            Apply::Command => torques = Some(&mut self.torques),
+            Apply::Hold => {
+                if let Some(tick) = self.gate.latest_state_tick() {
+                    self.hold.torques(&self.q, &self.qdot, &self.gravity, &mut self.torques.tau);
+                    self.torques.header.tick = tick;
+                    self.counters.hold_torques += 1;
+                    torques = Some(&mut self.torques);
+                }
+            }
+        }
+        let status = self.board.status.mode != mode_before;
+        if status {
+            self.last_status = Some(now);
+        }
+        Outputs {
+            terms: if terms { Some(&mut self.terms) } else { None },
+            description: if description { self.description.as_mut() } else { None },
+            torques,
+            status,
+        }
+    }
+
+    /// The caller has sent the outputs of the last call.
+    pub fn sent(&mut self, sent: &Sent) {
+        if let Some(done) = sent.terms_at {
+            if let Some(at) = self.state_at {
+                self.board.status.dynamics_latency_us = done.duration_since(at).as_secs_f64() * 1e6;
+            }
+            self.last_dynamics = Some((self.terms.header.tick, done));
+        }
+        if sent.description {
+            self.counters.descriptions += 1;
+        }
+    }
+
+    /// The status, brought up to date (counters, latest state tick, last applied tick); the
+    /// caller stamps and publishes it.
+    pub fn status(&mut self) -> &mut AgentStatus {
+        self.board.refresh(&self.counters, self.gate.latest_state_tick(), self.gate.last_applied_tick())
+    }
+
+    pub fn team(&self) -> &str {
+        &self.team
+    }
+
+    pub fn robot(&self) -> &str {
+        &self.robot
+    }
+
+    /// Actuated joints.
+    pub fn joints(&self) -> usize {
+        self.joints
+    }
+
+    pub fn mode(&self) -> AgentMode {
+        self.board.status.mode
+    }
+
+    pub fn counters(&self) -> &AgentCounters {
+        &self.counters
+    }
+
+    /// The contact set the next terms are computed for.
+    pub fn contacts(&self) -> &ContactSet {
+        &self.contacts
+    }
+
+    /// The robot description the agent publishes, if its source has a model.
+    pub fn description(&self) -> Option<&RobotDescription> {
+        self.description.as_ref()
+    }
+
+    /// Latest state tick at safe-mode entry, if in safe mode.
+    pub fn safe_mode_since(&self) -> Option<u64> {
+        self.watchdog.safe_mode_since()
+    }
+
+    pub fn latest_state_tick(&self) -> Option<u64> {
+        self.gate.latest_state_tick()
+    }
+
+    pub fn last_applied_tick(&self) -> Option<u64> {
+        self.gate.last_applied_tick()
+    }
+
+    pub fn source(&self) -> &S {
+        &self.source
+    }
+}

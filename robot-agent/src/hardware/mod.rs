@@ -1,0 +1,154 @@
+//! Where the robot is: a [`RobotHardware`] driven by the synchronous loop of [`driver`], in
+//! the shape of ros2_control's hardware interface (`hardware_interface::SystemInterface`).
+//!
+//! | ros2_control | here | the robot |
+//! | --- | --- | --- |
+//! | `on_init(params)` | the implementer's constructor | parse its settings; nothing is opened |
+//! | `on_configure` | [`RobotHardware::configure`] | connect; states are readable, no torques yet (INACTIVE) |
+//! | `on_activate` | [`RobotHardware::activate`] | accept torques (ACTIVE) |
+//! | `read(time, period)` | [`RobotHardware::read`] | measured joint positions and velocities, base pose and twist |
+//! | `write(time, period)` | [`RobotHardware::write`] | the torques to apply until the next write |
+//! | `on_deactivate` | [`RobotHardware::deactivate`] | stop taking torques; leave the robot safe (brakes, damping) |
+//! | `return_type {OK, ERROR, DEACTIVATE}` | [`HwStatus`] | `Error` stops the loop with [`driver::DriverError`]; `Deactivate` stops it after safe mode |
+//!
+//! * [`driver`]: the synchronous loop at the robot's rate: read, core, publish terms, command,
+//!   housekeeping, write.
+//! * [`link`]: the loop's non-blocking connection to the team ([`link::TeamLink`]; Zenoh:
+//!   [`link::ZenohLink`]).
+//! * [`mock`]: an in-memory robot (unit-inertia joints), ros2_control's
+//!   `mock_components::GenericSystem`, for tests and for trying the loop without a robot.
+//! * [`zenoh_sim`]: the simulated robot over Zenoh as the asynchronous Zenoh shell
+//!   ([`crate::agent`]) drives it (states from the sim-bridge, torques to it).
+//!
+//! # Plugging in a robot
+//!
+//! Implement [`RobotHardware`] over the robot's SDK, then run [`driver::run`] on a thread of
+//! its own with the robot's model ([`crate::dynamics_source::ModelDynamics`]) in an
+//! [`AgentCore`](crate::core::AgentCore) and a [`ZenohLink`] to the team:
+//!
+//! ```no_run
+//! use std::sync::atomic::AtomicBool;
+//! use std::time::{Duration, Instant};
+//!
+//! use protocol::transport::{self, Role, ZenohArgs};
+//! use protocol::RobotState;
+//! use robot_agent::core::{AgentConfig, AgentCore};
+//! use robot_agent::description::Robot;
+//! use robot_agent::dynamics_source::ModelDynamics;
+//! use robot_agent::hardware::{driver, DriverConfig, HardwareError, HwStatus, RobotHardware, ZenohLink};
+//!
+//! /// The lab's robot: its SDK handle (here only the last encoder readings).
+//! struct MyRobot {
+//!     q: Vec<f64>,
+//!     v: Vec<f64>,
+//! }
+//!
+//! impl RobotHardware for MyRobot {
+//!     fn joints(&self) -> usize {
+//!         self.q.len() // in the description's joint order
+//!     }
+//!     fn configure(&mut self) -> Result<(), HardwareError> {
+//!         Ok(()) // open the bus, check that every drive answers, read the encoders once
+//!     }
+//!     fn activate(&mut self) -> Result<(), HardwareError> {
+//!         Ok(()) // drives to torque mode, zero torque
+//!     }
+//!     fn deactivate(&mut self) -> Result<(), HardwareError> {
+//!         Ok(()) // zero torque, then the drives' own damping or brakes
+//!     }
+//!     fn read(&mut self, _now: Instant, state: &mut RobotState) -> HwStatus {
+//!         // encoders -> joints; the state estimator -> base pose and twist (base frame)
+//!         state.joint_positions.copy_from_slice(&self.q);
+//!         state.joint_velocities.copy_from_slice(&self.v);
+//!         HwStatus::Ok
+//!     }
+//!     fn write(&mut self, torques: &[f64]) -> HwStatus {
+//!         let _ = torques; // torques -> motor currents
+//!         HwStatus::Ok // a drive fault: HwStatus::Error; the e-stop: HwStatus::Deactivate
+//!     }
+//! }
+//!
+//! fn main() -> anyhow::Result<()> {
+//!     let model = ModelDynamics::new(Robot::load("models/legged_manipulator.toml")?)?;
+//!     let cfg = AgentConfig::new("team", "r1");
+//!     let mut core = AgentCore::new(&cfg, model)?;
+//!     let rt = tokio::runtime::Runtime::new()?;
+//!     let session = rt.block_on(transport::open(&ZenohArgs::default(), Role::Member))?;
+//!     let mut link = ZenohLink::declare(&session, &cfg.team, &cfg.robot)?;
+//!     let mut robot = MyRobot { q: vec![0.0; core.joints()], v: vec![0.0; core.joints()] };
+//!     let stop = AtomicBool::new(false); // set it from a signal handler to stop
+//!     let rate = DriverConfig::new(Duration::from_millis(1)); // 1 kHz
+//!     let report = driver::run(&mut core, &mut robot, &mut link, &rate, &stop)?;
+//!     println!("{report:?}");
+//!     Ok(())
+//! }
+//! ```
+
+pub mod driver;
+pub mod link;
+pub mod mock;
+pub mod zenoh_sim;
+
+use std::time::Instant;
+
+use protocol::RobotState;
+use thiserror::Error;
+
+pub use driver::{DriverConfig, DriverError, DriverExit, DriverReport};
+pub use link::{Inbound, TeamLink, ZenohLink};
+pub use mock::{MockConfig, MockFault, MockHardware};
+
+/// What [`RobotHardware::read`] and [`RobotHardware::write`] report, as ros2_control's
+/// `hardware_interface::return_type`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HwStatus {
+    /// Done.
+    Ok,
+    /// The hardware failed: the loop enters safe mode, deactivates the hardware (best effort)
+    /// and stops with [`driver::DriverError::Hardware`].
+    Error,
+    /// The hardware asks to leave the active state (an e-stop, a fault it can recover from):
+    /// the loop enters safe mode, deactivates it and stops with [`driver::DriverExit::Deactivated`].
+    Deactivate,
+}
+
+/// Why a lifecycle transition ([`RobotHardware::configure`], `activate`, `deactivate`) failed.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("{0}")]
+pub struct HardwareError(pub String);
+
+impl HardwareError {
+    pub fn new(reason: impl std::fmt::Display) -> Self {
+        HardwareError(reason.to_string())
+    }
+}
+
+/// A robot the synchronous loop ([`driver::run`]) can drive. The loop calls, in this order,
+/// `configure`, `activate`, then once per cycle `read` and `write`, and `deactivate` when it
+/// stops. None of them may block for longer than a fraction of the robot's period.
+pub trait RobotHardware {
+    /// Actuated joints, in the robot description's velocity order (checked against the model).
+    fn joints(&self) -> usize;
+
+    /// Connect (ros2_control `on_configure`). States are readable afterwards; torques are not
+    /// taken yet.
+    fn configure(&mut self) -> Result<(), HardwareError>;
+
+    /// Start taking torques (ros2_control `on_activate`).
+    fn activate(&mut self) -> Result<(), HardwareError>;
+
+    /// Stop taking torques and leave the robot in its own safe state (brakes, damping mode)
+    /// (ros2_control `on_deactivate`). Called when the loop stops, for whatever reason.
+    fn deactivate(&mut self) -> Result<(), HardwareError>;
+
+    /// Write the measured state into `state` at the loop's time `now`: `joint_positions` and
+    /// `joint_velocities` (one entry per actuated joint; the loop sizes them to `joints()`),
+    /// `base_pose` and `base_twist` (base linear velocity in the base frame, as everywhere in
+    /// the project; a fixed-base robot leaves them as they are). The loop owns the header
+    /// (team, robot, tick, stamp) and `time`.
+    fn read(&mut self, now: Instant, state: &mut RobotState) -> HwStatus;
+
+    /// Apply `torques` (N m, one per actuated joint, already checked and clamped to the
+    /// torque limits) until the next write.
+    fn write(&mut self, torques: &[f64]) -> HwStatus;
+}

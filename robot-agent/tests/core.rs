@@ -1,0 +1,230 @@
+//! The agent's core driven tick by tick, without any I/O: time is an argument, outputs are
+//! values. The robot is a three-joint stand-in with known limits and a constant gravity.
+
+use std::time::{Duration, Instant};
+
+use protocol::{AgentMode, ContactSet as ContactMsg, DynamicsTerms, Header, Matrix, Pose, RobotDescription, RobotState, TorqueCommand};
+use robot_agent::core::{AgentConfig, AgentCore, ContactRejection, Outputs, Sent, StateRejection};
+use robot_agent::dynamics_source::{DynamicsSource, SourceError};
+use robot_agent::gate::CommandRejection;
+use robot_agent::safe_mode::{CommandDeadline, HoldGains};
+use robot_agent::terms::ContactSet;
+
+const ID: &str = "r1";
+const LIMITS: [f64; 3] = [10.0, 10.0, 2.0];
+const GRAVITY: [f64; 3] = [1.5, -0.5, 0.25];
+
+/// Fixed base, unit mass matrix, constant gravity, two feet.
+struct Stub {
+    feet: Vec<String>,
+    last_contacts: Option<ContactSet>,
+}
+
+impl DynamicsSource for Stub {
+    fn joints(&self) -> usize {
+        3
+    }
+    fn floating_base(&self) -> bool {
+        false
+    }
+    fn torque_limits(&self) -> Vec<f64> {
+        LIMITS.to_vec()
+    }
+    fn foot_frames(&self) -> &[String] {
+        &self.feet
+    }
+    fn description(&self, _team: &str, _id: &str) -> Option<RobotDescription> {
+        None
+    }
+    fn compute(&mut self, state: &RobotState, contacts: &ContactSet, out: &mut DynamicsTerms) -> Result<(), SourceError> {
+        out.floating_base = false;
+        out.nv = 3;
+        out.mass_matrix = Matrix::zeros(3, 3);
+        out.bias = GRAVITY.to_vec();
+        out.velocity = state.joint_velocities.clone();
+        out.hand_in_grasp = contacts.hand_in_grasp;
+        self.last_contacts = Some(contacts.clone());
+        Ok(())
+    }
+    fn actuated_gravity(&self, out: &mut [f64]) {
+        out.copy_from_slice(&GRAVITY);
+    }
+}
+
+fn core(deadline: CommandDeadline) -> AgentCore<Stub> {
+    let mut cfg = AgentConfig::new("t", ID);
+    cfg.deadline = deadline;
+    cfg.max_command_age = Duration::from_millis(25);
+    AgentCore::new(&cfg, Stub { feet: vec!["LF".into(), "RF".into()], last_contacts: None }).unwrap()
+}
+
+fn state(tick: u64, q: [f64; 3], v: [f64; 3]) -> RobotState {
+    RobotState {
+        header: Header::new("t", Some(ID), tick, 1_000_000_000 + tick * 5_000_000),
+        base_pose: Pose::IDENTITY,
+        base_twist: [0.0; 6],
+        joint_positions: q.to_vec(),
+        joint_velocities: v.to_vec(),
+        time: tick as f64 * 0.005,
+    }
+}
+
+fn command(robot: &str, tick: u64, tau: &[f64]) -> TorqueCommand {
+    TorqueCommand { header: Header::new("t", Some(robot), tick, 0), tau: tau.to_vec() }
+}
+
+fn ms(k: u64) -> Duration {
+    Duration::from_millis(k)
+}
+
+/// (terms tick, torques) of a call's outputs.
+fn summary(out: Outputs<'_>) -> (Option<u64>, Option<(u64, Vec<f64>)>, bool) {
+    (out.terms.map(|t| t.header.tick), out.torques.map(|t| (t.header.tick, t.tau.clone())), out.status)
+}
+
+#[test]
+fn deadline_safe_mode_and_recovery_only_on_a_fresh_tick() {
+    let t0 = Instant::now();
+    let mut c = core(CommandDeadline { ticks: 5, time: Some(ms(25)) });
+    assert!(c.start(t0).status);
+    assert_eq!(c.on_command(&command(ID, 0, &[0.0; 3]), t0).unwrap_err(), CommandRejection::NoState);
+
+    // Tick 0: terms, no torques, still waiting.
+    let q = [0.1, -0.2, 0.3];
+    assert_eq!(summary(c.on_state(&state(0, q, [0.0; 3]), t0).unwrap()), (Some(0), None, false));
+    assert_eq!(c.mode(), AgentMode::WaitingForState);
+    // Its command: clamped, applied, the mode changes (status due).
+    let out = c.on_command(&command(ID, 0, &[12.0, -3.0, -2.5]), t0 + ms(1)).unwrap();
+    assert_eq!(summary(out), (None, Some((0, vec![10.0, -3.0, -2.0])), true));
+    assert_eq!((c.mode(), c.counters().applied, c.counters().clamped), (AgentMode::Commanded, 1, 1));
+
+    // Ticks 1..4 without commands: nothing to apply. Tick 5: five ticks since the last
+    // command: safe mode, the hold at zero error and velocity is the gravity (clamped).
+    for tick in 1..5 {
+        assert_eq!(summary(c.on_state(&state(tick, q, [0.0; 3]), t0 + ms(1 + tick)).unwrap()), (Some(tick), None, false));
+    }
+    let out = c.on_state(&state(5, q, [0.0; 3]), t0 + ms(6)).unwrap();
+    assert_eq!(summary(out), (Some(5), Some((5, GRAVITY.to_vec())), true));
+    assert_eq!((c.mode(), c.safe_mode_since(), c.counters().safe_mode_entries), (AgentMode::SafeMode, Some(5), 1));
+
+    // Tick 6, pushed and moving: PD about the held posture plus gravity, clamped.
+    let gains = HoldGains::from_torque_limits(&LIMITS);
+    let (q6, v6) = ([0.11, -0.2, -0.3], [0.1, 0.0, 0.0]);
+    let out = c.on_state(&state(6, q6, v6), t0 + ms(7)).unwrap();
+    let (_, torques, status) = summary(out);
+    let (tick, tau) = torques.unwrap();
+    assert_eq!((tick, status), (6, false));
+    for i in 0..3 {
+        let want = (gains.kp[i] * (q[i] - q6[i]) - gains.kd[i] * v6[i] + GRAVITY[i]).clamp(-LIMITS[i], LIMITS[i]);
+        assert!((tau[i] - want).abs() < 1e-12, "joint {i}: {} vs {want}", tau[i]);
+    }
+    assert_eq!(tau[2], 2.0, "0.6 rad of error on joint 2 saturates its 2 N m");
+
+    // A command of the entry tick does not end safe mode; one of the fresh tick 6 does.
+    let r = c.on_command(&command(ID, 5, &[1.0; 3]), t0 + ms(7)).unwrap_err();
+    assert_eq!(r, CommandRejection::BeforeSafeMode { tick: 5, entered: 5 });
+    assert_eq!(c.mode(), AgentMode::SafeMode);
+    let out = c.on_command(&command(ID, 6, &[1.0; 3]), t0 + ms(8)).unwrap();
+    assert_eq!(summary(out), (None, Some((6, vec![1.0; 3])), true));
+    assert_eq!((c.mode(), c.safe_mode_since()), (AgentMode::Commanded, None));
+
+    // By time, without new states: 25 ms after the last command the timer enters safe mode
+    // with the hold of the latest state (tick 6); once only.
+    assert!(c.on_timer(t0 + ms(8 + 25)).torques.is_none(), "the deadline is exclusive");
+    let out = c.on_timer(t0 + ms(8 + 26));
+    assert!(out.status);
+    assert_eq!(out.torques.map(|t| t.header.tick), Some(6));
+    assert!(c.on_timer(t0 + ms(40)).torques.is_none());
+    assert_eq!((c.mode(), c.safe_mode_since(), c.counters().safe_mode_entries), (AgentMode::SafeMode, Some(6), 2));
+    // Tick 6 again is not fresh (repeats of the latest state are admitted, not fresh).
+    c.on_state(&state(6, q6, v6), t0 + ms(41)).unwrap();
+    assert!(matches!(c.on_command(&command(ID, 6, &[0.0; 3]), t0 + ms(41)), Err(CommandRejection::Stale { .. })));
+    let counters = c.counters();
+    assert_eq!((counters.applied, counters.rejected, counters.hold_torques), (2, 3, 4));
+    assert_eq!(c.status().commands_rejected, 3);
+    assert!(c.status().last_rejection.as_deref().unwrap().contains("not newer"));
+}
+
+#[test]
+fn rejected_commands_are_counted_and_nothing_is_applied() {
+    let t0 = Instant::now();
+    let mut c = core(CommandDeadline { ticks: 0, time: None });
+    c.on_state(&state(3, [0.0; 3], [0.0; 3]), t0).unwrap();
+    let refused = [
+        (command("r9", 3, &[0.0; 3]), "WrongRobot"),
+        (command(ID, 4, &[0.0; 3]), "FromTheFuture"),
+        (command(ID, 3, &[0.0; 2]), "WrongSize"),
+        (command(ID, 3, &[0.0, f64::NAN, 0.0]), "NonFinite"),
+    ];
+    for (i, (cmd, what)) in refused.iter().enumerate() {
+        let r = c.on_command(cmd, t0 + ms(1)).unwrap_err();
+        assert!(format!("{r:?}").starts_with(what), "{r:?} is not {what}");
+        assert_eq!(c.counters().rejected, i as u64 + 1);
+    }
+    assert!(matches!(c.on_command(&command(ID, 3, &[0.0; 3]), t0 + ms(26)), Err(CommandRejection::TooOld { .. })));
+    assert_eq!(c.on_undecodable_command("bad magic"), CommandRejection::Undecodable("bad magic".into()));
+    assert_eq!((c.counters().rejected, c.counters().applied, c.last_applied_tick()), (6, 0, None));
+    let status = c.status();
+    assert_eq!((status.commands_rejected, status.mode), (6, AgentMode::WaitingForState));
+    assert_eq!(status.last_rejection.as_deref(), Some("undecodable command: bad magic"));
+    // A good one still passes; no deadline, so the timer never holds.
+    assert!(c.on_command(&command(ID, 3, &[-20.0, 20.0, 0.5]), t0 + ms(2)).unwrap().torques.is_some_and(|t| t.tau == [-10.0, 10.0, 0.5]));
+    assert!(c.on_timer(t0 + Duration::from_secs(3600)).torques.is_none());
+}
+
+#[test]
+fn states_are_checked_and_contact_sets_apply_from_the_next_state() {
+    let t0 = Instant::now();
+    let mut c = core(CommandDeadline { ticks: 0, time: None });
+    let mut other = state(1, [0.0; 3], [0.0; 3]);
+    other.header = Header::new("t", Some("r2"), 1, 0);
+    assert_eq!(c.on_state(&other, t0).unwrap_err(), StateRejection::OtherRobot { got: "r2".into() });
+    let mut short = state(1, [0.0; 3], [0.0; 3]);
+    short.joint_velocities.pop();
+    assert!(matches!(c.on_state(&short, t0), Err(StateRejection::WrongSize { got: 2, .. })));
+    c.on_state(&state(2, [0.0; 3], [0.0; 3]), t0).unwrap();
+    assert!(c.on_state(&state(2, [0.0; 3], [0.0; 3]), t0).is_ok(), "a repeat of the latest tick is recomputed");
+    assert_eq!(c.on_state(&state(1, [0.0; 3], [0.0; 3]), t0).unwrap_err(), StateRejection::OutOfOrder { tick: 1, latest: Some(2) });
+    c.on_undecodable_state("truncated");
+    assert_eq!((c.counters().states, c.counters().states_rejected, c.counters().dynamics), (2, 4, 2));
+
+    let set = |robot: &str, feet: &[&str], grasp| ContactMsg {
+        header: Header::new("t", Some(robot), 0, 0),
+        stance_feet: feet.iter().map(|f| f.to_string()).collect(),
+        hand_in_grasp: grasp,
+    };
+    assert_eq!(c.contacts(), &ContactSet { stance: vec![true, true], hand_in_grasp: true });
+    c.on_contacts(&set(ID, &["RF"], false)).unwrap();
+    assert!(matches!(c.on_contacts(&set(ID, &["XX"], true)), Err(ContactRejection::UnknownFeet { .. })));
+    assert!(matches!(c.on_contacts(&set("r2", &["LF"], true)), Err(ContactRejection::OtherRobot { .. })));
+    c.on_undecodable_contacts("truncated");
+    assert_eq!((c.counters().contacts_applied, c.counters().contacts_rejected), (1, 3));
+    let out = c.on_state(&state(3, [0.0; 3], [0.0; 3]), t0).unwrap();
+    assert!(!out.terms.unwrap().hand_in_grasp);
+    assert_eq!(c.source().last_contacts, Some(ContactSet { stance: vec![false, true], hand_in_grasp: false }));
+}
+
+#[test]
+fn timer_paces_the_status_and_latencies_come_from_what_was_sent() {
+    let t0 = Instant::now();
+    let mut cfg = AgentConfig::new("t", ID);
+    cfg.deadline = CommandDeadline { ticks: 0, time: None };
+    cfg.status_period = ms(100);
+    let mut c = AgentCore::new(&cfg, Stub { feet: vec![], last_contacts: None }).unwrap();
+    let out = c.start(t0);
+    assert!(out.status && out.description.is_none(), "a source without a model has no description");
+    assert!(!c.on_timer(t0 + ms(99)).status);
+    assert!(c.on_timer(t0 + ms(100)).status);
+    assert!(!c.on_timer(t0 + ms(150)).status);
+    c.on_state(&state(0, [0.0; 3], [0.0; 3]), t0 + ms(200)).unwrap();
+    c.sent(&Sent { terms_at: Some(t0 + ms(200) + Duration::from_micros(40)), description: false });
+    c.on_command(&command(ID, 0, &[0.0; 3]), t0 + ms(201)).unwrap();
+    let s = c.status();
+    assert_eq!((s.dynamics_latency_us.round(), s.command_latency_us.round()), (40.0, 960.0));
+    assert_eq!((s.header.tick, s.last_applied_tick, s.states_received), (0, Some(0), 1));
+
+    // A configuration the core cannot run with is refused at construction.
+    cfg.hold_gains = Some(HoldGains { kp: vec![1.0], kd: vec![1.0] });
+    let e = AgentCore::new(&cfg, Stub { feet: vec![], last_contacts: None }).err().unwrap();
+    assert!(e.to_string().contains("posture-hold gains have 1 kp"), "{e}");
+}

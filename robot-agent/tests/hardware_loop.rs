@@ -1,0 +1,261 @@
+//! The synchronous hardware loop with the in-memory mock robot: first with the team in
+//! memory (the coordinator's `JointDamping` controller called directly), then over a real
+//! Zenoh session on loopback (its own port) to a real coordinator service.
+
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use coordinator::service::{self, CoordinatorConfig};
+use coordinator::{JointDamping, TeamController};
+use protocol::keys::{self, RobotTopic};
+use protocol::transport::{self, decode_sample, Role, SampleQueue, TransportError, ZenohArgs};
+use protocol::{AgentMode, AgentStatus, ContactSet, CoordinatorStatus, DynamicsTerms, RobotDescription, TorqueCommand};
+use robot_agent::core::{AgentConfig, AgentCore};
+use robot_agent::dynamics_source::PlaceholderDynamics;
+use robot_agent::hardware::driver::{self, DriverConfig, DriverError, DriverExit};
+use robot_agent::hardware::mock::Lifecycle;
+use robot_agent::hardware::{HwStatus, Inbound, MockConfig, MockFault, MockHardware, TeamLink, ZenohLink};
+use robot_agent::safe_mode::{CommandDeadline, HoldGains};
+
+const ID: &str = "r1";
+const JOINTS: usize = 3;
+const DT: f64 = 0.01;
+const DAMPING: f64 = 5.0;
+const V0: f64 = 0.5;
+
+/// Unit-inertia joints: the mock robot's exact model.
+fn unit_joints() -> PlaceholderDynamics {
+    PlaceholderDynamics { joints: JOINTS, nv: JOINTS }
+}
+
+fn agent_config(team: &str, deadline: CommandDeadline) -> AgentConfig {
+    let mut cfg = AgentConfig::new(team, ID);
+    cfg.deadline = deadline;
+    // Without a time deadline, no age limit that a loaded machine could trip either.
+    cfg.max_command_age = deadline.time.unwrap_or(Duration::from_secs(10));
+    cfg
+}
+
+fn mock() -> MockHardware {
+    MockHardware::new(MockConfig { record: true, ..MockConfig::new(JOINTS, V0, DT) })
+}
+
+/// `v_k = (1 - dt d)^k v0`: semi-implicit Euler of `qdd = -d qd` with each tick's own torque.
+fn analytic(k: u64) -> f64 {
+    V0 * (1.0 - DT * DAMPING).powi(k as i32)
+}
+
+fn assert_close(got: f64, want: f64, what: &str) {
+    assert!((got - want).abs() <= 1e-12 * want.abs().max(1e-3), "{what}: {got} vs {want}");
+}
+
+/// The team in memory: the coordinator's controller answers every tick's terms at once
+/// while `answering`; the loop stops after `ticks` terms.
+struct TeamInMemory {
+    controller: JointDamping,
+    answering: Box<dyn Fn(u64) -> bool + Send>,
+    commands: VecDeque<TorqueCommand>,
+    out: Vec<TorqueCommand>,
+    statuses: Vec<AgentStatus>,
+    ticks: u64,
+    stop: Arc<AtomicBool>,
+}
+
+impl TeamInMemory {
+    fn new(ticks: u64, answering: impl Fn(u64) -> bool + Send + 'static) -> Self {
+        TeamInMemory {
+            controller: JointDamping { damping: DAMPING },
+            answering: Box::new(answering),
+            commands: VecDeque::new(),
+            out: Vec::new(),
+            statuses: Vec::new(),
+            ticks,
+            stop: Arc::new(AtomicBool::new(false)),
+        }
+    }
+}
+
+impl TeamLink for TeamInMemory {
+    fn send_terms(&mut self, terms: &DynamicsTerms) -> Result<(), TransportError> {
+        let tick = terms.header.tick;
+        if (self.answering)(tick) {
+            self.controller.solve(std::slice::from_ref(terms), &mut self.out).unwrap();
+            self.commands.extend(self.out.drain(..));
+        }
+        if tick + 1 >= self.ticks {
+            self.stop.store(true, Ordering::Release);
+        }
+        Ok(())
+    }
+    fn send_status(&mut self, status: &AgentStatus) -> Result<(), TransportError> {
+        self.statuses.push(status.clone());
+        Ok(())
+    }
+    fn send_description(&mut self, _: &RobotDescription) -> Result<(), TransportError> {
+        Ok(())
+    }
+    fn recv_command(&mut self, _deadline: Instant) -> Inbound<TorqueCommand> {
+        self.commands.pop_front().map_or(Inbound::Empty, Inbound::Message)
+    }
+    fn try_recv_contacts(&mut self) -> Inbound<ContactSet> {
+        Inbound::Empty
+    }
+}
+
+fn fast() -> DriverConfig {
+    DriverConfig { period: Duration::from_millis(1), command_wait: Duration::ZERO }
+}
+
+#[test]
+fn in_memory_team_damps_the_mock_exactly_then_safe_mode_holds_when_it_goes_silent() {
+    // Ticks 0..=49 answered; 50.. not. Tick deadline only, so that timing cannot interfere.
+    let deadline = CommandDeadline { ticks: 5, time: None };
+    let mut core = AgentCore::new(&agent_config("mem1", deadline), unit_joints()).unwrap();
+    let mut link = TeamInMemory::new(80, |tick| tick < 50);
+    let mut hw = mock();
+    let stop = link.stop.clone();
+    let report = driver::run(&mut core, &mut hw, &mut link, &fast(), &stop).unwrap();
+    assert_eq!((report.exit, report.cycles), (DriverExit::Stopped, 80));
+    assert_eq!(hw.lifecycle(), Lifecycle::Inactive, "deactivated when the loop stopped");
+
+    let h = hw.history();
+    for (k, step) in h.iter().enumerate().take(50) {
+        let want = analytic(k as u64);
+        assert_close(step.v[0], want, &format!("v at tick {k}"));
+        // The torque written in the cycle of tick k is the coordinator's answer to tick k.
+        assert_eq!(step.tau.as_deref(), Some(&[-DAMPING * step.v[0]; JOINTS][..]), "tick {k}");
+    }
+    // Ticks 50..53 repeat the last command (zero-order hold); tick 54 = 49 + 5 enters safe
+    // mode: the hold at the posture of entry, zero gravity: -Kd v.
+    for step in &h[50..54] {
+        assert_eq!(step.tau, h[49].tau, "tick {}", step.tick);
+    }
+    let kd = HoldGains::from_torque_limits(&[f64::INFINITY]).kd[0];
+    let entry = &h[54];
+    assert_eq!(entry.tau.as_deref().unwrap(), &[-kd * entry.v[0]; JOINTS][..]);
+    assert!(h[55..].iter().all(|s| s.tau.is_some()), "the hold is written every cycle");
+    let safe: Vec<&AgentStatus> = link.statuses.iter().filter(|s| s.mode == AgentMode::SafeMode).collect();
+    assert_eq!((safe[0].header.tick, safe[0].last_applied_tick), (54, Some(49)));
+    let c = &report.counters;
+    assert_eq!((c.states, c.dynamics, c.applied, c.rejected, c.safe_mode_entries, c.hold_torques), (80, 80, 50, 0, 1, 26));
+}
+
+#[test]
+fn the_loop_stops_on_deactivate_and_on_hardware_error_in_safe_mode() {
+    let deadline = CommandDeadline { ticks: 5, time: None };
+    // Deactivate asked by the write of tick 10: safe mode, deactivated, a normal exit.
+    let mut core = AgentCore::new(&agent_config("mem2", deadline), unit_joints()).unwrap();
+    let mut link = TeamInMemory::new(1000, |_| true);
+    let mut hw = mock().with_fault(MockFault { tick: 10, on_write: true, status: HwStatus::Deactivate });
+    let report = driver::run(&mut core, &mut hw, &mut link, &fast(), &AtomicBool::new(false)).unwrap();
+    assert_eq!((report.exit, report.cycles), (DriverExit::Deactivated { tick: 10 }, 11));
+    assert_eq!((core.mode(), hw.lifecycle(), hw.writes()), (AgentMode::SafeMode, Lifecycle::Inactive, 10));
+    assert_eq!(link.statuses.last().unwrap().mode, AgentMode::SafeMode);
+
+    // A failed read at tick 3: safe mode, deactivated, a typed error.
+    let mut core = AgentCore::new(&agent_config("mem3", deadline), unit_joints()).unwrap();
+    let mut link = TeamInMemory::new(1000, |_| true);
+    let mut hw = mock().with_fault(MockFault { tick: 3, on_write: false, status: HwStatus::Error });
+    let e = driver::run(&mut core, &mut hw, &mut link, &fast(), &AtomicBool::new(false)).unwrap_err();
+    assert!(matches!(e, DriverError::Hardware { op: "read", tick: 3 }), "{e}");
+    assert_eq!((core.mode(), hw.lifecycle()), (AgentMode::SafeMode, Lifecycle::Inactive));
+    assert_eq!(link.statuses.last().unwrap().mode, AgentMode::SafeMode);
+
+    // A robot of another size is refused before it is configured.
+    let mut core = AgentCore::new(&agent_config("mem4", deadline), unit_joints()).unwrap();
+    let mut hw = MockHardware::new(MockConfig::new(JOINTS + 1, 0.0, DT));
+    let e = driver::run(&mut core, &mut hw, &mut link, &fast(), &AtomicBool::new(false)).unwrap_err();
+    assert!(matches!(e, DriverError::JointCount { hardware: 4, model: 3 }), "{e}");
+    assert_eq!(hw.lifecycle(), Lifecycle::Unconfigured);
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+async fn next_where<M: protocol::Message>(q: &SampleQueue, within: Duration, pred: impl Fn(&M) -> bool) -> M {
+    let deadline = tokio::time::Instant::now() + within;
+    loop {
+        let left = deadline.saturating_duration_since(tokio::time::Instant::now());
+        let sample = tokio::time::timeout(left, q.recv_async()).await.expect("no matching message in time").unwrap();
+        if let Ok(m) = decode_sample::<M>(&sample) {
+            if pred(&m) {
+                return m;
+            }
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn mock_robot_with_a_real_coordinator_over_zenoh() {
+    let team = "hwloop1";
+    let hub = format!("tcp/127.0.0.1:{}", free_port());
+    let coordinator_session = transport::open(&ZenohArgs::listening(&hub), Role::Hub).await.unwrap();
+    let (stop_coordinator, rx) = tokio::sync::watch::channel(false);
+    let coordinator = {
+        let s = coordinator_session.clone();
+        let cfg = CoordinatorConfig { team: team.into(), tick_deadline: Duration::from_millis(200) };
+        tokio::spawn(async move { service::run(&s, cfg, JointDamping { damping: DAMPING }, rx).await })
+    };
+    let session = transport::open(&ZenohArgs::connecting(&hub), Role::Member).await.unwrap();
+    let status = transport::subscribe(&session, keys::robot(team, ID, RobotTopic::Status).unwrap()).await.unwrap();
+    let coordinator_status = transport::subscribe(&session, keys::coordinator_status(team).unwrap()).await.unwrap();
+
+    // The link joins the team on the loop's thread; the loop starts once the coordinator has
+    // seen the robot join, so that it answers from tick 0.
+    let deadline = CommandDeadline { ticks: 5, time: Some(Duration::from_secs(5)) };
+    let stop = Arc::new(AtomicBool::new(false));
+    let (joined_tx, joined_rx) = std::sync::mpsc::channel();
+    let (go_tx, go_rx) = std::sync::mpsc::channel::<()>();
+    let driver = {
+        let (session, stop) = (session.clone(), stop.clone());
+        std::thread::spawn(move || {
+            let mut link = ZenohLink::declare(&session, team, ID).unwrap();
+            joined_tx.send(()).unwrap();
+            go_rx.recv().unwrap();
+            let mut core = AgentCore::new(&agent_config(team, deadline), unit_joints()).unwrap();
+            let mut hw = mock();
+            // Period 10 ms; each tick's command is waited for up to 200 ms (it comes back in
+            // well under a millisecond on an idle machine).
+            let cfg = DriverConfig { period: Duration::from_millis(10), command_wait: Duration::from_millis(200) };
+            let report = driver::run(&mut core, &mut hw, &mut link, &cfg, &stop);
+            (report, hw)
+        })
+    };
+    tokio::task::spawn_blocking(move || joined_rx.recv().unwrap()).await.unwrap();
+    next_where::<CoordinatorStatus>(&coordinator_status, Duration::from_secs(10), |s| s.members.iter().any(|m| m == ID)).await;
+    go_tx.send(()).unwrap();
+
+    // 150 ticks commanded, then the coordinator stops: safe mode at the tick deadline.
+    next_where::<AgentStatus>(&status, Duration::from_secs(30), |s| s.commands_applied >= 150).await;
+    stop_coordinator.send(true).unwrap();
+    coordinator.await.unwrap().unwrap();
+    coordinator_session.close().await.unwrap();
+    let stopped = Instant::now();
+    let safe = next_where::<AgentStatus>(&status, Duration::from_secs(10), |s| s.mode == AgentMode::SafeMode).await;
+    let last = safe.last_applied_tick.unwrap();
+    assert_eq!(safe.header.tick, last + deadline.ticks, "safe mode at the deadline: 5 ticks after the last command");
+    assert!(stopped.elapsed() < deadline.time.unwrap(), "safe mode {:?} after the coordinator stopped", stopped.elapsed());
+    assert_eq!(safe.safe_mode_entries, 1, "no safe mode while the coordinator answered");
+
+    stop.store(true, Ordering::Release);
+    let (report, hw) = tokio::task::spawn_blocking(move || driver.join().unwrap()).await.unwrap();
+    let report = report.unwrap();
+    assert_eq!(report.exit, DriverExit::Stopped);
+    assert_eq!(report.counters.rejected, 0);
+
+    // Every tick up to the last command: that tick's damping torque, and the velocity the
+    // analytic discrete decay predicts.
+    let h = hw.history();
+    assert!(last >= 150, "{last}");
+    for step in &h[..=last as usize] {
+        assert_close(step.v[0], analytic(step.tick), &format!("v at tick {}", step.tick));
+        assert_eq!(step.tau.as_deref(), Some(&[-DAMPING * step.v[0]; JOINTS][..]), "tick {}", step.tick);
+    }
+    let kd = HoldGains::from_torque_limits(&[f64::INFINITY]).kd[0];
+    let entry = &h[safe.header.tick as usize];
+    assert_eq!(entry.tau.as_deref().unwrap(), &[-kd * entry.v[0]; JOINTS][..], "the posture hold after the coordinator stopped");
+    session.close().await.unwrap();
+}
