@@ -77,8 +77,10 @@ fn ms(k: u64) -> Duration {
     Duration::from_millis(k)
 }
 
-/// (terms tick, torques) of a call's outputs.
-fn summary(out: Outputs<'_>) -> (Option<u64>, Option<(u64, Vec<f64>)>, bool) {
+/// A call's outputs in brief: the terms' tick, the torques (tick and values), the status flag.
+type Summary = (Option<u64>, Option<(u64, Vec<f64>)>, bool);
+
+fn summary(out: Outputs<'_>) -> Summary {
     (out.terms.map(|t| t.header.tick), out.torques.map(|t| (t.header.tick, t.tau.clone())), out.status)
 }
 
