@@ -2,25 +2,22 @@
 //!
 //! One robot of the team. It turns its measured state into the dynamics terms the coordinator
 //! needs (DESIGN.md §2 step 2), checks the torque commands it receives and hands them to its
-//! torque sink (step 4).
+//! torque sink (step 4). The robot itself (URDF model, rigid-body algorithms, the description
+//! TOML) is the `robot-model` crate; this crate turns it into protocol messages and runs it.
 //!
-//! * [`dynamics`]: the robot's model from URDF and its rigid-body algorithms (Pinocchio-style
-//!   immutable `Model` and preallocated `Data`, one algorithm per file).
-//! * [`description`]: a robot's description (TOML beside its URDF), checked against the URDF.
 //! * [`inspect`]: the `robot-agent inspect` report of a model at one state.
 //! * [`terms`]: the per-tick dynamics terms (M, h, frame Jacobians and Jdot*v) from the model.
 //! * [`agent`]: the agent loop over Zenoh, wiring the modules below together.
 //! * [`source`]: where states come from ([`source::StateSource`]; Zenoh today, hardware later).
 //! * [`sink`]: where checked torques go ([`sink::TorqueSink`]; the robot's `torque` key).
 //! * [`dynamics_source`]: state to dynamics terms ([`dynamics_source::ModelDynamics`] over the
-//!   robot's model; [`dynamics_source::PlaceholderDynamics`] for the smoke run only).
+//!   robot's model; [`dynamics_source::PlaceholderDynamics`] for the smoke run only), and the
+//!   robot's protocol description ([`dynamics_source::robot_description`]).
 //! * [`gate`]: the checks of incoming commands and clamping to the torque limits.
 //! * [`safe_mode`]: the watchdog and the posture hold of safe mode.
 //! * [`status`]: the agent's status message and counters.
 
 pub mod agent;
-pub mod description;
-pub mod dynamics;
 pub mod dynamics_source;
 pub mod gate;
 pub mod inspect;
