@@ -3,10 +3,12 @@
 //! [`PlaceholderDynamics`] (unit mass matrix, no frames) exists only for the smoke run of the
 //! runner, whose closed loop has an analytic answer.
 
+use std::sync::Arc;
+
 use protocol::{Matrix, RobotDescription, RobotState};
+use robot_model::Robot;
 use thiserror::Error;
 
-use crate::description::Robot;
 use crate::terms::{ContactSet, TermsBuilder, TermsError};
 
 /// Errors computing terms from a state.
@@ -37,15 +39,41 @@ pub trait DynamicsSource: Send {
     fn actuated_gravity(&self, out: &mut [f64]);
 }
 
+/// The protocol's summary of `robot`, for robot `id` of team `team` (what the agent publishes
+/// on its `description` key).
+pub fn robot_description(robot: &Robot, team: &str, id: &str) -> RobotDescription {
+    RobotDescription {
+        header: protocol::Header::new(team, Some(id), 0, protocol::wall_clock_ns()),
+        joint_names: robot.actuated_joints.clone(),
+        torque_limits: robot.torque_limits.clone(),
+        floating_base: robot.model.floating_base,
+        nq: robot.model.nq as u32,
+        nv: robot.model.nv as u32,
+        foot_frames: robot.foot_frames.clone(),
+        hand_frame: robot.hand_frame.clone(),
+        torso_frame: robot.torso_frame.clone(),
+        foot_mu: robot.feet.mu,
+        hand_mu: robot.hand.mu,
+        hand_xi: robot.hand.xi,
+        hand_half_size: [robot.hand.half_size_x, robot.hand.half_size_y],
+        total_mass: robot.model.total_mass,
+    }
+}
+
 /// The robot's own model.
 pub struct ModelDynamics {
-    robot: Robot,
+    robot: Arc<Robot>,
     builder: TermsBuilder,
     gravity: Vec<f64>,
 }
 
 impl ModelDynamics {
     pub fn new(robot: Robot) -> Result<Self, SourceError> {
+        Self::shared(Arc::new(robot))
+    }
+
+    /// Over a robot loaded once and shared with the rest of the process.
+    pub fn shared(robot: Arc<Robot>) -> Result<Self, SourceError> {
         let builder = TermsBuilder::new(&robot)?;
         let gravity = vec![0.0; robot.joints()];
         Ok(ModelDynamics { robot, builder, gravity })
@@ -74,7 +102,7 @@ impl DynamicsSource for ModelDynamics {
     }
 
     fn description(&self, team: &str, id: &str) -> Option<RobotDescription> {
-        Some(self.robot.summary(team, id))
+        Some(robot_description(&self.robot, team, id))
     }
 
     fn compute(&mut self, state: &RobotState, contacts: &ContactSet, out: &mut protocol::DynamicsTerms) -> Result<(), SourceError> {

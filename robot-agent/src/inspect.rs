@@ -8,7 +8,7 @@ use nalgebra::{DMatrix, DVector, Matrix6xX};
 use serde_json::{json, Value};
 use thiserror::Error;
 
-use crate::dynamics::{
+use robot_model::{
     compute_all_terms, frame_jacobian, frame_jdot_v, DynamicsError, Data, FloatingBase, Model, ModelBuilder, ModelError, SE3,
 };
 

@@ -2,11 +2,9 @@
 //!
 //! One robot of the team. It turns its measured state into the dynamics terms the coordinator
 //! needs (DESIGN.md §2 step 2), checks the torque commands it receives and hands them to the
-//! robot (step 4).
+//! robot (step 4). The robot itself (URDF model, rigid-body algorithms, the description
+//! TOML) is the `robot-model` crate; this crate turns it into protocol messages and runs it.
 //!
-//! * [`dynamics`]: the robot's model from URDF and its rigid-body algorithms (Pinocchio-style
-//!   immutable `Model` and preallocated `Data`, one algorithm per file).
-//! * [`description`]: a robot's description (TOML beside its URDF), checked against the URDF.
 //! * [`inspect`]: the `robot-agent inspect` report of a model at one state.
 //! * [`terms`]: the per-tick dynamics terms (M, h, frame Jacobians and Jdot*v) from the model.
 //! * [`core`]: the agent's logic without I/O ([`core::AgentCore`]: `on_state`, `on_command`,
@@ -18,15 +16,14 @@
 //!   link, an in-memory mock robot, and the simulated robot over Zenoh
 //!   ([`hardware::zenoh_sim`]).
 //! * [`dynamics_source`]: state to dynamics terms ([`dynamics_source::ModelDynamics`] over the
-//!   robot's model; [`dynamics_source::PlaceholderDynamics`] for the smoke run and the mock).
+//!   robot's model; [`dynamics_source::PlaceholderDynamics`] for the smoke run and the mock),
+//!   and the robot's protocol description ([`dynamics_source::robot_description`]).
 //! * [`gate`]: the checks of incoming commands and clamping to the torque limits.
 //! * [`safe_mode`]: the watchdog and the posture hold of safe mode.
 //! * [`status`]: the agent's status message and counters.
 
 pub mod agent;
 pub mod core;
-pub mod description;
-pub mod dynamics;
 pub mod dynamics_source;
 pub mod gate;
 pub mod hardware;

@@ -8,7 +8,7 @@ use std::time::Duration;
 use clap::{Args, Parser, Subcommand};
 use protocol::transport::{self, Role, ZenohArgs};
 use robot_agent::agent::{self, AgentConfig, ModelDynamics, PlaceholderDynamics};
-use robot_agent::description::{default_robot_path, Robot};
+use robot_model::{default_robot_path, Robot};
 use robot_agent::inspect::{self, Attach, InspectArgs};
 
 #[derive(Parser)]

@@ -6,8 +6,7 @@ use nalgebra::{DVector, Matrix6xX};
 use protocol::{DynamicsTerms, FrameRole, FrameTerms, Header, Matrix, RobotState};
 use thiserror::Error;
 
-use crate::description::Robot;
-use crate::dynamics::{compute_all_terms, frame_jacobian, frame_jdot_v, Data, DynamicsError, FrameId};
+use robot_model::{compute_all_terms, frame_jacobian, frame_jdot_v, Data, DynamicsError, FrameId, Robot};
 
 /// Errors turning a state into terms.
 #[derive(Debug, Error)]
@@ -19,7 +18,7 @@ pub enum TermsError {
     #[error(transparent)]
     Dynamics(#[from] DynamicsError),
     #[error(transparent)]
-    Model(#[from] crate::dynamics::ModelError),
+    Model(#[from] robot_model::ModelError),
 }
 
 /// Which contacts are closed: per foot of the description (same order), stance or not, and
@@ -146,7 +145,7 @@ impl TermsBuilder {
 /// reference (5 mm with the paper's gains) while the controller believes the feet hold still.
 #[allow(clippy::too_many_arguments)]
 fn fill_frame(
-    m: &crate::dynamics::Model,
+    m: &robot_model::Model,
     data: &Data,
     jac: &mut Matrix6xX<f64>,
     name: &str,

@@ -8,7 +8,7 @@ use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, Role, SampleQueue, TypedPublisher, ZenohArgs};
 use protocol::{AgentMode, AgentStatus, ContactSet, DynamicsTerms, FrameRole, Header, Message, Pose, RobotDescription, RobotState, TorqueCommand, Validate};
 use robot_agent::agent::{self, AgentConfig, AgentCounters, CommandDeadline, HoldGains, ModelDynamics};
-use robot_agent::description::{default_robot_path, Robot};
+use robot_model::{default_robot_path, Robot};
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
 use zenoh::Session;
@@ -286,9 +286,9 @@ async fn rejects_stale_wrong_robot_wrong_size_nan_future_and_old_commands_and_cl
 fn gravity_oracle(robot: &Robot, state: &RobotState) -> Vec<f64> {
     let mut q = robot.standing_q.clone();
     q.as_mut_slice()[7..].copy_from_slice(&state.joint_positions);
-    let mut data = robot_agent::dynamics::Data::new(&robot.model);
+    let mut data = robot_model::Data::new(&robot.model);
     let zero = vec![0.0; robot.model.nv];
-    let tau = robot_agent::dynamics::rnea(&robot.model, &mut data, q.as_slice(), &zero, &zero).unwrap();
+    let tau = robot_model::rnea(&robot.model, &mut data, q.as_slice(), &zero, &zero).unwrap();
     robot.actuated_indices.iter().map(|&i| tau[i]).collect()
 }
 

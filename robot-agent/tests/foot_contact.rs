@@ -3,12 +3,13 @@
 //! the velocity of the shank's material point at the contact, by finite differences of the
 //! foot frame's forward kinematics; `Jdot v` by finite differences of `J(q(t)) v` along `v`.
 
+#[path = "../../robot-model/tests/common/mod.rs"]
 mod common;
 
 use common::*;
 use nalgebra::{DVector, Matrix3, Vector3};
 use protocol::{FrameRole, Header, Pose, RobotState};
-use robot_agent::description::{default_robot_path, Robot};
+use robot_model::{default_robot_path, Robot};
 use robot_agent::terms::{empty_terms, ContactSet, TermsBuilder};
 
 fn state_of(robot: &Robot, q: &DVector<f64>, v: &DVector<f64>) -> RobotState {

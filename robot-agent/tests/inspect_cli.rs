@@ -2,6 +2,7 @@
 //! `error: ...` line and exit status 2.
 #![allow(clippy::needless_range_loop)]
 
+#[path = "../../robot-model/tests/common/mod.rs"]
 mod common;
 
 use std::path::PathBuf;
@@ -9,7 +10,7 @@ use std::process::{Command, Output};
 
 use common::*;
 use nalgebra::Matrix6xX;
-use robot_agent::dynamics::*;
+use robot_model::*;
 use serde_json::Value;
 
 fn run(args: &[&str]) -> Output {

@@ -6,7 +6,9 @@
 //!   real Zenoh messages, embedded (every component in one process on one session) or
 //!   distributed (every component its own process, on loopback).
 //! * [`processes`]: the team's binaries as child processes on loopback.
-//! * [`plan`]: a scenario turned into what each component runs (scene, controller, references).
+//! * [`plan`]: a scenario turned into what each component runs (scene, controller, references);
+//!   each robot's description is loaded there, once, and shared (`Arc<robot_model::Robot>`).
+//! * [`grasp_plan`]: where the hands start: flat on the object's faces (arm IK from `robot_model::ik`).
 //! * [`run`]: `team run`: the scenario with the whole stack, embedded or distributed.
 //! * [`driver`]: the runner's participant during a run: references out, records in, progress.
 //! * [`evaluate`]: metrics, time series, plots and acceptance checks of a run.
@@ -17,6 +19,7 @@
 
 pub mod driver;
 pub mod evaluate;
+pub mod grasp_plan;
 pub mod metrics;
 pub mod plan;
 pub mod processes;

@@ -125,7 +125,7 @@ fn main() -> Result<()> {
 /// when it holds them (a checkout), else the repository this binary was built from.
 fn repo_root() -> PathBuf {
     let cwd = std::env::current_dir().unwrap_or_default();
-    if cwd.join("robot-agent/models").is_dir() {
+    if cwd.join("robot-model/models").is_dir() {
         return cwd;
     }
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or(cwd)

@@ -2,14 +2,17 @@
 //! hands placed on the object by IK, pushes, settle and run lengths), the coordinator's
 //! [`ControllerConfig`] (the scenario's gains, object and minimum forces), the agents'
 //! description files, and the [`ReferencePlan`] that turns ticks into task references.
+//! Each description file is loaded here once ([`RobotCache`]); the loaded robots travel with
+//! the plan to the grasp planner, the world build and the agents.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use coordinator::controller::ControllerConfig;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use protocol::conventions::quat_to_wxyz;
 use protocol::{Header, Pose, PoseReference, TaskReferences, TorsoReference};
-use robot_agent::description::Robot;
+use robot_model::{DescriptionError, Robot, RobotCache};
 use sim_bridge::perturbation::Perturbation;
 use sim_bridge::scene::Scene;
 use sim_bridge::world::{ContactParams, ObjectSpec, RobotPlacement, SolverParams, WorldSpec};
@@ -25,9 +28,9 @@ pub const TEAM: &str = "team";
 #[derive(Debug, Error)]
 pub enum PlanError {
     #[error("robot {robot}: {source}")]
-    Description { robot: String, source: robot_agent::description::DescriptionError },
+    Description { robot: String, source: DescriptionError },
     #[error("placing the hands on the object: {0}")]
-    Ik(#[from] sim_bridge::ik::IkError),
+    Ik(#[from] crate::grasp_plan::GraspPlanError),
     #[error(transparent)]
     World(#[from] sim_bridge::world::WorldError),
     #[error("controller: {0}")]
@@ -53,6 +56,8 @@ pub struct PlannedRobot {
     pub description: PathBuf,
     /// Its actuated joints, in the order of its torque commands.
     pub joints: Vec<String>,
+    /// The loaded description (shared by robots with the same file).
+    pub robot: Arc<Robot>,
 }
 
 impl Plan {
@@ -60,15 +65,21 @@ impl Plan {
     pub fn total_ticks(&self) -> u64 {
         self.scene.settle_ticks + self.scene.ticks
     }
+
+    /// The loaded robots in scenario order (the scene's world order).
+    pub fn loaded_robots(&self) -> Vec<Arc<Robot>> {
+        self.robots.iter().map(|r| r.robot.clone()).collect()
+    }
 }
 
 /// Build the plan; relative description paths are taken from `root` (the repository).
 pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
     let mut placements = Vec::new();
     let mut robots = Vec::new();
+    let mut cache = RobotCache::new();
     for r in &s.robots {
         let path = if r.description.is_absolute() { r.description.clone() } else { root.join(&r.description) };
-        let robot = Robot::load(&path).map_err(|source| PlanError::Description { robot: r.id.clone(), source })?;
+        let robot = cache.load(&path).map_err(|source| PlanError::Description { robot: r.id.clone(), source })?;
         // The base stands at the description's standing height.
         let z = robot.standing_q[2];
         placements.push(RobotPlacement {
@@ -78,7 +89,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
             base_yaw: r.yaw,
             joint_overrides: Default::default(),
         });
-        robots.push(PlannedRobot { id: r.id.clone(), description: path, joints: robot.actuated_joints.clone() });
+        robots.push(PlannedRobot { id: r.id.clone(), description: path, joints: robot.actuated_joints.clone(), robot });
     }
     let object = ObjectSpec {
         size: s.object.size,
@@ -99,7 +110,8 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
         initial_joint_noise: 0.0,
     };
     world.substeps()?;
-    sim_bridge::ik::place_hands(&mut world)?;
+    let loaded: Vec<Arc<Robot>> = robots.iter().map(|r| r.robot.clone()).collect();
+    crate::grasp_plan::place_hands(&mut world, &loaded)?;
 
     let perturbations = s
         .perturbations

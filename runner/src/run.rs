@@ -12,7 +12,6 @@ use coordinator::controller::PaperController;
 use coordinator::service::{self as coordinator_service, CoordinatorConfig};
 use protocol::transport::{self, Role, ZenohArgs};
 use robot_agent::agent::{self as agent_loop, AgentConfig};
-use robot_agent::description::Robot;
 use robot_agent::dynamics_source::ModelDynamics;
 use thiserror::Error;
 use tokio::sync::watch;
@@ -85,15 +84,14 @@ pub async fn run_embedded(plan: &Plan, opts: &RunOptions) -> Result<Records, Run
     let mut agents = Vec::new();
     for r in &plan.robots {
         let id = &r.id;
-        let robot = Robot::load(&r.description).map_err(|e| RunError::Agent { robot: id.clone(), reason: e.to_string() })?;
-        let source = ModelDynamics::new(robot).map_err(|e| RunError::Agent { robot: id.clone(), reason: e.to_string() })?;
+        let source = ModelDynamics::shared(r.robot.clone()).map_err(|e| RunError::Agent { robot: id.clone(), reason: e.to_string() })?;
         let acfg = AgentConfig::new(TEAM, id).with_deadline_time(AGENT_COMMAND_DEADLINE);
         let session = session.clone();
         let rx = stop_rx.clone();
         agents.push((id.clone(), tokio::spawn(async move { agent_loop::run(&session, acfg, source, rx).await })));
     }
     let driver_task = tokio::spawn(driver.run(stop_rx.clone()));
-    let bridge = sim_bridge::scene::run(&session, &plan.scene, stop_rx.clone()).await;
+    let bridge = sim_bridge::scene::run(&session, &plan.scene, &plan.loaded_robots(), stop_rx.clone()).await;
     if bridge.is_err() {
         let _ = stop_tx.send(true);
     }

@@ -7,7 +7,7 @@
 //! * [`lockstep`]: the lockstep loop over Zenoh: a tick advances only when every robot's
 //!   torques for it have arrived; a missing robot is named in a timeout error.
 //! * [`world`]: the MuJoCo world built from the robots' URDFs with mjSpec, checked against
-//!   the robots' own models.
+//!   the robots' own models (`robot_model::Robot`, loaded once by the caller and shared).
 //! * [`mujoco_plant`]: the [`plant::Plant`] over that world.
 //! * [`perturbation`]: timed external wrenches.
 
@@ -16,12 +16,10 @@
 #![allow(clippy::needless_range_loop, clippy::manual_is_multiple_of, unknown_lints)]
 
 pub mod ground_truth;
-pub mod ik;
 pub mod lockstep;
 pub mod mujoco_plant;
 pub mod perturbation;
 pub mod plant;
 pub mod realtime;
 pub mod scene;
-pub mod standing;
 pub mod world;

@@ -38,12 +38,10 @@ enum Command {
         zenoh: ZenohArgs,
     },
     /// Run the team in MuJoCo: robots from their description files, the object, lockstep
-    /// (default) or real time. Prints the real-time factor at the end.
+    /// (default) or real time, with the agents and the coordinator running elsewhere. The
+    /// robots start at their standing pose (hands are put on the object by the runner's grasp
+    /// planning: `team run`, or `scene` with the file it writes). Prints the real-time factor.
     Run(RunArgs),
-    /// Only the test-side standing controller (same world arguments as `run`), in its own
-    /// process, publishing on the robots' torque keys; pair with `run` without
-    /// --standing-controller for process-separated speed figures.
-    Stand(RunArgs),
     /// Run a scene file (world, pushes, settle and run lengths) as `team run --distributed`
     /// writes it into its report folder; lockstep, ground truth published every tick.
     Scene {
@@ -79,9 +77,6 @@ struct RunArgs {
     /// Object centre, m (x,y,z).
     #[arg(long, value_delimiter = ',', default_value = "0,0,0.6")]
     object_position: Vec<f64>,
-    /// Put the hands flat on the object by IK on the robots' models (default when there is an object).
-    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
-    grasp_ik: bool,
     #[arg(long, default_value_t = 1000.0)]
     control_hz: f64,
     #[arg(long, default_value_t = 1000.0)]
@@ -102,14 +97,6 @@ struct RunArgs {
     /// Standard deviation of initial joint noise, rad.
     #[arg(long, default_value_t = 0.0)]
     joint_noise: f64,
-    /// Run the test-side standing controller in this process (PD + gravity compensation from
-    /// the robots' own models, sent on the torque keys as the agents would): a self-contained
-    /// run for speed figures. Without it, the agents and coordinator must be running.
-    #[arg(long)]
-    standing_controller: bool,
-    /// With --standing-controller and an object: the force each hand squeezes it with, N.
-    #[arg(long, default_value_t = 40.0)]
-    squeeze: f64,
     /// Write the recorded ground truth (every --record-every ticks) as CSV here.
     #[arg(long)]
     ground_truth_csv: Option<std::path::PathBuf>,
@@ -157,12 +144,12 @@ async fn main() -> Result<()> {
             session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
         }
         Command::Run(args) => run(args).await?,
-        Command::Stand(args) => stand(args).await?,
         Command::Scene { path, zenoh } => {
             let scene = sim_bridge::scene::Scene::load(&path)?;
+            let robots = sim_bridge::world::load_robots(&scene.world)?;
             let session = transport::open(&zenoh, Role::Member).await?;
             let (_tx, rx) = tokio::sync::watch::channel(false);
-            let r = sim_bridge::scene::run(&session, &scene, rx).await?;
+            let r = sim_bridge::scene::run(&session, &scene, &robots, rx).await?;
             println!(
                 "scene {}: settled {} ticks in {:.3} s wall, ran {} ticks ({:.3} s simulated) in {:.3} s wall: real-time factor {:.3}",
                 path.display(),
@@ -182,32 +169,11 @@ async fn main() -> Result<()> {
 async fn run(a: RunArgs) -> Result<()> {
     let (spec, world) = build_world(&a)?;
     let n = spec.robots.len();
-    let controllers = if a.standing_controller { controllers(&a, &spec, &world)? } else { Vec::new() };
-    run_world(a, spec, world, controllers, n).await
-}
-
-/// Only the test-side standing controller, in its own process, acting as the agents on the
-/// torque keys (for process-separated speed figures). Listens on the default endpoint unless
-/// told otherwise; stops on Ctrl-C.
-async fn stand(a: RunArgs) -> Result<()> {
-    let (spec, world) = build_world(&a)?;
-    let ctl = controllers(&a, &spec, &world)?;
-    let session = transport::open(&a.zenoh, Role::Hub).await?;
-    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
-    let team = a.team.clone();
-    let s = session.clone();
-    let task = tokio::spawn(async move { sim_bridge::standing::serve(&s, &team, ctl, true, stop_rx).await });
-    tokio::signal::ctrl_c().await?;
-    stop_tx.send(true).ok();
-    let sent = task.await??;
-    println!("standing controller sent {sent} torque commands");
-    session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
-    Ok(())
+    run_world(a, world, n).await
 }
 
 fn build_world(a: &RunArgs) -> Result<(sim_bridge::world::WorldSpec, sim_bridge::world::World)> {
-    use sim_bridge::world::{ObjectSpec, RobotPlacement, World, WorldSpec};
-    anyhow::ensure!(a.squeeze.is_finite() && a.squeeze >= 0.0, "--squeeze must be a non-negative number");
+    use sim_bridge::world::{load_robots, ObjectSpec, RobotPlacement, World, WorldSpec};
     anyhow::ensure!(!a.robots.is_empty(), "--robots must name at least one robot");
     anyhow::ensure!(a.spacing.is_finite() && a.spacing > 0.0, "--spacing must be a positive number");
     anyhow::ensure!(a.command_timeout.is_finite() && a.command_timeout > 0.0, "--command-timeout must be positive");
@@ -238,59 +204,16 @@ fn build_world(a: &RunArgs) -> Result<(sim_bridge::world::WorldSpec, sim_bridge:
     spec.seed = a.seed;
     spec.initial_joint_noise = a.joint_noise;
     spec.substeps()?;
-    if spec.object.is_some() && a.grasp_ik {
-        for s in sim_bridge::ik::place_hands(&mut spec)? {
-            tracing::info!(position_error = s.position_error, angle_error = s.angle_error, iterations = s.iterations, "hand placed by IK");
-        }
-    }
-    let world = World::build(&spec)?;
+    let robots = load_robots(&spec)?;
+    let world = World::build(&spec, &robots)?;
     tracing::info!(robots = n, nq = world.model.ffi().nq, nv = world.model.ffi().nv, substeps = world.substeps, "world built and checked against the robots' models");
     Ok((spec, world))
 }
 
-fn controllers(
-    a: &RunArgs,
-    spec: &sim_bridge::world::WorldSpec,
-    world: &sim_bridge::world::World,
-) -> Result<Vec<(String, sim_bridge::standing::StandingController)>> {
-    let n = spec.robots.len();
-    world
-            .robots
-            .iter()
-            .map(|r| {
-                let off = r.robot.model.nq - r.robot.joints();
-                let q_ref = r.initial_q[off..].to_vec();
-                let c = sim_bridge::standing::StandingController::new(r.robot.clone(), Some(q_ref), Default::default())?;
-                let c = match spec.object {
-                    Some(o) if a.grasp_ik => c.with_hand_load(sim_bridge::standing::HandLoad { squeeze: a.squeeze, carry: o.mass * protocol::conventions::GRAVITY / n as f64 })?,
-                    _ => c,
-                };
-                Ok((r.id.clone(), c))
-            })
-            .collect::<Result<Vec<_>, String>>()
-            .map_err(|e| anyhow::anyhow!(e))
-}
-
-async fn run_world(
-    a: RunArgs,
-    spec: sim_bridge::world::WorldSpec,
-    world: sim_bridge::world::World,
-    controllers: Vec<(String, sim_bridge::standing::StandingController)>,
-    n: usize,
-) -> Result<()> {
-    let _ = &spec;
+async fn run_world(a: RunArgs, world: sim_bridge::world::World, n: usize) -> Result<()> {
     let mut plant = sim_bridge::mujoco_plant::MujocoPlant::new(world)?;
-    let role = if a.standing_controller && a.zenoh.listen.is_empty() && a.zenoh.connect.is_empty() && a.zenoh.config.is_none() { Role::Alone } else { Role::Member };
-    let session = transport::open(&a.zenoh, role).await?;
+    let session = transport::open(&a.zenoh, Role::Member).await?;
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
-    let ctl_task = if a.standing_controller {
-        let s = session.clone();
-        let team = a.team.clone();
-        let rx = stop_rx.clone();
-        Some(tokio::spawn(async move { sim_bridge::standing::serve(&s, &team, controllers, true, rx).await }))
-    } else {
-        None
-    };
     let cfg = LockstepConfig {
         team: a.team.clone(),
         ticks: a.ticks,
@@ -337,9 +260,6 @@ async fn run_world(
         println!("perturbations: {} taken, {} refused", extras.perturbations_taken, extras.perturbations_refused);
     }
     stop_tx.send(true).ok();
-    if let Some(t) = ctl_task {
-        t.await??;
-    }
     if let (Some(path), Some(rec)) = (&a.ground_truth_csv, &extras.recorder) {
         let f = std::fs::File::create(path).map_err(|e| anyhow::anyhow!("creating {}: {e}", path.display()))?;
         rec.write_csv(std::io::BufWriter::new(f))?;

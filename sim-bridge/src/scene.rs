@@ -4,6 +4,10 @@
 //! reads it when the bridge runs as its own process, and the embedded run calls [`run`] with
 //! the same value, so both modes simulate the same thing.
 //!
+//! The robots come loaded (`robot_model::Robot`, in the world's order): the embedded run
+//! passes the runner's, the `sim-bridge scene` process loads them from the scene's
+//! description paths ([`crate::world::load_robots`]).
+//!
 //! The run: build the world, settle `settle_ticks` lockstep ticks under the controller (the
 //! scenario clock then restarts at 0, tick numbers continue), add the pushes (their `start`
 //! is on the scenario clock), run `ticks` lockstep ticks. Ground truth is published on
@@ -11,8 +15,10 @@
 //! drives its progress bar from it).
 
 use std::path::Path;
+use std::sync::Arc;
 use std::time::Duration;
 
+use robot_model::Robot;
 use serde::{Deserialize, Serialize};
 use tokio::sync::watch;
 use zenoh::Session;
@@ -98,10 +104,11 @@ pub enum SceneError {
     Bridge(#[from] BridgeError),
 }
 
-/// Build the world and run the scene in lockstep (see the module docs).
-pub async fn run(session: &Session, scene: &Scene, stop: watch::Receiver<bool>) -> Result<SceneReport, SceneError> {
+/// Build the world from `robots` (the scene's, in its order) and run the scene in lockstep
+/// (see the module docs).
+pub async fn run(session: &Session, scene: &Scene, robots: &[Arc<Robot>], stop: watch::Receiver<bool>) -> Result<SceneReport, SceneError> {
     scene.check()?;
-    let world = World::build(&scene.world)?;
+    let world = World::build(&scene.world, robots)?;
     let mut plant = MujocoPlant::new(world)?;
     let mut extras = Extras { publish_ground_truth: true, perturbation_key: true, ..Default::default() };
     let settle = if scene.settle_ticks > 0 {

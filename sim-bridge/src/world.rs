@@ -1,5 +1,10 @@
 //! The MuJoCo world of the team, built from the robots' own URDFs (DESIGN.md §5).
 //!
+//! The robots come already loaded (`robot_model::Robot`, one `Arc` per description file,
+//! shared with the rest of the process): [`load_robots`] loads those of a [`WorldSpec`] when
+//! nobody else has, and [`World::build`] takes them in the spec's order. The palm and foot
+//! bodies are the parent links of the hand and foot frames in the robot's model.
+//!
 //! Each robot's URDF is parsed by MuJoCo's URDF importer into its own `mjSpec` (with the
 //! compiler block `fusestatic="false" discardvisual="true" balanceinertia="false"
 //! inertiafromgeom="false"` injected, so every URDF link stays a body with exactly the URDF's
@@ -14,11 +19,12 @@
 use std::collections::BTreeMap;
 use std::ffi::CString;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use mujoco_rs::mujoco_c::{self, mjModel, mjtObj};
 use mujoco_rs::prelude::*;
 use mujoco_rs::wrappers::mj_editing::Attach;
-use robot_agent::description::Robot;
+use robot_model::{Robot, RobotCache};
 use thiserror::Error;
 
 /// Errors while building or checking the world.
@@ -50,7 +56,7 @@ pub enum WorldError {
 pub struct RobotPlacement {
     /// Robot id (protocol id rules), also the MuJoCo name prefix `{id}/`.
     pub id: String,
-    /// Path of the robot's description TOML (`robot_agent::description`).
+    /// Path of the robot's description TOML (`robot_model::description`).
     pub description: PathBuf,
     /// Base position in the world (the default robot stands with its base at z = 0.54882015).
     pub base_position: [f64; 3],
@@ -65,7 +71,7 @@ impl RobotPlacement {
     pub fn default_robot(id: &str, x: f64, y: f64, yaw: f64) -> Self {
         RobotPlacement {
             id: id.to_string(),
-            description: robot_agent::description::default_robot_path(),
+            description: robot_model::default_robot_path(),
             base_position: [x, y, 0.54882015],
             base_yaw: yaw,
             joint_overrides: BTreeMap::new(),
@@ -273,8 +279,8 @@ fn finite(what: &str, xs: &[f64]) -> Result<(), WorldError> {
 #[derive(Debug, Clone)]
 pub struct RobotIndex {
     pub id: String,
-    /// The robot's own model and description.
-    pub robot: Robot,
+    /// The robot's own model and description (shared with whoever loaded it).
+    pub robot: Arc<Robot>,
     /// qpos address of the free joint (7: position, quaternion w,x,y,z).
     pub free_qpos: usize,
     /// qvel address of the free joint (6).
@@ -377,10 +383,42 @@ fn yaw_quat(yaw: f64) -> [f64; 4] {
     [(yaw / 2.0).cos(), 0.0, 0.0, (yaw / 2.0).sin()]
 }
 
+/// Load the robots of `spec`, in its order: each description file once, robots that share one
+/// share its `Arc`.
+pub fn load_robots(spec: &WorldSpec) -> Result<Vec<Arc<Robot>>, WorldError> {
+    let mut cache = RobotCache::new();
+    spec.robots
+        .iter()
+        .map(|p| {
+            cache.load(&p.description).map_err(|e| WorldError::Description { id: p.id.clone(), path: p.description.clone(), reason: e.to_string() })
+        })
+        .collect()
+}
+
+/// `robots` are those of `spec`, in its order, each loaded from its placement's description.
+fn check_robots(spec: &WorldSpec, robots: &[Arc<Robot>]) -> Result<(), WorldError> {
+    if robots.len() != spec.robots.len() {
+        return Err(WorldError::Invalid(format!("{} robots loaded for {} placements", robots.len(), spec.robots.len())));
+    }
+    for (placement, robot) in spec.robots.iter().zip(robots) {
+        if robot.path != placement.description {
+            return Err(WorldError::Invalid(format!(
+                "robot {}: its placement names {} but the robot given was loaded from {}",
+                placement.id,
+                placement.description.display(),
+                robot.path.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
 impl World {
-    /// Build and compile the world, and check it against each robot's own model.
-    pub fn build(spec: &WorldSpec) -> Result<World, WorldError> {
+    /// Build and compile the world from `spec` and its already loaded `robots` (the spec's
+    /// order, see [`load_robots`]), and check it against each robot's own model.
+    pub fn build(spec: &WorldSpec, robots: &[Arc<Robot>]) -> Result<World, WorldError> {
         spec.validate()?;
+        check_robots(spec, robots)?;
         let substeps = spec.substeps()?;
         let dt = 1.0 / spec.physics_hz;
         // A contact time constant below two physics steps is unstable (MuJoCo docs).
@@ -390,13 +428,8 @@ impl World {
 
         let mut world = MjSpec::from_xml_string(&world_xml(spec, dt)).map_err(|e| WorldError::Build(e.to_string()))?;
         let mut robots_loaded = Vec::new();
-        for placement in &spec.robots {
+        for (placement, robot) in spec.robots.iter().zip(robots) {
             let id = &placement.id;
-            let robot = Robot::load(&placement.description).map_err(|e| WorldError::Description {
-                id: id.clone(),
-                path: placement.description.clone(),
-                reason: e.to_string(),
-            })?;
             let urdf = std::fs::read_to_string(&robot.urdf_path).map_err(|e| WorldError::Urdf {
                 id: id.clone(),
                 path: robot.urdf_path.clone(),
@@ -405,8 +438,8 @@ impl World {
             let text = mujoco_urdf_text(&urdf).map_err(|reason| WorldError::Import { id: id.clone(), reason })?;
             let mut child = MjSpec::from_xml_string(&text).map_err(|e| WorldError::Import { id: id.clone(), reason: e.to_string() })?;
             let root = robot.model.bodies[0].name.clone();
-            let hand_body = hand_body_name(&robot)?;
-            let foot_bodies = foot_body_names(&robot);
+            let hand_body = hand_body_name(robot)?;
+            let foot_bodies = foot_body_names(robot);
             {
                 let root_body = child
                     .world_body_mut()
@@ -414,7 +447,7 @@ impl World {
                     .ok_or_else(|| WorldError::Import { id: id.clone(), reason: format!("no root body {root}") })?;
                 root_body.add_free_joint().set_name("base").map_err(|e| WorldError::Build(e.to_string()))?;
             }
-            configure_geoms(&mut child, &robot, &contact, &hand_body, &foot_bodies, id)?;
+            configure_geoms(&mut child, robot, &contact, &hand_body, &foot_bodies, id)?;
             let q = yaw_quat(placement.base_yaw);
             let frame = world.world_body_mut().add_frame();
             *frame.pos_mut() = placement.base_position;
@@ -423,10 +456,10 @@ impl World {
                 .body_mut(&root)
                 .ok_or_else(|| WorldError::Import { id: id.clone(), reason: format!("no root body {root}") })?;
             frame.attach_by_deep_copy(body, &format!("{id}/"), "").map_err(|e| WorldError::Build(format!("attaching {id}: {e}")))?;
-            robots_loaded.push((placement.clone(), robot));
+            robots_loaded.push((placement.clone(), robot.clone(), hand_body));
         }
         // One motor per actuated joint, limited to the robot's torque limits.
-        for (placement, robot) in &robots_loaded {
+        for (placement, robot, _) in &robots_loaded {
             for (name, limit) in robot.actuated_joints.iter().zip(&robot.torque_limits) {
                 let act = world.add_actuator();
                 act.set_name(&format!("{}/{name}", placement.id)).map_err(|e| WorldError::Build(e.to_string()))?;
@@ -453,7 +486,7 @@ impl World {
         let raw = model.ffi();
         let mut robots = Vec::new();
         let mut rng = SplitMix(spec.seed ^ 0x9e37_79b9_7f4a_7c15);
-        for (placement, robot) in robots_loaded {
+        for (placement, robot, hand_body) in robots_loaded {
             let id = placement.id.clone();
             let p = |n: &str| format!("{id}/{n}");
             let free = name2id(raw, mjtObj::mjOBJ_JOINT, "joint", &p("base"))?;
@@ -471,7 +504,6 @@ impl World {
             let root = &robot.model.bodies[0].name;
             let base_body = name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(root))?;
             let bodies: Vec<usize> = (0..raw.nbody as usize).filter(|&b| id2name(raw, mjtObj::mjOBJ_BODY, b).starts_with(&format!("{id}/"))).collect();
-            let hand_body = hand_body_name(&robot)?;
             let hb = name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(&hand_body))?;
             let hand_geoms: Vec<usize> = (0..raw.ngeom as usize).filter(|&g| unsafe { *raw.geom_bodyid.add(g) } as usize == hb).collect();
             let foot_geoms: Vec<usize> = (0..raw.ngeom as usize)
@@ -529,25 +561,22 @@ fn is_foot_geom(raw: &mjModel, g: usize, radius: f64) -> bool {
     t == mujoco_c::mjtGeom::mjGEOM_SPHERE as i32 && (size - radius).abs() < 1e-9
 }
 
+/// The URDF link of `frame`'s joint's parent, from the robot's model (`None`: no such frame,
+/// or the root link).
+fn parent_link(robot: &Robot, frame: &str) -> Option<String> {
+    let id = robot.model.frame_id(frame).ok()?;
+    robot.model.parent_link(id).map(str::to_string)
+}
+
 /// The URDF link (a MuJoCo body, since fusestatic is off) that carries the palm: the parent
 /// link of the hand contact frame.
 fn hand_body_name(robot: &Robot) -> Result<String, WorldError> {
-    let urdf = urdf_rs::read_file(&robot.urdf_path).map_err(|e| WorldError::Urdf { id: robot.name.clone(), path: robot.urdf_path.clone(), reason: e.to_string() })?;
-    urdf.joints
-        .iter()
-        .find(|j| j.child.link == robot.hand_frame)
-        .map(|j| j.parent.link.clone())
-        .ok_or_else(|| WorldError::Invalid(format!("no joint leads to the hand frame {}", robot.hand_frame)))
+    parent_link(robot, &robot.hand_frame).ok_or_else(|| WorldError::Invalid(format!("no joint leads to the hand frame {}", robot.hand_frame)))
 }
 
 /// Links carrying the foot spheres: the parents of the foot frames.
 fn foot_body_names(robot: &Robot) -> Vec<String> {
-    let Ok(urdf) = urdf_rs::read_file(&robot.urdf_path) else { return Vec::new() };
-    robot
-        .foot_frames
-        .iter()
-        .filter_map(|f| urdf.joints.iter().find(|j| &j.child.link == f).map(|j| j.parent.link.clone()))
-        .collect()
+    robot.foot_frames.iter().filter_map(|f| parent_link(robot, f)).collect()
 }
 
 fn configure_geoms(child: &mut MjSpec, robot: &Robot, c: &ContactParams, hand_body: &str, foot_bodies: &[String], id: &str) -> Result<(), WorldError> {

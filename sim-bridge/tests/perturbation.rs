@@ -4,7 +4,7 @@
 use protocol::{Header, PerturbationRequest, PerturbationTarget};
 use sim_bridge::mujoco_plant::MujocoPlant;
 use sim_bridge::plant::{empty_state, Plant};
-use sim_bridge::world::{World, WorldSpec};
+use sim_bridge::world::{load_robots, World, WorldSpec};
 
 fn req(target: PerturbationTarget, fx: f64, start: f64, duration: f64) -> PerturbationRequest {
     PerturbationRequest { header: Header::new("t", None, 0, 0), target, wrench: [fx, 0.0, 0.0, 0.0, 0.0, 0.0], start: Some(start), duration }
@@ -17,7 +17,7 @@ fn a_push_on_the_object_moves_it_only_while_it_lasts() {
     // The object alone on the floor, away from the robot.
     let o = spec.object.as_mut().unwrap();
     o.position = [0.5, 2.0, 0.3];
-    let world = World::build(&spec).unwrap();
+    let world = World::build(&spec, &load_robots(&spec).unwrap()).unwrap();
     let mut plant = MujocoPlant::new(world).unwrap();
     // 20 N along +x on a 1 kg cube (friction 0.8 * 9.81 = 7.8 N) from 0.1 s for 0.2 s.
     plant.perturb(&req(PerturbationTarget::Object, 20.0, 0.1, 0.2)).unwrap();
@@ -44,7 +44,8 @@ fn a_push_on_the_object_moves_it_only_while_it_lasts() {
 
 #[test]
 fn a_push_on_a_robot_body_and_bad_targets() {
-    let world = World::build(&WorldSpec::single("r1")).unwrap();
+    let spec = WorldSpec::single("r1");
+    let world = World::build(&spec, &load_robots(&spec).unwrap()).unwrap();
     let mut plant = MujocoPlant::new(world).unwrap();
     let target = |b: &str| PerturbationTarget::RobotBody { robot: "r1".into(), body: b.into() };
     assert!(plant.perturb(&req(target("nonexistent_link"), 1.0, 0.0, 0.1)).is_err());

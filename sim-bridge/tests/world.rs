@@ -2,11 +2,12 @@
 
 use sim_bridge::mujoco_plant::MujocoPlant;
 use sim_bridge::plant::{empty_state, Plant};
-use sim_bridge::world::{check_against_model, World, WorldError, WorldSpec};
+use sim_bridge::world::{check_against_model, load_robots, World, WorldError, WorldSpec};
 
 #[test]
 fn pair_world_builds_and_matches_the_models() {
-    let w = World::build(&WorldSpec::paper_pair()).expect("world builds");
+    let spec = WorldSpec::paper_pair();
+    let w = World::build(&spec, &load_robots(&spec).unwrap()).expect("world builds");
     let raw = w.model.ffi();
     // 2 robots x (7 + 18) + object 7
     assert_eq!(raw.nq, 2 * 25 + 7);
@@ -26,11 +27,35 @@ fn pair_world_builds_and_matches_the_models() {
 
 #[test]
 fn a_mass_or_joint_order_mismatch_is_detected() {
-    let w = World::build(&WorldSpec::single("r1")).unwrap();
+    let spec = WorldSpec::single("r1");
+    let w = World::build(&spec, &load_robots(&spec).unwrap()).unwrap();
     let mut r = w.robots[0].clone();
-    r.robot.model.total_mass += 0.01;
+    std::sync::Arc::make_mut(&mut r.robot).model.total_mass += 0.01;
     assert!(matches!(check_against_model(&w.model, &r), Err(WorldError::MassMismatch { ref id, .. }) if id == "r1"));
     let mut r = w.robots[0].clone();
-    r.robot.actuated_joints.swap(0, 1);
+    std::sync::Arc::make_mut(&mut r.robot).actuated_joints.swap(0, 1);
     assert!(matches!(check_against_model(&w.model, &r), Err(WorldError::JointOrderMismatch { .. })));
+}
+
+#[test]
+fn robots_are_loaded_once_per_description_and_must_match_the_spec() {
+    let spec = WorldSpec::paper_pair();
+    let robots = load_robots(&spec).unwrap();
+    // Both robots use the default description: one load, one shared robot.
+    assert_eq!(robots.len(), 2);
+    assert!(std::sync::Arc::ptr_eq(&robots[0], &robots[1]));
+    let w = World::build(&spec, &robots).unwrap();
+    assert!(w.robots.iter().all(|r| std::sync::Arc::ptr_eq(&r.robot, &robots[0])));
+    // One robot short, or one loaded from another file: refused, naming what is wrong.
+    let e = World::build(&spec, &robots[..1]).err().expect("too few robots refused");
+    assert!(matches!(&e, WorldError::Invalid(m) if m.contains("1 robots loaded for 2 placements")), "{e}");
+    let mut other = (*robots[1]).clone();
+    other.path = "elsewhere.toml".into();
+    let e = World::build(&spec, &[robots[0].clone(), std::sync::Arc::new(other)]).err().expect("wrong robot refused");
+    assert!(matches!(&e, WorldError::Invalid(m) if m.contains("r2") && m.contains("elsewhere.toml")), "{e}");
+    // A missing description is named with the robot.
+    let mut spec = WorldSpec::single("r9");
+    spec.robots[0].description = "/nonexistent/robot.toml".into();
+    let e = load_robots(&spec).unwrap_err();
+    assert!(matches!(&e, WorldError::Description { id, .. } if id == "r9"), "{e}");
 }

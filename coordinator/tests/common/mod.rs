@@ -1,11 +1,12 @@
-//! Team states from the real default robot (robot_agent's model and TermsBuilder).
+//! Team states from the real default robot (robot_model's model, robot_agent's TermsBuilder).
 #![allow(dead_code)]
 
 use nalgebra::DVector;
 use protocol::{DynamicsTerms, Header, Pose, RobotDescription, RobotState};
 use rand::{Rng, SeedableRng};
-use robot_agent::description::{default_robot_path, Robot};
+use robot_agent::dynamics_source::robot_description;
 use robot_agent::terms::{empty_terms, ContactSet, TermsBuilder};
+use robot_model::{default_robot_path, Robot};
 
 pub const TEAM: &str = "t";
 
@@ -22,7 +23,7 @@ impl Fixture {
     }
 
     pub fn description(&self, id: &str) -> RobotDescription {
-        self.robot.summary(TEAM, id)
+        robot_description(&self.robot, TEAM, id)
     }
 
     /// Standing `q` of robot `k` of `count` placed on a circle facing the centre. For two

@@ -33,7 +33,7 @@
 //! use protocol::transport::{self, Role, ZenohArgs};
 //! use protocol::RobotState;
 //! use robot_agent::core::{AgentConfig, AgentCore};
-//! use robot_agent::description::Robot;
+//! use robot_model::Robot;
 //! use robot_agent::dynamics_source::ModelDynamics;
 //! use robot_agent::hardware::{driver, DriverConfig, HardwareError, HwStatus, RobotHardware, ZenohLink};
 //!

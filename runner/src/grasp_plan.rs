@@ -1,0 +1,101 @@
+//! Where the hands go at the start of a run: each robot's hand flat on the face of the object
+//! that looks at it. This is planning (which face, where on it); the arm solve itself is
+//! `robot_model::ik`.
+//!
+//! The face is the object face whose outward normal points most toward the robot's base. The
+//! hand target: `hand_contact` at the face's point level with the face centre, palm normal
+//! (`+z`) anti-parallel to the face's outward normal, hand `x` horizontal (`x = e_z x z`), as in
+//! the standing pose of the default robot. Each arm is solved on the robot's own model, base
+//! fixed at its placement, legs at their configuration, only the joints that move the hand
+//! frame changing, within their position limits.
+
+use std::sync::Arc;
+
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use protocol::conventions::quat_from_wxyz;
+use robot_model::ik::{self, IkError, IkOptions, IkSolution};
+use robot_model::Robot;
+use sim_bridge::world::{ObjectSpec, WorldSpec};
+use thiserror::Error;
+
+/// Why the hands could not be placed.
+#[derive(Debug, Error)]
+pub enum GraspPlanError {
+    #[error("robot {robot}: {source}")]
+    Ik { robot: String, source: IkError },
+    #[error("the world has no object to put the hands on")]
+    NoObject,
+    #[error("robot {robot}: only a floating-base robot can be placed (its base pose is part of q)")]
+    FixedBase { robot: String },
+    #[error("{robots} robots loaded for {placements} placements")]
+    RobotCount { robots: usize, placements: usize },
+}
+
+/// Target pose of the hand frame on the face of `object` that faces a base at `base`.
+pub fn face_target(object: &ObjectSpec, base: &Vector3<f64>, hand_height: Option<f64>) -> (Vector3<f64>, Matrix3<f64>) {
+    let ro = quat_from_wxyz(object.orientation);
+    let po = Vector3::from(object.position);
+    let to_base = ro.inverse_transform_vector(&(base - po));
+    // The face (in the object's frame) most toward the base.
+    let mut best = (0usize, 1.0f64, f64::MIN);
+    for axis in 0..3 {
+        for sign in [1.0, -1.0] {
+            let d = sign * to_base[axis] / (object.size[axis] / 2.0);
+            if d > best.2 {
+                best = (axis, sign, d);
+            }
+        }
+    }
+    let mut n_local = Vector3::zeros();
+    n_local[best.0] = best.1;
+    let n = ro.transform_vector(&n_local);
+    let mut p = po + n * (object.size[best.0] / 2.0);
+    if let Some(h) = hand_height {
+        // Slide along the face (keep on its plane) to the requested height if it is vertical.
+        if n.z.abs() < 1e-9 {
+            p.z = h;
+        }
+    }
+    let z = -n;
+    let mut x = Vector3::z().cross(&z);
+    if x.norm() < 1e-9 {
+        x = Vector3::x().cross(&z);
+    }
+    let x = x.normalize();
+    let y = z.cross(&x);
+    (p, Matrix3::from_columns(&[x, y, z]))
+}
+
+/// Put every robot's hand flat on its face of the object: solves each arm on the robot's own
+/// model (`robots`: loaded, in the spec's order) from its placement and writes the arm joints
+/// into the placement's overrides. Returns the solutions in robot order.
+pub fn place_hands(spec: &mut WorldSpec, robots: &[Arc<Robot>]) -> Result<Vec<IkSolution>, GraspPlanError> {
+    let object = spec.object.ok_or(GraspPlanError::NoObject)?;
+    if robots.len() != spec.robots.len() {
+        return Err(GraspPlanError::RobotCount { robots: robots.len(), placements: spec.robots.len() });
+    }
+    let mut out = Vec::new();
+    for (r, robot) in spec.robots.iter_mut().zip(robots) {
+        if !robot.model.floating_base {
+            return Err(GraspPlanError::FixedBase { robot: r.id.clone() });
+        }
+        let mut q: Vec<f64> = robot.standing_q.iter().copied().collect();
+        let off = robot.model.nq - robot.model.joint_names.len();
+        for (j, v) in &r.joint_overrides {
+            if let Some(k) = robot.model.joint_names.iter().position(|n| n == j) {
+                q[off + k] = *v;
+            }
+        }
+        q[0..3].copy_from_slice(&r.base_position);
+        let yaw = UnitQuaternion::from_euler_angles(0.0, 0.0, r.base_yaw);
+        q[3..7].copy_from_slice(&[yaw.w, yaw.i, yaw.j, yaw.k]);
+        let base = Vector3::from(r.base_position);
+        let (p, rot) = face_target(&object, &base, None);
+        let sol = ik::solve_hand(robot, &q, &p, &rot, &IkOptions::default()).map_err(|source| GraspPlanError::Ik { robot: r.id.clone(), source })?;
+        for (name, v) in &sol.joints {
+            r.joint_overrides.insert(name.clone(), *v);
+        }
+        out.push(sol);
+    }
+    Ok(out)
+}
