@@ -6,6 +6,8 @@
 //! cargo run --release -p robot-agent --example mock_robot         # Ctrl-C stops it
 //! ```
 //!
+//! It takes the agent's `--team`, `--id` and Zenoh flags (`--connect tcp/HOST:PORT`, ...).
+//!
 //! The mock's joint velocities decay as `(1 - dt d)^k`; stop the coordinator and the agent
 //! enters safe mode within its deadline. A lab's robot replaces `MockHardware` with its own
 //! `RobotHardware` and `PlaceholderDynamics` with its model (robot-agent README, "Plugging in
@@ -15,24 +17,36 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
+use clap::Parser;
 use protocol::transport::{self, Role, ZenohArgs};
 use robot_agent::core::{AgentConfig, AgentCore};
 use robot_agent::dynamics_source::PlaceholderDynamics;
 use robot_agent::hardware::{driver, DriverConfig, MockConfig, MockHardware, ZenohLink};
 
+#[derive(Parser)]
+struct Args {
+    #[arg(long, default_value = "team")]
+    team: String,
+    #[arg(long, default_value = "r1")]
+    id: String,
+    #[command(flatten)]
+    zenoh: ZenohArgs,
+}
+
 fn main() -> anyhow::Result<()> {
+    let args = Args::parse();
     tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
         .with_writer(std::io::stderr)
         .init();
     let joints = 3;
     let rate = DriverConfig::new(Duration::from_millis(1));
-    let cfg = AgentConfig::new("team", "r1");
+    let cfg = AgentConfig::new(&args.team, &args.id);
     let mut core = AgentCore::new(&cfg, PlaceholderDynamics { joints, nv: joints })?;
     let mut robot = MockHardware::new(MockConfig::new(joints, 0.5, rate.period.as_secs_f64()));
 
     let rt = tokio::runtime::Runtime::new()?;
-    let session = rt.block_on(transport::open(&ZenohArgs::default(), Role::Member))?;
+    let session = rt.block_on(transport::open(&args.zenoh, Role::Member))?;
     let stop = Arc::new(AtomicBool::new(false));
     let on_signal = stop.clone();
     rt.spawn(async move {
