@@ -51,7 +51,7 @@ pub enum WorldError {
 }
 
 /// A robot of the scenario.
-#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RobotPlacement {
     /// Robot id (protocol id rules), also the MuJoCo name prefix `{id}/`.
@@ -67,15 +67,10 @@ pub struct RobotPlacement {
 }
 
 impl RobotPlacement {
-    /// The default robot at `(x, y)` at its standing height, facing `yaw`.
+    /// The default robot at `(x, y)` at its standing height, facing `yaw`
+    /// ([`crate::placement::default_robot`]).
     pub fn default_robot(id: &str, x: f64, y: f64, yaw: f64) -> Self {
-        RobotPlacement {
-            id: id.to_string(),
-            description: robot_model::default_robot_path(),
-            base_position: [x, y, 0.54882015],
-            base_yaw: yaw,
-            joint_overrides: BTreeMap::new(),
-        }
+        crate::placement::default_robot(id, [x, y], yaw)
     }
 }
 
@@ -204,17 +199,7 @@ impl WorldSpec {
 
     /// Physics substeps per control tick, checked.
     pub fn substeps(&self) -> Result<u32, WorldError> {
-        if !(self.control_hz.is_finite() && self.control_hz > 0.0 && self.physics_hz.is_finite() && self.physics_hz > 0.0) {
-            return Err(WorldError::Invalid(format!("rates must be positive: control {} Hz, physics {} Hz", self.control_hz, self.physics_hz)));
-        }
-        let n = self.physics_hz / self.control_hz;
-        if (n - n.round()).abs() > 1e-9 || n.round() < 1.0 || n.round() > 1000.0 {
-            return Err(WorldError::Invalid(format!(
-                "physics rate {} Hz must be an integer multiple (1..1000) of the control rate {} Hz",
-                self.physics_hz, self.control_hz
-            )));
-        }
-        Ok(n.round() as u32)
+        protocol::validate::substeps(self.control_hz, self.physics_hz).map_err(|e| WorldError::Invalid(e.to_string()))
     }
 
     fn validate(&self) -> Result<(), WorldError> {
@@ -222,11 +207,9 @@ impl WorldSpec {
         if self.robots.is_empty() {
             return Err(WorldError::Invalid("no robots".into()));
         }
-        for (i, r) in self.robots.iter().enumerate() {
+        protocol::validate::check_unique("robots", self.robots.iter().map(|r| r.id.as_str())).map_err(|e| WorldError::Invalid(e.to_string()))?;
+        for r in &self.robots {
             protocol::validate_id("robot", &r.id).map_err(|e| WorldError::Invalid(e.to_string()))?;
-            if self.robots[..i].iter().any(|o| o.id == r.id) {
-                return Err(WorldError::Invalid(format!("robot id {} used twice", r.id)));
-            }
             finite(&format!("robot {} base position", r.id), &r.base_position)?;
             finite(&format!("robot {} base yaw", r.id), &[r.base_yaw])?;
             for (j, v) in &r.joint_overrides {
@@ -246,10 +229,8 @@ impl WorldSpec {
             if i.iter().any(|x| *x <= 0.0) || i[0] + i[1] < i[2] || i[1] + i[2] < i[0] || i[0] + i[2] < i[1] {
                 return Err(WorldError::Invalid(format!("object inertia {i:?} is not physical")));
             }
-            let n: f64 = o.orientation.iter().map(|x| x * x).sum::<f64>().sqrt();
-            if (n - 1.0).abs() > 1e-6 {
-                return Err(WorldError::Invalid("object orientation is not a unit quaternion".into()));
-            }
+            protocol::validate::check_unit_quaternion_within("object orientation", &o.orientation, protocol::validate::FILE_QUATERNION_TOLERANCE)
+                .map_err(|e| WorldError::Invalid(e.to_string()))?;
         }
         let c = &self.contact;
         finite("contact parameters", &[c.foot_friction, c.floor_friction])?;
