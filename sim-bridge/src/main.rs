@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 use protocol::transport::{self, Role, ZenohArgs};
 use sim_bridge::lockstep::{self, LockstepConfig};
 use sim_bridge::plant::PlaceholderPlant;
+use sim_bridge::scene::{settle_then_run, Pace, PhaseReport};
 
 #[derive(Parser)]
 #[command(version, about = "Simulated robots for the team, in lockstep over Zenoh")]
@@ -173,7 +174,7 @@ async fn run(a: RunArgs) -> Result<()> {
 }
 
 fn build_world(a: &RunArgs) -> Result<(sim_bridge::world::WorldSpec, sim_bridge::world::World)> {
-    use sim_bridge::world::{load_robots, ObjectSpec, RobotPlacement, World, WorldSpec};
+    use sim_bridge::world::{load_robots, ObjectSpec, World, WorldSpec};
     anyhow::ensure!(!a.robots.is_empty(), "--robots must name at least one robot");
     anyhow::ensure!(a.spacing.is_finite() && a.spacing > 0.0, "--spacing must be a positive number");
     anyhow::ensure!(a.command_timeout.is_finite() && a.command_timeout > 0.0, "--command-timeout must be positive");
@@ -182,12 +183,8 @@ fn build_world(a: &RunArgs) -> Result<(sim_bridge::world::WorldSpec, sim_bridge:
     let mut spec = WorldSpec::single("r1");
     spec.robots.clear();
     let n = a.robots.len();
-    for (i, id) in a.robots.iter().enumerate() {
-        let th = std::f64::consts::PI + 2.0 * std::f64::consts::PI * i as f64 / n as f64;
-        let r = if n == 1 { 0.0 } else { a.spacing / 2.0 };
-        let yaw = (th + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI);
-        let yaw = if yaw > std::f64::consts::PI { yaw - 2.0 * std::f64::consts::PI } else { yaw };
-        let mut p = RobotPlacement::default_robot(id, r * th.cos(), r * th.sin(), yaw);
+    for (id, (xy, yaw)) in a.robots.iter().zip(sim_bridge::placement::facing_ring([0.0, 0.0], a.spacing / 2.0, n)) {
+        let mut p = sim_bridge::placement::default_robot(id, xy, yaw);
         if let Some(d) = &a.description {
             p.description = d.clone();
         }
@@ -229,22 +226,20 @@ async fn run_world(a: RunArgs, world: sim_bridge::world::World, n: usize) -> Res
         recorder: a.ground_truth_csv.as_ref().map(|_| sim_bridge::ground_truth::Recorder::new(a.record_every)),
         ..Default::default()
     };
-    if a.settle_ticks > 0 {
-        let settle = LockstepConfig { ticks: a.settle_ticks, progress_every: 0, ..cfg.clone() };
-        let r = lockstep::run_with(&session, &settle, &mut plant, &mut lockstep::Extras::default(), stop_rx.clone()).await?;
-        plant.restart_clock();
-        extras.first_tick = a.settle_ticks;
-        println!("settled for {} ticks ({:.3} s wall); the scenario clock starts now", r.ticks, r.wall_time.as_secs_f64());
+    let pace = if a.realtime { Pace::RealTime { period: Duration::from_secs_f64(1.0 / a.control_hz) } } else { Pace::Lockstep };
+    let (settle, run) = settle_then_run(&session, &mut plant, &cfg, a.settle_ticks, pace, &[], &mut extras, stop_rx.clone()).await?;
+    if settle.ticks > 0 {
+        println!("settled for {} ticks ({:.3} s wall); the scenario clock started then", settle.ticks, settle.wall_time.as_secs_f64());
     }
-    let (sim_time, wall) = if a.realtime {
-        let period = Duration::from_secs_f64(1.0 / a.control_hz);
-        let r = sim_bridge::realtime::run(&session, &cfg, period, &mut plant, &mut extras, stop_rx.clone()).await?;
-        println!("real time: {} ticks, missed torques per robot {:?}, {} overruns", r.ticks, r.missed, r.overruns);
-        (r.sim_time, r.wall_time)
-    } else {
-        let r = lockstep::run_with(&session, &cfg, &mut plant, &mut extras, stop_rx.clone()).await?;
-        println!("lockstep: {} ticks, {} resends, {} rejected torques", r.ticks, r.resends, r.rejected_torques);
-        (r.sim_time, r.wall_time)
+    let (sim_time, wall) = match run {
+        PhaseReport::RealTime(r) => {
+            println!("real time: {} ticks, missed torques per robot {:?}, {} overruns", r.ticks, r.missed, r.overruns);
+            (r.sim_time, r.wall_time)
+        }
+        PhaseReport::Lockstep(r) => {
+            println!("lockstep: {} ticks, {} resends, {} rejected torques", r.ticks, r.resends, r.rejected_torques);
+            (r.sim_time, r.wall_time)
+        }
     };
     println!(
         "{:.3} s simulated in {:.3} s wall: real-time factor {:.2} ({:.0} ticks/s, {} robots, control {} Hz, physics {} Hz)",

@@ -26,6 +26,7 @@ use zenoh::Session;
 use crate::lockstep::{self, BridgeError, Extras, LockstepConfig};
 use crate::mujoco_plant::MujocoPlant;
 use crate::perturbation::Perturbation;
+use crate::realtime::RealtimeReport;
 use crate::world::{World, WorldError, WorldSpec};
 
 /// Everything the bridge needs for a scenario run.
@@ -111,19 +112,63 @@ pub async fn run(session: &Session, scene: &Scene, robots: &[Arc<Robot>], stop: 
     let world = World::build(&scene.world, robots)?;
     let mut plant = MujocoPlant::new(world)?;
     let mut extras = Extras { publish_ground_truth: true, perturbation_key: true, ..Default::default() };
-    let settle = if scene.settle_ticks > 0 {
-        let r = lockstep::run_with(session, &scene.lockstep(scene.settle_ticks), &mut plant, &mut extras, stop.clone()).await?;
+    let cfg = scene.lockstep(scene.ticks);
+    let (settle, run) = settle_then_run(session, &mut plant, &cfg, scene.settle_ticks, Pace::Lockstep, &scene.perturbations, &mut extras, stop).await?;
+    let PhaseReport::Lockstep(run) = run else { unreachable!("a lockstep pace reports a lockstep phase") };
+    Ok(SceneReport { settle, run, perturbations_applied_steps: plant.perturbations.applied_steps })
+}
+
+/// How the scenario phase is paced; settling is always lockstep.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Pace {
+    /// A tick advances when every robot's torques for it have arrived.
+    Lockstep,
+    /// The wall clock paces the ticks at `period`; a missing torque holds the last one.
+    RealTime { period: Duration },
+}
+
+/// What the scenario phase did.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PhaseReport {
+    Lockstep(lockstep::LockstepReport),
+    RealTime(RealtimeReport),
+}
+
+/// The two phases of a run (`protocol::clock`): `settle_ticks` lockstep ticks under the
+/// controller, then the physics clock restarts (scenario time 0), the timed `pushes` are added
+/// (their `start` is on the scenario clock), and `cfg.ticks` ticks run at `pace`; tick numbers
+/// continue across. `extras` serve both phases (ground truth is published while settling
+/// too); its recorder keeps the scenario phase only.
+#[allow(clippy::too_many_arguments)]
+pub async fn settle_then_run(
+    session: &Session,
+    plant: &mut MujocoPlant,
+    cfg: &LockstepConfig,
+    settle_ticks: u64,
+    pace: Pace,
+    pushes: &[Perturbation],
+    extras: &mut Extras,
+    stop: watch::Receiver<bool>,
+) -> Result<(lockstep::LockstepReport, PhaseReport), SceneError> {
+    let settle = if settle_ticks > 0 {
+        let recorder = extras.recorder.take();
+        let settle_cfg = LockstepConfig { ticks: settle_ticks, progress_every: 0, ..cfg.clone() };
+        let r = lockstep::run_with(session, &settle_cfg, plant, extras, stop.clone()).await;
+        extras.recorder = recorder;
         plant.restart_clock();
-        r
+        r?
     } else {
         lockstep::LockstepReport { ticks: 0, sim_time: 0.0, wall_time: Duration::ZERO, resends: 0, rejected_torques: 0 }
     };
-    for p in &scene.perturbations {
+    for p in pushes {
         plant.perturbations.add(&plant.world, p.clone())?;
     }
-    extras.first_tick = scene.settle_ticks;
-    let run = lockstep::run_with(session, &scene.lockstep(scene.ticks), &mut plant, &mut extras, stop).await?;
-    Ok(SceneReport { settle, run, perturbations_applied_steps: plant.perturbations.applied_steps })
+    extras.first_tick = settle_ticks;
+    let run = match pace {
+        Pace::Lockstep => PhaseReport::Lockstep(lockstep::run_with(session, cfg, plant, extras, stop).await?),
+        Pace::RealTime { period } => PhaseReport::RealTime(crate::realtime::run(session, cfg, period, plant, extras, stop).await?),
+    };
+    Ok((settle, run))
 }
 
 #[cfg(test)]
