@@ -1,0 +1,219 @@
+//! The controller interface: [`TeamController`] (what [`crate::service::run`] drives every
+//! tick), [`ControllerError`], and [`ControllerSpec`], the choice of controller as data.
+//!
+//! **A second controller plugs in** by implementing [`TeamController`] (in its own module,
+//! composing the units of [`crate::units`] and the QP of [`crate::qp`]) and adding a variant
+//! `Kind(KindConfig)` to [`ControllerSpec`], named in [`ControllerSpec::KINDS`] and handled in
+//! the `match`es of this file (kind, parse, check, build). The coordinator binary,
+//! the scenario files and both run modes of the runner then take it by its kind, with no
+//! change of their own.
+
+use protocol::{DynamicsTerms, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
+
+use crate::joint_damping::{JointDamping, JointDampingConfig};
+use crate::pidc::{Pidc, PidcConfig};
+
+/// A controller of the whole team: from every member's dynamics terms of one tick (sorted by
+/// robot id) to one torque command per member, in the same order.
+pub trait TeamController: Send {
+    fn name(&self) -> &'static str;
+    fn solve(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError>;
+    /// Diagnostics of the last solved tick, if the controller makes any.
+    fn diagnostics(&self) -> Option<&TickDiagnostics> {
+        None
+    }
+    /// Whether the last tick's command came from the controller's fallback.
+    fn used_fallback(&self) -> bool {
+        false
+    }
+    /// A robot's description arrived (limits, contact parameters).
+    fn set_description(&mut self, _description: &RobotDescription) {}
+    /// New task references arrived.
+    fn set_references(&mut self, _references: &TaskReferences) {}
+    /// The present members changed (sorted ids).
+    fn set_members(&mut self, _members: &[String]) {}
+    /// Why the controller cannot run yet (e.g. descriptions missing), if so.
+    fn not_ready(&self, _members: &[String]) -> Option<String> {
+        None
+    }
+}
+
+/// Why a controller could not produce torques for a tick, or could not be configured.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ControllerError {
+    #[error("robot {robot}: {reason}")]
+    BadTerms { robot: String, reason: String },
+    #[error("robot {robot} is missing from the tick")]
+    MissingRobot { robot: String },
+    #[error("robot {robot} is in the tick but not expected")]
+    UnknownRobot { robot: String },
+    #[error("no description received for robot {robot}")]
+    MissingDescription { robot: String },
+    #[error("dimension mismatch in {what}: {detail}")]
+    Dimension { what: String, detail: String },
+    #[error("robot {robot}: non-finite {what}")]
+    NonFinite { robot: String, what: String },
+    #[error("singular {what}")]
+    Singular { what: String },
+    #[error("controller configuration: {0}")]
+    Config(String),
+}
+
+/// Which team controller runs, with its parameters. In TOML (a controller file, what
+/// `coordinator run --controller-config FILE` reads) the kind comes first, then the
+/// controller's own fields, any of which may be left out (they keep their defaults):
+///
+/// ```toml
+/// kind = "pidc"          # or "joint-damping"
+/// f_min_hand = 30.0
+/// [object_gains]
+/// kp = [1500, 1500, 1500, 400, 400, 400]
+/// kd = [150, 150, 150, 140, 140, 140]
+/// ```
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+#[allow(clippy::large_enum_variant)] // made once per run: a box would only burden its users
+pub enum ControllerSpec {
+    /// Projected inverse dynamics control with the contact-force QP (the paper's §III,
+    /// [`crate::pidc`]).
+    Pidc(PidcConfig),
+    /// Joint damping `tau = -damping * qdot` ([`JointDamping`]): the smoke run's stand-in, it
+    /// exercises the message flow only.
+    JointDamping(JointDampingConfig),
+    // Room for the multi-robot QP baseline: `Mqp(MqpConfig)`, kind "mqp".
+}
+
+/// Former names of controller kinds, and what they are now.
+const RENAMED: [(&str, &str); 2] = [("paper", "pidc"), ("smoke", "joint-damping")];
+
+impl ControllerSpec {
+    /// Every kind, as written in files and on the command line.
+    pub const KINDS: [&'static str; 2] = ["pidc", "joint-damping"];
+
+    /// The kind of this controller (`kind = ...` in its TOML).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            ControllerSpec::Pidc(_) => "pidc",
+            ControllerSpec::JointDamping(_) => "joint-damping",
+        }
+    }
+
+    /// The controller of kind `kind` with its default parameters.
+    pub fn of_kind(kind: &str) -> Result<Self, ControllerError> {
+        let mut table = toml::Table::new();
+        table.insert("kind".into(), toml::Value::String(kind.to_string()));
+        Self::from_table(table)
+    }
+
+    /// Parse a controller file (see the type's docs) and check it.
+    pub fn from_toml(text: &str) -> Result<Self, ControllerError> {
+        let table: toml::Table = toml::from_str(text).map_err(|e| ControllerError::Config(e.to_string()))?;
+        Self::from_table(table)
+    }
+
+    /// The kind's fields are read by the kind's own configuration type, so that an error names
+    /// the field it is about.
+    fn from_table(mut table: toml::Table) -> Result<Self, ControllerError> {
+        let known = || Self::KINDS.join(", ");
+        let kind = match table.remove("kind") {
+            Some(toml::Value::String(k)) => k,
+            Some(other) => return Err(ControllerError::Config(format!("`kind` must be a string (one of: {}), not {other}", known()))),
+            None => return Err(ControllerError::Config(format!("no `kind` (one of: {})", known()))),
+        };
+        let fields = toml::Value::Table(table);
+        let bad = |e: toml::de::Error| ControllerError::Config(format!("{kind}: {}", e.to_string().trim_end().replace('\n', " ")));
+        let spec = match kind.as_str() {
+            "pidc" => ControllerSpec::Pidc(fields.try_into().map_err(bad)?),
+            "joint-damping" => ControllerSpec::JointDamping(fields.try_into().map_err(bad)?),
+            k => {
+                return Err(ControllerError::Config(match RENAMED.iter().find(|(old, _)| *old == k) {
+                    Some((old, new)) => format!("controller kind `{old}` is now `{new}` (known: {})", known()),
+                    None => format!("unknown controller kind `{k}` (known: {})", known()),
+                }));
+            }
+        };
+        spec.check()?;
+        Ok(spec)
+    }
+
+    /// The TOML text of this specification (what [`ControllerSpec::from_toml`] reads back).
+    pub fn to_toml(&self) -> Result<String, ControllerError> {
+        toml::to_string(self).map_err(|e| ControllerError::Config(e.to_string()))
+    }
+
+    /// The parameters are usable (sizes, signs, ranges; the error says which).
+    pub fn check(&self) -> Result<(), ControllerError> {
+        match self {
+            ControllerSpec::Pidc(c) => c.check(),
+            ControllerSpec::JointDamping(c) => c.check(),
+        }
+    }
+
+    /// The controller, once the parameters are checked.
+    pub fn build(&self) -> Result<Box<dyn TeamController>, ControllerError> {
+        self.check()?;
+        Ok(match self {
+            ControllerSpec::Pidc(c) => Box::new(Pidc::new(c.clone())),
+            ControllerSpec::JointDamping(c) => Box::new(JointDamping { damping: c.damping }),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_kind_round_trips_through_toml_and_builds() {
+        let pidc = ControllerSpec::Pidc(PidcConfig { f_min_hand: 12.5, object_mass: 2.0, dense_qp: false, ..PidcConfig::default() });
+        let damping = ControllerSpec::JointDamping(JointDampingConfig { damping: 3.5 });
+        for spec in [pidc, damping] {
+            let text = spec.to_toml().expect("toml");
+            assert!(text.starts_with(&format!("kind = \"{}\"", spec.kind())), "{text}");
+            assert_eq!(ControllerSpec::from_toml(&text).expect("read back"), spec, "{text}");
+            // serde's own reading of the tagged enum agrees (for a spec inside another file).
+            assert_eq!(toml::from_str::<ControllerSpec>(&text).expect("serde"), spec);
+        }
+        for kind in ControllerSpec::KINDS {
+            let spec = ControllerSpec::of_kind(kind).expect("known kind");
+            assert_eq!(spec.kind(), kind);
+            assert!(spec.build().is_ok());
+        }
+        assert_eq!(ControllerSpec::of_kind("pidc"), Ok(ControllerSpec::Pidc(PidcConfig::default())));
+        assert_eq!(ControllerSpec::of_kind("joint-damping"), Ok(ControllerSpec::JointDamping(JointDampingConfig::default())));
+        assert!(ControllerSpec::of_kind("pidc").expect("pidc").build().expect("built").name().starts_with("pidc"));
+    }
+
+    #[test]
+    fn a_file_names_the_kind_and_any_subset_of_its_fields() {
+        let text = "kind = \"pidc\"\nf_min_hand = 20.0\n[object_gains]\nkp = [1, 2, 3, 4, 5, 6]\nkd = [6, 5, 4, 3, 2, 1]\n";
+        let Ok(ControllerSpec::Pidc(c)) = ControllerSpec::from_toml(text) else { panic!("{text} is a pidc file") };
+        let d = PidcConfig::default();
+        assert_eq!(c, PidcConfig { f_min_hand: 20.0, object_gains: crate::units::impedance::Gains::new(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0], &[6.0, 5.0, 4.0, 3.0, 2.0, 1.0]), ..d });
+        assert_eq!(ControllerSpec::from_toml("kind = \"joint-damping\"\ndamping = 0.5"), Ok(ControllerSpec::JointDamping(JointDampingConfig { damping: 0.5 })));
+    }
+
+    #[test]
+    fn unknown_kinds_and_fields_and_bad_values_say_what_is_wrong() {
+        for (text, says) in [
+            ("kind = \"paper\"", "controller kind `paper` is now `pidc` (known: pidc, joint-damping)"),
+            ("kind = \"smoke\"", "`smoke` is now `joint-damping`"),
+            ("kind = \"mpc\"", "unknown controller kind `mpc` (known: pidc, joint-damping)"),
+            ("f_min_hand = 3.0", "no `kind` (one of: pidc, joint-damping)"),
+            ("kind = 3", "`kind` must be a string"),
+            ("kind = \"pidc\"\nf_min_hnad = 3.0", "f_min_hnad"),
+            ("kind = \"pidc\"\nf_min_hand = \"a lot\"", "pidc: invalid type: string \"a lot\", expected f64 in `f_min_hand`"),
+            ("kind = \"pidc\"\npatch_margin = 1.5", "patch_margin"),
+            ("kind = \"pidc\"\n[torso_gains]\nkp = [1]\nkd = [1]", "torso_gains"),
+            ("kind = \"joint-damping\"\ndampng = 3.0", "dampng"),
+            ("kind = \"joint-damping\"\ndamping = -1.0", "damping: -1 must be finite and non-negative"),
+            ("kind = ", "controller configuration"),
+        ] {
+            let e = ControllerSpec::from_toml(text).expect_err(text).to_string();
+            println!("{text:?}: {e}");
+            assert!(e.contains(says), "{text:?}: {e}");
+        }
+        assert!(ControllerSpec::of_kind("paper").expect_err("renamed").to_string().contains("now `pidc`"));
+        assert!(ControllerSpec::JointDamping(JointDampingConfig { damping: f64::NAN }).build().is_err());
+    }
+}
