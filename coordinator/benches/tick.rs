@@ -1,7 +1,7 @@
 //! One full tick of the paper's controller (assembly, projections, impedance, QP) for 2, 4
 //! and 8 robots built from the real default robot. Besides criterion's estimates it prints
 //! p50/p99 of the total and of each stage over 600/N ticks. `CLARABEL_ONLY=1` solves the QP
-//! with Clarabel alone (`ControllerConfig::dense_qp = false`).
+//! with Clarabel alone (`PidcConfig::dense_qp = false`).
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -9,7 +9,7 @@ mod common;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 
-use coordinator::{ControllerConfig, PaperController};
+use coordinator::{Pidc, PidcConfig};
 use criterion::{criterion_group, criterion_main, Criterion};
 
 /// Counts heap allocations, to report what one tick allocates: in all, and inside faer's
@@ -43,7 +43,7 @@ fn bench(c: &mut Criterion) {
     let mut fx = common::Fixture::new();
     for &count in &[2usize, 4, 8] {
         let (terms, descs) = fx.static_team(count);
-        let mut ctl = PaperController::new(ControllerConfig { dense_qp: std::env::var_os("CLARABEL_ONLY").is_none(), ..ControllerConfig::default() });
+        let mut ctl = Pidc::new(PidcConfig { dense_qp: std::env::var_os("CLARABEL_ONLY").is_none(), ..PidcConfig::default() });
         for d in &descs {
             ctl.set_description(d);
         }

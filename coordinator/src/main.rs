@@ -1,11 +1,12 @@
 //! `coordinator`: solves the team problem every tick.
 
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use coordinator::service::{self, CoordinatorConfig};
-use coordinator::{ControllerConfig, JointDamping, PaperController};
+use coordinator::ControllerSpec;
 use protocol::transport::{self, Role, ZenohArgs};
 
 #[derive(Parser)]
@@ -13,12 +14,6 @@ use protocol::transport::{self, Role, ZenohArgs};
 struct Cli {
     #[command(subcommand)]
     command: Command,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-enum ControllerKind {
-    Smoke,
-    Paper,
 }
 
 #[derive(Subcommand)]
@@ -31,29 +26,51 @@ enum Command {
         /// How long a tick may wait for every member's dynamics terms, ms.
         #[arg(long, default_value_t = 200)]
         tick_deadline_ms: u64,
-        /// Team controller: `smoke` (joint damping, the smoke run) or `paper` (PIDC with the
-        /// contact-force QP; runs once every member's description is known).
-        #[arg(long, value_enum, default_value_t = ControllerKind::Smoke)]
-        controller: ControllerKind,
-        /// Joint damping of the smoke controller, N·m·s/rad.
-        #[arg(long, default_value_t = 2.0)]
-        damping: f64,
-        /// Minimum normal force of every stance foot (paper controller), N.
-        #[arg(long, default_value_t = 5.0)]
-        min_foot_force: f64,
-        /// Minimum normal force of every hand in grasp, the least squeeze (paper controller), N.
-        #[arg(long, default_value_t = 30.0)]
-        min_hand_force: f64,
-        /// Mass of the carried object (paper controller), kg.
-        #[arg(long, default_value_t = 1.0)]
-        object_mass: f64,
-        /// Paper controller configuration (TOML: gains, object, minimum forces, see
-        /// `ControllerConfig`); replaces --min-foot-force, --min-hand-force and --object-mass.
+        /// Team controller, with its default parameters: `pidc` (projected inverse dynamics
+        /// with the contact-force QP; runs once every member's description is known) or
+        /// `joint-damping` (the smoke run). Without it and without --controller-config:
+        /// joint-damping.
+        #[arg(long, value_parser = parse_kind)]
+        controller: Option<ControllerSpec>,
+        /// Controller file (TOML): `kind = "pidc"` or `"joint-damping"` and the controller's
+        /// parameters (see `ControllerSpec`). Enough alone; with --controller the kinds must
+        /// agree.
         #[arg(long)]
-        controller_config: Option<std::path::PathBuf>,
+        controller_config: Option<PathBuf>,
+        /// Joint damping of the joint-damping controller, N·m·s/rad (default 2).
+        #[arg(long, conflicts_with = "controller_config")]
+        damping: Option<f64>,
         #[command(flatten)]
         zenoh: ZenohArgs,
     },
+}
+
+fn parse_kind(kind: &str) -> Result<ControllerSpec, String> {
+    ControllerSpec::of_kind(kind).map_err(|e| e.to_string())
+}
+
+/// The controller the flags choose (see `Command::Run`).
+fn controller_spec(kind: Option<ControllerSpec>, file: Option<&Path>, damping: Option<f64>) -> Result<ControllerSpec> {
+    let mut spec = match (kind, file) {
+        (kind, Some(path)) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+            let spec = ControllerSpec::from_toml(&text).with_context(|| format!("controller file {}", path.display()))?;
+            if let Some(k) = kind {
+                anyhow::ensure!(k.kind() == spec.kind(), "--controller {} but {} has kind = \"{}\"", k.kind(), path.display(), spec.kind());
+            }
+            spec
+        }
+        (Some(spec), None) => spec,
+        (None, None) => ControllerSpec::of_kind("joint-damping")?,
+    };
+    if let Some(d) = damping {
+        match &mut spec {
+            ControllerSpec::JointDamping(c) => c.damping = d,
+            other => anyhow::bail!("--damping is the joint-damping controller's; {} takes its parameters from --controller-config", other.kind()),
+        }
+    }
+    spec.check()?;
+    Ok(spec)
 }
 
 #[tokio::main]
@@ -63,8 +80,8 @@ async fn main() -> Result<()> {
         .with_writer(std::io::stderr)
         .init();
     match Cli::parse().command {
-        Command::Run { team, tick_deadline_ms, controller, damping, min_foot_force, min_hand_force, object_mass, controller_config, zenoh } => {
-            anyhow::ensure!(damping.is_finite() && damping >= 0.0, "--damping must be a finite non-negative number");
+        Command::Run { team, tick_deadline_ms, controller, controller_config, damping, zenoh } => {
+            let controller = controller_spec(controller, controller_config.as_deref(), damping)?.build()?;
             let session = transport::open(&zenoh, Role::Hub).await?;
             let cfg = CoordinatorConfig { team, tick_deadline: Duration::from_millis(tick_deadline_ms) };
             let (tx, rx) = tokio::sync::watch::channel(false);
@@ -72,31 +89,50 @@ async fn main() -> Result<()> {
                 let _ = tokio::signal::ctrl_c().await;
                 let _ = tx.send(true);
             });
-            match controller {
-                ControllerKind::Smoke => {
-                    service::run(&session, cfg, JointDamping { damping }, rx).await?;
-                }
-                ControllerKind::Paper => {
-                    anyhow::ensure!(min_foot_force.is_finite() && min_foot_force >= 0.0, "--min-foot-force must be >= 0");
-                    anyhow::ensure!(min_hand_force.is_finite() && min_hand_force >= 0.0, "--min-hand-force must be >= 0");
-                    anyhow::ensure!(object_mass.is_finite() && object_mass >= 0.0, "--object-mass must be >= 0");
-                    let pc = match &controller_config {
-                        Some(path) => {
-                            let text = std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
-                            ControllerConfig::from_toml(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?
-                        }
-                        None => {
-                            let mut pc = ControllerConfig { f_min_foot: min_foot_force, f_min_hand: min_hand_force, ..ControllerConfig::default() };
-                            pc.object_inertia *= if pc.object_mass > 0.0 { object_mass / pc.object_mass } else { 0.0 };
-                            pc.object_mass = object_mass;
-                            pc
-                        }
-                    };
-                    service::run(&session, cfg, PaperController::new(pc), rx).await?;
-                }
-            }
+            service::run(&session, cfg, controller, rx).await?;
             session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use coordinator::joint_damping::JointDampingConfig;
+
+    fn file(name: &str, text: &str) -> PathBuf {
+        let path = std::env::temp_dir().join(format!("coordinator-{}-{name}.toml", std::process::id()));
+        std::fs::write(&path, text).expect("temp file");
+        path
+    }
+
+    #[test]
+    fn one_way_to_choose_the_controller_and_clear_errors() {
+        // Neither flag: joint damping (the smoke run); --damping sets it.
+        assert_eq!(controller_spec(None, None, None).unwrap(), ControllerSpec::JointDamping(JointDampingConfig { damping: 2.0 }));
+        assert_eq!(controller_spec(None, None, Some(0.5)).unwrap(), ControllerSpec::JointDamping(JointDampingConfig { damping: 0.5 }));
+        // A kind alone: its defaults.
+        let pidc = parse_kind("pidc").unwrap();
+        assert_eq!(controller_spec(Some(pidc.clone()), None, None).unwrap(), pidc);
+        let e = parse_kind("paper").unwrap_err();
+        assert!(e.contains("now `pidc`") && e.contains("pidc, joint-damping"), "{e}");
+        // A file alone is enough; with --controller the kinds must agree.
+        let path = file("pidc", "kind = \"pidc\"\nf_min_hand = 12.0\n");
+        let ControllerSpec::Pidc(c) = controller_spec(None, Some(&path), None).unwrap() else { panic!("pidc file") };
+        assert_eq!(c.f_min_hand, 12.0);
+        assert!(controller_spec(Some(pidc.clone()), Some(&path), None).is_ok());
+        let e = controller_spec(Some(parse_kind("joint-damping").unwrap()), Some(&path), None).unwrap_err().to_string();
+        assert!(e.contains("--controller joint-damping but") && e.contains("kind = \"pidc\""), "{e}");
+        // --damping belongs to joint damping.
+        let e = controller_spec(Some(pidc), None, Some(1.0)).unwrap_err().to_string();
+        assert!(e.contains("--damping"), "{e}");
+        assert!(controller_spec(None, None, Some(-1.0)).is_err());
+        // A broken file names itself.
+        let bad = file("bad", "kind = \"pidc\"\nf_min_hnad = 1.0\n");
+        let e = format!("{:#}", controller_spec(None, Some(&bad), None).unwrap_err());
+        assert!(e.contains(&bad.display().to_string()) && e.contains("f_min_hnad"), "{e}");
+        let _ = std::fs::remove_file(path);
+        let _ = std::fs::remove_file(bad);
+    }
 }

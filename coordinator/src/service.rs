@@ -9,8 +9,8 @@ use protocol::{CoordinatorMode, CoordinatorStatus, DynamicsTerms, Header, RobotD
 use tokio::sync::watch;
 use zenoh::Session;
 
-use crate::assembly::{TickAssembler, TickOutcome};
-use crate::membership::Membership;
+use crate::team::assembly::{TickAssembler, TickOutcome};
+use crate::team::membership::Membership;
 use crate::TeamController;
 
 /// Capacity of the references queue, samples.
@@ -38,11 +38,12 @@ pub struct CoordinatorCounters {
     pub not_ready: u64,
 }
 
-/// Run the coordinator until `stop` turns true.
+/// Run the coordinator with `controller` (see [`crate::ControllerSpec::build`]) until `stop`
+/// turns true.
 pub async fn run(
     session: &Session,
     cfg: CoordinatorConfig,
-    mut controller: impl TeamController,
+    mut controller: Box<dyn TeamController>,
     mut stop: watch::Receiver<bool>,
 ) -> Result<CoordinatorCounters, TransportError> {
     let dynamics = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Dynamics)?).await?;
@@ -120,8 +121,8 @@ pub async fn run(
                 match assembler.add(terms, &members) {
                     TickOutcome::Complete(tick, terms) => {
                         refs.drain(&references);
-                        refs.apply(tick, &mut controller);
-                        solve_and_publish(session, &cfg, &mut controller, tick, &terms, &mut commands, &mut command_pubs, &mut diag_pub, &mut counters).await?;
+                        refs.apply(tick, controller.as_mut());
+                        solve_and_publish(session, &cfg, controller.as_mut(), tick, &terms, &mut commands, &mut command_pubs, &mut diag_pub, &mut counters).await?;
                         status_tick = tick;
                     }
                     TickOutcome::NotAMember(r) => {
@@ -145,8 +146,8 @@ pub async fn run(
             for tick in assembler.pending_ticks() {
                 if let TickOutcome::Complete(t, terms) = assembler.try_complete(tick, &members) {
                     refs.drain(&references);
-                    refs.apply(t, &mut controller);
-                    solve_and_publish(session, &cfg, &mut controller, t, &terms, &mut commands, &mut command_pubs, &mut diag_pub, &mut counters).await?;
+                    refs.apply(t, controller.as_mut());
+                    solve_and_publish(session, &cfg, controller.as_mut(), t, &terms, &mut commands, &mut command_pubs, &mut diag_pub, &mut counters).await?;
                     status_tick = t;
                 }
             }
@@ -201,7 +202,7 @@ impl ReferenceBuffer {
     }
 
     /// Hand the controller the reference for `tick` (if a newer one than it has arrived).
-    fn apply(&mut self, tick: u64, controller: &mut impl TeamController) {
+    fn apply(&mut self, tick: u64, controller: &mut dyn TeamController) {
         let Some((&t, _)) = self.by_tick.range(..=tick).next_back() else { return };
         // Older entries are no longer needed; the applied one is removed once used.
         while self.by_tick.first_key_value().is_some_and(|(&k, _)| k < t) {
@@ -217,7 +218,7 @@ impl ReferenceBuffer {
 async fn solve_and_publish(
     session: &Session,
     cfg: &CoordinatorConfig,
-    controller: &mut impl TeamController,
+    controller: &mut dyn TeamController,
     tick: u64,
     terms: &[DynamicsTerms],
     commands: &mut Vec<TorqueCommand>,

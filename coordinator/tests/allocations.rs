@@ -1,4 +1,4 @@
-//! The control tick allocates nothing once the team's shape is known: `PaperController::solve`
+//! The control tick allocates nothing once the team's shape is known: `Pidc::solve`
 //! (assembly, projections, impedance, QP, torque slices and diagnostics) is counted by a
 //! global allocator that counts per thread, so the other tests of this binary cannot disturb
 //! the count.
@@ -13,7 +13,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
 use common::{robot_id, Fixture};
-use coordinator::{ControllerConfig, PaperController, TeamController};
+use coordinator::{Pidc, PidcConfig, TeamController};
 use nalgebra::DVector;
 use protocol::{DynamicsTerms, QpStatus, TorqueCommand};
 use robot_agent::terms::ContactSet;
@@ -52,14 +52,14 @@ fn allocations(f: impl FnOnce()) -> (u64, u64) {
 
 /// A controller and its output messages, kept from tick to tick as the service keeps them.
 struct Loop {
-    c: PaperController,
+    c: Pidc,
     out: Vec<TorqueCommand>,
     inside: Vec<u64>,
 }
 
 impl Loop {
     fn new(descs: &[protocol::RobotDescription]) -> Self {
-        let mut c = PaperController::new(ControllerConfig::default());
+        let mut c = Pidc::new(PidcConfig::default());
         for d in descs {
             c.set_description(d);
         }

@@ -5,13 +5,13 @@ mod common;
 use common::{robot_id, Fixture};
 use coordinator::linalg::pinv;
 use coordinator::qp::contact_rows;
-use coordinator::{ControllerConfig, ControllerError, PaperController, TeamController};
+use coordinator::{ControllerError, Pidc, PidcConfig, TeamController};
 use nalgebra::{DMatrix, DVector, Vector3};
 use protocol::{DynamicsTerms, QpStatus};
 use robot_agent::terms::ContactSet;
 
-fn controller(descs: &[protocol::RobotDescription], cfg: ControllerConfig) -> PaperController {
-    let mut c = PaperController::new(cfg);
+fn controller(descs: &[protocol::RobotDescription], cfg: PidcConfig) -> Pidc {
+    let mut c = Pidc::new(cfg);
     for d in descs {
         c.set_description(d);
     }
@@ -22,7 +22,7 @@ fn max_abs(m: &DMatrix<f64>) -> f64 {
     m.iter().fold(0.0, |a, x| a.max(x.abs()))
 }
 
-type RandomTeam = (Vec<DynamicsTerms>, Vec<DVector<f64>>, Vec<DVector<f64>>, PaperController);
+type RandomTeam = (Vec<DynamicsTerms>, Vec<DVector<f64>>, Vec<DVector<f64>>, Pidc);
 
 /// A 2-robot team at a random perturbed configuration with a velocity that keeps the
 /// contacts (v in the null space of J_c), and the controller that captured the grasp.
@@ -32,7 +32,7 @@ fn random_team(fx: &mut Fixture, seed: u64, amp: f64, vel: f64) -> RandomTeam {
     let qs: Vec<DVector<f64>> = (0..2).map(|k| fx.perturbed_q(k, 2, amp, &mut rng)).collect();
     let descs: Vec<_> = (0..2).map(|k| fx.description(&robot_id(k))).collect();
     let terms0: Vec<_> = (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &DVector::zeros(nv), 1)).collect();
-    let mut c = controller(&descs, ControllerConfig::default());
+    let mut c = controller(&descs, PidcConfig::default());
     let p = c.compute(&terms0).expect("tick").proj.p.clone();
     use rand::Rng;
     let v_rand = DVector::from_fn(2 * nv, |_, _| rng.random_range(-vel..vel));
@@ -78,7 +78,7 @@ fn pdot_v_against_finite_difference_in_time() {
         let v = r.team.velocity.clone();
         let nv = fx.robot.model.nv;
         let dt = 1e-6;
-        let mut p_at = |sign: f64, c: &mut PaperController| {
+        let mut p_at = |sign: f64, c: &mut Pidc| {
             let t: Vec<_> = (0..2)
                 .map(|k| {
                     let q = fx.robot.model.integrate(qs[k].as_slice(), vs[k].as_slice(), sign * dt);
@@ -138,7 +138,7 @@ fn fully_actuated_reduces_to_lin2018() {
     let mut fx = Fixture::new();
     let (terms, _, _, _) = random_team(&mut fx, 30, 0.02, 0.05);
     let descs: Vec<_> = (0..2).map(|k| fx.description(&robot_id(k))).collect();
-    let cfg = ControllerConfig { fully_actuated: true, ..ControllerConfig::default() };
+    let cfg = PidcConfig { fully_actuated: true, ..PidcConfig::default() };
     let mut c = controller(&descs, cfg);
     let r = c.compute(&terms).expect("tick");
     let n = r.team.n;
@@ -163,7 +163,7 @@ fn fully_actuated_reduces_to_lin2018() {
 
 /// Check every friction, moment and torque row on the predicted real wrenches. (The rows
 /// themselves are checked against the physical constraints in `tests/qp_rows.rs`.)
-fn worst_violation(r: &coordinator::controller::TickReport) -> (f64, f64) {
+fn worst_violation(r: &coordinator::pidc::TickReport) -> (f64, f64) {
     let mut worst_c = f64::NEG_INFINITY;
     for (start, kind) in &r.contacts {
         let d = if matches!(kind, coordinator::qp::ContactKind::Foot { .. }) { 3 } else { 6 };
@@ -183,7 +183,7 @@ fn worst_violation(r: &coordinator::controller::TickReport) -> (f64, f64) {
 fn static_team_holds_the_object() {
     let mut fx = Fixture::new();
     let (terms, descs) = fx.static_team(2);
-    let cfg = ControllerConfig::default();
+    let cfg = PidcConfig::default();
     let mut c = controller(&descs, cfg);
     // References equal to the current poses: first tick captures, then explicit references.
     c.compute(&terms).expect("tick");
@@ -261,7 +261,7 @@ fn static_team_holds_the_object() {
     // The dense interior-point method and Clarabel agree on the same QP.
     let solver = r.qp.solver;
     let tau_a = r.tau.clone();
-    let mut cc = controller(&descs, ControllerConfig { dense_qp: false, ..ControllerConfig::default() });
+    let mut cc = controller(&descs, PidcConfig { dense_qp: false, ..PidcConfig::default() });
     cc.set_references(&refs);
     let rc = cc.compute(&terms).expect("tick");
     let d_tau = (&rc.tau - &tau_a).amax();
@@ -276,11 +276,11 @@ fn bad_input_is_an_error_or_fallback_never_a_panic() {
     let (terms, descs) = fx.static_team(2);
     let mut out = Vec::new();
     // Missing robot.
-    let mut c = controller(&descs, ControllerConfig::default());
+    let mut c = controller(&descs, PidcConfig::default());
     c.set_expected(Some(vec!["r1".into(), "r2".into()]));
     assert!(matches!(c.solve(&terms[..1], &mut out), Err(ControllerError::MissingRobot { .. })));
     // No description.
-    let mut c2 = controller(&descs[..1], ControllerConfig::default());
+    let mut c2 = controller(&descs[..1], PidcConfig::default());
     assert!(matches!(c2.solve(&terms, &mut out), Err(ControllerError::MissingDescription { .. })));
     // Dimensions that disagree.
     let mut bad = terms.clone();
@@ -321,7 +321,7 @@ fn bad_input_is_an_error_or_fallback_never_a_panic() {
     let r = c.last().expect("last");
     assert_eq!(r.qp.status, QpStatus::Infeasible);
     let (wc, wt) = worst_violation(r);
-    let f_min_hand = ControllerConfig::default().f_min_hand;
+    let f_min_hand = PidcConfig::default().f_min_hand;
     assert!((wc - f_min_hand).abs() < 1e-3, "worst row violated by {wc} N, expected f_min_hand {f_min_hand} N");
     assert!(wt <= -1.0, "torques at least 1 N m inside the limits: {wt}");
     assert_eq!(out.len(), 2, "one command per robot");
@@ -331,7 +331,7 @@ fn bad_input_is_an_error_or_fallback_never_a_panic() {
         assert!(o.tau.iter().all(|t| t.abs() < 1e-9), "nothing to command without Jacobians: {:?}", o.tau);
     }
     // Infeasible QP (absurd minimum normal force): the fallback, within the torque limits.
-    let mut c3 = controller(&descs, ControllerConfig { f_min_foot: 1e5, ..ControllerConfig::default() });
+    let mut c3 = controller(&descs, PidcConfig { f_min_foot: 1e5, ..PidcConfig::default() });
     c3.solve(&terms, &mut out).expect("fallback, not an error");
     let r = c3.last().expect("last");
     println!("f_min_foot 1e5: QP {:?}, fallback: {:?}", r.qp.status, r.fallback);
@@ -351,7 +351,7 @@ fn contact_set_changes_and_more_robots() {
     let q = fx.standing_q(0, 2);
     let cs = ContactSet { stance: vec![false, true, true, true], hand_in_grasp: true };
     terms[0] = fx.terms_with("r1", &q, &DVector::zeros(nv), 1, &cs);
-    let mut c = controller(&descs, ControllerConfig::default());
+    let mut c = controller(&descs, PidcConfig::default());
     let r = c.compute(&terms).expect("tick");
     assert_eq!(r.team.feet.len(), 7);
     assert_eq!(r.team.swing_feet.len(), 1);
@@ -363,7 +363,7 @@ fn contact_set_changes_and_more_robots() {
     assert_eq!(r.j_c.nrows(), 36);
     // 4 robots on a circle.
     let (terms, descs) = fx.static_team(4);
-    let mut c = controller(&descs, ControllerConfig::default());
+    let mut c = controller(&descs, PidcConfig::default());
     let mut out = Vec::new();
     c.solve(&terms, &mut out).expect("tick");
     let r = c.last().expect("last");
@@ -373,14 +373,14 @@ fn contact_set_changes_and_more_robots() {
 
 #[test]
 fn controller_configuration_from_toml_keeps_defaults_and_refuses_bad_values() {
-    let c = ControllerConfig::from_toml("f_min_hand = 20.0\n[object_gains]\nkp = [1, 2, 3, 4, 5, 6]\nkd = [6, 5, 4, 3, 2, 1]\n").expect("partial file");
+    let c = PidcConfig::from_toml("f_min_hand = 20.0\n[object_gains]\nkp = [1, 2, 3, 4, 5, 6]\nkd = [6, 5, 4, 3, 2, 1]\n").expect("partial file");
     assert_eq!(c.f_min_hand, 20.0);
     assert_eq!(c.object_gains.kp, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
-    let d = ControllerConfig::default();
+    let d = PidcConfig::default();
     assert_eq!(c.torso_gains, d.torso_gains);
     assert_eq!(c.f_min_foot, d.f_min_foot);
     // A whole configuration round trips.
-    let back = ControllerConfig::from_toml(&d.to_toml().unwrap()).unwrap();
+    let back = PidcConfig::from_toml(&d.to_toml().unwrap()).unwrap();
     assert_eq!(back.object_inertia, d.object_inertia);
     assert_eq!((back.friction_margin, back.patch_margin), (d.friction_margin, d.patch_margin));
     for (bad, says) in [
@@ -393,7 +393,7 @@ fn controller_configuration_from_toml_keeps_defaults_and_refuses_bad_values() {
         ("gain = 3\n", "gain"),
         ("f_min_hand = \"a lot\"\n", "f_min_hand"),
     ] {
-        let e = ControllerConfig::from_toml(bad).expect_err(bad).to_string();
+        let e = PidcConfig::from_toml(bad).expect_err(bad).to_string();
         assert!(e.contains(says), "{bad}: {e}");
     }
 }

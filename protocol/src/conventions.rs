@@ -17,6 +17,8 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3, Vector6};
 
 /// Standard gravity magnitude, m/s², acting along -z of the world.
 pub const GRAVITY: f64 = 9.81;
+/// Gravity acceleration as a world vector, m/s²: `[0, 0, -GRAVITY]`.
+pub const GRAVITY_VECTOR: [f64; 3] = [0.0, 0.0, -GRAVITY];
 
 /// Dimension of a point-foot contact constraint.
 pub const FOOT_CONSTRAINT_DIM: usize = 3;

@@ -1,6 +1,6 @@
 //! From a [`Scenario`] to what every component runs: the bridge's [`Scene`] (world with the
 //! hands placed on the object by IK, pushes, settle and run lengths), the coordinator's
-//! [`ControllerConfig`] (the scenario's gains, object and minimum forces), the agents'
+//! [`ControllerSpec`] (PIDC with the scenario's gains, object and minimum forces), the agents'
 //! description files, and the [`ReferencePlan`] that turns ticks into task references.
 //! Each description file is loaded here once ([`RobotCache`]); the loaded robots travel with
 //! the plan to the grasp planner, the world build and the agents.
@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use coordinator::controller::ControllerConfig;
+use coordinator::{ControllerSpec, PidcConfig};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use protocol::conventions::quat_to_wxyz;
 use protocol::{Header, Pose, PoseReference, TaskReferences, TorsoReference};
@@ -42,7 +42,7 @@ pub enum PlanError {
 pub struct Plan {
     pub scenario: Scenario,
     pub scene: Scene,
-    pub controller: ControllerConfig,
+    pub controller: ControllerSpec,
     /// The robots, in scenario order.
     pub robots: Vec<PlannedRobot>,
     pub references: ReferencePlan,
@@ -141,16 +141,21 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
     };
 
     let principal = object.principal_inertia();
-    let controller = ControllerConfig {
-        object_gains: s.gains.object.gains(),
-        torso_gains: s.gains.torso.gains(),
-        swing_gains: s.gains.feet.as_ref().map(|f| f.gains()).unwrap_or_else(|| ControllerConfig::default().swing_gains),
-        object_mass: s.object.mass,
-        object_inertia: Matrix3::from_diagonal(&Vector3::from(principal)),
-        object_pose_at_grasp: None,
-        f_min_foot: s.min_foot_force,
-        f_min_hand: s.min_hand_force,
-        ..ControllerConfig::default()
+    // The scenario's controller; PIDC takes the scenario's gains, object and minimum forces,
+    // other kinds run with their defaults.
+    let controller = match ControllerSpec::of_kind(&s.controller)? {
+        ControllerSpec::Pidc(_) => ControllerSpec::Pidc(PidcConfig {
+            object_gains: s.gains.object.gains(),
+            torso_gains: s.gains.torso.gains(),
+            swing_gains: s.gains.feet.as_ref().map(|f| f.gains()).unwrap_or_else(|| PidcConfig::default().swing_gains),
+            object_mass: s.object.mass,
+            object_inertia: Matrix3::from_diagonal(&Vector3::from(principal)),
+            object_pose_at_grasp: None,
+            f_min_foot: s.min_foot_force,
+            f_min_hand: s.min_hand_force,
+            ..PidcConfig::default()
+        }),
+        other => other,
     };
     controller.check()?;
 

@@ -1,14 +1,14 @@
 //! `team run SCENARIO`: the whole stack on one scenario. Embedded (default): the sim-bridge,
-//! one robot-agent per robot (the robot's own model), the coordinator (the paper's controller)
-//! and the scenario driver are tasks of this process on one Zenoh session. Distributed: each
-//! is its own process on loopback (the coordinator listens, the rest connect), started from
-//! the files this run writes into the report folder (`scene.toml`, `controller.toml`). Either
-//! way every message goes over Zenoh and the same [`crate::plan::Plan`] is simulated.
+//! one robot-agent per robot (the robot's own model), the coordinator (the scenario's
+//! controller, built from the plan's `ControllerSpec`) and the scenario driver are tasks of
+//! this process on one Zenoh session. Distributed: each is its own process on loopback (the
+//! coordinator listens, the rest connect), started from the files this run writes into the
+//! report folder (`scene.toml`, `controller.toml`: the spec, `kind` first). Either way every
+//! message goes over Zenoh and the same [`crate::plan::Plan`] is simulated.
 
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use coordinator::controller::PaperController;
 use coordinator::service::{self as coordinator_service, CoordinatorConfig};
 use protocol::transport::{self, Role, ZenohArgs};
 use robot_agent::agent::{self as agent_loop, AgentConfig};
@@ -70,6 +70,7 @@ pub fn run(plan: &Plan, opts: &RunOptions, out: &Path) -> Result<Records, RunErr
 
 /// Every component a task of this process, on one session.
 pub async fn run_embedded(plan: &Plan, opts: &RunOptions) -> Result<Records, RunError> {
+    let controller = plan.controller.build()?;
     let session = transport::open(&ZenohArgs::default(), Role::Alone).await?;
     let (stop_tx, stop_rx) = watch::channel(false);
     let driver = Driver::start(&session, plan.references.clone(), plan.total_ticks(), opts.progress).await?;
@@ -78,7 +79,6 @@ pub async fn run_embedded(plan: &Plan, opts: &RunOptions) -> Result<Records, Run
         let session = session.clone();
         let rx = stop_rx.clone();
         let cfg = CoordinatorConfig { team: TEAM.into(), tick_deadline: COORDINATOR_TICK_DEADLINE };
-        let controller = PaperController::new(plan.controller.clone());
         tokio::spawn(async move { coordinator_service::run(&session, cfg, controller, rx).await })
     };
     let mut agents = Vec::new();
@@ -119,8 +119,8 @@ pub async fn run_distributed(plan: &Plan, opts: &RunOptions, out: &Path) -> Resu
     let hub = format!("tcp/127.0.0.1:{}", free_port()?);
     let connect = ZenohArgs::connecting(&hub).to_cli();
     let s = |x: &str| x.to_string();
-    let mut args = vec![s("run"), s("--team"), s(TEAM), s("--controller"), s("paper")];
-    args.extend([s("--controller-config"), controller_path.display().to_string()]);
+    // The controller file names its kind and parameters: the one way to choose it.
+    let mut args = vec![s("run"), s("--team"), s(TEAM), s("--controller-config"), controller_path.display().to_string()];
     args.extend([s("--tick-deadline-ms"), COORDINATOR_TICK_DEADLINE.as_millis().to_string()]);
     args.extend(ZenohArgs::listening(&hub).to_cli());
     let _coordinator = spawn("coordinator", &args, "coordinator")?;

@@ -2,11 +2,12 @@
 //! the perturbations, duration, rates and seed (DESIGN.md §7). Every number is a parameter,
 //! and `--set key=value` overrides any of them: `key` is a dotted path into the TOML
 //! (`gains.object.stiffness`, `robots.1.base_position`, `duration`), `value` a TOML value
-//! (`12.5`, `[1, 2, 3]`, `"paper"`).
+//! (`12.5`, `[1, 2, 3]`, `"pidc"`).
 //!
-//! Left open for what comes next: `controller` names the team controller (`paper` today; the
-//! baseline `mqp` comparison will add its own), and `contacts` will hold contact schedules
-//! for walking (today every foot stays in stance and every hand in grasp).
+//! `controller` is the kind of the team controller (`"pidc"`, the default; the kinds are the
+//! coordinator's, [`coordinator::ControllerSpec::KINDS`]). Left open for what comes next:
+//! `contacts` will hold contact schedules for walking (today every foot stays in stance and
+//! every hand in grasp).
 
 use std::path::{Path, PathBuf};
 
@@ -45,7 +46,7 @@ pub struct Scenario {
     pub control_hz: f64,
     pub physics_hz: f64,
     pub seed: u64,
-    /// Team controller: `paper`.
+    /// Team controller, by kind (`pidc`; see [`coordinator::ControllerSpec`]).
     #[serde(default = "default_controller")]
     pub controller: String,
     /// Minimum normal force of every stance foot in the QP, N.
@@ -76,7 +77,7 @@ fn default_ramp() -> f64 {
     1.0
 }
 fn default_controller() -> String {
-    "paper".into()
+    "pidc".into()
 }
 fn default_min_foot_force() -> f64 {
     5.0
@@ -211,9 +212,7 @@ impl Scenario {
         if (ratio - ratio.round()).abs() > 1e-9 || ratio < 1.0 {
             return Err(format!("physics_hz ({}) must be a whole multiple of control_hz ({})", self.physics_hz, self.control_hz));
         }
-        if self.controller != "paper" {
-            return Err(format!("controller {:?} is not known (known: paper)", self.controller));
-        }
+        coordinator::ControllerSpec::of_kind(&self.controller).map_err(|e| format!("controller: {e}"))?;
         for (what, f) in [("min_foot_force", self.min_foot_force), ("min_hand_force", self.min_hand_force)] {
             if !(f.is_finite() && f >= 0.0) {
                 return Err(format!("{what} = {f} must be non-negative"));
@@ -275,8 +274,8 @@ fn check_gains(what: &str, g: &TaskGains, n: usize) -> Result<(), String> {
 
 impl TaskGains {
     /// The coordinator's gains of this task.
-    pub fn gains(&self) -> coordinator::impedance::Gains {
-        coordinator::impedance::Gains::new(&self.stiffness, &self.damping)
+    pub fn gains(&self) -> coordinator::units::impedance::Gains {
+        coordinator::units::impedance::Gains::new(&self.stiffness, &self.damping)
     }
 }
 
@@ -349,9 +348,16 @@ mod tests {
         assert_eq!(s.duration, 2.5);
         assert_eq!(s.gains.object.stiffness, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
         assert_eq!(s.robots[1].yaw, 0.5);
-        for bad in ["duraton=3", "robots.7.yaw=1", "duration", "gains.object.stiffness=[1,2]", "duration=-1", "controller=mpc"] {
+        for bad in ["duraton=3", "robots.7.yaw=1", "duration", "gains.object.stiffness=[1,2]", "duration=-1", "controller=mpc", "controller=paper"] {
             assert!(Scenario::load(&p, &[bad.to_string()]).is_err(), "{bad} accepted");
         }
+        // The controller is chosen by its kind; the old name says what it became.
+        assert_eq!(Scenario::load(&p, &[]).unwrap().controller, "pidc");
+        assert_eq!(Scenario::load(&p, &["controller=joint-damping".into()]).unwrap().controller, "joint-damping");
+        let e = Scenario::load(&p, &["controller=paper".into()]).unwrap_err().to_string();
+        assert!(e.contains("now `pidc`"), "{e}");
+        let e = Scenario::load(&p, &["controller=mpc".into()]).unwrap_err().to_string();
+        assert!(e.contains("pidc, joint-damping"), "{e}");
     }
 
     #[test]

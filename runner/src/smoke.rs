@@ -82,7 +82,7 @@ pub async fn run_embedded(cfg: &SmokeConfig) -> Result<SmokeOutcome, SmokeError>
         let session = session.clone();
         let rx = stop_rx.clone();
         let damping = cfg.damping;
-        tokio::spawn(async move { coordinator_service::run(&session, coord_cfg, JointDamping { damping }, rx).await })
+        tokio::spawn(async move { coordinator_service::run(&session, coord_cfg, Box::new(JointDamping { damping }), rx).await })
     };
     let mut agents = Vec::new();
     for r in &cfg.robots {

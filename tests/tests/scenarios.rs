@@ -45,7 +45,7 @@ fn assert_accepted(plan: &Plan, m: &Metrics) {
     assert!(total as f64 >= 0.9 * plan.scene.ticks as f64, "diagnostics of {total} ticks");
     assert!(solved as f64 >= 0.99 * total as f64, "QP statuses {:?}", m.qp_status);
     for (r, f) in &m.mean_squeeze_n {
-        assert!(*f > 0.8 * plan.controller.f_min_hand, "{r} squeezes {f} N only");
+        assert!(*f > 0.8 * plan.scenario.min_hand_force, "{r} squeezes {f} N only");
     }
 }
 

@@ -6,6 +6,12 @@
 //! assembly is redone every tick). [`Team::assemble_into`] writes into the buffers of the
 //! previous tick's team: it allocates only when the team's shape (robots, frames, contact
 //! set) changes.
+//!
+//! Who is in the team ([`membership`]) and the gathering of one tick's terms from every member
+//! ([`assembly`]) live beside it.
+
+pub mod assembly;
+pub mod membership;
 
 use nalgebra::{DMatrix, DVector, Rotation3, Vector3};
 use protocol::{DynamicsTerms, FrameRole, FrameTerms};

@@ -1,6 +1,7 @@
 //! The force-closed grasp (paper §II-E, §III-A): grasp matrix `G` (eq. graspmatrix), the grasp
 //! null-space projector, `J_c,ee` (eq. jacobian_cee), `J_o` (eq. obj_jacobian), their
-//! `Jdot*v`, and the object pose inferred from the hand poses.
+//! `Jdot*v` ([`GraspTerms`]), and the object pose inferred from the hand poses
+//! ([`GraspOffsets`], kept from tick to tick by [`GraspTracker`]).
 //!
 //! Frames: our Jacobians are world-aligned at the hand-contact origin, so the partial grasp
 //! matrix is the paper's with `R_i = I`: `G_i = [[I, 0], [skew(r_i), I]]`, `r_i = p_i - p_o`
@@ -10,12 +11,13 @@
 //! The object is NOT in the generalized coordinates: the grasp constraint only constrains
 //! the hands' relative motion (`J_c,ee = (I - G^+ G) J_ee`, symmetric projector since
 //! `G^T (G^+)^T = G^+ G`). The object's weight and inertia enter as a known external wrench
-//! at the object centre (the paper's `J_x^T F_x` term with `J_x = J_o`), see `controller.rs`.
+//! at the object centre (the paper's `J_x^T F_x` term with `J_x = J_o`), see `pidc::stages::tasks`.
 
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 
 use crate::linalg::{mat, product, skew, zeros, zeros_v};
 use crate::team::Team;
+use crate::ControllerError;
 
 /// Grasp offsets captured when the grasp closed: each hand's rotation to the object's, and
 /// the object centre relative to the hands' centroid (in the object frame).
@@ -79,6 +81,45 @@ fn hand_centroid(team: &Team) -> Vector3<f64> {
 pub fn centroid_pose(team: &Team) -> Isometry3<f64> {
     let c = hand_centroid(team);
     Isometry3::translation(c.x, c.y, c.z)
+}
+
+/// The grasp from tick to tick: the offsets, captured again whenever the set of grasping
+/// hands changes, and the last object pose estimate (where the object is taken to be when the
+/// grasp next closes).
+#[derive(Debug, Clone, Default)]
+pub struct GraspTracker {
+    offsets: Option<GraspOffsets>,
+    last_object: Option<Isometry3<f64>>,
+}
+
+impl GraspTracker {
+    /// This tick's grasp terms into `terms`: `None` without hands in grasp. Otherwise the
+    /// offsets (captured when the grasping hands changed, with the object at the last estimate,
+    /// else at `pose_at_grasp`, else at the hands' centroid with world axes), the object pose
+    /// from the hands, and the terms of [`GraspTerms::compute_into`].
+    pub fn update(&mut self, team: &Team, pose_at_grasp: Option<Isometry3<f64>>, terms: &mut Option<GraspTerms>) -> Result<(), ControllerError> {
+        if team.hands.is_empty() {
+            self.offsets = None;
+            *terms = None;
+            return Ok(());
+        }
+        let offsets = match &mut self.offsets {
+            Some(o) if o.matches(team) => o,
+            slot => {
+                let at = self.last_object.or(pose_at_grasp).unwrap_or_else(|| centroid_pose(team));
+                slot.insert(GraspOffsets::capture(team, &at))
+            }
+        };
+        let pose = offsets.object_pose(team);
+        self.last_object = Some(pose);
+        let g = terms.get_or_insert_with(GraspTerms::default);
+        g.compute_into(team, pose).ok_or_else(|| ControllerError::Singular { what: "grasp matrix".into() })
+    }
+
+    /// Forget the offsets: they are captured again when the hands next close.
+    pub fn release(&mut self) {
+        self.offsets = None;
+    }
 }
 
 

@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use protocol::DynamicsTerms;
 
-use crate::membership::Membership;
+use crate::team::membership::Membership;
 
 /// Dynamics terms collected per tick until every member has sent its own.
 #[derive(Debug)]

@@ -1,0 +1,109 @@
+//! [`PidcConfig`]: the parameters of the PIDC controller (gains per task kind, the carried
+//! object, the QP's margins and settings).
+
+use nalgebra::{Isometry3, Matrix3};
+
+use crate::units::impedance::Gains;
+use crate::ControllerError;
+
+/// Parameters of the PIDC controller. In a controller file they follow `kind = "pidc"` (see
+/// [`crate::ControllerSpec`]); any subset of the fields may be given, the rest keep their
+/// defaults.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PidcConfig {
+    pub object_gains: Gains,
+    pub torso_gains: Gains,
+    pub swing_gains: Gains,
+    /// Carried object: mass, inertia about its centre in its own frame.
+    pub object_mass: f64,
+    pub object_inertia: Matrix3<f64>,
+    /// Object pose when the grasp first closes; `None`: the hands' centroid, world axes.
+    pub object_pose_at_grasp: Option<Isometry3<f64>>,
+    /// Minimum normal force of every stance foot, N.
+    pub f_min_foot: f64,
+    /// Minimum normal force of every hand (the least squeeze), N. The torque-optimal grasp
+    /// otherwise sits on the friction limit (weight / mu), where any disturbance slips it.
+    pub f_min_hand: f64,
+    /// Share of each contact's friction the QP may use (`mu` and `xi` are scaled by it). The
+    /// paper's pyramid `|f_x|, |f_y| <= mu f_n` reaches `sqrt(2) mu f_n` at its corners, outside
+    /// the real (circular) cone; `1/sqrt(2)` makes it the inscribed pyramid.
+    pub friction_margin: f64,
+    /// Share of the palm's half-sizes the centre of pressure may use (the tilt rows of eqn.
+    /// moment_constraint). At 1 the optimal grasp puts the whole squeeze on one palm edge,
+    /// where the palm starts to roll on the object (seen in MuJoCo: the palm rolled 27 deg
+    /// about its top edge within 3 s).
+    pub patch_margin: f64,
+    /// Added to the diagonal of the semi-definite QP objective.
+    pub regularisation: f64,
+    pub qp_max_iter: u32,
+    /// Solve the QP with the dense interior-point method first, Clarabel when it does not
+    /// converge (or always Clarabel when false). See `qp::DenseIpm`.
+    pub dense_qp: bool,
+    /// `S = I` (treat the base as actuated): the [Lin2018] comparison only.
+    pub fully_actuated: bool,
+}
+
+impl Default for PidcConfig {
+    fn default() -> Self {
+        // Gains of the paper's Table (simulations, torso and object motion).
+        PidcConfig {
+            object_gains: Gains::new(&[1500.0, 1500.0, 1500.0, 400.0, 400.0, 400.0], &[150.0, 150.0, 150.0, 140.0, 140.0, 140.0]),
+            torso_gains: Gains::new(&[4000.0, 4000.0, 4000.0, 3000.0, 3000.0, 3000.0], &[200.0, 200.0, 200.0, 125.0, 125.0, 125.0]),
+            swing_gains: Gains::new(&[3500.0, 3500.0, 3500.0], &[20.0, 20.0, 20.0]),
+            // The default scene's 0.6 m cube of 1 kg.
+            object_mass: 1.0,
+            object_inertia: Matrix3::identity() * (1.0 * (0.36 + 0.36) / 12.0),
+            object_pose_at_grasp: None,
+            f_min_foot: 5.0,
+            f_min_hand: 30.0,
+            friction_margin: std::f64::consts::FRAC_1_SQRT_2,
+            patch_margin: 0.5,
+            regularisation: 1e-6,
+            qp_max_iter: 50,
+            dense_qp: true,
+            fully_actuated: false,
+        }
+    }
+}
+
+impl PidcConfig {
+    /// Parse a TOML controller configuration and check it.
+    pub fn from_toml(text: &str) -> Result<Self, ControllerError> {
+        let c: PidcConfig = toml::from_str(text).map_err(|e| ControllerError::Config(e.to_string()))?;
+        c.check()?;
+        Ok(c)
+    }
+
+    /// The TOML text of this configuration.
+    pub fn to_toml(&self) -> Result<String, ControllerError> {
+        toml::to_string(self).map_err(|e| ControllerError::Config(e.to_string()))
+    }
+
+    /// Gains of the right sizes, finite and non-negative; masses, forces and limits sane.
+    pub fn check(&self) -> Result<(), ControllerError> {
+        let bad = |what: &str, why: String| Err(ControllerError::Config(format!("{what}: {why}")));
+        for (what, g, n) in [("object_gains", &self.object_gains, 6), ("torso_gains", &self.torso_gains, 6), ("swing_gains", &self.swing_gains, 3)] {
+            if let Err(why) = g.check(n) {
+                return bad(what, why);
+            }
+        }
+        if !(self.object_mass.is_finite() && self.object_mass >= 0.0) || self.object_inertia.iter().any(|x| !x.is_finite()) {
+            return bad("object", "mass and inertia must be finite, mass non-negative".into());
+        }
+        for (what, x) in [("f_min_foot", self.f_min_foot), ("f_min_hand", self.f_min_hand), ("regularisation", self.regularisation)] {
+            if !(x.is_finite() && x >= 0.0) {
+                return bad(what, format!("{x} must be finite and non-negative"));
+            }
+        }
+        for (what, x) in [("friction_margin", self.friction_margin), ("patch_margin", self.patch_margin)] {
+            if !(x.is_finite() && x > 0.0 && x <= 1.0) {
+                return bad(what, format!("{x} must be in (0, 1]"));
+            }
+        }
+        if self.qp_max_iter == 0 {
+            return bad("qp_max_iter", "must be positive".into());
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,243 @@
+//! [`Pidc`]: the team controller of the paper's §III, projected inverse dynamics control with
+//! the contact-force QP, run every tick.
+//!
+//! `tau = [P S]^+ P tau_M + B J_c^T F_c` (eq. ua_solution with `(I - P) tau_C = J_c^T F_c`),
+//! `F_c` from the QP of eq. wrench_optim2 (see [`crate::qp`]). [`Pidc::compute`] runs the
+//! stages of [`stages`] in the paper's order; each writes into the [`TickReport`] (what tests
+//! and reports read) or the controller's workspace, so a tick allocates nothing once the
+//! team's shape is known.
+//!
+//! * [`config`]: [`PidcConfig`], the gains, the object, the QP's margins and settings.
+//! * [`report`]: [`TickReport`] (every intermediate of the last tick) and the tick's messages.
+//! * [`stages`]: the stages, one job each.
+
+pub mod config;
+pub mod report;
+pub mod stages;
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use protocol::{DynamicsTerms, Header, QpStatus, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
+
+pub use config::PidcConfig;
+pub use report::{TickReport, Timing};
+
+use crate::qp::{self, QpInput, QpWorkspace};
+use crate::units::grasp::GraspTracker;
+use crate::units::impedance::TaskStack;
+use crate::units::projection::ProjectionWorkspace;
+use crate::{ControllerError, TeamController};
+use stages::contacts::{contact_jacobian, contact_list};
+use stages::limits::torque_limits;
+use stages::tasks::{task_torque, MotionSpaceTerms, TaskInput, Targets};
+use stages::torque::{compose, fallback, motion_torque, Clamp};
+use stages::wrench::{contact_map, contact_wrenches, Actuation, ContactMapScratch, MapInput, WrenchInput};
+
+/// Scratch of a tick that the report does not keep: each stage's workspace.
+#[derive(Default)]
+struct Workspace {
+    proj: ProjectionWorkspace,
+    motion: MotionSpaceTerms,
+    tasks: TaskStack,
+    /// `P tau_M`.
+    p_tau_m: nalgebra::DVector<f64>,
+    map: ContactMapScratch,
+    qp: QpWorkspace,
+}
+
+/// The PIDC team controller (paper §III).
+pub struct Pidc {
+    pub config: PidcConfig,
+    descriptions: BTreeMap<String, RobotDescription>,
+    expected: Option<Vec<String>>,
+    references: Option<TaskReferences>,
+    targets: Targets,
+    grasp: GraspTracker,
+    report: TickReport,
+    /// Whether `report` holds a completed tick.
+    valid: bool,
+    ws: Workspace,
+    diagnostics: Option<TickDiagnostics>,
+}
+
+impl Pidc {
+    pub fn new(config: PidcConfig) -> Self {
+        Pidc {
+            config,
+            descriptions: BTreeMap::new(),
+            expected: None,
+            references: None,
+            targets: Targets::default(),
+            grasp: GraspTracker::default(),
+            report: TickReport::default(),
+            valid: false,
+            ws: Workspace::default(),
+            diagnostics: None,
+        }
+    }
+
+    /// Limits and contact parameters of a robot (from its agent's description).
+    pub fn set_description(&mut self, d: &RobotDescription) {
+        self.descriptions.insert(d.header.robot_id().to_string(), d.clone());
+    }
+
+    pub fn has_description(&self, robot: &str) -> bool {
+        self.descriptions.contains_key(robot)
+    }
+
+    /// The robots every tick must contain (sorted ids); `None`: whoever is in the tick.
+    pub fn set_expected(&mut self, robots: Option<Vec<String>>) {
+        self.expected = robots;
+    }
+
+    /// Task references. Tasks without a reference hold the pose they had when first seen.
+    pub fn set_references(&mut self, r: &TaskReferences) {
+        match &mut self.references {
+            Some(old) => old.clone_from(r),
+            None => self.references = Some(r.clone()),
+        }
+    }
+
+    /// Forget the grasp (offsets are captured again when the hands next close).
+    pub fn release_grasp(&mut self) {
+        self.grasp.release();
+        self.targets.release_object();
+    }
+
+    /// The last tick, if it completed (a tick that ended in an error leaves none).
+    pub fn last(&self) -> Option<&TickReport> {
+        self.valid.then_some(&self.report)
+    }
+
+    /// Run one tick: the full team torque and every intermediate, stage by stage (§III).
+    ///
+    /// **Allocations.** Every matrix and vector of the tick lives in the report or in the
+    /// controller's workspace and is overwritten in place: once a team's shape (robots, stance
+    /// feet, grasp) has been seen, a tick allocates nothing (`tests/allocations.rs` counts).
+    /// What still allocates: a change of shape (buffers are resized), capturing a new grasp,
+    /// errors and fallback messages, and Clarabel when it has to finish a tick the dense
+    /// interior-point method did not.
+    pub fn compute(&mut self, tick: &[DynamicsTerms]) -> Result<&TickReport, ControllerError> {
+        self.valid = false;
+        let start = Instant::now();
+        let us = || start.elapsed().as_secs_f64() * 1e6;
+        let Pidc { config: cfg, descriptions, expected, references, targets, grasp, report: r, ws, valid, .. } = self;
+        // §III-A: M, h, v, S, J_cf, J_ee of the team; the torque limits (eq. original_torque_limit).
+        r.team.assemble_into(tick, expected.as_deref(), cfg.fully_actuated)?;
+        torque_limits(&r.team, descriptions, cfg.fully_actuated, &mut r.actuated, &mut r.limits)?;
+        // The rigid grasp: G, J_c,ee, J_o (eqs. graspmatrix, jacobian_cee, obj_jacobian).
+        grasp.update(&r.team, cfg.object_pose_at_grasp, &mut r.grasp)?;
+        // J_c = [J_cf; J_c,ee] (eq. jacobian_c).
+        contact_jacobian(&r.team, r.grasp.as_ref(), &mut r.j_c, &mut r.jdv_c);
+        let t_asm = us();
+        // P, Pdot v, M_c, Mbar, [P S]^+, B (eqs. aghili_21, aghili_25, constraint_force, bmatrix).
+        r.proj.compute_into(&mut ws.proj, &r.team, &r.j_c, &r.jdv_c)?;
+        ws.motion.compute_into(&r.proj, &r.team.bias);
+        let t_proj = us();
+        // tau_M of the object, torso and swing-foot impedances (eqs. control_law,
+        // joint_space_tau_M) with the object's load J_x^T F_x; tau_0 = [P S]^+ P tau_M.
+        let tasks = TaskInput { team: &r.team, grasp: r.grasp.as_ref(), references: references.as_ref(), config: cfg, motion: ws.motion.view() };
+        task_torque(&tasks, targets, &mut ws.tasks, &mut r.tau_m, &mut r.load, &mut r.f_x)?;
+        motion_torque(&r.proj, &r.tau_m, &mut r.tau0, &mut ws.p_tau_m);
+        let t_imp = us();
+        // lambda = rho F_c + eta (eq. relation_between_lambda_and_Fc); the QP's contacts.
+        let map = MapInput { team: &r.team, proj: &r.proj, j_c: &r.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
+        contact_map(&map, &mut ws.map, &mut r.y, &mut r.rho, &mut r.eta, &mut r.lambda_real);
+        contact_list(&r.team, descriptions, cfg, &mut r.contacts)?;
+        let t_build = us();
+        // F_c: eq. wrench_optim2 under the friction, moment and torque rows (eqs.
+        // unilateral_and_friction_cone_constraint, moment_constraint, real_torque_limit) on
+        // the real wrenches (lambda_real holds eta_real here); the fallback when it fails.
+        let input = QpInput {
+            y: &r.y,
+            rho: &r.rho,
+            eta: &r.lambda_real,
+            contacts: &r.contacts,
+            actuated: &r.actuated,
+            limits: &r.limits,
+            tau0: &r.tau0,
+            regularisation: cfg.regularisation,
+            dense_first: cfg.dense_qp,
+        };
+        r.qp = qp::solve(&mut ws.qp, &input, cfg.qp_max_iter, &mut r.f_c);
+        let t_qp = us();
+        r.fallback = fallback(&mut ws.qp, &input, cfg.qp_max_iter, r.qp.status, &mut r.f_c);
+        // tau = tau_0 + Y F_c (eq. ua_solution), clamped to the limits after a fallback.
+        let clamp = r.fallback.is_some().then_some(Clamp { actuated: &r.actuated, limits: &r.limits });
+        compose(&r.tau0, &r.y, &r.f_c, clamp, &mut r.tau)?;
+        // lambda for the torque sent (eq. relation_between_lambda_and_Fc, or eq.
+        // constraint_force for a clamped torque).
+        let sent = if r.fallback.is_some() { Actuation::Torque(&r.tau) } else { Actuation::ContactForces(&r.f_c) };
+        let wrench = WrenchInput { team: &r.team, proj: &r.proj, load: &r.load, rho: &r.rho, eta: &r.eta };
+        contact_wrenches(&wrench, sent, &mut ws.map, &mut r.lambda, &mut r.lambda_real);
+        r.timing = Timing {
+            assembly_us: t_asm,
+            projections_us: t_proj - t_asm,
+            impedance_us: t_imp - t_proj,
+            qp_build_us: t_build - t_imp,
+            qp_us: t_qp - t_build,
+            total_us: us(),
+        };
+        *valid = true;
+        Ok(&self.report)
+    }
+
+    /// Each robot's torque slice into `out` and the tick's diagnostics, reusing the previous
+    /// tick's messages (their strings and vectors) when the team is the same.
+    fn fill_outputs(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) {
+        if !self.valid {
+            return;
+        }
+        self.report.commands_into(tick, out);
+        let d = self.diagnostics.get_or_insert_with(|| TickDiagnostics {
+            header: Header::new("", None, 0, 0),
+            qp_status: QpStatus::NotRun,
+            qp_iterations: 0,
+            qp_solve_us: 0.0,
+            assembly_us: 0.0,
+            total_us: 0.0,
+            contacts: Vec::new(),
+            constraint_residual: 0.0,
+            object_estimate: None,
+        });
+        self.report.diagnostics_into(tick, d);
+    }
+}
+
+impl TeamController for Pidc {
+    fn name(&self) -> &'static str {
+        "pidc (projected inverse dynamics + contact-force QP)"
+    }
+
+    fn solve(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError> {
+        self.compute(tick)?;
+        self.fill_outputs(tick, out);
+        Ok(())
+    }
+
+    fn diagnostics(&self) -> Option<&TickDiagnostics> {
+        self.diagnostics.as_ref()
+    }
+
+    fn used_fallback(&self) -> bool {
+        self.last().is_some_and(|l| l.fallback.is_some())
+    }
+
+    fn set_description(&mut self, d: &RobotDescription) {
+        Pidc::set_description(self, d);
+    }
+
+    fn set_references(&mut self, r: &TaskReferences) {
+        Pidc::set_references(self, r);
+    }
+
+    fn set_members(&mut self, members: &[String]) {
+        self.set_expected(Some(members.to_vec()));
+    }
+
+    fn not_ready(&self, members: &[String]) -> Option<String> {
+        let missing: Vec<&String> = members.iter().filter(|m| !self.descriptions.contains_key(*m)).collect();
+        (!missing.is_empty()).then(|| format!("waiting for the descriptions of {missing:?}"))
+    }
+}

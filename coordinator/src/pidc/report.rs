@@ -1,0 +1,132 @@
+//! [`TickReport`]: everything one PIDC tick computed, kept for tests and reports, and the
+//! tick's outputs written from it (each robot's torque slice, the tick's diagnostics).
+
+use nalgebra::{DMatrix, DVector, Vector6};
+use protocol::{ContactWrench, DynamicsTerms, Header, TickDiagnostics, TorqueCommand};
+
+use crate::linalg::quat_wxyz;
+use crate::qp::{self, ContactKind};
+use crate::team::Team;
+use crate::units::grasp::GraspTerms;
+use crate::units::projection::Projections;
+
+/// Everything computed in the last tick (kept for tests and reports). It is also the tick's
+/// workspace: every matrix is overwritten in place by the next tick, so a tick allocates
+/// nothing once the team's shape is set (see [`super::Pidc::compute`]).
+#[derive(Debug, Clone, Default)]
+pub struct TickReport {
+    pub team: Team,
+    pub grasp: Option<GraspTerms>,
+    pub j_c: DMatrix<f64>,
+    pub jdv_c: DVector<f64>,
+    pub proj: Projections,
+    /// Motion torque `tau_M` and `tau_0 = [P S]^+ P tau_M`.
+    pub tau_m: DVector<f64>,
+    pub tau0: DVector<f64>,
+    /// `J_x^T F_x`: the object's load on the robots (n).
+    pub load: DVector<f64>,
+    /// `F_x` at the object centre.
+    pub f_x: Vector6<f64>,
+    pub f_c: DVector<f64>,
+    pub rho: DMatrix<f64>,
+    /// `eta` of eq. relation_between_lambda_and_Fc (without the hand-load offset).
+    pub eta: DVector<f64>,
+    /// `lambda = rho F_c + eta`, and the real contact wrenches (hand rows + `G^+ F_x`).
+    pub lambda: DVector<f64>,
+    pub lambda_real: DVector<f64>,
+    /// Full team torque (n) and the QP pieces.
+    pub tau: DVector<f64>,
+    pub y: DMatrix<f64>,
+    pub contacts: Vec<(usize, ContactKind)>,
+    pub limits: Vec<f64>,
+    pub actuated: Vec<usize>,
+    pub qp: qp::QpOutcome,
+    pub fallback: Option<String>,
+    pub timing: Timing,
+}
+
+/// Where the time of a tick went, µs.
+#[derive(Debug, Clone, Default)]
+pub struct Timing {
+    pub assembly_us: f64,
+    pub projections_us: f64,
+    pub impedance_us: f64,
+    pub qp_build_us: f64,
+    pub qp_us: f64,
+    pub total_us: f64,
+}
+
+impl TickReport {
+    /// Each robot's torque slice (its actuated rows of `tau`) into `out`, reusing the previous
+    /// tick's messages (their strings and vectors) when the team is the same.
+    pub fn commands_into(&self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) {
+        out.truncate(self.team.robots.len());
+        for (k, (r, t)) in self.team.robots.iter().zip(tick).enumerate() {
+            if k == out.len() {
+                out.push(TorqueCommand { header: Header::new(&t.header.team, Some(&r.id), 0, 0), tau: Vec::new() });
+            }
+            let cmd = &mut out[k];
+            set_header(&mut cmd.header, &t.header.team, Some(&r.id), t.header.tick, 0);
+            cmd.tau.clear();
+            cmd.tau.extend(r.actuated.iter().map(|&j| self.tau[j]));
+        }
+    }
+
+    /// The tick's diagnostics into `d` (its strings and vectors reused): the real contact
+    /// wrenches, the QP's status and time, `|J_c v|`, the object estimate.
+    pub fn diagnostics_into(&self, tick: &[DynamicsTerms], d: &mut TickDiagnostics) {
+        let (team_id, tick_no) = match tick.first() {
+            Some(t) => (t.header.team.as_str(), t.header.tick),
+            None => ("", 0),
+        };
+        set_header(&mut d.header, team_id, None, tick_no, protocol::wall_clock_ns());
+        let nf = self.team.feet.len();
+        let frames = self.team.feet.iter().map(|f| (f, 3)).chain(self.team.hands.iter().map(|h| (h, 6)));
+        d.contacts.truncate(nf + self.team.hands.len());
+        let mut row = 0;
+        for (k, (f, dim)) in frames.enumerate() {
+            if k == d.contacts.len() {
+                d.contacts.push(ContactWrench { robot: String::new(), frame: String::new(), wrench: Vec::new() });
+            }
+            let c = &mut d.contacts[k];
+            set_string(&mut c.robot, &self.team.robots[f.robot].id);
+            set_string(&mut c.frame, &f.name);
+            c.wrench.clear();
+            c.wrench.extend(self.lambda_real.rows(row, dim).iter());
+            row += dim;
+        }
+        // |J_c v|, without forming J_c v.
+        let v = &self.team.velocity;
+        let residual = (0..self.j_c.nrows()).map(|i| (0..v.len()).map(|j| self.j_c[(i, j)] * v[j]).sum::<f64>().powi(2)).sum::<f64>().sqrt();
+        d.qp_status = self.qp.status;
+        d.qp_iterations = self.qp.iterations;
+        d.qp_solve_us = self.qp.solve_us;
+        d.assembly_us = self.timing.assembly_us;
+        d.total_us = self.timing.total_us;
+        d.constraint_residual = if residual.is_finite() { residual } else { f64::MAX };
+        d.object_estimate = self.grasp.as_ref().map(|g| protocol::Pose {
+            position: g.object.translation.vector.into(),
+            orientation: quat_wxyz(&g.object.rotation.to_rotation_matrix()),
+        });
+    }
+}
+
+/// `s = value`, keeping `s`'s buffer.
+fn set_string(s: &mut String, value: &str) {
+    if s != value {
+        s.clear();
+        s.push_str(value);
+    }
+}
+
+/// A header's fields set in place (no new strings when they are unchanged).
+fn set_header(h: &mut Header, team: &str, robot: Option<&str>, tick: u64, stamp_ns: u64) {
+    h.version = protocol::PROTOCOL_VERSION;
+    set_string(&mut h.team, team);
+    match (robot, &mut h.robot) {
+        (Some(r), Some(old)) => set_string(old, r),
+        (r, old) => *old = r.map(str::to_string),
+    }
+    h.tick = tick;
+    h.stamp_ns = stamp_ns;
+}

@@ -1,0 +1,190 @@
+//! The motion tasks of a tick: each task's target ([`Targets`]), the carried object's load
+//! ([`object_load`], the paper's `J_x^T F_x` of eq. js_dynamics), the motion-space terms every
+//! task shares ([`MotionSpaceTerms`]) and the motion torque `tau_M` (eqs. control_law,
+//! joint_space_tau_M; [`task_torque`]).
+//!
+//! **Object weight.** The object is not in the generalized coordinates. Its load on the
+//! robots is modelled as the paper's external wrench `J_x^T F_x` (eq. js_dynamics) with
+//! `J_x = J_o` and `F_x = -w_ff`, `w_ff = [m_o (a_d - g); I_o alpha_d + omega x I_o omega]`
+//! (the object's gravity and inertial load at its reference acceleration, acting on the
+//! rigid grasp), and compensated by the same feed-forward in the object's impedance task:
+//! `F_o = (eq. control_law) + w_ff`. `J_o^T F_x = J_ee^T G^+ F_x`, so the real wrench the object
+//! exerts on hand `i` is `lambda_ee,i + (G^+ F_x)_i` (the internal part from the constraint
+//! plus the load distribution); that sum is what the diagnostics report and what the QP
+//! constrains (see [`super::wrench`]). The hands push the object with the negative of it, so
+//! their net wrench on the object is `-G (G^+ F_x) = w_ff`: it balances the weight in a
+//! static hold.
+
+use std::collections::BTreeMap;
+
+use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3, Vector6};
+use protocol::conventions::GRAVITY_VECTOR;
+use protocol::{PoseReference, TaskReferences};
+
+use crate::linalg::{mat, product, rotation_from_wxyz, zeros_v};
+use crate::pidc::PidcConfig;
+use crate::team::Team;
+use crate::units::grasp::GraspTerms;
+use crate::units::impedance::{point_error, pose_error, MotionSpace, TaskStack};
+use crate::units::projection::Projections;
+use crate::ControllerError;
+
+/// A pose target: pose, twist and acceleration (world, `[linear; angular]`).
+pub type PoseTarget = (Isometry3<f64>, [f64; 6], [f64; 6]);
+/// A point target: position, velocity and acceleration (world).
+pub type PointTarget = (Vector3<f64>, [f64; 3], [f64; 3]);
+
+/// Where each task's target comes from: the task references when they name the task, else
+/// the pose the task had when it was first seen without one (held, at rest).
+#[derive(Debug, Clone, Default)]
+pub struct Targets {
+    held_torsos: BTreeMap<String, Isometry3<f64>>,
+    /// (robot, frame, position) of swing feet without a reference.
+    held_feet: Vec<(String, String, Vector3<f64>)>,
+    held_object: Option<Isometry3<f64>>,
+}
+
+impl Targets {
+    /// The object's target; without a reference, the object pose `object` of the first such tick.
+    pub fn object(&mut self, refs: Option<&TaskReferences>, object: &Isometry3<f64>) -> PoseTarget {
+        match refs.and_then(|r| r.object.as_ref()) {
+            Some(r) => pose_ref(r),
+            None => (*self.held_object.get_or_insert(*object), [0.0; 6], [0.0; 6]),
+        }
+    }
+
+    /// Robot `id`'s torso target; without a reference, its pose `x` when first seen.
+    pub fn torso(&mut self, refs: Option<&TaskReferences>, id: &str, x: &Isometry3<f64>) -> PoseTarget {
+        match refs.and_then(|r| r.torsos.iter().find(|t| t.robot == id)) {
+            Some(t) => pose_ref(&t.reference),
+            None => match self.held_torsos.get(id) {
+                Some(h) => (*h, [0.0; 6], [0.0; 6]),
+                None => (*self.held_torsos.entry(id.to_string()).or_insert(*x), [0.0; 6], [0.0; 6]),
+            },
+        }
+    }
+
+    /// The target of robot `id`'s swing foot `frame`; without a reference, its position `p`
+    /// when first seen.
+    pub fn swing_foot(&mut self, refs: Option<&TaskReferences>, id: &str, frame: &str, p: &Vector3<f64>) -> PointTarget {
+        match refs.and_then(|r| r.swing_feet.iter().find(|s| s.robot == id && s.frame == frame)) {
+            Some(s) => (Vector3::from(s.reference.position), s.reference.velocity, s.reference.acceleration),
+            None => match self.held_feet.iter().find(|(r, f, _)| r == id && f == frame) {
+                Some((_, _, p)) => (*p, [0.0; 3], [0.0; 3]),
+                None => {
+                    self.held_feet.push((id.to_string(), frame.to_string(), *p));
+                    (*p, [0.0; 3], [0.0; 3])
+                }
+            },
+        }
+    }
+
+    /// Forget the held object pose (the grasp was released).
+    pub fn release_object(&mut self) {
+        self.held_object = None;
+    }
+}
+
+/// A pose reference as a target.
+fn pose_ref(r: &PoseReference) -> PoseTarget {
+    let rot = UnitQuaternion::from_rotation_matrix(&rotation_from_wxyz(&r.pose.orientation));
+    (Isometry3::from_parts(Translation3::from(Vector3::from(r.pose.position)), rot), r.twist, r.acceleration)
+}
+
+/// The object's load feed-forward `w_ff = [m_o (a_d - g); I_o alpha_d + omega x I_o omega]` at
+/// its centre (world): `object` its pose, `twist` its twist `[v; omega]`, `acc_d` the reference
+/// acceleration `[a_d; alpha_d]`, `inertia` about the centre in the object's frame. The load
+/// on the robots is `F_x = -w_ff` (see the module docs).
+pub fn object_load(object: &Isometry3<f64>, twist: &Vector6<f64>, acc_d: &[f64; 6], mass: f64, inertia: &Matrix3<f64>) -> Vector6<f64> {
+    let r_o = object.rotation.to_rotation_matrix();
+    let i_w = r_o.matrix() * *inertia * r_o.matrix().transpose();
+    let w = twist.fixed_rows::<3>(3).into_owned();
+    let alpha = Vector3::new(acc_d[3], acc_d[4], acc_d[5]);
+    let force = mass * (Vector3::new(acc_d[0], acc_d[1], acc_d[2]) - Vector3::from(GRAVITY_VECTOR));
+    let moment = i_w * alpha + w.cross(&(i_w * w));
+    Vector6::new(force.x, force.y, force.z, moment.x, moment.y, moment.z)
+}
+
+/// The motion-space terms every task shares: `M_c^{-1} P` and `M_c^{-1} (P h - Pdot v)`
+/// (eq. control_law's `Lambda_c` and `mu_c`), kept between ticks.
+#[derive(Debug, Clone, Default)]
+pub struct MotionSpaceTerms {
+    pub mcinv_p: DMatrix<f64>,
+    pub mcinv_bias: DVector<f64>,
+    /// `P h - Pdot v`.
+    p_bias: DVector<f64>,
+}
+
+impl MotionSpaceTerms {
+    /// From the tick's projections and the team's `h`.
+    pub fn compute_into(&mut self, proj: &Projections, bias: &DVector<f64>) {
+        let n = bias.len();
+        product(&mut self.mcinv_p, mat(&proj.mc_inv), mat(&proj.p));
+        zeros_v(&mut self.p_bias, n);
+        self.p_bias.copy_from(&proj.pdot_v);
+        self.p_bias.gemv(1.0, &proj.p, bias, -1.0); // P h - Pdot v
+        zeros_v(&mut self.mcinv_bias, n);
+        self.mcinv_bias.gemv(1.0, &proj.mc_inv, &self.p_bias, 0.0);
+    }
+
+    pub fn view(&self) -> MotionSpace<'_> {
+        MotionSpace { mcinv_p: &self.mcinv_p, mcinv_bias: &self.mcinv_bias }
+    }
+}
+
+/// What [`task_torque`] reads.
+pub struct TaskInput<'a> {
+    pub team: &'a Team,
+    pub grasp: Option<&'a GraspTerms>,
+    pub references: Option<&'a TaskReferences>,
+    pub config: &'a PidcConfig,
+    pub motion: MotionSpace<'a>,
+}
+
+/// `tau_M` (n): the superposition of the impedance tasks (eqn. joint_space_tau_M) of the
+/// object (when grasped), every torso and every swing foot, with the operational-space
+/// inertia and non-linear terms of eq. control_law computed for the team's task space as a
+/// whole (every task's rows stacked; see [`crate::units::impedance`]). Also the object's load
+/// `F_x` (zero without a grasp) and `J_x^T F_x` (`load`, n).
+pub fn task_torque(
+    inp: &TaskInput,
+    targets: &mut Targets,
+    stack: &mut TaskStack,
+    tau_m: &mut DVector<f64>,
+    load: &mut DVector<f64>,
+    f_x: &mut Vector6<f64>,
+) -> Result<(), ControllerError> {
+    let TaskInput { team, grasp, references: refs, config: cfg, motion } = inp;
+    let n = team.n;
+    let k_rows = grasp.map_or(0, |g| g.j_o.nrows()) + team.torsos.iter().chain(&team.swing_feet).map(|t| t.jacobian.nrows()).sum::<usize>();
+    stack.begin(k_rows, n);
+    zeros_v(load, n);
+    *f_x = Vector6::zeros();
+    if let Some(g) = grasp {
+        let (x_d, tw_d, acc_d) = targets.object(*refs, &g.object);
+        let err = pose_error(&g.object, &g.object_twist, &x_d, &tw_d, &acc_d);
+        // Object load feed-forward w_ff and the load F_x = -w_ff on the robots.
+        let w_ff = object_load(&g.object, &g.object_twist, &acc_d, cfg.object_mass, &cfg.object_inertia);
+        *f_x = -w_ff;
+        stack.push(&g.j_o, &g.jdv_o, &err, &cfg.object_gains, Some(&w_ff))?;
+        load.gemv_tr(1.0, &g.j_o, f_x, 0.0);
+    }
+    for tf in &team.torsos {
+        let id = &team.robots[tf.robot].id;
+        let x = Isometry3::from_parts(Translation3::from(tf.position), UnitQuaternion::from_rotation_matrix(&tf.rotation));
+        let (x_d, tw_d, acc_d) = targets.torso(*refs, id, &x);
+        let mut twist = Vector6::zeros();
+        twist.gemv(1.0, &tf.jacobian, &team.velocity, 0.0);
+        let err = pose_error(&x, &twist, &x_d, &tw_d, &acc_d);
+        stack.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.torso_gains, None)?;
+    }
+    for tf in &team.swing_feet {
+        let id = &team.robots[tf.robot].id;
+        let (p_d, v_d, a_d) = targets.swing_foot(*refs, id, &tf.name, &tf.position);
+        let mut vel = Vector3::zeros();
+        vel.gemv(1.0, &tf.jacobian, &team.velocity, 0.0);
+        let err = point_error(&tf.position, &vel, &p_d, &v_d, &a_d);
+        stack.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.swing_gains, None)?;
+    }
+    stack.joint_torque(motion, tau_m)
+}

@@ -1,0 +1,67 @@
+//! The team torque of eq. ua_solution, `tau = [P S]^+ P tau_M + B (I - P) tau_C` with
+//! `(I - P) tau_C = J_c^T F_c`: the motion part `tau_0` ([`motion_torque`]), `F_c` when the
+//! QP fails ([`fallback`]), and the sum `tau = tau_0 + Y F_c`, `Y = B J_c^T` ([`compose`]).
+//!
+//! **Fallback.** When the QP is infeasible or fails (status other than Solved/AlmostSolved),
+//! `F_c` comes from the least-violation relaxation ([`qp::solve_least_violation`]: every row
+//! softened by a heavily penalised slack), which keeps the squeeze and the friction rows as
+//! far as they can be kept; if even that fails, `F_c = 0` (plain projected inverse dynamics
+//! `tau = [P S]^+ P tau_M`). Either way the torques are clamped to the limits. The
+//! diagnostics keep the QP's status; `TickReport::fallback` says what was done. (`F_c = 0`
+//! drops the internal wrench, hence the squeeze: one infeasible tick lost the object.)
+
+use nalgebra::{DMatrix, DVector};
+use protocol::QpStatus;
+
+use crate::linalg::zeros_v;
+use crate::qp::{self, QpInput, QpWorkspace};
+use crate::units::projection::Projections;
+use crate::ControllerError;
+
+/// `tau_0 = [P S]^+ P tau_M` (n), the first term of eq. ua_solution. `p_tau_m` is scratch.
+pub fn motion_torque(proj: &Projections, tau_m: &DVector<f64>, tau0: &mut DVector<f64>, p_tau_m: &mut DVector<f64>) {
+    let n = tau_m.len();
+    zeros_v(p_tau_m, n);
+    p_tau_m.gemv(1.0, &proj.p, tau_m, 0.0);
+    zeros_v(tau0, n);
+    tau0.gemv(1.0, &proj.ps_pinv, p_tau_m, 0.0);
+}
+
+/// After a QP that ended with `status`: `None` when it was solved; otherwise `F_c` (into
+/// `f_c`) from the least-violation relaxation, or zero when that fails too, and what was done.
+pub fn fallback(ws: &mut QpWorkspace, input: &QpInput, max_iter: u32, status: QpStatus, f_c: &mut DVector<f64>) -> Option<String> {
+    match status {
+        QpStatus::Solved | QpStatus::AlmostSolved => None,
+        s => match qp::solve_least_violation(ws, input, max_iter, f_c) {
+            Some(worst) => Some(format!("QP {s:?}: least-violation F_c (worst row violated by {worst:.3}), torques clamped to the limits")),
+            None => {
+                f_c.fill(0.0);
+                Some(format!("QP {s:?}: F_c = 0, tau = [P S]^+ P tau_M clamped to the torque limits"))
+            }
+        },
+    }
+}
+
+/// Torque limits to clamp to: the actuated joints' team indices and their limits.
+#[derive(Debug, Clone, Copy)]
+pub struct Clamp<'a> {
+    pub actuated: &'a [usize],
+    pub limits: &'a [f64],
+}
+
+/// `tau = tau_0 + Y F_c` (n), clamped to `clamp` when given (after a fallback, whose `F_c` does
+/// not keep the torque limits). An error when a torque is not finite.
+pub fn compose(tau0: &DVector<f64>, y: &DMatrix<f64>, f_c: &DVector<f64>, clamp: Option<Clamp>, tau: &mut DVector<f64>) -> Result<(), ControllerError> {
+    zeros_v(tau, tau0.len());
+    tau.copy_from(tau0);
+    tau.gemv(1.0, y, f_c, 1.0);
+    if let Some(c) = clamp {
+        for (&j, &lim) in c.actuated.iter().zip(c.limits) {
+            tau[j] = tau[j].clamp(-lim, lim);
+        }
+    }
+    if !tau.iter().all(|x| x.is_finite()) {
+        return Err(ControllerError::NonFinite { robot: "team".into(), what: "torque".into() });
+    }
+    Ok(())
+}

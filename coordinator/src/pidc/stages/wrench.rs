@@ -1,0 +1,118 @@
+//! The contact map of eq. relation_between_lambda_and_Fc: the contact wrenches `lambda` as an
+//! affine function of the QP's variables, `lambda = rho F_c + eta` ([`contact_map`]), and the
+//! wrenches predicted for the torque actually sent ([`contact_wrenches`]).
+//!
+//! With `K = (I - P)(Mbar P - I)` and `Y = B J_c^T` (the torque per unit `F_c`):
+//! `rho = (J_c^T)^+ K S Y` and
+//! `eta = (J_c^T)^+ [K (S tau_0 + J_x^T F_x) + (I - P)(Mbar (Pdot v - P h) + h)]`
+//! (see [`Projections::contact_wrench`]); `rho` is formed right to left, without `K`.
+//! The real wrenches on the hands add the object's load distribution `G^+ F_x` (see
+//! [`super::tasks`]): `eta_real` and `lambda_real` are `eta` and `lambda` with it.
+
+use nalgebra::{DMatrix, DVector, Vector6};
+
+use crate::linalg::{add_product, mat, product, zeros, zeros_v};
+use crate::team::Team;
+use crate::units::grasp::GraspTerms;
+use crate::units::projection::Projections;
+
+/// Scratch of the contact map: `S Y`, two `n x m` products, team-sized vectors.
+#[derive(Debug, Clone, Default)]
+pub struct ContactMapScratch {
+    sy: DMatrix<f64>,
+    t_a: DMatrix<f64>,
+    t_b: DMatrix<f64>,
+    u: DVector<f64>,
+    t1: DVector<f64>,
+    t2: DVector<f64>,
+}
+
+/// What [`contact_map`] reads.
+pub struct MapInput<'a> {
+    pub team: &'a Team,
+    pub proj: &'a Projections,
+    pub j_c: &'a DMatrix<f64>,
+    /// `tau_0 = [P S]^+ P tau_M` and the object's load `J_x^T F_x` (n).
+    pub tau0: &'a DVector<f64>,
+    pub load: &'a DVector<f64>,
+    /// The grasp (its `G^+`) and the object's load `F_x`, for the hands' share `G^+ F_x`.
+    pub grasp: Option<&'a GraspTerms>,
+    pub f_x: &'a Vector6<f64>,
+}
+
+/// `Y = B J_c^T` (n x m), `rho` (m x m), `eta` (m) and `eta_real` (m: `eta` with `G^+ F_x` on
+/// the hand rows) of eq. relation_between_lambda_and_Fc.
+pub fn contact_map(inp: &MapInput, ws: &mut ContactMapScratch, y: &mut DMatrix<f64>, rho: &mut DMatrix<f64>, eta: &mut DVector<f64>, eta_real: &mut DVector<f64>) {
+    let MapInput { team, proj, j_c, tau0, load, grasp, f_x } = inp;
+    let n = team.n;
+    let m = j_c.nrows();
+    let nf = team.feet.len();
+    product(y, mat(&proj.b), mat(j_c).transpose()); // Y = B J_c^T
+    zeros(&mut ws.sy, n, m);
+    ws.sy.copy_from(y);
+    for i in 0..n {
+        ws.sy.row_mut(i).scale_mut(team.s_diag[i]);
+    }
+    product(&mut ws.t_a, mat(&proj.p), mat(&ws.sy)); // P S Y
+    zeros(&mut ws.t_b, n, m);
+    ws.t_b -= &ws.sy;
+    add_product(&mut ws.t_b, 1.0, mat(&proj.mbar), mat(&ws.t_a)); // (Mbar P - I) S Y
+    product(&mut ws.t_a, mat(&proj.ip), mat(&ws.t_b)); // K S Y
+    product(rho, mat(&proj.jct_pinv), mat(&ws.t_a));
+    zeros_v(&mut ws.u, n);
+    ws.u.copy_from(*tau0);
+    ws.u.component_mul_assign(&team.s_diag);
+    ws.u += *load; // S tau_0 + J_x^T F_x
+    proj.contact_wrench(&team.bias, &ws.u, eta, &mut ws.t1, &mut ws.t2);
+    // eta_real: the hand rows carry the object's load distribution G^+ F_x.
+    zeros_v(eta_real, m);
+    eta_real.copy_from(eta);
+    if let Some(g) = grasp {
+        let mut rows = eta_real.rows_mut(3 * nf, g.g_pinv.nrows());
+        rows.gemv(1.0, &g.g_pinv, *f_x, 1.0);
+    }
+}
+
+/// What the contact wrenches of a tick follow from.
+#[derive(Debug, Clone, Copy)]
+pub enum Actuation<'a> {
+    /// The QP's `F_c`, sent as `tau = tau_0 + Y F_c`: `lambda = rho F_c + eta`.
+    ContactForces(&'a DVector<f64>),
+    /// A torque that is not `tau_0 + Y F_c` (clamped after a fallback): `lambda` of eq.
+    /// constraint_force for `S tau + J_x^T F_x`.
+    Torque(&'a DVector<f64>),
+}
+
+/// What [`contact_wrenches`] reads: the map of [`contact_map`] and what it needs for a torque.
+pub struct WrenchInput<'a> {
+    pub team: &'a Team,
+    pub proj: &'a Projections,
+    pub load: &'a DVector<f64>,
+    pub rho: &'a DMatrix<f64>,
+    pub eta: &'a DVector<f64>,
+}
+
+/// The predicted contact wrenches `lambda` (m) for what was sent, and `lambda_real`, which
+/// holds `eta_real` on entry (see [`contact_map`]) and `lambda + (eta_real - eta)` on return.
+pub fn contact_wrenches(inp: &WrenchInput, sent: Actuation, ws: &mut ContactMapScratch, lambda: &mut DVector<f64>, lambda_real: &mut DVector<f64>) {
+    let WrenchInput { team, proj, load, rho, eta } = inp;
+    zeros_v(lambda, eta.len());
+    match sent {
+        Actuation::Torque(tau) => {
+            // The clamped torque is not tau_0 + Y F_c: predict lambda from the torque actually
+            // sent (eq. constraint_force).
+            zeros_v(&mut ws.u, team.n);
+            ws.u.copy_from(tau);
+            ws.u.component_mul_assign(&team.s_diag);
+            ws.u += *load; // S tau + J_x^T F_x
+            proj.contact_wrench(&team.bias, &ws.u, lambda, &mut ws.t1, &mut ws.t2);
+        }
+        Actuation::ContactForces(f_c) => {
+            lambda.copy_from(*eta);
+            lambda.gemv(1.0, *rho, f_c, 1.0);
+        }
+    }
+    // lambda_real = lambda + (eta_real - eta).
+    *lambda_real -= *eta;
+    *lambda_real += &*lambda;
+}

@@ -1,0 +1,8 @@
+//! Units of the team problem that any team controller composes (mc_rtc's `MetaTask` and
+//! `ConstraintSet` in spirit): the Cartesian impedance tasks ([`impedance`]), the rigid grasp
+//! ([`grasp`]) and the PIDC projections ([`projection`]). Each computes into buffers kept
+//! between ticks; none knows which controller uses it.
+
+pub mod grasp;
+pub mod impedance;
+pub mod projection;

@@ -1,0 +1,491 @@
+//! Each stage of the PIDC tick, called alone, against an independent statement of what it
+//! computes: the protocol's frames stacked by hand, the paper's equations written out with
+//! dense matrices, Euler's equations in the body frame. The inputs come from a tick of the
+//! real default robot (a moving two-robot team); the outputs are never compared with the
+//! function that made them.
+
+mod common;
+
+use std::collections::BTreeMap;
+
+use common::{robot_id, Fixture};
+use coordinator::pidc::stages::contacts::{contact_jacobian, contact_list};
+use coordinator::pidc::stages::limits::{torque_limits, UNBOUNDED_BASE_LIMIT};
+use coordinator::pidc::stages::tasks::{object_load, task_torque, MotionSpaceTerms, TaskInput, Targets};
+use coordinator::pidc::stages::torque::{compose, motion_torque, Clamp};
+use coordinator::pidc::stages::wrench::{contact_map, contact_wrenches, Actuation, ContactMapScratch, MapInput, WrenchInput};
+use coordinator::pidc::TickReport;
+use coordinator::qp::ContactKind;
+use coordinator::team::Team;
+use coordinator::units::grasp::{GraspTerms, GraspTracker};
+use coordinator::units::impedance::TaskStack;
+use coordinator::{ControllerError, Pidc, PidcConfig};
+use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
+use protocol::{DynamicsTerms, FrameRole, PoseReference, RobotDescription, TaskReferences, TorsoReference};
+use robot_agent::terms::ContactSet;
+
+fn max_abs(m: &DMatrix<f64>) -> f64 {
+    m.iter().fold(0.0, |a, x| a.max(x.abs()))
+}
+
+/// `|a - b|_max / max(1, |b|_max)`.
+fn rel(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
+    max_abs(&(a - b)) / max_abs(b).max(1.0)
+}
+
+fn relv(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
+    (a - b).amax() / b.amax().max(1.0)
+}
+
+/// A moving two-robot team (joints perturbed, velocities in `N(J_c)`), its descriptions, and
+/// the controller after a tick on it (its report holds every stage's inputs).
+fn moving_team(fx: &mut Fixture, seed: u64) -> (Vec<DynamicsTerms>, Vec<RobotDescription>, Pidc) {
+    let mut rng = common::rng(seed);
+    let nv = fx.robot.model.nv;
+    let qs: Vec<DVector<f64>> = (0..2).map(|k| fx.perturbed_q(k, 2, 0.1, &mut rng)).collect();
+    let descs: Vec<_> = (0..2).map(|k| fx.description(&robot_id(k))).collect();
+    let still: Vec<_> = (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &DVector::zeros(nv), 1)).collect();
+    let mut c = Pidc::new(PidcConfig::default());
+    for d in &descs {
+        c.set_description(d);
+    }
+    let p = c.compute(&still).expect("tick").proj.p.clone();
+    use rand::Rng;
+    let v = &p * DVector::from_fn(2 * nv, |_, _| rng.random_range(-0.5..0.5));
+    let terms: Vec<_> = (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &v.rows(k * nv, nv).into_owned(), 2)).collect();
+    c.compute(&terms).expect("tick");
+    (terms, descs, c)
+}
+
+/// The rows of every frame of `role` (hands only when in grasp), stacked by hand from the
+/// protocol's row-major Jacobians at each robot's column offset.
+fn stacked(terms: &[DynamicsTerms], role: FrameRole) -> (DMatrix<f64>, DVector<f64>) {
+    let n: usize = terms.iter().map(|t| t.nv()).sum();
+    let mut rows: Vec<Vec<f64>> = Vec::new();
+    let mut jdv = Vec::new();
+    let mut off = 0;
+    for t in terms {
+        for f in t.frames.iter().filter(|f| f.role == role && (role != FrameRole::Hand || t.hand_in_grasp)) {
+            for i in 0..f.jacobian.rows() {
+                let mut row = vec![0.0; n];
+                for j in 0..t.nv() {
+                    row[off + j] = f.jacobian.data[i * t.nv() + j];
+                }
+                rows.push(row);
+                jdv.push(f.jdot_v[i]);
+            }
+        }
+        off += t.nv();
+    }
+    (DMatrix::from_fn(rows.len(), n, |i, j| rows[i][j]), DVector::from_vec(jdv))
+}
+
+/// The grasp matrix of eq. graspmatrix (world-aligned, `R_i = I`) for hands at `hands` and
+/// the object centre at `centre`, and `G^+ = G^T (G G^T)^{-1}`.
+fn grasp_matrix(hands: &[Vector3<f64>], centre: &Vector3<f64>) -> (DMatrix<f64>, DMatrix<f64>) {
+    let mut g = DMatrix::zeros(6, 6 * hands.len());
+    for (i, p) in hands.iter().enumerate() {
+        let r = p - centre;
+        let mut gi = Matrix6::identity();
+        gi.fixed_view_mut::<3, 3>(3, 0).copy_from(&r.cross_matrix());
+        g.fixed_view_mut::<6, 6>(0, 6 * i).copy_from(&gi);
+    }
+    let g_pinv = g.transpose() * (&g * g.transpose()).try_inverse().expect("G G^T regular");
+    (g, g_pinv)
+}
+
+fn hand_positions(terms: &[DynamicsTerms]) -> Vec<Vector3<f64>> {
+    terms.iter().flat_map(|t| t.frames.iter().filter(|f| f.role == FrameRole::Hand && t.hand_in_grasp).map(|f| Vector3::from(f.position))).collect()
+}
+
+fn diag(v: &DVector<f64>) -> DMatrix<f64> {
+    DMatrix::from_diagonal(v)
+}
+
+#[test]
+fn contact_jacobian_is_the_feet_rows_then_the_grasp_projected_hand_rows() {
+    let mut fx = Fixture::new();
+    let (terms, _, c) = moving_team(&mut fx, 3);
+    let r = c.last().expect("tick");
+    // eq. jacobian_c: [J_cf; (I - G^T (G^+)^T) J_ee] (eq. jacobian_cee), from the frames.
+    let (j_cf, jdv_cf) = stacked(&terms, FrameRole::StanceFoot);
+    let (j_ee, _) = stacked(&terms, FrameRole::Hand);
+    let grasp = r.grasp.as_ref().expect("grasp");
+    let (g, g_pinv) = grasp_matrix(&hand_positions(&terms), &grasp.object.translation.vector);
+    let nproj = DMatrix::identity(12, 12) - g.transpose() * g_pinv.transpose();
+    let mut expect = DMatrix::zeros(j_cf.nrows() + 12, j_cf.ncols());
+    expect.rows_mut(0, j_cf.nrows()).copy_from(&j_cf);
+    expect.rows_mut(j_cf.nrows(), 12).copy_from(&(nproj * j_ee));
+
+    let (mut j_c, mut jdv_c) = (DMatrix::zeros(0, 0), DVector::zeros(0));
+    contact_jacobian(&r.team, Some(grasp), &mut j_c, &mut jdv_c);
+    let e = rel(&j_c, &expect);
+    println!("J_c ({}x{}) vs the frames stacked by hand: {e:.1e}", j_c.nrows(), j_c.ncols());
+    assert_eq!(j_c.shape(), (24 + 12, 2 * fx.robot.model.nv));
+    assert!(e < 1e-12);
+    assert_eq!(jdv_c.rows(0, 24).into_owned(), jdv_cf, "the feet's Jdot v are the agents' own");
+    assert_eq!(jdv_c.rows(24, 12).into_owned(), grasp.jdv_cee);
+
+    // No hand in grasp: the feet's rows alone.
+    let nv = fx.robot.model.nv;
+    let cs = ContactSet { stance: vec![true; 4], hand_in_grasp: false };
+    let free: Vec<_> = (0..2).map(|k| fx.terms_with(&robot_id(k), &fx.standing_q(k, 2), &DVector::zeros(nv), 1, &cs)).collect();
+    let mut team = Team::default();
+    team.assemble_into(&free, None, false).expect("team");
+    contact_jacobian(&team, None, &mut j_c, &mut jdv_c);
+    assert_eq!(j_c, stacked(&free, FrameRole::StanceFoot).0);
+}
+
+#[test]
+fn torque_limits_follow_the_descriptions() {
+    let mut fx = Fixture::new();
+    let (terms, descs) = fx.static_team(2);
+    let by_id: BTreeMap<String, RobotDescription> = descs.iter().map(|d| (d.header.robot_id().to_string(), d.clone())).collect();
+    let mut team = Team::default();
+    team.assemble_into(&terms, None, false).expect("team");
+    let (mut actuated, mut limits) = (Vec::new(), Vec::new());
+    torque_limits(&team, &by_id, false, &mut actuated, &mut limits).expect("limits");
+    // Robot k's joints follow its 6 base coordinates; the limits are its description's.
+    let nv = fx.robot.model.nv;
+    let expect: Vec<usize> = (0..2).flat_map(|k| (k * nv + 6)..((k + 1) * nv)).collect();
+    assert_eq!(actuated, expect);
+    assert_eq!(limits, [descs[0].torque_limits.clone(), descs[1].torque_limits.clone()].concat());
+    // S = I: the base coordinates too, unbounded.
+    torque_limits(&team, &by_id, true, &mut actuated, &mut limits).expect("limits");
+    assert_eq!(actuated, (0..2 * nv).collect::<Vec<_>>());
+    assert_eq!(limits[..6], [UNBOUNDED_BASE_LIMIT; 6]);
+    assert_eq!(limits[6..nv], descs[0].torque_limits[..]);
+    // A missing or disagreeing description is an error.
+    let one: BTreeMap<_, _> = by_id.iter().take(1).map(|(k, v)| (k.clone(), v.clone())).collect();
+    assert!(matches!(torque_limits(&team, &one, false, &mut actuated, &mut limits), Err(ControllerError::MissingDescription { robot }) if robot == "r2"));
+    let mut short = by_id.clone();
+    short.get_mut("r1").expect("r1").torque_limits.pop();
+    assert!(matches!(torque_limits(&team, &short, false, &mut actuated, &mut limits), Err(ControllerError::Dimension { .. })));
+}
+
+#[test]
+fn contact_list_scales_each_robots_friction_and_patch_by_the_margins() {
+    let mut fx = Fixture::new();
+    let (terms, descs) = fx.static_team(2);
+    let by_id: BTreeMap<String, RobotDescription> = descs.iter().map(|d| (d.header.robot_id().to_string(), d.clone())).collect();
+    let mut team = Team::default();
+    team.assemble_into(&terms, None, false).expect("team");
+    let cfg = PidcConfig { friction_margin: 0.5, patch_margin: 0.25, f_min_foot: 7.0, f_min_hand: 11.0, ..PidcConfig::default() };
+    let mut out = Vec::new();
+    contact_list(&team, &by_id, &cfg, &mut out).expect("contacts");
+    assert_eq!(out.len(), 8 + 2);
+    let d = &descs[0];
+    for (k, (row, kind)) in out.iter().take(8).enumerate() {
+        assert_eq!(*row, 3 * k);
+        let ContactKind::Foot { mu, f_min } = kind else { panic!("foot {k} is {kind:?}") };
+        assert_eq!((*mu, *f_min), (d.foot_mu * 0.5, 7.0));
+    }
+    // Hands: the contact frame's axes from the agent's rotation (row-major), after the feet.
+    for (k, t) in terms.iter().enumerate() {
+        let hand = t.frames.iter().find(|f| f.role == FrameRole::Hand).expect("hand");
+        let rot = Matrix3::from_row_slice(&hand.rotation);
+        let (row, kind) = &out[8 + k];
+        assert_eq!(*row, 24 + 6 * k);
+        let ContactKind::Hand { tx, ty, n, mu, xi, half, f_min } = kind else { panic!("hand {k} is {kind:?}") };
+        for (axis, col) in [(tx, 0), (ty, 1), (n, 2)] {
+            assert!((axis - rot.column(col)).amax() < 1e-15, "axis {col} of hand {k}");
+        }
+        assert_eq!((*mu, *xi, *f_min), (d.hand_mu * 0.5, d.hand_xi * 0.5, 11.0));
+        assert_eq!(*half, [d.hand_half_size[0] * 0.25, d.hand_half_size[1] * 0.25]);
+    }
+    let one: BTreeMap<_, _> = by_id.into_iter().take(1).collect();
+    assert!(matches!(contact_list(&team, &one, &cfg, &mut out), Err(ControllerError::MissingDescription { .. })));
+}
+
+#[test]
+fn grasp_tracker_captures_the_object_at_the_hands_centroid_or_where_told() {
+    let mut fx = Fixture::new();
+    let (terms, _) = fx.static_team(2);
+    let mut team = Team::default();
+    team.assemble_into(&terms, None, false).expect("team");
+    let hands = hand_positions(&terms);
+    let centroid = (hands[0] + hands[1]) / 2.0;
+    let mut terms_out: Option<GraspTerms> = None;
+    let mut tracker = GraspTracker::default();
+    tracker.update(&team, None, &mut terms_out).expect("grasp");
+    let object = terms_out.as_ref().expect("grasp terms").object;
+    assert!((object.translation.vector - centroid).amax() < 1e-12);
+    assert!(object.rotation.angle() < 1e-9, "world axes");
+    // Told where the object is when the grasp closes.
+    let at = Isometry3::from_parts(Translation3::new(1.1, 0.05, 0.62), UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3));
+    let mut told = None;
+    GraspTracker::default().update(&team, Some(at), &mut told).expect("grasp");
+    let object = told.expect("grasp terms").object;
+    assert!((object.translation.vector - at.translation.vector).amax() < 1e-12);
+    assert!(object.rotation.angle_to(&at.rotation) < 1e-9);
+    // Hands released: no grasp terms.
+    let nv = fx.robot.model.nv;
+    let cs = ContactSet { stance: vec![true; 4], hand_in_grasp: false };
+    let free: Vec<_> = (0..2).map(|k| fx.terms_with(&robot_id(k), &fx.standing_q(k, 2), &DVector::zeros(nv), 1, &cs)).collect();
+    team.assemble_into(&free, None, false).expect("team");
+    tracker.update(&team, None, &mut terms_out).expect("no grasp");
+    assert!(terms_out.is_none());
+}
+
+#[test]
+fn object_load_is_eulers_equations_in_the_body_frame_rotated_to_the_world() {
+    // Static: the weight, nothing else.
+    let inertia = Matrix3::new(0.06, 0.001, -0.002, 0.001, 0.05, 0.003, -0.002, 0.003, 0.07);
+    let w = object_load(&Isometry3::identity(), &Vector6::zeros(), &[0.0; 6], 2.0, &inertia);
+    assert_eq!(w, Vector6::new(0.0, 0.0, 2.0 * 9.81, 0.0, 0.0, 0.0));
+    // Moving and turning: m (a - g) and R (I alpha_b + omega_b x I omega_b), body-frame
+    // quantities rotated back to the world.
+    let rot = UnitQuaternion::from_euler_angles(0.4, -0.7, 1.9);
+    let pose = Isometry3::from_parts(Translation3::new(0.3, -0.2, 0.8), rot);
+    let omega = Vector3::new(0.7, -1.3, 0.4);
+    let twist = Vector6::new(0.1, 0.2, 0.3, omega.x, omega.y, omega.z);
+    let acc = [0.5, -0.4, 1.2, 2.0, -1.0, 0.5];
+    let w = object_load(&pose, &twist, &acc, 2.0, &inertia);
+    let (om_b, al_b) = (rot.inverse() * omega, rot.inverse() * Vector3::new(acc[3], acc[4], acc[5]));
+    let moment = rot * (inertia * al_b + om_b.cross(&(inertia * om_b)));
+    let force = 2.0 * Vector3::new(acc[0], acc[1], acc[2] + 9.81);
+    let expect = Vector6::new(force.x, force.y, force.z, moment.x, moment.y, moment.z);
+    println!("w_ff {:?}, vs Euler {:.1e}", w.as_slice(), (w - expect).amax());
+    assert!((w - expect).amax() < 1e-12);
+}
+
+#[test]
+fn targets_follow_references_and_otherwise_hold_the_first_pose_seen() {
+    let a = Isometry3::translation(1.0, 2.0, 3.0);
+    let b = Isometry3::translation(4.0, 5.0, 6.0);
+    let mut t = Targets::default();
+    assert_eq!(t.torso(None, "r1", &a), (a, [0.0; 6], [0.0; 6]));
+    assert_eq!(t.torso(None, "r1", &b).0, a, "held");
+    assert_eq!(t.torso(None, "r2", &b).0, b, "each robot its own");
+    let reference = PoseReference { pose: protocol::Pose { position: [7.0, 8.0, 9.0], orientation: [1.0, 0.0, 0.0, 0.0] }, twist: [0.1; 6], acceleration: [0.2; 6] };
+    let refs = TaskReferences {
+        header: protocol::Header::new("t", None, 1, 0),
+        object: Some(reference.clone()),
+        torsos: vec![TorsoReference { robot: "r1".into(), reference: reference.clone() }],
+        swing_feet: vec![],
+    };
+    let (x, tw, acc) = t.torso(Some(&refs), "r1", &b);
+    assert_eq!((x.translation.vector, tw, acc), (Vector3::new(7.0, 8.0, 9.0), [0.1; 6], [0.2; 6]));
+    assert_eq!(t.torso(Some(&refs), "r2", &a).0, b, "a reference for r1 only");
+    assert_eq!(t.object(None, &a).0, a);
+    assert_eq!(t.object(None, &b).0, a);
+    assert_eq!(t.object(Some(&refs), &b).0.translation.vector, Vector3::new(7.0, 8.0, 9.0));
+    t.release_object();
+    assert_eq!(t.object(None, &b).0, b, "captured again after a release");
+    let (p, q) = (Vector3::new(0.1, 0.2, 0.0), Vector3::new(0.3, 0.2, 0.1));
+    assert_eq!(t.swing_foot(None, "r1", "LF_FOOT", &p).0, p);
+    assert_eq!(t.swing_foot(None, "r1", "LF_FOOT", &q).0, p);
+    assert_eq!(t.swing_foot(None, "r1", "RF_FOOT", &q).0, q);
+}
+
+/// The tick's task references moved off the current poses (so that every error term acts).
+fn displaced_references(r: &TickReport) -> TaskReferences {
+    let to_ref = |x: &Isometry3<f64>| {
+        let q = x.rotation;
+        PoseReference { pose: protocol::Pose { position: x.translation.vector.into(), orientation: [q.w, q.i, q.j, q.k] }, twist: [0.02, -0.01, 0.03, 0.05, -0.04, 0.02], acceleration: [0.1, 0.2, -0.1, 0.3, -0.2, 0.1] }
+    };
+    let nudge = Isometry3::from_parts(Translation3::new(0.01, -0.02, 0.015), UnitQuaternion::from_euler_angles(0.03, -0.02, 0.04));
+    let object = r.grasp.as_ref().expect("grasp").object;
+    TaskReferences {
+        header: protocol::Header::new("t", None, 2, 0),
+        object: Some(to_ref(&(nudge * object))),
+        torsos: r
+            .team
+            .torsos
+            .iter()
+            .map(|tf| {
+                let x = Isometry3::from_parts(Translation3::from(tf.position), UnitQuaternion::from_rotation_matrix(&tf.rotation));
+                TorsoReference { robot: r.team.robots[tf.robot].id.clone(), reference: to_ref(&(nudge * x)) }
+            })
+            .collect(),
+        swing_feet: vec![],
+    }
+}
+
+/// A task written out: its Jacobian, `Jdot v`, current pose and reference.
+type Task<'a> = (&'a DMatrix<f64>, &'a DVector<f64>, Isometry3<f64>, &'a PoseReference);
+
+#[test]
+fn task_torque_is_the_stacked_impedance_law_written_out() {
+    let mut fx = Fixture::new();
+    let (_, _, c) = moving_team(&mut fx, 5);
+    let r = c.last().expect("tick");
+    let cfg = PidcConfig::default();
+    let refs = displaced_references(r);
+    let (team, proj, g) = (&r.team, &r.proj, r.grasp.as_ref().expect("grasp"));
+    let n = team.n;
+
+    let mut motion = MotionSpaceTerms::default();
+    motion.compute_into(proj, &team.bias);
+    assert!(rel(&motion.mcinv_p, &(&proj.mc_inv * &proj.p)) < 1e-12);
+    let p_bias = &proj.p * &team.bias - &proj.pdot_v;
+    assert!(relv(&motion.mcinv_bias, &(&proj.mc_inv * &p_bias)) < 1e-12);
+    let inp = TaskInput { team, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view() };
+    let (mut tau_m, mut load, mut f_x) = (DVector::zeros(0), DVector::zeros(0), Vector6::zeros());
+    task_torque(&inp, &mut Targets::default(), &mut TaskStack::default(), &mut tau_m, &mut load, &mut f_x).expect("tau_M");
+
+    // eq. control_law for the stacked task x = [x_o; x_t1; x_t2] (J_x = [J_o; J_t1; J_t2]):
+    // F = Lambda_c (J M_c^{-1} (P h - Pdot v) - Jdot v + a_d) - K_d edot - K_p e (+ w_ff on the
+    // object's rows), Lambda_c = (J M_c^{-1} P J^T)^{-1}; tau_M = J^T F (eqn. joint_space_tau_M).
+    let tasks: Vec<Task> = std::iter::once((&g.j_o, &g.jdv_o, g.object, refs.object.as_ref().expect("object")))
+        .chain(team.torsos.iter().zip(&refs.torsos).map(|(tf, t)| {
+            (&tf.jacobian, &tf.jdot_v, Isometry3::from_parts(Translation3::from(tf.position), UnitQuaternion::from_rotation_matrix(&tf.rotation)), &t.reference)
+        }))
+        .collect();
+    let k = 6 * tasks.len();
+    let mut j = DMatrix::zeros(k, n);
+    let (mut jdv, mut e, mut edot, mut acc, mut kp, mut kd, mut ff) = (DVector::zeros(k), DVector::zeros(k), DVector::zeros(k), DVector::zeros(k), DVector::zeros(k), DVector::zeros(k), DVector::zeros(k));
+    for (i, (jx, jdvx, x, reference)) in tasks.iter().enumerate() {
+        j.rows_mut(6 * i, 6).copy_from(*jx);
+        jdv.rows_mut(6 * i, 6).copy_from(*jdvx);
+        let x_d_rot = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(reference.pose.orientation[0], reference.pose.orientation[1], reference.pose.orientation[2], reference.pose.orientation[3]));
+        let dp = x.translation.vector - Vector3::from(reference.pose.position);
+        let dr = (x.rotation * x_d_rot.inverse()).scaled_axis();
+        e.rows_mut(6 * i, 6).copy_from(&Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z));
+        let twist = *jx * &team.velocity;
+        edot.rows_mut(6 * i, 6).copy_from(&(twist - DVector::from_row_slice(&reference.twist)));
+        acc.rows_mut(6 * i, 6).copy_from(&DVector::from_row_slice(&reference.acceleration));
+        let gains = if i == 0 { &cfg.object_gains } else { &cfg.torso_gains };
+        kp.rows_mut(6 * i, 6).copy_from(&DVector::from_row_slice(&gains.kp));
+        kd.rows_mut(6 * i, 6).copy_from(&DVector::from_row_slice(&gains.kd));
+    }
+    let a_o = refs.object.as_ref().expect("object").acceleration;
+    let w_ff = object_load(&g.object, &g.object_twist, &a_o, cfg.object_mass, &cfg.object_inertia);
+    ff.rows_mut(0, 6).copy_from(&w_ff);
+    let lambda = (&j * &proj.mc_inv * &proj.p * j.transpose()).try_inverse().expect("task space spans the motion space");
+    let u = &j * &proj.mc_inv * &p_bias - &jdv + &acc;
+    let f = &lambda * u - kd.component_mul(&edot) - kp.component_mul(&e) + ff;
+    let expect = j.transpose() * f;
+    let err = relv(&tau_m, &expect);
+    println!("tau_M vs eq. control_law written out: {err:.1e} (|tau_M| {:.1})", expect.amax());
+    assert!(err < 1e-8);
+    // The object's load: F_x = -w_ff, J_x^T F_x with J_x = J_o.
+    assert_eq!(f_x, -w_ff);
+    assert!(relv(&load, &(g.j_o.transpose() * (-w_ff))) < 1e-13);
+}
+
+#[test]
+fn contact_map_is_the_papers_rho_and_eta() {
+    let mut fx = Fixture::new();
+    let (_, _, c) = moving_team(&mut fx, 11);
+    let r = c.last().expect("tick");
+    let (team, proj) = (&r.team, &r.proj);
+    let g = r.grasp.as_ref().expect("grasp");
+    let map = MapInput { team, proj, j_c: &r.j_c, tau0: &r.tau0, load: &r.load, grasp: Some(g), f_x: &r.f_x };
+    let mut ws = ContactMapScratch::default();
+    let (mut y, mut rho, mut eta, mut eta_real) = (DMatrix::zeros(0, 0), DMatrix::zeros(0, 0), DVector::zeros(0), DVector::zeros(0));
+    contact_map(&map, &mut ws, &mut y, &mut rho, &mut eta, &mut eta_real);
+
+    // eq. relation_between_lambda_and_Fc as printed: rho = (J_c^T)^+ (I - P)(Mbar P - I) S B J_c^T,
+    // eta = (J_c^T)^+ (I - P) [eps tau_M + Mbar (-P h + Pdot v) + h + (Mbar P - I) J_x^T F_x],
+    // eps = (Mbar P - I) S [P S]^+ P, with Mbar = M M_c^{-1}.
+    let n = team.n;
+    let id = DMatrix::<f64>::identity(n, n);
+    let (p, s) = (&proj.p, diag(&team.s_diag));
+    let ip = &id - p;
+    let mbar = &team.mass * &proj.mc_inv;
+    let k = &mbar * p - &id;
+    let jct_pinv = &proj.jct_pinv;
+    let rho_paper = jct_pinv * &ip * &k * &s * &proj.b * r.j_c.transpose();
+    let eps = &k * &s * &proj.ps_pinv * p;
+    let eta_paper = jct_pinv * &ip * (&eps * &r.tau_m + &mbar * (-(p * &team.bias) + &proj.pdot_v) + &team.bias + &k * &r.load);
+    let (e_rho, e_eta) = (rel(&rho, &rho_paper), relv(&eta, &eta_paper));
+    println!("rho vs the paper {e_rho:.1e}, eta {e_eta:.1e} (|eta| {:.1})", eta_paper.amax());
+    assert!(e_rho < 1e-9 && e_eta < 1e-9);
+    assert!(rel(&y, &(&proj.b * r.j_c.transpose())) < 1e-13, "Y = B J_c^T");
+    // The real wrenches add the object's load share G^+ F_x on the hand rows.
+    let (_, g_pinv) = grasp_matrix(&team.hands.iter().map(|h| h.position).collect::<Vec<_>>(), &g.object.translation.vector);
+    let mut expect = eta_paper.clone();
+    let nf = team.feet.len();
+    let share = &g_pinv * DVector::from_column_slice(r.f_x.as_slice());
+    let mut hand_rows = expect.rows_mut(3 * nf, 12);
+    hand_rows += &share;
+    assert!(relv(&eta_real, &expect) < 1e-9);
+    // Feet rows carry no share.
+    assert_eq!(eta_real.rows(0, 3 * nf), eta.rows(0, 3 * nf));
+}
+
+#[test]
+fn contact_wrenches_follow_the_map_or_eq_constraint_force() {
+    let mut fx = Fixture::new();
+    let (_, _, c) = moving_team(&mut fx, 13);
+    let r = c.last().expect("tick");
+    let (team, proj) = (&r.team, &r.proj);
+    let eta_real = {
+        let mut e = r.eta.clone();
+        let nf = team.feet.len();
+        e.rows_mut(3 * nf, 12).gemv(1.0, &r.grasp.as_ref().expect("grasp").g_pinv, &r.f_x, 1.0);
+        e
+    };
+    let inp = WrenchInput { team, proj, load: &r.load, rho: &r.rho, eta: &r.eta };
+    let mut ws = ContactMapScratch::default();
+    // From F_c: lambda = rho F_c + eta.
+    let (mut lambda, mut real) = (DVector::zeros(0), eta_real.clone());
+    contact_wrenches(&inp, Actuation::ContactForces(&r.f_c), &mut ws, &mut lambda, &mut real);
+    let expect = &r.rho * &r.f_c + &r.eta;
+    assert!(relv(&lambda, &expect) < 1e-13);
+    assert!(relv(&real, &(&expect + &eta_real - &r.eta)) < 1e-13);
+    // From a torque (here: a quarter of the tick's): eq. constraint_force written out,
+    // lambda = (J_c^T)^+ [(I - P)[Mbar (P S tau - P h + Pdot v) + h] - (I - P) S tau
+    //          + (I - P)(Mbar P - I) J_x^T F_x].
+    let tau = &r.tau * 0.25;
+    let n = team.n;
+    let id = DMatrix::<f64>::identity(n, n);
+    let (p, s) = (&proj.p, diag(&team.s_diag));
+    let ip = &id - p;
+    let mbar = &team.mass * &proj.mc_inv;
+    let s_tau = &s * &tau;
+    let expect = &proj.jct_pinv * (&ip * (&mbar * (p * &s_tau - p * &team.bias + &proj.pdot_v) + &team.bias) - &ip * &s_tau + &ip * (&mbar * p - &id) * &r.load);
+    let mut real = eta_real.clone();
+    contact_wrenches(&inp, Actuation::Torque(&tau), &mut ws, &mut lambda, &mut real);
+    let e = relv(&lambda, &expect);
+    println!("lambda(tau) vs eq. constraint_force {e:.1e} (|lambda| {:.1})", expect.amax());
+    assert!(e < 1e-9);
+    assert!(relv(&real, &(&expect + &eta_real - &r.eta)) < 1e-9);
+}
+
+#[test]
+fn torque_is_tau0_plus_y_f_c_clamped_after_a_fallback() {
+    let mut fx = Fixture::new();
+    let (_, _, c) = moving_team(&mut fx, 17);
+    let r = c.last().expect("tick");
+    let proj = &r.proj;
+    // tau_0 = [P S]^+ P tau_M (eq. ua_solution).
+    let (mut tau0, mut scratch) = (DVector::zeros(0), DVector::zeros(0));
+    motion_torque(proj, &r.tau_m, &mut tau0, &mut scratch);
+    assert!(relv(&tau0, &(&proj.ps_pinv * (&proj.p * &r.tau_m))) < 1e-13);
+    // tau = tau_0 + Y F_c with Y = B J_c^T, for the tick's F_c and another one.
+    let y = &proj.b * r.j_c.transpose();
+    let mut tau = DVector::zeros(0);
+    for f_c in [r.f_c.clone(), DVector::from_fn(r.f_c.len(), |i, _| (i as f64 * 0.7).sin() * 20.0)] {
+        compose(&r.tau0, &r.y, &f_c, None, &mut tau).expect("finite");
+        let expect = &r.tau0 + &y * &f_c;
+        assert!(relv(&tau, &expect) < 1e-12);
+    }
+    // Clamped: the actuated joints to their limits, the rest untouched.
+    let f_c = r.f_c.clone() * 50.0;
+    let free = &r.tau0 + &y * &f_c;
+    let limits: Vec<f64> = r.limits.iter().map(|l| l * 0.05).collect();
+    compose(&r.tau0, &r.y, &f_c, Some(Clamp { actuated: &r.actuated, limits: &limits }), &mut tau).expect("finite");
+    let mut clamped = 0;
+    for i in 0..tau.len() {
+        match r.actuated.iter().position(|&j| j == i) {
+            Some(k) => {
+                let lim = limits[k];
+                assert!(tau[i].abs() <= lim);
+                if free[i].abs() > lim {
+                    clamped += 1;
+                    assert_eq!(tau[i], lim * free[i].signum());
+                } else {
+                    assert!((tau[i] - free[i]).abs() < 1e-9 * free.amax());
+                }
+            }
+            None => assert!((tau[i] - free[i]).abs() < 1e-9 * free.amax(), "base row {i} is not clamped"),
+        }
+    }
+    assert!(clamped > 0, "the test clamps something");
+    // A non-finite torque is an error, not a command.
+    let mut bad = r.f_c.clone();
+    bad[0] = f64::NAN;
+    assert!(matches!(compose(&r.tau0, &r.y, &bad, None, &mut tau), Err(ControllerError::NonFinite { .. })));
+}
