@@ -197,7 +197,7 @@ async fn mock_robot_with_a_real_coordinator_over_zenoh() {
     let coordinator = {
         let s = coordinator_session.clone();
         let cfg = CoordinatorConfig { team: team.into(), tick_deadline: Duration::from_millis(200) };
-        tokio::spawn(async move { service::run(&s, cfg, JointDamping { damping: DAMPING }, rx).await })
+        tokio::spawn(async move { service::run(&s, cfg, Box::new(JointDamping { damping: DAMPING }), rx).await })
     };
     let session = transport::open(&ZenohArgs::connecting(&hub), Role::Member).await.unwrap();
     let status = transport::subscribe(&session, keys::robot(team, ID, RobotTopic::Status).unwrap()).await.unwrap();

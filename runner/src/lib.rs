@@ -20,6 +20,7 @@
 pub mod driver;
 pub mod evaluate;
 pub mod grasp_plan;
+pub mod launch;
 pub mod metrics;
 pub mod plan;
 pub mod processes;

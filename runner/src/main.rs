@@ -8,6 +8,7 @@ use team_runner::evaluate;
 use team_runner::plan;
 use team_runner::run::{self as scenario_run, RunOptions};
 use team_runner::scenario::Scenario;
+use team_runner::launch::{BridgeOutcome, Mode};
 use team_runner::smoke::{self, SmokeConfig};
 
 #[derive(Parser)]
@@ -94,27 +95,30 @@ fn main() -> Result<()> {
                 damping: 2.0,
                 v0: 0.5,
             };
+            let dir = std::env::temp_dir().join(format!("team-smoke-{}", std::process::id()));
+            let mode = if distributed { Mode::Distributed { dir: dir.clone() } } else { Mode::Embedded };
             if distributed {
-                smoke::run_distributed(&cfg)?;
-                println!("distributed smoke run finished: {} robots, {ticks} ticks", cfg.robots.len());
-            } else {
-                let rt = tokio::runtime::Runtime::new()?;
-                let out = rt.block_on(smoke::run_embedded(&cfg))?;
-                let r = &out.report;
-                println!(
-                    "embedded smoke run: {} robots, {} ticks, {:.3} s simulated in {:.3} s wall ({:.0} ticks/s, {:.0} us/tick)",
-                    cfg.robots.len(),
-                    r.ticks,
-                    r.sim_time,
-                    r.wall_time.as_secs_f64(),
-                    r.ticks as f64 / r.wall_time.as_secs_f64(),
-                    1e6 * r.wall_time.as_secs_f64() / r.ticks.max(1) as f64
-                );
-                println!(
-                    "closed loop: joint velocity {:.6} rad/s, analytic {:.6} rad/s",
-                    out.final_velocities[0],
-                    cfg.expected_final_velocity()
-                );
+                std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
+            }
+            let rt = tokio::runtime::Runtime::new()?;
+            let outcome = rt.block_on(smoke::run(&cfg, &mode));
+            if distributed {
+                let _ = std::fs::remove_dir_all(&dir);
+            }
+            match outcome? {
+                BridgeOutcome::Smoke { report: r, final_velocities } => {
+                    println!(
+                        "embedded smoke run: {} robots, {} ticks, {:.3} s simulated in {:.3} s wall ({:.0} ticks/s, {:.0} us/tick)",
+                        cfg.robots.len(),
+                        r.ticks,
+                        r.sim_time,
+                        r.wall_time.as_secs_f64(),
+                        r.ticks as f64 / r.wall_time.as_secs_f64(),
+                        1e6 * r.wall_time.as_secs_f64() / r.ticks.max(1) as f64
+                    );
+                    println!("closed loop: joint velocity {:.6} rad/s, analytic {:.6} rad/s", final_velocities[0], cfg.expected_final_velocity());
+                }
+                _ => println!("{} smoke run finished: {} robots, {ticks} ticks", mode.name(), cfg.robots.len()),
             }
         }
     }

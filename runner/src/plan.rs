@@ -15,7 +15,7 @@ use protocol::{Header, Pose, PoseReference, TaskReferences, TorsoReference};
 use robot_model::{DescriptionError, Robot, RobotCache};
 use sim_bridge::perturbation::Perturbation;
 use sim_bridge::scene::Scene;
-use sim_bridge::world::{ContactParams, ObjectSpec, RobotPlacement, SolverParams, WorldSpec};
+use sim_bridge::world::{ContactParams, ObjectSpec, SolverParams, WorldSpec};
 use thiserror::Error;
 
 use crate::reference::PoseMotion;
@@ -80,15 +80,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
     for r in &s.robots {
         let path = if r.description.is_absolute() { r.description.clone() } else { root.join(&r.description) };
         let robot = cache.load(&path).map_err(|source| PlanError::Description { robot: r.id.clone(), source })?;
-        // The base stands at the description's standing height.
-        let z = robot.standing_q[2];
-        placements.push(RobotPlacement {
-            id: r.id.clone(),
-            description: path.clone(),
-            base_position: [r.base_xy[0], r.base_xy[1], z],
-            base_yaw: r.yaw,
-            joint_overrides: Default::default(),
-        });
+        placements.push(sim_bridge::placement::standing(&r.id, path.clone(), &robot, r.base_xy, r.yaw));
         robots.push(PlannedRobot { id: r.id.clone(), description: path, joints: robot.actuated_joints.clone(), robot });
     }
     let object = ObjectSpec {

@@ -1,0 +1,377 @@
+//! One launcher for every run of the team, embedded or distributed, smoke or scenario.
+//!
+//! A run is three kinds of component, each described by typed arguments:
+//! [`CoordinatorArgs`] (team, tick deadline, the controller as a [`ControllerSpec`]),
+//! one [`AgentArgs`] per robot (its id, its model or placeholder dynamics, its command
+//! deadline) and one [`BridgeArgs`] (the state source: a MuJoCo scene or the smoke run's
+//! placeholder plant). [`Launch::start`] starts the coordinator and the agents in the chosen
+//! [`Mode`]:
+//!
+//! * [`Mode::Embedded`]: every component is a task of this process on one Zenoh session;
+//! * [`Mode::Distributed`]: every component is its own process on loopback (the coordinator
+//!   listens on a free port, the others connect), started with the command line that
+//!   [`CoordinatorArgs::to_cli`], [`AgentArgs::to_cli`] and [`BridgeArgs::to_cli`] write from
+//!   the same values; files they need (the controller spec, the scene) go into the run's
+//!   folder.
+//!
+//! The caller then declares what it observes on [`Running::session`] (the scenario driver),
+//! runs the state source to its end with [`Running::run_bridge`] (it ends the run: after its
+//! last tick, or with an error that names who is missing) and stops everything with
+//! [`Running::finish`], which reports the first component that failed. Either way every
+//! message crosses Zenoh, and the lockstep makes both modes compute the same numbers.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+
+use coordinator::service::{self as coordinator_service, CoordinatorConfig};
+use coordinator::ControllerSpec;
+use protocol::transport::{self, Role, ZenohArgs};
+use robot_agent::agent::{self as agent_loop, AgentConfig};
+use robot_agent::dynamics_source::{ModelDynamics, PlaceholderDynamics};
+use robot_model::Robot;
+use sim_bridge::lockstep::{self, LockstepConfig, LockstepReport};
+use sim_bridge::plant::PlaceholderPlant;
+use sim_bridge::scene::{Scene, SceneReport};
+use thiserror::Error;
+use tokio::sync::watch;
+use tokio::task::JoinHandle;
+use zenoh::Session;
+
+use crate::processes::{free_port, spawn, ChildGuard, ProcessError};
+
+/// Why a run could not be launched or ended badly.
+#[derive(Debug, Error)]
+pub enum LaunchError {
+    #[error(transparent)]
+    Transport(#[from] protocol::transport::TransportError),
+    #[error(transparent)]
+    Process(#[from] ProcessError),
+    #[error("controller: {0}")]
+    Controller(#[from] coordinator::ControllerError),
+    #[error(transparent)]
+    Scene(#[from] sim_bridge::scene::SceneError),
+    #[error(transparent)]
+    World(#[from] sim_bridge::world::WorldError),
+    #[error(transparent)]
+    Lockstep(#[from] sim_bridge::lockstep::BridgeError),
+    #[error("robot {robot}: {reason}")]
+    Agent { robot: String, reason: String },
+    #[error("the coordinator: {0}")]
+    Coordinator(String),
+    #[error("writing {path}: {reason}")]
+    Write { path: String, reason: String },
+    #[error("{what}: {reason}")]
+    Task { what: String, reason: String },
+}
+
+/// Where the components run.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Mode {
+    /// Tasks of this process on one Zenoh session.
+    Embedded,
+    /// Processes on loopback; `dir` receives the files they read (controller spec, scene).
+    Distributed { dir: PathBuf },
+}
+
+impl Mode {
+    /// `"embedded"` or `"distributed"`, as reports name it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Mode::Embedded => "embedded",
+            Mode::Distributed { .. } => "distributed",
+        }
+    }
+}
+
+/// The coordinator of a run.
+#[derive(Debug, Clone)]
+pub struct CoordinatorArgs {
+    pub team: String,
+    /// How long a tick may wait for every member's dynamics terms.
+    pub tick_deadline: Duration,
+    pub controller: ControllerSpec,
+}
+
+impl CoordinatorArgs {
+    /// `coordinator run ...` for this coordinator; the controller spec is written to
+    /// `dir/controller.toml` (its `kind` and parameters: the one way a file chooses it).
+    pub fn to_cli(&self, dir: &Path, zenoh: &ZenohArgs) -> Result<Vec<String>, LaunchError> {
+        let path = dir.join("controller.toml");
+        let text = self.controller.to_toml()?;
+        std::fs::write(&path, text).map_err(|e| LaunchError::Write { path: path.display().to_string(), reason: e.to_string() })?;
+        let mut args = vec!["run".into(), "--team".into(), self.team.clone(), "--controller-config".into(), path.display().to_string()];
+        args.extend(["--tick-deadline-ms".into(), self.tick_deadline.as_millis().to_string()]);
+        args.extend(zenoh.to_cli());
+        Ok(args)
+    }
+
+    fn start_task(&self, session: &Session, stop: watch::Receiver<bool>) -> Result<JoinHandle<Result<(), String>>, LaunchError> {
+        let controller = self.controller.build()?;
+        let cfg = CoordinatorConfig { team: self.team.clone(), tick_deadline: self.tick_deadline };
+        let session = session.clone();
+        Ok(tokio::spawn(async move { coordinator_service::run(&session, cfg, controller, stop).await.map(|_| ()).map_err(|e| e.to_string()) }))
+    }
+}
+
+/// What an agent computes its dynamics terms from.
+#[derive(Debug, Clone)]
+pub enum AgentModel {
+    /// The robot's own model; `description` is the file it was loaded from (what a separate
+    /// process loads again).
+    Robot { robot: Arc<Robot>, description: PathBuf },
+    /// The smoke run's placeholder dynamics: a floating base and `joints` unit-inertia joints.
+    Placeholder { joints: usize },
+}
+
+/// One robot's agent.
+#[derive(Debug, Clone)]
+pub struct AgentArgs {
+    pub team: String,
+    pub id: String,
+    pub model: AgentModel,
+    /// Without a valid command for this long the agent holds its posture (safe mode).
+    pub command_deadline: Duration,
+}
+
+impl AgentArgs {
+    /// `robot-agent run ...` for this agent.
+    pub fn to_cli(&self, zenoh: &ZenohArgs) -> Vec<String> {
+        let mut args = vec!["run".into(), "--team".into(), self.team.clone(), "--id".into(), self.id.clone()];
+        match &self.model {
+            AgentModel::Robot { description, .. } => args.extend(["--robot".into(), description.display().to_string()]),
+            AgentModel::Placeholder { joints } => args.extend(["--placeholder-joints".into(), joints.to_string()]),
+        }
+        args.extend(["--command-deadline-ms".into(), self.command_deadline.as_millis().to_string()]);
+        args.extend(zenoh.to_cli());
+        args
+    }
+
+    fn start_task(&self, session: &Session, stop: watch::Receiver<bool>) -> Result<JoinHandle<Result<(), String>>, LaunchError> {
+        let cfg = AgentConfig::new(&self.team, &self.id).with_deadline_time(self.command_deadline);
+        let session = session.clone();
+        Ok(match &self.model {
+            AgentModel::Robot { robot, .. } => {
+                let source = ModelDynamics::shared(robot.clone()).map_err(|e| LaunchError::Agent { robot: self.id.clone(), reason: e.to_string() })?;
+                tokio::spawn(async move { agent_loop::run(&session, cfg, source, stop).await.map(|_| ()).map_err(|e| e.to_string()) })
+            }
+            AgentModel::Placeholder { joints } => {
+                let source = PlaceholderDynamics::floating(*joints);
+                tokio::spawn(async move { agent_loop::run(&session, cfg, source, stop).await.map(|_| ()).map_err(|e| e.to_string()) })
+            }
+        })
+    }
+}
+
+/// The smoke run's state source: placeholder joints (`qdd = tau`), one per robot, in lockstep.
+#[derive(Debug, Clone)]
+pub struct SmokePlant {
+    pub team: String,
+    pub robots: Vec<String>,
+    pub joints: usize,
+    pub ticks: u64,
+    /// Control period, s.
+    pub dt: f64,
+    /// Initial joint velocity, rad/s.
+    pub v0: f64,
+}
+
+/// The state source of a run: it numbers the ticks and ends the run (see `protocol::clock`).
+#[derive(Debug, Clone)]
+pub enum BridgeArgs {
+    /// A MuJoCo scene (world, pushes, settle and run lengths) with the robots already loaded.
+    Scene { scene: Scene, robots: Vec<Arc<Robot>> },
+    Smoke(SmokePlant),
+}
+
+impl BridgeArgs {
+    /// `sim-bridge scene FILE ...` (the scene written to `dir/scene.toml`) or
+    /// `sim-bridge smoke ...`.
+    pub fn to_cli(&self, dir: &Path, zenoh: &ZenohArgs) -> Result<Vec<String>, LaunchError> {
+        let mut args: Vec<String> = match self {
+            BridgeArgs::Scene { scene, .. } => {
+                let path = dir.join("scene.toml");
+                scene.save(&path)?;
+                vec!["scene".into(), path.display().to_string()]
+            }
+            BridgeArgs::Smoke(p) => vec![
+                "smoke".into(),
+                "--team".into(),
+                p.team.clone(),
+                "--robots".into(),
+                p.robots.join(","),
+                "--joints".into(),
+                p.joints.to_string(),
+                "--ticks".into(),
+                p.ticks.to_string(),
+                "--dt".into(),
+                p.dt.to_string(),
+            ],
+        };
+        args.extend(zenoh.to_cli());
+        Ok(args)
+    }
+}
+
+/// What the state source reported at the end of the run.
+#[derive(Debug, Clone)]
+pub enum BridgeOutcome {
+    Scene(SceneReport),
+    /// The smoke plant's lockstep report and each robot's final first-joint velocity.
+    Smoke { report: LockstepReport, final_velocities: Vec<f64> },
+    /// A separate sim-bridge process ended successfully (its figures are in its log).
+    Process,
+}
+
+/// A team to launch: its coordinator and its agents.
+#[derive(Debug, Clone)]
+pub struct Launch {
+    pub coordinator: CoordinatorArgs,
+    pub agents: Vec<AgentArgs>,
+}
+
+/// A started team: the session to observe it on, and its components.
+pub struct Running {
+    session: Session,
+    stop_tx: watch::Sender<bool>,
+    stop_rx: watch::Receiver<bool>,
+    mode: Mode,
+    /// Distributed: the coordinator's endpoint, which the others connect to.
+    connect: ZenohArgs,
+    tasks: Vec<(String, JoinHandle<Result<(), String>>)>,
+    processes: Vec<ChildGuard>,
+}
+
+impl Launch {
+    /// Start the coordinator, then the agents.
+    pub async fn start(&self, mode: &Mode) -> Result<Running, LaunchError> {
+        let (stop_tx, stop_rx) = watch::channel(false);
+        match mode {
+            Mode::Embedded => {
+                let session = transport::open(&ZenohArgs::default(), Role::Alone).await?;
+                let mut tasks = vec![("coordinator".to_string(), self.coordinator.start_task(&session, stop_rx.clone())?)];
+                for a in &self.agents {
+                    tasks.push((a.id.clone(), a.start_task(&session, stop_rx.clone())?));
+                }
+                Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect: ZenohArgs::default(), tasks, processes: Vec::new() })
+            }
+            Mode::Distributed { dir } => {
+                let hub = format!("tcp/127.0.0.1:{}", free_port()?);
+                let connect = ZenohArgs::connecting(&hub);
+                let mut processes = vec![spawn("coordinator", &self.coordinator.to_cli(dir, &ZenohArgs::listening(&hub))?, "coordinator")?];
+                let session = transport::open(&connect, Role::Member).await?;
+                for a in &self.agents {
+                    processes.push(spawn("robot-agent", &a.to_cli(&connect), &format!("robot-agent {}", a.id))?);
+                }
+                Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect, tasks: Vec::new(), processes })
+            }
+        }
+    }
+}
+
+impl Running {
+    /// The session the caller observes the run on (the scenario driver declares its
+    /// subscriptions here before [`Running::run_bridge`]).
+    pub fn session(&self) -> &Session {
+        &self.session
+    }
+
+    /// Turns true when the run is being stopped.
+    pub fn stop_signal(&self) -> watch::Receiver<bool> {
+        self.stop_rx.clone()
+    }
+
+    /// Run the state source until it ends the run. An error stops every component.
+    pub async fn run_bridge(&mut self, bridge: &BridgeArgs) -> Result<BridgeOutcome, LaunchError> {
+        let result = match &self.mode {
+            Mode::Embedded => self.run_bridge_here(bridge).await,
+            Mode::Distributed { dir } => {
+                let args = bridge.to_cli(dir, &self.connect)?;
+                let mut child = spawn("sim-bridge", &args, "sim-bridge")?;
+                tokio::task::spawn_blocking(move || child.wait_success())
+                    .await
+                    .map_err(|e| LaunchError::Task { what: "waiting for the sim-bridge process".into(), reason: e.to_string() })?
+                    .map(|()| BridgeOutcome::Process)
+                    .map_err(LaunchError::from)
+            }
+        };
+        if result.is_err() {
+            self.stop();
+        }
+        result
+    }
+
+    async fn run_bridge_here(&self, bridge: &BridgeArgs) -> Result<BridgeOutcome, LaunchError> {
+        match bridge {
+            BridgeArgs::Scene { scene, robots } => Ok(BridgeOutcome::Scene(sim_bridge::scene::run(&self.session, scene, robots, self.stop_signal()).await?)),
+            BridgeArgs::Smoke(p) => {
+                let cfg = LockstepConfig {
+                    team: p.team.clone(),
+                    ticks: p.ticks,
+                    start_timeout: Duration::from_secs(20),
+                    command_timeout: Duration::from_secs(5),
+                    resend_every: Duration::from_millis(50),
+                    progress_every: (p.ticks / 10).max(1),
+                    wait_for_coordinator: false,
+                };
+                let mut plant = PlaceholderPlant::new(p.robots.clone(), p.joints, p.v0, p.dt);
+                let report = lockstep::run(&self.session, &cfg, &mut plant, self.stop_signal()).await?;
+                let final_velocities = (0..p.robots.len()).map(|i| plant.velocities(i)[0]).collect();
+                Ok(BridgeOutcome::Smoke { report, final_velocities })
+            }
+        }
+    }
+
+    /// Tell every component (and the caller's tasks on [`Running::stop_signal`]) to stop.
+    pub fn stop(&self) {
+        let _ = self.stop_tx.send(true);
+    }
+
+    /// Stop every component, wait for the tasks, kill the processes and close the session.
+    /// The first agent or coordinator task that failed is the error.
+    pub async fn finish(self) -> Result<(), LaunchError> {
+        self.stop();
+        let mut first_error = None;
+        for (who, handle) in self.tasks {
+            let outcome = handle.await.map_err(|e| e.to_string()).and_then(|r| r);
+            if let (Err(reason), None) = (outcome, &first_error) {
+                first_error = Some(if who == "coordinator" { LaunchError::Coordinator(reason) } else { LaunchError::Agent { robot: who, reason } });
+            }
+        }
+        drop(self.processes);
+        let _ = self.session.close().await;
+        first_error.map_or(Ok(()), Err)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn command_lines_carry_every_typed_argument() {
+        let dir = std::env::temp_dir().join(format!("launch-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let zenoh = ZenohArgs::connecting("tcp/127.0.0.1:7999");
+        let c = CoordinatorArgs { team: "t1".into(), tick_deadline: Duration::from_millis(1500), controller: ControllerSpec::of_kind("pidc").unwrap() };
+        let args = c.to_cli(&dir, &zenoh).unwrap();
+        let written = std::fs::read_to_string(dir.join("controller.toml")).unwrap();
+        assert_eq!(ControllerSpec::from_toml(&written).unwrap(), c.controller, "the file holds the spec");
+        for pair in [["--team", "t1"], ["--tick-deadline-ms", "1500"], ["--controller-config", &dir.join("controller.toml").display().to_string()]] {
+            assert!(args.windows(2).any(|w| w[0] == pair[0] && w[1] == pair[1]), "{pair:?} in {args:?}");
+        }
+        assert!(args.iter().any(|a| a.contains("7999")), "{args:?}");
+        let a = AgentArgs { team: "t1".into(), id: "r7".into(), model: AgentModel::Placeholder { joints: 5 }, command_deadline: Duration::from_secs(3) };
+        let args = a.to_cli(&zenoh);
+        for pair in [["--id", "r7"], ["--placeholder-joints", "5"], ["--command-deadline-ms", "3000"]] {
+            assert!(args.windows(2).any(|w| w[0] == pair[0] && w[1] == pair[1]), "{pair:?} in {args:?}");
+        }
+        let b = BridgeArgs::Smoke(SmokePlant { team: "t1".into(), robots: vec!["r1".into(), "r2".into()], joints: 4, ticks: 9, dt: 0.002, v0: 0.5 });
+        let args = b.to_cli(&dir, &zenoh).unwrap();
+        assert_eq!(args[0], "smoke");
+        for pair in [["--robots", "r1,r2"], ["--joints", "4"], ["--ticks", "9"], ["--dt", "0.002"]] {
+            assert!(args.windows(2).any(|w| w[0] == pair[0] && w[1] == pair[1]), "{pair:?} in {args:?}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
