@@ -108,7 +108,7 @@ impl Driver {
     /// Run until the ground truth of the last tick arrived, or `stop` turns true.
     pub async fn run(mut self, mut stop: watch::Receiver<bool>) -> Result<Records, TransportError> {
         let mut rec = Records::default();
-        let settle = self.plan.settle_ticks;
+        let settle = self.plan.clock.settle_ticks;
         let started = Instant::now();
         let mut run_started: Option<Instant> = None;
         let mut last_logged = 0u64;

@@ -11,7 +11,7 @@ use std::sync::Arc;
 use coordinator::{ControllerSpec, PidcConfig};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use protocol::conventions::quat_to_wxyz;
-use protocol::{Header, Pose, PoseReference, TaskReferences, TorsoReference};
+use protocol::{Header, Pose, PoseReference, RunClock, TaskReferences, TorsoReference};
 use robot_model::{DescriptionError, Robot, RobotCache};
 use sim_bridge::perturbation::Perturbation;
 use sim_bridge::scene::Scene;
@@ -63,7 +63,7 @@ pub struct PlannedRobot {
 impl Plan {
     /// Ticks of the whole run (settling included).
     pub fn total_ticks(&self) -> u64 {
-        self.scene.settle_ticks + self.scene.ticks
+        self.scene.clock().total_ticks()
     }
 
     /// The loaded robots in scenario order (the scene's world order).
@@ -156,8 +156,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
         (Vector3::from(p.base_position), UnitQuaternion::from_axis_angle(&Vector3::z_axis(), p.base_yaw))
     };
     let references = ReferencePlan {
-        settle_ticks,
-        control_hz: s.control_hz,
+        clock: scene.clock(),
         ramp: s.references.ramp,
         object: s.references.object.clone(),
         object_start: (Vector3::from(s.object.position), UnitQuaternion::identity()),
@@ -180,8 +179,8 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
 /// reference arrives); afterwards `motion(t)` about the start pose, `t` on the scenario clock.
 #[derive(Debug, Clone)]
 pub struct ReferencePlan {
-    pub settle_ticks: u64,
-    pub control_hz: f64,
+    /// The run's ticks and scenario clock (the scene's; `protocol::clock`).
+    pub clock: RunClock,
     /// Fade-in of every motion, s.
     pub ramp: f64,
     pub object: PoseMotion,
@@ -197,7 +196,7 @@ fn hold(p: &Vector3<f64>, q: &UnitQuaternion<f64>) -> PoseReference {
 impl ReferencePlan {
     /// Scenario time of a tick's state (`None` while settling).
     pub fn time_of_tick(&self, tick: u64) -> Option<f64> {
-        (tick >= self.settle_ticks).then(|| (tick - self.settle_ticks) as f64 / self.control_hz)
+        self.clock.scenario_time(tick)
     }
 
     /// Object reference at scenario time `t` (`None`: the settling hold).

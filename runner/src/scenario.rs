@@ -208,10 +208,7 @@ impl Scenario {
         if !(self.settle.is_finite() && self.settle >= 0.0) {
             return Err(format!("settle = {} must be non-negative", self.settle));
         }
-        let ratio = self.physics_hz / self.control_hz;
-        if (ratio - ratio.round()).abs() > 1e-9 || ratio < 1.0 {
-            return Err(format!("physics_hz ({}) must be a whole multiple of control_hz ({})", self.physics_hz, self.control_hz));
-        }
+        protocol::validate::substeps(self.control_hz, self.physics_hz).map_err(|e| format!("control_hz, physics_hz: {e}"))?;
         coordinator::ControllerSpec::of_kind(&self.controller).map_err(|e| format!("controller: {e}"))?;
         for (what, f) in [("min_foot_force", self.min_foot_force), ("min_hand_force", self.min_hand_force)] {
             if !(f.is_finite() && f >= 0.0) {
@@ -229,11 +226,9 @@ impl Scenario {
         if self.robots.len() < 2 {
             return Err("a team needs at least two robots to hold the object".into());
         }
+        protocol::validate::check_unique("robots", self.robots.iter().map(|r| r.id.as_str())).map_err(|e| e.to_string())?;
         for (i, r) in self.robots.iter().enumerate() {
             protocol::validate_id("robot", &r.id).map_err(|e| format!("robots[{i}].id: {e}"))?;
-            if self.robots[..i].iter().any(|o| o.id == r.id) {
-                return Err(format!("robot id {:?} is used twice", r.id));
-            }
             if r.base_xy.iter().chain([&r.yaw]).any(|x| !x.is_finite()) {
                 return Err(format!("robots[{i}] pose must be finite"));
             }

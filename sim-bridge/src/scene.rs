@@ -83,6 +83,12 @@ impl Scene {
         Ok(())
     }
 
+    /// The run's ticks: settling, then the scenario, at the world's control rate
+    /// (`protocol::clock`: tick numbers continue, the scenario clock starts after settling).
+    pub fn clock(&self) -> protocol::RunClock {
+        protocol::RunClock { control_hz: self.world.control_hz, settle_ticks: self.settle_ticks, ticks: self.ticks }
+    }
+
     fn lockstep(&self, ticks: u64) -> LockstepConfig {
         LockstepConfig {
             team: self.team.clone(),
