@@ -2,7 +2,7 @@
 //! 1 kHz) against a coordinator, as a lab's robot would run:
 //!
 //! ```sh
-//! coordinator run --controller smoke --damping 5                  # listens on tcp/127.0.0.1:7447
+//! coordinator run --controller joint-damping --damping 5                  # listens on tcp/127.0.0.1:7447
 //! cargo run --release -p robot-agent --example mock_robot         # Ctrl-C stops it
 //! ```
 //!

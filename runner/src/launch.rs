@@ -206,6 +206,8 @@ impl BridgeArgs {
                 p.ticks.to_string(),
                 "--dt".into(),
                 p.dt.to_string(),
+                "--v0".into(),
+                p.v0.to_string(),
             ],
         };
         args.extend(zenoh.to_cli());
@@ -269,6 +271,14 @@ impl Launch {
     }
 }
 
+impl Drop for Running {
+    /// A run abandoned on an early error still stops its tasks (the processes' guards kill
+    /// them): nothing outlives the run.
+    fn drop(&mut self) {
+        let _ = self.stop_tx.send(true);
+    }
+}
+
 impl Running {
     /// The session the caller observes the run on (the scenario driver declares its
     /// subscriptions here before [`Running::run_bridge`]).
@@ -329,16 +339,16 @@ impl Running {
 
     /// Stop every component, wait for the tasks, kill the processes and close the session.
     /// The first agent or coordinator task that failed is the error.
-    pub async fn finish(self) -> Result<(), LaunchError> {
+    pub async fn finish(mut self) -> Result<(), LaunchError> {
         self.stop();
         let mut first_error = None;
-        for (who, handle) in self.tasks {
+        for (who, handle) in std::mem::take(&mut self.tasks) {
             let outcome = handle.await.map_err(|e| e.to_string()).and_then(|r| r);
             if let (Err(reason), None) = (outcome, &first_error) {
                 first_error = Some(if who == "coordinator" { LaunchError::Coordinator(reason) } else { LaunchError::Agent { robot: who, reason } });
             }
         }
-        drop(self.processes);
+        self.processes.clear();
         let _ = self.session.close().await;
         first_error.map_or(Ok(()), Err)
     }

@@ -80,7 +80,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
     for r in &s.robots {
         let path = if r.description.is_absolute() { r.description.clone() } else { root.join(&r.description) };
         let robot = cache.load(&path).map_err(|source| PlanError::Description { robot: r.id.clone(), source })?;
-        placements.push(sim_bridge::placement::standing(&r.id, path.clone(), &robot, r.base_xy, r.yaw));
+        placements.push(sim_bridge::placement::standing(&r.id, path.clone(), &robot, r.base_xy, r.yaw)?);
         robots.push(PlannedRobot { id: r.id.clone(), description: path, joints: robot.actuated_joints.clone(), robot });
     }
     let object = ObjectSpec {

@@ -29,6 +29,9 @@ enum Command {
         joints: usize,
         #[arg(long, default_value_t = 1000)]
         ticks: u64,
+        /// Initial joint velocity of every placeholder joint, rad/s.
+        #[arg(long, default_value_t = 0.5)]
+        v0: f64,
         /// Control period, s.
         #[arg(long, default_value_t = 0.001)]
         dt: f64,
@@ -118,7 +121,8 @@ async fn main() -> Result<()> {
         .with_writer(std::io::stderr)
         .init();
     match Cli::parse().command {
-        Command::Smoke { robots, team, joints, ticks, dt, command_timeout, zenoh } => {
+        Command::Smoke { robots, team, joints, ticks, v0, dt, command_timeout, zenoh } => {
+            anyhow::ensure!(v0.is_finite(), "--v0 must be a finite number");
             anyhow::ensure!(dt.is_finite() && dt > 0.0, "--dt must be a positive number of seconds");
             anyhow::ensure!(command_timeout.is_finite() && command_timeout > 0.0, "--command-timeout must be positive");
             let session = transport::open(&zenoh, Role::Member).await?;
@@ -131,7 +135,7 @@ async fn main() -> Result<()> {
                 progress_every: (ticks / 10).max(1),
                 wait_for_coordinator: false,
             };
-            let mut plant = PlaceholderPlant::new(robots, joints, 0.5, dt);
+            let mut plant = PlaceholderPlant::new(robots, joints, v0, dt);
             let (_tx, rx) = tokio::sync::watch::channel(false);
             let report = lockstep::run(&session, &cfg, &mut plant, rx).await?;
             println!(
@@ -174,7 +178,7 @@ async fn run(a: RunArgs) -> Result<()> {
 }
 
 fn build_world(a: &RunArgs) -> Result<(sim_bridge::world::WorldSpec, sim_bridge::world::World)> {
-    use sim_bridge::world::{load_robots, ObjectSpec, World, WorldSpec};
+    use sim_bridge::world::{ObjectSpec, World, WorldSpec};
     anyhow::ensure!(!a.robots.is_empty(), "--robots must name at least one robot");
     anyhow::ensure!(a.spacing.is_finite() && a.spacing > 0.0, "--spacing must be a positive number");
     anyhow::ensure!(a.command_timeout.is_finite() && a.command_timeout > 0.0, "--command-timeout must be positive");
@@ -183,12 +187,10 @@ fn build_world(a: &RunArgs) -> Result<(sim_bridge::world::WorldSpec, sim_bridge:
     let mut spec = WorldSpec::single("r1");
     spec.robots.clear();
     let n = a.robots.len();
+    let description = a.description.clone().unwrap_or_else(robot_model::default_robot_path);
+    let robot = std::sync::Arc::new(robot_model::Robot::load(&description).map_err(|e| anyhow::anyhow!("{}: {e}", description.display()))?);
     for (id, (xy, yaw)) in a.robots.iter().zip(sim_bridge::placement::facing_ring([0.0, 0.0], a.spacing / 2.0, n)) {
-        let mut p = sim_bridge::placement::default_robot(id, xy, yaw);
-        if let Some(d) = &a.description {
-            p.description = d.clone();
-        }
-        spec.robots.push(p);
+        spec.robots.push(sim_bridge::placement::standing(id, description.clone(), &robot, xy, yaw)?);
     }
     if !a.no_object {
         let mut o = ObjectSpec::paper_cube([a.object_position[0], a.object_position[1], a.object_position[2]]);
@@ -201,7 +203,8 @@ fn build_world(a: &RunArgs) -> Result<(sim_bridge::world::WorldSpec, sim_bridge:
     spec.seed = a.seed;
     spec.initial_joint_noise = a.joint_noise;
     spec.substeps()?;
-    let robots = load_robots(&spec)?;
+    // Every robot runs the same description: loaded once, shared.
+    let robots = vec![robot; n];
     let world = World::build(&spec, &robots)?;
     tracing::info!(robots = n, nq = world.model.ffi().nq, nv = world.model.ffi().nv, substeps = world.substeps, "world built and checked against the robots' models");
     Ok((spec, world))

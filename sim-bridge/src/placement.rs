@@ -16,15 +16,19 @@ use std::path::PathBuf;
 
 use robot_model::Robot;
 
-use crate::world::RobotPlacement;
+use crate::world::{RobotPlacement, WorldError};
 
 /// Base height of the default robot's standing pose (`robot-model/models/legged_manipulator.toml`,
 /// `[standing] base_position`), m.
 pub const DEFAULT_STANDING_HEIGHT: f64 = 0.54882015;
 
-/// `robot` (loaded from `description`) at `(x, y)` facing `yaw`, its base at its standing height.
-pub fn standing(id: &str, description: PathBuf, robot: &Robot, xy: [f64; 2], yaw: f64) -> RobotPlacement {
-    at_height(id, description, [xy[0], xy[1], robot.standing_q[2]], yaw)
+/// `robot` (loaded from `description`) at `(x, y)` facing `yaw`, its base at its standing
+/// height. A fixed-base robot has no base to place on the floor: an error.
+pub fn standing(id: &str, description: PathBuf, robot: &Robot, xy: [f64; 2], yaw: f64) -> Result<RobotPlacement, WorldError> {
+    if !robot.model.floating_base {
+        return Err(WorldError::Invalid(format!("robot {id}: {} has a fixed base; only a floating-base robot stands on the floor", description.display())));
+    }
+    Ok(at_height(id, description, [xy[0], xy[1], robot.standing_q[2]], yaw))
 }
 
 /// The default robot at `(x, y)` facing `yaw`, at [`DEFAULT_STANDING_HEIGHT`].
@@ -81,7 +85,7 @@ mod tests {
     fn the_default_height_is_the_default_robots_standing_height() {
         let robot = Robot::load(&robot_model::default_robot_path()).unwrap();
         assert_eq!(robot.standing_q[2], DEFAULT_STANDING_HEIGHT);
-        let p = standing("r1", robot_model::default_robot_path(), &robot, [1.0, 2.0], 0.5);
+        let p = standing("r1", robot_model::default_robot_path(), &robot, [1.0, 2.0], 0.5).unwrap();
         assert_eq!(p.base_position, [1.0, 2.0, DEFAULT_STANDING_HEIGHT]);
         assert_eq!(p, default_robot("r1", [1.0, 2.0], 0.5));
     }

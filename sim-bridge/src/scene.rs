@@ -29,6 +29,9 @@ use crate::perturbation::Perturbation;
 use crate::realtime::RealtimeReport;
 use crate::world::{World, WorldError, WorldSpec};
 
+/// Longest wait a scene may ask for, s (a day): every wait has a bound.
+pub const MAX_TIMEOUT_S: f64 = 86_400.0;
+
 /// Everything the bridge needs for a scenario run.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -72,8 +75,8 @@ impl Scene {
     fn check(&self) -> Result<(), WorldError> {
         protocol::validate_id("team", &self.team).map_err(|e| WorldError::Invalid(format!("scene team: {e}")))?;
         for (what, x) in [("command_timeout", self.command_timeout), ("start_timeout", self.start_timeout)] {
-            if !(x.is_finite() && x > 0.0) {
-                return Err(WorldError::Invalid(format!("scene {what} = {x} must be positive")));
+            if !(x.is_finite() && x > 0.0 && x <= MAX_TIMEOUT_S) {
+                return Err(WorldError::Invalid(format!("scene {what} = {x} must be positive and at most {MAX_TIMEOUT_S} s")));
             }
         }
         if self.ticks == 0 {
@@ -169,7 +172,7 @@ pub async fn settle_then_run(
     for p in pushes {
         plant.perturbations.add(&plant.world, p.clone())?;
     }
-    extras.first_tick = settle_ticks;
+    extras.first_tick += settle_ticks;
     let run = match pace {
         Pace::Lockstep => PhaseReport::Lockstep(lockstep::run_with(session, cfg, plant, extras, stop).await?),
         Pace::RealTime { period } => PhaseReport::RealTime(crate::realtime::run(session, cfg, period, plant, extras, stop).await?),

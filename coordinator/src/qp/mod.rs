@@ -9,7 +9,7 @@
 //!
 //! where `lambda = rho F + eta` (eq. relation_between_lambda_and_Fc) are the predicted real
 //! contact wrenches ON the robots (world-aligned, at the contact frame origins; for hands the
-//! offset of the object load is already in `eta`, see `controller.rs`).
+//! offset of the object load is already in `eta`, see `pidc/stages/wrench.rs`).
 //!
 //! Laid out as Clarabel is, data apart from solvers, one file per concept:
 //!

@@ -38,8 +38,8 @@ pub struct QpSettings {
 }
 
 impl QpSettings {
-    /// The defaults with the controller's two choices (`ControllerConfig::qp_max_iter`,
-    /// `ControllerConfig::dense_qp`).
+    /// The defaults with the controller's two choices (`PidcConfig::qp_max_iter`,
+    /// `PidcConfig::dense_qp`).
     pub fn new(max_iter: u32, dense_first: bool) -> Self {
         QpSettings { max_iter, dense_first, ..QpSettings::default() }
     }
