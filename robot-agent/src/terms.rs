@@ -123,9 +123,10 @@ impl TermsBuilder {
             fill_frame(m, &self.data, &mut self.jac, name, *id, role, below, out, used)?;
             used += 1;
         }
-        let (hand, torso) = (self.hand.clone(), self.torso.clone());
-        fill_frame(m, &self.data, &mut self.jac, &hand.0, hand.1, FrameRole::Hand, 0.0, out, used)?;
-        fill_frame(m, &self.data, &mut self.jac, &torso.0, torso.1, FrameRole::Torso, 0.0, out, used + 1)?;
+        // Borrowed field by field: the frame names are not copied (the tick allocates nothing).
+        let (data, jac, hand, torso) = (&self.data, &mut self.jac, &self.hand, &self.torso);
+        fill_frame(m, data, jac, &hand.0, hand.1, FrameRole::Hand, 0.0, out, used)?;
+        fill_frame(m, data, jac, &torso.0, torso.1, FrameRole::Torso, 0.0, out, used + 1)?;
         out.frames.truncate(used + 2);
         Ok(())
     }

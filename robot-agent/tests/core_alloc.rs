@@ -1,6 +1,7 @@
 //! The core's per-tick calls (state, command, timer, the posture hold) allocate nothing after
-//! start-up: a counting global allocator watches this thread. The dynamics source is the
-//! placeholder (unit mass matrix), so that only the core is measured.
+//! start-up: a counting global allocator watches this thread. The first test uses the
+//! placeholder dynamics (unit mass matrix), so that only the core is measured; the second the
+//! robot's own model, the agent's whole tick.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
@@ -8,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use protocol::{Header, Pose, RobotState, TorqueCommand};
 use robot_agent::core::{AgentConfig, AgentCore};
-use robot_agent::dynamics_source::PlaceholderDynamics;
+use robot_agent::dynamics_source::{DynamicsSource, ModelDynamics, PlaceholderDynamics};
 use robot_agent::safe_mode::CommandDeadline;
 
 struct Counting;
@@ -38,11 +39,7 @@ static GLOBAL: Counting = Counting;
 #[test]
 fn per_tick_calls_do_not_allocate() {
     let n = 18;
-    let mut cfg = AgentConfig::new("t", "r1");
-    cfg.deadline = CommandDeadline { ticks: 5, time: None };
-    cfg.max_command_age = Duration::from_secs(10);
-    let mut core = AgentCore::new(&cfg, PlaceholderDynamics::floating(n)).unwrap();
-    let mut state = RobotState {
+    let state = RobotState {
         header: Header::new("t", Some("r1"), 0, 0),
         base_pose: Pose::IDENTITY,
         base_twist: [0.0; 6],
@@ -50,6 +47,43 @@ fn per_tick_calls_do_not_allocate() {
         joint_velocities: vec![0.2; n],
         time: 0.0,
     };
+    let (count, applied, held) = ticks_allocations(PlaceholderDynamics::floating(n), state, n);
+    assert_eq!(count, 0, "the core's tick allocated {count} times");
+    assert_eq!((applied, held), (180, 17), "commanded and safe-mode ticks were both exercised");
+    // The counter works: an allocation while watching is seen.
+    WATCH.with(|w| w.set(true));
+    let v: Vec<u8> = Vec::with_capacity(16);
+    WATCH.with(|w| w.set(false));
+    drop(v);
+    assert_eq!(COUNT.with(|c| c.get()), 1);
+}
+
+#[test]
+fn the_agents_tick_on_the_robots_model_does_not_allocate() {
+    let robot = robot_model::Robot::load(&robot_model::default_robot_path()).unwrap();
+    let q = robot.standing_q.clone();
+    let n = q.len() - 7;
+    let state = RobotState {
+        header: Header::new("t", Some("r1"), 0, 0),
+        base_pose: Pose { position: [q[0], q[1], q[2]], orientation: [q[3], q[4], q[5], q[6]] },
+        base_twist: [0.0; 6],
+        joint_positions: q.as_slice()[7..].to_vec(),
+        joint_velocities: vec![0.01; n],
+        time: 0.0,
+    };
+    let (count, applied, held) = ticks_allocations(ModelDynamics::new(robot).unwrap(), state, n);
+    assert_eq!(count, 0, "the agent's tick with the robot's model allocated {count} times");
+    assert_eq!((applied, held), (180, 17), "commanded and safe-mode ticks were both exercised");
+}
+
+/// 200 ticks of the core over `source` (10 to warm up, 20 without commands: safe mode from the
+/// 5th); the allocations counted after warm-up, the ticks that applied a command and the ticks
+/// that held the posture.
+fn ticks_allocations(source: impl DynamicsSource, mut state: RobotState, n: usize) -> (usize, u32, u32) {
+    let mut cfg = AgentConfig::new("t", "r1");
+    cfg.deadline = CommandDeadline { ticks: 5, time: None };
+    cfg.max_command_age = Duration::from_secs(10);
+    let mut core = AgentCore::new(&cfg, source).unwrap();
     let mut cmd = TorqueCommand { header: Header::new("t", Some("r1"), 0, 0), tau: vec![1.0; n] };
     let t0 = Instant::now();
     let _ = core.start(t0);
@@ -72,13 +106,5 @@ fn per_tick_calls_do_not_allocate() {
         let _ = core.status();
     }
     WATCH.with(|w| w.set(false));
-    let count = COUNT.with(|c| c.get());
-    assert_eq!(count, 0, "the core's tick allocated {count} times");
-    assert_eq!((applied, held), (180, 17), "commanded and safe-mode ticks were both exercised");
-    // The counter works: an allocation while watching is seen.
-    WATCH.with(|w| w.set(true));
-    let v: Vec<u8> = Vec::with_capacity(16);
-    WATCH.with(|w| w.set(false));
-    drop(v);
-    assert_eq!(COUNT.with(|c| c.get()), 1);
+    (COUNT.with(|c| c.get()), applied, held)
 }
