@@ -310,23 +310,11 @@ fn check(file: File, model: Model, path: &Path, urdf_path: PathBuf) -> Result<Ro
             return Err(DescriptionError::BadValue { path: p(), what: what.into(), value: *x, rule: "finite" });
         }
     }
-    let qn = s.base_orientation.iter().map(|x| x * x).sum::<f64>().sqrt();
-    if (qn - 1.0).abs() > 1e-6 {
-        return Err(DescriptionError::BadValue {
-            path: p(),
-            what: "norm of standing.base_orientation".into(),
-            value: qn,
-            rule: "1 (a unit quaternion w, x, y, z)",
-        });
-    }
-    let hn = s.hand_orientation.iter().map(|x| x * x).sum::<f64>().sqrt();
-    if (hn - 1.0).abs() > 1e-6 {
-        return Err(DescriptionError::BadValue {
-            path: p(),
-            what: "norm of standing.hand_orientation".into(),
-            value: hn,
-            rule: "1 (a unit quaternion w, x, y, z)",
-        });
+    for (what, q) in [("standing.base_orientation", &s.base_orientation), ("standing.hand_orientation", &s.hand_orientation)] {
+        let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if (n - 1.0).abs() > 1e-6 {
+            return Err(DescriptionError::BadValue { path: p(), what: format!("norm of {what}"), value: n, rule: "1 (a unit quaternion w, x, y, z)" });
+        }
     }
     for (name, value) in &s.joints {
         if !model.joint_names.contains(name) {
