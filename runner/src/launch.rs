@@ -315,15 +315,7 @@ impl Running {
         match bridge {
             BridgeArgs::Scene { scene, robots } => Ok(BridgeOutcome::Scene(sim_bridge::scene::run(&self.session, scene, robots, self.stop_signal()).await?)),
             BridgeArgs::Smoke(p) => {
-                let cfg = LockstepConfig {
-                    team: p.team.clone(),
-                    ticks: p.ticks,
-                    start_timeout: Duration::from_secs(20),
-                    command_timeout: Duration::from_secs(5),
-                    resend_every: Duration::from_millis(50),
-                    progress_every: (p.ticks / 10).max(1),
-                    wait_for_coordinator: false,
-                };
+                let cfg = LockstepConfig::smoke(&p.team, p.ticks, Duration::from_secs(5));
                 let mut plant = PlaceholderPlant::new(p.robots.clone(), p.joints, p.v0, p.dt);
                 let report = lockstep::run(&self.session, &cfg, &mut plant, self.stop_signal()).await?;
                 let final_velocities = (0..p.robots.len()).map(|i| plant.velocities(i)[0]).collect();

@@ -52,6 +52,24 @@ pub struct LockstepConfig {
     pub wait_for_coordinator: bool,
 }
 
+impl LockstepConfig {
+    /// The smoke run's lockstep (placeholder plant): 20 s for every robot to join, `command_timeout`
+    /// per tick, resends every 50 ms, progress every tenth of the run, no coordinator readiness
+    /// wait (the smoke controller needs no descriptions). The embedded launcher and
+    /// `sim-bridge smoke` both use it.
+    pub fn smoke(team: &str, ticks: u64, command_timeout: Duration) -> Self {
+        LockstepConfig {
+            team: team.to_string(),
+            ticks,
+            start_timeout: Duration::from_secs(20),
+            command_timeout,
+            resend_every: Duration::from_millis(50),
+            progress_every: (ticks / 10).max(1),
+            wait_for_coordinator: false,
+        }
+    }
+}
+
 /// What a lockstep run did.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LockstepReport {

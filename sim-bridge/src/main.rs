@@ -126,15 +126,7 @@ async fn main() -> Result<()> {
             anyhow::ensure!(dt.is_finite() && dt > 0.0, "--dt must be a positive number of seconds");
             anyhow::ensure!(command_timeout.is_finite() && command_timeout > 0.0, "--command-timeout must be positive");
             let session = transport::open(&zenoh, Role::Member).await?;
-            let cfg = LockstepConfig {
-                team,
-                ticks,
-                start_timeout: Duration::from_secs(20),
-                command_timeout: Duration::from_secs_f64(command_timeout),
-                resend_every: Duration::from_millis(50),
-                progress_every: (ticks / 10).max(1),
-                wait_for_coordinator: false,
-            };
+            let cfg = LockstepConfig::smoke(&team, ticks, Duration::from_secs_f64(command_timeout));
             let mut plant = PlaceholderPlant::new(robots, joints, v0, dt);
             let (_tx, rx) = tokio::sync::watch::channel(false);
             let report = lockstep::run(&session, &cfg, &mut plant, rx).await?;
