@@ -9,7 +9,7 @@
 //! Where the hand should go (a face of the object) is planning, not IK: the runner's
 //! `grasp_plan` decides it.
 
-use nalgebra::{Matrix3, Matrix6, Matrix6xX, Rotation3, Vector3, Vector6};
+use nalgebra::{Matrix3, Matrix6, Matrix6xX, Rotation3, UnitQuaternion, Vector3, Vector6};
 use thiserror::Error;
 
 use crate::algorithm::{forward_kinematics, frame_jacobian};
@@ -100,7 +100,9 @@ pub fn solve(
         let m = data.o_m_f[frame];
         let dp = p_t - m.trans;
         let r_err = Rotation3::from_matrix_unchecked(r_t * m.rot.transpose());
-        let dw = r_err.scaled_axis();
+        // Through the quaternion: Rotation3::scaled_axis is NaN when rounding puts the trace
+        // above 3 (see coordinator::linalg::rotation_error).
+        let dw = UnitQuaternion::from_rotation_matrix(&r_err).scaled_axis();
         pe = dp.norm();
         ae = dw.norm();
         if pe < options.epsilon_linear && ae < options.epsilon_angular {
