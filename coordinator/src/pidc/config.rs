@@ -18,7 +18,8 @@ pub struct PidcConfig {
     /// Carried object: mass, inertia about its centre in its own frame.
     pub object_mass: f64,
     pub object_inertia: Matrix3<f64>,
-    /// Object pose when the grasp first closes; `None`: the hands' centroid, world axes.
+    /// Object pose when the grasp first closes (the runner's plan knows it); `None`: the hands'
+    /// centroid with world axes, which is the object's centre only for two opposite palms.
     pub object_pose_at_grasp: Option<Isometry3<f64>>,
     /// Minimum normal force of every stance foot, N.
     pub f_min_foot: f64,

@@ -200,6 +200,8 @@ impl Pidc {
             contacts: Vec::new(),
             constraint_residual: 0.0,
             object_estimate: None,
+            grasp_slip: 0.0,
+            fallback: None,
         });
         self.report.diagnostics_into(tick, d);
     }

@@ -63,7 +63,7 @@ impl TickReport {
         out.truncate(self.team.robots.len());
         for (k, (r, t)) in self.team.robots.iter().zip(tick).enumerate() {
             if k == out.len() {
-                out.push(TorqueCommand { header: Header::new(&t.header.team, Some(&r.id), 0, 0), tau: Vec::new() });
+                out.push(TorqueCommand { header: Header::new(&t.header.team, Some(&r.id), 0, 0), tau: Vec::new(), hold: false });
             }
             let cmd = &mut out[k];
             set_header(&mut cmd.header, &t.header.team, Some(&r.id), t.header.tick, 0);
@@ -73,7 +73,8 @@ impl TickReport {
     }
 
     /// The tick's diagnostics into `d` (its strings and vectors reused): the real contact
-    /// wrenches, the QP's status and time, `|J_c v|`, the object estimate.
+    /// wrenches, the QP's status and time, `|J_c v|`, the object estimate and the fit's slip, the
+    /// fallback taken.
     pub fn diagnostics_into(&self, tick: &[DynamicsTerms], d: &mut TickDiagnostics) {
         let (team_id, tick_no) = match tick.first() {
             Some(t) => (t.header.team.as_str(), t.header.tick),
@@ -108,6 +109,12 @@ impl TickReport {
             position: g.object.translation.vector.into(),
             orientation: quat_wxyz(&g.object.rotation.to_rotation_matrix()),
         });
+        d.grasp_slip = self.grasp.as_ref().map_or(0.0, |g| g.fit_residual);
+        match (&self.fallback, &mut d.fallback) {
+            (None, f) => *f = None,
+            (Some(why), Some(f)) => set_string(f, why),
+            (Some(why), f) => *f = Some(why.clone()),
+        }
     }
 }
 

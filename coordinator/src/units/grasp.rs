@@ -1,7 +1,7 @@
 //! The force-closed grasp (paper §II-E, §III-A): grasp matrix `G` (eq. graspmatrix), the grasp
 //! null-space projector, `J_c,ee` (eq. jacobian_cee), `J_o` (eq. obj_jacobian), their
-//! `Jdot*v` ([`GraspTerms`]), and the object pose inferred from the hand poses
-//! ([`GraspOffsets`], kept from tick to tick by [`GraspTracker`]).
+//! `Jdot*v` ([`GraspTerms`]), and the object pose fitted to the hand poses
+//! ([`GraspOffsets::fit`], offsets kept from tick to tick by [`GraspTracker`]).
 //!
 //! Frames: our Jacobians are world-aligned at the hand-contact origin, so the partial grasp
 //! matrix is the paper's with `R_i = I`: `G_i = [[I, 0], [skew(r_i), I]]`, `r_i = p_i - p_o`
@@ -13,41 +13,53 @@
 //! `G^T (G^+)^T = G^+ G`). The object's weight and inertia enter as a known external wrench
 //! at the object centre (the paper's `J_x^T F_x` term with `J_x = J_o`), see `pidc::stages::tasks`.
 
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix6, Rotation3, Translation3, UnitQuaternion, Vector3, Vector6};
 
 use crate::linalg::{mat, product, skew, zeros, zeros_v};
 use crate::team::Team;
 use crate::ControllerError;
 
-/// Grasp offsets captured when the grasp closed: each hand's rotation to the object's, and
-/// the object centre relative to the hands' centroid (in the object frame).
-///
-/// The estimate takes its position from the hands' centroid, not from each hand's pose times
-/// its lever arm: a palm that rocks on its face by a small angle (soft contact, a moment near
-/// the patch's limit) then moves the estimate by the rocking of the centroid only, not by
-/// `angle x 0.3 m` as a per-hand estimate would. Opposite palms rock in opposite senses, so
-/// their mean rotation cancels it too.
+/// Grasp offsets captured when the grasp closed: each hand's rotation to the object's and its
+/// contact point in the object's frame. Every tick [`GraspOffsets::fit`] finds the object pose
+/// that best explains all hands' poses with these offsets.
 #[derive(Debug, Clone)]
 pub struct GraspOffsets {
     /// (robot id, hand frame) of each hand in grasp, team order.
     pub hands: Vec<(String, String)>,
     /// `R_hand^T R_object` per hand.
     pub hand_to_object: Vec<UnitQuaternion<f64>>,
-    /// `R_object^T (p_object - centroid(p_hand))`.
-    pub centre_offset: Vector3<f64>,
+    /// `R_object^T (p_hand - p_object)` per hand: where the hand holds the object, in its frame.
+    pub contact_in_object: Vec<Vector3<f64>>,
 }
+
+/// The object pose fitted to the hands, and how far the hands are from where it puts them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjectFit {
+    pub pose: Isometry3<f64>,
+    /// Largest distance of a hand's contact point from where the fitted pose puts it, m: the
+    /// controller's own slip signal (zero for a rigid grasp).
+    pub residual: f64,
+}
+
+/// Weight of each hand's orientation in the fit, m^2: a hand's rotation counts like points
+/// one metre from its contact. The palms' orientation is the better measurement of the
+/// object's rotation on a soft contact (a palm rocking on its face moves its contact point's
+/// rotation estimate by `angle x lever`; opposite palms rock in opposite senses, so their mean
+/// orientation cancels it); the contact points then fix the centre, for two hands as for eight.
+pub const ORIENTATION_WEIGHT: f64 = 1.0;
 
 impl GraspOffsets {
     /// Capture the offsets with the object at `object` (world).
     pub fn capture(team: &Team, object: &Isometry3<f64>) -> Self {
         let mut hands = Vec::new();
         let mut hand_to_object = Vec::new();
+        let mut contact_in_object = Vec::new();
         for h in &team.hands {
             hands.push((team.robots[h.robot].id.clone(), h.name.clone()));
             hand_to_object.push(UnitQuaternion::from_rotation_matrix(&h.rotation).inverse() * object.rotation);
+            contact_in_object.push(object.inverse_transform_point(&h.position.into()).coords);
         }
-        let centre_offset = object.rotation.inverse() * (object.translation.vector - hand_centroid(team));
-        GraspOffsets { hands, hand_to_object, centre_offset }
+        GraspOffsets { hands, hand_to_object, contact_in_object }
     }
 
     /// Whether these offsets belong to the team's current set of grasping hands.
@@ -56,19 +68,29 @@ impl GraspOffsets {
             && self.hands.iter().zip(&team.hands).all(|((r, f), h)| *r == team.robots[h.robot].id && *f == h.name)
     }
 
-    /// Object pose from the hands: orientation the sign-aligned normalised mean of each hand's
-    /// estimate, position the hands' centroid plus the captured centre offset.
-    pub fn object_pose(&self, team: &Team) -> Isometry3<f64> {
-        let mut q = nalgebra::Vector4::zeros();
-        let mut first: Option<nalgebra::Vector4<f64>> = None;
-        for (h, off) in team.hands.iter().zip(&self.hand_to_object) {
-            let c = (UnitQuaternion::from_rotation_matrix(&h.rotation) * off).coords;
-            let f = *first.get_or_insert(c);
-            q += if f.dot(&c) < 0.0 { -c } else { c };
+    /// The object pose from the hands by weighted least squares over SE(3): the rotation `R`
+    /// minimises `sum_i |(p_i - p_mean) - R (c_i - c_mean)|^2 + w sum_i |R - R_i Q_i|_F^2`
+    /// (`c_i` the contact in the object frame, `R_i Q_i` hand i's estimate of the object's
+    /// rotation, `w` = [`ORIENTATION_WEIGHT`]), which is Procrustes' problem: with
+    /// `H = sum_i (p_i - p_mean)(c_i - c_mean)^T + w sum_i R_i Q_i = U S V^T`,
+    /// `R = U diag(1, 1, det(U V^T)) V^T`; the position is then `p_mean - R c_mean`.
+    pub fn fit(&self, team: &Team) -> ObjectFit {
+        let b = team.hands.len().max(1) as f64;
+        let p_mean = team.hands.iter().fold(Vector3::zeros(), |a, h| a + h.position) / b;
+        let c_mean = self.contact_in_object.iter().fold(Vector3::zeros(), |a, c| a + c) / b;
+        let mut h_mat = Matrix3::zeros();
+        for ((h, c), q) in team.hands.iter().zip(&self.contact_in_object).zip(&self.hand_to_object) {
+            h_mat += (h.position - p_mean) * (c - c_mean).transpose();
+            h_mat += ORIENTATION_WEIGHT * (UnitQuaternion::from_rotation_matrix(&h.rotation) * q).to_rotation_matrix().into_inner();
         }
-        let rot = UnitQuaternion::from_quaternion(nalgebra::Quaternion::from(q));
-        let p = hand_centroid(team) + rot * self.centre_offset;
-        Isometry3::from_parts(Translation3::from(p), rot)
+        let svd = h_mat.svd(true, true);
+        let (u, v_t) = (svd.u.unwrap_or_else(Matrix3::identity), svd.v_t.unwrap_or_else(Matrix3::identity));
+        let d = (u * v_t).determinant().signum();
+        let r = u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * v_t;
+        let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
+        let p = p_mean - rot * c_mean;
+        let residual = team.hands.iter().zip(&self.contact_in_object).map(|(h, c)| (h.position - p - rot * c).norm()).fold(0.0, f64::max);
+        ObjectFit { pose: Isometry3::from_parts(Translation3::from(p), rot), residual }
     }
 }
 
@@ -110,10 +132,11 @@ impl GraspTracker {
                 slot.insert(GraspOffsets::capture(team, &at))
             }
         };
-        let pose = offsets.object_pose(team);
-        self.last_object = Some(pose);
+        let fit = offsets.fit(team);
+        self.last_object = Some(fit.pose);
         let g = terms.get_or_insert_with(GraspTerms::default);
-        g.compute_into(team, pose).ok_or_else(|| ControllerError::Singular { what: "grasp matrix".into() })
+        g.fit_residual = fit.residual;
+        g.compute_into(team, fit.pose).ok_or_else(|| ControllerError::Singular { what: "grasp matrix".into() })
     }
 
     /// Forget the offsets: they are captured again when the hands next close.
@@ -128,6 +151,8 @@ impl GraspTracker {
 pub struct GraspTerms {
     /// Object pose estimate and twist `J_o v` (world, at the object centre).
     pub object: Isometry3<f64>,
+    /// The pose fit's residual ([`ObjectFit::residual`]), m.
+    pub fit_residual: f64,
     pub object_twist: Vector6<f64>,
     /// `G` (6 x 6B) and `G^+` (6B x 6).
     pub g: DMatrix<f64>,
