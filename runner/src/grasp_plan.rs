@@ -3,7 +3,9 @@
 //! `robot_model::ik`.
 //!
 //! The face is the object face whose outward normal points most toward the robot's base. The
-//! hand target: `hand_contact` at the face's point level with the face centre, palm normal
+//! hand target: `hand_contact` on the face level with the face centre and, along the face,
+//! in front of the base (robots spaced along a long face hold it where they stand, kept
+//! [`FACE_END_MARGIN`] from its ends), palm normal
 //! (`+z`) anti-parallel to the face's outward normal, hand `x` horizontal (`x = e_z x z`), as in
 //! the standing pose of the default robot. Each arm is solved on the robot's own model, base
 //! fixed at its placement, legs at their configuration, only the joints that move the hand
@@ -15,6 +17,7 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use protocol::conventions::quat_from_wxyz;
 use robot_model::ik::{self, IkError, IkOptions, IkSolution};
 use robot_model::Robot;
+use sim_bridge::placement::FACE_END_MARGIN;
 use sim_bridge::world::{ObjectSpec, WorldSpec};
 use thiserror::Error;
 
@@ -50,6 +53,16 @@ pub fn face_target(object: &ObjectSpec, base: &Vector3<f64>, hand_height: Option
     n_local[best.0] = best.1;
     let n = ro.transform_vector(&n_local);
     let mut p = po + n * (object.size[best.0] / 2.0);
+    // Along the face's horizontal axis: in front of the base, inside the face.
+    for axis in (0..3).filter(|a| *a != best.0) {
+        let mut e = Vector3::zeros();
+        e[axis] = 1.0;
+        let e = ro.transform_vector(&e);
+        if e.z.abs() < 1e-9 {
+            let room = (object.size[axis] / 2.0 - FACE_END_MARGIN).max(0.0);
+            p += e * e.dot(&(base - po)).clamp(-room, room);
+        }
+    }
     if let Some(h) = hand_height {
         // Slide along the face (keep on its plane) to the requested height if it is vertical.
         if n.z.abs() < 1e-9 {

@@ -9,13 +9,13 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use coordinator::{ControllerSpec, PidcConfig};
-use nalgebra::{Matrix3, UnitQuaternion, Vector3};
-use protocol::conventions::quat_to_wxyz;
+use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
+use protocol::conventions::{quat_from_wxyz, quat_to_wxyz};
 use protocol::{Header, Pose, PoseReference, RunClock, TaskReferences, TorsoReference};
 use robot_model::{DescriptionError, Robot, RobotCache};
 use sim_bridge::perturbation::Perturbation;
 use sim_bridge::scene::Scene;
-use sim_bridge::world::{ContactParams, ObjectSpec, SolverParams, WorldSpec};
+use sim_bridge::world::{ContactParams, SolverParams, WorldSpec};
 use thiserror::Error;
 
 use crate::reference::PoseMotion;
@@ -83,14 +83,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
         placements.push(sim_bridge::placement::standing(&r.id, path.clone(), &robot, r.base_xy, r.yaw)?);
         robots.push(PlannedRobot { id: r.id.clone(), description: path, joints: robot.actuated_joints.clone(), robot });
     }
-    let object = ObjectSpec {
-        size: s.object.size,
-        mass: s.object.mass,
-        inertia: None,
-        friction: [s.object.friction, 0.005, 0.0001],
-        position: s.object.position,
-        orientation: [1.0, 0.0, 0.0, 0.0],
-    };
+    let object = s.object.world();
     let mut world = WorldSpec {
         robots: placements,
         object: Some(object),
@@ -142,7 +135,8 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
             swing_gains: s.gains.feet.as_ref().map(|f| f.gains()).unwrap_or_else(|| PidcConfig::default().swing_gains),
             object_mass: s.object.mass,
             object_inertia: Matrix3::from_diagonal(&Vector3::from(principal)),
-            object_pose_at_grasp: None,
+            // Where the object is when the grasp closes: the fit's offsets are taken there.
+            object_pose_at_grasp: Some(Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation))),
             f_min_foot: s.min_foot_force,
             f_min_hand: s.min_hand_force,
             ..PidcConfig::default()

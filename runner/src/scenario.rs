@@ -56,7 +56,13 @@ pub struct Scenario {
     #[serde(default = "default_min_hand_force")]
     pub min_hand_force: f64,
     pub object: ObjectSpec,
+    /// The robots, each with its floor pose; or, instead, `team`.
+    #[serde(default)]
     pub robots: Vec<RobotSpec>,
+    /// The robots laid out around the object's faces (`sim_bridge::placement::around_object`),
+    /// named `r1`, `r2`, ... face by face; expanded into `robots` when the file is loaded.
+    #[serde(default)]
+    pub team: Option<TeamSpec>,
     pub gains: Gains,
     #[serde(default)]
     pub references: References,
@@ -109,6 +115,53 @@ pub struct RobotSpec {
     pub base_xy: [f64; 2],
     /// Heading about z, rad.
     pub yaw: f64,
+}
+
+/// A team laid out around the object: `per_face` robots on each of `faces` (`"+x"`, `"-x"`,
+/// `"+y"`, `"-y"`: the object's vertical faces by outward normal), `spacing` m apart along a
+/// face, each `standoff` m from its face.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TeamSpec {
+    /// Every robot's description (default: the project's legged manipulator).
+    #[serde(default = "default_description")]
+    pub description: PathBuf,
+    pub faces: Vec<sim_bridge::placement::Face>,
+    pub per_face: usize,
+    #[serde(default)]
+    pub spacing: f64,
+    #[serde(default = "default_standoff")]
+    pub standoff: f64,
+}
+
+fn default_description() -> PathBuf {
+    PathBuf::from("robot-model/models/legged_manipulator.toml")
+}
+fn default_standoff() -> f64 {
+    sim_bridge::placement::DEFAULT_STANDOFF
+}
+
+impl TeamSpec {
+    /// The robots of this layout around `object`.
+    pub fn robots(&self, object: &ObjectSpec) -> Result<Vec<RobotSpec>, String> {
+        let layout = sim_bridge::placement::FaceLayout { faces: self.faces.clone(), per_face: self.per_face, spacing: self.spacing, standoff: self.standoff };
+        let poses = sim_bridge::placement::around_object(&object.world(), &layout).map_err(|e| e.to_string())?;
+        Ok(poses.into_iter().enumerate().map(|(i, (base_xy, yaw))| RobotSpec { id: format!("r{}", i + 1), description: self.description.clone(), base_xy, yaw }).collect())
+    }
+}
+
+impl ObjectSpec {
+    /// The simulator's object: this box, world-aligned, a uniform inertia.
+    pub fn world(&self) -> sim_bridge::world::ObjectSpec {
+        sim_bridge::world::ObjectSpec {
+            size: self.size,
+            mass: self.mass,
+            inertia: None,
+            friction: [self.friction, 0.005, 0.0001],
+            position: self.position,
+            orientation: [1.0, 0.0, 0.0, 0.0],
+        }
+    }
 }
 
 /// Stiffness and damping of a task, per axis (`[x, y, z, rx, ry, rz]`, or 3 for feet).
@@ -190,7 +243,13 @@ impl Scenario {
         for o in overrides {
             apply_override(&mut value, o)?;
         }
-        let s: Scenario = value.try_into().map_err(|e: toml::de::Error| toml_err(e.to_string()))?;
+        let mut s: Scenario = value.try_into().map_err(|e: toml::de::Error| toml_err(e.to_string()))?;
+        let invalid = |reason: String| ScenarioError::Invalid { path: path.to_path_buf(), reason };
+        match (&s.team, s.robots.is_empty()) {
+            (Some(t), true) => s.robots = t.robots(&s.object).map_err(invalid)?,
+            (Some(_), false) => return Err(invalid("give either [[robots]] or [team], not both".into())),
+            (None, _) => {}
+        }
         s.check().map_err(|reason| ScenarioError::Invalid { path: path.to_path_buf(), reason })?;
         Ok(s)
     }

@@ -4,19 +4,24 @@
 //!   description's standing pose (so its feet touch the floor);
 //! * [`facing_ring`]: `n` floor poses on a circle around a centre, each facing it (the first at
 //!   the circle's `-x` point; two robots are the paper's facing pair);
+//! * [`around_object`]: a team around a box or beam, robots spaced along the object's vertical
+//!   faces ([`FaceLayout`]: which faces, how many per face, spacing, standoff), each facing its
+//!   face;
 //! * [`DEFAULT_STANDING_HEIGHT`]: the default robot's base height, for worlds built without
 //!   loading it first (tests, the paper's pair).
 //!
-//! Scenarios name each robot's floor pose (`base_xy`, `yaw`); the runner's plan and the
-//! `sim-bridge run` command both place robots through these functions.
+//! Scenarios name each robot's floor pose (`base_xy`, `yaw`) or a [`FaceLayout`]; the runner's
+//! plan and the `sim-bridge run` command both place robots through these functions.
 
 use std::collections::BTreeMap;
 use std::f64::consts::PI;
 use std::path::PathBuf;
 
+use nalgebra::Vector3;
+use protocol::conventions::quat_from_wxyz;
 use robot_model::Robot;
 
-use crate::world::{RobotPlacement, WorldError};
+use crate::world::{ObjectSpec, RobotPlacement, WorldError};
 
 /// Base height of the default robot's standing pose (`robot-model/models/legged_manipulator.toml`,
 /// `[standing] base_position`), m.
@@ -55,6 +60,109 @@ pub fn facing_ring(centre: [f64; 2], radius: f64, n: usize) -> Vec<([f64; 2], f6
         .collect()
 }
 
+/// A vertical face of a box, named by its outward normal in the object's frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Face {
+    #[serde(rename = "+x")]
+    PlusX,
+    #[serde(rename = "-x")]
+    MinusX,
+    #[serde(rename = "+y")]
+    PlusY,
+    #[serde(rename = "-y")]
+    MinusY,
+}
+
+impl Face {
+    /// Outward normal (object frame) and the axis index along which the face extends
+    /// horizontally.
+    fn normal_and_tangent_axis(self) -> (Vector3<f64>, usize, usize) {
+        match self {
+            Face::PlusX => (Vector3::x(), 0, 1),
+            Face::MinusX => (-Vector3::x(), 0, 1),
+            Face::PlusY => (Vector3::y(), 1, 0),
+            Face::MinusY => (-Vector3::y(), 1, 0),
+        }
+    }
+}
+
+/// How a team stands around an object: `per_face` robots on each of `faces` (in that order),
+/// neighbours `spacing` apart along the face and centred on it, each base `standoff` from its
+/// face (horizontally, from the face plane to the base), facing the face.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FaceLayout {
+    pub faces: Vec<Face>,
+    pub per_face: usize,
+    /// m between neighbouring bases along a face.
+    #[serde(default)]
+    pub spacing: f64,
+    /// m from the face plane to each base (the default robot reaches a face 0.85 m away).
+    #[serde(default = "default_standoff")]
+    pub standoff: f64,
+}
+
+/// The distance from a face to the default robot's base in the paper's pair (1.15 m from a
+/// 0.6 m cube's centre).
+pub const DEFAULT_STANDOFF: f64 = 0.85;
+
+fn default_standoff() -> f64 {
+    DEFAULT_STANDOFF
+}
+
+/// Distance each end of a face keeps free of hand centres, m (a palm is 0.1 m wide).
+pub const FACE_END_MARGIN: f64 = 0.06;
+
+/// Floor poses `((x, y), yaw)` of a team laid out by `layout` around `object` (a box with a
+/// vertical z axis; its yaw may be any). Robots come face by face, along each face in the
+/// direction of `z x n`. An error when the layout is empty, repeats a face, does not fit on a
+/// face (the hands would leave it) or is not finite.
+pub fn around_object(object: &ObjectSpec, layout: &FaceLayout) -> Result<Vec<([f64; 2], f64)>, WorldError> {
+    let bad = |why: String| Err(WorldError::Invalid(format!("team layout: {why}")));
+    if layout.faces.is_empty() || layout.per_face == 0 {
+        return bad("needs at least one face and one robot per face".into());
+    }
+    if !(layout.spacing.is_finite() && layout.spacing >= 0.0 && layout.standoff.is_finite() && layout.standoff > 0.0) {
+        return bad(format!("spacing {} must be >= 0 and standoff {} > 0, both finite", layout.spacing, layout.standoff));
+    }
+    if layout.per_face > 1 && layout.spacing == 0.0 {
+        return bad(format!("{} robots per face need a spacing", layout.per_face));
+    }
+    for (i, f) in layout.faces.iter().enumerate() {
+        if layout.faces[..i].contains(f) {
+            return bad(format!("face {f:?} named twice"));
+        }
+    }
+    let rot = quat_from_wxyz(object.orientation);
+    if (rot * Vector3::z()).z < 1.0 - 1e-9 {
+        return bad("the object's z axis must be vertical to stand robots at its faces".into());
+    }
+    let centre = Vector3::from(object.position);
+    let mut out = Vec::new();
+    for face in &layout.faces {
+        let (n_local, normal_axis, tangent_axis) = face.normal_and_tangent_axis();
+        let n = rot * n_local;
+        let t = Vector3::z().cross(&n);
+        let half_length = object.size[tangent_axis] / 2.0;
+        let span = layout.spacing * (layout.per_face - 1) as f64 / 2.0;
+        if span > half_length - FACE_END_MARGIN {
+            return bad(format!(
+                "{} robots {} m apart span {:.3} m, face {face:?} is {:.3} m long (hands need {FACE_END_MARGIN} m from each end)",
+                layout.per_face,
+                layout.spacing,
+                2.0 * span,
+                2.0 * half_length
+            ));
+        }
+        for k in 0..layout.per_face {
+            let along = k as f64 * layout.spacing - span;
+            let base = centre + n * (object.size[normal_axis] / 2.0 + layout.standoff) + t * along;
+            out.push(([base.x, base.y], (-n.y).atan2(-n.x)));
+        }
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -88,5 +196,57 @@ mod tests {
         let p = standing("r1", robot_model::default_robot_path(), &robot, [1.0, 2.0], 0.5).unwrap();
         assert_eq!(p.base_position, [1.0, 2.0, DEFAULT_STANDING_HEIGHT]);
         assert_eq!(p, default_robot("r1", [1.0, 2.0], 0.5));
+    }
+
+    fn beam() -> ObjectSpec {
+        ObjectSpec { size: [2.4, 0.4, 0.4], mass: 4.0, inertia: None, friction: [0.8, 0.005, 0.0001], position: [1.0, 2.0, 0.6], orientation: [1.0, 0.0, 0.0, 0.0] }
+    }
+
+    /// Each base at the standoff from its face plane, facing it, spaced along the face and
+    /// centred on it; written out in world coordinates for a beam and a yawed cube.
+    #[test]
+    fn robots_stand_at_their_faces_facing_them() {
+        let layout = FaceLayout { faces: vec![Face::MinusY, Face::PlusY], per_face: 4, spacing: 0.6, standoff: 0.85 };
+        let poses = around_object(&beam(), &layout).unwrap();
+        assert_eq!(poses.len(), 8);
+        for (i, ([x, y], yaw)) in poses.iter().enumerate() {
+            let side = if i < 4 { -1.0 } else { 1.0 };
+            assert!((y - (2.0 + side * (0.2 + 0.85))).abs() < 1e-12, "robot {i} y {y}");
+            assert!((yaw.sin() + side).abs() < 1e-12 && yaw.cos().abs() < 1e-12, "robot {i} faces the beam: yaw {yaw}");
+            assert!(x - 1.0 >= -0.9 - 1e-12 && x - 1.0 <= 0.9 + 1e-12);
+        }
+        let xs: Vec<f64> = poses[..4].iter().map(|p| p.0[0]).collect();
+        let mean = xs.iter().sum::<f64>() / 4.0;
+        assert!((mean - 1.0).abs() < 1e-12, "centred on the face");
+        let mut sorted = xs.clone();
+        sorted.sort_by(f64::total_cmp);
+        for w in sorted.windows(2) {
+            assert!((w[1] - w[0] - 0.6).abs() < 1e-12, "spacing {:?}", w);
+        }
+        // A cube yawed by 30 deg: the base of the +x face lies on the rotated x axis.
+        let yaw = 30f64.to_radians();
+        let cube = ObjectSpec { orientation: [(yaw / 2.0).cos(), 0.0, 0.0, (yaw / 2.0).sin()], ..ObjectSpec::paper_cube([0.0, 0.0, 0.6]) };
+        let one = around_object(&cube, &FaceLayout { faces: vec![Face::PlusX], per_face: 1, spacing: 0.0, standoff: 0.85 }).unwrap();
+        let ([x, y], heading) = one[0];
+        assert!((x - 1.15 * yaw.cos()).abs() < 1e-12 && (y - 1.15 * yaw.sin()).abs() < 1e-12);
+        assert!((heading - (yaw - PI)).abs() < 1e-12 || (heading - (yaw + PI)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn layouts_that_cannot_be_stood_are_refused() {
+        let ok = FaceLayout { faces: vec![Face::MinusY, Face::PlusY], per_face: 3, spacing: 0.8, standoff: 0.85 };
+        assert!(around_object(&beam(), &ok).is_ok());
+        for bad in [
+            FaceLayout { per_face: 5, ..ok.clone() },                         // 3.2 m on a 2.4 m face
+            FaceLayout { faces: vec![], ..ok.clone() },
+            FaceLayout { per_face: 0, ..ok.clone() },
+            FaceLayout { spacing: 0.0, ..ok.clone() },
+            FaceLayout { standoff: f64::NAN, ..ok.clone() },
+            FaceLayout { faces: vec![Face::PlusX, Face::PlusX], per_face: 1, ..ok.clone() },
+            FaceLayout { faces: vec![Face::PlusX], per_face: 2, ..ok.clone() }, // 0.8 m on a 0.4 m end
+        ] {
+            let e = around_object(&beam(), &bad).expect_err(&format!("{bad:?}")).to_string();
+            assert!(e.contains("team layout"), "{e}");
+        }
     }
 }
