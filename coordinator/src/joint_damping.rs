@@ -49,6 +49,7 @@ impl TeamController for JointDamping {
             out.push(TorqueCommand {
                 header: protocol::Header::new(&terms.header.team, terms.header.robot.as_deref(), terms.header.tick, 0),
                 tau: v.iter().map(|qd| -self.damping * qd).collect(),
+                hold: false,
             });
         }
         Ok(())

@@ -11,7 +11,7 @@ use zenoh::Session;
 
 use crate::team::assembly::{TickAssembler, TickOutcome};
 use crate::team::membership::Membership;
-use crate::TeamController;
+use crate::{ControllerError, TeamController};
 
 /// Capacity of the references queue, samples.
 pub const REFERENCE_QUEUE: usize = 1 << 16;
@@ -48,6 +48,8 @@ pub async fn run(
 ) -> Result<CoordinatorCounters, TransportError> {
     let dynamics = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Dynamics)?).await?;
     let members_q = transport::watch_members(session, &cfg.team).await?;
+    // Agents and the bridge see the coordinator go when this token does.
+    let _alive = transport::declare_coordinator(session, &cfg.team).await?;
     let descriptions = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Description)?).await?;
     // A planner may send many ticks' references at once (the scenario driver does).
     let references = transport::subscribe_with_capacity(session, keys::references(&cfg.team)?, REFERENCE_QUEUE).await?;
@@ -176,6 +178,26 @@ pub async fn run(
     Ok(counters)
 }
 
+/// A hold order for each robot of a tick the controller failed (into `commands`), and the
+/// tick's diagnostics saying so.
+fn hold_orders(team: &str, tick: u64, robots: &[String], error: &ControllerError, commands: &mut Vec<TorqueCommand>) -> TickDiagnostics {
+    commands.clear();
+    commands.extend(robots.iter().map(|r| TorqueCommand::hold(team, r, tick)));
+    TickDiagnostics {
+        header: Header::new(team, None, tick, protocol::wall_clock_ns()),
+        qp_status: protocol::QpStatus::NotRun,
+        qp_iterations: 0,
+        qp_solve_us: 0.0,
+        assembly_us: 0.0,
+        total_us: 0.0,
+        contacts: Vec::new(),
+        constraint_residual: 0.0,
+        object_estimate: None,
+        grasp_slip: 0.0,
+        fallback: Some(format!("controller error: {error}; every robot holds its posture")),
+    }
+}
+
 /// Task references by tick. A planner may publish references ahead of time (the scenario
 /// driver publishes 20,000 ticks ahead); tick `k` is solved with the newest
 /// reference whose tick is at most `k`. References still queued when a tick completes are
@@ -233,17 +255,25 @@ async fn solve_and_publish(
         tracing::debug!(tick, "controller not ready: {why}");
         return Ok(());
     }
-    if let Err(e) = controller.solve(terms, commands) {
-        counters.controller_errors += 1;
-        tracing::error!(tick, "controller failed: {e}");
-        return Ok(());
-    }
-    if controller.used_fallback() {
-        counters.fallbacks += 1;
-    }
-    if let Some(d) = controller.diagnostics() {
-        if let Err(e) = diag_pub.put(d).await {
-            tracing::warn!(tick, "diagnostics not published: {e}");
+    match controller.solve(terms, commands) {
+        Ok(()) => {
+            if controller.used_fallback() {
+                counters.fallbacks += 1;
+            }
+            if let Some(d) = controller.diagnostics() {
+                if let Err(e) = diag_pub.put(d).await {
+                    tracing::warn!(tick, "diagnostics not published: {e}");
+                }
+            }
+        }
+        Err(e) => {
+            // Every robot of the tick is still commanded: it holds its posture this tick.
+            counters.controller_errors += 1;
+            tracing::error!(tick, "controller failed: {e}; every robot holds its posture this tick");
+            let d = hold_orders(&cfg.team, tick, &ids, &e, commands);
+            if let Err(e) = diag_pub.put(&d).await {
+                tracing::warn!(tick, "diagnostics not published: {e}");
+            }
         }
     }
     for cmd in commands.iter() {

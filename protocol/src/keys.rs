@@ -6,6 +6,7 @@
 //! team/{team}/robot/{robot}/{state|dynamics|command|torque|status|description|contacts}
 //! team/{team}/member/{robot}                  liveliness tokens
 //! team/{team}/coordinator/{status|diagnostics}
+//! team/{team}/coordinator/alive              the coordinator's liveliness token
 //! team/{team}/references
 //! team/{team}/perturbation
 //! team/{team}/ground-truth
@@ -71,6 +72,13 @@ pub fn all_members(team: &str) -> Result<String, ProtocolError> {
 pub fn coordinator_status(team: &str) -> Result<String, ProtocolError> {
     validate_id("team", team)?;
     Ok(format!("{ROOT}/{team}/coordinator/status"))
+}
+
+/// `team/{team}/coordinator/alive`: the coordinator's liveliness token (agents go to safe
+/// mode and the bridge counts ticks from the moment it disappears).
+pub fn coordinator_alive(team: &str) -> Result<String, ProtocolError> {
+    validate_id("team", team)?;
+    Ok(format!("{ROOT}/{team}/coordinator/alive"))
 }
 
 /// `team/{team}/coordinator/diagnostics`.

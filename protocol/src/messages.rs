@@ -224,17 +224,35 @@ impl Validate for DynamicsTerms {
 // ---------------------------------------------------------------------------------------------
 // Coordinator -> agent -> torque sink
 
-/// Joint torques for one robot's actuated joints, velocity order (DESIGN.md §2 step 3).
+/// Joint torques for one robot's actuated joints, velocity order (DESIGN.md §2 step 3); or,
+/// from the coordinator, the order to hold posture this tick.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TorqueCommand {
     pub header: Header,
-    /// One torque per actuated joint, N·m (or N for prismatic joints).
+    /// One torque per actuated joint, N·m (or N for prismatic joints); empty when `hold`.
     pub tau: Vec<f64>,
+    /// The coordinator has no torque for this robot this tick (its controller failed the
+    /// tick): the robot applies its own posture-hold torque for the tick. A robot is never
+    /// left without a command for a tick whose terms the coordinator has.
+    pub hold: bool,
+}
+
+impl TorqueCommand {
+    /// The order to hold posture at `tick`.
+    pub fn hold(team: &str, robot: &str, tick: u64) -> Self {
+        TorqueCommand { header: Header::new(team, Some(robot), tick, 0), tau: Vec::new(), hold: true }
+    }
 }
 
 impl Validate for TorqueCommand {
     fn validate(&self) -> Result<(), ProtocolError> {
         self.header.check(true)?;
+        if self.hold {
+            if !self.tau.is_empty() {
+                return Err(ProtocolError::invalid("tau", "a hold command carries no torques"));
+            }
+            return Ok(());
+        }
         if self.tau.is_empty() {
             return Err(ProtocolError::invalid("tau", "empty torque vector"));
         }
@@ -431,14 +449,20 @@ pub struct TickDiagnostics {
     pub contacts: Vec<ContactWrench>,
     /// `|J_c v|`: how far the measured motion violates the contact constraints.
     pub constraint_residual: f64,
-    /// Object pose inferred from the hands.
+    /// Object pose fitted to the hands.
     pub object_estimate: Option<Pose>,
+    /// Largest distance of a hand from where the fitted object pose puts it, m (the
+    /// controller's own slip signal; 0 without a grasp).
+    pub grasp_slip: f64,
+    /// Why this tick's command did not come from the controller's normal path (QP failed,
+    /// controller error: what was sent instead); `None` on a normal tick.
+    pub fallback: Option<String>,
 }
 
 impl Validate for TickDiagnostics {
     fn validate(&self) -> Result<(), ProtocolError> {
         self.header.check(false)?;
-        check_finite("timings", &[self.qp_solve_us, self.assembly_us, self.total_us, self.constraint_residual])?;
+        check_finite("timings", &[self.qp_solve_us, self.assembly_us, self.total_us, self.constraint_residual, self.grasp_slip])?;
         for (i, c) in self.contacts.iter().enumerate() {
             validate_id("robot", &c.robot)?;
             if c.wrench.len() != 3 && c.wrench.len() != 6 {

@@ -280,6 +280,29 @@ pub async fn watch_members(session: &Session, team: &str) -> Result<SampleQueue,
         .map_err(|e| zenoh_err("liveliness subscriber", &key, e))
 }
 
+/// Declare the coordinator's liveliness token; it is alive as long as the token lives.
+pub async fn declare_coordinator(session: &Session, team: &str) -> Result<zenoh::liveliness::LivelinessToken, TransportError> {
+    let key = keys::coordinator_alive(team)?;
+    session.liveliness().declare_token(key.clone()).await.map_err(|e| zenoh_err("declare_token", &key, e))
+}
+
+/// Watch the coordinator's liveliness: a `Put` sample when it is (or comes) alive, a `Delete`
+/// when it goes ([`coordinator_alive`]).
+pub async fn watch_coordinator(session: &Session, team: &str) -> Result<SampleQueue, TransportError> {
+    let key = keys::coordinator_alive(team)?;
+    session
+        .liveliness()
+        .declare_subscriber(key.clone())
+        .history(true)
+        .await
+        .map_err(|e| zenoh_err("liveliness subscriber", &key, e))
+}
+
+/// Whether a sample of [`watch_coordinator`] says the coordinator is alive.
+pub fn coordinator_alive(sample: &Sample) -> bool {
+    sample.kind() == SampleKind::Put
+}
+
 fn zenoh_err(op: &'static str, key: &str, e: impl std::fmt::Display) -> TransportError {
     TransportError::Zenoh { op, key: key.to_string(), reason: e.to_string() }
 }

@@ -57,7 +57,7 @@ fn dynamics(nv: usize) -> DynamicsTerms {
 }
 
 fn command(n: usize) -> TorqueCommand {
-    TorqueCommand { header: header(true), tau: vec![1.5; n] }
+    TorqueCommand { header: header(true), tau: vec![1.5; n], hold: false }
 }
 
 fn raw<M: Message>(m: &M) -> Vec<u8> {

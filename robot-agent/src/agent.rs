@@ -64,6 +64,7 @@ pub async fn run_with<S: DynamicsSource>(
     let contacts = transport::subscribe(session, keys::contacts(team, robot)?).await?;
     let mut io = Io::declare(session, team, robot, core.description().is_some(), sink).await?;
 
+    let coordinator = transport::watch_coordinator(session, team).await?;
     let _token = transport::declare_member(session, team, robot).await?;
     tracing::info!(%robot, %team, joints = core.joints(), deadline = ?cfg.deadline, max_command_age = ?cfg.max_command_age, "agent joined the team");
     let out = core.start(Instant::now());
@@ -104,6 +105,18 @@ pub async fn run_with<S: DynamicsSource>(
                     Ok(msg) => core.on_contacts(&msg),
                     Err(e) => Err(core.on_undecodable_contacts(&e.to_string())),
                 };
+            }
+            c = coordinator.recv_async() => {
+                let Ok(sample) = c else { break };
+                if transport::coordinator_alive(&sample) {
+                    tracing::info!(%robot, "the coordinator is present");
+                    continue;
+                }
+                // The coordinator is gone: hold posture now rather than at the deadline.
+                tracing::warn!(%robot, "the coordinator left");
+                let out = core.enter_safe_mode("the coordinator left", Instant::now());
+                let done = io.send(out).await?;
+                io.done(&mut core, done).await;
             }
             _ = housekeeping.tick() => {
                 let out = core.on_timer(Instant::now());

@@ -201,7 +201,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             contacts: ContactSet { stance: vec![true; feet.len()], hand_in_grasp: true },
             feet,
             terms: empty_terms(team, robot),
-            torques: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints) },
+            torques: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false },
             q: vec![0.0; joints],
             qdot: vec![0.0; joints],
             gravity: vec![0.0; joints],
@@ -315,7 +315,9 @@ impl<S: DynamicsSource> AgentCore<S> {
             tracing::info!(robot = %self.robot, tick, "left safe mode: the coordinator commands again");
         }
         self.board.status.mode = AgentMode::Commanded;
-        Ok(self.outputs(now, mode_before, false, Apply::Command, false))
+        // A hold order: this tick's torque is the agent's own posture hold.
+        let apply = if cmd.hold { Apply::Hold } else { Apply::Command };
+        Ok(self.outputs(now, mode_before, false, apply, false))
     }
 
     /// Something arrived on the command key that is not a command.

@@ -123,8 +123,10 @@ impl CommandGate {
                 return Err(CommandRejection::Stale { tick, last });
             }
         }
-        if cmd.tau.len() != self.limits.len() {
-            return Err(CommandRejection::WrongSize { expected: self.limits.len(), got: cmd.tau.len() });
+        // A hold command carries no torques (the agent's own hold is applied).
+        let expected = if cmd.hold { 0 } else { self.limits.len() };
+        if cmd.tau.len() != expected {
+            return Err(CommandRejection::WrongSize { expected, got: cmd.tau.len() });
         }
         if let Some(index) = cmd.tau.iter().position(|t| !t.is_finite()) {
             return Err(CommandRejection::NonFinite { index, value: cmd.tau[index] });
@@ -187,7 +189,7 @@ mod tests {
     use protocol::Header;
 
     fn cmd(robot: &str, tick: u64, tau: Vec<f64>) -> TorqueCommand {
-        TorqueCommand { header: Header::new("t", Some(robot), tick, 0), tau }
+        TorqueCommand { header: Header::new("t", Some(robot), tick, 0), tau, hold: false }
     }
 
     #[test]

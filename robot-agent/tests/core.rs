@@ -70,7 +70,7 @@ fn state(tick: u64, q: [f64; 3], v: [f64; 3]) -> RobotState {
 }
 
 fn command(robot: &str, tick: u64, tau: &[f64]) -> TorqueCommand {
-    TorqueCommand { header: Header::new("t", Some(robot), tick, 0), tau: tau.to_vec() }
+    TorqueCommand { header: Header::new("t", Some(robot), tick, 0), tau: tau.to_vec(), hold: false }
 }
 
 fn ms(k: u64) -> Duration {

@@ -27,6 +27,10 @@ pub enum BridgeError {
     CoordinatorNotReady { last: String, waited: Duration },
     #[error("no torques from robot(s) {missing:?} for tick {tick} within {waited:?}")]
     TorqueTimeout { tick: u64, missing: Vec<String>, waited: Duration },
+    #[error("robot {robot}'s agent left the team at tick {tick}")]
+    RobotLeft { robot: String, tick: u64 },
+    #[error("the coordinator left at tick {since}; the robots held their posture for {ticks} ticks and it did not come back")]
+    CoordinatorLost { since: u64, ticks: u64 },
     #[error("stopped")]
     Stopped,
 }
@@ -45,6 +49,10 @@ pub struct LockstepConfig {
     pub resend_every: Duration,
     /// Log progress every this many ticks (0: never).
     pub progress_every: u64,
+    /// Ticks the run goes on after the coordinator's liveliness token disappeared (the agents
+    /// hold their posture meanwhile) before it fails; a coordinator that comes back within
+    /// them takes the team back.
+    pub coordinator_grace_ticks: u64,
     /// Also wait, before the first tick, until the coordinator's status lists every robot as a
     /// member and it is ready to command them (descriptions received). The coordinator learns
     /// of members through liveliness, which may reach it after a robot's first dynamics: a tick
@@ -66,9 +74,13 @@ impl LockstepConfig {
             resend_every: Duration::from_millis(50),
             progress_every: (ticks / 10).max(1),
             wait_for_coordinator: false,
+            coordinator_grace_ticks: DEFAULT_COORDINATOR_GRACE_TICKS,
         }
     }
 }
+
+/// [`LockstepConfig::coordinator_grace_ticks`] by default: half a second at 1 kHz.
+pub const DEFAULT_COORDINATOR_GRACE_TICKS: u64 = 500;
 
 /// What a lockstep run did.
 #[derive(Debug, Clone, PartialEq)]
@@ -127,10 +139,12 @@ pub async fn run_with(
     let mut resends = 0u64;
     let mut rejected = 0u64;
     let mut got = vec![false; robots.len()];
+    let mut watch = Liveness::open(session, &cfg.team).await?;
     for tick in extras.first_tick..extras.first_tick + cfg.ticks {
         if *stop.borrow() {
             return Err(BridgeError::Stopped);
         }
+        watch.check(tick, cfg.coordinator_grace_ticks)?;
         states.publish(plant, tick).await?;
         got.iter_mut().for_each(|g| *g = false);
         let tick_started = Instant::now();
@@ -143,8 +157,19 @@ pub async fn run_with(
                 return Err(BridgeError::TorqueTimeout { tick, missing, waited });
             }
             let wait = cfg.resend_every.saturating_sub(last_send.elapsed()).min(timeout - waited);
-            match tokio::time::timeout(wait, torques.recv_async()).await {
-                Ok(Ok(sample)) => {
+            let sample = tokio::select! {
+                s = torques.recv_async() => match s {
+                    Ok(s) => Some(s),
+                    Err(_) => return Err(BridgeError::Stopped),
+                },
+                ev = watch.next() => {
+                    watch.take(ev, tick, &robots)?;
+                    continue;
+                }
+                _ = tokio::time::sleep(wait) => None,
+            };
+            match sample {
+                Some(sample) => {
                     let cmd = match decode_sample::<TorqueCommand>(&sample) {
                         Ok(c) => c,
                         Err(e) => {
@@ -167,8 +192,7 @@ pub async fn run_with(
                         got[i] = true;
                     }
                 }
-                Ok(Err(_)) => return Err(BridgeError::Stopped),
-                Err(_) => {
+                None => {
                     if last_send.elapsed() >= cfg.resend_every {
                         states.republish().await?;
                         resends += 1;
@@ -191,6 +215,71 @@ pub async fn run_with(
     })
 }
 
+
+/// The liveliness of the run's components while it runs: a robot whose agent leaves ends the
+/// run at once, naming it; the coordinator's leaving starts a count of ticks (the agents hold
+/// their posture meanwhile) that ends the run after the grace unless it comes back.
+struct Liveness {
+    members: transport::SampleQueue,
+    coordinator: transport::SampleQueue,
+    coordinator_lost: Option<u64>,
+}
+
+/// What the liveliness queues said.
+enum LivenessEvent {
+    Member(zenoh::sample::Sample),
+    Coordinator(zenoh::sample::Sample),
+    Closed,
+}
+
+impl Liveness {
+    async fn open(session: &Session, team: &str) -> Result<Self, BridgeError> {
+        Ok(Liveness { members: transport::watch_members(session, team).await?, coordinator: transport::watch_coordinator(session, team).await?, coordinator_lost: None })
+    }
+
+    async fn next(&self) -> LivenessEvent {
+        tokio::select! {
+            m = self.members.recv_async() => m.map_or(LivenessEvent::Closed, LivenessEvent::Member),
+            c = self.coordinator.recv_async() => c.map_or(LivenessEvent::Closed, LivenessEvent::Coordinator),
+        }
+    }
+
+    /// Take one event during `tick`.
+    fn take(&mut self, ev: LivenessEvent, tick: u64, robots: &[String]) -> Result<(), BridgeError> {
+        match ev {
+            LivenessEvent::Member(s) => {
+                if let Some(MemberEvent::Left(r)) = MemberEvent::from_sample(&s) {
+                    if robots.contains(&r) {
+                        return Err(BridgeError::RobotLeft { robot: r, tick });
+                    }
+                }
+            }
+            LivenessEvent::Coordinator(s) if transport::coordinator_alive(&s) => {
+                if let Some(since) = self.coordinator_lost.take() {
+                    tracing::info!(since, tick, "the coordinator is back");
+                }
+            }
+            LivenessEvent::Coordinator(_) => {
+                tracing::warn!(tick, "the coordinator left; the robots hold their posture");
+                self.coordinator_lost.get_or_insert(tick);
+            }
+            LivenessEvent::Closed => return Err(BridgeError::Stopped),
+        }
+        Ok(())
+    }
+
+    /// Before `tick`: drain what arrived, and fail when the coordinator has been gone for
+    /// `grace` ticks.
+    fn check(&mut self, tick: u64, grace: u64) -> Result<(), BridgeError> {
+        while let Ok(Some(s)) = self.coordinator.try_recv() {
+            self.take(LivenessEvent::Coordinator(s), tick, &[])?;
+        }
+        match self.coordinator_lost {
+            Some(since) if tick.saturating_sub(since) >= grace => Err(BridgeError::CoordinatorLost { since, ticks: tick - since }),
+            _ => Ok(()),
+        }
+    }
+}
 
 /// Wait until every robot of `robots` has a liveliness token, or fail naming the missing ones.
 pub(crate) async fn wait_for_members(

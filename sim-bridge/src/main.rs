@@ -214,6 +214,7 @@ async fn run_world(a: RunArgs, world: sim_bridge::world::World, n: usize) -> Res
         resend_every: Duration::from_millis(50),
         progress_every: (a.ticks / 10).max(1),
         wait_for_coordinator: false,
+        coordinator_grace_ticks: sim_bridge::lockstep::DEFAULT_COORDINATOR_GRACE_TICKS,
     };
     let mut extras = lockstep::Extras {
         publish_ground_truth: true,

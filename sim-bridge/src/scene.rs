@@ -101,6 +101,7 @@ impl Scene {
             resend_every: Duration::from_millis(50),
             progress_every: 0,
             wait_for_coordinator: true,
+            coordinator_grace_ticks: crate::lockstep::DEFAULT_COORDINATOR_GRACE_TICKS,
         }
     }
 }

@@ -22,6 +22,7 @@ fn cfg(team: &str, ticks: u64) -> LockstepConfig {
         resend_every: Duration::from_millis(50),
         progress_every: 0,
         wait_for_coordinator: false,
+        coordinator_grace_ticks: sim_bridge::lockstep::DEFAULT_COORDINATOR_GRACE_TICKS,
     }
 }
 

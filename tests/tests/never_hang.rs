@@ -1,0 +1,193 @@
+//! A lockstep run never waits without bound (the teams issue): a controller that fails a
+//! tick still commands every robot (hold orders, said in the diagnostics); an agent that
+//! leaves ends the run at once, naming its robot; when the coordinator leaves, the agents hold
+//! their posture at once and the run ends after a grace counted in simulated ticks.
+//!
+//! Every component runs in this process on one Zenoh session (the embedded mode), each with
+//! its own stop signal so that one can be taken away mid-run. The plant is the placeholder
+//! (the subject is the message flow, not the physics); the failing controller is a test
+//! double of the controller only, the service around it is the real one.
+
+use std::time::{Duration, Instant};
+
+use coordinator::service::{self, CoordinatorConfig};
+use coordinator::{ControllerError, TeamController};
+use protocol::keys;
+use protocol::transport::{self, decode_sample, Role, ZenohArgs};
+use protocol::{DynamicsTerms, TickDiagnostics, TorqueCommand};
+use robot_agent::core::AgentConfig;
+use robot_agent::dynamics_source::PlaceholderDynamics;
+use robot_agent::safe_mode::CommandDeadline;
+use sim_bridge::lockstep::{self, BridgeError, LockstepConfig};
+use sim_bridge::plant::PlaceholderPlant;
+use tokio::sync::watch;
+use tokio::task::JoinHandle;
+use zenoh::Session;
+
+const JOINTS: usize = 3;
+
+/// Joint damping that fails every `every`-th tick with a controller error.
+struct FailsEvery {
+    every: u64,
+}
+
+impl TeamController for FailsEvery {
+    fn name(&self) -> &'static str {
+        "fails every n-th tick"
+    }
+
+    fn solve(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError> {
+        let t = tick[0].header.tick;
+        if t % self.every == self.every - 1 {
+            return Err(ControllerError::NonFinite { robot: "team".into(), what: format!("torque (made to fail at tick {t})") });
+        }
+        out.clear();
+        for terms in tick {
+            let v = &terms.velocity[terms.nv() - terms.actuated()..];
+            out.push(TorqueCommand { header: protocol::Header::new(&terms.header.team, terms.header.robot.as_deref(), t, 0), tau: v.iter().map(|qd| -2.0 * qd).collect(), hold: false });
+        }
+        Ok(())
+    }
+}
+
+struct Component<T> {
+    stop: watch::Sender<bool>,
+    task: JoinHandle<T>,
+}
+
+fn coordinator(session: &Session, team: &str, controller: Box<dyn TeamController>) -> Component<service::CoordinatorCounters> {
+    let (stop, rx) = watch::channel(false);
+    let (s, cfg) = (session.clone(), CoordinatorConfig { team: team.into(), tick_deadline: Duration::from_secs(5) });
+    Component { stop, task: tokio::spawn(async move { service::run(&s, cfg, controller, rx).await.expect("coordinator runs") }) }
+}
+
+fn agent(session: &Session, team: &str, robot: &str) -> Component<robot_agent::status::AgentCounters> {
+    let (stop, rx) = watch::channel(false);
+    let mut cfg = AgentConfig::new(team, robot);
+    // Lockstep: the agent's own time deadline must not be what ends a wait here.
+    cfg.deadline = CommandDeadline { ticks: 5, time: Some(Duration::from_secs(30)) };
+    cfg.max_command_age = Duration::from_secs(30);
+    let s = session.clone();
+    Component { stop, task: tokio::spawn(async move { robot_agent::agent::run(&s, cfg, PlaceholderDynamics::floating(JOINTS), rx).await.expect("agent runs") }) }
+}
+
+fn lockstep_cfg(team: &str, ticks: u64, grace: u64) -> LockstepConfig {
+    LockstepConfig {
+        team: team.into(),
+        ticks,
+        start_timeout: Duration::from_secs(20),
+        // Far longer than any test waits: a run that ends, ends for another reason.
+        command_timeout: Duration::from_secs(60),
+        resend_every: Duration::from_millis(50),
+        progress_every: 0,
+        wait_for_coordinator: false,
+        coordinator_grace_ticks: grace,
+    }
+}
+
+fn bridge(session: &Session, team: &str, robots: &[&str], ticks: u64, grace: u64) -> Component<Result<lockstep::LockstepReport, BridgeError>> {
+    let (stop, rx) = watch::channel(false);
+    let cfg = lockstep_cfg(team, ticks, grace);
+    let mut plant = PlaceholderPlant::new(robots.iter().map(|r| r.to_string()).collect(), JOINTS, 0.1, 0.001);
+    let s = session.clone();
+    Component { stop, task: tokio::spawn(async move { lockstep::run(&s, &cfg, &mut plant, rx).await }) }
+}
+
+async fn session() -> Session {
+    transport::open(&ZenohArgs::default(), Role::Alone).await.expect("session")
+}
+
+async fn stop<T>(c: Component<T>) -> T {
+    let _ = c.stop.send(true);
+    tokio::time::timeout(Duration::from_secs(10), c.task).await.expect("stops in time").expect("task")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_failing_controller_still_commands_every_robot() {
+    let team = "hang1";
+    let s = session().await;
+    let diags = transport::subscribe(&s, keys::diagnostics(team).unwrap()).await.unwrap();
+    let c = coordinator(&s, team, Box::new(FailsEvery { every: 10 }));
+    let agents = [agent(&s, team, "r1"), agent(&s, team, "r2")];
+    let started = Instant::now();
+    let b = bridge(&s, team, &["r1", "r2"], 200, 500);
+    let report = tokio::time::timeout(Duration::from_secs(60), b.task).await.expect("bounded").unwrap().expect("the run completes");
+    assert_eq!(report.ticks, 200);
+    assert!(started.elapsed() < Duration::from_secs(30), "no deadline was waited out: {:?}", started.elapsed());
+    // Agents first: the coordinator's leaving would put them in safe mode.
+    for a in agents {
+        let counters = stop(a).await;
+        assert_eq!(counters.hold_torques, 20, "a hold for each failed tick");
+        assert_eq!(counters.safe_mode_entries, 0, "no robot was left without a command");
+    }
+    let coordinator = stop(c).await;
+    assert_eq!(coordinator.controller_errors, 20, "ticks 9, 19, ... failed");
+    assert_eq!(coordinator.commands_sent, 400, "every robot commanded on every tick, failed ticks included");
+    let mut holds = 0;
+    while let Ok(Some(sample)) = diags.try_recv() {
+        let d: TickDiagnostics = decode_sample(&sample).unwrap();
+        if let Some(f) = &d.fallback {
+            assert!(f.contains("controller error") && f.contains("holds its posture"), "{f}");
+            assert_eq!(d.header.tick % 10, 9);
+            holds += 1;
+        }
+    }
+    assert_eq!(holds, 20, "the diagnostics say so for each failed tick");
+    s.close().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_agent_that_leaves_ends_the_run_at_once_naming_it() {
+    let team = "hang2";
+    let s = session().await;
+    let c = coordinator(&s, team, Box::new(FailsEvery { every: u64::MAX }));
+    let r1 = agent(&s, team, "r1");
+    let r2 = agent(&s, team, "r2");
+    let b = bridge(&s, team, &["r1", "r2"], 1_000_000, 500);
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    assert!(!b.task.is_finished(), "the run is going");
+    let left = Instant::now();
+    stop(r2).await;
+    let err = tokio::time::timeout(Duration::from_secs(10), b.task).await.expect("bounded").unwrap().expect_err("the run ends");
+    let waited = left.elapsed();
+    match err {
+        BridgeError::RobotLeft { robot, tick } => {
+            assert_eq!(robot, "r2");
+            assert!(tick > 0);
+        }
+        other => panic!("expected RobotLeft, got {other}"),
+    }
+    // The command timeout is 60 s: the run ended on the liveliness event, not on a deadline.
+    assert!(waited < Duration::from_secs(5), "took {waited:?}");
+    stop(r1).await;
+    stop(c).await;
+    s.close().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn when_the_coordinator_leaves_the_robots_hold_and_the_run_ends_after_the_grace_in_ticks() {
+    let team = "hang3";
+    let grace = 300;
+    let s = session().await;
+    let c = coordinator(&s, team, Box::new(FailsEvery { every: u64::MAX }));
+    let agents = [agent(&s, team, "r1"), agent(&s, team, "r2")];
+    let b = bridge(&s, team, &["r1", "r2"], 1_000_000, grace);
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    let gone = Instant::now();
+    stop(c).await;
+    let err = tokio::time::timeout(Duration::from_secs(30), b.task).await.expect("bounded").unwrap().expect_err("the run ends");
+    match err {
+        BridgeError::CoordinatorLost { since, ticks } => {
+            assert!(since > 0);
+            assert_eq!(ticks, grace, "the grace is counted in ticks");
+        }
+        other => panic!("expected CoordinatorLost, got {other}"),
+    }
+    assert!(gone.elapsed() < Duration::from_secs(20), "took {:?}", gone.elapsed());
+    for a in agents {
+        let counters = stop(a).await;
+        assert_eq!(counters.safe_mode_entries, 1, "safe mode at once, on the liveliness event");
+        assert!(counters.hold_torques >= grace, "the robots held their posture through the grace: {}", counters.hold_torques);
+    }
+    s.close().await.unwrap();
+}
