@@ -4,6 +4,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::problem::{all_finite, QpInput, QpProblem};
+use super::rows::{contact_rows, ContactKind};
 use super::settings::QpSettings;
 use super::QpWorkspace;
 use crate::linalg::{zeros, zeros_v};
@@ -18,13 +19,33 @@ pub(crate) struct LeastViolation {
     best: DVector<f64>,
     active: Vec<bool>,
     now: Vec<bool>,
+    /// Price of each row (see [`row_weights`]).
+    weights: Vec<f64>,
+}
+
+/// Each row's price of violation, in the order of [`super::problem::constraints_into`]: the
+/// hands' rows (squeeze, friction, centre of pressure) at `w`, the stance feet's rows and the
+/// torque limits at `w * hard_factor`. The object yields first: what cannot be kept is the
+/// grasp, never the footing or the joints.
+fn row_weights(inp: &QpInput, w: f64, hard_factor: f64, out: &mut Vec<f64>) {
+    out.clear();
+    for (_, kind) in inp.contacts {
+        let price = match kind {
+            ContactKind::Foot { .. } => w * hard_factor,
+            ContactKind::Hand { .. } => w,
+        };
+        out.extend(std::iter::repeat_n(price, contact_rows(kind).len()));
+    }
+    out.extend(std::iter::repeat_n(w * hard_factor, 2 * inp.actuated.len()));
 }
 
 /// The fallback when the QP is infeasible: every row `A F <= b` may be violated at a price,
-/// `min F^T H F + w sum_i max(0, a_i F - b_i)^2` (`w` = [`super::VIOLATION_WEIGHT`]). Always
-/// solvable; it keeps what can be kept (above all the hands' squeeze) instead of dropping every
-/// contact force. Solved by the active-set Newton method of this piecewise quadratic: with the
-/// violated rows `V`, `(H + w A_V^T A_V) F = w A_V^T b_V`, until `V` repeats (a few 36 x 36
+/// `min F^T H F + sum_i w_i max(0, a_i F - b_i)^2`, `w_i` = [`super::VIOLATION_WEIGHT`] on the
+/// hands' rows and [`super::HARD_ROW_FACTOR`] times that on the feet's rows and the torque
+/// limits (the object yields first). Always solvable; it keeps what can be kept (the footing
+/// and the joints, then as much squeeze as is left) instead of dropping every contact force.
+/// Solved by the active-set Newton method of this piecewise quadratic: with the violated rows
+/// `V`, `(H + A_V^T W_V A_V) F = A_V^T W_V b_V`, until `V` repeats (a few 36 x 36
 /// solves; a first version put a slack per row into the interior-point method, 170 variables,
 /// and took a second per tick). Writes `F` into `f` and returns the largest violation, or
 /// `None` if a solve fails. It builds `H`, `A` and `b` into `ws` itself (as [`super::solve`]
@@ -35,23 +56,28 @@ pub fn solve_least_violation(ws: &mut QpWorkspace, inp: &QpInput, max_iter: u32,
 }
 
 /// [`solve_least_violation`] with explicit settings (`max_iter`, `violation_weight`,
-/// `least_violation_min_iter`).
+/// `hard_row_factor`, `least_violation_min_iter`).
 pub fn solve_least_violation_with(ws: &mut QpWorkspace, inp: &QpInput, settings: &QpSettings, f: &mut DVector<f64>) -> Option<f64> {
     let m = inp.rho.ncols();
     let w = settings.violation_weight;
     ws.problem.assemble(inp);
     let QpWorkspace { problem: QpProblem { h, a, b, .. }, lv, .. } = ws;
-    let LeastViolation { k: lv_k, rhs: lv_rhs, r: lv_r, hf: lv_hf, best: lv_best, active: lv_active, now: lv_now } = lv;
+    let LeastViolation { k: lv_k, rhs: lv_rhs, r: lv_r, hf: lv_hf, best: lv_best, active: lv_active, now: lv_now, weights } = lv;
     if !(all_finite(b.iter()) && all_finite(a.iter()) && all_finite(h.iter())) {
         return None;
     }
     let rows = a.nrows();
+    row_weights(inp, w, settings.hard_row_factor, weights);
+    if weights.len() != rows {
+        return None;
+    }
+    let weights = &*weights;
     // Cost of F; leaves the residual A F - b in `r`.
     let cost = |f: &DVector<f64>, r: &mut DVector<f64>, hf: &mut DVector<f64>| {
         r.copy_from(b);
         r.gemv(1.0, a, f, -1.0);
         hf.gemv(1.0, h, f, 0.0);
-        f.dot(hf) + w * r.iter().map(|v| v.max(0.0).powi(2)).sum::<f64>()
+        f.dot(hf) + r.iter().zip(weights).map(|(v, wi)| wi * v.max(0.0).powi(2)).sum::<f64>()
     };
     zeros_v(f, m);
     zeros_v(lv_r, rows);
@@ -71,14 +97,14 @@ pub fn solve_least_violation_with(ws: &mut QpWorkspace, inp: &QpInput, settings:
         }
         first = false;
         std::mem::swap(lv_active, lv_now);
-        // K = H + w A_V^T A_V, rhs = w A_V^T b_V.
+        // K = H + A_V^T W_V A_V, rhs = A_V^T W_V b_V.
         zeros(lv_k, m, m);
         lv_k.copy_from(h);
         lv_rhs.fill(0.0);
         for i in (0..rows).filter(|&i| lv_active[i]) {
             let ai = a.row(i);
-            lv_k.ger(w, &ai.transpose(), &ai.transpose(), 1.0);
-            lv_rhs.axpy(w * b[i], &ai.transpose(), 1.0);
+            lv_k.ger(weights[i], &ai.transpose(), &ai.transpose(), 1.0);
+            lv_rhs.axpy(weights[i] * b[i], &ai.transpose(), 1.0);
         }
         let k = std::mem::replace(lv_k, DMatrix::zeros(0, 0));
         let chol = k.cholesky()?;

@@ -15,6 +15,11 @@ pub const REDUCED_TOL: f64 = 1e-5;
 /// the torque objective in (N m)^2).
 pub const VIOLATION_WEIGHT: f64 = 1e6;
 
+/// How much more a violated stance-foot row or torque limit costs than a violated hand row in
+/// [`super::solve_least_violation`]: when not every contact force can be kept, the grasp
+/// gives way before the footing and the joints.
+pub const HARD_ROW_FACTOR: f64 = 1e3;
+
 /// Fewest active-set iterations [`super::solve_least_violation`] may take, whatever
 /// `max_iter` says.
 pub const LEAST_VIOLATION_MIN_ITER: u32 = 30;
@@ -33,6 +38,8 @@ pub struct QpSettings {
     pub reduced_tol: f64,
     /// [`VIOLATION_WEIGHT`].
     pub violation_weight: f64,
+    /// [`HARD_ROW_FACTOR`].
+    pub hard_row_factor: f64,
     /// [`LEAST_VIOLATION_MIN_ITER`].
     pub least_violation_min_iter: u32,
 }
@@ -53,6 +60,7 @@ impl Default for QpSettings {
             dense_tol: DENSE_TOL,
             reduced_tol: REDUCED_TOL,
             violation_weight: VIOLATION_WEIGHT,
+            hard_row_factor: HARD_ROW_FACTOR,
             least_violation_min_iter: LEAST_VIOLATION_MIN_ITER,
         }
     }
