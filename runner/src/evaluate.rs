@@ -75,6 +75,11 @@ pub struct Metrics {
     /// Torque RMS per joint, by robot then joint name, N m.
     pub torque_rms: BTreeMap<String, Vec<(String, f64)>>,
     pub qp_status: BTreeMap<String, u64>,
+    /// Ticks whose command did not come from the controller's normal path (the QP's
+    /// least-violation fallback, or hold orders after a controller error), by what was done.
+    pub fallback_ticks: BTreeMap<String, u64>,
+    /// Largest residual of the controller's object-pose fit (its own slip signal), m.
+    pub grasp_fit_residual_max_m: f64,
     pub qp_iterations: Percentiles,
     pub qp_solve_us: Percentiles,
     pub controller_tick_us: Percentiles,
@@ -255,6 +260,13 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
     for d in &records.diagnostics {
         *qp_status.entry(format!("{:?}", d.qp_status)).or_insert(0u64) += 1;
     }
+    let mut fallback_ticks = BTreeMap::new();
+    for f in records.diagnostics.iter().filter_map(|d| d.fallback.as_deref()) {
+        // Group by what was done, not by the numbers in the message.
+        let kind = if f.starts_with("controller error") { "hold orders after a controller error" } else { "QP fallback" };
+        *fallback_ticks.entry(kind.to_string()).or_insert(0u64) += 1;
+    }
+    let grasp_fit_residual_max_m = records.diagnostics.iter().map(|d| d.grasp_slip).fold(0.0, f64::max);
     let qp_iterations = metrics::percentiles(&records.diagnostics.iter().map(|d| d.qp_iterations as f64).collect::<Vec<_>>());
     let qp_solve_us = metrics::percentiles(&records.diagnostics.iter().map(|d| d.qp_solve_us).collect::<Vec<_>>());
     let controller_tick_us = metrics::percentiles(&records.diagnostics.iter().map(|d| d.total_us).collect::<Vec<_>>());
@@ -314,6 +326,8 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
         mean_squeeze_n,
         torque_rms,
         qp_status,
+        fallback_ticks,
+        grasp_fit_residual_max_m,
         qp_iterations,
         qp_solve_us,
         controller_tick_us,
@@ -384,7 +398,13 @@ pub fn summary(m: &Metrics, dir: &Path) -> String {
         if m.drop.dropped { "YES" } else { "no" }
     ));
     for (r, t) in &m.torsos {
-        s.push_str(&format!("  torso {r}: position RMS {:.2} mm, orientation RMS {:.3} deg\n", t.position_rms_m * 1e3, t.orientation_rms_deg));
+        s.push_str(&format!(
+            "  torso {r}: position RMS {:.2} mm (max {:.2} mm), orientation RMS {:.3} deg (max {:.2} deg)\n",
+            t.position_rms_m * 1e3,
+            t.position_max_m * 1e3,
+            t.orientation_rms_deg,
+            t.orientation_max_deg
+        ));
     }
     for (r, x) in &m.slip_m {
         s.push_str(&format!("  palm {r}: slip {:.3} mm, mean squeeze {:.1} N\n", x * 1e3, m.mean_squeeze_n.get(r).copied().unwrap_or(0.0)));
@@ -393,6 +413,10 @@ pub fn summary(m: &Metrics, dir: &Path) -> String {
         "  QP: {:?}, solve p50 {:.0} us p99 {:.0} us; controller tick p50 {:.0} us p99 {:.0} us; real-time factor {:.3}\n",
         m.qp_status, m.qp_solve_us.p50, m.qp_solve_us.p99, m.controller_tick_us.p50, m.controller_tick_us.p99, m.real_time_factor
     ));
+    if !m.fallback_ticks.is_empty() {
+        s.push_str(&format!("  fallback ticks: {:?}\n", m.fallback_ticks));
+    }
+    s.push_str(&format!("  controller's grasp-fit residual: max {:.3} mm\n", m.grasp_fit_residual_max_m * 1e3));
     for r in &m.recoveries {
         if let Some(e) = r.object_error_after_m {
             s.push_str(&format!("  push on {} ending at {:.1} s: object error {:.2} mm after {} s\n", r.on, r.push_end_s, e * 1e3, RECOVERY_AFTER));
