@@ -489,3 +489,42 @@ fn torque_is_tau0_plus_y_f_c_clamped_after_a_fallback() {
     bad[0] = f64::NAN;
     assert!(matches!(compose(&r.tau0, &r.y, &bad, None, &mut tau), Err(ControllerError::NonFinite { .. })));
 }
+
+/// The object pose fitted to three and four hands: after a rigid motion of every hand the fit
+/// is that motion applied to the object (written out here), with no residual; a hand that
+/// slipped by 3 mm shows in the residual and moves the fit by less than it.
+#[test]
+fn object_pose_fit_follows_any_number_of_hands_and_reports_slip() {
+    use coordinator::units::grasp::GraspOffsets;
+    let mut fx = Fixture::new();
+    for count in [3, 4] {
+        let (terms, _) = fx.static_team(count);
+        let mut team = Team::default();
+        team.assemble_into(&terms, None, false).expect("team");
+        assert_eq!(team.hands.len(), count);
+        let object = Isometry3::from_parts(Translation3::new(0.02, -0.01, 0.6), UnitQuaternion::from_euler_angles(0.05, -0.02, 0.3));
+        let offsets = GraspOffsets::capture(&team, &object);
+        let at_capture = offsets.fit(&team);
+        assert!((at_capture.pose.translation.vector - object.translation.vector).norm() < 1e-12, "{count} hands");
+        assert!(at_capture.pose.rotation.angle_to(&object.rotation) < 1e-12);
+        assert!(at_capture.residual < 1e-12);
+        // Move every hand rigidly by T: the object is at T * object.
+        let t = Isometry3::from_parts(Translation3::new(0.03, 0.04, -0.02), UnitQuaternion::from_euler_angles(0.1, 0.2, -0.15));
+        for h in &mut team.hands {
+            h.position = t.transform_point(&h.position.into()).coords;
+            h.rotation = t.rotation.to_rotation_matrix() * h.rotation;
+        }
+        let moved = offsets.fit(&team);
+        let expected = t * object;
+        assert!((moved.pose.translation.vector - expected.translation.vector).norm() < 1e-12, "{count} hands: {:?}", moved.pose);
+        assert!(moved.pose.rotation.angle_to(&expected.rotation) < 1e-12);
+        assert!(moved.residual < 1e-12);
+        // One hand slips 3 mm along its face.
+        let slip = 0.003;
+        let tangent = team.hands[0].rotation * nalgebra::Vector3::x();
+        team.hands[0].position += tangent * slip;
+        let slipped = offsets.fit(&team);
+        assert!(slipped.residual > 0.5 * slip && slipped.residual <= slip + 1e-12, "{count} hands: residual {}", slipped.residual);
+        assert!((slipped.pose.translation.vector - expected.translation.vector).norm() < slip, "the fit moves less than the slip");
+    }
+}
