@@ -21,13 +21,14 @@
 //! | --- | --- | --- |
 //! | `team/{team}/robot/{robot}/state` | [`RobotState`] | state source (sim-bridge) → agent |
 //! | `team/{team}/robot/{robot}/dynamics` | [`DynamicsTerms`] | agent → coordinator |
-//! | `team/{team}/robot/{robot}/command` | [`TorqueCommand`] | coordinator → agent |
+//! | `team/{team}/robot/{robot}/command` | [`TorqueCommand`] (torques, or a hold order) | coordinator → agent |
 //! | `team/{team}/robot/{robot}/torque` | [`TorqueCommand`] (checked) | agent → torque sink (sim-bridge) |
 //! | `team/{team}/robot/{robot}/status` | [`AgentStatus`] | agent → tools |
 //! | `team/{team}/robot/{robot}/description` | [`RobotDescription`] | agent → coordinator, tools (queryable) |
 //! | `team/{team}/member/{robot}` | liveliness token | agent → coordinator |
 //! | `team/{team}/coordinator/status` | [`CoordinatorStatus`] | coordinator → tools |
 //! | `team/{team}/coordinator/diagnostics` | [`TickDiagnostics`] | coordinator → reports |
+//! | `team/{team}/coordinator/alive` | liveliness token | coordinator → agents, sim-bridge |
 //! | `team/{team}/references` | [`TaskReferences`] | scenario runner → coordinator |
 //! | `team/{team}/perturbation` | [`PerturbationRequest`] | tools → sim-bridge |
 //! | `team/{team}/robot/{robot}/contacts` | [`ContactSet`] | runner, gait planner → agent |

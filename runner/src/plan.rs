@@ -83,6 +83,9 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
         placements.push(sim_bridge::placement::standing(&r.id, path.clone(), &robot, r.base_xy, r.yaw)?);
         robots.push(PlannedRobot { id: r.id.clone(), description: path, joints: robot.actuated_joints.clone(), robot });
     }
+    // Robots must not stand in each other (a dense layout is refused, naming the pair).
+    let footprints = robots.iter().map(|r| sim_bridge::placement::Footprint::of(&r.robot)).collect::<Result<Vec<_>, _>>()?;
+    sim_bridge::placement::check_clearance(&placements, &footprints)?;
     let object = s.object.world();
     let mut world = WorldSpec {
         robots: placements,

@@ -73,6 +73,17 @@ pub enum Face {
     MinusY,
 }
 
+impl std::fmt::Display for Face {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Face::PlusX => "+x",
+            Face::MinusX => "-x",
+            Face::PlusY => "+y",
+            Face::MinusY => "-y",
+        })
+    }
+}
+
 impl Face {
     /// Outward normal (object frame) and the axis index along which the face extends
     /// horizontally.
@@ -130,7 +141,7 @@ pub fn around_object(object: &ObjectSpec, layout: &FaceLayout) -> Result<Vec<([f
     }
     for (i, f) in layout.faces.iter().enumerate() {
         if layout.faces[..i].contains(f) {
-            return bad(format!("face {f:?} named twice"));
+            return bad(format!("face {f} named twice"));
         }
     }
     let rot = quat_from_wxyz(object.orientation);
@@ -147,7 +158,7 @@ pub fn around_object(object: &ObjectSpec, layout: &FaceLayout) -> Result<Vec<([f
         let span = layout.spacing * (layout.per_face - 1) as f64 / 2.0;
         if span > half_length - FACE_END_MARGIN {
             return bad(format!(
-                "{} robots {} m apart span {:.3} m, face {face:?} is {:.3} m long (hands need {FACE_END_MARGIN} m from each end)",
+                "{} robots {} m apart span {:.3} m, face {face} is {:.3} m long (hands need {FACE_END_MARGIN} m from each end)",
                 layout.per_face,
                 layout.spacing,
                 2.0 * span,
@@ -161,6 +172,84 @@ pub fn around_object(object: &ObjectSpec, layout: &FaceLayout) -> Result<Vec<([f
         }
     }
     Ok(out)
+}
+
+/// How much room a standing robot takes on the floor: the rectangle (in its base frame, x
+/// forward, y left) around its feet at the standing pose, widened by [`FOOTPRINT_MARGIN`] on
+/// every side for the legs' and feet's own size.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Footprint {
+    pub min: [f64; 2],
+    pub max: [f64; 2],
+}
+
+/// Added around the feet: a foot's radius (0.03 m) and a little clearance, m.
+pub const FOOTPRINT_MARGIN: f64 = 0.04;
+
+impl Footprint {
+    /// The footprint of `robot` standing (feet from forward kinematics at its standing pose).
+    pub fn of(robot: &Robot) -> Result<Self, WorldError> {
+        let invalid = |e: String| WorldError::Invalid(format!("{}: footprint: {e}", robot.name));
+        let model = &robot.model;
+        let mut data = robot_model::Data::new(model);
+        let q: Vec<f64> = robot.standing_q.iter().copied().collect();
+        robot_model::forward_kinematics(model, &mut data, &q, &vec![0.0; model.nv]).map_err(|e| invalid(e.to_string()))?;
+        let torso = model.frame_id(&robot.torso_frame).map_err(|e| invalid(e.to_string()))?;
+        let base = data.o_m_f[torso];
+        let (mut min, mut max) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for foot in &robot.foot_frames {
+            let f = model.frame_id(foot).map_err(|e| invalid(e.to_string()))?;
+            let p = base.rot.transpose() * (data.o_m_f[f].trans - base.trans);
+            for k in 0..2 {
+                min[k] = min[k].min(p[k] - FOOTPRINT_MARGIN);
+                max[k] = max[k].max(p[k] + FOOTPRINT_MARGIN);
+            }
+        }
+        if !(min.iter().chain(&max).all(|x| x.is_finite())) {
+            return Err(invalid("a robot without feet has no footprint".into()));
+        }
+        Ok(Footprint { min, max })
+    }
+
+    /// The rectangle's corners on the floor for a base at `xy` facing `yaw`.
+    fn corners(&self, xy: [f64; 2], yaw: f64) -> [[f64; 2]; 4] {
+        let (c, s) = (yaw.cos(), yaw.sin());
+        let at = |x: f64, y: f64| [xy[0] + c * x - s * y, xy[1] + s * x + c * y];
+        [at(self.min[0], self.min[1]), at(self.max[0], self.min[1]), at(self.max[0], self.max[1]), at(self.min[0], self.max[1])]
+    }
+}
+
+/// Whether two convex quadrilaterals overlap (separating-axis test on their edge normals).
+fn overlap(a: &[[f64; 2]; 4], b: &[[f64; 2]; 4]) -> bool {
+    for poly in [a, b] {
+        for i in 0..4 {
+            let (p, q) = (poly[i], poly[(i + 1) % 4]);
+            let axis = [q[1] - p[1], p[0] - q[0]];
+            let project = |r: &[[f64; 2]; 4]| r.iter().map(|v| v[0] * axis[0] + v[1] * axis[1]).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| (lo.min(x), hi.max(x)));
+            let ((alo, ahi), (blo, bhi)) = (project(a), project(b));
+            if ahi < blo || bhi < alo {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// Refuse placements whose robots would stand in each other: the footprints of every pair
+/// (robot `i` at `placements[i]` with `footprints[i]`) must not overlap. The error names both.
+pub fn check_clearance(placements: &[RobotPlacement], footprints: &[Footprint]) -> Result<(), WorldError> {
+    let corners: Vec<[[f64; 2]; 4]> = placements.iter().zip(footprints).map(|(p, f)| f.corners([p.base_position[0], p.base_position[1]], p.base_yaw)).collect();
+    for i in 0..corners.len() {
+        for j in i + 1..corners.len() {
+            if overlap(&corners[i], &corners[j]) {
+                return Err(WorldError::Invalid(format!(
+                    "robots {} and {} would stand in each other (their footprints, feet plus {FOOTPRINT_MARGIN} m, overlap): space them further apart",
+                    placements[i].id, placements[j].id
+                )));
+            }
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -248,5 +337,24 @@ mod tests {
             let e = around_object(&beam(), &bad).expect_err(&format!("{bad:?}")).to_string();
             assert!(e.contains("team layout"), "{e}");
         }
+    }
+
+    /// The default robot's footprint holds its feet; two robots side by side clear at 0.7 m and
+    /// not at 0.6 m (eight robots on the beam at 0.6 m stood in each other and fell); a robot
+    /// turned 90 deg is checked on its rotated rectangle.
+    #[test]
+    fn footprints_of_neighbours_must_not_overlap() {
+        let robot = Robot::load(&robot_model::default_robot_path()).unwrap();
+        let f = Footprint::of(&robot).unwrap();
+        assert!(f.max[0] > 0.3 && f.min[0] < -0.3, "feet fore and aft of the base: {f:?}");
+        let width = f.max[1] - f.min[1];
+        assert!(width > 0.6 && width < 0.7, "side by side the robots need between 0.6 and 0.7 m: width {width}");
+        let pair = |d: f64, yaw_b: f64| vec![default_robot("a", [0.0, 0.0], PI / 2.0), default_robot("b", [d, 0.0], yaw_b)];
+        assert!(check_clearance(&pair(0.7, PI / 2.0), &[f, f]).is_ok());
+        let e = check_clearance(&pair(0.6, PI / 2.0), &[f, f]).unwrap_err().to_string();
+        assert!(e.contains("robots a and b"), "{e}");
+        // b turned to face along x: its long side reaches towards a.
+        assert!(check_clearance(&pair(0.7, 0.0), &[f, f]).is_err());
+        assert!(check_clearance(&pair(1.2, 0.0), &[f, f]).is_ok());
     }
 }

@@ -76,3 +76,20 @@ fn eight_robots_hold_and_move_the_beam() {
     let (plan, m) = run_team("team8_beam.toml", &["duration=1.25", "settle=0.5"], "team8_beam");
     assert_team_accepted(&plan, &m, 8);
 }
+
+/// Layouts that cannot be stood are refused before anything runs, with the reason: robots in
+/// each other's footprint (eight on the beam 0.6 m apart stood in each other and the team fell),
+/// hands beyond a face's end, both `[team]` and `[[robots]]`.
+#[test]
+fn impossible_layouts_are_refused_when_planning() {
+    let load = |sets: &[&str]| Scenario::load(repo().join("scenarios/team8_beam.toml"), &sets.iter().map(|s| s.to_string()).collect::<Vec<_>>());
+    let crowded = load(&["team.spacing=0.6"]).expect("the layout itself fits the beam");
+    let e = plan::plan(&crowded, &repo()).expect_err("robots in each other").to_string();
+    assert!(e.contains("robots r") && e.contains("stand in each other"), "{e}");
+    let e = load(&["team.per_face=5"]).expect_err("five robots 0.7 m apart do not fit on 2.4 m").to_string();
+    assert!(e.contains("team layout") && e.contains("-y"), "{e}");
+    let text = std::fs::read_to_string(repo().join("scenarios/team3_cube.toml")).unwrap()
+        + "\n[[robots]]\nid = \"r9\"\ndescription = \"robot-model/models/legged_manipulator.toml\"\nbase_xy = [3.0, 0.0]\nyaw = 0.0\n";
+    let e = Scenario::from_str_with(&text, Path::new("both.toml"), &[]).expect_err("both").to_string();
+    assert!(e.contains("either [[robots]] or [team]"), "{e}");
+}
