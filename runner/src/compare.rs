@@ -5,7 +5,7 @@
 //! and each run's own report in a sub-folder.
 //!
 //! * [`compare`]: scenarios x controllers (`team compare`).
-//! * [`sweep`]: one scenario's motion amplitudes scaled by each factor x controllers, and where
+//! * [`sweep`]: one scenario's motion amplitudes (or speeds) scaled by each factor x controllers, and where
 //!   each controller stops meeting the acceptance bounds (`team sweep`).
 
 use std::path::{Path, PathBuf};
@@ -73,22 +73,41 @@ struct Finished {
     series: Option<TimeSeries>,
 }
 
-/// Multiply every motion amplitude (sinusoid amplitudes, circle radii) by `k`.
-pub fn scale_motion(m: &mut Motion, k: f64) {
-    match m {
-        Motion::Hold => {}
-        Motion::Sinusoid { amplitude, .. } => amplitude.iter_mut().for_each(|a| *a *= k),
-        Motion::Circle { radius, .. } => *radius *= k,
-        Motion::Sequence { segments } => segments.iter_mut().for_each(|s| scale_motion(&mut s.motion, k)),
+/// What a sweep scales.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scaling {
+    /// Every motion amplitude (sinusoid amplitudes, circle radii).
+    Amplitude,
+    /// Every motion's speed (frequencies; a sequence's segments are `k` times shorter).
+    Speed,
+}
+
+/// Scale `m` by `k` (see [`Scaling`]).
+pub fn scale_motion(m: &mut Motion, k: f64, what: Scaling) {
+    match (m, what) {
+        (Motion::Hold, _) => {}
+        (Motion::Sinusoid { amplitude, .. }, Scaling::Amplitude) => amplitude.iter_mut().for_each(|a| *a *= k),
+        (Motion::Sinusoid { frequency, .. }, Scaling::Speed) => frequency.iter_mut().for_each(|f| *f *= k),
+        (Motion::Circle { radius, .. }, Scaling::Amplitude) => *radius *= k,
+        (Motion::Circle { frequency, .. }, Scaling::Speed) => *frequency *= k,
+        (Motion::Sequence { segments }, _) => {
+            for seg in segments {
+                scale_motion(&mut seg.motion, k, what);
+                if what == Scaling::Speed {
+                    seg.duration /= k;
+                    seg.ramp /= k;
+                }
+            }
+        }
     }
 }
 
-fn scaled(mut s: Scenario, k: f64) -> Scenario {
-    scale_motion(&mut s.references.object.position, k);
-    scale_motion(&mut s.references.object.orientation, k);
+fn scaled(mut s: Scenario, k: f64, what: Scaling) -> Scenario {
+    scale_motion(&mut s.references.object.position, k, what);
+    scale_motion(&mut s.references.object.orientation, k, what);
     for t in &mut s.references.torsos {
-        scale_motion(&mut t.motion.position, k);
-        scale_motion(&mut t.motion.orientation, k);
+        scale_motion(&mut t.motion.position, k, what);
+        scale_motion(&mut t.motion.orientation, k, what);
     }
     s
 }
@@ -193,10 +212,13 @@ pub fn compare(files: &[PathBuf], controllers: &[String], sets: &[String], out: 
     Ok(rows)
 }
 
-/// `file` with its motion amplitudes scaled by each of `scales`, with every controller, into
+/// Per controller, the largest motion factor at which it met every bound (`None`: not even the first).
+pub type Limits = Vec<(String, Option<f64>)>;
+
+/// `file` with its motion amplitudes (or speeds) scaled by each of `scales`, with every controller, into
 /// `out` (`sweep.md` / `sweep.json` and one sub-folder per run). Returns the rows and, per
 /// controller, the largest scale at which it met every bound before its first failure.
-pub fn sweep(file: &Path, controllers: &[String], scales: &[f64], sets: &[String], out: &Path, root: &Path, progress: bool) -> Result<(Vec<Row>, Vec<(String, Option<f64>)>), CompareError> {
+pub fn sweep(file: &Path, controllers: &[String], (scales, what): (&[f64], Scaling), sets: &[String], out: &Path, root: &Path, progress: bool) -> Result<(Vec<Row>, Limits), CompareError> {
     let mut rows = Vec::new();
     let mut limits = Vec::new();
     for c in controllers {
@@ -205,8 +227,8 @@ pub fn sweep(file: &Path, controllers: &[String], scales: &[f64], sets: &[String
         let base = Scenario::load(file, &all)?;
         let mut last_pass = None;
         for &k in scales {
-            eprintln!("{}: {c}, motion x {k}...", base.name);
-            let f = run_one(scaled(base.clone(), k), k, root, &out.join(format!("{}-{c}-x{k}", stem(file))), progress);
+            eprintln!("{}: {c}, motion {what:?} x {k}...", base.name);
+            let f = run_one(scaled(base.clone(), k, what), k, root, &out.join(format!("{}-{c}-x{k}", stem(file))), progress);
             let passed = f.row.passed;
             rows.push(f.row);
             if !passed {
@@ -261,4 +283,48 @@ fn write_table(rows: &[Row], out: &Path, name: &str) -> Result<(), CompareError>
     std::fs::write(&md, markdown(rows)).map_err(|e| CompareError::Io { path: md.display().to_string(), reason: e.to_string() })?;
     report::write_json(&rows, &out.join(format!("{name}.json")))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::reference::{Plane, Segment};
+
+    #[test]
+    fn a_sweep_scales_amplitudes_or_speeds_and_nothing_else() {
+        let sin = Motion::Sinusoid { amplitude: [0.03, 0.0, 0.02], frequency: [0.2, 0.0, 0.25], phase: [0.1, 0.0, 0.0] };
+        let circle = Motion::Circle { radius: 0.04, frequency: 0.2, plane: Plane::Xz, phase: 0.0 };
+        let seq = Motion::Sequence { segments: vec![Segment { duration: 2.0, motion: sin.clone(), ramp: 0.5 }] };
+        let mut m = sin.clone();
+        scale_motion(&mut m, 2.0, Scaling::Amplitude);
+        assert_eq!(m, Motion::Sinusoid { amplitude: [0.06, 0.0, 0.04], frequency: [0.2, 0.0, 0.25], phase: [0.1, 0.0, 0.0] });
+        let mut m = sin.clone();
+        scale_motion(&mut m, 2.0, Scaling::Speed);
+        assert_eq!(m, Motion::Sinusoid { amplitude: [0.03, 0.0, 0.02], frequency: [0.4, 0.0, 0.5], phase: [0.1, 0.0, 0.0] });
+        let mut m = circle;
+        scale_motion(&mut m, 3.0, Scaling::Amplitude);
+        assert!(matches!(m, Motion::Circle { radius, frequency, .. } if (radius - 0.12).abs() < 1e-15 && frequency == 0.2));
+        let mut m = seq;
+        scale_motion(&mut m, 2.0, Scaling::Speed);
+        let Motion::Sequence { segments } = m else { panic!("a sequence") };
+        assert_eq!((segments[0].duration, segments[0].ramp), (1.0, 0.25));
+        assert!(matches!(segments[0].motion, Motion::Sinusoid { frequency, .. } if frequency == [0.4, 0.0, 0.5]));
+        let mut hold = Motion::Hold;
+        scale_motion(&mut hold, 5.0, Scaling::Speed);
+        assert_eq!(hold, Motion::Hold);
+    }
+
+    #[test]
+    fn the_table_names_a_failed_run_and_marks_missed_bounds() {
+        let ok = Row { scenario: "S".into(), controller: "mqp".into(), scale: 1.0, passed: true, fallbacks: Some(0), ..Row::default() };
+        let bad = Row { controller: "pidc".into(), scale: 4.0, dropped: true, drop_reason: Some("hand 1 without contact for 50 ms".into()), ..ok.clone() };
+        let bad = Row { passed: false, ..bad };
+        let failed = Row { error: Some("run: no torques | from r2".into()), ..ok.clone() };
+        let md = markdown(&[ok, bad, failed]);
+        let lines: Vec<&str> = md.lines().collect();
+        assert_eq!(lines.len(), 5, "{md}");
+        assert!(lines[2].starts_with("| S | mqp | 1 |") && lines[2].ends_with("| yes |"), "{md}");
+        assert!(lines[3].contains("hand 1 without contact for 50 ms") && lines[3].ends_with("| NO |"), "{md}");
+        assert!(lines[4].contains("run failed: run: no torques / from r2"), "{md}");
+    }
 }

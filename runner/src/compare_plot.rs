@@ -18,10 +18,10 @@ pub fn object_z(runs: &[(String, Option<TimeSeries>)], title: &str, path: &Path)
     let mut series = TimeSeries::with_columns(&names);
     let des = first.column("object_z_des").unwrap_or(&[]);
     let measured: Vec<&[f64]> = done.iter().map(|(_, s)| s.column("object_z_mrt").unwrap_or(&[])).collect();
-    for k in 0..len.min(des.len()) {
-        let mut row = vec![des[k]];
+    for (k, (t, d)) in first.time.iter().zip(des).take(len).enumerate() {
+        let mut row = vec![*d];
         row.extend(measured.iter().map(|m| m.get(k).copied().unwrap_or(f64::NAN)));
-        series.push(first.time[k], &row);
+        series.push(*t, &row);
     }
     let legends: Vec<String> = done.iter().map(|(c, _)| c.to_string()).collect();
     let pairs = legends.iter().zip(&names[1..]).map(|(l, m)| (l.as_str(), "object_z_des", m.as_str())).collect();

@@ -61,7 +61,7 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
-    /// Scale a scenario's motion amplitudes by each factor and run it with each controller
+    /// Scale a scenario's motion amplitudes (or, with --speed, frequencies) by each factor and run it with each controller
     /// until it first misses an acceptance bound: where each controller stops meeting them.
     Sweep {
         scenario: PathBuf,
@@ -70,6 +70,9 @@ enum Command {
         /// Amplitude factors, ascending, comma separated.
         #[arg(long, value_delimiter = ',', default_value = "0.25,0.5,1,1.5,2,3")]
         scales: Vec<f64>,
+        /// Scale the motions' speed (frequencies) instead of their amplitudes.
+        #[arg(long)]
+        speed: bool,
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
         /// Report folder (default: reports/sweep-<scenario>).
@@ -129,15 +132,16 @@ fn main() -> Result<()> {
             print!("{}", compare::markdown(&rows));
             println!("report: {}", dir.display());
         }
-        Command::Sweep { scenario, controllers, scales, set, out, quiet } => {
+        Command::Sweep { scenario, controllers, scales, speed, set, out, quiet } => {
             let dir = out.unwrap_or_else(|| PathBuf::from("reports").join(format!("sweep-{}", scenario.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default())));
             create_dir(&dir)?;
-            let (rows, limits) = compare::sweep(&scenario, &controllers, &scales, &set, &dir, &repo_root(), !quiet)?;
+            let what = if speed { compare::Scaling::Speed } else { compare::Scaling::Amplitude };
+            let (rows, limits) = compare::sweep(&scenario, &controllers, (&scales, what), &set, &dir, &repo_root(), !quiet)?;
             print!("{}", compare::markdown(&rows));
             for (c, k) in limits {
                 match k {
-                    Some(k) => println!("{c}: meets every bound up to motion x {k}"),
-                    None => println!("{c}: misses a bound already at motion x {}", scales.first().copied().unwrap_or(0.0)),
+                    Some(k) => println!("{c}: meets every bound up to motion {what:?} x {k}"),
+                    None => println!("{c}: misses a bound already at motion {what:?} x {}", scales.first().copied().unwrap_or(0.0)),
                 }
             }
             println!("report: {}", dir.display());
