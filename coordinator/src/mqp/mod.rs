@@ -15,7 +15,7 @@
 //! * [`tasks`]: the task rows of the objective.
 //! * [`object`]: the carried object's dynamics as an affine function of `qdd`.
 //! * [`problem`]: the QP (objective, equalities, inequalities), dense and CSC.
-//! * [`mod@solve`]: Clarabel.
+//! * [`solve`](mod@solve): Clarabel.
 //! * [`report`]: [`MqpReport`], the tick's commands and diagnostics.
 //!
 //! **Fallback.** When Clarabel fails (infeasible, iteration limit, numerical error) every robot
