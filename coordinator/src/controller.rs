@@ -11,6 +11,7 @@
 use protocol::{DynamicsTerms, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
 
 use crate::joint_damping::{JointDamping, JointDampingConfig};
+use crate::mqp::{Mqp, MqpConfig};
 use crate::pidc::{Pidc, PidcConfig};
 
 /// A controller of the whole team: from every member's dynamics terms of one tick (sorted by
@@ -64,7 +65,7 @@ pub enum ControllerError {
 /// controller's own fields, any of which may be left out (they keep their defaults):
 ///
 /// ```toml
-/// kind = "pidc"          # or "joint-damping"
+/// kind = "pidc"          # or "joint-damping", "mqp"
 /// f_min_hand = 30.0
 /// [object_gains]
 /// kp = [1500, 1500, 1500, 400, 400, 400]
@@ -80,7 +81,8 @@ pub enum ControllerSpec {
     /// Joint damping `tau = -damping * qdot` ([`JointDamping`]): the smoke run's stand-in, it
     /// exercises the message flow only.
     JointDamping(JointDampingConfig),
-    // Room for the multi-robot QP baseline: `Mqp(MqpConfig)`, kind "mqp".
+    /// The paper's baseline, the multi-robot QP of Bouyarmane et al. 2019 ([`crate::mqp`]).
+    Mqp(MqpConfig),
 }
 
 /// Former names of controller kinds, and what they are now.
@@ -88,13 +90,14 @@ const RENAMED: [(&str, &str); 2] = [("paper", "pidc"), ("smoke", "joint-damping"
 
 impl ControllerSpec {
     /// Every kind, as written in files and on the command line.
-    pub const KINDS: [&'static str; 2] = ["pidc", "joint-damping"];
+    pub const KINDS: [&'static str; 3] = ["pidc", "joint-damping", "mqp"];
 
     /// The kind of this controller (`kind = ...` in its TOML).
     pub fn kind(&self) -> &'static str {
         match self {
             ControllerSpec::Pidc(_) => "pidc",
             ControllerSpec::JointDamping(_) => "joint-damping",
+            ControllerSpec::Mqp(_) => "mqp",
         }
     }
 
@@ -125,6 +128,7 @@ impl ControllerSpec {
         let spec = match kind.as_str() {
             "pidc" => ControllerSpec::Pidc(fields.try_into().map_err(bad)?),
             "joint-damping" => ControllerSpec::JointDamping(fields.try_into().map_err(bad)?),
+            "mqp" => ControllerSpec::Mqp(fields.try_into().map_err(bad)?),
             k => {
                 return Err(ControllerError::Config(match RENAMED.iter().find(|(old, _)| *old == k) {
                     Some((old, new)) => format!("controller kind `{old}` is now `{new}` (known: {})", known()),
@@ -146,6 +150,7 @@ impl ControllerSpec {
         match self {
             ControllerSpec::Pidc(c) => c.check(),
             ControllerSpec::JointDamping(c) => c.check(),
+            ControllerSpec::Mqp(c) => c.check(),
         }
     }
 
@@ -155,6 +160,7 @@ impl ControllerSpec {
         Ok(match self {
             ControllerSpec::Pidc(c) => Box::new(Pidc::new(c.clone())),
             ControllerSpec::JointDamping(c) => Box::new(JointDamping { damping: c.damping }),
+            ControllerSpec::Mqp(c) => Box::new(Mqp::new(c.clone())),
         })
     }
 }
@@ -167,7 +173,8 @@ mod tests {
     fn every_kind_round_trips_through_toml_and_builds() {
         let pidc = ControllerSpec::Pidc(PidcConfig { f_min_hand: 12.5, object_mass: 2.0, dense_qp: false, ..PidcConfig::default() });
         let damping = ControllerSpec::JointDamping(JointDampingConfig { damping: 3.5 });
-        for spec in [pidc, damping] {
+        let mqp = ControllerSpec::Mqp(MqpConfig { object_weight: 2.0, dt: 0.0005, ..MqpConfig::default() });
+        for spec in [pidc, damping, mqp] {
             let text = spec.to_toml().expect("toml");
             assert!(text.starts_with(&format!("kind = \"{}\"", spec.kind())), "{text}");
             assert_eq!(ControllerSpec::from_toml(&text).expect("read back"), spec, "{text}");
@@ -196,10 +203,10 @@ mod tests {
     #[test]
     fn unknown_kinds_and_fields_and_bad_values_say_what_is_wrong() {
         for (text, says) in [
-            ("kind = \"paper\"", "controller kind `paper` is now `pidc` (known: pidc, joint-damping)"),
+            ("kind = \"paper\"", "controller kind `paper` is now `pidc` (known: pidc, joint-damping, mqp)"),
             ("kind = \"smoke\"", "`smoke` is now `joint-damping`"),
-            ("kind = \"mpc\"", "unknown controller kind `mpc` (known: pidc, joint-damping)"),
-            ("f_min_hand = 3.0", "no `kind` (one of: pidc, joint-damping)"),
+            ("kind = \"mpc\"", "unknown controller kind `mpc` (known: pidc, joint-damping, mqp)"),
+            ("f_min_hand = 3.0", "no `kind` (one of: pidc, joint-damping, mqp)"),
             ("kind = 3", "`kind` must be a string"),
             ("kind = \"pidc\"\nf_min_hnad = 3.0", "f_min_hnad"),
             ("kind = \"pidc\"\nf_min_hand = \"a lot\"", "pidc: invalid type: string \"a lot\", expected f64 in `f_min_hand`"),
@@ -207,6 +214,9 @@ mod tests {
             ("kind = \"pidc\"\n[torso_gains]\nkp = [1]\nkd = [1]", "torso_gains"),
             ("kind = \"joint-damping\"\ndampng = 3.0", "dampng"),
             ("kind = \"joint-damping\"\ndamping = -1.0", "damping: -1 must be finite and non-negative"),
+            ("kind = \"mqp\"\nobject_wieght = 1.0", "object_wieght"),
+            ("kind = \"mqp\"\ndt = 0.0", "dt: 0 must be finite and positive"),
+            ("kind = \"mqp\"\n[torso_gains]\nkp = [1]\nkd = [1]", "torso_gains"),
             ("kind = ", "controller configuration"),
         ] {
             let e = ControllerSpec::from_toml(text).expect_err(text).to_string();

@@ -8,10 +8,12 @@
 //!
 //! * [`controller`]: the interface, [`TeamController`] (what the service drives),
 //!   [`ControllerError`], and [`ControllerSpec`], the choice of controller as data
-//!   (`kind = "pidc"` or `"joint-damping"` plus its parameters).
+//!   (`kind = "pidc"`, `"joint-damping"` or `"mqp"` plus its parameters).
 //! * [`pidc`]: [`Pidc`], the paper's §III controller (projected inverse dynamics with the
 //!   contact-force QP), its [`PidcConfig`], its [`pidc::TickReport`] and its stages
 //!   ([`pidc::stages`]).
+//! * [`mqp`]: [`Mqp`], the paper's baseline (the multi-robot QP of Bouyarmane et al. 2019,
+//!   solved by Clarabel), its [`MqpConfig`] and [`mqp::MqpReport`].
 //! * [`joint_damping`]: [`JointDamping`], the smoke run's stand-in.
 //! * [`team`]: the team of a tick ([`team::Team`]: block-diagonal `M`, stacked `h`, `v`, `S`,
 //!   contact and task frames), membership ([`team::membership`]) and the gathering of a tick's
@@ -26,6 +28,7 @@ pub mod controller;
 pub mod diagnostics;
 pub mod joint_damping;
 pub mod linalg;
+pub mod mqp;
 pub mod pidc;
 pub mod qp;
 pub mod service;
@@ -34,4 +37,5 @@ pub mod units;
 
 pub use controller::{ControllerError, ControllerSpec, TeamController};
 pub use joint_damping::JointDamping;
+pub use mqp::{Mqp, MqpConfig};
 pub use pidc::{Pidc, PidcConfig};

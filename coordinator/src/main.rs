@@ -27,12 +27,13 @@ enum Command {
         #[arg(long, default_value_t = 200)]
         tick_deadline_ms: u64,
         /// Team controller, with its default parameters: `pidc` (projected inverse dynamics
-        /// with the contact-force QP; runs once every member's description is known) or
+        /// with the contact-force QP; runs once every member's description is known),
+        /// `mqp` (the paper's baseline, the multi-robot QP solved by Clarabel; likewise) or
         /// `joint-damping` (the smoke run). Without it and without --controller-config:
         /// joint-damping.
         #[arg(long, value_parser = parse_kind)]
         controller: Option<ControllerSpec>,
-        /// Controller file (TOML): `kind = "pidc"` or `"joint-damping"` and the controller's
+        /// Controller file (TOML): `kind = "pidc"`, `"mqp"` or `"joint-damping"` and the controller's
         /// parameters (see `ControllerSpec`). Enough alone; with --controller the kinds must
         /// agree.
         #[arg(long)]
@@ -132,7 +133,14 @@ mod tests {
         let bad = file("bad", "kind = \"pidc\"\nf_min_hnad = 1.0\n");
         let e = format!("{:#}", controller_spec(None, Some(&bad), None).unwrap_err());
         assert!(e.contains(&bad.display().to_string()) && e.contains("f_min_hnad"), "{e}");
+        // The baseline: by kind, or by file with any of its fields.
+        assert_eq!(controller_spec(Some(parse_kind("mqp").unwrap()), None, None).unwrap(), ControllerSpec::Mqp(coordinator::MqpConfig::default()));
+        let mqp = file("mqp", "kind = \"mqp\"\nobject_weight = 3.0\n");
+        let ControllerSpec::Mqp(m) = controller_spec(None, Some(&mqp), None).unwrap() else { panic!("mqp file") };
+        assert_eq!(m.object_weight, 3.0);
+        assert!(controller_spec(None, Some(&mqp), None).unwrap().build().unwrap().name().starts_with("mqp"));
         let _ = std::fs::remove_file(path);
         let _ = std::fs::remove_file(bad);
+        let _ = std::fs::remove_file(mqp);
     }
 }

@@ -11,12 +11,16 @@
 //! * [`grasp_plan`]: where the hands start: flat on the object's faces (arm IK from `robot_model::ik`).
 //! * [`run`]: `team run`: the scenario with the whole stack, embedded or distributed.
 //! * [`driver`]: the runner's participant during a run: references out, records in, progress.
+//! * [`compare`]: controllers side by side on the same scenarios (experiment S3) and the motion
+//!   sweep; [`compare_plot`] draws its object-Z figure.
 //! * [`evaluate`]: metrics, time series, plots and acceptance checks of a run.
 //! * [`scenario`]: scenario files (TOML) with `--set key=value` overrides.
 //! * [`reference`]: the scenarios' reference trajectories.
 //! * [`metrics`]: the measures of success of DESIGN.md §8.
 //! * [`report`]: CSV time series, `metrics.json` and plots of a run.
 
+pub mod compare;
+pub mod compare_plot;
 pub mod driver;
 pub mod evaluate;
 pub mod grasp_plan;

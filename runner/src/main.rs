@@ -4,6 +4,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use std::path::{Path, PathBuf};
 
+use team_runner::compare;
 use team_runner::evaluate;
 use team_runner::plan;
 use team_runner::run::{self as scenario_run, RunOptions};
@@ -36,6 +37,47 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
         /// No progress bar or progress lines.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Run scenarios with several controllers side by side (experiment S3: `team compare
+    /// scenarios/s3_hold.toml scenarios/s1_torso_and_object.toml --controllers pidc,mqp`):
+    /// one folder with comparison.md / .json (tracking, drops, slip, contact forces against
+    /// their limits, solve times, QP failures), the object-Z figure per scenario and each
+    /// run's own report.
+    Compare {
+        /// Scenario files (TOML).
+        #[arg(required = true)]
+        scenarios: Vec<PathBuf>,
+        /// Controller kinds, comma separated.
+        #[arg(long, value_delimiter = ',', default_value = "pidc,mqp")]
+        controllers: Vec<String>,
+        /// Overrides for every run (as `team run --set`).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// Report folder (default: reports/compare).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Scale a scenario's motion amplitudes (or, with --speed, frequencies) by each factor and run it with each controller
+    /// until it first misses an acceptance bound: where each controller stops meeting them.
+    Sweep {
+        scenario: PathBuf,
+        #[arg(long, value_delimiter = ',', default_value = "pidc,mqp")]
+        controllers: Vec<String>,
+        /// Amplitude factors, ascending, comma separated.
+        #[arg(long, value_delimiter = ',', default_value = "0.25,0.5,1,1.5,2,3")]
+        scales: Vec<f64>,
+        /// Scale the motions' speed (frequencies) instead of their amplitudes.
+        #[arg(long)]
+        speed: bool,
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// Report folder (default: reports/sweep-<scenario>).
+        #[arg(long)]
+        out: Option<PathBuf>,
         #[arg(long)]
         quiet: bool,
     },
@@ -83,6 +125,27 @@ fn main() -> Result<()> {
             print!("{}", evaluate::summary(&eval.metrics, &dir));
             anyhow::ensure!(eval.metrics.passed, "acceptance checks failed (see {})", dir.join("metrics.json").display());
         }
+        Command::Compare { scenarios, controllers, set, out, quiet } => {
+            let dir = out.unwrap_or_else(|| PathBuf::from("reports/compare"));
+            create_dir(&dir)?;
+            let rows = compare::compare(&scenarios, &controllers, &set, &dir, &repo_root(), !quiet)?;
+            print!("{}", compare::markdown(&rows));
+            println!("report: {}", dir.display());
+        }
+        Command::Sweep { scenario, controllers, scales, speed, set, out, quiet } => {
+            let dir = out.unwrap_or_else(|| PathBuf::from("reports").join(format!("sweep-{}", scenario.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default())));
+            create_dir(&dir)?;
+            let what = if speed { compare::Scaling::Speed } else { compare::Scaling::Amplitude };
+            let (rows, limits) = compare::sweep(&scenario, &controllers, (&scales, what), &set, &dir, &repo_root(), !quiet)?;
+            print!("{}", compare::markdown(&rows));
+            for (c, k) in limits {
+                match k {
+                    Some(k) => println!("{c}: meets every bound up to motion {what:?} x {k}"),
+                    None => println!("{c}: misses a bound already at motion {what:?} x {}", scales.first().copied().unwrap_or(0.0)),
+                }
+            }
+            println!("report: {}", dir.display());
+        }
         Command::Smoke { robots, ticks, joints, distributed } => {
             anyhow::ensure!((1..=64).contains(&robots), "--robots must be between 1 and 64");
             anyhow::ensure!(joints > 0, "--joints must be positive");
@@ -123,6 +186,10 @@ fn main() -> Result<()> {
         }
     }
     Ok(())
+}
+
+fn create_dir(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))
 }
 
 /// Where relative robot description paths of a scenario are resolved: the current directory

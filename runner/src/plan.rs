@@ -1,6 +1,6 @@
 //! From a [`Scenario`] to what every component runs: the bridge's [`Scene`] (world with the
 //! hands placed on the object by IK, pushes, settle and run lengths), the coordinator's
-//! [`ControllerSpec`] (PIDC with the scenario's gains, object and minimum forces), the agents'
+//! [`ControllerSpec`] (PIDC or MQP with the scenario's gains, object and minimum forces), the agents'
 //! description files, and the [`ReferencePlan`] that turns ticks into task references.
 //! Each description file is loaded here once ([`RobotCache`]); the loaded robots travel with
 //! the plan to the grasp planner, the world build and the agents.
@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use coordinator::{ControllerSpec, PidcConfig};
+use coordinator::{ControllerSpec, MqpConfig, PidcConfig};
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use protocol::conventions::{quat_from_wxyz, quat_to_wxyz};
 use protocol::{Header, Pose, PoseReference, RunClock, TaskReferences, TorsoReference};
@@ -129,8 +129,8 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
     };
 
     let principal = object.principal_inertia();
-    // The scenario's controller; PIDC takes the scenario's gains, object and minimum forces,
-    // other kinds run with their defaults.
+    // The scenario's controller; PIDC and MQP take the scenario's gains, object and minimum
+    // forces, other kinds run with their defaults.
     let controller = match ControllerSpec::of_kind(&s.controller)? {
         ControllerSpec::Pidc(_) => ControllerSpec::Pidc(PidcConfig {
             object_gains: s.gains.object.gains(),
@@ -143,6 +143,20 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
             f_min_foot: s.min_foot_force,
             f_min_hand: s.min_hand_force,
             ..PidcConfig::default()
+        }),
+        // MQP: the same gains (as acceleration gains, see MqpConfig), object and minimum
+        // forces; its velocity bound looks one control period ahead.
+        ControllerSpec::Mqp(_) => ControllerSpec::Mqp(MqpConfig {
+            object_gains: s.gains.object.gains(),
+            torso_gains: s.gains.torso.gains(),
+            swing_gains: s.gains.feet.as_ref().map(|f| f.gains()).unwrap_or_else(|| MqpConfig::default().swing_gains),
+            object_mass: s.object.mass,
+            object_inertia: Matrix3::from_diagonal(&Vector3::from(principal)),
+            f_min_foot: s.min_foot_force,
+            f_min_hand: s.min_hand_force,
+            dt: 1.0 / s.control_hz,
+            object_pose_at_grasp: Some(Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation))),
+            ..MqpConfig::default()
         }),
         other => other,
     };
