@@ -453,3 +453,39 @@ fn paired_torque_rows_in_the_dense_ipm_give_clarabels_solution() {
     assert!(worst_clarabel < TOL_CLARABEL, "dense vs Clarabel {worst_clarabel:.2e}");
     assert!(worst_unpaired < TOL_UNPAIRED, "paired vs unpaired {worst_unpaired:.2e}");
 }
+
+/// The least-violation fallback keeps the torque limits and the feet before the hands: a hand
+/// that must squeeze 30 N through a joint limited to 10 N m cannot have both. With the default
+/// prices the joint keeps its limit (within 1 %) and the squeeze gives way; with equal prices
+/// (`hard_row_factor = 1`) the two split the difference. Rows written out here: the squeeze is
+/// `-n . f` with `n = e_x`, the torque `tau = F_3`.
+#[test]
+fn least_violation_gives_up_the_grasp_before_the_joints() {
+    let m = 9;
+    let rho = DMatrix::<f64>::identity(m, m);
+    let eta = DVector::<f64>::zeros(m);
+    let mut y = DMatrix::<f64>::zeros(1, m);
+    y[(0, 3)] = 1.0;
+    let contacts = vec![
+        (0, ContactKind::Foot { mu: 0.8, f_min: 5.0 }),
+        (3, ContactKind::Hand { tx: Vector3::y(), ty: Vector3::z(), n: Vector3::x(), mu: 0.8, xi: 0.05, half: [0.05, 0.05], f_min: 30.0 }),
+    ];
+    let tau0 = DVector::<f64>::zeros(1);
+    let (actuated, limits) = (vec![0usize], vec![10.0]);
+    let input = QpInput { y: &y, rho: &rho, eta: &eta, contacts: &contacts, actuated: &actuated, limits: &limits, tau0: &tau0, regularisation: 1e-6, dense_first: true };
+    let solve = |hard: f64| {
+        let mut ws = QpWorkspace::default();
+        let mut f = DVector::zeros(m);
+        let settings = QpSettings { hard_row_factor: hard, ..QpSettings::default() };
+        qp::solve_least_violation_with(&mut ws, &input, &settings, &mut f).expect("always solvable");
+        let squeeze = -f[3];
+        let torque = f[3];
+        (squeeze, torque, f[2])
+    };
+    let (squeeze, torque, foot) = solve(qp::HARD_ROW_FACTOR);
+    assert!(torque.abs() <= 10.0 * 1.01, "the joint keeps its limit: tau = {torque}");
+    assert!(squeeze < 11.0, "the squeeze gives way: {squeeze} N");
+    assert!(foot >= 5.0 - 0.05, "the foot keeps its least force: {foot}");
+    let (squeeze, torque, _) = solve(1.0);
+    assert!((torque.abs() - 20.0).abs() < 0.5 && (squeeze - 20.0).abs() < 0.5, "equal prices split: tau {torque}, squeeze {squeeze}");
+}
