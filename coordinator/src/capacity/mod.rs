@@ -38,7 +38,7 @@ pub mod solve;
 
 pub use problem::{Limit, LimitRow, Place, StaticProblem};
 pub use report::{BindingLimit, CapacityError};
-pub use solve::{Capacity, Relaxed, StaticSolution, CAPACITY_TOLERANCE, FEASIBILITY_TOL};
+pub use solve::{Capacity, Relaxed, StaticSolution, CAPACITY_TOLERANCE, FEASIBILITY_TOL, REACHED_TOL};
 
 #[cfg(doc)]
 use crate::PidcConfig;

@@ -16,7 +16,8 @@ pub struct BindingLimit {
     pub robot: String,
     pub place: Place,
     pub limit: Limit,
-    /// How far over, in [`Limit::unit`] (N or Nm).
+    /// How far over, in [`Limit::unit`] (N or Nm); negative: how far within (a limit reached,
+    /// [`super::StaticProblem::reached`]).
     pub over: f64,
     /// For a torque limit: the torque the relaxed solution needs there, Nm.
     pub torque: Option<f64>,
@@ -37,7 +38,11 @@ impl fmt::Display for BindingLimit {
             (Limit::Torsion { positive }, _) => write!(f, "torsion ({}) beyond xi f_n", sign(positive))?,
             (Limit::CentreOfPressure { axis, positive }, _) => write!(f, "centre of pressure past the patch's {}{axis} edge", sign(positive))?,
         }
-        write!(f, " ({:.2} {} over)", self.over, self.limit.unit())
+        if self.over > 0.0 {
+            write!(f, " ({:.3} {} over)", self.over, self.limit.unit())
+        } else {
+            write!(f, " ({:.3} {} from it)", -self.over, self.limit.unit())
+        }
     }
 }
 

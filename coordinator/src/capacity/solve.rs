@@ -21,6 +21,9 @@ pub const CAPACITY_TOLERANCE: f64 = 1e-3;
 /// are feasible.
 const SLACK_SQUARE: f64 = 1e-3;
 
+/// A limit row this close to its bound (N or Nm) counts as reached at the capacity.
+pub const REACHED_TOL: f64 = 0.05;
+
 /// Largest mass the bisection looks at, kg.
 const MAX_MASS: f64 = 1e6;
 
@@ -42,19 +45,8 @@ impl Relaxed {
 
     /// The rows over by more than [`FEASIBILITY_TOL`], largest first.
     pub fn binding(&self, p: &StaticProblem) -> Vec<BindingLimit> {
-        let tau = p.torques(&self.lambda);
-        let mut out: Vec<BindingLimit> = (0..self.slack.len())
-            .filter(|&i| self.slack[i] > FEASIBILITY_TOL)
-            .map(|i| {
-                let row = &p.rows[i];
-                // The torque rows come last, two per actuated joint.
-                let first_torque = p.rows.len() - 2 * p.actuated.len();
-                let torque = matches!(row.limit, Limit::Torque { .. }).then(|| tau[(i - first_torque) / 2]);
-                BindingLimit { robot: row.robot.clone(), place: row.place.clone(), limit: row.limit, over: self.slack[i], torque }
-            })
-            .collect();
-        out.sort_by(|a, b| b.over.total_cmp(&a.over));
-        out
+        let over: Vec<(usize, f64)> = self.slack.iter().enumerate().filter(|(_, s)| **s > FEASIBILITY_TOL).map(|(i, s)| (i, *s)).collect();
+        p.limits_at(&self.lambda, &over)
     }
 }
 
@@ -78,6 +70,8 @@ pub struct Capacity {
     /// The lightest mass found infeasible, and its binding limits.
     pub infeasible_at: f64,
     pub binding: Vec<BindingLimit>,
+    /// The limits the forces holding `mass` reach (within [`REACHED_TOL`]).
+    pub reached: Vec<BindingLimit>,
     /// Relaxed problems solved.
     pub solves: usize,
 }
@@ -107,6 +101,31 @@ fn clarabel(p: &DMatrix<f64>, q: &DVector<f64>, a: &DMatrix<f64>, b: &DVector<f6
 }
 
 impl StaticProblem {
+    /// The named limits of rows `(i, over)` at `lambda`, largest `over` first.
+    fn limits_at(&self, lambda: &DVector<f64>, rows: &[(usize, f64)]) -> Vec<BindingLimit> {
+        let tau = self.torques(lambda);
+        // The torque rows come last, two per actuated joint.
+        let first_torque = self.rows.len() - 2 * self.actuated.len();
+        let mut out: Vec<BindingLimit> = rows
+            .iter()
+            .map(|&(i, over)| {
+                let row = &self.rows[i];
+                let torque = matches!(row.limit, Limit::Torque { .. }).then(|| tau[(i - first_torque) / 2]);
+                BindingLimit { robot: row.robot.clone(), place: row.place.clone(), limit: row.limit, over, torque }
+            })
+            .collect();
+        out.sort_by(|a, b| b.over.total_cmp(&a.over));
+        out
+    }
+
+    /// The limits `lambda` reaches: rows within `tol` (N or Nm) of their bound or over it,
+    /// closest to (or furthest over) first; `over` is `A lambda - b` (<= 0 when within).
+    pub fn reached(&self, lambda: &DVector<f64>, tol: f64) -> Vec<BindingLimit> {
+        let r = &self.a * lambda - &self.b;
+        let rows: Vec<(usize, f64)> = r.iter().enumerate().filter(|(_, x)| **x > -tol).map(|(i, x)| (i, *x)).collect();
+        self.limits_at(lambda, &rows)
+    }
+
     /// The equalities' right-hand side at `mass`.
     fn rhs(&self, mass: f64) -> DVector<f64> {
         &self.e0 + &self.e1 * mass
@@ -195,6 +214,7 @@ impl StaticProblem {
                 (hi, at_hi) = (mid, r);
             }
         }
-        Ok(Capacity { mass: lo, infeasible_at: hi, binding: at_hi.binding(self), solves })
+        let reached = self.reached(&self.solve(lo)?.lambda, REACHED_TOL);
+        Ok(Capacity { mass: lo, infeasible_at: hi, binding: at_hi.binding(self), reached, solves })
     }
 }
