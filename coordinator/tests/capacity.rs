@@ -41,7 +41,7 @@ fn static_solution_balances_each_robot_and_the_object() {
     let nfeet = fx.robot.foot_frames.len();
     let mut data = Data::new(model);
     let (mut object_force, mut object_moment) = (Vector3::zeros(), Vector3::zeros());
-    for k in 0..2 {
+    for (k, desc) in descs.iter().enumerate() {
         let q = fx.standing_q(k, 2);
         let zero = vec![0.0; nv];
         let g = rnea(model, &mut data, q.as_slice(), &zero, &zero).expect("rnea").clone();
@@ -66,7 +66,7 @@ fn static_solution_balances_each_robot_and_the_object() {
         for i in 0..6 {
             assert!((jt_lambda[i] - g[i]).abs() < 1e-8, "robot {k} base row {i}: {} vs {}", jt_lambda[i], g[i]);
         }
-        let limits = &descs[k].torque_limits;
+        let limits = &desc.torque_limits;
         for j in 0..nv - 6 {
             let tau = g[6 + j] - jt_lambda[6 + j];
             assert!((tau - sol.torques[(nv - 6) * k + j]).abs() < 1e-8);

@@ -151,9 +151,12 @@ impl StaticProblem {
     }
 }
 
+/// `(E, e0, e1)` of `E lambda = e0 + m e1`.
+type Equalities = (DMatrix<f64>, DVector<f64>, DVector<f64>);
+
 /// `E lambda = e0 + m e1`: each floating base's 6 rows `(J_c^T lambda)_u = g_u` (eq.
 /// js_dynamics at rest), then the object's `G lambda_hands = m [g_vec; 0]` (eq. graspmatrix).
-fn equalities(team: &Team, j_c: &DMatrix<f64>, centre: &Vector3<f64>) -> Result<(DMatrix<f64>, DVector<f64>, DVector<f64>), CapacityError> {
+fn equalities(team: &Team, j_c: &DMatrix<f64>, centre: &Vector3<f64>) -> Result<Equalities, CapacityError> {
     let bases: Vec<usize> = team.robots.iter().filter(|r| r.floating_base).flat_map(|r| r.offset..r.offset + 6).collect();
     let m = j_c.nrows();
     let rows = bases.len() + 6;
