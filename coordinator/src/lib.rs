@@ -22,8 +22,11 @@
 //!   projections.
 //! * [`qp`]: the contact-force QP (constraint rows, problem, solvers).
 //! * [`linalg`]: pseudo-inverses, inverses and products into preallocated buffers.
+//! * [`capacity`]: the static team problem at a pose at rest: whether contact forces within
+//!   the controller's limits hold the object, the binding limits when not, the payload capacity.
 //! * [`service`], [`diagnostics`]: the Zenoh loop and the diagnostics history.
 
+pub mod capacity;
 pub mod controller;
 pub mod diagnostics;
 pub mod joint_damping;

@@ -8,6 +8,8 @@
 //! * [`processes`]: the team's binaries as child processes on loopback.
 //! * [`plan`]: a scenario turned into what each component runs (scene, controller, references);
 //!   each robot's description is loaded there, once, and shared (`Arc<robot_model::Robot>`).
+//! * [`capacity`]: the payload check of a plan (the static team problem at the start pose) and
+//!   the team's capacity (`team capacity`).
 //! * [`grasp_plan`]: where the hands start: flat on the object's faces (arm IK from `robot_model::ik`).
 //! * [`run`]: `team run`: the scenario with the whole stack, embedded or distributed.
 //! * [`driver`]: the runner's participant during a run: references out, records in, progress.
@@ -19,6 +21,7 @@
 //! * [`metrics`]: the measures of success of DESIGN.md §8.
 //! * [`report`]: CSV time series, `metrics.json` and plots of a run.
 
+pub mod capacity;
 pub mod compare;
 pub mod compare_plot;
 pub mod driver;

@@ -5,6 +5,7 @@ use clap::{Parser, Subcommand};
 use std::path::{Path, PathBuf};
 
 use team_runner::compare;
+use team_runner::capacity;
 use team_runner::evaluate;
 use team_runner::plan;
 use team_runner::run::{self as scenario_run, RunOptions};
@@ -81,6 +82,19 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// The heaviest object the scenario's team can hold in its start configuration (the static
+    /// team problem with the controller's limits and margins, bisection on the mass), and the
+    /// limits that bind just above it.
+    Capacity {
+        /// Scenario file (TOML).
+        scenario: PathBuf,
+        /// Override any number of the scenario (as for `run`): --set friction_margin=1
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// Width of the bisection's final bracket, kg.
+        #[arg(long, default_value_t = coordinator::capacity::CAPACITY_TOLERANCE)]
+        tolerance: f64,
+    },
     /// Smoke run of the whole stack: sim-bridge, agents and coordinator exchange real
     /// messages over Zenoh for N ticks (placeholder physics and controller).
     Smoke {
@@ -145,6 +159,14 @@ fn main() -> Result<()> {
                 }
             }
             println!("report: {}", dir.display());
+        }
+        Command::Capacity { scenario, mut set, tolerance } => {
+            // The scenario's own mass may be beyond the capacity: plan without the check.
+            set.push("capacity_check=false".into());
+            let plan = plan::plan(&Scenario::load(&scenario, &set)?, &repo_root())?;
+            let t0 = std::time::Instant::now();
+            let cap = capacity::capacity(&plan, tolerance)?;
+            print!("{}", capacity::summary(&plan, &cap, tolerance, t0.elapsed().as_secs_f64()));
         }
         Command::Smoke { robots, ticks, joints, distributed } => {
             anyhow::ensure!((1..=64).contains(&robots), "--robots must be between 1 and 64");

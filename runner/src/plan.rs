@@ -35,6 +35,9 @@ pub enum PlanError {
     World(#[from] sim_bridge::world::WorldError),
     #[error("controller: {0}")]
     Controller(#[from] coordinator::ControllerError),
+    /// Not `#[from]`: the message holds the check's whole error, no source chain repeats it.
+    #[error("payload check at the start pose: {0} (`capacity_check = false` runs anyway)")]
+    Capacity(crate::capacity::CheckError),
 }
 
 /// Everything a scenario run needs, for either mode.
@@ -142,6 +145,8 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
             object_pose_at_grasp: Some(Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation))),
             f_min_foot: s.min_foot_force,
             f_min_hand: s.min_hand_force,
+            friction_margin: s.friction_margin,
+            patch_margin: s.patch_margin,
             ..PidcConfig::default()
         }),
         // MQP: the same gains (as acceleration gains, see MqpConfig), object and minimum
@@ -161,6 +166,12 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
         other => other,
     };
     controller.check()?;
+    // The payload check (crate::capacity): the PIDC controller's limits at the start pose.
+    if let (true, ControllerSpec::Pidc(cfg)) = (s.capacity_check, &controller) {
+        let t0 = std::time::Instant::now();
+        crate::capacity::check_world(&scene.world, &loaded, cfg).map_err(PlanError::Capacity)?;
+        tracing::info!(ms = 1e3 * t0.elapsed().as_secs_f64(), mass = s.object.mass, "payload check: the start pose holds the object");
+    }
 
     let torso_start = |i: usize| {
         let p = &scene.world.robots[i];

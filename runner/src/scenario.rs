@@ -55,6 +55,18 @@ pub struct Scenario {
     /// Minimum normal force of every hand in the QP (the least squeeze), N.
     #[serde(default = "default_min_hand_force")]
     pub min_hand_force: f64,
+    /// Share of each contact's friction the controller's QP may use (PIDC's
+    /// `friction_margin`, in (0, 1]; 1/sqrt(2) inscribes the pyramid in the cone).
+    #[serde(default = "default_friction_margin")]
+    pub friction_margin: f64,
+    /// Share of the palm's half-sizes the centre of pressure may use (PIDC's `patch_margin`).
+    #[serde(default = "default_patch_margin")]
+    pub patch_margin: f64,
+    /// Before the run, check that contact forces within the controller's limits hold the
+    /// object at the start pose (`crate::capacity`), and refuse the run when none do.
+    /// `false` runs anyway (to watch a refused load).
+    #[serde(default = "default_capacity_check")]
+    pub capacity_check: bool,
     pub object: ObjectSpec,
     /// The robots, each with its floor pose; or, instead, `team`.
     #[serde(default)]
@@ -91,6 +103,18 @@ fn default_min_foot_force() -> f64 {
 fn default_min_hand_force() -> f64 {
     30.0
 }
+fn default_friction_margin() -> f64 {
+    coordinator::PidcConfig::default().friction_margin
+}
+fn default_patch_margin() -> f64 {
+    coordinator::PidcConfig::default().patch_margin
+}
+fn default_capacity_check() -> bool {
+    true
+}
+
+/// Top-level keys with a default that `--set` may give although the file leaves them out.
+pub const OPTIONAL_KEYS: [&str; 8] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check"];
 
 /// The carried box.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -274,6 +298,11 @@ impl Scenario {
                 return Err(format!("{what} = {f} must be non-negative"));
             }
         }
+        for (what, x) in [("friction_margin", self.friction_margin), ("patch_margin", self.patch_margin)] {
+            if !(x.is_finite() && x > 0.0 && x <= 1.0) {
+                return Err(format!("{what} = {x} must be in (0, 1]"));
+            }
+        }
         pos("object.mass", self.object.mass)?;
         pos("object.friction", self.object.friction)?;
         for (i, s) in self.object.size.iter().enumerate() {
@@ -334,7 +363,8 @@ impl TaskGains {
 }
 
 /// Apply one `key=value` override to a TOML tree. Array elements are addressed by index
-/// (`robots.1.yaw`); the key must exist, so a typo is an error rather than a silent no-op.
+/// (`robots.1.yaw`); the key must exist (or be one of [`OPTIONAL_KEYS`]), so a typo is an
+/// error rather than a silent no-op.
 pub fn apply_override(root: &mut toml::Value, assignment: &str) -> Result<(), ScenarioError> {
     let (key, raw) = assignment.split_once('=').ok_or_else(|| ScenarioError::OverrideSyntax(assignment.to_string()))?;
     let key = key.trim();
@@ -353,7 +383,8 @@ pub fn apply_override(root: &mut toml::Value, assignment: &str) -> Result<(), Sc
         let last = i == parts.len() - 1;
         node = match node {
             toml::Value::Table(t) => {
-                if !t.contains_key(*part) {
+                let optional = i == 0 && last && OPTIONAL_KEYS.contains(part);
+                if !t.contains_key(*part) && !optional {
                     return Err(err(format!("no such key {part:?} (known: {})", t.keys().cloned().collect::<Vec<_>>().join(", "))));
                 }
                 if last {
@@ -403,6 +434,13 @@ mod tests {
         assert_eq!(s.gains.object.stiffness, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
         assert_eq!(s.robots[1].yaw, 0.5);
         for bad in ["duraton=3", "robots.7.yaw=1", "duration", "gains.object.stiffness=[1,2]", "duration=-1", "controller=mpc", "controller=paper"] {
+            assert!(Scenario::load(&p, &[bad.to_string()]).is_err(), "{bad} accepted");
+        }
+        // Defaulted top-level keys may be set although the file leaves them out.
+        let s = Scenario::load(&p, &["capacity_check=false".into(), "friction_margin=1".into(), "patch_margin=1".into()]).unwrap();
+        assert!(!s.capacity_check && s.friction_margin == 1.0 && s.patch_margin == 1.0);
+        assert!(Scenario::load(&p, &[]).unwrap().capacity_check);
+        for bad in ["friction_margin=0", "patch_margin=1.5", "capacity_check=3", "object.capacity_check=false"] {
             assert!(Scenario::load(&p, &[bad.to_string()]).is_err(), "{bad} accepted");
         }
         // The controller is chosen by its kind; the old name says what it became.

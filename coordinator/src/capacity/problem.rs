@@ -1,0 +1,252 @@
+//! The static team problem's rows: equalities `E lambda = e0 + m e1` (robots' base rows, the
+//! object's wrench balance), limit rows `A lambda <= b` each with its name ([`LimitRow`]), and
+//! the objective (the torques relative to their limits, least squares).
+
+use std::collections::BTreeMap;
+
+use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
+use protocol::conventions::GRAVITY_VECTOR;
+use protocol::{DynamicsTerms, RobotDescription};
+
+use super::report::CapacityError;
+use crate::pidc::stages::{contacts::contact_list, limits::torque_limits};
+use crate::qp::{contact_rows, ContactKind};
+use crate::team::Team;
+use crate::units::grasp::GraspTerms;
+use crate::PidcConfig;
+
+/// Largest joint speed taken as rest, rad/s or m/s: the terms' `h` is then `g(q)`.
+pub const REST_SPEED: f64 = 1e-9;
+
+/// Weight of the least-squares regularisation of `lambda` in the objective, per N^2.
+const LAMBDA_REGULARISATION: f64 = 1e-9;
+
+/// Where a limit acts: a joint or a contact frame of a robot.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Place {
+    Joint(String),
+    Contact(String),
+}
+
+/// Which limit a row is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Limit {
+    /// `tau <= tau_max` (`upper`) or `-tau <= tau_max`, Nm.
+    Torque { upper: bool, max: f64 },
+    /// Tangential force along the contact's `x` or `y` axis (`+` or `-`) within `mu f_n`, N.
+    Friction { axis: char, positive: bool },
+    /// Normal force at least `f_min`, N.
+    MinNormal { f_min: f64 },
+    /// Moment about the normal within `xi f_n`, Nm.
+    Torsion { positive: bool },
+    /// Centre of pressure within the palm patch along `axis` (the tilt moment), Nm.
+    CentreOfPressure { axis: char, positive: bool },
+}
+
+impl Limit {
+    /// The unit of the row's excess.
+    pub fn unit(&self) -> &'static str {
+        match self {
+            Limit::Friction { .. } | Limit::MinNormal { .. } => "N",
+            _ => "Nm",
+        }
+    }
+}
+
+/// A named limit row of `A lambda <= b`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LimitRow {
+    pub robot: String,
+    pub place: Place,
+    pub limit: Limit,
+}
+
+/// The names of [`contact_rows`]' rows, in its order.
+fn contact_limits(kind: &ContactKind) -> Vec<Limit> {
+    let fr = |axis, positive| Limit::Friction { axis, positive };
+    match kind {
+        ContactKind::Foot { f_min, .. } => vec![fr('x', true), fr('x', false), fr('y', true), fr('y', false), Limit::MinNormal { f_min: *f_min }],
+        ContactKind::Hand { f_min, .. } => {
+            let cop = |axis, positive| Limit::CentreOfPressure { axis, positive };
+            vec![
+                fr('x', true),
+                fr('x', false),
+                fr('y', true),
+                fr('y', false),
+                Limit::MinNormal { f_min: *f_min },
+                Limit::Torsion { positive: true },
+                Limit::Torsion { positive: false },
+                // The tilt moments (rows.rs): m_x = -p_y f_n, m_y = p_x f_n, so the row
+                // `t_x . m <= delta_y f_n` keeps p_y >= -delta_y, `t_y . m <= delta_x f_n` p_x <= delta_x.
+                cop('y', false),
+                cop('y', true),
+                cop('x', true),
+                cop('x', false),
+            ]
+        }
+    }
+}
+
+/// The static problem of a team at rest, for any object mass.
+#[derive(Debug, Clone)]
+pub struct StaticProblem {
+    /// The team at the pose (`bias` = `g(q)`).
+    pub team: Team,
+    pub object_centre: Vector3<f64>,
+    /// `E lambda = e0 + m e1`: 6 rows per floating base, then the object's 6.
+    pub e: DMatrix<f64>,
+    pub e0: DVector<f64>,
+    pub e1: DVector<f64>,
+    /// Limit rows `A lambda <= b`: every contact's, then two per actuated joint.
+    pub a: DMatrix<f64>,
+    pub b: DVector<f64>,
+    pub rows: Vec<LimitRow>,
+    /// Objective `1/2 lambda^T P lambda + q^T lambda`.
+    pub p: DMatrix<f64>,
+    pub q: DVector<f64>,
+    /// `J_c = [J_cf; J_ee]` (m x n), the actuated joints (team indices) and their limits.
+    pub j_c: DMatrix<f64>,
+    pub actuated: Vec<usize>,
+    pub limits: Vec<f64>,
+}
+
+impl StaticProblem {
+    /// Build from one tick's terms of the team at rest, the robots' descriptions and the
+    /// controller's configuration (margins, minimum forces), the object's centre at `centre`.
+    pub fn build(terms: &[DynamicsTerms], descriptions: &[RobotDescription], cfg: &PidcConfig, centre: Vector3<f64>) -> Result<Self, CapacityError> {
+        if centre.iter().any(|x| !x.is_finite()) {
+            return Err(CapacityError::Input(format!("object centre {centre:?} must be finite")));
+        }
+        cfg.check()?;
+        let mut team = Team::default();
+        team.assemble_into(terms, None, false)?;
+        if let Some(t) = terms.iter().find(|t| t.velocity.iter().any(|v| v.abs() > REST_SPEED)) {
+            return Err(CapacityError::NotAtRest { robot: t.header.robot_id().to_string() });
+        }
+        if team.hands.is_empty() {
+            return Err(CapacityError::NoHands);
+        }
+        let descs: BTreeMap<String, RobotDescription> = descriptions.iter().map(|d| (d.header.robot_id().to_string(), d.clone())).collect();
+        let (mut actuated, mut limits, mut contacts) = (Vec::new(), Vec::new(), Vec::new());
+        torque_limits(&team, &descs, false, &mut actuated, &mut limits)?;
+        contact_list(&team, &descs, cfg, &mut contacts)?;
+        let mut j_c = DMatrix::zeros(team.contact_rows(), team.n);
+        j_c.rows_mut(0, team.j_cf.nrows()).copy_from(&team.j_cf);
+        j_c.rows_mut(team.j_cf.nrows(), team.j_ee.nrows()).copy_from(&team.j_ee);
+        let (e, e0, e1) = equalities(&team, &j_c, &centre)?;
+        let (a, b, rows) = limit_rows(&team, &j_c, &contacts, &actuated, &limits, &descs);
+        let (p, q) = objective(&team, &j_c, &actuated, &limits);
+        Ok(StaticProblem { team, object_centre: centre, e, e0, e1, a, b, rows, p, q, j_c, actuated, limits })
+    }
+
+    /// Number of unknowns (`lambda`'s rows).
+    pub fn unknowns(&self) -> usize {
+        self.j_c.nrows()
+    }
+
+    /// The actuated joints' torques `tau = g_a - J_c,a^T lambda`.
+    pub fn torques(&self, lambda: &DVector<f64>) -> DVector<f64> {
+        let jt = self.j_c.tr_mul(lambda);
+        DVector::from_iterator(self.actuated.len(), self.actuated.iter().map(|&j| self.team.bias[j] - jt[j]))
+    }
+}
+
+/// `(E, e0, e1)` of `E lambda = e0 + m e1`.
+type Equalities = (DMatrix<f64>, DVector<f64>, DVector<f64>);
+
+/// `E lambda = e0 + m e1`: each floating base's 6 rows `(J_c^T lambda)_u = g_u` (eq.
+/// js_dynamics at rest), then the object's `G lambda_hands = m [g_vec; 0]` (eq. graspmatrix).
+fn equalities(team: &Team, j_c: &DMatrix<f64>, centre: &Vector3<f64>) -> Result<Equalities, CapacityError> {
+    let bases: Vec<usize> = team.robots.iter().filter(|r| r.floating_base).flat_map(|r| r.offset..r.offset + 6).collect();
+    let m = j_c.nrows();
+    let rows = bases.len() + 6;
+    let (mut e, mut e0, mut e1) = (DMatrix::zeros(rows, m), DVector::zeros(rows), DVector::zeros(rows));
+    for (i, &u) in bases.iter().enumerate() {
+        e.row_mut(i).copy_from(&j_c.column(u).transpose());
+        e0[i] = team.bias[u];
+    }
+    let mut grasp = GraspTerms::default();
+    grasp.compute_into(team, Isometry3::translation(centre.x, centre.y, centre.z)).ok_or(CapacityError::Input("singular grasp matrix".into()))?;
+    let first_hand = 3 * team.feet.len();
+    e.view_mut((bases.len(), first_hand), (6, grasp.g.ncols())).copy_from(&grasp.g);
+    for k in 0..3 {
+        e1[bases.len() + k] = GRAVITY_VECTOR[k];
+    }
+    Ok((e, e0, e1))
+}
+
+/// The limit rows `A lambda <= b` with their names: each contact's rows `c . lambda_k >= lo`
+/// as `-c . lambda_k <= -lo`, then per actuated joint `tau <= max` and `-tau <= max` with
+/// `tau = g_j - (J_c^T lambda)_j` (eq. original_torque_limit).
+fn limit_rows(
+    team: &Team,
+    j_c: &DMatrix<f64>,
+    contacts: &[(usize, ContactKind)],
+    actuated: &[usize],
+    limits: &[f64],
+    descs: &BTreeMap<String, RobotDescription>,
+) -> (DMatrix<f64>, DVector<f64>, Vec<LimitRow>) {
+    let frame = |start: usize| {
+        let nf3 = 3 * team.feet.len();
+        let f = if start < nf3 { &team.feet[start / 3] } else { &team.hands[(start - nf3) / 6] };
+        (team.robots[f.robot].id.clone(), f.name.clone())
+    };
+    let nc: usize = contacts.iter().map(|(_, k)| contact_rows(k).len()).sum();
+    let m = j_c.nrows();
+    let (mut a, mut b) = (DMatrix::zeros(nc + 2 * actuated.len(), m), DVector::zeros(nc + 2 * actuated.len()));
+    let mut rows = Vec::with_capacity(a.nrows());
+    for (start, kind) in contacts {
+        let (robot, name) = frame(*start);
+        for ((c, lo), limit) in contact_rows(kind).iter().zip(contact_limits(kind)) {
+            let i = rows.len();
+            for (r, cr) in c.iter().enumerate() {
+                a[(i, start + r)] = -cr;
+            }
+            b[i] = -lo;
+            rows.push(LimitRow { robot: robot.clone(), place: Place::Contact(name.clone()), limit });
+        }
+    }
+    for (&j, &max) in actuated.iter().zip(limits) {
+        let rb = team.robots.iter().find(|r| r.offset <= j && j < r.offset + r.nv).expect("an actuated joint belongs to a robot");
+        let joint = descs.get(&rb.id).and_then(|d| d.joint_names.get(rb.actuated.iter().position(|&x| x == j)?)).cloned().unwrap_or_else(|| format!("joint {j}"));
+        for upper in [true, false] {
+            // tau = g_j - a_j . lambda: tau <= max <=> -a_j . lambda <= max - g_j.
+            let s = if upper { -1.0 } else { 1.0 };
+            let i = rows.len();
+            a.row_mut(i).copy_from(&(s * j_c.column(j).transpose()));
+            b[i] = max + s * team.bias[j];
+            rows.push(LimitRow { robot: rb.id.clone(), place: Place::Joint(joint.clone()), limit: Limit::Torque { upper, max } });
+        }
+    }
+    (a, b, rows)
+}
+
+/// `min sum_j (tau_j / max_j)^2 + eps |lambda|^2` as `1/2 lambda^T P lambda + q^T lambda`:
+/// the torques the team needs, each relative to its limit, least squares.
+fn objective(team: &Team, j_c: &DMatrix<f64>, actuated: &[usize], limits: &[f64]) -> (DMatrix<f64>, DVector<f64>) {
+    let m = j_c.nrows();
+    let mut p = DMatrix::identity(m, m) * (2.0 * LAMBDA_REGULARISATION);
+    let mut q = DVector::zeros(m);
+    for (&j, &max) in actuated.iter().zip(limits) {
+        let aj = j_c.column(j);
+        let w = 1.0 / (max * max);
+        p.ger(2.0 * w, &aj, &aj, 1.0);
+        q.axpy(-2.0 * w * team.bias[j], &aj, 1.0);
+    }
+    (p, q)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    #[test]
+    fn every_contact_row_has_a_name() {
+        let foot = ContactKind::Foot { mu: 0.5, f_min: 5.0 };
+        let hand = ContactKind::Hand { tx: Vector3::x(), ty: Vector3::y(), n: Vector3::z(), mu: 0.5, xi: 0.03, half: [0.05, 0.04], f_min: 30.0 };
+        for k in [foot, hand] {
+            assert_eq!(contact_rows(&k).len(), contact_limits(&k).len());
+        }
+    }
+}
