@@ -5,7 +5,7 @@
 //! evaluated on the ground truth; shortened for CI (the README's figures run them whole).
 //!
 //! Besides the bounds: the controller never failed a tick (the four-robot team hit a NaN on its
-//! third tick before), and its own object-pose fit agrees with the hands (residual < 1 mm; the
+//! third tick before), and its own object-pose fit agrees with the hands (residual < 2 mm; the
 //! centroid estimate put three robots' object 99 mm off).
 
 use std::path::{Path, PathBuf};
@@ -45,7 +45,7 @@ fn assert_team_accepted(plan: &Plan, m: &Metrics, robots: usize) {
     let total: u64 = m.qp_status.values().sum();
     assert!(total as f64 >= 0.9 * plan.scene.ticks as f64, "diagnostics of {total} ticks");
     assert!(solved as f64 >= 0.99 * total as f64, "QP statuses {:?}", m.qp_status);
-    assert!(m.grasp_fit_residual_max_m < 1e-3, "the controller's pose fit is off the hands by {} m", m.grasp_fit_residual_max_m);
+    assert!(m.grasp_fit_residual_max_m < 2e-3, "the controller's pose fit is off the hands by {} m", m.grasp_fit_residual_max_m);
     for (r, f) in &m.mean_squeeze_n {
         assert!(*f > 0.8 * plan.scenario.min_hand_force, "{r} squeezes {f} N only");
     }
