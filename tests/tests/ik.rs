@@ -1,5 +1,6 @@
-//! The grasp plan (arm IK from robot_model) puts each hand flat on its face of the object: on
-//! our model and in MuJoCo's world.
+//! The grasp plan (arm IK from robot_model) puts each hand flat on its face of the object, level
+//! with the face's centre and in front of its robot along the face: on our model and in
+//! MuJoCo's world.
 
 use mujoco_rs::mujoco_c::mjtObj;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
@@ -41,8 +42,13 @@ fn hands_lie_flat_on_the_object_faces_in_our_model_and_in_mujoco() {
         let n = normals[i];
         let dist = (p - po).dot(&n) - 0.3;
         assert!(dist.abs() < 1e-3, "{id}: hand frame {dist} m off the face plane");
+        // Along the face: level with its centre, and horizontally in front of the robot's base
+        // (the face's horizontal axis is the object's y for the +-x faces).
         let along = (p - po) - n * (p - po).dot(&n);
-        assert!(along.norm() < 1e-3, "{id}: hand not at the face centre ({along:?})");
+        let e = ro * Vector3::y();
+        let base = Vector3::from(spec.robots[i].base_position);
+        let expected = e * e.dot(&(base - po)).clamp(-0.24, 0.24);
+        assert!((along - expected).norm() < 1e-3, "{id}: hand at {along:?} on the face, expected in front of the base at {expected:?}");
         let angle = (-r.column(2).dot(&n)).clamp(-1.0, 1.0).acos();
         assert!(angle < 0.5f64.to_radians(), "{id}: palm normal {} deg off", angle.to_degrees());
         let err = (p - sols[i].target_position).norm();
