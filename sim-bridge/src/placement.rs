@@ -280,7 +280,7 @@ mod tests {
 
     #[test]
     fn the_default_height_is_the_default_robots_standing_height() {
-        let robot = Robot::load(&robot_model::default_robot_path()).unwrap();
+        let robot = Robot::load(robot_model::default_robot_path()).unwrap();
         assert_eq!(robot.standing_q[2], DEFAULT_STANDING_HEIGHT);
         let p = standing("r1", robot_model::default_robot_path(), &robot, [1.0, 2.0], 0.5).unwrap();
         assert_eq!(p.base_position, [1.0, 2.0, DEFAULT_STANDING_HEIGHT]);
@@ -344,7 +344,7 @@ mod tests {
     /// turned 90 deg is checked on its rotated rectangle.
     #[test]
     fn footprints_of_neighbours_must_not_overlap() {
-        let robot = Robot::load(&robot_model::default_robot_path()).unwrap();
+        let robot = Robot::load(robot_model::default_robot_path()).unwrap();
         let f = Footprint::of(&robot).unwrap();
         assert!(f.max[0] > 0.3 && f.min[0] < -0.3, "feet fore and aft of the base: {f:?}");
         let width = f.max[1] - f.min[1];
