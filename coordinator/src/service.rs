@@ -183,19 +183,10 @@ pub async fn run(
 fn hold_orders(team: &str, tick: u64, robots: &[String], error: &ControllerError, commands: &mut Vec<TorqueCommand>) -> TickDiagnostics {
     commands.clear();
     commands.extend(robots.iter().map(|r| TorqueCommand::hold(team, r, tick)));
-    TickDiagnostics {
-        header: Header::new(team, None, tick, protocol::wall_clock_ns()),
-        qp_status: protocol::QpStatus::NotRun,
-        qp_iterations: 0,
-        qp_solve_us: 0.0,
-        assembly_us: 0.0,
-        total_us: 0.0,
-        contacts: Vec::new(),
-        constraint_residual: 0.0,
-        object_estimate: None,
-        grasp_slip: 0.0,
-        fallback: Some(format!("controller error: {error}; every robot holds its posture")),
-    }
+    let mut d = TickDiagnostics::empty(team, tick);
+    d.header.stamp_ns = protocol::wall_clock_ns();
+    d.fallback = Some(format!("controller error: {error}; every robot holds its posture"));
+    d
 }
 
 /// Task references by tick. A planner may publish references ahead of time (the scenario

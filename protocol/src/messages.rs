@@ -459,6 +459,26 @@ pub struct TickDiagnostics {
     pub fallback: Option<String>,
 }
 
+impl TickDiagnostics {
+    /// The diagnostics of `tick` before anything was solved: no QP run, no contacts, no
+    /// object estimate, no fallback.
+    pub fn empty(team: &str, tick: u64) -> Self {
+        TickDiagnostics {
+            header: Header::new(team, None, tick, 0),
+            qp_status: QpStatus::NotRun,
+            qp_iterations: 0,
+            qp_solve_us: 0.0,
+            assembly_us: 0.0,
+            total_us: 0.0,
+            contacts: Vec::new(),
+            constraint_residual: 0.0,
+            object_estimate: None,
+            grasp_slip: 0.0,
+            fallback: None,
+        }
+    }
+}
+
 impl Validate for TickDiagnostics {
     fn validate(&self) -> Result<(), ProtocolError> {
         self.header.check(false)?;

@@ -265,31 +265,32 @@ pub async fn declare_member(
     team: &str,
     robot: &str,
 ) -> Result<zenoh::liveliness::LivelinessToken, TransportError> {
-    let key = keys::member(team, robot)?;
-    session.liveliness().declare_token(key.clone()).await.map_err(|e| zenoh_err("declare_token", &key, e))
+    declare_token(session, keys::member(team, robot)?).await
 }
 
 /// Watch the team's membership: current members first (history), then joins and leaves.
 pub async fn watch_members(session: &Session, team: &str) -> Result<SampleQueue, TransportError> {
-    let key = keys::all_members(team)?;
-    session
-        .liveliness()
-        .declare_subscriber(key.clone())
-        .history(true)
-        .await
-        .map_err(|e| zenoh_err("liveliness subscriber", &key, e))
+    watch_liveliness(session, keys::all_members(team)?).await
 }
 
 /// Declare the coordinator's liveliness token; it is alive as long as the token lives.
 pub async fn declare_coordinator(session: &Session, team: &str) -> Result<zenoh::liveliness::LivelinessToken, TransportError> {
-    let key = keys::coordinator_alive(team)?;
-    session.liveliness().declare_token(key.clone()).await.map_err(|e| zenoh_err("declare_token", &key, e))
+    declare_token(session, keys::coordinator_alive(team)?).await
 }
 
 /// Watch the coordinator's liveliness: a `Put` sample when it is (or comes) alive, a `Delete`
 /// when it goes ([`coordinator_alive`]).
 pub async fn watch_coordinator(session: &Session, team: &str) -> Result<SampleQueue, TransportError> {
-    let key = keys::coordinator_alive(team)?;
+    watch_liveliness(session, keys::coordinator_alive(team)?).await
+}
+
+/// A liveliness token on `key`.
+async fn declare_token(session: &Session, key: String) -> Result<zenoh::liveliness::LivelinessToken, TransportError> {
+    session.liveliness().declare_token(key.clone()).await.map_err(|e| zenoh_err("declare_token", &key, e))
+}
+
+/// The liveliness tokens on `key`: those present first (history), then their comings and goings.
+async fn watch_liveliness(session: &Session, key: String) -> Result<SampleQueue, TransportError> {
     session
         .liveliness()
         .declare_subscriber(key.clone())

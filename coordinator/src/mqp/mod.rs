@@ -34,7 +34,7 @@ pub mod tasks;
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use protocol::{DynamicsTerms, Header, QpStatus, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
+use protocol::{DynamicsTerms, QpStatus, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
 
 pub use config::MqpConfig;
 pub use report::{MqpReport, MqpTiming};
@@ -197,19 +197,7 @@ impl TeamController for Mqp {
     fn solve(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError> {
         self.compute(tick)?;
         self.report.commands_into(tick, out);
-        let d = self.diagnostics.get_or_insert_with(|| TickDiagnostics {
-            header: Header::new("", None, 0, 0),
-            qp_status: QpStatus::NotRun,
-            qp_iterations: 0,
-            qp_solve_us: 0.0,
-            assembly_us: 0.0,
-            total_us: 0.0,
-            contacts: Vec::new(),
-            constraint_residual: 0.0,
-            object_estimate: None,
-            grasp_slip: 0.0,
-            fallback: None,
-        });
+        let d = self.diagnostics.get_or_insert_with(|| TickDiagnostics::empty("", 0));
         self.report.diagnostics_into(tick, d);
         Ok(())
     }

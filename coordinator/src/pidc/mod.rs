@@ -18,7 +18,7 @@ pub mod stages;
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use protocol::{DynamicsTerms, Header, QpStatus, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
+use protocol::{DynamicsTerms, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
 
 pub use config::PidcConfig;
 pub use report::{TickReport, Timing};
@@ -190,19 +190,7 @@ impl Pidc {
             return;
         }
         self.report.commands_into(tick, out);
-        let d = self.diagnostics.get_or_insert_with(|| TickDiagnostics {
-            header: Header::new("", None, 0, 0),
-            qp_status: QpStatus::NotRun,
-            qp_iterations: 0,
-            qp_solve_us: 0.0,
-            assembly_us: 0.0,
-            total_us: 0.0,
-            contacts: Vec::new(),
-            constraint_residual: 0.0,
-            object_estimate: None,
-            grasp_slip: 0.0,
-            fallback: None,
-        });
+        let d = self.diagnostics.get_or_insert_with(|| TickDiagnostics::empty("", 0));
         self.report.diagnostics_into(tick, d);
     }
 }
