@@ -80,7 +80,10 @@ fn lockstep_cfg(team: &str, ticks: u64, grace: u64) -> LockstepConfig {
         command_timeout: Duration::from_secs(60),
         resend_every: Duration::from_millis(50),
         progress_every: 0,
-        wait_for_coordinator: false,
+        // As the scenario runs do: the first tick only once the coordinator lists every robot
+        // as a member (terms that reach it before a robot's liveliness token are not a tick it
+        // commands, and the agent would wait out its time deadline).
+        wait_for_coordinator: true,
         coordinator_grace_ticks: grace,
     }
 }
@@ -187,7 +190,9 @@ async fn when_the_coordinator_leaves_the_robots_hold_and_the_run_ends_after_the_
     for a in agents {
         let counters = stop(a).await;
         assert_eq!(counters.safe_mode_entries, 1, "safe mode at once, on the liveliness event");
-        assert!(counters.hold_torques >= grace, "the robots held their posture through the grace: {}", counters.hold_torques);
+        // Every tick of the grace but possibly the one on which the bridge saw the token go
+        // (the agent may have applied the coordinator's last command for it).
+        assert!(counters.hold_torques >= grace - 1, "the robots held their posture through the grace: {}", counters.hold_torques);
     }
     s.close().await.unwrap();
 }
