@@ -23,6 +23,9 @@ pub(crate) struct LeastViolation {
     weights: Vec<f64>,
 }
 
+/// Ridges (times `K`'s largest diagonal entry) tried in turn until `K` factors.
+const RIDGES: [f64; 4] = [0.0, 1e-13, 1e-11, 1e-9];
+
 /// Each row's price of violation, in the order of [`super::problem::constraints_into`]: the
 /// hands' rows (squeeze, friction, centre of pressure) at `w`, the stance feet's rows and the
 /// torque limits at `w * hard_factor`. The object yields first: what cannot be kept is the
@@ -98,19 +101,37 @@ pub fn solve_least_violation_with(ws: &mut QpWorkspace, inp: &QpInput, settings:
         first = false;
         std::mem::swap(lv_active, lv_now);
         // K = H + A_V^T W_V A_V, rhs = A_V^T W_V b_V.
-        zeros(lv_k, m, m);
-        lv_k.copy_from(h);
-        lv_rhs.fill(0.0);
-        for i in (0..rows).filter(|&i| lv_active[i]) {
-            let ai = a.row(i);
-            lv_k.ger(weights[i], &ai.transpose(), &ai.transpose(), 1.0);
-            lv_rhs.axpy(weights[i] * b[i], &ai.transpose(), 1.0);
+        let build = |k: &mut DMatrix<f64>, rhs: &mut DVector<f64>| {
+            zeros(k, m, m);
+            k.copy_from(h);
+            rhs.fill(0.0);
+            for i in (0..rows).filter(|&i| lv_active[i]) {
+                let ai = a.row(i);
+                k.ger(weights[i], &ai.transpose(), &ai.transpose(), 1.0);
+                rhs.axpy(weights[i] * b[i], &ai.transpose(), 1.0);
+            }
+        };
+        // The hard rows' prices (1e9) against H's regularisation (1e-6) can leave K numerically
+        // indefinite: Cholesky is retried with a ridge relative to K's largest diagonal entry.
+        let mut solved = false;
+        for ridge in RIDGES {
+            build(lv_k, lv_rhs);
+            let top = lv_k.diagonal().amax();
+            for i in 0..m {
+                lv_k[(i, i)] += ridge * top;
+            }
+            let k = std::mem::replace(lv_k, DMatrix::zeros(0, 0));
+            if let Some(chol) = k.cholesky() {
+                f.copy_from(lv_rhs);
+                chol.solve_mut(f);
+                *lv_k = chol.unpack_dirty();
+                solved = true;
+                break;
+            }
         }
-        let k = std::mem::replace(lv_k, DMatrix::zeros(0, 0));
-        let chol = k.cholesky()?;
-        f.copy_from(lv_rhs);
-        chol.solve_mut(f);
-        *lv_k = chol.unpack_dirty();
+        if !solved {
+            return None;
+        }
         let c = cost(f, lv_r, lv_hf);
         if c < best {
             best = c;
