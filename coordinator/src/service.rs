@@ -11,7 +11,7 @@ use zenoh::Session;
 
 use crate::team::assembly::{TickAssembler, TickOutcome};
 use crate::team::membership::Membership;
-use crate::{ControllerError, TeamController};
+use crate::TeamController;
 
 /// Capacity of the references queue, samples.
 pub const REFERENCE_QUEUE: usize = 1 << 16;
@@ -127,9 +127,14 @@ pub async fn run(
                         solve_and_publish(session, &cfg, controller.as_mut(), tick, &terms, &mut commands, &mut command_pubs, &mut diag_pub, &mut counters).await?;
                         status_tick = tick;
                     }
-                    TickOutcome::NotAMember(r) => {
+                    TickOutcome::NotAMember(r, tick) => {
+                        // Its terms can beat its liveliness token: it is told to hold its
+                        // posture this tick rather than left waiting for a command.
                         counters.rejected_terms += 1;
-                        tracing::warn!(robot = %r, "dynamics from a robot that is not a member (no liveliness token)");
+                        tracing::warn!(robot = %r, tick, "dynamics from a robot that is not a member (no liveliness token): it holds its posture this tick");
+                        commands.clear();
+                        commands.push(TorqueCommand::hold(&cfg.team, &r, tick));
+                        publish_commands(session, &cfg, &commands, &mut command_pubs, &mut counters).await?;
                     }
                     TickOutcome::Stale(t) => tracing::debug!(tick = t, "late dynamics terms dropped"),
                     TickOutcome::Pending => {}
@@ -178,14 +183,14 @@ pub async fn run(
     Ok(counters)
 }
 
-/// A hold order for each robot of a tick the controller failed (into `commands`), and the
-/// tick's diagnostics saying so.
-fn hold_orders(team: &str, tick: u64, robots: &[String], error: &ControllerError, commands: &mut Vec<TorqueCommand>) -> TickDiagnostics {
+/// A hold order for each robot of a tick the controller failed or was not ready for (into
+/// `commands`), and the tick's diagnostics saying so (`why`).
+fn hold_orders(team: &str, tick: u64, robots: &[String], why: &str, commands: &mut Vec<TorqueCommand>) -> TickDiagnostics {
     commands.clear();
     commands.extend(robots.iter().map(|r| TorqueCommand::hold(team, r, tick)));
     let mut d = TickDiagnostics::empty(team, tick);
     d.header.stamp_ns = protocol::wall_clock_ns();
-    d.fallback = Some(format!("controller error: {error}; every robot holds its posture"));
+    d.fallback = Some(format!("{why}; every robot holds its posture"));
     d
 }
 
@@ -241,12 +246,19 @@ async fn solve_and_publish(
 ) -> Result<(), TransportError> {
     let started = Instant::now();
     let ids: Vec<String> = terms.iter().map(|t| t.header.robot_id().to_string()).collect();
-    if let Some(why) = controller.not_ready(&ids) {
-        counters.not_ready += 1;
-        tracing::debug!(tick, "controller not ready: {why}");
-        return Ok(());
-    }
-    match controller.solve(terms, commands) {
+    let outcome = match controller.not_ready(&ids) {
+        Some(why) => {
+            counters.not_ready += 1;
+            tracing::debug!(tick, "controller not ready: {why}; every robot holds its posture this tick");
+            Err(format!("controller not ready: {why}"))
+        }
+        None => controller.solve(terms, commands).map_err(|e| {
+            counters.controller_errors += 1;
+            tracing::error!(tick, "controller failed: {e}; every robot holds its posture this tick");
+            format!("controller error: {e}")
+        }),
+    };
+    match outcome {
         Ok(()) => {
             if controller.used_fallback() {
                 counters.fallbacks += 1;
@@ -257,17 +269,29 @@ async fn solve_and_publish(
                 }
             }
         }
-        Err(e) => {
+        Err(why) => {
             // Every robot of the tick is still commanded: it holds its posture this tick.
-            counters.controller_errors += 1;
-            tracing::error!(tick, "controller failed: {e}; every robot holds its posture this tick");
-            let d = hold_orders(&cfg.team, tick, &ids, &e, commands);
+            let d = hold_orders(&cfg.team, tick, &ids, &why, commands);
             if let Err(e) = diag_pub.put(&d).await {
                 tracing::warn!(tick, "diagnostics not published: {e}");
             }
         }
     }
-    for cmd in commands.iter() {
+    publish_commands(session, cfg, commands, command_pubs, counters).await?;
+    counters.ticks += 1;
+    tracing::trace!(tick, us = started.elapsed().as_micros() as u64, "tick solved");
+    Ok(())
+}
+
+/// Each command on its robot's command key (publishers declared on first use).
+async fn publish_commands(
+    session: &Session,
+    cfg: &CoordinatorConfig,
+    commands: &[TorqueCommand],
+    command_pubs: &mut BTreeMap<String, TypedPublisher<TorqueCommand>>,
+    counters: &mut CoordinatorCounters,
+) -> Result<(), TransportError> {
+    for cmd in commands {
         let robot = cmd.header.robot_id();
         if !command_pubs.contains_key(robot) {
             let key = keys::robot(&cfg.team, robot, RobotTopic::Command)?;
@@ -277,8 +301,6 @@ async fn solve_and_publish(
         publisher.put(cmd).await?;
         counters.commands_sent += 1;
     }
-    counters.ticks += 1;
-    tracing::trace!(tick, us = started.elapsed().as_micros() as u64, "tick solved");
     Ok(())
 }
 

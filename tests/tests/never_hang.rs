@@ -196,3 +196,90 @@ async fn when_the_coordinator_leaves_the_robots_hold_and_the_run_ends_after_the_
     }
     s.close().await.unwrap();
 }
+
+/// The terms of robot `robot` for `tick` (a fixed-base 3-joint arm at rest).
+fn terms(team: &str, robot: &str, tick: u64) -> DynamicsTerms {
+    let mut mass_matrix = protocol::Matrix::zeros(JOINTS, JOINTS);
+    for i in 0..JOINTS {
+        mass_matrix.data[i * JOINTS + i] = 1.0;
+    }
+    DynamicsTerms {
+        header: protocol::Header::new(team, Some(robot), tick, protocol::wall_clock_ns()),
+        floating_base: false,
+        nv: JOINTS as u32,
+        mass_matrix,
+        bias: vec![0.0; JOINTS],
+        velocity: vec![0.0; JOINTS],
+        frames: Vec::new(),
+        hand_in_grasp: false,
+        state_tick: tick,
+    }
+}
+
+/// The first command on `queue` within 10 s (resending `terms` every 50 ms meanwhile: the
+/// coordinator's subscriber may not be matched yet).
+async fn first_command(queue: &transport::SampleQueue, publisher: &mut transport::TypedPublisher<DynamicsTerms>, terms: &DynamicsTerms) -> TorqueCommand {
+    let until = Instant::now() + Duration::from_secs(10);
+    while Instant::now() < until {
+        publisher.put(terms).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        if let Ok(Some(sample)) = queue.try_recv() {
+            return decode_sample(&sample).unwrap();
+        }
+    }
+    panic!("no command for {} within 10 s", terms.header.robot_id());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn terms_that_beat_their_robots_token_are_answered_with_a_hold() {
+    // Before, such a tick was dropped and the robot waited out its time deadline (30 s).
+    let team = "hang4";
+    let s = session().await;
+    let c = coordinator(&s, team, Box::new(FailsEvery { every: u64::MAX }));
+    let commands = transport::subscribe(&s, keys::robot(team, "r7", keys::RobotTopic::Command).unwrap()).await.unwrap();
+    let mut publisher = transport::TypedPublisher::declare(&s, keys::robot(team, "r7", keys::RobotTopic::Dynamics).unwrap(), transport::Qos::HotPath).await.unwrap();
+    let cmd = first_command(&commands, &mut publisher, &terms(team, "r7", 7)).await;
+    assert!(cmd.hold, "a hold order: {cmd:?}");
+    assert_eq!((cmd.header.robot_id(), cmd.header.tick), ("r7", 7));
+    let counters = stop(c).await;
+    assert!(counters.rejected_terms >= 1, "the terms were not a tick of the team");
+    assert_eq!(counters.ticks, 0, "no tick was solved with them");
+    s.close().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_controller_that_is_not_ready_still_commands_the_tick() {
+    // PIDC needs every member's description; r8 is a member (its token) that never sent one.
+    let team = "hang5";
+    let s = session().await;
+    let diags = transport::subscribe(&s, keys::diagnostics(team).unwrap()).await.unwrap();
+    let c = coordinator(&s, team, Box::new(coordinator::Pidc::new(coordinator::PidcConfig::default())));
+    let _token = transport::declare_member(&s, team, "r8").await.unwrap();
+    let commands = transport::subscribe(&s, keys::robot(team, "r8", keys::RobotTopic::Command).unwrap()).await.unwrap();
+    let mut publisher = transport::TypedPublisher::declare(&s, keys::robot(team, "r8", keys::RobotTopic::Dynamics).unwrap(), transport::Qos::HotPath).await.unwrap();
+    // Until the token is seen the terms are answered as a non-member's; then as a member's.
+    let mut tick = 0;
+    let cmd = loop {
+        tick += 1;
+        let cmd = first_command(&commands, &mut publisher, &terms(team, "r8", tick)).await;
+        assert!(cmd.hold, "a hold order: {cmd:?}");
+        if tokio::time::timeout(Duration::from_millis(200), async {
+            loop {
+                if let Ok(Some(sample)) = diags.try_recv() {
+                    return decode_sample::<TickDiagnostics>(&sample).unwrap();
+                }
+                tokio::time::sleep(Duration::from_millis(10)).await;
+            }
+        })
+        .await
+        .is_ok_and(|d| d.fallback.as_deref().is_some_and(|f| f.contains("not ready") && f.contains("r8")))
+        {
+            break cmd;
+        }
+        assert!(tick < 50, "the coordinator never took r8's terms as a member's");
+    };
+    assert_eq!(cmd.header.robot_id(), "r8");
+    let counters = stop(c).await;
+    assert!(counters.not_ready >= 1 && counters.commands_sent >= 1, "{counters:?}");
+    s.close().await.unwrap();
+}

@@ -24,8 +24,9 @@ pub enum TickOutcome {
     Complete(u64, Vec<DynamicsTerms>),
     /// The terms belong to a tick already completed or abandoned.
     Stale(u64),
-    /// A robot that is not a member sent terms.
-    NotAMember(String),
+    /// A robot that is not a member (no liveliness token yet, or any more) sent the terms of
+    /// a tick: (robot, tick).
+    NotAMember(String, u64),
 }
 
 impl TickAssembler {
@@ -41,7 +42,7 @@ impl TickAssembler {
     pub fn add(&mut self, terms: DynamicsTerms, members: &Membership) -> TickOutcome {
         let robot = terms.header.robot_id().to_string();
         if !members.contains(&robot) {
-            return TickOutcome::NotAMember(robot);
+            return TickOutcome::NotAMember(robot, terms.header.tick);
         }
         let tick = terms.header.tick;
         if self.last_completed.is_some_and(|t| tick <= t) {
