@@ -387,8 +387,16 @@ fn contact_map_is_the_papers_rho_and_eta() {
     let k = &mbar * p - &id;
     let jct_pinv = &proj.jct_pinv;
     let rho_paper = jct_pinv * &ip * &k * &s * &proj.b * r.j_c.transpose();
-    let eps = &k * &s * &proj.ps_pinv * p;
-    let eta_paper = jct_pinv * &ip * (&eps * &r.tau_m + &mbar * (-(p * &team.bias) + &proj.pdot_v) + &team.bias + &k * &r.load);
+    // eps tau_M = (Mbar P - I) S tau_0 with tau_0 = [P S]^+ P tau_M, saturated at the torque
+    // limits when the QP failed on it (the controller then solved again with that).
+    let mut tau0 = &proj.ps_pinv * p * &r.tau_m;
+    if r.saturated {
+        for (&j, &lim) in r.actuated.iter().zip(&r.limits) {
+            tau0[j] = tau0[j].clamp(-lim, lim);
+        }
+    }
+    println!("tau_0 saturated: {}", r.saturated);
+    let eta_paper = jct_pinv * &ip * (&k * &s * &tau0 + &mbar * (-(p * &team.bias) + &proj.pdot_v) + &team.bias + &k * &r.load);
     let (e_rho, e_eta) = (rel(&rho, &rho_paper), relv(&eta, &eta_paper));
     println!("rho vs the paper {e_rho:.1e}, eta {e_eta:.1e} (|eta| {:.1})", eta_paper.amax());
     assert!(e_rho < 1e-9 && e_eta < 1e-9);

@@ -76,7 +76,8 @@ pub struct Metrics {
     pub torque_rms: BTreeMap<String, Vec<(String, f64)>>,
     pub qp_status: BTreeMap<String, u64>,
     /// Ticks whose command did not come from the controller's normal path (the QP's
-    /// least-violation fallback, or hold orders after a controller error), by what was done.
+    /// least-violation fallback, hold orders after a controller error, or free hands after
+    /// the controller let go of the object), by what was done.
     pub fallback_ticks: BTreeMap<String, u64>,
     /// Largest residual of the controller's object-pose fit (its own slip signal), m.
     pub grasp_fit_residual_max_m: f64,
@@ -263,7 +264,15 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
     let mut fallback_ticks = BTreeMap::new();
     for f in records.diagnostics.iter().filter_map(|d| d.fallback.as_deref()) {
         // Group by what was done, not by the numbers in the message.
-        let kind = if f.starts_with("controller error") { "hold orders after a controller error" } else { "QP fallback" };
+        let kind = if f.starts_with("controller error") {
+            "hold orders after a controller error"
+        } else if f.starts_with("controller not ready") {
+            "hold orders: controller not ready"
+        } else if f.starts_with("grasp released") {
+            "grasp released (hands free, feet only)"
+        } else {
+            "QP fallback"
+        };
         *fallback_ticks.entry(kind.to_string()).or_insert(0u64) += 1;
     }
     let grasp_fit_residual_max_m = records.diagnostics.iter().map(|d| d.grasp_slip).fold(0.0, f64::max);

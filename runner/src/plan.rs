@@ -147,6 +147,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
             f_min_hand: s.min_hand_force,
             friction_margin: s.friction_margin,
             patch_margin: s.patch_margin,
+            release: s.release,
             ..PidcConfig::default()
         }),
         // MQP: the same gains (as acceleration gains, see MqpConfig), object and minimum

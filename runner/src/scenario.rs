@@ -67,6 +67,10 @@ pub struct Scenario {
     /// `false` runs anyway (to watch a refused load).
     #[serde(default = "default_capacity_check")]
     pub capacity_check: bool,
+    /// When PIDC lets go of an object it cannot hold (`release.after_failed_ticks`: control
+    /// ticks of failed QPs in a row; `release.max_fit_residual`: m; 0 turns a limit off).
+    #[serde(default)]
+    pub release: coordinator::units::release::ReleasePolicy,
     pub object: ObjectSpec,
     /// The robots, each with its floor pose; or, instead, `team`.
     #[serde(default)]
@@ -115,6 +119,9 @@ fn default_capacity_check() -> bool {
 
 /// Top-level keys with a default that `--set` may give although the file leaves them out.
 pub const OPTIONAL_KEYS: [&str; 8] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check"];
+/// Top-level tables a scenario may leave out that `--set` may still reach into
+/// (`--set release.after_failed_ticks=50`); their own fields are checked when the file is read.
+pub const OPTIONAL_TABLES: [&str; 1] = ["release"];
 
 /// The carried box.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -384,6 +391,10 @@ pub fn apply_override(root: &mut toml::Value, assignment: &str) -> Result<(), Sc
         node = match node {
             toml::Value::Table(t) => {
                 let optional = i == 0 && last && OPTIONAL_KEYS.contains(part);
+                if i == 0 && !last && OPTIONAL_TABLES.contains(part) && !t.contains_key(*part) {
+                    t.insert(part.to_string(), toml::Value::Table(toml::Table::new()));
+                }
+                let optional = optional || (i == 1 && OPTIONAL_TABLES.contains(&parts[0]));
                 if !t.contains_key(*part) && !optional {
                     return Err(err(format!("no such key {part:?} (known: {})", t.keys().cloned().collect::<Vec<_>>().join(", "))));
                 }
@@ -441,6 +452,13 @@ mod tests {
         assert!(!s.capacity_check && s.friction_margin == 1.0 && s.patch_margin == 1.0);
         assert!(Scenario::load(&p, &[]).unwrap().capacity_check);
         for bad in ["friction_margin=0", "patch_margin=1.5", "capacity_check=3", "object.capacity_check=false"] {
+            assert!(Scenario::load(&p, &[bad.to_string()]).is_err(), "{bad} accepted");
+        }
+        // So may the fields of the optional `release` table; a typo there is still an error.
+        let s = Scenario::load(&p, &["release.after_failed_ticks=7".into(), "release.retreat=0.1".into()]).unwrap();
+        assert_eq!((s.release.after_failed_ticks, s.release.retreat), (7, 0.1));
+        assert_eq!(s.release.max_fit_residual, coordinator::units::release::ReleasePolicy::default().max_fit_residual);
+        for bad in ["release.after_failed=7", "release=3", "release.retreat=[1]"] {
             assert!(Scenario::load(&p, &[bad.to_string()]).is_err(), "{bad} accepted");
         }
         // The controller is chosen by its kind; the old name says what it became.

@@ -4,6 +4,7 @@
 use nalgebra::{Isometry3, Matrix3};
 
 use crate::units::impedance::Gains;
+use crate::units::release::ReleasePolicy;
 use crate::ControllerError;
 
 /// Parameters of the PIDC controller. In a controller file they follow `kind = "pidc"` (see
@@ -15,6 +16,10 @@ pub struct PidcConfig {
     pub object_gains: Gains,
     pub torso_gains: Gains,
     pub swing_gains: Gains,
+    /// Free hands (not in grasp, or let go of: see [`ReleasePolicy`]) hold their pose.
+    pub hand_gains: Gains,
+    /// When the team lets go of an object it cannot hold (degrade, never collapse).
+    pub release: ReleasePolicy,
     /// Carried object: mass, inertia about its centre in its own frame.
     pub object_mass: f64,
     pub object_inertia: Matrix3<f64>,
@@ -52,6 +57,11 @@ impl Default for PidcConfig {
             object_gains: Gains::new(&[1500.0, 1500.0, 1500.0, 400.0, 400.0, 400.0], &[150.0, 150.0, 150.0, 140.0, 140.0, 140.0]),
             torso_gains: Gains::new(&[4000.0, 4000.0, 4000.0, 3000.0, 3000.0, 3000.0], &[200.0, 200.0, 200.0, 125.0, 125.0, 125.0]),
             swing_gains: Gains::new(&[3500.0, 3500.0, 3500.0], &[20.0, 20.0, 20.0]),
+            // Gains are forces on the task's own inertia: a few kg of arm at the hand (about
+            // 1 Hz, damped; stiffer hands asked more than the arm's limits after a push) and a wrist of a few 1e-3 kg m^2 about the palm's normal, which a
+            // damping of 6 N m s/rad set into a limit cycle at 1 kHz (seen in MuJoCo).
+            hand_gains: Gains::new(&[150.0, 150.0, 150.0, 5.0, 5.0, 5.0], &[30.0, 30.0, 30.0, 0.3, 0.3, 0.3]),
+            release: ReleasePolicy::default(),
             // The default scene's 0.6 m cube of 1 kg.
             object_mass: 1.0,
             object_inertia: Matrix3::identity() * (1.0 * (0.36 + 0.36) / 12.0),
@@ -84,7 +94,7 @@ impl PidcConfig {
     /// Gains of the right sizes, finite and non-negative; masses, forces and limits sane.
     pub fn check(&self) -> Result<(), ControllerError> {
         let bad = |what: &str, why: String| Err(ControllerError::Config(format!("{what}: {why}")));
-        for (what, g, n) in [("object_gains", &self.object_gains, 6), ("torso_gains", &self.torso_gains, 6), ("swing_gains", &self.swing_gains, 3)] {
+        for (what, g, n) in [("object_gains", &self.object_gains, 6), ("torso_gains", &self.torso_gains, 6), ("swing_gains", &self.swing_gains, 3), ("hand_gains", &self.hand_gains, 6)] {
             if let Err(why) = g.check(n) {
                 return bad(what, why);
             }
@@ -101,6 +111,9 @@ impl PidcConfig {
             if !(x.is_finite() && x > 0.0 && x <= 1.0) {
                 return bad(what, format!("{x} must be in (0, 1]"));
             }
+        }
+        if let Err(why) = self.release.check() {
+            return bad("release", why);
         }
         if self.qp_max_iter == 0 {
             return bad("qp_max_iter", "must be positive".into());

@@ -18,20 +18,23 @@ pub mod stages;
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use protocol::{DynamicsTerms, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
+use nalgebra::DVector;
+use protocol::{DynamicsTerms, QpStatus, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
 
 pub use config::PidcConfig;
 pub use report::{TickReport, Timing};
+use report::set_note;
 
 use crate::qp::{self, QpInput, QpWorkspace};
 use crate::units::grasp::GraspTracker;
 use crate::units::impedance::TaskStack;
 use crate::units::projection::ProjectionWorkspace;
+use crate::units::release::{GraspWatch, TickOutcome};
 use crate::{ControllerError, TeamController};
 use stages::contacts::{contact_jacobian, contact_list};
 use stages::limits::torque_limits;
 use stages::tasks::{task_torque, MotionSpaceTerms, TaskInput, Targets};
-use stages::torque::{compose, fallback, motion_torque, Clamp};
+use stages::torque::{compose, fallback, motion_torque, saturate, Clamp};
 use stages::wrench::{contact_map, contact_wrenches, Actuation, ContactMapScratch, MapInput, WrenchInput};
 
 /// Scratch of a tick that the report does not keep: each stage's workspace.
@@ -54,6 +57,8 @@ pub struct Pidc {
     references: Option<TaskReferences>,
     targets: Targets,
     grasp: GraspTracker,
+    /// When the team lets go of the object ([`crate::units::release`]).
+    watch: GraspWatch,
     report: TickReport,
     /// Whether `report` holds a completed tick.
     valid: bool,
@@ -70,6 +75,7 @@ impl Pidc {
             references: None,
             targets: Targets::default(),
             grasp: GraspTracker::default(),
+            watch: GraspWatch::default(),
             report: TickReport::default(),
             valid: false,
             ws: Workspace::default(),
@@ -99,7 +105,8 @@ impl Pidc {
         }
     }
 
-    /// Forget the grasp (offsets are captured again when the hands next close).
+    /// Forget the grasp (offsets are captured again when the hands next close). This does not
+    /// let go of the object: see [`crate::units::release`] for that.
     pub fn release_grasp(&mut self) {
         self.grasp.release();
         self.targets.release_object();
@@ -122,7 +129,10 @@ impl Pidc {
         self.valid = false;
         let start = Instant::now();
         let us = || start.elapsed().as_secs_f64() * 1e6;
-        let Pidc { config: cfg, descriptions, expected, references, targets, grasp, report: r, ws, valid, .. } = self;
+        let Pidc { config: cfg, descriptions, expected, references, targets, grasp, watch, report: r, ws, valid, .. } = self;
+        // Degrade, never collapse: once the team has let go of the object, every hand is free.
+        watch.rearm(tick.iter().any(|t| t.hand_in_grasp));
+        r.team.hands_released = watch.released().is_some();
         // §III-A: M, h, v, S, J_cf, J_ee of the team; the torque limits (eq. original_torque_limit).
         r.team.assemble_into(tick, expected.as_deref(), cfg.fully_actuated)?;
         torque_limits(&r.team, descriptions, cfg.fully_actuated, &mut r.actuated, &mut r.limits)?;
@@ -141,42 +151,28 @@ impl Pidc {
         task_torque(&tasks, targets, &mut ws.tasks, &mut r.tau_m, &mut r.load, &mut r.f_x)?;
         motion_torque(&r.proj, &r.tau_m, &mut r.tau0, &mut ws.p_tau_m);
         let t_imp = us();
-        // lambda = rho F_c + eta (eq. relation_between_lambda_and_Fc); the QP's contacts.
-        let map = MapInput { team: &r.team, proj: &r.proj, j_c: &r.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
-        contact_map(&map, &mut ws.map, &mut r.y, &mut r.rho, &mut r.eta, &mut r.lambda_real);
-        contact_list(&r.team, descriptions, cfg, &mut r.contacts)?;
-        let t_build = us();
-        // F_c: eq. wrench_optim2 under the friction, moment and torque rows (eqs.
-        // unilateral_and_friction_cone_constraint, moment_constraint, real_torque_limit) on
-        // the real wrenches (lambda_real holds eta_real here); the fallback when it fails.
-        let input = QpInput {
-            y: &r.y,
-            rho: &r.rho,
-            eta: &r.lambda_real,
-            contacts: &r.contacts,
-            actuated: &r.actuated,
-            limits: &r.limits,
-            tau0: &r.tau0,
-            regularisation: cfg.regularisation,
-            dense_first: cfg.dense_qp,
+        let (build_us, qp_us) = contact_forces(r, ws, descriptions, cfg)?;
+        let outcome = TickOutcome {
+            tick: tick[0].header.tick,
+            hands_in_grasp: !r.team.hands.is_empty(),
+            qp_failed: r.fallback.is_some(),
+            fit_residual: r.grasp.as_ref().map(|g| g.fit_residual),
         };
-        r.qp = qp::solve(&mut ws.qp, &input, cfg.qp_max_iter, &mut r.f_c);
-        let t_qp = us();
-        r.fallback = fallback(&mut ws.qp, &input, cfg.qp_max_iter, r.qp.status, &mut r.f_c);
-        // tau = tau_0 + Y F_c (eq. ua_solution), clamped to the limits after a fallback.
-        let clamp = r.fallback.is_some().then_some(Clamp { actuated: &r.actuated, limits: &r.limits });
-        compose(&r.tau0, &r.y, &r.f_c, clamp, &mut r.tau)?;
-        // lambda for the torque sent (eq. relation_between_lambda_and_Fc, or eq.
-        // constraint_force for a clamped torque).
-        let sent = if r.fallback.is_some() { Actuation::Torque(&r.tau) } else { Actuation::ContactForces(&r.f_c) };
-        let wrench = WrenchInput { team: &r.team, proj: &r.proj, load: &r.load, rho: &r.rho, eta: &r.eta };
-        contact_wrenches(&wrench, sent, &mut ws.map, &mut r.lambda, &mut r.lambda_real);
+        if let Some(release) = watch.observe(&cfg.release, outcome) {
+            tracing::warn!(tick = release.tick, "{}", release.note);
+            if let Some(g) = &r.grasp {
+                targets.let_go(&r.team, &g.object.translation.vector, cfg.release.retreat);
+            }
+            grasp.release();
+            targets.release_object();
+        }
+        set_note(&mut r.release, watch.released().map(|w| w.note.as_str()));
         r.timing = Timing {
             assembly_us: t_asm,
             projections_us: t_proj - t_asm,
             impedance_us: t_imp - t_proj,
-            qp_build_us: t_build - t_imp,
-            qp_us: t_qp - t_build,
+            qp_build_us: build_us,
+            qp_us,
             total_us: us(),
         };
         *valid = true;
@@ -192,6 +188,64 @@ impl Pidc {
         self.report.commands_into(tick, out);
         let d = self.diagnostics.get_or_insert_with(|| TickDiagnostics::empty("", 0));
         self.report.diagnostics_into(tick, d);
+    }
+}
+
+/// `F_c` and `tau` of a tick from its `tau_0`: the contact map (eq.
+/// relation_between_lambda_and_Fc), the QP of eq. wrench_optim2 under the friction, moment and
+/// torque rows (eqs. unilateral_and_friction_cone_constraint, moment_constraint,
+/// real_torque_limit) on the real wrenches, `tau = tau_0 + Y F_c` (eq. ua_solution) and the
+/// wrenches for the torque sent. When the QP fails and `tau_0` asks more of a joint than its
+/// limit ([`saturate`]: a push, a task far from its target), the QP is solved again with `tau_0`
+/// saturated, so that the contact forces are chosen for a torque the joints can give; then
+/// the least-violation fallback ([`fallback`]). Returns the build and QP times, µs.
+fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMap<String, RobotDescription>, cfg: &PidcConfig) -> Result<(f64, f64), ControllerError> {
+    let (mut build_us, mut qp_us) = (0.0, 0.0);
+    let mut saturated = false;
+    loop {
+        let t0 = Instant::now();
+        let map = MapInput { team: &r.team, proj: &r.proj, j_c: &r.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
+        contact_map(&map, &mut ws.map, &mut r.y, &mut r.rho, &mut r.eta, &mut r.lambda_real);
+        contact_list(&r.team, descriptions, cfg, &mut r.contacts)?;
+        let t1 = Instant::now();
+        // F_c is kept out of the report while the QP reads it (no allocation: an empty vector).
+        let mut f_c = std::mem::replace(&mut r.f_c, DVector::zeros(0));
+        r.qp = qp::solve(&mut ws.qp, &qp_input(r, cfg), cfg.qp_max_iter, &mut f_c);
+        r.f_c = f_c;
+        build_us += (t1 - t0).as_secs_f64() * 1e6;
+        qp_us += t1.elapsed().as_secs_f64() * 1e6;
+        let solved = matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved);
+        if solved || saturated || !saturate(&mut r.tau0, &r.actuated, &r.limits) {
+            break;
+        }
+        saturated = true;
+    }
+    let mut f_c = std::mem::replace(&mut r.f_c, DVector::zeros(0));
+    let fallback = fallback(&mut ws.qp, &qp_input(r, cfg), cfg.qp_max_iter, r.qp.status, saturated, &mut f_c);
+    (r.f_c, r.fallback, r.saturated) = (f_c, fallback, saturated);
+    // tau = tau_0 + Y F_c (eq. ua_solution), clamped to the limits after a fallback.
+    let clamp = r.fallback.is_some().then_some(Clamp { actuated: &r.actuated, limits: &r.limits });
+    compose(&r.tau0, &r.y, &r.f_c, clamp, &mut r.tau)?;
+    // lambda for the torque sent (eq. relation_between_lambda_and_Fc, or eq.
+    // constraint_force for a clamped torque).
+    let sent = if r.fallback.is_some() { Actuation::Torque(&r.tau) } else { Actuation::ContactForces(&r.f_c) };
+    let wrench = WrenchInput { team: &r.team, proj: &r.proj, load: &r.load, rho: &r.rho, eta: &r.eta };
+    contact_wrenches(&wrench, sent, &mut ws.map, &mut r.lambda, &mut r.lambda_real);
+    Ok((build_us, qp_us))
+}
+
+/// The QP's data from the tick's report (`lambda_real` holds `eta_real` until the QP is solved).
+fn qp_input<'a>(r: &'a TickReport, cfg: &PidcConfig) -> QpInput<'a> {
+    QpInput {
+        y: &r.y,
+        rho: &r.rho,
+        eta: &r.lambda_real,
+        contacts: &r.contacts,
+        actuated: &r.actuated,
+        limits: &r.limits,
+        tau0: &r.tau0,
+        regularisation: cfg.regularisation,
+        dense_first: cfg.dense_qp,
     }
 }
 

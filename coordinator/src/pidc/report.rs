@@ -42,6 +42,12 @@ pub struct TickReport {
     pub actuated: Vec<usize>,
     pub qp: qp::QpOutcome,
     pub fallback: Option<String>,
+    /// `tau0` was saturated at the torque limits after the QP failed on it (it is then no
+    /// longer `[P S]^+ P tau_M`; see [`super::stages::torque`]).
+    pub saturated: bool,
+    /// Why the hands are free while the contact sets hold the object
+    /// ([`crate::units::release`]); `None` while the grasp holds.
+    pub release: Option<String>,
     pub timing: Timing,
 }
 
@@ -110,11 +116,16 @@ impl TickReport {
             orientation: quat_wxyz(&g.object.rotation.to_rotation_matrix()),
         });
         d.grasp_slip = self.grasp.as_ref().map_or(0.0, |g| g.fit_residual);
-        match (&self.fallback, &mut d.fallback) {
-            (None, f) => *f = None,
-            (Some(why), Some(f)) => set_string(f, why),
-            (Some(why), f) => *f = Some(why.clone()),
-        }
+        set_note(&mut d.fallback, self.fallback.as_deref().or(self.release.as_deref()));
+    }
+}
+
+/// `note = value`, keeping `note`'s buffer.
+pub(crate) fn set_note(note: &mut Option<String>, value: Option<&str>) {
+    match (value, note) {
+        (None, n) => *n = None,
+        (Some(v), Some(n)) => set_string(n, v),
+        (Some(v), n) => *n = Some(v.to_string()),
     }
 }
 

@@ -57,6 +57,12 @@ pub struct Team {
     /// Stance feet (3 rows each) and hands in grasp (6 rows each), in robot order.
     pub feet: Vec<TeamFrame>,
     pub hands: Vec<TeamFrame>,
+    /// Hands not in grasp (their robot's contact set says so, or the controller let go of the
+    /// object: [`Team::hands_released`]): tasks, not contacts.
+    pub free_hands: Vec<TeamFrame>,
+    /// Whether the controller has let go of the object: [`Team::assemble_into`] then treats
+    /// every hand as free, whatever the contact sets say.
+    pub hands_released: bool,
     pub torsos: Vec<TeamFrame>,
     pub swing_feet: Vec<TeamFrame>,
     /// `J_cf` (3 nf x n) and its `Jdot*v`; `J_ee` (6 B x n) and its `Jdot*v`.
@@ -98,7 +104,7 @@ impl Team {
         zeros_v(&mut self.s_diag, n);
         self.s_diag.fill(1.0);
         self.robots.truncate(tick.len());
-        let (mut feet, mut hands, mut torsos, mut swing) = (0, 0, 0, 0);
+        let (mut feet, mut hands, mut free_hands, mut torsos, mut swing) = (0, 0, 0, 0, 0);
         let mut off = 0;
         for (k, t) in tick.iter().enumerate() {
             let nv = t.nv();
@@ -130,8 +136,8 @@ impl Team {
                 let (list, count) = match f.role {
                     FrameRole::StanceFoot => (&mut self.feet, &mut feet),
                     FrameRole::SwingFoot => (&mut self.swing_feet, &mut swing),
-                    FrameRole::Hand if t.hand_in_grasp => (&mut self.hands, &mut hands),
-                    FrameRole::Hand => continue,
+                    FrameRole::Hand if t.hand_in_grasp && !self.hands_released => (&mut self.hands, &mut hands),
+                    FrameRole::Hand => (&mut self.free_hands, &mut free_hands),
                     FrameRole::Torso => (&mut self.torsos, &mut torsos),
                 };
                 if *count == list.len() {
@@ -144,6 +150,7 @@ impl Team {
         }
         self.feet.truncate(feet);
         self.hands.truncate(hands);
+        self.free_hands.truncate(free_hands);
         self.torsos.truncate(torsos);
         self.swing_feet.truncate(swing);
         stack(&self.feet, 3, n, &mut self.j_cf, &mut self.jdv_cf);

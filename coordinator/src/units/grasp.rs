@@ -112,6 +112,8 @@ pub fn centroid_pose(team: &Team) -> Isometry3<f64> {
 pub struct GraspTracker {
     offsets: Option<GraspOffsets>,
     last_object: Option<Isometry3<f64>>,
+    /// The grasp was released: the object is no longer where the plan or the last estimate put it.
+    released: bool,
 }
 
 impl GraspTracker {
@@ -128,7 +130,9 @@ impl GraspTracker {
         let offsets = match &mut self.offsets {
             Some(o) if o.matches(team) => o,
             slot => {
-                let at = self.last_object.or(pose_at_grasp).unwrap_or_else(|| centroid_pose(team));
+                let known = if self.released { None } else { self.last_object.or(pose_at_grasp) };
+                let at = known.unwrap_or_else(|| centroid_pose(team));
+                self.released = false;
                 slot.insert(GraspOffsets::capture(team, &at))
             }
         };
@@ -139,9 +143,12 @@ impl GraspTracker {
         g.compute_into(team, fit.pose).ok_or_else(|| ControllerError::Singular { what: "grasp matrix".into() })
     }
 
-    /// Forget the offsets: they are captured again when the hands next close.
+    /// Forget the offsets and the object's pose: when the hands next close, the offsets are
+    /// captured with the object at the hands' centroid (world axes).
     pub fn release(&mut self) {
         self.offsets = None;
+        self.last_object = None;
+        self.released = true;
     }
 }
 

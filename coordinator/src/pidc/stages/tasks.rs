@@ -23,7 +23,7 @@ use protocol::{PoseReference, TaskReferences};
 
 use crate::linalg::{mat, product, rotation_from_wxyz, zeros_v};
 use crate::pidc::PidcConfig;
-use crate::team::Team;
+use crate::team::{Team, TeamFrame};
 use crate::units::grasp::GraspTerms;
 use crate::units::impedance::{point_error, pose_error, MotionSpace, TaskStack};
 use crate::units::projection::Projections;
@@ -42,6 +42,8 @@ pub struct Targets {
     /// (robot, frame, position) of swing feet without a reference.
     held_feet: Vec<(String, String, Vector3<f64>)>,
     held_object: Option<Isometry3<f64>>,
+    /// (robot, pose) of free hands: the pose each had when it became free.
+    held_hands: Vec<(String, Isometry3<f64>)>,
 }
 
 impl Targets {
@@ -77,6 +79,39 @@ impl Targets {
                 }
             },
         }
+    }
+
+    /// Robot `id`'s free hand's target: its pose `x` when it became free (there are no hand
+    /// references), at rest.
+    pub fn free_hand(&mut self, id: &str, x: &Isometry3<f64>) -> PoseTarget {
+        match self.held_hands.iter().find(|(r, _)| r == id) {
+            Some((_, h)) => (*h, [0.0; 6], [0.0; 6]),
+            None => {
+                self.held_hands.push((id.to_string(), *x));
+                (*x, [0.0; 6], [0.0; 6])
+            }
+        }
+    }
+
+    /// The team lets go of the object centred at `centre`: each hand in grasp will hold its
+    /// pose moved `retreat` away from the centre (horizontally) once it is free.
+    pub fn let_go(&mut self, team: &Team, centre: &Vector3<f64>, retreat: f64) {
+        for h in &team.hands {
+            let mut away = h.position - centre;
+            away.z = 0.0;
+            let step = away.try_normalize(1e-9).map_or(Vector3::zeros(), |d| d * retreat);
+            let pose = Isometry3::from_parts(Translation3::from(h.position + step), UnitQuaternion::from_rotation_matrix(&h.rotation));
+            let id = &team.robots[h.robot].id;
+            match self.held_hands.iter_mut().find(|(r, _)| r == id) {
+                Some((_, held)) => *held = pose,
+                None => self.held_hands.push((id.clone(), pose)),
+            }
+        }
+    }
+
+    /// Forget the held poses of hands that are no longer free (they closed on the object).
+    pub fn keep_free_hands(&mut self, team: &Team) {
+        self.held_hands.retain(|(r, _)| team.free_hands.iter().any(|h| team.robots[h.robot].id == *r));
     }
 
     /// Forget the held object pose (the grasp was released).
@@ -132,6 +167,14 @@ impl MotionSpaceTerms {
     }
 }
 
+/// A 6-row frame's pose and twist `J v` (world, `[linear; angular]`).
+fn frame_pose(tf: &TeamFrame, velocity: &DVector<f64>) -> (Isometry3<f64>, Vector6<f64>) {
+    let x = Isometry3::from_parts(Translation3::from(tf.position), UnitQuaternion::from_rotation_matrix(&tf.rotation));
+    let mut twist = Vector6::zeros();
+    twist.gemv(1.0, &tf.jacobian, velocity, 0.0);
+    (x, twist)
+}
+
 /// What [`task_torque`] reads.
 pub struct TaskInput<'a> {
     pub team: &'a Team,
@@ -142,7 +185,7 @@ pub struct TaskInput<'a> {
 }
 
 /// `tau_M` (n): the superposition of the impedance tasks (eqn. joint_space_tau_M) of the
-/// object (when grasped), every torso and every swing foot, with the operational-space
+/// object (when grasped), every torso, every swing foot and every free hand, with the operational-space
 /// inertia and non-linear terms of eq. control_law computed for the team's task space as a
 /// whole (every task's rows stacked; see [`crate::units::impedance`]). Also the object's load
 /// `F_x` (zero without a grasp) and `J_x^T F_x` (`load`, n).
@@ -156,7 +199,8 @@ pub fn task_torque(
 ) -> Result<(), ControllerError> {
     let TaskInput { team, grasp, references: refs, config: cfg, motion } = inp;
     let n = team.n;
-    let k_rows = grasp.map_or(0, |g| g.j_o.nrows()) + team.torsos.iter().chain(&team.swing_feet).map(|t| t.jacobian.nrows()).sum::<usize>();
+    let frames = team.torsos.iter().chain(&team.swing_feet).chain(&team.free_hands);
+    let k_rows = grasp.map_or(0, |g| g.j_o.nrows()) + frames.map(|t| t.jacobian.nrows()).sum::<usize>();
     stack.begin(k_rows, n);
     zeros_v(load, n);
     *f_x = Vector6::zeros();
@@ -171,10 +215,8 @@ pub fn task_torque(
     }
     for tf in &team.torsos {
         let id = &team.robots[tf.robot].id;
-        let x = Isometry3::from_parts(Translation3::from(tf.position), UnitQuaternion::from_rotation_matrix(&tf.rotation));
+        let (x, twist) = frame_pose(tf, &team.velocity);
         let (x_d, tw_d, acc_d) = targets.torso(*refs, id, &x);
-        let mut twist = Vector6::zeros();
-        twist.gemv(1.0, &tf.jacobian, &team.velocity, 0.0);
         let err = pose_error(&x, &twist, &x_d, &tw_d, &acc_d);
         stack.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.torso_gains, None)?;
     }
@@ -185,6 +227,13 @@ pub fn task_torque(
         vel.gemv(1.0, &tf.jacobian, &team.velocity, 0.0);
         let err = point_error(&tf.position, &vel, &p_d, &v_d, &a_d);
         stack.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.swing_gains, None)?;
+    }
+    targets.keep_free_hands(team);
+    for tf in &team.free_hands {
+        let (x, twist) = frame_pose(tf, &team.velocity);
+        let (x_d, tw_d, acc_d) = targets.free_hand(&team.robots[tf.robot].id, &x);
+        let err = pose_error(&x, &twist, &x_d, &tw_d, &acc_d);
+        stack.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.hand_gains, None)?;
     }
     stack.joint_torque(motion, tau_m)
 }

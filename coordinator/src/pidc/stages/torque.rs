@@ -2,8 +2,9 @@
 //! `(I - P) tau_C = J_c^T F_c`: the motion part `tau_0` ([`motion_torque`]), `F_c` when the
 //! QP fails ([`fallback`]), and the sum `tau = tau_0 + Y F_c`, `Y = B J_c^T` ([`compose`]).
 //!
-//! **Fallback.** When the QP is infeasible or fails (status other than Solved/AlmostSolved),
-//! `F_c` comes from the least-violation relaxation ([`qp::solve_least_violation`]: every row
+//! **Fallback.** When the QP is infeasible or fails (status other than Solved/AlmostSolved)
+//! while `tau_0` asks more of some joint than its limit, the QP is first solved again with
+//! `tau_0` saturated ([`saturate`]; the caller does it). If it still fails, `F_c` comes from the least-violation relaxation ([`qp::solve_least_violation`]: every row
 //! softened by a heavily penalised slack), which keeps the squeeze and the friction rows as
 //! far as they can be kept; if even that fails, `F_c = 0` (plain projected inverse dynamics
 //! `tau = [P S]^+ P tau_M`). Either way the torques are clamped to the limits. The
@@ -27,16 +28,31 @@ pub fn motion_torque(proj: &Projections, tau_m: &DVector<f64>, tau0: &mut DVecto
     tau0.gemv(1.0, &proj.ps_pinv, p_tau_m, 0.0);
 }
 
-/// After a QP that ended with `status`: `None` when it was solved; otherwise `F_c` (into
-/// `f_c`) from the least-violation relaxation, or zero when that fails too, and what was done.
-pub fn fallback(ws: &mut QpWorkspace, input: &QpInput, max_iter: u32, status: QpStatus, f_c: &mut DVector<f64>) -> Option<String> {
+/// Saturate `tau_0` at the torque limits; whether any entry was over.
+pub fn saturate(tau0: &mut DVector<f64>, actuated: &[usize], limits: &[f64]) -> bool {
+    let mut any = false;
+    for (&j, &lim) in actuated.iter().zip(limits) {
+        if tau0[j].abs() > lim {
+            tau0[j] = tau0[j].clamp(-lim, lim);
+            any = true;
+        }
+    }
+    any
+}
+
+/// After a QP that ended with `status` (on a `tau_0` that was `saturated` first, or not):
+/// `None` when it was solved on the unsaturated `tau_0`; otherwise what was done, and `F_c`
+/// (into `f_c`) from the QP, the least-violation relaxation or zero when that fails too.
+pub fn fallback(ws: &mut QpWorkspace, input: &QpInput, max_iter: u32, status: QpStatus, saturated: bool, f_c: &mut DVector<f64>) -> Option<String> {
+    let motion = if saturated { "tau_0 saturated at the limits" } else { "tau_0" };
     match status {
-        QpStatus::Solved | QpStatus::AlmostSolved => None,
+        QpStatus::Solved | QpStatus::AlmostSolved if !saturated => None,
+        QpStatus::Solved | QpStatus::AlmostSolved => Some(format!("QP failed on tau_0 over the torque limits: solved with {motion}")),
         s => match qp::solve_least_violation(ws, input, max_iter, f_c) {
-            Some(worst) => Some(format!("QP {s:?}: least-violation F_c (worst row violated by {worst:.3}), torques clamped to the limits")),
+            Some(worst) => Some(format!("QP {s:?}: least-violation F_c on {motion} (worst row violated by {worst:.3}), torques clamped to the limits")),
             None => {
                 f_c.fill(0.0);
-                Some(format!("QP {s:?}: F_c = 0, tau = [P S]^+ P tau_M clamped to the torque limits"))
+                Some(format!("QP {s:?}: F_c = 0, tau = {motion} clamped to the torque limits"))
             }
         },
     }

@@ -1,0 +1,166 @@
+//! Letting go of the object: the last step of "degrade, never collapse".
+//!
+//! The contact-force QP keeps the stance feet's rows and the torque limits before the hands'
+//! (its least-violation fallback weights them so): when the object cannot be held, the hands'
+//! rows give first and the object slips. What the fallback cannot fix is the model: the
+//! controller keeps treating the hands as rigidly joined through the object (the rows of
+//! `J_c,ee` in `P`, the object's load `J_x^T F_x`), so once the object has gone the robots
+//! push against a constraint that no longer exists and fall (seen in MuJoCo with two robots and
+//! 1.5 times the payload capacity: the object slid out within 0.2 s, the torsos tipped over
+//! from 0.3 s).
+//!
+//! [`GraspWatch`] decides when the team lets go. It watches, after each tick, whether the QP
+//! was solved and how far the hands are from where the fitted object puts them (the fit's
+//! residual, the controller's own slip signal), and latches a [`Release`] when either
+//! [`ReleasePolicy`] limit is passed. While released, the controller treats every hand as free
+//! ([`crate::team::Team::hands_released`]): no grasp rows, no object task or load, each hand
+//! backs away from the object by [`ReleasePolicy::retreat`] and holds that pose (a free-hand task), and the QP is the stance feet's alone. The latch
+//! clears when no robot's contact set has its hand in grasp any more (the grasp was opened),
+//! so a later grasp closes as usual.
+
+use serde::{Deserialize, Serialize};
+
+/// When the team lets go of the object. Either limit at 0 is never reached.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ReleasePolicy {
+    /// Consecutive ticks whose contact-force QP was not solved (a fallback was sent) before
+    /// the hands let go. A push makes a few; an object the team cannot hold makes them all.
+    pub after_failed_ticks: u32,
+    /// Largest grasp-fit residual (m): a hand this far from where the fitted object pose puts it
+    /// means the grasp is no longer rigid (the object slipped out or the palms came apart).
+    pub max_fit_residual: f64,
+    /// How far each hand backs away from the object when the team lets go (m, horizontally
+    /// from the object's centre): holding the palms where they were would keep the object
+    /// pinched, its weight on arms that cannot carry it.
+    pub retreat: f64,
+}
+
+impl Default for ReleasePolicy {
+    fn default() -> Self {
+        // 50 ms of failed ticks at 1 kHz (two robots with 1.5 times their payload: releasing
+        // within 0.1 s kept both standing, from 0.15 s on they fell); 2 cm, four times the
+        // acceptance bound on palm slip; 5 cm clears the palms off the object.
+        ReleasePolicy { after_failed_ticks: 50, max_fit_residual: 0.02, retreat: 0.05 }
+    }
+}
+
+impl ReleasePolicy {
+    /// Finite, non-negative residual.
+    pub fn check(&self) -> Result<(), String> {
+        for (what, x) in [("max_fit_residual", self.max_fit_residual), ("retreat", self.retreat)] {
+            if !(x.is_finite() && x >= 0.0) {
+                return Err(format!("{what} {x} must be finite and non-negative"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Why and when the team let go.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Release {
+    /// The tick after which the hands were released.
+    pub tick: u64,
+    /// One line for logs and the diagnostics' `fallback` field.
+    pub note: String,
+}
+
+/// What one tick showed (see [`GraspWatch::observe`]).
+#[derive(Debug, Clone, Copy)]
+pub struct TickOutcome {
+    pub tick: u64,
+    /// Some robot's contact set has its hand in grasp (whatever the controller did with it).
+    pub hands_in_grasp: bool,
+    /// The contact-force QP was not solved and a fallback was sent.
+    pub qp_failed: bool,
+    /// The grasp fit's residual this tick (m), when a grasp was modelled.
+    pub fit_residual: Option<f64>,
+}
+
+/// The latch of [`ReleasePolicy`] (see the module docs).
+#[derive(Debug, Clone, Default)]
+pub struct GraspWatch {
+    failed_run: u32,
+    released: Option<Release>,
+}
+
+impl GraspWatch {
+    /// The release in force, if the team has let go.
+    pub fn released(&self) -> Option<&Release> {
+        self.released.as_ref()
+    }
+
+    /// Before a tick: clear the latch when no hand is in grasp any more (the grasp was opened).
+    pub fn rearm(&mut self, hands_in_grasp: bool) {
+        if !hands_in_grasp {
+            self.failed_run = 0;
+            self.released = None;
+        }
+    }
+
+    /// After a tick: count failed ticks and check the fit; `Some` on the tick the team lets go.
+    pub fn observe(&mut self, policy: &ReleasePolicy, t: TickOutcome) -> Option<&Release> {
+        if self.released.is_some() || !t.hands_in_grasp {
+            self.failed_run = 0;
+            return None;
+        }
+        self.failed_run = if t.qp_failed { self.failed_run + 1 } else { 0 };
+        let failed = policy.after_failed_ticks > 0 && self.failed_run >= policy.after_failed_ticks;
+        let slipped = t.fit_residual.filter(|&r| policy.max_fit_residual > 0.0 && r > policy.max_fit_residual);
+        let why = match (failed, slipped) {
+            (_, Some(r)) => format!("a hand is {:.1} mm from the fitted object (limit {:.1} mm)", r * 1e3, policy.max_fit_residual * 1e3),
+            (true, None) => format!("the contact-force QP failed {} ticks in a row", self.failed_run),
+            (false, None) => return None,
+        };
+        let note = format!("grasp released at tick {}: {why}; the hands back away and hold, the feet carry the robots", t.tick);
+        Some(&*self.released.insert(Release { tick: t.tick, note }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tick(tick: u64, qp_failed: bool, fit_residual: Option<f64>) -> TickOutcome {
+        TickOutcome { tick, hands_in_grasp: true, qp_failed, fit_residual }
+    }
+
+    #[test]
+    fn a_run_of_failed_ticks_releases_and_a_solved_tick_restarts_the_count() {
+        let p = ReleasePolicy { after_failed_ticks: 3, ..ReleasePolicy::default() };
+        let mut w = GraspWatch::default();
+        assert!(w.observe(&p, tick(1, true, Some(0.0))).is_none());
+        assert!(w.observe(&p, tick(2, true, Some(0.0))).is_none());
+        assert!(w.observe(&p, tick(3, false, Some(0.0))).is_none(), "a solved tick restarts the count");
+        assert!(w.observe(&p, tick(4, true, Some(0.0))).is_none());
+        assert!(w.observe(&p, tick(5, true, Some(0.0))).is_none());
+        let r = w.observe(&p, tick(6, true, Some(0.0))).expect("three failed ticks in a row").clone();
+        assert_eq!(r.tick, 6);
+        assert!(r.note.contains("failed 3 ticks"), "{}", r.note);
+        assert!(w.observe(&p, tick(7, true, Some(0.0))).is_none(), "released once");
+        assert_eq!(w.released(), Some(&r));
+    }
+
+    #[test]
+    fn a_slipped_hand_releases_at_once_and_opening_the_grasp_rearms() {
+        let p = ReleasePolicy::default();
+        let mut w = GraspWatch::default();
+        assert!(w.observe(&p, tick(1, false, Some(0.019))).is_none());
+        assert!(w.observe(&p, tick(2, false, Some(0.021))).expect("past 2 cm").note.contains("21.0 mm"));
+        w.rearm(true);
+        assert!(w.released().is_some(), "still in grasp: still released");
+        w.rearm(false);
+        assert!(w.released().is_none(), "the grasp was opened");
+        assert!(w.observe(&p, tick(3, true, None)).is_none(), "no grasp modelled, one failed tick");
+    }
+
+    #[test]
+    fn zero_limits_never_release() {
+        let p = ReleasePolicy { after_failed_ticks: 0, max_fit_residual: 0.0, retreat: 0.05 };
+        let mut w = GraspWatch::default();
+        for t in 0..1000 {
+            assert!(w.observe(&p, tick(t, true, Some(1.0))).is_none());
+        }
+    }
+}
