@@ -161,6 +161,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
             f_min_foot: s.min_foot_force,
             f_min_hand: s.min_hand_force,
             dt: 1.0 / s.control_hz,
+            release: s.release,
             object_pose_at_grasp: Some(Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation))),
             ..MqpConfig::default()
         }),

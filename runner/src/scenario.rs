@@ -67,7 +67,7 @@ pub struct Scenario {
     /// `false` runs anyway (to watch a refused load).
     #[serde(default = "default_capacity_check")]
     pub capacity_check: bool,
-    /// When PIDC lets go of an object it cannot hold (`release.after_failed_ticks`: control
+    /// When the controller (PIDC or MQP) lets go of an object it cannot hold (`release.after_failed_ticks`: control
     /// ticks of failed QPs in a row; `release.max_fit_residual`: m; 0 turns a limit off).
     #[serde(default)]
     pub release: coordinator::units::release::ReleasePolicy,

@@ -5,6 +5,7 @@
 use nalgebra::{Isometry3, Matrix3};
 
 use crate::units::impedance::Gains;
+use crate::units::release::ReleasePolicy;
 use crate::ControllerError;
 
 /// Parameters of the MQP controller. In a controller file they follow `kind = "mqp"` (see
@@ -21,10 +22,15 @@ pub struct MqpConfig {
     pub object_gains: Gains,
     pub torso_gains: Gains,
     pub swing_gains: Gains,
+    /// Free hands (not in grasp, or let go of) hold their pose.
+    pub hand_gains: Gains,
     /// Weights of each task's squared acceleration error in the objective.
     pub object_weight: f64,
     pub torso_weight: f64,
     pub swing_weight: f64,
+    pub hand_weight: f64,
+    /// When the team lets go of an object it cannot hold (as PIDC's).
+    pub release: ReleasePolicy,
     /// Regularisation: weights of `|qdd|^2`, `|lambda|^2`, `|tau|^2` (small).
     pub regularisation_qdd: f64,
     pub regularisation_lambda: f64,
@@ -57,9 +63,13 @@ impl Default for MqpConfig {
             object_gains: Gains::new(&[1500.0, 1500.0, 1500.0, 400.0, 400.0, 400.0], &[150.0, 150.0, 150.0, 140.0, 140.0, 140.0]),
             torso_gains: Gains::new(&[4000.0, 4000.0, 4000.0, 3000.0, 3000.0, 3000.0], &[200.0, 200.0, 200.0, 125.0, 125.0, 125.0]),
             swing_gains: Gains::new(&[3500.0, 3500.0, 3500.0], &[20.0, 20.0, 20.0]),
+            // Acceleration gains: about 1.6 Hz, critically damped.
+            hand_gains: Gains::new(&[100.0; 6], &[20.0; 6]),
             object_weight: 1.0,
             torso_weight: 1.0,
             swing_weight: 1.0,
+            hand_weight: 0.1,
+            release: ReleasePolicy::default(),
             regularisation_qdd: 1e-6,
             regularisation_lambda: 1e-8,
             regularisation_tau: 1e-6,
@@ -82,7 +92,7 @@ impl MqpConfig {
     /// Gains of the right sizes, finite and non-negative; weights, masses, forces and limits sane.
     pub fn check(&self) -> Result<(), ControllerError> {
         let bad = |what: &str, why: String| Err(ControllerError::Config(format!("{what}: {why}")));
-        for (what, g, n) in [("object_gains", &self.object_gains, 6), ("torso_gains", &self.torso_gains, 6), ("swing_gains", &self.swing_gains, 3)] {
+        for (what, g, n) in [("object_gains", &self.object_gains, 6), ("torso_gains", &self.torso_gains, 6), ("swing_gains", &self.swing_gains, 3), ("hand_gains", &self.hand_gains, 6)] {
             if let Err(why) = g.check(n) {
                 return bad(what, why);
             }
@@ -94,6 +104,7 @@ impl MqpConfig {
             ("object_weight", self.object_weight),
             ("torso_weight", self.torso_weight),
             ("swing_weight", self.swing_weight),
+            ("hand_weight", self.hand_weight),
             ("regularisation_qdd", self.regularisation_qdd),
             ("regularisation_lambda", self.regularisation_lambda),
             ("regularisation_tau", self.regularisation_tau),
@@ -114,6 +125,9 @@ impl MqpConfig {
             if !(x.is_finite() && x > 0.0 && x <= 1.0) {
                 return bad(what, format!("{x} must be in (0, 1]"));
             }
+        }
+        if let Err(why) = self.release.check() {
+            return bad("release", why);
         }
         if self.max_iter == 0 {
             return bad("max_iter", "must be positive".into());

@@ -42,8 +42,10 @@ pub use report::{MqpReport, MqpTiming};
 use crate::linalg::zeros_v;
 use crate::pidc::stages::contacts::{contact_jacobian, contact_list};
 use crate::pidc::stages::limits::torque_limits;
-use crate::pidc::stages::tasks::Targets;
+use crate::units::targets::Targets;
 use crate::units::grasp::GraspTracker;
+use crate::pidc::report::set_note;
+use crate::units::release::{GraspWatch, TickOutcome};
 use crate::{ControllerError, PidcConfig, TeamController};
 use problem::ProblemInput;
 use tasks::{task_rows, TaskInput};
@@ -58,6 +60,8 @@ pub struct Mqp {
     references: Option<TaskReferences>,
     targets: Targets,
     grasp: GraspTracker,
+    /// When the team lets go of the object ([`crate::units::release`]).
+    watch: GraspWatch,
     report: MqpReport,
     /// The last valid solution's torque (empty before the first).
     last_tau: nalgebra::DVector<f64>,
@@ -77,6 +81,7 @@ impl Mqp {
             references: None,
             targets: Targets::default(),
             grasp: GraspTracker::default(),
+            watch: GraspWatch::default(),
             report: MqpReport::default(),
             last_tau: nalgebra::DVector::zeros(0),
             valid: false,
@@ -115,7 +120,10 @@ impl Mqp {
         self.valid = false;
         let start = Instant::now();
         let us = || start.elapsed().as_secs_f64() * 1e6;
-        let Mqp { config: cfg, contact_parameters, descriptions, expected, references, targets, grasp, report: r, last_tau, n_jdv, .. } = self;
+        let Mqp { config: cfg, contact_parameters, descriptions, expected, references, targets, grasp, watch, report: r, last_tau, n_jdv, .. } = self;
+        // Degrade, never collapse: once the team has let go of the object, every hand is free.
+        watch.rearm(tick.iter().any(|t| t.hand_in_grasp));
+        r.team.hands_released = watch.released().is_some();
         // §III-A: the team; torque limits (eq. original_torque_limit); the grasp (eqs.
         // graspmatrix, jacobian_cee, obj_jacobian); J_c (eq. jacobian_c).
         r.team.assemble_into(tick, expected.as_deref(), false)?;
@@ -160,6 +168,9 @@ impl Mqp {
         } else {
             r.fallback = Some(fallback_torque(r, last_tau));
         }
+        // Degrade, never collapse: let go of an object the team cannot hold.
+        let outcome = TickOutcome::of(tick[0].header.tick, &r.team, r.grasp.as_ref(), r.fallback.is_some());
+        set_note(&mut r.release, watch.after_tick(&cfg.release, outcome, &r.team, r.grasp.as_ref(), targets, grasp));
         r.timing = MqpTiming { build_us: t_build, solve_us: r.outcome.solve_us, total_us: us() };
         self.valid = true;
         Ok(&self.report)

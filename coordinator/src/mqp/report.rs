@@ -46,6 +46,9 @@ pub struct MqpReport {
     pub outcome: SolveOutcome,
     /// Why the torque came from the fallback, if it did.
     pub fallback: Option<String>,
+    /// Why the hands are free while the contact sets hold the object
+    /// ([`crate::units::release`]); `None` while the grasp holds.
+    pub release: Option<String>,
     pub timing: MqpTiming,
 }
 
@@ -135,7 +138,7 @@ impl MqpReport {
         d.constraint_residual = if residual.is_finite() { residual } else { f64::MAX };
         d.object_estimate = self.grasp.as_ref().map(|g| protocol::Pose { position: g.object.translation.vector.into(), orientation: quat_wxyz(&g.object.rotation.to_rotation_matrix()) });
         d.grasp_slip = self.grasp.as_ref().map_or(0.0, |g| g.fit_residual);
-        d.fallback.clone_from(&self.fallback);
+        d.fallback.clone_from(if self.fallback.is_some() { &self.fallback } else { &self.release });
     }
 }
 

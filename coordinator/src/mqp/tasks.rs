@@ -6,12 +6,12 @@
 //! Targets, errors and the object pose are the coordinator's units (the same
 //! [`Targets`] rules as PIDC: a task without a reference holds the pose it had when first seen).
 
-use nalgebra::{DMatrix, DVector, Isometry3, Translation3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Vector3, Vector6};
 use protocol::TaskReferences;
 
 use crate::linalg::{zeros, zeros_v};
 use crate::mqp::MqpConfig;
-use crate::pidc::stages::tasks::Targets;
+use crate::units::targets::{frame_pose, Targets};
 use crate::team::Team;
 use crate::units::grasp::GraspTerms;
 use crate::units::impedance::{point_error, pose_error, Gains, TaskError};
@@ -59,7 +59,8 @@ pub struct TaskInput<'a> {
 /// a grasp), which the report keeps.
 pub fn task_rows(inp: &TaskInput, targets: &mut Targets, rows: &mut TaskRows) -> Result<Vector6<f64>, ControllerError> {
     let TaskInput { team, grasp, references: refs, config: cfg } = inp;
-    let k = grasp.map_or(0, |g| g.j_o.nrows()) + team.torsos.iter().chain(&team.swing_feet).map(|t| t.jacobian.nrows()).sum::<usize>();
+    let frames = team.torsos.iter().chain(&team.swing_feet).chain(&team.free_hands);
+    let k = grasp.map_or(0, |g| g.j_o.nrows()) + frames.map(|t| t.jacobian.nrows()).sum::<usize>();
     rows.begin(k, team.n);
     let mut object_acc_d = Vector6::zeros();
     if let Some(g) = grasp {
@@ -70,10 +71,8 @@ pub fn task_rows(inp: &TaskInput, targets: &mut Targets, rows: &mut TaskRows) ->
     }
     for tf in &team.torsos {
         let id = &team.robots[tf.robot].id;
-        let x = Isometry3::from_parts(Translation3::from(tf.position), UnitQuaternion::from_rotation_matrix(&tf.rotation));
+        let (x, twist) = frame_pose(tf, &team.velocity);
         let (x_d, tw_d, acc_d) = targets.torso(*refs, id, &x);
-        let mut twist = Vector6::zeros();
-        twist.gemv(1.0, &tf.jacobian, &team.velocity, 0.0);
         let err = pose_error(&x, &twist, &x_d, &tw_d, &acc_d);
         rows.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.torso_gains, cfg.torso_weight);
     }
@@ -84,6 +83,13 @@ pub fn task_rows(inp: &TaskInput, targets: &mut Targets, rows: &mut TaskRows) ->
         vel.gemv(1.0, &tf.jacobian, &team.velocity, 0.0);
         let err = point_error(&tf.position, &vel, &p_d, &v_d, &a_d);
         rows.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.swing_gains, cfg.swing_weight);
+    }
+    targets.keep_free_hands(team);
+    for tf in &team.free_hands {
+        let (x, twist) = frame_pose(tf, &team.velocity);
+        let (x_d, tw_d, acc_d) = targets.free_hand(&team.robots[tf.robot].id, &x);
+        let err = pose_error(&x, &twist, &x_d, &tw_d, &acc_d);
+        rows.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.hand_gains, cfg.hand_weight);
     }
     if rows.at != k {
         return Err(ControllerError::Dimension { what: "mqp tasks".into(), detail: format!("{} of {k} task rows filled", rows.at) });

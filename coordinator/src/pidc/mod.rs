@@ -152,21 +152,9 @@ impl Pidc {
         motion_torque(&r.proj, &r.tau_m, &mut r.tau0, &mut ws.p_tau_m);
         let t_imp = us();
         let (build_us, qp_us) = contact_forces(r, ws, descriptions, cfg)?;
-        let outcome = TickOutcome {
-            tick: tick[0].header.tick,
-            hands_in_grasp: !r.team.hands.is_empty(),
-            qp_failed: r.fallback.is_some(),
-            fit_residual: r.grasp.as_ref().map(|g| g.fit_residual),
-        };
-        if let Some(release) = watch.observe(&cfg.release, outcome) {
-            tracing::warn!(tick = release.tick, "{}", release.note);
-            if let Some(g) = &r.grasp {
-                targets.let_go(&r.team, &g.object.translation.vector, cfg.release.retreat);
-            }
-            grasp.release();
-            targets.release_object();
-        }
-        set_note(&mut r.release, watch.released().map(|w| w.note.as_str()));
+        // Degrade, never collapse: let go of an object the team cannot hold.
+        let outcome = TickOutcome::of(tick[0].header.tick, &r.team, r.grasp.as_ref(), r.fallback.is_some());
+        set_note(&mut r.release, watch.after_tick(&cfg.release, outcome, &r.team, r.grasp.as_ref(), targets, grasp));
         r.timing = Timing {
             assembly_us: t_asm,
             projections_us: t_proj - t_asm,

@@ -1,10 +1,11 @@
 //! Units of the team problem that any team controller composes (mc_rtc's `MetaTask` and
 //! `ConstraintSet` in spirit): the Cartesian impedance tasks ([`impedance`]), the rigid grasp
-//! ([`grasp`]), the PIDC projections ([`projection`]) and when to let go of the object
-//! ([`release`]). Each computes into buffers kept
+//! ([`grasp`]), the PIDC projections ([`projection`]), the tasks' targets ([`targets`]) and
+//! when to let go of the object ([`release`]). Each computes into buffers kept
 //! between ticks; none knows which controller uses it.
 
 pub mod grasp;
 pub mod impedance;
 pub mod projection;
 pub mod release;
+pub mod targets;

@@ -20,6 +20,10 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::team::Team;
+use crate::units::grasp::{GraspTerms, GraspTracker};
+use crate::units::targets::Targets;
+
 /// When the team lets go of the object. Either limit at 0 is never reached.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -78,6 +82,13 @@ pub struct TickOutcome {
     pub fit_residual: Option<f64>,
 }
 
+impl TickOutcome {
+    /// The outcome of a tick of `team` (its hands in grasp as modelled) with `grasp`'s fit.
+    pub fn of(tick: u64, team: &Team, grasp: Option<&GraspTerms>, qp_failed: bool) -> Self {
+        TickOutcome { tick, hands_in_grasp: !team.hands.is_empty(), qp_failed, fit_residual: grasp.map(|g| g.fit_residual) }
+    }
+}
+
 /// The latch of [`ReleasePolicy`] (see the module docs).
 #[derive(Debug, Clone, Default)]
 pub struct GraspWatch {
@@ -97,6 +108,21 @@ impl GraspWatch {
             self.failed_run = 0;
             self.released = None;
         }
+    }
+
+    /// After a tick of `team` with `grasp` (the controllers' last step): [`GraspWatch::observe`];
+    /// on the tick the team lets go, the hands' targets back away from the object
+    /// ([`Targets::let_go`]) and the grasp is forgotten. The release in force, as its note.
+    pub fn after_tick(&mut self, policy: &ReleasePolicy, t: TickOutcome, team: &Team, grasp: Option<&GraspTerms>, targets: &mut Targets, tracker: &mut GraspTracker) -> Option<&str> {
+        if let Some(release) = self.observe(policy, t) {
+            tracing::warn!(tick = release.tick, "{}", release.note);
+            if let Some(g) = grasp {
+                targets.let_go(team, &g.object.translation.vector, policy.retreat);
+            }
+            tracker.release();
+            targets.release_object();
+        }
+        self.released.as_ref().map(|r| r.note.as_str())
     }
 
     /// After a tick: count failed ticks and check the fit; `Some` on the tick the team lets go.
