@@ -6,6 +6,7 @@ use std::time::{Duration, Instant};
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, MemberEvent, Qos, TransportError, TypedPublisher};
 use protocol::{CoordinatorMode, CoordinatorStatus, DynamicsTerms, Header, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
+use protocol::validate::Validate;
 use tokio::sync::watch;
 use zenoh::Session;
 
@@ -298,7 +299,15 @@ async fn publish_commands(
             command_pubs.insert(robot.to_string(), TypedPublisher::declare(session, key, Qos::HotPath).await?);
         }
         let publisher = command_pubs.get_mut(robot).expect("declared above");
-        publisher.put(cmd).await?;
+        match cmd.validate() {
+            Ok(()) => publisher.put(cmd).await?,
+            Err(e) => {
+                // A controller's bad message never ends the coordinator: that robot holds.
+                counters.controller_errors += 1;
+                tracing::error!(robot, tick = cmd.header.tick, "invalid command from the controller ({e}); the robot holds its posture this tick");
+                publisher.put(&TorqueCommand::hold(&cfg.team, robot, cmd.header.tick)).await?;
+            }
+        }
         counters.commands_sent += 1;
     }
     Ok(())

@@ -371,6 +371,24 @@ fn contact_set_changes_and_more_robots() {
     assert_eq!(out.len(), 4);
 }
 
+/// The service reuses the command buffer; after a tick of hold orders (a controller error)
+/// the controller's next commands must be torques again, not holds carrying torques (which the
+/// protocol refuses: an eight-robot run lost its coordinator that way).
+#[test]
+fn commands_after_a_hold_tick_are_torques_again() {
+    let mut fx = Fixture::new();
+    let (terms, descs) = fx.static_team(2);
+    let mut c = controller(&descs, PidcConfig::default());
+    let mut out: Vec<protocol::TorqueCommand> = ["r1", "r2"].iter().map(|r| protocol::TorqueCommand::hold(common::TEAM, r, 0)).collect();
+    c.solve(&terms, &mut out).expect("tick");
+    assert_eq!(out.len(), 2);
+    for cmd in &out {
+        assert!(!cmd.hold, "{} still a hold order", cmd.header.robot_id());
+        assert!(!cmd.tau.is_empty());
+        protocol::validate::Validate::validate(cmd).expect("a valid torque command");
+    }
+}
+
 #[test]
 fn controller_configuration_from_toml_keeps_defaults_and_refuses_bad_values() {
     let c = PidcConfig::from_toml("f_min_hand = 20.0\n[object_gains]\nkp = [1, 2, 3, 4, 5, 6]\nkd = [6, 5, 4, 3, 2, 1]\n").expect("partial file");

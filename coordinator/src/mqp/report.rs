@@ -87,6 +87,8 @@ impl MqpReport {
                 out.push(TorqueCommand { header: Header::new(&t.header.team, Some(&r.id), 0, 0), tau: Vec::new(), hold: false });
             }
             let cmd = &mut out[i];
+            // The message may be last tick's hold order (the service reuses the buffer).
+            cmd.hold = false;
             cmd.header.version = protocol::PROTOCOL_VERSION;
             set_string(&mut cmd.header.team, &t.header.team);
             match &mut cmd.header.robot {

@@ -73,6 +73,8 @@ impl TickReport {
             }
             let cmd = &mut out[k];
             set_header(&mut cmd.header, &t.header.team, Some(&r.id), t.header.tick, 0);
+            // The message may be last tick's hold order (the service reuses the buffer).
+            cmd.hold = false;
             cmd.tau.clear();
             cmd.tau.extend(r.actuated.iter().map(|&j| self.tau[j]));
         }
