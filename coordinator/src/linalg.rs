@@ -188,6 +188,13 @@ impl Pinv {
         );
         drop(scope);
         result.ok()?;
+        let finite = |m: &DMatrix<f64>| m.iter().all(|x| x.is_finite());
+        if !(self.s.iter().all(|x| x.is_finite()) && finite(&self.u) && finite(&self.v)) {
+            // Seen on one tick of an eight-robot run (its 192 x 144 P S, after the team let go
+            // of a beam it could not hold): faer's SVD reported success with NaN in its
+            // factors. nalgebra's SVD then, on this rare path (it allocates).
+            return Self::fallback(a, rel_tol, out);
+        }
         let smax = self.s.iter().cloned().fold(0.0, f64::max);
         let eps = (rel_tol * smax).max(1e-300);
         let mut rank = 0;
@@ -201,6 +208,22 @@ impl Pinv {
             self.v.column_mut(j).scale_mut(inv);
         }
         gemm(mat_mut(out), 0.0, 1.0, mat(&self.v), mat(&self.u).transpose());
+        Some(rank)
+    }
+}
+
+impl Pinv {
+    /// `out = a^+` by nalgebra's SVD (allocates), with the same rank rule; `None` if it fails.
+    fn fallback(a: MatRef<'_, f64>, rel_tol: f64, out: &mut DMatrix<f64>) -> Option<usize> {
+        let m = DMatrix::from_fn(a.nrows(), a.ncols(), |i, j| a[(i, j)]);
+        let svd = m.try_svd(true, true, f64::EPSILON, 0)?;
+        let smax = svd.singular_values.max();
+        let rank = svd.singular_values.iter().filter(|&&x| x > (rel_tol * smax).max(1e-300)).count();
+        let pinv = svd.pseudo_inverse((rel_tol * smax).max(1e-300)).ok()?;
+        if !pinv.iter().all(|x| x.is_finite()) {
+            return None;
+        }
+        out.copy_from(&pinv);
         Some(rank)
     }
 }
