@@ -215,6 +215,7 @@ impl Pinv {
 impl Pinv {
     /// `out = a^+` by nalgebra's SVD (allocates), with the same rank rule; `None` if it fails.
     fn fallback(a: MatRef<'_, f64>, rel_tol: f64, out: &mut DMatrix<f64>) -> Option<usize> {
+        zeros(out, a.ncols(), a.nrows());
         let m = DMatrix::from_fn(a.nrows(), a.ncols(), |i, j| a[(i, j)]);
         let svd = m.try_svd(true, true, f64::EPSILON, 0)?;
         let smax = svd.singular_values.max();
@@ -301,6 +302,30 @@ pub fn rotation_from_wxyz(q: &[f64; 4]) -> Rotation3<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fallback pseudo-inverse (nalgebra's SVD) satisfies the Moore-Penrose conditions
+    /// and keeps the rank rule of faer's path, on a rank-deficient matrix.
+    #[test]
+    fn the_fallback_pseudo_inverse_is_a_pseudo_inverse_of_the_same_rank() {
+        let mut seed = 12345u64;
+        let mut next = move || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let b = DMatrix::from_fn(12, 5, |_, _| next());
+        let c = DMatrix::from_fn(5, 9, |_, _| next());
+        let a = &b * &c; // 12 x 9, rank 5
+        let mut fast = DMatrix::zeros(0, 0);
+        let mut slow = DMatrix::zeros(0, 0);
+        let rank = Pinv::default().compute(mat(&a), 1e-10, &mut fast).expect("faer");
+        let rank_fallback = Pinv::fallback(mat(&a), 1e-10, &mut slow).expect("nalgebra");
+        assert_eq!((rank, rank_fallback), (5, 5));
+        let scale = a.amax();
+        assert!((&a * &slow * &a - &a).amax() < 1e-10 * scale, "A A+ A = A");
+        assert!((&slow * &a * &slow - &slow).amax() < 1e-10 * slow.amax(), "A+ A A+ = A+");
+        assert!((&a * &slow - (&a * &slow).transpose()).amax() < 1e-10, "A A+ symmetric");
+        assert!((&slow - &fast).amax() < 1e-8 * slow.amax(), "both paths agree");
+    }
 
     /// `exp(w) R_d` against `R_d` gives back `w` for angles below pi (the exponential map is
     /// nalgebra's `from_scaled_axis`, an independent formula).
