@@ -188,7 +188,11 @@ pub struct TypedPublisher<M> {
 impl<M: Message> TypedPublisher<M> {
     /// Declare a publisher on `key`.
     pub async fn declare(session: &Session, key: String, qos: Qos) -> Result<Self, TransportError> {
-        let builder = session.declare_publisher(key.clone());
+        let encoding = match M::WIRE {
+            crate::codec::Wire::Json => zenoh::bytes::Encoding::APPLICATION_JSON,
+            crate::codec::Wire::Binary => zenoh::bytes::Encoding::ZENOH_BYTES,
+        };
+        let builder = session.declare_publisher(key.clone()).encoding(encoding.with_schema(crate::codec::schema_id::<M>()));
         let builder = match qos {
             Qos::HotPath => builder
                 .express(true)
