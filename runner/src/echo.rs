@@ -1,0 +1,67 @@
+//! `team echo KEY`: every message on a key (wildcards allowed, e.g. `team/team/robot/*/state`)
+//! printed as one JSON line `{"key", "encoding", "message"}`, like `ros2 topic echo`. The
+//! message type comes from the key's shape ([`protocol::keys::kind_of`]), so binary hot-path
+//! messages print as JSON too.
+
+use std::io::Write;
+use std::time::Duration;
+
+use protocol::transport::{self, TransportError};
+use thiserror::Error;
+use zenoh::Session;
+
+/// Errors of `team echo`.
+#[derive(Debug, Error)]
+pub enum EchoError {
+    #[error(transparent)]
+    Transport(#[from] TransportError),
+    #[error("nothing on {key} for {waited:?} (is a run going, and reachable from here? see --connect)")]
+    Silent { key: String, waited: Duration },
+    #[error("writing the output: {0}")]
+    Output(String),
+}
+
+/// What to print.
+#[derive(Debug, Clone)]
+pub struct EchoOptions {
+    pub key: String,
+    /// Stop after this many messages.
+    pub count: Option<u64>,
+    /// Stop (with [`EchoError::Silent`] if nothing came at all) after this long without a
+    /// message.
+    pub wait: Duration,
+}
+
+/// One sample as a JSON line; samples whose type is unknown or that do not decode print
+/// with an `"error"` instead of the message.
+pub fn line(key: &str, encoding: &str, payload: &[u8]) -> serde_json::Value {
+    let decoded = match protocol::keys::kind_of(key) {
+        Some(kind) => protocol::codec::decode_to_json(kind, payload).map_err(|e| e.to_string()),
+        None => Err("no message type for this key".to_string()),
+    };
+    match decoded {
+        Ok(m) => serde_json::json!({ "key": key, "encoding": encoding, "message": m }),
+        Err(e) => serde_json::json!({ "key": key, "encoding": encoding, "error": e, "bytes": payload.len() }),
+    }
+}
+
+/// Print messages on `opts.key` to `out` until the count is reached or the key is silent for
+/// `opts.wait`; returns how many were printed.
+pub async fn echo(session: &Session, opts: &EchoOptions, out: &mut impl Write) -> Result<u64, EchoError> {
+    let queue = transport::subscribe_with_capacity(session, opts.key.clone(), 4096).await?;
+    let mut printed = 0u64;
+    while opts.count.is_none_or(|n| printed < n) {
+        let sample = match tokio::time::timeout(opts.wait, queue.recv_async()).await {
+            Ok(Ok(s)) => s,
+            Ok(Err(_)) => break,
+            Err(_) if printed == 0 => return Err(EchoError::Silent { key: opts.key.clone(), waited: opts.wait }),
+            Err(_) => break,
+        };
+        let bytes = sample.payload().to_bytes();
+        let v = line(sample.key_expr().as_str(), &sample.encoding().to_string(), &bytes);
+        writeln!(out, "{v}").map_err(|e| EchoError::Output(e.to_string()))?;
+        printed += 1;
+    }
+    out.flush().map_err(|e| EchoError::Output(e.to_string()))?;
+    Ok(printed)
+}
