@@ -65,3 +65,30 @@ pub async fn echo(session: &Session, opts: &EchoOptions, out: &mut impl Write) -
     out.flush().map_err(|e| EchoError::Output(e.to_string()))?;
     Ok(printed)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::{CoordinatorMode, CoordinatorStatus, Header, Pose, RobotState};
+
+    #[test]
+    fn binary_and_json_keys_print_as_json() {
+        let s = RobotState {
+            header: Header::new("t", Some("r1"), 5, 0),
+            base_pose: Pose::IDENTITY,
+            base_twist: [0.0; 6],
+            joint_positions: vec![0.5],
+            joint_velocities: vec![0.0],
+            time: 0.005,
+        };
+        let v = line("team/t/robot/r1/state", "zenoh/bytes;team.RobotState/v1", &protocol::encode(&s).unwrap());
+        assert_eq!(v["message"]["joint_positions"][0], 0.5);
+        assert_eq!(v["message"]["header"]["tick"], 5);
+        let st = CoordinatorStatus { header: Header::new("t", None, 9, 0), mode: CoordinatorMode::Running, members: vec![], ticks: 9, commands_sent: 0, deadline_misses: 0, fallbacks: 0, detail: String::new() };
+        let v = line("team/t/coordinator/status", "application/json", &protocol::encode(&st).unwrap());
+        assert_eq!(v["message"]["mode"], "Running");
+        // A payload of the wrong type, or a key without a type: an error line, no panic.
+        assert!(line("team/t/robot/r1/dynamics", "", &protocol::encode(&s).unwrap())["error"].is_string());
+        assert!(line("team/t/member/r1", "", b"x")["error"].is_string());
+    }
+}

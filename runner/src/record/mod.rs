@@ -159,7 +159,9 @@ impl Recorder {
     pub async fn start(plan: &Plan, opts: &RecordOptions) -> Result<Recorder, RecordError> {
         let ctx = foxglove::Context::new();
         let mcap_err = |e: String| RecordError::Mcap { path: opts.path.display().to_string(), reason: e };
-        let handle = ctx.mcap_writer().create_new_buffered_file(&opts.path).map_err(|e| mcap_err(e.to_string()))?;
+        // A run again into the same report folder replaces the recording.
+        let file = std::fs::File::create(&opts.path).map_err(|e| mcap_err(e.to_string()))?;
+        let handle = ctx.mcap_writer().create(std::io::BufWriter::new(file)).map_err(|e| mcap_err(e.to_string()))?;
         let live = match opts.live {
             Some(port) => Some(
                 foxglove::WebSocketServer::new()
