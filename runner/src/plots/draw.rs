@@ -111,8 +111,14 @@ pub fn decimate(points: &[(f64, f64)], buckets: usize) -> Vec<(f64, f64)> {
 
 /// Tick label text with as many decimals as the axis span needs, and no "-0".
 pub fn tick_label(v: f64, span: f64) -> String {
-    let step = span.abs().max(1e-12) / 5.0;
-    let decimals = (-step.log10().floor()).clamp(0.0, 9.0) as usize;
+    let step = span.abs().max(1e-300) / 5.0;
+    let decimals = (-step.log10().floor()).max(0.0) as usize;
+    if decimals > 4 {
+        // Tiny spans (sub-micrometre errors): scientific, short enough for the label area.
+        let scale = 10f64.powi(-(decimals as i32));
+        let r = (v / scale).round();
+        return if r == 0.0 { "0".into() } else { format!("{:.0}e-{decimals}", r) };
+    }
     let s = format!("{v:.decimals$}");
     if s.trim_start_matches('-').chars().all(|c| c == '0' || c == '.') {
         s.trim_start_matches('-').to_string()
@@ -161,7 +167,7 @@ fn draw_panels<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, title: &str, p
             .caption(&panel.title, ("sans-serif", 16))
             .margin(8)
             .x_label_area_size(36)
-            .y_label_area_size(70)
+            .y_label_area_size(85)
             .build_cartesian_2d(x0..x1, lo..hi)
             .map_err(|e| e.to_string())?;
         let (xs, ys) = (x1 - x0, hi - lo);
@@ -312,5 +318,9 @@ mod tests {
         assert_eq!(tick_label(0.0012, 0.004), "0.0012");
         assert_eq!(tick_label(1500.0, 4000.0), "1500");
         assert_ne!(tick_label(0.001, 0.004), tick_label(0.002, 0.004));
+        // Tiny spans: short scientific labels, distinct, no "-0".
+        assert_eq!(tick_label(2e-9, 1e-8), "2e-9");
+        assert_eq!(tick_label(-1e-12, 1e-8), "0");
+        assert_ne!(tick_label(1e-6, 5e-6), tick_label(2e-6, 5e-6));
     }
 }
