@@ -157,6 +157,13 @@ pub fn kind_of(key: &str) -> Option<crate::MessageKind> {
     }
 }
 
+/// Whether `key` (wildcards allowed) names liveliness tokens rather than messages:
+/// `team/{team}/member/{robot}` and `team/{team}/coordinator/alive`.
+pub fn is_liveliness(key: &str) -> bool {
+    let parts: Vec<&str> = key.split('/').collect();
+    parts.len() == 4 && parts[0] == ROOT && (parts[2] == "member" || (parts[2] == "coordinator" && parts[3] == "alive"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -177,6 +184,10 @@ mod tests {
         assert_eq!(kind_of(&ground_truth("t1").unwrap()), Some(K::GroundTruth));
         assert_eq!(kind_of(&contacts("t1", "r1").unwrap()), Some(K::ContactSet));
         assert_eq!(kind_of("team/t1/member/r2"), None);
+        assert_eq!(kind_of(&coordinator_alive("t1").unwrap()), None);
+        assert!(is_liveliness("team/t1/member/r2") && is_liveliness("team/t1/member/*"));
+        assert!(is_liveliness(&coordinator_alive("t1").unwrap()));
+        assert!(!is_liveliness(&coordinator_status("t1").unwrap()) && !is_liveliness("team/t1/robot/r2/state"));
         assert_eq!(kind_of("team/t1/robot/r2/state/extra"), None);
     }
 

@@ -293,8 +293,9 @@ async fn declare_token(session: &Session, key: String) -> Result<zenoh::liveline
     session.liveliness().declare_token(key.clone()).await.map_err(|e| zenoh_err("declare_token", &key, e))
 }
 
-/// The liveliness tokens on `key`: those present first (history), then their comings and goings.
-async fn watch_liveliness(session: &Session, key: String) -> Result<SampleQueue, TransportError> {
+/// The liveliness tokens on `key` (wildcards allowed): those present first (history), then
+/// their comings and goings (a `Put` sample when one comes, a `Delete` when it goes).
+pub async fn watch_liveliness(session: &Session, key: String) -> Result<SampleQueue, TransportError> {
     session
         .liveliness()
         .declare_subscriber(key.clone())

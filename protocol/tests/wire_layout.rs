@@ -63,3 +63,25 @@ fn tool_facing_messages_are_json_with_the_version_checked() {
     assert!(decode::<CoordinatorStatus>(b"{\"header\": 3}").is_err());
     assert!(decode::<CoordinatorStatus>(b"\xff\xfe not json").is_err());
 }
+
+#[test]
+fn torque_command_bytes_are_the_documented_ones() {
+    // WIRE.md's TorqueCommand examples: a hold order, then one torque of 1.5 N m.
+    let head = [0x01, 0x01, 0x74, 0x01, 0x02, 0x72, 0x31, 0xFB, 0x2C, 0x01, 0x00];
+    let hold = protocol::TorqueCommand::hold("t", "r1", 300);
+    let mut want: Vec<u8> = vec![0x54, 0x51, 0x01, 0x00, 0x03, 0x00];
+    want.extend(head);
+    want.extend([0x00, 0x01]);
+    assert_eq!(encode(&hold).unwrap(), want);
+    assert_eq!(decode::<protocol::TorqueCommand>(&want).unwrap(), hold);
+    let torques = protocol::TorqueCommand { tau: vec![1.5], hold: false, ..hold.clone() };
+    let mut want: Vec<u8> = vec![0x54, 0x51, 0x01, 0x00, 0x03, 0x00];
+    want.extend(head);
+    want.push(0x01);
+    want.extend(f(1.5));
+    assert_eq!(&f(1.5), &[0, 0, 0, 0, 0, 0, 0xF8, 0x3F]);
+    want.push(0x00);
+    assert_eq!(encode(&torques).unwrap(), want);
+    // A hold order that carries torques is refused.
+    assert!(encode(&protocol::TorqueCommand { hold: true, ..torques }).is_err());
+}
