@@ -1,7 +1,9 @@
 //! `team echo KEY`: every message on a key (wildcards allowed, e.g. `team/team/robot/*/state`)
 //! printed as one JSON line `{"key", "encoding", "message"}`, like `ros2 topic echo`. The
 //! message type comes from the key's shape ([`protocol::keys::kind_of`]), so binary hot-path
-//! messages print as JSON too.
+//! messages print as JSON too. Liveliness keys (`team/{team}/member/*`,
+//! `team/{team}/coordinator/alive`) carry no message: their tokens' comings and goings print as
+//! `{"key", "alive"}`.
 
 use std::io::Write;
 use std::time::Duration;
@@ -45,10 +47,22 @@ pub fn line(key: &str, encoding: &str, payload: &[u8]) -> serde_json::Value {
     }
 }
 
+/// A liveliness token's coming (`alive: true`) or going as a JSON line.
+pub fn token_line(key: &str, alive: bool) -> serde_json::Value {
+    serde_json::json!({ "key": key, "alive": alive })
+}
+
 /// Print messages on `opts.key` to `out` until the count is reached or the key is silent for
 /// `opts.wait`; returns how many were printed.
+/// Liveliness keys (`member/*`, `coordinator/alive`) print `{"key", "alive"}` per coming and
+/// going, the tokens present first.
 pub async fn echo(session: &Session, opts: &EchoOptions, out: &mut impl Write) -> Result<u64, EchoError> {
-    let queue = transport::subscribe_with_capacity(session, opts.key.clone(), 4096).await?;
+    let tokens = protocol::keys::is_liveliness(&opts.key);
+    let queue = if tokens {
+        transport::watch_liveliness(session, opts.key.clone()).await?
+    } else {
+        transport::subscribe_with_capacity(session, opts.key.clone(), 4096).await?
+    };
     let mut printed = 0u64;
     while opts.count.is_none_or(|n| printed < n) {
         let sample = match tokio::time::timeout(opts.wait, queue.recv_async()).await {
@@ -57,8 +71,11 @@ pub async fn echo(session: &Session, opts: &EchoOptions, out: &mut impl Write) -
             Err(_) if printed == 0 => return Err(EchoError::Silent { key: opts.key.clone(), waited: opts.wait }),
             Err(_) => break,
         };
-        let bytes = sample.payload().to_bytes();
-        let v = line(sample.key_expr().as_str(), &sample.encoding().to_string(), &bytes);
+        let v = if tokens {
+            token_line(sample.key_expr().as_str(), sample.kind() == zenoh::sample::SampleKind::Put)
+        } else {
+            line(sample.key_expr().as_str(), &sample.encoding().to_string(), &sample.payload().to_bytes())
+        };
         writeln!(out, "{v}").map_err(|e| EchoError::Output(e.to_string()))?;
         printed += 1;
     }

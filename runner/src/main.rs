@@ -58,8 +58,10 @@ enum Command {
         out: Option<PathBuf>,
     },
     /// Print every message on a Zenoh key as JSON lines (wildcards allowed), like
-    /// `ros2 topic echo`: e.g. `team echo team/team/coordinator/status --count 1`. Connects to
-    /// the hub of a distributed run by default (see --connect).
+    /// `ros2 topic echo`: e.g. `team echo team/team/coordinator/status --count 1`. Liveliness
+    /// keys (team/team/member/*, team/team/coordinator/alive) print their tokens' comings and
+    /// goings as {"key", "alive"}. Connects to the hub of a distributed run by default (see
+    /// --connect).
     Echo {
         /// Key expression, e.g. team/team/robot/*/state.
         key: String,
