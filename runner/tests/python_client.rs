@@ -2,7 +2,7 @@
 //! (eclipse-zenoh from PyPI and the standard library, no project code) connects to a session
 //! on which the coordinator's status and diagnostics are published through the project's
 //! transport, and decodes both from their JSON. The script's Python environment is made once
-//! under `target/py-client` (`python3 -m venv`, `pip install eclipse-zenoh==1.10.*`); without
+//! under `target/py-client` by `scripts/setup-python-client.sh` (eclipse-zenoh pinned); without
 //! python3 or PyPI the test fails and says so.
 
 use std::path::{Path, PathBuf};
@@ -18,25 +18,13 @@ fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("repo root").to_path_buf()
 }
 
-/// The venv's python with eclipse-zenoh, made if needed.
+/// The venv's python with eclipse-zenoh: `scripts/setup-python-client.sh` makes it (scripts/test.sh
+/// runs it first; here again, it returns at once when the pinned version is there).
 fn python() -> PathBuf {
-    let venv = repo().join("target/py-client");
-    let py = venv.join("bin/python");
-    let has_zenoh = |py: &Path| Command::new(py).args(["-c", "import zenoh"]).status().map(|s| s.success()).unwrap_or(false);
-    if py.exists() && has_zenoh(&py) {
-        return py;
-    }
-    let ok = Command::new("python3").args(["-m", "venv"]).arg(&venv).status().map(|s| s.success()).unwrap_or(false);
-    assert!(ok, "python3 -m venv {} failed: this test needs python3 with the venv module", venv.display());
-    let pip = Command::new(venv.join("bin/pip")).args(["install", "--quiet", "eclipse-zenoh==1.10.*"]).output().expect("pip runs");
-    assert!(
-        pip.status.success(),
-        "pip could not install eclipse-zenoh==1.10.* into {} (is PyPI reachable?): {}",
-        venv.display(),
-        String::from_utf8_lossy(&pip.stderr)
-    );
-    assert!(has_zenoh(&py), "eclipse-zenoh installed but `import zenoh` fails");
-    py
+    let script = repo().join("scripts/setup-python-client.sh");
+    let out = Command::new("bash").arg(&script).output().expect("bash runs");
+    assert!(out.status.success(), "{} failed: {}", script.display(), String::from_utf8_lossy(&out.stderr));
+    repo().join("target/py-client/bin/python")
 }
 
 fn free_port() -> u16 {
@@ -67,7 +55,7 @@ async fn a_python_client_decodes_status_and_diagnostics() {
         let header = Header::new(TEAM, None, tick, protocol::wall_clock_ns());
         let st = CoordinatorStatus { header: header.clone(), mode: CoordinatorMode::Running, members: vec!["r1".into(), "r2".into()], ticks: tick, commands_sent: 2 * tick, deadline_misses: 0, fallbacks: 0, detail: String::new() };
         let contacts = vec![ContactWrench { robot: "r1".into(), frame: "hand".into(), wrench: vec![1.0, 2.0, 30.5, 0.0, 0.0, 0.0] }];
-        let d = TickDiagnostics { header, qp_status: QpStatus::Solved, qp_iterations: 9, qp_solve_us: 123.5, assembly_us: 40.0, total_us: 210.0, contacts, constraint_residual: 1e-9, object_estimate: None };
+        let d = TickDiagnostics { header, qp_status: QpStatus::Solved, qp_iterations: 9, qp_solve_us: 123.5, assembly_us: 40.0, total_us: 210.0, contacts, constraint_residual: 1e-9, object_estimate: None, grasp_slip: 0.002, fallback: None };
         status_pub.put(&st).await.unwrap();
         diag_pub.put(&d).await.unwrap();
         tick += 1;
@@ -80,5 +68,5 @@ async fn a_python_client_decodes_status_and_diagnostics() {
     assert!(stdout.contains(&format!("status encoding={} mode=Running", schema("CoordinatorStatus"))), "{stdout}");
     assert!(stdout.contains("members=['r1', 'r2']"), "{stdout}");
     assert!(stdout.contains(&format!("diagnostics encoding={}", schema("TickDiagnostics"))), "{stdout}");
-    assert!(stdout.contains("qp_status=Solved qp_solve_us=123.5 contacts=1"), "{stdout}");
+    assert!(stdout.contains("qp_status=Solved qp_solve_us=123.5 contacts=1 grasp_slip=0.002 fallback=None"), "{stdout}");
 }

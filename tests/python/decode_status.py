@@ -38,7 +38,7 @@ def main():
             if kind == "status":
                 print(f"status encoding={encoding} mode={msg['mode']} ticks={msg['ticks']} members={msg['members']} version={msg['header']['version']}", flush=True)
             elif kind == "diagnostics":
-                print(f"diagnostics encoding={encoding} tick={msg['header']['tick']} qp_status={msg['qp_status']} qp_solve_us={msg['qp_solve_us']} contacts={len(msg['contacts'])}", flush=True)
+                print(f"diagnostics encoding={encoding} tick={msg['header']['tick']} qp_status={msg['qp_status']} qp_solve_us={msg['qp_solve_us']} contacts={len(msg['contacts'])} grasp_slip={msg['grasp_slip']} fallback={msg['fallback']}", flush=True)
             if {"status", "diagnostics"} <= seen.keys():
                 done.set()
 
