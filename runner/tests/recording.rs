@@ -1,7 +1,7 @@
 //! A recorded run read back with an independent reader (the `mcap` crate's, not the foxglove
 //! SDK that wrote it): the channels are named after the Zenoh keys with JSON Schemas, the 3-D
 //! view has Foxglove's well-known schemas, every tick's messages are there, nothing was
-//! dropped; and `team report run.mcap` (the replay) gives the live run's metrics exactly.
+//! dropped, the chunks are zstd-compressed; and `team report run.mcap` (the replay) gives the live run's metrics exactly.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -44,6 +44,12 @@ fn a_recorded_run_reads_back_and_replays_to_the_same_metrics() {
 
     let bytes = std::fs::read(dir.join("run.mcap")).unwrap();
     let ch = channels(&bytes);
+    // The chunks are zstd-compressed, and it pays (JSON of every tick compresses well).
+    let summary = mcap::Summary::read(&bytes).expect("a summary").expect("an indexed file");
+    assert!(!summary.chunk_indexes.is_empty());
+    assert!(summary.chunk_indexes.iter().all(|c| c.compression == "zstd"), "{:?}", summary.chunk_indexes.iter().map(|c| &c.compression).collect::<Vec<_>>());
+    let (packed, plain): (u64, u64) = summary.chunk_indexes.iter().fold((0, 0), |(p, u), c| (p + c.compressed_size, u + c.uncompressed_size));
+    assert!(packed * 5 < plain, "zstd chunks: {packed} bytes for {plain}");
     let total = plan.total_ticks();
     let json = |topic: &str, schema: &str| {
         let (name, enc, msg_enc, n) = ch.get(topic).unwrap_or_else(|| panic!("no channel {topic}: {:?}", ch.keys()));

@@ -161,7 +161,7 @@ impl Recorder {
         let mcap_err = |e: String| RecordError::Mcap { path: opts.path.display().to_string(), reason: e };
         // A run again into the same report folder replaces the recording.
         let file = std::fs::File::create(&opts.path).map_err(|e| mcap_err(e.to_string()))?;
-        let handle = ctx.mcap_writer().create(std::io::BufWriter::new(file)).map_err(|e| mcap_err(e.to_string()))?;
+        let handle = ctx.mcap_writer_with_options(write_options()).create(std::io::BufWriter::new(file)).map_err(|e| mcap_err(e.to_string()))?;
         let live = match opts.live {
             Some(port) => Some(
                 foxglove::WebSocketServer::new()
@@ -230,6 +230,12 @@ impl Recorder {
         }
         Ok(RecordingSummary { path: self.path.clone(), messages: counts.messages, dropped, failed: counts.failed, bytes })
     }
+}
+
+/// The MCAP file's options: zstd-compressed chunks (the default chunk size, 1 MiB), compressed
+/// on the writer thread itself (no compression threads: the run's processes keep the cores).
+fn write_options() -> foxglove::McapWriteOptions {
+    foxglove::McapWriteOptions::new().compression(Some(mcap::Compression::Zstd)).compression_threads(0)
 }
 
 /// The [`RUN_METADATA`] record.
