@@ -24,7 +24,7 @@ pub const MAX_RECOVERY_ERROR: f64 = 0.01;
 pub const RECOVERY_AFTER: f64 = 2.0;
 /// The CSV time series and plots keep at most this many samples per second (the metrics use
 /// every tick).
-pub const SERIES_HZ: f64 = 200.0;
+pub const SERIES_HZ: f64 = 25.0;
 
 /// Tracking of one pose task.
 #[derive(Debug, Clone, Serialize)]

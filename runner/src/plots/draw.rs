@@ -16,8 +16,9 @@ use crate::report::ReportError;
 /// `runner/assets/LICENSE-DejaVu.txt`), subset to Latin-1 and a few symbols.
 pub static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans-subset.ttf");
 
-/// Samples kept per line for drawing: two (min and max) per bucket.
-pub const BUCKETS: usize = 600;
+/// Samples kept per line for drawing: two (min and max) per bucket, about one per pixel
+/// column of a panel's plotting area (560 px panels).
+pub const BUCKETS: usize = 300;
 
 static REGISTER: Once = Once::new();
 
