@@ -81,6 +81,9 @@ pub struct Driver {
     log_progress: bool,
     /// The recorder's queue: every message the driver decoded or published.
     tap: Option<Tap>,
+    /// References of ticks below this went to the tap already (the first window is published
+    /// twice; the recording keeps one reference per tick).
+    tapped_refs: u64,
 }
 
 impl Driver {
@@ -105,7 +108,7 @@ impl Driver {
         } else {
             ProgressBar::hidden()
         };
-        Ok(Driver { truth, torques, diagnostics, status, refs_pub, plan, total: total_ticks, progress, log_progress: show_progress && !terminal, tap: None })
+        Ok(Driver { truth, torques, diagnostics, status, refs_pub, plan, total: total_ticks, progress, log_progress: show_progress && !terminal, tap: None, tapped_refs: 0 })
     }
 
     /// Hand every message the driver decodes or publishes to the recorder too.
@@ -118,8 +121,9 @@ impl Driver {
         for tick in from..to.min(self.total) {
             let refs = self.plan.for_tick(TEAM, tick);
             self.refs_pub.put(&refs).await?;
-            if let Some(tap) = &self.tap {
+            if let Some(tap) = self.tap.as_ref().filter(|_| tick >= self.tapped_refs) {
                 tap.send(&self.refs_pub.key(), Message::References(refs));
+                self.tapped_refs = tick + 1;
             }
         }
         Ok(())

@@ -44,12 +44,13 @@ fn a_recorded_run_reads_back_and_replays_to_the_same_metrics() {
 
     let bytes = std::fs::read(dir.join("run.mcap")).unwrap();
     let ch = channels(&bytes);
-    // The chunks are zstd-compressed, and it pays (JSON of every tick compresses well).
+    // The chunks are zstd-compressed, and it pays (S4's whole 10 s: 3.5 times smaller; the
+    // floats' low digits are what is left).
     let summary = mcap::Summary::read(&bytes).expect("a summary").expect("an indexed file");
     assert!(!summary.chunk_indexes.is_empty());
     assert!(summary.chunk_indexes.iter().all(|c| c.compression == "zstd"), "{:?}", summary.chunk_indexes.iter().map(|c| &c.compression).collect::<Vec<_>>());
     let (packed, plain): (u64, u64) = summary.chunk_indexes.iter().fold((0, 0), |(p, u), c| (p + c.compressed_size, u + c.uncompressed_size));
-    assert!(packed * 5 < plain, "zstd chunks: {packed} bytes for {plain}");
+    assert!(packed * 5 < plain * 2, "zstd chunks: {packed} bytes for {plain}");
     let total = plan.total_ticks();
     let json = |topic: &str, schema: &str| {
         let (name, enc, msg_enc, n) = ch.get(topic).unwrap_or_else(|| panic!("no channel {topic}: {:?}", ch.keys()));
@@ -57,9 +58,9 @@ fn a_recorded_run_reads_back_and_replays_to_the_same_metrics() {
         *n
     };
     assert_eq!(json("team/team/ground-truth", "team.GroundTruth"), total, "a ground truth per tick");
-    // References: the driver sends its first window again once the coordinator is heard of,
-    // so some ticks come twice; every tick has one.
-    assert!(json("team/team/references", "team.TaskReferences") >= total);
+    // References: one per tick (the driver sends its first window again once the coordinator
+    // is heard of; the recording keeps the first).
+    assert_eq!(json("team/team/references", "team.TaskReferences"), total);
     let mut ticks = std::collections::BTreeSet::new();
     for m in mcap::MessageStream::new(&bytes).unwrap().map(Result::unwrap).filter(|m| m.channel.topic == "team/team/references") {
         ticks.insert(serde_json::from_slice::<protocol::TaskReferences>(&m.data).unwrap().header.tick);
