@@ -73,6 +73,9 @@ pub struct Panel {
     pub lines: Vec<Line>,
 }
 
+/// A bucket's lowest or highest point so far, if any.
+type Point = Option<(f64, f64)>;
+
 /// The min and the max of each of `buckets` equal spans of x, in x order; series shorter than
 /// `2 * buckets` are returned as they are. Non-finite values are skipped.
 pub fn decimate(points: &[(f64, f64)], buckets: usize) -> Vec<(f64, f64)> {
@@ -85,7 +88,7 @@ pub fn decimate(points: &[(f64, f64)], buckets: usize) -> Vec<(f64, f64)> {
     let mut k = 0;
     for b in 0..buckets {
         let end = x0 + span * (b + 1) as f64 / buckets as f64;
-        let (mut lo, mut hi): (Option<(f64, f64)>, Option<(f64, f64)>) = (None, None);
+        let (mut lo, mut hi): (Point, Point) = (None, None);
         while k < points.len() && (points[k].0 <= end || b + 1 == buckets) {
             let p = points[k];
             if p.1.is_finite() {

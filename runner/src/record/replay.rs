@@ -28,8 +28,15 @@ pub enum ReplayError {
     Message { path: PathBuf, topic: String, reason: String },
     #[error("the recorded scenario: {0}")]
     Scenario(#[from] ScenarioError),
+    /// Boxed: a plan error is large, and every reading function returns this type.
     #[error("planning the recorded scenario: {0}")]
-    Plan(#[from] PlanError),
+    Plan(Box<PlanError>),
+}
+
+impl From<PlanError> for ReplayError {
+    fn from(e: PlanError) -> Self {
+        ReplayError::Plan(Box::new(e))
+    }
 }
 
 /// Evaluate a recording as `team run` evaluated the run: the recorded scenario planned again
