@@ -1,4 +1,9 @@
 //! Binary (hot path) and JSON (tools) encodings. See the crate docs for the format and why.
+//! Which one a message travels in is fixed per type ([`Message::WIRE`]): the hot path
+//! (state, dynamics terms, torque commands, contact sets) is binary, documented byte for byte
+//! in `protocol/WIRE.md`; what tools read (status, diagnostics, ground truth, references,
+//! perturbations, descriptions) is JSON with a published JSON Schema
+//! (`protocol/schemas/<Name>.json`).
 
 use bincode::Options;
 use serde::de::DeserializeOwned;
@@ -31,35 +36,53 @@ pub enum MessageKind {
     GroundTruth = 11,
 }
 
-/// A message that travels: it has a kind, a header and can validate itself.
+/// How a message type travels on the wire.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wire {
+    /// The 6-byte envelope and bincode (see the crate docs and `protocol/WIRE.md`); Zenoh
+    /// encoding `zenoh/bytes;team.<Name>/v<version>`.
+    Binary,
+    /// Compact JSON of the message (its JSON Schema: `protocol/schemas/<Name>.json`); Zenoh
+    /// encoding `application/json;team.<Name>/v<version>`. The version is the header's.
+    Json,
+}
+
+/// A message that travels: it has a kind, a wire format, a header and can validate itself.
 pub trait Message: Serialize + DeserializeOwned + Validate {
     const KIND: MessageKind;
     const NAME: &'static str;
+    const WIRE: Wire;
     fn header(&self) -> &Header;
 }
 
 macro_rules! message {
-    ($t:ident) => {
+    ($t:ident, $wire:ident) => {
         impl Message for $t {
             const KIND: MessageKind = MessageKind::$t;
             const NAME: &'static str = stringify!($t);
+            const WIRE: Wire = Wire::$wire;
             fn header(&self) -> &Header {
                 &self.header
             }
         }
     };
 }
-message!(RobotState);
-message!(DynamicsTerms);
-message!(TorqueCommand);
-message!(TaskReferences);
-message!(PerturbationRequest);
-message!(CoordinatorStatus);
-message!(TickDiagnostics);
-message!(AgentStatus);
-message!(RobotDescription);
-message!(ContactSet);
-message!(GroundTruth);
+message!(RobotState, Binary);
+message!(DynamicsTerms, Binary);
+message!(TorqueCommand, Binary);
+message!(ContactSet, Binary);
+message!(TaskReferences, Json);
+message!(PerturbationRequest, Json);
+message!(CoordinatorStatus, Json);
+message!(TickDiagnostics, Json);
+message!(AgentStatus, Json);
+message!(RobotDescription, Json);
+message!(GroundTruth, Json);
+
+/// The schema part of a message's Zenoh encoding: `team.<Name>/v<version>`.
+pub fn schema_id<M: Message>() -> String {
+    format!("team.{}/v{PROTOCOL_VERSION}", M::NAME)
+}
 
 fn options() -> impl Options {
     bincode::DefaultOptions::new()
@@ -81,6 +104,13 @@ pub fn encode<M: Message>(msg: &M) -> Result<Vec<u8>, ProtocolError> {
 /// already validated what they built.
 pub fn encode_into<M: Message>(msg: &M, out: &mut Vec<u8>) -> Result<(), ProtocolError> {
     out.clear();
+    if M::WIRE == Wire::Json {
+        serde_json::to_writer(&mut *out, msg).map_err(|e| ProtocolError::Malformed { kind: M::NAME, reason: e.to_string() })?;
+        if out.len() > MAX_MESSAGE_BYTES {
+            return Err(ProtocolError::Oversized { len: out.len(), max: MAX_MESSAGE_BYTES });
+        }
+        return Ok(());
+    }
     out.extend_from_slice(&MAGIC);
     out.extend_from_slice(&PROTOCOL_VERSION.to_le_bytes());
     out.push(M::KIND as u8);
@@ -102,6 +132,9 @@ pub fn decode<M: Message>(bytes: &[u8]) -> Result<M, ProtocolError> {
     if bytes.len() > MAX_MESSAGE_BYTES {
         return Err(ProtocolError::Oversized { len: bytes.len(), max: MAX_MESSAGE_BYTES });
     }
+    if M::WIRE == Wire::Json {
+        return decode_json(bytes);
+    }
     if bytes[0..2] != MAGIC {
         return Err(ProtocolError::BadMagic { found: [bytes[0], bytes[1]] });
     }
@@ -117,6 +150,38 @@ pub fn decode<M: Message>(bytes: &[u8]) -> Result<M, ProtocolError> {
         .map_err(|e| ProtocolError::Malformed { kind: M::NAME, reason: e.to_string() })?;
     msg.validate()?;
     Ok(msg)
+}
+
+/// A JSON wire message: the version in its header must be ours.
+fn decode_json<M: Message>(bytes: &[u8]) -> Result<M, ProtocolError> {
+    let msg: M = serde_json::from_slice(bytes).map_err(|e| ProtocolError::Malformed { kind: M::NAME, reason: e.to_string() })?;
+    let version = msg.header().version;
+    if version != PROTOCOL_VERSION {
+        return Err(ProtocolError::VersionMismatch { found: version, expected: PROTOCOL_VERSION });
+    }
+    msg.validate()?;
+    Ok(msg)
+}
+
+/// Decode a wire message of `kind` (either wire format) into its JSON value, for tools that
+/// print any key (`team echo`).
+pub fn decode_to_json(kind: MessageKind, bytes: &[u8]) -> Result<serde_json::Value, ProtocolError> {
+    fn value<M: Message>(bytes: &[u8]) -> Result<serde_json::Value, ProtocolError> {
+        serde_json::to_value(decode::<M>(bytes)?).map_err(|e| ProtocolError::Json(e.to_string()))
+    }
+    match kind {
+        MessageKind::RobotState => value::<RobotState>(bytes),
+        MessageKind::DynamicsTerms => value::<DynamicsTerms>(bytes),
+        MessageKind::TorqueCommand => value::<TorqueCommand>(bytes),
+        MessageKind::TaskReferences => value::<TaskReferences>(bytes),
+        MessageKind::PerturbationRequest => value::<PerturbationRequest>(bytes),
+        MessageKind::CoordinatorStatus => value::<CoordinatorStatus>(bytes),
+        MessageKind::TickDiagnostics => value::<TickDiagnostics>(bytes),
+        MessageKind::AgentStatus => value::<AgentStatus>(bytes),
+        MessageKind::RobotDescription => value::<RobotDescription>(bytes),
+        MessageKind::ContactSet => value::<ContactSet>(bytes),
+        MessageKind::GroundTruth => value::<GroundTruth>(bytes),
+    }
 }
 
 /// Validate and encode as pretty JSON, for tools and files.

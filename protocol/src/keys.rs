@@ -127,6 +127,43 @@ pub fn contacts(team: &str, robot_id: &str) -> Result<String, ProtocolError> {
     robot(team, robot_id, RobotTopic::Contacts)
 }
 
+/// The message type a key carries, from its shape (`None` for liveliness tokens and keys
+/// outside the tree).
+pub fn kind_of(key: &str) -> Option<crate::MessageKind> {
+    use crate::MessageKind as K;
+    let parts: Vec<&str> = key.split('/').collect();
+    if parts.first() != Some(&ROOT) || parts.len() < 3 {
+        return None;
+    }
+    match (parts[2], parts.len()) {
+        ("robot", 5) => match parts[4] {
+            "state" => Some(K::RobotState),
+            "dynamics" => Some(K::DynamicsTerms),
+            "command" | "torque" => Some(K::TorqueCommand),
+            "status" => Some(K::AgentStatus),
+            "description" => Some(K::RobotDescription),
+            "contacts" => Some(K::ContactSet),
+            _ => None,
+        },
+        ("coordinator", 4) => match parts[3] {
+            "status" => Some(K::CoordinatorStatus),
+            "diagnostics" => Some(K::TickDiagnostics),
+            _ => None,
+        },
+        ("references", 3) => Some(K::TaskReferences),
+        ("perturbation", 3) => Some(K::PerturbationRequest),
+        ("ground-truth", 3) => Some(K::GroundTruth),
+        _ => None,
+    }
+}
+
+/// Whether `key` (wildcards allowed) names liveliness tokens rather than messages:
+/// `team/{team}/member/{robot}` and `team/{team}/coordinator/alive`.
+pub fn is_liveliness(key: &str) -> bool {
+    let parts: Vec<&str> = key.split('/').collect();
+    parts.len() == 4 && parts[0] == ROOT && (parts[2] == "member" || (parts[2] == "coordinator" && parts[3] == "alive"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -140,6 +177,18 @@ mod tests {
         assert_eq!(robot_of("team/t1/robot/r9/command"), Some("r9"));
         assert_eq!(robot_of("team/t1/coordinator/status"), None);
         assert_eq!(robot_of("other/t1/robot/r9/command"), None);
+        use crate::MessageKind as K;
+        assert_eq!(kind_of("team/t1/robot/r2/torque"), Some(K::TorqueCommand));
+        assert_eq!(kind_of(&coordinator_status("t1").unwrap()), Some(K::CoordinatorStatus));
+        assert_eq!(kind_of(&diagnostics("t1").unwrap()), Some(K::TickDiagnostics));
+        assert_eq!(kind_of(&ground_truth("t1").unwrap()), Some(K::GroundTruth));
+        assert_eq!(kind_of(&contacts("t1", "r1").unwrap()), Some(K::ContactSet));
+        assert_eq!(kind_of("team/t1/member/r2"), None);
+        assert_eq!(kind_of(&coordinator_alive("t1").unwrap()), None);
+        assert!(is_liveliness("team/t1/member/r2") && is_liveliness("team/t1/member/*"));
+        assert!(is_liveliness(&coordinator_alive("t1").unwrap()));
+        assert!(!is_liveliness(&coordinator_status("t1").unwrap()) && !is_liveliness("team/t1/robot/r2/state"));
+        assert_eq!(kind_of("team/t1/robot/r2/state/extra"), None);
     }
 
     #[test]

@@ -53,7 +53,13 @@
 //!   instead of misreading bytes. Changing any message bumps the version; components of one
 //!   team must run the same version (the coordinator names the offending robot).
 //! * **JSON, for tools** ([`to_json`], [`from_json`]): the same types, human readable; the
-//!   version travels in every [`Header`].
+//!   version travels in every [`Header`]. The tool-facing keys travel in JSON on the wire too
+//!   ([`Wire`]: status, diagnostics, ground truth, references, perturbations, descriptions),
+//!   with the Zenoh encoding `application/json;team.<Name>/v<version>` and the JSON Schemas
+//!   published in `protocol/schemas/` (generated from the types, checked by a test), so any
+//!   Zenoh client in any language reads them. The hot path (state, dynamics terms, torque
+//!   commands, contact sets) stays binary, `zenoh/bytes;team.<Name>/v<version>`, its layout
+//!   written out byte for byte in `protocol/WIRE.md`.
 //!
 //! Decoding never panics and never trusts its input: the envelope, a size limit
 //! ([`MAX_MESSAGE_BYTES`]), trailing bytes, the version, identifiers, every dimension against
@@ -71,7 +77,7 @@ pub mod clock;
 #[cfg(feature = "transport")]
 pub mod transport;
 
-pub use codec::{decode, encode, from_json, to_json, Message, MessageKind, MAX_MESSAGE_BYTES};
+pub use codec::{decode, encode, from_json, schema_id, to_json, Message, MessageKind, Wire, MAX_MESSAGE_BYTES};
 pub use clock::RunClock;
 pub use error::ProtocolError;
 pub use matrix::Matrix;

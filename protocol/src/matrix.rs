@@ -9,6 +9,7 @@ use crate::ProtocolError;
 /// Row-major dense matrix with explicit dimensions. `data.len() == rows * cols` is checked by
 /// [`Matrix::check`] (decoding always calls it).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct Matrix {
     pub rows: u32,
     pub cols: u32,

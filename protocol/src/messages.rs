@@ -11,6 +11,7 @@ use crate::{Matrix, ProtocolError, PROTOCOL_VERSION};
 
 /// Carried by every message.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct Header {
     /// [`PROTOCOL_VERSION`] of the sender.
     pub version: u16,
@@ -56,6 +57,7 @@ impl Header {
 
 /// A pose: position in the world and orientation `(w, x, y, z)`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct Pose {
     pub position: [f64; 3],
     pub orientation: [f64; 4],
@@ -75,6 +77,7 @@ impl Pose {
 
 /// One robot's measured state at a tick (DESIGN.md §2 step 1).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct RobotState {
     pub header: Header,
     /// Base position (world) and orientation `(w, x, y, z)`.
@@ -106,6 +109,7 @@ impl Validate for RobotState {
 
 /// What a frame is for in the team problem.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub enum FrameRole {
     /// A point foot in stance: 3 contact constraints.
     StanceFoot,
@@ -130,6 +134,7 @@ impl FrameRole {
 /// Kinematic terms of one frame: pose, Jacobian and `Jdot*v`, at the frame origin with
 /// world-aligned axes, rows `[linear; angular]` (only linear rows for point feet).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct FrameTerms {
     pub name: String,
     pub role: FrameRole,
@@ -144,6 +149,7 @@ pub struct FrameTerms {
 
 /// A robot's dynamics terms at a tick (DESIGN.md §2 step 2).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct DynamicsTerms {
     pub header: Header,
     /// Whether the first 6 generalized coordinates are an unactuated floating base
@@ -227,6 +233,7 @@ impl Validate for DynamicsTerms {
 /// Joint torques for one robot's actuated joints, velocity order (DESIGN.md §2 step 3); or,
 /// from the coordinator, the order to hold posture this tick.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct TorqueCommand {
     pub header: Header,
     /// One torque per actuated joint, N·m (or N for prismatic joints); empty when `hold`.
@@ -265,6 +272,7 @@ impl Validate for TorqueCommand {
 
 /// Desired pose, twist and acceleration of a 6-D task (object, torso).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct PoseReference {
     pub pose: Pose,
     /// `[v; omega]` in the world frame.
@@ -283,6 +291,7 @@ impl PoseReference {
 
 /// Desired position, velocity and acceleration of a 3-D task (swing foot).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct PointReference {
     pub position: [f64; 3],
     pub velocity: [f64; 3],
@@ -291,6 +300,7 @@ pub struct PointReference {
 
 /// A torso reference for one robot.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct TorsoReference {
     pub robot: String,
     pub reference: PoseReference,
@@ -298,6 +308,7 @@ pub struct TorsoReference {
 
 /// A swing-foot reference for one robot's foot frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct SwingFootReference {
     pub robot: String,
     pub frame: String,
@@ -306,6 +317,7 @@ pub struct SwingFootReference {
 
 /// Task references for a tick: the object, each torso, each swing foot.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct TaskReferences {
     pub header: Header,
     pub object: Option<PoseReference>,
@@ -339,6 +351,7 @@ impl Validate for TaskReferences {
 
 /// What an external wrench acts on.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub enum PerturbationTarget {
     /// The carried object, at its centre of mass.
     Object,
@@ -348,6 +361,7 @@ pub enum PerturbationTarget {
 
 /// A timed external wrench `[force; moment]` in the world frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct PerturbationRequest {
     pub header: Header,
     pub target: PerturbationTarget,
@@ -383,6 +397,7 @@ impl Validate for PerturbationRequest {
 
 /// What the coordinator is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub enum CoordinatorMode {
     /// Not all expected members are present.
     WaitingForMembers,
@@ -394,6 +409,7 @@ pub enum CoordinatorMode {
 
 /// Outcome of the contact-force QP of a tick.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub enum QpStatus {
     Solved,
     AlmostSolved,
@@ -406,6 +422,7 @@ pub enum QpStatus {
 
 /// The coordinator's status, published every tick.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct CoordinatorStatus {
     pub header: Header,
     pub mode: CoordinatorMode,
@@ -429,6 +446,7 @@ impl Validate for CoordinatorStatus {
 
 /// A predicted contact wrench of one contact of one robot.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct ContactWrench {
     pub robot: String,
     pub frame: String,
@@ -438,6 +456,7 @@ pub struct ContactWrench {
 
 /// Per-tick diagnostics of the team controller.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct TickDiagnostics {
     pub header: Header,
     pub qp_status: QpStatus,
@@ -499,6 +518,7 @@ impl Validate for TickDiagnostics {
 
 /// What a robot-agent is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub enum AgentMode {
     /// No state received yet.
     WaitingForState,
@@ -510,6 +530,7 @@ pub enum AgentMode {
 
 /// A robot-agent's status.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct AgentStatus {
     pub header: Header,
     pub mode: AgentMode,
@@ -537,6 +558,7 @@ impl Validate for AgentStatus {
 
 /// What the team needs to know of a robot, published once and on request.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct RobotDescription {
     pub header: Header,
     /// Actuated joints in velocity order.
@@ -599,6 +621,7 @@ pub const MAX_CONTACT_FEET: usize = 16;
 /// `team/{team}/robot/{robot}/contacts` (see [`crate::keys::contacts`]); the agent checks the
 /// names against its own description and refuses unknown feet.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct ContactSet {
     pub header: Header,
     /// Foot frames in stance, each at most once.
@@ -636,6 +659,7 @@ impl Validate for ContactSet {
 /// body frame's origin and the angular velocity, **both in the world frame** (ground truth is for
 /// evaluation, so it uses the world frame throughout).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct BodyTruth {
     /// `"object"`, or the robot id for a torso.
     pub name: String,
@@ -645,6 +669,7 @@ pub struct BodyTruth {
 
 /// Where a contact touches and what it transmits, world frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct ContactTruth {
     pub robot: String,
     /// The robot's body that touches (MuJoCo body name without the robot prefix).
@@ -659,6 +684,7 @@ pub struct ContactTruth {
 /// Ground truth of one control tick, from the simulator: published on
 /// `team/{team}/ground-truth` and recorded for reports.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct GroundTruth {
     pub header: Header,
     /// Simulated time, s.

@@ -188,7 +188,11 @@ pub struct TypedPublisher<M> {
 impl<M: Message> TypedPublisher<M> {
     /// Declare a publisher on `key`.
     pub async fn declare(session: &Session, key: String, qos: Qos) -> Result<Self, TransportError> {
-        let builder = session.declare_publisher(key.clone());
+        let encoding = match M::WIRE {
+            crate::codec::Wire::Json => zenoh::bytes::Encoding::APPLICATION_JSON,
+            crate::codec::Wire::Binary => zenoh::bytes::Encoding::ZENOH_BYTES,
+        };
+        let builder = session.declare_publisher(key.clone()).encoding(encoding.with_schema(crate::codec::schema_id::<M>()));
         let builder = match qos {
             Qos::HotPath => builder
                 .express(true)
@@ -289,8 +293,9 @@ async fn declare_token(session: &Session, key: String) -> Result<zenoh::liveline
     session.liveliness().declare_token(key.clone()).await.map_err(|e| zenoh_err("declare_token", &key, e))
 }
 
-/// The liveliness tokens on `key`: those present first (history), then their comings and goings.
-async fn watch_liveliness(session: &Session, key: String) -> Result<SampleQueue, TransportError> {
+/// The liveliness tokens on `key` (wildcards allowed): those present first (history), then
+/// their comings and goings (a `Put` sample when one comes, a `Delete` when it goes).
+pub async fn watch_liveliness(session: &Session, key: String) -> Result<SampleQueue, TransportError> {
     session
         .liveliness()
         .declare_subscriber(key.clone())

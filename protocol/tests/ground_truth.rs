@@ -1,4 +1,4 @@
-//! The GroundTruth message: round trip in both encodings, kind 11, non-finite numbers and bad
+//! The GroundTruth message: round trip in both encodings (its wire form is JSON), kind 11, non-finite numbers and bad
 //! ids refused.
 
 use protocol::{decode, encode, from_json, to_json, BodyTruth, ContactTruth, GroundTruth, Header, MessageKind, Pose};
@@ -19,7 +19,9 @@ fn sample() -> GroundTruth {
 fn ground_truth_round_trips_and_is_kind_11() {
     let g = sample();
     let bytes = encode(&g).unwrap();
-    assert_eq!(bytes[4], MessageKind::GroundTruth as u8);
+    // Tool-facing: JSON on the wire (its kind number stays 11).
+    assert_eq!(<GroundTruth as protocol::Message>::WIRE, protocol::Wire::Json);
+    assert_eq!(serde_json::from_slice::<serde_json::Value>(&bytes).unwrap()["header"]["tick"], 42);
     assert_eq!(MessageKind::GroundTruth as u8, 11);
     assert_eq!(decode::<GroundTruth>(&bytes).unwrap(), g);
     assert_eq!(from_json::<GroundTruth>(&to_json(&g).unwrap()).unwrap(), g);

@@ -179,7 +179,7 @@ fn run_one(s: Scenario, scale: f64, root: &Path, dir: &Path, progress: bool) -> 
         Err(e) => return failed(format!("run: {e}")),
     };
     let eval = evaluate::evaluate(&plan, &records, "embedded");
-    if let Err(e) = evaluate::write_report(&plan, &eval, dir) {
+    if let Err(e) = evaluate::write_report(&plan, &eval, dir).and_then(|_| crate::plots::write_all(&plan, &eval, &records, dir)) {
         return failed(format!("report: {e}"));
     }
     eprint!("{}", evaluate::summary(&eval.metrics, dir));
@@ -191,7 +191,8 @@ fn stem(p: &Path) -> String {
 }
 
 /// Every scenario with every controller (`sets` apply to all), into `out`: one sub-folder per
-/// run (`<scenario>-<controller>`), `<scenario>_object_z.svg` per scenario, and
+/// run (`<scenario>-<controller>`, its report with figures and report.html, no recording),
+/// `<scenario>_object_z.svg` / `.png` per scenario, and
 /// `comparison.md` / `comparison.json` with the table.
 pub fn compare(files: &[PathBuf], controllers: &[String], sets: &[String], out: &Path, root: &Path, progress: bool) -> Result<Vec<Row>, CompareError> {
     let mut rows = Vec::new();

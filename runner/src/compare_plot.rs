@@ -1,30 +1,34 @@
 //! The paper's Fig. controller_comparison (c): the object's Z, desired and under each
-//! controller, one panel (kept apart from [`crate::compare`] so that plotting can move).
+//! controller, one panel (kept apart from [`crate::compare`] so that plotting can move), and
+//! each controller's Z error below it. Drawn with [`crate::plots::draw`] (PNG and SVG).
 
 use std::path::Path;
 
-use crate::report::{self, Panel, ReportError, TimeSeries};
+use crate::plots::draw::{self, Line, Panel, Stroke, GREY, PALETTE};
+use crate::report::{ReportError, TimeSeries};
 
 /// `runs`: (controller, its run's time series, `None` if the run failed) of one scenario.
-/// Writes one panel with each controller's measured object Z against the desired one.
+/// Writes `path` (SVG) and the same stem as PNG: the desired Z (grey, dashed) and each
+/// controller's measured Z (solid), then each controller's error (mm).
 pub fn object_z(runs: &[(String, Option<TimeSeries>)], title: &str, path: &Path) -> Result<(), ReportError> {
     let done: Vec<(&String, &TimeSeries)> = runs.iter().filter_map(|(c, s)| s.as_ref().map(|s| (c, s))).collect();
     let Some((_, first)) = done.first() else { return Ok(()) };
-    // Columns: the desired Z (from the first run) and each controller's measured Z, on the
-    // first run's sample times (the runs share the scenario's clock; a shorter run is cut).
-    let len = done.iter().map(|(_, s)| s.time.len()).min().unwrap_or(0);
-    let mut names = vec!["object_z_des".to_string()];
-    names.extend(done.iter().map(|(c, _)| format!("{c}_object_z")));
-    let mut series = TimeSeries::with_columns(&names);
-    let des = first.column("object_z_des").unwrap_or(&[]);
-    let measured: Vec<&[f64]> = done.iter().map(|(_, s)| s.column("object_z_mrt").unwrap_or(&[])).collect();
-    for (k, (t, d)) in first.time.iter().zip(des).take(len).enumerate() {
-        let mut row = vec![*d];
-        row.extend(measured.iter().map(|m| m.get(k).copied().unwrap_or(f64::NAN)));
-        series.push(*t, &row);
+    let points = |s: &TimeSeries, col: &str, scale: f64| -> Vec<(f64, f64)> {
+        s.time.iter().zip(s.column(col).unwrap_or(&[])).map(|(t, v)| (*t, scale * v)).collect()
+    };
+    let mut z = vec![Line::new("desired", points(first, "object_z_des", 1.0), GREY, Stroke::Dashed)];
+    let mut err = Vec::new();
+    for (i, (c, s)) in done.iter().enumerate() {
+        let color = PALETTE[i % PALETTE.len()];
+        z.push(Line::new(c.as_str(), points(s, "object_z_mrt", 1.0), color, Stroke::Solid));
+        let e = s.time.iter().zip(s.column("object_z_des").unwrap_or(&[]).iter().zip(s.column("object_z_mrt").unwrap_or(&[]))).map(|(t, (d, m))| (*t, 1e3 * (m - d))).collect();
+        err.push(Line::new(c.as_str(), e, color, Stroke::Solid));
     }
-    let legends: Vec<String> = done.iter().map(|(c, _)| c.to_string()).collect();
-    let pairs = legends.iter().zip(&names[1..]).map(|(l, m)| (l.as_str(), "object_z_des", m.as_str())).collect();
-    let caption = format!("{title}: object Z, desired and per controller");
-    report::plot_panels(&series, &[Panel { title: &caption, y_label: "m", pairs }], path)
+    let panels = [
+        Panel { title: format!("{title}: object Z, desired and per controller"), y_label: "m".into(), lines: z },
+        Panel { title: format!("{title}: object Z error per controller"), y_label: "mm".into(), lines: err },
+    ];
+    let dir = path.parent().unwrap_or_else(|| Path::new("."));
+    let stem = path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "object_z".into());
+    draw::panels(dir, &stem, title, &panels, 1, "t [s]")
 }

@@ -20,6 +20,7 @@ use tokio::sync::watch;
 use zenoh::Session;
 
 use crate::plan::{ReferencePlan, TEAM};
+use crate::record::{Message, Tap};
 
 /// References are published this many ticks ahead of the last simulated tick (10 s at 2 kHz;
 /// below the coordinator's reference queue, `coordinator::service::REFERENCE_QUEUE`).
@@ -41,9 +42,13 @@ pub struct Records {
 }
 
 impl Records {
-    /// Keep an applied torque command of a scenario tick (settling ticks are not evaluated).
-    fn take_torques(&mut self, sample: &zenoh::sample::Sample, settle: u64) {
+    /// Keep an applied torque command of a scenario tick (settling ticks are not evaluated);
+    /// every decoded one goes to the recorder.
+    fn take_torques(&mut self, sample: &zenoh::sample::Sample, settle: u64, tap: Option<&Tap>) {
         if let Ok(cmd) = decode_sample::<TorqueCommand>(sample) {
+            if let Some(tap) = tap {
+                tap.send(sample.key_expr().as_str(), Message::Torque(cmd.clone()));
+            }
             if cmd.header.tick >= settle {
                 self.torques.entry(cmd.header.robot_id().to_string()).or_default().push((cmd.header.tick, cmd.tau));
             }
@@ -51,8 +56,11 @@ impl Records {
     }
 
     /// Keep the coordinator's diagnostics of a scenario tick.
-    fn take_diagnostics(&mut self, sample: &zenoh::sample::Sample, settle: u64) {
+    fn take_diagnostics(&mut self, sample: &zenoh::sample::Sample, settle: u64, tap: Option<&Tap>) {
         if let Ok(d) = decode_sample::<TickDiagnostics>(sample) {
+            if let Some(tap) = tap {
+                tap.send(sample.key_expr().as_str(), Message::Diagnostics(d.clone()));
+            }
             if d.header.tick >= settle {
                 self.diagnostics.push(d);
             }
@@ -71,6 +79,11 @@ pub struct Driver {
     total: u64,
     progress: ProgressBar,
     log_progress: bool,
+    /// The recorder's queue: every message the driver decoded or published.
+    tap: Option<Tap>,
+    /// References of ticks below this went to the tap already (the first window is published
+    /// twice; the recording keeps one reference per tick).
+    tapped_refs: u64,
 }
 
 impl Driver {
@@ -95,12 +108,23 @@ impl Driver {
         } else {
             ProgressBar::hidden()
         };
-        Ok(Driver { truth, torques, diagnostics, status, refs_pub, plan, total: total_ticks, progress, log_progress: show_progress && !terminal })
+        Ok(Driver { truth, torques, diagnostics, status, refs_pub, plan, total: total_ticks, progress, log_progress: show_progress && !terminal, tap: None, tapped_refs: 0 })
+    }
+
+    /// Hand every message the driver decodes or publishes to the recorder too.
+    pub fn with_tap(mut self, tap: Tap) -> Driver {
+        self.tap = Some(tap);
+        self
     }
 
     async fn publish_refs(&mut self, from: u64, to: u64) -> Result<(), TransportError> {
         for tick in from..to.min(self.total) {
-            self.refs_pub.put(&self.plan.for_tick(TEAM, tick)).await?;
+            let refs = self.plan.for_tick(TEAM, tick);
+            self.refs_pub.put(&refs).await?;
+            if let Some(tap) = self.tap.as_ref().filter(|_| tick >= self.tapped_refs) {
+                tap.send(&self.refs_pub.key(), Message::References(refs));
+                self.tapped_refs = tick + 1;
+            }
         }
         Ok(())
     }
@@ -124,6 +148,9 @@ impl Driver {
                 s = self.status.recv_async() => {
                     let Ok(sample) = s else { break };
                     if let Ok(st) = decode_sample::<CoordinatorStatus>(&sample) {
+                        if let Some(tap) = &self.tap {
+                            tap.send(sample.key_expr().as_str(), Message::Status(st.clone()));
+                        }
                         rec.last_status = Some(st);
                         if !coordinator_heard {
                             coordinator_heard = true;
@@ -137,6 +164,9 @@ impl Driver {
                         Ok(g) => g,
                         Err(e) => { tracing::warn!("rejected ground truth: {e}"); continue; }
                     };
+                    if let Some(tap) = &self.tap {
+                        tap.send(sample.key_expr().as_str(), Message::Truth(gt.clone()));
+                    }
                     let tick = gt.header.tick;
                     rec.ticks_seen = rec.ticks_seen.max(tick + 1);
                     let ahead = (tick + 1 + LOOKAHEAD).min(self.total);
@@ -166,20 +196,20 @@ impl Driver {
                 }
                 s = self.torques.recv_async() => {
                     let Ok(sample) = s else { break };
-                    rec.take_torques(&sample, settle);
+                    rec.take_torques(&sample, settle, self.tap.as_ref());
                 }
                 s = self.diagnostics.recv_async() => {
                     let Ok(sample) = s else { break };
-                    rec.take_diagnostics(&sample, settle);
+                    rec.take_diagnostics(&sample, settle, self.tap.as_ref());
                 }
             }
         }
         // Whatever else already arrived (torques and diagnostics of the last ticks).
         while let Ok(Some(sample)) = self.torques.try_recv() {
-            rec.take_torques(&sample, settle);
+            rec.take_torques(&sample, settle, self.tap.as_ref());
         }
         while let Ok(Some(sample)) = self.diagnostics.try_recv() {
-            rec.take_diagnostics(&sample, settle);
+            rec.take_diagnostics(&sample, settle, self.tap.as_ref());
         }
         rec.run_wall = run_started.map(|s| s.elapsed()).unwrap_or_default();
         self.progress.finish_and_clear();

@@ -1,5 +1,5 @@
 //! From a run's records to the report: every measure of DESIGN.md §8 (`metrics.json`), the
-//! time series (`timeseries.csv`, `torques.csv`), the paper-style plots (SVG) and the
+//! time series (`timeseries.csv`, `torques.csv`) and the
 //! acceptance checks of the team demo. Measured values come from the ground truth only.
 
 use std::collections::BTreeMap;
@@ -12,7 +12,7 @@ use serde::Serialize;
 use crate::driver::Records;
 use crate::metrics::{self, DropReport, Percentiles};
 use crate::plan::Plan;
-use crate::report::{self, Panel, ReportError, TimeSeries};
+use crate::report::{self, ReportError, TimeSeries};
 
 /// Bounds of the acceptance checks (issue: the team demo).
 pub const MAX_SLIP: f64 = 0.005;
@@ -24,7 +24,7 @@ pub const MAX_RECOVERY_ERROR: f64 = 0.01;
 pub const RECOVERY_AFTER: f64 = 2.0;
 /// The CSV time series and plots keep at most this many samples per second (the metrics use
 /// every tick).
-pub const SERIES_HZ: f64 = 200.0;
+pub const SERIES_HZ: f64 = 25.0;
 
 /// Tracking of one pose task.
 #[derive(Debug, Clone, Serialize)]
@@ -352,45 +352,12 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
     Evaluation { metrics, series, torques }
 }
 
-/// Write the report folder: `metrics.json`, `timeseries.csv`, `torques.csv` and the plots.
-pub fn write_report(plan: &Plan, eval: &Evaluation, dir: &Path) -> Result<(), ReportError> {
+/// Write the report folder's data: `metrics.json`, `timeseries.csv`, `torques.csv` (the
+/// figures and `report.html`: [`crate::plots::write_all`]).
+pub fn write_report(_plan: &Plan, eval: &Evaluation, dir: &Path) -> Result<(), ReportError> {
     report::write_json(&eval.metrics, &dir.join("metrics.json"))?;
     eval.series.write_csv(&dir.join("timeseries.csv"))?;
     eval.torques.write_csv(&dir.join("torques.csv"))?;
-    if eval.series.time.is_empty() {
-        return Ok(());
-    }
-    let robots: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
-    // One panel per axis, each with its own range (centimetre motions about a 1 m position
-    // would be flat lines on a shared axis), as the paper's figures do.
-    let axes = [("x", "m"), ("y", "m"), ("z", "m"), ("rx", "rad"), ("ry", "rad"), ("rz", "rad")];
-    let object_cols: Vec<(String, String, String, &str)> = axes
-        .iter()
-        .map(|(a, unit)| (format!("object {a}"), format!("object_{a}_des"), format!("object_{a}_mrt"), *unit))
-        .collect();
-    let panels: Vec<Panel> = object_cols
-        .iter()
-        .map(|(title, d, m, unit)| Panel { title: title.as_str(), y_label: unit, pairs: vec![(title.as_str(), d.as_str(), m.as_str())] })
-        .collect();
-    report::plot_panels(&eval.series, &panels, &dir.join("object.svg"))?;
-    let torso_cols: Vec<(String, String, String)> = robots
-        .iter()
-        .flat_map(|r| ["x", "y", "z"].iter().map(move |a| (format!("torso {r} {a}"), format!("{r}_torso_{a}_des"), format!("{r}_torso_{a}_mrt"))))
-        .collect();
-    let panels: Vec<Panel> = torso_cols
-        .iter()
-        .map(|(title, d, m)| Panel { title: title.as_str(), y_label: "m", pairs: vec![(title.as_str(), d.as_str(), m.as_str())] })
-        .collect();
-    report::plot_panels(&eval.series, &panels, &dir.join("torsos.svg"))?;
-    let mut labels = Vec::new();
-    let mut values = Vec::new();
-    for (r, joints) in &eval.metrics.torque_rms {
-        for (j, v) in joints {
-            labels.push(format!("{r} {j}"));
-            values.push(*v);
-        }
-    }
-    report::plot_bars("commanded torque RMS per joint", "N m", &labels, &values, &dir.join("torque_rms.svg"))?;
     Ok(())
 }
 
@@ -511,7 +478,8 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("evaluate-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         write_report(&plan, &bad, &dir).unwrap();
-        for f in ["metrics.json", "timeseries.csv", "torques.csv", "object.svg", "torsos.svg", "torque_rms.svg"] {
+        crate::plots::write_all(&plan, &bad, &records(&plan, |_| 0.0, |_| true), &dir).unwrap();
+        for f in ["metrics.json", "timeseries.csv", "torques.csv", "report.html", "object_error.png", "object_error.svg", "contact_forces.png", "torque_rms.svg"] {
             assert!(dir.join(f).exists(), "{f}");
         }
         let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();

@@ -20,17 +20,22 @@
 //! * [`reference`]: the scenarios' reference trajectories.
 //! * [`metrics`]: the measures of success of DESIGN.md §8.
 //! * [`report`]: CSV time series, `metrics.json` and plots of a run.
+//! * [`record`]: the run as MCAP (`run.mcap`), live to Foxglove (`--live`), and read back
+//!   (`team report run.mcap`).
 
 pub mod capacity;
 pub mod compare;
 pub mod compare_plot;
 pub mod driver;
+pub mod echo;
 pub mod evaluate;
 pub mod grasp_plan;
 pub mod launch;
 pub mod metrics;
 pub mod plan;
+pub mod plots;
 pub mod processes;
+pub mod record;
 pub mod reference;
 pub mod report;
 pub mod run;

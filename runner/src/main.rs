@@ -6,8 +6,11 @@ use std::path::{Path, PathBuf};
 
 use team_runner::compare;
 use team_runner::capacity;
+use team_runner::echo;
 use team_runner::evaluate;
 use team_runner::plan;
+use team_runner::plots;
+use team_runner::record::{self, RecordOptions, ScenarioSource};
 use team_runner::run::{self as scenario_run, RunOptions};
 use team_runner::scenario::Scenario;
 use team_runner::launch::{BridgeOutcome, Mode};
@@ -24,7 +27,7 @@ struct Cli {
 enum Command {
     /// Run a scenario (scenarios/*.toml) with the whole stack in the loop: MuJoCo, one agent
     /// per robot, the paper's coordinator. Writes a report folder (metrics.json, CSV time
-    /// series, SVG plots) and prints a summary; exits with an error if an acceptance check fails.
+    /// series, plots, report.html, the recording run.mcap) and prints a summary; exits with an error if an acceptance check fails.
     Run {
         /// Scenario file (TOML).
         scenario: PathBuf,
@@ -40,6 +43,36 @@ enum Command {
         /// No progress bar or progress lines.
         #[arg(long)]
         quiet: bool,
+        /// Serve the run live to Foxglove (WebSocket on 127.0.0.1:PORT; open Foxglove and
+        /// connect to ws://127.0.0.1:PORT). The run is recorded to run.mcap either way.
+        #[arg(long, value_name = "PORT", num_args = 0..=1, default_missing_value = "8765")]
+        live: Option<u16>,
+    },
+    /// Rebuild a run's report (metrics, time series, plots, report.html) from its recording
+    /// alone (the run.mcap that `team run` wrote).
+    Report {
+        /// The recording (run.mcap).
+        recording: PathBuf,
+        /// Report folder (default: the recording's folder).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Print every message on a Zenoh key as JSON lines (wildcards allowed), like
+    /// `ros2 topic echo`: e.g. `team echo team/team/coordinator/status --count 1`. Liveliness
+    /// keys (team/team/member/*, team/team/coordinator/alive) print their tokens' comings and
+    /// goings as {"key", "alive"}. Connects to the hub of a distributed run by default (see
+    /// --connect).
+    Echo {
+        /// Key expression, e.g. team/team/robot/*/state.
+        key: String,
+        /// Stop after this many messages.
+        #[arg(long)]
+        count: Option<u64>,
+        /// Give up after this many seconds without a message.
+        #[arg(long, default_value_t = 10.0)]
+        wait: f64,
+        #[command(flatten)]
+        zenoh: protocol::transport::ZenohArgs,
     },
     /// Run scenarios with several controllers side by side (experiment S3: `team compare
     /// scenarios/s3_hold.toml scenarios/s1_torso_and_object.toml --controllers pidc,mqp`):
@@ -117,7 +150,7 @@ fn main() -> Result<()> {
         .with_writer(std::io::stderr)
         .init();
     match Cli::parse().command {
-        Command::Run { scenario, set, distributed, out, quiet } => {
+        Command::Run { scenario, set, distributed, out, quiet, live } => {
             let s = Scenario::load(&scenario, &set)?;
             let stem = scenario.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scenario".into());
             let dir = out.unwrap_or_else(|| PathBuf::from("reports").join(stem));
@@ -133,10 +166,16 @@ fn main() -> Result<()> {
                 s.control_hz,
                 if distributed { "distributed" } else { "embedded" }
             );
-            let records = scenario_run::run(&plan, &RunOptions { distributed, progress: !quiet }, &dir)?;
+            let source = ScenarioSource::read(&scenario, &set).map_err(|e| anyhow::anyhow!("reading {}: {e}", scenario.display()))?;
+            let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live };
+            let (records, recording) = scenario_run::run_recorded(&plan, &RunOptions { distributed, progress: !quiet }, &dir, Some(&rec))?;
             let eval = evaluate::evaluate(&plan, &records, if distributed { "distributed" } else { "embedded" });
             evaluate::write_report(&plan, &eval, &dir)?;
+            plots::write_all(&plan, &eval, &records, &dir)?;
             print!("{}", evaluate::summary(&eval.metrics, &dir));
+            if let Some(r) = recording {
+                println!("  recording: {} ({:.1} MB, {} messages, {} dropped)", r.path.display(), r.bytes as f64 / 1e6, r.messages, r.dropped);
+            }
             anyhow::ensure!(eval.metrics.passed, "acceptance checks failed (see {})", dir.join("metrics.json").display());
         }
         Command::Compare { scenarios, controllers, set, out, quiet } => {
@@ -167,6 +206,25 @@ fn main() -> Result<()> {
             let t0 = std::time::Instant::now();
             let cap = capacity::capacity(&plan, tolerance)?;
             print!("{}", capacity::summary(&plan, &cap, tolerance, t0.elapsed().as_secs_f64()));
+        }
+        Command::Report { recording, out } => {
+            let dir = out.unwrap_or_else(|| recording.parent().map(Path::to_path_buf).unwrap_or_default());
+            std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
+            let (plan, records, eval) = record::replay::evaluate_recording(&recording, &repo_root())?;
+            evaluate::write_report(&plan, &eval, &dir)?;
+            plots::write_all(&plan, &eval, &records, &dir)?;
+            print!("{}", evaluate::summary(&eval.metrics, &dir));
+        }
+        Command::Echo { key, count, wait, zenoh } => {
+            anyhow::ensure!(wait.is_finite() && wait > 0.0, "--wait must be a positive number of seconds");
+            let rt = tokio::runtime::Runtime::new()?;
+            let opts = echo::EchoOptions { key, count, wait: std::time::Duration::from_secs_f64(wait) };
+            rt.block_on(async {
+                let session = protocol::transport::open(&zenoh, protocol::transport::Role::Member).await?;
+                let result = echo::echo(&session, &opts, &mut std::io::stdout().lock()).await;
+                let _ = session.close().await;
+                result.map(|_| ()).map_err(anyhow::Error::from)
+            })?;
         }
         Command::Smoke { robots, ticks, joints, distributed } => {
             anyhow::ensure!((1..=64).contains(&robots), "--robots must be between 1 and 64");

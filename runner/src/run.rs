@@ -13,6 +13,7 @@ use thiserror::Error;
 use crate::driver::{Driver, Records};
 use crate::launch::{AgentArgs, AgentModel, BridgeArgs, CoordinatorArgs, Launch, LaunchError, Mode};
 use crate::plan::{Plan, TEAM};
+use crate::record::{self, RecordError, RecordOptions, Recorder, RecordingSummary, RunFacts};
 
 /// In lockstep, an agent waits this long for its command before it holds its posture: a tick
 /// that is merely slow (a loaded machine) must not see safe-mode torques.
@@ -34,6 +35,8 @@ pub enum RunError {
     Incomplete { seen: u64, expected: u64 },
     #[error("{what}: {reason}")]
     Task { what: String, reason: String },
+    #[error(transparent)]
+    Record(#[from] RecordError),
 }
 
 /// How to run.
@@ -64,21 +67,47 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
 /// Run the plan; `out` is the report folder (the distributed run writes its component files
 /// there).
 pub fn run(plan: &Plan, opts: &RunOptions, out: &Path) -> Result<Records, RunError> {
+    run_recorded(plan, opts, out, None).map(|(records, _)| records)
+}
+
+/// [`run`], recording the run as MCAP (and serving it live) when `record` is given.
+pub fn run_recorded(plan: &Plan, opts: &RunOptions, out: &Path, record: Option<&RecordOptions>) -> Result<(Records, Option<RecordingSummary>), RunError> {
     let rt = tokio::runtime::Runtime::new().map_err(|e| RunError::Task { what: "starting the async runtime".into(), reason: e.to_string() })?;
     let mode = if opts.distributed { Mode::Distributed { dir: out.to_path_buf() } } else { Mode::Embedded };
-    let records = rt.block_on(run_in(plan, opts, &mode))?;
+    let recorder = match record {
+        Some(r) => Some(rt.block_on(Recorder::start(plan, r))?),
+        None => None,
+    };
+    if let Some(port) = recorder.as_ref().and_then(Recorder::live_port) {
+        tracing::info!("live: open Foxglove and connect to ws://127.0.0.1:{port}");
+    }
+    let result = rt.block_on(run_in(plan, opts, &mode, recorder.as_ref()));
+    // The recording is closed whatever happened: a failed run's recording shows why.
+    let facts = |r: &Records| RunFacts { mode: mode.name().to_string(), settle_wall: r.settle_wall, run_wall: r.run_wall };
+    let summary = match recorder {
+        Some(rec) => Some(rec.finish(&result.as_ref().map(facts).unwrap_or_default())?),
+        None => None,
+    };
+    let records = result?;
     if records.ticks_seen < plan.total_ticks() {
         return Err(RunError::Incomplete { seen: records.ticks_seen, expected: plan.total_ticks() });
     }
-    Ok(records)
+    Ok((records, summary))
 }
 
 /// Launch the team in `mode`, drive the scenario until the bridge ends it, stop everything.
-pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &Mode) -> Result<Records, RunError> {
+/// With a `recorder`, the driver and the recorder's subscriptions feed it.
+pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &Mode, recorder: Option<&Recorder>) -> Result<Records, RunError> {
     let (launch, bridge) = launch_of(plan);
     let started = Instant::now();
     let mut running = launch.start(mode).await?;
-    let driver = Driver::start(running.session(), plan.references.clone(), plan.total_ticks(), opts.progress).await?;
+    let mut driver = Driver::start(running.session(), plan.references.clone(), plan.total_ticks(), opts.progress).await?;
+    let (record_stop, record_stopped) = tokio::sync::watch::channel(false);
+    let mut record_tasks = Vec::new();
+    if let Some(rec) = recorder {
+        driver = driver.with_tap(rec.tap());
+        record_tasks = record::subscribe(running.session(), TEAM, &rec.tap(), &record_stopped).await?;
+    }
     let mut driver_task = tokio::spawn(driver.run(running.stop_signal()));
     let bridge_result = running.run_bridge(&bridge).await;
     // The driver ends by itself at the ground truth of the last tick (which may still be
@@ -93,6 +122,10 @@ pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &Mode) -> Result<Recor
         }
     };
     let records = records.map_err(|e| RunError::Task { what: "the scenario driver".into(), reason: e.to_string() })?;
+    let _ = record_stop.send(true);
+    for t in record_tasks {
+        let _ = t.await;
+    }
     let finished = running.finish().await;
     tracing::debug!(wall = ?started.elapsed(), mode = mode.name(), "run ended");
     bridge_result?;

@@ -28,6 +28,7 @@ fn run_scenario(file: &str, sets: &[&str], distributed: bool, name: &str) -> (Pl
     let records = run::run(&plan, &RunOptions { distributed, progress: false }, &dir).expect("the run completes");
     let eval = evaluate::evaluate(&plan, &records, if distributed { "distributed" } else { "embedded" });
     evaluate::write_report(&plan, &eval, &dir).expect("report written");
+    team_runner::plots::write_all(&plan, &eval, &records, &dir).expect("figures drawn");
     println!("{}", evaluate::summary(&eval.metrics, &dir));
     (plan, eval.metrics)
 }

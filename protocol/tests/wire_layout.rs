@@ -1,0 +1,87 @@
+//! The binary layout written in `protocol/WIRE.md` is the one on the wire: the document's
+//! worked example, built byte by byte from the document, equals what `encode` produces; and
+//! the tool-facing types travel as plain JSON.
+
+use protocol::{decode, encode, CoordinatorMode, CoordinatorStatus, Header, Pose, RobotState, Wire, Message};
+
+fn f(x: f64) -> [u8; 8] {
+    x.to_le_bytes()
+}
+
+#[test]
+fn robot_state_bytes_are_the_documented_ones() {
+    let s = RobotState {
+        header: Header { version: 1, team: "t".into(), robot: Some("r1".into()), tick: 300, stamp_ns: 0 },
+        base_pose: Pose { position: [1.0, 2.0, 3.0], orientation: [1.0, 0.0, 0.0, 0.0] },
+        base_twist: [0.0; 6],
+        joint_positions: vec![0.5],
+        joint_velocities: vec![-0.25],
+        time: 0.3,
+    };
+    let mut want: Vec<u8> = vec![0x54, 0x51, 0x01, 0x00, 0x01, 0x00];
+    want.extend([0x01, 0x01, 0x74, 0x01, 0x02, 0x72, 0x31, 0xFB, 0x2C, 0x01, 0x00]);
+    for x in [1.0, 2.0, 3.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0] {
+        want.extend(f(x));
+    }
+    want.push(0x01);
+    want.extend(f(0.5));
+    assert_eq!(&f(0.5), &[0, 0, 0, 0, 0, 0, 0xE0, 0x3F]);
+    want.push(0x01);
+    want.extend(f(-0.25));
+    want.extend(f(0.3));
+    assert_eq!(&f(0.3), &[0x33, 0x33, 0x33, 0x33, 0x33, 0x33, 0xD3, 0x3F]);
+    let got = encode(&s).unwrap();
+    assert_eq!(got, want);
+    assert_eq!(decode::<RobotState>(&want).unwrap(), s);
+    assert_eq!(RobotState::WIRE, Wire::Binary);
+}
+
+#[test]
+fn tool_facing_messages_are_json_with_the_version_checked() {
+    let st = CoordinatorStatus {
+        header: Header::new("t", None, 7, 0),
+        mode: CoordinatorMode::Running,
+        members: vec!["r1".into()],
+        ticks: 7,
+        commands_sent: 14,
+        deadline_misses: 0,
+        fallbacks: 0,
+        detail: String::new(),
+    };
+    assert_eq!(CoordinatorStatus::WIRE, Wire::Json);
+    let bytes = encode(&st).unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&bytes).expect("plain JSON on the wire");
+    assert_eq!((v["mode"].as_str(), v["ticks"].as_u64(), v["header"]["version"].as_u64()), (Some("Running"), Some(7), Some(1)));
+    assert_eq!(decode::<CoordinatorStatus>(&bytes).unwrap(), st);
+    assert_eq!(protocol::schema_id::<CoordinatorStatus>(), "team.CoordinatorStatus/v1");
+    // Another version is refused, not misread.
+    let mut other = st.clone();
+    other.header.version = 9;
+    let bytes = serde_json::to_vec(&other).unwrap();
+    assert!(matches!(decode::<CoordinatorStatus>(&bytes), Err(protocol::ProtocolError::VersionMismatch { found: 9, .. })));
+    // Garbage is an error, not a panic.
+    assert!(decode::<CoordinatorStatus>(b"{\"header\": 3}").is_err());
+    assert!(decode::<CoordinatorStatus>(b"\xff\xfe not json").is_err());
+}
+
+#[test]
+fn torque_command_bytes_are_the_documented_ones() {
+    // WIRE.md's TorqueCommand examples: a hold order, then one torque of 1.5 N m.
+    let head = [0x01, 0x01, 0x74, 0x01, 0x02, 0x72, 0x31, 0xFB, 0x2C, 0x01, 0x00];
+    let hold = protocol::TorqueCommand::hold("t", "r1", 300);
+    let mut want: Vec<u8> = vec![0x54, 0x51, 0x01, 0x00, 0x03, 0x00];
+    want.extend(head);
+    want.extend([0x00, 0x01]);
+    assert_eq!(encode(&hold).unwrap(), want);
+    assert_eq!(decode::<protocol::TorqueCommand>(&want).unwrap(), hold);
+    let torques = protocol::TorqueCommand { tau: vec![1.5], hold: false, ..hold.clone() };
+    let mut want: Vec<u8> = vec![0x54, 0x51, 0x01, 0x00, 0x03, 0x00];
+    want.extend(head);
+    want.push(0x01);
+    want.extend(f(1.5));
+    assert_eq!(&f(1.5), &[0, 0, 0, 0, 0, 0, 0xF8, 0x3F]);
+    want.push(0x00);
+    assert_eq!(encode(&torques).unwrap(), want);
+    // A hold order that carries torques is refused.
+    assert!(encode(&protocol::TorqueCommand { hold: true, ..torques }).is_err());
+}
