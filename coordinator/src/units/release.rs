@@ -14,9 +14,10 @@
 //! residual, the controller's own slip signal), and latches a [`Release`] when either
 //! [`ReleasePolicy`] limit is passed. While released, the controller treats every hand as free
 //! ([`crate::team::Team::hands_released`]): no grasp rows, no object task or load, each hand
-//! backs away from the object by [`ReleasePolicy::retreat`] and holds that pose (a free-hand task), and the QP is the stance feet's alone. The latch
-//! clears when no robot's contact set has its hand in grasp any more (the grasp was opened),
-//! so a later grasp closes as usual.
+//! backs away from the object by [`ReleasePolicy::retreat`] and holds that pose (a free-hand
+//! task), and the QP is the stance feet's alone. The latch clears when no robot's contact set
+//! has its hand in grasp any more (the grasp was opened), so a later grasp closes as usual.
+//! Both PIDC and MQP call [`GraspWatch::after_tick`] as their tick's last step.
 
 use serde::{Deserialize, Serialize};
 
