@@ -190,11 +190,14 @@ impl Pidc {
 fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMap<String, RobotDescription>, cfg: &PidcConfig) -> Result<(f64, f64), ControllerError> {
     let (mut build_us, mut qp_us) = (0.0, 0.0);
     let mut saturated = false;
+    let t_list = Instant::now();
+    contact_list(&r.team, descriptions, cfg, &mut r.contacts)?;
+    build_us += t_list.elapsed().as_secs_f64() * 1e6;
     loop {
+        // The contact map depends on tau_0: built again after a saturation.
         let t0 = Instant::now();
         let map = MapInput { team: &r.team, proj: &r.proj, j_c: &r.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
         contact_map(&map, &mut ws.map, &mut r.y, &mut r.rho, &mut r.eta, &mut r.lambda_real);
-        contact_list(&r.team, descriptions, cfg, &mut r.contacts)?;
         let t1 = Instant::now();
         // F_c is kept out of the report while the QP reads it (no allocation: an empty vector).
         let mut f_c = std::mem::replace(&mut r.f_c, DVector::zeros(0));

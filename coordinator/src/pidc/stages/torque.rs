@@ -72,9 +72,7 @@ pub fn compose(tau0: &DVector<f64>, y: &DMatrix<f64>, f_c: &DVector<f64>, clamp:
     tau.copy_from(tau0);
     tau.gemv(1.0, y, f_c, 1.0);
     if let Some(c) = clamp {
-        for (&j, &lim) in c.actuated.iter().zip(c.limits) {
-            tau[j] = tau[j].clamp(-lim, lim);
-        }
+        saturate(tau, c.actuated, c.limits);
     }
     if !tau.iter().all(|x| x.is_finite()) {
         return Err(ControllerError::NonFinite { robot: "team".into(), what: "torque".into() });
