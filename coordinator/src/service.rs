@@ -336,7 +336,7 @@ mod tests {
     }
 
     fn refs(tick: u64) -> TaskReferences {
-        TaskReferences { header: Header::new("t", None, tick, 0), object: None, torsos: Vec::new(), swing_feet: Vec::new() }
+        TaskReferences { header: Header::new("t", None, tick, 0), object: None, torsos: Vec::new(), swing_feet: Vec::new(), foot_loads: Vec::new() }
     }
 
     #[test]

@@ -208,6 +208,7 @@ fn static_team_holds_the_object() {
             })
             .collect(),
         swing_feet: vec![],
+        foot_loads: vec![],
     };
     c.set_references(&refs);
     let mut cmds = Vec::new();

@@ -177,7 +177,7 @@ fn contact_list_scales_each_robots_friction_and_patch_by_the_margins() {
     let d = &descs[0];
     for (k, (row, kind)) in out.iter().take(8).enumerate() {
         assert_eq!(*row, 3 * k);
-        let ContactKind::Foot { mu, f_min } = kind else { panic!("foot {k} is {kind:?}") };
+        let ContactKind::Foot { mu, f_min, .. } = kind else { panic!("foot {k} is {kind:?}") };
         assert_eq!((*mu, *f_min), (d.foot_mu * 0.5, 7.0));
     }
     // Hands: the contact frame's axes from the agent's rotation (row-major), after the feet.
@@ -263,6 +263,7 @@ fn targets_follow_references_and_otherwise_hold_the_first_pose_seen() {
         object: Some(reference.clone()),
         torsos: vec![TorsoReference { robot: "r1".into(), reference: reference.clone() }],
         swing_feet: vec![],
+        foot_loads: vec![],
     };
     let (x, tw, acc) = t.torso(Some(&refs), "r1", &b);
     assert_eq!((x.translation.vector, tw, acc), (Vector3::new(7.0, 8.0, 9.0), [0.1; 6], [0.2; 6]));
@@ -299,6 +300,7 @@ fn displaced_references(r: &TickReport) -> TaskReferences {
             })
             .collect(),
         swing_feet: vec![],
+        foot_loads: vec![],
     }
 }
 

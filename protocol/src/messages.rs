@@ -90,6 +90,10 @@ pub struct RobotState {
     pub joint_velocities: Vec<f64>,
     /// Simulated (or hardware) time of the measurement, seconds.
     pub time: f64,
+    /// Measured normal contact force of each foot, N, in the description's foot order (the
+    /// simulator's contact forces, or a real robot's foot sensors); empty when the robot does
+    /// not measure them. The agent confirms a touchdown with it ([`ContactSet`]).
+    pub foot_forces: Vec<f64>,
 }
 
 impl Validate for RobotState {
@@ -100,7 +104,15 @@ impl Validate for RobotState {
         check_finite("joint_positions", &self.joint_positions)?;
         check_len("joint_velocities", &self.joint_velocities, self.joint_positions.len())?;
         check_finite("joint_velocities", &self.joint_velocities)?;
-        check_finite("time", &[self.time])
+        check_finite("time", &[self.time])?;
+        if self.foot_forces.len() > MAX_CONTACT_FEET {
+            return Err(ProtocolError::invalid("foot_forces", format!("{} feet, at most {MAX_CONTACT_FEET} are accepted", self.foot_forces.len())));
+        }
+        check_finite("foot_forces", &self.foot_forces)?;
+        if let Some(f) = self.foot_forces.iter().find(|f| **f < 0.0) {
+            return Err(ProtocolError::invalid("foot_forces", format!("a normal force of {f} N (it pushes, >= 0)")));
+        }
+        Ok(())
     }
 }
 
@@ -315,7 +327,20 @@ pub struct SwingFootReference {
     pub reference: PointReference,
 }
 
-/// Task references for a tick: the object, each torso, each swing foot.
+/// An upper bound on a stance foot's normal force, N: the ramp that unloads a foot before it
+/// lifts off (the gait planner sends it; the controller's QP keeps the foot's normal force at
+/// most `max_normal_force`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
+pub struct FootLoad {
+    pub robot: String,
+    pub frame: String,
+    pub max_normal_force: f64,
+}
+
+/// Task references for a tick: the object, each torso, each swing foot, and the stance feet
+/// being unloaded. A swing-foot reference is used while the robot's contact set has that foot
+/// in swing; references of feet in stance are ignored.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct TaskReferences {
@@ -323,6 +348,9 @@ pub struct TaskReferences {
     pub object: Option<PoseReference>,
     pub torsos: Vec<TorsoReference>,
     pub swing_feet: Vec<SwingFootReference>,
+    /// Unloading ramps of stance feet (empty when no foot is about to lift off).
+    #[serde(default)]
+    pub foot_loads: Vec<FootLoad>,
 }
 
 impl Validate for TaskReferences {
@@ -341,6 +369,14 @@ impl Validate for TaskReferences {
             check_finite(&format!("{f}.position"), &s.reference.position)?;
             check_finite(&format!("{f}.velocity"), &s.reference.velocity)?;
             check_finite(&format!("{f}.acceleration"), &s.reference.acceleration)?;
+        }
+        for (i, l) in self.foot_loads.iter().enumerate() {
+            validate_id("robot", &l.robot)?;
+            let f = format!("foot_loads[{i}].max_normal_force");
+            check_finite(&f, &[l.max_normal_force])?;
+            if l.max_normal_force < 0.0 {
+                return Err(ProtocolError::invalid(f, format!("{} N: a bound on a pushing force is >= 0", l.max_normal_force)));
+            }
         }
         Ok(())
     }
@@ -616,10 +652,14 @@ pub const MAX_FRAME_NAME_LEN: usize = 128;
 /// look up).
 pub const MAX_CONTACT_FEET: usize = 16;
 
-/// Which contacts of a robot are closed from now on: the feet in stance (the other feet of its
-/// description are in swing) and whether its hand holds the object. Published on
-/// `team/{team}/robot/{robot}/contacts` (see [`crate::keys::contacts`]); the agent checks the
-/// names against its own description and refuses unknown feet.
+/// Which contacts of a robot are closed from the state of tick `header.tick` on: the feet in
+/// stance (the other feet of its description are in swing) and whether its hand holds the
+/// object. Published on `team/{team}/robot/{robot}/contacts` (see [`crate::keys::contacts`]),
+/// possibly ahead of time: the agent keeps a bounded schedule and applies each set at its tick.
+/// It checks the names against its own description and refuses unknown feet. A foot that
+/// leaves the stance lifts off at that tick (if enough feet stay on the ground); a foot that
+/// joins it is in stance once its touchdown is confirmed by its measured normal force
+/// (`RobotState::foot_forces`), which may be before or after its planned time.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct ContactSet {
@@ -698,13 +738,17 @@ pub struct GroundTruth {
     /// Each robot's palm contact frame (named by robot id): where the hand is on the object
     /// (slip is measured from it).
     pub hands: Vec<BodyTruth>,
+    /// Each robot's foot centres (named `{robot}/{foot frame}`, world-aligned, twist of the
+    /// centre): foot heights and stance-foot slides of walks are measured from them.
+    #[serde(default)]
+    pub feet: Vec<BodyTruth>,
 }
 
 impl Validate for GroundTruth {
     fn validate(&self) -> Result<(), ProtocolError> {
         self.header.check(false)?;
         check_finite("time", &[self.time])?;
-        let bodies = self.object.iter().map(|b| ("object", b)).chain(self.torsos.iter().map(|b| ("torsos", b))).chain(self.hands.iter().map(|b| ("hands", b)));
+        let bodies = self.object.iter().map(|b| ("object", b)).chain(self.torsos.iter().map(|b| ("torsos", b))).chain(self.hands.iter().map(|b| ("hands", b))).chain(self.feet.iter().map(|b| ("feet", b)));
         for (field, b) in bodies {
             if b.name.is_empty() {
                 return Err(ProtocolError::invalid(field, "empty body name"));

@@ -17,6 +17,7 @@ fn state(nj: usize) -> RobotState {
         joint_positions: (0..nj).map(|i| i as f64 * 0.1).collect(),
         joint_velocities: vec![0.01; nj],
         time: 0.5,
+        foot_forces: Vec::new(),
     }
 }
 
@@ -170,6 +171,35 @@ fn mismatched_dimensions_are_named() {
     let mut s = state(4);
     s.header.robot = Some("r/1".into());
     assert!(matches!(decode::<RobotState>(&raw(&s)), Err(ProtocolError::BadId { .. })));
+    // Foot forces: pushing only, finite, bounded in count.
+    for bad in [vec![-1.0, 0.0, 0.0, 0.0], vec![f64::NAN], vec![0.0; 17]] {
+        let mut s = state(4);
+        s.foot_forces = bad;
+        assert!(decode::<RobotState>(&raw(&s)).is_err(), "foot forces {:?} accepted", s.foot_forces);
+    }
+    let mut s = state(4);
+    s.foot_forces = vec![0.0, 120.0, 95.5, 3.0];
+    assert_eq!(decode::<RobotState>(&raw(&s)).unwrap(), s);
+}
+
+#[test]
+fn foot_loads_must_bound_a_pushing_force() {
+    let refs = |f: f64| TaskReferences {
+        header: Header::new("t", None, 3, 0),
+        object: None,
+        torsos: vec![],
+        swing_feet: vec![],
+        foot_loads: vec![FootLoad { robot: "r1".into(), frame: "LF_FOOT".into(), max_normal_force: f }],
+    };
+    assert!(from_json::<TaskReferences>(&to_json(&refs(40.0)).unwrap()).is_ok());
+    for bad in [-1.0, f64::INFINITY] {
+        assert!(to_json(&refs(bad)).is_err(), "bound {bad} sent");
+        let text = serde_json::to_string(&refs(bad)).unwrap();
+        assert!(from_json::<TaskReferences>(&text).is_err(), "bound {bad} accepted");
+    }
+    // An older sender without the field: no foot is being unloaded.
+    let old = r#"{"header":{"version":1,"team":"t","robot":null,"tick":3,"stamp_ns":0},"object":null,"torsos":[],"swing_feet":[]}"#;
+    assert!(from_json::<TaskReferences>(old).unwrap().foot_loads.is_empty());
 }
 
 fn any_kind_decode(bytes: &[u8]) {

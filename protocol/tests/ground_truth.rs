@@ -12,6 +12,7 @@ fn sample() -> GroundTruth {
         hand_contacts: vec![ContactTruth { robot: "r1".into(), body: "hand".into(), position: [-0.3, 0.0, 0.6], wrench: [40.0, 0.0, 4.9, 0.0, 0.0, 0.0] }],
         foot_contacts: vec![ContactTruth { robot: "r1".into(), body: "LF_SHANK".into(), position: [0.0; 3], wrench: [0.0, 0.0, 150.0, 0.0, 0.0, 0.0] }],
         hands: vec![BodyTruth { name: "r1".into(), pose: Pose { position: [-0.3, 0.0, 0.6], orientation: [1.0, 0.0, 0.0, 0.0] }, twist: [0.0; 6] }],
+        feet: vec![BodyTruth { name: "r1/LF_FOOT".into(), pose: Pose { position: [-0.8, 0.3, 0.03], orientation: [1.0, 0.0, 0.0, 0.0] }, twist: [0.0; 6] }],
     }
 }
 

@@ -17,6 +17,7 @@ fn robot_state_bytes_are_the_documented_ones() {
         joint_positions: vec![0.5],
         joint_velocities: vec![-0.25],
         time: 0.3,
+        foot_forces: vec![120.0],
     };
     let mut want: Vec<u8> = vec![0x54, 0x51, 0x01, 0x00, 0x01, 0x00];
     want.extend([0x01, 0x01, 0x74, 0x01, 0x02, 0x72, 0x31, 0xFB, 0x2C, 0x01, 0x00]);
@@ -30,6 +31,9 @@ fn robot_state_bytes_are_the_documented_ones() {
     want.extend(f(-0.25));
     want.extend(f(0.3));
     assert_eq!(&f(0.3), &[0x33, 0x33, 0x33, 0x33, 0x33, 0x33, 0xD3, 0x3F]);
+    want.push(0x01);
+    want.extend(f(120.0));
+    assert_eq!(&f(120.0), &[0, 0, 0, 0, 0, 0, 0x5E, 0x40]);
     let got = encode(&s).unwrap();
     assert_eq!(got, want);
     assert_eq!(decode::<RobotState>(&want).unwrap(), s);

@@ -19,6 +19,7 @@ fn bench(c: &mut Criterion) {
         joint_positions: sq[7..].to_vec(),
         joint_velocities: (0..18).map(|i| 0.1 * (i as f64).sin()).collect(),
         time: 0.0,
+        foot_forces: Vec::new(),
     };
     let contacts = ContactSet::all_stance(&robot);
     let mut terms = empty_terms("bench", "r1");

@@ -46,6 +46,7 @@ fn per_tick_calls_do_not_allocate() {
         joint_positions: vec![0.1; n],
         joint_velocities: vec![0.2; n],
         time: 0.0,
+        foot_forces: Vec::new(),
     };
     let (count, applied, held) = ticks_allocations(PlaceholderDynamics::floating(n), state, n);
     assert_eq!(count, 0, "the core's tick allocated {count} times");
@@ -70,6 +71,7 @@ fn the_agents_tick_on_the_robots_model_does_not_allocate() {
         joint_positions: q.as_slice()[7..].to_vec(),
         joint_velocities: vec![0.01; n],
         time: 0.0,
+        foot_forces: Vec::new(),
     };
     let (count, applied, held) = ticks_allocations(ModelDynamics::new(robot).unwrap(), state, n);
     assert_eq!(count, 0, "the agent's tick with the robot's model allocated {count} times");

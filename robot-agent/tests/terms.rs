@@ -18,6 +18,7 @@ fn terms_of_the_standing_robot_are_consistent_with_the_model() {
         joint_positions: q[7..].to_vec(),
         joint_velocities: vec![0.05; 18],
         time: 0.0,
+        foot_forces: Vec::new(),
     };
     b.load_state(&robot, &state).unwrap();
     let mut contacts = ContactSet::all_stance(&robot);

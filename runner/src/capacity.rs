@@ -68,6 +68,7 @@ pub fn start_terms(world: &WorldSpec, robots: &[Arc<Robot>]) -> Result<(Vec<Dyna
             joint_velocities: vec![0.0; joints.len()],
             joint_positions: joints,
             time: 0.0,
+            foot_forces: Vec::new(),
         };
         let mut builder = TermsBuilder::new(robot).map_err(terms_err)?;
         builder.load_state(robot, &state).map_err(terms_err)?;

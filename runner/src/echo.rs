@@ -97,6 +97,7 @@ mod tests {
             joint_positions: vec![0.5],
             joint_velocities: vec![0.0],
             time: 0.005,
+            foot_forces: Vec::new(),
         };
         let v = line("team/t/robot/r1/state", "zenoh/bytes;team.RobotState/v1", &protocol::encode(&s).unwrap());
         assert_eq!(v["message"]["joint_positions"][0], 0.5);

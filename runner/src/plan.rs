@@ -250,6 +250,7 @@ impl ReferencePlan {
             object: Some(self.object_at(t)),
             torsos: (0..self.torsos.len()).map(|i| TorsoReference { robot: self.torsos[i].0.clone(), reference: self.torso_at(i, t) }).collect(),
             swing_feet: Vec::new(),
+            foot_loads: Vec::new(),
         }
     }
 }

@@ -104,5 +104,6 @@ pub fn empty_state(team: &str, robot: &str) -> RobotState {
         joint_positions: Vec::new(),
         joint_velocities: Vec::new(),
         time: 0.0,
+        foot_forces: Vec::new(),
     }
 }

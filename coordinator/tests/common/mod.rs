@@ -53,6 +53,7 @@ impl Fixture {
             joint_positions: q.as_slice()[7..].to_vec(),
             joint_velocities: v.as_slice()[6..].to_vec(),
             time: 0.0,
+            foot_forces: Vec::new(),
         };
         self.builder.load_state(&self.robot, &state).expect("state");
         let mut out = empty_terms(TEAM, id);

@@ -141,6 +141,7 @@ impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
             joint_positions: vec![0.0; joints],
             joint_velocities: vec![0.0; joints],
             time: 0.0,
+            foot_forces: Vec::new(),
         };
         let out = Written { torques: vec![0.0; joints], have: false, link_errors: 0 };
         Driver { core, hardware, link, cfg: *cfg, state, out, tick: 0, overruns: 0 }

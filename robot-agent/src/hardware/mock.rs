@@ -222,6 +222,7 @@ mod tests {
             joint_positions: Vec::new(),
             joint_velocities: Vec::new(),
             time: 0.0,
+            foot_forces: Vec::new(),
         }
     }
 
