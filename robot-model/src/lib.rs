@@ -60,7 +60,7 @@ pub mod parsers;
 pub mod spatial;
 
 pub use algorithm::{
-    compute_all_terms, coriolis_matrix, crba, forward_kinematics, frame_jacobian, frame_jacobian_time_variation, frame_jdot_v, frame_placement,
+    center_of_mass, compute_all_terms, coriolis_matrix, crba, forward_kinematics, frame_jacobian, frame_jacobian_time_variation, frame_jdot_v, frame_placement,
     frame_velocity, gravity, kinetic_energy, nonlinear_effects, point_jacobian, potential_energy, rnea, update_frame_placements,
 };
 pub use data::Data;

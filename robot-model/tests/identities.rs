@@ -194,3 +194,29 @@ fn skew_cols(pw: &Vector3<f64>, j: &Matrix6xX<f64>) -> Matrix3xX<f64> {
     }
     out
 }
+
+/// The centre of mass against the gravity term of RNEA (an independent path): for a floating
+/// base, `g = dU/dq` (checked above) with `U = -M g0 . c`, so the base's linear rows are
+/// `-M R^T g0` and its angular rows `-M R^T ((c - p) x g0)` (`p`, `R`: the base's pose).
+#[test]
+fn center_of_mass_gives_the_gravity_wrench_on_the_floating_base() {
+    let model = composed_model();
+    let mut data = Data::new(&model);
+    let mut r = rng(17);
+    let zero = DVector::zeros(model.nv);
+    for _ in 0..SAMPLES {
+        let (q, _) = random_state(&model, &mut r);
+        forward_kinematics(&model, &mut data, q.as_slice(), zero.as_slice()).unwrap();
+        let (mass, c) = center_of_mass(&model, &data);
+        let base = data.o_m_i[0];
+        let g = gravity(&model, &mut data, q.as_slice()).unwrap().clone();
+        let g0 = model.gravity;
+        let lin = -mass * base.rot.transpose() * g0;
+        let ang = -mass * base.rot.transpose() * (c - base.trans).cross(&g0);
+        let want = [lin.x, lin.y, lin.z, ang.x, ang.y, ang.z];
+        for k in 0..6 {
+            assert!((g[k] - want[k]).abs() < 1e-8 * (1.0 + want[k].abs()), "row {k}: rnea {} vs centre of mass {}", g[k], want[k]);
+        }
+        assert!(mass > 1.0, "total mass {mass}");
+    }
+}

@@ -1,6 +1,7 @@
 //! The rigid-body algorithms, one file each (Pinocchio's `algorithm/`), all free functions of
 //! `(&Model, &mut Data, ...)` that allocate nothing after [`crate::Data::new`].
 
+pub mod com;
 pub mod compute_all_terms;
 pub mod crba;
 pub mod jacobian;
@@ -8,6 +9,7 @@ pub mod jdot;
 pub mod kinematics;
 pub mod rnea;
 
+pub use com::center_of_mass;
 pub use compute_all_terms::compute_all_terms;
 pub use crba::crba;
 pub use jacobian::{frame_jacobian, point_jacobian};
