@@ -9,7 +9,7 @@
 //! | [`AgentCore::start`] | once, after the caller can send | the description, the status |
 //! | [`AgentCore::on_state`] | a measured state | terms to publish; hold torques in safe mode |
 //! | [`AgentCore::on_command`] | a torque command | checked, clamped torques to apply |
-//! | [`AgentCore::on_contacts`] | a contact set | nothing (used from the next state on) |
+//! | [`AgentCore::on_contacts`] | a contact set | nothing (scheduled for its tick, see [`crate::contact_switch`]) |
 //! | [`AgentCore::on_timer`] | housekeeping, a few times per deadline | hold torques on entering safe mode, status, description |
 //!
 //! Each returns [`Outputs`]: references into the core's preallocated buffers that the caller
@@ -23,6 +23,7 @@ use std::time::{Duration, Instant};
 use protocol::{AgentMode, AgentStatus, DynamicsTerms, Header, RobotDescription, RobotState, TorqueCommand};
 use thiserror::Error;
 
+use crate::contact_switch::{ContactSwitch, SwitchConfig};
 use crate::dynamics_source::DynamicsSource;
 use crate::gate::{CommandGate, CommandRejection};
 use crate::safe_mode::{CommandDeadline, HoldGains, PostureHold, Watchdog};
@@ -45,6 +46,8 @@ pub struct AgentConfig {
     pub status_period: Duration,
     /// The robot description is published at start and this often.
     pub description_period: Duration,
+    /// How contact sets are switched (touchdown force, feet kept down).
+    pub contacts: SwitchConfig,
 }
 
 impl AgentConfig {
@@ -60,6 +63,7 @@ impl AgentConfig {
             hold_gains: None,
             status_period: Duration::from_millis(100),
             description_period: Duration::from_secs(1),
+            contacts: SwitchConfig::default(),
         }
     }
 
@@ -96,6 +100,8 @@ pub enum StateRejection {
     WrongSize { tick: u64, expected: usize, got: usize },
     #[error("dropped out-of-order state of tick {tick} (latest {latest:?})")]
     OutOfOrder { tick: u64, latest: Option<u64> },
+    #[error("dropped state of tick {tick} with {got} foot forces, the robot has {expected} feet (or none measured)")]
+    WrongFootForces { tick: u64, expected: usize, got: usize },
 }
 
 /// Why a contact set was refused. It is counted (`contacts_rejected`) and logged by the core;
@@ -108,6 +114,8 @@ pub enum ContactRejection {
     OtherRobot { robot: String, got: String },
     #[error("unknown foot frame(s) {unknown:?}; this robot's feet are {feet:?}")]
     UnknownFeet { unknown: Vec<String>, feet: Vec<String> },
+    #[error("contact set of tick {tick} refused: {capacity} sets are already scheduled")]
+    ScheduleFull { tick: u64, capacity: usize },
 }
 
 /// What the caller sends or applies after a core call, in this order: publish `terms` on the
@@ -153,7 +161,7 @@ pub struct AgentCore<S: DynamicsSource> {
     gate: CommandGate,
     watchdog: Watchdog,
     hold: PostureHold,
-    contacts: ContactSet,
+    contacts: ContactSwitch,
     terms: DynamicsTerms,
     torques: TorqueCommand,
     description: Option<RobotDescription>,
@@ -198,7 +206,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             gate: CommandGate::new(robot, limits.clone(), cfg.max_command_age),
             watchdog: Watchdog::new(cfg.deadline),
             hold: PostureHold::new(gains, limits),
-            contacts: ContactSet { stance: vec![true; feet.len()], hand_in_grasp: true },
+            contacts: ContactSwitch::new(cfg.contacts.clone(), ContactSet { stance: vec![true; feet.len()], hand_in_grasp: true }),
             feet,
             terms: empty_terms(team, robot),
             torques: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false },
@@ -240,7 +248,8 @@ impl<S: DynamicsSource> AgentCore<S> {
         self.watchdog.on_state(tick, now);
         self.q.copy_from_slice(&state.joint_positions);
         self.qdot.copy_from_slice(&state.joint_velocities);
-        let terms = match self.source.compute(state, &self.contacts, &mut self.terms) {
+        self.switch_contacts(tick, &state.foot_forces);
+        let terms = match self.source.compute(state, self.contacts.active(), &mut self.terms) {
             Ok(()) => {
                 self.terms.header.tick = tick;
                 self.terms.state_tick = tick;
@@ -269,6 +278,10 @@ impl<S: DynamicsSource> AgentCore<S> {
             if got != self.joints {
                 return Err(StateRejection::WrongSize { tick, expected: self.joints, got });
             }
+        }
+        let (feet, got) = (self.feet.len(), state.foot_forces.len());
+        if got != 0 && got != feet {
+            return Err(StateRejection::WrongFootForces { tick, expected: feet, got });
         }
         if !self.gate.on_state(tick, state.header.stamp_ns, now) {
             return Err(StateRejection::OutOfOrder { tick, latest: self.gate.latest_state_tick() });
@@ -332,17 +345,37 @@ impl<S: DynamicsSource> AgentCore<S> {
         r
     }
 
-    /// A contact set arrived: checked against this robot's id and feet, used from the next
-    /// state on.
+    /// A contact set arrived: checked against this robot's id and feet, scheduled from its tick
+    /// on (a past tick: from the next state on).
     pub fn on_contacts(&mut self, msg: &protocol::ContactSet) -> Result<(), ContactRejection> {
-        match self.contact_set(msg) {
-            Ok(set) => {
-                tracing::info!(robot = %self.robot, stance = ?set.stance, hand_in_grasp = set.hand_in_grasp, "contact set changed");
-                self.contacts = set;
+        let tick = msg.header.tick;
+        let scheduled = self.contact_set(msg).and_then(|set| {
+            tracing::debug!(robot = %self.robot, tick, stance = ?set.stance, hand_in_grasp = set.hand_in_grasp, "contact set scheduled");
+            self.contacts.schedule(tick, set).map_err(|f| ContactRejection::ScheduleFull { tick: f.tick, capacity: f.capacity })
+        });
+        match scheduled {
+            Ok(()) => {
                 self.counters.contacts_applied += 1;
                 Ok(())
             }
             Err(r) => Err(self.reject_contacts(r)),
+        }
+    }
+
+    /// The contact sets due at the state of `tick`: lift-offs and force-confirmed touchdowns
+    /// (see [`crate::contact_switch`]).
+    fn switch_contacts(&mut self, tick: u64, foot_forces: &[f64]) {
+        let ev = self.contacts.on_state(tick, foot_forces);
+        self.counters.liftoffs += u64::from(ev.liftoffs);
+        self.counters.touchdowns += u64::from(ev.touchdowns);
+        if ev.deferred > 0 {
+            self.counters.liftoffs_deferred += 1;
+            if self.counters.liftoffs_deferred.is_power_of_two() {
+                tracing::warn!(robot = %self.robot, tick, "lift-off deferred: too few feet would stay on the ground");
+            }
+        }
+        if ev.changed() {
+            tracing::info!(robot = %self.robot, tick, stance = ?self.contacts.active().stance, "contact set changed");
         }
     }
 
@@ -498,7 +531,7 @@ impl<S: DynamicsSource> AgentCore<S> {
 
     /// The contact set the next terms are computed for.
     pub fn contacts(&self) -> &ContactSet {
-        &self.contacts
+        self.contacts.active()
     }
 
     /// The robot description the agent publishes, if its source has a model.

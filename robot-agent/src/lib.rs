@@ -18,11 +18,13 @@
 //! * [`dynamics_source`]: state to dynamics terms ([`dynamics_source::ModelDynamics`] over the
 //!   robot's model; [`dynamics_source::PlaceholderDynamics`] for the smoke run and the mock),
 //!   and the robot's protocol description ([`dynamics_source::robot_description`]).
+//! * [`contact_switch`]: the contact sets' schedule, lift-offs and force-confirmed touchdowns.
 //! * [`gate`]: the checks of incoming commands and clamping to the torque limits.
 //! * [`safe_mode`]: the watchdog and the posture hold of safe mode.
 //! * [`status`]: the agent's status message and counters.
 
 pub mod agent;
+pub mod contact_switch;
 pub mod core;
 pub mod dynamics_source;
 pub mod gate;

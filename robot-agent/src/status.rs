@@ -20,9 +20,15 @@ pub struct AgentCounters {
     pub safe_mode_entries: u64,
     /// Posture-hold torques handed to the torque sink.
     pub hold_torques: u64,
-    /// Contact sets applied / refused (unknown feet, another robot's, undecodable).
+    /// Contact sets accepted into the schedule / refused (unknown feet, another robot's,
+    /// undecodable, schedule full).
     pub contacts_applied: u64,
     pub contacts_rejected: u64,
+    /// Feet lifted off and landed (touchdown confirmed), and states at which a scheduled
+    /// lift-off was deferred because too few feet would have stayed down.
+    pub liftoffs: u64,
+    pub touchdowns: u64,
+    pub liftoffs_deferred: u64,
     /// Descriptions published.
     pub descriptions: u64,
 }

@@ -32,6 +32,7 @@ fn standing_state(robot: &Robot, team: &str, tick: u64, dq0: f64, qd: f64) -> Ro
         joint_positions: joints,
         joint_velocities: vec![qd; robot.joints()],
         time: tick as f64 * 0.005,
+        foot_forces: Vec::new(),
     }
 }
 
@@ -209,10 +210,29 @@ async fn publishes_dynamics_for_each_state_for_its_contact_set_and_its_descripti
     assert!(!terms.hand_in_grasp);
     assert_eq!(terms.frames_with(FrameRole::SwingFoot).count(), 1);
 
+    // A set sent ahead for tick 8 lands the foot: not before tick 8, and only once the foot's
+    // measured force confirms the touchdown.
+    let land = ContactSet {
+        header: Header::new(&team, Some(ID), 8, 0),
+        stance_feet: vec!["LF_FOOT".into(), "RF_FOOT".into(), "LH_FOOT".into(), "RH_FOOT".into()],
+        hand_in_grasp: true,
+    };
+    h.contacts.put(&land).await.unwrap();
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    for (tick, lf_force, swinging) in [(7, 0.0, 1), (8, 0.0, 1), (9, 80.0, 0)] {
+        let mut st = standing_state(&robot, &team, tick, 0.0, 0.0);
+        st.foot_forces = vec![lf_force, 100.0, 100.0, 100.0];
+        h.state(&st).await;
+        let terms = h.dynamics_of(tick).await;
+        assert_eq!(terms.frames_with(FrameRole::SwingFoot).count(), swinging, "tick {tick}");
+        assert_eq!(terms.hand_in_grasp, tick >= 8, "tick {tick}");
+    }
+
     let c = h.stop().await;
-    assert_eq!(c.states, 7);
-    assert_eq!(c.dynamics, 7);
-    assert_eq!((c.contacts_applied, c.contacts_rejected), (1, 1));
+    assert_eq!(c.states, 10);
+    assert_eq!(c.dynamics, 10);
+    assert_eq!((c.liftoffs, c.touchdowns), (1, 1));
+    assert_eq!((c.contacts_applied, c.contacts_rejected), (2, 1));
     assert!(c.descriptions >= 1);
 }
 

@@ -66,6 +66,7 @@ fn state(tick: u64, q: [f64; 3], v: [f64; 3]) -> RobotState {
         joint_positions: q.to_vec(),
         joint_velocities: v.to_vec(),
         time: tick as f64 * 0.005,
+        foot_forces: Vec::new(),
     }
 }
 
@@ -188,7 +189,10 @@ fn states_are_checked_and_contact_sets_apply_from_the_next_state() {
     assert!(c.on_state(&state(2, [0.0; 3], [0.0; 3]), t0).is_ok(), "a repeat of the latest tick is recomputed");
     assert_eq!(c.on_state(&state(1, [0.0; 3], [0.0; 3]), t0).unwrap_err(), StateRejection::OutOfOrder { tick: 1, latest: Some(2) });
     c.on_undecodable_state("truncated");
-    assert_eq!((c.counters().states, c.counters().states_rejected, c.counters().dynamics), (2, 4, 2));
+    let mut three_feet = state(3, [0.0; 3], [0.0; 3]);
+    three_feet.foot_forces = vec![10.0; 3];
+    assert!(matches!(c.on_state(&three_feet, t0), Err(StateRejection::WrongFootForces { expected: 2, got: 3, .. })));
+    assert_eq!((c.counters().states, c.counters().states_rejected, c.counters().dynamics), (2, 5, 2));
 
     let set = |robot: &str, feet: &[&str], grasp| ContactMsg {
         header: Header::new("t", Some(robot), 0, 0),
