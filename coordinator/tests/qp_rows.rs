@@ -57,7 +57,7 @@ impl Contact {
     /// What the controller hands the QP.
     fn kind(&self) -> ContactKind {
         match *self {
-            Contact::Foot { mu, f_min } => ContactKind::Foot { mu, f_min },
+            Contact::Foot { mu, f_min } => ContactKind::Foot { mu, f_min, f_max: f64::INFINITY },
             Contact::Hand { rot, mu, xi, half, f_min } => {
                 let r = rot.matrix();
                 ContactKind::Hand { tx: r.column(0).into(), ty: r.column(1).into(), n: r.column(2).into(), mu, xi, half, f_min }
@@ -467,7 +467,7 @@ fn least_violation_gives_up_the_grasp_before_the_joints() {
     let mut y = DMatrix::<f64>::zeros(1, m);
     y[(0, 3)] = 1.0;
     let contacts = vec![
-        (0, ContactKind::Foot { mu: 0.8, f_min: 5.0 }),
+        (0, ContactKind::Foot { mu: 0.8, f_min: 5.0, f_max: f64::INFINITY }),
         (3, ContactKind::Hand { tx: Vector3::y(), ty: Vector3::z(), n: Vector3::x(), mu: 0.8, xi: 0.05, half: [0.05, 0.05], f_min: 30.0 }),
     ];
     let tau0 = DVector::<f64>::zeros(1);
@@ -488,4 +488,28 @@ fn least_violation_gives_up_the_grasp_before_the_joints() {
     assert!(foot >= 5.0 - 0.05, "the foot keeps its least force: {foot}");
     let (squeeze, torque, _) = solve(1.0);
     assert!((torque.abs() - 20.0).abs() < 0.5 && (squeeze - 20.0).abs() < 0.5, "equal prices split: tau {torque}, squeeze {squeeze}");
+}
+
+/// A foot being unloaded before its lift-off: one more row, `f_z <= f_max`, written out again
+/// here as the physics states it; below `f_min` the ramp wins (the minimum drops to `f_max`).
+#[test]
+fn an_unloading_foot_has_its_normal_force_bounded_above() {
+    let mut rng = StdRng::seed_from_u64(7);
+    for _ in 0..500 {
+        let (mu, f_min) = (rng.random_range(0.2..1.2), rng.random_range(1.0..30.0));
+        let f_max = rng.random_range(0.0..400.0);
+        let kind = ContactKind::Foot { mu, f_min, f_max };
+        assert_eq!(contact_rows(&kind).len(), 6);
+        let physics_ok = |w: &[f64]| w[2] <= f_max && w[2] >= f_min.min(f_max) && w[0].abs() <= mu * w[2] && w[1].abs() <= mu * w[2];
+        for _ in 0..20 {
+            let f_n = rng.random_range(0.0..500.0);
+            let w = [rng.random_range(-0.98..0.98) * mu * f_n, rng.random_range(-0.98..0.98) * mu * f_n, f_n];
+            assert_eq!(broken_rows(&kind, &w).is_empty(), physics_ok(&w), "mu {mu} f_min {f_min} f_max {f_max}: {w:?}");
+        }
+        // Over the bound alone: exactly the new row.
+        let w = [0.0, 0.0, f_max * rng.random_range(1.02..1.5) + 1e-3];
+        assert_eq!(broken_rows(&kind, &w), vec![5]);
+    }
+    // No ramp: the five rows of a foot.
+    assert_eq!(contact_rows(&ContactKind::Foot { mu: 0.5, f_min: 5.0, f_max: f64::INFINITY }).len(), 5);
 }

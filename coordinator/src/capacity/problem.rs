@@ -243,7 +243,7 @@ mod tests {
 
     #[test]
     fn every_contact_row_has_a_name() {
-        let foot = ContactKind::Foot { mu: 0.5, f_min: 5.0 };
+        let foot = ContactKind::Foot { mu: 0.5, f_min: 5.0, f_max: f64::INFINITY };
         let hand = ContactKind::Hand { tx: Vector3::x(), ty: Vector3::y(), n: Vector3::z(), mu: 0.5, xi: 0.03, half: [0.05, 0.04], f_min: 30.0 };
         for k in [foot, hand] {
             assert_eq!(contact_rows(&k).len(), contact_limits(&k).len());

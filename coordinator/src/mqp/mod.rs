@@ -40,7 +40,7 @@ pub use config::MqpConfig;
 pub use report::{MqpReport, MqpTiming};
 
 use crate::linalg::zeros_v;
-use crate::pidc::stages::contacts::{contact_jacobian, contact_list};
+use crate::pidc::stages::contacts::{contact_jacobian, contact_list, unload_feet};
 use crate::pidc::stages::limits::torque_limits;
 use crate::units::targets::Targets;
 use crate::units::grasp::GraspTracker;
@@ -141,6 +141,7 @@ impl Mqp {
         let tasks = TaskInput { team: &r.team, grasp: r.grasp.as_ref(), references: references.as_ref(), config: cfg };
         task_rows(&tasks, targets, &mut r.tasks)?;
         contact_list(&r.team, descriptions, contact_parameters, &mut r.contacts)?;
+        unload_feet(&r.team, references.as_ref().map_or(&[][..], |refs| &refs.foot_loads[..]), &mut r.contacts);
         let input = ProblemInput {
             team: &r.team,
             grasp: r.grasp.as_ref(),

@@ -85,6 +85,7 @@ pub fn task_rows(inp: &TaskInput, targets: &mut Targets, rows: &mut TaskRows) ->
         rows.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.swing_gains, cfg.swing_weight);
     }
     targets.keep_free_hands(team);
+    targets.keep_swing_feet(team);
     for tf in &team.free_hands {
         let (x, twist) = frame_pose(tf, &team.velocity);
         let (x_d, tw_d, acc_d) = targets.free_hand(&team.robots[tf.robot].id, &x);

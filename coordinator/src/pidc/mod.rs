@@ -19,7 +19,7 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use nalgebra::DVector;
-use protocol::{DynamicsTerms, QpStatus, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
+use protocol::{DynamicsTerms, FootLoad, QpStatus, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
 
 pub use config::PidcConfig;
 pub use report::{TickReport, Timing};
@@ -31,7 +31,7 @@ use crate::units::impedance::TaskStack;
 use crate::units::projection::ProjectionWorkspace;
 use crate::units::release::{GraspWatch, TickOutcome};
 use crate::{ControllerError, TeamController};
-use stages::contacts::{contact_jacobian, contact_list};
+use stages::contacts::{contact_jacobian, contact_list, unload_feet};
 use stages::limits::torque_limits;
 use stages::tasks::{task_torque, MotionSpaceTerms, TaskInput, Targets};
 use stages::torque::{compose, fallback, motion_torque, saturate, Clamp};
@@ -151,7 +151,8 @@ impl Pidc {
         task_torque(&tasks, targets, &mut ws.tasks, &mut r.tau_m, &mut r.load, &mut r.f_x)?;
         motion_torque(&r.proj, &r.tau_m, &mut r.tau0, &mut ws.p_tau_m);
         let t_imp = us();
-        let (build_us, qp_us) = contact_forces(r, ws, descriptions, cfg)?;
+        let loads = references.as_ref().map_or(&[][..], |refs| &refs.foot_loads[..]);
+        let (build_us, qp_us) = contact_forces(r, ws, descriptions, cfg, loads)?;
         // Degrade, never collapse: let go of an object the team cannot hold.
         let outcome = TickOutcome::of(tick[0].header.tick, &r.team, r.grasp.as_ref(), r.fallback.is_some());
         set_note(&mut r.release, watch.after_tick(&cfg.release, outcome, &r.team, r.grasp.as_ref(), targets, grasp));
@@ -186,12 +187,14 @@ impl Pidc {
 /// wrenches for the torque sent. When the QP fails and `tau_0` asks more of a joint than its
 /// limit ([`saturate`]: a push, a task far from its target), the QP is solved again with `tau_0`
 /// saturated, so that the contact forces are chosen for a torque the joints can give; then
-/// the least-violation fallback ([`fallback`]). Returns the build and QP times, µs.
-fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMap<String, RobotDescription>, cfg: &PidcConfig) -> Result<(f64, f64), ControllerError> {
+/// the least-violation fallback ([`fallback`]). Feet named in `loads` (the references'
+/// unloading ramps) have their normal force bounded. Returns the build and QP times, µs.
+fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMap<String, RobotDescription>, cfg: &PidcConfig, loads: &[FootLoad]) -> Result<(f64, f64), ControllerError> {
     let (mut build_us, mut qp_us) = (0.0, 0.0);
     let mut saturated = false;
     let t_list = Instant::now();
     contact_list(&r.team, descriptions, cfg, &mut r.contacts)?;
+    unload_feet(&r.team, loads, &mut r.contacts);
     build_us += t_list.elapsed().as_secs_f64() * 1e6;
     loop {
         // The contact map depends on tau_0: built again after a saturation.

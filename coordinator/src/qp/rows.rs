@@ -23,8 +23,9 @@ use nalgebra::Vector3;
 /// What a contact's rows need.
 #[derive(Debug, Clone, Copy)]
 pub enum ContactKind {
-    /// Point foot: friction coefficient.
-    Foot { mu: f64, f_min: f64 },
+    /// Point foot: friction coefficient, minimum normal force, and the upper bound of an
+    /// unloading ramp before lift-off (`f64::INFINITY`: none).
+    Foot { mu: f64, f_min: f64, f_max: f64 },
     /// Flat hand: frame axes (world), friction, torsional coefficient, patch half-sizes
     /// `[delta_x, delta_y]` (along `tx`, along `ty`), minimum normal force.
     Hand { tx: Vector3<f64>, ty: Vector3<f64>, n: Vector3<f64>, mu: f64, xi: f64, half: [f64; 2], f_min: f64 },
@@ -76,18 +77,24 @@ impl ContactRows {
 }
 
 /// Rows `c . lambda_k >= lo` of one contact (3 or 6 columns): a foot's 5 (friction pyramid,
-/// normal force), a hand's 11 (friction pyramid, normal force, torsion, tilt).
+/// normal force; a 6th, `f_z <= f_max`, while it is being unloaded, with the minimum lowered
+/// to `f_max` when the ramp goes below it), a hand's 11 (friction pyramid, normal force,
+/// torsion, tilt).
 pub fn contact_rows(kind: &ContactKind) -> ContactRows {
     let mut rows = ContactRows::new(kind.dim());
     match kind {
-        ContactKind::Foot { mu, f_min } => {
+        ContactKind::Foot { mu, f_min, f_max } => {
             // eqn. unilateral_and_friction_cone_constraint, n = e_z
             let row = |x: f64, y: f64, z: f64| [x, y, z, 0.0, 0.0, 0.0];
             rows.push(row(-1.0, 0.0, *mu), 0.0);
             rows.push(row(1.0, 0.0, *mu), 0.0);
             rows.push(row(0.0, -1.0, *mu), 0.0);
             rows.push(row(0.0, 1.0, *mu), 0.0);
-            rows.push(row(0.0, 0.0, 1.0), *f_min);
+            rows.push(row(0.0, 0.0, 1.0), f_min.min(*f_max));
+            // The unloading ramp before a lift-off (DESIGN.md §10): f_z <= f_max.
+            if f_max.is_finite() {
+                rows.push(row(0.0, 0.0, -1.0), -*f_max);
+            }
         }
         ContactKind::Hand { tx, ty, n, mu, xi, half, f_min } => {
             let row = |f: Vector3<f64>, m: Vector3<f64>| [f.x, f.y, f.z, m.x, m.y, m.z];

@@ -91,6 +91,13 @@ impl Targets {
         }
     }
 
+    /// Forget the held positions of feet that are no longer in swing (they landed): a foot
+    /// that swings again without a reference holds where it lifts off next time, not where it
+    /// lifted off first.
+    pub fn keep_swing_feet(&mut self, team: &Team) {
+        self.held_feet.retain(|(r, f, _)| team.swing_feet.iter().any(|s| s.name == *f && team.robots[s.robot].id == *r));
+    }
+
     /// Forget the held poses of hands that are no longer free (they closed on the object).
     pub fn keep_free_hands(&mut self, team: &Team) {
         self.held_hands.retain(|(r, _)| team.free_hands.iter().any(|h| team.robots[h.robot].id == *r));

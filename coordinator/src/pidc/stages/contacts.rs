@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 
 use nalgebra::{DMatrix, DVector};
-use protocol::RobotDescription;
+use protocol::{FootLoad, RobotDescription};
 
 use crate::linalg::{zeros, zeros_v};
 use crate::pidc::PidcConfig;
@@ -44,7 +44,7 @@ pub fn contact_list(team: &Team, descriptions: &BTreeMap<String, RobotDescriptio
     out.clear();
     for (k, f) in team.feet.iter().enumerate() {
         let d = description(f.robot)?;
-        out.push((3 * k, ContactKind::Foot { mu: d.foot_mu * cfg.friction_margin, f_min: cfg.f_min_foot }));
+        out.push((3 * k, ContactKind::Foot { mu: d.foot_mu * cfg.friction_margin, f_min: cfg.f_min_foot, f_max: f64::INFINITY }));
     }
     for (k, h) in team.hands.iter().enumerate() {
         let d = description(h.robot)?;
@@ -63,4 +63,20 @@ pub fn contact_list(team: &Team, descriptions: &BTreeMap<String, RobotDescriptio
         ));
     }
     Ok(())
+}
+
+/// The unloading ramps of the references (`loads`): each stance foot named there gets its
+/// upper bound on the normal force (eq. unilateral_and_friction_cone_constraint with
+/// `f_z <= f_max`, see [`crate::qp::contact_rows`]). `out` is [`contact_list`]'s: the feet
+/// first, in the team's order.
+pub fn unload_feet(team: &Team, loads: &[FootLoad], out: &mut [(usize, ContactKind)]) {
+    if loads.is_empty() {
+        return;
+    }
+    for (f, (_, kind)) in team.feet.iter().zip(out.iter_mut()) {
+        let id = &team.robots[f.robot].id;
+        if let (Some(l), ContactKind::Foot { f_max, .. }) = (loads.iter().find(|l| l.robot == *id && l.frame == f.name), kind) {
+            *f_max = l.max_normal_force;
+        }
+    }
 }
