@@ -31,6 +31,19 @@ fn body_truth(m: &mjModel, d: &mjData, body: usize, name: &str) -> BodyTruth {
     BodyTruth { name: name.to_string(), pose, twist: [vel[3], vel[4], vel[5], vel[0], vel[1], vel[2]] }
 }
 
+/// Position and world-frame twist `[v; omega]` of a geom's centre (a foot sphere), world-aligned.
+fn geom_truth(m: &mjModel, d: &mjData, geom: usize, name: &str) -> BodyTruth {
+    let mut pose = Pose::IDENTITY;
+    let mut vel = [0.0; 6];
+    unsafe {
+        for k in 0..3 {
+            pose.position[k] = *d.geom_xpos.add(3 * geom + k);
+        }
+        mujoco_c::mj_objectVelocity(m, d, mjtObj::mjOBJ_GEOM as i32, geom as i32, &mut vel, 0);
+    }
+    BodyTruth { name: name.to_string(), pose, twist: [vel[3], vel[4], vel[5], vel[0], vel[1], vel[2]] }
+}
+
 /// Ground truth of the current MuJoCo state (call after `mj_step` or `mj_forward`).
 pub fn compute(world: &World, d: &mjData, team: &str, tick: u64, out: &mut GroundTruth) {
     let m = world.model.ffi();
@@ -39,9 +52,15 @@ pub fn compute(world: &World, d: &mjData, team: &str, tick: u64, out: &mut Groun
     out.object = world.object.map(|(b, _, _)| body_truth(m, d, b, "object"));
     out.torsos.clear();
     out.hands.clear();
+    out.feet.clear();
     for r in &world.robots {
         out.torsos.push(body_truth(m, d, r.base_body, &r.id));
         out.hands.push(body_truth(m, d, r.hand_contact_body, &r.id));
+        for (frame, &body) in r.robot.foot_frames.iter().zip(&r.foot_bodies) {
+            if let Some(&g) = r.foot_geoms.iter().find(|&&g| unsafe { *m.geom_bodyid.add(g) } as usize == body) {
+                out.feet.push(geom_truth(m, d, g, &format!("{}/{frame}", r.id)));
+            }
+        }
     }
     out.hand_contacts.clear();
     out.foot_contacts.clear();
@@ -84,7 +103,7 @@ pub fn compute(world: &World, d: &mjData, team: &str, tick: u64, out: &mut Groun
 
 /// An empty ground-truth message.
 pub fn empty(team: &str) -> GroundTruth {
-    GroundTruth { header: Header::new(team, None, 0, 0), time: 0.0, object: None, torsos: Vec::new(), hand_contacts: Vec::new(), foot_contacts: Vec::new(), hands: Vec::new() }
+    GroundTruth { header: Header::new(team, None, 0, 0), time: 0.0, object: None, torsos: Vec::new(), hand_contacts: Vec::new(), foot_contacts: Vec::new(), hands: Vec::new(), feet: Vec::new() }
 }
 
 /// Ground truth kept in memory, every `every` ticks.

@@ -155,6 +155,7 @@ impl Plant for MujocoPlant {
             }
         }
         out.time = self.time();
+        foot_forces(self.world.model.ffi(), d, r, &mut out.foot_forces);
     }
 
     fn set_torques(&mut self, robot: usize, tau: &[f64]) {
@@ -188,5 +189,26 @@ impl Plant for MujocoPlant {
     fn perturb(&mut self, req: &PerturbationRequest) -> Result<(), String> {
         let now = self.time();
         self.perturbations.add_request(&self.world, req, now).map_err(|e| e.to_string())
+    }
+}
+
+/// Each foot's normal contact force, N, in the description's foot order (the sum over the
+/// foot's contacts with anything but its own robot's palm): what foot sensors would measure.
+fn foot_forces(m: &mjModel, d: &mjData, r: &crate::world::RobotIndex, out: &mut Vec<f64>) {
+    out.clear();
+    out.resize(r.foot_bodies.len(), 0.0);
+    for i in 0..d.ncon as usize {
+        let c = unsafe { &*d.contact.add(i) };
+        for (g, other) in [(c.geom[0], c.geom[1]), (c.geom[1], c.geom[0])] {
+            if !r.foot_geoms.iter().any(|&f| f as i32 == g) || r.hand_geoms.iter().any(|&h| h as i32 == other) {
+                continue;
+            }
+            let body = unsafe { *m.geom_bodyid.add(g as usize) } as usize;
+            if let Some(k) = r.foot_bodies.iter().position(|&b| b == body) {
+                let mut f = [0.0; 6];
+                unsafe { mujoco_c::mj_contactForce(m, d, i as i32, &mut f) };
+                out[k] += f[0].max(0.0);
+            }
+        }
     }
 }

@@ -277,6 +277,8 @@ pub struct RobotIndex {
     /// Geom ids of the palm and of the four foot spheres.
     pub hand_geoms: Vec<usize>,
     pub foot_geoms: Vec<usize>,
+    /// The body id of each foot, in the description's foot order (its contacts are the foot's).
+    pub foot_bodies: Vec<usize>,
     /// Body id of the hand contact frame.
     pub hand_contact_body: usize,
     /// Initial configuration: standing with overrides (and noise), the robot's q convention.
@@ -490,6 +492,7 @@ impl World {
             let foot_geoms: Vec<usize> = (0..raw.ngeom as usize)
                 .filter(|&g| bodies.contains(&(unsafe { *raw.geom_bodyid.add(g) } as usize)) && unsafe { *raw.geom_condim.add(g) } == 3 && is_foot_geom(raw, g, robot.feet.radius))
                 .collect();
+            let foot_bodies = foot_body_names(&robot).iter().map(|b| name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(b))).collect::<Result<Vec<_>, _>>()?;
             let hand_contact_body = name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(&robot.hand_frame))?;
             let mut initial_q: Vec<f64> = robot.standing_q.iter().copied().collect();
             let off = robot.model.nq - robot.model.joint_names.len();
@@ -516,6 +519,7 @@ impl World {
                 bodies,
                 hand_geoms,
                 foot_geoms,
+                foot_bodies,
                 hand_contact_body,
                 initial_q,
             });
