@@ -416,3 +416,41 @@ fn controller_configuration_from_toml_keeps_defaults_and_refuses_bad_values() {
         assert!(e.contains(says), "{bad}: {e}");
     }
 }
+
+/// A swing foot without a reference holds where it lifted off, each time it swings: once it
+/// lands its held target is forgotten (it used to be kept, and a second swing pulled the foot
+/// back to its first lift-off point).
+#[test]
+fn a_swing_foot_without_a_reference_holds_where_it_lifted_off_this_time() {
+    use coordinator::team::Team;
+    use coordinator::units::targets::Targets;
+    let mut fx = Fixture::new();
+    let nv = fx.robot.model.nv;
+    let swing = ContactSet { stance: vec![false, true, true, true], hand_in_grasp: false };
+    let stance = ContactSet { stance: vec![true; 4], hand_in_grasp: false };
+    let q0 = fx.standing_q(0, 2);
+    let mut q1 = q0.clone();
+    let hfe = fx.robot.model.joint_names.iter().position(|j| j == "LF_HFE").expect("LF_HFE");
+    q1[7 + hfe] += 0.2;
+    let mut team_at = |q: &DVector<f64>, cs: &ContactSet| {
+        let terms = fx.terms_with("r1", q, &DVector::zeros(nv), 1, cs);
+        let mut team = Team::default();
+        team.assemble_into(&[terms], None, false).expect("team");
+        team
+    };
+    let first = team_at(&q0, &swing);
+    let (name, p0) = (first.swing_feet[0].name.clone(), first.swing_feet[0].position);
+    let mut targets = Targets::default();
+    assert_eq!(targets.swing_foot(None, "r1", &name, &p0).0, p0);
+    // Still swinging, elsewhere: the lift-off point is held.
+    let moved = team_at(&q1, &swing);
+    let p1 = moved.swing_feet[0].position;
+    assert!((p1 - p0).norm() > 0.02, "the foot moved {:.3} m", (p1 - p0).norm());
+    targets.keep_swing_feet(&moved);
+    assert_eq!(targets.swing_foot(None, "r1", &name, &p1).0, p0);
+    // It lands, then lifts off again at p1: p1 is held now.
+    targets.keep_swing_feet(&team_at(&q0, &stance));
+    let again = team_at(&q1, &swing);
+    targets.keep_swing_feet(&again);
+    assert_eq!(targets.swing_foot(None, "r1", &name, &p1).0, p1);
+}
