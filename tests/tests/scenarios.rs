@@ -8,30 +8,11 @@
 //!
 //! Reports are written to `target/test-reports/<name>/` for a look at the plots.
 
-use std::path::{Path, PathBuf};
+mod common;
 
-use team_runner::evaluate::{self, Metrics};
-use team_runner::plan::{self, Plan};
-use team_runner::run::{self, RunOptions};
-use team_runner::scenario::Scenario;
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("repo root").to_path_buf()
-}
-
-fn run_scenario(file: &str, sets: &[&str], distributed: bool, name: &str) -> (Plan, Metrics) {
-    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-    let scenario = Scenario::load(repo().join("scenarios").join(file), &sets).expect("scenario loads");
-    let plan = plan::plan(&scenario, &repo()).expect("plan");
-    let dir = repo().join("target/test-reports").join(name);
-    std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(&plan, &RunOptions { distributed, progress: false }, &dir).expect("the run completes");
-    let eval = evaluate::evaluate(&plan, &records, if distributed { "distributed" } else { "embedded" });
-    evaluate::write_report(&plan, &eval, &dir).expect("report written");
-    team_runner::plots::write_all(&plan, &eval, &records, &dir).expect("figures drawn");
-    println!("{}", evaluate::summary(&eval.metrics, &dir));
-    (plan, eval.metrics)
-}
+use common::scenario::run_scenario;
+use team_runner::evaluate::Metrics;
+use team_runner::plan::Plan;
 
 /// Every acceptance check passed, and the run was the real thing: every tick evaluated, the
 /// QP solved (almost) every tick, the hands squeezing.

@@ -8,29 +8,11 @@
 //! third tick before), and its own object-pose fit agrees with the hands (residual < 2 mm; the
 //! centroid estimate put three robots' object 99 mm off).
 
-use std::path::{Path, PathBuf};
+mod common;
 
-use team_runner::evaluate::{self, Metrics};
-use team_runner::plan::{self, Plan};
-use team_runner::run::{self, RunOptions};
-use team_runner::scenario::Scenario;
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("repo root").to_path_buf()
-}
-
-fn run_team(file: &str, sets: &[&str], name: &str) -> (Plan, Metrics) {
-    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-    let scenario = Scenario::load(repo().join("scenarios").join(file), &sets).expect("scenario loads");
-    let plan = plan::plan(&scenario, &repo()).expect("plan");
-    let dir = repo().join("target/test-reports").join(name);
-    std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(&plan, &RunOptions { distributed: false, progress: false }, &dir).expect("the run completes");
-    let eval = evaluate::evaluate(&plan, &records, "embedded");
-    evaluate::write_report(&plan, &eval, &dir).expect("report written");
-    println!("{}", evaluate::summary(&eval.metrics, &dir));
-    (plan, eval.metrics)
-}
+use common::scenario::run_scenario;
+use team_runner::evaluate::Metrics;
+use team_runner::plan::Plan;
 
 fn assert_team_accepted(plan: &Plan, m: &Metrics, robots: usize) {
     assert_eq!(plan.robots.len(), robots);
@@ -55,25 +37,25 @@ fn assert_team_accepted(plan: &Plan, m: &Metrics, robots: usize) {
 
 #[test]
 fn three_robots_hold_and_move_the_cube() {
-    let (plan, m) = run_team("team3_cube.toml", &["duration=2.0", "settle=0.5"], "team3_cube");
+    let (plan, m) = run_scenario("team3_cube.toml", &["duration=2.0", "settle=0.5"], false, "team3_cube");
     assert_team_accepted(&plan, &m, 3);
 }
 
 #[test]
 fn four_robots_hold_and_move_the_cube() {
-    let (plan, m) = run_team("team4_cube.toml", &["duration=2.0", "settle=0.5"], "team4_cube");
+    let (plan, m) = run_scenario("team4_cube.toml", &["duration=2.0", "settle=0.5"], false, "team4_cube");
     assert_team_accepted(&plan, &m, 4);
 }
 
 #[test]
 fn six_robots_hold_and_move_the_beam() {
-    let (plan, m) = run_team("team6_beam.toml", &["duration=1.5", "settle=0.5"], "team6_beam");
+    let (plan, m) = run_scenario("team6_beam.toml", &["duration=1.5", "settle=0.5"], false, "team6_beam");
     assert_team_accepted(&plan, &m, 6);
 }
 
 #[test]
 fn eight_robots_hold_and_move_the_beam() {
-    let (plan, m) = run_team("team8_beam.toml", &["duration=1.25", "settle=0.5"], "team8_beam");
+    let (plan, m) = run_scenario("team8_beam.toml", &["duration=1.25", "settle=0.5"], false, "team8_beam");
     assert_team_accepted(&plan, &m, 8);
 }
 

@@ -1,0 +1,30 @@
+//! A scenario run as the integration tests make it: load the file with `--set` overrides, plan,
+//! run the whole stack, evaluate on the ground truth, and write the report folder (with its
+//! figures) under `target/test-reports/<name>/` for a look.
+
+use std::path::{Path, PathBuf};
+
+use team_runner::evaluate::{self, Metrics};
+use team_runner::plan::{self, Plan};
+use team_runner::run::{self, RunOptions};
+use team_runner::scenario::Scenario;
+
+/// The repository's root.
+pub fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("repo root").to_path_buf()
+}
+
+/// Run `scenarios/{file}` with `sets`, embedded or `distributed`; the plan and the metrics.
+pub fn run_scenario(file: &str, sets: &[&str], distributed: bool, name: &str) -> (Plan, Metrics) {
+    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+    let scenario = Scenario::load(repo().join("scenarios").join(file), &sets).expect("scenario loads");
+    let plan = plan::plan(&scenario, &repo()).expect("plan");
+    let dir = repo().join("target/test-reports").join(name);
+    std::fs::create_dir_all(&dir).expect("report dir");
+    let records = run::run(&plan, &RunOptions { distributed, progress: false }, &dir).expect("the run completes");
+    let eval = evaluate::evaluate(&plan, &records, if distributed { "distributed" } else { "embedded" });
+    evaluate::write_report(&plan, &eval, &dir).expect("report written");
+    team_runner::plots::write_all(&plan, &eval, &records, &dir).expect("figures drawn");
+    println!("{}", evaluate::summary(&eval.metrics, &dir));
+    (plan, eval.metrics)
+}
