@@ -6,7 +6,9 @@
 //! on a loaded machine). It records what the evaluation needs (ground truth,
 //! the torques the agents applied, the coordinator's diagnostics and status) and shows the
 //! progress. It never talks to the controller other than by references: the ground truth it
-//! records is for evaluation only.
+//! records is for evaluation only. A walking scenario's contact sets go out
+//! [`CONTACT_LOOKAHEAD`] ticks ahead on each robot's `contacts` key (the agents keep a bounded
+//! schedule of them).
 
 use std::collections::BTreeMap;
 use std::io::IsTerminal;
@@ -15,7 +17,7 @@ use std::time::{Duration, Instant};
 use indicatif::{ProgressBar, ProgressStyle};
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, SampleQueue, TransportError, TypedPublisher};
-use protocol::{CoordinatorStatus, GroundTruth, TaskReferences, TickDiagnostics, TorqueCommand};
+use protocol::{ContactSet, CoordinatorStatus, GroundTruth, TaskReferences, TickDiagnostics, TorqueCommand};
 use tokio::sync::watch;
 use zenoh::Session;
 
@@ -25,6 +27,9 @@ use crate::record::{Message, Tap};
 /// References are published this many ticks ahead of the last simulated tick (10 s at 2 kHz;
 /// below the coordinator's reference queue, `coordinator::service::REFERENCE_QUEUE`).
 pub const LOOKAHEAD: u64 = 20_000;
+/// Contact sets are published this many ticks ahead of the last simulated tick (well within
+/// the agent's schedule of `robot_agent::contact_switch::SwitchConfig::max_scheduled` sets).
+pub const CONTACT_LOOKAHEAD: u64 = 1_000;
 
 /// What a run recorded (scenario ticks only; settling is not evaluated).
 #[derive(Debug, Clone, Default)]
@@ -75,6 +80,10 @@ pub struct Driver {
     diagnostics: SampleQueue,
     status: SampleQueue,
     refs_pub: TypedPublisher<TaskReferences>,
+    /// A walk's contact sets by tick, the next to publish, and each robot's publisher.
+    contact_sets: Vec<ContactSet>,
+    next_contact: usize,
+    contact_pubs: BTreeMap<String, TypedPublisher<ContactSet>>,
     plan: ReferencePlan,
     total: u64,
     progress: ProgressBar,
@@ -95,6 +104,15 @@ impl Driver {
         let diagnostics = transport::subscribe(session, keys::diagnostics(TEAM)?).await?;
         let status = transport::subscribe(session, keys::coordinator_status(TEAM)?).await?;
         let refs_pub = TypedPublisher::declare(session, keys::references(TEAM)?, Qos::HotPath).await?;
+        let contact_sets = plan.walk.as_ref().map(|w| w.contact_sets(TEAM, &plan.clock)).unwrap_or_default();
+        let mut contact_pubs = BTreeMap::new();
+        for c in &contact_sets {
+            let id = c.header.robot_id().to_string();
+            if !contact_pubs.contains_key(&id) {
+                let key = keys::contacts(TEAM, &id)?;
+                contact_pubs.insert(id, TypedPublisher::declare(session, key, Qos::HotPath).await?);
+            }
+        }
         let terminal = std::io::stderr().is_terminal();
         let progress = if show_progress && terminal {
             let pb = ProgressBar::new(total_ticks);
@@ -108,7 +126,7 @@ impl Driver {
         } else {
             ProgressBar::hidden()
         };
-        Ok(Driver { truth, torques, diagnostics, status, refs_pub, plan, total: total_ticks, progress, log_progress: show_progress && !terminal, tap: None, tapped_refs: 0 })
+        Ok(Driver { truth, torques, diagnostics, status, refs_pub, contact_sets, next_contact: 0, contact_pubs, plan, total: total_ticks, progress, log_progress: show_progress && !terminal, tap: None, tapped_refs: 0 })
     }
 
     /// Hand every message the driver decodes or publishes to the recorder too.
@@ -125,6 +143,20 @@ impl Driver {
                 tap.send(&self.refs_pub.key(), Message::References(refs));
                 self.tapped_refs = tick + 1;
             }
+        }
+        Ok(())
+    }
+
+    /// Publish the contact sets due before tick `until`.
+    async fn publish_contacts(&mut self, until: u64) -> Result<(), TransportError> {
+        while let Some(c) = self.contact_sets.get(self.next_contact).filter(|c| c.header.tick < until) {
+            if let Some(p) = self.contact_pubs.get_mut(c.header.robot_id()) {
+                p.put(c).await?;
+                if let Some(tap) = &self.tap {
+                    tap.send(&p.key(), Message::Contacts(c.clone()));
+                }
+            }
+            self.next_contact += 1;
         }
         Ok(())
     }
@@ -174,6 +206,7 @@ impl Driver {
                         self.publish_refs(next_ref, ahead).await?;
                         next_ref = ahead;
                     }
+                    self.publish_contacts(tick + 1 + CONTACT_LOOKAHEAD).await?;
                     if tick >= settle {
                         if run_started.is_none() {
                             rec.settle_wall = started.elapsed();

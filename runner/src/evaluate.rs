@@ -87,6 +87,8 @@ pub struct Metrics {
     pub coordinator_deadline_misses: Option<u64>,
     pub coordinator_fallbacks: Option<u64>,
     pub recoveries: Vec<Recovery>,
+    /// Steps, stance-foot slides and final torso poses of a walk (`None` without one).
+    pub walk: Option<crate::walk::evaluate::WalkReport>,
     pub settle_wall_s: f64,
     pub run_wall_s: f64,
     pub real_time_factor: f64,
@@ -311,8 +313,16 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
     }
     check("object position RMS [m]".into(), object.position_rms_m, MAX_OBJECT_POSITION_RMS);
     check("object orientation RMS [deg]".into(), object.orientation_rms_deg, MAX_OBJECT_ORIENTATION_RMS_DEG);
+    let walk = refs.walk.as_ref().map(|w| w.evaluate(&truth));
     for (r, t) in &torsos {
-        check(format!("{r} torso position RMS [m]"), t.position_rms_m, MAX_TORSO_POSITION_RMS);
+        // A walking torso follows a moving reference: its own bound.
+        let i = robots.iter().position(|x| x == r);
+        let walking = refs.walk.as_ref().zip(i).is_some_and(|(w, i)| w.walking[i]);
+        let (what, bound) = if walking { ("walking torso", crate::walk::evaluate::MAX_WALKING_TORSO_POSITION_RMS) } else { ("torso", MAX_TORSO_POSITION_RMS) };
+        check(format!("{r} {what} position RMS [m]"), t.position_rms_m, bound);
+    }
+    for (name, value, bound) in walk.iter().flat_map(crate::walk::evaluate::checks) {
+        check(name, value, bound);
     }
     for rec in &recoveries {
         if let Some(e) = rec.object_error_after_m {
@@ -343,6 +353,7 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
         coordinator_deadline_misses: records.last_status.as_ref().map(|s| s.deadline_misses),
         coordinator_fallbacks: records.last_status.as_ref().map(|s| s.fallbacks),
         recoveries,
+        walk,
         settle_wall_s: records.settle_wall.as_secs_f64(),
         run_wall_s: records.run_wall.as_secs_f64(),
         real_time_factor: if records.run_wall.is_zero() { 0.0 } else { sim / records.run_wall.as_secs_f64() },

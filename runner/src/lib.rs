@@ -18,6 +18,9 @@
 //! * [`evaluate`]: metrics, time series, plots and acceptance checks of a run.
 //! * [`scenario`]: scenario files (TOML) with `--set key=value` overrides.
 //! * [`reference`]: the scenarios' reference trajectories.
+//! * [`gait`]: the static walk (crawl) planner: steps, CoM shifts, swing trajectories, ramps.
+//! * [`walk`]: a scenario's walk: the crawl planned from its waypoints, the references and
+//!   contact sets a run sends for it, and its evaluation (steps, slides, final poses).
 //! * [`metrics`]: the measures of success of DESIGN.md §8.
 //! * [`report`]: CSV time series, `metrics.json` and plots of a run.
 //! * [`record`]: the run as MCAP (`run.mcap`), live to Foxglove (`--live`), and read back
@@ -29,6 +32,7 @@ pub mod compare_plot;
 pub mod driver;
 pub mod echo;
 pub mod evaluate;
+pub mod gait;
 pub mod grasp_plan;
 pub mod launch;
 pub mod metrics;
@@ -41,3 +45,4 @@ pub mod report;
 pub mod run;
 pub mod scenario;
 pub mod smoke;
+pub mod walk;

@@ -38,6 +38,8 @@ pub enum PlanError {
     /// Not `#[from]`: the message holds the check's whole error, no source chain repeats it.
     #[error("payload check at the start pose: {0} (`capacity_check = false` runs anyway)")]
     Capacity(crate::capacity::CheckError),
+    #[error(transparent)]
+    Walk(#[from] crate::walk::WalkError),
 }
 
 /// Everything a scenario run needs, for either mode.
@@ -175,6 +177,20 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
         tracing::info!(ms = 1e3 * t0.elapsed().as_secs_f64(), mass = s.object.mass, "payload check: the start pose holds the object");
     }
 
+    let walk = match &s.walk {
+        Some(w) => {
+            let ids: Vec<(String, Arc<Robot>)> = robots.iter().map(|r| (r.id.clone(), r.robot.clone())).collect();
+            let object_start = Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation));
+            let walk = crate::walk::Walk::plan(w, &ids, &scene.world.robots, &object_start, s.duration)?;
+            for st in walk.gait.steps() {
+                tracing::debug!(robot = %walk.robots[st.robot], foot = %walk.feet[st.robot][st.foot], liftoff = st.liftoff, margin = st.margin, "planned step");
+            }
+            let least = walk.gait.steps().iter().map(|st| st.margin).fold(f64::INFINITY, f64::min);
+            tracing::info!(steps = walk.gait.steps().len(), end_s = walk.gait.end_time(), least_margin_m = least, "walk planned");
+            Some(Arc::new(walk))
+        }
+        None => None,
+    };
     let torso_start = |i: usize| {
         let p = &scene.world.robots[i];
         (Vector3::from(p.base_position), UnitQuaternion::from_axis_angle(&Vector3::z_axis(), p.base_yaw))
@@ -194,6 +210,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
                 (r.id.clone(), motion, p, q)
             })
             .collect(),
+        walk,
     };
     Ok(Plan { scenario: s.clone(), scene, controller, robots, references })
 }
@@ -211,6 +228,9 @@ pub struct ReferencePlan {
     pub object_start: (Vector3<f64>, UnitQuaternion<f64>),
     /// Robot id, motion, start position and orientation of each torso.
     pub torsos: Vec<(String, PoseMotion, Vector3<f64>, UnitQuaternion<f64>)>,
+    /// The walk, if the scenario has one: it gives the walking torsos', the carried object's
+    /// and the swing feet's references.
+    pub walk: Option<Arc<crate::walk::Walk>>,
 }
 
 fn hold(p: &Vector3<f64>, q: &UnitQuaternion<f64>) -> PoseReference {
@@ -225,12 +245,18 @@ impl ReferencePlan {
 
     /// Object reference at scenario time `t` (`None`: the settling hold).
     pub fn object_at(&self, t: Option<f64>) -> PoseReference {
+        if let Some(r) = t.zip(self.walk.as_ref()).and_then(|(t, w)| w.object(t)) {
+            return r;
+        }
         let (p, q) = &self.object_start;
         self.pose_at(&self.object, p, q, t)
     }
 
     /// Reference of torso `i` at scenario time `t`.
     pub fn torso_at(&self, i: usize, t: Option<f64>) -> PoseReference {
+        if let Some(r) = t.zip(self.walk.as_ref()).and_then(|(t, w)| w.torso(i, t)) {
+            return r;
+        }
         let (_, m, p, q) = &self.torsos[i];
         self.pose_at(m, p, q, t)
     }
@@ -245,12 +271,16 @@ impl ReferencePlan {
     /// The TaskReferences message of `tick`.
     pub fn for_tick(&self, team: &str, tick: u64) -> TaskReferences {
         let t = self.time_of_tick(tick);
-        TaskReferences {
+        let mut refs = TaskReferences {
             header: Header::new(team, None, tick, protocol::wall_clock_ns()),
             object: Some(self.object_at(t)),
             torsos: (0..self.torsos.len()).map(|i| TorsoReference { robot: self.torsos[i].0.clone(), reference: self.torso_at(i, t) }).collect(),
             swing_feet: Vec::new(),
             foot_loads: Vec::new(),
+        };
+        if let Some((t, w)) = t.zip(self.walk.as_ref()) {
+            w.feet_into(t, &mut refs);
         }
+        refs
     }
 }

@@ -5,9 +5,9 @@
 //! (`12.5`, `[1, 2, 3]`, `"pidc"`).
 //!
 //! `controller` is the kind of the team controller (`"pidc"`, the default; the kinds are the
-//! coordinator's, [`coordinator::ControllerSpec::KINDS`]). Left open for what comes next:
-//! `contacts` will hold contact schedules for walking (today every foot stays in stance and
-//! every hand in grasp).
+//! coordinator's, [`coordinator::ControllerSpec::KINDS`]). `[walk]` makes robots walk a
+//! static crawl along waypoints ([`WalkSpec`], planned by [`crate::gait`], run by
+//! [`crate::walk`]); without it every foot stays in stance.
 
 use std::path::{Path, PathBuf};
 
@@ -84,6 +84,64 @@ pub struct Scenario {
     pub references: References,
     #[serde(default)]
     pub perturbations: Vec<Perturbation>,
+    /// Walking: who walks where, with which gait.
+    #[serde(default)]
+    pub walk: Option<WalkSpec>,
+}
+
+/// The frame of a walk's waypoints.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WalkFrame {
+    /// Each walking robot's start torso frame (forward, left, yaw); the object holds its pose
+    /// (the paper's S2).
+    #[default]
+    Robot,
+    /// The whole team moves rigidly: world offsets (x, y) and a turn about the object's
+    /// start centre; every robot walks and the object's reference moves with the team.
+    Team,
+}
+
+/// A walk (DESIGN.md §10): waypoints `[dx, dy, yaw_deg]`, each an offset from the start pose
+/// (not from the previous waypoint), in `frame`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WalkSpec {
+    /// Robots that walk (ids); empty: every robot. In the `team` frame every robot walks.
+    #[serde(default)]
+    pub robots: Vec<String>,
+    #[serde(default)]
+    pub frame: WalkFrame,
+    pub path: Vec<[f64; 3]>,
+    /// Scenario time the first step starts, s.
+    #[serde(default)]
+    pub start: f64,
+    /// The crawl's parameters (stride, lift height, phase durations, margin, ...).
+    #[serde(default)]
+    pub gait: crate::gait::GaitParams,
+}
+
+impl WalkSpec {
+    fn check(&self, robots: &[RobotSpec]) -> Result<(), String> {
+        if self.path.is_empty() {
+            return Err("walk.path needs at least one waypoint".into());
+        }
+        if self.path.iter().flatten().chain([&self.start]).any(|x| !x.is_finite()) || self.start < 0.0 {
+            return Err("walk.path and walk.start must be finite, start >= 0".into());
+        }
+        if let Some(r) = self.robots.iter().find(|r| !robots.iter().any(|x| &x.id == *r)) {
+            return Err(format!("walk.robots names unknown robot {r:?}"));
+        }
+        if self.frame == WalkFrame::Team && !self.robots.is_empty() && self.robots.len() != robots.len() {
+            return Err("walk.frame = \"team\" moves the whole team: leave walk.robots empty".into());
+        }
+        Ok(())
+    }
+
+    /// Whether robot `id` walks.
+    pub fn walks(&self, id: &str) -> bool {
+        self.robots.is_empty() || self.robots.iter().any(|r| r == id)
+    }
 }
 
 fn default_settle() -> f64 {
@@ -342,6 +400,9 @@ impl Scenario {
                 return Err(format!("references.torsos[{i}] names unknown robot {:?}", t.robot));
             }
             t.motion.check(&format!("references.torsos[{i}]")).map_err(|e| e.0)?;
+        }
+        if let Some(w) = &self.walk {
+            w.check(&self.robots)?;
         }
         for (i, p) in self.perturbations.iter().enumerate() {
             if p.target.on != "object" && !self.robots.iter().any(|r| r.id == p.target.on) {

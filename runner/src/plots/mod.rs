@@ -9,10 +9,14 @@
 //! * `qp_timing`: the QP solve time and the whole controller tick per tick (us);
 //! * `torque_rms`: the commanded torque RMS per joint, joint names readable.
 //!
+//! A walking scenario adds [`walk::FIGURES`]: the gait diagram, foot heights and the paths
+//! from above.
+//!
 //! Each as PNG and SVG (see [`draw`]). Inputs: the plan, the evaluation and the driver's
 //! records, so a replayed recording draws the same figures.
 
 pub mod draw;
+pub mod walk;
 
 use std::path::Path;
 
@@ -52,7 +56,17 @@ pub fn write_all(plan: &Plan, eval: &Evaluation, records: &Records, dir: &Path) 
         }
     }
     draw::bars(dir, "torque_rms", "commanded torque RMS per joint", "N m", &labels, &values)?;
-    write_index(eval, dir)
+    let mut figures: Vec<(&str, &str)> = FIGURES.to_vec();
+    if let Some(w) = &plan.references.walk {
+        let refs = &plan.references;
+        draw::panels(dir, "gait", "gait diagram", &walk::gait_diagram(w, records), 1, "t [s]")?;
+        draw::panels(dir, "foot_heights", "foot heights", &walk::foot_heights(w, records), 2, "t [s]")?;
+        let torso = |i: usize, t: f64| refs.torso_at(i, Some(t)).pose.position;
+        let object = |t: f64| refs.object_at(Some(t)).pose.position;
+        draw::panels(dir, "torso_paths", "paths from above", &walk::torso_paths(w, records, torso, object), 1, "x [m]")?;
+        figures.extend(walk::FIGURES);
+    }
+    write_index(eval, dir, &figures)
 }
 
 fn column<'a>(s: &'a TimeSeries, name: &str) -> &'a [f64] {
@@ -173,7 +187,7 @@ fn escape(s: &str) -> String {
 }
 
 /// `report.html`: the summary, the checks and every figure (PNG, linked to its SVG).
-pub fn write_index(eval: &Evaluation, dir: &Path) -> Result<(), ReportError> {
+pub fn write_index(eval: &Evaluation, dir: &Path, figures: &[(&str, &str)]) -> Result<(), ReportError> {
     let m = &eval.metrics;
     let mut h = String::new();
     h.push_str(&format!("<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>{0}</title>\n", escape(&m.scenario)));
@@ -185,7 +199,7 @@ pub fn write_index(eval: &Evaluation, dir: &Path) -> Result<(), ReportError> {
         h.push_str(&format!("<tr{class}><td>{}</td><td>{:.5}</td><td>{}</td><td>{mark}</td></tr>\n", escape(&c.name), c.value, c.bound));
     }
     h.push_str("</table>\n<p>Files: <a href=\"metrics.json\">metrics.json</a>, <a href=\"timeseries.csv\">timeseries.csv</a>, <a href=\"torques.csv\">torques.csv</a>, <a href=\"run.mcap\">run.mcap</a> (open in Foxglove; <code>team report run.mcap</code> rebuilds this page).</p>\n");
-    for (stem, caption) in FIGURES {
+    for (stem, caption) in figures {
         h.push_str(&format!("<h2>{caption}</h2>\n<a href=\"{stem}.svg\"><img src=\"{stem}.png\" alt=\"{caption}\"></a>\n"));
     }
     h.push_str("</body></html>\n");

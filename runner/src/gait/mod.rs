@@ -1,0 +1,122 @@
+//! The static walk (crawl) planner (DESIGN.md §10): one foot in swing at a time, the torso
+//! shifted before each lift-off so that the robot's centre of mass lies inside the triangle
+//! of the other three feet with a margin, the foot unloaded by a force ramp, swung with a lift
+//! height and zero velocity at touchdown, and placed where the torso's path puts it. References:
+//! the ETH static-gait controllers (CoM over the support polygon), OCS2's swing trajectories.
+//!
+//! Pure and deterministic: [`GaitPlan::new`] turns each robot's torso waypoints into a timed
+//! plan; its queries give, at any time, the torso, object and swing-foot references, the
+//! unloading ramps, the planned stance and every contact change.
+//!
+//! * [`support`]: the support triangle, the CoM's margin in it and the shift that reaches a margin.
+//! * [`swing`]: the quintic blend and the swing-foot trajectory.
+//! * [`schedule`]: waypoints to cycles and steps, the timed plan and its queries.
+
+pub mod schedule;
+pub mod support;
+pub mod swing;
+
+use nalgebra::{Isometry3, Vector3};
+use serde::Deserialize;
+use thiserror::Error;
+
+pub use schedule::{GaitPlan, Step};
+
+/// The crawl's parameters (a scenario's `[walk.gait]`; every field has a default).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GaitParams {
+    /// Largest horizontal displacement of a foot in one step, m.
+    pub stride: f64,
+    /// Largest torso yaw change per gait cycle (four steps), deg.
+    pub max_turn_deg: f64,
+    /// Swing apex above the straight line from lift-off to touchdown, m.
+    pub lift_height: f64,
+    /// Torso shift before each lift-off, s.
+    pub t_shift: f64,
+    /// Force ramp that unloads the foot before its lift-off, s.
+    pub t_unload: f64,
+    pub t_swing: f64,
+    /// After the touchdown, before the next shift (the foot's load ramps up), s.
+    pub t_load: f64,
+    /// Required distance of the centre of mass inside the support triangle at lift-off, m.
+    pub margin: f64,
+    /// The swing ends this far below the foothold, pressing the foot down, m.
+    pub touchdown_depth: f64,
+    /// The contact set that lands the foot is due this long before the planned touchdown, s
+    /// (a foot that touches a little early is switched as soon as its force says so).
+    pub touchdown_window: f64,
+    /// Bound on the foot's normal force at the start of the unloading ramp (and at the end of
+    /// the loading ramp), N.
+    pub unload_force: f64,
+}
+
+impl Default for GaitParams {
+    fn default() -> Self {
+        GaitParams {
+            stride: 0.10,
+            max_turn_deg: 15.0,
+            lift_height: 0.08,
+            t_shift: 0.4,
+            t_unload: 0.15,
+            t_swing: 0.5,
+            t_load: 0.15,
+            margin: 0.04,
+            touchdown_depth: 0.01,
+            touchdown_window: 0.08,
+            unload_force: 250.0,
+        }
+    }
+}
+
+impl GaitParams {
+    fn check(&self) -> Result<(), GaitError> {
+        let positive = [("stride", self.stride), ("max_turn_deg", self.max_turn_deg), ("t_shift", self.t_shift), ("t_unload", self.t_unload), ("t_swing", self.t_swing), ("t_load", self.t_load), ("unload_force", self.unload_force)];
+        for (what, x) in positive {
+            if !(x.is_finite() && x > 0.0) {
+                return Err(GaitError::Params(format!("{what} = {x} must be positive")));
+            }
+        }
+        let non_negative = [("lift_height", self.lift_height), ("margin", self.margin), ("touchdown_depth", self.touchdown_depth), ("touchdown_window", self.touchdown_window)];
+        for (what, x) in non_negative {
+            if !(x.is_finite() && x >= 0.0) {
+                return Err(GaitError::Params(format!("{what} = {x} must be non-negative")));
+            }
+        }
+        if self.touchdown_window >= self.t_swing {
+            return Err(GaitError::Params(format!("touchdown_window = {} must be shorter than t_swing = {}", self.touchdown_window, self.t_swing)));
+        }
+        Ok(())
+    }
+
+    /// One step's duration: shift, unload, swing, load.
+    pub fn step_time(&self) -> f64 {
+        self.t_shift + self.t_unload + self.t_swing + self.t_load
+    }
+}
+
+/// A robot the planner walks.
+#[derive(Debug, Clone)]
+pub struct WalkingRobot {
+    pub robot: String,
+    /// Its four foot frames (description order) and their start centre positions (world).
+    pub feet: Vec<(String, Vector3<f64>)>,
+    /// The whole robot's centre of mass in the torso frame.
+    pub com_offset: Vector3<f64>,
+    /// Torso poses, the first the start; every robot of a plan has as many. A robot whose
+    /// waypoints repeat does not walk there.
+    pub waypoints: Vec<Isometry3<f64>>,
+}
+
+/// Why a walk cannot be planned.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum GaitError {
+    #[error("gait parameters: {0}")]
+    Params(String),
+    #[error("robot {robot}: {reason}")]
+    Robot { robot: String, reason: String },
+    #[error("the object has {got} waypoints, the robots {expected}")]
+    ObjectWaypoints { expected: usize, got: usize },
+    #[error("robot {robot}, step {step} (foot {foot}): the centre of mass cannot be {margin} m inside the support triangle (its inradius is {inradius:.3} m); lower walk.gait.margin or step shorter")]
+    Margin { robot: String, step: usize, foot: String, margin: f64, inradius: f64 },
+}

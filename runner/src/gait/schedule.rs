@@ -1,0 +1,335 @@
+//! The timed crawl: waypoints to gait cycles and steps ([`GaitPlan::new`]), and the plan's
+//! queries at any time (torso, object and swing-foot references, unloading ramps, planned
+//! stance, contact changes).
+//!
+//! Segment `k` (waypoint `k` to `k + 1`) takes `N_k` cycles, the same for every robot: the
+//! fewest with every foot moving at most `stride` per step and the torso turning at most
+//! `max_turn_deg` per cycle. A cycle steps hind-left, front-left, hind-right, front-right
+//! (told apart by where each foot is in the torso frame at the start). Each step: the torso
+//! shifts (quintic blend, `t_shift`) to the path's next quarter cycle plus the shift that puts
+//! the centre of mass `margin` inside the other three feet's triangle; the foot is unloaded
+//! (`t_unload`, its normal force bounded by a ramp to zero), swings (`t_swing`) to where the
+//! path puts it at the end of the cycle, pressing `touchdown_depth` below it, and is loaded
+//! again (`t_load`). A last shift brings each torso to its last waypoint.
+
+use nalgebra::{Isometry3, Translation3, Vector2, Vector3};
+
+use super::support::{margin, shift_into};
+use super::swing::{quintic, swing};
+use super::{GaitError, GaitParams, WalkingRobot};
+
+/// A planned step: `robot`'s `foot` (description index) from `from` to `to` (foot centres),
+/// lifting off at `liftoff` and touching down at `touchdown` (scenario time, s), with the
+/// centre of mass `margin` m inside the support triangle at lift-off.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Step {
+    pub robot: usize,
+    pub foot: usize,
+    pub liftoff: f64,
+    pub touchdown: f64,
+    pub from: Vector3<f64>,
+    pub to: Vector3<f64>,
+    pub margin: f64,
+}
+
+/// A pose target: pose, twist and acceleration (world, `[linear; angular]`).
+pub type PoseTarget = (Isometry3<f64>, [f64; 6], [f64; 6]);
+/// A point target: position, velocity and acceleration (world).
+pub type PointTarget = (Vector3<f64>, [f64; 3], [f64; 3]);
+
+/// A blend from `from` to `to` over `[t0, t1]`.
+#[derive(Debug, Clone)]
+struct Move {
+    t0: f64,
+    t1: f64,
+    from: Isometry3<f64>,
+    to: Isometry3<f64>,
+}
+
+/// A pose over time: its start, then moves in time order (holding between them).
+#[derive(Debug, Clone)]
+struct Track {
+    start: Isometry3<f64>,
+    moves: Vec<Move>,
+}
+
+impl Track {
+    fn current(&self) -> Isometry3<f64> {
+        self.moves.last().map_or(self.start, |m| m.to)
+    }
+
+    fn push(&mut self, t0: f64, t1: f64, to: Isometry3<f64>) {
+        let from = self.current();
+        self.moves.push(Move { t0, t1, from, to });
+    }
+
+    fn at(&self, t: f64) -> PoseTarget {
+        let k = self.moves.partition_point(|m| m.t0 <= t);
+        let Some(m) = k.checked_sub(1).map(|k| &self.moves[k]) else { return (self.start, [0.0; 6], [0.0; 6]) };
+        let dur = m.t1 - m.t0;
+        let (s, ds, dds) = quintic((t - m.t0) / dur);
+        let dp = m.to.translation.vector - m.from.translation.vector;
+        let w = (m.to.rotation * m.from.rotation.inverse()).scaled_axis();
+        let pose = Isometry3::from_parts(Translation3::from(m.from.translation.vector + dp * s), nalgebra::UnitQuaternion::from_scaled_axis(w * s) * m.from.rotation);
+        let (v, om) = (dp * (ds / dur), w * (ds / dur));
+        let (a, al) = (dp * (dds / (dur * dur)), w * (dds / (dur * dur)));
+        (pose, [v.x, v.y, v.z, om.x, om.y, om.z], [a.x, a.y, a.z, al.x, al.y, al.z])
+    }
+}
+
+/// Waypoint interpolation: translation linear, rotation slerp.
+fn interp(a: &Isometry3<f64>, b: &Isometry3<f64>, p: f64) -> Isometry3<f64> {
+    Isometry3::from_parts(Translation3::from(a.translation.vector.lerp(&b.translation.vector, p)), a.rotation.slerp(&b.rotation, p))
+}
+
+/// The plan (see the module docs).
+#[derive(Debug, Clone)]
+pub struct GaitPlan {
+    params: GaitParams,
+    torsos: Vec<Track>,
+    object: Option<Track>,
+    steps: Vec<Step>,
+    /// Per robot, per foot: its steps' indices in time order.
+    swings: Vec<Vec<Vec<usize>>>,
+    finals: Vec<Isometry3<f64>>,
+    end: f64,
+}
+
+/// The feet in crawl order (hind-left, front-left, hind-right, front-right) from their offsets
+/// in the torso frame.
+fn crawl_order(r: &WalkingRobot, offsets: &[Vector3<f64>]) -> Result<[usize; 4], GaitError> {
+    let bad = |reason: String| GaitError::Robot { robot: r.robot.clone(), reason };
+    if offsets.len() != 4 {
+        return Err(bad(format!("a crawl needs 4 feet, the robot has {}", offsets.len())));
+    }
+    let find = |front: bool, left: bool| {
+        let mut it = offsets.iter().enumerate().filter(|(_, o)| (o.x > 0.0) == front && (o.y > 0.0) == left);
+        match (it.next(), it.next()) {
+            (Some((k, _)), None) => Ok(k),
+            _ => Err(bad(format!("no single {} {} foot in the torso frame", if front { "front" } else { "hind" }, if left { "left" } else { "right" }))),
+        }
+    };
+    Ok([find(false, true)?, find(true, true)?, find(false, false)?, find(true, false)?])
+}
+
+/// Cycles of segment `k`: the fewest keeping every foot's step within `stride` and the turn
+/// within `max_turn_deg` per cycle, over all robots (0 when nobody moves).
+fn cycles(robots: &[WalkingRobot], offsets: &[Vec<Vector3<f64>>], k: usize, p: &GaitParams) -> usize {
+    let mut n: f64 = 0.0;
+    for (r, off) in robots.iter().zip(offsets) {
+        let (a, b) = (&r.waypoints[k], &r.waypoints[k + 1]);
+        let foot = off.iter().map(|o| ((b * nalgebra::Point3::from(*o)) - (a * nalgebra::Point3::from(*o))).xy().norm()).fold(0.0, f64::max);
+        let turn = a.rotation.angle_to(&b.rotation).to_degrees();
+        if foot > 1e-9 || turn > 1e-9 {
+            n = n.max((foot / p.stride).max(turn / p.max_turn_deg).ceil().max(1.0));
+        }
+    }
+    n as usize
+}
+
+fn check(robots: &[WalkingRobot], object: Option<&[Isometry3<f64>]>) -> Result<usize, GaitError> {
+    let count = robots.first().map_or(0, |r| r.waypoints.len());
+    for r in robots {
+        let bad = |reason: String| GaitError::Robot { robot: r.robot.clone(), reason };
+        if r.waypoints.is_empty() || r.waypoints.len() != count {
+            return Err(bad(format!("{} waypoints, the first robot has {count} (at least the start)", r.waypoints.len())));
+        }
+        let finite = r.waypoints.iter().all(|w| w.translation.vector.iter().chain(r.com_offset.iter()).all(|x| x.is_finite()) && w.rotation.coords.iter().all(|x| x.is_finite()));
+        if !finite || r.feet.iter().any(|(_, p)| p.iter().any(|x| !x.is_finite())) {
+            return Err(bad("a non-finite waypoint, foot or centre of mass".into()));
+        }
+    }
+    match object {
+        Some(o) if o.len() != count => Err(GaitError::ObjectWaypoints { expected: count, got: o.len() }),
+        _ => Ok(count),
+    }
+}
+
+/// The plan being built: the clock, each robot's feet where they stand now, the tracks.
+struct Builder<'a> {
+    robots: &'a [WalkingRobot],
+    object: Option<&'a [Isometry3<f64>]>,
+    p: &'a GaitParams,
+    offsets: Vec<Vec<Vector3<f64>>>,
+    order: Vec<[usize; 4]>,
+    feet: Vec<Vec<Vector3<f64>>>,
+    t: f64,
+    torsos: Vec<Track>,
+    object_track: Option<Track>,
+    steps: Vec<Step>,
+}
+
+impl Builder<'_> {
+    /// Step `j` of cycle `c` of `n` in segment `k`: shift, unload, swing, load.
+    fn step(&mut self, k: usize, c: usize, j: usize, n: usize) -> Result<(), GaitError> {
+        let (progress, cycle_end) = ((c as f64 + (j + 1) as f64 / 4.0) / n as f64, (c + 1) as f64 / n as f64);
+        let (t_shift_end, liftoff) = (self.t + self.p.t_shift, self.t + self.p.t_shift + self.p.t_unload);
+        let touchdown = liftoff + self.p.t_swing;
+        for (i, r) in self.robots.iter().enumerate() {
+            let (a, b) = (&r.waypoints[k], &r.waypoints[k + 1]);
+            if a == b {
+                continue;
+            }
+            let foot = self.order[i][j];
+            let nominal = interp(a, b, progress);
+            let mut to = interp(a, b, cycle_end) * nalgebra::Point3::from(self.offsets[i][foot]);
+            to.z = r.feet[foot].1.z;
+            let others: Vec<Vector2<f64>> = (0..4).filter(|f| *f != foot).map(|f| self.feet[i][f].xy()).collect();
+            let tri = [others[0], others[1], others[2]];
+            let com = (nominal * nalgebra::Point3::from(r.com_offset)).coords.xy();
+            let Some(d) = shift_into(&com, &tri, self.p.margin) else {
+                let inradius = super::support::incentre(&tri).1;
+                return Err(GaitError::Margin { robot: r.robot.clone(), step: self.steps.len(), foot: r.feet[foot].0.clone(), margin: self.p.margin, inradius });
+            };
+            let target = Translation3::new(d.x, d.y, 0.0) * nominal;
+            self.torsos[i].push(self.t, t_shift_end, target);
+            let step = Step { robot: i, foot, liftoff, touchdown, from: self.feet[i][foot], to: to.coords, margin: margin(&(com + d), &tri) };
+            self.feet[i][foot] = to.coords;
+            self.steps.push(step);
+        }
+        if let (Some(track), Some(o)) = (self.object_track.as_mut(), self.object) {
+            track.push(self.t, t_shift_end, interp(&o[k], &o[k + 1], progress));
+        }
+        self.t = touchdown + self.p.t_load;
+        Ok(())
+    }
+
+    /// The last shift: every torso to its last waypoint, the object to its own.
+    fn finish(&mut self) -> f64 {
+        let end = self.t + self.p.t_shift;
+        for (track, r) in self.torsos.iter_mut().zip(self.robots) {
+            let last = *r.waypoints.last().expect("checked: at least the start");
+            if track.current() != last {
+                track.push(self.t, end, last);
+            }
+        }
+        if let (Some(track), Some(o)) = (self.object_track.as_mut(), self.object) {
+            track.push(self.t, end, *o.last().expect("checked"));
+        }
+        end
+    }
+}
+
+impl GaitPlan {
+    /// The crawl of `robots` along their waypoints (and the object's, moved with the same
+    /// progress), starting at `t0` (scenario time, s).
+    pub fn new(robots: &[WalkingRobot], object: Option<&[Isometry3<f64>]>, params: &GaitParams, t0: f64) -> Result<GaitPlan, GaitError> {
+        params.check()?;
+        let count = check(robots, object)?;
+        let offsets: Vec<Vec<Vector3<f64>>> = robots.iter().map(|r| r.feet.iter().map(|(_, p)| r.waypoints[0].inverse_transform_point(&(*p).into()).coords).collect()).collect();
+        let order = robots.iter().zip(&offsets).map(|(r, o)| crawl_order(r, o)).collect::<Result<Vec<_>, _>>()?;
+        let mut b = Builder {
+            robots,
+            object,
+            p: params,
+            feet: robots.iter().map(|r| r.feet.iter().map(|(_, p)| *p).collect()).collect(),
+            offsets,
+            order,
+            t: t0,
+            torsos: robots.iter().map(|r| Track { start: r.waypoints[0], moves: Vec::new() }).collect(),
+            object_track: object.map(|o| Track { start: o[0], moves: Vec::new() }),
+            steps: Vec::new(),
+        };
+        for k in 0..count.saturating_sub(1) {
+            let n = cycles(robots, &b.offsets, k, params);
+            for c in 0..n {
+                for j in 0..4 {
+                    b.step(k, c, j, n)?;
+                }
+            }
+        }
+        let end = b.finish();
+        let mut swings = vec![vec![Vec::new(); 4]; robots.len()];
+        for (s, step) in b.steps.iter().enumerate() {
+            swings[step.robot][step.foot].push(s);
+        }
+        let finals = robots.iter().map(|r| *r.waypoints.last().expect("checked")).collect();
+        Ok(GaitPlan { params: params.clone(), torsos: b.torsos, object: b.object_track, steps: b.steps, swings, finals, end })
+    }
+
+    pub fn params(&self) -> &GaitParams {
+        &self.params
+    }
+
+    /// Every step, in time order.
+    pub fn steps(&self) -> &[Step] {
+        &self.steps
+    }
+
+    /// When the last torso reaches its last waypoint, s.
+    pub fn end_time(&self) -> f64 {
+        self.end
+    }
+
+    /// Robot `i`'s last waypoint.
+    pub fn final_torso(&self, i: usize) -> Isometry3<f64> {
+        self.finals[i]
+    }
+
+    /// Robot `i`'s torso target at `t`.
+    pub fn torso(&self, i: usize, t: f64) -> PoseTarget {
+        self.torsos[i].at(t)
+    }
+
+    /// The object's target at `t`, when the plan moves it.
+    pub fn object(&self, t: f64) -> Option<PoseTarget> {
+        self.object.as_ref().map(|o| o.at(t))
+    }
+
+    /// The step of robot `i`'s foot `k` that lifted off last at or before `t`.
+    fn last_step(&self, i: usize, k: usize, t: f64) -> Option<&Step> {
+        let list = self.swings.get(i)?.get(k)?;
+        let n = list.partition_point(|&s| self.steps[s].liftoff <= t);
+        n.checked_sub(1).map(|n| &self.steps[list[n]])
+    }
+
+    /// Robot `i`'s foot `k` target at `t`, from its first lift-off on: the swing, then the
+    /// pressed touchdown point at rest (for a foot that lands late).
+    pub fn swing_foot(&self, i: usize, k: usize, t: f64) -> Option<PointTarget> {
+        let s = self.last_step(i, k, t)?;
+        let pressed = s.to - Vector3::z() * self.params.touchdown_depth;
+        if t >= s.touchdown {
+            return Some((pressed, [0.0; 3], [0.0; 3]));
+        }
+        let (p, v, a) = swing(&s.from, &pressed, self.params.lift_height, s.touchdown - s.liftoff, t - s.liftoff);
+        Some((p, v.into(), a.into()))
+    }
+
+    /// The bound on robot `i`'s foot `k` normal force at `t`: a ramp from `unload_force` to 0
+    /// over `t_unload` before each lift-off, and back up over `t_load` after each touchdown.
+    pub fn max_normal_force(&self, i: usize, k: usize, t: f64) -> Option<f64> {
+        let p = &self.params;
+        self.swings.get(i)?.get(k)?.iter().map(|&s| &self.steps[s]).find_map(|s| {
+            if (s.liftoff - p.t_unload..s.liftoff).contains(&t) {
+                Some(p.unload_force * (s.liftoff - t) / p.t_unload)
+            } else if (s.touchdown..s.touchdown + p.t_load).contains(&t) {
+                Some(p.unload_force * (t - s.touchdown) / p.t_load)
+            } else {
+                None
+            }
+        })
+    }
+
+    /// Robot `i`'s planned stance at `t`: a foot is in swing from its lift-off until the
+    /// contact set that lands it is due (`touchdown_window` before its touchdown).
+    pub fn stance(&self, i: usize, t: f64) -> [bool; 4] {
+        let mut out = [true; 4];
+        for (k, o) in out.iter_mut().enumerate() {
+            *o = !self.last_step(i, k, t).is_some_and(|s| t < s.touchdown - self.params.touchdown_window);
+        }
+        out
+    }
+
+    /// Every change of a robot's planned stance: `(time, robot, stance)`, in time order.
+    pub fn contact_changes(&self) -> Vec<(f64, usize, [bool; 4])> {
+        let mut out = Vec::with_capacity(2 * self.steps.len());
+        for s in &self.steps {
+            let mut lifted = [true; 4];
+            lifted[s.foot] = false;
+            out.push((s.liftoff, s.robot, lifted));
+            out.push((s.touchdown - self.params.touchdown_window, s.robot, [true; 4]));
+        }
+        out.sort_by(|a, b| a.0.total_cmp(&b.0));
+        out
+    }
+}

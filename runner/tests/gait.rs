@@ -1,0 +1,201 @@
+//! The crawl planner against independent statements: derivatives by finite differences, the
+//! swing's boundary values, the CoM's margin in the support triangle written out again
+//! (barycentric coordinates and edge distances), footholds from the final waypoint, and the
+//! errors of impossible input.
+
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector2, Vector3};
+use team_runner::gait::{GaitError, GaitParams, GaitPlan, WalkingRobot};
+
+/// A robot like the project's (feet 0.3 m ahead/behind, 0.2 m to each side of a torso 0.55 m
+/// up, foot centres 0.03 m above the ground), in description order LF, RF, LH, RH.
+fn robot(id: &str, x: f64, y: f64, yaw_deg: f64, path: &[[f64; 3]]) -> WalkingRobot {
+    let start = Isometry3::from_parts(Translation3::new(x, y, 0.55), UnitQuaternion::from_euler_angles(0.0, 0.0, yaw_deg.to_radians()));
+    let foot = |name: &str, fx: f64, fy: f64| (name.to_string(), (start * Point3::new(fx, fy, -0.52)).coords);
+    let feet = vec![foot("LF", 0.3, 0.2), foot("RF", 0.3, -0.2), foot("LH", -0.3, 0.2), foot("RH", -0.3, -0.2)];
+    let mut waypoints = vec![start];
+    waypoints.extend(path.iter().map(|w| start * Isometry3::from_parts(Translation3::new(w[0], w[1], 0.0), UnitQuaternion::from_euler_angles(0.0, 0.0, w[2].to_radians()))));
+    WalkingRobot { robot: id.into(), feet, com_offset: Vector3::new(0.05, 0.0, 0.0), waypoints }
+}
+
+const S2: [[f64; 3]; 3] = [[-0.27, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, -30.0]];
+
+fn s2() -> (GaitPlan, Vec<WalkingRobot>) {
+    let robots = vec![robot("r1", 0.0, 0.0, 0.0, &S2), robot("r2", 2.3, 0.0, 180.0, &[[0.0; 3]; 3])];
+    (GaitPlan::new(&robots, None, &GaitParams::default(), 0.5).expect("plan"), robots)
+}
+
+/// Central differences of `f` against its returned derivative at many times.
+fn check_derivative(what: &str, t_end: f64, f: impl Fn(f64) -> (Vec<f64>, Vec<f64>, Vec<f64>)) {
+    let h = 1e-5;
+    let mut t = 0.013;
+    while t < t_end {
+        let (x0, v, a) = f(t);
+        let (xm, vm, _) = f(t - h);
+        let (xp, vp, _) = f(t + h);
+        for k in 0..x0.len() {
+            let fd_v = (xp[k] - xm[k]) / (2.0 * h);
+            let fd_a = (vp[k] - vm[k]) / (2.0 * h);
+            assert!((fd_v - v[k]).abs() < 1e-4 * (1.0 + v[k].abs()), "{what} t {t}: velocity[{k}] {} vs finite difference {fd_v}", v[k]);
+            assert!((fd_a - a[k]).abs() < 2e-3 * (1.0 + a[k].abs()), "{what} t {t}: acceleration[{k}] {} vs finite difference {fd_a}", a[k]);
+        }
+        t += 0.0371;
+    }
+}
+
+#[test]
+fn torso_object_and_swing_derivatives_match_finite_differences() {
+    let robots = vec![robot("r1", 0.0, 0.0, 0.0, &[[0.3, 0.1, 20.0]]), robot("r2", 2.3, 0.0, 180.0, &[[-0.3, -0.1, 20.0]])];
+    let object = [Isometry3::translation(1.15, 0.0, 0.6), Isometry3::from_parts(Translation3::new(1.45, 0.1, 0.6), UnitQuaternion::from_euler_angles(0.0, 0.0, 0.35))];
+    let plan = GaitPlan::new(&robots, Some(&object), &GaitParams::default(), 0.0).unwrap();
+    let pose = |x: Isometry3<f64>| {
+        let r = x.rotation.scaled_axis();
+        vec![x.translation.x, x.translation.y, x.translation.z, r.x, r.y, r.z]
+    };
+    // Rotations stay small here, so the scaled axis differentiates to the angular velocity
+    // only approximately: compare the linear rows and the yaw row (a rotation about z).
+    let rows = |v: Vec<f64>| vec![v[0], v[1], v[2], v[5]];
+    check_derivative("torso", plan.end_time(), |t| {
+        let (x, v, a) = plan.torso(0, t);
+        (rows(pose(x)), rows(v.to_vec()), rows(a.to_vec()))
+    });
+    check_derivative("object", plan.end_time(), |t| {
+        let (x, v, a) = plan.object(t).unwrap();
+        (rows(pose(x)), rows(v.to_vec()), rows(a.to_vec()))
+    });
+    for k in 0..4 {
+        check_derivative("swing foot", plan.end_time(), |t| match plan.swing_foot(1, k, t) {
+            Some((p, v, a)) => (p.as_slice().to_vec(), v.to_vec(), a.to_vec()),
+            None => (vec![0.0; 3], vec![0.0; 3], vec![0.0; 3]),
+        });
+    }
+}
+
+#[test]
+fn a_swing_leaves_and_lands_at_rest_lifts_and_presses_into_the_ground() {
+    let (plan, _) = s2();
+    let p = plan.params().clone();
+    for s in plan.steps() {
+        let (at_lift, v0, _) = plan.swing_foot(s.robot, s.foot, s.liftoff).unwrap();
+        assert!((at_lift - s.from).norm() < 1e-12);
+        assert!(v0.iter().all(|x| x.abs() < 1e-12));
+        let (land, v1, _) = plan.swing_foot(s.robot, s.foot, s.touchdown - 1e-9).unwrap();
+        assert!((land - (s.to - Vector3::z() * p.touchdown_depth)).norm() < 1e-6, "lands {} below the foothold", p.touchdown_depth);
+        assert!(v1.iter().all(|x| x.abs() < 1e-6), "touchdown velocity {v1:?}");
+        let (mid, _, _) = plan.swing_foot(s.robot, s.foot, 0.5 * (s.liftoff + s.touchdown)).unwrap();
+        let line = 0.5 * (s.from.z + s.to.z - p.touchdown_depth);
+        assert!((mid.z - line - p.lift_height).abs() < 1e-9, "apex {} above the line", mid.z - line);
+        assert!(s.touchdown - s.liftoff - p.t_swing < 1e-12);
+    }
+}
+
+/// Distance of `p` inside triangle `abc`, written out again: negative when a barycentric
+/// coordinate is negative, else the least distance to the edges' lines.
+fn inside(p: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>, c: Vector2<f64>) -> f64 {
+    let det = (b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y);
+    let l1 = ((b.x - p.x) * (c.y - p.y) - (c.x - p.x) * (b.y - p.y)) / det;
+    let l2 = ((c.x - p.x) * (a.y - p.y) - (a.x - p.x) * (c.y - p.y)) / det;
+    let l3 = 1.0 - l1 - l2;
+    let line = |u: Vector2<f64>, w: Vector2<f64>| ((w.x - u.x) * (p.y - u.y) - (w.y - u.y) * (p.x - u.x)).abs() / (w - u).norm();
+    let d = line(a, b).min(line(b, c)).min(line(c, a));
+    if l1 < 0.0 || l2 < 0.0 || l3 < 0.0 {
+        -d
+    } else {
+        d
+    }
+}
+
+#[test]
+fn at_every_liftoff_the_centre_of_mass_is_the_margin_inside_the_other_three_feet() {
+    for path in [&S2[..], &[[0.0, 0.3, 0.0]][..], &[[0.25, 0.0, 45.0]][..]] {
+        let robots = vec![robot("r1", 0.0, 0.0, 30.0, path)];
+        let params = GaitParams::default();
+        let plan = GaitPlan::new(&robots, None, &params, 0.0).unwrap();
+        assert!(!plan.steps().is_empty());
+        // Where every foot is, replayed step by step.
+        let mut feet: Vec<Vector3<f64>> = robots[0].feet.iter().map(|(_, p)| *p).collect();
+        for s in plan.steps() {
+            assert!((feet[s.foot] - s.from).norm() < 1e-12, "a foot lifts off where it landed");
+            let (torso, _, _) = plan.torso(0, s.liftoff);
+            let com = (torso * Point3::from(robots[0].com_offset)).coords.xy();
+            let tri: Vec<Vector2<f64>> = (0..4).filter(|f| *f != s.foot).map(|f| feet[f].xy()).collect();
+            let m = inside(com, tri[0], tri[1], tri[2]);
+            assert!(m >= params.margin - 1e-9, "path {path:?}: margin {m} at lift-off of foot {}", s.foot);
+            assert!((m - s.margin).abs() < 1e-9, "the reported margin is the real one");
+            assert!((s.to - s.from).xy().norm() <= params.stride + 1e-9, "a step of {} m", (s.to - s.from).xy().norm());
+            feet[s.foot] = s.to;
+        }
+    }
+}
+
+#[test]
+fn never_fewer_than_three_feet_down_and_one_swing_at_a_time() {
+    let (plan, _) = s2();
+    let changes = plan.contact_changes();
+    assert_eq!(changes.len(), 2 * plan.steps().len());
+    let mut t = 0.0;
+    while t < plan.end_time() + 1.0 {
+        let down = plan.stance(0, t).iter().filter(|s| **s).count();
+        assert!(down >= 3, "t {t}: {down} feet down");
+        t += 0.001;
+    }
+    for w in plan.steps().windows(2) {
+        assert!(w[1].liftoff > w[0].touchdown, "one swing at a time");
+    }
+    for (time, robot, stance) in &changes {
+        assert_eq!(*robot, 0);
+        assert!(stance.iter().filter(|s| **s).count() >= 3, "at {time}");
+    }
+}
+
+#[test]
+fn s2_walks_whole_cycles_and_ends_on_the_start_offsets_around_the_goal() {
+    let (plan, robots) = s2();
+    let p = GaitParams::default();
+    // 0.27 m at 0.1 m per step: 3 cycles back, 3 forward; 30 deg at 15 deg per cycle: 2 cycles.
+    let r1: Vec<_> = plan.steps().iter().filter(|s| s.robot == 0).collect();
+    assert_eq!(r1.len(), 4 * (3 + 3 + 2));
+    assert!(plan.steps().iter().all(|s| s.robot == 0), "robot 2 does not walk");
+    for f in 0..4 {
+        assert_eq!(r1.iter().filter(|s| s.foot == f).count(), 8, "each foot steps once a cycle");
+    }
+    let goal = plan.final_torso(0);
+    assert_eq!(goal, *robots[0].waypoints.last().unwrap());
+    let start = robots[0].waypoints[0];
+    for (k, (_, p0)) in robots[0].feet.iter().enumerate() {
+        let last = r1.iter().rev().find(|s| s.foot == k).unwrap();
+        let want = goal * start.inverse() * Point3::from(*p0);
+        assert!((last.to - want.coords).norm() < 1e-9, "foot {k} ends {} m off", (last.to - want.coords).norm());
+    }
+    let (torso, v, _) = plan.torso(0, plan.end_time() + 0.1);
+    assert!((torso.translation.vector - goal.translation.vector).norm() < 1e-12 && v.iter().all(|x| *x == 0.0));
+    assert!((plan.end_time() - (0.5 + r1.len() as f64 * p.step_time() + p.t_shift)).abs() < 1e-9);
+    // Ramps: the foot's bound falls to zero at lift-off and rises after touchdown.
+    let s = r1[0];
+    let bound = |t: f64| plan.max_normal_force(0, s.foot, t);
+    assert_eq!(bound(s.liftoff - p.t_unload - 1e-6), None);
+    assert!((bound(s.liftoff - p.t_unload).unwrap() - p.unload_force).abs() < 1e-9);
+    assert!(bound(s.liftoff - 1e-6).unwrap() < 1e-2);
+    assert!((bound(s.touchdown + 0.5 * p.t_load).unwrap() - 0.5 * p.unload_force).abs() < 1e-6);
+}
+
+#[test]
+fn impossible_walks_are_refused_with_the_reason() {
+    let ok = robot("r1", 0.0, 0.0, 0.0, &[[0.2, 0.0, 0.0]]);
+    let p = GaitParams::default();
+    let mut three = ok.clone();
+    three.feet.pop();
+    assert!(matches!(GaitPlan::new(&[three], None, &p, 0.0), Err(GaitError::Robot { .. })));
+    let mut nan = ok.clone();
+    nan.com_offset.x = f64::NAN;
+    assert!(matches!(GaitPlan::new(&[nan], None, &p, 0.0), Err(GaitError::Robot { .. })));
+    let short = robot("r2", 2.0, 0.0, 0.0, &[]);
+    assert!(matches!(GaitPlan::new(&[ok.clone(), short], None, &p, 0.0), Err(GaitError::Robot { .. })));
+    assert!(matches!(GaitPlan::new(&[ok.clone()], Some(&[Isometry3::identity()]), &p, 0.0), Err(GaitError::ObjectWaypoints { .. })));
+    for bad in [GaitParams { stride: 0.0, ..p.clone() }, GaitParams { t_swing: f64::NAN, ..p.clone() }, GaitParams { touchdown_window: 1.0, ..p.clone() }] {
+        assert!(matches!(GaitPlan::new(&[ok.clone()], None, &bad, 0.0), Err(GaitError::Params(_))));
+    }
+    let deep = GaitParams { margin: 0.5, ..p };
+    let err = GaitPlan::new(&[ok], None, &deep, 0.0).unwrap_err();
+    assert!(matches!(err, GaitError::Margin { .. }), "{err}");
+    assert!(err.to_string().contains("inradius"));
+}
