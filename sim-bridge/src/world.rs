@@ -146,11 +146,16 @@ pub struct SolverParams {
     pub impratio: f64,
     pub iterations: u32,
     pub tolerance: f64,
+    /// MuJoCo's no-slip post-processing iterations (`noslip_iterations`): without them its
+    /// soft contacts let a foot under a steady tangential force creep (about 1 mm/s for a
+    /// standing robot's splayed feet), which real feet do not.
+    #[serde(default)]
+    pub noslip_iterations: u32,
 }
 
 impl Default for SolverParams {
     fn default() -> Self {
-        SolverParams { integrator: "implicitfast".into(), cone: "elliptic".into(), impratio: 10.0, iterations: 100, tolerance: 1e-10 }
+        SolverParams { integrator: "implicitfast".into(), cone: "elliptic".into(), impratio: 10.0, iterations: 100, tolerance: 1e-10, noslip_iterations: 20 }
     }
 }
 
@@ -313,7 +318,7 @@ fn world_xml(spec: &WorldSpec, dt: f64) -> String {
     let mut xml = format!(
         r#"<mujoco model="team">
   <compiler angle="radian" fusestatic="false" balanceinertia="false" inertiafromgeom="false" autolimits="true"/>
-  <option timestep="{dt:e}" gravity="0 0 {g:e}" integrator="{integ}" cone="{cone}" impratio="{imp:e}" iterations="{it}" tolerance="{tol:e}" solver="Newton"/>
+  <option timestep="{dt:e}" gravity="0 0 {g:e}" integrator="{integ}" cone="{cone}" impratio="{imp:e}" iterations="{it}" tolerance="{tol:e}" noslip_iterations="{noslip}" solver="Newton"/>
   <size memory="64M"/>
   <worldbody>
     <geom name="floor" type="plane" size="0 0 0.05" friction="{ff:e} 0.005 0.0001" condim="3"/>
@@ -324,6 +329,7 @@ fn world_xml(spec: &WorldSpec, dt: f64) -> String {
         imp = s.impratio,
         it = s.iterations,
         tol = s.tolerance,
+        noslip = s.noslip_iterations,
         ff = spec.contact.floor_friction,
     );
     if let Some(o) = &spec.object {
