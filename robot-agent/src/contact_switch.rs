@@ -5,9 +5,10 @@
 //! switch takes the newest due set as its *goal* and moves the *active* set (the one the
 //! dynamics terms are computed for) towards it, foot by foot:
 //!
-//! * **Lift-off** (stance -> swing) happens at the set's tick, unless fewer than
-//!   [`SwitchConfig::min_stance`] feet (or all but one) would stay in stance: then the foot stays down and the
-//!   lift-off is counted as deferred (it is tried again at every state while the goal asks for it).
+//! * **Lift-off** (stance -> swing) happens at the set's tick once the foot is unloaded (its
+//!   measured force at most [`SwitchConfig::liftoff_force`]), unless fewer than
+//!   [`SwitchConfig::min_stance`] feet (or all but one) would stay in stance: else the foot stays
+//!   down and the lift-off is deferred (tried again at every state while the goal asks for it).
 //! * **Touchdown** (swing -> stance) needs the foot's measured normal force
 //!   (`RobotState::foot_forces`) to reach [`SwitchConfig::touchdown_force`]: a foot that lands
 //!   late stays in swing (tracking its reference, which presses it down) until it touches, one
@@ -24,6 +25,9 @@ use crate::terms::ContactSet;
 pub struct SwitchConfig {
     /// A swing foot lands when its measured normal force reaches this, N.
     pub touchdown_force: f64,
+    /// A stance foot lifts off only once its measured normal force is at most this, N (the
+    /// unloading ramp has done its work).
+    pub liftoff_force: f64,
     /// A lift-off that would leave fewer feet in stance is deferred (at most all feet but
     /// one are kept down: a robot with two feet may lift one).
     pub min_stance: usize,
@@ -32,9 +36,10 @@ pub struct SwitchConfig {
 }
 
 impl Default for SwitchConfig {
-    /// 20 N to confirm a touchdown, three feet always down, 64 sets scheduled.
+    /// 20 N to confirm a touchdown, at most 20 N to lift off, three feet always down, 64 sets
+    /// scheduled.
     fn default() -> Self {
-        SwitchConfig { touchdown_force: 20.0, min_stance: 3, max_scheduled: 64 }
+        SwitchConfig { touchdown_force: 20.0, liftoff_force: 20.0, min_stance: 3, max_scheduled: 64 }
     }
 }
 
@@ -43,7 +48,8 @@ impl Default for SwitchConfig {
 pub struct SwitchEvents {
     pub liftoffs: u32,
     pub touchdowns: u32,
-    /// Lift-offs the goal asks for that would leave too few feet down.
+    /// Lift-offs the goal asks for that would leave too few feet down, or of a foot still
+    /// loaded.
     pub deferred: u32,
     /// Feet the goal has in stance that have not touched down yet.
     pub awaiting_touchdown: u32,
@@ -134,7 +140,8 @@ impl ContactSwitch {
         for k in 0..self.active.stance.len() {
             if self.active.stance[k] && !self.goal.stance.get(k).copied().unwrap_or(true) {
                 let down = self.active.stance.iter().filter(|s| **s).count();
-                if down > keep {
+                let unloaded = !sensed || foot_forces[k] <= self.config.liftoff_force;
+                if down > keep && unloaded {
                     self.active.stance[k] = false;
                     ev.liftoffs += 1;
                 } else {

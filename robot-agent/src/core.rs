@@ -371,7 +371,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         if ev.deferred > 0 {
             self.counters.liftoffs_deferred += 1;
             if self.counters.liftoffs_deferred.is_power_of_two() {
-                tracing::warn!(robot = %self.robot, tick, "lift-off deferred: too few feet would stay on the ground");
+                tracing::warn!(robot = %self.robot, tick, "lift-off deferred: the foot is still loaded, or too few feet would stay on the ground");
             }
         }
         if ev.changed() {

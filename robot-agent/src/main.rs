@@ -44,6 +44,10 @@ struct RunCmd {
     /// Without a valid command for this many state ticks the agent enters safe mode (0: off).
     #[arg(long, value_name = "TICKS", default_value_t = 5)]
     command_deadline_ticks: u64,
+    /// A swing foot counts as landed once its measured normal force reaches this, N (default:
+    /// `contact_switch::SwitchConfig`'s, 20 N).
+    #[arg(long, value_name = "N")]
+    touchdown_force: Option<f64>,
     /// Smoke run only: placeholder dynamics (unit mass matrix, no frames, no limits) of this
     /// many joints instead of a robot model.
     #[arg(long, value_name = "N", conflicts_with = "robot", hide = true)]
@@ -57,6 +61,7 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
     protocol::validate_id("robot", &cmd.id)?;
     protocol::validate_id("team", &cmd.team)?;
     anyhow::ensure!(cmd.command_deadline_ms > 0, "--command-deadline-ms must be positive");
+    anyhow::ensure!(cmd.touchdown_force.is_none_or(|f| f.is_finite() && f > 0.0), "--touchdown-force must be a positive force (N)");
     enum Source {
         Model(ModelDynamics),
         Placeholder(PlaceholderDynamics),
@@ -75,6 +80,9 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
         .init();
     let mut cfg = AgentConfig::new(&cmd.team, &cmd.id).with_deadline_time(Duration::from_millis(cmd.command_deadline_ms));
     cfg.deadline.ticks = cmd.command_deadline_ticks;
+    if let Some(f) = cmd.touchdown_force {
+        cfg.contacts.touchdown_force = f;
+    }
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async move {
         let session = transport::open(&cmd.zenoh, Role::Member).await?;

@@ -25,7 +25,7 @@ pub struct AgentCounters {
     pub contacts_applied: u64,
     pub contacts_rejected: u64,
     /// Feet lifted off and landed (touchdown confirmed), and states at which a scheduled
-    /// lift-off was deferred because too few feet would have stayed down.
+    /// lift-off was deferred (the foot still loaded, or too few feet would have stayed down).
     pub liftoffs: u64,
     pub touchdowns: u64,
     pub liftoffs_deferred: u64,

@@ -13,6 +13,8 @@ fn all_down() -> ContactSwitch {
 }
 
 const LOADED: [f64; 4] = [100.0; 4];
+/// Foot 0 unloaded by its ramp, the others carrying the robot.
+const FOOT0_UNLOADED: [f64; 4] = [0.0, 100.0, 100.0, 100.0];
 
 #[test]
 fn a_set_applies_from_its_tick_not_before() {
@@ -22,7 +24,7 @@ fn a_set_applies_from_its_tick_not_before() {
         assert!(!s.on_state(tick, &LOADED).changed(), "tick {tick}");
         assert_eq!(s.active().stance, vec![true; 4]);
     }
-    let ev = s.on_state(105, &LOADED);
+    let ev = s.on_state(105, &FOOT0_UNLOADED);
     assert_eq!(ev.liftoffs, 1);
     assert_eq!(s.active().stance, vec![false, true, true, true]);
     assert_eq!(s.scheduled(), 0);
@@ -35,7 +37,7 @@ fn sets_out_of_order_are_applied_in_tick_order_and_a_repeat_replaces() {
     s.schedule(10, set([true, false, true, true])).unwrap();
     s.schedule(10, set([true, true, false, true])).unwrap();
     assert_eq!(s.scheduled(), 2);
-    s.on_state(10, &LOADED);
+    s.on_state(10, &[100.0, 100.0, 0.0, 100.0]);
     assert_eq!(s.active().stance, vec![true, true, false, true], "the newer set of tick 10 wins");
     s.on_state(30, &LOADED);
     assert_eq!(s.active().stance, vec![true; 4]);
@@ -45,10 +47,11 @@ fn sets_out_of_order_are_applied_in_tick_order_and_a_repeat_replaces() {
 fn a_liftoff_that_would_leave_two_feet_is_deferred() {
     let mut s = all_down();
     s.schedule(1, set([false, false, true, true])).unwrap();
-    let ev = s.on_state(1, &LOADED);
+    let unloaded = [0.0, 0.0, 150.0, 150.0];
+    let ev = s.on_state(1, &unloaded);
     assert_eq!((ev.liftoffs, ev.deferred), (1, 1));
     assert_eq!(s.active().stance.iter().filter(|x| **x).count(), 3);
-    let ev = s.on_state(2, &LOADED);
+    let ev = s.on_state(2, &unloaded);
     assert_eq!((ev.liftoffs, ev.deferred), (0, 1), "still deferred while the goal asks for it");
 }
 
@@ -56,7 +59,7 @@ fn a_liftoff_that_would_leave_two_feet_is_deferred() {
 fn a_touchdown_waits_for_the_force_late_or_early() {
     let mut s = all_down();
     s.schedule(1, set([false, true, true, true])).unwrap();
-    s.on_state(1, &LOADED);
+    s.on_state(1, &FOOT0_UNLOADED);
     // The set that lands the foot is due at tick 50 (its planned touchdown minus the lead).
     s.schedule(50, set([true; 4])).unwrap();
     // Early contact (tick 40, before the set is due): the foot stays in swing.
@@ -76,12 +79,12 @@ fn a_touchdown_waits_for_the_force_late_or_early() {
 fn a_landing_lets_the_next_foot_lift_in_the_same_state() {
     let mut s = all_down();
     s.schedule(1, set([false, true, true, true])).unwrap();
-    s.on_state(1, &LOADED);
+    s.on_state(1, &FOOT0_UNLOADED);
     // The next step is due before foot 0 is confirmed down: deferred, then both at once.
     s.schedule(10, set([true, false, true, true])).unwrap();
-    let ev = s.on_state(10, &[0.0, 100.0, 100.0, 100.0]);
+    let ev = s.on_state(10, &[0.0, 5.0, 150.0, 150.0]);
     assert_eq!((ev.touchdowns, ev.liftoffs, ev.deferred), (0, 0, 1));
-    let ev = s.on_state(11, &[60.0, 100.0, 100.0, 100.0]);
+    let ev = s.on_state(11, &[60.0, 5.0, 150.0, 150.0]);
     assert_eq!((ev.touchdowns, ev.liftoffs), (1, 1));
     assert_eq!(s.active().stance, vec![true, false, true, true]);
 }
@@ -106,4 +109,16 @@ fn the_schedule_is_bounded() {
     let full = s.schedule(200, set([true; 4])).unwrap_err();
     assert_eq!((full.tick, full.capacity), (200, 3));
     assert!(s.schedule(101, set([false, true, true, true])).is_ok(), "replacing a scheduled tick needs no room");
+}
+
+#[test]
+fn a_foot_still_loaded_does_not_lift_off_until_its_force_is_down() {
+    let mut s = all_down();
+    s.schedule(1, set([false, true, true, true])).unwrap();
+    let ev = s.on_state(1, &[60.0, 100.0, 100.0, 100.0]);
+    assert_eq!((ev.liftoffs, ev.deferred), (0, 1), "60 N on the foot: the ramp has not unloaded it");
+    assert!(s.active().stance[0]);
+    let ev = s.on_state(2, &[4.0, 150.0, 150.0, 150.0]);
+    assert_eq!(ev.liftoffs, 1);
+    assert!(!s.active().stance[0]);
 }
