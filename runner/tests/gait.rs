@@ -199,3 +199,12 @@ fn impossible_walks_are_refused_with_the_reason() {
     assert!(matches!(err, GaitError::Margin { .. }), "{err}");
     assert!(err.to_string().contains("inradius"));
 }
+
+#[test]
+fn a_step_of_exactly_the_stride_is_one_cycle() {
+    let p = GaitParams::default();
+    for path in [[p.stride, 0.0, 0.0], [0.0, 0.0, p.max_turn_deg]] {
+        let plan = GaitPlan::new(&[robot("r1", 0.0, 0.0, 0.0, &[path])], None, &p, 0.0).unwrap();
+        assert_eq!(plan.steps().len(), 4, "{path:?}");
+    }
+}

@@ -29,7 +29,7 @@ fn assert_walked(plan: &Plan, m: &Metrics) {
 
 #[test]
 fn s2_robot_one_walks_back_returns_and_turns_while_the_team_holds() {
-    let sets = ["walk.path=[[-0.09, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, -15.0]]", "duration=16.0", "settle=0.5"];
+    let sets = ["walk.path=[[-0.09, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, -10.0]]", "duration=16.0", "settle=0.5"];
     let (plan, m) = run_scenario("s2_walk.toml", &sets, false, "s2_walk");
     let walk = m.walk.as_ref().expect("walk report");
     assert_eq!(walk.steps_planned["r2"], 0, "robot 2 holds");
@@ -39,7 +39,7 @@ fn s2_robot_one_walks_back_returns_and_turns_while_the_team_holds() {
 
 #[test]
 fn two_robots_carry_the_object_forward_sideways_and_turn() {
-    let sets = ["walk.path=[[0.1, 0.0, 0.0], [0.1, 0.05, 0.0], [0.1, 0.05, 5.0]]", "duration=16.0", "settle=0.5"];
+    let sets = ["walk.path=[[0.1, 0.0, 0.0], [0.1, 0.05, 0.0], [0.1, 0.05, 3.0]]", "duration=16.0", "settle=0.5"];
     let (plan, m) = run_scenario("transport2.toml", &sets, false, "transport2");
     assert_walked(&plan, &m);
 }

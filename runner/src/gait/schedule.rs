@@ -121,7 +121,8 @@ fn cycles(robots: &[WalkingRobot], offsets: &[Vec<Vector3<f64>>], k: usize, p: &
         let foot = off.iter().map(|o| ((b * nalgebra::Point3::from(*o)) - (a * nalgebra::Point3::from(*o))).xy().norm()).fold(0.0, f64::max);
         let turn = a.rotation.angle_to(&b.rotation).to_degrees();
         if foot > 1e-9 || turn > 1e-9 {
-            n = n.max((foot / p.stride).max(turn / p.max_turn_deg).ceil().max(1.0));
+            // A step of exactly `stride` is one step, whatever the rounding.
+            n = n.max(((foot / p.stride).max(turn / p.max_turn_deg) - 1e-9).ceil().max(1.0));
         }
     }
     n as usize
