@@ -108,9 +108,9 @@ impl Driver {
         let mut contact_pubs = BTreeMap::new();
         for c in &contact_sets {
             let id = c.header.robot_id().to_string();
-            if !contact_pubs.contains_key(&id) {
-                let key = keys::contacts(TEAM, &id)?;
-                contact_pubs.insert(id, TypedPublisher::declare(session, key, Qos::HotPath).await?);
+            if let std::collections::btree_map::Entry::Vacant(slot) = contact_pubs.entry(id) {
+                let key = keys::contacts(TEAM, slot.key())?;
+                slot.insert(TypedPublisher::declare(session, key, Qos::HotPath).await?);
             }
         }
         let terminal = std::io::stderr().is_terminal();

@@ -190,9 +190,9 @@ fn impossible_walks_are_refused_with_the_reason() {
     assert!(matches!(GaitPlan::new(&[nan], None, &p, 0.0), Err(GaitError::Robot { .. })));
     let short = robot("r2", 2.0, 0.0, 0.0, &[]);
     assert!(matches!(GaitPlan::new(&[ok.clone(), short], None, &p, 0.0), Err(GaitError::Robot { .. })));
-    assert!(matches!(GaitPlan::new(&[ok.clone()], Some(&[Isometry3::identity()]), &p, 0.0), Err(GaitError::ObjectWaypoints { .. })));
+    assert!(matches!(GaitPlan::new(std::slice::from_ref(&ok), Some(&[Isometry3::identity()]), &p, 0.0), Err(GaitError::ObjectWaypoints { .. })));
     for bad in [GaitParams { stride: 0.0, ..p.clone() }, GaitParams { t_swing: f64::NAN, ..p.clone() }, GaitParams { touchdown_window: 1.0, ..p.clone() }] {
-        assert!(matches!(GaitPlan::new(&[ok.clone()], None, &bad, 0.0), Err(GaitError::Params(_))));
+        assert!(matches!(GaitPlan::new(std::slice::from_ref(&ok), None, &bad, 0.0), Err(GaitError::Params(_))));
     }
     let deep = GaitParams { margin: 0.5, ..p };
     let err = GaitPlan::new(&[ok], None, &deep, 0.0).unwrap_err();

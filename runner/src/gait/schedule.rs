@@ -4,8 +4,10 @@
 //!
 //! Segment `k` (waypoint `k` to `k + 1`) takes `N_k` cycles, the same for every robot: the
 //! fewest with every foot moving at most `stride` per step and the torso turning at most
-//! `max_turn_deg` per cycle. A cycle steps hind-left, front-left, hind-right, front-right
-//! (told apart by where each foot is in the torso frame at the start). Each step: the torso
+//! `max_turn_deg` per cycle. A cycle steps each foot once, in the order that needs the least
+//! CoM shift for the segment's motion (forward: hind-left, front-left, hind-right, front-right,
+//! the crawl; backwards the front feet lead; feet told apart by where each is in the torso
+//! frame at the start). Each step: the torso
 //! shifts (quintic blend, `t_shift`) to the path's next quarter cycle plus the shift that puts
 //! the centre of mass `margin` inside the other three feet's triangle; the foot is unloaded
 //! (`t_unload`, its normal force bounded by a ramp to zero), swings (`t_swing`) to where the
@@ -152,6 +154,8 @@ struct Builder<'a> {
     object: Option<&'a [Isometry3<f64>]>,
     p: &'a GaitParams,
     offsets: Vec<Vec<Vector3<f64>>>,
+    /// Each robot's crawl order, and the order of the current segment.
+    crawl: Vec<[usize; 4]>,
     order: Vec<[usize; 4]>,
     feet: Vec<Vec<Vector3<f64>>>,
     t: f64,
@@ -160,33 +164,99 @@ struct Builder<'a> {
     steps: Vec<Step>,
 }
 
+/// Where one step of a robot goes: the torso's target (the path's pose plus the CoM shift),
+/// the foothold, the shift and the CoM's margin at lift-off.
+struct Placement {
+    target: Isometry3<f64>,
+    to: Vector3<f64>,
+    shift: f64,
+    margin: f64,
+}
+
+/// Robot `r`'s step of `foot` with its feet at `feet`, the path at `progress` for the torso and
+/// at `cycle_end` for the foothold (segment `k`); `None` when no shift reaches the margin.
+#[allow(clippy::too_many_arguments)]
+fn place(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], foot: usize, k: usize, progress: f64, cycle_end: f64, p: &GaitParams) -> Option<Placement> {
+    let (a, b) = (&r.waypoints[k], &r.waypoints[k + 1]);
+    let nominal = interp(a, b, progress);
+    let mut to = interp(a, b, cycle_end) * nalgebra::Point3::from(offsets[foot]);
+    to.z = r.feet[foot].1.z;
+    let others: Vec<Vector2<f64>> = (0..4).filter(|f| *f != foot).map(|f| feet[f].xy()).collect();
+    let tri = [others[0], others[1], others[2]];
+    let com = (nominal * nalgebra::Point3::from(r.com_offset)).coords.xy();
+    let d = shift_into(&com, &tri, p.margin)?;
+    Some(Placement { target: Translation3::new(d.x, d.y, 0.0) * nominal, to: to.coords, shift: d.norm(), margin: margin(&(com + d), &tri) })
+}
+
+/// The foot order of robot `i` in segment `k` (`n` cycles): of the 24, the one whose first
+/// cycle needs the least total CoM shift (walking backwards, the front feet lead; sideways,
+/// the feet away from the motion), the crawl order on a tie; `None` when none reaches the margin.
+fn best_order(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], crawl: [usize; 4], k: usize, n: usize, p: &GaitParams) -> Option<[usize; 4]> {
+    let mut best: Option<([usize; 4], f64)> = None;
+    for perm in permutations(crawl) {
+        let mut at = feet.to_vec();
+        let mut total = 0.0;
+        for (j, &foot) in perm.iter().enumerate() {
+            let Some(pl) = place(r, offsets, &at, foot, k, (j + 1) as f64 / 4.0 / n as f64, 1.0 / n as f64, p) else {
+                total = f64::INFINITY;
+                break;
+            };
+            total += pl.shift;
+            at[foot] = pl.to;
+        }
+        if total.is_finite() && best.is_none_or(|(_, b)| total < b - 1e-9) {
+            best = Some((perm, total));
+        }
+    }
+    best.map(|(o, _)| o)
+}
+
+/// The 24 orders of four feet, starting with `first` itself.
+fn permutations(first: [usize; 4]) -> Vec<[usize; 4]> {
+    let mut out = Vec::with_capacity(24);
+    for a in 0..4 {
+        for b in (0..4).filter(|b| *b != a) {
+            for c in (0..4).filter(|c| *c != a && *c != b) {
+                let d = 6 - a - b - c;
+                out.push([first[a], first[b], first[c], first[d]]);
+            }
+        }
+    }
+    out
+}
+
 impl Builder<'_> {
+    /// Each moving robot's foot order for segment `k` of `n` cycles ([`best_order`]).
+    fn choose_orders(&mut self, k: usize, n: usize) {
+        for (i, r) in self.robots.iter().enumerate() {
+            if r.waypoints[k] == r.waypoints[k + 1] {
+                continue;
+            }
+            match best_order(r, &self.offsets[i], &self.feet[i], self.crawl[i], k, n, self.p) {
+                Some(o) => self.order[i] = o,
+                None => self.order[i] = self.crawl[i],
+            }
+        }
+    }
+
     /// Step `j` of cycle `c` of `n` in segment `k`: shift, unload, swing, load.
     fn step(&mut self, k: usize, c: usize, j: usize, n: usize) -> Result<(), GaitError> {
         let (progress, cycle_end) = ((c as f64 + (j + 1) as f64 / 4.0) / n as f64, (c + 1) as f64 / n as f64);
         let (t_shift_end, liftoff) = (self.t + self.p.t_shift, self.t + self.p.t_shift + self.p.t_unload);
         let touchdown = liftoff + self.p.t_swing;
         for (i, r) in self.robots.iter().enumerate() {
-            let (a, b) = (&r.waypoints[k], &r.waypoints[k + 1]);
-            if a == b {
+            if r.waypoints[k] == r.waypoints[k + 1] {
                 continue;
             }
             let foot = self.order[i][j];
-            let nominal = interp(a, b, progress);
-            let mut to = interp(a, b, cycle_end) * nalgebra::Point3::from(self.offsets[i][foot]);
-            to.z = r.feet[foot].1.z;
-            let others: Vec<Vector2<f64>> = (0..4).filter(|f| *f != foot).map(|f| self.feet[i][f].xy()).collect();
-            let tri = [others[0], others[1], others[2]];
-            let com = (nominal * nalgebra::Point3::from(r.com_offset)).coords.xy();
-            let Some(d) = shift_into(&com, &tri, self.p.margin) else {
-                let inradius = super::support::incentre(&tri).1;
+            let Some(pl) = place(r, &self.offsets[i], &self.feet[i], foot, k, progress, cycle_end, self.p) else {
+                let others: Vec<Vector2<f64>> = (0..4).filter(|f| *f != foot).map(|f| self.feet[i][f].xy()).collect();
+                let inradius = super::support::incentre(&[others[0], others[1], others[2]]).1;
                 return Err(GaitError::Margin { robot: r.robot.clone(), step: self.steps.len(), foot: r.feet[foot].0.clone(), margin: self.p.margin, inradius });
             };
-            let target = Translation3::new(d.x, d.y, 0.0) * nominal;
-            self.torsos[i].push(self.t, t_shift_end, target);
-            let step = Step { robot: i, foot, liftoff, touchdown, from: self.feet[i][foot], to: to.coords, margin: margin(&(com + d), &tri) };
-            self.feet[i][foot] = to.coords;
-            self.steps.push(step);
+            self.torsos[i].push(self.t, t_shift_end, pl.target);
+            self.steps.push(Step { robot: i, foot, liftoff, touchdown, from: self.feet[i][foot], to: pl.to, margin: pl.margin });
+            self.feet[i][foot] = pl.to;
         }
         if let (Some(track), Some(o)) = (self.object_track.as_mut(), self.object) {
             track.push(self.t, t_shift_end, interp(&o[k], &o[k + 1], progress));
@@ -225,6 +295,7 @@ impl GaitPlan {
             p: params,
             feet: robots.iter().map(|r| r.feet.iter().map(|(_, p)| *p).collect()).collect(),
             offsets,
+            crawl: order.clone(),
             order,
             t: t0,
             torsos: robots.iter().map(|r| Track { start: r.waypoints[0], moves: Vec::new() }).collect(),
@@ -233,6 +304,9 @@ impl GaitPlan {
         };
         for k in 0..count.saturating_sub(1) {
             let n = cycles(robots, &b.offsets, k, params);
+            if n > 0 {
+                b.choose_orders(k, n);
+            }
             for c in 0..n {
                 for j in 0..4 {
                     b.step(k, c, j, n)?;

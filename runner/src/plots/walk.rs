@@ -55,9 +55,9 @@ pub fn foot_heights(walk: &Walk, records: &Records) -> Vec<Panel> {
             let z0 = records.truth.iter().find_map(at).map_or(0.0, |p| p.z);
             let measured = records.truth.iter().filter_map(|g| at(g).map(|p| (g.time, 1e3 * (p.z - z0)))).collect();
             let swing: Vec<(f64, Vector3<f64>, Vector3<f64>)> = records.truth.iter().filter(|g| !walk.gait.stance(i, g.time)[k]).filter_map(|g| Some((g.time, at(g)?, walk.gait.swing_foot(i, k, g.time)?.0))).collect();
-            heights.push(path(format!("{frame}"), measured, c, Stroke::Solid));
+            heights.push(path(frame.to_string(), measured, c, Stroke::Solid));
             heights.push(path(format!("{frame} ref"), swing.iter().map(|(t, _, r)| (*t, 1e3 * (r.z - z0))).collect(), GREY, Stroke::Dashed));
-            errors.push(path(format!("{frame}"), swing.iter().map(|(t, p, r)| (*t, 1e3 * (p - r).norm())).collect(), c, Stroke::Solid));
+            errors.push(path(frame.to_string(), swing.iter().map(|(t, p, r)| (*t, 1e3 * (p - r).norm())).collect(), c, Stroke::Solid));
         }
         panels.push(Panel { title: format!("{id} foot heights"), y_label: "mm".into(), lines: heights });
         panels.push(Panel { title: format!("{id} swing foot error |p - p_ref|"), y_label: "mm".into(), lines: errors });
@@ -72,7 +72,7 @@ pub fn torso_paths(walk: &Walk, records: &Records, desired_torso: impl Fn(usize,
         let c = PALETTE[i % PALETTE.len()];
         let measured = records.truth.iter().filter_map(|g| g.torsos.iter().find(|b| &b.name == id).map(|b| (b.pose.position[0], b.pose.position[1]))).collect();
         let desired = records.truth.iter().map(|g| desired_torso(i, g.time)).map(|p| (p[0], p[1])).collect();
-        lines.push(path(format!("{id}"), measured, c, Stroke::Solid));
+        lines.push(path(id.to_string(), measured, c, Stroke::Solid));
         lines.push(path(format!("{id} desired"), desired, GREY, Stroke::Dashed));
     }
     if walk.moves_object {
