@@ -125,10 +125,12 @@ impl ContactSwitch {
         let mut ev = SwitchEvents::default();
         self.active.hand_in_grasp = self.goal.hand_in_grasp;
         let sensed = foot_forces.len() == self.active.stance.len();
+        // Without a measurement a foot counts as landed and as unloaded.
+        let force = |k: usize| if sensed { foot_forces[k] } else { f64::NAN };
         // Touchdowns first: a foot that lands lets another lift off in the same state.
         for k in 0..self.active.stance.len() {
             if !self.active.stance[k] && self.goal.stance.get(k).copied().unwrap_or(true) {
-                if !sensed || foot_forces[k] >= self.config.touchdown_force {
+                if !sensed || force(k) >= self.config.touchdown_force {
                     self.active.stance[k] = true;
                     ev.touchdowns += 1;
                 } else {
@@ -140,7 +142,7 @@ impl ContactSwitch {
         for k in 0..self.active.stance.len() {
             if self.active.stance[k] && !self.goal.stance.get(k).copied().unwrap_or(true) {
                 let down = self.active.stance.iter().filter(|s| **s).count();
-                let unloaded = !sensed || foot_forces[k] <= self.config.liftoff_force;
+                let unloaded = !sensed || force(k) <= self.config.liftoff_force;
                 if down > keep && unloaded {
                     self.active.stance[k] = false;
                     ev.liftoffs += 1;

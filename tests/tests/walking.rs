@@ -51,7 +51,7 @@ fn four_robots_carry_the_object_forward() {
     assert_walked(&plan, &m);
 }
 
-/// A landing the simulator delays: the first step's foot is pushed up (60 N on its shank) over
+/// A landing the simulator delays: the first step's foot is pushed up (120 N on its shank) over
 /// its planned touchdown, so it touches the ground late. The contact switch keeps it in swing
 /// until its force confirms the touchdown, and the walk goes on; the early landings of every
 /// other step (the swing presses 1 cm below the ground) are switched as they touch.
@@ -63,7 +63,7 @@ fn a_late_touchdown_is_waited_for_and_the_walk_goes_on() {
     let walk = planned.references.walk.as_ref().expect("walk");
     let first = walk.gait.steps()[0].clone();
     let shank = walk.feet[first.robot][first.foot].replace("_FOOT", "_SHANK");
-    let push = format!("perturbations=[{{on = \"r1\", body = \"{shank}\", start = {:.3}, duration = 0.30, wrench = [0.0, 0.0, 60.0, 0.0, 0.0, 0.0]}}]", first.touchdown - 0.15);
+    let push = format!("perturbations=[{{on = \"r1\", body = \"{shank}\", start = {:.3}, duration = 0.35, wrench = [0.0, 0.0, 120.0, 0.0, 0.0, 0.0]}}]", first.touchdown - 0.1);
     let sets: Vec<&str> = base.iter().map(String::as_str).chain([push.as_str()]).collect();
     let (plan, m) = run_scenario("s2_walk.toml", &sets, false, "s2_late_touchdown");
     let offsets = m.walk.as_ref().expect("walk report").touchdown_offset_ms;

@@ -61,7 +61,7 @@ impl Default for GaitParams {
             t_unload: 0.15,
             t_swing: 0.5,
             t_load: 0.15,
-            margin: 0.03,
+            margin: 0.04,
             touchdown_depth: 0.01,
             touchdown_window: 0.08,
             unload_force: 250.0,
