@@ -79,9 +79,19 @@ fn steps(times: &[f64], contact: &[bool]) -> usize {
     count
 }
 
-/// The first sample in contact at or after `after`.
+/// The landing after `after`: the first contact that ends at least `MIN_AIRBORNE` in the air
+/// (a foot that scuffs the ground as it lifts off has not landed).
 fn first_contact_after(times: &[f64], contact: &[bool], after: f64) -> Option<f64> {
-    times.iter().zip(contact).find(|(t, c)| **t >= after && **c).map(|(t, _)| *t)
+    let mut lifted: Option<f64> = None;
+    for (t, c) in times.iter().zip(contact).filter(|(t, _)| **t >= after) {
+        match (c, lifted) {
+            (false, None) => lifted = Some(*t),
+            (true, Some(t0)) if t - t0 >= MIN_AIRBORNE => return Some(*t),
+            (true, Some(_)) => lifted = None,
+            _ => {}
+        }
+    }
+    None
 }
 
 /// Largest horizontal slide of a foot while in stance: the slip velocity integrated from
@@ -122,7 +132,7 @@ impl Walk {
             rep.steps_taken.insert(id.clone(), taken);
             for s in self.gait.steps().iter().filter(|s| s.robot == i) {
                 let track = foot_track(truth, id, &self.feet[i][s.foot], &self.foot_links[i][s.foot], self.foot_radius[i]);
-                if let Some(dt) = first_contact_after(&times, &track.contact, s.liftoff + MIN_AIRBORNE).map(|t| 1e3 * (t - s.touchdown)) {
+                if let Some(dt) = first_contact_after(&times, &track.contact, s.liftoff).map(|t| 1e3 * (t - s.touchdown)) {
                     let o = &mut rep.touchdown_offset_ms;
                     (o[0], o[1]) = (o[0].min(dt), o[1].max(dt));
                 }
