@@ -10,9 +10,12 @@
 
 mod common;
 
-use common::scenario::run_scenario;
+use std::path::Path;
+
+use common::scenario::{repo, run_scenario};
 use team_runner::evaluate::Metrics;
-use team_runner::plan::Plan;
+use team_runner::plan::{self, Plan};
+use team_runner::scenario::Scenario;
 
 fn assert_team_accepted(plan: &Plan, m: &Metrics, robots: usize) {
     assert_eq!(plan.robots.len(), robots);
