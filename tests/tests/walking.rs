@@ -39,14 +39,14 @@ fn s2_robot_one_walks_back_returns_and_turns_while_the_team_holds() {
 
 #[test]
 fn two_robots_carry_the_object_forward_sideways_and_turn() {
-    let sets = ["walk.path=[[0.1, 0.0, 0.0], [0.1, 0.05, 0.0], [0.1, 0.05, 3.0]]", "duration=21.0", "settle=0.5"];
+    let sets = ["walk.path=[[0.1, 0.0, 0.0], [0.1, 0.05, 0.0], [0.1, 0.05, 3.0]]", "duration=24.0", "settle=0.5"];
     let (plan, m) = run_scenario("transport2.toml", &sets, false, "transport2");
     assert_walked(&plan, &m);
 }
 
 #[test]
 fn four_robots_carry_the_object_forward() {
-    let sets = ["walk.path=[[0.1, 0.0, 0.0]]", "duration=8.0", "settle=0.5"];
+    let sets = ["walk.path=[[0.1, 0.0, 0.0]]", "duration=9.0", "settle=0.5"];
     let (plan, m) = run_scenario("transport4.toml", &sets, false, "transport4");
     assert_walked(&plan, &m);
 }
