@@ -98,7 +98,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
         control_hz: s.control_hz,
         physics_hz: s.physics_hz,
         contact: ContactParams::default(),
-        solver: SolverParams::default(),
+        solver: SolverParams { noslip_iterations: s.noslip_iterations, ..SolverParams::default() },
         seed: s.seed,
         initial_joint_noise: 0.0,
     };

@@ -84,6 +84,10 @@ pub struct Scenario {
     pub references: References,
     #[serde(default)]
     pub perturbations: Vec<Perturbation>,
+    /// MuJoCo's no-slip iterations (`sim_bridge::world::SolverParams::noslip_iterations`; 0:
+    /// off). Walking scenarios use 20: without them a standing robot's feet creep.
+    #[serde(default)]
+    pub noslip_iterations: u32,
     /// Walking: who walks where, with which gait.
     #[serde(default)]
     pub walk: Option<WalkSpec>,
@@ -176,7 +180,7 @@ fn default_capacity_check() -> bool {
 }
 
 /// Top-level keys with a default that `--set` may give although the file leaves them out.
-pub const OPTIONAL_KEYS: [&str; 9] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations"];
+pub const OPTIONAL_KEYS: [&str; 10] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations", "noslip_iterations"];
 /// Top-level tables a scenario may leave out that `--set` may still reach into
 /// (`--set release.after_failed_ticks=50`); their own fields are checked when the file is read.
 pub const OPTIONAL_TABLES: [&str; 1] = ["release"];

@@ -146,16 +146,16 @@ pub struct SolverParams {
     pub impratio: f64,
     pub iterations: u32,
     pub tolerance: f64,
-    /// MuJoCo's no-slip post-processing iterations (`noslip_iterations`): without them its
-    /// soft contacts let a foot under a steady tangential force creep (about 1 mm/s for a
-    /// standing robot's splayed feet), which real feet do not.
+    /// MuJoCo's no-slip post-processing iterations (`noslip_iterations`, 0: off): without them
+    /// its soft contacts let a foot under a steady tangential force creep (about 1 mm/s for a
+    /// standing robot's splayed feet), which real feet do not. Walking scenarios turn them on.
     #[serde(default)]
     pub noslip_iterations: u32,
 }
 
 impl Default for SolverParams {
     fn default() -> Self {
-        SolverParams { integrator: "implicitfast".into(), cone: "elliptic".into(), impratio: 10.0, iterations: 100, tolerance: 1e-10, noslip_iterations: 20 }
+        SolverParams { integrator: "implicitfast".into(), cone: "elliptic".into(), impratio: 10.0, iterations: 100, tolerance: 1e-10, noslip_iterations: 0 }
     }
 }
 
