@@ -27,6 +27,11 @@ pub trait TeamController: Send {
     fn used_fallback(&self) -> bool {
         false
     }
+    /// The tick after which the team let go of the object (`crate::units::release`), while it
+    /// stays released.
+    fn released_at(&self) -> Option<u64> {
+        None
+    }
     /// A robot's description arrived (limits, contact parameters).
     fn set_description(&mut self, _description: &RobotDescription) {}
     /// New task references arrived.

@@ -70,6 +70,8 @@ pub async fn run(
     let mut housekeeping = tokio::time::interval(cfg.tick_deadline.clamp(Duration::from_millis(10), Duration::from_secs(1)));
     let mut detail = String::from("waiting for members");
     let mut refs = ReferenceBuffer::default();
+    // Whether the last status published said the team had let go of the object.
+    let mut released_reported = false;
     let mut described = std::collections::BTreeSet::new();
     loop {
         let mut membership_changed = false;
@@ -127,6 +129,9 @@ pub async fn run(
                         refs.apply(tick, controller.as_mut());
                         solve_and_publish(session, &cfg, controller.as_mut(), tick, &terms, &mut commands, &mut command_pubs, &mut diag_pub, &mut counters).await?;
                         status_tick = tick;
+                        // Letting go (or taking a grasp again) is said at once, not at the next
+                        // housekeeping tick: a planner stops moving the team on it.
+                        publish_status |= controller.released_at().is_some() != released_reported;
                     }
                     TickOutcome::NotAMember(r, tick) => {
                         // Its terms can beat its liveliness token: it is told to hold its
@@ -165,6 +170,8 @@ pub async fn run(
                 header: Header::new(&cfg.team, None, status_tick, protocol::wall_clock_ns()),
                 mode: if members.is_empty() || controller.not_ready(&members.to_vec()).is_some() {
                     CoordinatorMode::WaitingForMembers
+                } else if controller.released_at().is_some() {
+                    CoordinatorMode::Released
                 } else if controller.used_fallback() {
                     CoordinatorMode::Fallback
                 } else {
@@ -177,6 +184,7 @@ pub async fn run(
                 fallbacks: counters.fallbacks,
                 detail: controller.not_ready(&members.to_vec()).unwrap_or_else(|| detail.clone()),
             };
+            released_reported = controller.released_at().is_some();
             status_pub.put(&status).await?;
         }
     }

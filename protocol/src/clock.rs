@@ -43,6 +43,12 @@ impl RunClock {
         (tick >= self.settle_ticks).then(|| (tick - self.settle_ticks) as f64 / self.control_hz)
     }
 
+    /// The first tick whose scenario time is at or after `t` (s; before 0: the first scenario
+    /// tick).
+    pub fn first_tick_at(&self, t: f64) -> u64 {
+        self.settle_ticks + (t * self.control_hz - 1e-9).ceil().max(0.0) as u64
+    }
+
     /// Control period, s.
     pub fn dt(&self) -> f64 {
         1.0 / self.control_hz
@@ -58,6 +64,12 @@ mod tests {
         let c = RunClock { control_hz: 1000.0, settle_ticks: 500, ticks: 2000 };
         assert_eq!(c.total_ticks(), 2500);
         assert!(c.is_settling(499) && !c.is_settling(500));
+        for k in [500, 501, 1234, 2499] {
+            let t = c.scenario_time(k).unwrap();
+            assert_eq!(c.first_tick_at(t), k, "tick {k} at its own time");
+            assert_eq!(c.first_tick_at(t + 0.5e-3), k + 1, "half a period later: the next tick");
+        }
+        assert_eq!(c.first_tick_at(-1.0), 500);
         assert_eq!(c.scenario_time(0), None);
         assert_eq!(c.scenario_time(499), None);
         assert_eq!(c.scenario_time(500), Some(0.0));

@@ -441,6 +441,10 @@ pub enum CoordinatorMode {
     Running,
     /// The last tick used the fallback (see [`QpStatus`]).
     Fallback,
+    /// The team let go of the object it could not hold: the hands are free, the feet carry
+    /// the robots. A planner stops moving the team (a walk halts at its next quiet point);
+    /// the mode stays until the hands are in a grasp again.
+    Released,
 }
 
 /// Outcome of the contact-force QP of a tick.

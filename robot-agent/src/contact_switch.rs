@@ -99,18 +99,18 @@ impl ContactSwitch {
         self.scheduled.len()
     }
 
-    /// Schedule `set` from state tick `tick` on. A set for a tick already scheduled replaces
-    /// it (the newest message wins); sets stay sorted by tick.
+    /// Schedule `set` from state tick `tick` on. The newest message is the plan from its tick
+    /// on: it replaces a set scheduled for the same tick and cancels every set scheduled for a
+    /// later one (a planner that changes its mind, e.g. a walk halted when the team lets go,
+    /// sends the set it wants from then on). A planner that sends its sets in tick order never
+    /// cancels any.
     pub fn schedule(&mut self, tick: u64, set: ContactSet) -> Result<(), ScheduleFull> {
-        if let Some(slot) = self.scheduled.iter_mut().find(|(t, _)| *t == tick) {
-            slot.1 = set;
-            return Ok(());
-        }
-        if self.scheduled.len() >= self.config.max_scheduled {
+        let at = self.scheduled.partition_point(|(t, _)| *t < tick);
+        if at >= self.config.max_scheduled {
             return Err(ScheduleFull { tick, capacity: self.config.max_scheduled });
         }
-        let at = self.scheduled.partition_point(|(t, _)| *t < tick);
-        self.scheduled.insert(at, (tick, set));
+        self.scheduled.truncate(at);
+        self.scheduled.push_back((tick, set));
         Ok(())
     }
 

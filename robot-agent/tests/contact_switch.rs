@@ -31,16 +31,24 @@ fn a_set_applies_from_its_tick_not_before() {
 }
 
 #[test]
-fn sets_out_of_order_are_applied_in_tick_order_and_a_repeat_replaces() {
+fn sets_in_order_wait_and_a_set_for_an_earlier_tick_is_the_new_plan_from_there() {
     let mut s = all_down();
-    s.schedule(30, set([true, true, true, true])).unwrap();
     s.schedule(10, set([true, false, true, true])).unwrap();
-    s.schedule(10, set([true, true, false, true])).unwrap();
-    assert_eq!(s.scheduled(), 2);
-    s.on_state(10, &[100.0, 100.0, 0.0, 100.0]);
-    assert_eq!(s.active().stance, vec![true, true, false, true], "the newer set of tick 10 wins");
-    s.on_state(30, &LOADED);
-    assert_eq!(s.active().stance, vec![true; 4]);
+    s.schedule(30, set([true, true, true, true])).unwrap();
+    s.schedule(50, set([false, true, true, true])).unwrap();
+    assert_eq!(s.scheduled(), 3, "sets sent in tick order all wait");
+    // The planner changes its mind at tick 30: all four down from then on, nothing after.
+    s.schedule(30, set([true, true, false, true])).unwrap();
+    assert_eq!(s.scheduled(), 2, "the set of tick 50 was cancelled");
+    s.on_state(10, &[100.0, 0.0, 100.0, 100.0]);
+    assert_eq!(s.active().stance, vec![true, false, true, true]);
+    s.on_state(30, &[100.0, 100.0, 0.0, 100.0]);
+    assert_eq!(s.active().stance, vec![true, true, false, true], "the newer set of tick 30 wins");
+    for t in 31..200 {
+        s.on_state(t, &[0.0, 100.0, 0.0, 100.0]);
+    }
+    assert_eq!(s.active().stance, vec![true, true, false, true], "the cancelled lift-off of tick 50 never happens");
+    assert_eq!(s.scheduled(), 0);
 }
 
 #[test]
@@ -109,6 +117,7 @@ fn the_schedule_is_bounded() {
     let full = s.schedule(200, set([true; 4])).unwrap_err();
     assert_eq!((full.tick, full.capacity), (200, 3));
     assert!(s.schedule(101, set([false, true, true, true])).is_ok(), "replacing a scheduled tick needs no room");
+    assert_eq!(s.scheduled(), 2, "and cancels the later one");
 }
 
 #[test]

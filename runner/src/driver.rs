@@ -8,7 +8,9 @@
 //! progress. It never talks to the controller other than by references: the ground truth it
 //! records is for evaluation only. A walking scenario's contact sets go out
 //! [`CONTACT_LOOKAHEAD`] ticks ahead on each robot's `contacts` key (the agents keep a bounded
-//! schedule of them).
+//! schedule of them). When the coordinator reports that the team let go of the object
+//! ([`CoordinatorMode::Released`]), a walk halts at its next quiet point
+//! ([`ReferencePlan::halt_walk`]): robots without the object do not walk on.
 
 use std::collections::BTreeMap;
 use std::io::IsTerminal;
@@ -17,7 +19,7 @@ use std::time::{Duration, Instant};
 use indicatif::{ProgressBar, ProgressStyle};
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, SampleQueue, TransportError, TypedPublisher};
-use protocol::{ContactSet, CoordinatorStatus, GroundTruth, TaskReferences, TickDiagnostics, TorqueCommand};
+use protocol::{ContactSet, CoordinatorMode, CoordinatorStatus, GroundTruth, TaskReferences, TickDiagnostics, TorqueCommand};
 use tokio::sync::watch;
 use zenoh::Session;
 
@@ -39,6 +41,8 @@ pub struct Records {
     pub torques: BTreeMap<String, Vec<(u64, Vec<f64>)>>,
     pub diagnostics: Vec<TickDiagnostics>,
     pub last_status: Option<CoordinatorStatus>,
+    /// The status tick at which the coordinator first reported the team let go of the object.
+    pub released_at: Option<u64>,
     /// Wall time of the settling and of the scenario proper.
     pub settle_wall: Duration,
     pub run_wall: Duration,
@@ -161,6 +165,21 @@ impl Driver {
         Ok(())
     }
 
+    /// The team let go after `tick`: halt the walk at its next quiet point. The references
+    /// already published from there on (up to `published_to`) are sent again, held; each
+    /// walking robot gets a set with all its feet down from then on, which cancels the sets it
+    /// has waiting; no later set goes out.
+    async fn halt_walk(&mut self, tick: u64, published_to: u64) -> Result<(), TransportError> {
+        let (Some(t), Some(walk)) = (self.plan.halt_walk(tick), self.plan.walk.clone()) else { return Ok(()) };
+        let from = self.plan.clock.first_tick_at(t);
+        tracing::warn!(released_after = tick, halt_s = t, halt_tick = from, "the team let go of the object: the walk halts at its next quiet point");
+        self.publish_refs(from, published_to).await?;
+        let halt = walk.halt_sets(TEAM, &self.plan.clock, t);
+        self.contact_sets.truncate(self.next_contact);
+        self.contact_sets.extend(halt);
+        self.publish_contacts(u64::MAX).await
+    }
+
     /// Run until the ground truth of the last tick arrived, or `stop` turns true.
     pub async fn run(mut self, mut stop: watch::Receiver<bool>) -> Result<Records, TransportError> {
         let mut rec = Records::default();
@@ -182,6 +201,10 @@ impl Driver {
                     if let Ok(st) = decode_sample::<CoordinatorStatus>(&sample) {
                         if let Some(tap) = &self.tap {
                             tap.send(sample.key_expr().as_str(), Message::Status(st.clone()));
+                        }
+                        if st.mode == CoordinatorMode::Released && rec.released_at.is_none() {
+                            rec.released_at = Some(st.header.tick);
+                            self.halt_walk(st.header.tick, next_ref).await?;
                         }
                         rec.last_status = Some(st);
                         if !coordinator_heard {

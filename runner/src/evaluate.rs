@@ -118,7 +118,12 @@ pub struct Evaluation {
 
 /// Evaluate the records of a run of `plan`.
 pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
-    let refs = &plan.references;
+    // The references the run sent: a walk halts when the team lets go (crate::driver).
+    let mut halted = plan.references.clone();
+    if let Some(tick) = records.released_at {
+        halted.halt_walk(tick);
+    }
+    let refs = &halted;
     let robots: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
     let truth: Vec<&GroundTruth> = records.truth.iter().filter(|g| g.object.is_some()).collect();
     let (o_p0, o_q0) = refs.object_start;
@@ -313,7 +318,7 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
     }
     check("object position RMS [m]".into(), object.position_rms_m, MAX_OBJECT_POSITION_RMS);
     check("object orientation RMS [deg]".into(), object.orientation_rms_deg, MAX_OBJECT_ORIENTATION_RMS_DEG);
-    let walk = refs.walk.as_ref().map(|w| w.evaluate(&truth));
+    let walk = refs.walk.as_ref().map(|w| w.evaluate(&truth, refs.walk_halted_at));
     for (r, t) in &torsos {
         // A walking torso follows a moving reference: its own bound.
         let i = robots.iter().position(|x| x == r);

@@ -108,6 +108,7 @@ pub fn place_hands(spec: &mut WorldSpec, robots: &[Arc<Robot>]) -> Result<Vec<Ik
         for (name, v) in &sol.joints {
             r.joint_overrides.insert(name.clone(), *v);
         }
+        tracing::debug!(robot = %r.id, joints = ?sol.joints, "hand placed on the object");
         out.push(sol);
     }
     Ok(out)

@@ -211,6 +211,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
             })
             .collect(),
         walk,
+        walk_halted_at: None,
     };
     Ok(Plan { scenario: s.clone(), scene, controller, robots, references })
 }
@@ -231,6 +232,9 @@ pub struct ReferencePlan {
     /// The walk, if the scenario has one: it gives the walking torsos', the carried object's
     /// and the swing feet's references.
     pub walk: Option<Arc<crate::walk::Walk>>,
+    /// Scenario time at which the walk was halted ([`ReferencePlan::halt_walk`]): from then on
+    /// its references hold the values they had there.
+    pub walk_halted_at: Option<f64>,
 }
 
 fn hold(p: &Vector3<f64>, q: &UnitQuaternion<f64>) -> PoseReference {
@@ -243,9 +247,32 @@ impl ReferencePlan {
         self.clock.scenario_time(tick)
     }
 
+    /// When a walk stops if the team lets go after `released_tick`: at the walk's first quiet
+    /// point from then on (`None` without a walk).
+    pub fn walk_halt_time(&self, released_tick: u64) -> Option<f64> {
+        let t = self.time_of_tick(released_tick).unwrap_or(0.0);
+        self.walk.as_ref().map(|w| w.gait.quiet_point(t))
+    }
+
+    /// Halt the walk for a release after `released_tick` ([`ReferencePlan::walk_halt_time`]),
+    /// once; the halt time when this call halted it.
+    pub fn halt_walk(&mut self, released_tick: u64) -> Option<f64> {
+        if self.walk_halted_at.is_some() {
+            return None;
+        }
+        self.walk_halted_at = self.walk_halt_time(released_tick);
+        self.walk_halted_at
+    }
+
+    /// The walk and the time to ask it for at scenario time `t` (held at the halt).
+    fn walk_at(&self, t: Option<f64>) -> Option<(f64, &crate::walk::Walk)> {
+        let t = t?.min(self.walk_halted_at.unwrap_or(f64::INFINITY));
+        self.walk.as_deref().map(|w| (t, w))
+    }
+
     /// Object reference at scenario time `t` (`None`: the settling hold).
     pub fn object_at(&self, t: Option<f64>) -> PoseReference {
-        if let Some(r) = t.zip(self.walk.as_ref()).and_then(|(t, w)| w.object(t)) {
+        if let Some(r) = self.walk_at(t).and_then(|(t, w)| w.object(t)) {
             return r;
         }
         let (p, q) = &self.object_start;
@@ -254,7 +281,7 @@ impl ReferencePlan {
 
     /// Reference of torso `i` at scenario time `t`.
     pub fn torso_at(&self, i: usize, t: Option<f64>) -> PoseReference {
-        if let Some(r) = t.zip(self.walk.as_ref()).and_then(|(t, w)| w.torso(i, t)) {
+        if let Some(r) = self.walk_at(t).and_then(|(t, w)| w.torso(i, t)) {
             return r;
         }
         let (_, m, p, q) = &self.torsos[i];
@@ -278,7 +305,7 @@ impl ReferencePlan {
             swing_feet: Vec::new(),
             foot_loads: Vec::new(),
         };
-        if let Some((t, w)) = t.zip(self.walk.as_ref()) {
+        if let Some((t, w)) = self.walk_at(t) {
             w.feet_into(t, &mut refs);
         }
         refs

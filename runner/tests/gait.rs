@@ -208,3 +208,52 @@ fn a_step_of_exactly_the_stride_is_one_cycle() {
         assert_eq!(plan.steps().len(), 4, "{path:?}");
     }
 }
+
+/// A halted walk stops at [`GaitPlan::quiet_point`]: no robot stepping there (every foot down
+/// with no unloading or loading ramp, no swing foot and no torso moving, checked with the
+/// plan's own queries), and nothing quieter before it: at every sampled time between the
+/// request and the quiet point some robot is stepping.
+#[test]
+fn a_walk_halts_at_its_first_quiet_point_never_inside_a_step() {
+    let robots = vec![robot("r1", 0.0, 0.0, 0.0, &[[0.3, 0.1, 10.0]]), robot("r2", 2.3, 0.0, 180.0, &[[-0.3, -0.1, 10.0]])];
+    let plan = GaitPlan::new(&robots, None, &GaitParams::default(), 0.5).expect("plan");
+    let moving = |v: &[f64]| v.iter().any(|x| x.abs() > 1e-9);
+    let at_rest = |t: f64| {
+        (0..robots.len()).all(|i| {
+            let feet = (0..4).all(|k| plan.stance(i, t)[k] && plan.max_normal_force(i, k, t).is_none() && plan.swing_foot(i, k, t).is_none_or(|s| !moving(&s.1)));
+            feet && !moving(&plan.torso(i, t).1)
+        })
+    };
+    let end = plan.end_time();
+    let p = plan.params();
+    let mut boundaries = vec![end];
+    for st in plan.steps() {
+        let start = st.liftoff - p.t_unload - p.t_shift;
+        boundaries.extend([start, start + p.t_shift, st.liftoff, st.touchdown - p.touchdown_window, st.touchdown, st.touchdown + p.t_load]);
+    }
+    let mut t = 0.0;
+    let mut inside_steps = 0;
+    while t < end + 1.0 {
+        let q = plan.quiet_point(t);
+        assert!(q >= t, "t {t}: quiet point {q} before it");
+        assert!(at_rest(q), "t {t}: a robot is stepping at the quiet point {q}");
+        if q > t {
+            inside_steps += 1;
+            // Between two steps the robots rest for an instant only: the first resting one of
+            // every phase boundary of every step is the quiet point.
+            let first = boundaries.iter().copied().filter(|b| *b >= t && at_rest(*b)).fold(f64::INFINITY, f64::min);
+            assert!((q - first).abs() < 1e-9, "t {t}: quiet point {q}, but the robots rest at {first}");
+            // And in between (samples at half-integer multiples of 0.1 ms, off the phase
+            // boundaries, where a quintic's speed is only just zero) a robot steps.
+            let mut s = t + 0.5 * 0.0113;
+            while s < q {
+                assert!(!at_rest(s), "t {t}: {s} is quiet, before the quiet point {q}");
+                s += 0.0113;
+            }
+        }
+        t += 0.037;
+    }
+    assert!(inside_steps > 100, "most times are inside a step: {inside_steps}");
+    assert_eq!(plan.quiet_point(0.2), 0.2, "before the walk");
+    assert_eq!(plan.quiet_point(end + 0.5), end + 0.5, "after it");
+}

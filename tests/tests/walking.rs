@@ -1,7 +1,7 @@
 //! Walking while holding (the walking issue), the whole stack in the loop: the paper's S2
 //! (robot 1 walks a static crawl backwards, back, and turns while robot 2 and the object
-//! hold) and the transport of the object by two and four robots walking together. Shortened
-//! for CI (the README's figures run them whole). Acceptance, from the ground truth: never
+//! hold; whole) and the transport of the object by two and four robots walking together
+//! (shortened for CI; the README's figures run them whole). Acceptance, from the ground truth: never
 //! dropped, palm slip < 5 mm, object RMS < 1 cm and < 2 deg against the (moving) reference,
 //! walking torso RMS < 2 cm, final torso pose within 2 cm and 3 deg of its goal, no stance
 //! foot sliding more than 1 cm, and every planned step taken (counted from the simulator's
@@ -9,7 +9,7 @@
 
 mod common;
 
-use common::scenario::run_scenario;
+use common::scenario::{run_scenario, run_scenario_records};
 use team_runner::evaluate::Metrics;
 use team_runner::plan::Plan;
 
@@ -27,9 +27,10 @@ fn assert_walked(plan: &Plan, m: &Metrics) {
     assert!(m.fallback_ticks.is_empty(), "no fallback or hold ticks: {:?}", m.fallback_ticks);
 }
 
+/// The paper's S2 whole: 0.27 m back, back to the start, -30 deg (59 s of scenario).
 #[test]
 fn s2_robot_one_walks_back_returns_and_turns_while_the_team_holds() {
-    let sets = ["walk.path=[[-0.09, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, -10.0]]", "duration=21.0", "settle=0.5"];
+    let sets = ["settle=0.5"];
     let (plan, m) = run_scenario("s2_walk.toml", &sets, false, "s2_walk");
     let walk = m.walk.as_ref().expect("walk report");
     assert_eq!(walk.steps_planned["r2"], 0, "robot 2 holds");
@@ -70,4 +71,66 @@ fn a_late_touchdown_is_waited_for_and_the_walk_goes_on() {
     assert!(offsets[1] > 50.0, "the pushed foot ({shank}) landed late: {offsets:?} ms");
     assert!(offsets[0] < 0.0, "the others landed early: {offsets:?} ms");
     assert_walked(&plan, &m);
+}
+
+/// A team that lets go of the object stops walking. Mid-walk the object is pushed sideways by
+/// `PUSH_N` for 0.3 s, more than the palms' friction can carry: the coordinator lets go
+/// (status `Released`), and the driver halts the walk at its next quiet point. The step in
+/// progress is finished; from shortly after the halt to the end every foot of both robots is on
+/// the ground in the simulator (the agents dropped the lift-offs they had waiting), and both
+/// robots stand: torsos within 5 cm and 10 deg of their references (held from the halt on), no
+/// stance foot sliding 1 cm.
+#[test]
+fn a_team_that_lets_go_of_the_object_stops_walking() {
+    const PUSH_N: f64 = 100.0;
+    let base = ["walk.path=[[0.2, 0.0, 0.0]]".to_string(), "duration=16.5".into(), "settle=0.5".into()];
+    let scenario = team_runner::scenario::Scenario::load(common::scenario::repo().join("scenarios/transport2.toml"), &base).expect("scenario");
+    let planned = team_runner::plan::plan(&scenario, &common::scenario::repo()).expect("plan");
+    let walk = planned.references.walk.as_ref().expect("walk");
+    let all_steps = walk.gait.steps().len();
+    // In the swing of the team's third step.
+    let push_at = walk.gait.steps().iter().filter(|s| s.robot == 0).nth(2).expect("a third step").liftoff + 0.1;
+    let push = format!("perturbations=[{{on = \"object\", start = {push_at:.3}, duration = 0.3, wrench = [0.0, {PUSH_N}, 0.0, 0.0, 0.0, 0.0]}}]");
+    let sets: Vec<&str> = base.iter().map(String::as_str).chain([push.as_str()]).collect();
+    let (plan, m, records) = run_scenario_records("transport2.toml", &sets, false, "transport2_released");
+    assert!(m.fallback_ticks.get("grasp released (hands free, feet only)").copied().unwrap_or(0) > 0, "the team let go: {:?}", m.fallback_ticks);
+    let rep = m.walk.as_ref().expect("walk report");
+    let halt = rep.halted_at_s.expect("the walk halted");
+    let step_time = plan.references.walk.as_ref().expect("walk").gait.params().step_time();
+    assert!(halt > push_at && halt < push_at + 0.3 + step_time, "halted at {halt:.2} s, pushed from {push_at:.2} s");
+    let planned_before: usize = rep.steps_planned.values().sum();
+    assert!(planned_before < all_steps / 2, "the halt cut the walk short: {planned_before} of {all_steps} steps");
+    let after: Vec<_> = records.truth.iter().filter(|g| g.time > halt + 0.2).collect();
+    assert!(after.len() > 5_000, "the run went on after the halt: {} samples", after.len());
+    for g in after {
+        for r in ["r1", "r2"] {
+            let down = g.foot_contacts.iter().filter(|c| c.robot == r).map(|c| c.body.as_str()).collect::<std::collections::BTreeSet<_>>().len();
+            assert_eq!(down, 4, "{r} has {down} feet down at {:.3} s, after the halt at {halt:.2} s", g.time);
+        }
+    }
+    for (r, t) in &m.torsos {
+        assert!(t.position_max_m < 0.05, "torso {r} moved {:.3} m from its reference", t.position_max_m);
+        assert!(t.orientation_max_deg < 10.0, "torso {r} tilted {:.2} deg", t.orientation_max_deg);
+    }
+    for (r, s) in &rep.stance_slide_m {
+        assert!(*s < 0.01, "{r}'s stance feet slid {s:.3} m");
+    }
+}
+
+/// A walk the arm cannot follow is refused before the run, naming the robot: S2 with the
+/// object at the other scenarios' height (0.60 m) and robot 1 at its standing distance asks
+/// its torso to go 0.27 m back plus the crawl's sway, past the stretched arm (run anyway, the
+/// grasp was lost 0.195 m back). The walking scenarios as shipped plan.
+#[test]
+fn a_walk_beyond_the_arms_reach_is_refused_before_the_run() {
+    let file = common::scenario::repo().join("scenarios/s2_walk.toml");
+    let far = ["object.position=[1.15, 0.0, 0.6]".to_string(), "robots.0.base_xy=[0.0, 0.0]".into()];
+    let scenario = team_runner::scenario::Scenario::load(&file, &far).expect("scenario");
+    let err = team_runner::plan::plan(&scenario, &common::scenario::repo()).expect_err("refused");
+    let text = err.to_string();
+    assert!(text.contains("robot r1's arm cannot keep its hand on the object"), "{text}");
+    for shipped in ["s2_walk.toml", "transport2.toml", "transport4.toml"] {
+        let scenario = team_runner::scenario::Scenario::load(common::scenario::repo().join("scenarios").join(shipped), &[]).expect("scenario");
+        team_runner::plan::plan(&scenario, &common::scenario::repo()).unwrap_or_else(|e| panic!("{shipped} as shipped plans: {e}"));
+    }
 }

@@ -262,6 +262,10 @@ impl TeamController for Pidc {
         self.last().is_some_and(|l| l.fallback.is_some())
     }
 
+    fn released_at(&self) -> Option<u64> {
+        self.watch.released().map(|r| r.tick)
+    }
+
     fn set_description(&mut self, d: &RobotDescription) {
         Pidc::set_description(self, d);
     }

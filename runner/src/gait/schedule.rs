@@ -395,6 +395,26 @@ impl GaitPlan {
         out
     }
 
+    /// The first time at or after `t` when no robot is stepping: every foot down at full load
+    /// and every torso at rest. That is `t` itself before the walk, between two steps and after
+    /// it; otherwise the end of the step (shift, unload, swing, load) or of the last shift in
+    /// progress. A walk halted there stops without cutting a step short.
+    pub fn quiet_point(&self, t: f64) -> f64 {
+        let p = &self.params;
+        let mut at = t;
+        // Steps run one after another in time order; one ends where the next one starts.
+        for s in &self.steps {
+            let (start, end) = (s.liftoff - p.t_unload - p.t_shift, s.touchdown + p.t_load);
+            if at > start && at < end {
+                at = end;
+            }
+        }
+        if at > self.end - p.t_shift && at < self.end {
+            at = self.end;
+        }
+        at
+    }
+
     /// Every change of a robot's planned stance: `(time, robot, stance)`, in time order.
     pub fn contact_changes(&self) -> Vec<(f64, usize, [bool; 4])> {
         let mut out = Vec::with_capacity(2 * self.steps.len());

@@ -11,6 +11,7 @@ use protocol::GroundTruth;
 use serde::Serialize;
 
 use super::Walk;
+use crate::gait::Step;
 use crate::metrics;
 
 /// A foot must be off the ground at least this long for a step to count, s.
@@ -39,6 +40,9 @@ pub struct WalkReport {
     /// Final torso position and angle error against the last waypoint, per walking robot.
     pub final_torso_m: BTreeMap<String, f64>,
     pub final_torso_deg: BTreeMap<String, f64>,
+    /// When the walk halted because the team let go of the object (scenario time, s): the
+    /// steps planned are those that lifted off before, the goals the torsos held there.
+    pub halted_at_s: Option<f64>,
 }
 
 /// One foot over the run, per ground-truth sample: in contact or not, and the horizontal
@@ -117,12 +121,16 @@ fn stance_slide(times: &[f64], foot: &FootTrack) -> f64 {
 }
 
 impl Walk {
-    /// The walk's report from the run's ground truth (scenario samples, in time order).
-    pub fn evaluate(&self, truth: &[&GroundTruth]) -> WalkReport {
+    /// The walk's report from the run's ground truth (scenario samples, in time order), for a
+    /// walk halted at `halted_at` (s) if the team let go.
+    pub fn evaluate(&self, truth: &[&GroundTruth], halted_at: Option<f64>) -> WalkReport {
         let times: Vec<f64> = truth.iter().map(|g| g.time).collect();
-        let mut rep = WalkReport { touchdown_offset_ms: [f64::INFINITY, f64::NEG_INFINITY], least_margin_m: self.gait.steps().iter().map(|s| s.margin).fold(f64::INFINITY, f64::min), ..WalkReport::default() };
+        let end = halted_at.unwrap_or(f64::INFINITY);
+        let planned: Vec<&Step> = self.gait.steps().iter().filter(|s| s.liftoff < end).collect();
+        let least_margin_m = planned.iter().map(|s| s.margin).fold(f64::INFINITY, f64::min);
+        let mut rep = WalkReport { touchdown_offset_ms: [f64::INFINITY, f64::NEG_INFINITY], least_margin_m, halted_at_s: halted_at, ..WalkReport::default() };
         for (i, id) in self.robots.iter().enumerate() {
-            rep.steps_planned.insert(id.clone(), self.gait.steps().iter().filter(|s| s.robot == i).count());
+            rep.steps_planned.insert(id.clone(), planned.iter().filter(|s| s.robot == i).count());
             let (mut taken, mut slide) = (0, 0.0_f64);
             for (frame, link) in self.feet[i].iter().zip(&self.foot_links[i]) {
                 let track = foot_track(truth, id, frame, link, self.foot_radius[i]);
@@ -130,7 +138,7 @@ impl Walk {
                 slide = slide.max(stance_slide(&times, &track));
             }
             rep.steps_taken.insert(id.clone(), taken);
-            for s in self.gait.steps().iter().filter(|s| s.robot == i) {
+            for s in planned.iter().filter(|s| s.robot == i) {
                 let track = foot_track(truth, id, &self.feet[i][s.foot], &self.foot_links[i][s.foot], self.foot_radius[i]);
                 if let Some(dt) = first_contact_after(&times, &track.contact, s.liftoff).map(|t| 1e3 * (t - s.touchdown)) {
                     let o = &mut rep.touchdown_offset_ms;
@@ -140,7 +148,7 @@ impl Walk {
             rep.stance_slide_m.insert(id.clone(), slide);
             let last = truth.last().and_then(|g| g.torsos.iter().find(|b| &b.name == id));
             if let (true, Some(b)) = (self.walking[i], last) {
-                let goal = self.gait.final_torso(i);
+                let goal = halted_at.map_or(self.gait.final_torso(i), |t| self.gait.torso(i, t).0);
                 let at = Isometry3::from_parts(Translation3::from(Vector3::from(b.pose.position)), protocol::conventions::quat_from_wxyz(b.pose.orientation));
                 rep.final_torso_m.insert(id.clone(), (at.translation.vector - goal.translation.vector).norm());
                 rep.final_torso_deg.insert(id.clone(), metrics::geodesic_angle(&at.rotation, &goal.rotation).to_degrees());

@@ -6,6 +6,7 @@
 //! slid, final torso poses.
 
 pub mod evaluate;
+pub mod reach;
 pub mod references;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -25,6 +26,8 @@ pub enum WalkError {
     Gait(#[from] GaitError),
     #[error("walk: the scenario lasts {duration} s but the walk ends at {end:.2} s: set duration >= {end:.1}")]
     TooShort { duration: f64, end: f64 },
+    #[error("walk: robot {robot}'s arm cannot keep its hand on the object at {time:.2} s, with its torso {offset:.3} m from its start ({reason}): stand it nearer, or walk less far")]
+    Reach { robot: String, time: f64, offset: f64, reason: String },
 }
 
 /// A planned walk: the gait and who walks.
@@ -52,7 +55,9 @@ struct Standing {
     com_in_torso: Vector3<f64>,
 }
 
-fn standing(robot: &Robot, placement: &RobotPlacement) -> Result<Standing, String> {
+/// A robot's configuration at its placement: the standing pose, the placement's joint
+/// overrides (the hands on the object), the base where the placement puts it.
+fn placed_q(robot: &Robot, placement: &RobotPlacement) -> Result<Vec<f64>, String> {
     let model = &robot.model;
     let mut q: Vec<f64> = robot.standing_q.iter().copied().collect();
     let off = model.nq - model.joint_names.len();
@@ -63,6 +68,12 @@ fn standing(robot: &Robot, placement: &RobotPlacement) -> Result<Standing, Strin
     q[0..3].copy_from_slice(&placement.base_position);
     let yaw = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), placement.base_yaw);
     q[3..7].copy_from_slice(&[yaw.w, yaw.i, yaw.j, yaw.k]);
+    Ok(q)
+}
+
+fn standing(robot: &Robot, placement: &RobotPlacement) -> Result<Standing, String> {
+    let model = &robot.model;
+    let q = placed_q(robot, placement)?;
     let mut data = robot_model::Data::new(model);
     robot_model::forward_kinematics(model, &mut data, &q, &vec![0.0; model.nv]).map_err(|e| e.to_string())?;
     let frame = |name: &str| model.frame_id(name).map(|f| data.o_m_f[f]).map_err(|e| e.to_string());
@@ -113,6 +124,11 @@ impl Walk {
         if gait.end_time() > duration {
             return Err(WalkError::TooShort { duration, end: gait.end_time() });
         }
-        Ok(Walk { gait, robots: robots.iter().map(|(id, _)| id.clone()).collect(), walking, feet, foot_links, foot_radius, moves_object: object.is_some() })
+        let walk = Walk { gait, robots: robots.iter().map(|(id, _)| id.clone()).collect(), walking, feet, foot_links, foot_radius, moves_object: object.is_some() };
+        for (i, ((id, robot), placement)) in robots.iter().zip(placements).enumerate().filter(|(i, _)| walk.walking[*i]) {
+            let q = placed_q(robot, placement).map_err(|reason| WalkError::Robot { robot: id.clone(), reason })?;
+            reach::check(&walk, i, robot, &q, object_start)?;
+        }
+        Ok(walk)
     }
 }

@@ -43,17 +43,24 @@ impl Walk {
     /// the first tick at or after its time (the agent lifts the foot off then, and lands a
     /// foot once its force confirms the touchdown).
     pub fn contact_sets(&self, team: &str, clock: &RunClock) -> Vec<ContactSet> {
-        let mut sets: Vec<ContactSet> = self
-            .gait
-            .contact_changes()
-            .into_iter()
-            .map(|(t, i, stance)| {
-                let tick = clock.settle_ticks + (t * clock.control_hz - 1e-9).ceil().max(0.0) as u64;
-                let feet = self.feet[i].iter().zip(stance).filter(|(_, s)| *s).map(|(f, _)| f.clone()).collect();
-                ContactSet { header: Header::new(team, Some(&self.robots[i]), tick, 0), stance_feet: feet, hand_in_grasp: true }
-            })
-            .collect();
+        let mut sets: Vec<ContactSet> = self.gait.contact_changes().into_iter().map(|(t, i, stance)| self.contact_set(team, clock, t, i, stance)).collect();
         sets.sort_by_key(|c| c.header.tick);
         sets
+    }
+
+    /// The sets that halt the walk at scenario time `t` (a quiet point,
+    /// [`crate::gait::GaitPlan::quiet_point`]): every walking robot on all its feet from then
+    /// on. An agent takes a set for an earlier tick than those it has waiting as the new plan
+    /// and drops the later ones (`robot_agent::contact_switch`), so the walk's remaining
+    /// lift-offs never happen.
+    pub fn halt_sets(&self, team: &str, clock: &RunClock, t: f64) -> Vec<ContactSet> {
+        (0..self.robots.len()).filter(|i| self.walking[*i]).map(|i| self.contact_set(team, clock, t, i, [true; 4])).collect()
+    }
+
+    /// Robot `i`'s set with `stance` from the first tick at or after scenario time `t`.
+    fn contact_set(&self, team: &str, clock: &RunClock, t: f64, i: usize, stance: [bool; 4]) -> ContactSet {
+        let tick = clock.first_tick_at(t);
+        let feet = self.feet[i].iter().zip(stance).filter(|(_, s)| *s).map(|(f, _)| f.clone()).collect();
+        ContactSet { header: Header::new(team, Some(&self.robots[i]), tick, 0), stance_feet: feet, hand_in_grasp: true }
     }
 }

@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use team_runner::driver::Records;
 use team_runner::evaluate::{self, Metrics};
 use team_runner::plan::{self, Plan};
 use team_runner::run::{self, RunOptions};
@@ -16,6 +17,12 @@ pub fn repo() -> PathBuf {
 
 /// Run `scenarios/{file}` with `sets`, embedded or `distributed`; the plan and the metrics.
 pub fn run_scenario(file: &str, sets: &[&str], distributed: bool, name: &str) -> (Plan, Metrics) {
+    let (plan, metrics, _) = run_scenario_records(file, sets, distributed, name);
+    (plan, metrics)
+}
+
+/// [`run_scenario`], with what the run recorded (the ground truth among it).
+pub fn run_scenario_records(file: &str, sets: &[&str], distributed: bool, name: &str) -> (Plan, Metrics, Records) {
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
     let scenario = Scenario::load(repo().join("scenarios").join(file), &sets).expect("scenario loads");
     let plan = plan::plan(&scenario, &repo()).expect("plan");
@@ -26,5 +33,5 @@ pub fn run_scenario(file: &str, sets: &[&str], distributed: bool, name: &str) ->
     evaluate::write_report(&plan, &eval, &dir).expect("report written");
     team_runner::plots::write_all(&plan, &eval, &records, &dir).expect("figures drawn");
     println!("{}", evaluate::summary(&eval.metrics, &dir));
-    (plan, eval.metrics)
+    (plan, eval.metrics, records)
 }

@@ -1,0 +1,52 @@
+//! Whether a walking robot's arm can keep its hand on the object all along the walk: with the
+//! torso at every pose the crawl puts it in (each step's shift, where the torso sways furthest,
+//! and the last waypoint), the hand's grasp pose (fixed on the object, which moves with the
+//! team in a transport) is solved by IK within the arm's joint limits. A walk that asks more
+//! is refused before the run, naming the robot, the time and how far its torso is from its
+//! start: run anyway, the grasp would be lost there.
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use robot_model::ik::{self, IkOptions};
+use robot_model::Robot;
+
+use super::{Walk, WalkError};
+
+/// Check robot `i` of `walk` (`robot` at configuration `q` at the start, its hand on the
+/// object, which starts at `object_start`).
+pub fn check(walk: &Walk, i: usize, robot: &Robot, q: &[f64], object_start: &Isometry3<f64>) -> Result<(), WalkError> {
+    let id = &walk.robots[i];
+    let fail = |reason: String| WalkError::Robot { robot: id.clone(), reason };
+    let model = &robot.model;
+    let mut data = robot_model::Data::new(model);
+    robot_model::forward_kinematics(model, &mut data, q, &vec![0.0; model.nv]).map_err(|e| fail(e.to_string()))?;
+    let pose = |name: &str| -> Result<Isometry3<f64>, WalkError> {
+        let f = model.frame_id(name).map_err(|e| fail(e.to_string()))?;
+        let m = data.o_m_f[f];
+        Ok(Isometry3::from_parts(Translation3::from(m.trans), UnitQuaternion::from_matrix(&m.rot)))
+    };
+    let (hand, torso) = (pose(&robot.hand_frame)?, pose(&robot.torso_frame)?);
+    let base = Isometry3::from_parts(Translation3::new(q[0], q[1], q[2]), UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[3], q[4], q[5], q[6])));
+    let torso_to_base = torso.inverse() * base;
+    let hand_on_object = object_start.inverse() * hand;
+    let mut times: Vec<f64> = walk.gait.steps().iter().filter(|s| s.robot == i).map(|s| s.liftoff).collect();
+    times.push(walk.gait.end_time());
+    let mut q_t = q.to_vec();
+    for t in times {
+        let object = walk.gait.object(t).map_or(*object_start, |o| o.0);
+        let target = object * hand_on_object;
+        let torso_t = walk.gait.torso(i, t).0;
+        let base_t = torso_t * torso_to_base;
+        q_t[0..3].copy_from_slice(base_t.translation.vector.as_slice());
+        let r = base_t.rotation;
+        q_t[3..7].copy_from_slice(&[r.w, r.i, r.j, r.k]);
+        match ik::solve_hand(robot, &q_t, &target.translation.vector, target.rotation.to_rotation_matrix().matrix(), &IkOptions::default()) {
+            // The next pose starts from this one's arm: the walk moves it continuously.
+            Ok(sol) => q_t = sol.q,
+            Err(e) => {
+                let offset = (torso_t.translation.vector - torso.translation.vector).xy().norm();
+                return Err(WalkError::Reach { robot: id.clone(), time: t, offset, reason: e.to_string() });
+            }
+        }
+    }
+    Ok(())
+}
