@@ -9,7 +9,8 @@
 //!
 //! * [`Mode::Embedded`]: every component is a task of this process on one Zenoh session;
 //! * [`Mode::Distributed`]: every component is its own process on loopback (the coordinator
-//!   listens on a free port, the others connect), started with the command line that
+//!   listens on a free port, the others connect), or on its own test host
+//!   ([`Mode::Hosts`], `crate::hosts`), started with the command line that
 //!   [`CoordinatorArgs::to_cli`], [`AgentArgs::to_cli`] and [`BridgeArgs::to_cli`] write from
 //!   the same values; files they need (the controller spec, the scene) go into the run's
 //!   folder.
@@ -38,7 +39,8 @@ use tokio::sync::watch;
 use tokio::task::JoinHandle;
 use zenoh::Session;
 
-use crate::processes::{free_port, spawn, ChildGuard, ProcessError};
+use crate::hosts::TestHosts;
+use crate::processes::{free_port, spawn, spawn_on, ChildGuard, ProcessError};
 
 /// Why a run could not be launched or ended badly.
 #[derive(Debug, Error)]
@@ -57,6 +59,8 @@ pub enum LaunchError {
     Lockstep(#[from] sim_bridge::lockstep::BridgeError),
     #[error("robot {robot}: {reason}")]
     Agent { robot: String, reason: String },
+    #[error("{0}")]
+    Hosts(String),
     #[error("the coordinator: {0}")]
     Coordinator(String),
     #[error("writing {path}: {reason}")]
@@ -66,20 +70,38 @@ pub enum LaunchError {
 }
 
 /// Where the components run.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone)]
 pub enum Mode {
     /// Tasks of this process on one Zenoh session.
     Embedded,
     /// Processes on loopback; `dir` receives the files they read (controller spec, scene).
     Distributed { dir: PathBuf },
+    /// Processes on test hosts (`crate::hosts`): the coordinator on host `coordinator`, each
+    /// agent on the host named after its robot, the sim-bridge on host `sim`; this process
+    /// (the scenario driver) reaches them through the hosts' bridge.
+    Hosts { dir: PathBuf, hosts: Arc<TestHosts> },
 }
 
+/// The test host names of a team: the coordinator, each robot, the sim-bridge.
+pub fn host_names(robots: &[String]) -> Vec<String> {
+    let mut names = vec![COORDINATOR_HOST.to_string()];
+    names.extend(robots.iter().cloned());
+    names.push(SIM_HOST.to_string());
+    names
+}
+
+pub const COORDINATOR_HOST: &str = "coordinator";
+pub const SIM_HOST: &str = "sim";
+/// The coordinator's port on its host (every host has its own ports).
+pub const HUB_PORT: u16 = 7447;
+
 impl Mode {
-    /// `"embedded"` or `"distributed"`, as reports name it.
+    /// `"embedded"`, `"distributed"` or `"hosts"`, as reports name it.
     pub fn name(&self) -> &'static str {
         match self {
             Mode::Embedded => "embedded",
             Mode::Distributed { .. } => "distributed",
+            Mode::Hosts { .. } => "hosts",
         }
     }
 }
@@ -238,7 +260,8 @@ pub struct Running {
     stop_tx: watch::Sender<bool>,
     stop_rx: watch::Receiver<bool>,
     mode: Mode,
-    /// Distributed: the coordinator's endpoint, which the others connect to.
+    /// Distributed: the Zenoh arguments of the sim-bridge (the coordinator's endpoint, which
+    /// the others connect to; on test hosts also the bridge host's own endpoint).
     connect: ZenohArgs,
     tasks: Vec<(String, JoinHandle<Result<(), String>>)>,
     processes: Vec<ChildGuard>,
@@ -265,6 +288,18 @@ impl Launch {
                 for a in &self.agents {
                     processes.push(spawn("robot-agent", &a.to_cli(&connect), &format!("robot-agent {}", a.id))?);
                 }
+                Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect, tasks: Vec::new(), processes })
+            }
+            Mode::Hosts { dir, hosts } => {
+                let hosts_err = |e: crate::hosts::HostsError| LaunchError::Hosts(e.to_string());
+                let hub = format!("tcp/{}:{HUB_PORT}", hosts.addr(COORDINATOR_HOST).map_err(hosts_err)?);
+                let mut processes = vec![spawn_on(hosts, COORDINATOR_HOST, "coordinator", &self.coordinator.to_cli(dir, &ZenohArgs::listening(&hub))?, "coordinator")?];
+                let session = transport::open(&hosts.zenoh_args(None, &hub).map_err(hosts_err)?, Role::Member).await?;
+                for a in &self.agents {
+                    let zenoh = hosts.zenoh_args(Some(&a.id), &hub).map_err(hosts_err)?;
+                    processes.push(spawn_on(hosts, &a.id, "robot-agent", &a.to_cli(&zenoh), &format!("robot-agent {}", a.id))?);
+                }
+                let connect = hosts.zenoh_args(Some(SIM_HOST), &hub).map_err(hosts_err)?;
                 Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect, tasks: Vec::new(), processes })
             }
         }
@@ -295,9 +330,12 @@ impl Running {
     pub async fn run_bridge(&mut self, bridge: &BridgeArgs) -> Result<BridgeOutcome, LaunchError> {
         let result = match &self.mode {
             Mode::Embedded => self.run_bridge_here(bridge).await,
-            Mode::Distributed { dir } => {
+            Mode::Distributed { dir } | Mode::Hosts { dir, .. } => {
                 let args = bridge.to_cli(dir, &self.connect)?;
-                let mut child = spawn("sim-bridge", &args, "sim-bridge")?;
+                let mut child = match &self.mode {
+                    Mode::Hosts { hosts, .. } => spawn_on(hosts, SIM_HOST, "sim-bridge", &args, "sim-bridge")?,
+                    _ => spawn("sim-bridge", &args, "sim-bridge")?,
+                };
                 tokio::task::spawn_blocking(move || child.wait_success())
                     .await
                     .map_err(|e| LaunchError::Task { what: "waiting for the sim-bridge process".into(), reason: e.to_string() })?

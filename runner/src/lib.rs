@@ -30,6 +30,7 @@ pub mod capacity;
 pub mod compare;
 pub mod compare_plot;
 pub mod driver;
+pub mod hosts;
 pub mod echo;
 pub mod evaluate;
 pub mod gait;

@@ -37,6 +37,10 @@ enum Command {
         /// Run every component as its own process on loopback instead of one process.
         #[arg(long)]
         distributed: bool,
+        /// Run every component as its own process on its own test host (a Linux network
+        /// namespace, made for the run by scripts/testhosts.sh and removed after it; root).
+        #[arg(long)]
+        hosts: bool,
         /// Report folder (default: reports/<scenario file name>).
         #[arg(long)]
         out: Option<PathBuf>,
@@ -150,7 +154,8 @@ fn main() -> Result<()> {
         .with_writer(std::io::stderr)
         .init();
     match Cli::parse().command {
-        Command::Run { scenario, set, distributed, out, quiet, live } => {
+        Command::Run { scenario, set, distributed, hosts, out, quiet, live } => {
+            let mode_name = if hosts { "hosts" } else if distributed { "distributed" } else { "embedded" };
             let s = Scenario::load(&scenario, &set)?;
             let stem = scenario.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scenario".into());
             let dir = out.unwrap_or_else(|| PathBuf::from("reports").join(stem));
@@ -164,12 +169,12 @@ fn main() -> Result<()> {
                 s.settle,
                 s.duration,
                 s.control_hz,
-                if distributed { "distributed" } else { "embedded" }
+                mode_name
             );
             let source = ScenarioSource::read(&scenario, &set).map_err(|e| anyhow::anyhow!("reading {}: {e}", scenario.display()))?;
             let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live };
-            let (records, recording) = scenario_run::run_recorded(&plan, &RunOptions { distributed, progress: !quiet }, &dir, Some(&rec))?;
-            let eval = evaluate::evaluate(&plan, &records, if distributed { "distributed" } else { "embedded" });
+            let (records, recording) = scenario_run::run_recorded(&plan, &RunOptions { distributed, hosts, progress: !quiet }, &dir, Some(&rec))?;
+            let eval = evaluate::evaluate(&plan, &records, mode_name);
             evaluate::write_report(&plan, &eval, &dir)?;
             plots::write_all(&plan, &eval, &records, &dir)?;
             print!("{}", evaluate::summary(&eval.metrics, &dir));

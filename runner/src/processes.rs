@@ -1,9 +1,12 @@
-//! The team's binaries as child processes on loopback: free ports, spawning a sibling
-//! binary, and a guard that kills the child when dropped (the distributed runs and tests).
+//! The team's binaries as child processes on loopback or on test hosts: free ports, spawning
+//! a sibling binary, and a guard that kills the child when dropped (the distributed runs and
+//! tests).
 
+use std::io::{BufRead, BufReader};
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
 
 use thiserror::Error;
 
@@ -37,6 +40,8 @@ pub fn sibling_binary(name: &str) -> PathBuf {
 pub struct ChildGuard {
     pub what: String,
     pub child: Child,
+    /// The last `Error: ...` line the child wrote on stderr.
+    last_error: Arc<Mutex<Option<String>>>,
 }
 
 impl Drop for ChildGuard {
@@ -48,19 +53,46 @@ impl Drop for ChildGuard {
 
 /// Start one of the team's binaries with arguments.
 pub fn spawn(bin: &str, args: &[String], what: &str) -> Result<ChildGuard, ProcessError> {
+    spawn_with(Command::new(sibling_binary(bin)), bin, args, what)
+}
+
+/// Start one of the team's binaries on a test host (`crate::hosts`).
+pub fn spawn_on(hosts: &crate::hosts::TestHosts, host: &str, bin: &str, args: &[String], what: &str) -> Result<ChildGuard, ProcessError> {
     let path = sibling_binary(bin);
-    let child = Command::new(&path)
+    let command = hosts.command(host, &path).map_err(|e| ProcessError::Spawn { what: what.to_string(), path, reason: e.to_string() })?;
+    spawn_with(command, bin, args, what)
+}
+
+fn spawn_with(mut command: Command, bin: &str, args: &[String], what: &str) -> Result<ChildGuard, ProcessError> {
+    let path = sibling_binary(bin);
+    let mut child = command
         .args(args)
         .stdin(Stdio::null())
         .stdout(Stdio::inherit())
-        .stderr(Stdio::inherit())
+        .stderr(Stdio::piped())
         .spawn()
         .map_err(|e| ProcessError::Spawn {
             what: what.to_string(),
             path: path.clone(),
             reason: format!("{e} (build the binaries first: cargo build --release --bins)"),
         })?;
-    Ok(ChildGuard { what: what.to_string(), child })
+    let last_error = Arc::new(Mutex::new(None));
+    if let Some(stderr) = child.stderr.take() {
+        let keep = last_error.clone();
+        // The child's log goes on to ours, line by line; its `Error: ...` line is kept for
+        // the error that reports its exit.
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                eprintln!("{line}");
+                if let Some(e) = line.strip_prefix("Error: ") {
+                    if let Ok(mut k) = keep.lock() {
+                        *k = Some(e.to_string());
+                    }
+                }
+            }
+        });
+    }
+    Ok(ChildGuard { what: what.to_string(), child, last_error })
 }
 
 impl ChildGuard {
@@ -68,7 +100,11 @@ impl ChildGuard {
     pub fn wait_success(&mut self) -> Result<(), ProcessError> {
         let status = self.child.wait().map_err(|e| ProcessError::Failed { what: self.what.clone(), status: e.to_string() })?;
         if !status.success() {
-            return Err(ProcessError::Failed { what: self.what.clone(), status: status.to_string() });
+            // The reader thread may still be passing the last lines on.
+            std::thread::sleep(std::time::Duration::from_millis(50));
+            let said = self.last_error.lock().ok().and_then(|e| e.clone());
+            let status = said.map_or_else(|| status.to_string(), |e| format!("{status}: {e}"));
+            return Err(ProcessError::Failed { what: self.what.clone(), status });
         }
         Ok(())
     }

@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 use thiserror::Error;
 
 use crate::driver::{Driver, Records};
+use crate::hosts::TestHosts;
 use crate::launch::{AgentArgs, AgentModel, BridgeArgs, CoordinatorArgs, Launch, LaunchError, Mode};
 use crate::plan::{Plan, TEAM};
 use crate::record::{self, RecordError, RecordOptions, Recorder, RecordingSummary, RunFacts};
@@ -43,6 +44,9 @@ pub enum RunError {
 #[derive(Debug, Clone)]
 pub struct RunOptions {
     pub distributed: bool,
+    /// Distributed across test hosts (`crate::hosts`), one per component, made for the run
+    /// and removed after it.
+    pub hosts: bool,
     /// A progress bar (terminal) or progress log lines.
     pub progress: bool,
 }
@@ -73,7 +77,15 @@ pub fn run(plan: &Plan, opts: &RunOptions, out: &Path) -> Result<Records, RunErr
 /// [`run`], recording the run as MCAP (and serving it live) when `record` is given.
 pub fn run_recorded(plan: &Plan, opts: &RunOptions, out: &Path, record: Option<&RecordOptions>) -> Result<(Records, Option<RecordingSummary>), RunError> {
     let rt = tokio::runtime::Runtime::new().map_err(|e| RunError::Task { what: "starting the async runtime".into(), reason: e.to_string() })?;
-    let mode = if opts.distributed { Mode::Distributed { dir: out.to_path_buf() } } else { Mode::Embedded };
+    let mode = if opts.hosts {
+        let ids: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
+        let hosts = TestHosts::up(&crate::launch::host_names(&ids)).map_err(|e| RunError::Task { what: "making the test hosts".into(), reason: e.to_string() })?;
+        Mode::Hosts { dir: out.to_path_buf(), hosts: std::sync::Arc::new(hosts) }
+    } else if opts.distributed {
+        Mode::Distributed { dir: out.to_path_buf() }
+    } else {
+        Mode::Embedded
+    };
     let recorder = match record {
         Some(r) => Some(rt.block_on(Recorder::start(plan, r))?),
         None => None,

@@ -28,7 +28,7 @@ pub fn run_scenario_records(file: &str, sets: &[&str], distributed: bool, name: 
     let plan = plan::plan(&scenario, &repo()).expect("plan");
     let dir = repo().join("target/test-reports").join(name);
     std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(&plan, &RunOptions { distributed, progress: false }, &dir).expect("the run completes");
+    let records = run::run(&plan, &RunOptions { distributed, hosts: false, progress: false }, &dir).expect("the run completes");
     let eval = evaluate::evaluate(&plan, &records, if distributed { "distributed" } else { "embedded" });
     evaluate::write_report(&plan, &eval, &dir).expect("report written");
     team_runner::plots::write_all(&plan, &eval, &records, &dir).expect("figures drawn");

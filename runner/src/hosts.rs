@@ -1,0 +1,158 @@
+//! Test hosts: the team's components on separate machines of one computer, as Linux network
+//! namespaces joined by veth pairs to one bridge (`scripts/testhosts.sh` makes and removes
+//! them; root needed). [`TestHosts`] is one such set for one run: a host per component name,
+//! its address, packet loss (nftables) and link failures, and the command line that starts a
+//! program on a host. The set is removed when dropped. Where namespaces cannot be made
+//! ([`TestHosts::check`]), callers say so and run on loopback instead.
+
+use std::collections::BTreeMap;
+use std::net::Ipv4Addr;
+use std::path::PathBuf;
+use std::process::Command;
+use std::sync::atomic::{AtomicU32, Ordering};
+
+use thiserror::Error;
+
+/// Every call of the script ends within this (`timeout`), s.
+const SCRIPT_TIMEOUT_S: u32 = 30;
+
+/// Why test hosts could not be made or changed.
+#[derive(Debug, Error)]
+pub enum HostsError {
+    #[error("test hosts: {0}")]
+    Unavailable(String),
+    #[error("test hosts: `testhosts.sh {args}` failed: {reason}")]
+    Script { args: String, reason: String },
+    #[error("test hosts: no host {0} in the set")]
+    UnknownHost(String),
+}
+
+/// The script: `TEAM_TESTHOSTS_SCRIPT`, else the repository's `scripts/testhosts.sh`.
+fn script() -> PathBuf {
+    std::env::var_os("TEAM_TESTHOSTS_SCRIPT").map(PathBuf::from).unwrap_or_else(|| PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../scripts/testhosts.sh")))
+}
+
+fn call(args: &[&str]) -> Result<String, HostsError> {
+    let joined = args.join(" ");
+    let out = Command::new("timeout")
+        .arg(SCRIPT_TIMEOUT_S.to_string())
+        .arg(script())
+        .args(args)
+        .output()
+        .map_err(|e| HostsError::Script { args: joined.clone(), reason: format!("cannot start {}: {e}", script().display()) })?;
+    if !out.status.success() {
+        let reason = String::from_utf8_lossy(&out.stderr).trim().to_string();
+        return Err(HostsError::Script { args: joined, reason: if reason.is_empty() { out.status.to_string() } else { reason } });
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).trim().to_string())
+}
+
+/// A set of test hosts (see the module docs).
+#[derive(Debug)]
+pub struct TestHosts {
+    set: String,
+    /// The bridge's address, in the namespace that made the set.
+    gateway: Ipv4Addr,
+    addrs: BTreeMap<String, Ipv4Addr>,
+}
+
+impl TestHosts {
+    /// Whether namespaces, veth pairs and nftables work here (root, iproute2, nftables); the
+    /// reason if not.
+    pub fn check() -> Result<(), HostsError> {
+        call(&["check"]).map(|_| ()).map_err(|e| match e {
+            HostsError::Script { reason, .. } => HostsError::Unavailable(reason),
+            other => other,
+        })
+    }
+
+    /// Make one host per name, with a set name and network of their own (several sets may
+    /// exist at once: one per run or test).
+    pub fn up(names: &[String]) -> Result<TestHosts, HostsError> {
+        static COUNTER: AtomicU32 = AtomicU32::new(0);
+        let n = std::process::id().wrapping_mul(64).wrapping_add(COUNTER.fetch_add(1, Ordering::Relaxed)) % (36 * 36 * 36 * 36);
+        let set = format!("h{}", radix36(n, 4));
+        let net = format!("10.{}.{}", 100 + n % 100, (n / 100) % 250);
+        let mut args = vec!["up", set.as_str(), net.as_str()];
+        args.extend(names.iter().map(String::as_str));
+        call(&args)?;
+        let gateway = format!("{net}.1").parse().map_err(|e| HostsError::Script { args: args.join(" "), reason: format!("network {net}: {e}") })?;
+        let mut hosts = TestHosts { set, gateway, addrs: BTreeMap::new() };
+        for name in names {
+            let text = call(&["addr", &hosts.set, name])?;
+            let addr = text.parse().map_err(|e| HostsError::Script { args: format!("addr {} {name}", hosts.set), reason: format!("{text:?}: {e}") })?;
+            hosts.addrs.insert(name.clone(), addr);
+        }
+        tracing::info!(set = %hosts.set, %net, hosts = ?hosts.addrs, "test hosts up");
+        Ok(hosts)
+    }
+
+    /// The host's address.
+    pub fn addr(&self, name: &str) -> Result<Ipv4Addr, HostsError> {
+        self.addrs.get(name).copied().ok_or_else(|| HostsError::UnknownHost(name.to_string()))
+    }
+
+    /// The address of the hosts' bridge in the namespace that made them (this process's side).
+    pub fn gateway(&self) -> Ipv4Addr {
+        self.gateway
+    }
+
+    /// Zenoh arguments of a component on `host` (`None`: this process, on the bridge) that
+    /// connects to `hub`: it listens on its own address, so that the peers it meets through
+    /// gossip can connect to it directly.
+    pub fn zenoh_args(&self, host: Option<&str>, hub: &str) -> Result<protocol::transport::ZenohArgs, HostsError> {
+        let addr = match host {
+            Some(h) => self.addr(h)?,
+            None => self.gateway,
+        };
+        Ok(protocol::transport::ZenohArgs { listen: vec![format!("tcp/{addr}:0")], connect: vec![hub.to_string()], ..Default::default() })
+    }
+
+    /// The host's network namespace.
+    pub fn namespace(&self, name: &str) -> Result<String, HostsError> {
+        self.addr(name).map(|_| format!("{}-{name}", self.set))
+    }
+
+    /// A command that runs `program` on the host (`ip netns exec`).
+    pub fn command(&self, name: &str, program: &std::path::Path) -> Result<Command, HostsError> {
+        let mut c = Command::new("ip");
+        c.args(["netns", "exec", &self.namespace(name)?]).arg(program);
+        Ok(c)
+    }
+
+    /// Drop `percent` % of the packets entering and leaving the host (0: none).
+    pub fn set_loss(&self, name: &str, percent: u8) -> Result<(), HostsError> {
+        self.addr(name)?;
+        call(&["loss", &self.set, name, &percent.to_string()]).map(|_| ())
+    }
+
+    /// Packets the host's loss rule dropped so far.
+    pub fn dropped(&self, name: &str) -> Result<u64, HostsError> {
+        self.addr(name)?;
+        let text = call(&["dropped", &self.set, name])?;
+        text.parse().map_err(|e| HostsError::Script { args: format!("dropped {} {name}", self.set), reason: format!("{text:?}: {e}") })
+    }
+
+    /// Take the host's link up or down.
+    pub fn set_link(&self, name: &str, up: bool) -> Result<(), HostsError> {
+        self.addr(name)?;
+        call(&["link", &self.set, name, if up { "up" } else { "down" }]).map(|_| ())
+    }
+}
+
+impl Drop for TestHosts {
+    fn drop(&mut self) {
+        if let Err(e) = call(&["down", &self.set]) {
+            tracing::warn!("{e}");
+        }
+    }
+}
+
+fn radix36(mut n: u32, digits: usize) -> String {
+    let mut out = vec![b'0'; digits];
+    for d in out.iter_mut().rev() {
+        *d = b"0123456789abcdefghijklmnopqrstuvwxyz"[(n % 36) as usize];
+        n /= 36;
+    }
+    String::from_utf8(out).unwrap_or_default()
+}

@@ -1,0 +1,120 @@
+//! The team across test hosts (`scripts/testhosts.sh`, `team_runner::hosts`): the coordinator,
+//! each agent and the sim-bridge each in its own Linux network namespace, joined by veth pairs
+//! to one bridge, this process (the scenario driver) on the bridge. Where namespaces cannot be
+//! made here (not root, no nftables), each test says so on stderr and runs the same scenario
+//! distributed on loopback instead (a link cannot be taken down there: that test says it did
+//! not run).
+
+mod common;
+
+use std::sync::{Arc, Mutex};
+
+use team_runner::evaluate;
+use team_runner::hosts::TestHosts;
+use team_runner::launch::{host_names, Mode};
+use team_runner::plan::{self, Plan};
+use team_runner::run::{self, RunOptions};
+use team_runner::scenario::Scenario;
+
+/// The tests run one at a time: each counts the machine's namespaces.
+static SERIAL: Mutex<()> = Mutex::new(());
+
+fn serial() -> std::sync::MutexGuard<'static, ()> {
+    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+fn s4(duration: f64) -> Plan {
+    let sets = [format!("duration={duration}"), "settle=0.5".into()];
+    let s = Scenario::load(common::scenario::repo().join("scenarios/s4_object_circle.toml"), &sets).expect("scenario");
+    plan::plan(&s, &common::scenario::repo()).expect("plan")
+}
+
+fn report_dir(name: &str) -> std::path::PathBuf {
+    let dir = common::scenario::repo().join("target/test-reports").join(name);
+    std::fs::create_dir_all(&dir).expect("report dir");
+    dir
+}
+
+/// Test hosts for `plan`'s team, or why not (said on stderr).
+fn hosts_for(plan: &Plan) -> Option<Arc<TestHosts>> {
+    if let Err(e) = TestHosts::check() {
+        eprintln!("{e}: running on loopback instead of test hosts");
+        return None;
+    }
+    let ids: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
+    Some(Arc::new(TestHosts::up(&host_names(&ids)).expect("test hosts up")))
+}
+
+fn namespaces() -> Vec<String> {
+    let out = std::process::Command::new("ip").args(["netns", "list"]).output().map(|o| String::from_utf8_lossy(&o.stdout).to_string()).unwrap_or_default();
+    out.lines().filter_map(|l| l.split_whitespace().next()).map(str::to_string).collect()
+}
+
+fn run_on(plan: &Plan, hosts: Option<&Arc<TestHosts>>, name: &str) -> Result<team_runner::driver::Records, run::RunError> {
+    let dir = report_dir(name);
+    let rt = tokio::runtime::Runtime::new().expect("runtime");
+    let mode = match hosts {
+        Some(h) => Mode::Hosts { dir, hosts: h.clone() },
+        None => Mode::Distributed { dir },
+    };
+    rt.block_on(run::run_in(plan, &RunOptions { distributed: true, hosts: hosts.is_some(), progress: false }, &mode, None))
+}
+
+/// S4 with every component on its own host passes its checks, and `team run --hosts`'s hosts
+/// are gone after the run.
+#[test]
+fn s4_holds_with_every_component_on_its_own_host() {
+    let _one = serial();
+    let plan = s4(2.0);
+    let before = namespaces();
+    let hosts = TestHosts::check().is_ok();
+    if !hosts {
+        eprintln!("test hosts unavailable: running on loopback instead");
+    }
+    let dir = report_dir("hosts_s4");
+    let records = run::run(&plan, &RunOptions { distributed: true, hosts, progress: false }, &dir).expect("the run completes");
+    let eval = evaluate::evaluate(&plan, &records, if hosts { "hosts" } else { "distributed" });
+    println!("{}", evaluate::summary(&eval.metrics, &dir));
+    for c in &eval.metrics.checks {
+        assert!(c.passed, "{} = {} not below {}", c.name, c.value, c.bound);
+    }
+    assert_eq!(namespaces(), before, "the run's hosts were removed");
+}
+
+/// 5 % of the packets to and from robot r1's host dropped (nftables): TCP carries the lockstep
+/// through, the team holds, and the rule did drop packets.
+#[test]
+fn the_team_holds_with_five_percent_of_one_agents_packets_dropped() {
+    let _one = serial();
+    let plan = s4(2.0);
+    let hosts = hosts_for(&plan);
+    if let Some(h) = &hosts {
+        h.set_loss("r1", 5).expect("loss rule");
+    }
+    let records = run_on(&plan, hosts.as_ref(), "hosts_loss").expect("the run completes");
+    let eval = evaluate::evaluate(&plan, &records, "hosts");
+    for c in &eval.metrics.checks {
+        assert!(c.passed, "{} = {} not below {}", c.name, c.value, c.bound);
+    }
+    if let Some(h) = &hosts {
+        let dropped = h.dropped("r1").expect("counter");
+        println!("r1's host dropped {dropped} packets");
+        assert!(dropped > 10, "the loss rule dropped packets: {dropped}");
+    }
+}
+
+/// Robot r2's link down from the start: the run ends with an error that names r2, within the
+/// lockstep's bounded wait for the team to join.
+#[test]
+fn a_robot_whose_link_is_down_is_named() {
+    let _one = serial();
+    let plan = s4(1.0);
+    let Some(hosts) = hosts_for(&plan) else { return eprintln!("no test hosts: a link cannot be taken down on loopback; nothing else to run") };
+    hosts.set_link("r2", false).expect("link down");
+    let started = std::time::Instant::now();
+    let err = run_on(&plan, Some(&hosts), "hosts_link_down").expect_err("the run fails");
+    let text = err.to_string();
+    println!("after {:.1} s: {text}", started.elapsed().as_secs_f64());
+    assert!(text.contains("r2") && !text.contains("\"r1\""), "the error names r2 only: {text}");
+    assert!(started.elapsed().as_secs() < 120, "bounded: {:?}", started.elapsed());
+}
