@@ -92,11 +92,6 @@ impl TestHosts {
         self.addrs.get(name).copied().ok_or_else(|| HostsError::UnknownHost(name.to_string()))
     }
 
-    /// The address of the hosts' bridge in the namespace that made them (this process's side).
-    pub fn gateway(&self) -> Ipv4Addr {
-        self.gateway
-    }
-
     /// Zenoh arguments of a component on `host` (`None`: this process, on the bridge) that
     /// connects to `hub`: it listens on its own address, so that the peers it meets through
     /// gossip can connect to it directly.

@@ -104,6 +104,31 @@ impl Mode {
             Mode::Hosts { .. } => "hosts",
         }
     }
+
+    /// The coordinator's endpoint, which the other processes connect to: a free loopback
+    /// port, or [`HUB_PORT`] on the coordinator's host.
+    fn hub(&self) -> Result<String, LaunchError> {
+        match self {
+            Mode::Hosts { hosts, .. } => Ok(format!("tcp/{}:{HUB_PORT}", hosts.addr(COORDINATOR_HOST).map_err(|e| LaunchError::Hosts(e.to_string()))?)),
+            _ => Ok(format!("tcp/127.0.0.1:{}", free_port()?)),
+        }
+    }
+
+    /// The Zenoh arguments of a process on `host` (`None`: this one) connecting to `hub`.
+    fn zenoh_args(&self, host: Option<&str>, hub: &str) -> Result<ZenohArgs, LaunchError> {
+        match self {
+            Mode::Hosts { hosts, .. } => hosts.zenoh_args(host, hub).map_err(|e| LaunchError::Hosts(e.to_string())),
+            _ => Ok(ZenohArgs::connecting(hub)),
+        }
+    }
+
+    /// Start one of the team's binaries: on `host` with test hosts, else on this machine.
+    fn spawn(&self, host: &str, bin: &str, args: &[String], what: &str) -> Result<ChildGuard, ProcessError> {
+        match self {
+            Mode::Hosts { hosts, .. } => spawn_on(hosts, host, bin, args, what),
+            _ => spawn(bin, args, what),
+        }
+    }
 }
 
 /// The coordinator of a run.
@@ -280,26 +305,14 @@ impl Launch {
                 }
                 Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect: ZenohArgs::default(), tasks, processes: Vec::new() })
             }
-            Mode::Distributed { dir } => {
-                let hub = format!("tcp/127.0.0.1:{}", free_port()?);
-                let connect = ZenohArgs::connecting(&hub);
-                let mut processes = vec![spawn("coordinator", &self.coordinator.to_cli(dir, &ZenohArgs::listening(&hub))?, "coordinator")?];
-                let session = transport::open(&connect, Role::Member).await?;
+            Mode::Distributed { dir } | Mode::Hosts { dir, .. } => {
+                let hub = mode.hub()?;
+                let mut processes = vec![mode.spawn(COORDINATOR_HOST, "coordinator", &self.coordinator.to_cli(dir, &ZenohArgs::listening(&hub))?, "coordinator")?];
+                let session = transport::open(&mode.zenoh_args(None, &hub)?, Role::Member).await?;
                 for a in &self.agents {
-                    processes.push(spawn("robot-agent", &a.to_cli(&connect), &format!("robot-agent {}", a.id))?);
+                    processes.push(mode.spawn(&a.id, "robot-agent", &a.to_cli(&mode.zenoh_args(Some(&a.id), &hub)?), &format!("robot-agent {}", a.id))?);
                 }
-                Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect, tasks: Vec::new(), processes })
-            }
-            Mode::Hosts { dir, hosts } => {
-                let hosts_err = |e: crate::hosts::HostsError| LaunchError::Hosts(e.to_string());
-                let hub = format!("tcp/{}:{HUB_PORT}", hosts.addr(COORDINATOR_HOST).map_err(hosts_err)?);
-                let mut processes = vec![spawn_on(hosts, COORDINATOR_HOST, "coordinator", &self.coordinator.to_cli(dir, &ZenohArgs::listening(&hub))?, "coordinator")?];
-                let session = transport::open(&hosts.zenoh_args(None, &hub).map_err(hosts_err)?, Role::Member).await?;
-                for a in &self.agents {
-                    let zenoh = hosts.zenoh_args(Some(&a.id), &hub).map_err(hosts_err)?;
-                    processes.push(spawn_on(hosts, &a.id, "robot-agent", &a.to_cli(&zenoh), &format!("robot-agent {}", a.id))?);
-                }
-                let connect = hosts.zenoh_args(Some(SIM_HOST), &hub).map_err(hosts_err)?;
+                let connect = mode.zenoh_args(Some(SIM_HOST), &hub)?;
                 Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect, tasks: Vec::new(), processes })
             }
         }
@@ -331,11 +344,7 @@ impl Running {
         let result = match &self.mode {
             Mode::Embedded => self.run_bridge_here(bridge).await,
             Mode::Distributed { dir } | Mode::Hosts { dir, .. } => {
-                let args = bridge.to_cli(dir, &self.connect)?;
-                let mut child = match &self.mode {
-                    Mode::Hosts { hosts, .. } => spawn_on(hosts, SIM_HOST, "sim-bridge", &args, "sim-bridge")?,
-                    _ => spawn("sim-bridge", &args, "sim-bridge")?,
-                };
+                let mut child = self.mode.spawn(SIM_HOST, "sim-bridge", &bridge.to_cli(dir, &self.connect)?, "sim-bridge")?;
                 tokio::task::spawn_blocking(move || child.wait_success())
                     .await
                     .map_err(|e| LaunchError::Task { what: "waiting for the sim-bridge process".into(), reason: e.to_string() })?

@@ -53,18 +53,19 @@ impl Drop for ChildGuard {
 
 /// Start one of the team's binaries with arguments.
 pub fn spawn(bin: &str, args: &[String], what: &str) -> Result<ChildGuard, ProcessError> {
-    spawn_with(Command::new(sibling_binary(bin)), bin, args, what)
+    let path = sibling_binary(bin);
+    spawn_with(Command::new(&path), path, args, what)
 }
 
 /// Start one of the team's binaries on a test host (`crate::hosts`).
 pub fn spawn_on(hosts: &crate::hosts::TestHosts, host: &str, bin: &str, args: &[String], what: &str) -> Result<ChildGuard, ProcessError> {
     let path = sibling_binary(bin);
-    let command = hosts.command(host, &path).map_err(|e| ProcessError::Spawn { what: what.to_string(), path, reason: e.to_string() })?;
-    spawn_with(command, bin, args, what)
+    let command = hosts.command(host, &path).map_err(|e| ProcessError::Spawn { what: what.to_string(), path: path.clone(), reason: e.to_string() })?;
+    spawn_with(command, path, args, what)
 }
 
-fn spawn_with(mut command: Command, bin: &str, args: &[String], what: &str) -> Result<ChildGuard, ProcessError> {
-    let path = sibling_binary(bin);
+/// Start `command` (which runs the binary at `path`) with arguments.
+fn spawn_with(mut command: Command, path: PathBuf, args: &[String], what: &str) -> Result<ChildGuard, ProcessError> {
     let mut child = command
         .args(args)
         .stdin(Stdio::null())
@@ -73,7 +74,7 @@ fn spawn_with(mut command: Command, bin: &str, args: &[String], what: &str) -> R
         .spawn()
         .map_err(|e| ProcessError::Spawn {
             what: what.to_string(),
-            path: path.clone(),
+            path,
             reason: format!("{e} (build the binaries first: cargo build --release --bins)"),
         })?;
     let last_error = Arc::new(Mutex::new(None));

@@ -47,10 +47,12 @@ pub struct Walk {
     pub moves_object: bool,
 }
 
-/// Where a standing robot's feet (centres), torso and centre of mass are, from forward
-/// kinematics at its standing pose with the placement's joint overrides.
+/// Where a standing robot's feet (centres), torso, hand and centre of mass are, from forward
+/// kinematics at its standing pose with the placement's joint overrides (`q`).
 struct Standing {
+    q: Vec<f64>,
     torso: Isometry3<f64>,
+    hand: Isometry3<f64>,
     feet: Vec<Vector3<f64>>,
     com_in_torso: Vector3<f64>,
 }
@@ -77,11 +79,11 @@ fn standing(robot: &Robot, placement: &RobotPlacement) -> Result<Standing, Strin
     let mut data = robot_model::Data::new(model);
     robot_model::forward_kinematics(model, &mut data, &q, &vec![0.0; model.nv]).map_err(|e| e.to_string())?;
     let frame = |name: &str| model.frame_id(name).map(|f| data.o_m_f[f]).map_err(|e| e.to_string());
-    let t = frame(&robot.torso_frame)?;
-    let torso = Isometry3::from_parts(Translation3::from(t.trans), UnitQuaternion::from_matrix(&t.rot));
+    let pose = |name: &str| frame(name).map(|m| Isometry3::from_parts(Translation3::from(m.trans), UnitQuaternion::from_matrix(&m.rot)));
+    let (torso, hand) = (pose(&robot.torso_frame)?, pose(&robot.hand_frame)?);
     let feet = robot.foot_frames.iter().map(|f| frame(f).map(|p| p.trans)).collect::<Result<Vec<_>, _>>()?;
     let (_, com) = robot_model::center_of_mass(model, &data);
-    Ok(Standing { com_in_torso: torso.inverse_transform_point(&com.into()).coords, torso, feet })
+    Ok(Standing { com_in_torso: torso.inverse_transform_point(&com.into()).coords, q, torso, hand, feet })
 }
 
 /// Waypoint `w = [dx, dy, yaw_deg]` applied to a start pose: in the pose's own frame
@@ -107,8 +109,11 @@ impl Walk {
         let mut feet = Vec::new();
         let mut foot_links = Vec::new();
         let mut foot_radius = Vec::new();
+        // Each robot's standing configuration, torso and hand, for the reach check.
+        let mut arms = Vec::new();
         for ((id, robot), placement) in robots.iter().zip(placements) {
             let s = standing(robot, placement).map_err(|reason| WalkError::Robot { robot: id.clone(), reason })?;
+            arms.push((s.q.clone(), s.torso, s.hand));
             let walks = spec.frame == WalkFrame::Team || spec.walks(id);
             let mut waypoints = vec![s.torso];
             waypoints.extend(spec.path.iter().map(|w| if walks { moved(&s.torso, w, spec.frame, &centre) } else { s.torso }));
@@ -125,9 +130,8 @@ impl Walk {
             return Err(WalkError::TooShort { duration, end: gait.end_time() });
         }
         let walk = Walk { gait, robots: robots.iter().map(|(id, _)| id.clone()).collect(), walking, feet, foot_links, foot_radius, moves_object: object.is_some() };
-        for (i, ((id, robot), placement)) in robots.iter().zip(placements).enumerate().filter(|(i, _)| walk.walking[*i]) {
-            let q = placed_q(robot, placement).map_err(|reason| WalkError::Robot { robot: id.clone(), reason })?;
-            reach::check(&walk, i, robot, &q, object_start)?;
+        for (i, ((_, robot), (q, torso, hand))) in robots.iter().zip(&arms).enumerate().filter(|(i, _)| walk.walking[*i]) {
+            reach::check(&walk, i, robot, q, torso, hand, object_start)?;
         }
         Ok(walk)
     }

@@ -11,20 +11,10 @@ use robot_model::Robot;
 
 use super::{Walk, WalkError};
 
-/// Check robot `i` of `walk` (`robot` at configuration `q` at the start, its hand on the
-/// object, which starts at `object_start`).
-pub fn check(walk: &Walk, i: usize, robot: &Robot, q: &[f64], object_start: &Isometry3<f64>) -> Result<(), WalkError> {
+/// Check robot `i` of `walk`: `robot` standing at configuration `q` with its torso at `torso`
+/// and its hand at `hand`, on the object, which starts at `object_start`.
+pub fn check(walk: &Walk, i: usize, robot: &Robot, q: &[f64], torso: &Isometry3<f64>, hand: &Isometry3<f64>, object_start: &Isometry3<f64>) -> Result<(), WalkError> {
     let id = &walk.robots[i];
-    let fail = |reason: String| WalkError::Robot { robot: id.clone(), reason };
-    let model = &robot.model;
-    let mut data = robot_model::Data::new(model);
-    robot_model::forward_kinematics(model, &mut data, q, &vec![0.0; model.nv]).map_err(|e| fail(e.to_string()))?;
-    let pose = |name: &str| -> Result<Isometry3<f64>, WalkError> {
-        let f = model.frame_id(name).map_err(|e| fail(e.to_string()))?;
-        let m = data.o_m_f[f];
-        Ok(Isometry3::from_parts(Translation3::from(m.trans), UnitQuaternion::from_matrix(&m.rot)))
-    };
-    let (hand, torso) = (pose(&robot.hand_frame)?, pose(&robot.torso_frame)?);
     let base = Isometry3::from_parts(Translation3::new(q[0], q[1], q[2]), UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[3], q[4], q[5], q[6])));
     let torso_to_base = torso.inverse() * base;
     let hand_on_object = object_start.inverse() * hand;
