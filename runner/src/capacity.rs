@@ -8,14 +8,15 @@
 //! `DynamicsTerms` and `RobotDescription` the coordinator assembles in a run. The object is
 //! taken where the scenario puts it (the hands are placed on its faces).
 //!
-//! * [`check_world`]: whether the scenario's object is held ([`crate::plan::plan`] runs it
-//!   unless the scenario says `capacity_check = false`);
+//! * [`start_hand_loads`]: whether the scenario's object is held ([`crate::plan::plan`] checks
+//!   it unless the scenario says `capacity_check = false`) and what each hand carries at the
+//!   start (a walk is planned with it);
 //! * [`capacity`]: the heaviest object the team holds in that configuration, by bisection
 //!   (`team capacity`).
 
 use std::sync::Arc;
 
-use coordinator::capacity::{Capacity, CapacityError, StaticProblem, StaticSolution, REACHED_TOL};
+use coordinator::capacity::{Capacity, CapacityError, StaticProblem, REACHED_TOL};
 use coordinator::{ControllerSpec, PidcConfig};
 use nalgebra::{UnitQuaternion, Vector3};
 use protocol::{DynamicsTerms, Header, Pose, RobotDescription, RobotState};
@@ -25,6 +26,7 @@ use robot_model::Robot;
 use sim_bridge::world::WorldSpec;
 use thiserror::Error;
 
+use crate::gait::HandLoad;
 use crate::plan::{Plan, TEAM};
 
 /// Why the check could not run or refused the load.
@@ -88,11 +90,24 @@ pub fn static_problem(world: &WorldSpec, robots: &[Arc<Robot>], cfg: &PidcConfig
     Ok(StaticProblem::build(&terms, &descs, cfg, Vector3::from(object.position))?)
 }
 
-/// Whether contact forces within the controller's limits hold the world's object at the
-/// start pose; [`CapacityError::Infeasible`] names the binding limits when none do.
-pub fn check_world(world: &WorldSpec, robots: &[Arc<Robot>], cfg: &PidcConfig) -> Result<StaticSolution, CheckError> {
-    let object = world.object.ok_or(CheckError::NoObject)?;
-    Ok(static_problem(world, robots, cfg)?.solve(object.mass)?)
+/// The statics of a plan's start pose from one solve of the static team problem: with
+/// `check`, a load that no forces within the controller's limits hold is refused
+/// ([`CapacityError::Infeasible`] names the binding limits); the answer is what the object applies to each robot's hand (the forces
+/// that hold it, or without `check` and where none do, the least-violation ones), which a
+/// walk's planner keeps inside the support triangle with each robot's weight.
+pub fn start_hand_loads(world: &WorldSpec, robots: &[Arc<Robot>], cfg: &PidcConfig, check: bool) -> Result<Vec<(String, HandLoad)>, CheckError> {
+    let mass = world.object.ok_or(CheckError::NoObject)?.mass;
+    let problem = static_problem(world, robots, cfg)?;
+    let lambda = match problem.solve(mass) {
+        Ok(sol) => sol.lambda,
+        Err(CapacityError::Infeasible { .. }) if !check => problem.relaxed(mass)?.lambda,
+        Err(e) => return Err(e.into()),
+    };
+    Ok(problem
+        .hand_wrenches(&lambda)
+        .into_iter()
+        .map(|(robot, point, w)| (robot, HandLoad { point, force: w.fixed_rows::<3>(0).into_owned(), moment: w.fixed_rows::<3>(3).into_owned() }))
+        .collect())
 }
 
 /// The PIDC configuration of a controller (the check follows the controller's margins).

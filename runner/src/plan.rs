@@ -134,24 +134,26 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
     };
 
     let principal = object.principal_inertia();
+    // The PIDC configuration of the scenario: its gains, object, minimum forces and margins.
+    let pidc = PidcConfig {
+        object_gains: s.gains.object.gains(),
+        torso_gains: s.gains.torso.gains(),
+        swing_gains: s.gains.feet.as_ref().map(|f| f.gains()).unwrap_or_else(|| PidcConfig::default().swing_gains),
+        object_mass: s.object.mass,
+        object_inertia: Matrix3::from_diagonal(&Vector3::from(principal)),
+        // Where the object is when the grasp closes: the fit's offsets are taken there.
+        object_pose_at_grasp: Some(Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation))),
+        f_min_foot: s.min_foot_force,
+        f_min_hand: s.min_hand_force,
+        friction_margin: s.friction_margin,
+        patch_margin: s.patch_margin,
+        release: s.release,
+        ..PidcConfig::default()
+    };
     // The scenario's controller; PIDC and MQP take the scenario's gains, object and minimum
     // forces, other kinds run with their defaults.
     let controller = match ControllerSpec::of_kind(&s.controller)? {
-        ControllerSpec::Pidc(_) => ControllerSpec::Pidc(PidcConfig {
-            object_gains: s.gains.object.gains(),
-            torso_gains: s.gains.torso.gains(),
-            swing_gains: s.gains.feet.as_ref().map(|f| f.gains()).unwrap_or_else(|| PidcConfig::default().swing_gains),
-            object_mass: s.object.mass,
-            object_inertia: Matrix3::from_diagonal(&Vector3::from(principal)),
-            // Where the object is when the grasp closes: the fit's offsets are taken there.
-            object_pose_at_grasp: Some(Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation))),
-            f_min_foot: s.min_foot_force,
-            f_min_hand: s.min_hand_force,
-            friction_margin: s.friction_margin,
-            patch_margin: s.patch_margin,
-            release: s.release,
-            ..PidcConfig::default()
-        }),
+        ControllerSpec::Pidc(_) => ControllerSpec::Pidc(pidc.clone()),
         // MQP: the same gains (as acceleration gains, see MqpConfig), object and minimum
         // forces; its velocity bound looks one control period ahead.
         ControllerSpec::Mqp(_) => ControllerSpec::Mqp(MqpConfig {
@@ -170,18 +172,22 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
         other => other,
     };
     controller.check()?;
-    // The payload check (crate::capacity): the PIDC controller's limits at the start pose.
-    if let (true, ControllerSpec::Pidc(cfg)) = (s.capacity_check, &controller) {
+    // The static team problem at the start pose (crate::capacity), solved once: the payload
+    // check with the PIDC controller's limits, and the hands' loads a walk is planned with
+    // (the same forces whichever controller runs).
+    let check = s.capacity_check && matches!(controller, ControllerSpec::Pidc(_));
+    let mut hand_loads = Vec::new();
+    if check || s.walk.is_some() {
         let t0 = std::time::Instant::now();
-        crate::capacity::check_world(&scene.world, &loaded, cfg).map_err(PlanError::Capacity)?;
-        tracing::info!(ms = 1e3 * t0.elapsed().as_secs_f64(), mass = s.object.mass, "payload check: the start pose holds the object");
+        hand_loads = crate::capacity::start_hand_loads(&scene.world, &loaded, &pidc, check).map_err(PlanError::Capacity)?;
+        tracing::info!(ms = 1e3 * t0.elapsed().as_secs_f64(), mass = s.object.mass, checked = check, "static team problem at the start pose solved");
     }
 
     let walk = match &s.walk {
         Some(w) => {
             let ids: Vec<(String, Arc<Robot>)> = robots.iter().map(|r| (r.id.clone(), r.robot.clone())).collect();
             let object_start = Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation));
-            let walk = crate::walk::Walk::plan(w, &ids, &scene.world.robots, &object_start, s.duration)?;
+            let walk = crate::walk::Walk::plan(w, &ids, &scene.world.robots, &object_start, &hand_loads, s.duration)?;
             for st in walk.gait.steps() {
                 tracing::debug!(robot = %walk.robots[st.robot], foot = %walk.feet[st.robot][st.foot], liftoff = st.liftoff, margin = st.margin, "planned step");
             }

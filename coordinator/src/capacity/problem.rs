@@ -4,7 +4,7 @@
 
 use std::collections::BTreeMap;
 
-use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
+use nalgebra::{DMatrix, DVector, Isometry3, Vector3, Vector6};
 use protocol::conventions::GRAVITY_VECTOR;
 use protocol::{DynamicsTerms, RobotDescription};
 
@@ -142,6 +142,19 @@ impl StaticProblem {
     /// Number of unknowns (`lambda`'s rows).
     pub fn unknowns(&self) -> usize {
         self.j_c.nrows()
+    }
+
+    /// Each hand's wrench in `lambda` (`[force; moment]`, world-aligned, acting on the robot,
+    /// about the hand frame's origin): `(robot id, that origin, wrench)`, in team order.
+    pub fn hand_wrenches(&self, lambda: &DVector<f64>) -> Vec<(String, Vector3<f64>, Vector6<f64>)> {
+        let first = 3 * self.team.feet.len();
+        self.team
+            .hands
+            .iter()
+            .enumerate()
+            .filter(|(h, _)| first + 6 * h + 6 <= lambda.len())
+            .map(|(h, f)| (self.team.robots[f.robot].id.clone(), f.position, lambda.fixed_rows::<6>(first + 6 * h).into_owned()))
+            .collect()
     }
 
     /// The actuated joints' torques `tau = g_a - J_c,a^T lambda`.

@@ -1,6 +1,7 @@
 //! The static walk (crawl) planner (DESIGN.md §10): one foot in swing at a time, the torso
-//! shifted before each lift-off so that the robot's centre of mass lies inside the triangle
-//! of the other three feet with a margin, the foot unloaded by a force ramp, swung with a lift
+//! shifted before each lift-off so that the centre of pressure (where the ground carries the
+//! robot's weight and the load in its hand) lies inside the triangle of the other three feet
+//! with a margin, the foot unloaded by a force ramp, swung with a lift
 //! height and zero velocity at touchdown, and placed where the torso's path puts it. References:
 //! the ETH static-gait controllers (CoM over the support polygon), OCS2's swing trajectories.
 //!
@@ -8,7 +9,8 @@
 //! plan; its queries give, at any time, the torso, object and swing-foot references, the
 //! unloading ramps, the planned stance and every contact change.
 //!
-//! * [`support`]: the support triangle, the CoM's margin in it and the shift that reaches a margin.
+//! * [`support`]: the centre of pressure with the hand's load, the support triangle, a point's
+//!   margin in it and the shift that reaches a margin.
 //! * [`swing`]: the quintic blend and the swing-foot trajectory.
 //! * [`schedule`]: waypoints to cycles and steps, the timed plan and its queries.
 
@@ -16,11 +18,12 @@ pub mod schedule;
 pub mod support;
 pub mod swing;
 
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::{Isometry3, Matrix2, Vector3};
 use serde::Deserialize;
 use thiserror::Error;
 
 pub use schedule::{GaitPlan, Step};
+pub use support::HandLoad;
 
 /// The crawl's parameters (a scenario's `[walk.gait]`; every field has a default).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -39,7 +42,8 @@ pub struct GaitParams {
     pub t_swing: f64,
     /// After the touchdown, before the next shift (the foot's load ramps up), s.
     pub t_load: f64,
-    /// Required distance of the centre of mass inside the support triangle at lift-off, m.
+    /// Required distance of the centre of pressure (the robot's weight and its hand's load)
+    /// inside the support triangle at lift-off, m.
     pub margin: f64,
     /// The swing ends this far below the foothold, pressing the foot down, m.
     pub touchdown_depth: f64,
@@ -101,8 +105,18 @@ pub struct WalkingRobot {
     pub robot: String,
     /// Its four foot frames (description order) and their start centre positions (world).
     pub feet: Vec<(String, Vector3<f64>)>,
-    /// The whole robot's centre of mass in the torso frame.
+    /// The whole robot's centre of mass in the torso frame, and its mass, kg.
     pub com_offset: Vector3<f64>,
+    /// How far the CoM moves horizontally per metre the torso shifts with the feet and the
+    /// hand held (torso frame; the legs and the arm take up the shift, so less than one:
+    /// `crate::walk::com_gain`). The identity moves the CoM rigidly with the torso.
+    pub com_gain: Matrix2<f64>,
+    pub mass: f64,
+    /// The ground's height under the feet (their contact points), m.
+    pub ground_z: f64,
+    /// What the object applies to its hand at the walk's start (`None`: nothing in hand). It
+    /// moves with the object: held where it is, or carried along the object's waypoints.
+    pub hand: Option<HandLoad>,
     /// Torso poses, the first the start; every robot of a plan has as many. A robot whose
     /// waypoints repeat does not walk there.
     pub waypoints: Vec<Isometry3<f64>>,
@@ -117,6 +131,6 @@ pub enum GaitError {
     Robot { robot: String, reason: String },
     #[error("the object has {got} waypoints, the robots {expected}")]
     ObjectWaypoints { expected: usize, got: usize },
-    #[error("robot {robot}, step {step} (foot {foot}): the centre of mass cannot be {margin} m inside the support triangle (its inradius is {inradius:.3} m); lower walk.gait.margin or step shorter")]
+    #[error("robot {robot}, step {step} (foot {foot}): the centre of pressure cannot be {margin} m inside the support triangle (its inradius is {inradius:.3} m); lower walk.gait.margin or step shorter")]
     Margin { robot: String, step: usize, foot: String, margin: f64, inradius: f64 },
 }

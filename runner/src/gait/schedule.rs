@@ -9,20 +9,21 @@
 //! the crawl; backwards the front feet lead; feet told apart by where each is in the torso
 //! frame at the start). Each step: the torso
 //! shifts (quintic blend, `t_shift`) to the path's next quarter cycle plus the shift that puts
-//! the centre of mass `margin` inside the other three feet's triangle; the foot is unloaded
+//! the centre of pressure `margin` inside the other three feet's triangle (the robot's weight
+//! and the load in its hand, [`super::support::centre_of_pressure`]); the foot is unloaded
 //! (`t_unload`, its normal force bounded by a ramp to zero), swings (`t_swing`) to where the
 //! path puts it at the end of the cycle, pressing `touchdown_depth` below it, and is loaded
 //! again (`t_load`). A last shift brings each torso to its last waypoint.
 
-use nalgebra::{Isometry3, Translation3, Vector2, Vector3};
+use nalgebra::{Isometry3, Rotation2, Translation3, Vector2, Vector3};
 
-use super::support::{margin, shift_into};
+use super::support::{centre_of_pressure, margin, shift_into, HandLoad};
 use super::swing::{quintic, swing};
 use super::{GaitError, GaitParams, WalkingRobot};
 
 /// A planned step: `robot`'s `foot` (description index) from `from` to `to` (foot centres),
 /// lifting off at `liftoff` and touching down at `touchdown` (scenario time, s), with the
-/// centre of mass `margin` m inside the support triangle at lift-off.
+/// planned centre of pressure `margin` m inside the support triangle at lift-off.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Step {
     pub robot: usize,
@@ -138,8 +139,23 @@ fn check(robots: &[WalkingRobot], object: Option<&[Isometry3<f64>]>) -> Result<u
             return Err(bad(format!("{} waypoints, the first robot has {count} (at least the start)", r.waypoints.len())));
         }
         let finite = r.waypoints.iter().all(|w| w.translation.vector.iter().chain(r.com_offset.iter()).all(|x| x.is_finite()) && w.rotation.coords.iter().all(|x| x.is_finite()));
-        if !finite || r.feet.iter().any(|(_, p)| p.iter().any(|x| !x.is_finite())) {
-            return Err(bad("a non-finite waypoint, foot or centre of mass".into()));
+        if !finite || r.feet.iter().any(|(_, p)| p.iter().any(|x| !x.is_finite())) || !r.ground_z.is_finite() || r.hand.is_some_and(|h| !h.is_finite()) {
+            return Err(bad("a non-finite waypoint, foot, centre of mass, ground height or hand load".into()));
+        }
+        if !(r.mass.is_finite() && r.mass > 0.0) {
+            return Err(bad(format!("mass {} kg must be positive", r.mass)));
+        }
+        if !(r.com_gain.iter().all(|x| x.is_finite()) && r.com_gain.determinant() > 1e-3) {
+            return Err(bad(format!("the CoM's shift gain {:?} must be finite and invertible", r.com_gain)));
+        }
+        // The feet must carry some weight wherever the object takes the hand's load.
+        let object_at = |k: usize| object.map_or(Isometry3::identity(), |o| o[k.min(o.len().saturating_sub(1))] * o[0].inverse());
+        for k in 0..count {
+            let load = r.hand.map(|h| h.moved(&object_at(k)));
+            let com = r.waypoints[k] * nalgebra::Point3::from(r.com_offset);
+            if centre_of_pressure(r.mass, &com.coords, load.as_ref(), r.ground_z).is_none() {
+                return Err(bad(format!("its hand's load {:?} N lifts it off its feet at waypoint {k}", load.map(|l| l.force))));
+            }
         }
     }
     match object {
@@ -164,8 +180,8 @@ struct Builder<'a> {
     steps: Vec<Step>,
 }
 
-/// Where one step of a robot goes: the torso's target (the path's pose plus the CoM shift),
-/// the foothold, the shift and the CoM's margin at lift-off.
+/// Where one step of a robot goes: the torso's target (the path's pose plus the shift), the
+/// foothold, the shift and the centre of pressure's margin at lift-off.
 struct Placement {
     target: Isometry3<f64>,
     to: Vector3<f64>,
@@ -173,36 +189,62 @@ struct Placement {
     margin: f64,
 }
 
-/// Robot `r`'s step of `foot` with its feet at `feet`, the path at `progress` for the torso and
-/// at `cycle_end` for the foothold (segment `k`); `None` when no shift reaches the margin.
-#[allow(clippy::too_many_arguments)]
-fn place(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], foot: usize, k: usize, progress: f64, cycle_end: f64, p: &GaitParams) -> Option<Placement> {
-    let (a, b) = (&r.waypoints[k], &r.waypoints[k + 1]);
-    let nominal = interp(a, b, progress);
-    let mut to = interp(a, b, cycle_end) * nalgebra::Point3::from(offsets[foot]);
+/// Where the path is: segment `k` (waypoint `k` to `k + 1`), `progress` of the way for the
+/// torso and the object, `cycle_end` for the foothold.
+#[derive(Clone, Copy)]
+struct PathAt {
+    k: usize,
+    progress: f64,
+    cycle_end: f64,
+}
+
+/// The hand's load of `r` with the object where the path puts it (`object`: its waypoints
+/// when it moves with the team; else it holds where it started).
+fn hand_load(r: &WalkingRobot, object: Option<&[Isometry3<f64>]>, at: PathAt) -> Option<HandLoad> {
+    let h = r.hand?;
+    Some(match object {
+        Some(o) => h.moved(&(interp(&o[at.k], &o[at.k + 1], at.progress) * o[0].inverse())),
+        None => h,
+    })
+}
+
+/// Robot `r`'s step of `foot` with its feet at `feet`, the path at `at`; `None` when no shift
+/// reaches the margin. The torso is shifted so that the centre of pressure (its weight and
+/// the hand's load, which stays on the object) is `margin` inside the other three feet.
+fn place(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], foot: usize, at: PathAt, object: Option<&[Isometry3<f64>]>, p: &GaitParams) -> Option<Placement> {
+    let (a, b) = (&r.waypoints[at.k], &r.waypoints[at.k + 1]);
+    let nominal = interp(a, b, at.progress);
+    let mut to = interp(a, b, at.cycle_end) * nalgebra::Point3::from(offsets[foot]);
     to.z = r.feet[foot].1.z;
     let others: Vec<Vector2<f64>> = (0..4).filter(|f| *f != foot).map(|f| feet[f].xy()).collect();
     let tri = [others[0], others[1], others[2]];
-    let com = (nominal * nalgebra::Point3::from(r.com_offset)).coords.xy();
-    let d = shift_into(&com, &tri, p.margin)?;
-    Some(Placement { target: Translation3::new(d.x, d.y, 0.0) * nominal, to: to.coords, shift: d.norm(), margin: margin(&(com + d), &tri) })
+    let com = (nominal * nalgebra::Point3::from(r.com_offset)).coords;
+    let (cop, gain) = centre_of_pressure(r.mass, &com, hand_load(r, object, at).as_ref(), r.ground_z)?;
+    // A torso shift `d` moves the CoM by `com_gain d` (turned with the torso's yaw), the
+    // centre of pressure `gain` times that.
+    let yaw = Rotation2::new(nominal.rotation.euler_angles().2).into_inner();
+    let moves = gain * yaw * r.com_gain * yaw.transpose();
+    let d_cop = shift_into(&cop, &tri, p.margin)?;
+    let d = moves.try_inverse()? * d_cop;
+    Some(Placement { target: Translation3::new(d.x, d.y, 0.0) * nominal, to: to.coords, shift: d.norm(), margin: margin(&(cop + d_cop), &tri) })
 }
 
 /// The foot order of robot `i` in segment `k` (`n` cycles): of the 24, the one whose first
-/// cycle needs the least total CoM shift (walking backwards, the front feet lead; sideways,
+/// cycle needs the least total torso shift (walking backwards, the front feet lead; sideways,
 /// the feet away from the motion), the crawl order on a tie; `None` when none reaches the margin.
-fn best_order(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], crawl: [usize; 4], k: usize, n: usize, p: &GaitParams) -> Option<[usize; 4]> {
+fn best_order(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], crawl: [usize; 4], k: usize, n: usize, object: Option<&[Isometry3<f64>]>, p: &GaitParams) -> Option<[usize; 4]> {
     let mut best: Option<([usize; 4], f64)> = None;
     for perm in permutations(crawl) {
-        let mut at = feet.to_vec();
+        let mut now = feet.to_vec();
         let mut total = 0.0;
         for (j, &foot) in perm.iter().enumerate() {
-            let Some(pl) = place(r, offsets, &at, foot, k, (j + 1) as f64 / 4.0 / n as f64, 1.0 / n as f64, p) else {
+            let at = PathAt { k, progress: (j + 1) as f64 / 4.0 / n as f64, cycle_end: 1.0 / n as f64 };
+            let Some(pl) = place(r, offsets, &now, foot, at, object, p) else {
                 total = f64::INFINITY;
                 break;
             };
             total += pl.shift;
-            at[foot] = pl.to;
+            now[foot] = pl.to;
         }
         if total.is_finite() && best.is_none_or(|(_, b)| total < b - 1e-9) {
             best = Some((perm, total));
@@ -232,7 +274,7 @@ impl Builder<'_> {
             if r.waypoints[k] == r.waypoints[k + 1] {
                 continue;
             }
-            match best_order(r, &self.offsets[i], &self.feet[i], self.crawl[i], k, n, self.p) {
+            match best_order(r, &self.offsets[i], &self.feet[i], self.crawl[i], k, n, self.object, self.p) {
                 Some(o) => self.order[i] = o,
                 None => self.order[i] = self.crawl[i],
             }
@@ -241,7 +283,7 @@ impl Builder<'_> {
 
     /// Step `j` of cycle `c` of `n` in segment `k`: shift, unload, swing, load.
     fn step(&mut self, k: usize, c: usize, j: usize, n: usize) -> Result<(), GaitError> {
-        let (progress, cycle_end) = ((c as f64 + (j + 1) as f64 / 4.0) / n as f64, (c + 1) as f64 / n as f64);
+        let at = PathAt { k, progress: (c as f64 + (j + 1) as f64 / 4.0) / n as f64, cycle_end: (c + 1) as f64 / n as f64 };
         let (t_shift_end, liftoff) = (self.t + self.p.t_shift, self.t + self.p.t_shift + self.p.t_unload);
         let touchdown = liftoff + self.p.t_swing;
         for (i, r) in self.robots.iter().enumerate() {
@@ -249,7 +291,7 @@ impl Builder<'_> {
                 continue;
             }
             let foot = self.order[i][j];
-            let Some(pl) = place(r, &self.offsets[i], &self.feet[i], foot, k, progress, cycle_end, self.p) else {
+            let Some(pl) = place(r, &self.offsets[i], &self.feet[i], foot, at, self.object, self.p) else {
                 let others: Vec<Vector2<f64>> = (0..4).filter(|f| *f != foot).map(|f| self.feet[i][f].xy()).collect();
                 let inradius = super::support::incentre(&[others[0], others[1], others[2]]).1;
                 return Err(GaitError::Margin { robot: r.robot.clone(), step: self.steps.len(), foot: r.feet[foot].0.clone(), margin: self.p.margin, inradius });
@@ -259,7 +301,7 @@ impl Builder<'_> {
             self.feet[i][foot] = pl.to;
         }
         if let (Some(track), Some(o)) = (self.object_track.as_mut(), self.object) {
-            track.push(self.t, t_shift_end, interp(&o[k], &o[k + 1], progress));
+            track.push(self.t, t_shift_end, interp(&o[k], &o[k + 1], at.progress));
         }
         self.t = touchdown + self.p.t_load;
         Ok(())

@@ -1,8 +1,54 @@
-//! The support triangle of a crawl (the three feet on the ground while one swings): how far a
-//! point lies inside it ([`margin`]) and the smallest horizontal shift that puts the centre of
-//! mass a given margin inside ([`shift_into`]).
+//! The support triangle of a crawl (the three feet on the ground while one swings): where the
+//! ground pushes a standing robot that also carries a load in its hand ([`centre_of_pressure`]),
+//! how far a point lies inside the triangle ([`margin`]) and the smallest horizontal shift that
+//! puts it a given margin inside ([`shift_into`]).
 
-use nalgebra::Vector2;
+use nalgebra::{Isometry3, Vector2, Vector3};
+use protocol::conventions::GRAVITY;
+
+/// The wrench the object applies to a robot's hand (world-aligned, on the robot), where it
+/// applies: with its weight, what the robot's feet must carry.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HandLoad {
+    /// Point of application (the hand frame's origin), world, m.
+    pub point: Vector3<f64>,
+    /// Force and moment about `point`, N and N m.
+    pub force: Vector3<f64>,
+    pub moment: Vector3<f64>,
+}
+
+impl HandLoad {
+    /// The same load carried along by a rigid motion of the object (the grasp moves with it).
+    pub fn moved(&self, by: &Isometry3<f64>) -> HandLoad {
+        HandLoad { point: (by * nalgebra::Point3::from(self.point)).coords, force: by.rotation * self.force, moment: by.rotation * self.moment }
+    }
+
+    pub fn is_finite(&self) -> bool {
+        self.point.iter().chain(self.force.iter()).chain(self.moment.iter()).all(|x| x.is_finite())
+    }
+}
+
+/// Where the ground's resultant acts on a robot standing still on flat ground at height
+/// `ground_z`: its weight `mass` g at `com` and the hand's load balanced by the feet (statics:
+/// the ground's force `F = m g e_z - f`, its moment about the origin `-(p x f + n + c x (-m g
+/// e_z))`, and the point of the ground plane about which that moment has no horizontal part).
+/// Also how far that point moves per metre the centre of mass moves horizontally (`m g / F_z`:
+/// a hand pressed down moves it less than the CoM). `None` when the feet carry no weight
+/// (`F_z <= 0`: the hand lifts the robot).
+pub fn centre_of_pressure(mass: f64, com: &Vector3<f64>, load: Option<&HandLoad>, ground_z: f64) -> Option<(Vector2<f64>, f64)> {
+    let weight = Vector3::new(0.0, 0.0, -mass * GRAVITY);
+    let (mut force, mut moment) = (-weight, -com.cross(&weight));
+    if let Some(h) = load {
+        force -= h.force;
+        moment -= h.point.cross(&h.force) + h.moment;
+    }
+    if !(force.z > 0.0) {
+        return None;
+    }
+    let x = (ground_z * force.x - moment.y) / force.z;
+    let y = (moment.x + ground_z * force.y) / force.z;
+    Some((Vector2::new(x, y), mass * GRAVITY / force.z))
+}
 
 /// Signed distance of `p` inside the triangle `tri` (positive inside: the distance to the
 /// nearest edge; negative outside), whatever the vertices' order.

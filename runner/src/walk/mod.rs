@@ -5,6 +5,7 @@
 //! from. [`evaluate`] measures a walk from the ground truth: steps taken, stance feet that
 //! slid, final torso poses.
 
+pub mod com_gain;
 pub mod evaluate;
 pub mod reach;
 pub mod references;
@@ -14,7 +15,7 @@ use robot_model::Robot;
 use sim_bridge::world::RobotPlacement;
 use thiserror::Error;
 
-use crate::gait::{GaitError, GaitPlan, WalkingRobot};
+use crate::gait::{GaitError, GaitPlan, HandLoad, WalkingRobot};
 use crate::scenario::{WalkFrame, WalkSpec};
 
 /// Why a walk cannot be planned.
@@ -28,6 +29,8 @@ pub enum WalkError {
     TooShort { duration: f64, end: f64 },
     #[error("walk: robot {robot}'s arm cannot keep its hand on the object at {time:.2} s, with its torso {offset:.3} m from its start ({reason}): stand it nearer, or walk less far")]
     Reach { robot: String, time: f64, offset: f64, reason: String },
+    #[error("walk: robot {robot}'s arm would need {torque:.1} N m at {joint} (limit {limit} N m) to hold the object with its torso shifted for the step at {time:.2} s: lighten the object, lower walk.gait.margin, or stand the robots otherwise")]
+    ArmTorque { robot: String, time: f64, joint: String, torque: f64, limit: f64 },
 }
 
 /// A planned walk: the gait and who walks.
@@ -55,6 +58,7 @@ struct Standing {
     hand: Isometry3<f64>,
     feet: Vec<Vector3<f64>>,
     com_in_torso: Vector3<f64>,
+    mass: f64,
 }
 
 /// A robot's configuration at its placement: the standing pose, the placement's joint
@@ -82,8 +86,8 @@ fn standing(robot: &Robot, placement: &RobotPlacement) -> Result<Standing, Strin
     let pose = |name: &str| frame(name).map(|m| Isometry3::from_parts(Translation3::from(m.trans), UnitQuaternion::from_matrix(&m.rot)));
     let (torso, hand) = (pose(&robot.torso_frame)?, pose(&robot.hand_frame)?);
     let feet = robot.foot_frames.iter().map(|f| frame(f).map(|p| p.trans)).collect::<Result<Vec<_>, _>>()?;
-    let (_, com) = robot_model::center_of_mass(model, &data);
-    Ok(Standing { com_in_torso: torso.inverse_transform_point(&com.into()).coords, q, torso, hand, feet })
+    let (mass, com) = robot_model::center_of_mass(model, &data);
+    Ok(Standing { com_in_torso: torso.inverse_transform_point(&com.into()).coords, mass, q, torso, hand, feet })
 }
 
 /// Waypoint `w = [dx, dy, yaw_deg]` applied to a start pose: in the pose's own frame
@@ -101,8 +105,10 @@ fn moved(start: &Isometry3<f64>, w: &[f64; 3], frame: WalkFrame, centre: &Vector
 
 impl Walk {
     /// The walk of `spec` for robots standing at `placements` around an object starting at
-    /// `object_start`, on a scenario of `duration` s.
-    pub fn plan(spec: &WalkSpec, robots: &[(String, std::sync::Arc<Robot>)], placements: &[RobotPlacement], object_start: &Isometry3<f64>, duration: f64) -> Result<Walk, WalkError> {
+    /// `object_start`, on a scenario of `duration` s, with what the object applies to each
+    /// robot's hand at the start (`hand_loads`, by robot id; a robot not named carries nothing:
+    /// the planner then keeps its bare centre of mass inside the support triangle).
+    pub fn plan(spec: &WalkSpec, robots: &[(String, std::sync::Arc<Robot>)], placements: &[RobotPlacement], object_start: &Isometry3<f64>, hand_loads: &[(String, HandLoad)], duration: f64) -> Result<Walk, WalkError> {
         let centre = object_start.translation.vector;
         let mut inputs = Vec::new();
         let mut walking = Vec::new();
@@ -117,7 +123,12 @@ impl Walk {
             let walks = spec.frame == WalkFrame::Team || spec.walks(id);
             let mut waypoints = vec![s.torso];
             waypoints.extend(spec.path.iter().map(|w| if walks { moved(&s.torso, w, spec.frame, &centre) } else { s.torso }));
-            inputs.push(WalkingRobot { robot: id.clone(), feet: robot.foot_frames.iter().cloned().zip(s.feet).collect(), com_offset: s.com_in_torso, waypoints });
+            // The feet's contact points: their sphere's lowest points.
+            let ground_z = s.feet.iter().map(|f| f.z).sum::<f64>() / s.feet.len().max(1) as f64 - robot.feet.radius;
+            let hand = hand_loads.iter().find(|(r, _)| r == id).map(|(_, h)| *h);
+            let com_gain = com_gain::com_shift_gain(robot, &s.q, hand.is_some()).map_err(|reason| WalkError::Robot { robot: id.clone(), reason })?;
+            tracing::debug!(robot = %id, ?com_gain, ?hand, "walk: the CoM's shift gain and the hand's load");
+            inputs.push(WalkingRobot { robot: id.clone(), feet: robot.foot_frames.iter().cloned().zip(s.feet).collect(), com_offset: s.com_in_torso, com_gain, mass: s.mass, ground_z, hand, waypoints });
             walking.push(walks);
             feet.push(robot.foot_frames.clone());
             let link = |f: &String| robot.model.frame_id(f).ok().and_then(|id| robot.model.parent_link(id)).map(str::to_string).unwrap_or_default();
@@ -130,8 +141,9 @@ impl Walk {
             return Err(WalkError::TooShort { duration, end: gait.end_time() });
         }
         let walk = Walk { gait, robots: robots.iter().map(|(id, _)| id.clone()).collect(), walking, feet, foot_links, foot_radius, moves_object: object.is_some() };
-        for (i, ((_, robot), (q, torso, hand))) in robots.iter().zip(&arms).enumerate().filter(|(i, _)| walk.walking[*i]) {
-            reach::check(&walk, i, robot, q, torso, hand, object_start)?;
+        for (i, ((id, robot), (q, torso, hand))) in robots.iter().zip(&arms).enumerate().filter(|(i, _)| walk.walking[*i]) {
+            let load = hand_loads.iter().find(|(r, _)| r == id).map(|(_, h)| h);
+            reach::check(&walk, i, robot, q, torso, hand, object_start, load)?;
         }
         Ok(walk)
     }
