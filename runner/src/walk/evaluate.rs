@@ -29,8 +29,17 @@ pub const MAX_WALKING_TORSO_POSITION_RMS: f64 = 0.02;
 pub struct WalkReport {
     pub steps_planned: BTreeMap<String, usize>,
     pub steps_taken: BTreeMap<String, usize>,
-    /// Least planned distance of the centre of mass inside the support triangle at a lift-off, m.
+    /// Least planned distance of the centre of pressure inside the support triangle at a
+    /// lift-off, m.
     pub least_margin_m: f64,
+    /// Per walking robot, the least measured distance of its centre of pressure (from the
+    /// simulator's foot contact forces) inside the triangle of the three other feet as a
+    /// foot's unloading starts (torso shifted, every foot down): the planned margin as the
+    /// simulator realises it, m.
+    pub cop_margin_m: BTreeMap<String, f64>,
+    /// Per walking robot, the longest a foot that should stand was off the ground while
+    /// another swung (the robot rocked onto a diagonal), ms.
+    pub stance_lift_ms: BTreeMap<String, f64>,
     /// Largest horizontal slide of a stance foot, per robot, m.
     pub stance_slide_m: BTreeMap<String, f64>,
     /// Each landing's first ground contact minus its planned touchdown, ms: the earliest and
@@ -120,7 +129,53 @@ fn stance_slide(times: &[f64], foot: &FootTrack) -> f64 {
     worst
 }
 
+/// Robot `robot`'s centre of pressure in a ground-truth sample: its foot contacts' points
+/// weighted by their normal forces (the ground is flat), `None` without load.
+fn measured_cop(g: &GroundTruth, robot: &str) -> Option<Vector2<f64>> {
+    let (mut sum, mut weight) = (Vector2::zeros(), 0.0);
+    for c in g.foot_contacts.iter().filter(|c| c.robot == robot) {
+        let fz = c.wrench[2].max(0.0);
+        sum += fz * Vector2::new(c.position[0], c.position[1]);
+        weight += fz;
+    }
+    (weight > 1e-6).then(|| sum / weight)
+}
+
 impl Walk {
+    /// Robot `i`'s measured centre of pressure margin in the triangle of its other three feet
+    /// (their centres in the ground truth) as the unloading of `step`'s foot starts.
+    fn cop_margin_at_unload(&self, truth: &[&GroundTruth], i: usize, step: &Step) -> Option<f64> {
+        let id = &self.robots[i];
+        let start = step.liftoff - self.gait.params().t_unload;
+        let g = truth.iter().rev().find(|g| g.time <= start)?;
+        let tri: Vec<Vector2<f64>> = (0..self.feet[i].len())
+            .filter(|f| *f != step.foot)
+            .filter_map(|f| g.feet.iter().find(|b| b.name == format!("{id}/{}", self.feet[i][f])))
+            .map(|b| Vector2::new(b.pose.position[0], b.pose.position[1]))
+            .collect();
+        let [a, b, c] = tri.as_slice() else { return None };
+        Some(crate::gait::support::margin(&measured_cop(g, id)?, &[*a, *b, *c]))
+    }
+
+    /// The longest time any foot of robot `i` was off the ground during the swing of another
+    /// of its feet (from `MIN_AIRBORNE` after the lift-off to the landing set), s.
+    fn stance_lift(&self, truth: &[&GroundTruth], times: &[f64], i: usize, planned: &[&Step]) -> f64 {
+        let window = self.gait.params().touchdown_window;
+        let mut worst = 0.0_f64;
+        for f in 0..self.feet[i].len() {
+            let track = foot_track(truth, &self.robots[i], &self.feet[i][f], &self.foot_links[i][f], self.foot_radius[i]);
+            let mut since: Option<f64> = None;
+            for (k, t) in times.iter().enumerate() {
+                let swinging = planned.iter().any(|s| s.robot == i && s.foot != f && *t >= s.liftoff + MIN_AIRBORNE && *t <= s.touchdown - window);
+                since = if swinging && !track.contact[k] { Some(since.unwrap_or(*t)) } else { None };
+                if let Some(t0) = since {
+                    worst = worst.max(t - t0);
+                }
+            }
+        }
+        worst
+    }
+
     /// The walk's report from the run's ground truth (scenario samples, in time order), for a
     /// walk halted at `halted_at` (s) if the team let go.
     pub fn evaluate(&self, truth: &[&GroundTruth], halted_at: Option<f64>) -> WalkReport {
@@ -138,6 +193,11 @@ impl Walk {
                 slide = slide.max(stance_slide(&times, &track));
             }
             rep.steps_taken.insert(id.clone(), taken);
+            let cop = planned.iter().filter(|s| s.robot == i).filter_map(|s| self.cop_margin_at_unload(truth, i, s)).fold(f64::INFINITY, f64::min);
+            if cop.is_finite() {
+                rep.cop_margin_m.insert(id.clone(), cop);
+                rep.stance_lift_ms.insert(id.clone(), 1e3 * self.stance_lift(truth, &times, i, &planned));
+            }
             for s in planned.iter().filter(|s| s.robot == i) {
                 let track = foot_track(truth, id, &self.feet[i][s.foot], &self.foot_links[i][s.foot], self.foot_radius[i]);
                 if let Some(dt) = first_contact_after(&times, &track.contact, s.liftoff).map(|t| 1e3 * (t - s.touchdown)) {
