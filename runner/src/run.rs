@@ -47,6 +47,10 @@ pub struct RunOptions {
     /// Distributed across test hosts (`crate::hosts`), one per component, made for the run
     /// and removed after it.
     pub hosts: bool,
+    /// Distributed on loopback over mutual TLS with the team's access control, with the
+    /// certificates in this folder (`scripts/make-test-certs.sh DIR ROBOT...`; README "Access
+    /// control (mutual TLS and ACL)").
+    pub tls: Option<std::path::PathBuf>,
     /// A progress bar (terminal) or progress log lines.
     pub progress: bool,
 }
@@ -81,6 +85,8 @@ pub fn run_recorded(plan: &Plan, opts: &RunOptions, out: &Path, record: Option<&
         let ids: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
         let hosts = TestHosts::up(&crate::launch::host_names(&ids)).map_err(|e| RunError::Task { what: "making the test hosts".into(), reason: e.to_string() })?;
         Mode::Hosts { dir: out.to_path_buf(), hosts: std::sync::Arc::new(hosts) }
+    } else if let Some(certs) = &opts.tls {
+        Mode::Tls { dir: out.to_path_buf(), certs: certs.clone() }
     } else if opts.distributed {
         Mode::Distributed { dir: out.to_path_buf() }
     } else {
