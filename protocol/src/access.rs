@@ -327,14 +327,12 @@ impl SecureConfig {
     }
 }
 
-/// Write the Zenoh configuration of every identity of a team into `out`
-/// (`zenoh-{identity}.json5`), the certificates named from `certs` as given (a relative path
-/// stays relative: Zenoh resolves it from the component's working directory). The coordinator
-/// listens on `hub`; the others listen on a random loopback TLS port and connect to `hub`.
-/// Returns the files written.
-pub fn write_team(certs: &Path, team: &str, robots: &[String], hub: &str, out: &Path) -> Result<Vec<PathBuf>, AccessError> {
-    std::fs::create_dir_all(out).map_err(|e| AccessError::Write { path: out.to_path_buf(), reason: e.to_string() })?;
-    let mut written = Vec::new();
+/// The configurations of every identity of a team, the certificates named from `certs` as
+/// given (a relative path stays relative: Zenoh resolves it from the component's working
+/// directory). The coordinator listens on `hub`; the others listen on a random loopback TLS
+/// port and connect to `hub`.
+pub fn team_configs(certs: &Path, team: &str, robots: &[String], hub: &str) -> Vec<SecureConfig> {
+    let mut out = Vec::new();
     for who in Identity::all(robots) {
         let mut cfg = SecureConfig::in_dir(certs, team, robots, who);
         if cfg.identity == Identity::Coordinator {
@@ -342,7 +340,22 @@ pub fn write_team(certs: &Path, team: &str, robots: &[String], hub: &str, out: &
         } else {
             cfg.connect = vec![hub.to_string()];
         }
-        let path = out.join(format!("zenoh-{}.json5", cfg.identity.name()));
+        out.push(cfg);
+    }
+    out
+}
+
+/// The file name of an identity's configuration: `zenoh-{identity}.json5`.
+pub fn file_name(who: &Identity) -> String {
+    format!("zenoh-{}.json5", who.name())
+}
+
+/// Write [`team_configs`] into `out` ([`file_name`]); returns the files written.
+pub fn write_team(certs: &Path, team: &str, robots: &[String], hub: &str, out: &Path) -> Result<Vec<PathBuf>, AccessError> {
+    std::fs::create_dir_all(out).map_err(|e| AccessError::Write { path: out.to_path_buf(), reason: e.to_string() })?;
+    let mut written = Vec::new();
+    for cfg in team_configs(certs, team, robots, hub) {
+        let path = out.join(file_name(&cfg.identity));
         cfg.write(&path)?;
         written.push(path);
     }

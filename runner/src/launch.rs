@@ -171,7 +171,7 @@ fn secure_args(dir: &Path, certs: &Path, ids: &TeamIds, identity: Identity, list
     let mut cfg = SecureConfig::in_dir(certs, &ids.team, &ids.robots, identity);
     cfg.listen = vec![listen.to_string()];
     cfg.connect = connect.map(|c| vec![c.to_string()]).unwrap_or_default();
-    let path = dir.join(format!("zenoh-{}.json5", cfg.identity.name()));
+    let path = dir.join(protocol::access::file_name(&cfg.identity));
     cfg.write(&path)?;
     Ok(ZenohArgs { config: Some(path), ..Default::default() })
 }

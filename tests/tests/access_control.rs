@@ -309,3 +309,18 @@ async fn an_agent_cannot_publish_another_robots_keys() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `config/zenoh/` is what `team zenoh-config certs` writes (team `team`, robots r1 and r2,
+/// the hub on tls/127.0.0.1:7447): the shipped files follow the rules.
+#[test]
+fn the_shipped_configurations_are_the_generated_ones() {
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/zenoh");
+    let configs = protocol::access::team_configs(Path::new("certs"), "team", &robots(&["r1", "r2"]), "tls/127.0.0.1:7447");
+    assert_eq!(configs.len(), 6);
+    for cfg in configs {
+        let path = shipped.join(protocol::access::file_name(&cfg.identity));
+        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let file: serde_json::Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(file, cfg.to_json().unwrap(), "{} differs from the generator (team zenoh-config certs)", path.display());
+    }
+}
