@@ -11,7 +11,7 @@
 //! | `coordinator` | `robot/*/command`, `coordinator/{status,diagnostics}` | `robot/*/{dynamics,description}`, `references` | declares `coordinator/alive`, watches `member/*` |
 //! | robot `rN` | `robot/rN/{dynamics,torque,status,description}` | `robot/rN/{state,command,contacts}` | declares `member/rN`, watches `coordinator/alive` |
 //! | `sim-bridge` | `robot/*/state`, `ground-truth` | `robot/*/torque`, `perturbation`, `coordinator/status` | watches `member/*`, `coordinator/alive` |
-//! | `runner` | `references`, `robot/*/contacts`, `perturbation` | every robot key, `coordinator/*`, `ground-truth` | watches `member/*`, `coordinator/alive` |
+//! | `runner` | `references`, `robot/*/contacts`, `perturbation` | every robot key, `coordinator/{status,diagnostics}`, `ground-truth` | watches `member/*`, `coordinator/alive` |
 //! | `tool` | nothing | `robot/*/status`, `coordinator/{status,diagnostics}` | none |
 //!
 //! (keys under `team/{team}/`). [`access_control`] turns the grants into Zenoh's

@@ -199,7 +199,7 @@ fn main() -> Result<()> {
             );
             let source = ScenarioSource::read(&scenario, &set).map_err(|e| anyhow::anyhow!("reading {}: {e}", scenario.display()))?;
             let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live };
-            let (records, recording) = scenario_run::run_recorded(&plan, &RunOptions { distributed, hosts, tls, progress: !quiet }, &dir, Some(&rec))?;
+            let (records, recording) = scenario_run::run_recorded_secure(&plan, &RunOptions { distributed, hosts, progress: !quiet }, tls.as_deref(), &dir, Some(&rec))?;
             let eval = evaluate::evaluate(&plan, &records, mode_name);
             evaluate::write_report(&plan, &eval, &dir)?;
             plots::write_all(&plan, &eval, &records, &dir)?;
