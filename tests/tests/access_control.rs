@@ -12,6 +12,8 @@
 //!   the same command from the coordinator's identity is applied.
 //! * Agent r2's identity cannot publish r1's state, torque or dynamics, while its own keys
 //!   arrive.
+//! * The grants are enough for a whole team: a distributed smoke run over TLS with the ACL
+//!   (`team smoke --tls`, the launcher's `Mode::Tls`) completes every tick.
 //!
 //! Needs the release binaries (`cargo build --release --bins`) and openssl. Each test has its
 //! own ports and folder; every wait is bounded.
@@ -323,4 +325,23 @@ fn the_shipped_configurations_are_the_generated_ones() {
         let file: serde_json::Value = serde_json::from_str(&text).unwrap();
         assert_eq!(file, cfg.to_json().unwrap(), "{} differs from the generator (team zenoh-config certs)", path.display());
     }
+}
+
+/// Every process of a team (coordinator, two agents, the sim-bridge, the runner) over mutual
+/// TLS with the ACL: the lockstep runs every tick (a missing grant would leave a robot out).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_whole_team_runs_over_tls_with_the_acl() {
+    use team_runner::launch::{BridgeOutcome, Mode};
+    use team_runner::smoke::{self, SmokeConfig};
+    let dir = certificates("smoke", &["r1", "r2"]);
+    let run_dir = dir.join("run");
+    std::fs::create_dir_all(&run_dir).unwrap();
+    let cfg = SmokeConfig { team: "team".into(), robots: robots(&["r1", "r2"]), joints: 6, ticks: 300, dt: 0.001, damping: 2.0, v0: 0.5 };
+    let mode = Mode::Tls { dir: run_dir.clone(), certs: dir.clone() };
+    let outcome = tokio::time::timeout(Duration::from_secs(60), smoke::run(&cfg, &mode)).await.expect("the run ends in time");
+    assert!(matches!(outcome, Ok(BridgeOutcome::Process)), "the TLS smoke run failed: {:?}", outcome.err());
+    for who in ["coordinator", "r1", "r2", "sim-bridge", "runner"] {
+        assert!(run_dir.join(format!("zenoh-{who}.json5")).is_file(), "no configuration for {who}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }
