@@ -55,6 +55,12 @@ pub fn all_robots(team: &str, topic: RobotTopic) -> Result<String, ProtocolError
     Ok(format!("{ROOT}/{team}/robot/*/{}", topic.as_str()))
 }
 
+/// `team/{team}/**`: every key of the team (access-control rules).
+pub fn everything(team: &str) -> Result<String, ProtocolError> {
+    validate_id("team", team)?;
+    Ok(format!("{ROOT}/{team}/**"))
+}
+
 /// `team/{team}/member/{robot}`: the liveliness token of a member.
 pub fn member(team: &str, robot: &str) -> Result<String, ProtocolError> {
     validate_id("team", team)?;

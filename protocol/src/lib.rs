@@ -76,6 +76,8 @@ pub mod validate;
 pub mod clock;
 #[cfg(feature = "transport")]
 pub mod transport;
+#[cfg(feature = "transport")]
+pub mod access;
 
 pub use codec::{decode, encode, from_json, schema_id, to_json, Message, MessageKind, Wire, MAX_MESSAGE_BYTES};
 pub use clock::RunClock;

@@ -13,7 +13,10 @@
 //!   ([`Mode::Hosts`], `crate::hosts`), started with the command line that
 //!   [`CoordinatorArgs::to_cli`], [`AgentArgs::to_cli`] and [`BridgeArgs::to_cli`] write from
 //!   the same values; files they need (the controller spec, the scene) go into the run's
-//!   folder.
+//!   folder;
+//! * [`Mode::Tls`]: as [`Mode::Distributed`], over mutual TLS with the team's access control
+//!   (`protocol::access`): each process gets a Zenoh configuration with its identity's
+//!   certificate, written into the run's folder.
 //!
 //! The caller then declares what it observes on [`Running::session`] (the scenario driver),
 //! runs the state source to its end with [`Running::run_bridge`] (it ends the run: after its
@@ -27,6 +30,7 @@ use std::time::Duration;
 
 use coordinator::service::{self as coordinator_service, CoordinatorConfig};
 use coordinator::ControllerSpec;
+use protocol::access::{Identity, SecureConfig};
 use protocol::transport::{self, Role, ZenohArgs};
 use robot_agent::agent::{self as agent_loop, AgentConfig};
 use robot_agent::dynamics_source::{ModelDynamics, PlaceholderDynamics};
@@ -67,6 +71,8 @@ pub enum LaunchError {
     Write { path: String, reason: String },
     #[error("{what}: {reason}")]
     Task { what: String, reason: String },
+    #[error("access control: {0}")]
+    Access(#[from] protocol::access::AccessError),
 }
 
 /// Where the components run.
@@ -80,6 +86,16 @@ pub enum Mode {
     /// agent on the host named after its robot, the sim-bridge on host `sim`; this process
     /// (the scenario driver) reaches them through the hosts' bridge.
     Hosts { dir: PathBuf, hosts: Arc<TestHosts> },
+    /// Processes on loopback over mutual TLS with the team's access control: the identities'
+    /// certificates are in `certs` (`scripts/make-test-certs.sh CERTS ROBOT...`), and each
+    /// process's Zenoh configuration is written to `dir`. This process is the `runner`.
+    Tls { dir: PathBuf, certs: PathBuf },
+}
+
+/// The team a Zenoh configuration with access control is written for.
+struct TeamIds {
+    team: String,
+    robots: Vec<String>,
 }
 
 /// The test host names of a team: the coordinator, each robot, the sim-bridge.
@@ -102,6 +118,7 @@ impl Mode {
             Mode::Embedded => "embedded",
             Mode::Distributed { .. } => "distributed",
             Mode::Hosts { .. } => "hosts",
+            Mode::Tls { .. } => "distributed-tls",
         }
     }
 
@@ -110,15 +127,32 @@ impl Mode {
     fn hub(&self) -> Result<String, LaunchError> {
         match self {
             Mode::Hosts { hosts, .. } => Ok(format!("tcp/{}:{HUB_PORT}", hosts.addr(COORDINATOR_HOST).map_err(|e| LaunchError::Hosts(e.to_string()))?)),
+            Mode::Tls { .. } => Ok(format!("tls/127.0.0.1:{}", free_port()?)),
             _ => Ok(format!("tcp/127.0.0.1:{}", free_port()?)),
         }
     }
 
     /// The Zenoh arguments of a process on `host` (`None`: this one) connecting to `hub`.
-    fn zenoh_args(&self, host: Option<&str>, hub: &str) -> Result<ZenohArgs, LaunchError> {
+    fn zenoh_args(&self, host: Option<&str>, hub: &str, ids: &TeamIds) -> Result<ZenohArgs, LaunchError> {
         match self {
             Mode::Hosts { hosts, .. } => hosts.zenoh_args(host, hub).map_err(|e| LaunchError::Hosts(e.to_string())),
+            Mode::Tls { dir, certs } => {
+                let identity = match host {
+                    None => Identity::Runner,
+                    Some(SIM_HOST) => Identity::SimBridge,
+                    Some(robot) => Identity::Agent(robot.to_string()),
+                };
+                secure_args(dir, certs, ids, identity, "tls/127.0.0.1:0", Some(hub))
+            }
             _ => Ok(ZenohArgs::connecting(hub)),
+        }
+    }
+
+    /// The Zenoh arguments of the coordinator, which listens on `hub`.
+    fn hub_args(&self, hub: &str, ids: &TeamIds) -> Result<ZenohArgs, LaunchError> {
+        match self {
+            Mode::Tls { dir, certs } => secure_args(dir, certs, ids, Identity::Coordinator, hub, None),
+            _ => Ok(ZenohArgs::listening(hub)),
         }
     }
 
@@ -129,6 +163,17 @@ impl Mode {
             _ => spawn(bin, args, what),
         }
     }
+}
+
+/// Write `identity`'s Zenoh configuration (mutual TLS, the team's ACL) into `dir` and return
+/// the arguments that use it.
+fn secure_args(dir: &Path, certs: &Path, ids: &TeamIds, identity: Identity, listen: &str, connect: Option<&str>) -> Result<ZenohArgs, LaunchError> {
+    let mut cfg = SecureConfig::in_dir(certs, &ids.team, &ids.robots, identity);
+    cfg.listen = vec![listen.to_string()];
+    cfg.connect = connect.map(|c| vec![c.to_string()]).unwrap_or_default();
+    let path = dir.join(protocol::access::file_name(&cfg.identity));
+    cfg.write(&path)?;
+    Ok(ZenohArgs { config: Some(path), ..Default::default() })
 }
 
 /// The coordinator of a run.
@@ -305,14 +350,15 @@ impl Launch {
                 }
                 Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect: ZenohArgs::default(), tasks, processes: Vec::new() })
             }
-            Mode::Distributed { dir } | Mode::Hosts { dir, .. } => {
+            Mode::Distributed { dir } | Mode::Hosts { dir, .. } | Mode::Tls { dir, .. } => {
                 let hub = mode.hub()?;
-                let mut processes = vec![mode.spawn(COORDINATOR_HOST, "coordinator", &self.coordinator.to_cli(dir, &ZenohArgs::listening(&hub))?, "coordinator")?];
-                let session = transport::open(&mode.zenoh_args(None, &hub)?, Role::Member).await?;
+                let ids = TeamIds { team: self.coordinator.team.clone(), robots: self.agents.iter().map(|a| a.id.clone()).collect() };
+                let mut processes = vec![mode.spawn(COORDINATOR_HOST, "coordinator", &self.coordinator.to_cli(dir, &mode.hub_args(&hub, &ids)?)?, "coordinator")?];
+                let session = transport::open(&mode.zenoh_args(None, &hub, &ids)?, Role::Member).await?;
                 for a in &self.agents {
-                    processes.push(mode.spawn(&a.id, "robot-agent", &a.to_cli(&mode.zenoh_args(Some(&a.id), &hub)?), &format!("robot-agent {}", a.id))?);
+                    processes.push(mode.spawn(&a.id, "robot-agent", &a.to_cli(&mode.zenoh_args(Some(&a.id), &hub, &ids)?), &format!("robot-agent {}", a.id))?);
                 }
-                let connect = mode.zenoh_args(Some(SIM_HOST), &hub)?;
+                let connect = mode.zenoh_args(Some(SIM_HOST), &hub, &ids)?;
                 Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect, tasks: Vec::new(), processes })
             }
         }
@@ -343,7 +389,7 @@ impl Running {
     pub async fn run_bridge(&mut self, bridge: &BridgeArgs) -> Result<BridgeOutcome, LaunchError> {
         let result = match &self.mode {
             Mode::Embedded => self.run_bridge_here(bridge).await,
-            Mode::Distributed { dir } | Mode::Hosts { dir, .. } => {
+            Mode::Distributed { dir } | Mode::Hosts { dir, .. } | Mode::Tls { dir, .. } => {
                 let mut child = self.mode.spawn(SIM_HOST, "sim-bridge", &bridge.to_cli(dir, &self.connect)?, "sim-bridge")?;
                 tokio::task::spawn_blocking(move || child.wait_success())
                     .await

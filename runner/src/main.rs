@@ -41,6 +41,10 @@ enum Command {
         /// namespace, made for the run by scripts/testhosts.sh and removed after it; root).
         #[arg(long)]
         hosts: bool,
+        /// Run distributed on loopback over mutual TLS with the team's access control, with the
+        /// certificates in DIR (make them with scripts/make-test-certs.sh DIR r1 r2 ...).
+        #[arg(long, value_name = "DIR", conflicts_with = "hosts")]
+        tls: Option<PathBuf>,
         /// Report folder (default: reports/<scenario file name>).
         #[arg(long)]
         out: Option<PathBuf>,
@@ -77,6 +81,25 @@ enum Command {
         wait: f64,
         #[command(flatten)]
         zenoh: protocol::transport::ZenohArgs,
+    },
+    /// Write every identity's Zenoh configuration (mutual TLS, the team's access control) into
+    /// a folder: zenoh-coordinator.json5, zenoh-r1.json5, ..., zenoh-tool.json5, for any binary's
+    /// --zenoh-config. Make the certificates first: scripts/make-test-certs.sh CERTS r1 r2.
+    ZenohConfig {
+        /// Folder of the certificates (ca.pem, IDENTITY.pem, IDENTITY.key); written into the
+        /// files as given (a relative path is resolved from each component's working directory).
+        certs: PathBuf,
+        /// Robot ids, comma separated.
+        #[arg(long, value_delimiter = ',', default_value = "r1,r2")]
+        robots: Vec<String>,
+        #[arg(long, default_value = "team")]
+        team: String,
+        /// The coordinator's endpoint: it listens there, the others connect to it.
+        #[arg(long, default_value = "tls/127.0.0.1:7447")]
+        hub: String,
+        /// Output folder.
+        #[arg(long, default_value = "config/zenoh")]
+        out: PathBuf,
     },
     /// Run scenarios with several controllers side by side (experiment S3: `team compare
     /// scenarios/s3_hold.toml scenarios/s1_torso_and_object.toml --controllers pidc,mqp`):
@@ -145,6 +168,9 @@ enum Command {
         /// Run every component as its own process on loopback instead of one process.
         #[arg(long)]
         distributed: bool,
+        /// Distributed over mutual TLS with the team's access control, certificates in DIR.
+        #[arg(long, value_name = "DIR")]
+        tls: Option<PathBuf>,
     },
 }
 
@@ -154,8 +180,8 @@ fn main() -> Result<()> {
         .with_writer(std::io::stderr)
         .init();
     match Cli::parse().command {
-        Command::Run { scenario, set, distributed, hosts, out, quiet, live } => {
-            let mode_name = if hosts { "hosts" } else if distributed { "distributed" } else { "embedded" };
+        Command::Run { scenario, set, distributed, hosts, tls, out, quiet, live } => {
+            let mode_name = if hosts { "hosts" } else if tls.is_some() { "distributed-tls" } else if distributed { "distributed" } else { "embedded" };
             let s = Scenario::load(&scenario, &set)?;
             let stem = scenario.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scenario".into());
             let dir = out.unwrap_or_else(|| PathBuf::from("reports").join(stem));
@@ -173,7 +199,7 @@ fn main() -> Result<()> {
             );
             let source = ScenarioSource::read(&scenario, &set).map_err(|e| anyhow::anyhow!("reading {}: {e}", scenario.display()))?;
             let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live };
-            let (records, recording) = scenario_run::run_recorded(&plan, &RunOptions { distributed, hosts, progress: !quiet }, &dir, Some(&rec))?;
+            let (records, recording) = scenario_run::run_recorded_secure(&plan, &RunOptions { distributed, hosts, progress: !quiet }, tls.as_deref(), &dir, Some(&rec))?;
             let eval = evaluate::evaluate(&plan, &records, mode_name);
             evaluate::write_report(&plan, &eval, &dir)?;
             plots::write_all(&plan, &eval, &records, &dir)?;
@@ -231,7 +257,12 @@ fn main() -> Result<()> {
                 result.map(|_| ()).map_err(anyhow::Error::from)
             })?;
         }
-        Command::Smoke { robots, ticks, joints, distributed } => {
+        Command::ZenohConfig { certs, robots, team, hub, out } => {
+            for path in protocol::access::write_team(&certs, &team, &robots, &hub, &out)? {
+                println!("{}", path.display());
+            }
+        }
+        Command::Smoke { robots, ticks, joints, distributed, tls } => {
             anyhow::ensure!((1..=64).contains(&robots), "--robots must be between 1 and 64");
             anyhow::ensure!(joints > 0, "--joints must be positive");
             let cfg = SmokeConfig {
@@ -244,7 +275,12 @@ fn main() -> Result<()> {
                 v0: 0.5,
             };
             let dir = std::env::temp_dir().join(format!("team-smoke-{}", std::process::id()));
-            let mode = if distributed { Mode::Distributed { dir: dir.clone() } } else { Mode::Embedded };
+            let distributed = distributed || tls.is_some();
+            let mode = match tls {
+                Some(certs) => Mode::Tls { dir: dir.clone(), certs },
+                None if distributed => Mode::Distributed { dir: dir.clone() },
+                None => Mode::Embedded,
+            };
             if distributed {
                 std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
             }

@@ -76,11 +76,26 @@ pub fn run(plan: &Plan, opts: &RunOptions, out: &Path) -> Result<Records, RunErr
 
 /// [`run`], recording the run as MCAP (and serving it live) when `record` is given.
 pub fn run_recorded(plan: &Plan, opts: &RunOptions, out: &Path, record: Option<&RecordOptions>) -> Result<(Records, Option<RecordingSummary>), RunError> {
+    run_recorded_secure(plan, opts, None, out, record)
+}
+
+/// [`run_recorded`]; with `tls`, distributed on loopback over mutual TLS with the team's
+/// access control ([`Mode::Tls`]), the certificates in that folder
+/// (`scripts/make-test-certs.sh DIR ROBOT...`; README "Access control (mutual TLS and ACL)").
+pub fn run_recorded_secure(
+    plan: &Plan,
+    opts: &RunOptions,
+    tls: Option<&Path>,
+    out: &Path,
+    record: Option<&RecordOptions>,
+) -> Result<(Records, Option<RecordingSummary>), RunError> {
     let rt = tokio::runtime::Runtime::new().map_err(|e| RunError::Task { what: "starting the async runtime".into(), reason: e.to_string() })?;
     let mode = if opts.hosts {
         let ids: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
         let hosts = TestHosts::up(&crate::launch::host_names(&ids)).map_err(|e| RunError::Task { what: "making the test hosts".into(), reason: e.to_string() })?;
         Mode::Hosts { dir: out.to_path_buf(), hosts: std::sync::Arc::new(hosts) }
+    } else if let Some(certs) = tls {
+        Mode::Tls { dir: out.to_path_buf(), certs: certs.to_path_buf() }
     } else if opts.distributed {
         Mode::Distributed { dir: out.to_path_buf() }
     } else {

@@ -1,0 +1,414 @@
+//! Access control: Zenoh configurations with mutual TLS and an access-control list (ACL) that
+//! says, per identity, which keys it may publish and subscribe to.
+//!
+//! An identity is the common name (CN) of the certificate a component presents
+//! ([`Identity`]): `coordinator`, each robot's id (its agent), `sim-bridge`, `runner` (the
+//! scenario driver: references, contact sets, perturbations, evaluation) and `tool` (read-only:
+//! status and diagnostics). [`grants`] lists, from [`crate::keys`], what each may do:
+//!
+//! | identity | publishes (put) | subscribes to | liveliness |
+//! | --- | --- | --- | --- |
+//! | `coordinator` | `robot/*/command`, `coordinator/{status,diagnostics}` | `robot/*/{dynamics,description}`, `references` | declares `coordinator/alive`, watches `member/*` |
+//! | robot `rN` | `robot/rN/{dynamics,torque,status,description}` | `robot/rN/{state,command,contacts}` | declares `member/rN`, watches `coordinator/alive` |
+//! | `sim-bridge` | `robot/*/state`, `ground-truth` | `robot/*/torque`, `perturbation`, `coordinator/status` | watches `member/*`, `coordinator/alive` |
+//! | `runner` | `references`, `robot/*/contacts`, `perturbation` | every robot key, `coordinator/{status,diagnostics}`, `ground-truth` | watches `member/*`, `coordinator/alive` |
+//! | `tool` | nothing | `robot/*/status`, `coordinator/{status,diagnostics}` | none |
+//!
+//! (keys under `team/{team}/`). [`access_control`] turns the grants into Zenoh's
+//! `access_control` section, default deny. Zenoh enforces it on every node, per link, against
+//! the certificate name of the node at the other end: *ingress* rules say what a remote may
+//! send us (its puts, its liveliness tokens) and which subscriptions it may declare to us (so
+//! that we never route to it what it may not read); *egress* rules say what we may send it
+//! (puts and tokens only on keys it may read). Declarations that we send out (our own
+//! subscriptions) are allowed towards every team identity. Every component runs the same
+//! section, so a message is checked at both ends of each link: a component that runs without
+//! it (or with a forged configuration) still cannot get anything past the others.
+//!
+//! Peers in peer mode do not route for each other, so the remote at the end of a link is the
+//! origin of what it sends. A Zenoh router in between would be the remote of every message
+//! (its certificate name, not the origin's): use peer mode, as the team does, or enforce the
+//! ACL on the router.
+//!
+//! [`SecureConfig`] writes one component's whole Zenoh configuration: peer mode, multicast
+//! scouting off, TLS endpoints, the certificate files ([`TlsFiles`]: CA, certificate, key;
+//! `enable_mtls`, so that a node without a certificate from the CA cannot open a link) and the
+//! ACL. `scripts/make-test-certs.sh` makes test certificates with these names.
+
+use std::path::{Path, PathBuf};
+
+use serde_json::{json, Value};
+use thiserror::Error;
+
+use crate::keys::{self, RobotTopic};
+use crate::ProtocolError;
+
+/// Errors building an access-controlled configuration.
+#[derive(Debug, Error)]
+pub enum AccessError {
+    #[error(transparent)]
+    Key(#[from] ProtocolError),
+    #[error("robot id {0:?} is the name of another identity (coordinator, sim-bridge, runner, tool)")]
+    ReservedRobotId(String),
+    #[error("{what} {path} is missing (make test certificates with scripts/make-test-certs.sh DIR ROBOT...)")]
+    MissingFile { what: &'static str, path: PathBuf },
+    #[error("cannot write {path}: {reason}")]
+    Write { path: PathBuf, reason: String },
+    #[error("the configuration for {identity} is not a valid Zenoh configuration: {reason}")]
+    Invalid { identity: String, reason: String },
+}
+
+/// Names that robots may not take: they are the other identities' certificate names.
+pub const RESERVED: [&str; 4] = ["coordinator", "sim-bridge", "runner", "tool"];
+
+/// Who a component is: the common name of its certificate.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub enum Identity {
+    Coordinator,
+    /// A robot's agent, by robot id.
+    Agent(String),
+    SimBridge,
+    /// The scenario driver (`team run`): references, contact sets, perturbations, evaluation.
+    Runner,
+    /// A read-only tool: status and diagnostics.
+    Tool,
+}
+
+impl Identity {
+    /// The identity a certificate common name stands for (any other name is a robot's).
+    pub fn from_name(name: &str) -> Result<Self, AccessError> {
+        Ok(match name {
+            "coordinator" => Identity::Coordinator,
+            "sim-bridge" => Identity::SimBridge,
+            "runner" => Identity::Runner,
+            "tool" => Identity::Tool,
+            robot => {
+                crate::validate_id("robot", robot)?;
+                Identity::Agent(robot.to_string())
+            }
+        })
+    }
+
+    /// The certificate common name.
+    pub fn name(&self) -> &str {
+        match self {
+            Identity::Coordinator => "coordinator",
+            Identity::Agent(r) => r,
+            Identity::SimBridge => "sim-bridge",
+            Identity::Runner => "runner",
+            Identity::Tool => "tool",
+        }
+    }
+
+    /// Every identity of a team with these robots.
+    pub fn all(robots: &[String]) -> Vec<Identity> {
+        let mut out = vec![Identity::Coordinator, Identity::SimBridge, Identity::Runner, Identity::Tool];
+        out.extend(robots.iter().cloned().map(Identity::Agent));
+        out
+    }
+}
+
+/// What one identity may do, as key expressions (wildcards allowed).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Grants {
+    /// Keys it may publish (put and delete).
+    pub puts: Vec<String>,
+    /// Keys it may subscribe to (declare a subscriber, receive puts).
+    pub gets: Vec<String>,
+    /// Liveliness tokens it may declare.
+    pub tokens: Vec<String>,
+    /// Liveliness tokens it may watch.
+    pub watches: Vec<String>,
+}
+
+/// What `who` may do in `team`.
+pub fn grants(team: &str, who: &Identity) -> Result<Grants, AccessError> {
+    use RobotTopic as T;
+    let all = |t| keys::all_robots(team, t);
+    let members = keys::all_members(team)?;
+    let alive = keys::coordinator_alive(team)?;
+    Ok(match who {
+        Identity::Coordinator => Grants {
+            puts: vec![all(T::Command)?, keys::coordinator_status(team)?, keys::diagnostics(team)?],
+            gets: vec![all(T::Dynamics)?, all(T::Description)?, keys::references(team)?],
+            tokens: vec![alive],
+            watches: vec![members],
+        },
+        Identity::Agent(robot) => {
+            if RESERVED.contains(&robot.as_str()) {
+                return Err(AccessError::ReservedRobotId(robot.clone()));
+            }
+            let own = |t| keys::robot(team, robot, t);
+            Grants {
+                puts: vec![own(T::Dynamics)?, own(T::Torque)?, own(T::Status)?, own(T::Description)?],
+                gets: vec![own(T::State)?, own(T::Command)?, own(T::Contacts)?],
+                tokens: vec![keys::member(team, robot)?],
+                watches: vec![alive],
+            }
+        }
+        Identity::SimBridge => Grants {
+            puts: vec![all(T::State)?, keys::ground_truth(team)?],
+            gets: vec![all(T::Torque)?, keys::perturbation(team)?, keys::coordinator_status(team)?],
+            tokens: Vec::new(),
+            watches: vec![members, alive],
+        },
+        Identity::Runner => Grants {
+            puts: vec![keys::references(team)?, all(T::Contacts)?, keys::perturbation(team)?],
+            gets: runner_gets(team)?,
+            tokens: Vec::new(),
+            watches: vec![members, alive],
+        },
+        Identity::Tool => Grants {
+            puts: Vec::new(),
+            gets: vec![all(T::Status)?, keys::coordinator_status(team)?, keys::diagnostics(team)?],
+            tokens: Vec::new(),
+            watches: Vec::new(),
+        },
+    })
+}
+
+/// The runner evaluates and records the run: it reads every robot key and the coordinator's.
+fn runner_gets(team: &str) -> Result<Vec<String>, AccessError> {
+    use RobotTopic as T;
+    let mut gets = Vec::new();
+    for t in [T::State, T::Dynamics, T::Command, T::Torque, T::Status, T::Description, T::Contacts] {
+        gets.push(keys::all_robots(team, t)?);
+    }
+    gets.extend([keys::coordinator_status(team)?, keys::diagnostics(team)?, keys::ground_truth(team)?]);
+    Ok(gets)
+}
+
+/// One ACL rule: messages, flows and keys, allowed.
+fn rule(id: String, messages: &[&str], flow: &str, keys: &[String]) -> Value {
+    json!({ "id": id, "messages": messages, "flows": [flow], "permission": "allow", "key_exprs": keys })
+}
+
+/// The rules of one identity, as seen by the node at the other end of its links.
+fn identity_rules(team: &str, who: &Identity) -> Result<Vec<Value>, AccessError> {
+    let g = grants(team, who)?;
+    let n = who.name();
+    let mut rules = Vec::new();
+    let mut add = |suffix: &str, messages: &[&str], flow: &str, keys: &[String]| {
+        if !keys.is_empty() {
+            rules.push(rule(format!("{n}/{suffix}"), messages, flow, keys));
+        }
+    };
+    add("puts", &["put", "delete"], "ingress", &g.puts);
+    add("receives", &["put", "delete"], "egress", &g.gets);
+    add("subscribes", &["declare_subscriber"], "ingress", &g.gets);
+    add("tokens", &["liveliness_token"], "ingress", &g.tokens);
+    add("sees-tokens", &["liveliness_token"], "egress", &g.watches);
+    add("watches", &["declare_liveliness_subscriber", "liveliness_query"], "ingress", &g.watches);
+    Ok(rules)
+}
+
+/// Zenoh's `access_control` section for a team with these robots: default deny, one subject
+/// per identity (by certificate common name), each identity's grants as rules.
+pub fn access_control(team: &str, robots: &[String]) -> Result<Value, AccessError> {
+    let identities = Identity::all(robots);
+    let mut rules = Vec::new();
+    let mut subjects = Vec::new();
+    let mut policies = Vec::new();
+    for who in &identities {
+        let own = identity_rules(team, who)?;
+        let ids: Vec<Value> = own.iter().map(|r| r["id"].clone()).collect();
+        rules.extend(own);
+        subjects.push(json!({ "id": who.name(), "cert_common_names": [who.name()] }));
+        if !ids.is_empty() {
+            policies.push(json!({ "id": who.name(), "rules": ids, "subjects": [who.name()] }));
+        }
+    }
+    // Our own declarations (subscribers, liveliness subscribers) go out to every team member:
+    // a declaration carries no data, and the remote checks it against its own rules.
+    let everything = keys::everything(team)?;
+    rules.push(rule("declarations".into(), &["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"], "egress", &[everything]));
+    let names: Vec<&str> = identities.iter().map(Identity::name).collect();
+    policies.push(json!({ "id": "declarations", "rules": ["declarations"], "subjects": names }));
+    Ok(json!({ "enabled": true, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies }))
+}
+
+/// The CA, certificate and key of one identity.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TlsFiles {
+    pub root_ca: PathBuf,
+    pub certificate: PathBuf,
+    pub private_key: PathBuf,
+}
+
+impl TlsFiles {
+    /// The files `scripts/make-test-certs.sh DIR` writes for `who`: `DIR/ca.pem`,
+    /// `DIR/{name}.pem`, `DIR/{name}.key`.
+    pub fn in_dir(dir: &Path, who: &Identity) -> Self {
+        TlsFiles {
+            root_ca: dir.join("ca.pem"),
+            certificate: dir.join(format!("{}.pem", who.name())),
+            private_key: dir.join(format!("{}.key", who.name())),
+        }
+    }
+
+    /// An error naming the first file that is missing.
+    pub fn check(&self) -> Result<(), AccessError> {
+        for (what, path) in [("CA certificate", &self.root_ca), ("certificate", &self.certificate), ("private key", &self.private_key)] {
+            if !path.is_file() {
+                return Err(AccessError::MissingFile { what, path: path.clone() });
+            }
+        }
+        Ok(())
+    }
+
+    /// Zenoh's `transport/link/tls` section: the same certificate for both ends of a link,
+    /// mutual TLS, the peer's name checked against its certificate.
+    pub fn tls_section(&self) -> Value {
+        let s = |p: &PathBuf| p.display().to_string();
+        json!({
+            "root_ca_certificate": s(&self.root_ca),
+            "listen_certificate": s(&self.certificate),
+            "listen_private_key": s(&self.private_key),
+            "connect_certificate": s(&self.certificate),
+            "connect_private_key": s(&self.private_key),
+            "enable_mtls": true,
+            "verify_name_on_connect": true,
+        })
+    }
+}
+
+/// One component's Zenoh configuration with mutual TLS and the team's ACL.
+#[derive(Debug, Clone)]
+pub struct SecureConfig {
+    pub team: String,
+    pub robots: Vec<String>,
+    pub identity: Identity,
+    pub tls: TlsFiles,
+    /// `tls/HOST:PORT` endpoints (flags given to the binary override them).
+    pub listen: Vec<String>,
+    pub connect: Vec<String>,
+}
+
+impl SecureConfig {
+    /// The configuration with the identity's files from `dir` (see [`TlsFiles::in_dir`]),
+    /// listening on a random loopback TLS port and connecting nowhere.
+    pub fn in_dir(dir: &Path, team: &str, robots: &[String], identity: Identity) -> Self {
+        let tls = TlsFiles::in_dir(dir, &identity);
+        SecureConfig {
+            team: team.to_string(),
+            robots: robots.to_vec(),
+            identity,
+            tls,
+            listen: vec!["tls/127.0.0.1:0".into()],
+            connect: Vec::new(),
+        }
+    }
+
+    /// The configuration as JSON (which is JSON5).
+    pub fn to_json(&self) -> Result<Value, AccessError> {
+        Ok(json!({
+            "mode": "peer",
+            "listen": { "endpoints": self.listen },
+            "connect": { "endpoints": self.connect },
+            "scouting": { "multicast": { "enabled": false } },
+            "transport": { "link": { "tls": self.tls.tls_section() } },
+            "access_control": access_control(&self.team, &self.robots)?,
+        }))
+    }
+
+    /// The configuration as a Zenoh configuration (checks that Zenoh accepts it).
+    pub fn to_zenoh(&self) -> Result<zenoh::Config, AccessError> {
+        let invalid = |reason: String| AccessError::Invalid { identity: self.identity.name().to_string(), reason };
+        let text = serde_json::to_string(&self.to_json()?).map_err(|e| invalid(e.to_string()))?;
+        zenoh::Config::from_json5(&text).map_err(|e| invalid(e.to_string()))
+    }
+
+    /// Check the certificate files and write the configuration to `path` (pretty JSON, which
+    /// `--zenoh-config` reads as JSON5).
+    pub fn write(&self, path: &Path) -> Result<(), AccessError> {
+        self.tls.check()?;
+        self.to_zenoh()?;
+        let text = serde_json::to_string_pretty(&self.to_json()?).map_err(|e| AccessError::Write { path: path.to_path_buf(), reason: e.to_string() })?;
+        std::fs::write(path, text + "\n").map_err(|e| AccessError::Write { path: path.to_path_buf(), reason: e.to_string() })
+    }
+}
+
+/// The configurations of every identity of a team, the certificates named from `certs` as
+/// given (a relative path stays relative: Zenoh resolves it from the component's working
+/// directory). The coordinator listens on `hub`; the others listen on a random loopback TLS
+/// port and connect to `hub`.
+pub fn team_configs(certs: &Path, team: &str, robots: &[String], hub: &str) -> Vec<SecureConfig> {
+    let mut out = Vec::new();
+    for who in Identity::all(robots) {
+        let mut cfg = SecureConfig::in_dir(certs, team, robots, who);
+        if cfg.identity == Identity::Coordinator {
+            cfg.listen = vec![hub.to_string()];
+        } else {
+            cfg.connect = vec![hub.to_string()];
+        }
+        out.push(cfg);
+    }
+    out
+}
+
+/// The file name of an identity's configuration: `zenoh-{identity}.json5`.
+pub fn file_name(who: &Identity) -> String {
+    format!("zenoh-{}.json5", who.name())
+}
+
+/// Write [`team_configs`] into `out` ([`file_name`]); returns the files written.
+pub fn write_team(certs: &Path, team: &str, robots: &[String], hub: &str, out: &Path) -> Result<Vec<PathBuf>, AccessError> {
+    std::fs::create_dir_all(out).map_err(|e| AccessError::Write { path: out.to_path_buf(), reason: e.to_string() })?;
+    let mut written = Vec::new();
+    for cfg in team_configs(certs, team, robots, hub) {
+        let path = out.join(file_name(&cfg.identity));
+        cfg.write(&path)?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn robots() -> Vec<String> {
+        vec!["r1".into(), "r2".into()]
+    }
+
+    #[test]
+    fn agents_publish_only_their_own_keys() {
+        let g = grants("t", &Identity::Agent("r2".into())).unwrap();
+        assert!(g.puts.iter().all(|k| k.starts_with("team/t/robot/r2/")), "{:?}", g.puts);
+        assert!(!g.puts.iter().any(|k| k.ends_with("/state") || k.ends_with("/command")));
+        assert_eq!(g.tokens, vec!["team/t/member/r2".to_string()]);
+        assert!(g.gets.contains(&"team/t/robot/r2/command".to_string()));
+        assert!(g.gets.iter().all(|k| k.starts_with("team/t/robot/r2/")));
+    }
+
+    #[test]
+    fn only_the_coordinator_publishes_commands() {
+        for who in Identity::all(&robots()) {
+            let g = grants("t", &who).unwrap();
+            let commands = g.puts.iter().any(|k| k.ends_with("/command"));
+            assert_eq!(commands, who == Identity::Coordinator, "{who:?}: {:?}", g.puts);
+        }
+        let tool = grants("t", &Identity::Tool).unwrap();
+        assert!(tool.puts.is_empty() && tool.tokens.is_empty());
+    }
+
+    #[test]
+    fn reserved_and_bad_names_are_refused() {
+        assert!(matches!(grants("t", &Identity::Agent("tool".into())), Err(AccessError::ReservedRobotId(_))));
+        assert!(access_control("t", &["coordinator".to_string()]).is_err());
+        assert!(Identity::from_name("a/b").is_err());
+        assert_eq!(Identity::from_name("sim-bridge").unwrap(), Identity::SimBridge);
+        assert_eq!(Identity::from_name("r7").unwrap(), Identity::Agent("r7".into()));
+        assert!(access_control("bad team", &robots()).is_err());
+    }
+
+    #[test]
+    fn zenoh_accepts_the_configuration() {
+        let cfg = SecureConfig::in_dir(Path::new("/certs"), "t", &robots(), Identity::Agent("r1".into()));
+        let z = cfg.to_zenoh().unwrap();
+        assert_eq!(z.get_json("access_control/default_permission").unwrap(), "\"deny\"");
+        assert_eq!(z.get_json("transport/link/tls/enable_mtls").unwrap(), "true");
+        assert!(z.get_json("transport/link/tls/connect_certificate").unwrap().contains("/certs/r1.pem"));
+        let missing = cfg.write(Path::new("/nonexistent/zenoh.json5"));
+        assert!(matches!(missing, Err(AccessError::MissingFile { .. })), "{missing:?}");
+    }
+}
