@@ -15,9 +15,9 @@
 //! path puts it at the end of the cycle, pressing `touchdown_depth` below it, and is loaded
 //! again (`t_load`). A last shift brings each torso to its last waypoint.
 
-use nalgebra::{Isometry3, Rotation2, Translation3, Vector2, Vector3};
+use nalgebra::{Isometry3, Translation3, Vector2, Vector3};
 
-use super::support::{centre_of_pressure, margin, shift_into, HandLoad};
+use super::support::{along, centre_of_pressure, incentre, margin, HandLoad};
 use super::swing::{quintic, swing};
 use super::{GaitError, GaitParams, WalkingRobot};
 
@@ -145,9 +145,6 @@ fn check(robots: &[WalkingRobot], object: Option<&[Isometry3<f64>]>) -> Result<u
         if !(r.mass.is_finite() && r.mass > 0.0) {
             return Err(bad(format!("mass {} kg must be positive", r.mass)));
         }
-        if !(r.com_gain.iter().all(|x| x.is_finite()) && r.com_gain.determinant() > 1e-3) {
-            return Err(bad(format!("the CoM's shift gain {:?} must be finite and invertible", r.com_gain)));
-        }
         // The feet must carry some weight wherever the object takes the hand's load.
         let object_at = |k: usize| object.map_or(Isometry3::identity(), |o| o[k.min(o.len().saturating_sub(1))] * o[0].inverse());
         for k in 0..count {
@@ -209,8 +206,10 @@ fn hand_load(r: &WalkingRobot, object: Option<&[Isometry3<f64>]>, at: PathAt) ->
 }
 
 /// Robot `r`'s step of `foot` with its feet at `feet`, the path at `at`; `None` when no shift
-/// reaches the margin. The torso is shifted so that the centre of pressure (its weight and
-/// the hand's load, which stays on the object) is `margin` inside the other three feet.
+/// reaches the margin. The torso is shifted towards the incentre of the other three feet until
+/// both the centre of mass and the centre of pressure (its weight and the hand's load, which
+/// stays on the object) are `margin` inside: the CoM so that the robot stands if the team lets
+/// go mid-step, the centre of pressure while it holds. The reported margin is the lesser.
 fn place(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], foot: usize, at: PathAt, object: Option<&[Isometry3<f64>]>, p: &GaitParams) -> Option<Placement> {
     let (a, b) = (&r.waypoints[at.k], &r.waypoints[at.k + 1]);
     let nominal = interp(a, b, at.progress);
@@ -219,14 +218,19 @@ fn place(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], foot
     let others: Vec<Vector2<f64>> = (0..4).filter(|f| *f != foot).map(|f| feet[f].xy()).collect();
     let tri = [others[0], others[1], others[2]];
     let com = (nominal * nalgebra::Point3::from(r.com_offset)).coords;
-    let (cop, gain) = centre_of_pressure(r.mass, &com, hand_load(r, object, at).as_ref(), r.ground_z)?;
-    // A torso shift `d` moves the CoM by `com_gain d` (turned with the torso's yaw), the
-    // centre of pressure `gain` times that.
-    let yaw = Rotation2::new(nominal.rotation.euler_angles().2).into_inner();
-    let moves = gain * yaw * r.com_gain * yaw.transpose();
-    let d_cop = shift_into(&cop, &tri, p.margin)?;
-    let d = moves.try_inverse()? * d_cop;
-    Some(Placement { target: Translation3::new(d.x, d.y, 0.0) * nominal, to: to.coords, shift: d.norm(), margin: margin(&(cop + d_cop), &tri) })
+    let load = if p.hand_load { hand_load(r, object, at) } else { None };
+    let (cop, gain) = centre_of_pressure(r.mass, &com, load.as_ref(), r.ground_z)?;
+    // A shift `alpha dir` moves the CoM by that, the centre of pressure `gain` times as far.
+    let dir = incentre(&tri).0 - com.xy();
+    let (lo_com, hi_com) = along(&com.xy(), &dir, &tri, p.margin)?;
+    let (lo_cop, hi_cop) = along(&cop, &(gain * dir), &tri, p.margin)?;
+    let alpha = lo_com.max(lo_cop);
+    if alpha > hi_com.min(hi_cop) {
+        return None;
+    }
+    let d = alpha * dir;
+    let least = margin(&(com.xy() + d), &tri).min(margin(&(cop + gain * d), &tri));
+    Some(Placement { target: Translation3::new(d.x, d.y, 0.0) * nominal, to: to.coords, shift: d.norm(), margin: least })
 }
 
 /// The foot order of robot `i` in segment `k` (`n` cycles): of the 24, the one whose first

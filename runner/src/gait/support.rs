@@ -1,7 +1,7 @@
 //! The support triangle of a crawl (the three feet on the ground while one swings): where the
 //! ground pushes a standing robot that also carries a load in its hand ([`centre_of_pressure`]),
-//! how far a point lies inside the triangle ([`margin`]) and the smallest horizontal shift that
-//! puts it a given margin inside ([`shift_into`]).
+//! how far a point lies inside the triangle ([`margin`]) and how far along a line it must move
+//! to be a given margin inside ([`along`]).
 
 use nalgebra::{Isometry3, Vector2, Vector3};
 use protocol::conventions::GRAVITY;
@@ -73,25 +73,25 @@ pub fn incentre(tri: &[Vector2<f64>; 3]) -> (Vector2<f64>, f64) {
     (centre, margin(&centre, tri))
 }
 
-/// The smallest shift `d` along the line from `p` to the incentre with `margin(p + d) >=
-/// required`, or `None` when even the incentre is not that deep (its inradius). Each edge's
-/// distance is affine along the line, so the shift is the largest of the edges' needs.
-pub fn shift_into(p: &Vector2<f64>, tri: &[Vector2<f64>; 3], required: f64) -> Option<Vector2<f64>> {
-    let (centre, inradius) = incentre(tri);
-    if inradius < required {
-        return None;
-    }
+/// The least `alpha >= 0` with `margin(p + alpha dir) >= required`, and the largest for which
+/// that still holds (`None` when no `alpha` does): each edge's distance is affine in `alpha`.
+pub fn along(p: &Vector2<f64>, dir: &Vector2<f64>, tri: &[Vector2<f64>; 3], required: f64) -> Option<(f64, f64)> {
     let area2 = (tri[1] - tri[0]).perp(&(tri[2] - tri[0]));
     let sign = if area2 >= 0.0 { 1.0 } else { -1.0 };
-    let mut alpha: f64 = 0.0;
+    let (mut lo, mut hi): (f64, f64) = (0.0, f64::INFINITY);
     for k in 0..3 {
         let (a, b) = (tri[k], tri[(k + 1) % 3]);
         let e = b - a;
-        let dist = |x: &Vector2<f64>| sign * e.perp(&(x - a)) / e.norm().max(1e-12);
-        let (dp, dc) = (dist(p), dist(&centre));
-        if dp < required && dc > dp {
-            alpha = alpha.max((required - dp) / (dc - dp));
+        let (d0, rate) = (sign * e.perp(&(p - a)) / e.norm().max(1e-12), sign * e.perp(dir) / e.norm().max(1e-12));
+        if rate.abs() < 1e-15 {
+            if d0 < required {
+                return None;
+            }
+        } else if rate > 0.0 {
+            lo = lo.max((required - d0) / rate);
+        } else {
+            hi = hi.min((required - d0) / rate);
         }
     }
-    Some((centre - p) * alpha.min(1.0))
+    (lo <= hi).then_some((lo, hi))
 }

@@ -5,7 +5,6 @@
 //! from. [`evaluate`] measures a walk from the ground truth: steps taken, stance feet that
 //! slid, final torso poses.
 
-pub mod com_gain;
 pub mod evaluate;
 pub mod reach;
 pub mod references;
@@ -126,9 +125,8 @@ impl Walk {
             // The feet's contact points: their sphere's lowest points.
             let ground_z = s.feet.iter().map(|f| f.z).sum::<f64>() / s.feet.len().max(1) as f64 - robot.feet.radius;
             let hand = hand_loads.iter().find(|(r, _)| r == id).map(|(_, h)| *h);
-            let com_gain = com_gain::com_shift_gain(robot, &s.q, hand.is_some()).map_err(|reason| WalkError::Robot { robot: id.clone(), reason })?;
-            tracing::debug!(robot = %id, ?com_gain, ?hand, "walk: the CoM's shift gain and the hand's load");
-            inputs.push(WalkingRobot { robot: id.clone(), feet: robot.foot_frames.iter().cloned().zip(s.feet).collect(), com_offset: s.com_in_torso, com_gain, mass: s.mass, ground_z, hand, waypoints });
+            tracing::debug!(robot = %id, ?hand, "walk: the hand's load");
+            inputs.push(WalkingRobot { robot: id.clone(), feet: robot.foot_frames.iter().cloned().zip(s.feet).collect(), com_offset: s.com_in_torso, mass: s.mass, ground_z, hand, waypoints });
             walking.push(walks);
             feet.push(robot.foot_frames.clone());
             let link = |f: &String| robot.model.frame_id(f).ok().and_then(|id| robot.model.parent_link(id)).map(str::to_string).unwrap_or_default();
