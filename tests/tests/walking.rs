@@ -28,7 +28,8 @@ fn assert_walked(plan: &Plan, m: &Metrics) {
     // The simulator's contact forces put the centre of pressure inside, at least a quarter of
     // the planned margin (S2's walking arm, stretched, realises 2.4 cm of 4), and no stance foot
     // comes off the ground while another swings.
-    for (r, m) in &walk.cop_margin_m {
+    // (Not under a push: a push on a leg moves the measured centre of pressure by itself.)
+    for (r, m) in walk.cop_margin_m.iter().filter(|_| plan.scene.perturbations.is_empty()) {
         assert!(*m > 0.25 * margin, "{r}: measured centre of pressure {m:.4} m inside at an unloading, planned {margin}");
     }
     for (r, ms) in &walk.stance_lift_ms {
