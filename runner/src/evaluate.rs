@@ -125,6 +125,9 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
     }
     let refs = &halted;
     let robots: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
+    // Robots whose agent a fault kills: unpowered, they fall; their torso, palm and hand
+    // contact are reported, not judged.
+    let faulted = |r: &String| plan.scenario.faults.iter().any(|f| f.robot == *r);
     let truth: Vec<&GroundTruth> = records.truth.iter().filter(|g| g.object.is_some()).collect();
     let (o_p0, o_q0) = refs.object_start;
 
@@ -200,7 +203,9 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
             let f: f64 = g.hand_contacts.iter().filter(|c| &c.robot == r).map(|c| n.dot(&Vector3::new(c.wrench[0], c.wrench[1], c.wrench[2]))).sum();
             row.push(f);
             squeeze_sum[i] += f;
-            flags.push(g.hand_contacts.iter().any(|c| &c.robot == r));
+            if !faulted(r) {
+                flags.push(g.hand_contacts.iter().any(|c| &c.robot == r));
+            }
             // Where the palm is on the object, and how far it turned on it, since the start.
             let (mut slip_now, mut turn_now) = (0.0, 0.0);
             if let Some(p) = palm {
@@ -313,13 +318,13 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
     let mut checks = Vec::new();
     let mut check = |name: String, value: f64, bound: f64| checks.push(Check { passed: value < bound, name, value, bound });
     check("object never dropped (1 = dropped)".into(), if drop.dropped { 1.0 } else { 0.0 }, 0.5);
-    for (r, s) in &slip_m {
+    for (r, s) in slip_m.iter().filter(|(r, _)| !faulted(r)) {
         check(format!("{r} palm slip [m]"), *s, MAX_SLIP);
     }
     check("object position RMS [m]".into(), object.position_rms_m, MAX_OBJECT_POSITION_RMS);
     check("object orientation RMS [deg]".into(), object.orientation_rms_deg, MAX_OBJECT_ORIENTATION_RMS_DEG);
     let walk = refs.walk.as_ref().map(|w| w.evaluate(&truth, refs.walk_halted_at));
-    for (r, t) in &torsos {
+    for (r, t) in torsos.iter().filter(|(r, _)| !faulted(r)) {
         // A walking torso follows a moving reference: its own bound.
         let i = robots.iter().position(|x| x == r);
         let walking = refs.walk.as_ref().zip(i).is_some_and(|(w, i)| w.walking[i]);

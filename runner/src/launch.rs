@@ -335,6 +335,44 @@ pub struct Running {
     connect: ZenohArgs,
     tasks: Vec<(String, JoinHandle<Result<(), String>>)>,
     processes: Vec<ChildGuard>,
+    /// Each agent's kill switch (the faults' "an agent dies"), by robot id.
+    kills: Vec<(String, AgentKill)>,
+}
+
+/// Kills one agent mid-run (a fault): its task is told to stop, or its process is killed
+/// (SIGKILL: no goodbye, its Zenoh session just ends). Cheap to clone.
+#[derive(Clone)]
+pub enum AgentKill {
+    Task(Arc<watch::Sender<bool>>),
+    Process(Arc<std::sync::Mutex<Option<ChildGuard>>>),
+}
+
+impl AgentKill {
+    pub fn kill(&self) {
+        match self {
+            AgentKill::Task(tx) => {
+                let _ = tx.send(true);
+            }
+            // Dropping the guard kills the process and reaps it.
+            AgentKill::Process(p) => drop(p.lock().map(|mut g| g.take())),
+        }
+    }
+}
+
+/// A stop signal of one component that also turns true with the run's (`all`).
+fn own_stop(all: &watch::Receiver<bool>) -> (Arc<watch::Sender<bool>>, watch::Receiver<bool>) {
+    let (tx, rx) = watch::channel(*all.borrow());
+    let tx = Arc::new(tx);
+    let (forward, mut all) = (tx.clone(), all.clone());
+    tokio::spawn(async move {
+        while !*all.borrow_and_update() {
+            if all.changed().await.is_err() {
+                break;
+            }
+        }
+        let _ = forward.send(true);
+    });
+    (tx, rx)
 }
 
 impl Launch {
@@ -345,21 +383,26 @@ impl Launch {
             Mode::Embedded => {
                 let session = transport::open(&ZenohArgs::default(), Role::Alone).await?;
                 let mut tasks = vec![("coordinator".to_string(), self.coordinator.start_task(&session, stop_rx.clone())?)];
+                let mut kills = Vec::new();
                 for a in &self.agents {
-                    tasks.push((a.id.clone(), a.start_task(&session, stop_rx.clone())?));
+                    let (kill, stop) = own_stop(&stop_rx);
+                    tasks.push((a.id.clone(), a.start_task(&session, stop)?));
+                    kills.push((a.id.clone(), AgentKill::Task(kill)));
                 }
-                Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect: ZenohArgs::default(), tasks, processes: Vec::new() })
+                Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect: ZenohArgs::default(), tasks, processes: Vec::new(), kills })
             }
             Mode::Distributed { dir } | Mode::Hosts { dir, .. } | Mode::Tls { dir, .. } => {
                 let hub = mode.hub()?;
                 let ids = TeamIds { team: self.coordinator.team.clone(), robots: self.agents.iter().map(|a| a.id.clone()).collect() };
-                let mut processes = vec![mode.spawn(COORDINATOR_HOST, "coordinator", &self.coordinator.to_cli(dir, &mode.hub_args(&hub, &ids)?)?, "coordinator")?];
+                let processes = vec![mode.spawn(COORDINATOR_HOST, "coordinator", &self.coordinator.to_cli(dir, &mode.hub_args(&hub, &ids)?)?, "coordinator")?];
                 let session = transport::open(&mode.zenoh_args(None, &hub, &ids)?, Role::Member).await?;
+                let mut kills = Vec::new();
                 for a in &self.agents {
-                    processes.push(mode.spawn(&a.id, "robot-agent", &a.to_cli(&mode.zenoh_args(Some(&a.id), &hub, &ids)?), &format!("robot-agent {}", a.id))?);
+                    let child = mode.spawn(&a.id, "robot-agent", &a.to_cli(&mode.zenoh_args(Some(&a.id), &hub, &ids)?), &format!("robot-agent {}", a.id))?;
+                    kills.push((a.id.clone(), AgentKill::Process(Arc::new(std::sync::Mutex::new(Some(child))))));
                 }
                 let connect = mode.zenoh_args(Some(SIM_HOST), &hub, &ids)?;
-                Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect, tasks: Vec::new(), processes })
+                Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect, tasks: Vec::new(), processes, kills })
             }
         }
     }
@@ -378,6 +421,11 @@ impl Running {
     /// subscriptions here before [`Running::run_bridge`]).
     pub fn session(&self) -> &Session {
         &self.session
+    }
+
+    /// The kill switch of robot `robot`'s agent (`None`: no such agent).
+    pub fn agent_kill(&self, robot: &str) -> Option<AgentKill> {
+        self.kills.iter().find(|(r, _)| r == robot).map(|(_, k)| k.clone())
     }
 
     /// Turns true when the run is being stopped.
@@ -434,6 +482,9 @@ impl Running {
             }
         }
         self.processes.clear();
+        for (_, k) in std::mem::take(&mut self.kills) {
+            k.kill();
+        }
         let _ = self.session.close().await;
         first_error.map_or(Ok(()), Err)
     }

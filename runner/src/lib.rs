@@ -33,6 +33,7 @@ pub mod driver;
 pub mod hosts;
 pub mod echo;
 pub mod evaluate;
+pub mod faults;
 pub mod gait;
 pub mod grasp_plan;
 pub mod launch;

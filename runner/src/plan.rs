@@ -189,7 +189,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
             let object_start = Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation));
             let walk = crate::walk::Walk::plan(w, &ids, &scene.world.robots, &object_start, &hand_loads, s.duration)?;
             for st in walk.gait.steps() {
-                tracing::debug!(robot = %walk.robots[st.robot], foot = %walk.feet[st.robot][st.foot], liftoff = st.liftoff, margin = st.margin, "planned step");
+                tracing::debug!(robot = %walk.robots[st.robot], foot = %walk.feet[st.robot][st.foot], liftoff = st.liftoff, margin = st.margin, cop_margin = ?st.cop_margin, "planned step");
             }
             let least = walk.gait.steps().iter().map(|st| st.margin).fold(f64::INFINITY, f64::min);
             tracing::info!(steps = walk.gait.steps().len(), end_s = walk.gait.end_time(), least_margin_m = least, "walk planned");

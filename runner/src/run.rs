@@ -135,6 +135,12 @@ pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &Mode, recorder: Optio
         driver = driver.with_tap(rec.tap());
         record_tasks = record::subscribe(running.session(), TEAM, &rec.tap(), &record_stopped).await?;
     }
+    let mut fault_tasks = Vec::new();
+    for f in &plan.scenario.faults {
+        let kill = running.agent_kill(&f.robot).ok_or_else(|| RunError::Task { what: format!("fault on {}", f.robot), reason: "no such agent in the run".into() })?;
+        let armed = crate::faults::Armed::new(f, &plan.references.clock, kill);
+        fault_tasks.push(crate::faults::inject(running.session(), TEAM, armed, running.stop_signal()).await?);
+    }
     let mut driver_task = tokio::spawn(driver.run(running.stop_signal()));
     let bridge_result = running.run_bridge(&bridge).await;
     // The driver ends by itself at the ground truth of the last tick (which may still be
@@ -150,6 +156,9 @@ pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &Mode, recorder: Optio
     };
     let records = records.map_err(|e| RunError::Task { what: "the scenario driver".into(), reason: e.to_string() })?;
     let _ = record_stop.send(true);
+    for t in fault_tasks {
+        t.abort();
+    }
     for t in record_tasks {
         let _ = t.await;
     }

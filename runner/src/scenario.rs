@@ -91,6 +91,28 @@ pub struct Scenario {
     /// Walking: who walks where, with which gait.
     #[serde(default)]
     pub walk: Option<WalkSpec>,
+    /// Faults injected while the scenario runs (an agent that dies mid-carry).
+    #[serde(default)]
+    pub faults: Vec<Fault>,
+}
+
+/// A fault injected into a run: robot `robot`'s agent stops `at` s after the scenario clock
+/// starts (its task is stopped, or its process killed with SIGKILL in the distributed modes).
+/// The simulated robot then gets no torques: its joints are unpowered ([`sim_bridge::lockstep::AgentLoss`]).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Fault {
+    pub kind: FaultKind,
+    pub robot: String,
+    pub at: f64,
+}
+
+/// What fails.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FaultKind {
+    /// The robot's agent dies.
+    AgentStops,
 }
 
 /// The frame of a walk's waypoints.
@@ -180,7 +202,7 @@ fn default_capacity_check() -> bool {
 }
 
 /// Top-level keys with a default that `--set` may give although the file leaves them out.
-pub const OPTIONAL_KEYS: [&str; 10] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations", "noslip_iterations"];
+pub const OPTIONAL_KEYS: [&str; 11] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations", "noslip_iterations", "faults"];
 /// Top-level tables a scenario may leave out that `--set` may still reach into
 /// (`--set release.after_failed_ticks=50`); their own fields are checked when the file is read.
 pub const OPTIONAL_TABLES: [&str; 1] = ["release"];
@@ -407,6 +429,14 @@ impl Scenario {
         }
         if let Some(w) = &self.walk {
             w.check(&self.robots)?;
+        }
+        for (i, f) in self.faults.iter().enumerate() {
+            if !self.robots.iter().any(|r| r.id == f.robot) {
+                return Err(format!("faults[{i}] names unknown robot {:?}", f.robot));
+            }
+            if !(f.at.is_finite() && f.at >= 0.0 && f.at < self.duration) {
+                return Err(format!("faults[{i}].at = {} must be within the scenario's [0, {}) s", f.at, self.duration));
+            }
         }
         for (i, p) in self.perturbations.iter().enumerate() {
             if p.target.on != "object" && !self.robots.iter().any(|r| r.id == p.target.on) {

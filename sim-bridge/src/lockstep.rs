@@ -58,6 +58,21 @@ pub struct LockstepConfig {
     /// of members through liveliness, which may reach it after a robot's first dynamics: a tick
     /// it then completed without that robot was never commanded for it.
     pub wait_for_coordinator: bool,
+    /// What a robot whose agent leaves mid-run becomes.
+    pub agent_loss: AgentLoss,
+}
+
+/// What the lockstep loop does when a robot's agent leaves the team mid-run (its liveliness
+/// token is gone: the process died, or was stopped).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum AgentLoss {
+    /// End the run with [`BridgeError::RobotLeft`], naming the robot (the smoke runs).
+    #[default]
+    EndRun,
+    /// Go on without it: from then on its joints get zero torque (what a robot's motor drivers
+    /// do when their commands stop: unpowered, the model's joint damping only) and no tick
+    /// waits for it. The run ends with [`BridgeError::RobotLeft`] when every agent has left.
+    Unpowered,
 }
 
 impl LockstepConfig {
@@ -75,6 +90,7 @@ impl LockstepConfig {
             progress_every: (ticks / 10).max(1),
             wait_for_coordinator: false,
             coordinator_grace_ticks: DEFAULT_COORDINATOR_GRACE_TICKS,
+            agent_loss: AgentLoss::EndRun,
         }
     }
 }
@@ -139,6 +155,7 @@ pub async fn run_with(
     let mut resends = 0u64;
     let mut rejected = 0u64;
     let mut got = vec![false; robots.len()];
+    let mut unpowered = vec![false; robots.len()];
     let mut watch = Liveness::open(session, &cfg.team).await?;
     for tick in extras.first_tick..extras.first_tick + cfg.ticks {
         if *stop.borrow() {
@@ -146,7 +163,7 @@ pub async fn run_with(
         }
         watch.check(tick, cfg.coordinator_grace_ticks)?;
         states.publish(plant, tick).await?;
-        got.iter_mut().for_each(|g| *g = false);
+        got.copy_from_slice(&unpowered);
         let tick_started = Instant::now();
         let mut last_send = Instant::now();
         while !got.iter().all(|g| *g) {
@@ -163,7 +180,10 @@ pub async fn run_with(
                     Err(_) => return Err(BridgeError::Stopped),
                 },
                 ev = watch.next() => {
-                    watch.take(ev, tick, &robots)?;
+                    if let Some(i) = watch.take(ev, tick, &robots)? {
+                        lose_agent(cfg, plant, &robots, i, tick, &mut unpowered)?;
+                        got[i] = true;
+                    }
                     continue;
                 }
                 _ = tokio::time::sleep(wait) => None,
@@ -216,6 +236,24 @@ pub async fn run_with(
 }
 
 
+/// Robot `i`'s agent left during `tick`: end the run, or unpower the robot ([`AgentLoss`]).
+fn lose_agent(cfg: &LockstepConfig, plant: &mut impl Plant, robots: &[String], i: usize, tick: u64, unpowered: &mut [bool]) -> Result<(), BridgeError> {
+    let robot = robots[i].clone();
+    if cfg.agent_loss == AgentLoss::EndRun {
+        return Err(BridgeError::RobotLeft { robot, tick });
+    }
+    if !unpowered[i] {
+        tracing::warn!(robot = %robot, tick, "the robot's agent left: its joints are unpowered from this tick on");
+        // Once per robot: the zero torque stays applied (no allocation on later ticks).
+        plant.set_torques(i, &vec![0.0; plant.joints(i)]);
+        unpowered[i] = true;
+    }
+    if unpowered.iter().all(|u| *u) {
+        return Err(BridgeError::RobotLeft { robot, tick });
+    }
+    Ok(())
+}
+
 /// The liveliness of the run's components while it runs: a robot whose agent leaves ends the
 /// run at once, naming it; the coordinator's leaving starts a count of ticks (the agents hold
 /// their posture meanwhile) that ends the run after the grace unless it comes back.
@@ -244,14 +282,12 @@ impl Liveness {
         }
     }
 
-    /// Take one event during `tick`.
-    fn take(&mut self, ev: LivenessEvent, tick: u64, robots: &[String]) -> Result<(), BridgeError> {
+    /// Take one event during `tick`: the index in `robots` of a robot whose agent left.
+    fn take(&mut self, ev: LivenessEvent, tick: u64, robots: &[String]) -> Result<Option<usize>, BridgeError> {
         match ev {
             LivenessEvent::Member(s) => {
                 if let Some(MemberEvent::Left(r)) = MemberEvent::from_sample(&s) {
-                    if robots.contains(&r) {
-                        return Err(BridgeError::RobotLeft { robot: r, tick });
-                    }
+                    return Ok(robots.iter().position(|x| *x == r));
                 }
             }
             LivenessEvent::Coordinator(s) if transport::coordinator_alive(&s) => {
@@ -265,7 +301,7 @@ impl Liveness {
             }
             LivenessEvent::Closed => return Err(BridgeError::Stopped),
         }
-        Ok(())
+        Ok(None)
     }
 
     /// Before `tick`: drain what arrived, and fail when the coordinator has been gone for

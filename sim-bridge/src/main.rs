@@ -215,6 +215,7 @@ async fn run_world(a: RunArgs, world: sim_bridge::world::World, n: usize) -> Res
         progress_every: (a.ticks / 10).max(1),
         wait_for_coordinator: false,
         coordinator_grace_ticks: sim_bridge::lockstep::DEFAULT_COORDINATOR_GRACE_TICKS,
+        agent_loss: sim_bridge::lockstep::AgentLoss::Unpowered,
     };
     let mut extras = lockstep::Extras {
         publish_ground_truth: true,

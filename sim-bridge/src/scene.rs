@@ -102,6 +102,7 @@ impl Scene {
             progress_every: 0,
             wait_for_coordinator: true,
             coordinator_grace_ticks: crate::lockstep::DEFAULT_COORDINATOR_GRACE_TICKS,
+            agent_loss: crate::lockstep::AgentLoss::Unpowered,
         }
     }
 }

@@ -23,6 +23,7 @@ fn cfg(team: &str, ticks: u64) -> LockstepConfig {
         progress_every: 0,
         wait_for_coordinator: false,
         coordinator_grace_ticks: sim_bridge::lockstep::DEFAULT_COORDINATOR_GRACE_TICKS,
+        agent_loss: sim_bridge::lockstep::AgentLoss::EndRun,
     }
 }
 

@@ -109,6 +109,7 @@ async fn lockstep_names_the_robot_that_never_joined() {
         progress_every: 0,
         wait_for_coordinator: false,
         coordinator_grace_ticks: sim_bridge::lockstep::DEFAULT_COORDINATOR_GRACE_TICKS,
+        agent_loss: sim_bridge::lockstep::AgentLoss::EndRun,
     };
     let mut plant = sim_bridge::plant::PlaceholderPlant::new(vec!["r1".into(), "ghost".into()], 3, 0.0, 0.001);
     let (_tx, rx) = tokio::sync::watch::channel(false);

@@ -75,8 +75,8 @@ pub struct Release {
 #[derive(Debug, Clone, Copy)]
 pub struct TickOutcome {
     pub tick: u64,
-    /// Some robot's contact set has its hand in grasp (whatever the controller did with it).
-    pub hands_in_grasp: bool,
+    /// Hands in grasp as modelled this tick (0 once released).
+    pub hands: usize,
     /// The contact-force QP was not solved and a fallback was sent.
     pub qp_failed: bool,
     /// The grasp fit's residual this tick (m), when a grasp was modelled.
@@ -86,7 +86,7 @@ pub struct TickOutcome {
 impl TickOutcome {
     /// The outcome of a tick of `team` (its hands in grasp as modelled) with `grasp`'s fit.
     pub fn of(tick: u64, team: &Team, grasp: Option<&GraspTerms>, qp_failed: bool) -> Self {
-        TickOutcome { tick, hands_in_grasp: !team.hands.is_empty(), qp_failed, fit_residual: grasp.map(|g| g.fit_residual) }
+        TickOutcome { tick, hands: team.hands.len(), qp_failed, fit_residual: grasp.map(|g| g.fit_residual) }
     }
 }
 
@@ -94,6 +94,8 @@ impl TickOutcome {
 #[derive(Debug, Clone, Default)]
 pub struct GraspWatch {
     failed_run: u32,
+    /// Hands in grasp on the last tick observed.
+    last_hands: usize,
     released: Option<Release>,
 }
 
@@ -128,17 +130,22 @@ impl GraspWatch {
 
     /// After a tick: count failed ticks and check the fit; `Some` on the tick the team lets go.
     pub fn observe(&mut self, policy: &ReleasePolicy, t: TickOutcome) -> Option<&Release> {
-        if self.released.is_some() || !t.hands_in_grasp {
+        let last_hands = std::mem::replace(&mut self.last_hands, t.hands);
+        if self.released.is_some() || t.hands == 0 {
             self.failed_run = 0;
             return None;
         }
         self.failed_run = if t.qp_failed { self.failed_run + 1 } else { 0 };
         let failed = policy.after_failed_ticks > 0 && self.failed_run >= policy.after_failed_ticks;
         let slipped = t.fit_residual.filter(|&r| policy.max_fit_residual > 0.0 && r > policy.max_fit_residual);
-        let why = match (failed, slipped) {
-            (_, Some(r)) => format!("a hand is {:.1} mm from the fitted object (limit {:.1} mm)", r * 1e3, policy.max_fit_residual * 1e3),
-            (true, None) => format!("the contact-force QP failed {} ticks in a row", self.failed_run),
-            (false, None) => return None,
+        // A flat palm pushes, it cannot pinch: one hand left of a grasp (a member left the
+        // team, its hand went) cannot hold the object. Let go at once.
+        let alone = t.hands == 1 && last_hands >= 2;
+        let why = match (failed, slipped, alone) {
+            (_, _, true) => format!("one hand is left of the {last_hands} in grasp (a robot left the team), and one palm cannot hold the object"),
+            (_, Some(r), _) => format!("a hand is {:.1} mm from the fitted object (limit {:.1} mm)", r * 1e3, policy.max_fit_residual * 1e3),
+            (true, None, _) => format!("the contact-force QP failed {} ticks in a row", self.failed_run),
+            (false, None, false) => return None,
         };
         let note = format!("grasp released at tick {}: {why}; the hands back away and hold, the feet carry the robots", t.tick);
         Some(&*self.released.insert(Release { tick: t.tick, note }))
@@ -150,7 +157,23 @@ mod tests {
     use super::*;
 
     fn tick(tick: u64, qp_failed: bool, fit_residual: Option<f64>) -> TickOutcome {
-        TickOutcome { tick, hands_in_grasp: true, qp_failed, fit_residual }
+        TickOutcome { tick, hands: 2, qp_failed, fit_residual }
+    }
+
+    #[test]
+    fn a_grasp_left_with_one_hand_releases_at_once_and_a_single_hand_closing_does_not() {
+        let p = ReleasePolicy::default();
+        let mut w = GraspWatch::default();
+        // One hand closing before the other (a contact set a tick ahead) is not a loss.
+        assert!(w.observe(&p, TickOutcome { hands: 1, ..tick(1, false, Some(0.0)) }).is_none());
+        for t in 2..5 {
+            assert!(w.observe(&p, TickOutcome { hands: 3, ..tick(t, false, Some(0.0)) }).is_none());
+        }
+        // Three to two: the rest still hold.
+        assert!(w.observe(&p, tick(5, false, Some(0.0))).is_none());
+        let r = w.observe(&p, TickOutcome { hands: 1, ..tick(6, false, Some(0.0)) }).expect("one hand left").clone();
+        assert_eq!(r.tick, 6);
+        assert!(r.note.contains("one hand is left of the 2"), "{}", r.note);
     }
 
     #[test]

@@ -33,6 +33,9 @@ pub struct Step {
     pub from: Vector3<f64>,
     pub to: Vector3<f64>,
     pub margin: f64,
+    /// The planned centre of pressure's margin with the hand's load (`WalkingRobot::hand`)
+    /// whether or not the planner kept it (`GaitParams::hand_load`); `None` without a load.
+    pub cop_margin: Option<f64>,
 }
 
 /// A pose target: pose, twist and acceleration (world, `[linear; angular]`).
@@ -184,6 +187,7 @@ struct Placement {
     to: Vector3<f64>,
     shift: f64,
     margin: f64,
+    cop_margin: Option<f64>,
 }
 
 /// Where the path is: segment `k` (waypoint `k` to `k + 1`), `progress` of the way for the
@@ -218,7 +222,8 @@ fn place(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], foot
     let others: Vec<Vector2<f64>> = (0..4).filter(|f| *f != foot).map(|f| feet[f].xy()).collect();
     let tri = [others[0], others[1], others[2]];
     let com = (nominal * nalgebra::Point3::from(r.com_offset)).coords;
-    let load = if p.hand_load { hand_load(r, object, at) } else { None };
+    let real = hand_load(r, object, at);
+    let load = if p.hand_load { real } else { None };
     let (cop, gain) = centre_of_pressure(r.mass, &com, load.as_ref(), r.ground_z)?;
     // A shift `alpha dir` moves the CoM by that, the centre of pressure `gain` times as far.
     let dir = incentre(&tri).0 - com.xy();
@@ -230,7 +235,9 @@ fn place(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], foot
     }
     let d = alpha * dir;
     let least = margin(&(com.xy() + d), &tri).min(margin(&(cop + gain * d), &tri));
-    Some(Placement { target: Translation3::new(d.x, d.y, 0.0) * nominal, to: to.coords, shift: d.norm(), margin: least })
+    let shifted = com + Vector3::new(d.x, d.y, 0.0);
+    let cop_margin = real.and_then(|l| centre_of_pressure(r.mass, &shifted, Some(&l), r.ground_z)).map(|(c, _)| margin(&c, &tri));
+    Some(Placement { target: Translation3::new(d.x, d.y, 0.0) * nominal, to: to.coords, shift: d.norm(), margin: least, cop_margin })
 }
 
 /// The foot order of robot `i` in segment `k` (`n` cycles): of the 24, the one whose first
@@ -301,7 +308,7 @@ impl Builder<'_> {
                 return Err(GaitError::Margin { robot: r.robot.clone(), step: self.steps.len(), foot: r.feet[foot].0.clone(), margin: self.p.margin, inradius });
             };
             self.torsos[i].push(self.t, t_shift_end, pl.target);
-            self.steps.push(Step { robot: i, foot, liftoff, touchdown, from: self.feet[i][foot], to: pl.to, margin: pl.margin });
+            self.steps.push(Step { robot: i, foot, liftoff, touchdown, from: self.feet[i][foot], to: pl.to, margin: pl.margin, cop_margin: pl.cop_margin });
             self.feet[i][foot] = pl.to;
         }
         if let (Some(track), Some(o)) = (self.object_track.as_mut(), self.object) {

@@ -55,6 +55,7 @@ pub fn lockstep_cfg(team: &str, ticks: u64, grace: u64) -> LockstepConfig {
         // commands, and the agent would wait out its time deadline).
         wait_for_coordinator: true,
         coordinator_grace_ticks: grace,
+        agent_loss: sim_bridge::lockstep::AgentLoss::EndRun,
     }
 }
 
