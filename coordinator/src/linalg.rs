@@ -304,7 +304,8 @@ impl SpdInverse {
         }
         let l = std::mem::replace(&mut self.l, DMatrix::zeros(0, 0));
         let chol = nalgebra::Cholesky::new(l)?;
-        let ok = pivots_ok(chol.l_dirty().diagonal().iter().copied());
+        let l = chol.l_dirty();
+        let ok = pivots_ok((0..n).map(|i| l[(i, i)]));
         if ok {
             out.fill_with_identity();
             chol.solve_mut(out);
@@ -433,6 +434,24 @@ mod tests {
         let mut bad = a.clone();
         bad[(1, 1)] = f64::NAN;
         assert_eq!(ws.compute(mat(&bad), RANK_TOL, &mut x), None);
+    }
+
+    #[test]
+    fn spd_inverse_inverts_gram_matrices_and_declines_rank_deficient_ones() {
+        let j = DMatrix::<f64>::from_fn(5, 8, |i, k| ((i * 3 + k * 5) % 7) as f64 - 3.0 + if i == k { 4.0 } else { 0.0 });
+        let gram = &j * j.transpose();
+        let mut ws = SpdInverse::default();
+        let mut x = DMatrix::zeros(0, 0);
+        ws.compute(mat(&gram), &mut x).expect("positive definite");
+        assert!((&gram * &x - DMatrix::identity(5, 5)).amax() < 1e-12);
+        let six = Matrix6::from_fn(|i, k| gram[(i.min(4), k.min(4))] + if i == k { 1.0 } else { 0.0 });
+        assert!((six * spd6_inverse(&six).expect("regular") - Matrix6::identity()).amax() < 1e-10);
+        let mut low = j.clone();
+        let r0 = low.row(0).into_owned();
+        low.row_mut(4).copy_from(&(r0 * 2.0));
+        assert!(ws.compute(mat(&(&low * low.transpose())), &mut x).is_none(), "rank-deficient");
+        ws.compute(mat(&DMatrix::zeros(0, 0)), &mut x).expect("empty");
+        assert_eq!(x.shape(), (0, 0));
     }
 
     #[test]
