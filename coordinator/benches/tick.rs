@@ -1,7 +1,9 @@
 //! One full tick of the paper's controller (assembly, projections, impedance, QP) for 2, 4
 //! and 8 robots built from the real default robot. Besides criterion's estimates it prints
 //! p50/p99 of the total and of each stage over 600/N ticks. `CLARABEL_ONLY=1` solves the QP
-//! with Clarabel alone (`PidcConfig::dense_qp = false`).
+//! with Clarabel alone (`PidcConfig::dense_qp = false`); `DENSE_PROJECTIONS=1` computes the
+//! projections by dense SVDs of the team's matrices (`PidcConfig::dense_projections`, the
+//! formulation before the team's blocks were used, kept as the oracle).
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -43,7 +45,8 @@ fn bench(c: &mut Criterion) {
     let mut fx = common::Fixture::new();
     for &count in &[2usize, 4, 8] {
         let (terms, descs) = fx.static_team(count);
-        let mut ctl = Pidc::new(PidcConfig { dense_qp: std::env::var_os("CLARABEL_ONLY").is_none(), ..PidcConfig::default() });
+        let dense_projections = std::env::var_os("DENSE_PROJECTIONS").is_some();
+        let mut ctl = Pidc::new(PidcConfig { dense_qp: std::env::var_os("CLARABEL_ONLY").is_none(), dense_projections, ..PidcConfig::default() });
         for d in &descs {
             ctl.set_description(d);
         }
@@ -69,12 +72,13 @@ fn bench(c: &mut Criterion) {
         let r = ctl.last().expect("last");
         let names = ["total", "assembly", "projections", "impedance", "QP build", "QP solve"];
         println!(
-            "robots {count}: n {} F_c {} QP rows {} status {:?} iterations {}",
+            "robots {count}: n {} F_c {} QP rows {} status {:?} iterations {} projections by {}",
             r.team.n,
             r.j_c.nrows(),
             r.qp.rows,
             r.qp.status,
-            r.qp.iterations
+            r.qp.iterations,
+            if r.proj.by_blocks { "blocks" } else { "dense SVDs" }
         );
         for (k, name) in names.iter().enumerate() {
             let (p50, p99) = (pct(&mut stages[k], 50.0), pct(&mut stages[k], 99.0));

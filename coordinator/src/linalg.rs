@@ -18,7 +18,7 @@ use std::cell::Cell;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::svd::{svd, svd_scratch, ComputeSvdVectors};
 use faer::{ColMut, MatMut, MatRef, Par};
-use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Rotation3, UnitQuaternion, Vector3};
 
 /// Relative tolerance of the pseudo-inverses: singular values below `RANK_TOL * sigma_max`
 /// are treated as zero. `J_c,ee` has rank `6(B-1)` (not `6B`), so this matters.
@@ -269,6 +269,59 @@ impl Inverse {
     }
 }
 
+/// Smallest squared Cholesky pivot, relative to the largest, of a matrix [`SpdInverse`] and
+/// [`spd6_inverse`] accept: a Gram matrix this well conditioned has full rank under any
+/// rank rule of [`RANK_TOL`] (its singular values' ratio is the square root).
+pub const SPD_TOL: f64 = 1e-12;
+
+/// Whether Cholesky pivots `l_ii` are positive and their squared ratio above [`SPD_TOL`].
+fn pivots_ok(diag: impl Iterator<Item = f64>) -> bool {
+    let (lo, hi) = diag.fold((f64::INFINITY, 0.0f64), |(lo, hi), p| (lo.min(p), hi.max(p)));
+    hi.is_finite() && lo > 0.0 && lo * lo > SPD_TOL * hi * hi
+}
+
+/// Workspace of the inverse of a symmetric positive definite matrix by Cholesky, kept
+/// between ticks (no allocation once shaped).
+#[derive(Default)]
+pub struct SpdInverse {
+    l: DMatrix<f64>,
+}
+
+impl SpdInverse {
+    /// `out = a^{-1}` (`a` square, symmetric: its lower triangle is read). `None` when `a` is
+    /// not positive definite or its pivots fail [`SPD_TOL`]. A 0 x 0 `a` gives a 0 x 0 `out`.
+    pub fn compute(&mut self, a: MatRef<'_, f64>, out: &mut DMatrix<f64>) -> Option<()> {
+        let n = a.nrows();
+        zeros(out, n, n);
+        zeros(&mut self.l, n, n);
+        if n == 0 {
+            return Some(());
+        }
+        for j in 0..n {
+            for i in 0..n {
+                self.l[(i, j)] = a[(i, j)];
+            }
+        }
+        let l = std::mem::replace(&mut self.l, DMatrix::zeros(0, 0));
+        let chol = nalgebra::Cholesky::new(l)?;
+        let l = chol.l_dirty();
+        let ok = pivots_ok((0..n).map(|i| l[(i, i)]));
+        if ok {
+            out.fill_with_identity();
+            chol.solve_mut(out);
+        }
+        self.l = chol.unpack_dirty();
+        (ok && out.iter().all(|x| x.is_finite())).then_some(())
+    }
+}
+
+/// Inverse of a symmetric positive definite 6 x 6 matrix (a hand's block), with the pivot
+/// rule of [`SpdInverse`].
+pub fn spd6_inverse(a: &Matrix6<f64>) -> Option<Matrix6<f64>> {
+    let chol = a.cholesky()?;
+    pivots_ok(chol.l_dirty().diagonal().iter().copied()).then(|| chol.inverse())
+}
+
 /// Cross-product matrix: `skew(a) b = a x b`.
 pub fn skew(a: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -a.z, a.y, a.z, 0.0, -a.x, -a.y, a.x, 0.0)
@@ -381,6 +434,24 @@ mod tests {
         let mut bad = a.clone();
         bad[(1, 1)] = f64::NAN;
         assert_eq!(ws.compute(mat(&bad), RANK_TOL, &mut x), None);
+    }
+
+    #[test]
+    fn spd_inverse_inverts_gram_matrices_and_declines_rank_deficient_ones() {
+        let j = DMatrix::<f64>::from_fn(5, 8, |i, k| ((i * 3 + k * 5) % 7) as f64 - 3.0 + if i == k { 4.0 } else { 0.0 });
+        let gram = &j * j.transpose();
+        let mut ws = SpdInverse::default();
+        let mut x = DMatrix::zeros(0, 0);
+        ws.compute(mat(&gram), &mut x).expect("positive definite");
+        assert!((&gram * &x - DMatrix::identity(5, 5)).amax() < 1e-12);
+        let six = Matrix6::from_fn(|i, k| gram[(i.min(4), k.min(4))] + if i == k { 1.0 } else { 0.0 });
+        assert!((six * spd6_inverse(&six).expect("regular") - Matrix6::identity()).amax() < 1e-10);
+        let mut low = j.clone();
+        let r0 = low.row(0).into_owned();
+        low.row_mut(4).copy_from(&(r0 * 2.0));
+        assert!(ws.compute(mat(&(&low * low.transpose())), &mut x).is_none(), "rank-deficient");
+        ws.compute(mat(&DMatrix::zeros(0, 0)), &mut x).expect("empty");
+        assert_eq!(x.shape(), (0, 0));
     }
 
     #[test]

@@ -101,6 +101,7 @@ fn the_tick_allocates_nothing_once_the_team_shape_is_known() {
     println!("2 robots: first tick {first} allocations, then {steady:?}; inside faer's decompositions {:?}; QP {:?} by {}", &l.inside[1..], r.qp.status, r.qp.solver);
     assert!(first > 0, "the first tick sizes the buffers (the counter counts)");
     assert!(matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved) && r.qp.solver == "dense-ipm");
+    assert!(r.proj.by_blocks, "the projections by the team's blocks (the default)");
     assert_eq!(steady, vec![0; 20], "steady ticks allocate nothing");
     assert!(l.c.diagnostics().is_some_and(|d| d.contacts.len() == 10));
     assert_eq!(l.out.len(), 2);
@@ -140,5 +141,6 @@ fn four_robots_allocate_nothing_either() {
     l.run(&mut terms, 2);
     let steady = l.run(&mut terms, 5);
     println!("4 robots: {steady:?}; inside faer's decompositions {:?}", &l.inside[2..]);
+    assert!(l.c.last().is_some_and(|r| r.proj.by_blocks));
     assert_eq!(steady, vec![0; 5]);
 }

@@ -48,6 +48,10 @@ pub struct PidcConfig {
     pub dense_qp: bool,
     /// `S = I` (treat the base as actuated): the [Lin2018] comparison only.
     pub fully_actuated: bool,
+    /// Compute the projections by dense SVDs of the team's matrices (the oracle) instead of
+    /// by the team's blocks (`units::block_projection`, the default; it falls back to the
+    /// dense path by itself when a block is too ill-conditioned).
+    pub dense_projections: bool,
 }
 
 impl Default for PidcConfig {
@@ -74,6 +78,7 @@ impl Default for PidcConfig {
             qp_max_iter: 50,
             dense_qp: true,
             fully_actuated: false,
+            dense_projections: false,
         }
     }
 }

@@ -142,7 +142,7 @@ impl Pidc {
         contact_jacobian(&r.team, r.grasp.as_ref(), &mut r.j_c, &mut r.jdv_c);
         let t_asm = us();
         // P, Pdot v, M_c, Mbar, [P S]^+, B (eqs. aghili_21, aghili_25, constraint_force, bmatrix).
-        r.proj.compute_into(&mut ws.proj, &r.team, &r.j_c, &r.jdv_c)?;
+        r.proj.compute(&mut ws.proj, &r.team, r.grasp.as_ref(), &r.j_c, &r.jdv_c, cfg.dense_projections)?;
         ws.motion.compute_into(&r.proj, &r.team.bias);
         let t_proj = us();
         // tau_M of the object, torso and swing-foot impedances (eqs. control_law,

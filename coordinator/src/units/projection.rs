@@ -9,6 +9,8 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::linalg::{gemm, mat, mat_mut, product, zeros, zeros_v, Inverse, Pinv, RANK_TOL};
 use crate::team::Team;
+use crate::units::block_projection::BlockWorkspace;
+use crate::units::grasp::GraspTerms;
 use crate::ControllerError;
 
 /// The projected quantities of one tick.
@@ -28,18 +30,24 @@ pub struct Projections {
     /// `M_c = P M + I - P` and its inverse (eq. aghili_25).
     pub mc: DMatrix<f64>,
     pub mc_inv: DMatrix<f64>,
+    /// `M_c^{-1} P` (eq. control_law's `Lambda_c`; `= P (P M P)^+ P`).
+    pub mcinv_p: DMatrix<f64>,
     /// Constraint inertia `Mbar = M M_c^{-1}` (eq. constraint_force).
     pub mbar: DMatrix<f64>,
     /// `[P S]^+` (eq. ua_solution).
     pub ps_pinv: DMatrix<f64>,
     /// `B = I - [(I - S)(I - P)]^+` (eq. bmatrix).
     pub b: DMatrix<f64>,
+    /// Whether the team's blocks made these ([`crate::units::block_projection`]) or the
+    /// dense SVDs ([`Projections::compute_into`]).
+    pub by_blocks: bool,
 }
 
 /// Scratch of [`Projections::compute_into`]: the decompositions' workspaces and the reduced
 /// matrices whose pseudo-inverses give `[P S]^+` and `B`.
 #[derive(Default)]
 pub struct ProjectionWorkspace {
+    blocks: BlockWorkspace,
     jc: Pinv,
     ps: Pinv,
     x: Pinv,
@@ -72,7 +80,20 @@ impl Projections {
         out.gemv(1.0, &self.jct_pinv, t1, 0.0);
     }
 
-    /// All projections of the team with contact Jacobian `j_c` and its `Jdot*v`.
+    /// All projections of the team: by the team's blocks unless `dense` (or the blocks
+    /// decline: see [`crate::units::block_projection`]), else by dense SVDs
+    /// ([`Projections::compute_into`]). Both give the same matrices (`coordinator/tests/
+    /// structured.rs`).
+    pub fn compute(&mut self, ws: &mut ProjectionWorkspace, team: &Team, grasp: Option<&GraspTerms>, j_c: &DMatrix<f64>, jdv_c: &DVector<f64>, dense: bool) -> Result<(), ControllerError> {
+        self.by_blocks = !dense && ws.blocks.compute_into(self, team, grasp, j_c, jdv_c).is_some();
+        if self.by_blocks {
+            return Ok(());
+        }
+        self.compute_into(ws, team, j_c, jdv_c)
+    }
+
+    /// All projections of the team with contact Jacobian `j_c` and its `Jdot*v`, by dense
+    /// SVDs of team-sized matrices (the oracle of the block path).
     ///
     /// `Pdot v`: `P = I - J^+ J`, so `Pdot v = -(d/dt J^+) (J v) - J^+ (Jdot v)`. While the
     /// contacts hold (`J_c v = 0`, eq. contact_constraint) the first term vanishes and
@@ -91,35 +112,16 @@ impl Projections {
         self.p.neg_mut();
         for i in 0..n {
             self.p[(i, i)] += 1.0;
-            for j in 0..i {
-                let s = 0.5 * (self.p[(i, j)] + self.p[(j, i)]);
-                self.p[(i, j)] = s;
-                self.p[(j, i)] = s;
-            }
         }
-        zeros(&mut self.ip, n, n);
-        self.ip -= &self.p;
-        for i in 0..n {
-            self.ip[(i, i)] += 1.0;
-        }
+        symmetrise(&mut self.p);
+        complement(&self.p, &mut self.ip);
         zeros_v(&mut self.pdot_v, n);
         self.pdot_v.gemv(-1.0, &self.jc_pinv, jdv_c, 0.0);
-        // M_c = P M + I - P, by M's diagonal blocks.
-        zeros(&mut self.mc, n, n);
-        self.mc.copy_from(&self.ip);
-        for r in &team.robots {
-            let (o, k) = (r.offset, r.nv);
-            let m_blk = mat(&team.mass).submatrix(o, o, k, k);
-            gemm(mat_mut(&mut self.mc).subcols_mut(o, k), 1.0, 1.0, mat(&self.p).subcols(o, k), m_blk);
-        }
+        // M_c = P M + I - P by M's diagonal blocks, its inverse, Mbar = M M_c^{-1}.
+        mc_into(team, self);
         ws.mc.compute(&self.mc, &mut self.mc_inv).ok_or_else(|| singular("M_c"))?;
-        // Mbar = M M_c^{-1}, by M's diagonal blocks.
-        zeros(&mut self.mbar, n, n);
-        for r in &team.robots {
-            let (o, k) = (r.offset, r.nv);
-            let m_blk = mat(&team.mass).submatrix(o, o, k, k);
-            gemm(mat_mut(&mut self.mbar).subrows_mut(o, k), 0.0, 1.0, m_blk, mat(&self.mc_inv).subrows(o, k));
-        }
+        mbar_into(team, self);
+        product(&mut self.mcinv_p, mat(&self.mc_inv), mat(&self.p));
         // [P S]^+: S is a 0/1 diagonal, so P S keeps P's actuated columns; the pseudo-inverse
         // of the column-reduced matrix, placed on the actuated rows, is [P S]^+.
         let s = &team.s_diag;
@@ -146,5 +148,49 @@ impl Projections {
             col -= &ws.xr_pinv.column(k);
         }
         Ok(())
+    }
+}
+
+/// Make `p` exactly symmetric: each pair of entries replaced by their mean.
+pub(crate) fn symmetrise(p: &mut DMatrix<f64>) {
+    for i in 0..p.nrows() {
+        for j in 0..i {
+            let s = 0.5 * (p[(i, j)] + p[(j, i)]);
+            p[(i, j)] = s;
+            p[(j, i)] = s;
+        }
+    }
+}
+
+/// `ip = I - p`.
+pub(crate) fn complement(p: &DMatrix<f64>, ip: &mut DMatrix<f64>) {
+    let n = p.nrows();
+    zeros(ip, n, n);
+    *ip -= p;
+    for i in 0..n {
+        ip[(i, i)] += 1.0;
+    }
+}
+
+/// `M_c = P M + I - P` (eq. aghili_25) from `proj.p` and `proj.ip`, by `M`'s diagonal blocks.
+pub(crate) fn mc_into(team: &Team, proj: &mut Projections) {
+    let n = team.n;
+    zeros(&mut proj.mc, n, n);
+    proj.mc.copy_from(&proj.ip);
+    for r in &team.robots {
+        let (o, k) = (r.offset, r.nv);
+        let m_blk = mat(&team.mass).submatrix(o, o, k, k);
+        gemm(mat_mut(&mut proj.mc).subcols_mut(o, k), 1.0, 1.0, mat(&proj.p).subcols(o, k), m_blk);
+    }
+}
+
+/// `Mbar = M M_c^{-1}` (eq. constraint_force) from `proj.mc_inv`, by `M`'s diagonal blocks.
+pub(crate) fn mbar_into(team: &Team, proj: &mut Projections) {
+    let n = team.n;
+    zeros(&mut proj.mbar, n, n);
+    for r in &team.robots {
+        let (o, k) = (r.offset, r.nv);
+        let m_blk = mat(&team.mass).submatrix(o, o, k, k);
+        gemm(mat_mut(&mut proj.mbar).subrows_mut(o, k), 0.0, 1.0, m_blk, mat(&proj.mc_inv).subrows(o, k));
     }
 }

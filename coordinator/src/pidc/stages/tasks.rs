@@ -20,7 +20,7 @@ use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Vector3, Vector6};
 use protocol::conventions::GRAVITY_VECTOR;
 use protocol::TaskReferences;
 
-use crate::linalg::{mat, product, zeros_v};
+use crate::linalg::{zeros, zeros_v};
 use crate::pidc::PidcConfig;
 use crate::team::Team;
 use crate::units::grasp::GraspTerms;
@@ -57,7 +57,8 @@ impl MotionSpaceTerms {
     /// From the tick's projections and the team's `h`.
     pub fn compute_into(&mut self, proj: &Projections, bias: &DVector<f64>) {
         let n = bias.len();
-        product(&mut self.mcinv_p, mat(&proj.mc_inv), mat(&proj.p));
+        zeros(&mut self.mcinv_p, n, n);
+        self.mcinv_p.copy_from(&proj.mcinv_p);
         zeros_v(&mut self.p_bias, n);
         self.p_bias.copy_from(&proj.pdot_v);
         self.p_bias.gemv(1.0, &proj.p, bias, -1.0); // P h - Pdot v

@@ -5,13 +5,15 @@
 //! With `K = (I - P)(Mbar P - I)` and `Y = B J_c^T` (the torque per unit `F_c`):
 //! `rho = (J_c^T)^+ K S Y` and
 //! `eta = (J_c^T)^+ [K (S tau_0 + J_x^T F_x) + (I - P)(Mbar (Pdot v - P h) + h)]`
-//! (see [`Projections::contact_wrench`]); `rho` is formed right to left, without `K`.
+//! (see [`Projections::contact_wrench`]); `rho` is formed right to left, without `K`
+//! ([`rho_dense`]), or with the identities of [`rho_by_blocks`] when the projections came
+//! from the team's blocks.
 //! The real wrenches on the hands add the object's load distribution `G^+ F_x` (see
 //! [`super::tasks`]): `eta_real` and `lambda_real` are `eta` and `lambda` with it.
 
 use nalgebra::{DMatrix, DVector, Vector6};
 
-use crate::linalg::{add_product, mat, product, zeros, zeros_v};
+use crate::linalg::{add_product, gemm, mat, mat_mut, product, zeros, zeros_v};
 use crate::team::Team;
 use crate::units::grasp::GraspTerms;
 use crate::units::projection::Projections;
@@ -20,6 +22,9 @@ use crate::units::projection::Projections;
 #[derive(Debug, Clone, Default)]
 pub struct ContactMapScratch {
     sy: DMatrix<f64>,
+    /// `(B - I)` and `J_c` on the unactuated columns ([`rho_by_blocks`]).
+    b_u: DMatrix<f64>,
+    jc_u: DMatrix<f64>,
     t_a: DMatrix<f64>,
     t_b: DMatrix<f64>,
     u: DVector<f64>,
@@ -47,18 +52,11 @@ pub fn contact_map(inp: &MapInput, ws: &mut ContactMapScratch, y: &mut DMatrix<f
     let n = team.n;
     let m = j_c.nrows();
     let nf = team.feet.len();
-    product(y, mat(&proj.b), mat(j_c).transpose()); // Y = B J_c^T
-    zeros(&mut ws.sy, n, m);
-    ws.sy.copy_from(y);
-    for i in 0..n {
-        ws.sy.row_mut(i).scale_mut(team.s_diag[i]);
+    if proj.by_blocks {
+        rho_by_blocks(team, proj, j_c, ws, y, rho);
+    } else {
+        rho_dense(team, proj, j_c, ws, y, rho);
     }
-    product(&mut ws.t_a, mat(&proj.p), mat(&ws.sy)); // P S Y
-    zeros(&mut ws.t_b, n, m);
-    ws.t_b -= &ws.sy;
-    add_product(&mut ws.t_b, 1.0, mat(&proj.mbar), mat(&ws.t_a)); // (Mbar P - I) S Y
-    product(&mut ws.t_a, mat(&proj.ip), mat(&ws.t_b)); // K S Y
-    product(rho, mat(&proj.jct_pinv), mat(&ws.t_a));
     zeros_v(&mut ws.u, n);
     ws.u.copy_from(*tau0);
     ws.u.component_mul_assign(&team.s_diag);
@@ -70,6 +68,58 @@ pub fn contact_map(inp: &MapInput, ws: &mut ContactMapScratch, y: &mut DMatrix<f
     if let Some(g) = grasp {
         let mut rows = eta_real.rows_mut(3 * nf, g.g_pinv.nrows());
         rows.gemv(1.0, &g.g_pinv, *f_x, 1.0);
+    }
+}
+
+/// `Y = B J_c^T` and `rho = (J_c^T)^+ K S Y` as written, `K = (I - P)(Mbar P - I)`, right to
+/// left (the dense path's, and the oracle of [`rho_by_blocks`]).
+fn rho_dense(team: &Team, proj: &Projections, j_c: &DMatrix<f64>, ws: &mut ContactMapScratch, y: &mut DMatrix<f64>, rho: &mut DMatrix<f64>) {
+    let (n, m) = (team.n, j_c.nrows());
+    product(y, mat(&proj.b), mat(j_c).transpose()); // Y = B J_c^T
+    scaled_rows(y, &team.s_diag, &mut ws.sy);
+    product(&mut ws.t_a, mat(&proj.p), mat(&ws.sy)); // P S Y
+    zeros(&mut ws.t_b, n, m);
+    ws.t_b -= &ws.sy;
+    add_product(&mut ws.t_b, 1.0, mat(&proj.mbar), mat(&ws.t_a)); // (Mbar P - I) S Y
+    product(&mut ws.t_a, mat(&proj.ip), mat(&ws.t_b)); // K S Y
+    product(rho, mat(&proj.jct_pinv), mat(&ws.t_a));
+}
+
+/// The same `Y` and `rho` with two products of team size instead of five:
+/// `B = I + (B - I)_{:u}` differs from `I` on the unactuated columns only, so
+/// `Y = J_c^T + (B - I)_{:u} J_c[:, u]^T`; `(J_c^T)^+ (I - P) = (J_c^T)^+` and
+/// `Mbar P = M M_c^{-1} P`, so `rho = (J_c^T)^+ (M (M_c^{-1} P) S Y - S Y)` with `M` by blocks.
+fn rho_by_blocks(team: &Team, proj: &Projections, j_c: &DMatrix<f64>, ws: &mut ContactMapScratch, y: &mut DMatrix<f64>, rho: &mut DMatrix<f64>) {
+    let (n, m, s) = (team.n, j_c.nrows(), &team.s_diag);
+    let nu = s.iter().filter(|x| **x == 0.0).count();
+    zeros(&mut ws.b_u, n, nu);
+    zeros(&mut ws.jc_u, m, nu);
+    for (c, j) in (0..n).filter(|&j| s[j] == 0.0).enumerate() {
+        ws.b_u.column_mut(c).copy_from(&proj.b.column(j));
+        ws.b_u[(j, c)] -= 1.0;
+        ws.jc_u.column_mut(c).copy_from(&j_c.column(j));
+    }
+    zeros(y, n, m);
+    j_c.transpose_to(y);
+    add_product(y, 1.0, mat(&ws.b_u), mat(&ws.jc_u).transpose()); // Y = B J_c^T
+    scaled_rows(y, s, &mut ws.sy);
+    product(&mut ws.t_a, mat(&proj.mcinv_p), mat(&ws.sy)); // M_c^{-1} P S Y
+    zeros(&mut ws.t_b, n, m);
+    ws.t_b -= &ws.sy;
+    for r in &team.robots {
+        let (o, k) = (r.offset, r.nv);
+        let m_blk = mat(&team.mass).submatrix(o, o, k, k);
+        gemm(mat_mut(&mut ws.t_b).subrows_mut(o, k), 1.0, 1.0, m_blk, mat(&ws.t_a).subrows(o, k));
+    }
+    product(rho, mat(&proj.jct_pinv), mat(&ws.t_b));
+}
+
+/// `out = diag(s) y`.
+fn scaled_rows(y: &DMatrix<f64>, s: &DVector<f64>, out: &mut DMatrix<f64>) {
+    zeros(out, y.nrows(), y.ncols());
+    out.copy_from(y);
+    for i in 0..y.nrows() {
+        out.row_mut(i).scale_mut(s[i]);
     }
 }
 

@@ -1,0 +1,154 @@
+//! The projections by the team's blocks (`units::block_projection`, the default) against the
+//! dense SVDs of the team's matrices (`PidcConfig::dense_projections`, the oracle): the same
+//! `P`, `J_c^+`, `M_c^{-1}`, `[P S]^+`, `B`, QP data (`tau_0`, `Y`, `rho`, `eta`) and torque
+//! map `tau = tau_0 + Y F_c` to 1e-9 relative, and the torques sent (each path solving its
+//! own QP to its tolerance) to 1e-6, on random moving team states of 2, 3, 4 and 8 robots of
+//! the real default robot, with a swing foot, with the hands free, and fully actuated.
+
+mod common;
+
+use common::{robot_id, Fixture};
+use coordinator::pidc::TickReport;
+use coordinator::{Pidc, PidcConfig};
+use nalgebra::{DMatrix, DVector};
+use protocol::DynamicsTerms;
+use rand::Rng;
+use robot_agent::terms::ContactSet;
+
+/// Agreement asked of every compared quantity: `|a - b|_max <= TOL |b|_max`.
+const TOL: f64 = 1e-9;
+
+fn rel(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    let scale = b.iter().fold(0.0f64, |m, x| m.max(x.abs())).max(f64::MIN_POSITIVE);
+    a.iter().zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs())) / scale
+}
+
+/// How a random team is set up.
+#[derive(Clone, Copy)]
+struct Case {
+    robots: usize,
+    seed: u64,
+    /// Robot 0 lifts its first foot.
+    swing: bool,
+    /// Hands in grasp (else every hand is a free task).
+    grasp: bool,
+    fully_actuated: bool,
+}
+
+fn controller(fx: &Fixture, case: Case, dense: bool) -> Pidc {
+    let mut c = Pidc::new(PidcConfig { dense_projections: dense, fully_actuated: case.fully_actuated, ..PidcConfig::default() });
+    for k in 0..case.robots {
+        c.set_description(&fx.description(&robot_id(k)));
+    }
+    c
+}
+
+fn contacts(fx: &Fixture, case: Case, k: usize) -> ContactSet {
+    let mut set = ContactSet::all_stance(&fx.robot);
+    set.stance[0] = !(case.swing && k == 0);
+    set.hand_in_grasp = case.grasp;
+    set
+}
+
+/// A random configuration of the team at rest (tick 1), then moving with velocities in the
+/// constraints' null space (tick 2).
+fn team_states(fx: &mut Fixture, case: Case) -> [Vec<DynamicsTerms>; 2] {
+    let mut rng = common::rng(case.seed);
+    let nv = fx.robot.model.nv;
+    let qs: Vec<DVector<f64>> = (0..case.robots).map(|k| fx.perturbed_q(k, case.robots, 0.1, &mut rng)).collect();
+    let still: Vec<_> = (0..case.robots).map(|k| fx.terms_with(&robot_id(k), &qs[k], &DVector::zeros(nv), 1, &contacts(fx, case, k))).collect();
+    let mut c = controller(fx, case, true);
+    let p = c.compute(&still).expect("tick").proj.p.clone();
+    let v = &p * DVector::from_fn(case.robots * nv, |_, _| rng.random_range(-0.5..0.5));
+    let moving = (0..case.robots).map(|k| fx.terms_with(&robot_id(k), &qs[k], &v.rows(k * nv, nv).into_owned(), 2, &contacts(fx, case, k))).collect();
+    [still, moving]
+}
+
+/// The largest relative difference of the block path's tick from the dense path's over the
+/// projections, the QP's data and the torque map `tau = tau_0 + Y F_c` (at the dense path's
+/// `F_c`), with its name.
+fn compare(blocks: &TickReport, dense: &TickReport) -> (f64, &'static str) {
+    let (a, b) = (&blocks.proj, &dense.proj);
+    assert!(a.by_blocks && !b.by_blocks, "the block path declined");
+    assert_eq!(a.jc_rank, b.jc_rank, "rank of J_c");
+    let m = |x: &DMatrix<f64>| x.as_slice().to_vec();
+    let v = |x: &DVector<f64>| x.as_slice().to_vec();
+    let torque = |r: &TickReport| &r.tau0 + &r.y * &dense.f_c;
+    let pairs: [(&'static str, Vec<f64>, Vec<f64>); 14] = [
+        ("P", m(&a.p), m(&b.p)),
+        ("J_c^+", m(&a.jc_pinv), m(&b.jc_pinv)),
+        ("Pdot v", v(&a.pdot_v), v(&b.pdot_v)),
+        ("M_c", m(&a.mc), m(&b.mc)),
+        ("M_c^-1", m(&a.mc_inv), m(&b.mc_inv)),
+        ("M_c^-1 P", m(&a.mcinv_p), m(&b.mcinv_p)),
+        ("Mbar", m(&a.mbar), m(&b.mbar)),
+        ("[P S]^+", m(&a.ps_pinv), m(&b.ps_pinv)),
+        ("B", m(&a.b), m(&b.b)),
+        ("tau_0", v(&blocks.tau0), v(&dense.tau0)),
+        ("Y", m(&blocks.y), m(&dense.y)),
+        ("rho", m(&blocks.rho), m(&dense.rho)),
+        ("eta", v(&blocks.eta), v(&dense.eta)),
+        ("tau(F_c)", v(&torque(blocks)), v(&torque(dense))),
+    ];
+    if std::env::var_os("STRUCTURED_VERBOSE").is_some() {
+        for (name, x, y) in &pairs {
+            println!("    {name:10} {:.2e}", rel(x, y));
+        }
+    }
+    pairs.iter().map(|(name, x, y)| (rel(x, y), *name)).fold((0.0, "none"), |w, e| if e.0 > w.0 { e } else { w })
+}
+
+/// Both paths on both ticks of `case`: the worst relative difference of [`compare`], and of
+/// the torques sent, each path with its own QP solve (interior point to
+/// [`coordinator::qp::DENSE_TOL`]: the solves agree to their tolerance, not to round-off).
+fn agree(fx: &mut Fixture, case: Case) -> (f64, f64) {
+    let ticks = team_states(fx, case);
+    let (mut blocks, mut dense) = (controller(fx, case, false), controller(fx, case, true));
+    let (mut worst, mut worst_sent) = (0.0f64, 0.0f64);
+    for (t, tick) in ticks.iter().enumerate() {
+        let b = blocks.compute(tick).expect("block tick").clone();
+        let d = dense.compute(tick).expect("dense tick");
+        assert_eq!(b.qp.status, d.qp.status);
+        let (err, what) = compare(&b, d);
+        let sent = rel(b.tau.as_slice(), d.tau.as_slice());
+        println!("{} robots (seed {}) tick {}: worst {what} {err:.2e}; torques sent {sent:.2e}", case.robots, case.seed, t + 1);
+        assert!(err <= TOL, "{} robots, tick {}: {what} differs by {err:e} relative", case.robots, t + 1);
+        assert!(sent <= 10.0 * coordinator::qp::DENSE_TOL, "{} robots, tick {}: the torques sent differ by {sent:e} relative", case.robots, t + 1);
+        worst = worst.max(err);
+        worst_sent = worst_sent.max(sent);
+    }
+    (worst, worst_sent)
+}
+
+fn worst(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
+    (a.0.max(b.0), a.1.max(b.1))
+}
+
+fn case(robots: usize, seed: u64) -> Case {
+    Case { robots, seed, swing: false, grasp: true, fully_actuated: false }
+}
+
+#[test]
+fn blocks_match_the_dense_oracle_on_random_teams_of_2_3_4_and_8_robots() {
+    let mut fx = Fixture::new();
+    let mut w = (0.0, 0.0);
+    for robots in [2, 3, 4, 8] {
+        for seed in 0..3 {
+            w = worst(w, agree(&mut fx, case(robots, 100 * robots as u64 + seed)));
+        }
+    }
+    println!("worst relative difference over all teams: {:.2e}; torques sent {:.2e}", w.0, w.1);
+}
+
+#[test]
+fn blocks_match_the_dense_oracle_with_a_swing_foot_free_hands_or_full_actuation() {
+    let mut fx = Fixture::new();
+    let mut w = (0.0, 0.0);
+    for robots in [2, 3] {
+        w = worst(w, agree(&mut fx, Case { swing: true, ..case(robots, 7) }));
+        w = worst(w, agree(&mut fx, Case { grasp: false, ..case(robots, 8) }));
+        w = worst(w, agree(&mut fx, Case { fully_actuated: true, ..case(robots, 9) }));
+    }
+    println!("worst relative difference: {:.2e}; torques sent {:.2e}", w.0, w.1);
+}
