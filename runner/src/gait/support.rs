@@ -50,18 +50,24 @@ pub fn centre_of_pressure(mass: f64, com: &Vector3<f64>, load: Option<&HandLoad>
     Some((Vector2::new(x, y), mass * GRAVITY / force.z))
 }
 
+/// Each edge `k` of `tri` (from vertex `k` to `k + 1`) as the signed distance of a point
+/// inside it, an affine map `d(p) = n . (p - a)` with `n` the edge's inward unit normal: `(a,
+/// n)` for each edge, whatever the vertices' order.
+fn edges(tri: &[Vector2<f64>; 3]) -> [(Vector2<f64>, Vector2<f64>); 3] {
+    let area2 = (tri[1] - tri[0]).perp(&(tri[2] - tri[0]));
+    let sign = if area2 >= 0.0 { 1.0 } else { -1.0 };
+    std::array::from_fn(|k| {
+        let (a, b) = (tri[k], tri[(k + 1) % 3]);
+        let e = b - a;
+        // e.perp(q) = e.x q.y - e.y q.x = n . q with n = (-e.y, e.x).
+        (a, sign * Vector2::new(-e.y, e.x) / e.norm().max(1e-12))
+    })
+}
+
 /// Signed distance of `p` inside the triangle `tri` (positive inside: the distance to the
 /// nearest edge; negative outside), whatever the vertices' order.
 pub fn margin(p: &Vector2<f64>, tri: &[Vector2<f64>; 3]) -> f64 {
-    let area2 = (tri[1] - tri[0]).perp(&(tri[2] - tri[0]));
-    let sign = if area2 >= 0.0 { 1.0 } else { -1.0 };
-    (0..3)
-        .map(|k| {
-            let (a, b) = (tri[k], tri[(k + 1) % 3]);
-            let e = b - a;
-            sign * e.perp(&(p - a)) / e.norm().max(1e-12)
-        })
-        .fold(f64::INFINITY, f64::min)
+    edges(tri).iter().map(|(a, n)| n.dot(&(p - a))).fold(f64::INFINITY, f64::min)
 }
 
 /// The triangle's incentre and inradius (the point deepest inside and its margin).
@@ -76,13 +82,9 @@ pub fn incentre(tri: &[Vector2<f64>; 3]) -> (Vector2<f64>, f64) {
 /// The least `alpha >= 0` with `margin(p + alpha dir) >= required`, and the largest for which
 /// that still holds (`None` when no `alpha` does): each edge's distance is affine in `alpha`.
 pub fn along(p: &Vector2<f64>, dir: &Vector2<f64>, tri: &[Vector2<f64>; 3], required: f64) -> Option<(f64, f64)> {
-    let area2 = (tri[1] - tri[0]).perp(&(tri[2] - tri[0]));
-    let sign = if area2 >= 0.0 { 1.0 } else { -1.0 };
     let (mut lo, mut hi): (f64, f64) = (0.0, f64::INFINITY);
-    for k in 0..3 {
-        let (a, b) = (tri[k], tri[(k + 1) % 3]);
-        let e = b - a;
-        let (d0, rate) = (sign * e.perp(&(p - a)) / e.norm().max(1e-12), sign * e.perp(dir) / e.norm().max(1e-12));
+    for (a, n) in edges(tri) {
+        let (d0, rate) = (n.dot(&(p - a)), n.dot(dir));
         if rate.abs() < 1e-15 {
             if d0 < required {
                 return None;

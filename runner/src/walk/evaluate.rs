@@ -161,12 +161,18 @@ impl Walk {
     /// of its feet (from `MIN_AIRBORNE` after the lift-off to the landing set), s.
     fn stance_lift(&self, truth: &[&GroundTruth], times: &[f64], i: usize, planned: &[&Step]) -> f64 {
         let window = self.gait.params().touchdown_window;
+        // The foot in mid-swing at each sample (one swings at a time): O(samples + steps).
+        let mut swinging_foot: Vec<Option<usize>> = vec![None; times.len()];
+        for s in planned.iter().filter(|s| s.robot == i) {
+            let (from, to) = (times.partition_point(|t| *t < s.liftoff + MIN_AIRBORNE), times.partition_point(|t| *t <= s.touchdown - window));
+            swinging_foot[from..to.max(from)].fill(Some(s.foot));
+        }
         let mut worst = 0.0_f64;
         for f in 0..self.feet[i].len() {
             let track = foot_track(truth, &self.robots[i], &self.feet[i][f], &self.foot_links[i][f], self.foot_radius[i]);
             let mut since: Option<f64> = None;
             for (k, t) in times.iter().enumerate() {
-                let swinging = planned.iter().any(|s| s.robot == i && s.foot != f && *t >= s.liftoff + MIN_AIRBORNE && *t <= s.touchdown - window);
+                let swinging = swinging_foot[k].is_some_and(|g| g != f);
                 since = if swinging && !track.contact[k] { Some(since.unwrap_or(*t)) } else { None };
                 if let Some(t0) = since {
                     worst = worst.max(t - t0);
