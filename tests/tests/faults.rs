@@ -7,13 +7,24 @@
 //! object and the team lets go at once (`coordinator::units::release`), the remaining robot
 //! standing; with three robots, two of them on opposite faces, the grasp is captured again
 //! with the two remaining hands and the object stays held.
+//!
+//! Fault 4, the state source stops, is a message-flow test (placeholder dynamics and plant):
+//! the agents, whose real-time command deadline is 25 ms, hold their posture within it.
 
 use team_runner::driver::Records;
 use team_runner::evaluate::Metrics;
 use team_runner::plan::Plan;
 
+use std::time::{Duration, Instant};
+
+use protocol::keys::{self, RobotTopic};
+use protocol::transport::{self, decode_sample};
+use protocol::{AgentMode, AgentStatus};
+use robot_agent::safe_mode::CommandDeadline;
+
 mod common;
 use common::scenario::run_scenario_records;
+use common::team::{agent_with_deadline, bridge, coordinator, session, stop};
 
 const RELEASED: &str = "grasp released (hands free, feet only)";
 
@@ -86,4 +97,39 @@ fn an_agent_dying_in_a_team_of_three_leaves_the_other_two_holding() {
     }
     assert!(m.object.position_max_m < 0.02, "the object follows its reference within 2 cm: {:.4} m", m.object.position_max_m);
     assert_standing(&m, "r3");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn when_the_state_source_stops_every_agent_holds_within_its_deadline() {
+    let team = "fault4";
+    let s = session().await;
+    let deadline = CommandDeadline::default();
+    let limit = deadline.time.expect("a time deadline");
+    let statuses = transport::subscribe(&s, keys::all_robots(team, RobotTopic::Status).unwrap()).await.unwrap();
+    let c = coordinator(&s, team, Box::new(coordinator::JointDamping { damping: 2.0 }));
+    let agents = [agent_with_deadline(&s, team, "r1", deadline), agent_with_deadline(&s, team, "r2", deadline)];
+    let b = bridge(&s, team, &["r1", "r2"], 500, 500);
+    let report = tokio::time::timeout(Duration::from_secs(60), b.task).await.expect("bounded").unwrap().expect("the run completes");
+    assert_eq!(report.ticks, 500);
+    // The state source has stopped: no more states, so no more terms and no more commands.
+    let (stopped, stopped_ns) = (Instant::now(), protocol::wall_clock_ns());
+    let mut held: std::collections::BTreeMap<String, Duration> = Default::default();
+    while held.len() < 2 && stopped.elapsed() < Duration::from_secs(2) {
+        let Ok(Ok(sample)) = tokio::time::timeout(Duration::from_millis(100), statuses.recv_async()).await else { continue };
+        let Ok(st) = decode_sample::<AgentStatus>(&sample) else { continue };
+        if st.mode == AgentMode::SafeMode && st.header.stamp_ns > stopped_ns {
+            held.entry(st.header.robot_id().to_string()).or_insert(Duration::from_nanos(st.header.stamp_ns - stopped_ns));
+        }
+    }
+    println!("safe mode after the state source stopped: {held:?} (deadline {limit:?})");
+    assert_eq!(held.len(), 2, "both agents hold their posture: {held:?}");
+    for (r, after) in &held {
+        // The deadline, one housekeeping period (5 ms) and scheduling slack on a loaded machine.
+        assert!(*after < limit + Duration::from_millis(75), "{r} held {after:?} after the last state");
+    }
+    for a in agents {
+        assert!(stop(a).await.safe_mode_entries >= 1);
+    }
+    stop(c).await;
+    s.close().await.unwrap();
 }

@@ -32,10 +32,16 @@ pub fn coordinator(session: &Session, team: &str, controller: Box<dyn TeamContro
 }
 
 pub fn agent(session: &Session, team: &str, robot: &str) -> Component<robot_agent::status::AgentCounters> {
+    // Lockstep: the agent's own time deadline must not be what ends a wait here.
+    agent_with_deadline(session, team, robot, CommandDeadline { ticks: 5, time: Some(Duration::from_secs(30)) })
+}
+
+/// An agent with its command deadline `deadline` (the real-time default is
+/// `CommandDeadline::default()`: 5 ticks or 25 ms).
+pub fn agent_with_deadline(session: &Session, team: &str, robot: &str, deadline: CommandDeadline) -> Component<robot_agent::status::AgentCounters> {
     let (stop, rx) = watch::channel(false);
     let mut cfg = AgentConfig::new(team, robot);
-    // Lockstep: the agent's own time deadline must not be what ends a wait here.
-    cfg.deadline = CommandDeadline { ticks: 5, time: Some(Duration::from_secs(30)) };
+    cfg.deadline = deadline;
     cfg.max_command_age = Duration::from_secs(30);
     let s = session.clone();
     Component { stop, task: tokio::spawn(async move { robot_agent::agent::run(&s, cfg, PlaceholderDynamics::floating(JOINTS), rx).await.expect("agent runs") }) }
