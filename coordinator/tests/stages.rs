@@ -319,10 +319,10 @@ fn task_torque_is_the_stacked_impedance_law_written_out() {
 
     let mut motion = MotionSpaceTerms::default();
     motion.compute_into(proj, &team.bias);
-    assert!(rel(&motion.mcinv_p, &(&proj.mc_inv * &proj.p)) < 1e-12);
+    assert!(rel(motion.view(proj).mcinv_p, &(&proj.mc_inv * &proj.p)) < 1e-12);
     let p_bias = &proj.p * &team.bias - &proj.pdot_v;
     assert!(relv(&motion.mcinv_bias, &(&proj.mc_inv * &p_bias)) < 1e-12);
-    let inp = TaskInput { team, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view() };
+    let inp = TaskInput { team, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view(proj) };
     let (mut tau_m, mut load, mut f_x) = (DVector::zeros(0), DVector::zeros(0), Vector6::zeros());
     task_torque(&inp, &mut Targets::default(), &mut TaskStack::default(), &mut tau_m, &mut load, &mut f_x).expect("tau_M");
 

@@ -254,8 +254,8 @@ fn lose_agent(cfg: &LockstepConfig, plant: &mut impl Plant, robots: &[String], i
     Ok(())
 }
 
-/// The liveliness of the run's components while it runs: a robot whose agent leaves ends the
-/// run at once, naming it; the coordinator's leaving starts a count of ticks (the agents hold
+/// The liveliness of the run's components while it runs: a robot whose agent leaves is named
+/// to the loop (which ends the run or unpowers the robot, [`AgentLoss`]); the coordinator's leaving starts a count of ticks (the agents hold
 /// their posture meanwhile) that ends the run after the grace unless it comes back.
 struct Liveness {
     members: transport::SampleQueue,

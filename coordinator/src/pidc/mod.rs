@@ -147,7 +147,7 @@ impl Pidc {
         let t_proj = us();
         // tau_M of the object, torso and swing-foot impedances (eqs. control_law,
         // joint_space_tau_M) with the object's load J_x^T F_x; tau_0 = [P S]^+ P tau_M.
-        let tasks = TaskInput { team: &r.team, grasp: r.grasp.as_ref(), references: references.as_ref(), config: cfg, motion: ws.motion.view() };
+        let tasks = TaskInput { team: &r.team, grasp: r.grasp.as_ref(), references: references.as_ref(), config: cfg, motion: ws.motion.view(&r.proj) };
         task_torque(&tasks, targets, &mut ws.tasks, &mut r.tau_m, &mut r.load, &mut r.f_x)?;
         motion_torque(&r.proj, &r.tau_m, &mut r.tau0, &mut ws.p_tau_m);
         let t_imp = us();

@@ -16,11 +16,11 @@
 //! their net wrench on the object is `-G (G^+ F_x) = w_ff`: it balances the weight in a
 //! static hold.
 
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Vector3, Vector6};
+use nalgebra::{DVector, Isometry3, Matrix3, Vector3, Vector6};
 use protocol::conventions::GRAVITY_VECTOR;
 use protocol::TaskReferences;
 
-use crate::linalg::{zeros, zeros_v};
+use crate::linalg::zeros_v;
 use crate::pidc::PidcConfig;
 use crate::team::Team;
 use crate::units::grasp::GraspTerms;
@@ -43,11 +43,11 @@ pub fn object_load(object: &Isometry3<f64>, twist: &Vector6<f64>, acc_d: &[f64; 
     Vector6::new(force.x, force.y, force.z, moment.x, moment.y, moment.z)
 }
 
-/// The motion-space terms every task shares: `M_c^{-1} P` and `M_c^{-1} (P h - Pdot v)`
-/// (eq. control_law's `Lambda_c` and `mu_c`), kept between ticks.
+/// The motion-space term of the tasks' bias, `M_c^{-1} (P h - Pdot v)` (eq. control_law's
+/// `mu_c`), kept between ticks; its `M_c^{-1} P` (`Lambda_c`) is the projections' own
+/// ([`Projections::mcinv_p`]).
 #[derive(Debug, Clone, Default)]
 pub struct MotionSpaceTerms {
-    pub mcinv_p: DMatrix<f64>,
     pub mcinv_bias: DVector<f64>,
     /// `P h - Pdot v`.
     p_bias: DVector<f64>,
@@ -57,8 +57,6 @@ impl MotionSpaceTerms {
     /// From the tick's projections and the team's `h`.
     pub fn compute_into(&mut self, proj: &Projections, bias: &DVector<f64>) {
         let n = bias.len();
-        zeros(&mut self.mcinv_p, n, n);
-        self.mcinv_p.copy_from(&proj.mcinv_p);
         zeros_v(&mut self.p_bias, n);
         self.p_bias.copy_from(&proj.pdot_v);
         self.p_bias.gemv(1.0, &proj.p, bias, -1.0); // P h - Pdot v
@@ -66,8 +64,9 @@ impl MotionSpaceTerms {
         self.mcinv_bias.gemv(1.0, &proj.mc_inv, &self.p_bias, 0.0);
     }
 
-    pub fn view(&self) -> MotionSpace<'_> {
-        MotionSpace { mcinv_p: &self.mcinv_p, mcinv_bias: &self.mcinv_bias }
+    /// What the tasks read: these terms with the projections they were computed from.
+    pub fn view<'a>(&'a self, proj: &'a Projections) -> MotionSpace<'a> {
+        MotionSpace { mcinv_p: &proj.mcinv_p, mcinv_bias: &self.mcinv_bias }
     }
 }
 
