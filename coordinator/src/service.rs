@@ -37,6 +37,9 @@ pub struct CoordinatorCounters {
     pub fallbacks: u64,
     /// Ticks skipped because the controller was not ready (e.g. descriptions missing).
     pub not_ready: u64,
+    /// Complete ticks not solved because a newer one was complete too (a coordinator that fell
+    /// behind in real time catches up; never in lockstep).
+    pub overtaken: u64,
 }
 
 /// Run the coordinator with `controller` (see [`crate::ControllerSpec::build`]) until `stop`
@@ -115,35 +118,45 @@ pub async fn run(
             }
             d = dynamics.recv_async() => {
                 let Ok(sample) = d else { break };
-                let terms = match decode_sample::<DynamicsTerms>(&sample) {
-                    Ok(t) => t,
-                    Err(e) => {
-                        counters.rejected_terms += 1;
-                        tracing::warn!(key = %sample.key_expr(), "rejected dynamics terms: {e}");
-                        continue;
+                // Once a tick is complete, the terms already queued are taken too and only the
+                // newest complete tick is solved: a coordinator that fell behind in real time
+                // catches up instead of sending commands too old to apply.
+                let mut newest: Option<(u64, Vec<DynamicsTerms>)> = None;
+                let mut next = Some(sample);
+                while let Some(sample) = next {
+                    let outcome = match decode_terms(&sample, &mut counters) {
+                        Some(terms) => assembler.add(terms, &members),
+                        None => TickOutcome::Pending,
+                    };
+                    match outcome {
+                        TickOutcome::Complete(tick, terms) => {
+                            if let Some((old, _)) = newest.replace((tick, terms)) {
+                                counters.overtaken += 1;
+                                tracing::debug!(tick = old, newer = tick, "complete tick overtaken by a newer one: not solved");
+                            }
+                        }
+                        TickOutcome::NotAMember(r, tick) => {
+                            // Its terms can beat its liveliness token: it is told to hold its
+                            // posture this tick rather than left waiting for a command.
+                            counters.rejected_terms += 1;
+                            tracing::warn!(robot = %r, tick, "dynamics from a robot that is not a member (no liveliness token): it holds its posture this tick");
+                            commands.clear();
+                            commands.push(TorqueCommand::hold(&cfg.team, &r, tick));
+                            publish_commands(session, &cfg, &commands, &mut command_pubs, &mut counters).await?;
+                        }
+                        TickOutcome::Stale(t) => tracing::debug!(tick = t, "late dynamics terms dropped"),
+                        TickOutcome::Pending => {}
                     }
-                };
-                match assembler.add(terms, &members) {
-                    TickOutcome::Complete(tick, terms) => {
-                        refs.drain(&references);
-                        refs.apply(tick, controller.as_mut());
-                        solve_and_publish(session, &cfg, controller.as_mut(), tick, &terms, &mut commands, &mut command_pubs, &mut diag_pub, &mut counters).await?;
-                        status_tick = tick;
-                        // Letting go (or taking a grasp again) is said at once, not at the next
-                        // housekeeping tick: a planner stops moving the team on it.
-                        publish_status |= controller.released_at().is_some() != released_reported;
-                    }
-                    TickOutcome::NotAMember(r, tick) => {
-                        // Its terms can beat its liveliness token: it is told to hold its
-                        // posture this tick rather than left waiting for a command.
-                        counters.rejected_terms += 1;
-                        tracing::warn!(robot = %r, tick, "dynamics from a robot that is not a member (no liveliness token): it holds its posture this tick");
-                        commands.clear();
-                        commands.push(TorqueCommand::hold(&cfg.team, &r, tick));
-                        publish_commands(session, &cfg, &commands, &mut command_pubs, &mut counters).await?;
-                    }
-                    TickOutcome::Stale(t) => tracing::debug!(tick = t, "late dynamics terms dropped"),
-                    TickOutcome::Pending => {}
+                    next = if newest.is_some() { dynamics.try_recv().ok().flatten() } else { None };
+                }
+                if let Some((tick, terms)) = newest {
+                    refs.drain(&references);
+                    refs.apply(tick, controller.as_mut());
+                    solve_and_publish(session, &cfg, controller.as_mut(), tick, &terms, &mut commands, &mut command_pubs, &mut diag_pub, &mut counters).await?;
+                    status_tick = tick;
+                    // Letting go (or taking a grasp again) is said at once, not at the next
+                    // housekeeping tick: a planner stops moving the team on it.
+                    publish_status |= controller.released_at().is_some() != released_reported;
                 }
             }
             _ = housekeeping.tick() => {
@@ -190,6 +203,18 @@ pub async fn run(
     }
     tracing::info!(?counters, "coordinator stopped");
     Ok(counters)
+}
+
+/// One sample of the dynamics key decoded, or counted and logged as rejected.
+fn decode_terms(sample: &zenoh::sample::Sample, counters: &mut CoordinatorCounters) -> Option<DynamicsTerms> {
+    match decode_sample::<DynamicsTerms>(sample) {
+        Ok(t) => Some(t),
+        Err(e) => {
+            counters.rejected_terms += 1;
+            tracing::warn!(key = %sample.key_expr(), "rejected dynamics terms: {e}");
+            None
+        }
+    }
 }
 
 /// A hold order for each robot of a tick the controller failed or was not ready for (into

@@ -746,6 +746,26 @@ pub struct GroundTruth {
     /// centre): foot heights and stance-foot slides of walks are measured from them.
     #[serde(default)]
     pub feet: Vec<BodyTruth>,
+    /// The control loop as the bridge (the robots' drives) measured it on this tick, one entry
+    /// per robot; empty in lockstep, where every tick waits for every torque.
+    #[serde(default)]
+    pub loop_timing: Vec<LoopTiming>,
+}
+
+/// One robot's control loop on one real-time tick, measured where the torques are applied (the
+/// bridge; on hardware, the drive interface): a single clock, so no synchronisation is needed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
+pub struct LoopTiming {
+    pub robot: String,
+    /// From this tick's state leaving to this tick's torques arriving, µs; `None` if they did
+    /// not arrive by the tick's deadline (a deadline miss: the drive held `applied_tick`'s torques).
+    pub latency_us: Option<f64>,
+    /// Tick of the torques applied during this tick's step (the tick itself unless missed;
+    /// `None` before any torques arrived).
+    pub applied_tick: Option<u64>,
+    /// Torques of earlier ticks that arrived while this tick waited (late messages).
+    pub late: u32,
 }
 
 impl Validate for GroundTruth {
@@ -762,6 +782,17 @@ impl Validate for GroundTruth {
         }
         for t in self.torsos.iter().chain(&self.hands) {
             validate_id("robot", &t.name)?;
+        }
+        for t in &self.loop_timing {
+            validate_id("robot", &t.robot)?;
+            if let Some(l) = t.latency_us {
+                if !(l.is_finite() && l >= 0.0) {
+                    return Err(ProtocolError::invalid(format!("loop_timing({}).latency_us", t.robot), "must be finite and non-negative"));
+                }
+            }
+            if t.applied_tick.is_some_and(|a| a > self.header.tick) {
+                return Err(ProtocolError::invalid(format!("loop_timing({}).applied_tick", t.robot), "is after the tick"));
+            }
         }
         for (field, list) in [("hand_contacts", &self.hand_contacts), ("foot_contacts", &self.foot_contacts)] {
             for (i, c) in list.iter().enumerate() {

@@ -221,20 +221,34 @@ impl<M: Message> TypedPublisher<M> {
     }
 }
 
-/// A subscriber queue (FIFO) on a key expression.
-pub type SampleQueue = Subscriber<zenoh::handlers::FifoChannelHandler<Sample>>;
+/// Samples a data subscription keeps before it drops its oldest ([`subscribe`]).
+pub const QUEUE_CAPACITY: usize = 1024;
 
-/// Subscribe to `key` with a FIFO queue.
+/// A data subscription's queue on a key expression: first in, first out, and when its reader
+/// falls [`QUEUE_CAPACITY`] (or its own capacity) behind, the oldest sample is dropped.
+///
+/// It never blocks the publisher. Zenoh delivers a sample to a subscriber of the same session by
+/// calling its handler on the publisher's thread, and a full blocking queue there stalls that
+/// thread: with every component in one process (`team run` embedded), a real-time run that fell
+/// behind blocked both runtime threads in such sends while the readers waited to be scheduled.
+/// In lockstep nothing is ever dropped: a tick has a bounded number of messages in flight. In
+/// real time a sample that old is useless anyway (the loop counts what it misses).
+pub type SampleQueue = Subscriber<zenoh::handlers::RingChannelHandler<Sample>>;
+
+/// Liveliness events (joins and leaves): first in, first out, never dropped ([`watch_liveliness`]).
+pub type EventQueue = Subscriber<zenoh::handlers::FifoChannelHandler<Sample>>;
+
+/// Subscribe to `key` with a queue of [`QUEUE_CAPACITY`] samples ([`SampleQueue`]).
 pub async fn subscribe(session: &Session, key: String) -> Result<SampleQueue, TransportError> {
-    session.declare_subscriber(key.clone()).await.map_err(|e| zenoh_err("declare_subscriber", &key, e))
+    subscribe_with_capacity(session, key, QUEUE_CAPACITY).await
 }
 
-/// Subscribe to `key` with a FIFO queue of `capacity` samples (the default holds 256; a
-/// publisher that sends a burst, such as a whole run's references, needs more).
+/// Subscribe to `key` with a queue of `capacity` samples: a publisher that sends a burst, such as
+/// a whole run's references, or a reader that must not lose any (the run's recorder), needs more.
 pub async fn subscribe_with_capacity(session: &Session, key: String, capacity: usize) -> Result<SampleQueue, TransportError> {
     session
         .declare_subscriber(key.clone())
-        .with(zenoh::handlers::FifoChannel::new(capacity))
+        .with(zenoh::handlers::RingChannel::new(capacity))
         .await
         .map_err(|e| zenoh_err("declare_subscriber", &key, e))
 }
@@ -273,7 +287,7 @@ pub async fn declare_member(
 }
 
 /// Watch the team's membership: current members first (history), then joins and leaves.
-pub async fn watch_members(session: &Session, team: &str) -> Result<SampleQueue, TransportError> {
+pub async fn watch_members(session: &Session, team: &str) -> Result<EventQueue, TransportError> {
     watch_liveliness(session, keys::all_members(team)?).await
 }
 
@@ -284,7 +298,7 @@ pub async fn declare_coordinator(session: &Session, team: &str) -> Result<zenoh:
 
 /// Watch the coordinator's liveliness: a `Put` sample when it is (or comes) alive, a `Delete`
 /// when it goes ([`coordinator_alive`]).
-pub async fn watch_coordinator(session: &Session, team: &str) -> Result<SampleQueue, TransportError> {
+pub async fn watch_coordinator(session: &Session, team: &str) -> Result<EventQueue, TransportError> {
     watch_liveliness(session, keys::coordinator_alive(team)?).await
 }
 
@@ -295,7 +309,7 @@ async fn declare_token(session: &Session, key: String) -> Result<zenoh::liveline
 
 /// The liveliness tokens on `key` (wildcards allowed): those present first (history), then
 /// their comings and goings (a `Put` sample when one comes, a `Delete` when it goes).
-pub async fn watch_liveliness(session: &Session, key: String) -> Result<SampleQueue, TransportError> {
+pub async fn watch_liveliness(session: &Session, key: String) -> Result<EventQueue, TransportError> {
     session
         .liveliness()
         .declare_subscriber(key.clone())

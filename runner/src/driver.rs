@@ -99,13 +99,18 @@ pub struct Driver {
     tapped_refs: u64,
 }
 
+/// Samples each of the driver's recording queues holds.
+pub const RECORD_QUEUE: usize = 1 << 15;
+
 impl Driver {
     /// Declare everything on `session`. `show_progress`: a progress bar on a terminal, log
     /// lines every 10 % otherwise.
     pub async fn start(session: &Session, plan: ReferencePlan, total_ticks: u64, show_progress: bool) -> Result<Driver, TransportError> {
-        let truth = transport::subscribe(session, keys::ground_truth(TEAM)?).await?;
-        let torques = transport::subscribe(session, keys::all_robots(TEAM, RobotTopic::Torque)?).await?;
-        let diagnostics = transport::subscribe(session, keys::diagnostics(TEAM)?).await?;
+        // What the report is made of: room for seconds of a real-time run whose driver fell
+        // behind (a queue drops its oldest when full, see `transport::SampleQueue`).
+        let truth = transport::subscribe_with_capacity(session, keys::ground_truth(TEAM)?, RECORD_QUEUE).await?;
+        let torques = transport::subscribe_with_capacity(session, keys::all_robots(TEAM, RobotTopic::Torque)?, RECORD_QUEUE).await?;
+        let diagnostics = transport::subscribe_with_capacity(session, keys::diagnostics(TEAM)?, RECORD_QUEUE).await?;
         let status = transport::subscribe(session, keys::coordinator_status(TEAM)?).await?;
         let refs_pub = TypedPublisher::declare(session, keys::references(TEAM)?, Qos::HotPath).await?;
         let contact_sets = plan.walk.as_ref().map(|w| w.contact_sets(TEAM, &plan.clock)).unwrap_or_default();

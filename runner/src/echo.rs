@@ -58,14 +58,21 @@ pub fn token_line(key: &str, alive: bool) -> serde_json::Value {
 /// going, the tokens present first.
 pub async fn echo(session: &Session, opts: &EchoOptions, out: &mut impl Write) -> Result<u64, EchoError> {
     let tokens = protocol::keys::is_liveliness(&opts.key);
-    let queue = if tokens {
-        transport::watch_liveliness(session, opts.key.clone()).await?
+    let (events, samples) = if tokens {
+        (Some(transport::watch_liveliness(session, opts.key.clone()).await?), None)
     } else {
-        transport::subscribe_with_capacity(session, opts.key.clone(), 4096).await?
+        (None, Some(transport::subscribe_with_capacity(session, opts.key.clone(), 4096).await?))
+    };
+    let next = || async {
+        match (&events, &samples) {
+            (Some(q), _) => q.recv_async().await,
+            (_, Some(q)) => q.recv_async().await,
+            (None, None) => Err("no subscription".into()),
+        }
     };
     let mut printed = 0u64;
     while opts.count.is_none_or(|n| printed < n) {
-        let sample = match tokio::time::timeout(opts.wait, queue.recv_async()).await {
+        let sample = match tokio::time::timeout(opts.wait, next()).await {
             Ok(Ok(s)) => s,
             Ok(Err(_)) => break,
             Err(_) if printed == 0 => return Err(EchoError::Silent { key: opts.key.clone(), waited: opts.wait }),

@@ -85,6 +85,8 @@ pub struct Metrics {
     pub qp_solve_us: Percentiles,
     pub controller_tick_us: Percentiles,
     pub coordinator_deadline_misses: Option<u64>,
+    /// The control loop of a real-time run (`None` in lockstep): latency, misses, late, lost.
+    pub loop_timing: Option<crate::loop_timing::LoopReport>,
     pub coordinator_fallbacks: Option<u64>,
     pub recoveries: Vec<Recovery>,
     /// Steps, stance-foot slides and final torso poses of a walk (`None` without one).
@@ -361,6 +363,7 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
         qp_solve_us,
         controller_tick_us,
         coordinator_deadline_misses: records.last_status.as_ref().map(|s| s.deadline_misses),
+        loop_timing: crate::loop_timing::LoopReport::from_truth(&records.truth),
         coordinator_fallbacks: records.last_status.as_ref().map(|s| s.fallbacks),
         recoveries,
         walk,
@@ -418,6 +421,9 @@ pub fn summary(m: &Metrics, dir: &Path) -> String {
         if let Some(e) = r.object_error_after_m {
             s.push_str(&format!("  push on {} ending at {:.1} s: object error {:.2} mm after {} s\n", r.on, r.push_end_s, e * 1e3, RECOVERY_AFTER));
         }
+    }
+    if let Some(l) = &m.loop_timing {
+        s.push_str(&l.summary());
     }
     let failed: Vec<&Check> = m.checks.iter().filter(|c| !c.passed).collect();
     if failed.is_empty() {

@@ -37,6 +37,7 @@ pub mod faults;
 pub mod gait;
 pub mod grasp_plan;
 pub mod launch;
+pub mod loop_timing;
 pub mod metrics;
 pub mod plan;
 pub mod plots;

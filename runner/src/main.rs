@@ -41,6 +41,12 @@ enum Command {
         /// namespace, made for the run by scripts/testhosts.sh and removed after it; root).
         #[arg(long)]
         hosts: bool,
+        /// Run the scenario against the wall clock: the sim-bridge paces physics at the
+        /// control period, a robot whose torques are late keeps its last ones, agents keep
+        /// their real deadlines (25 ms or 5 ticks), and the report adds the loop's timing.
+        /// Settling stays lockstep. Combines with --distributed, --hosts and --tls.
+        #[arg(long)]
+        realtime: bool,
         /// Run distributed on loopback over mutual TLS with the team's access control, with the
         /// certificates in DIR (make them with scripts/make-test-certs.sh DIR r1 r2 ...).
         #[arg(long, value_name = "DIR", conflicts_with = "hosts")]
@@ -180,15 +186,18 @@ fn main() -> Result<()> {
         .with_writer(std::io::stderr)
         .init();
     match Cli::parse().command {
-        Command::Run { scenario, set, distributed, hosts, tls, out, quiet, live } => {
+        Command::Run { scenario, set, distributed, hosts, realtime, tls, out, quiet, live } => {
             let mode_name = if hosts { "hosts" } else if tls.is_some() { "distributed-tls" } else if distributed { "distributed" } else { "embedded" };
+            let mode_name = if realtime { format!("{mode_name}, real time") } else { mode_name.to_string() };
+            let mode_name = mode_name.as_str();
             let s = Scenario::load(&scenario, &set)?;
             let stem = scenario.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scenario".into());
             let dir = out.unwrap_or_else(|| PathBuf::from("reports").join(stem));
             std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
             let root = repo_root();
             eprintln!("{}: planning (hands placed on the object by IK)...", s.name);
-            let plan = plan::plan(&s, &root)?;
+            let mut plan = plan::plan(&s, &root)?;
+            plan.scene.realtime = realtime;
             eprintln!(
                 "{}: settling {:.1} s, then {:.1} s of scenario at {} Hz ({} mode)",
                 s.name,

@@ -131,6 +131,8 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
         // but a missing robot is still named.
         command_timeout: 30.0,
         start_timeout: 60.0,
+        // `team run --realtime` turns it on.
+        realtime: false,
     };
 
     let principal = object.principal_inertia();

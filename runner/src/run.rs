@@ -22,6 +22,14 @@ pub const AGENT_COMMAND_DEADLINE: Duration = Duration::from_secs(20);
 /// The coordinator abandons a tick whose terms are incomplete after this long.
 pub const COORDINATOR_TICK_DEADLINE: Duration = Duration::from_secs(20);
 
+/// In real time ([`sim_bridge::scene::Scene::realtime`]) an agent holds its posture after this
+/// long without a command (or `CommandDeadline::ticks` state ticks, whichever comes first): the
+/// agent's own default, a robot's real deadline.
+pub const REALTIME_AGENT_COMMAND_DEADLINE: Duration = Duration::from_millis(25);
+/// In real time the coordinator abandons a tick whose terms are incomplete after this long
+/// (its states are long gone by then; the tick only holds memory).
+pub const REALTIME_COORDINATOR_TICK_DEADLINE: Duration = Duration::from_millis(50);
+
 /// After the bridge ended the run, how long the driver may take to record the last ticks.
 pub const DRIVER_DRAIN: Duration = Duration::from_secs(5);
 
@@ -52,8 +60,16 @@ pub struct RunOptions {
 }
 
 /// The components of a scenario run.
+/// Lockstep runs wait long ([`AGENT_COMMAND_DEADLINE`], [`COORDINATOR_TICK_DEADLINE`]); real-time
+/// runs (`plan.scene.realtime`) keep a robot's deadlines ([`REALTIME_AGENT_COMMAND_DEADLINE`],
+/// [`REALTIME_COORDINATOR_TICK_DEADLINE`]).
 pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
-    let coordinator = CoordinatorArgs { team: TEAM.into(), tick_deadline: COORDINATOR_TICK_DEADLINE, controller: plan.controller.clone() };
+    let (tick_deadline, command_deadline) = if plan.scene.realtime {
+        (REALTIME_COORDINATOR_TICK_DEADLINE, REALTIME_AGENT_COMMAND_DEADLINE)
+    } else {
+        (COORDINATOR_TICK_DEADLINE, AGENT_COMMAND_DEADLINE)
+    };
+    let coordinator = CoordinatorArgs { team: TEAM.into(), tick_deadline, controller: plan.controller.clone() };
     let agents = plan
         .robots
         .iter()
@@ -61,7 +77,7 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
             team: TEAM.into(),
             id: r.id.clone(),
             model: AgentModel::Robot { robot: r.robot.clone(), description: r.description.clone() },
-            command_deadline: AGENT_COMMAND_DEADLINE,
+            command_deadline,
         })
         .collect();
     let bridge = BridgeArgs::Scene { scene: plan.scene.clone(), robots: plan.loaded_robots() };

@@ -103,7 +103,7 @@ pub fn compute(world: &World, d: &mjData, team: &str, tick: u64, out: &mut Groun
 
 /// An empty ground-truth message.
 pub fn empty(team: &str) -> GroundTruth {
-    GroundTruth { header: Header::new(team, None, 0, 0), time: 0.0, object: None, torsos: Vec::new(), hand_contacts: Vec::new(), foot_contacts: Vec::new(), hands: Vec::new(), feet: Vec::new() }
+    GroundTruth { header: Header::new(team, None, 0, 0), time: 0.0, object: None, torsos: Vec::new(), hand_contacts: Vec::new(), foot_contacts: Vec::new(), hands: Vec::new(), feet: Vec::new(), loop_timing: Vec::new() }
 }
 
 /// Ground truth kept in memory, every `every` ticks.

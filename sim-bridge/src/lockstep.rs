@@ -258,8 +258,8 @@ fn lose_agent(cfg: &LockstepConfig, plant: &mut impl Plant, robots: &[String], i
 /// to the loop (which ends the run or unpowers the robot, [`AgentLoss`]); the coordinator's leaving starts a count of ticks (the agents hold
 /// their posture meanwhile) that ends the run after the grace unless it comes back.
 struct Liveness {
-    members: transport::SampleQueue,
-    coordinator: transport::SampleQueue,
+    members: transport::EventQueue,
+    coordinator: transport::EventQueue,
     coordinator_lost: Option<u64>,
 }
 
@@ -390,6 +390,16 @@ impl TickSide {
         };
         let perturbations = if extras.perturbation_key { Some(transport::subscribe(session, keys::perturbation(team)?).await?) } else { None };
         Ok(TickSide { truth_pub, perturbations, truth: crate::ground_truth::empty(team) })
+    }
+
+    /// The loop timing the next ground truth carries, one entry per robot (made on first use;
+    /// the real-time loop fills it every tick, lockstep never asks for it).
+    pub(crate) fn loop_timing(&mut self, robots: &[String]) -> &mut [protocol::LoopTiming] {
+        let t = &mut self.truth.loop_timing;
+        if t.len() != robots.len() || t.iter().zip(robots).any(|(a, r)| a.robot != *r) {
+            *t = robots.iter().map(|r| protocol::LoopTiming { robot: r.clone(), latency_us: None, applied_tick: None, late: 0 }).collect();
+        }
+        t
     }
 
     /// Perturbations in, one plant step, ground truth out.

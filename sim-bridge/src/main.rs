@@ -152,11 +152,14 @@ async fn main() -> Result<()> {
                 path.display(),
                 r.settle.ticks,
                 r.settle.wall_time.as_secs_f64(),
-                r.run.ticks,
-                r.run.sim_time,
-                r.run.wall_time.as_secs_f64(),
-                r.run.sim_time / r.run.wall_time.as_secs_f64()
+                r.run.ticks(),
+                r.run.sim_time(),
+                r.run.wall_time().as_secs_f64(),
+                r.run.sim_time() / r.run.wall_time().as_secs_f64()
             );
+            if let PhaseReport::RealTime(rt) = &r.run {
+                println!("real time: ticks without their torques by the deadline {:?}, overruns {}", rt.missed, rt.overruns);
+            }
             session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
         }
     }

@@ -3,6 +3,10 @@
 //! deadline, and steps. A robot whose torques for the tick did not arrive in time keeps its last
 //! torques (zero before the first), and the miss is counted per robot. Torques of older ticks
 //! that arrive late are taken as the newest available, also counted as misses of the tick.
+//!
+//! Every tick's ground truth carries the loop as measured here ([`protocol::LoopTiming`]): per
+//! robot, state-to-torque latency (one clock: the states leave and the torques arrive here),
+//! the tick of the torques applied, and the late arrivals.
 
 use std::time::{Duration, Instant};
 
@@ -55,7 +59,12 @@ pub async fn run(
         }
         let deadline = started + period.mul_f64((tick - extras.first_tick + 1) as f64);
         states.publish(plant, tick).await?;
+        let sent = Instant::now();
         got.iter_mut().for_each(|g| *g = false);
+        for t in side.loop_timing(&robots) {
+            t.latency_us = None;
+            t.late = 0;
+        }
         while !got.iter().all(|g| *g) {
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
@@ -85,7 +94,14 @@ pub async fn run(
                 }
             };
             let Some(i) = robots.iter().position(|r| r == cmd.header.robot_id()) else { continue };
-            if cmd.header.tick > tick || last_tick[i].is_some_and(|t| cmd.header.tick <= t) {
+            if cmd.header.tick > tick {
+                continue;
+            }
+            let timing = &mut side.loop_timing(&robots)[i];
+            if cmd.header.tick < tick {
+                timing.late += 1;
+            }
+            if last_tick[i].is_some_and(|t| cmd.header.tick <= t) {
                 continue;
             }
             if cmd.tau.len() != plant.joints(i) {
@@ -95,8 +111,12 @@ pub async fn run(
             plant.set_torques(i, &cmd.tau);
             last_tick[i] = Some(cmd.header.tick);
             got[i] = cmd.header.tick == tick;
+            if got[i] {
+                timing.latency_us = Some(sent.elapsed().as_secs_f64() * 1e6);
+            }
         }
-        for (i, g) in got.iter().enumerate() {
+        for (i, (g, timing)) in got.iter().zip(side.loop_timing(&robots)).enumerate() {
+            timing.applied_tick = last_tick[i];
             if !g {
                 missed[i] += 1;
             }

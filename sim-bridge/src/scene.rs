@@ -10,7 +10,8 @@
 //!
 //! The run: build the world, settle `settle_ticks` lockstep ticks under the controller (the
 //! scenario clock then restarts at 0, tick numbers continue), add the pushes (their `start`
-//! is on the scenario clock), run `ticks` lockstep ticks. Ground truth is published on
+//! is on the scenario clock), run `ticks` ticks, lockstep or against the wall clock
+//! ([`Scene::realtime`]). Ground truth is published on
 //! `team/{team}/ground-truth` after every tick of both phases (the runner records it and
 //! drives its progress bar from it).
 
@@ -47,13 +48,17 @@ pub struct Scene {
     pub command_timeout: f64,
     /// Seconds to wait for every robot to join.
     pub start_timeout: f64,
+    /// Run the scenario phase against the wall clock, one control period per tick ([`Pace::RealTime`]:
+    /// a robot whose torques are late keeps its last ones); settling stays lockstep.
+    #[serde(default)]
+    pub realtime: bool,
 }
 
 /// What a scene run did.
 #[derive(Debug, Clone)]
 pub struct SceneReport {
     pub settle: lockstep::LockstepReport,
-    pub run: lockstep::LockstepReport,
+    pub run: PhaseReport,
     pub perturbations_applied_steps: u64,
 }
 
@@ -92,6 +97,16 @@ impl Scene {
         protocol::RunClock { control_hz: self.world.control_hz, settle_ticks: self.settle_ticks, ticks: self.ticks }
     }
 
+    /// How the scenario phase is paced: [`Pace::RealTime`] at the control period if
+    /// [`Scene::realtime`], else lockstep.
+    pub fn pace(&self) -> Pace {
+        if self.realtime {
+            Pace::RealTime { period: Duration::from_secs_f64(1.0 / self.world.control_hz) }
+        } else {
+            Pace::Lockstep
+        }
+    }
+
     fn lockstep(&self, ticks: u64) -> LockstepConfig {
         LockstepConfig {
             team: self.team.clone(),
@@ -124,8 +139,7 @@ pub async fn run(session: &Session, scene: &Scene, robots: &[Arc<Robot>], stop: 
     let mut plant = MujocoPlant::new(world)?;
     let mut extras = Extras { publish_ground_truth: true, perturbation_key: true, ..Default::default() };
     let cfg = scene.lockstep(scene.ticks);
-    let (settle, run) = settle_then_run(session, &mut plant, &cfg, scene.settle_ticks, Pace::Lockstep, &scene.perturbations, &mut extras, stop).await?;
-    let PhaseReport::Lockstep(run) = run else { unreachable!("a lockstep pace reports a lockstep phase") };
+    let (settle, run) = settle_then_run(session, &mut plant, &cfg, scene.settle_ticks, scene.pace(), &scene.perturbations, &mut extras, stop).await?;
     Ok(SceneReport { settle, run, perturbations_applied_steps: plant.perturbations.applied_steps })
 }
 
@@ -143,6 +157,30 @@ pub enum Pace {
 pub enum PhaseReport {
     Lockstep(lockstep::LockstepReport),
     RealTime(RealtimeReport),
+}
+
+impl PhaseReport {
+    pub fn ticks(&self) -> u64 {
+        match self {
+            PhaseReport::Lockstep(r) => r.ticks,
+            PhaseReport::RealTime(r) => r.ticks,
+        }
+    }
+
+    /// Simulated time at the end, s.
+    pub fn sim_time(&self) -> f64 {
+        match self {
+            PhaseReport::Lockstep(r) => r.sim_time,
+            PhaseReport::RealTime(r) => r.sim_time,
+        }
+    }
+
+    pub fn wall_time(&self) -> Duration {
+        match self {
+            PhaseReport::Lockstep(r) => r.wall_time,
+            PhaseReport::RealTime(r) => r.wall_time,
+        }
+    }
 }
 
 /// The two phases of a run (`protocol::clock`): `settle_ticks` lockstep ticks under the
@@ -188,7 +226,7 @@ mod tests {
     use crate::world::WorldSpec;
 
     fn scene() -> Scene {
-        Scene { team: "team".into(), world: WorldSpec::paper_pair(), perturbations: Vec::new(), settle_ticks: 10, ticks: 20, command_timeout: 1.0, start_timeout: 1.0 }
+        Scene { team: "team".into(), world: WorldSpec::paper_pair(), perturbations: Vec::new(), settle_ticks: 10, ticks: 20, command_timeout: 1.0, start_timeout: 1.0, realtime: false }
     }
 
     #[test]

@@ -7,7 +7,9 @@
 //! * `contact_forces`: each hand's normal and tangential force against its friction limit
 //!   `mu f_n`, and each robot's feet friction use `|f_t| / (mu f_n)` (at most 1 in the cone);
 //! * `qp_timing`: the QP solve time and the whole controller tick per tick (us);
-//! * `torque_rms`: the commanded torque RMS per joint, joint names readable.
+//! * `torque_rms`: the commanded torque RMS per joint, joint names readable;
+//! * `loop_timing` (real-time runs only, [`LOOP_FIGURE`]): state-to-torque latency per robot
+//!   against the control period, and the ticks each robot's drive held its last torques.
 //!
 //! A walking scenario adds [`walk::FIGURES`]: the gait diagram, foot heights and the paths
 //! from above.
@@ -57,6 +59,10 @@ pub fn write_all(plan: &Plan, eval: &Evaluation, records: &Records, dir: &Path) 
     }
     draw::bars(dir, "torque_rms", "commanded torque RMS per joint", "N m", &labels, &values)?;
     let mut figures: Vec<(&str, &str)> = FIGURES.to_vec();
+    if eval.metrics.loop_timing.is_some() {
+        draw::panels(dir, "loop_timing", "control loop (real time)", &loop_timing(plan, records), 1, "t [s]")?;
+        figures.push(LOOP_FIGURE);
+    }
     if let Some(w) = &plan.references.walk {
         let refs = &plan.references;
         draw::panels(dir, "gait", "gait diagram", &walk::gait_diagram(w, records), 1, "t [s]")?;
@@ -179,6 +185,43 @@ fn qp_timing(plan: &Plan, records: &Records) -> Vec<Panel> {
             y_label: "us".into(),
             lines: vec![Line::new("tick", d.iter().map(|x| (t(x.header.tick), x.total_us)).collect(), ORANGE, Stroke::Solid)],
         },
+    ]
+}
+
+/// A real-time run's figure: [`loop_timing`].
+pub const LOOP_FIGURE: (&str, &str) = ("loop_timing", "State-to-torque latency per robot against the control period; the ticks each robot's drive held its last torques");
+
+/// Per robot, the state-to-torque latency of each tick whose torques came in time, with the
+/// control period (the deadline) dashed; below, each robot's deadline misses counted up over
+/// the run (a step is a tick its drive held its last torques).
+fn loop_timing(plan: &Plan, records: &Records) -> Vec<Panel> {
+    let t = |tick: u64| plan.references.time_of_tick(tick).unwrap_or(0.0);
+    let period_us = 1e6 / plan.scenario.control_hz;
+    let robots: Vec<&str> = plan.robots.iter().map(|r| r.id.as_str()).collect();
+    let mut latency = Vec::new();
+    let mut missed = Vec::new();
+    for (i, r) in robots.iter().enumerate() {
+        let color = draw::PALETTE[i % draw::PALETTE.len()];
+        let timings = records.truth.iter().flat_map(|g| g.loop_timing.iter().filter(|l| l.robot == *r).map(move |l| (g.header.tick, l)));
+        let (mut on_time, mut held, mut count) = (Vec::new(), Vec::new(), 0u64);
+        for (tick, l) in timings {
+            match l.latency_us {
+                Some(us) => on_time.push((t(tick), us)),
+                None => count += 1,
+            }
+            held.push((t(tick), count as f64));
+        }
+        latency.push(Line::new(*r, on_time, color, Stroke::Solid));
+        missed.push(Line::new(format!("{r} ({count} missed)"), held, color, Stroke::Solid));
+    }
+    let span = |g: &protocol::GroundTruth| t(g.header.tick);
+    let (t0, t1) = records.truth.iter().filter(|g| !g.loop_timing.is_empty()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), g| (a.min(span(g)), b.max(span(g))));
+    if t0 <= t1 {
+        latency.push(Line::new("control period", vec![(t0, period_us), (t1, period_us)], GREY, Stroke::Dashed));
+    }
+    vec![
+        Panel { title: "state-to-torque latency (ticks in time)".into(), y_label: "us".into(), lines: latency },
+        Panel { title: "deadline misses so far (the drive held its last torques)".into(), y_label: "ticks".into(), lines: missed },
     ]
 }
 
