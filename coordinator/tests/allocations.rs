@@ -100,7 +100,7 @@ fn the_tick_allocates_nothing_once_the_team_shape_is_known() {
     let r = l.c.last().expect("tick");
     println!("2 robots: first tick {first} allocations, then {steady:?}; inside faer's decompositions {:?}; QP {:?} by {}", &l.inside[1..], r.qp.status, r.qp.solver);
     assert!(first > 0, "the first tick sizes the buffers (the counter counts)");
-    assert!(matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved) && r.qp.solver == "dense-ipm");
+    assert!(matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved) && r.qp.solver != "clarabel");
     assert!(r.proj.by_blocks, "the projections by the team's blocks (the default)");
     assert_eq!(steady, vec![0; 20], "steady ticks allocate nothing");
     assert!(l.c.diagnostics().is_some_and(|d| d.contacts.len() == 10));
@@ -124,7 +124,7 @@ fn a_new_contact_set_resizes_once_then_allocates_nothing() {
     let r = l.c.last().expect("tick");
     println!("a foot lifts: {changed:?}; QP {:?} by {}", r.qp.status, r.qp.solver);
     assert_eq!((r.team.feet.len(), r.team.swing_feet.len()), (7, 1));
-    assert_eq!(r.qp.solver, "dense-ipm", "Clarabel allocates; this test is about the dense path");
+    assert_ne!(r.qp.solver, "clarabel", "Clarabel allocates; this test is about the active-set and dense paths");
     assert!(changed[0] > 0);
     assert_eq!(&changed[1..], &[0; 5]);
     terms[0] = all_stance;

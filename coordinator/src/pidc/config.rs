@@ -46,6 +46,9 @@ pub struct PidcConfig {
     /// Solve the QP with the dense interior-point method first, Clarabel when it does not
     /// converge (or always Clarabel when false). See `qp::DenseIpm`.
     pub dense_qp: bool,
+    /// With `dense_qp`: try the dual active-set method (`qp::DualActiveSet`, hot-started from
+    /// the previous tick's active rows) before the dense interior-point method.
+    pub active_set_qp: bool,
     /// `S = I` (treat the base as actuated): the [Lin2018] comparison only.
     pub fully_actuated: bool,
     /// Compute the projections by dense SVDs of the team's matrices (the oracle) instead of
@@ -77,6 +80,7 @@ impl Default for PidcConfig {
             regularisation: 1e-6,
             qp_max_iter: 50,
             dense_qp: true,
+            active_set_qp: true,
             fully_actuated: false,
             dense_projections: false,
         }
