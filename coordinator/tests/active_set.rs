@@ -85,6 +85,9 @@ impl Worst {
 /// squares on `2 H F + A_W^T u = 0`, their most negative value and the residual (relative to
 /// `|2 H F|`); objective `F^T H F` relative; `Y F`, `rho F` and `F` relative to Clarabel's.
 fn check(p: &QpProblem, d: &Data, f: &DVector<f64>, fc: &DVector<f64>) -> Worst {
+    // The objective as assembled (by blocks of its lower triangle) is Y^T Y + eps I.
+    let h = d.r.y.transpose() * &d.r.y + DMatrix::identity(p.n(), p.n()) * 1e-6;
+    assert!((&p.h - &h).amax() <= 1e-12 * (1.0 + h.amax()), "H");
     let slack = &p.b - &p.a * f;
     let rows = (0..p.rows()).map(|i| -slack[i] / (1.0 + p.b[i].abs())).fold(0.0f64, f64::max);
     let obj = |x: &DVector<f64>| x.dot(&(&p.h * x));
