@@ -3,7 +3,9 @@
 //! p50/p99 of the total and of each stage over 600/N ticks. `CLARABEL_ONLY=1` solves the QP
 //! with Clarabel alone (`PidcConfig::dense_qp = false`); `DENSE_PROJECTIONS=1` computes the
 //! projections by dense SVDs of the team's matrices (`PidcConfig::dense_projections`, the
-//! formulation before the team's blocks were used, kept as the oracle).
+//! formulation before the team's blocks were used, kept as the oracle). `ACTIVE_SET=1` tries the
+//! dual active-set method first (`PidcConfig::active_set_qp = true`, hot-started from the last
+//! tick; off by default), `DENSE_IPM=1` forces it off.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -46,7 +48,8 @@ fn bench(c: &mut Criterion) {
     for &count in &[2usize, 4, 8] {
         let (terms, descs) = fx.static_team(count);
         let dense_projections = std::env::var_os("DENSE_PROJECTIONS").is_some();
-        let mut ctl = Pidc::new(PidcConfig { dense_qp: std::env::var_os("CLARABEL_ONLY").is_none(), dense_projections, ..PidcConfig::default() });
+        let active_set_qp = std::env::var_os("DENSE_IPM").is_none() && (std::env::var_os("ACTIVE_SET").is_some() || PidcConfig::default().active_set_qp);
+        let mut ctl = Pidc::new(PidcConfig { dense_qp: std::env::var_os("CLARABEL_ONLY").is_none(), active_set_qp, dense_projections, ..PidcConfig::default() });
         for d in &descs {
             ctl.set_description(d);
         }
@@ -72,11 +75,12 @@ fn bench(c: &mut Criterion) {
         let r = ctl.last().expect("last");
         let names = ["total", "assembly", "projections", "impedance", "QP build", "QP solve"];
         println!(
-            "robots {count}: n {} F_c {} QP rows {} status {:?} iterations {} projections by {}",
+            "robots {count}: n {} F_c {} QP rows {} status {:?} by {} iterations {} projections by {}",
             r.team.n,
             r.j_c.nrows(),
             r.qp.rows,
             r.qp.status,
+            r.qp.solver,
             r.qp.iterations,
             if r.proj.by_blocks { "blocks" } else { "dense SVDs" }
         );

@@ -267,7 +267,7 @@ fn static_team_holds_the_object() {
     let rc = cc.compute(&terms).expect("tick");
     let d_tau = (&rc.tau - &tau_a).amax();
     println!("{solver} vs {} ({:?}, {} iterations): |tau difference| {d_tau:.2e} Nm", rc.qp.solver, rc.qp.status, rc.qp.iterations);
-    assert_eq!(solver, "dense-ipm");
+    assert_ne!(solver, "clarabel");
     assert!(d_tau < 1e-4);
 }
 

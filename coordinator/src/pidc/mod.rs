@@ -204,7 +204,8 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
         let t1 = Instant::now();
         // F_c is kept out of the report while the QP reads it (no allocation: an empty vector).
         let mut f_c = std::mem::replace(&mut r.f_c, DVector::zeros(0));
-        r.qp = qp::solve(&mut ws.qp, &qp_input(r, cfg), cfg.qp_max_iter, &mut f_c);
+        let settings = qp::QpSettings { active_set_first: cfg.active_set_qp, ..qp::QpSettings::new(cfg.qp_max_iter, cfg.dense_qp) };
+        r.qp = qp::solve_with(&mut ws.qp, &qp_input(r, cfg), &settings, &mut f_c);
         r.f_c = f_c;
         build_us += (t1 - t0).as_secs_f64() * 1e6;
         qp_us += t1.elapsed().as_secs_f64() * 1e6;

@@ -18,11 +18,13 @@
 //! | [`rows`] | one contact's rows `c . lambda_k >= lo` ([`ContactKind`], [`contact_rows`]); the sign conventions and the tilt-moment pairing that deviates from the paper |
 //! | [`problem`] | the controller's terms ([`QpInput`]) and the assembled `min 1/2 F^T P F, A F <= b` ([`QpProblem`], [`constraints_into`], [`objective_into`]) |
 //! | [`settings`] | [`QpSettings`]: dense first or not, iterations, tolerances, the fallback's price |
-//! | [`dense_ipm`] | [`DenseIpm`], the dense interior-point method tried first |
+//! | [`active_set`] | [`DualActiveSet`], the Goldfarb–Idnani dual active-set method hot-started from the last tick, tried first |
+//! | [`dense_ipm`] | [`DenseIpm`], the dense interior-point method tried next |
 //! | [`clarabel`] | [`Clarabel`], the adapter to Clarabel 0.11 ([`to_csc`]) |
 //! | [`least_violation`] | [`solve_least_violation`], the fallback when the QP is infeasible |
-//! | here | the [`QpSolver`] interface, [`QpOutcome`], [`QpWorkspace`] and [`solve`] (dense, then Clarabel) |
+//! | here | the [`QpSolver`] interface, [`QpOutcome`], [`QpWorkspace`] and [`solve`] (active set, dense, then Clarabel) |
 
+pub mod active_set;
 pub mod clarabel;
 pub mod dense_ipm;
 pub mod least_violation;
@@ -35,12 +37,13 @@ use std::time::Instant;
 use nalgebra::DVector;
 pub use protocol::QpStatus;
 
+pub use active_set::{ActiveSetError, DualActiveSet};
 pub use clarabel::{to_csc, Clarabel};
 pub use dense_ipm::DenseIpm;
 pub use least_violation::{solve_least_violation, solve_least_violation_with};
 pub use problem::{constraints_into, objective_into, QpInput, QpProblem};
 pub use rows::{contact_rows, ContactKind, ContactRows, MAX_CONTACT_ROWS};
-pub use settings::{QpSettings, DENSE_TOL, HARD_ROW_FACTOR, LEAST_VIOLATION_MIN_ITER, REDUCED_TOL, VIOLATION_WEIGHT};
+pub use settings::{QpSettings, ACTIVE_SET_MAX_ITER, ACTIVE_SET_TOL, DENSE_TOL, HARD_ROW_FACTOR, LEAST_VIOLATION_MIN_ITER, REDUCED_TOL, VIOLATION_WEIGHT};
 
 use crate::linalg::zeros_v;
 use least_violation::LeastViolation;
@@ -62,7 +65,7 @@ pub struct QpOutcome {
     pub solve_us: f64,
     pub setup_us: f64,
     pub rows: usize,
-    /// Which solver produced the answer: "dense-ipm" or "clarabel".
+    /// Which solver produced the answer: "active-set", "dense-ipm" or "clarabel".
     pub solver: &'static str,
 }
 
@@ -76,6 +79,7 @@ impl Default for QpOutcome {
 #[derive(Default)]
 pub struct QpWorkspace {
     problem: QpProblem,
+    active_set: DualActiveSet,
     ipm: DenseIpm,
     lv: LeastViolation,
 }
@@ -97,8 +101,11 @@ pub fn solve(ws: &mut QpWorkspace, inp: &QpInput, max_iter: u32, f: &mut DVector
 }
 
 /// [`solve`] with explicit settings (`inp.dense_first` is not read: `settings.dense_first`
-/// decides). [`DenseIpm`] first if `settings.dense_first`; [`Clarabel`] when it does not
-/// converge. `solve_us` is the whole call's time, assembly included.
+/// decides). With `settings.dense_first`: [`DualActiveSet`] first if
+/// `settings.active_set_first` (hot-started from the last call's active rows), then
+/// [`DenseIpm`] when it does not solve the QP; [`Clarabel`] when neither does (it also
+/// certifies infeasibility, so the status of an infeasible QP is Clarabel's as before).
+/// `solve_us` is the whole call's time, assembly included.
 pub fn solve_with(ws: &mut QpWorkspace, inp: &QpInput, settings: &QpSettings, f: &mut DVector<f64>) -> QpOutcome {
     let t0 = Instant::now();
     zeros_v(f, inp.rho.ncols());
@@ -106,6 +113,12 @@ pub fn solve_with(ws: &mut QpWorkspace, inp: &QpInput, settings: &QpSettings, f:
     if !ws.problem.is_finite() {
         let rows = ws.problem.rows();
         return QpOutcome { status: QpStatus::NumericalError, iterations: 0, solve_us: 0.0, setup_us: 0.0, rows, solver: "clarabel" };
+    }
+    if settings.dense_first && settings.active_set_first {
+        let out = ws.active_set.solve_problem(&ws.problem, settings, f);
+        if out.status == QpStatus::Solved {
+            return QpOutcome { solve_us: t0.elapsed().as_secs_f64() * 1e6, ..out };
+        }
     }
     if settings.dense_first {
         let out = ws.ipm.solve_problem(&ws.problem, settings, f);
