@@ -21,6 +21,13 @@ use team_runner::plan::{self, Plan};
 use team_runner::run::{self, RunOptions};
 use team_runner::scenario::Scenario;
 
+/// The tests run one at a time: two real-time runs at once on two cores miss their deadlines.
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn serial() -> std::sync::MutexGuard<'static, ()> {
+    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// S4 at `hz` for `duration` s, paced by the wall clock.
 fn s4_realtime(hz: f64, duration: f64) -> Plan {
     let sets = [format!("duration={duration}"), "settle=0.5".into(), format!("control_hz={hz}")];
@@ -70,6 +77,7 @@ fn assert_loop_consistent(plan: &Plan, records: &Records, report: &LoopReport) {
 /// tick, and it kept up (at most 2 % of the ticks missed).
 #[test]
 fn s4_holds_in_real_time_and_reports_its_loop() {
+    let _one = serial();
     let plan = s4_realtime(250.0, 2.0);
     let dir = common::scenario::repo().join("target/test-reports/realtime_s4");
     std::fs::create_dir_all(&dir).expect("report dir");
@@ -93,6 +101,7 @@ fn s4_holds_in_real_time_and_reports_its_loop() {
 /// cannot be made, it says so and runs distributed on loopback without loss.
 #[test]
 fn s4_holds_in_real_time_across_hosts_with_five_percent_loss_on_one_link() {
+    let _one = serial();
     let plan = s4_realtime(250.0, 3.0);
     let dir = common::scenario::repo().join("target/test-reports/realtime_hosts_loss");
     std::fs::create_dir_all(&dir).expect("report dir");
