@@ -42,9 +42,23 @@ pub async fn run(
     source: impl DynamicsSource,
     stop: watch::Receiver<bool>,
 ) -> Result<AgentCounters, AgentError> {
+    let (_never, stall) = watch::channel(false);
+    run_stallable(session, cfg, source, stop, stall).await
+}
+
+/// [`run`], stalled while `stall` is true: alive (its liveliness token held) but handling
+/// nothing, as a hung process would be. A fault injector's hook (`team_runner::faults`); a
+/// separate process is stalled with SIGSTOP instead.
+pub async fn run_stallable(
+    session: &Session,
+    cfg: AgentConfig,
+    source: impl DynamicsSource,
+    stop: watch::Receiver<bool>,
+    stall: watch::Receiver<bool>,
+) -> Result<AgentCounters, AgentError> {
     let states = ZenohStateSource::subscribe(session, &cfg.team, &cfg.robot).await?;
     let sink = ZenohTorqueSink::declare(session, &cfg.team, &cfg.robot).await?;
-    run_with(session, cfg, source, states, sink, stop).await
+    run_with(session, cfg, source, states, sink, stop, stall).await
 }
 
 /// The agent loop with any state source and torque sink; commands, contacts, dynamics, status
@@ -57,6 +71,7 @@ pub async fn run_with<S: DynamicsSource>(
     mut states: impl StateSource,
     sink: impl TorqueSink,
     mut stop: watch::Receiver<bool>,
+    mut stall: watch::Receiver<bool>,
 ) -> Result<AgentCounters, AgentError> {
     let mut core = AgentCore::new(&cfg, source)?;
     let (team, robot) = (cfg.team.as_str(), cfg.robot.as_str());
@@ -76,8 +91,19 @@ pub async fn run_with<S: DynamicsSource>(
     housekeeping.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
 
     loop {
+        if *stall.borrow_and_update() {
+            tracing::warn!(%robot, "stalled: handling nothing, still a member");
+            while *stall.borrow_and_update() && !*stop.borrow() {
+                tokio::select! {
+                    r = stop.changed() => if r.is_err() { break },
+                    r = stall.changed() => if r.is_err() { break },
+                }
+            }
+            tracing::warn!(%robot, "stall over");
+        }
         tokio::select! {
             r = stop.changed() => { if r.is_err() || *stop.borrow() { break; } }
+            r = stall.changed() => { if r.is_err() { break; } }
             ev = states.next() => {
                 let state = match ev {
                     StateEvent::State(s) => s,
@@ -110,6 +136,10 @@ pub async fn run_with<S: DynamicsSource>(
                 let Ok(sample) = c else { break };
                 if transport::coordinator_alive(&sample) {
                     tracing::info!(%robot, "the coordinator is present");
+                    // A coordinator that (re)started needs the description to command us.
+                    let out = core.on_coordinator(Instant::now());
+                    let done = io.send(out).await?;
+                    io.done(&mut core, done).await;
                     continue;
                 }
                 // The coordinator is gone: hold posture now rather than at the deadline.

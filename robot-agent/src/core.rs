@@ -11,6 +11,7 @@
 //! | [`AgentCore::on_command`] | a torque command | checked, clamped torques to apply |
 //! | [`AgentCore::on_contacts`] | a contact set | nothing (scheduled for its tick, see [`crate::contact_switch`]) |
 //! | [`AgentCore::on_timer`] | housekeeping, a few times per deadline | hold torques on entering safe mode, status, description |
+//! | [`AgentCore::on_coordinator`] | the coordinator appeared (liveliness) | the description |
 //!
 //! Each returns [`Outputs`]: references into the core's preallocated buffers that the caller
 //! stamps (`header.stamp_ns`) and sends or applies, in the field order, then reports back with
@@ -26,7 +27,7 @@ use thiserror::Error;
 use crate::contact_switch::{ContactSwitch, SwitchConfig};
 use crate::dynamics_source::DynamicsSource;
 use crate::gate::{CommandGate, CommandRejection};
-use crate::safe_mode::{CommandDeadline, HoldGains, PostureHold, Watchdog};
+use crate::safe_mode::{CommandDeadline, HoldGains, PostureHold, Takeover, Watchdog};
 use crate::status::{AgentCounters, StatusBoard};
 use crate::terms::{empty_terms, ContactSet};
 
@@ -48,11 +49,14 @@ pub struct AgentConfig {
     pub description_period: Duration,
     /// How contact sets are switched (touchdown force, feet kept down).
     pub contacts: SwitchConfig,
+    /// Robot time over which commands take over from the posture hold (bumpless transfer,
+    /// [`Takeover`]) when they follow it: after safe mode, or after the coordinator's hold orders.
+    pub takeover: Duration,
 }
 
 impl AgentConfig {
     /// Defaults: deadline 5 ticks or 25 ms, maximum command age 25 ms, status every 100 ms,
-    /// description every second.
+    /// description every second, takeover from the hold over 100 ms.
     pub fn new(team: &str, robot: &str) -> Self {
         let deadline = CommandDeadline::default();
         AgentConfig {
@@ -64,6 +68,7 @@ impl AgentConfig {
             status_period: Duration::from_millis(100),
             description_period: Duration::from_secs(1),
             contacts: SwitchConfig::default(),
+            takeover: DEFAULT_TAKEOVER,
         }
     }
 
@@ -81,6 +86,10 @@ impl AgentConfig {
         self.deadline.time.map_or(Duration::from_millis(20), |d| d / 5).clamp(Duration::from_millis(1), Duration::from_millis(20))
     }
 }
+
+/// [`AgentConfig::takeover`] by default: 100 ms, a tenth of the robot's slowest task
+/// impedance period, long against a torque step, short against a fall.
+pub const DEFAULT_TAKEOVER: Duration = Duration::from_millis(100);
 
 /// A configuration the core cannot run with.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -141,7 +150,7 @@ pub struct Sent {
     pub description: bool,
 }
 
-/// Which torques a call yields.
+/// Which torques a call yields (and which the agent applied last).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Apply {
     Nothing,
@@ -161,6 +170,17 @@ pub struct AgentCore<S: DynamicsSource> {
     gate: CommandGate,
     watchdog: Watchdog,
     hold: PostureHold,
+    /// Commands following the hold blend in from it.
+    takeover: Takeover,
+    /// What the agent applied last: a command or its own hold.
+    last_applied: Apply,
+    /// The hold torques while a takeover blends them out.
+    hold_tau: Vec<f64>,
+    /// The last command's torque as applied (after clamping and blending), for the load the
+    /// hold carries ([`PostureHold::hold_carrying`]).
+    last_command: Vec<f64>,
+    /// Robot time of the latest accepted state, s.
+    state_time: f64,
     contacts: ContactSwitch,
     terms: DynamicsTerms,
     torques: TorqueCommand,
@@ -206,6 +226,11 @@ impl<S: DynamicsSource> AgentCore<S> {
             gate: CommandGate::new(robot, limits.clone(), cfg.max_command_age),
             watchdog: Watchdog::new(cfg.deadline),
             hold: PostureHold::new(gains, limits),
+            takeover: Takeover::new(cfg.takeover),
+            last_applied: Apply::Nothing,
+            hold_tau: Vec::with_capacity(joints),
+            last_command: Vec::with_capacity(joints),
+            state_time: 0.0,
             contacts: ContactSwitch::new(cfg.contacts.clone(), ContactSet { stance: vec![true; feet.len()], hand_in_grasp: true }),
             feet,
             terms: empty_terms(team, robot),
@@ -245,6 +270,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         self.counters.states += 1;
         self.state_at = Some(now);
+        self.state_time = state.time;
         self.watchdog.on_state(tick, now);
         self.q.copy_from_slice(&state.joint_positions);
         self.qdot.copy_from_slice(&state.joint_velocities);
@@ -427,6 +453,14 @@ impl<S: DynamicsSource> AgentCore<S> {
         out
     }
 
+    /// The coordinator appeared (it started, or came back after a restart): it needs this
+    /// robot's description before it can command it, so it goes out now rather than at its
+    /// next period.
+    pub fn on_coordinator(&mut self, now: Instant) -> Outputs<'_> {
+        self.last_description = Some(now);
+        Outputs { description: self.description.as_mut(), ..Outputs::default() }
+    }
+
     /// Enter safe mode now, for a reason outside the core (the hardware asked to deactivate or
     /// failed). Yields the hold torques of the latest state, if there is one; nothing if
     /// already in safe mode.
@@ -454,7 +488,7 @@ impl<S: DynamicsSource> AgentCore<S> {
 
     fn enter_safe_mode_at(&mut self, tick: u64, why: &str) {
         self.watchdog.enter(tick);
-        self.hold.hold(&self.q);
+        self.latch_hold();
         self.counters.safe_mode_entries += 1;
         self.board.status.mode = AgentMode::SafeMode;
         tracing::warn!(robot = %self.robot, tick, "entering safe mode (posture hold): {why}");
@@ -467,12 +501,23 @@ impl<S: DynamicsSource> AgentCore<S> {
         let mut torques = None;
         match apply {
             Apply::Nothing => {}
-            Apply::Command => torques = Some(&mut self.torques),
+            Apply::Command => {
+                self.take_over();
+                self.last_applied = Apply::Command;
+                self.last_command.clone_from(&self.torques.tau);
+                torques = Some(&mut self.torques);
+            }
             Apply::Hold => {
                 if let Some(tick) = self.gate.latest_state_tick() {
+                    if self.last_applied != Apply::Hold {
+                        // A hold order after commands holds the posture of now.
+                        self.latch_hold();
+                    }
+                    self.takeover.cancel();
                     self.hold.torques(&self.q, &self.qdot, &self.gravity, &mut self.torques.tau);
                     self.torques.header.tick = tick;
                     self.counters.hold_torques += 1;
+                    self.last_applied = Apply::Hold;
                     torques = Some(&mut self.torques);
                 }
             }
@@ -486,6 +531,31 @@ impl<S: DynamicsSource> AgentCore<S> {
             description: if description { self.description.as_mut() } else { None },
             torques,
             status,
+        }
+    }
+
+    /// Hold the posture of now, carrying the last command's load if a command was the last
+    /// torque applied (after a hold, the load that hold carried).
+    fn latch_hold(&mut self) {
+        match self.last_applied {
+            Apply::Command => self.hold.hold_carrying(&self.q, &self.last_command, &self.gravity),
+            Apply::Hold => self.hold.move_to(&self.q),
+            Apply::Nothing => self.hold.hold(&self.q),
+        }
+    }
+
+    /// A command about to be applied takes over from the hold without a jump: a command that
+    /// follows the hold starts the blend ([`Takeover`]), and while it lasts the command is
+    /// blended with the hold torques of the latest state.
+    fn take_over(&mut self) {
+        if self.last_applied == Apply::Hold {
+            self.takeover.start(self.state_time);
+            tracing::info!(robot = %self.robot, tick = self.torques.header.tick, over_s = self.takeover.duration(), "commands take over from the posture hold");
+        }
+        if self.takeover.active() {
+            self.hold.torques(&self.q, &self.qdot, &self.gravity, &mut self.hold_tau);
+            self.takeover.blend(self.state_time, &self.hold_tau, &mut self.torques.tau);
+            self.counters.blended += 1;
         }
     }
 

@@ -2,15 +2,25 @@
 //!
 //! Without a valid command within the deadline (a number of state ticks, or a time, whichever
 //! comes first) the agent enters safe mode: a locally computed joint-space posture hold with
-//! damping and gravity compensation,
+//! damping and gravity compensation, carrying the load the last command carried,
 //!
 //! ```text
-//! tau = clamp( Kp (q_hold - q) - Kd qdot + g_a(q), -tau_max, tau_max )
+//! tau = clamp( Kp (q_hold - q) - Kd qdot + g_a(q) + tau_c, -tau_max, tau_max )
+//! tau_c = tau_last - g_a(q_hold)
 //! ```
 //!
-//! on the actuated joints, where `q_hold` are the joint positions when safe mode was entered and
-//! `g_a(q)` the actuated rows of the model's generalized gravity at the current state. It leaves
-//! safe mode only on a valid command whose tick is newer than the latest state tick at entry.
+//! on the actuated joints, where `q_hold` are the joint positions when safe mode was entered,
+//! `g_a(q)` the actuated rows of the model's generalized gravity at the current state, and
+//! `tau_c` what the last command applied beyond the robot's own gravity (the hand's squeeze and
+//! the object's weight, the feet's share of them; zero if no command was applied): entering
+//! the hold does not drop the object, and the torque does not jump. It leaves safe mode only on
+//! a valid command whose tick is newer than the latest state tick at entry.
+//!
+//! Commands then take over without a jump ([`Takeover`], a bumpless transfer): for
+//! [`Takeover::duration`] of robot time the applied torque moves linearly from the posture
+//! hold of the current state to the command, `tau = (1 - a) tau_hold + a tau_cmd`. The same
+//! happens after the coordinator's hold orders (a member it is admitting, or a tick it could
+//! not solve): whenever the agent's own hold was the last torque applied.
 
 use std::time::{Duration, Instant};
 
@@ -113,37 +123,59 @@ impl HoldGains {
     }
 }
 
-/// The posture-hold law with its held configuration.
+/// The posture-hold law with its held configuration and carried load.
 #[derive(Debug, Clone)]
 pub struct PostureHold {
     gains: HoldGains,
     limits: Vec<f64>,
     q_hold: Vec<f64>,
+    /// `tau_c`: the last command's torque beyond gravity at `q_hold` (zeros without one).
+    carried: Vec<f64>,
 }
 
 impl PostureHold {
     pub fn new(gains: HoldGains, limits: Vec<f64>) -> Self {
         let n = limits.len();
-        PostureHold { gains, limits, q_hold: Vec::with_capacity(n) }
+        PostureHold { gains, limits, q_hold: Vec::with_capacity(n), carried: vec![0.0; n] }
     }
 
     pub fn gains(&self) -> &HoldGains {
         &self.gains
     }
 
-    /// Hold these joint positions from now on.
+    /// Hold these joint positions from now on, carrying no load but the robot's own weight.
     pub fn hold(&mut self, q: &[f64]) {
+        self.move_to(q);
+        self.carried.iter_mut().for_each(|c| *c = 0.0);
+    }
+
+    /// Hold these joint positions from now on, carrying the same load as before.
+    pub fn move_to(&mut self, q: &[f64]) {
         self.q_hold.clear();
         self.q_hold.extend_from_slice(q);
+    }
+
+    /// Hold these joint positions from now on, carrying what the last command `applied`
+    /// carried beyond `gravity` (both at `q`).
+    pub fn hold_carrying(&mut self, q: &[f64], applied: &[f64], gravity: &[f64]) {
+        self.hold(q);
+        for ((c, a), g) in self.carried.iter_mut().zip(applied).zip(gravity) {
+            *c = a - g;
+        }
     }
 
     pub fn q_hold(&self) -> &[f64] {
         &self.q_hold
     }
 
-    /// `tau = clamp(Kp (q_hold - q) - Kd qdot + g, ±limit)` into `out`; returns how many joints
-    /// were clamped. Lengths must agree (the agent checks states against its size first);
-    /// missing entries are treated as zero error, zero velocity, zero gravity.
+    /// The load carried beyond gravity, `tau_c`.
+    pub fn carried(&self) -> &[f64] {
+        &self.carried
+    }
+
+    /// `tau = clamp(Kp (q_hold - q) - Kd qdot + g + tau_c, ±limit)` into `out`; returns how many
+    /// joints were clamped. Lengths must agree (the agent checks states against its size
+    /// first); missing entries are treated as zero error, zero velocity, zero gravity.
     pub fn torques(&self, q: &[f64], qdot: &[f64], gravity: &[f64], out: &mut Vec<f64>) -> usize {
         out.clear();
         let mut clamped = 0;
@@ -153,13 +185,72 @@ impl PostureHold {
                 _ => 0.0,
             };
             let t = self.gains.kp[i] * e - self.gains.kd[i] * qdot.get(i).copied().unwrap_or(0.0)
-                + gravity.get(i).copied().unwrap_or(0.0);
+                + gravity.get(i).copied().unwrap_or(0.0)
+                + self.carried[i];
             let l = self.limits[i];
             let c = t.clamp(-l, l);
             clamped += (c != t) as usize;
             out.push(c);
         }
         clamped
+    }
+}
+
+/// The bumpless transfer from the posture hold to the coordinator's commands (see the module
+/// docs): started when a command follows a hold, it blends the two over `duration` of robot
+/// time (the states' `time`, so lockstep and real time blend alike).
+#[derive(Debug, Clone)]
+pub struct Takeover {
+    duration: f64,
+    /// Robot time at which the blend started, while it lasts.
+    since: Option<f64>,
+}
+
+impl Takeover {
+    /// A takeover over `duration` (zero: commands apply at once).
+    pub fn new(duration: std::time::Duration) -> Self {
+        Takeover { duration: duration.as_secs_f64(), since: None }
+    }
+
+    pub fn duration(&self) -> f64 {
+        self.duration
+    }
+
+    /// A command follows a hold at robot time `t`: the blend starts.
+    pub fn start(&mut self, t: f64) {
+        self.since = (self.duration > 0.0).then_some(t);
+    }
+
+    /// The blend's weight of the command at robot time `t` (1 once it is over, and the blend
+    /// ends then).
+    pub fn weight(&mut self, t: f64) -> f64 {
+        let Some(t0) = self.since else { return 1.0 };
+        let a = ((t - t0) / self.duration).clamp(0.0, 1.0);
+        if a >= 1.0 {
+            self.since = None;
+        }
+        a
+    }
+
+    /// The hold applies again: no blend until the next start.
+    pub fn cancel(&mut self) {
+        self.since = None;
+    }
+
+    /// Whether a blend is under way.
+    pub fn active(&self) -> bool {
+        self.since.is_some()
+    }
+
+    /// `cmd = (1 - a) hold + a cmd` in place, `a` = [`Takeover::weight`] at `t`; returns `a`.
+    pub fn blend(&mut self, t: f64, hold: &[f64], cmd: &mut [f64]) -> f64 {
+        let a = self.weight(t);
+        if a < 1.0 {
+            for (c, h) in cmd.iter_mut().zip(hold) {
+                *c = (1.0 - a) * h + a * *c;
+            }
+        }
+        a
     }
 }
 
@@ -186,6 +277,47 @@ mod tests {
         assert_eq!(w.safe_mode_since(), None);
         let no_time = Watchdog::new(CommandDeadline { ticks: 0, time: None });
         assert!(!no_time.expired(u64::MAX, t0 + Duration::from_secs(100)));
+    }
+
+    #[test]
+    fn takeover_blends_linearly_in_robot_time_and_ends() {
+        let mut t = Takeover::new(Duration::from_millis(100));
+        let hold = [10.0, -4.0];
+        let mut cmd = [20.0, 4.0];
+        assert_eq!(t.blend(5.0, &hold, &mut cmd), 1.0, "no blend before a start");
+        assert_eq!(cmd, [20.0, 4.0]);
+        t.start(5.0);
+        let mut at = |time: f64| {
+            let mut c = [20.0, 4.0];
+            let a = t.blend(time, &hold, &mut c);
+            (a, c)
+        };
+        let (a, c) = at(5.0);
+        assert_eq!((a, c), (0.0, hold), "starts at the hold");
+        let (a, c) = at(5.025);
+        assert!((a - 0.25).abs() < 1e-12);
+        assert!((c[0] - 12.5).abs() < 1e-9 && (c[1] + 2.0).abs() < 1e-9, "{c:?}");
+        let (a, c) = at(5.1 + 1e-9);
+        assert_eq!((a, c), (1.0, [20.0, 4.0]), "ends at the command");
+        assert!(!t.active());
+        let mut none = Takeover::new(Duration::ZERO);
+        none.start(1.0);
+        assert!(!none.active(), "a zero duration never blends");
+    }
+
+    #[test]
+    fn the_hold_carries_the_last_commands_load_beyond_gravity() {
+        let mut h = PostureHold::new(HoldGains { kp: vec![100.0, 10.0], kd: vec![2.0, 1.0] }, vec![80.0, 9.0]);
+        // The last command applied [20, -3] at q where gravity was [3, 8.5]: it carried [17, -11.5].
+        h.hold_carrying(&[0.5, -0.2], &[20.0, -3.0], &[3.0, 8.5]);
+        assert_eq!(h.carried(), [17.0, -11.5]);
+        let mut out = Vec::new();
+        h.torques(&[0.5, -0.2], &[0.0, 0.0], &[3.0, 8.5], &mut out);
+        assert_eq!(out, vec![20.0, -3.0], "at the held posture: the last command itself");
+        h.torques(&[0.4, -0.2], &[0.0, 0.0], &[4.0, 8.0], &mut out);
+        assert!((out[0] - (10.0 + 4.0 + 17.0)).abs() < 1e-12 && (out[1] - (8.0 - 11.5)).abs() < 1e-12, "{out:?}");
+        h.hold(&[0.5, -0.2]);
+        assert_eq!(h.carried(), [0.0, 0.0], "a plain hold carries nothing");
     }
 
     #[test]

@@ -20,6 +20,8 @@ pub struct AgentCounters {
     pub safe_mode_entries: u64,
     /// Posture-hold torques handed to the torque sink.
     pub hold_torques: u64,
+    /// Commands applied blended with the hold (a takeover, see `safe_mode::Takeover`).
+    pub blended: u64,
     /// Contact sets accepted into the schedule / refused (unknown feet, another robot's,
     /// undecodable, schedule full).
     pub contacts_applied: u64,

@@ -319,6 +319,8 @@ async fn enters_safe_mode_after_the_deadline_holds_posture_and_leaves_on_a_fresh
     let mut h = Harness::start("loop3", |mut c| {
         c.deadline = CommandDeadline { ticks: 5, time: None };
         c.max_command_age = Duration::from_secs(5);
+        // Commands apply at once when they take over (the takeover has its own test).
+        c.takeover = Duration::ZERO;
         c
     })
     .await;
@@ -337,29 +339,32 @@ async fn enters_safe_mode_after_the_deadline_holds_posture_and_leaves_on_a_fresh
         h.dynamics_of(tick).await;
     }
     h.no_torque_for(Duration::from_millis(150)).await;
-    // Tick 5: five ticks since the last command: safe mode, holding the standing pose.
+    // Tick 5: five ticks since the last command: safe mode, holding the standing pose and
+    // carrying what the last command (1 N m per joint) carried beyond gravity: at the held
+    // posture the hold is that command.
     let standing = standing_state(&robot, &team, 5, 0.0, 0.0);
     h.state(&standing).await;
     let t = h.torque().await;
     assert_eq!(t.header.tick, 5);
     let g = gravity_oracle(&robot, &standing);
     for i in 0..n {
-        assert!((t.tau[i] - g[i]).abs() < 1e-9, "joint {i}: hold {} vs gravity {}", t.tau[i], g[i]);
+        assert!((t.tau[i] - 1.0).abs() < 1e-9, "joint {i}: hold {} vs the last command 1.0", t.tau[i]);
     }
     assert!(g.iter().any(|x| x.abs() > 1.0), "gravity torques are not trivially zero");
     let s = h.status_where(|s| s.mode == AgentMode::SafeMode).await;
     assert_eq!(s.safe_mode_entries, 1);
 
-    // Tick 6: joint 0 pushed 0.01 rad away and every joint moving at 0.1 rad/s: PD + gravity.
+    // Tick 6: joint 0 pushed 0.01 rad away and every joint moving at 0.1 rad/s: PD + gravity
+    // + the carried load (1 - g at the held posture).
     let pushed = standing_state(&robot, &team, 6, 0.01, 0.1);
     h.state(&pushed).await;
     let t = h.torque().await;
     assert_eq!(t.header.tick, 6);
     let gains = HoldGains::from_torque_limits(&robot.torque_limits);
-    let g = gravity_oracle(&robot, &pushed);
+    let (g6, g5) = (gravity_oracle(&robot, &pushed), g);
     for i in 0..n {
         let dq = if i == 0 { -0.01 } else { 0.0 };
-        let want = (gains.kp[i] * dq - gains.kd[i] * 0.1 + g[i]).clamp(-robot.torque_limits[i], robot.torque_limits[i]);
+        let want = (gains.kp[i] * dq - gains.kd[i] * 0.1 + g6[i] + (1.0 - g5[i])).clamp(-robot.torque_limits[i], robot.torque_limits[i]);
         assert!((t.tau[i] - want).abs() < 1e-9, "joint {i}: {} vs {want}", t.tau[i]);
     }
 
@@ -386,6 +391,7 @@ async fn enters_safe_mode_by_time_without_new_states() {
     let mut h = Harness::start("loop4", |mut c| {
         c.deadline = CommandDeadline { ticks: 0, time: Some(Duration::from_millis(50)) };
         c.max_command_age = Duration::from_secs(5);
+        c.takeover = Duration::ZERO;
         c
     })
     .await;
@@ -413,6 +419,63 @@ async fn enters_safe_mode_by_time_without_new_states() {
     assert_eq!((t.header.tick, t.tau[0]), (1, 0.5));
     h.status_where(|s| s.mode == AgentMode::Commanded).await;
     h.stop().await;
+}
+
+/// After safe mode, commands take over from the posture hold without a jump: over the
+/// takeover (20 ms of robot time here, 4 ticks of 5 ms) the torque applied moves linearly from
+/// the hold torque (gravity at the standing pose: the RNEA oracle) to the command; a hold order
+/// in between starts the blend again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn commands_take_over_from_the_posture_hold_without_a_jump() {
+    let robot = robot();
+    let mut h = Harness::start("loop5", |mut c| {
+        c.deadline = CommandDeadline { ticks: 2, time: None };
+        c.max_command_age = Duration::from_secs(5);
+        c.takeover = Duration::from_millis(20);
+        c
+    })
+    .await;
+    let (team, n) = (h.team.clone(), robot.joints());
+    let cmd = vec![3.0; n];
+    for tick in 0..3 {
+        h.state(&standing_state(&robot, &team, tick, 0.0, 0.0)).await;
+        h.dynamics_of(tick).await;
+    }
+    // Two ticks without a command: safe mode, the hold of tick 2.
+    let hold = h.torque().await;
+    assert_eq!(hold.header.tick, 2);
+    let g = gravity_oracle(&robot, &standing_state(&robot, &team, 2, 0.0, 0.0));
+    // Commands of ticks 3..: each state 5 ms later, so the command's weight is (t - t3) / 20 ms.
+    for (k, tick) in (3..9).enumerate() {
+        h.state(&standing_state(&robot, &team, tick, 0.0, 0.0)).await;
+        h.dynamics_of(tick).await;
+        if tick == 3 {
+            // Still in safe mode at this state: its hold comes first.
+            assert_eq!(h.torque().await.header.tick, 3);
+        }
+        h.command(&command(&team, ID, tick, cmd.clone())).await;
+        let t = h.torque().await;
+        assert_eq!(t.header.tick, tick);
+        let a = (k as f64 * 0.25).min(1.0);
+        for i in 0..n {
+            let want = (1.0 - a) * g[i] + a * cmd[i];
+            assert!((t.tau[i] - want).abs() < 1e-9, "tick {tick} joint {i}: {} vs {want} (weight {a})", t.tau[i]);
+        }
+    }
+    // A hold order, then a command: the blend starts again from the hold, which carries the
+    // last command's load (at the same posture: the last command itself).
+    h.state(&standing_state(&robot, &team, 9, 0.0, 0.0)).await;
+    h.dynamics_of(9).await;
+    h.command(&TorqueCommand::hold(&team, ID, 9)).await;
+    let t = h.torque().await;
+    assert!(t.tau.iter().zip(&cmd).all(|(a, b)| (a - b).abs() < 1e-9), "the hold order holds, carrying the load: {:?}", t.tau);
+    h.state(&standing_state(&robot, &team, 10, 0.0, 0.0)).await;
+    h.dynamics_of(10).await;
+    h.command(&command(&team, ID, 10, vec![5.0; n])).await;
+    let t = h.torque().await;
+    assert!(t.tau.iter().zip(&cmd).all(|(a, b)| (a - b).abs() < 1e-9), "the blend restarts at the hold, not at the new command: {:?}", t.tau);
+    let c = h.stop().await;
+    assert_eq!(c.blended, 6, "ticks 3..6 and 10 blended, 7 and 8 were the command's alone");
 }
 
 /// The posture hold without Zenoh: at zero error and zero velocity the hold torque is the

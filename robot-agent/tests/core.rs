@@ -55,6 +55,8 @@ fn core(deadline: CommandDeadline) -> AgentCore<Stub> {
     let mut cfg = AgentConfig::new("t", ID);
     cfg.deadline = deadline;
     cfg.max_command_age = Duration::from_millis(25);
+    // Commands apply at once after a hold (the takeover's blend: tests/agent_loop.rs).
+    cfg.takeover = Duration::ZERO;
     AgentCore::new(&cfg, Stub { feet: vec!["LF".into(), "RF".into()], last_contacts: None }).unwrap()
 }
 
@@ -102,26 +104,29 @@ fn deadline_safe_mode_and_recovery_only_on_a_fresh_tick() {
     assert_eq!((c.mode(), c.counters().applied, c.counters().clamped), (AgentMode::Commanded, 1, 1));
 
     // Ticks 1..4 without commands: nothing to apply. Tick 5: five ticks since the last
-    // command: safe mode, the hold at zero error and velocity is the gravity (clamped).
+    // command: safe mode; the hold carries the last command's load beyond gravity, so at zero
+    // error and velocity it is that command.
     for tick in 1..5 {
         assert_eq!(summary(c.on_state(&state(tick, q, [0.0; 3]), t0 + ms(1 + tick)).unwrap()), (Some(tick), None, false));
     }
+    let last = [10.0, -3.0, -2.0];
     let out = c.on_state(&state(5, q, [0.0; 3]), t0 + ms(6)).unwrap();
-    assert_eq!(summary(out), (Some(5), Some((5, GRAVITY.to_vec())), true));
+    assert_eq!(summary(out), (Some(5), Some((5, last.to_vec())), true));
     assert_eq!((c.mode(), c.safe_mode_since(), c.counters().safe_mode_entries), (AgentMode::SafeMode, Some(5), 1));
 
     // Tick 6, pushed and moving: PD about the held posture plus gravity, clamped.
     let gains = HoldGains::from_torque_limits(&LIMITS);
-    let (q6, v6) = ([0.11, -0.2, -0.3], [0.1, 0.0, 0.0]);
+    let (q6, v6) = ([0.11, -0.2, 1.0], [0.1, 0.0, 0.0]);
     let out = c.on_state(&state(6, q6, v6), t0 + ms(7)).unwrap();
     let (_, torques, status) = summary(out);
     let (tick, tau) = torques.unwrap();
     assert_eq!((tick, status), (6, false));
     for i in 0..3 {
-        let want = (gains.kp[i] * (q[i] - q6[i]) - gains.kd[i] * v6[i] + GRAVITY[i]).clamp(-LIMITS[i], LIMITS[i]);
+        let carried = last[i] - GRAVITY[i];
+        let want = (gains.kp[i] * (q[i] - q6[i]) - gains.kd[i] * v6[i] + GRAVITY[i] + carried).clamp(-LIMITS[i], LIMITS[i]);
         assert!((tau[i] - want).abs() < 1e-12, "joint {i}: {} vs {want}", tau[i]);
     }
-    assert_eq!(tau[2], 2.0, "0.6 rad of error on joint 2 saturates its 2 N m");
+    assert_eq!(tau[2], -2.0, "-0.7 rad of error on joint 2 saturates its 2 N m");
 
     // A command of the entry tick does not end safe mode; one of the fresh tick 6 does.
     let r = c.on_command(&command(ID, 5, &[1.0; 3]), t0 + ms(7)).unwrap_err();
