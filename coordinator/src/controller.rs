@@ -42,6 +42,10 @@ pub trait TeamController: Send {
     fn not_ready(&self, _members: &[String]) -> Option<String> {
         None
     }
+    /// Whether the controller can command robot `robot` (its description arrived).
+    fn ready(&self, _robot: &str) -> bool {
+        true
+    }
 }
 
 /// Why a controller could not produce torques for a tick, or could not be configured.

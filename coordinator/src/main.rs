@@ -6,6 +6,7 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use coordinator::service::{self, CoordinatorConfig};
+use coordinator::team::assembly::Reuse;
 use coordinator::ControllerSpec;
 use protocol::transport::{self, Role, ZenohArgs};
 
@@ -41,6 +42,18 @@ enum Command {
         /// Joint damping of the joint-damping controller, N·m·s/rad (default 2).
         #[arg(long, conflicts_with = "controller_config")]
         damping: Option<f64>,
+        /// Real time: solve a tick this long (µs) after its first terms with a late member's
+        /// latest terms, and leave out a member whose latest are more than
+        /// --reuse-max-age ticks old (silent). Without it every tick waits for every member.
+        #[arg(long, requires = "reuse_max_age")]
+        reuse_after_us: Option<u64>,
+        /// With --reuse-after-us: the oldest terms reused, in ticks.
+        #[arg(long, requires = "reuse_after_us")]
+        reuse_max_age: Option<u64>,
+        /// The team's robots (comma-separated): the first tick waits until all have joined, at
+        /// most 3 s (a restarted coordinator meets its agents one by one).
+        #[arg(long, value_delimiter = ',')]
+        expect: Vec<String>,
         #[command(flatten)]
         zenoh: ZenohArgs,
     },
@@ -81,10 +94,14 @@ async fn main() -> Result<()> {
         .with_writer(std::io::stderr)
         .init();
     match Cli::parse().command {
-        Command::Run { team, tick_deadline_ms, controller, controller_config, damping, zenoh } => {
+        Command::Run { team, tick_deadline_ms, controller, controller_config, damping, reuse_after_us, reuse_max_age, expect, zenoh } => {
             let controller = controller_spec(controller, controller_config.as_deref(), damping)?.build()?;
             let session = transport::open(&zenoh, Role::Hub).await?;
-            let cfg = CoordinatorConfig { team, tick_deadline: Duration::from_millis(tick_deadline_ms) };
+            let reuse = reuse_after_us.zip(reuse_max_age).map(|(us, max_age)| Reuse { after: Duration::from_micros(us), max_age });
+            for r in &expect {
+                protocol::validate_id("robot", r).map_err(|e| anyhow::anyhow!("--expect: {e}"))?;
+            }
+            let cfg = CoordinatorConfig { team, tick_deadline: Duration::from_millis(tick_deadline_ms), reuse, expected: expect };
             let (tx, rx) = tokio::sync::watch::channel(false);
             tokio::spawn(async move {
                 let _ = tokio::signal::ctrl_c().await;

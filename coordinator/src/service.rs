@@ -1,4 +1,8 @@
 //! The coordinator service over Zenoh: membership, tick assembly, solving, publishing.
+//!
+//! Who is commanded is the [`Roster`]'s (members by liveliness, silent members left out, late
+//! ones admitted beside the team); a tick is gathered by the [`TickAssembler`], in real time
+//! with a late member's latest terms reused ([`Reuse`]) so that one late link delays nobody.
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -10,8 +14,8 @@ use protocol::validate::Validate;
 use tokio::sync::watch;
 use zenoh::Session;
 
-use crate::team::assembly::{TickAssembler, TickOutcome};
-use crate::team::membership::Membership;
+use crate::team::assembly::{Reuse, Reused, TickAssembler, TickOutcome};
+use crate::team::membership::{Admission, Roster};
 use crate::TeamController;
 
 /// Capacity of the references queue, samples.
@@ -23,6 +27,23 @@ pub struct CoordinatorConfig {
     pub team: String,
     /// How long a tick may wait for every member's terms before it is abandoned.
     pub tick_deadline: Duration,
+    /// Real time: solve a tick with a late member's latest terms ([`Reuse`]) and leave out a
+    /// member silent for longer; `None` (lockstep) waits for every member's own terms.
+    pub reuse: Option<Reuse>,
+    /// The robots the team is made of: the first tick waits until all have joined (every
+    /// member holding its posture meanwhile), at most [`FORMATION_TIMEOUT`] from the
+    /// coordinator's start ([`Roster::expect`]). Empty: whoever is there.
+    pub expected: Vec<String>,
+}
+
+/// How long a coordinator waits at its start for the robots it expects.
+pub const FORMATION_TIMEOUT: Duration = Duration::from_secs(3);
+
+impl CoordinatorConfig {
+    /// A lockstep coordinator: no reuse, no expected team.
+    pub fn lockstep(team: &str, tick_deadline: Duration) -> Self {
+        CoordinatorConfig { team: team.to_string(), tick_deadline, reuse: None, expected: Vec::new() }
+    }
 }
 
 /// Counters of the service, returned when it stops.
@@ -40,6 +61,34 @@ pub struct CoordinatorCounters {
     /// Complete ticks not solved because a newer one was complete too (a coordinator that fell
     /// behind in real time catches up; never in lockstep).
     pub overtaken: u64,
+    /// Hold orders sent to a single robot outside the team (not a member yet, being admitted,
+    /// no description).
+    pub held: u64,
+    /// Members' terms taken from an earlier tick (real time, [`Reuse`]).
+    pub reused_terms: u64,
+    /// Times a member went silent and was left out.
+    pub silenced: u64,
+}
+
+/// The service's publishers, buffers and bookkeeping between ticks.
+struct Service<'a> {
+    session: &'a Session,
+    cfg: CoordinatorConfig,
+    diag_pub: TypedPublisher<TickDiagnostics>,
+    status_pub: TypedPublisher<CoordinatorStatus>,
+    command_pubs: BTreeMap<String, TypedPublisher<TorqueCommand>>,
+    commands: Vec<TorqueCommand>,
+    counters: CoordinatorCounters,
+    refs: ReferenceBuffer,
+    roster: Roster,
+    /// Members whose terms the last solved tick reused.
+    stale: Vec<String>,
+    /// The robots of the last solved tick (what the controller was told to expect).
+    solved_members: Vec<String>,
+    status_tick: u64,
+    detail: String,
+    /// Whether the last status published said the team had let go of the object.
+    released_reported: bool,
 }
 
 /// Run the coordinator with `controller` (see [`crate::ControllerSpec::build`]) until `stop`
@@ -57,39 +106,44 @@ pub async fn run(
     let descriptions = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Description)?).await?;
     // A planner may send many ticks' references at once (the scenario driver does).
     let references = transport::subscribe_with_capacity(session, keys::references(&cfg.team)?, REFERENCE_QUEUE).await?;
-    let mut diag_pub: TypedPublisher<TickDiagnostics> =
-        TypedPublisher::declare(session, keys::diagnostics(&cfg.team)?, Qos::Telemetry).await?;
-    let mut status_pub: TypedPublisher<CoordinatorStatus> =
-        TypedPublisher::declare(session, keys::coordinator_status(&cfg.team)?, Qos::Telemetry).await?;
-    let mut command_pubs: BTreeMap<String, TypedPublisher<TorqueCommand>> = BTreeMap::new();
-    tracing::info!(team = %cfg.team, controller = controller.name(), "coordinator running");
+    let mut svc = Service {
+        session,
+        diag_pub: TypedPublisher::declare(session, keys::diagnostics(&cfg.team)?, Qos::Telemetry).await?,
+        status_pub: TypedPublisher::declare(session, keys::coordinator_status(&cfg.team)?, Qos::Telemetry).await?,
+        command_pubs: BTreeMap::new(),
+        commands: Vec::new(),
+        counters: CoordinatorCounters::default(),
+        refs: ReferenceBuffer::default(),
+        roster: Roster::default(),
+        stale: Vec::new(),
+        solved_members: Vec::new(),
+        status_tick: 0,
+        detail: String::from("waiting for members"),
+        released_reported: false,
+        cfg,
+    };
+    tracing::info!(team = %svc.cfg.team, controller = controller.name(), reuse = ?svc.cfg.reuse, "coordinator running");
 
-    let mut members = Membership::default();
-    let mut assembler = TickAssembler::new(cfg.tick_deadline);
-    let mut counters = CoordinatorCounters::default();
-    let mut commands = Vec::new();
-    let mut status_tick = 0u64;
+    let mut assembler = TickAssembler::new(svc.cfg.tick_deadline).with_reuse(svc.cfg.reuse);
+    svc.roster.expect(&svc.cfg.expected, Instant::now() + FORMATION_TIMEOUT);
     // Expired ticks are looked for, and the status published, at least every second.
-    let mut housekeeping = tokio::time::interval(cfg.tick_deadline.clamp(Duration::from_millis(10), Duration::from_secs(1)));
-    let mut detail = String::from("waiting for members");
-    let mut refs = ReferenceBuffer::default();
-    // Whether the last status published said the team had let go of the object.
-    let mut released_reported = false;
+    let mut housekeeping = tokio::time::interval(svc.cfg.tick_deadline.clamp(Duration::from_millis(10), Duration::from_secs(1)));
     let mut described = std::collections::BTreeSet::new();
     loop {
-        let mut membership_changed = false;
+        let mut team_changed = false;
         let mut publish_status = false;
+        let reuse_at = assembler.reuse_at();
         tokio::select! {
             _ = stop.changed() => { if *stop.borrow() { break; } }
             m = members_q.recv_async() => {
                 let Ok(sample) = m else { break };
                 if let Some(ev) = MemberEvent::from_sample(&sample) {
-                    membership_changed = members.apply(&ev);
-                    controller.set_members(&members.to_vec());
+                    team_changed = svc.roster.apply(&ev);
+                    publish_status = true;
                     if let MemberEvent::Left(r) = &ev {
-                        command_pubs.remove(r);
+                        svc.command_pubs.remove(r);
                     }
-                    detail = match &ev {
+                    svc.detail = match &ev {
                         MemberEvent::Joined(r) => format!("robot {r} joined"),
                         MemberEvent::Left(r) => format!("robot {r} left"),
                     };
@@ -114,95 +168,212 @@ pub async fn run(
             }
             r = references.recv_async() => {
                 let Ok(sample) = r else { break };
-                refs.take(&sample);
+                svc.refs.take(&sample);
             }
             d = dynamics.recv_async() => {
                 let Ok(sample) = d else { break };
-                // Once a tick is complete, the terms already queued are taken too and only the
-                // newest complete tick is solved: a coordinator that fell behind in real time
-                // catches up instead of sending commands too old to apply.
-                let mut newest: Option<(u64, Vec<DynamicsTerms>)> = None;
-                let mut next = Some(sample);
-                while let Some(sample) = next {
-                    let outcome = match decode_terms(&sample, &mut counters) {
-                        Some(terms) => assembler.add(terms, &members),
-                        None => TickOutcome::Pending,
-                    };
-                    match outcome {
-                        TickOutcome::Complete(tick, terms) => {
-                            if let Some((old, _)) = newest.replace((tick, terms)) {
-                                counters.overtaken += 1;
-                                tracing::debug!(tick = old, newer = tick, "complete tick overtaken by a newer one: not solved");
-                            }
-                        }
-                        TickOutcome::NotAMember(r, tick) => {
-                            // Its terms can beat its liveliness token: it is told to hold its
-                            // posture this tick rather than left waiting for a command.
-                            counters.rejected_terms += 1;
-                            tracing::warn!(robot = %r, tick, "dynamics from a robot that is not a member (no liveliness token): it holds its posture this tick");
-                            commands.clear();
-                            commands.push(TorqueCommand::hold(&cfg.team, &r, tick));
-                            publish_commands(session, &cfg, &commands, &mut command_pubs, &mut counters).await?;
-                        }
-                        TickOutcome::Stale(t) => tracing::debug!(tick = t, "late dynamics terms dropped"),
-                        TickOutcome::Pending => {}
-                    }
-                    next = if newest.is_some() { dynamics.try_recv().ok().flatten() } else { None };
-                }
+                let (newest, changed) = svc.gather(sample, &dynamics, &mut assembler, controller.as_mut()).await?;
+                team_changed |= changed;
                 if let Some((tick, terms)) = newest {
-                    refs.drain(&references);
-                    refs.apply(tick, controller.as_mut());
-                    solve_and_publish(session, &cfg, controller.as_mut(), tick, &terms, &mut commands, &mut command_pubs, &mut diag_pub, &mut counters).await?;
-                    status_tick = tick;
-                    // Letting go (or taking a grasp again) is said at once, not at the next
-                    // housekeeping tick: a planner stops moving the team on it.
-                    publish_status |= controller.released_at().is_some() != released_reported;
+                    publish_status |= svc.solve(controller.as_mut(), tick, terms, &references, Vec::new()).await?;
                 }
             }
+            _ = sleep_until(reuse_at), if reuse_at.is_some() => {
+                let (solved, changed) = svc.reuse_due(&mut assembler, controller.as_mut(), &references).await?;
+                team_changed |= changed;
+                publish_status |= solved;
+            }
             _ = housekeeping.tick() => {
-                for (tick, missing) in assembler.expire(&members) {
-                    counters.deadline_misses += 1;
+                for (tick, missing) in assembler.expire(svc.roster.team()) {
+                    svc.counters.deadline_misses += 1;
                     tracing::warn!(tick, ?missing, "tick abandoned: terms missing at the deadline");
                 }
                 publish_status = true;
             }
         }
-        if membership_changed {
-            // A robot that left no longer holds up the ticks it had not sent.
+        if team_changed {
+            // A robot that left (or went silent) no longer holds up the ticks it had not sent.
             for tick in assembler.pending_ticks() {
-                if let TickOutcome::Complete(t, terms) = assembler.try_complete(tick, &members) {
-                    refs.drain(&references);
-                    refs.apply(t, controller.as_mut());
-                    solve_and_publish(session, &cfg, controller.as_mut(), t, &terms, &mut commands, &mut command_pubs, &mut diag_pub, &mut counters).await?;
-                    status_tick = t;
+                if let TickOutcome::Complete(t, terms) = assembler.try_complete(tick, svc.roster.team()) {
+                    svc.solve(controller.as_mut(), t, terms, &references, Vec::new()).await?;
                 }
             }
+            publish_status = true;
         }
-        if membership_changed || publish_status {
-            let status = CoordinatorStatus {
-                header: Header::new(&cfg.team, None, status_tick, protocol::wall_clock_ns()),
-                mode: if members.is_empty() || controller.not_ready(&members.to_vec()).is_some() {
-                    CoordinatorMode::WaitingForMembers
-                } else if controller.released_at().is_some() {
-                    CoordinatorMode::Released
-                } else if controller.used_fallback() {
-                    CoordinatorMode::Fallback
-                } else {
-                    CoordinatorMode::Running
-                },
-                members: members.to_vec(),
-                ticks: counters.ticks,
-                commands_sent: counters.commands_sent,
-                deadline_misses: counters.deadline_misses,
-                fallbacks: counters.fallbacks,
-                detail: controller.not_ready(&members.to_vec()).unwrap_or_else(|| detail.clone()),
-            };
-            released_reported = controller.released_at().is_some();
-            status_pub.put(&status).await?;
+        if publish_status {
+            svc.publish_status(controller.as_mut()).await?;
         }
     }
-    tracing::info!(?counters, "coordinator stopped");
-    Ok(counters)
+    tracing::info!(counters = ?svc.counters, "coordinator stopped");
+    Ok(svc.counters)
+}
+
+/// Sleep until `at` (forever without one: the branch is disabled then).
+async fn sleep_until(at: Option<Instant>) {
+    match at {
+        Some(at) => tokio::time::sleep_until(at.into()).await,
+        None => std::future::pending().await,
+    }
+}
+
+impl Service<'_> {
+    /// Take `first` and, once a tick is complete, the terms already queued: only the newest
+    /// complete tick is returned for solving (a coordinator that fell behind in real time
+    /// catches up instead of sending commands too old to apply). Terms of robots outside the
+    /// team get a hold order for their tick. Also returns whether the team changed.
+    async fn gather(
+        &mut self,
+        first: zenoh::sample::Sample,
+        queue: &transport::SampleQueue,
+        assembler: &mut TickAssembler,
+        controller: &mut dyn TeamController,
+    ) -> Result<(Option<(u64, Vec<DynamicsTerms>)>, bool), TransportError> {
+        let mut newest: Option<(u64, Vec<DynamicsTerms>)> = None;
+        let mut team_changed = false;
+        let mut next = Some(first);
+        while let Some(sample) = next {
+            if let Some(terms) = decode_terms(&sample, &mut self.counters) {
+                let (robot, tick) = (terms.header.robot_id().to_string(), terms.header.tick);
+                let waiting = self.roster.forming(Instant::now());
+                if !waiting.is_empty() {
+                    self.counters.not_ready += 1;
+                    let why = format!("forming the team: waiting for {waiting:?} to join");
+                    self.detail.clone_from(&why);
+                    self.hold_one(&robot, tick, &why).await?;
+                    next = None;
+                    continue;
+                }
+                let before = self.roster.team().len();
+                let outcome = match self.roster.admit(&robot, controller.ready(&robot)) {
+                    Admission::NotAMember => {
+                        // Its terms can beat its liveliness token: it is told to hold its
+                        // posture this tick rather than left waiting for a command.
+                        self.counters.rejected_terms += 1;
+                        tracing::warn!(robot = %robot, tick, "dynamics from a robot that is not a member (no liveliness token): it holds its posture this tick");
+                        self.hold_one(&robot, tick, "not a member").await?;
+                        TickOutcome::Pending
+                    }
+                    Admission::Hold(why) => {
+                        team_changed |= self.roster.team().len() != before;
+                        self.hold_one(&robot, tick, &why).await?;
+                        // The tick goes on without it (admitted, it is in from the next tick).
+                        assembler.hold(&robot, tick, self.roster.team())
+                    }
+                    Admission::Team => assembler.add(terms, self.roster.team()),
+                };
+                match outcome {
+                    TickOutcome::Complete(tick, terms) => {
+                        if let Some((old, _)) = newest.replace((tick, terms)) {
+                            self.counters.overtaken += 1;
+                            tracing::debug!(tick = old, newer = tick, "complete tick overtaken by a newer one: not solved");
+                        }
+                    }
+                    TickOutcome::Stale(t) => tracing::debug!(tick = t, "late dynamics terms dropped"),
+                    TickOutcome::Pending => {}
+                }
+            }
+            next = if newest.is_some() { queue.try_recv().ok().flatten() } else { None };
+        }
+        Ok((newest, team_changed))
+    }
+
+    /// A hold order for `robot` at `tick` (it is outside the team this tick, `why`).
+    async fn hold_one(&mut self, robot: &str, tick: u64, why: &str) -> Result<(), TransportError> {
+        self.counters.held += 1;
+        tracing::debug!(robot, tick, "{why}: it holds its posture this tick");
+        self.commands.clear();
+        self.commands.push(TorqueCommand::hold(&self.cfg.team, robot, tick));
+        publish_commands(self.session, &self.cfg, &self.commands, &mut self.command_pubs, &mut self.counters).await
+    }
+
+    /// Ticks due for reuse: solve the newest (with its late members' latest terms), leaving out
+    /// the members too silent for it. Returns whether a tick was solved and whether the team
+    /// changed.
+    async fn reuse_due(&mut self, assembler: &mut TickAssembler, controller: &mut dyn TeamController, references: &transport::SampleQueue) -> Result<(bool, bool), TransportError> {
+        let mut team_changed = false;
+        loop {
+            match assembler.reuse_due(Instant::now(), self.roster.team()) {
+                Some(Reused::Complete { tick, terms, reused }) => {
+                    self.counters.reused_terms += reused.len() as u64;
+                    tracing::debug!(tick, ?reused, "late terms: solved with the latest of each");
+                    let stale = reused.into_iter().map(|(r, _)| r).collect();
+                    self.solve(controller, tick, terms, references, stale).await?;
+                    return Ok((true, team_changed));
+                }
+                Some(Reused::Silent { tick, robots }) => {
+                    for r in &robots {
+                        if self.roster.silence(r) {
+                            self.counters.silenced += 1;
+                            team_changed = true;
+                            self.detail = format!("robot {r} silent since before tick {tick}: solving without it");
+                        }
+                    }
+                    if let TickOutcome::Complete(t, terms) = assembler.try_complete(tick, self.roster.team()) {
+                        self.solve(controller, t, terms, references, Vec::new()).await?;
+                        return Ok((true, team_changed));
+                    }
+                }
+                None => return Ok((false, team_changed)),
+            }
+        }
+    }
+
+    /// Solve a complete tick and publish its commands; `stale`: members whose terms were
+    /// reused. Late members' hands stay out of the grasp. Returns whether the status should go
+    /// out now (letting go, or taking a grasp again, is said at once: a planner stops moving
+    /// the team on it; so is a change of the stale members).
+    async fn solve(&mut self, controller: &mut dyn TeamController, tick: u64, mut terms: Vec<DynamicsTerms>, references: &transport::SampleQueue, stale: Vec<String>) -> Result<bool, TransportError> {
+        for t in terms.iter_mut().filter(|t| self.roster.is_late(t.header.robot_id())) {
+            t.hand_in_grasp = false;
+        }
+        // The controller expects exactly the robots of the tick (members holding their posture
+        // this tick are not in it).
+        if self.solved_members.len() != terms.len() || self.solved_members.iter().zip(&terms).any(|(m, t)| m != t.header.robot_id()) {
+            self.solved_members = terms.iter().map(|t| t.header.robot_id().to_string()).collect();
+            controller.set_members(&self.solved_members);
+        }
+        self.refs.drain(references);
+        self.refs.apply(tick, controller);
+        let solved = solve_and_publish(self.session, &self.cfg, controller, tick, &terms, &mut self.commands, &mut self.command_pubs, &mut self.diag_pub, &mut self.counters).await?;
+        if solved && !self.roster.started() {
+            tracing::info!(tick, team = ?self.roster.team(), "the team's first tick is solved");
+            self.roster.start();
+        }
+        self.status_tick = tick;
+        let stale_changed = stale != self.stale;
+        self.stale = stale;
+        Ok(stale_changed || controller.released_at().is_some() != self.released_reported)
+    }
+
+    async fn publish_status(&mut self, controller: &mut dyn TeamController) -> Result<(), TransportError> {
+        let members = self.roster.members().to_vec();
+        let team = self.roster.team();
+        let forming = !self.roster.forming(Instant::now()).is_empty();
+        let status = CoordinatorStatus {
+            header: Header::new(&self.cfg.team, None, self.status_tick, protocol::wall_clock_ns()),
+            mode: if forming || team.is_empty() || controller.not_ready(team).is_some() {
+                CoordinatorMode::WaitingForMembers
+            } else if controller.released_at().is_some() {
+                CoordinatorMode::Released
+            } else if controller.used_fallback() {
+                CoordinatorMode::Fallback
+            } else {
+                CoordinatorMode::Running
+            },
+            ticks: self.counters.ticks,
+            commands_sent: self.counters.commands_sent,
+            deadline_misses: self.counters.deadline_misses,
+            fallbacks: self.counters.fallbacks,
+            detail: controller.not_ready(&members).unwrap_or_else(|| self.detail.clone()),
+            members,
+            stale: self.stale.clone(),
+            silent: self.roster.silent(),
+            late: self.roster.late(),
+            reused_terms: self.counters.reused_terms,
+        };
+        self.released_reported = controller.released_at().is_some();
+        self.status_pub.put(&status).await
+    }
 }
 
 /// One sample of the dynamics key decoded, or counted and logged as rejected.
@@ -277,7 +448,7 @@ async fn solve_and_publish(
     command_pubs: &mut BTreeMap<String, TypedPublisher<TorqueCommand>>,
     diag_pub: &mut TypedPublisher<TickDiagnostics>,
     counters: &mut CoordinatorCounters,
-) -> Result<(), TransportError> {
+) -> Result<bool, TransportError> {
     let started = Instant::now();
     let ids: Vec<String> = terms.iter().map(|t| t.header.robot_id().to_string()).collect();
     let outcome = match controller.not_ready(&ids) {
@@ -292,6 +463,7 @@ async fn solve_and_publish(
             format!("controller error: {e}")
         }),
     };
+    let solved = outcome.is_ok();
     match outcome {
         Ok(()) => {
             if controller.used_fallback() {
@@ -314,7 +486,7 @@ async fn solve_and_publish(
     publish_commands(session, cfg, commands, command_pubs, counters).await?;
     counters.ticks += 1;
     tracing::trace!(tick, us = started.elapsed().as_micros() as u64, "tick solved");
-    Ok(())
+    Ok(solved)
 }
 
 /// Each command on its robot's command key (publishers declared on first use).

@@ -17,7 +17,7 @@ use coordinator::pidc::stages::wrench::{contact_map, contact_wrenches, Actuation
 use coordinator::pidc::TickReport;
 use coordinator::qp::ContactKind;
 use coordinator::team::Team;
-use coordinator::units::grasp::{GraspTerms, GraspTracker};
+use coordinator::units::grasp::{GraspTerms, GraspTracker, PlannedHand};
 use coordinator::units::impedance::TaskStack;
 use coordinator::{ControllerError, Pidc, PidcConfig};
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
@@ -207,14 +207,14 @@ fn grasp_tracker_captures_the_object_at_the_hands_centroid_or_where_told() {
     let centroid = (hands[0] + hands[1]) / 2.0;
     let mut terms_out: Option<GraspTerms> = None;
     let mut tracker = GraspTracker::default();
-    tracker.update(&team, None, &mut terms_out).expect("grasp");
+    tracker.update(&team, None, &[], &mut terms_out).expect("grasp");
     let object = terms_out.as_ref().expect("grasp terms").object;
     assert!((object.translation.vector - centroid).amax() < 1e-12);
     assert!(object.rotation.angle() < 1e-9, "world axes");
     // Told where the object is when the grasp closes.
     let at = Isometry3::from_parts(Translation3::new(1.1, 0.05, 0.62), UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3));
     let mut told = None;
-    GraspTracker::default().update(&team, Some(at), &mut told).expect("grasp");
+    GraspTracker::default().update(&team, Some(at), &[], &mut told).expect("grasp");
     let object = told.expect("grasp terms").object;
     assert!((object.translation.vector - at.translation.vector).amax() < 1e-12);
     assert!(object.rotation.angle_to(&at.rotation) < 1e-9);
@@ -223,8 +223,57 @@ fn grasp_tracker_captures_the_object_at_the_hands_centroid_or_where_told() {
     let cs = ContactSet { stance: vec![true; 4], hand_in_grasp: false };
     let free: Vec<_> = (0..2).map(|k| fx.terms_with(&robot_id(k), &fx.standing_q(k, 2), &DVector::zeros(nv), 1, &cs)).collect();
     team.assemble_into(&free, None, false).expect("team");
-    tracker.update(&team, None, &mut terms_out).expect("no grasp");
+    tracker.update(&team, None, &[], &mut terms_out).expect("no grasp");
     assert!(terms_out.is_none());
+}
+
+#[test]
+fn a_tracker_started_mid_carry_fits_the_object_from_the_planned_grasp() {
+    // The plan: the object at `at` with the hands where the fixture stands them.
+    let mut fx = Fixture::new();
+    let (mut terms, _) = fx.static_team(3);
+    let at = Isometry3::from_parts(Translation3::new(1.1, 0.05, 0.62), UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3));
+    let hand_pose = |t: &DynamicsTerms| {
+        let h = t.frames.iter().find(|f| f.role == FrameRole::Hand).expect("hand");
+        let rot = UnitQuaternion::from_matrix(&Matrix3::from_row_slice(&h.rotation));
+        (h.name.clone(), Isometry3::from_parts(Translation3::new(h.position[0], h.position[1], h.position[2]), rot))
+    };
+    let planned: Vec<PlannedHand> = terms.iter().map(|t| {
+        let (frame, pose) = hand_pose(t);
+        PlannedHand::new(t.header.robot_id(), &frame, &pose, &at)
+    }).collect();
+    // Mid-carry the team has carried the object by a rigid motion `moved`: every hand moved with it.
+    let moved = Isometry3::from_parts(Translation3::new(0.03, -0.02, 0.04), UnitQuaternion::from_euler_angles(0.05, 0.02, -0.1));
+    for t in terms.iter_mut() {
+        let h = t.frames.iter_mut().find(|f| f.role == FrameRole::Hand).expect("hand");
+        let pose = Isometry3::from_parts(Translation3::new(h.position[0], h.position[1], h.position[2]), UnitQuaternion::from_matrix(&Matrix3::from_row_slice(&h.rotation)));
+        let p = moved * pose;
+        h.position = [p.translation.x, p.translation.y, p.translation.z];
+        let r = p.rotation.to_rotation_matrix();
+        h.rotation = std::array::from_fn(|k| r[(k / 3, k % 3)]);
+    }
+    let mut team = Team::default();
+    team.assemble_into(&terms, None, false).expect("team");
+    // A fresh tracker (a restarted coordinator) with the plan finds the object where it is...
+    let mut got = None;
+    GraspTracker::default().update(&team, Some(at), &planned, &mut got).expect("grasp");
+    let object = got.expect("grasp terms").object;
+    let want = moved * at;
+    assert!((object.translation.vector - want.translation.vector).amax() < 1e-12, "{object} vs {want}");
+    assert!(object.rotation.angle_to(&want.rotation) < 1e-12);
+    // ... without it, it would take the object to be where the plan put it at the start.
+    let mut blind = None;
+    GraspTracker::default().update(&team, Some(at), &[], &mut blind).expect("grasp");
+    assert!((blind.expect("grasp terms").object.translation.vector - at.translation.vector).amax() < 1e-12);
+    // A plan missing one of the grasping hands is not used.
+    let mut partial = None;
+    GraspTracker::default().update(&team, Some(at), &planned[..2], &mut partial).expect("grasp");
+    assert!((partial.expect("grasp terms").object.translation.vector - at.translation.vector).amax() < 1e-12);
+    // Bad plans are refused by the configuration check.
+    let mut bad = planned[0].clone();
+    bad.hand_to_object = [1.0, 1.0, 0.0, 0.0];
+    let cfg = PidcConfig { planned_grasp: vec![bad], ..PidcConfig::default() };
+    assert!(cfg.check().unwrap_err().to_string().contains("planned_grasp"));
 }
 
 #[test]

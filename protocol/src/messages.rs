@@ -475,12 +475,30 @@ pub struct CoordinatorStatus {
     pub fallbacks: u64,
     /// Human-readable reason for the current mode.
     pub detail: String,
+    /// Members whose terms the last solved tick took from an earlier tick (theirs were late),
+    /// sorted.
+    #[serde(default)]
+    pub stale: Vec<String>,
+    /// Members left out of the team: silent (alive, but no terms for longer than the
+    /// coordinator reuses them), sorted.
+    #[serde(default)]
+    pub silent: Vec<String>,
+    /// Members that joined a running team (or came back after a silence): they stand with
+    /// their hand out of the grasp, sorted.
+    #[serde(default)]
+    pub late: Vec<String>,
+    /// Terms reused in all (one per member per tick).
+    #[serde(default)]
+    pub reused_terms: u64,
 }
 
 impl Validate for CoordinatorStatus {
     fn validate(&self) -> Result<(), ProtocolError> {
         self.header.check(false)?;
-        self.members.iter().try_for_each(|m| validate_id("robot", m))
+        for list in [&self.members, &self.stale, &self.silent, &self.late] {
+            list.iter().try_for_each(|m| validate_id("robot", m))?;
+        }
+        Ok(())
     }
 }
 

@@ -51,6 +51,10 @@ fn tool_facing_messages_are_json_with_the_version_checked() {
         deadline_misses: 0,
         fallbacks: 0,
         detail: String::new(),
+        stale: vec![],
+        silent: vec!["r2".into()],
+        late: vec![],
+        reused_terms: 3,
     };
     assert_eq!(CoordinatorStatus::WIRE, Wire::Json);
     let bytes = encode(&st).unwrap();
@@ -58,6 +62,13 @@ fn tool_facing_messages_are_json_with_the_version_checked() {
     assert_eq!((v["mode"].as_str(), v["ticks"].as_u64(), v["header"]["version"].as_u64()), (Some("Running"), Some(7), Some(1)));
     assert_eq!(decode::<CoordinatorStatus>(&bytes).unwrap(), st);
     assert_eq!(protocol::schema_id::<CoordinatorStatus>(), "team.CoordinatorStatus/v1");
+    // A status from before the silent, stale and late lists (an old recording) still decodes.
+    let mut old = v.clone();
+    for k in ["stale", "silent", "late", "reused_terms"] {
+        old.as_object_mut().unwrap().remove(k);
+    }
+    let back = decode::<CoordinatorStatus>(&serde_json::to_vec(&old).unwrap()).unwrap();
+    assert!(back.silent.is_empty() && back.reused_terms == 0);
     // Another version is refused, not misread.
     let mut other = st.clone();
     other.header.version = 9;

@@ -41,6 +41,9 @@ pub struct Records {
     pub torques: BTreeMap<String, Vec<(u64, Vec<f64>)>>,
     pub diagnostics: Vec<TickDiagnostics>,
     pub last_status: Option<CoordinatorStatus>,
+    /// Every coordinator status heard (it goes out on every change of mode, members, stale,
+    /// silent or late robots, and periodically).
+    pub statuses: Vec<CoordinatorStatus>,
     /// The status tick at which the coordinator first reported the team let go of the object.
     pub released_at: Option<u64>,
     /// Wall time of the settling and of the scenario proper.
@@ -83,6 +86,9 @@ pub struct Driver {
     torques: SampleQueue,
     diagnostics: SampleQueue,
     status: SampleQueue,
+    /// The coordinator's liveliness: a coordinator that comes back (restarted) gets the
+    /// references again.
+    coordinator: transport::EventQueue,
     refs_pub: TypedPublisher<TaskReferences>,
     /// A walk's contact sets by tick, the next to publish, and each robot's publisher.
     contact_sets: Vec<ContactSet>,
@@ -112,6 +118,7 @@ impl Driver {
         let torques = transport::subscribe_with_capacity(session, keys::all_robots(TEAM, RobotTopic::Torque)?, RECORD_QUEUE).await?;
         let diagnostics = transport::subscribe_with_capacity(session, keys::diagnostics(TEAM)?, RECORD_QUEUE).await?;
         let status = transport::subscribe(session, keys::coordinator_status(TEAM)?).await?;
+        let coordinator = transport::watch_coordinator(session, TEAM).await?;
         let refs_pub = TypedPublisher::declare(session, keys::references(TEAM)?, Qos::HotPath).await?;
         let contact_sets = plan.walk.as_ref().map(|w| w.contact_sets(TEAM, &plan.clock)).unwrap_or_default();
         let mut contact_pubs = BTreeMap::new();
@@ -135,7 +142,7 @@ impl Driver {
         } else {
             ProgressBar::hidden()
         };
-        Ok(Driver { truth, torques, diagnostics, status, refs_pub, contact_sets, next_contact: 0, contact_pubs, plan, total: total_ticks, progress, log_progress: show_progress && !terminal, tap: None, tapped_refs: 0 })
+        Ok(Driver { truth, torques, diagnostics, status, coordinator, refs_pub, contact_sets, next_contact: 0, contact_pubs, plan, total: total_ticks, progress, log_progress: show_progress && !terminal, tap: None, tapped_refs: 0 })
     }
 
     /// Hand every message the driver decodes or publishes to the recorder too.
@@ -198,9 +205,22 @@ impl Driver {
         let mut next_ref = LOOKAHEAD.min(self.total);
         self.publish_refs(0, next_ref).await?;
         let mut coordinator_heard = false;
+        // Whether the coordinator was seen to go (its liveliness token): the next one to come
+        // is a restarted coordinator, which has none of the references sent ahead.
+        let mut coordinator_lost = false;
         loop {
             tokio::select! {
                 _ = stop.changed() => { if *stop.borrow() { break; } }
+                c = self.coordinator.recv_async() => {
+                    let Ok(sample) = c else { break };
+                    if !transport::coordinator_alive(&sample) {
+                        coordinator_lost = true;
+                    } else if std::mem::take(&mut coordinator_lost) {
+                        let from = rec.ticks_seen.saturating_sub(1);
+                        tracing::warn!(from, to = next_ref, "the coordinator is back: the references are sent again");
+                        self.publish_refs(from, next_ref).await?;
+                    }
+                }
                 s = self.status.recv_async() => {
                     let Ok(sample) = s else { break };
                     if let Ok(st) = decode_sample::<CoordinatorStatus>(&sample) {
@@ -211,6 +231,7 @@ impl Driver {
                             rec.released_at = Some(st.header.tick);
                             self.halt_walk(st.header.tick, next_ref).await?;
                         }
+                        rec.statuses.push(st.clone());
                         rec.last_status = Some(st);
                         if !coordinator_heard {
                             coordinator_heard = true;

@@ -127,9 +127,9 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
     }
     let refs = &halted;
     let robots: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
-    // Robots whose agent a fault kills: unpowered, they fall; their torso, palm and hand
-    // contact are reported, not judged.
-    let faulted = |r: &String| plan.scenario.faults.iter().any(|f| f.robot == *r);
+    // Robots whose agent a fault stops or stalls: their drives lose their commands (they fall,
+    // or freeze); their torso, palm and hand contact are reported, not judged.
+    let faulted = |r: &String| plan.scenario.faults.iter().any(|f| f.robot() == Some(r.as_str()));
     let truth: Vec<&GroundTruth> = records.truth.iter().filter(|g| g.object.is_some()).collect();
     let (o_p0, o_q0) = refs.object_start;
 

@@ -1,7 +1,9 @@
 //! Faults injected into a run (`[[faults]]` of a scenario, [`crate::scenario::Fault`]): at the
-//! fault's tick the robot's agent is killed ([`crate::launch::AgentKill`]). The tick is read from
-//! the robot's own state messages, so that the agent dies between two ticks of the run as a real
-//! process would, whatever the run's pace.
+//! fault's tick the component fails ([`crate::launch::Component`]): an agent or the
+//! coordinator dies (killed), or an agent stalls (alive but silent); with `restart_after` (or
+//! at the end of a stall's `duration`) it is started again (or goes on). The ticks are read
+//! from a robot's own state messages, so that a component fails between two ticks of the run
+//! as a real process would, whatever the run's pace.
 
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, TransportError};
@@ -10,37 +12,82 @@ use tokio::sync::watch;
 use tokio::task::JoinHandle;
 use zenoh::Session;
 
-use crate::launch::AgentKill;
+use crate::launch::Component;
 use crate::scenario::{Fault, FaultKind};
 
-/// A fault with its kill switch and the tick it strikes at.
+/// A fault with the component it strikes and its ticks.
 pub struct Armed {
     pub fault: Fault,
+    /// The tick it strikes at.
     pub tick: u64,
-    kill: AgentKill,
+    /// The tick the component comes back at (restarted, or its stall over), if it does.
+    pub back: Option<u64>,
+    /// The robot whose states count the ticks.
+    watched: String,
+    component: Component,
 }
 
 impl Armed {
-    /// `fault` on the run's `clock`, with the agent's kill switch.
-    pub fn new(fault: &Fault, clock: &RunClock, kill: AgentKill) -> Self {
-        Armed { fault: fault.clone(), tick: clock.first_tick_at(fault.at), kill }
+    /// `fault` on the run's `clock`, striking `component`; `first_robot` counts the ticks of a
+    /// coordinator fault.
+    pub fn new(fault: &Fault, clock: &RunClock, component: Component, first_robot: &str) -> Self {
+        let tick = clock.first_tick_at(fault.at);
+        let back = fault.restart_after.or(fault.duration).map(|d| clock.first_tick_at(fault.at + d).max(tick + 1));
+        let watched = fault.robot().unwrap_or(first_robot).to_string();
+        Armed { fault: fault.clone(), tick, back, watched, component }
+    }
+
+    /// What the fault does to its component at its tick.
+    fn strike(&self) {
+        let who = self.fault.robot().unwrap_or("coordinator");
+        tracing::warn!(component = who, tick = self.tick, kind = ?self.fault.kind, "fault strikes");
+        match self.fault.kind {
+            FaultKind::AgentStops | FaultKind::CoordinatorStops => self.component.kill(),
+            FaultKind::AgentStalls => {
+                if let Err(e) = self.component.stall(true) {
+                    tracing::error!("fault: {e}");
+                }
+            }
+        }
+    }
+
+    /// What happens at the `back` tick: the component starts again, or its stall ends.
+    fn recover(&self) {
+        let who = self.fault.robot().unwrap_or("coordinator");
+        let outcome = match self.fault.kind {
+            FaultKind::AgentStops | FaultKind::CoordinatorStops => self.component.start(),
+            FaultKind::AgentStalls => self.component.stall(false),
+        };
+        match outcome {
+            Ok(()) => tracing::warn!(component = who, tick = ?self.back, "fault over: the component runs again"),
+            Err(e) => tracing::error!(component = who, "fault: could not recover: {e}"),
+        }
     }
 }
 
-/// Watch the faulty robot's states and kill its agent once a state of the fault's tick or later
-/// has been sent (the agent then never answers it). Ends at the kill, or when the run stops.
+/// Watch a robot's states and strike once a state of the fault's tick or later has been sent
+/// (the component then never answers it), then recover at the `back` tick. Ends then, or when
+/// the run stops.
 pub async fn inject(session: &Session, team: &str, armed: Armed, mut stop: watch::Receiver<bool>) -> Result<JoinHandle<()>, TransportError> {
-    let FaultKind::AgentStops = armed.fault.kind;
-    let states = transport::subscribe(session, keys::robot(team, &armed.fault.robot, RobotTopic::State)?).await?;
+    let states = transport::subscribe(session, keys::robot(team, &armed.watched, RobotTopic::State)?).await?;
     Ok(tokio::spawn(async move {
+        let mut struck = false;
         loop {
             tokio::select! {
                 s = states.recv_async() => {
                     let Ok(sample) = s else { return };
-                    if decode_sample::<RobotState>(&sample).is_ok_and(|st| st.header.tick >= armed.tick) {
-                        tracing::warn!(robot = %armed.fault.robot, tick = armed.tick, "fault: the robot's agent is killed");
-                        armed.kill.kill();
-                        return;
+                    let Ok(tick) = decode_sample::<RobotState>(&sample).map(|st| st.header.tick) else { continue };
+                    if !struck && tick >= armed.tick {
+                        armed.strike();
+                        struck = true;
+                    }
+                    match armed.back {
+                        Some(back) if struck && tick >= back => {
+                            armed.recover();
+                            return;
+                        }
+                        None if struck => return,
+                        _ => {}
                     }
                 }
                 c = stop.changed() => if c.is_err() || *stop.borrow() { return },

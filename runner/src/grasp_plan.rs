@@ -15,8 +15,10 @@ use std::sync::Arc;
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use protocol::conventions::quat_from_wxyz;
+use coordinator::units::grasp::PlannedHand;
+use nalgebra::Isometry3;
 use robot_model::ik::{self, IkError, IkOptions, IkSolution};
-use robot_model::Robot;
+use robot_model::{Data, Robot};
 use sim_bridge::placement::FACE_END_MARGIN;
 use sim_bridge::world::{ObjectSpec, WorldSpec};
 use thiserror::Error;
@@ -32,6 +34,8 @@ pub enum GraspPlanError {
     FixedBase { robot: String },
     #[error("{robots} robots loaded for {placements} placements")]
     RobotCount { robots: usize, placements: usize },
+    #[error("robot {robot}: the hand's pose: {reason}")]
+    Kinematics { robot: String, reason: String },
 }
 
 /// Target pose of the hand frame on the face of `object` that faces a base at `base`.
@@ -110,6 +114,23 @@ pub fn place_hands(spec: &mut WorldSpec, robots: &[Arc<Robot>]) -> Result<Vec<Ik
         }
         tracing::debug!(robot = %r.id, joints = ?sol.joints, "hand placed on the object");
         out.push(sol);
+    }
+    Ok(out)
+}
+
+/// Each hand's grasp as planned (`coordinator::units::grasp::PlannedHand`): its frame's pose at
+/// the solved configuration (`solutions`, from [`place_hands`], robot order) against the object
+/// at `object`. The controller fits the object from the hands with these whenever it starts.
+pub fn planned_grasp(spec: &WorldSpec, robots: &[Arc<Robot>], solutions: &[IkSolution], object: &Isometry3<f64>) -> Result<Vec<PlannedHand>, GraspPlanError> {
+    let mut out = Vec::with_capacity(robots.len());
+    for ((r, robot), sol) in spec.robots.iter().zip(robots).zip(solutions) {
+        let fail = |e: &dyn std::fmt::Display| GraspPlanError::Kinematics { robot: r.id.clone(), reason: e.to_string() };
+        let frame = robot.model.frame_id(&robot.hand_frame).map_err(|e| fail(&e))?;
+        let mut data = Data::new(&robot.model);
+        robot_model::forward_kinematics(&robot.model, &mut data, &sol.q, &vec![0.0; robot.model.nv]).map_err(|e| fail(&e))?;
+        let m = robot_model::frame_placement(&robot.model, &data, frame).map_err(|e| fail(&e))?;
+        let hand = Isometry3::from_parts(m.trans.into(), UnitQuaternion::from_matrix(&m.rot));
+        out.push(PlannedHand::new(&r.id, &robot.hand_frame, &hand, object));
     }
     Ok(out)
 }

@@ -29,6 +29,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use coordinator::service::{self as coordinator_service, CoordinatorConfig};
+use coordinator::team::assembly::Reuse;
 use coordinator::ControllerSpec;
 use protocol::access::{Identity, SecureConfig};
 use protocol::transport::{self, Role, ZenohArgs};
@@ -182,6 +183,11 @@ pub struct CoordinatorArgs {
     pub team: String,
     /// How long a tick may wait for every member's dynamics terms.
     pub tick_deadline: Duration,
+    /// Real time: reuse a late member's latest terms (`coordinator::team::assembly::Reuse`).
+    pub reuse: Option<Reuse>,
+    /// The team's robots: the first tick waits for all of them (bounded), which a restarted
+    /// coordinator needs (`coordinator::team::membership::Roster::expect`).
+    pub expected: Vec<String>,
     pub controller: ControllerSpec,
 }
 
@@ -194,13 +200,19 @@ impl CoordinatorArgs {
         std::fs::write(&path, text).map_err(|e| LaunchError::Write { path: path.display().to_string(), reason: e.to_string() })?;
         let mut args = vec!["run".into(), "--team".into(), self.team.clone(), "--controller-config".into(), path.display().to_string()];
         args.extend(["--tick-deadline-ms".into(), self.tick_deadline.as_millis().to_string()]);
+        if let Some(r) = self.reuse {
+            args.extend(["--reuse-after-us".into(), r.after.as_micros().to_string(), "--reuse-max-age".into(), r.max_age.to_string()]);
+        }
+        if !self.expected.is_empty() {
+            args.extend(["--expect".into(), self.expected.join(",")]);
+        }
         args.extend(zenoh.to_cli());
         Ok(args)
     }
 
-    fn start_task(&self, session: &Session, stop: watch::Receiver<bool>) -> Result<JoinHandle<Result<(), String>>, LaunchError> {
+    fn start_task(&self, session: &Session, stop: watch::Receiver<bool>, _stall: watch::Receiver<bool>) -> Result<JoinHandle<Result<(), String>>, LaunchError> {
         let controller = self.controller.build()?;
-        let cfg = CoordinatorConfig { team: self.team.clone(), tick_deadline: self.tick_deadline };
+        let cfg = CoordinatorConfig { team: self.team.clone(), tick_deadline: self.tick_deadline, reuse: self.reuse, expected: self.expected.clone() };
         let session = session.clone();
         Ok(tokio::spawn(async move { coordinator_service::run(&session, cfg, controller, stop).await.map(|_| ()).map_err(|e| e.to_string()) }))
     }
@@ -239,17 +251,17 @@ impl AgentArgs {
         args
     }
 
-    fn start_task(&self, session: &Session, stop: watch::Receiver<bool>) -> Result<JoinHandle<Result<(), String>>, LaunchError> {
+    fn start_task(&self, session: &Session, stop: watch::Receiver<bool>, stall: watch::Receiver<bool>) -> Result<JoinHandle<Result<(), String>>, LaunchError> {
         let cfg = AgentConfig::new(&self.team, &self.id).with_deadline_time(self.command_deadline);
         let session = session.clone();
         Ok(match &self.model {
             AgentModel::Robot { robot, .. } => {
                 let source = ModelDynamics::shared(robot.clone()).map_err(|e| LaunchError::Agent { robot: self.id.clone(), reason: e.to_string() })?;
-                tokio::spawn(async move { agent_loop::run(&session, cfg, source, stop).await.map(|_| ()).map_err(|e| e.to_string()) })
+                tokio::spawn(async move { agent_loop::run_stallable(&session, cfg, source, stop, stall).await.map(|_| ()).map_err(|e| e.to_string()) })
             }
             AgentModel::Placeholder { joints } => {
                 let source = PlaceholderDynamics::floating(*joints);
-                tokio::spawn(async move { agent_loop::run(&session, cfg, source, stop).await.map(|_| ()).map_err(|e| e.to_string()) })
+                tokio::spawn(async move { agent_loop::run_stallable(&session, cfg, source, stop, stall).await.map(|_| ()).map_err(|e| e.to_string()) })
             }
         })
     }
@@ -333,29 +345,137 @@ pub struct Running {
     /// Distributed: the Zenoh arguments of the sim-bridge (the coordinator's endpoint, which
     /// the others connect to; on test hosts also the bridge host's own endpoint).
     connect: ZenohArgs,
-    tasks: Vec<(String, JoinHandle<Result<(), String>>)>,
-    processes: Vec<ChildGuard>,
-    /// Each agent's kill switch (the faults' "an agent dies"), by robot id.
-    kills: Vec<(String, AgentKill)>,
+    /// The coordinator, then each agent by robot id (what faults kill, stall and restart).
+    components: Vec<(String, Component)>,
 }
 
-/// Kills one agent mid-run (a fault): its task is told to stop, or its process is killed
-/// (SIGKILL: no goodbye, its Zenoh session just ends). Cheap to clone.
+/// The name [`Running::component`] gives the coordinator.
+pub const COORDINATOR: &str = "coordinator";
+
+type TaskHandle = JoinHandle<Result<(), String>>;
+type TaskStarter = Box<dyn Fn(watch::Receiver<bool>, watch::Receiver<bool>) -> Result<TaskHandle, LaunchError> + Send>;
+
+/// One component of a running team, the coordinator or an agent, as a task of this process or
+/// as a child process, that a fault can kill, stall and start again ([`crate::faults`]). Cheap
+/// to clone; every clone controls the same component.
 #[derive(Clone)]
-pub enum AgentKill {
-    Task(Arc<watch::Sender<bool>>),
-    Process(Arc<std::sync::Mutex<Option<ChildGuard>>>),
+pub struct Component(Arc<std::sync::Mutex<ComponentState>>);
+
+struct ComponentState {
+    what: String,
+    /// The run's stop signal: a component started again stops with the run.
+    run_stop: watch::Receiver<bool>,
+    starter: Starter,
+    /// The running incarnation, if any.
+    live: Option<Live>,
+    /// Tasks of earlier incarnations that ended (killed): their results are still reported.
+    ended: Vec<TaskHandle>,
 }
 
-impl AgentKill {
+/// How a component is started (again).
+enum Starter {
+    Task(TaskStarter),
+    Process { mode: Mode, host: String, bin: String, args: Vec<String> },
+}
+
+/// A running incarnation.
+enum Live {
+    /// A task with its own stop and stall signals.
+    Task { handle: TaskHandle, stop: Arc<watch::Sender<bool>>, stall: watch::Sender<bool> },
+    Process(ChildGuard),
+}
+
+impl Component {
+    fn new(what: &str, run_stop: &watch::Receiver<bool>, starter: Starter) -> Result<Self, LaunchError> {
+        let c = Component(Arc::new(std::sync::Mutex::new(ComponentState { what: what.to_string(), run_stop: run_stop.clone(), starter, live: None, ended: Vec::new() })));
+        c.start()?;
+        Ok(c)
+    }
+
+    fn state(&self) -> std::sync::MutexGuard<'_, ComponentState> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Start it (again); an error if it is running.
+    pub fn start(&self) -> Result<(), LaunchError> {
+        let mut st = self.state();
+        if st.live.is_some() {
+            return Err(LaunchError::Task { what: st.what.clone(), reason: "already running".into() });
+        }
+        let live = match &st.starter {
+            Starter::Task(start) => {
+                let (stop, stop_rx) = own_stop(&st.run_stop);
+                let (stall, stall_rx) = watch::channel(false);
+                Live::Task { handle: start(stop_rx, stall_rx)?, stop, stall }
+            }
+            Starter::Process { mode, host, bin, args } => Live::Process(mode.spawn(host, bin, args, &st.what)?),
+        };
+        st.live = Some(live);
+        Ok(())
+    }
+
+    /// Kill it: a task is told to stop, a process gets SIGKILL (no goodbye: its Zenoh session
+    /// just ends). Nothing if it is not running.
     pub fn kill(&self) {
-        match self {
-            AgentKill::Task(tx) => {
-                let _ = tx.send(true);
+        let mut st = self.state();
+        match st.live.take() {
+            Some(Live::Task { handle, stop, .. }) => {
+                let _ = stop.send(true);
+                st.ended.push(handle);
             }
             // Dropping the guard kills the process and reaps it.
-            AgentKill::Process(p) => drop(p.lock().map(|mut g| g.take())),
+            Some(Live::Process(child)) => drop(child),
+            None => {}
         }
+    }
+
+    /// Stall it (`true`) or let it go on (`false`): it stays alive, its liveliness token held,
+    /// but handles nothing (a task pauses; a process gets SIGSTOP, then SIGCONT).
+    pub fn stall(&self, on: bool) -> Result<(), LaunchError> {
+        let st = self.state();
+        match &st.live {
+            Some(Live::Task { stall, .. }) => {
+                let _ = stall.send(on);
+                Ok(())
+            }
+            Some(Live::Process(child)) => signal(child.child.id(), if on { "-STOP" } else { "-CONT" }).map_err(|reason| LaunchError::Task { what: st.what.clone(), reason }),
+            None => Err(LaunchError::Task { what: st.what.clone(), reason: "not running".into() }),
+        }
+    }
+
+    /// Stop it for good, waiting for its tasks: the first task that failed is the error.
+    async fn finish(&self) -> Result<(), String> {
+        let (live, ended) = {
+            let mut st = self.state();
+            (st.live.take(), std::mem::take(&mut st.ended))
+        };
+        let mut handles = ended;
+        match live {
+            Some(Live::Task { handle, stop, .. }) => {
+                let _ = stop.send(true);
+                handles.push(handle);
+            }
+            Some(Live::Process(child)) => drop(child),
+            None => {}
+        }
+        let mut first = Ok(());
+        for h in handles {
+            let outcome = h.await.map_err(|e| e.to_string()).and_then(|r| r);
+            if first.is_ok() {
+                first = outcome;
+            }
+        }
+        first
+    }
+}
+
+/// Send `sig` (`-STOP`, `-CONT`) to process `pid` with the system's `kill`.
+fn signal(pid: u32, sig: &str) -> Result<(), String> {
+    let status = std::process::Command::new("kill").args([sig, &pid.to_string()]).status().map_err(|e| format!("kill {sig} {pid}: {e}"))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("kill {sig} {pid}: {status}"))
     }
 }
 
@@ -382,27 +502,28 @@ impl Launch {
         match mode {
             Mode::Embedded => {
                 let session = transport::open(&ZenohArgs::default(), Role::Alone).await?;
-                let mut tasks = vec![("coordinator".to_string(), self.coordinator.start_task(&session, stop_rx.clone())?)];
-                let mut kills = Vec::new();
+                let c = (self.coordinator.clone(), session.clone());
+                let mut components = vec![(COORDINATOR.to_string(), Component::new(COORDINATOR, &stop_rx, Starter::Task(Box::new(move |stop, stall| c.0.start_task(&c.1, stop, stall))))?)];
                 for a in &self.agents {
-                    let (kill, stop) = own_stop(&stop_rx);
-                    tasks.push((a.id.clone(), a.start_task(&session, stop)?));
-                    kills.push((a.id.clone(), AgentKill::Task(kill)));
+                    let s = (a.clone(), session.clone());
+                    let starter = Starter::Task(Box::new(move |stop, stall| s.0.start_task(&s.1, stop, stall)));
+                    components.push((a.id.clone(), Component::new(&format!("robot-agent {}", a.id), &stop_rx, starter)?));
                 }
-                Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect: ZenohArgs::default(), tasks, processes: Vec::new(), kills })
+                Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect: ZenohArgs::default(), components })
             }
             Mode::Distributed { dir } | Mode::Hosts { dir, .. } | Mode::Tls { dir, .. } => {
                 let hub = mode.hub()?;
                 let ids = TeamIds { team: self.coordinator.team.clone(), robots: self.agents.iter().map(|a| a.id.clone()).collect() };
-                let processes = vec![mode.spawn(COORDINATOR_HOST, "coordinator", &self.coordinator.to_cli(dir, &mode.hub_args(&hub, &ids)?)?, "coordinator")?];
+                let process = |host: &str, bin: &str, args: Vec<String>| Starter::Process { mode: mode.clone(), host: host.to_string(), bin: bin.to_string(), args };
+                let coordinator = process(COORDINATOR_HOST, "coordinator", self.coordinator.to_cli(dir, &mode.hub_args(&hub, &ids)?)?);
+                let mut components = vec![(COORDINATOR.to_string(), Component::new(COORDINATOR, &stop_rx, coordinator)?)];
                 let session = transport::open(&mode.zenoh_args(None, &hub, &ids)?, Role::Member).await?;
-                let mut kills = Vec::new();
                 for a in &self.agents {
-                    let child = mode.spawn(&a.id, "robot-agent", &a.to_cli(&mode.zenoh_args(Some(&a.id), &hub, &ids)?), &format!("robot-agent {}", a.id))?;
-                    kills.push((a.id.clone(), AgentKill::Process(Arc::new(std::sync::Mutex::new(Some(child))))));
+                    let starter = process(&a.id, "robot-agent", a.to_cli(&mode.zenoh_args(Some(&a.id), &hub, &ids)?));
+                    components.push((a.id.clone(), Component::new(&format!("robot-agent {}", a.id), &stop_rx, starter)?));
                 }
                 let connect = mode.zenoh_args(Some(SIM_HOST), &hub, &ids)?;
-                Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect, tasks: Vec::new(), processes, kills })
+                Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect, components })
             }
         }
     }
@@ -423,9 +544,10 @@ impl Running {
         &self.session
     }
 
-    /// The kill switch of robot `robot`'s agent (`None`: no such agent).
-    pub fn agent_kill(&self, robot: &str) -> Option<AgentKill> {
-        self.kills.iter().find(|(r, _)| r == robot).map(|(_, k)| k.clone())
+    /// Robot `robot`'s agent, or the coordinator ([`COORDINATOR`]): what a fault kills, stalls
+    /// and starts again (`None`: no such component).
+    pub fn component(&self, name: &str) -> Option<Component> {
+        self.components.iter().find(|(r, _)| r == name).map(|(_, c)| c.clone())
     }
 
     /// Turns true when the run is being stopped.
@@ -475,15 +597,10 @@ impl Running {
     pub async fn finish(mut self) -> Result<(), LaunchError> {
         self.stop();
         let mut first_error = None;
-        for (who, handle) in std::mem::take(&mut self.tasks) {
-            let outcome = handle.await.map_err(|e| e.to_string()).and_then(|r| r);
-            if let (Err(reason), None) = (outcome, &first_error) {
-                first_error = Some(if who == "coordinator" { LaunchError::Coordinator(reason) } else { LaunchError::Agent { robot: who, reason } });
+        for (who, c) in std::mem::take(&mut self.components) {
+            if let (Err(reason), None) = (c.finish().await, &first_error) {
+                first_error = Some(if who == COORDINATOR { LaunchError::Coordinator(reason) } else { LaunchError::Agent { robot: who, reason } });
             }
-        }
-        self.processes.clear();
-        for (_, k) in std::mem::take(&mut self.kills) {
-            k.kill();
         }
         let _ = self.session.close().await;
         first_error.map_or(Ok(()), Err)
@@ -499,11 +616,11 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("launch-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let zenoh = ZenohArgs::connecting("tcp/127.0.0.1:7999");
-        let c = CoordinatorArgs { team: "t1".into(), tick_deadline: Duration::from_millis(1500), controller: ControllerSpec::of_kind("pidc").unwrap() };
+        let c = CoordinatorArgs { team: "t1".into(), tick_deadline: Duration::from_millis(1500), reuse: Some(Reuse { after: Duration::from_micros(250), max_age: 25 }), expected: vec!["r1".into(), "r2".into()], controller: ControllerSpec::of_kind("pidc").unwrap() };
         let args = c.to_cli(&dir, &zenoh).unwrap();
         let written = std::fs::read_to_string(dir.join("controller.toml")).unwrap();
         assert_eq!(ControllerSpec::from_toml(&written).unwrap(), c.controller, "the file holds the spec");
-        for pair in [["--team", "t1"], ["--tick-deadline-ms", "1500"], ["--controller-config", &dir.join("controller.toml").display().to_string()]] {
+        for pair in [["--team", "t1"], ["--tick-deadline-ms", "1500"], ["--reuse-after-us", "250"], ["--reuse-max-age", "25"], ["--expect", "r1,r2"], ["--controller-config", &dir.join("controller.toml").display().to_string()]] {
             assert!(args.windows(2).any(|w| w[0] == pair[0] && w[1] == pair[1]), "{pair:?} in {args:?}");
         }
         assert!(args.iter().any(|a| a.contains("7999")), "{args:?}");

@@ -104,7 +104,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
     };
     world.substeps()?;
     let loaded: Vec<Arc<Robot>> = robots.iter().map(|r| r.robot.clone()).collect();
-    crate::grasp_plan::place_hands(&mut world, &loaded)?;
+    let arms = crate::grasp_plan::place_hands(&mut world, &loaded)?;
 
     let perturbations = s
         .perturbations
@@ -133,9 +133,13 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
         start_timeout: 60.0,
         // `team run --realtime` turns it on.
         realtime: false,
+        drive_loss: s.drive_loss,
     };
 
     let principal = object.principal_inertia();
+    let object_at_grasp = Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation));
+    // Each hand's grasp as planned: a coordinator (re)started mid-carry finds the object by it.
+    let planned_grasp = crate::grasp_plan::planned_grasp(&scene.world, &loaded, &arms, &object_at_grasp)?;
     // The PIDC configuration of the scenario: its gains, object, minimum forces and margins.
     let pidc = PidcConfig {
         object_gains: s.gains.object.gains(),
@@ -143,8 +147,9 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
         swing_gains: s.gains.feet.as_ref().map(|f| f.gains()).unwrap_or_else(|| PidcConfig::default().swing_gains),
         object_mass: s.object.mass,
         object_inertia: Matrix3::from_diagonal(&Vector3::from(principal)),
-        // Where the object is when the grasp closes: the fit's offsets are taken there.
-        object_pose_at_grasp: Some(Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation))),
+        // Where the object is when the grasp closes, and where each hand holds it.
+        object_pose_at_grasp: Some(object_at_grasp),
+        planned_grasp: planned_grasp.clone(),
         f_min_foot: s.min_foot_force,
         f_min_hand: s.min_hand_force,
         friction_margin: s.friction_margin,
@@ -168,7 +173,8 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
             f_min_hand: s.min_hand_force,
             dt: 1.0 / s.control_hz,
             release: s.release,
-            object_pose_at_grasp: Some(Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation))),
+            object_pose_at_grasp: Some(object_at_grasp),
+            planned_grasp,
             ..MqpConfig::default()
         }),
         other => other,

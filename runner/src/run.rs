@@ -30,6 +30,18 @@ pub const REALTIME_AGENT_COMMAND_DEADLINE: Duration = Duration::from_millis(25);
 /// (its states are long gone by then; the tick only holds memory).
 pub const REALTIME_COORDINATOR_TICK_DEADLINE: Duration = Duration::from_millis(50);
 
+/// In real time the coordinator solves a tick a quarter of the control period after its first
+/// terms arrived, with a late member's latest terms, as long as they are at most the agents'
+/// command deadline old ([`REALTIME_AGENT_COMMAND_DEADLINE`]: by then the agent holds its
+/// posture anyway); a member silent for longer is left out.
+pub fn realtime_reuse(control_hz: f64) -> coordinator::team::assembly::Reuse {
+    let period = 1.0 / control_hz;
+    coordinator::team::assembly::Reuse {
+        after: Duration::from_secs_f64(period / 4.0),
+        max_age: (REALTIME_AGENT_COMMAND_DEADLINE.as_secs_f64() / period).ceil().max(1.0) as u64,
+    }
+}
+
 /// After the bridge ended the run, how long the driver may take to record the last ticks.
 pub const DRIVER_DRAIN: Duration = Duration::from_secs(5);
 
@@ -64,12 +76,13 @@ pub struct RunOptions {
 /// runs (`plan.scene.realtime`) keep a robot's deadlines ([`REALTIME_AGENT_COMMAND_DEADLINE`],
 /// [`REALTIME_COORDINATOR_TICK_DEADLINE`]).
 pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
-    let (tick_deadline, command_deadline) = if plan.scene.realtime {
-        (REALTIME_COORDINATOR_TICK_DEADLINE, REALTIME_AGENT_COMMAND_DEADLINE)
+    let (tick_deadline, command_deadline, reuse) = if plan.scene.realtime {
+        (REALTIME_COORDINATOR_TICK_DEADLINE, REALTIME_AGENT_COMMAND_DEADLINE, Some(realtime_reuse(plan.scenario.control_hz)))
     } else {
-        (COORDINATOR_TICK_DEADLINE, AGENT_COMMAND_DEADLINE)
+        (COORDINATOR_TICK_DEADLINE, AGENT_COMMAND_DEADLINE, None)
     };
-    let coordinator = CoordinatorArgs { team: TEAM.into(), tick_deadline, controller: plan.controller.clone() };
+    let expected = plan.robots.iter().map(|r| r.id.clone()).collect();
+    let coordinator = CoordinatorArgs { team: TEAM.into(), tick_deadline, reuse, expected, controller: plan.controller.clone() };
     let agents = plan
         .robots
         .iter()
@@ -153,8 +166,13 @@ pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &Mode, recorder: Optio
     }
     let mut fault_tasks = Vec::new();
     for f in &plan.scenario.faults {
-        let kill = running.agent_kill(&f.robot).ok_or_else(|| RunError::Task { what: format!("fault on {}", f.robot), reason: "no such agent in the run".into() })?;
-        let armed = crate::faults::Armed::new(f, &plan.references.clock, kill);
+        let who = f.robot().unwrap_or(crate::launch::COORDINATOR);
+        let fault = |reason: &str| RunError::Task { what: format!("fault on {who}"), reason: reason.to_string() };
+        if f.kind == crate::scenario::FaultKind::AgentStalls && !plan.scene.realtime {
+            return Err(fault("agent-stalls needs a real-time run (--realtime): in lockstep the team waits for the stalled agent"));
+        }
+        let component = running.component(who).ok_or_else(|| fault("no such component in the run"))?;
+        let armed = crate::faults::Armed::new(f, &plan.references.clock, component, &plan.robots[0].id);
         fault_tasks.push(crate::faults::inject(running.session(), TEAM, armed, running.stop_signal()).await?);
     }
     let mut driver_task = tokio::spawn(driver.run(running.stop_signal()));

@@ -94,17 +94,41 @@ pub struct Scenario {
     /// Faults injected while the scenario runs (an agent that dies mid-carry).
     #[serde(default)]
     pub faults: Vec<Fault>,
+    /// What a robot's drives do when its agent leaves, or (real time) when its torques stop
+    /// for the drive timeout: `"unpowered"` (the default: the robot falls where it stands) or
+    /// `"freeze"` (each joint held where it was: the robot stands, and a restarted agent can
+    /// take it back).
+    #[serde(default)]
+    pub drive_loss: sim_bridge::plant::DriveLoss,
 }
 
-/// A fault injected into a run: robot `robot`'s agent stops `at` s after the scenario clock
-/// starts (its task is stopped, or its process killed with SIGKILL in the distributed modes).
-/// The simulated robot then gets no torques: its joints are unpowered ([`sim_bridge::lockstep::AgentLoss`]).
+/// A fault injected into a run, `at` s after the scenario clock starts
+/// (`crate::faults`):
+///
+/// * `agent-stops`: robot `robot`'s agent dies (its task is stopped, or its process killed
+///   with SIGKILL in the distributed modes); with `restart_after`, a new agent for the robot
+///   starts that many seconds later and rejoins the team;
+/// * `agent-stalls`: robot `robot`'s agent stays alive (its liveliness token holds) but
+///   handles nothing for `duration` s (its task pauses; its process gets SIGSTOP, then SIGCONT);
+/// * `coordinator-stops`: the coordinator dies; with `restart_after`, a new one starts that many
+///   seconds later and takes the team back.
+///
+/// Meanwhile the simulated robot's drives do what the scenario's `drive_loss` says
+/// (`sim_bridge::plant::DriveLoss`).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Fault {
     pub kind: FaultKind,
-    pub robot: String,
+    /// The robot whose agent fails (the agent kinds).
+    #[serde(default)]
+    pub robot: Option<String>,
     pub at: f64,
+    /// Start the failed component again this many seconds after the fault.
+    #[serde(default)]
+    pub restart_after: Option<f64>,
+    /// How long an `agent-stalls` fault lasts, s.
+    #[serde(default)]
+    pub duration: Option<f64>,
 }
 
 /// What fails.
@@ -113,6 +137,42 @@ pub struct Fault {
 pub enum FaultKind {
     /// The robot's agent dies.
     AgentStops,
+    /// The robot's agent is alive but silent.
+    AgentStalls,
+    /// The coordinator dies.
+    CoordinatorStops,
+}
+
+impl Fault {
+    /// The fault's robot, for the agent kinds.
+    pub fn robot(&self) -> Option<&str> {
+        self.robot.as_deref()
+    }
+
+    /// Whether the fault is consistent: a robot exactly for the agent kinds, a positive
+    /// `duration` exactly for a stall, a positive `restart_after` only where a component dies.
+    /// `i` names it in the error.
+    fn check(&self, i: usize, robots: &[RobotSpec], scenario: f64) -> Result<(), String> {
+        let agent = matches!(self.kind, FaultKind::AgentStops | FaultKind::AgentStalls);
+        match (&self.robot, agent) {
+            (Some(r), true) if !robots.iter().any(|x| x.id == *r) => return Err(format!("faults[{i}] names unknown robot {r:?}")),
+            (None, true) => return Err(format!("faults[{i}] ({:?}) needs the robot whose agent fails", self.kind)),
+            (Some(r), false) => return Err(format!("faults[{i}] (coordinator-stops) names robot {r:?}: the coordinator serves the whole team")),
+            _ => {}
+        }
+        if !(self.at.is_finite() && self.at >= 0.0 && self.at < scenario) {
+            return Err(format!("faults[{i}].at = {} must be within the scenario's [0, {scenario}) s", self.at));
+        }
+        let positive = |x: f64| x.is_finite() && x > 0.0;
+        match (self.kind, self.duration, self.restart_after) {
+            (FaultKind::AgentStalls, Some(d), None) if positive(d) => Ok(()),
+            (FaultKind::AgentStalls, _, Some(_)) => Err(format!("faults[{i}]: a stalled agent resumes by itself (give duration, not restart_after)")),
+            (FaultKind::AgentStalls, _, None) => Err(format!("faults[{i}]: agent-stalls needs a positive duration, s")),
+            (_, Some(_), _) => Err(format!("faults[{i}]: duration is for agent-stalls only (a component that stops comes back with restart_after)")),
+            (_, None, Some(r)) if !positive(r) => Err(format!("faults[{i}].restart_after = {r} must be positive")),
+            _ => Ok(()),
+        }
+    }
 }
 
 /// The frame of a walk's waypoints.
@@ -202,7 +262,7 @@ fn default_capacity_check() -> bool {
 }
 
 /// Top-level keys with a default that `--set` may give although the file leaves them out.
-pub const OPTIONAL_KEYS: [&str; 11] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations", "noslip_iterations", "faults"];
+pub const OPTIONAL_KEYS: [&str; 12] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations", "noslip_iterations", "faults", "drive_loss"];
 /// Top-level tables a scenario may leave out that `--set` may still reach into
 /// (`--set release.after_failed_ticks=50`); their own fields are checked when the file is read.
 pub const OPTIONAL_TABLES: [&str; 1] = ["release"];
@@ -431,12 +491,7 @@ impl Scenario {
             w.check(&self.robots)?;
         }
         for (i, f) in self.faults.iter().enumerate() {
-            if !self.robots.iter().any(|r| r.id == f.robot) {
-                return Err(format!("faults[{i}] names unknown robot {:?}", f.robot));
-            }
-            if !(f.at.is_finite() && f.at >= 0.0 && f.at < self.duration) {
-                return Err(format!("faults[{i}].at = {} must be within the scenario's [0, {}) s", f.at, self.duration));
-            }
+            f.check(i, &self.robots, self.duration)?;
         }
         for (i, p) in self.perturbations.iter().enumerate() {
             if p.target.on != "object" && !self.robots.iter().any(|r| r.id == p.target.on) {

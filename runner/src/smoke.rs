@@ -49,6 +49,8 @@ impl SmokeConfig {
         let coordinator = CoordinatorArgs {
             team: self.team.clone(),
             tick_deadline: SMOKE_TICK_DEADLINE,
+            reuse: None,
+            expected: Vec::new(),
             controller: ControllerSpec::JointDamping(JointDampingConfig { damping: self.damping }),
         };
         let agents = self

@@ -12,7 +12,7 @@ use tokio::sync::watch;
 use zenoh::Session;
 
 use crate::ground_truth::Recorder;
-use crate::plant::{empty_state, Plant};
+use crate::plant::{empty_state, DriveLoss, Plant};
 
 /// Errors of the bridge loop.
 #[derive(Debug, Error)]
@@ -60,20 +60,40 @@ pub struct LockstepConfig {
     pub wait_for_coordinator: bool,
     /// What a robot whose agent leaves mid-run becomes.
     pub agent_loss: AgentLoss,
+    /// Real time: a robot whose torques have not come for this long loses its drives
+    /// ([`AgentLoss::Drives`]); until then its drives hold its last torques.
+    pub drive_timeout: Duration,
 }
 
-/// What the lockstep loop does when a robot's agent leaves the team mid-run (its liveliness
-/// token is gone: the process died, or was stopped).
+/// What the loops do when a robot's agent leaves the team mid-run (its liveliness token is
+/// gone: the process died, or was stopped) or, in real time, sends no torques for
+/// [`LockstepConfig::drive_timeout`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum AgentLoss {
-    /// End the run with [`BridgeError::RobotLeft`], naming the robot (the smoke runs).
+    /// End the run with [`BridgeError::RobotLeft`], naming the robot (the smoke runs). In real
+    /// time the drives hold the last torques.
     #[default]
     EndRun,
-    /// Go on without it: from then on its joints get zero torque (what a robot's motor drivers
-    /// do when their commands stop: unpowered, the model's joint damping only) and no tick
-    /// waits for it. The run ends with [`BridgeError::RobotLeft`] when every agent has left.
-    Unpowered,
+    /// Go on without it: its drives do what [`DriveLoss`] says (unpowered, or frozen where
+    /// they are) and no tick waits for it. When its agent joins again (restarted), the loop
+    /// waits for its torques from the next tick on, and the first torques it sends drive the
+    /// robot again. The run ends with [`BridgeError::RobotLeft`] when every agent has left.
+    Drives(DriveLoss),
 }
+
+impl AgentLoss {
+    /// What the drives do on a loss, if the run goes on.
+    pub fn drive_loss(&self) -> Option<DriveLoss> {
+        match self {
+            AgentLoss::EndRun => None,
+            AgentLoss::Drives(d) => Some(*d),
+        }
+    }
+}
+
+/// [`LockstepConfig::drive_timeout`] by default: twice an agent's own command deadline (25 ms),
+/// so that an agent in safe mode (which sends its hold torques) never trips it.
+pub const DEFAULT_DRIVE_TIMEOUT: Duration = Duration::from_millis(50);
 
 impl LockstepConfig {
     /// The smoke run's lockstep (placeholder plant): 20 s for every robot to join, `command_timeout`
@@ -91,6 +111,7 @@ impl LockstepConfig {
             wait_for_coordinator: false,
             coordinator_grace_ticks: DEFAULT_COORDINATOR_GRACE_TICKS,
             agent_loss: AgentLoss::EndRun,
+            drive_timeout: DEFAULT_DRIVE_TIMEOUT,
         }
     }
 }
@@ -155,7 +176,8 @@ pub async fn run_with(
     let mut resends = 0u64;
     let mut rejected = 0u64;
     let mut got = vec![false; robots.len()];
-    let mut unpowered = vec![false; robots.len()];
+    // Robots whose agents left: no tick waits for them (until their agent joins again).
+    let mut lost = vec![false; robots.len()];
     let mut watch = Liveness::open(session, &cfg.team).await?;
     for tick in extras.first_tick..extras.first_tick + cfg.ticks {
         if *stop.borrow() {
@@ -163,7 +185,7 @@ pub async fn run_with(
         }
         watch.check(tick, cfg.coordinator_grace_ticks)?;
         states.publish(plant, tick).await?;
-        got.copy_from_slice(&unpowered);
+        got.copy_from_slice(&lost);
         let tick_started = Instant::now();
         let mut last_send = Instant::now();
         while !got.iter().all(|g| *g) {
@@ -180,9 +202,17 @@ pub async fn run_with(
                     Err(_) => return Err(BridgeError::Stopped),
                 },
                 ev = watch.next() => {
-                    if let Some(i) = watch.take(ev, tick, &robots)? {
-                        lose_agent(cfg, plant, &robots, i, tick, &mut unpowered)?;
-                        got[i] = true;
+                    match watch.take(ev, tick, &robots)? {
+                        Some(AgentChange::Left(i)) => {
+                            lose_agent(cfg, plant, &robots, i, tick, &mut lost)?;
+                            got[i] = true;
+                        }
+                        Some(AgentChange::Joined(i)) if lost[i] => {
+                            // A restarted agent: its torques are waited for from the next tick.
+                            tracing::info!(robot = %robots[i], tick, "the robot's agent joined again: its torques drive it from the next tick its agent answers");
+                            lost[i] = false;
+                        }
+                        _ => {}
                     }
                     continue;
                 }
@@ -208,6 +238,10 @@ pub async fn run_with(
                         continue;
                     }
                     if !got[i] {
+                        if plant.drives_lost(i) {
+                            tracing::info!(robot = %robots[i], tick, "the robot's drives take torques again");
+                            plant.restore_drives(i);
+                        }
                         plant.set_torques(i, &cmd.tau);
                         got[i] = true;
                     }
@@ -236,27 +270,34 @@ pub async fn run_with(
 }
 
 
-/// Robot `i`'s agent left during `tick`: end the run, or unpower the robot ([`AgentLoss`]).
-fn lose_agent(cfg: &LockstepConfig, plant: &mut impl Plant, robots: &[String], i: usize, tick: u64, unpowered: &mut [bool]) -> Result<(), BridgeError> {
+/// Robot `i`'s agent left during `tick`: end the run, or its drives are lost ([`AgentLoss`]).
+fn lose_agent(cfg: &LockstepConfig, plant: &mut impl Plant, robots: &[String], i: usize, tick: u64, lost: &mut [bool]) -> Result<(), BridgeError> {
     let robot = robots[i].clone();
-    if cfg.agent_loss == AgentLoss::EndRun {
+    let Some(loss) = cfg.agent_loss.drive_loss() else {
         return Err(BridgeError::RobotLeft { robot, tick });
+    };
+    if !lost[i] {
+        tracing::warn!(robot = %robot, tick, ?loss, "the robot's agent left: its drives lose their commands from this tick on");
+        plant.lose_drives(i, loss);
+        lost[i] = true;
     }
-    if !unpowered[i] {
-        tracing::warn!(robot = %robot, tick, "the robot's agent left: its joints are unpowered from this tick on");
-        // Once per robot: the zero torque stays applied (no allocation on later ticks).
-        plant.set_torques(i, &vec![0.0; plant.joints(i)]);
-        unpowered[i] = true;
-    }
-    if unpowered.iter().all(|u| *u) {
+    if lost.iter().all(|u| *u) {
         return Err(BridgeError::RobotLeft { robot, tick });
     }
     Ok(())
 }
 
-/// The liveliness of the run's components while it runs: a robot whose agent leaves is named
-/// to the loop (which ends the run or unpowers the robot, [`AgentLoss`]); the coordinator's leaving starts a count of ticks (the agents hold
-/// their posture meanwhile) that ends the run after the grace unless it comes back.
+/// A robot's agent that left or joined the team during a run (index in the plant's robots).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum AgentChange {
+    Left(usize),
+    Joined(usize),
+}
+
+/// The liveliness of the run's components while it runs: a robot whose agent leaves or joins
+/// again is named to the loop (which ends the run or takes the robot's drives away and back,
+/// [`AgentLoss`]); the coordinator's leaving starts a count of ticks (the agents hold their
+/// posture meanwhile) that ends the run after the grace unless it comes back.
 struct Liveness {
     members: transport::EventQueue,
     coordinator: transport::EventQueue,
@@ -282,13 +323,16 @@ impl Liveness {
         }
     }
 
-    /// Take one event during `tick`: the index in `robots` of a robot whose agent left.
-    fn take(&mut self, ev: LivenessEvent, tick: u64, robots: &[String]) -> Result<Option<usize>, BridgeError> {
+    /// Take one event during `tick`: a robot of `robots` whose agent left or joined.
+    fn take(&mut self, ev: LivenessEvent, tick: u64, robots: &[String]) -> Result<Option<AgentChange>, BridgeError> {
         match ev {
             LivenessEvent::Member(s) => {
-                if let Some(MemberEvent::Left(r)) = MemberEvent::from_sample(&s) {
-                    return Ok(robots.iter().position(|x| *x == r));
-                }
+                let index = |r: &str| robots.iter().position(|x| x == r);
+                return Ok(match MemberEvent::from_sample(&s) {
+                    Some(MemberEvent::Left(r)) => index(&r).map(AgentChange::Left),
+                    Some(MemberEvent::Joined(r)) => index(&r).map(AgentChange::Joined),
+                    None => None,
+                });
             }
             LivenessEvent::Coordinator(s) if transport::coordinator_alive(&s) => {
                 if let Some(since) = self.coordinator_lost.take() {

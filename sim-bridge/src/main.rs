@@ -90,6 +90,10 @@ struct RunArgs {
     /// Paced by the wall clock; a missing torque holds the last one and is counted.
     #[arg(long)]
     realtime: bool,
+    /// What a robot's drives do when its agent leaves or its torques stop (`unpowered`,
+    /// `freeze`).
+    #[arg(long, value_enum, default_value = "unpowered")]
+    drive_loss: sim_bridge::plant::DriveLoss,
     /// Seconds a lockstep tick may wait for torques before the run fails naming the robot.
     #[arg(long, default_value_t = 2.0)]
     command_timeout: f64,
@@ -218,7 +222,8 @@ async fn run_world(a: RunArgs, world: sim_bridge::world::World, n: usize) -> Res
         progress_every: (a.ticks / 10).max(1),
         wait_for_coordinator: false,
         coordinator_grace_ticks: sim_bridge::lockstep::DEFAULT_COORDINATOR_GRACE_TICKS,
-        agent_loss: sim_bridge::lockstep::AgentLoss::Unpowered,
+        agent_loss: sim_bridge::lockstep::AgentLoss::Drives(a.drive_loss),
+        drive_timeout: sim_bridge::lockstep::DEFAULT_DRIVE_TIMEOUT,
     };
     let mut extras = lockstep::Extras {
         publish_ground_truth: true,

@@ -10,7 +10,7 @@ use protocol::conventions::{base_twist_from_mujoco, base_twist_to_mujoco};
 use protocol::{GroundTruth, PerturbationRequest, Pose, RobotState};
 
 use crate::perturbation::Perturbations;
-use crate::plant::Plant;
+use crate::plant::{DriveLoss, Plant};
 use crate::world::{World, WorldError};
 
 /// The team in MuJoCo.
@@ -21,7 +21,24 @@ pub struct MujocoPlant {
     ticks: u64,
     /// Timed external wrenches, applied through `xfrc_applied` at every physics step.
     pub perturbations: Perturbations,
+    /// Robots whose drives are lost ([`Plant::lose_drives`]), with their freeze servos.
+    lost: Vec<Option<LostDrives>>,
 }
+
+/// A robot's drives after they lost their commands: unpowered, or each joint held at `q_hold`
+/// by the drive's own servo `tau = kp (q_hold - q) - kd qdot` (clamped to the torque limit by
+/// MuJoCo's `ctrlrange`), run at every physics step as a drive's inner loop would.
+#[derive(Debug, Clone)]
+struct LostDrives {
+    loss: DriveLoss,
+    q_hold: Vec<f64>,
+    kp: Vec<f64>,
+    kd: Vec<f64>,
+}
+
+/// A freezing drive reaches its torque limit at this joint error, rad: its stiffness is
+/// `limit / FREEZE_ERROR_AT_LIMIT` (legs 1600 N m/rad, shoulder 780, wrist 180).
+pub const FREEZE_ERROR_AT_LIMIT: f64 = 0.05;
 
 // SAFETY: MjData owns its buffers and its boxed model; nothing is shared between threads.
 unsafe impl Send for MujocoPlant {}
@@ -33,7 +50,8 @@ impl MujocoPlant {
         let model = world.model.clone();
         let data = MjData::new(model);
         let ids = world.robots.iter().map(|r| r.id.clone()).collect();
-        let mut p = MujocoPlant { world, data, ids, ticks: 0, perturbations: Perturbations::default() };
+        let lost = vec![None; world.robots.len()];
+        let mut p = MujocoPlant { world, data, ids, ticks: 0, perturbations: Perturbations::default(), lost };
         for i in 0..p.world.robots.len() {
             let q = p.world.robots[i].initial_q.clone();
             p.set_configuration(i, &q, None);
@@ -116,6 +134,40 @@ impl MujocoPlant {
         self.ticks
     }
 
+    /// Robot `i`'s freeze servo at its current configuration: stiffness from each joint's
+    /// torque limit ([`FREEZE_ERROR_AT_LIMIT`]), damping critical for the joint's own inertia
+    /// (the mass matrix's diagonal, armature included) `kd = 2 sqrt(kp M_jj)`.
+    fn freeze_servo(&self, i: usize, loss: DriveLoss) -> LostDrives {
+        let r = &self.world.robots[i];
+        let (m, d) = self.raw();
+        let nv = m.nv as usize;
+        // The dense mass matrix (once, at the loss), for each joint's own inertia.
+        let mut full = vec![0.0; nv * nv];
+        unsafe { mujoco_c::mj_fullM(m, d, full.as_mut_ptr()) };
+        let mut out = LostDrives { loss, q_hold: Vec::with_capacity(r.joint_qpos.len()), kp: Vec::new(), kd: Vec::new() };
+        for ((&qa, &va), &a) in r.joint_qpos.iter().zip(&r.joint_dof).zip(&r.actuator) {
+            let limit = unsafe { (*m.actuator_ctrlrange.add(2 * a + 1)).abs().max((*m.actuator_ctrlrange.add(2 * a)).abs()) };
+            let inertia = full[va * nv + va];
+            let kp = if limit.is_finite() && limit > 0.0 { limit / FREEZE_ERROR_AT_LIMIT } else { 0.0 };
+            out.q_hold.push(unsafe { *d.qpos.add(qa) });
+            out.kp.push(kp);
+            out.kd.push(2.0 * (kp * inertia.max(0.0)).sqrt());
+        }
+        out
+    }
+
+    /// The lost drives' torques for the coming physics step.
+    fn drive_lost(&mut self) {
+        for (i, lost) in self.lost.iter().enumerate() {
+            let Some(l) = lost.as_ref().filter(|l| l.loss == DriveLoss::Freeze) else { continue };
+            let r = &self.world.robots[i];
+            let d = unsafe { self.data.ffi_mut() };
+            for (k, ((&qa, &va), &a)) in r.joint_qpos.iter().zip(&r.joint_dof).zip(&r.actuator).enumerate() {
+                unsafe { *d.ctrl.add(a) = l.kp[k] * (l.q_hold[k] - *d.qpos.add(qa)) - l.kd[k] * *d.qvel.add(va) };
+            }
+        }
+    }
+
     /// Reset the tick count and simulated time (after settling): the scenario clock starts.
     pub fn restart_clock(&mut self) {
         self.ticks = 0;
@@ -159,6 +211,9 @@ impl Plant for MujocoPlant {
     }
 
     fn set_torques(&mut self, robot: usize, tau: &[f64]) {
+        if self.lost[robot].is_some() {
+            return;
+        }
         let r = &self.world.robots[robot];
         let d = unsafe { self.data.ffi_mut() };
         for (&a, &t) in r.actuator.iter().zip(tau) {
@@ -166,9 +221,28 @@ impl Plant for MujocoPlant {
         }
     }
 
+    fn lose_drives(&mut self, robot: usize, loss: DriveLoss) {
+        let servo = self.freeze_servo(robot, loss);
+        let r = &self.world.robots[robot];
+        let d = unsafe { self.data.ffi_mut() };
+        for &a in &r.actuator {
+            unsafe { *d.ctrl.add(a) = 0.0 };
+        }
+        self.lost[robot] = Some(servo);
+    }
+
+    fn restore_drives(&mut self, robot: usize) {
+        self.lost[robot] = None;
+    }
+
+    fn drives_lost(&self, robot: usize) -> bool {
+        self.lost[robot].is_some()
+    }
+
     fn step(&mut self) {
         let m = self.world.model.ffi() as *const mjModel;
         for _ in 0..self.world.substeps {
+            self.drive_lost();
             let t = self.data.ffi().time;
             let d = unsafe { self.data.ffi_mut() as *mut mjData };
             unsafe { self.perturbations.apply(&*m, &mut *d, &self.world, t) };

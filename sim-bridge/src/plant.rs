@@ -1,6 +1,22 @@
 //! What the bridge simulates.
 
 use protocol::{GroundTruth, Header, PerturbationRequest, Pose, RobotState};
+use serde::{Deserialize, Serialize};
+
+/// What a robot's drives do when its commands stop (its agent died, stalled, or lost its link):
+/// the bridge's model of a real drive's command timeout. Torques that come again restore them
+/// ([`Plant::restore_drives`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum DriveLoss {
+    /// Zero torque: the joints are unpowered and the robot falls where it stands.
+    #[default]
+    Unpowered,
+    /// Each drive holds its joint where it was with its own stiff position servo (a drive's
+    /// freeze mode, or a brake): the robot stays standing, sagging a little under its weight,
+    /// and a hand on the object keeps its place without squeezing.
+    Freeze,
+}
 
 /// A simulated team: states out, torques in, step.
 pub trait Plant: Send {
@@ -10,8 +26,16 @@ pub trait Plant: Send {
     fn joints(&self, robot: usize) -> usize;
     /// Write the state of robot `robot` (header fields other than tick/stamp are the caller's).
     fn state(&self, robot: usize, out: &mut RobotState);
-    /// Set the torques of robot `robot` for the next step (already checked for size).
+    /// Set the torques of robot `robot` for the next step (already checked for size); ignored
+    /// while its drives are lost ([`Plant::lose_drives`]).
     fn set_torques(&mut self, robot: usize, tau: &[f64]);
+    /// Robot `robot`'s drives stop taking torques and do what `loss` says until
+    /// [`Plant::restore_drives`].
+    fn lose_drives(&mut self, robot: usize, loss: DriveLoss);
+    /// Robot `robot`'s drives take torques again (from the next [`Plant::set_torques`]).
+    fn restore_drives(&mut self, robot: usize);
+    /// Whether robot `robot`'s drives are lost.
+    fn drives_lost(&self, robot: usize) -> bool;
     /// Advance one control period.
     fn step(&mut self);
     /// Simulated time, s.
@@ -34,6 +58,7 @@ pub struct PlaceholderPlant {
     q: Vec<Vec<f64>>,
     v: Vec<Vec<f64>>,
     tau: Vec<Vec<f64>>,
+    lost: Vec<Option<DriveLoss>>,
     dt: f64,
     steps: u64,
 }
@@ -47,6 +72,7 @@ impl PlaceholderPlant {
             q: vec![vec![0.0; joints]; n],
             v: vec![vec![v0; joints]; n],
             tau: vec![vec![0.0; joints]; n],
+            lost: vec![None; n],
             dt,
             steps: 0,
         }
@@ -77,11 +103,31 @@ impl Plant for PlaceholderPlant {
     }
 
     fn set_torques(&mut self, robot: usize, tau: &[f64]) {
-        self.tau[robot].copy_from_slice(tau);
+        if self.lost[robot].is_none() {
+            self.tau[robot].copy_from_slice(tau);
+        }
+    }
+
+    fn lose_drives(&mut self, robot: usize, loss: DriveLoss) {
+        self.lost[robot] = Some(loss);
+        self.tau[robot].iter_mut().for_each(|t| *t = 0.0);
+    }
+
+    fn restore_drives(&mut self, robot: usize) {
+        self.lost[robot] = None;
+    }
+
+    fn drives_lost(&self, robot: usize) -> bool {
+        self.lost[robot].is_some()
     }
 
     fn step(&mut self) {
         for r in 0..self.robots.len() {
+            if self.lost[r] == Some(DriveLoss::Freeze) {
+                // Unit-inertia joints held where they are.
+                self.v[r].iter_mut().for_each(|v| *v = 0.0);
+                continue;
+            }
             for j in 0..self.q[r].len() {
                 self.v[r][j] += self.dt * self.tau[r][j];
                 self.q[r][j] += self.dt * self.v[r][j];

@@ -4,6 +4,10 @@
 //! torques (zero before the first), and the miss is counted per robot. Torques of older ticks
 //! that arrive late are taken as the newest available, also counted as misses of the tick.
 //!
+//! A robot whose torques have not come for [`LockstepConfig::drive_timeout`] (its agent died,
+//! stalled or lost its link) loses its drives as [`crate::lockstep::AgentLoss`] says (frozen
+//! or unpowered); the next torques of a tick in time drive it again.
+//!
 //! Every tick's ground truth carries the loop as measured here ([`protocol::LoopTiming`]): per
 //! robot, state-to-torque latency (one clock: the states leave and the torques arrive here),
 //! the tick of the torques applied, and the late arrivals.
@@ -30,6 +34,8 @@ pub struct RealtimeReport {
     /// Ticks whose own work (states, stepping) overran the control period.
     pub overruns: u64,
     pub rejected_torques: u64,
+    /// Per robot (plant order): times its drives were lost for want of torques.
+    pub drive_losses: Vec<(String, u64)>,
 }
 
 /// Run `cfg.ticks` ticks of `plant` in real time with control period `period`.
@@ -50,6 +56,10 @@ pub async fn run(
     let mut missed = vec![0u64; robots.len()];
     let mut got = vec![false; robots.len()];
     let mut last_tick: Vec<Option<u64>> = vec![None; robots.len()];
+    // The drive timeout in ticks, and the last tick each robot's torques came in time.
+    let timeout_ticks = (cfg.drive_timeout.as_secs_f64() / period.as_secs_f64()).ceil().max(1.0) as u64;
+    let mut last_fresh = vec![extras.first_tick; robots.len()];
+    let mut drive_losses = vec![0u64; robots.len()];
     let mut overruns = 0u64;
     let mut rejected = 0u64;
     let started = Instant::now();
@@ -108,6 +118,13 @@ pub async fn run(
                 rejected += 1;
                 continue;
             }
+            if plant.drives_lost(i) {
+                if cmd.header.tick < tick {
+                    continue; // too old to wake the drives
+                }
+                tracing::info!(robot = %robots[i], tick, "the robot's drives take torques again");
+                plant.restore_drives(i);
+            }
             plant.set_torques(i, &cmd.tau);
             last_tick[i] = Some(cmd.header.tick);
             got[i] = cmd.header.tick == tick;
@@ -117,8 +134,17 @@ pub async fn run(
         }
         for (i, (g, timing)) in got.iter().zip(side.loop_timing(&robots)).enumerate() {
             timing.applied_tick = last_tick[i];
-            if !g {
+            if *g {
+                last_fresh[i] = tick;
+            } else {
                 missed[i] += 1;
+            }
+        }
+        for (i, r) in robots.iter().enumerate() {
+            if let Some(loss) = cfg.agent_loss.drive_loss().filter(|_| tick - last_fresh[i] >= timeout_ticks && !plant.drives_lost(i)) {
+                tracing::warn!(robot = %r, tick, since = last_fresh[i], ?loss, "no torques for the drive timeout: the robot's drives lose their commands");
+                plant.lose_drives(i, loss);
+                drive_losses[i] += 1;
             }
         }
         side.step(plant, &cfg.team, tick, extras).await?;
@@ -141,6 +167,7 @@ pub async fn run(
         ticks: cfg.ticks,
         sim_time: plant.time(),
         wall_time: started.elapsed(),
+        drive_losses: robots.iter().cloned().zip(drive_losses).collect(),
         missed: robots.into_iter().zip(missed).collect(),
         overruns,
         rejected_torques: rejected,

@@ -27,6 +27,7 @@ use zenoh::Session;
 use crate::lockstep::{self, BridgeError, Extras, LockstepConfig};
 use crate::mujoco_plant::MujocoPlant;
 use crate::perturbation::Perturbation;
+use crate::plant::DriveLoss;
 use crate::realtime::RealtimeReport;
 use crate::world::{World, WorldError, WorldSpec};
 
@@ -52,6 +53,10 @@ pub struct Scene {
     /// a robot whose torques are late keeps its last ones); settling stays lockstep.
     #[serde(default)]
     pub realtime: bool,
+    /// What a robot's drives do when its agent leaves, or (real time) when its torques stop
+    /// for the drive timeout.
+    #[serde(default)]
+    pub drive_loss: DriveLoss,
 }
 
 /// What a scene run did.
@@ -117,7 +122,8 @@ impl Scene {
             progress_every: 0,
             wait_for_coordinator: true,
             coordinator_grace_ticks: crate::lockstep::DEFAULT_COORDINATOR_GRACE_TICKS,
-            agent_loss: crate::lockstep::AgentLoss::Unpowered,
+            agent_loss: crate::lockstep::AgentLoss::Drives(self.drive_loss),
+            drive_timeout: crate::lockstep::DEFAULT_DRIVE_TIMEOUT,
         }
     }
 }
@@ -226,7 +232,7 @@ mod tests {
     use crate::world::WorldSpec;
 
     fn scene() -> Scene {
-        Scene { team: "team".into(), world: WorldSpec::paper_pair(), perturbations: Vec::new(), settle_ticks: 10, ticks: 20, command_timeout: 1.0, start_timeout: 1.0, realtime: false }
+        Scene { team: "team".into(), world: WorldSpec::paper_pair(), perturbations: Vec::new(), settle_ticks: 10, ticks: 20, command_timeout: 1.0, start_timeout: 1.0, realtime: false, drive_loss: DriveLoss::Freeze }
     }
 
     #[test]

@@ -133,3 +133,118 @@ async fn when_the_state_source_stops_every_agent_holds_within_its_deadline() {
     stop(c).await;
     s.close().await.unwrap();
 }
+
+/// "Without a jump in torque": no joint's torque steps more than this from one tick to the next
+/// around a hand-over, N m (the carry itself steps 0.005 N m; an unblended takeover 0.65-1.9).
+const MAX_STEP: f64 = 0.4;
+
+/// The largest change of any joint's applied torque from one tick to the next, per robot, over
+/// the ticks `from..to` (recorded torques of consecutive ticks only), with its tick.
+fn largest_step(records: &Records, robot: &str, from: u64, to: u64) -> (f64, u64) {
+    let mut by_tick: Vec<&(u64, Vec<f64>)> = records.torques[robot].iter().filter(|(t, _)| (from..to).contains(t)).collect();
+    by_tick.sort_by_key(|(t, _)| *t);
+    let mut worst = (0.0, from);
+    for w in by_tick.windows(2) {
+        let ((t0, a), (t1, b)) = (w[0], w[1]);
+        if t1 - t0 != 1 {
+            continue;
+        }
+        let step = a.iter().zip(b).map(|(x, y)| (y - x).abs()).fold(0.0, f64::max);
+        if step > worst.0 {
+            worst = (step, *t1);
+        }
+    }
+    worst
+}
+
+/// Fault 2: the coordinator dies mid-carry and a new one starts 0.2 s later. The agents hold
+/// their posture at once (its liveliness token goes; the hold carries the load the last
+/// command carried, so the object stays held), the new coordinator forms the team again (it
+/// waits for every robot of the plan), fits the object from the hands with the planned grasp,
+/// gets the references again from the driver, and the agents blend from their hold into its
+/// torques: no torque steps larger than the carry's own.
+fn coordinator_restart(distributed: bool, name: &str) {
+    let fault = "faults=[{kind=\"coordinator-stops\",at=0.5,restart_after=0.2}]";
+    let (plan, m, records) = run_scenario_records("s4_object_circle.toml", &["duration=1.5", "settle=0.5", fault], distributed, name);
+    let clock = &plan.references.clock;
+    let (struck, back) = (clock.first_tick_at(0.5), clock.first_tick_at(0.7));
+    let solved: Vec<u64> = records.diagnostics.iter().filter(|d| d.qp_status != protocol::QpStatus::NotRun).map(|d| d.header.tick).collect();
+    assert!(solved.iter().all(|t| *t <= struck + 1 || *t >= back), "no tick solved while the coordinator was dead: {:?}", solved.iter().filter(|t| **t > struck + 1 && **t < back).collect::<Vec<_>>());
+    let after: Vec<(u64, protocol::QpStatus)> = records.diagnostics.iter().filter(|d| d.header.tick > struck).map(|d| (d.header.tick, d.qp_status)).take(5).collect();
+    let resumed = *solved.iter().find(|t| **t >= back).unwrap_or_else(|| panic!("the new coordinator solves ticks; diagnostics after the fault: {after:?}"));
+    println!("coordinator killed at tick {struck}, started again at {back}, solving from {resumed}");
+    // Lockstep waits for nobody during the outage (the agents answer with their hold); a new
+    // process meets its agents as they reconnect (up to their 0.5 s retry period).
+    assert!(resumed < back + 1000, "the new coordinator took the team back within a second: tick {resumed}");
+    for r in ["r1", "r2"] {
+        let ticks: std::collections::BTreeSet<u64> = records.torques[r].iter().map(|(t, _)| *t).collect();
+        assert!((plan.references.clock.settle_ticks..plan.total_ticks()).all(|t| ticks.contains(&t)), "{r} applied a torque every tick");
+        let normal = largest_step(&records, r, clock.first_tick_at(0.1), struck);
+        let hold = largest_step(&records, r, struck, struck + 20);
+        let takeover = largest_step(&records, r, resumed.saturating_sub(2), resumed + 200);
+        println!("{r}: largest torque step per tick: carrying {:.3} N m (tick {}), entering the hold {:.3} (tick {}), taking over {:.3} (tick {})", normal.0, normal.1, hold.0, hold.1, takeover.0, takeover.1);
+        // Measured: 0.005 N m per tick while carrying; entering the hold 0.010-0.022; taking
+        // over 0.012-0.16 with the agents' blend, 0.65-1.9 without it (takeover set to zero).
+        assert!(hold.0 <= MAX_STEP, "{r}: the hold starts where the commands left off: {hold:?} (carrying: {normal:?})");
+        assert!(takeover.0 <= MAX_STEP, "{r}: the new coordinator's torques blend in: {takeover:?} (carrying: {normal:?})");
+    }
+    assert!(!m.drop.dropped, "the object stays held");
+    for (r, slip) in &m.slip_m {
+        assert!(*slip < 0.005, "{r}'s palm slipped {slip} m");
+    }
+    for (r, t) in &m.torsos {
+        assert!(t.position_max_m < 0.01, "torso {r} moved {} m", t.position_max_m);
+    }
+    assert!(m.object.position_max_m < 0.05, "the object stays within 5 cm of its moving reference: {} m", m.object.position_max_m);
+}
+
+#[test]
+fn a_restarted_coordinator_takes_the_team_back_without_a_torque_jump() {
+    coordinator_restart(false, "fault-coordinator-restart");
+}
+
+#[test]
+fn a_coordinator_process_killed_and_started_again_takes_the_team_back() {
+    // SIGKILL: the Zenoh hub of the run goes with it; the new process listens on the same
+    // endpoint and the others reconnect.
+    coordinator_restart(true, "fault-coordinator-restart-distributed");
+}
+
+/// Fault 3: an agent dies and a new one starts 0.3 s later. Its robot's drives freeze
+/// meanwhile (`drive_loss = "freeze"`), so it still stands; the two robots on opposite faces
+/// keep the object; the restarted agent joins the running team: the coordinator commands it from
+/// its first terms, and it stands beside the team with its hand out of the grasp (taking a
+/// grasp again is not built).
+#[test]
+fn an_agent_restarted_mid_carry_rejoins_the_team_beside_it() {
+    let fault = "faults=[{kind=\"agent-stops\",robot=\"r3\",at=0.5,restart_after=0.3}]";
+    let (plan, m, records) = run_scenario_records("team3_cube.toml", &["duration=2.0", "settle=0.5", "drive_loss=\"freeze\"", fault], false, "fault-agent-restarts");
+    let clock = &plan.references.clock;
+    let (struck, back) = (clock.first_tick_at(0.5), clock.first_tick_at(0.8));
+    let feet_of = |d: &protocol::TickDiagnostics, r: &str| d.contacts.iter().filter(|c| c.robot == r && c.wrench.len() == 3).count();
+    let hand_of = |d: &protocol::TickDiagnostics, r: &str| d.contacts.iter().any(|c| c.robot == r && c.wrench.len() == 6);
+    let without = records.diagnostics.iter().find(|d| d.header.tick >= struck && feet_of(d, "r3") == 0).map(|d| d.header.tick).expect("solved without r3");
+    let rejoined = records.diagnostics.iter().find(|d| d.header.tick > back && feet_of(d, "r3") > 0).map(|d| d.header.tick).expect("r3 back in the team's solution");
+    println!("r3's agent killed at tick {struck}: solved without it from {without}; started again at {back}: in the team again from {rejoined}");
+    assert!(without <= struck + 3, "noticed within 3 ticks");
+    assert!(rejoined < back + 500, "rejoined within 0.5 s of its start: tick {rejoined}");
+    for d in records.diagnostics.iter().filter(|d| d.header.tick >= rejoined) {
+        assert!(!hand_of(d, "r3"), "tick {}: r3's hand stays out of the grasp", d.header.tick);
+        assert!(hand_of(d, "r1") && hand_of(d, "r2"), "tick {}: r1 and r2 hold the object", d.header.tick);
+    }
+    let status = records.last_status.as_ref().expect("status");
+    assert_eq!(status.members, vec!["r1", "r2", "r3"], "{status:?}");
+    assert_eq!(status.late, vec!["r3"], "r3 is named as late: {status:?}");
+    // Its agent commands it again: torques of the coordinator's ticks after the rejoin.
+    assert!(records.torques["r3"].iter().any(|(t, _)| *t > rejoined), "r3's agent applies torques again");
+    assert!(!m.drop.dropped && m.drop.largest_fall < 0.02, "the object stays up: fell {:.3} m", m.drop.largest_fall);
+    for r in ["r1", "r2"] {
+        assert!(m.slip_m[r] < 0.005, "{r}'s palm slipped {:.4} m", m.slip_m[r]);
+        assert!(m.torsos[r].position_max_m < 0.01, "torso {r} moved {:.4} m", m.torsos[r].position_max_m);
+    }
+    assert!(m.object.position_max_m < 0.02, "the object follows its reference within 2 cm: {:.4} m", m.object.position_max_m);
+    let t3 = &m.torsos["r3"];
+    println!("r3's torso: max {:.4} m, {:.2} deg from its reference", t3.position_max_m, t3.orientation_max_deg);
+    // Measured 2.0 mm, 0.08 deg (with a hold order before its first command: 41 mm, 0.66 deg).
+    assert!(t3.position_max_m < 0.01 && t3.orientation_max_deg < 1.0, "r3 stands throughout (frozen, then commanded)");
+}

@@ -24,6 +24,7 @@ fn cfg(team: &str, ticks: u64) -> LockstepConfig {
         wait_for_coordinator: false,
         coordinator_grace_ticks: sim_bridge::lockstep::DEFAULT_COORDINATOR_GRACE_TICKS,
         agent_loss: sim_bridge::lockstep::AgentLoss::EndRun,
+        drive_timeout: sim_bridge::lockstep::DEFAULT_DRIVE_TIMEOUT,
     }
 }
 

@@ -110,6 +110,7 @@ async fn lockstep_names_the_robot_that_never_joined() {
         wait_for_coordinator: false,
         coordinator_grace_ticks: sim_bridge::lockstep::DEFAULT_COORDINATOR_GRACE_TICKS,
         agent_loss: sim_bridge::lockstep::AgentLoss::EndRun,
+        drive_timeout: sim_bridge::lockstep::DEFAULT_DRIVE_TIMEOUT,
     };
     let mut plant = sim_bridge::plant::PlaceholderPlant::new(vec!["r1".into(), "ghost".into()], 3, 0.0, 0.001);
     let (_tx, rx) = tokio::sync::watch::channel(false);

@@ -149,3 +149,47 @@ fn s4_holds_in_real_time_across_hosts_with_five_percent_loss_on_one_link() {
 const HELD_OBJECT_MAX_M: f64 = 0.05;
 /// "Standing" under loss: each torso within this of its reference throughout, m.
 const STANDING_TORSO_MAX_M: f64 = 0.08;
+
+/// An agent alive but silent (fault `agent-stalls`: its task handles nothing for 0.3 s while
+/// its liveliness token holds), three robots at 250 Hz against the wall clock. The coordinator
+/// notices at once: the tick it misses is solved with the robot's latest terms and the status
+/// names it stale; after the agents' command deadline (25 ms) it is silent and the team goes on
+/// without it, the two robots on opposite faces holding the object; its drives freeze after
+/// their timeout. When the agent goes on, the robot is admitted again beside the team, its hand
+/// out of the grasp.
+#[test]
+fn a_stalled_agent_is_noticed_at_once_left_out_and_taken_back() {
+    let _one = serial();
+    let sets = ["duration=2.0", "settle=0.5", "control_hz=250", "drive_loss=\"freeze\"", "faults=[{kind=\"agent-stalls\",robot=\"r3\",at=0.5,duration=0.3}]"];
+    let s = Scenario::load(common::scenario::repo().join("scenarios/team3_cube.toml"), &sets.map(String::from)).expect("scenario");
+    let mut plan = plan::plan(&s, &common::scenario::repo()).expect("plan");
+    plan.scene.realtime = true;
+    let dir = common::scenario::repo().join("target/test-reports/realtime_stall");
+    std::fs::create_dir_all(&dir).expect("report dir");
+    let records = run::run(&plan, &RunOptions { distributed: false, hosts: false, progress: false }, &dir).expect("the run completes");
+    let m = evaluated(&plan, &records, "embedded, real time", "realtime_stall");
+    let clock = &plan.references.clock;
+    let (struck, over) = (clock.first_tick_at(0.5), clock.first_tick_at(0.8));
+    let first = |what: &str, pred: &dyn Fn(&protocol::CoordinatorStatus) -> bool| {
+        records.statuses.iter().find(|st| st.header.tick >= struck && pred(st)).map(|st| st.header.tick).unwrap_or_else(|| panic!("no status with r3 {what}"))
+    };
+    let r3 = "r3".to_string();
+    let stale = first("stale", &|st| st.stale.contains(&r3));
+    let silent = first("silent", &|st| st.silent.contains(&r3));
+    let late = first("late", &|st| st.late.contains(&r3) && !st.silent.contains(&r3));
+    println!("r3 stalled at tick {struck}: stale from {stale}, silent from {silent}; stall over at {over}, back (late) from {late}");
+    assert!(stale <= struck + 3, "noticed within 3 ticks: {stale}");
+    let reuse = team_runner::run::realtime_reuse(plan.scenario.control_hz);
+    assert!(silent <= struck + reuse.max_age + 3, "left out after its terms aged {} ticks: {silent}", reuse.max_age);
+    assert!(late >= over, "back once the stall was over: {late}");
+    let last = records.last_status.as_ref().expect("status");
+    assert!(last.silent.is_empty() && last.late == vec![r3.clone()] && last.reused_terms > 0, "{last:?}");
+    assert!(!m.drop.dropped, "the object is held");
+    for r in ["r1", "r2"] {
+        assert!(m.slip_m[r] < evaluate::MAX_SLIP, "palm {r} slipped {} m", m.slip_m[r]);
+        assert!(m.torsos[r].position_max_m < 0.02, "torso {r} moved {} m", m.torsos[r].position_max_m);
+    }
+    assert!(m.object.position_max_m < HELD_OBJECT_MAX_M, "object error up to {} m", m.object.position_max_m);
+    let t3 = &m.torsos["r3"];
+    assert!(t3.position_max_m < STANDING_TORSO_MAX_M, "r3 stands (frozen drives, then commanded): {} m", t3.position_max_m);
+}

@@ -40,6 +40,10 @@ pub struct MqpConfig {
     pub object_inertia: Matrix3<f64>,
     /// Object pose when the grasp first closes; `None`: the hands' centroid, world axes.
     pub object_pose_at_grasp: Option<Isometry3<f64>>,
+    /// Each hand's grasp as planned (`units::grasp::PlannedHand`): a controller started while the
+    /// team holds the object fits it from the hands with these. Empty: captured when the grasp
+    /// first closes, with the object at `object_pose_at_grasp`.
+    pub planned_grasp: Vec<crate::units::grasp::PlannedHand>,
     /// Minimum normal force of stance feet and hands (the least squeeze), N.
     pub f_min_foot: f64,
     pub f_min_hand: f64,
@@ -76,6 +80,7 @@ impl Default for MqpConfig {
             object_mass: 1.0,
             object_inertia: Matrix3::identity() * (1.0 * (0.36 + 0.36) / 12.0),
             object_pose_at_grasp: None,
+            planned_grasp: Vec::new(),
             f_min_foot: 5.0,
             f_min_hand: 30.0,
             friction_margin: std::f64::consts::FRAC_1_SQRT_2,
@@ -124,6 +129,11 @@ impl MqpConfig {
         for (what, x) in [("friction_margin", self.friction_margin), ("patch_margin", self.patch_margin)] {
             if !(x.is_finite() && x > 0.0 && x <= 1.0) {
                 return bad(what, format!("{x} must be in (0, 1]"));
+            }
+        }
+        for h in &self.planned_grasp {
+            if let Err(why) = h.check() {
+                return bad("planned_grasp", why);
             }
         }
         if let Err(why) = self.release.check() {

@@ -128,7 +128,7 @@ impl Mqp {
         // graspmatrix, jacobian_cee, obj_jacobian); J_c (eq. jacobian_c).
         r.team.assemble_into(tick, expected.as_deref(), false)?;
         torque_limits(&r.team, descriptions, false, &mut r.actuated, &mut r.limits)?;
-        grasp.update(&r.team, cfg.object_pose_at_grasp, &mut r.grasp)?;
+        grasp.update(&r.team, cfg.object_pose_at_grasp, &cfg.planned_grasp, &mut r.grasp)?;
         contact_jacobian(&r.team, r.grasp.as_ref(), &mut r.j_c, &mut r.jdv_c);
         if let Some(g) = &r.grasp {
             // The grasp rows' right side in the range of N (see problem's docs).
@@ -241,5 +241,9 @@ impl TeamController for Mqp {
     fn not_ready(&self, members: &[String]) -> Option<String> {
         let missing: Vec<&String> = members.iter().filter(|m| !self.descriptions.contains_key(*m)).collect();
         (!missing.is_empty()).then(|| format!("waiting for the descriptions of {missing:?}"))
+    }
+
+    fn ready(&self, robot: &str) -> bool {
+        self.descriptions.contains_key(robot)
     }
 }

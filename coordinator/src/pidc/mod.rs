@@ -137,7 +137,7 @@ impl Pidc {
         r.team.assemble_into(tick, expected.as_deref(), cfg.fully_actuated)?;
         torque_limits(&r.team, descriptions, cfg.fully_actuated, &mut r.actuated, &mut r.limits)?;
         // The rigid grasp: G, J_c,ee, J_o (eqs. graspmatrix, jacobian_cee, obj_jacobian).
-        grasp.update(&r.team, cfg.object_pose_at_grasp, &mut r.grasp)?;
+        grasp.update(&r.team, cfg.object_pose_at_grasp, &cfg.planned_grasp, &mut r.grasp)?;
         // J_c = [J_cf; J_c,ee] (eq. jacobian_c).
         contact_jacobian(&r.team, r.grasp.as_ref(), &mut r.j_c, &mut r.jdv_c);
         let t_asm = us();
@@ -282,5 +282,9 @@ impl TeamController for Pidc {
     fn not_ready(&self, members: &[String]) -> Option<String> {
         let missing: Vec<&String> = members.iter().filter(|m| !self.descriptions.contains_key(*m)).collect();
         (!missing.is_empty()).then(|| format!("waiting for the descriptions of {missing:?}"))
+    }
+
+    fn ready(&self, robot: &str) -> bool {
+        self.has_description(robot)
     }
 }

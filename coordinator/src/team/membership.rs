@@ -1,4 +1,5 @@
-//! Who is in the team: liveliness tokens seen join and leave.
+//! Who is in the team: liveliness tokens seen join and leave ([`Membership`]), and of those
+//! members, whom the coordinator commands tick by tick ([`Roster`]).
 
 use std::collections::BTreeSet;
 
@@ -50,6 +51,173 @@ impl Membership {
     pub fn to_vec(&self) -> Vec<String> {
         self.members.iter().cloned().collect()
     }
+
+    /// The members as a set of ids.
+    fn set(&self) -> &BTreeSet<String> {
+        &self.members
+    }
+}
+
+/// What the coordinator does with a member's terms of one tick ([`Roster::admit`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Admission {
+    /// The robot is in the team: its terms go to the tick.
+    Team,
+    /// The robot is not a member (no liveliness token yet, or any more): it holds its posture
+    /// this tick rather than wait for a command.
+    NotAMember,
+    /// The robot holds its posture this tick (a hold order), for the reason given.
+    Hold(String),
+}
+
+/// Whom the coordinator commands: the [`Membership`] (liveliness), less the members left out.
+///
+/// * **Start.** Until the team's first tick is solved, every member is in, and the controller
+///   waits until it can command all of them (their descriptions): a team forms whole. With
+///   [`Roster::expect`] it also waits (every member holding its posture) until the robots it
+///   expects have all joined, for a bounded time: a coordinator restarted mid-run meets its
+///   agents one by one as they reconnect, and a team formed with some of them would take the
+///   others for late joiners (or let go of a grasp left with one hand).
+/// * **Silent members.** A member whose terms stopped for longer than the coordinator reuses
+///   them ([`crate::team::assembly::Reuse`]) is left out ([`Roster::silence`]): the others are
+///   solved without it, as if it had left, though its liveliness token holds.
+/// * **Late members.** A robot that joins a running team (a restarted agent), or a silent one
+///   whose terms come again, is *late*: it is in the team from its first terms, with its hand
+///   out of the grasp: it stands beside the team and does not take the object (taking a grasp
+///   again is not built). It is commanded at once: its drives held it meanwhile, and an agent
+///   in safe mode blends into the commands itself (`robot_agent::safe_mode::Takeover`). (A
+///   hold order first was tried: a restarted agent's own posture hold, without the weight its
+///   legs carry, let the torso sag 3 cm before the commands took over, which then swung it
+///   4 cm; commanded at once it stays within 2 mm.)
+/// * A member the controller cannot command yet (no description) holds its posture.
+#[derive(Debug, Clone, Default)]
+pub struct Roster {
+    members: Membership,
+    silent: BTreeSet<String>,
+    /// Late members, and of them those admitted (their terms came).
+    late: BTreeSet<String>,
+    admitted: BTreeSet<String>,
+    started: bool,
+    team: Vec<String>,
+    /// The robots to wait for before the first tick, and until when.
+    expected: Vec<String>,
+    forming_until: Option<std::time::Instant>,
+}
+
+impl Roster {
+    /// Wait, before the first tick, until every robot of `expected` has joined, or until
+    /// `until`.
+    pub fn expect(&mut self, expected: &[String], until: std::time::Instant) {
+        self.expected = expected.to_vec();
+        self.forming_until = Some(until);
+    }
+
+    /// Expected robots that have not joined yet while the team is still forming at `now`
+    /// (empty: formed, or no longer waited for).
+    pub fn forming(&self, now: std::time::Instant) -> Vec<&str> {
+        if self.started || self.forming_until.is_none_or(|t| now >= t) {
+            return Vec::new();
+        }
+        self.expected.iter().filter(|r| !self.members.contains(r)).map(String::as_str).collect()
+    }
+
+    /// A liveliness event; returns whether the team changed.
+    pub fn apply(&mut self, event: &MemberEvent) -> bool {
+        if !self.members.apply(event) {
+            return false;
+        }
+        match event {
+            MemberEvent::Joined(r) if self.started => {
+                tracing::info!(robot = %r, "robot joined a running team: it stands beside it, hand out of the grasp");
+                self.late.insert(r.clone());
+                self.admitted.remove(r);
+            }
+            MemberEvent::Left(r) => {
+                self.silent.remove(r);
+            }
+            _ => {}
+        }
+        self.recompute()
+    }
+
+    /// What to do with robot `robot`'s terms this tick; `ready` says whether the controller
+    /// can command it. Admitting a late robot changes the team (see [`Roster::team`]).
+    pub fn admit(&mut self, robot: &str, ready: bool) -> Admission {
+        if !self.members.contains(robot) {
+            return Admission::NotAMember;
+        }
+        if self.silent.remove(robot) {
+            tracing::warn!(robot, "a silent robot sends again: it comes back beside the team, hand out of the grasp");
+            self.late.insert(robot.to_string());
+            self.admitted.remove(robot);
+        }
+        if self.started && !ready {
+            return Admission::Hold(format!("robot {robot} cannot be commanded yet (no description)"));
+        }
+        if self.late.contains(robot) && self.admitted.insert(robot.to_string()) {
+            tracing::info!(robot, "late robot admitted into the team, hand out of the grasp");
+            self.recompute();
+        }
+        Admission::Team
+    }
+
+    /// Leave `robot` out of the team: alive, but silent. Returns whether the team changed.
+    pub fn silence(&mut self, robot: &str) -> bool {
+        if !self.members.contains(robot) || !self.silent.insert(robot.to_string()) {
+            return false;
+        }
+        tracing::warn!(robot, "robot silent: solving without it until it sends again");
+        self.recompute()
+    }
+
+    /// The team's first tick was solved: from now on joins are late.
+    pub fn start(&mut self) {
+        self.started = true;
+    }
+
+    pub fn started(&self) -> bool {
+        self.started
+    }
+
+    /// The team, sorted: members neither silent nor late and still to be admitted.
+    pub fn team(&self) -> &[String] {
+        &self.team
+    }
+
+    pub fn in_team(&self, robot: &str) -> bool {
+        self.team.binary_search_by(|r| r.as_str().cmp(robot)).is_ok()
+    }
+
+    /// Whether `robot` is late (its hand stays out of the grasp).
+    pub fn is_late(&self, robot: &str) -> bool {
+        self.late.contains(robot)
+    }
+
+    pub fn members(&self) -> &Membership {
+        &self.members
+    }
+
+    pub fn silent(&self) -> Vec<String> {
+        self.silent.iter().cloned().collect()
+    }
+
+    /// Late members still present, sorted.
+    pub fn late(&self) -> Vec<String> {
+        self.late.iter().filter(|r| self.members.contains(r)).cloned().collect()
+    }
+
+    fn recompute(&mut self) -> bool {
+        let team: Vec<String> = self
+            .members
+            .set()
+            .iter()
+            .filter(|r| !self.silent.contains(*r) && (!self.late.contains(*r) || self.admitted.contains(*r)))
+            .cloned()
+            .collect();
+        let changed = team != self.team;
+        self.team = team;
+        changed
+    }
 }
 
 #[cfg(test)]
@@ -66,5 +234,70 @@ mod tests {
         assert!(m.apply(&MemberEvent::Left("r1".into())));
         assert!(!m.apply(&MemberEvent::Left("r1".into())));
         assert_eq!(m.to_vec(), vec!["r2"]);
+    }
+
+    fn joined(r: &str) -> MemberEvent {
+        MemberEvent::Joined(r.into())
+    }
+
+    #[test]
+    fn a_team_forms_whole_then_late_robots_are_admitted_beside_it() {
+        let mut r = Roster::default();
+        assert!(r.apply(&joined("r2")));
+        assert!(r.apply(&joined("r1")));
+        assert_eq!(r.team(), ["r1", "r2"]);
+        // Before the start a robot without a description is in the team: the controller
+        // itself waits for the whole team.
+        assert_eq!(r.admit("r1", false), Admission::Team);
+        assert_eq!(r.admit("r9", true), Admission::NotAMember);
+        r.start();
+        assert!(matches!(r.admit("r2", false), Admission::Hold(why) if why.contains("description")));
+        // r3 joins the running team: in from its first terms, late.
+        assert!(!r.apply(&joined("r3")), "not in the team before its first terms");
+        assert!(!r.in_team("r3"));
+        assert_eq!(r.admit("r3", true), Admission::Team);
+        assert!(r.in_team("r3") && r.is_late("r3"));
+        assert_eq!(r.admit("r3", true), Admission::Team);
+        assert_eq!(r.late(), vec!["r3"]);
+        assert!(!r.is_late("r1"));
+    }
+
+    #[test]
+    fn a_team_expected_whole_forms_whole_or_at_its_deadline() {
+        let t0 = std::time::Instant::now();
+        let mut r = Roster::default();
+        r.expect(&["r1".to_string(), "r2".to_string()], t0 + std::time::Duration::from_secs(1));
+        assert_eq!(r.forming(t0), vec!["r1", "r2"]);
+        r.apply(&joined("r1"));
+        assert_eq!(r.forming(t0), vec!["r2"]);
+        assert!(r.forming(t0 + std::time::Duration::from_secs(2)).is_empty(), "not waited for past the deadline");
+        r.apply(&joined("r2"));
+        assert!(r.forming(t0).is_empty());
+        r.apply(&MemberEvent::Left("r2".into()));
+        r.start();
+        assert!(r.forming(t0).is_empty(), "once started it never waits again");
+    }
+
+    #[test]
+    fn a_silent_member_is_left_out_and_comes_back_late() {
+        let mut r = Roster::default();
+        for id in ["r1", "r2", "r3"] {
+            r.apply(&joined(id));
+        }
+        r.start();
+        assert!(r.silence("r3"));
+        assert!(!r.silence("r3"), "once");
+        assert!(!r.silence("r7"), "not a member");
+        assert_eq!(r.team(), ["r1", "r2"]);
+        assert_eq!(r.silent(), vec!["r3"]);
+        // Its terms come again: in the team with its hand out of the grasp.
+        assert_eq!(r.admit("r3", true), Admission::Team);
+        assert!(r.silent().is_empty());
+        assert_eq!(r.team(), ["r1", "r2", "r3"]);
+        assert!(r.is_late("r3"));
+        // Leaving takes it out of every list.
+        assert!(r.apply(&MemberEvent::Left("r3".into())));
+        assert_eq!(r.team(), ["r1", "r2"]);
+        assert!(r.late().is_empty());
     }
 }

@@ -32,6 +32,40 @@ pub struct GraspOffsets {
     pub contact_in_object: Vec<Vector3<f64>>,
 }
 
+/// One hand's grasp as the plan made it: where the hand holds the object and how it is turned
+/// to it. With these a controller that starts while the team already holds the object (a
+/// coordinator restarted mid-carry) fits the object from the hands where it is, instead of
+/// taking it to be where the plan put it at the start ([`GraspTracker::update`]).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlannedHand {
+    pub robot: String,
+    /// The hand frame (the agent's `hand` frame name).
+    pub frame: String,
+    /// The hand's contact point in the object's frame, m.
+    pub contact_in_object: [f64; 3],
+    /// `R_hand^T R_object` as a unit quaternion `(w, x, y, z)`.
+    pub hand_to_object: [f64; 4],
+}
+
+impl PlannedHand {
+    /// The plan of a hand at `hand` (world pose of its frame) on the object at `object`.
+    pub fn new(robot: &str, frame: &str, hand: &Isometry3<f64>, object: &Isometry3<f64>) -> Self {
+        let c = object.inverse_transform_point(&hand.translation.vector.into()).coords;
+        let q = hand.rotation.inverse() * object.rotation;
+        PlannedHand { robot: robot.to_string(), frame: frame.to_string(), contact_in_object: [c.x, c.y, c.z], hand_to_object: [q.w, q.i, q.j, q.k] }
+    }
+
+    /// Finite numbers and a unit quaternion (within 1e-6).
+    pub fn check(&self) -> Result<(), String> {
+        let n2: f64 = self.hand_to_object.iter().map(|x| x * x).sum();
+        if !self.contact_in_object.iter().chain(&self.hand_to_object).all(|x| x.is_finite()) || (n2 - 1.0).abs() > 1e-6 {
+            return Err(format!("planned hand {} of {}: contact and rotation must be finite, the rotation a unit quaternion", self.frame, self.robot));
+        }
+        Ok(())
+    }
+}
+
 /// The object pose fitted to the hands, and how far the hands are from where it puts them.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ObjectFit {
@@ -60,6 +94,20 @@ impl GraspOffsets {
             contact_in_object.push(object.inverse_transform_point(&h.position.into()).coords);
         }
         GraspOffsets { hands, hand_to_object, contact_in_object }
+    }
+
+    /// The offsets of the team's grasping hands as `planned`, if every one of them is planned.
+    pub fn planned(team: &Team, planned: &[PlannedHand]) -> Option<Self> {
+        let mut out = GraspOffsets { hands: Vec::new(), hand_to_object: Vec::new(), contact_in_object: Vec::new() };
+        for h in &team.hands {
+            let robot = &team.robots[h.robot].id;
+            let p = planned.iter().find(|p| p.robot == *robot && p.frame == h.name)?;
+            let [w, x, y, z] = p.hand_to_object;
+            out.hands.push((robot.clone(), h.name.clone()));
+            out.hand_to_object.push(UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z)));
+            out.contact_in_object.push(Vector3::from(p.contact_in_object));
+        }
+        Some(out)
     }
 
     /// Whether these offsets belong to the team's current set of grasping hands.
@@ -118,10 +166,11 @@ pub struct GraspTracker {
 
 impl GraspTracker {
     /// This tick's grasp terms into `terms`: `None` without hands in grasp. Otherwise the
-    /// offsets (captured when the grasping hands changed, with the object at the last estimate,
-    /// else at `pose_at_grasp`, else at the hands' centroid with world axes), the object pose
-    /// from the hands, and the terms of [`GraspTerms::compute_into`].
-    pub fn update(&mut self, team: &Team, pose_at_grasp: Option<Isometry3<f64>>, terms: &mut Option<GraspTerms>) -> Result<(), ControllerError> {
+    /// offsets (captured when the grasping hands changed, with the object at the last estimate;
+    /// before any estimate, the `planned` offsets if they cover every grasping hand, else with
+    /// the object at `pose_at_grasp`, else at the hands' centroid with world axes), the object
+    /// pose from the hands, and the terms of [`GraspTerms::compute_into`].
+    pub fn update(&mut self, team: &Team, pose_at_grasp: Option<Isometry3<f64>>, planned: &[PlannedHand], terms: &mut Option<GraspTerms>) -> Result<(), ControllerError> {
         if team.hands.is_empty() {
             self.offsets = None;
             *terms = None;
@@ -130,10 +179,16 @@ impl GraspTracker {
         let offsets = match &mut self.offsets {
             Some(o) if o.matches(team) => o,
             slot => {
-                let known = if self.released { None } else { self.last_object.or(pose_at_grasp) };
-                let at = known.unwrap_or_else(|| centroid_pose(team));
+                let first = !self.released && self.last_object.is_none();
+                let offsets = match first.then(|| GraspOffsets::planned(team, planned)).flatten() {
+                    Some(o) => o,
+                    None => {
+                        let known = if self.released { None } else { self.last_object.or(pose_at_grasp) };
+                        GraspOffsets::capture(team, &known.unwrap_or_else(|| centroid_pose(team)))
+                    }
+                };
                 self.released = false;
-                slot.insert(GraspOffsets::capture(team, &at))
+                slot.insert(offsets)
             }
         };
         let fit = offsets.fit(team);

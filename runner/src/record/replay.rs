@@ -75,6 +75,7 @@ impl Recording {
             truth: self.truth.iter().filter(|g| g.header.tick >= settle).cloned().collect(),
             diagnostics: self.diagnostics.iter().filter(|d| d.header.tick >= settle).cloned().collect(),
             last_status: self.statuses.last().cloned(),
+            statuses: self.statuses.clone(),
             released_at: self.statuses.iter().find(|s| s.mode == protocol::CoordinatorMode::Released).map(|s| s.header.tick),
             settle_wall: self.facts.settle_wall,
             run_wall: self.facts.run_wall,

@@ -27,7 +27,7 @@ pub struct Component<T> {
 
 pub fn coordinator(session: &Session, team: &str, controller: Box<dyn TeamController>) -> Component<service::CoordinatorCounters> {
     let (stop, rx) = watch::channel(false);
-    let (s, cfg) = (session.clone(), CoordinatorConfig { team: team.into(), tick_deadline: Duration::from_secs(5) });
+    let (s, cfg) = (session.clone(), CoordinatorConfig::lockstep(team, Duration::from_secs(5)));
     Component { stop, task: tokio::spawn(async move { service::run(&s, cfg, controller, rx).await.expect("coordinator runs") }) }
 }
 
@@ -62,6 +62,7 @@ pub fn lockstep_cfg(team: &str, ticks: u64, grace: u64) -> LockstepConfig {
         wait_for_coordinator: true,
         coordinator_grace_ticks: grace,
         agent_loss: sim_bridge::lockstep::AgentLoss::EndRun,
+        drive_timeout: sim_bridge::lockstep::DEFAULT_DRIVE_TIMEOUT,
     }
 }
 
