@@ -38,6 +38,9 @@ pub trait TeamController: Send {
     fn set_references(&mut self, _references: &TaskReferences) {}
     /// The present members changed (sorted ids).
     fn set_members(&mut self, _members: &[String]) {}
+    /// Robots that joined the running team with their hands out of the grasp (sorted ids):
+    /// their free hands keep clear of the object (`units::targets::Targets::keep_clear`).
+    fn set_late(&mut self, _robots: &[String]) {}
     /// Why the controller cannot run yet (e.g. descriptions missing), if so.
     fn not_ready(&self, _members: &[String]) -> Option<String> {
         None

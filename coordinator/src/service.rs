@@ -132,7 +132,9 @@ pub async fn run(
     loop {
         let mut team_changed = false;
         let mut publish_status = false;
-        let reuse_at = assembler.reuse_at();
+        // Late terms are reused only once the team has formed: before its first tick every
+        // member's own terms are waited for (one not heard of yet is not silent).
+        let reuse_at = if svc.roster.started() { assembler.reuse_at() } else { None };
         tokio::select! {
             _ = stop.changed() => { if *stop.borrow() { break; } }
             m = members_q.recv_async() => {
@@ -244,7 +246,9 @@ impl Service<'_> {
                     continue;
                 }
                 let before = self.roster.team().len();
-                let outcome = match self.roster.admit(&robot, controller.ready(&robot)) {
+                let fresh = assembler.last_completed().is_none_or(|t| tick > t);
+                let outcome = match self.roster.admit(&robot, controller.ready(&robot), fresh) {
+                    Admission::Stale => TickOutcome::Stale(tick),
                     Admission::NotAMember => {
                         // Its terms can beat its liveliness token: it is told to hold its
                         // posture this tick rather than left waiting for a command.
@@ -331,6 +335,7 @@ impl Service<'_> {
         if self.solved_members.len() != terms.len() || self.solved_members.iter().zip(&terms).any(|(m, t)| m != t.header.robot_id()) {
             self.solved_members = terms.iter().map(|t| t.header.robot_id().to_string()).collect();
             controller.set_members(&self.solved_members);
+            controller.set_late(&self.roster.late());
         }
         self.refs.drain(references);
         self.refs.apply(tick, controller);

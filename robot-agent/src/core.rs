@@ -91,6 +91,12 @@ impl AgentConfig {
 /// impedance period, long against a torque step, short against a fall.
 pub const DEFAULT_TAKEOVER: Duration = Duration::from_millis(100);
 
+/// How far ahead of the latest state a command may be and still wait for its state: in real
+/// time the coordinator answers a tick with a late member's latest terms, and that member's
+/// command can overtake the state of its tick on the way (or the agent is still busy with the
+/// previous one). Further ahead, it is refused as from the future.
+pub const EARLY_TICKS: u64 = 4;
+
 /// A configuration the core cannot run with.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum CoreError {
@@ -184,6 +190,10 @@ pub struct AgentCore<S: DynamicsSource> {
     contacts: ContactSwitch,
     terms: DynamicsTerms,
     torques: TorqueCommand,
+    /// A command that came before the state of its tick (see [`EARLY_TICKS`]); it is checked
+    /// when that state arrives. `early_pending` says whether it holds one.
+    early: TorqueCommand,
+    early_pending: bool,
     description: Option<RobotDescription>,
     q: Vec<f64>,
     qdot: Vec<f64>,
@@ -235,6 +245,8 @@ impl<S: DynamicsSource> AgentCore<S> {
             feet,
             terms: empty_terms(team, robot),
             torques: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false },
+            early: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false },
+            early_pending: false,
             q: vec![0.0; joints],
             qdot: vec![0.0; joints],
             gravity: vec![0.0; joints],
@@ -288,6 +300,9 @@ impl<S: DynamicsSource> AgentCore<S> {
             }
         };
         self.source.actuated_gravity(&mut self.gravity);
+        if let Some(apply) = self.early_command_due(tick, now) {
+            return Ok(self.outputs(now, mode_before, terms, apply, false));
+        }
         if self.watchdog.expired(tick, now) {
             self.enter_safe_mode_at(tick, "no valid command in time");
         }
@@ -323,15 +338,69 @@ impl<S: DynamicsSource> AgentCore<S> {
 
     /// A torque command arrived at `now`: the gate's checks and clamping, then the watchdog
     /// (in safe mode only a command of a tick newer than the entry is admitted).
+    ///
+    /// A command up to [`EARLY_TICKS`] ahead of the latest state waits for the state of its
+    /// tick (nothing is applied now): the coordinator answered its tick with this robot's
+    /// latest terms before this robot had that tick's state.
     pub fn on_command(&mut self, cmd: &TorqueCommand, now: Instant) -> Result<Outputs<'_>, CommandRejection> {
         let mode_before = self.board.status.mode;
+        match self.admit_command(cmd, now) {
+            Ok(Some(apply)) => Ok(self.outputs(now, mode_before, false, apply, false)),
+            Ok(None) => Ok(Outputs::default()),
+            Err(r) => Err(self.reject(r)),
+        }
+    }
+
+    /// The early command, if it waited for the state of `tick` (or an older one): checked now.
+    fn early_command_due(&mut self, tick: u64, now: Instant) -> Option<Apply> {
+        if !self.early_pending || self.early.header.tick > tick {
+            return None;
+        }
+        self.early_pending = false;
+        // Taken out and put back: the gate reads it while the core changes (no allocation).
+        let empty = TorqueCommand { header: Header { version: 0, team: String::new(), robot: None, tick: 0, stamp_ns: 0 }, tau: Vec::new(), hold: false };
+        let early = std::mem::replace(&mut self.early, empty);
+        let admitted = self.admit_command(&early, now);
+        self.early = early;
+        match admitted {
+            Ok(apply) => apply,
+            Err(r) => {
+                self.reject(r);
+                None
+            }
+        }
+    }
+
+    /// Keep `cmd` until the state of its tick arrives (replacing an older early command); a
+    /// command of the wrong size is refused now (the buffer never grows).
+    fn keep_early(&mut self, cmd: &TorqueCommand) -> Result<(), CommandRejection> {
+        let expected = if cmd.hold { 0 } else { self.joints };
+        if cmd.tau.len() != expected {
+            return Err(CommandRejection::WrongSize { expected, got: cmd.tau.len() });
+        }
+        self.early.header.tick = cmd.header.tick;
+        self.early.header.stamp_ns = cmd.header.stamp_ns;
+        self.early.hold = cmd.hold;
+        self.early.tau.clear();
+        self.early.tau.extend_from_slice(&cmd.tau);
+        self.early_pending = true;
+        self.counters.early += 1;
+        Ok(())
+    }
+
+    /// The gate's checks and the bookkeeping of an applied command; `None`: kept as early.
+    fn admit_command(&mut self, cmd: &TorqueCommand, now: Instant) -> Result<Option<Apply>, CommandRejection> {
         let clamped = match self.gate.check(cmd, now, &mut self.torques.tau) {
             Ok(n) => n,
-            Err(r) => return Err(self.reject(r)),
+            Err(CommandRejection::FromTheFuture { tick, latest }) if tick <= latest + EARLY_TICKS => {
+                self.keep_early(cmd)?;
+                return Ok(None);
+            }
+            Err(r) => return Err(r),
         };
         let tick = cmd.header.tick;
         if let Err(entered) = self.watchdog.admits(tick) {
-            return Err(self.reject(CommandRejection::BeforeSafeMode { tick, entered }));
+            return Err(CommandRejection::BeforeSafeMode { tick, entered });
         }
         self.torques.header.tick = tick;
         self.gate.mark_applied(tick);
@@ -355,8 +424,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         self.board.status.mode = AgentMode::Commanded;
         // A hold order: this tick's torque is the agent's own posture hold.
-        let apply = if cmd.hold { Apply::Hold } else { Apply::Command };
-        Ok(self.outputs(now, mode_before, false, apply, false))
+        Ok(Some(if cmd.hold { Apply::Hold } else { Apply::Command }))
     }
 
     /// Something arrived on the command key that is not a command.

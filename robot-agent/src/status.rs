@@ -15,6 +15,8 @@ pub struct AgentCounters {
     pub applied: u64,
     /// Commands refused by the checks (undecodable ones included).
     pub rejected: u64,
+    /// Commands that came before the state of their tick and waited for it.
+    pub early: u64,
     /// Applied commands of which at least one torque was clamped to its limit.
     pub clamped: u64,
     pub safe_mode_entries: u64,

@@ -160,7 +160,7 @@ fn rejected_commands_are_counted_and_nothing_is_applied() {
     c.on_state(&state(3, [0.0; 3], [0.0; 3]), t0).unwrap();
     let refused = [
         (command("r9", 3, &[0.0; 3]), "WrongRobot"),
-        (command(ID, 4, &[0.0; 3]), "FromTheFuture"),
+        (command(ID, 3 + robot_agent::core::EARLY_TICKS + 1, &[0.0; 3]), "FromTheFuture"),
         (command(ID, 3, &[0.0; 2]), "WrongSize"),
         (command(ID, 3, &[0.0, f64::NAN, 0.0]), "NonFinite"),
     ];
@@ -178,6 +178,32 @@ fn rejected_commands_are_counted_and_nothing_is_applied() {
     // A good one still passes; no deadline, so the timer never holds.
     assert!(c.on_command(&command(ID, 3, &[-20.0, 20.0, 0.5]), t0 + ms(2)).unwrap().torques.is_some_and(|t| t.tau == [-10.0, 10.0, 0.5]));
     assert!(c.on_timer(t0 + Duration::from_secs(3600)).torques.is_none());
+}
+
+#[test]
+fn a_command_ahead_of_its_state_waits_for_it_and_is_checked_then() {
+    let t0 = Instant::now();
+    let mut c = core(CommandDeadline { ticks: 3, time: None });
+    c.on_state(&state(3, [0.0; 3], [0.0; 3]), t0).unwrap();
+    // Tick 4's command overtook tick 4's state: nothing now, nothing refused.
+    let out = c.on_command(&command(ID, 4, &[1.0, -20.0, 0.5]), t0 + ms(1)).unwrap();
+    assert!(out.torques.is_none());
+    assert_eq!((c.counters().rejected, c.counters().early, c.last_applied_tick()), (0, 1, None));
+    // A newer early command replaces it; the wrong size is refused at once.
+    assert!(matches!(c.on_command(&command(ID, 5, &[0.0; 2]), t0 + ms(1)), Err(CommandRejection::WrongSize { .. })));
+    // Tick 4's state: its terms and its command, clamped, in the same outputs.
+    let out = c.on_state(&state(4, [0.0; 3], [0.0; 3]), t0 + ms(5)).unwrap();
+    assert!(out.terms.is_some());
+    assert_eq!(out.torques.map(|t| (t.header.tick, t.tau.clone())), Some((4, vec![1.0, -10.0, 0.5])));
+    assert_eq!((c.counters().applied, c.last_applied_tick()), (1, Some(4)));
+    // The next state brings nothing: the early command was used once.
+    assert!(c.on_state(&state(5, [0.0; 3], [0.0; 3]), t0 + ms(10)).unwrap().torques.is_none());
+    // An early command whose state never comes (tick 7 skipped) is too old when tick 8 arrives.
+    c.on_command(&command(ID, 7, &[0.0; 3]), t0 + ms(11)).unwrap();
+    let out = c.on_state(&state(8, [0.0; 3], [0.0; 3]), t0 + ms(20)).unwrap();
+    assert!(out.torques.is_none_or(|t| t.header.tick == 8), "the skipped tick's command is not applied");
+    assert_eq!(c.last_applied_tick(), Some(4));
+    assert!(c.status().last_rejection.as_deref().unwrap().contains("old"), "{:?}", c.status().last_rejection);
 }
 
 #[test]

@@ -68,6 +68,9 @@ pub enum Admission {
     NotAMember,
     /// The robot holds its posture this tick (a hold order), for the reason given.
     Hold(String),
+    /// Terms of a silent robot for a tick already solved (a backlog it sends as it comes
+    /// back): dropped; only fresh terms bring it back.
+    Stale,
 }
 
 /// Whom the coordinator commands: the [`Membership`] (liveliness), less the members left out.
@@ -141,10 +144,14 @@ impl Roster {
     }
 
     /// What to do with robot `robot`'s terms this tick; `ready` says whether the controller
-    /// can command it. Admitting a late robot changes the team (see [`Roster::team`]).
-    pub fn admit(&mut self, robot: &str, ready: bool) -> Admission {
+    /// can command it, `fresh` whether the terms are for a tick not yet solved. Admitting a
+    /// late robot changes the team (see [`Roster::team`]).
+    pub fn admit(&mut self, robot: &str, ready: bool, fresh: bool) -> Admission {
         if !self.members.contains(robot) {
             return Admission::NotAMember;
+        }
+        if self.silent.contains(robot) && !fresh {
+            return Admission::Stale;
         }
         if self.silent.remove(robot) {
             tracing::warn!(robot, "a silent robot sends again: it comes back beside the team, hand out of the grasp");
@@ -248,16 +255,16 @@ mod tests {
         assert_eq!(r.team(), ["r1", "r2"]);
         // Before the start a robot without a description is in the team: the controller
         // itself waits for the whole team.
-        assert_eq!(r.admit("r1", false), Admission::Team);
-        assert_eq!(r.admit("r9", true), Admission::NotAMember);
+        assert_eq!(r.admit("r1", false, true), Admission::Team);
+        assert_eq!(r.admit("r9", true, true), Admission::NotAMember);
         r.start();
-        assert!(matches!(r.admit("r2", false), Admission::Hold(why) if why.contains("description")));
+        assert!(matches!(r.admit("r2", false, true), Admission::Hold(why) if why.contains("description")));
         // r3 joins the running team: in from its first terms, late.
         assert!(!r.apply(&joined("r3")), "not in the team before its first terms");
         assert!(!r.in_team("r3"));
-        assert_eq!(r.admit("r3", true), Admission::Team);
+        assert_eq!(r.admit("r3", true, true), Admission::Team);
         assert!(r.in_team("r3") && r.is_late("r3"));
-        assert_eq!(r.admit("r3", true), Admission::Team);
+        assert_eq!(r.admit("r3", true, true), Admission::Team);
         assert_eq!(r.late(), vec!["r3"]);
         assert!(!r.is_late("r1"));
     }
@@ -290,8 +297,10 @@ mod tests {
         assert!(!r.silence("r7"), "not a member");
         assert_eq!(r.team(), ["r1", "r2"]);
         assert_eq!(r.silent(), vec!["r3"]);
-        // Its terms come again: in the team with its hand out of the grasp.
-        assert_eq!(r.admit("r3", true), Admission::Team);
+        // Its backlog does not bring it back, fresh terms do: in the team, hand out of the grasp.
+        assert_eq!(r.admit("r3", true, false), Admission::Stale);
+        assert_eq!(r.silent(), vec!["r3"]);
+        assert_eq!(r.admit("r3", true, true), Admission::Team);
         assert!(r.silent().is_empty());
         assert_eq!(r.team(), ["r1", "r2", "r3"]);
         assert!(r.is_late("r3"));

@@ -79,15 +79,28 @@ impl Targets {
     /// pose moved `retreat` away from the centre (horizontally) once it is free.
     pub fn let_go(&mut self, team: &Team, centre: &Vector3<f64>, retreat: f64) {
         for h in &team.hands {
-            let mut away = h.position - centre;
-            away.z = 0.0;
-            let step = away.try_normalize(1e-9).map_or(Vector3::zeros(), |d| d * retreat);
-            let pose = Isometry3::from_parts(Translation3::from(h.position + step), UnitQuaternion::from_rotation_matrix(&h.rotation));
+            let pose = away_from(h, centre, retreat);
             let id = &team.robots[h.robot].id;
             match self.held_hands.iter_mut().find(|(r, _)| r == id) {
                 Some((_, held)) => *held = pose,
                 None => self.held_hands.push((id.clone(), pose)),
             }
+        }
+    }
+
+    /// The free hands of `late` robots (they joined a team that holds the object, their hands
+    /// out of the grasp: `crate::team::membership::Roster`) keep clear of the object centred at
+    /// `centre`: the first time such a hand is seen free it will hold its pose moved `retreat`
+    /// away from the centre (horizontally), as a hand the team let go of does. Without an object
+    /// (`None`) they hold their pose.
+    pub fn keep_clear(&mut self, team: &Team, late: &[String], centre: Option<&Vector3<f64>>, retreat: f64) {
+        let Some(centre) = centre else { return };
+        for h in &team.free_hands {
+            let id = &team.robots[h.robot].id;
+            if !late.contains(id) || self.held_hands.iter().any(|(r, _)| r == id) {
+                continue;
+            }
+            self.held_hands.push((id.clone(), away_from(h, centre, retreat)));
         }
     }
 
@@ -107,6 +120,14 @@ impl Targets {
     pub fn release_object(&mut self) {
         self.held_object = None;
     }
+}
+
+/// Hand `h`'s pose moved `retreat` away from `centre`, horizontally.
+fn away_from(h: &TeamFrame, centre: &Vector3<f64>, retreat: f64) -> Isometry3<f64> {
+    let mut away = h.position - centre;
+    away.z = 0.0;
+    let step = away.try_normalize(1e-9).map_or(Vector3::zeros(), |d| d * retreat);
+    Isometry3::from_parts(Translation3::from(h.position + step), UnitQuaternion::from_rotation_matrix(&h.rotation))
 }
 
 /// A pose reference as a target.
