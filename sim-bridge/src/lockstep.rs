@@ -97,9 +97,10 @@ pub const DEFAULT_DRIVE_TIMEOUT: Duration = Duration::from_millis(50);
 
 impl LockstepConfig {
     /// The smoke run's lockstep (placeholder plant): 20 s for every robot to join, `command_timeout`
-    /// per tick, resends every 50 ms, progress every tenth of the run, no coordinator readiness
-    /// wait (the smoke controller needs no descriptions). The embedded launcher and
-    /// `sim-bridge smoke` both use it.
+    /// per tick, resends every 50 ms, progress every tenth of the run, and the coordinator's
+    /// readiness awaited (under load its members' liveliness reached it after their first
+    /// terms: it ordered a hold at tick 0, and the closed loop's analytic answer was off). The
+    /// embedded launcher and `sim-bridge smoke` both use it.
     pub fn smoke(team: &str, ticks: u64, command_timeout: Duration) -> Self {
         LockstepConfig {
             team: team.to_string(),
@@ -108,7 +109,7 @@ impl LockstepConfig {
             command_timeout,
             resend_every: Duration::from_millis(50),
             progress_every: (ticks / 10).max(1),
-            wait_for_coordinator: false,
+            wait_for_coordinator: true,
             coordinator_grace_ticks: DEFAULT_COORDINATOR_GRACE_TICKS,
             agent_loss: AgentLoss::EndRun,
             drive_timeout: DEFAULT_DRIVE_TIMEOUT,
