@@ -69,8 +69,6 @@ pub struct Mqp {
     diagnostics: Option<TickDiagnostics>,
     /// Scratch: `N Jdot_c,ee v`.
     n_jdv: nalgebra::DVector<f64>,
-    /// Robots that joined the running team, their hands out of the grasp.
-    late: Vec<String>,
 }
 
 impl Mqp {
@@ -88,7 +86,6 @@ impl Mqp {
             last_tau: nalgebra::DVector::zeros(0),
             valid: false,
             diagnostics: None,
-            late: Vec::new(),
             n_jdv: nalgebra::DVector::zeros(0),
         }
     }
@@ -123,7 +120,7 @@ impl Mqp {
         self.valid = false;
         let start = Instant::now();
         let us = || start.elapsed().as_secs_f64() * 1e6;
-        let Mqp { config: cfg, late, contact_parameters, descriptions, expected, references, targets, grasp, watch, report: r, last_tau, n_jdv, .. } = self;
+        let Mqp { config: cfg, contact_parameters, descriptions, expected, references, targets, grasp, watch, report: r, last_tau, n_jdv, .. } = self;
         // Degrade, never collapse: once the team has let go of the object, every hand is free.
         watch.rearm(tick.iter().any(|t| t.hand_in_grasp));
         r.team.hands_released = watch.released().is_some();
@@ -133,7 +130,7 @@ impl Mqp {
         torque_limits(&r.team, descriptions, false, &mut r.actuated, &mut r.limits)?;
         grasp.update(&r.team, cfg.object_pose_at_grasp, &cfg.planned_grasp, &mut r.grasp)?;
         // Late robots' free hands keep clear of the object the others hold.
-        targets.keep_clear(&r.team, late, r.grasp.as_ref().map(|g| &g.object.translation.vector), cfg.release.retreat);
+        targets.keep_clear(&r.team, r.grasp.as_ref().map(|g| &g.object.translation.vector), cfg.release.retreat);
         contact_jacobian(&r.team, r.grasp.as_ref(), &mut r.j_c, &mut r.jdv_c);
         if let Some(g) = &r.grasp {
             // The grasp rows' right side in the range of N (see problem's docs).
@@ -240,7 +237,7 @@ impl TeamController for Mqp {
     }
 
     fn set_late(&mut self, robots: &[String]) {
-        self.late = robots.to_vec();
+        self.targets.set_late(robots);
     }
 
     fn set_members(&mut self, members: &[String]) {

@@ -64,8 +64,6 @@ pub struct Pidc {
     valid: bool,
     ws: Workspace,
     diagnostics: Option<TickDiagnostics>,
-    /// Robots that joined the running team, their hands out of the grasp.
-    late: Vec<String>,
 }
 
 impl Pidc {
@@ -82,7 +80,6 @@ impl Pidc {
             valid: false,
             ws: Workspace::default(),
             diagnostics: None,
-            late: Vec::new(),
         }
     }
 
@@ -132,7 +129,7 @@ impl Pidc {
         self.valid = false;
         let start = Instant::now();
         let us = || start.elapsed().as_secs_f64() * 1e6;
-        let Pidc { config: cfg, late, descriptions, expected, references, targets, grasp, watch, report: r, ws, valid, .. } = self;
+        let Pidc { config: cfg, descriptions, expected, references, targets, grasp, watch, report: r, ws, valid, .. } = self;
         // Degrade, never collapse: once the team has let go of the object, every hand is free.
         watch.rearm(tick.iter().any(|t| t.hand_in_grasp));
         r.team.hands_released = watch.released().is_some();
@@ -142,7 +139,7 @@ impl Pidc {
         // The rigid grasp: G, J_c,ee, J_o (eqs. graspmatrix, jacobian_cee, obj_jacobian).
         grasp.update(&r.team, cfg.object_pose_at_grasp, &cfg.planned_grasp, &mut r.grasp)?;
         // Late robots' free hands keep clear of the object the others hold.
-        targets.keep_clear(&r.team, late, r.grasp.as_ref().map(|g| &g.object.translation.vector), cfg.release.retreat);
+        targets.keep_clear(&r.team, r.grasp.as_ref().map(|g| &g.object.translation.vector), cfg.release.retreat);
         // J_c = [J_cf; J_c,ee] (eq. jacobian_c).
         contact_jacobian(&r.team, r.grasp.as_ref(), &mut r.j_c, &mut r.jdv_c);
         let t_asm = us();
@@ -281,7 +278,7 @@ impl TeamController for Pidc {
     }
 
     fn set_late(&mut self, robots: &[String]) {
-        self.late = robots.to_vec();
+        self.targets.set_late(robots);
     }
 
     fn set_members(&mut self, members: &[String]) {

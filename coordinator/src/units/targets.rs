@@ -26,6 +26,8 @@ pub struct Targets {
     held_object: Option<Isometry3<f64>>,
     /// (robot, pose) of free hands: the pose each had when it became free.
     held_hands: Vec<(String, Isometry3<f64>)>,
+    /// Robots that joined the running team, their hands out of the grasp ([`Targets::keep_clear`]).
+    late: Vec<String>,
 }
 
 impl Targets {
@@ -88,16 +90,22 @@ impl Targets {
         }
     }
 
-    /// The free hands of `late` robots (they joined a team that holds the object, their hands
-    /// out of the grasp: `crate::team::membership::Roster`) keep clear of the object centred at
+    /// The late robots (sorted ids): they joined a team that holds the object, their hands out
+    /// of the grasp (`crate::team::membership::Roster`).
+    pub fn set_late(&mut self, robots: &[String]) {
+        self.late.clear();
+        self.late.extend_from_slice(robots);
+    }
+
+    /// The free hands of late robots ([`Targets::set_late`]) keep clear of the object centred at
     /// `centre`: the first time such a hand is seen free it will hold its pose moved `retreat`
     /// away from the centre (horizontally), as a hand the team let go of does. Without an object
     /// (`None`) they hold their pose.
-    pub fn keep_clear(&mut self, team: &Team, late: &[String], centre: Option<&Vector3<f64>>, retreat: f64) {
+    pub fn keep_clear(&mut self, team: &Team, centre: Option<&Vector3<f64>>, retreat: f64) {
         let Some(centre) = centre else { return };
         for h in &team.free_hands {
             let id = &team.robots[h.robot].id;
-            if !late.contains(id) || self.held_hands.iter().any(|(r, _)| r == id) {
+            if !self.late.contains(id) || self.held_hands.iter().any(|(r, _)| r == id) {
                 continue;
             }
             self.held_hands.push((id.clone(), away_from(h, centre, retreat)));
