@@ -4,8 +4,8 @@
 //! with Clarabel alone (`PidcConfig::dense_qp = false`); `DENSE_PROJECTIONS=1` computes the
 //! projections by dense SVDs of the team's matrices (`PidcConfig::dense_projections`, the
 //! formulation before the team's blocks were used, kept as the oracle). `ACTIVE_SET=1` tries the
-//! dual active-set method first (`PidcConfig::active_set_qp = true`, hot-started from the last
-//! tick; off by default), `DENSE_IPM=1` forces it off.
+//! dual active-set method first (`PidcConfig::active_set_qp`, hot-started from the last tick;
+//! the default), `DENSE_IPM=1` forces it off.
 
 #[path = "../tests/common/mod.rs"]
 mod common;

@@ -68,8 +68,19 @@ pub fn mat_mut(a: &mut DMatrix<f64>) -> MatMut<'_, f64> {
 /// (a new team, a contact set that changed).
 pub fn zeros(a: &mut DMatrix<f64>, r: usize, c: usize) {
     if a.shape() == (r, c) {
-        a.fill(0.0);
+        // The storage's slice: a memset. nalgebra's `fill` walks an element iterator, which
+        // cost a quarter of an eight-robot tick.
+        a.as_mut_slice().fill(0.0);
     } else {
+        *a = DMatrix::zeros(r, c);
+    }
+}
+
+/// Make `a` an `r x c` matrix whose contents the caller overwrites (what it held is left, or
+/// zeros after a change of shape): [`zeros`] without the clearing, for buffers a product or a
+/// copy fills entirely.
+pub fn shape(a: &mut DMatrix<f64>, r: usize, c: usize) {
+    if a.shape() != (r, c) {
         *a = DMatrix::zeros(r, c);
     }
 }
@@ -77,7 +88,7 @@ pub fn zeros(a: &mut DMatrix<f64>, r: usize, c: usize) {
 /// Make `v` a zero vector of length `n`, reallocating only when the length changes.
 pub fn zeros_v(v: &mut DVector<f64>, n: usize) {
     if v.len() == n {
-        v.fill(0.0);
+        v.as_mut_slice().fill(0.0);
     } else {
         *v = DVector::zeros(n);
     }
@@ -86,7 +97,8 @@ pub fn zeros_v(v: &mut DVector<f64>, n: usize) {
 /// `out = a b` (shaped to fit, see [`zeros`]). `a` and `b` are views: `mat(x).transpose()`
 /// multiplies by a transpose without forming it.
 pub fn product(out: &mut DMatrix<f64>, a: MatRef<'_, f64>, b: MatRef<'_, f64>) {
-    zeros(out, a.nrows(), b.ncols());
+    // gemm with a zero factor on `dst` writes every entry without reading it.
+    shape(out, a.nrows(), b.ncols());
     gemm(mat_mut(out), 0.0, 1.0, a, b);
 }
 
@@ -106,10 +118,21 @@ pub fn gemm(dst: MatMut<'_, f64>, beta: f64, alpha: f64, a: MatRef<'_, f64>, b: 
     if m == 0 || n == 0 {
         return;
     }
+    if k == 0 {
+        // No product: dst = beta dst, written out here so that `beta = 0` clears what a
+        // buffer made by [`shape`] held.
+        let mut dst = dst;
+        for j in 0..n {
+            for i in 0..m {
+                dst[(i, j)] = if beta == 0.0 { 0.0 } else { beta * dst[(i, j)] };
+            }
+        }
+        return;
+    }
     // SAFETY: the three views are valid for their shapes and strides (checked to agree
     // above), `dst` is borrowed mutably so it aliases neither operand, and nano-gemm reads
-    // and writes exactly the `m x k`, `k x n` and `m x n` elements those describe. With
-    // `k == 0` it only scales `dst` by `beta`.
+    // and writes exactly the `m x k`, `k x n` and `m x n` elements those describe; with a
+    // zero `beta` it writes `dst` without reading it.
     unsafe {
         nano_gemm::planless::execute_f64(
             m,
@@ -281,10 +304,13 @@ fn pivots_ok(diag: impl Iterator<Item = f64>) -> bool {
 }
 
 /// Workspace of the inverse of a symmetric positive definite matrix by Cholesky, kept
-/// between ticks (no allocation once shaped).
-#[derive(Default)]
+/// between ticks (no allocation once shaped): `A = L L^T` in place ([`cholesky_in_place`]),
+/// `X = L^{-1}` ([`lower_inverse`]), `A^{-1} = X^T X` by [`gemm`]. (nalgebra's
+/// `Cholesky::solve_mut` on the identity, column by column, was a fifth of an eight-robot tick.)
+#[derive(Debug, Clone, Default)]
 pub struct SpdInverse {
     l: DMatrix<f64>,
+    x: DMatrix<f64>,
 }
 
 impl SpdInverse {
@@ -292,26 +318,75 @@ impl SpdInverse {
     /// not positive definite or its pivots fail [`SPD_TOL`]. A 0 x 0 `a` gives a 0 x 0 `out`.
     pub fn compute(&mut self, a: MatRef<'_, f64>, out: &mut DMatrix<f64>) -> Option<()> {
         let n = a.nrows();
-        zeros(out, n, n);
-        zeros(&mut self.l, n, n);
+        // `l`'s lower triangle is written below, `x` by lower_inverse, `out` by gemm.
+        shape(out, n, n);
+        shape(&mut self.l, n, n);
+        shape(&mut self.x, n, n);
         if n == 0 {
             return Some(());
         }
+        let l = self.l.as_mut_slice();
         for j in 0..n {
-            for i in 0..n {
-                self.l[(i, j)] = a[(i, j)];
+            for i in j..n {
+                l[j * n + i] = a[(i, j)];
             }
         }
-        let l = std::mem::replace(&mut self.l, DMatrix::zeros(0, 0));
-        let chol = nalgebra::Cholesky::new(l)?;
-        let l = chol.l_dirty();
-        let ok = pivots_ok((0..n).map(|i| l[(i, i)]));
-        if ok {
-            out.fill_with_identity();
-            chol.solve_mut(out);
+        cholesky_in_place(l, n, n, 0.0)?;
+        if !pivots_ok((0..n).map(|i| l[i * n + i])) {
+            return None;
         }
-        self.l = chol.unpack_dirty();
-        (ok && out.iter().all(|x| x.is_finite())).then_some(())
+        lower_inverse(l, n, self.x.as_mut_slice());
+        gemm(mat_mut(out), 0.0, 1.0, mat(&self.x).transpose(), mat(&self.x));
+        out.as_slice().iter().all(|x| x.is_finite()).then_some(())
+    }
+}
+
+/// Cholesky `A = L L^T` of the leading `dim x dim` block of the column-major `a` (leading
+/// dimension `ld`), in place: the lower triangle becomes `L` (left-looking, as axpys on
+/// contiguous columns); the strict upper triangle is not read. `None` on a pivot not above
+/// `rel` times the largest diagonal entry, or not finite.
+pub fn cholesky_in_place(a: &mut [f64], ld: usize, dim: usize, rel: f64) -> Option<()> {
+    let top = (0..dim).map(|k| a[k * ld + k].abs()).fold(0.0, f64::max);
+    for jc in 0..dim {
+        for k in 0..jc {
+            let f = a[k * ld + jc];
+            if f != 0.0 {
+                let (src, dst) = a.split_at_mut(jc * ld);
+                let src = &src[k * ld + jc..k * ld + dim];
+                for (y, x) in dst[jc..dim].iter_mut().zip(src) {
+                    *y -= f * x;
+                }
+            }
+        }
+        let dd = a[jc * ld + jc];
+        if !(dd > rel * top && dd.is_finite()) {
+            return None;
+        }
+        let s = dd.sqrt();
+        for y in &mut a[jc * ld + jc..jc * ld + dim] {
+            *y /= s;
+        }
+    }
+    Some(())
+}
+
+/// `x = L^{-1}` (both `n x n`, column-major) for the lower triangular `l` of
+/// [`cholesky_in_place`], by columns (forward substitution as axpys on `L`'s columns); `x`'s
+/// strict upper triangle is zero.
+pub fn lower_inverse(l: &[f64], n: usize, x: &mut [f64]) {
+    x.fill(0.0);
+    for k in 0..n {
+        let col = &mut x[k * n..(k + 1) * n];
+        col[k] = 1.0;
+        for i in k..n {
+            let xi = col[i] / l[i * n + i];
+            col[i] = xi;
+            if xi != 0.0 {
+                for (y, li) in col[i + 1..n].iter_mut().zip(&l[i * n + i + 1..i * n + n]) {
+                    *y -= xi * li;
+                }
+            }
+        }
     }
 }
 
@@ -452,6 +527,48 @@ mod tests {
         assert!(ws.compute(mat(&(&low * low.transpose())), &mut x).is_none(), "rank-deficient");
         ws.compute(mat(&DMatrix::zeros(0, 0)), &mut x).expect("empty");
         assert_eq!(x.shape(), (0, 0));
+    }
+
+    /// The in-place Cholesky factor reproduces `A = L L^T` and `lower_inverse` gives
+    /// `L X = I`; a reused, dirty `SpdInverse` output buffer is overwritten; the factor refuses
+    /// an indefinite matrix.
+    #[test]
+    fn cholesky_in_place_and_lower_inverse_are_a_factor_and_its_inverse() {
+        let j = DMatrix::<f64>::from_fn(7, 9, |i, k| ((i * 5 + k * 3) % 11) as f64 - 5.0 + if i == k { 6.0 } else { 0.0 });
+        let a = &j * j.transpose();
+        let mut l = a.clone();
+        cholesky_in_place(l.as_mut_slice(), 7, 7, 0.0).expect("positive definite");
+        let low = l.lower_triangle();
+        assert!((&low * low.transpose() - &a).amax() < 1e-10 * a.amax());
+        let mut x = DMatrix::from_element(7, 7, f64::NAN);
+        lower_inverse(l.as_slice(), 7, x.as_mut_slice());
+        assert!((&low * &x - DMatrix::identity(7, 7)).amax() < 1e-12);
+        let mut ws = SpdInverse::default();
+        let mut inv = DMatrix::from_element(7, 7, f64::NAN);
+        ws.compute(mat(&a), &mut inv).expect("positive definite");
+        assert!((&a * &inv - DMatrix::identity(7, 7)).amax() < 1e-10);
+        let mut indefinite = a.clone();
+        indefinite[(3, 3)] = -1.0;
+        assert!(cholesky_in_place(indefinite.as_mut_slice(), 7, 7, 0.0).is_none());
+    }
+
+    /// `gemm` with an empty inner dimension: `dst = beta dst`, and `beta = 0` clears a buffer
+    /// that `shape` left dirty (what `product` relies on).
+    #[test]
+    fn gemm_without_inner_dimension_scales_or_clears() {
+        let a = DMatrix::<f64>::zeros(3, 0);
+        let b = DMatrix::<f64>::zeros(0, 2);
+        let mut d = DMatrix::from_element(3, 2, 4.0);
+        gemm(mat_mut(&mut d), 0.5, 1.0, mat(&a), mat(&b));
+        assert!(d.iter().all(|&x| x == 2.0));
+        let mut dirty = DMatrix::from_element(3, 2, f64::NAN);
+        product(&mut dirty, mat(&a), mat(&b));
+        assert!(dirty.iter().all(|&x| x == 0.0));
+        let m = DMatrix::<f64>::from_fn(3, 4, |i, k| (i + 2 * k) as f64);
+        let n = DMatrix::<f64>::from_fn(4, 2, |i, k| (3 * i) as f64 - k as f64);
+        let mut p = DMatrix::from_element(3, 2, f64::NAN);
+        product(&mut p, mat(&m), mat(&n));
+        assert_eq!(p, &m * &n);
     }
 
     #[test]

@@ -33,7 +33,8 @@ fn random_team(fx: &mut Fixture, seed: u64, amp: f64, vel: f64) -> RandomTeam {
     let descs: Vec<_> = (0..2).map(|k| fx.description(&robot_id(k))).collect();
     let terms0: Vec<_> = (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &DVector::zeros(nv), 1)).collect();
     let mut c = controller(&descs, PidcConfig::default());
-    let p = c.compute(&terms0).expect("tick").proj.p.clone();
+    c.compute(&terms0).expect("tick");
+    let p = c.materialized().expect("tick").proj.p.clone();
     use rand::Rng;
     let v_rand = DVector::from_fn(2 * nv, |_, _| rng.random_range(-vel..vel));
     let v = &p * v_rand;
@@ -48,7 +49,8 @@ fn projection_identities_on_random_states() {
     let mut worst = [0.0f64; 5];
     for seed in 0..5 {
         let (terms, _, _, mut c) = random_team(&mut fx, seed, 0.15, 0.5);
-        let r = c.compute(&terms).expect("tick");
+        c.compute(&terms).expect("tick");
+        let r = c.materialized().expect("tick");
         let p = &r.proj.p;
         let n = p.nrows();
         worst[0] = worst[0].max(max_abs(&(p - p.transpose())));
@@ -85,7 +87,8 @@ fn pdot_v_against_finite_difference_in_time() {
                     fx.terms(&robot_id(k), &q, &DVector::zeros(nv), 3)
                 })
                 .collect();
-            c.compute(&t).expect("tick").proj.p.clone()
+            c.compute(&t).expect("tick");
+            c.materialized().expect("tick").proj.p.clone()
         };
         let pp = p_at(1.0, &mut c);
         let pm = p_at(-1.0, &mut c);
@@ -118,7 +121,8 @@ fn lambda_relation_matches_constrained_forward_dynamics() {
     let mut worst = (0.0f64, 0.0f64);
     for seed in 20..24 {
         let (terms, _, _, mut c) = random_team(&mut fx, seed, 0.1, 0.3);
-        let r = c.compute(&terms).expect("tick");
+        c.compute(&terms).expect("tick");
+        let r = c.materialized().expect("tick");
         let s_tau = r.tau.component_mul(&r.team.s_diag);
         let rhs = &s_tau - &r.team.bias + &r.load;
         let (qdd, lambda) = kkt(&r.team.mass, &r.j_c, &rhs, &r.jdv_c);
@@ -140,7 +144,8 @@ fn fully_actuated_reduces_to_lin2018() {
     let descs: Vec<_> = (0..2).map(|k| fx.description(&robot_id(k))).collect();
     let cfg = PidcConfig { fully_actuated: true, ..PidcConfig::default() };
     let mut c = controller(&descs, cfg);
-    let r = c.compute(&terms).expect("tick");
+    c.compute(&terms).expect("tick");
+    let r = c.materialized().expect("tick");
     let n = r.team.n;
     let id = DMatrix::<f64>::identity(n, n);
     let p = &r.proj.p;
@@ -213,7 +218,10 @@ fn static_team_holds_the_object() {
     c.set_references(&refs);
     let mut cmds = Vec::new();
     c.solve(&terms, &mut cmds).expect("tick");
-    let r = c.last().expect("last");
+    let d = c.diagnostics().expect("diagnostics");
+    assert_eq!(d.contacts.len(), 10);
+    assert!(d.object_estimate.is_some());
+    let r = c.materialized().expect("last");
     assert_eq!(r.qp.status, QpStatus::Solved, "{:?}", r.fallback);
     assert_eq!(cmds.len(), 2);
     assert!(cmds.iter().all(|c| c.tau.len() == 18));
@@ -256,9 +264,6 @@ fn static_team_holds_the_object() {
     assert!(leak < 1e-9, "F_c must not accelerate the motion space");
     assert!((fz - total - momentum_z).abs() < 1e-6 * total);
     assert!(momentum_z.abs() < 0.01 * total, "the leak stays small: {momentum_z} N");
-    let d = c.diagnostics().expect("diagnostics");
-    assert_eq!(d.contacts.len(), 10);
-    assert!(d.object_estimate.is_some());
     // The dense interior-point method and Clarabel agree on the same QP.
     let solver = r.qp.solver;
     let tau_a = r.tau.clone();

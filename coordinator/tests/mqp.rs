@@ -23,7 +23,8 @@ fn random_team(fx: &mut Fixture, seed: u64, amp: f64, vel: f64) -> (Vec<Dynamics
     let terms0: Vec<_> = (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &DVector::zeros(nv), 1)).collect();
     let mut pidc = Pidc::new(PidcConfig::default());
     descs.iter().for_each(|d| pidc.set_description(d));
-    let p = pidc.compute(&terms0).expect("tick").proj.p.clone();
+    pidc.compute(&terms0).expect("tick");
+    let p = pidc.materialized().expect("tick").proj.p.clone();
     let v = &p * DVector::from_fn(2 * nv, |_, _| rng.random_range(-vel..vel));
     let terms = (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &v.rows(k * nv, nv).into_owned(), 2)).collect();
     (terms, descs)

@@ -12,7 +12,7 @@ use common::{robot_id, Fixture};
 use coordinator::pidc::stages::contacts::{contact_jacobian, contact_list};
 use coordinator::pidc::stages::limits::{torque_limits, UNBOUNDED_BASE_LIMIT};
 use coordinator::pidc::stages::tasks::{object_load, task_torque, MotionSpaceTerms, TaskInput, Targets};
-use coordinator::pidc::stages::torque::{compose, motion_torque, Clamp};
+use coordinator::pidc::stages::torque::{compose, motion_torque, Clamp, MotionTorqueScratch};
 use coordinator::pidc::stages::wrench::{contact_map, contact_wrenches, Actuation, ContactMapScratch, MapInput, WrenchInput};
 use coordinator::pidc::TickReport;
 use coordinator::qp::ContactKind;
@@ -49,7 +49,8 @@ fn moving_team(fx: &mut Fixture, seed: u64) -> (Vec<DynamicsTerms>, Vec<RobotDes
     for d in &descs {
         c.set_description(d);
     }
-    let p = c.compute(&still).expect("tick").proj.p.clone();
+    c.compute(&still).expect("tick");
+    let p = c.materialized().expect("tick").proj.p.clone();
     use rand::Rng;
     let v = &p * DVector::from_fn(2 * nv, |_, _| rng.random_range(-0.5..0.5));
     let terms: Vec<_> = (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &v.rows(k * nv, nv).into_owned(), 2)).collect();
@@ -359,16 +360,15 @@ type Task<'a> = (&'a DMatrix<f64>, &'a DVector<f64>, Isometry3<f64>, &'a PoseRef
 #[test]
 fn task_torque_is_the_stacked_impedance_law_written_out() {
     let mut fx = Fixture::new();
-    let (_, _, c) = moving_team(&mut fx, 5);
-    let r = c.last().expect("tick");
+    let (_, _, mut c) = moving_team(&mut fx, 5);
+    let r = c.materialized().expect("tick");
     let cfg = PidcConfig::default();
     let refs = displaced_references(r);
     let (team, proj, g) = (&r.team, &r.proj, r.grasp.as_ref().expect("grasp"));
     let n = team.n;
 
     let mut motion = MotionSpaceTerms::default();
-    motion.compute_into(proj, &team.bias);
-    assert!(rel(motion.view(proj).mcinv_p, &(&proj.mc_inv * &proj.p)) < 1e-12);
+    motion.compute_into(proj, team);
     let p_bias = &proj.p * &team.bias - &proj.pdot_v;
     assert!(relv(&motion.mcinv_bias, &(&proj.mc_inv * &p_bias)) < 1e-12);
     let inp = TaskInput { team, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view(proj) };
@@ -418,8 +418,8 @@ fn task_torque_is_the_stacked_impedance_law_written_out() {
 #[test]
 fn contact_map_is_the_papers_rho_and_eta() {
     let mut fx = Fixture::new();
-    let (_, _, c) = moving_team(&mut fx, 11);
-    let r = c.last().expect("tick");
+    let (_, _, mut c) = moving_team(&mut fx, 11);
+    let r = c.materialized().expect("tick");
     let (team, proj) = (&r.team, &r.proj);
     let g = r.grasp.as_ref().expect("grasp");
     let map = MapInput { team, proj, j_c: &r.j_c, tau0: &r.tau0, load: &r.load, grasp: Some(g), f_x: &r.f_x };
@@ -467,8 +467,8 @@ fn contact_map_is_the_papers_rho_and_eta() {
 #[test]
 fn contact_wrenches_follow_the_map_or_eq_constraint_force() {
     let mut fx = Fixture::new();
-    let (_, _, c) = moving_team(&mut fx, 13);
-    let r = c.last().expect("tick");
+    let (_, _, mut c) = moving_team(&mut fx, 13);
+    let r = c.materialized().expect("tick");
     let (team, proj) = (&r.team, &r.proj);
     let eta_real = {
         let mut e = r.eta.clone();
@@ -506,12 +506,12 @@ fn contact_wrenches_follow_the_map_or_eq_constraint_force() {
 #[test]
 fn torque_is_tau0_plus_y_f_c_clamped_after_a_fallback() {
     let mut fx = Fixture::new();
-    let (_, _, c) = moving_team(&mut fx, 17);
-    let r = c.last().expect("tick");
+    let (_, _, mut c) = moving_team(&mut fx, 17);
+    let r = c.materialized().expect("tick");
     let proj = &r.proj;
     // tau_0 = [P S]^+ P tau_M (eq. ua_solution).
-    let (mut tau0, mut scratch) = (DVector::zeros(0), DVector::zeros(0));
-    motion_torque(proj, &r.tau_m, &mut tau0, &mut scratch);
+    let (mut tau0, mut scratch) = (DVector::zeros(0), MotionTorqueScratch::default());
+    motion_torque(proj, &r.team.s_diag, &r.tau_m, &mut tau0, &mut scratch);
     assert!(relv(&tau0, &(&proj.ps_pinv * (&proj.p * &r.tau_m))) < 1e-13);
     // tau = tau_0 + Y F_c with Y = B J_c^T, for the tick's F_c and another one.
     let y = &proj.b * r.j_c.transpose();

@@ -1,14 +1,18 @@
 //! The projections by the team's blocks (`units::block_projection`, the default) against the
 //! dense SVDs of the team's matrices (`PidcConfig::dense_projections`, the oracle): the same
-//! `P`, `J_c^+`, `M_c^{-1}`, `[P S]^+`, `B`, QP data (`tau_0`, `Y`, `rho`, `eta`) and torque
-//! map `tau = tau_0 + Y F_c` to 1e-9 relative, and the torques sent (each path solving its
-//! own QP to its tolerance) to 1e-6, on random moving team states of 2, 3, 4 and 8 robots of
-//! the real default robot, with a swing foot, with the hands free, and fully actuated.
+//! `P`, `J_c^+`, `M_c^{-1}`, `[P S]^+`, `B` (the block path's operators applied to the
+//! identity), the same motion torque `tau_M` (the operational-space inertia by the operator
+//! and Cholesky against the dense matrices and an SVD), QP data (`tau_0`, `Y`, `rho`, `eta`),
+//! contact wrenches of eq. constraint_force for a given torque, and torque map
+//! `tau = tau_0 + Y F_c`, to 1e-9 relative; and the torques sent (each path solving its own
+//! QP to its tolerance) to 1e-6, on random moving team states of 2, 3, 4 and 8 robots of the
+//! real default robot, with a swing foot, with the hands free, and fully actuated.
 
 mod common;
 
 use common::{robot_id, Fixture};
 use coordinator::pidc::TickReport;
+use coordinator::units::projection::WrenchScratch;
 use coordinator::{Pidc, PidcConfig};
 use nalgebra::{DMatrix, DVector};
 use protocol::DynamicsTerms;
@@ -59,7 +63,8 @@ fn team_states(fx: &mut Fixture, case: Case) -> [Vec<DynamicsTerms>; 2] {
     let qs: Vec<DVector<f64>> = (0..case.robots).map(|k| fx.perturbed_q(k, case.robots, 0.1, &mut rng)).collect();
     let still: Vec<_> = (0..case.robots).map(|k| fx.terms_with(&robot_id(k), &qs[k], &DVector::zeros(nv), 1, &contacts(fx, case, k))).collect();
     let mut c = controller(fx, case, true);
-    let p = c.compute(&still).expect("tick").proj.p.clone();
+    c.compute(&still).expect("tick");
+    let p = c.materialized().expect("tick").proj.p.clone();
     let v = &p * DVector::from_fn(case.robots * nv, |_, _| rng.random_range(-0.5..0.5));
     let moving = (0..case.robots).map(|k| fx.terms_with(&robot_id(k), &qs[k], &v.rows(k * nv, nv).into_owned(), 2, &contacts(fx, case, k))).collect();
     [still, moving]
@@ -75,7 +80,14 @@ fn compare(blocks: &TickReport, dense: &TickReport) -> (f64, &'static str) {
     let m = |x: &DMatrix<f64>| x.as_slice().to_vec();
     let v = |x: &DVector<f64>| x.as_slice().to_vec();
     let torque = |r: &TickReport| &r.tau0 + &r.y * &dense.f_c;
-    let pairs: [(&'static str, Vec<f64>, Vec<f64>); 14] = [
+    // eq. constraint_force for one torque (the sent one of the dense path), by each path.
+    let wrench = |r: &TickReport| {
+        let u = dense.tau.component_mul(&r.team.s_diag) + &r.load;
+        let mut out = DVector::zeros(0);
+        r.proj.contact_wrench(&r.team, &u, &mut out, &mut WrenchScratch::default());
+        out
+    };
+    let pairs: [(&'static str, Vec<f64>, Vec<f64>); 16] = [
         ("P", m(&a.p), m(&b.p)),
         ("J_c^+", m(&a.jc_pinv), m(&b.jc_pinv)),
         ("Pdot v", v(&a.pdot_v), v(&b.pdot_v)),
@@ -85,10 +97,12 @@ fn compare(blocks: &TickReport, dense: &TickReport) -> (f64, &'static str) {
         ("Mbar", m(&a.mbar), m(&b.mbar)),
         ("[P S]^+", m(&a.ps_pinv), m(&b.ps_pinv)),
         ("B", m(&a.b), m(&b.b)),
+        ("tau_M", v(&blocks.tau_m), v(&dense.tau_m)),
         ("tau_0", v(&blocks.tau0), v(&dense.tau0)),
         ("Y", m(&blocks.y), m(&dense.y)),
         ("rho", m(&blocks.rho), m(&dense.rho)),
         ("eta", v(&blocks.eta), v(&dense.eta)),
+        ("lambda(tau)", v(&wrench(blocks)), v(&wrench(dense))),
         ("tau(F_c)", v(&torque(blocks)), v(&torque(dense))),
     ];
     if std::env::var_os("STRUCTURED_VERBOSE").is_some() {
@@ -107,7 +121,10 @@ fn agree(fx: &mut Fixture, case: Case) -> (f64, f64) {
     let (mut blocks, mut dense) = (controller(fx, case, false), controller(fx, case, true));
     let (mut worst, mut worst_sent) = (0.0f64, 0.0f64);
     for (t, tick) in ticks.iter().enumerate() {
-        let b = blocks.compute(tick).expect("block tick").clone();
+        let on_tick = blocks.compute(tick).expect("block tick");
+        // The block path forms no team-sized matrix on the tick (only its factors).
+        assert!(on_tick.proj.p.is_empty() && on_tick.proj.mc_inv.is_empty() && on_tick.proj.mbar.is_empty(), "an n x n matrix on the block path's tick");
+        let b = blocks.materialized().expect("block tick").clone();
         let d = dense.compute(tick).expect("dense tick");
         assert_eq!(b.qp.status, d.qp.status);
         let (err, what) = compare(&b, d);

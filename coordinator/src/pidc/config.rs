@@ -52,11 +52,10 @@ pub struct PidcConfig {
     pub dense_qp: bool,
     /// With `dense_qp`: try the dual active-set method (`qp::DualActiveSet`, hot-started from
     /// the previous tick's active rows) before the dense interior-point method: the same
-    /// forces to the interior point's tolerance, 7 times faster for eight robots. Off by
-    /// default for now: `tests/tests/degrade.rs`'s 300 N push keeps the team standing only
-    /// with the interior point's answers at `DENSE_TOL = 1e-7` (the exact optimum, and the
-    /// interior point at 3e-8, both leave one torso 0.4-0.7 m off), a margin below the
-    /// solvers' tolerance that the release policy should get first.
+    /// forces to the interior point's tolerance, 7 times faster for eight robots. On by
+    /// default since the release lets go at half its slip limit while the QP fails
+    /// (`units::release::SLIP_WHILE_FAILING`): before that, `tests/tests/degrade.rs`'s
+    /// 300 N push kept the team standing only with the interior point's 1e-7 answers.
     pub active_set_qp: bool,
     /// `S = I` (treat the base as actuated): the [Lin2018] comparison only.
     pub fully_actuated: bool,
@@ -90,7 +89,7 @@ impl Default for PidcConfig {
             regularisation: 1e-6,
             qp_max_iter: 50,
             dense_qp: true,
-            active_set_qp: false,
+            active_set_qp: true,
             fully_actuated: false,
             dense_projections: false,
         }

@@ -34,7 +34,7 @@ use crate::{ControllerError, TeamController};
 use stages::contacts::{contact_jacobian, contact_list, unload_feet};
 use stages::limits::torque_limits;
 use stages::tasks::{task_torque, MotionSpaceTerms, TaskInput, Targets};
-use stages::torque::{compose, fallback, motion_torque, saturate, Clamp};
+use stages::torque::{compose, fallback, motion_torque, saturate, Clamp, MotionTorqueScratch};
 use stages::wrench::{contact_map, contact_wrenches, Actuation, ContactMapScratch, MapInput, WrenchInput};
 
 /// Scratch of a tick that the report does not keep: each stage's workspace.
@@ -43,8 +43,7 @@ struct Workspace {
     proj: ProjectionWorkspace,
     motion: MotionSpaceTerms,
     tasks: TaskStack,
-    /// `P tau_M`.
-    p_tau_m: nalgebra::DVector<f64>,
+    torque: MotionTorqueScratch,
     map: ContactMapScratch,
     qp: QpWorkspace,
 }
@@ -117,6 +116,18 @@ impl Pidc {
         self.valid.then_some(&self.report)
     }
 
+    /// The last tick with its team-sized projection matrices formed ([`Projections::materialize`]:
+    /// the block path keeps only factors on the tick). For tests and reports; it allocates.
+    ///
+    /// [`Projections::materialize`]: crate::units::projection::Projections::materialize
+    pub fn materialized(&mut self) -> Option<&TickReport> {
+        if !self.valid {
+            return None;
+        }
+        self.report.proj.materialize(&self.report.team);
+        Some(&self.report)
+    }
+
     /// Run one tick: the full team torque and every intermediate, stage by stage (§III).
     ///
     /// **Allocations.** Every matrix and vector of the tick lives in the report or in the
@@ -145,13 +156,13 @@ impl Pidc {
         let t_asm = us();
         // P, Pdot v, M_c, Mbar, [P S]^+, B (eqs. aghili_21, aghili_25, constraint_force, bmatrix).
         r.proj.compute(&mut ws.proj, &r.team, r.grasp.as_ref(), &r.j_c, &r.jdv_c, cfg.dense_projections)?;
-        ws.motion.compute_into(&r.proj, &r.team.bias);
+        ws.motion.compute_into(&r.proj, &r.team);
         let t_proj = us();
         // tau_M of the object, torso and swing-foot impedances (eqs. control_law,
         // joint_space_tau_M) with the object's load J_x^T F_x; tau_0 = [P S]^+ P tau_M.
         let tasks = TaskInput { team: &r.team, grasp: r.grasp.as_ref(), references: references.as_ref(), config: cfg, motion: ws.motion.view(&r.proj) };
         task_torque(&tasks, targets, &mut ws.tasks, &mut r.tau_m, &mut r.load, &mut r.f_x)?;
-        motion_torque(&r.proj, &r.tau_m, &mut r.tau0, &mut ws.p_tau_m);
+        motion_torque(&r.proj, &r.team.s_diag, &r.tau_m, &mut r.tau0, &mut ws.torque);
         let t_imp = us();
         let loads = references.as_ref().map_or(&[][..], |refs| &refs.foot_loads[..]);
         let (build_us, qp_us) = contact_forces(r, ws, descriptions, cfg, loads)?;

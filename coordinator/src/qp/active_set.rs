@@ -34,7 +34,7 @@ use protocol::QpStatus;
 use super::problem::QpProblem;
 use super::settings::QpSettings;
 use super::{QpOutcome, QpSolver};
-use crate::linalg::{zeros, zeros_v};
+use crate::linalg::{cholesky_in_place, lower_inverse, shape, zeros_v};
 
 /// Why [`DualActiveSet`] stopped without an answer (the caller then runs the interior-point
 /// path).
@@ -94,34 +94,6 @@ pub struct DualActiveSet {
     /// Iterations of the last solve, and whether it was hot-started.
     pub iterations: u32,
     pub hot: bool,
-}
-
-/// Cholesky `A = L L^T` of the leading `dim x dim` block of the column-major `a` (leading
-/// dimension `ld`), in place (lower triangle; left-looking, as axpys on columns). Fails on a
-/// pivot not above `rel` times the largest diagonal entry (or not finite).
-fn cholesky_in_place(a: &mut [f64], ld: usize, dim: usize, rel: f64) -> Result<(), ActiveSetError> {
-    let top = (0..dim).map(|k| a[k * ld + k].abs()).fold(0.0, f64::max);
-    for jc in 0..dim {
-        for k in 0..jc {
-            let f = a[k * ld + jc];
-            if f != 0.0 {
-                let (src, dst) = a.split_at_mut(jc * ld);
-                let src = &src[k * ld + jc..k * ld + dim];
-                for (y, x) in dst[jc..dim].iter_mut().zip(src) {
-                    *y -= f * x;
-                }
-            }
-        }
-        let dd = a[jc * ld + jc];
-        if !(dd > rel * top && dd.is_finite()) {
-            return Err(ActiveSetError::NotPositiveDefinite);
-        }
-        let s = dd.sqrt();
-        for y in &mut a[jc * ld + jc..jc * ld + dim] {
-            *y /= s;
-        }
-    }
-    Ok(())
 }
 
 /// `(c, s, h)` with `[c s; -s c] [a; b] = [h; 0]`.
@@ -195,19 +167,19 @@ impl DualActiveSet {
         }
         self.size(n, rows);
         self.l.copy_from(&problem.p);
-        cholesky_in_place(self.l.as_mut_slice(), n, n, 0.0)?;
+        cholesky_in_place(self.l.as_mut_slice(), n, n, 0.0).ok_or(ActiveSetError::NotPositiveDefinite)?;
         let tol = settings.active_set_tol;
         let hot = self.warm_shape == (n, rows) && !self.warm.is_empty();
         if hot && self.hot_answer(a, b, tol) {
             self.hot = true;
             return Ok(());
         }
-        self.x.fill(0.0);
-        self.u.fill(0.0);
-        self.r.fill(0.0);
+        self.x.as_mut_slice().fill(0.0);
+        self.u.as_mut_slice().fill(0.0);
+        self.r.as_mut_slice().fill(0.0);
         self.invert();
         // Row norms, by columns (A is column-major).
-        self.norms.fill(0.0);
+        self.norms.as_mut_slice().fill(0.0);
         for c in 0..n {
             for (nm, v) in self.norms.iter_mut().zip(a.column(c).iter()) {
                 *nm += v * v;
@@ -287,7 +259,7 @@ impl DualActiveSet {
                 let q = self.active.len();
                 self.d.gemv_tr(1.0, &self.j, &self.np, 0.0);
                 // z = J_2 d_2, r = R^{-1} d_1.
-                self.z.fill(0.0);
+                self.z.as_mut_slice().fill(0.0);
                 for k in q..n {
                     self.z.axpy(self.d[k], &self.j.column(k), 1.0);
                 }
@@ -356,9 +328,11 @@ impl DualActiveSet {
             self.warm.clear();
             self.warm_shape = (0, 0);
         }
-        zeros(&mut self.l, n, n);
-        zeros(&mut self.j, n, n);
-        zeros(&mut self.r, n, n);
+        // `l` is copied from `P`; `j` and `r` are written before they are read (hot_answer
+        // fills what it uses, the cold path clears `r` and `invert` writes `j`).
+        shape(&mut self.l, n, n);
+        shape(&mut self.j, n, n);
+        shape(&mut self.r, n, n);
         for v in [&mut self.x, &mut self.u, &mut self.d, &mut self.z, &mut self.rv, &mut self.np] {
             zeros_v(v, n);
         }
@@ -373,23 +347,7 @@ impl DualActiveSet {
     /// `J = L^{-T}` into `j` (from `l`).
     fn invert(&mut self) {
         let n = self.l.nrows();
-        // X = L^{-1} by columns (forward substitution as axpys on L's columns), J = X^T.
-        let l = self.l.as_slice();
-        let j = self.j.as_mut_slice();
-        j.fill(0.0);
-        for k in 0..n {
-            let col = &mut j[k * n..(k + 1) * n];
-            col[k] = 1.0;
-            for i in k..n {
-                let xi = col[i] / l[i * n + i];
-                col[i] = xi;
-                if xi != 0.0 {
-                    for (y, li) in col[i + 1..n].iter_mut().zip(&l[i * n + i + 1..i * n + n]) {
-                        *y -= xi * li;
-                    }
-                }
-            }
-        }
+        lower_inverse(self.l.as_slice(), n, self.j.as_mut_slice());
         self.j.transpose_mut();
     }
 
@@ -430,7 +388,7 @@ impl DualActiveSet {
                 g[k1 * n + k2] = dot;
             }
         }
-        if cholesky_in_place(g, n, q, 1e-12).is_err() {
+        if cholesky_in_place(g, n, q, 1e-12).is_none() {
             return false;
         }
         // u: L_W L_W^T u = -b_W.
@@ -453,7 +411,7 @@ impl DualActiveSet {
             return false;
         }
         // x = L^{-T} (M u).
-        self.z.fill(0.0);
+        self.z.as_mut_slice().fill(0.0);
         for k in 0..q {
             let uk = self.u[k];
             for (z, m) in self.z.iter_mut().zip(&mw[k * n..(k + 1) * n]) {
@@ -547,7 +505,7 @@ impl DualActiveSet {
             }
             self.rv[k] = acc / self.r[(k, k)];
         }
-        self.x.fill(0.0);
+        self.x.as_mut_slice().fill(0.0);
         for k in 0..q {
             self.x.axpy(self.rv[k], &self.j.column(k), 1.0);
         }

@@ -143,7 +143,7 @@ impl QpProblem {
 
     /// Every entry of `P`, `A` and `b` finite.
     pub fn is_finite(&self) -> bool {
-        all_finite(self.b.iter()) && all_finite(self.p.iter()) && all_finite(self.a.iter())
+        all_finite(self.b.as_slice()) && all_finite(self.p.as_slice()) && all_finite(self.a.as_slice())
     }
 }
 

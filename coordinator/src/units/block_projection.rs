@@ -1,6 +1,7 @@
 //! The projections of PIDC by the team's structure (issue 15; DESIGN.md §9): the same
 //! [`Projections`] as the dense SVDs of [`Projections::compute_into`], from per-robot blocks
-//! and one coupling of the hands through the grasp.
+//! and one coupling of the hands through the grasp, kept as factors ([`BlockFactors`]) and
+//! applied as operators: no team-sized `n x n` matrix is formed on the tick.
 //!
 //! Each robot's stance feet `A_r` (3 f x k) and its mass matrix `M_r` are its own; only the
 //! grasp couples robots, through `J_c,ee = N_G J_ee` (eq. jacobian_cee, `N_G = I - G^+ G`).
@@ -23,22 +24,30 @@
 //! `[P S]^+ = S (P + P_{:u} K P_{u:})`, `[(I - S)(I - P)]^+ = (I - P)_{:u} K` on the
 //! unactuated columns.
 //!
+//! **Operators.** `P`, `Phi` and `Mbar P = M Phi` are each "blocks minus a coupling",
+//! `diag(D_r) - S W T^T` with `S`, `T` block-diagonal (k x 6 per robot) and `W` of 6B x 6B:
+//! applied to `c` columns they cost `sum_r k^2 c + 12 B k c + 36 B^2 c` instead of `n^2 c`
+//! ([`BlockFactors::apply`]). `(J_c^T)^+` likewise ([`BlockFactors::jct_pinv_apply`]).
+//! [`BlockFactors::materialize`] forms the team-sized matrices from the same factors, for
+//! tests and reports only.
+//!
 //! Each inverse is of a Gram matrix whose Cholesky pivots pass [`crate::linalg::SPD_TOL`]:
 //! then every rank the dense path decides with [`crate::linalg::RANK_TOL`] is full, and both
 //! paths compute the same (unique) pseudo-inverses. Otherwise (a stretched leg, a hand at a
-//! singularity, two hands on one robot) [`BlockWorkspace::compute_into`] declines and the
+//! singularity, two hands on one robot) [`BlockFactors::compute_into`] declines and the
 //! caller runs the dense path.
 
-use nalgebra::{DMatrix, Matrix6};
+use faer::{MatMut, MatRef};
+use nalgebra::{DMatrix, DVector, Matrix6};
 
-use crate::linalg::{gemm, mat, mat_mut, spd6_inverse, zeros, zeros_v, SpdInverse};
+use crate::linalg::{gemm, mat, mat_mut, shape, spd6_inverse, zeros, zeros_v, SpdInverse};
 use crate::team::Team;
 use crate::units::grasp::GraspTerms;
 use crate::units::projection::{complement, mbar_into, mc_into, symmetrise, Projections};
 
 /// One robot's blocks: its feet rows and hand row in the team's `J_c`, and its share of the
 /// recursion (see the module docs).
-#[derive(Default)]
+#[derive(Debug, Clone, Default)]
 struct RobotBlocks {
     /// Team velocity offset and `nv`; first stance foot and their count; its hand in grasp.
     o: usize,
@@ -46,6 +55,9 @@ struct RobotBlocks {
     foot0: usize,
     feet: usize,
     hand: Option<usize>,
+    /// Its unactuated velocities: first column in the team's unactuated list, and count.
+    u0: usize,
+    nu: usize,
     a: DMatrix<f64>,
     gram: DMatrix<f64>,
     gram_inv: DMatrix<f64>,
@@ -55,6 +67,9 @@ struct RobotBlocks {
     ma: DMatrix<f64>,
     t: DMatrix<f64>,
     phi_f: DMatrix<f64>,
+    /// `M_r Phi_f` and `M_r L_h`: the blocks of `Mbar P = M Phi`.
+    mphi_f: DMatrix<f64>,
+    ml_h: DMatrix<f64>,
     /// Its hand's Jacobian `J_h` (6 x k), `R_h = N_f J_h^T`, `L_h = Phi_f J_h^T` (k x 6),
     /// `J_h A_r^+` (6 x 3 f).
     j_h: DMatrix<f64>,
@@ -64,9 +79,27 @@ struct RobotBlocks {
     inv: [SpdInverse; 3],
 }
 
-/// Scratch of the block path, kept between ticks.
-#[derive(Default)]
-pub struct BlockWorkspace {
+/// Which "blocks minus a coupling" operator [`BlockFactors::apply`] applies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BlockOp {
+    /// `P = N_f - R W_E R^T` (eq. aghili_21).
+    P,
+    /// `Phi = M_c^{-1} P = Phi_f - L W_D L^T` (eq. aghili_25).
+    Phi,
+    /// `Mbar P = M M_c^{-1} P = M Phi_f - M L W_D L^T` (eq. constraint_force).
+    MbarP,
+}
+
+/// Scratch of the operators (coupling-sized: 6B x columns).
+#[derive(Debug, Clone, Default)]
+pub struct OpScratch {
+    t: DMatrix<f64>,
+    u: DMatrix<f64>,
+}
+
+/// The block path's factors, kept between ticks (see the module docs).
+#[derive(Debug, Clone, Default)]
+pub struct BlockFactors {
     robots: Vec<RobotBlocks>,
     /// Per hand: `E_h`, `D_h` and, for [`coupling`], their inverses and `X_h^{-1} G_h^T`.
     e: Vec<Matrix6<f64>>,
@@ -75,22 +108,24 @@ pub struct BlockWorkspace {
     y: Vec<Matrix6<f64>>,
     w_e: DMatrix<f64>,
     w_d: DMatrix<f64>,
-    /// `R W_E` and `L W_D` (n x 6B).
-    rw: DMatrix<f64>,
-    lw: DMatrix<f64>,
-    /// The unactuated rows' `I - P_uu`, its inverse `K`, `P_{:u}`, `P_{:u} K`.
+    /// The unactuated team indices `u`; `P_{:u}`, `I - P_uu`, its inverse `K`, `P_{:u} K`.
+    unact: Vec<usize>,
+    pu: DMatrix<f64>,
     quu: DMatrix<f64>,
     k_inv: DMatrix<f64>,
-    pu: DMatrix<f64>,
     pk: DMatrix<f64>,
     k_spd: SpdInverse,
+    /// Rows of `J_c`: `3 nf + 6 B`; `3 nf`.
+    m: usize,
+    nf3: usize,
+    scratch: OpScratch,
 }
 
-impl BlockWorkspace {
-    /// All of `proj` for the team with contact Jacobian `j_c` (`[J_cf; N_G J_ee]`) and its
-    /// `Jdot*v`, by blocks. `None` (and `proj` partly written) when the team is not laid out
-    /// by robots or a Gram matrix is too ill-conditioned: run the dense path then.
-    pub fn compute_into(&mut self, proj: &mut Projections, team: &Team, grasp: Option<&GraspTerms>, j_c: &DMatrix<f64>, jdv_c: &nalgebra::DVector<f64>) -> Option<()> {
+impl BlockFactors {
+    /// The factors of the team with contact Jacobian `j_c` (`[J_cf; N_G J_ee]`). `None`
+    /// when the team is not laid out by robots or a Gram matrix is too ill-conditioned: run
+    /// the dense path then.
+    pub fn compute_into(&mut self, team: &Team, grasp: Option<&GraspTerms>, j_c: &DMatrix<f64>) -> Option<()> {
         let b = grasp.map_or(0, |_| team.hands.len());
         self.layout(team, b, j_c.nrows())?;
         for rb in &mut self.robots {
@@ -109,9 +144,13 @@ impl BlockWorkspace {
             zeros(&mut self.w_e, 0, 0);
             zeros(&mut self.w_d, 0, 0);
         }
-        self.constraint_space(proj, team, j_c, jdv_c, b);
-        self.motion_space(proj, team);
-        self.actuation(proj, team)
+        self.actuation(team)
+    }
+
+    /// The rank of `J_c`: `3 nf + 6 (B - 1)` (`J_c,ee` loses the object's 6 directions).
+    pub fn jc_rank(&self) -> usize {
+        let b = self.w_e.nrows() / 6;
+        self.nf3 + 6 * b.saturating_sub(1)
     }
 
     /// Each robot's offset, feet and hand; `None` unless the feet and hands come in robot
@@ -122,11 +161,16 @@ impl BlockWorkspace {
         if m != 3 * nf + 6 * b || team.feet.windows(2).any(|w| w[0].robot > w[1].robot) || !hands_sorted {
             return None;
         }
+        (self.m, self.nf3) = (m, 3 * nf);
+        self.unact.clear();
+        self.unact.extend((0..team.n).filter(|&i| team.s_diag[i] == 0.0));
         self.robots.resize_with(team.robots.len(), RobotBlocks::default);
         for (r, rb) in self.robots.iter_mut().enumerate() {
             (rb.o, rb.k) = (team.robots[r].offset, team.robots[r].nv);
             rb.foot0 = team.feet.iter().position(|f| f.robot == r).unwrap_or(0);
             rb.feet = team.feet.iter().filter(|f| f.robot == r).count();
+            rb.u0 = self.unact.iter().position(|&i| i >= rb.o).unwrap_or(self.unact.len());
+            rb.nu = self.unact.iter().filter(|&&i| i >= rb.o && i < rb.o + rb.k).count();
             let mut hands = team.hands.iter().enumerate().filter(|(_, h)| h.robot == r).map(|(i, _)| i);
             rb.hand = if b == 0 { None } else { hands.next() };
             if b > 0 && hands.next().is_some() {
@@ -145,125 +189,273 @@ impl BlockWorkspace {
         Some(())
     }
 
-    /// `P`, `I - P`, `J_c^+`, `(J_c^T)^+`, the rank of `J_c` and `Pdot v = -J_c^+ Jdot_c v`.
-    fn constraint_space(&mut self, proj: &mut Projections, team: &Team, j_c: &DMatrix<f64>, jdv_c: &nalgebra::DVector<f64>, b: usize) {
-        let (n, m, nf) = (team.n, j_c.nrows(), 3 * team.feet.len());
-        blocks_minus_coupling(&self.robots, |rb| (&rb.n_f, &rb.r_h), &self.w_e, &mut self.rw, &mut proj.p, n);
-        complement(&proj.p, &mut proj.ip);
-        // J_c^+ = [A^+ - R W_E J_ee A^+, R W_E].
-        zeros(&mut proj.jc_pinv, n, m);
-        for rb in &self.robots {
-            let (o, k, f0, f) = (rb.o, rb.k, 3 * rb.foot0, 3 * rb.feet);
-            proj.jc_pinv.view_mut((o, f0), (k, f)).copy_from(&rb.a_pinv);
-            if let Some(h) = rb.hand {
-                let cols = mat_mut(&mut proj.jc_pinv).subcols_mut(f0, f);
-                gemm(cols, 1.0, -1.0, mat(&self.rw).subcols(6 * h, 6), mat(&rb.jap));
-            }
-        }
-        if b > 0 {
-            proj.jc_pinv.columns_mut(nf, 6 * b).copy_from(&self.rw);
-        }
-        proj.jc_rank = nf + 6 * b.saturating_sub(1);
-        zeros(&mut proj.jct_pinv, m, n);
-        proj.jc_pinv.transpose_to(&mut proj.jct_pinv);
-        zeros_v(&mut proj.pdot_v, n);
-        proj.pdot_v.gemv(-1.0, &proj.jc_pinv, jdv_c, 0.0);
-    }
-
-    /// `Phi = M_c^{-1} P`, `M_c`, `M_c^{-1} = I + Phi - Phi M`, `Mbar = M M_c^{-1}`.
-    fn motion_space(&mut self, proj: &mut Projections, team: &Team) {
-        let n = team.n;
-        blocks_minus_coupling(&self.robots, |rb| (&rb.phi_f, &rb.l_h), &self.w_d, &mut self.lw, &mut proj.mcinv_p, n);
-        // M_c^{-1} = I + Phi - Phi M (Phi M by M's diagonal blocks, into mc_inv).
-        zeros(&mut proj.mc_inv, n, n);
-        for r in &team.robots {
-            let (o, k) = (r.offset, r.nv);
-            let m_blk = mat(&team.mass).submatrix(o, o, k, k);
-            gemm(mat_mut(&mut proj.mc_inv).subcols_mut(o, k), 0.0, -1.0, mat(&proj.mcinv_p).subcols(o, k), m_blk);
-        }
-        proj.mc_inv += &proj.mcinv_p;
-        for i in 0..n {
-            proj.mc_inv[(i, i)] += 1.0;
-        }
-        mc_into(team, proj);
-        mbar_into(team, proj);
-    }
-
-    /// `[P S]^+` and `B` from `K = (I - P_uu)^{-1}` (module docs); `None` when `I - P_uu` is
-    /// too ill-conditioned for the rank of `P S` to be full.
-    fn actuation(&mut self, proj: &mut Projections, team: &Team) -> Option<()> {
-        let (n, s) = (team.n, &team.s_diag);
-        let unact = || (0..n).filter(|&i| s[i] == 0.0);
-        let nu = unact().count();
-        zeros(&mut self.pu, n, nu);
-        for (c, j) in unact().enumerate() {
-            self.pu.column_mut(c).copy_from(&proj.p.column(j));
-        }
+    /// `P_{:u}` (by [`BlockFactors::unit_columns`]), `K = (I - P_uu)^{-1}` and `P_{:u} K`;
+    /// `None` when `I - P_uu` is too ill-conditioned for the rank of `P S` to be full.
+    fn actuation(&mut self, team: &Team) -> Option<()> {
+        let nu = self.unact.len();
+        let mut pu = std::mem::take(&mut self.pu);
+        self.unit_columns(team.n, &mut pu);
+        self.pu = pu;
         zeros(&mut self.quu, nu, nu);
-        for (r, i) in unact().enumerate() {
+        for (r, &i) in self.unact.iter().enumerate() {
             for c in 0..nu {
                 self.quu[(r, c)] = -self.pu[(i, c)];
             }
             self.quu[(r, r)] += 1.0;
         }
         self.k_spd.compute(mat(&self.quu), &mut self.k_inv)?;
-        zeros(&mut self.pk, n, nu);
+        shape(&mut self.pk, team.n, nu);
         gemm(mat_mut(&mut self.pk), 0.0, 1.0, mat(&self.pu), mat(&self.k_inv));
-        // [P S]^+ = S (P + P_{:u} K P_{u:}).
-        zeros(&mut proj.ps_pinv, n, n);
-        proj.ps_pinv.copy_from(&proj.p);
-        gemm(mat_mut(&mut proj.ps_pinv), 1.0, 1.0, mat(&self.pk), mat(&self.pu).transpose());
-        for i in unact() {
-            proj.ps_pinv.row_mut(i).fill(0.0);
-        }
-        // B = I - (I - P)_{:u} K on the unactuated columns = I - E_u K + P_{:u} K.
-        zeros(&mut proj.b, n, n);
-        proj.b.fill_with_identity();
-        for (c, j) in unact().enumerate() {
-            proj.b.column_mut(j).axpy(1.0, &self.pk.column(c), 1.0);
-            for (r, i) in unact().enumerate() {
-                proj.b[(i, j)] -= self.k_inv[(r, c)];
+        Some(())
+    }
+
+    /// `P_{:u} = P E_u` (n x nu) from the factors: robot `r`'s unit columns touch only its own
+    /// blocks, `N_f E_u` is a copy of columns and `R^T E_u` a copy of rows.
+    fn unit_columns(&mut self, n: usize, pu: &mut DMatrix<f64>) {
+        let nu = self.unact.len();
+        let hb = self.w_e.nrows();
+        zeros(pu, n, nu);
+        let OpScratch { t, u } = &mut self.scratch;
+        zeros(t, hb, nu);
+        zeros(u, hb, nu);
+        for rb in &self.robots {
+            for c in rb.u0..rb.u0 + rb.nu {
+                let jl = self.unact[c] - rb.o;
+                pu.view_mut((rb.o, c), (rb.k, 1)).copy_from(&rb.n_f.column(jl));
+                if let Some(h) = rb.hand.filter(|_| hb > 0) {
+                    for i in 0..6 {
+                        t[(6 * h + i, c)] = rb.r_h[(jl, i)];
+                    }
+                }
             }
         }
-        Some(())
+        if hb == 0 {
+            return;
+        }
+        gemm(mat_mut(u), 0.0, 1.0, mat(&self.w_e), mat(t));
+        for rb in &self.robots {
+            if let Some(h) = rb.hand {
+                gemm(mat_mut(pu).subrows_mut(rb.o, rb.k), 1.0, -1.0, mat(&rb.r_h), mat(u).subrows(6 * h, 6));
+            }
+        }
+    }
+}
+
+impl BlockFactors {
+    /// `out = op x` for `x` (n x c) (see [`BlockOp`]): each robot's block times its rows of
+    /// `x`, minus `S_r (W (T^T x))_h` through its hand (module docs). `out` is n x c.
+    pub fn apply(&self, op: BlockOp, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>, s: &mut OpScratch) {
+        let w = if op == BlockOp::P { &self.w_e } else { &self.w_d };
+        let (hb, c) = (w.nrows(), x.ncols());
+        for rb in &self.robots {
+            gemm(out.as_mut().subrows_mut(rb.o, rb.k), 0.0, 1.0, mat(rb.operator(op)[0]), x.subrows(rb.o, rb.k));
+        }
+        if hb == 0 {
+            return;
+        }
+        zeros(&mut s.t, hb, c);
+        zeros(&mut s.u, hb, c);
+        for rb in &self.robots {
+            if let Some(h) = rb.hand {
+                gemm(mat_mut(&mut s.t).subrows_mut(6 * h, 6), 0.0, 1.0, mat(rb.operator(op)[2]).transpose(), x.subrows(rb.o, rb.k));
+            }
+        }
+        gemm(mat_mut(&mut s.u), 0.0, 1.0, mat(w), mat(&s.t));
+        for rb in &self.robots {
+            if let Some(h) = rb.hand {
+                gemm(out.as_mut().subrows_mut(rb.o, rb.k), 1.0, -1.0, mat(rb.operator(op)[1]), mat(&s.u).subrows(6 * h, 6));
+            }
+        }
+    }
+
+    /// `out = (J_c^T)^+ x` (m x c) for `x` (n x c): with `J_c^+ = [A^+ - R W_E J_ee A^+, R W_E]`,
+    /// the hand rows are `W_E R^T x` and robot `r`'s feet rows `A_r^{+T} x_r - (J_h A_r^+)^T
+    /// (W_E R^T x)_h`.
+    pub fn jct_pinv_apply(&self, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>, s: &mut OpScratch) {
+        let (hb, c) = (self.w_e.nrows(), x.ncols());
+        zeros(&mut s.t, hb, c);
+        zeros(&mut s.u, hb, c);
+        for rb in &self.robots {
+            if let Some(h) = rb.hand.filter(|_| hb > 0) {
+                gemm(mat_mut(&mut s.t).subrows_mut(6 * h, 6), 0.0, 1.0, mat(&rb.r_h).transpose(), x.subrows(rb.o, rb.k));
+            }
+        }
+        gemm(mat_mut(&mut s.u), 0.0, 1.0, mat(&self.w_e), mat(&s.t));
+        for rb in &self.robots {
+            let (f0, f) = (3 * rb.foot0, 3 * rb.feet);
+            gemm(out.as_mut().subrows_mut(f0, f), 0.0, 1.0, mat(&rb.a_pinv).transpose(), x.subrows(rb.o, rb.k));
+            if let Some(h) = rb.hand.filter(|_| hb > 0) {
+                gemm(out.as_mut().subrows_mut(f0, f), 1.0, -1.0, mat(&rb.jap).transpose(), mat(&s.u).subrows(6 * h, 6));
+            }
+        }
+        out.subrows_mut(self.nf3, hb).copy_from(mat(&s.u));
+    }
+
+    /// `out = alpha J_c^+ y` (n) for `y` (m): `A^+ y_f + R W_E (y_h - J_ee A^+ y_f)`.
+    pub fn jc_pinv_apply(&self, alpha: f64, y: &DVector<f64>, out: &mut DVector<f64>, s: &mut OpScratch) {
+        let hb = self.w_e.nrows();
+        zeros_v(out, self.robots.iter().map(|rb| rb.k).sum());
+        zeros(&mut s.t, hb, 1);
+        zeros(&mut s.u, hb, 1);
+        if hb > 0 {
+            s.t.column_mut(0).copy_from(&y.rows(self.nf3, hb));
+        }
+        for rb in &self.robots {
+            let yf = y.rows(3 * rb.foot0, 3 * rb.feet);
+            out.rows_mut(rb.o, rb.k).gemv(alpha, &rb.a_pinv, &yf, 0.0);
+            if let Some(h) = rb.hand.filter(|_| hb > 0) {
+                s.t.fixed_view_mut::<6, 1>(6 * h, 0).gemv(-1.0, &rb.jap, &yf, 1.0);
+            }
+        }
+        if hb == 0 {
+            return;
+        }
+        gemm(mat_mut(&mut s.u), 0.0, 1.0, mat(&self.w_e), mat(&s.t));
+        for rb in &self.robots {
+            if let Some(h) = rb.hand {
+                out.rows_mut(rb.o, rb.k).gemv(alpha, &rb.r_h, &s.u.fixed_view::<6, 1>(6 * h, 0), 1.0);
+            }
+        }
+    }
+
+    /// `out = [P S]^+ x = S (P x + P_{:u} K P_{u:} x)` (eq. ua_solution) for a vector `x`;
+    /// `px` is scratch.
+    pub fn ps_pinv_apply(&self, x: &DVector<f64>, s_diag: &DVector<f64>, out: &mut DVector<f64>, px: &mut DVector<f64>, s: &mut OpScratch) {
+        let n = x.len();
+        zeros_v(out, n);
+        zeros_v(px, self.unact.len());
+        self.apply(BlockOp::P, vmat(x), vmat_mut(out), s);
+        px.gemv_tr(1.0, &self.pu, x, 0.0);
+        out.gemv(1.0, &self.pk, px, 1.0);
+        out.component_mul_assign(s_diag);
+    }
+
+    /// `(B - I)_{:u} = P_{:u} K - E_u K` (n x nu, eq. bmatrix on the unactuated columns, the
+    /// only ones where `B` differs from `I`), and the unactuated indices.
+    pub fn b_minus_i_u(&self, out: &mut DMatrix<f64>) -> &[usize] {
+        zeros(out, self.pk.nrows(), self.unact.len());
+        out.copy_from(&self.pk);
+        for (r, &i) in self.unact.iter().enumerate() {
+            for c in 0..self.unact.len() {
+                out[(i, c)] -= self.k_inv[(r, c)];
+            }
+        }
+        &self.unact
+    }
+
+    /// Each robot's feet rows of `J_c` (first row, count) and its unactuated columns in the
+    /// team's unactuated list (first, count): the only columns where its feet rows meet `u`.
+    pub fn feet_and_unactuated(&self) -> impl Iterator<Item = ((usize, usize), (usize, usize))> + '_ {
+        self.robots.iter().map(|rb| ((3 * rb.foot0, 3 * rb.feet), (rb.u0, rb.nu)))
+    }
+
+    /// `(m, 3 nf)`: the rows of `J_c` and of its feet.
+    pub fn rows(&self) -> (usize, usize) {
+        (self.m, self.nf3)
+    }
+}
+
+impl BlockFactors {
+    /// The team-sized matrices of `proj` from these factors, each operator applied to the
+    /// identity (it allocates: for tests and reports, never on the tick):
+    /// `P`, `I - P`, `J_c^+`, `M_c^{-1} P`, `M_c^{-1} = I + Phi - Phi M`, `M_c`, `Mbar`,
+    /// `[P S]^+ = S (P + P_{:u} K P_{u:})` and `B = I + (B - I)_{:u}`.
+    pub fn materialize(&self, team: &Team, proj: &mut Projections) {
+        let n = team.n;
+        let id = DMatrix::<f64>::identity(n, n);
+        let mut s = OpScratch::default();
+        let mut op = |which: BlockOp| {
+            let mut out = DMatrix::zeros(n, n);
+            self.apply(which, mat(&id), mat_mut(&mut out), &mut s);
+            symmetrise(&mut out);
+            out
+        };
+        proj.p = op(BlockOp::P);
+        proj.mcinv_p = op(BlockOp::Phi);
+        complement(&proj.p, &mut proj.ip);
+        let mut jct = DMatrix::zeros(self.m, n);
+        self.jct_pinv_apply(mat(&id), mat_mut(&mut jct), &mut s);
+        proj.jc_pinv = jct.transpose();
+        proj.jct_pinv = jct;
+        proj.mc_inv = &id + &proj.mcinv_p - &proj.mcinv_p * &team.mass;
+        mc_into(team, proj);
+        mbar_into(team, proj);
+        let mut ps = &proj.p + &self.pk * self.pu.transpose();
+        for &i in &self.unact {
+            ps.row_mut(i).fill(0.0);
+        }
+        proj.ps_pinv = ps;
+        let mut z = DMatrix::zeros(0, 0);
+        self.b_minus_i_u(&mut z);
+        proj.b = id;
+        for (c, &j) in self.unact.iter().enumerate() {
+            let mut col = proj.b.column_mut(j);
+            col += z.column(c);
+        }
     }
 }
 
 impl RobotBlocks {
-    /// `A^+`, `N_f`, `Phi_f` and the hand's `R_h`, `L_h`, `J_h A^+` of this robot.
+    /// This robot's `[D_r, S_r, T_r]` of `op = diag(D_r) - S W T^T`.
+    fn operator(&self, op: BlockOp) -> [&DMatrix<f64>; 3] {
+        match op {
+            BlockOp::P => [&self.n_f, &self.r_h, &self.r_h],
+            BlockOp::Phi => [&self.phi_f, &self.l_h, &self.l_h],
+            BlockOp::MbarP => [&self.mphi_f, &self.ml_h, &self.l_h],
+        }
+    }
+
+    /// `A^+`, `N_f`, `Phi_f`, `M_r Phi_f` and the hand's `R_h`, `L_h`, `M_r L_h`, `J_h A^+`.
     fn compute(&mut self, team: &Team) -> Option<()> {
         let (o, k, f) = (self.o, self.k, 3 * self.feet);
         let [gram_inv, m_inv, ama_inv] = &mut self.inv;
+        let m_r = mat(&team.mass).submatrix(o, o, k, k);
         // A^+ = A^T (A A^T)^{-1}, N_f = I - A^+ A.
-        zeros(&mut self.gram, f, f);
+        shape(&mut self.gram, f, f);
         gemm(mat_mut(&mut self.gram), 0.0, 1.0, mat(&self.a), mat(&self.a).transpose());
         gram_inv.compute(mat(&self.gram), &mut self.gram_inv)?;
-        zeros(&mut self.a_pinv, k, f);
+        shape(&mut self.a_pinv, k, f);
         gemm(mat_mut(&mut self.a_pinv), 0.0, 1.0, mat(&self.a).transpose(), mat(&self.gram_inv));
         zeros(&mut self.n_f, k, k);
         self.n_f.fill_with_identity();
         gemm(mat_mut(&mut self.n_f), 1.0, -1.0, mat(&self.a_pinv), mat(&self.a));
         // Phi_f = M^{-1} - M^{-1} A^T (A M^{-1} A^T)^{-1} A M^{-1}.
-        m_inv.compute(mat(&team.mass).submatrix(o, o, k, k), &mut self.m_inv)?;
-        zeros(&mut self.ma, k, f);
+        m_inv.compute(m_r, &mut self.m_inv)?;
+        shape(&mut self.ma, k, f);
         gemm(mat_mut(&mut self.ma), 0.0, 1.0, mat(&self.m_inv), mat(&self.a).transpose());
         gemm(mat_mut(&mut self.gram), 0.0, 1.0, mat(&self.a), mat(&self.ma));
         ama_inv.compute(mat(&self.gram), &mut self.gram_inv)?;
-        zeros(&mut self.t, k, f);
+        shape(&mut self.t, k, f);
         gemm(mat_mut(&mut self.t), 0.0, 1.0, mat(&self.ma), mat(&self.gram_inv));
         zeros(&mut self.phi_f, k, k);
         self.phi_f.copy_from(&self.m_inv);
         gemm(mat_mut(&mut self.phi_f), 1.0, -1.0, mat(&self.t), mat(&self.ma).transpose());
-        // The hand's R_h = N_f J_h^T, L_h = Phi_f J_h^T, J_h A^+.
+        symmetrise(&mut self.phi_f);
+        shape(&mut self.mphi_f, k, k);
+        gemm(mat_mut(&mut self.mphi_f), 0.0, 1.0, m_r, mat(&self.phi_f));
+        // The hand's R_h = N_f J_h^T, L_h = Phi_f J_h^T, M_r L_h, J_h A^+.
         let rows = self.j_h.nrows();
         for (out, left) in [(&mut self.r_h, &self.n_f), (&mut self.l_h, &self.phi_f)] {
             zeros(out, k, rows);
             gemm(mat_mut(out), 0.0, 1.0, mat(left), mat(&self.j_h).transpose());
         }
-        zeros(&mut self.jap, rows, f);
+        shape(&mut self.ml_h, k, rows);
+        gemm(mat_mut(&mut self.ml_h), 0.0, 1.0, m_r, mat(&self.l_h));
+        shape(&mut self.jap, rows, f);
         gemm(mat_mut(&mut self.jap), 0.0, 1.0, mat(&self.j_h), mat(&self.a_pinv));
         Some(())
     }
+}
+
+/// faer view of a vector as one column.
+pub fn vmat(v: &DVector<f64>) -> MatRef<'_, f64> {
+    MatRef::from_column_major_slice(v.as_slice(), v.len(), 1)
+}
+
+/// Mutable faer view of a vector as one column.
+pub fn vmat_mut(v: &mut DVector<f64>) -> MatMut<'_, f64> {
+    let n = v.len();
+    MatMut::from_column_major_slice_mut(v.as_mut_slice(), n, 1)
 }
 
 /// `J_h X` for `X` (k x 6): a hand's 6 x 6 Gram block (`E_h` or `D_h`), symmetrised.
@@ -306,26 +498,4 @@ fn coupling(x: &[Matrix6<f64>], g: &DMatrix<f64>, x_inv: &mut Vec<Matrix6<f64>>,
         }
     }
     Some(())
-}
-
-/// `out = diag(D_r) - S W S^T` (n x n) where robot `r`'s hand block of `S` (n x 6B) is
-/// `S_r` on its rows, `(D_r, S_r) = part(r)`; `sw = S W` (n x 6B) is kept for the caller.
-fn blocks_minus_coupling(robots: &[RobotBlocks], part: impl Fn(&RobotBlocks) -> (&DMatrix<f64>, &DMatrix<f64>), w: &DMatrix<f64>, sw: &mut DMatrix<f64>, out: &mut DMatrix<f64>, n: usize) {
-    let hb = w.nrows();
-    zeros(out, n, n);
-    zeros(sw, n, hb);
-    for rb in robots {
-        let (d, s) = part(rb);
-        out.view_mut((rb.o, rb.o), (rb.k, rb.k)).copy_from(d);
-        if let Some(h) = rb.hand.filter(|_| hb > 0) {
-            gemm(mat_mut(sw).subrows_mut(rb.o, rb.k), 0.0, 1.0, mat(s), mat(w).subrows(6 * h, 6));
-        }
-    }
-    for rb in robots {
-        if let Some(h) = rb.hand.filter(|_| hb > 0) {
-            let (_, s) = part(rb);
-            gemm(mat_mut(out).subcols_mut(rb.o, rb.k), 1.0, -1.0, mat(sw).subcols(6 * h, 6), mat(s).transpose());
-        }
-    }
-    symmetrise(out);
 }

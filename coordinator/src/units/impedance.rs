@@ -17,7 +17,9 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3, Vector3, Vector6};
 
-use crate::linalg::{mat, product, rotation_error, zeros, zeros_v, Pinv, RANK_TOL};
+use crate::linalg::{mat, mat_mut, product, rotation_error, zeros, zeros_v, Pinv, SpdInverse, RANK_TOL};
+use crate::units::block_projection::{BlockOp, OpScratch};
+use crate::units::projection::Projections;
 use crate::ControllerError;
 
 /// Diagonal stiffness and damping of one task (3 or 6 entries).
@@ -45,9 +47,10 @@ impl Gains {
     }
 }
 
-/// Per-tick quantities shared by every task: `M_c^{-1} P` and `M_c^{-1} (P h - Pdot v)`.
+/// Per-tick quantities shared by every task: `M_c^{-1} P` (the projections' matrix, or
+/// their operator on the block path) and `M_c^{-1} (P h - Pdot v)`.
 pub struct MotionSpace<'a> {
-    pub mcinv_p: &'a DMatrix<f64>,
+    pub proj: &'a Projections,
     pub mcinv_bias: &'a DVector<f64>,
 }
 
@@ -94,9 +97,13 @@ pub struct TaskStack {
     ff: DVector<f64>,
     // Scratch of `joint_torque`.
     j_mcinv_p: DMatrix<f64>,
+    jt: DMatrix<f64>,
+    phi_jt: DMatrix<f64>,
+    ops: OpScratch,
     lambda_inv: DMatrix<f64>,
     lambda: DMatrix<f64>,
     pinv: Pinv,
+    spd: SpdInverse,
     u: DVector<f64>,
     f: DVector<f64>,
 }
@@ -148,10 +155,7 @@ impl TaskStack {
         if k == 0 {
             return Ok(());
         }
-        // Lambda_c = (J M_c^{-1} P J^T)^+.
-        product(&mut self.j_mcinv_p, mat(&self.j), mat(ms.mcinv_p));
-        product(&mut self.lambda_inv, mat(&self.j_mcinv_p), mat(&self.j).transpose());
-        self.pinv.compute(mat(&self.lambda_inv), RANK_TOL, &mut self.lambda).ok_or_else(|| ControllerError::Singular { what: "operational-space inertia".into() })?;
+        self.lambda_c(ms.proj)?;
         // u = J M_c^{-1} (P h - Pdot v) - Jdot v + a_d; F = Lambda u - K_d edot - K_p e + ff.
         zeros_v(&mut self.u, k);
         self.u.copy_from(&self.acc_d);
@@ -163,6 +167,30 @@ impl TaskStack {
             self.f[i] += self.ff[i] - self.kd[i] * self.edot[i] - self.kp[i] * self.e[i];
         }
         tau_m.gemv_tr(1.0, &self.j, &self.f, 0.0);
+        Ok(())
+    }
+
+    /// `Lambda_c = (J M_c^{-1} P J^T)^+` (eq. control_law) into `lambda`. Dense path: the
+    /// projections' `M_c^{-1} P` and an SVD (the oracle). Block path: `M_c^{-1} P J^T` by the
+    /// operator, and Cholesky when its pivots pass [`crate::linalg::SPD_TOL`] (the
+    /// pseudo-inverse is then the inverse), the SVD otherwise.
+    fn lambda_c(&mut self, proj: &Projections) -> Result<(), ControllerError> {
+        let singular = || ControllerError::Singular { what: "operational-space inertia".into() };
+        if !proj.by_blocks {
+            product(&mut self.j_mcinv_p, mat(&self.j), mat(&proj.mcinv_p));
+            product(&mut self.lambda_inv, mat(&self.j_mcinv_p), mat(&self.j).transpose());
+            self.pinv.compute(mat(&self.lambda_inv), RANK_TOL, &mut self.lambda).ok_or_else(singular)?;
+            return Ok(());
+        }
+        let (k, n) = self.j.shape();
+        zeros(&mut self.jt, n, k);
+        self.j.transpose_to(&mut self.jt);
+        zeros(&mut self.phi_jt, n, k);
+        proj.blocks.apply(BlockOp::Phi, mat(&self.jt), mat_mut(&mut self.phi_jt), &mut self.ops);
+        product(&mut self.lambda_inv, mat(&self.j), mat(&self.phi_jt));
+        if self.spd.compute(mat(&self.lambda_inv), &mut self.lambda).is_none() {
+            self.pinv.compute(mat(&self.lambda_inv), RANK_TOL, &mut self.lambda).ok_or_else(singular)?;
+        }
         Ok(())
     }
 }

@@ -2,18 +2,25 @@
 //! constraint inertia `Mbar = M M_c^{-1}` (eq. aghili_25, constraint_force), `[P S]^+` and
 //! `B` (eqs. ua_solution, bmatrix), all with rank-revealing pseudo-inverses (DESIGN.md §4).
 //!
-//! Computed into the previous tick's buffers ([`Projections::compute_into`]); `M` is
-//! block-diagonal (one block per robot), so `P M` and `M M_c^{-1}` are products by blocks.
+//! Two paths: by the team's blocks ([`crate::units::block_projection`], the default), which
+//! keeps factors and applies the projections as operators without forming a team-sized
+//! matrix, and by dense SVDs ([`Projections::compute_into`], the oracle), which fills every
+//! matrix below. [`Projections::materialize`] fills them on the block path too (tests,
+//! reports). `M` is block-diagonal (one block per robot), so `P M` and `M M_c^{-1}` are
+//! products by blocks.
 
+use faer::{MatMut, MatRef};
 use nalgebra::{DMatrix, DVector};
 
 use crate::linalg::{gemm, mat, mat_mut, product, zeros, zeros_v, Inverse, Pinv, RANK_TOL};
 use crate::team::Team;
-use crate::units::block_projection::BlockWorkspace;
+use crate::units::block_projection::{vmat, vmat_mut, BlockFactors, BlockOp, OpScratch};
 use crate::units::grasp::GraspTerms;
 use crate::ControllerError;
 
-/// The projected quantities of one tick.
+/// The projected quantities of one tick. On the block path (`by_blocks`) only `jc_rank`,
+/// `pdot_v` and the factors are computed on the tick; the matrices are empty until
+/// [`Projections::materialize`].
 #[derive(Debug, Clone, Default)]
 pub struct Projections {
     /// `J_c^+` (n x m) and the rank of `J_c`.
@@ -41,13 +48,15 @@ pub struct Projections {
     /// Whether the team's blocks made these ([`crate::units::block_projection`]) or the
     /// dense SVDs ([`Projections::compute_into`]).
     pub by_blocks: bool,
+    /// The block path's factors (valid when `by_blocks`).
+    pub blocks: BlockFactors,
 }
 
 /// Scratch of [`Projections::compute_into`]: the decompositions' workspaces and the reduced
 /// matrices whose pseudo-inverses give `[P S]^+` and `B`.
 #[derive(Default)]
 pub struct ProjectionWorkspace {
-    blocks: BlockWorkspace,
+    ops: OpScratch,
     jc: Pinv,
     ps: Pinv,
     x: Pinv,
@@ -58,26 +67,86 @@ pub struct ProjectionWorkspace {
     xr_pinv: DMatrix<f64>,
 }
 
+/// Team-sized scratch of [`Projections::contact_wrench`].
+#[derive(Debug, Clone, Default)]
+pub struct WrenchScratch {
+    t1: DVector<f64>,
+    t2: DVector<f64>,
+    t3: DVector<f64>,
+    ops: OpScratch,
+}
+
 impl Projections {
     /// The contact wrenches of eq. constraint_force for a generalized force `u` (actuation
     /// `S tau` plus external `J_x^T F_x`): with `K = (I - P)(Mbar P - I)`,
     /// `lambda = (J_c^T)^+ [K u + (I - P)(Mbar (Pdot v - P h) + h)]
     ///         = (J_c^T)^+ (I - P) [Mbar (P (u - h) + Pdot v) + h - u]`, into `out`.
-    /// `t1`, `t2` are team-sized scratch.
-    pub fn contact_wrench(&self, h: &DVector<f64>, u: &DVector<f64>, out: &mut DVector<f64>, t1: &mut DVector<f64>, t2: &mut DVector<f64>) {
-        let n = h.len();
-        zeros_v(t1, n);
-        zeros_v(t2, n);
+    pub fn contact_wrench(&self, team: &Team, u: &DVector<f64>, out: &mut DVector<f64>, s: &mut WrenchScratch) {
+        let (n, h) = (team.n, &team.bias);
+        let WrenchScratch { t1, t2, t3, ops } = s;
+        for t in [&mut *t1, &mut *t2, &mut *t3] {
+            zeros_v(t, n);
+        }
         t2.copy_from(u);
         *t2 -= h;
-        t1.copy_from(&self.pdot_v);
-        t1.gemv(1.0, &self.p, t2, 1.0); // P (u - h) + Pdot v
-        t2.copy_from(h);
-        *t2 -= u;
-        t2.gemv(1.0, &self.mbar, t1, 1.0); // Mbar (...) + h - u
-        t1.gemv(1.0, &self.ip, t2, 0.0);
-        zeros_v(out, self.jct_pinv.nrows());
-        out.gemv(1.0, &self.jct_pinv, t1, 0.0);
+        if !self.by_blocks {
+            t1.copy_from(&self.pdot_v);
+            t1.gemv(1.0, &self.p, t2, 1.0); // P (u - h) + Pdot v
+            t2.copy_from(h);
+            *t2 -= u;
+            t2.gemv(1.0, &self.mbar, t1, 1.0); // Mbar (...) + h - u
+            t1.gemv(1.0, &self.ip, t2, 0.0);
+            zeros_v(out, self.jct_pinv.nrows());
+            out.gemv(1.0, &self.jct_pinv, t1, 0.0);
+            return;
+        }
+        let f = &self.blocks;
+        f.apply(BlockOp::P, vmat(t2), vmat_mut(t1), ops);
+        *t1 += &self.pdot_v; // P (u - h) + Pdot v
+        // Mbar t1 = M M_c^{-1} t1 with M_c^{-1} = I + Phi - Phi M (eq. aghili_25).
+        t3.copy_from(t1);
+        mass_times(team, -1.0, vmat(t1), 1.0, vmat_mut(t3)); // t1 - M t1
+        f.apply(BlockOp::Phi, vmat(t3), vmat_mut(t2), ops);
+        *t2 += &*t1; // M_c^{-1} t1
+        t3.copy_from(h);
+        *t3 -= u;
+        mass_times(team, 1.0, vmat(t2), 1.0, vmat_mut(t3)); // Mbar (...) + h - u
+        f.apply(BlockOp::P, vmat(t3), vmat_mut(t1), ops);
+        *t3 -= &*t1; // (I - P) (...)
+        let m = f.rows().0;
+        zeros_v(out, m);
+        f.jct_pinv_apply(vmat(t3), vmat_mut(out), ops);
+    }
+
+    /// `out = [P S]^+ x` (eq. ua_solution) for a vector `x`; `px` is scratch.
+    pub fn ps_pinv_times(&self, x: &DVector<f64>, s_diag: &DVector<f64>, out: &mut DVector<f64>, px: &mut DVector<f64>, ops: &mut OpScratch) {
+        if self.by_blocks {
+            self.blocks.ps_pinv_apply(x, s_diag, out, px, ops);
+        } else {
+            zeros_v(out, x.len());
+            out.gemv(1.0, &self.ps_pinv, x, 0.0);
+        }
+    }
+
+    /// `out = P x` for a vector `x`.
+    pub fn p_times(&self, x: &DVector<f64>, out: &mut DVector<f64>, ops: &mut OpScratch) {
+        zeros_v(out, x.len());
+        if self.by_blocks {
+            self.blocks.apply(BlockOp::P, vmat(x), vmat_mut(out), ops);
+        } else {
+            out.gemv(1.0, &self.p, x, 0.0);
+        }
+    }
+
+    /// The team-sized matrices of the block path from its factors (each operator applied to
+    /// the identity; it allocates): for tests and reports, never on the tick. Nothing to do
+    /// on the dense path.
+    pub fn materialize(&mut self, team: &Team) {
+        if self.by_blocks {
+            let f = std::mem::take(&mut self.blocks);
+            f.materialize(team, self);
+            self.blocks = f;
+        }
     }
 
     /// All projections of the team: by the team's blocks unless `dense` (or the blocks
@@ -85,11 +154,17 @@ impl Projections {
     /// ([`Projections::compute_into`]). Both give the same matrices (`coordinator/tests/
     /// structured.rs`).
     pub fn compute(&mut self, ws: &mut ProjectionWorkspace, team: &Team, grasp: Option<&GraspTerms>, j_c: &DMatrix<f64>, jdv_c: &DVector<f64>, dense: bool) -> Result<(), ControllerError> {
-        self.by_blocks = !dense && ws.blocks.compute_into(self, team, grasp, j_c, jdv_c).is_some();
-        if self.by_blocks {
-            return Ok(());
+        self.by_blocks = !dense && self.blocks.compute_into(team, grasp, j_c).is_some();
+        if !self.by_blocks {
+            return self.compute_into(ws, team, j_c, jdv_c);
         }
-        self.compute_into(ws, team, j_c, jdv_c)
+        self.jc_rank = self.blocks.jc_rank();
+        // Pdot v = -J_c^+ (Jdot_c v) (see compute_into).
+        self.blocks.jc_pinv_apply(-1.0, jdv_c, &mut self.pdot_v, &mut ws.ops);
+        for m in [&mut self.jc_pinv, &mut self.jct_pinv, &mut self.p, &mut self.ip, &mut self.mc, &mut self.mc_inv, &mut self.mcinv_p, &mut self.mbar, &mut self.ps_pinv, &mut self.b] {
+            zeros(m, 0, 0);
+        }
+        Ok(())
     }
 
     /// All projections of the team with contact Jacobian `j_c` and its `Jdot*v`, by dense
@@ -169,6 +244,14 @@ pub(crate) fn complement(p: &DMatrix<f64>, ip: &mut DMatrix<f64>) {
     *ip -= p;
     for i in 0..n {
         ip[(i, i)] += 1.0;
+    }
+}
+
+/// `out = beta out + alpha M x` for `x` (n x c), by `M`'s diagonal blocks.
+pub(crate) fn mass_times(team: &Team, alpha: f64, x: MatRef<'_, f64>, beta: f64, mut out: MatMut<'_, f64>) {
+    for r in &team.robots {
+        let (o, k) = (r.offset, r.nv);
+        gemm(out.as_mut().subrows_mut(o, k), beta, alpha, mat(&team.mass).submatrix(o, o, k, k), x.subrows(o, k));
     }
 }
 

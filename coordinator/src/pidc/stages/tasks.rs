@@ -24,8 +24,9 @@ use crate::linalg::zeros_v;
 use crate::pidc::PidcConfig;
 use crate::team::Team;
 use crate::units::grasp::GraspTerms;
+use crate::units::block_projection::{vmat, vmat_mut, BlockOp, OpScratch};
 use crate::units::impedance::{point_error, pose_error, MotionSpace, TaskStack};
-use crate::units::projection::Projections;
+use crate::units::projection::{mass_times, Projections};
 pub use crate::units::targets::{frame_pose, PointTarget, PoseTarget, Targets};
 use crate::ControllerError;
 
@@ -45,28 +46,38 @@ pub fn object_load(object: &Isometry3<f64>, twist: &Vector6<f64>, acc_d: &[f64; 
 
 /// The motion-space term of the tasks' bias, `M_c^{-1} (P h - Pdot v)` (eq. control_law's
 /// `mu_c`), kept between ticks; its `M_c^{-1} P` (`Lambda_c`) is the projections' own
-/// ([`Projections::mcinv_p`]).
+/// ([`Projections::mcinv_p`], or their operator on the block path).
 #[derive(Debug, Clone, Default)]
 pub struct MotionSpaceTerms {
     pub mcinv_bias: DVector<f64>,
-    /// `P h - Pdot v`.
+    /// `P h - Pdot v`, and scratch.
     p_bias: DVector<f64>,
+    t: DVector<f64>,
+    ops: OpScratch,
 }
 
 impl MotionSpaceTerms {
-    /// From the tick's projections and the team's `h`.
-    pub fn compute_into(&mut self, proj: &Projections, bias: &DVector<f64>) {
-        let n = bias.len();
-        zeros_v(&mut self.p_bias, n);
-        self.p_bias.copy_from(&proj.pdot_v);
-        self.p_bias.gemv(1.0, &proj.p, bias, -1.0); // P h - Pdot v
+    /// From the tick's projections and the team's `M` and `h`.
+    pub fn compute_into(&mut self, proj: &Projections, team: &Team) {
+        let n = team.n;
+        proj.p_times(&team.bias, &mut self.p_bias, &mut self.ops);
+        self.p_bias -= &proj.pdot_v; // P h - Pdot v
         zeros_v(&mut self.mcinv_bias, n);
-        self.mcinv_bias.gemv(1.0, &proj.mc_inv, &self.p_bias, 0.0);
+        if !proj.by_blocks {
+            self.mcinv_bias.gemv(1.0, &proj.mc_inv, &self.p_bias, 0.0);
+            return;
+        }
+        // M_c^{-1} x = x + Phi (x - M x) (eq. aghili_25, M_c^{-1} = I + Phi - Phi M).
+        zeros_v(&mut self.t, n);
+        self.t.copy_from(&self.p_bias);
+        mass_times(team, -1.0, vmat(&self.p_bias), 1.0, vmat_mut(&mut self.t));
+        proj.blocks.apply(BlockOp::Phi, vmat(&self.t), vmat_mut(&mut self.mcinv_bias), &mut self.ops);
+        self.mcinv_bias += &self.p_bias;
     }
 
     /// What the tasks read: these terms with the projections they were computed from.
     pub fn view<'a>(&'a self, proj: &'a Projections) -> MotionSpace<'a> {
-        MotionSpace { mcinv_p: &proj.mcinv_p, mcinv_bias: &self.mcinv_bias }
+        MotionSpace { proj, mcinv_bias: &self.mcinv_bias }
     }
 }
 

@@ -16,16 +16,23 @@ use protocol::QpStatus;
 
 use crate::linalg::zeros_v;
 use crate::qp::{self, QpInput, QpWorkspace};
+use crate::units::block_projection::OpScratch;
 use crate::units::projection::Projections;
 use crate::ControllerError;
 
-/// `tau_0 = [P S]^+ P tau_M` (n), the first term of eq. ua_solution. `p_tau_m` is scratch.
-pub fn motion_torque(proj: &Projections, tau_m: &DVector<f64>, tau0: &mut DVector<f64>, p_tau_m: &mut DVector<f64>) {
-    let n = tau_m.len();
-    zeros_v(p_tau_m, n);
-    p_tau_m.gemv(1.0, &proj.p, tau_m, 0.0);
-    zeros_v(tau0, n);
-    tau0.gemv(1.0, &proj.ps_pinv, p_tau_m, 0.0);
+/// Scratch of [`motion_torque`].
+#[derive(Debug, Clone, Default)]
+pub struct MotionTorqueScratch {
+    /// `P tau_M`.
+    p_tau_m: DVector<f64>,
+    px: DVector<f64>,
+    ops: OpScratch,
+}
+
+/// `tau_0 = [P S]^+ P tau_M` (n), the first term of eq. ua_solution (`s_diag`: `S`).
+pub fn motion_torque(proj: &Projections, s_diag: &DVector<f64>, tau_m: &DVector<f64>, tau0: &mut DVector<f64>, s: &mut MotionTorqueScratch) {
+    proj.p_times(tau_m, &mut s.p_tau_m, &mut s.ops);
+    proj.ps_pinv_times(&s.p_tau_m, s_diag, tau0, &mut s.px, &mut s.ops);
 }
 
 /// Saturate `tau_0` at the torque limits; whether any entry was over.

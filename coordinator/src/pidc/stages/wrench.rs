@@ -6,8 +6,8 @@
 //! `rho = (J_c^T)^+ K S Y` and
 //! `eta = (J_c^T)^+ [K (S tau_0 + J_x^T F_x) + (I - P)(Mbar (Pdot v - P h) + h)]`
 //! (see [`Projections::contact_wrench`]); `rho` is formed right to left, without `K`
-//! ([`rho_dense`]), or with the identities of [`rho_by_blocks`] when the projections came
-//! from the team's blocks.
+//! ([`rho_dense`]), or with the identities and the projections' operators of
+//! [`rho_by_blocks`] when the projections came from the team's blocks (no `n x n` matrix).
 //! The real wrenches on the hands add the object's load distribution `G^+ F_x` (see
 //! [`super::tasks`]): `eta_real` and `lambda_real` are `eta` and `lambda` with it.
 
@@ -15,8 +15,9 @@ use nalgebra::{DMatrix, DVector, Vector6};
 
 use crate::linalg::{add_product, gemm, mat, mat_mut, product, zeros, zeros_v};
 use crate::team::Team;
+use crate::units::block_projection::{BlockOp, OpScratch};
 use crate::units::grasp::GraspTerms;
-use crate::units::projection::Projections;
+use crate::units::projection::{Projections, WrenchScratch};
 
 /// Scratch of the contact map: `S Y`, two `n x m` products, team-sized vectors.
 #[derive(Debug, Clone, Default)]
@@ -28,8 +29,8 @@ pub struct ContactMapScratch {
     t_a: DMatrix<f64>,
     t_b: DMatrix<f64>,
     u: DVector<f64>,
-    t1: DVector<f64>,
-    t2: DVector<f64>,
+    wrench: WrenchScratch,
+    ops: OpScratch,
 }
 
 /// What [`contact_map`] reads.
@@ -61,7 +62,7 @@ pub fn contact_map(inp: &MapInput, ws: &mut ContactMapScratch, y: &mut DMatrix<f
     ws.u.copy_from(*tau0);
     ws.u.component_mul_assign(&team.s_diag);
     ws.u += *load; // S tau_0 + J_x^T F_x
-    proj.contact_wrench(&team.bias, &ws.u, eta, &mut ws.t1, &mut ws.t2);
+    proj.contact_wrench(team, &ws.u, eta, &mut ws.wrench);
     // eta_real: the hand rows carry the object's load distribution G^+ F_x.
     zeros_v(eta_real, m);
     eta_real.copy_from(eta);
@@ -85,41 +86,44 @@ fn rho_dense(team: &Team, proj: &Projections, j_c: &DMatrix<f64>, ws: &mut Conta
     product(rho, mat(&proj.jct_pinv), mat(&ws.t_a));
 }
 
-/// The same `Y` and `rho` with two products of team size instead of five:
+/// The same `Y` and `rho` by the projections' factors, without an `n x n` matrix:
 /// `B = I + (B - I)_{:u}` differs from `I` on the unactuated columns only, so
-/// `Y = J_c^T + (B - I)_{:u} J_c[:, u]^T`; `(J_c^T)^+ (I - P) = (J_c^T)^+` and
-/// `Mbar P = M M_c^{-1} P`, so `rho = (J_c^T)^+ (M (M_c^{-1} P) S Y - S Y)` with `M` by blocks.
+/// `Y = J_c^T + (B - I)_{:u} J_c[:, u]^T` (eq. bmatrix), where robot `r`'s feet rows of `J_c`
+/// meet only its own unactuated columns; `(J_c^T)^+ (I - P) = (J_c^T)^+` and
+/// `Mbar P = M M_c^{-1} P`, so `rho = (J_c^T)^+ (Mbar P S Y - S Y)` with both operators by
+/// blocks ([`crate::units::block_projection`]).
 fn rho_by_blocks(team: &Team, proj: &Projections, j_c: &DMatrix<f64>, ws: &mut ContactMapScratch, y: &mut DMatrix<f64>, rho: &mut DMatrix<f64>) {
-    let (n, m, s) = (team.n, j_c.nrows(), &team.s_diag);
-    let nu = s.iter().filter(|x| **x == 0.0).count();
-    zeros(&mut ws.b_u, n, nu);
-    zeros(&mut ws.jc_u, m, nu);
-    for (c, j) in (0..n).filter(|&j| s[j] == 0.0).enumerate() {
-        ws.b_u.column_mut(c).copy_from(&proj.b.column(j));
-        ws.b_u[(j, c)] -= 1.0;
+    let (n, m, f) = (team.n, j_c.nrows(), &proj.blocks);
+    let unact = f.b_minus_i_u(&mut ws.b_u);
+    zeros(&mut ws.jc_u, m, unact.len());
+    for (c, &j) in unact.iter().enumerate() {
         ws.jc_u.column_mut(c).copy_from(&j_c.column(j));
     }
     zeros(y, n, m);
     j_c.transpose_to(y);
-    add_product(y, 1.0, mat(&ws.b_u), mat(&ws.jc_u).transpose()); // Y = B J_c^T
-    scaled_rows(y, s, &mut ws.sy);
-    product(&mut ws.t_a, mat(&proj.mcinv_p), mat(&ws.sy)); // M_c^{-1} P S Y
-    zeros(&mut ws.t_b, n, m);
-    ws.t_b -= &ws.sy;
-    for r in &team.robots {
-        let (o, k) = (r.offset, r.nv);
-        let m_blk = mat(&team.mass).submatrix(o, o, k, k);
-        gemm(mat_mut(&mut ws.t_b).subrows_mut(o, k), 1.0, 1.0, m_blk, mat(&ws.t_a).subrows(o, k));
+    for ((f0, nf), (u0, nu)) in f.feet_and_unactuated() {
+        let jc_u = mat(&ws.jc_u).submatrix(f0, u0, nf, nu);
+        gemm(mat_mut(y).subcols_mut(f0, nf), 1.0, 1.0, mat(&ws.b_u).subcols(u0, nu), jc_u.transpose());
     }
-    product(rho, mat(&proj.jct_pinv), mat(&ws.t_b));
+    let nf3 = f.rows().1;
+    gemm(mat_mut(y).subcols_mut(nf3, m - nf3), 1.0, 1.0, mat(&ws.b_u), mat(&ws.jc_u).subrows(nf3, m - nf3).transpose());
+    scaled_rows(y, &team.s_diag, &mut ws.sy);
+    zeros(&mut ws.t_a, n, m);
+    f.apply(BlockOp::MbarP, mat(&ws.sy), mat_mut(&mut ws.t_a), &mut ws.ops); // Mbar P S Y
+    ws.t_a -= &ws.sy;
+    zeros(rho, m, m);
+    f.jct_pinv_apply(mat(&ws.t_a), mat_mut(rho), &mut ws.ops);
 }
 
 /// `out = diag(s) y`.
 fn scaled_rows(y: &DMatrix<f64>, s: &DVector<f64>, out: &mut DMatrix<f64>) {
     zeros(out, y.nrows(), y.ncols());
-    out.copy_from(y);
-    for i in 0..y.nrows() {
-        out.row_mut(i).scale_mut(s[i]);
+    // Column by column over the storage (row views are strided).
+    let n = y.nrows();
+    for (dst, src) in out.as_mut_slice().chunks_exact_mut(n.max(1)).zip(y.as_slice().chunks_exact(n.max(1))) {
+        for ((d, x), si) in dst.iter_mut().zip(src).zip(s.as_slice()) {
+            *d = x * si;
+        }
     }
 }
 
@@ -155,7 +159,7 @@ pub fn contact_wrenches(inp: &WrenchInput, sent: Actuation, ws: &mut ContactMapS
             ws.u.copy_from(tau);
             ws.u.component_mul_assign(&team.s_diag);
             ws.u += *load; // S tau + J_x^T F_x
-            proj.contact_wrench(&team.bias, &ws.u, lambda, &mut ws.t1, &mut ws.t2);
+            proj.contact_wrench(team, &ws.u, lambda, &mut ws.wrench);
         }
         Actuation::ContactForces(f_c) => {
             lambda.copy_from(*eta);
