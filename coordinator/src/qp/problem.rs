@@ -9,8 +9,10 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::rows::{contact_rows, ContactKind};
-use crate::linalg::{gemm, mat, mat_mut, zeros, zeros_v};
+use faer::MatRef;
+
+use super::rows::{contact_rows, ContactKind, MAX_CONTACT_ROWS};
+use crate::linalg::{gemm, mat, mat_mut, shape, zeros, zeros_v};
 
 /// The QP's data.
 pub struct QpInput<'a> {
@@ -40,30 +42,26 @@ pub fn constraints_into(inp: &QpInput, a: &mut DMatrix<f64>, b: &mut DVector<f64
     let m = inp.rho.ncols();
     let nc: usize = inp.contacts.iter().map(|(_, k)| contact_rows(k).len()).sum();
     let l = inp.actuated.len();
-    zeros(a, nc + 2 * l, m);
+    // Every entry is written below: the contacts' rows by one product each, the torque rows
+    // by copies.
+    shape(a, nc + 2 * l, m);
     zeros_v(b, nc + 2 * l);
-    // Column by column (both matrices are column-major): row i of contact k is
-    // -(c^T rho[start.., :]), its column j reads rho's column j at the contact's rows.
+    // Contact k's rows: c . (rho F + eta)_k >= lo  <=>  -(C_k rho_k) F <= C_k eta_k - lo, with
+    // C_k its rows' coefficients (r x dim) and rho_k its dim rows of rho.
+    let mut c = [0.0; MAX_CONTACT_ROWS * 6];
     let mut i = 0;
     for (start, kind) in inp.contacts {
         let rows = contact_rows(kind);
-        let dim = kind.dim();
-        for (k, (c, lo)) in rows.iter().enumerate() {
-            // c.(rho F + eta) >= lo  <=>  -(c^T rho) F <= c.eta - lo
-            b[i + k] = c.iter().zip(inp.eta.rows(*start, dim).iter()).map(|(cr, e)| cr * e).sum::<f64>() - lo;
-        }
-        for j in 0..m {
-            let rc = inp.rho.view((*start, j), (dim, 1));
-            let col = &mut a.column_mut(j);
-            for (k, (c, _)) in rows.iter().enumerate() {
-                let mut v = 0.0;
-                for (cr, x) in c.iter().zip(rc.iter()) {
-                    v -= cr * x;
-                }
-                col[i + k] = v;
+        let (r, dim) = (rows.len(), kind.dim());
+        for (k, (cr, lo)) in rows.iter().enumerate() {
+            b[i + k] = cr.iter().zip(inp.eta.rows(*start, dim).iter()).map(|(x, e)| x * e).sum::<f64>() - lo;
+            for (d, x) in cr.iter().enumerate() {
+                c[d * r + k] = *x;
             }
         }
-        i += rows.len();
+        let ck = MatRef::from_column_major_slice(&c[..r * dim], r, dim);
+        gemm(mat_mut(a).submatrix_mut(i, 0, r, m), 0.0, -1.0, ck, mat(inp.rho).submatrix(*start, 0, dim, m));
+        i += r;
     }
     for (k, (&j, &lim)) in inp.actuated.iter().zip(inp.limits).enumerate() {
         b[nc + 2 * k] = lim - inp.tau0[j];
