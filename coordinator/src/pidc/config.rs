@@ -53,8 +53,9 @@ pub struct PidcConfig {
     /// With `dense_qp`: try the dual active-set method (`qp::DualActiveSet`, hot-started from
     /// the previous tick's active rows) before the dense interior-point method: the same
     /// forces to the interior point's tolerance, 7 times faster for eight robots. On by
-    /// default since the release lets go at half its slip limit while the QP fails
-    /// (`units::release::SLIP_WHILE_FAILING`): before that, `tests/tests/degrade.rs`'s
+    /// default since the release lets go at half its slip limit once the QP has failed 10
+    /// ticks in a row (`units::release::SLIP_WHILE_FAILING`, `SLIP_WHILE_FAILING_TICKS`):
+    /// before that, `tests/tests/degrade.rs`'s
     /// 300 N push kept the team standing only with the interior point's 1e-7 answers.
     pub active_set_qp: bool,
     /// `S = I` (treat the base as actuated): the [Lin2018] comparison only.
