@@ -315,7 +315,8 @@ pub struct SpdInverse {
 
 impl SpdInverse {
     /// `out = a^{-1}` (`a` square, symmetric: its lower triangle is read). `None` when `a` is
-    /// not positive definite or its pivots fail [`SPD_TOL`]. A 0 x 0 `a` gives a 0 x 0 `out`.
+    /// not positive definite or its pivots fail [`SPD_TOL`]; `out` is then `n x n` with
+    /// unspecified contents. A 0 x 0 `a` gives a 0 x 0 `out`.
     pub fn compute(&mut self, a: MatRef<'_, f64>, out: &mut DMatrix<f64>) -> Option<()> {
         let n = a.nrows();
         // `l`'s lower triangle is written below, `x` by lower_inverse, `out` by gemm.
