@@ -13,7 +13,7 @@
 
 use nalgebra::{DMatrix, DVector, Vector6};
 
-use crate::linalg::{add_product, gemm, mat, mat_mut, product, zeros, zeros_v};
+use crate::linalg::{add_product, gemm, mat, mat_mut, product, shape, zeros, zeros_v};
 use crate::team::Team;
 use crate::units::block_projection::{BlockOp, OpScratch};
 use crate::units::grasp::GraspTerms;
@@ -117,8 +117,9 @@ fn rho_by_blocks(team: &Team, proj: &Projections, j_c: &DMatrix<f64>, ws: &mut C
 
 /// `out = diag(s) y`.
 fn scaled_rows(y: &DMatrix<f64>, s: &DVector<f64>, out: &mut DMatrix<f64>) {
-    zeros(out, y.nrows(), y.ncols());
-    // Column by column over the storage (row views are strided).
+    // Every entry is written: shaped, not cleared first. Column by column over the storage
+    // (row views are strided).
+    shape(out, y.nrows(), y.ncols());
     let n = y.nrows();
     for (dst, src) in out.as_mut_slice().chunks_exact_mut(n.max(1)).zip(y.as_slice().chunks_exact(n.max(1))) {
         for ((d, x), si) in dst.iter_mut().zip(src).zip(s.as_slice()) {
