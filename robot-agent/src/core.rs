@@ -50,7 +50,8 @@ pub struct AgentConfig {
     /// How contact sets are switched (touchdown force, feet kept down).
     pub contacts: SwitchConfig,
     /// Robot time over which commands take over from the posture hold (bumpless transfer,
-    /// [`Takeover`]) when they follow it: after safe mode, or after the coordinator's hold orders.
+    /// [`Takeover`]) when they follow it: after safe mode, or after the coordinator's hold orders;
+    /// and over which the hold takes over from the last command when it follows commands.
     pub takeover: Duration,
 }
 
@@ -178,6 +179,9 @@ pub struct AgentCore<S: DynamicsSource> {
     hold: PostureHold,
     /// Commands following the hold blend in from it.
     takeover: Takeover,
+    /// The hold following commands blends in from the last of them (`entry_from`).
+    entry: Takeover,
+    entry_from: Vec<f64>,
     /// What the agent applied last: a command or its own hold.
     last_applied: Apply,
     /// The hold torques while a takeover blends them out.
@@ -237,6 +241,8 @@ impl<S: DynamicsSource> AgentCore<S> {
             watchdog: Watchdog::new(cfg.deadline),
             hold: PostureHold::new(gains, limits),
             takeover: Takeover::new(cfg.takeover),
+            entry: Takeover::new(cfg.takeover),
+            entry_from: Vec::with_capacity(joints),
             last_applied: Apply::Nothing,
             hold_tau: Vec::with_capacity(joints),
             last_command: Vec::with_capacity(joints),
@@ -581,8 +587,14 @@ impl<S: DynamicsSource> AgentCore<S> {
                         // A hold order after commands holds the posture of now.
                         self.latch_hold();
                     }
+                    if self.last_applied == Apply::Command {
+                        // Entering the hold without a jump: from the last command applied.
+                        self.entry_from.clone_from(&self.last_command);
+                        self.entry.start(self.state_time);
+                    }
                     self.takeover.cancel();
                     self.hold.torques(&self.q, &self.qdot, &self.gravity, &mut self.torques.tau);
+                    self.entry.blend(self.state_time, &self.entry_from, &mut self.torques.tau);
                     self.torques.header.tick = tick;
                     self.counters.hold_torques += 1;
                     self.last_applied = Apply::Hold;
@@ -621,7 +633,9 @@ impl<S: DynamicsSource> AgentCore<S> {
             tracing::info!(robot = %self.robot, tick = self.torques.header.tick, over_s = self.takeover.duration(), "commands take over from the posture hold");
         }
         if self.takeover.active() {
+            // The hold as it would apply now (still blending in from a command, if it is).
             self.hold.torques(&self.q, &self.qdot, &self.gravity, &mut self.hold_tau);
+            self.entry.blend(self.state_time, &self.entry_from, &mut self.hold_tau);
             self.takeover.blend(self.state_time, &self.hold_tau, &mut self.torques.tau);
             self.counters.blended += 1;
         }

@@ -34,7 +34,8 @@ pub trait DynamicsSource: Send {
     fn description(&self, team: &str, id: &str) -> Option<RobotDescription>;
     /// Fill `out` (header excepted) with the terms at `state` for `contacts`.
     fn compute(&mut self, state: &RobotState, contacts: &ContactSet, out: &mut protocol::DynamicsTerms) -> Result<(), SourceError>;
-    /// Actuated rows of the generalized gravity `g(q)` at the state of the last successful
+    /// The joint torques that balance gravity at rest, the stance feet carrying the floating
+    /// base ([`crate::standing`]), at the state and contacts of the last successful
     /// [`DynamicsSource::compute`] (zeros before).
     fn actuated_gravity(&self, out: &mut [f64]);
 }
@@ -108,10 +109,8 @@ impl DynamicsSource for ModelDynamics {
     fn compute(&mut self, state: &RobotState, contacts: &ContactSet, out: &mut protocol::DynamicsTerms) -> Result<(), SourceError> {
         self.builder.load_state(&self.robot, state)?;
         self.builder.compute(&self.robot, contacts, out)?;
-        let g = &self.builder.data().g;
-        for (k, &idx) in self.robot.actuated_indices.iter().enumerate() {
-            self.gravity[k] = g[idx];
-        }
+        let g = self.builder.data().g.as_slice();
+        crate::standing::standing_torques(g, self.robot.model.floating_base, &out.frames, &self.robot.actuated_indices, &mut self.gravity);
         Ok(())
     }
 

@@ -31,5 +31,6 @@ pub mod gate;
 pub mod hardware;
 pub mod inspect;
 pub mod safe_mode;
+pub mod standing;
 pub mod status;
 pub mod terms;

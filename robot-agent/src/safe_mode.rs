@@ -10,11 +10,17 @@
 //! ```
 //!
 //! on the actuated joints, where `q_hold` are the joint positions when safe mode was entered,
-//! `g_a(q)` the actuated rows of the model's generalized gravity at the current state, and
+//! `g_a(q)` the joint torques that balance gravity at the current state, the stance feet
+//! carrying the floating base ([`crate::standing`]), and
 //! `tau_c` what the last command applied beyond the robot's own gravity (the hand's squeeze and
 //! the object's weight, the feet's share of them; zero if no command was applied): entering
 //! the hold does not drop the object, and the torque does not jump. It leaves safe mode only on
 //! a valid command whose tick is newer than the latest state tick at entry.
+//!
+//! Entering the hold from commands blends too ([`Takeover`] the other way): for
+//! [`Takeover::duration`] the applied torque moves linearly from the last command to the hold,
+//! `tau = (1 - a) tau_last + a tau_hold`. The hold's damping `-Kd qdot` would otherwise step in
+//! at once: 0.5 N m on an arm joint of S4's circle, a hundred times the carry's own steps.
 //!
 //! Commands then take over without a jump ([`Takeover`], a bumpless transfer): for
 //! [`Takeover::duration`] of robot time the applied torque moves linearly from the posture

@@ -35,6 +35,9 @@ fn agent_config(team: &str, deadline: CommandDeadline) -> AgentConfig {
     cfg.deadline = deadline;
     // Without a time deadline, no age limit that a loaded machine could trip either.
     cfg.max_command_age = deadline.time.unwrap_or(Duration::from_secs(10));
+    // The hold law itself, applied at once: the blends between hold and commands (in robot
+    // time, here the wall clock's) have their own tests in `agent_loop.rs`.
+    cfg.takeover = Duration::ZERO;
     cfg
 }
 

@@ -185,6 +185,15 @@ pub async fn run_with(
             return Err(BridgeError::Stopped);
         }
         watch.check(tick, cfg.coordinator_grace_ticks)?;
+        if watch.take_returned() && cfg.wait_for_coordinator {
+            // As at the start: a tick the coordinator answers before its team has formed is one
+            // it holds, and in lockstep its start-up is not the robots' time.
+            let present: Vec<String> = robots.iter().zip(&lost).filter(|(_, l)| !**l).map(|(r, _)| r.clone()).collect();
+            let status_q = transport::subscribe(session, keys::coordinator_status(&cfg.team)?).await?;
+            coordinator_ready(&status_q, &present, Instant::now(), cfg.start_timeout, &stop).await?;
+            tracing::info!(tick, "the coordinator that came back is ready for the team");
+        }
+        watch.pace_outage(plant.time()).await;
         states.publish(plant, tick).await?;
         got.copy_from_slice(&lost);
         let tick_started = Instant::now();
@@ -299,10 +308,21 @@ enum AgentChange {
 /// again is named to the loop (which ends the run or takes the robot's drives away and back,
 /// [`AgentLoss`]); the coordinator's leaving starts a count of ticks (the agents hold their
 /// posture meanwhile) that ends the run after the grace unless it comes back.
+///
+/// While the coordinator is gone, ticks run no faster than the wall clock
+/// ([`Liveness::pace_outage`]): nothing then waits for a computation (the agents answer each
+/// state with their hold at once), and the outage lasts in simulated time what it lasts on the
+/// machine, a restart included, as it would on robots. Without it the ticks of the hold ran at
+/// several thousand per second, and how far the references had moved on when a restarted
+/// coordinator took over depended on the machine's load.
 struct Liveness {
     members: transport::EventQueue,
     coordinator: transport::EventQueue,
     coordinator_lost: Option<u64>,
+    /// The coordinator came back after an outage (taken by [`Liveness::take_returned`]).
+    returned: bool,
+    /// Wall instant and simulated time at which the outage's pacing started.
+    outage_clock: Option<(Instant, f64)>,
 }
 
 /// What the liveliness queues said.
@@ -314,7 +334,24 @@ enum LivenessEvent {
 
 impl Liveness {
     async fn open(session: &Session, team: &str) -> Result<Self, BridgeError> {
-        Ok(Liveness { members: transport::watch_members(session, team).await?, coordinator: transport::watch_coordinator(session, team).await?, coordinator_lost: None })
+        Ok(Liveness { members: transport::watch_members(session, team).await?, coordinator: transport::watch_coordinator(session, team).await?, coordinator_lost: None, returned: false, outage_clock: None })
+    }
+
+    /// Whether the coordinator came back since the last call.
+    fn take_returned(&mut self) -> bool {
+        std::mem::take(&mut self.returned)
+    }
+
+    /// Before a tick at simulated time `sim_time`: while the coordinator is gone, wait until
+    /// the wall clock has caught up with the simulated time since the outage began.
+    async fn pace_outage(&mut self, sim_time: f64) {
+        if self.coordinator_lost.is_none() {
+            self.outage_clock = None;
+            return;
+        }
+        let (wall0, sim0) = *self.outage_clock.get_or_insert((Instant::now(), sim_time));
+        let due = wall0 + Duration::from_secs_f64((sim_time - sim0).max(0.0));
+        tokio::time::sleep_until(due.into()).await;
     }
 
     async fn next(&self) -> LivenessEvent {
@@ -338,6 +375,7 @@ impl Liveness {
             LivenessEvent::Coordinator(s) if transport::coordinator_alive(&s) => {
                 if let Some(since) = self.coordinator_lost.take() {
                     tracing::info!(since, tick, "the coordinator is back");
+                    self.returned = true;
                 }
             }
             LivenessEvent::Coordinator(_) => {
@@ -395,26 +433,32 @@ pub(crate) async fn wait_for_members(
         }
     }
     if let Some(q) = status_q {
-        let mut last = String::from("no status heard");
-        loop {
-            if *stop.borrow() {
-                return Err(BridgeError::Stopped);
-            }
-            let left = cfg.start_timeout.saturating_sub(started.elapsed());
-            match tokio::time::timeout(left, q.recv_async()).await {
-                Ok(Ok(sample)) => {
-                    let Ok(st) = decode_sample::<protocol::CoordinatorStatus>(&sample) else { continue };
-                    let all = robots.iter().all(|r| st.members.contains(r));
-                    if all && st.mode != protocol::CoordinatorMode::WaitingForMembers {
-                        break;
-                    }
-                    last = format!("members {:?}, mode {:?}: {}", st.members, st.mode, st.detail);
-                }
-                _ => return Err(BridgeError::CoordinatorNotReady { last, waited: cfg.start_timeout }),
-            }
-        }
+        coordinator_ready(&q, robots, started, cfg.start_timeout, stop).await?;
     }
     Ok(())
+}
+
+/// Wait, until `timeout` after `started`, for a coordinator status on `q` that lists every robot
+/// of `robots` as a member and is ready to command them; or fail with the last status heard.
+async fn coordinator_ready(q: &transport::SampleQueue, robots: &[String], started: Instant, timeout: Duration, stop: &watch::Receiver<bool>) -> Result<(), BridgeError> {
+    let mut last = String::from("no status heard");
+    loop {
+        if *stop.borrow() {
+            return Err(BridgeError::Stopped);
+        }
+        let left = timeout.saturating_sub(started.elapsed());
+        match tokio::time::timeout(left, q.recv_async()).await {
+            Ok(Ok(sample)) => {
+                let Ok(st) = decode_sample::<protocol::CoordinatorStatus>(&sample) else { continue };
+                let all = robots.iter().all(|r| st.members.contains(r));
+                if all && st.mode != protocol::CoordinatorMode::WaitingForMembers {
+                    return Ok(());
+                }
+                last = format!("members {:?}, mode {:?}: {}", st.members, st.mode, st.detail);
+            }
+            _ => return Err(BridgeError::CoordinatorNotReady { last, waited: timeout }),
+        }
+    }
 }
 
 /// What the lockstep and real-time loops do around every physics step: take the perturbation

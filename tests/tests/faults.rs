@@ -140,9 +140,16 @@ const MAX_STEP: f64 = 0.4;
 
 /// The largest change of any joint's applied torque from one tick to the next, per robot, over
 /// the ticks `from..to` (recorded torques of consecutive ticks only), with its tick.
+///
+/// A tick's torque is the first the robot's agent sent for it: the one the lockstep bridge
+/// applies. A robot may send more for a tick it has already answered: a coordinator that comes
+/// back catches up through ticks the robot held, and the agent takes its command (for the
+/// state it has now) under the old tick's number, but no drive ever sees it.
 fn largest_step(records: &Records, robot: &str, from: u64, to: u64) -> (f64, u64) {
     let mut by_tick: Vec<&(u64, Vec<f64>)> = records.torques[robot].iter().filter(|(t, _)| (from..to).contains(t)).collect();
+    // Stable: of a tick's torques, the first sent stays first.
     by_tick.sort_by_key(|(t, _)| *t);
+    by_tick.dedup_by_key(|(t, _)| *t);
     let mut worst = (0.0, from);
     for w in by_tick.windows(2) {
         let ((t0, a), (t1, b)) = (w[0], w[1]);
@@ -173,18 +180,20 @@ fn coordinator_restart(distributed: bool, name: &str) {
     let after: Vec<(u64, protocol::QpStatus)> = records.diagnostics.iter().filter(|d| d.header.tick > struck).map(|d| (d.header.tick, d.qp_status)).take(5).collect();
     let resumed = *solved.iter().find(|t| **t >= back).unwrap_or_else(|| panic!("the new coordinator solves ticks; diagnostics after the fault: {after:?}"));
     println!("coordinator killed at tick {struck}, started again at {back}, solving from {resumed}");
-    // Lockstep waits for nobody during the outage (the agents answer with their hold); a new
-    // process meets its agents as they reconnect (up to their 0.5 s retry period).
+    // During the outage lockstep runs at the wall clock's pace (the agents answer with their
+    // hold) and waits for the new coordinator to be ready; a new process meets its agents as
+    // they reconnect (up to their 0.5 s retry period).
     assert!(resumed < back + 1000, "the new coordinator took the team back within a second: tick {resumed}");
     for r in ["r1", "r2"] {
         let ticks: std::collections::BTreeSet<u64> = records.torques[r].iter().map(|(t, _)| *t).collect();
         assert!((plan.references.clock.settle_ticks..plan.total_ticks()).all(|t| ticks.contains(&t)), "{r} applied a torque every tick");
         let normal = largest_step(&records, r, clock.first_tick_at(0.1), struck);
-        let hold = largest_step(&records, r, struck, struck + 20);
+        let hold = largest_step(&records, r, struck.saturating_sub(1), struck + 20);
         let takeover = largest_step(&records, r, resumed.saturating_sub(2), resumed + 200);
         println!("{r}: largest torque step per tick: carrying {:.3} N m (tick {}), entering the hold {:.3} (tick {}), taking over {:.3} (tick {})", normal.0, normal.1, hold.0, hold.1, takeover.0, takeover.1);
-        // Measured: 0.005 N m per tick while carrying; entering the hold 0.010-0.022; taking
-        // over 0.012-0.16 with the agents' blend, 0.65-1.9 without it (takeover set to zero).
+        // Measured: 0.005 N m per tick while carrying; entering the hold 0.007-0.013 with the
+        // agents' blend from the last command (0.53-0.55 without it: the hold's damping stepping
+        // in); taking over 0.010-0.030 with the blend, 0.65-1.9 without it (takeover zero).
         assert!(hold.0 <= MAX_STEP, "{r}: the hold starts where the commands left off: {hold:?} (carrying: {normal:?})");
         assert!(takeover.0 <= MAX_STEP, "{r}: the new coordinator's torques blend in: {takeover:?} (carrying: {normal:?})");
     }
@@ -245,6 +254,7 @@ fn an_agent_restarted_mid_carry_rejoins_the_team_beside_it() {
     assert!(m.object.position_max_m < 0.02, "the object follows its reference within 2 cm: {:.4} m", m.object.position_max_m);
     let t3 = &m.torsos["r3"];
     println!("r3's torso: max {:.4} m, {:.2} deg from its reference", t3.position_max_m, t3.orientation_max_deg);
-    // Measured 2.0 mm, 0.08 deg (with a hold order before its first command: 41 mm, 0.66 deg).
+    // Measured 2.0 mm, 0.08 deg (with a hold order before its first command: 41 mm, 0.66 deg,
+    // before the hold carried the torso on the feet, `robot_agent::standing`).
     assert!(t3.position_max_m < 0.01 && t3.orientation_max_deg < 1.0, "r3 stands throughout (frozen, then commanded)");
 }

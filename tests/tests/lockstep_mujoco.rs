@@ -97,6 +97,49 @@ async fn default_robot_stands_5_s_under_its_agent() {
     assert!((fz - mass * 9.81).abs() < 0.02 * mass * 9.81, "foot forces {fz} N vs weight {} N", mass * 9.81);
 }
 
+/// An agent that never hears from a coordinator holds its robot up by itself: after its
+/// deadline it holds the posture it found, its joints carrying the torso's weight on the four
+/// feet (`robot_agent::standing`), not only the legs' own gravity. The oracle is MuJoCo's
+/// torso height and the contact forces.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_agent_alone_holds_its_robot_standing() {
+    let team = "alone";
+    let session = transport::open(&ZenohArgs::default(), Role::Alone).await.unwrap();
+    let spec = WorldSpec::single("r1");
+    let world = World::build(&spec, &load_robots(&spec).unwrap()).unwrap();
+    let mass = world.robots[0].robot.model.total_mass;
+    let mut plant = MujocoPlant::new(world).unwrap();
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let s2 = session.clone();
+    let rx = stop_rx.clone();
+    let agent = tokio::spawn(async move {
+        let robot = robot_model::Robot::load(robot_model::default_robot_path()).unwrap();
+        agent::run(&s2, AgentConfig::new(team, "r1"), ModelDynamics::new(robot).unwrap(), rx).await
+    });
+    // The first tick waits for the agent's deadline (25 ms); the hold answers every tick after.
+    let mut extras = Extras { recorder: Some(Recorder::new(10)), ..Default::default() };
+    lockstep::run_with(&session, &cfg(team, 2000), &mut plant, &mut extras, stop_rx.clone()).await.unwrap();
+    stop_tx.send(true).unwrap();
+    let counters = agent.await.unwrap().unwrap();
+    assert_eq!((counters.applied, counters.safe_mode_entries), (0, 1), "{counters:?}");
+    let rec = extras.recorder.unwrap();
+    // From the first recorded tick (the robot as the hold found it) to the end of 2 s.
+    let z0 = rec.records[0].torsos[0].pose.position[2];
+    let (mut sink, mut tilt) = (0.0f64, 0.0f64);
+    for g in &rec.records {
+        let t = &g.torsos[0];
+        sink = sink.max(z0 - t.pose.position[2]);
+        tilt = tilt.max(tilt_deg(t.pose.orientation));
+    }
+    eprintln!("the hold alone: torso sank {sink:.4} m, tilted {tilt:.3} deg");
+    // Measured: 0.7 mm, 0.007 deg; with the legs' own gravity only (no feet carrying the torso): 29 mm, 1.2 deg.
+    assert!(sink < 0.005, "the torso sank {sink} m under the hold");
+    assert!(tilt < 1.0, "trunk tilted {tilt} deg");
+    let last = rec.records.last().unwrap();
+    let fz: f64 = last.foot_contacts.iter().map(|c| c.wrench[2]).sum();
+    assert!((fz - mass * 9.81).abs() < 0.02 * mass * 9.81, "foot forces {fz} N vs weight {} N", mass * 9.81);
+}
+
 /// One lockstep run of the pair with the object and the direct-mode test controller;
 /// returns the final MuJoCo state and the recorded torso/object trajectory.
 async fn pair_run(team: &str, seed: u64, ticks: u64) -> (Vec<f64>, Vec<f64>) {

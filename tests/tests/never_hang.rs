@@ -125,6 +125,9 @@ async fn when_the_coordinator_leaves_the_robots_hold_and_the_run_ends_after_the_
         other => panic!("expected CoordinatorLost, got {other}"),
     }
     assert!(gone.elapsed() < Duration::from_secs(20), "took {:?}", gone.elapsed());
+    // The outage runs at the wall clock's pace: the grace's 300 ticks of 1 ms took at least
+    // about 0.3 s (the last is not paced; the holds alone ran at several thousand a second).
+    assert!(gone.elapsed() >= Duration::from_millis(grace * 9 / 10), "the outage's ticks were paced: {:?}", gone.elapsed());
     for a in agents {
         let counters = stop(a).await;
         assert_eq!(counters.safe_mode_entries, 1, "safe mode at once, on the liveliness event");
