@@ -184,7 +184,7 @@ pub struct AgentCore<S: DynamicsSource> {
     entry_from: Vec<f64>,
     /// What the agent applied last: a command or its own hold.
     last_applied: Apply,
-    /// The hold torques while a takeover blends them out.
+    /// The hold torques as they apply now ([`AgentCore::hold_now`]).
     hold_tau: Vec<f64>,
     /// The last command's torque as applied (after clamping and blending), for the load the
     /// hold carries ([`PostureHold::hold_carrying`]).
@@ -593,8 +593,8 @@ impl<S: DynamicsSource> AgentCore<S> {
                         self.entry.start(self.state_time);
                     }
                     self.takeover.cancel();
-                    self.hold.torques(&self.q, &self.qdot, &self.gravity, &mut self.torques.tau);
-                    self.entry.blend(self.state_time, &self.entry_from, &mut self.torques.tau);
+                    self.hold_now();
+                    self.torques.tau.clone_from(&self.hold_tau);
                     self.torques.header.tick = tick;
                     self.counters.hold_torques += 1;
                     self.last_applied = Apply::Hold;
@@ -624,6 +624,13 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
     }
 
+    /// The posture hold as it applies at the latest state, into `hold_tau`: the hold law, still
+    /// blending in from the last command while its entry lasts.
+    fn hold_now(&mut self) {
+        self.hold.torques(&self.q, &self.qdot, &self.gravity, &mut self.hold_tau);
+        self.entry.blend(self.state_time, &self.entry_from, &mut self.hold_tau);
+    }
+
     /// A command about to be applied takes over from the hold without a jump: a command that
     /// follows the hold starts the blend ([`Takeover`]), and while it lasts the command is
     /// blended with the hold torques of the latest state.
@@ -633,9 +640,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             tracing::info!(robot = %self.robot, tick = self.torques.header.tick, over_s = self.takeover.duration(), "commands take over from the posture hold");
         }
         if self.takeover.active() {
-            // The hold as it would apply now (still blending in from a command, if it is).
-            self.hold.torques(&self.q, &self.qdot, &self.gravity, &mut self.hold_tau);
-            self.entry.blend(self.state_time, &self.entry_from, &mut self.hold_tau);
+            self.hold_now();
             self.takeover.blend(self.state_time, &self.hold_tau, &mut self.torques.tau);
             self.counters.blended += 1;
         }
