@@ -441,6 +441,15 @@ async fn enters_safe_mode_by_time_without_new_states() {
     h.stop().await;
 }
 
+/// The blends' tests: safe mode two ticks without a command (ticks only), no age limit a loaded
+/// machine could trip, and a takeover of 20 ms (4 ticks of 5 ms of robot time).
+fn blending(mut c: AgentConfig) -> AgentConfig {
+    c.deadline = CommandDeadline { ticks: 2, time: None };
+    c.max_command_age = Duration::from_secs(5);
+    c.takeover = Duration::from_millis(20);
+    c
+}
+
 /// Entering safe mode from commands blends the other way: over the takeover (20 ms, 4 ticks of
 /// 5 ms) the torque moves linearly from the last command to the hold. The joints move at `qd`,
 /// so the hold (carrying the last command, at the same posture) is `cmd - Kd qd`: its damping
@@ -448,13 +457,7 @@ async fn enters_safe_mode_by_time_without_new_states() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_posture_hold_takes_over_from_the_last_command_without_a_jump() {
     let robot = robot();
-    let mut h = Harness::start("loop6", |mut c| {
-        c.deadline = CommandDeadline { ticks: 2, time: None };
-        c.max_command_age = Duration::from_secs(5);
-        c.takeover = Duration::from_millis(20);
-        c
-    })
-    .await;
+    let mut h = Harness::start("loop6", blending).await;
     let (team, n) = (h.team.clone(), robot.joints());
     let (cmd, qd) = (vec![3.0; n], 0.2);
     let kd = HoldGains::from_torque_limits(&robot.torque_limits).kd;
@@ -488,13 +491,7 @@ async fn the_posture_hold_takes_over_from_the_last_command_without_a_jump() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn commands_take_over_from_the_posture_hold_without_a_jump() {
     let robot = robot();
-    let mut h = Harness::start("loop5", |mut c| {
-        c.deadline = CommandDeadline { ticks: 2, time: None };
-        c.max_command_age = Duration::from_secs(5);
-        c.takeover = Duration::from_millis(20);
-        c
-    })
-    .await;
+    let mut h = Harness::start("loop5", blending).await;
     let (team, n) = (h.team.clone(), robot.joints());
     let cmd = vec![3.0; n];
     for tick in 0..3 {

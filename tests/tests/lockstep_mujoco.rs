@@ -5,13 +5,14 @@
 use std::time::Duration;
 
 use protocol::transport::{self, Role, ZenohArgs};
-use robot_agent::agent::{self, AgentConfig, ModelDynamics};
+use robot_agent::agent::{self, AgentConfig, AgentCounters, AgentError, ModelDynamics};
 use sim_bridge::ground_truth::Recorder;
 use sim_bridge::lockstep::{self, BridgeError, Extras, LockstepConfig};
 use sim_bridge::mujoco_plant::MujocoPlant;
 use sim_bridge::world::{load_robots, World, WorldSpec};
 use team_tests::standing::{self, StandingController, StandingGains};
 use tokio::sync::watch;
+use tokio::task::JoinHandle;
 
 fn cfg(team: &str, ticks: u64) -> LockstepConfig {
     LockstepConfig {
@@ -41,6 +42,15 @@ fn tilt_deg(q: [f64; 4]) -> f64 {
     (1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2])).clamp(-1.0, 1.0).acos().to_degrees()
 }
 
+/// The real agent loop with the default robot's model, on its own task until `stop`.
+fn spawn_agent(session: &zenoh::Session, cfg: AgentConfig, stop: watch::Receiver<bool>) -> JoinHandle<Result<AgentCounters, AgentError>> {
+    let session = session.clone();
+    tokio::spawn(async move {
+        let robot = robot_model::Robot::load(robot_model::default_robot_path()).unwrap();
+        agent::run(&session, cfg, ModelDynamics::new(robot).unwrap(), stop).await
+    })
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn default_robot_stands_5_s_under_its_agent() {
     let team = "stand5";
@@ -55,15 +65,9 @@ async fn default_robot_stands_5_s_under_its_agent() {
     // The real agent loop with the robot's model (it publishes the dynamics terms); the
     // test-side coordinator computes the torques from the robot's own model and sends them as
     // commands, which the agent checks and forwards to the bridge.
-    let s2 = session.clone();
-    let rx = stop_rx.clone();
-    let agent = tokio::spawn(async move {
-        // A generous command deadline: lockstep ticks can be slow on a loaded machine, and safe
-        // mode is not what this test is about.
-        let cfg = AgentConfig::new(team, "r1").with_deadline_time(Duration::from_secs(2));
-        let robot = robot_model::Robot::load(robot_model::default_robot_path()).unwrap();
-        agent::run(&s2, cfg, ModelDynamics::new(robot).unwrap(), rx).await
-    });
+    // A generous command deadline: lockstep ticks can be slow on a loaded machine, and safe
+    // mode is not what this test is about.
+    let agent = spawn_agent(&session, AgentConfig::new(team, "r1").with_deadline_time(Duration::from_secs(2)), stop_rx.clone());
     let s3 = session.clone();
     let rx = stop_rx.clone();
     let coord = tokio::spawn(async move { standing::serve(&s3, team, ctl, false, rx).await });
@@ -110,12 +114,7 @@ async fn an_agent_alone_holds_its_robot_standing() {
     let mass = world.robots[0].robot.model.total_mass;
     let mut plant = MujocoPlant::new(world).unwrap();
     let (stop_tx, stop_rx) = watch::channel(false);
-    let s2 = session.clone();
-    let rx = stop_rx.clone();
-    let agent = tokio::spawn(async move {
-        let robot = robot_model::Robot::load(robot_model::default_robot_path()).unwrap();
-        agent::run(&s2, AgentConfig::new(team, "r1"), ModelDynamics::new(robot).unwrap(), rx).await
-    });
+    let agent = spawn_agent(&session, AgentConfig::new(team, "r1"), stop_rx.clone());
     // The first tick waits for the agent's deadline (25 ms); the hold answers every tick after.
     let mut extras = Extras { recorder: Some(Recorder::new(10)), ..Default::default() };
     lockstep::run_with(&session, &cfg(team, 2000), &mut plant, &mut extras, stop_rx.clone()).await.unwrap();
