@@ -162,7 +162,7 @@ async fn main() -> Result<()> {
                 r.run.sim_time() / r.run.wall_time().as_secs_f64()
             );
             if let PhaseReport::RealTime(rt) = &r.run {
-                println!("real time: ticks without their torques by the deadline {:?}, overruns {}", rt.missed, rt.overruns);
+                println!("real time: ticks without their torques by the deadline {:?}, overruns {}, schedule slipped {:.3} s", rt.missed, rt.overruns, rt.slipped.as_secs_f64());
             }
             session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
         }
@@ -238,7 +238,7 @@ async fn run_world(a: RunArgs, world: sim_bridge::world::World, n: usize) -> Res
     }
     let (sim_time, wall) = match run {
         PhaseReport::RealTime(r) => {
-            println!("real time: {} ticks, missed torques per robot {:?}, {} overruns", r.ticks, r.missed, r.overruns);
+            println!("real time: {} ticks, missed torques per robot {:?}, {} overruns, schedule slipped {:.3} s", r.ticks, r.missed, r.overruns, r.slipped.as_secs_f64());
             (r.sim_time, r.wall_time)
         }
         PhaseReport::Lockstep(r) => {

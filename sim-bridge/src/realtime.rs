@@ -4,6 +4,12 @@
 //! torques (zero before the first), and the miss is counted per robot. Torques of older ticks
 //! that arrive late are taken as the newest available, also counted as misses of the tick.
 //!
+//! A tick that starts behind its schedule (the bridge's own work, or a loaded machine, overran
+//! the period) does not catch up: its deadline is one period from when its states leave, and the
+//! schedule slips by the time lost (reported as [`RealtimeReport::slipped`]). A real robot's state
+//! stream never bursts; catching up would send states back to back with no time to answer them,
+//! every one a miss, and the burst itself loads the machine that fell behind.
+//!
 //! A robot whose torques have not come for [`LockstepConfig::drive_timeout`] (its agent died,
 //! stalled or lost its link) loses its drives as [`crate::lockstep::AgentLoss`] says (frozen
 //! or unpowered); the next torques of a tick in time drive it again.
@@ -33,6 +39,9 @@ pub struct RealtimeReport {
     pub missed: Vec<(String, u64)>,
     /// Ticks whose own work (states, stepping) overran the control period.
     pub overruns: u64,
+    /// Wall-clock time the schedule slipped: ticks that started late were given their whole
+    /// period instead of catching up (the simulation then runs slower than the wall clock).
+    pub slipped: Duration,
     pub rejected_torques: u64,
     /// Per robot (plant order): times its drives were lost for want of torques.
     pub drive_losses: Vec<(String, u64)>,
@@ -62,12 +71,20 @@ pub async fn run(
     let mut drive_losses = vec![0u64; robots.len()];
     let mut overruns = 0u64;
     let mut rejected = 0u64;
+    let mut slipped = Duration::ZERO;
     let started = Instant::now();
+    let mut due = started;
     for tick in extras.first_tick..extras.first_tick + cfg.ticks {
         if *stop.borrow() {
             return Err(BridgeError::Stopped);
         }
-        let deadline = started + period.mul_f64((tick - extras.first_tick + 1) as f64);
+        let now = Instant::now();
+        if now > due + SLIP_TOLERANCE {
+            slipped += now - due;
+            due = now;
+        }
+        let deadline = due + period;
+        due = deadline;
         states.publish(plant, tick).await?;
         let sent = Instant::now();
         got.iter_mut().for_each(|g| *g = false);
@@ -170,6 +187,11 @@ pub async fn run(
         drive_losses: robots.iter().cloned().zip(drive_losses).collect(),
         missed: robots.into_iter().zip(missed).collect(),
         overruns,
+        slipped,
         rejected_torques: rejected,
     })
 }
+
+/// How late a tick may start and still keep its place in the schedule (its deadline one period
+/// after it was due); later, the schedule slips.
+const SLIP_TOLERANCE: Duration = Duration::from_micros(200);
