@@ -12,6 +12,7 @@
 //!   the team's capacity (`team capacity`).
 //! * [`grasp_plan`]: where the hands start: flat on the object's faces (arm IK from `robot_model::ik`).
 //! * [`run`]: `team run`: the scenario with the whole stack, embedded or distributed.
+//! * [`priority`]: a real-time run's scheduling priority (raised where permitted).
 //! * [`driver`]: the runner's participant during a run: references out, records in, progress.
 //! * [`compare`]: controllers side by side on the same scenarios (experiment S3) and the motion
 //!   sweep; [`compare_plot`] draws its object-Z figure.
@@ -40,6 +41,7 @@ pub mod launch;
 pub mod loop_timing;
 pub mod metrics;
 pub mod plan;
+pub mod priority;
 pub mod plots;
 pub mod processes;
 pub mod record;

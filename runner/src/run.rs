@@ -159,6 +159,9 @@ pub fn run_recorded_secure(
 /// Launch the team in `mode`, drive the scenario until the bridge ends it, stop everything.
 /// With a `recorder`, the driver and the recorder's subscriptions feed it.
 pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &Mode, recorder: Option<&Recorder>) -> Result<Records, RunError> {
+    if plan.scene.realtime {
+        crate::priority::raise_for_realtime();
+    }
     let (launch, bridge) = launch_of(plan);
     let started = Instant::now();
     let mut running = launch.start(mode).await?;
