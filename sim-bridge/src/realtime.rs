@@ -5,10 +5,12 @@
 //! that arrive late are taken as the newest available, also counted as misses of the tick.
 //!
 //! A tick that starts behind its schedule (the bridge's own work, or a loaded machine, overran
-//! the period) does not catch up: its deadline is one period from when its states leave, and the
-//! schedule slips by the time lost (reported as [`RealtimeReport::slipped`]). A real robot's state
-//! stream never bursts; catching up would send states back to back with no time to answer them,
-//! every one a miss, and the burst itself loads the machine that fell behind.
+//! the period) still gives the robots most of a period to answer ([`MIN_WINDOW`]): the schedule
+//! catches up a little each tick, and when it has fallen a whole period behind it slips instead
+//! (reported as [`RealtimeReport::slipped`]; the simulation then runs slower than the wall
+//! clock). A real robot's state stream never bursts; catching up at once sent states back to
+//! back with no time to answer them, every one a miss, and the burst loaded the machine that
+//! had fallen behind.
 //!
 //! A robot whose torques have not come for [`LockstepConfig::drive_timeout`] (its agent died,
 //! stalled or lost its link) loses its drives as [`crate::lockstep::AgentLoss`] says (frozen
@@ -39,8 +41,8 @@ pub struct RealtimeReport {
     pub missed: Vec<(String, u64)>,
     /// Ticks whose own work (states, stepping) overran the control period.
     pub overruns: u64,
-    /// Wall-clock time the schedule slipped: ticks that started late were given their whole
-    /// period instead of catching up (the simulation then runs slower than the wall clock).
+    /// Wall-clock time the schedule slipped: ticks that started more than a period late were
+    /// rescheduled from when they started (the simulation ran slower than the wall clock).
     pub slipped: Duration,
     pub rejected_torques: u64,
     /// Per robot (plant order): times its drives were lost for want of torques.
@@ -79,12 +81,12 @@ pub async fn run(
             return Err(BridgeError::Stopped);
         }
         let now = Instant::now();
-        if now > due + SLIP_TOLERANCE {
+        if now > due + period {
             slipped += now - due;
             due = now;
         }
-        let deadline = due + period;
-        due = deadline;
+        let deadline = (due + period).max(now + period.mul_f64(MIN_WINDOW));
+        due += period;
         states.publish(plant, tick).await?;
         let sent = Instant::now();
         got.iter_mut().for_each(|g| *g = false);
@@ -165,11 +167,11 @@ pub async fn run(
             }
         }
         side.step(plant, &cfg.team, tick, extras).await?;
-        // Pace: wait for the end of the period (the torques may all have come early).
-        if Instant::now() > deadline {
+        // Pace: wait for the next tick's start (the torques may all have come early).
+        if Instant::now() > due {
             overruns += 1;
         }
-        while let Some(left) = deadline.checked_duration_since(Instant::now()).filter(|d| !d.is_zero()) {
+        while let Some(left) = due.checked_duration_since(Instant::now()).filter(|d| !d.is_zero()) {
             if left > Duration::from_millis(2) {
                 tokio::time::sleep(left - Duration::from_millis(1)).await;
             } else {
@@ -192,6 +194,6 @@ pub async fn run(
     })
 }
 
-/// How late a tick may start and still keep its place in the schedule (its deadline one period
-/// after it was due); later, the schedule slips.
-const SLIP_TOLERANCE: Duration = Duration::from_micros(200);
+/// The least time a tick gives the robots to answer, in control periods: a tick that starts
+/// late has its deadline at least this long after its states leave.
+pub const MIN_WINDOW: f64 = 0.75;
