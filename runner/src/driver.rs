@@ -105,6 +105,9 @@ pub struct Driver {
     tapped_refs: u64,
 }
 
+/// How long the driver waits after the last tick for its copies of the torques the bridge took.
+pub const FINAL_GRACE: Duration = Duration::from_millis(500);
+
 /// Samples each of the driver's recording queues holds.
 pub const RECORD_QUEUE: usize = 1 << 15;
 
@@ -190,6 +193,30 @@ impl Driver {
         self.contact_sets.truncate(self.next_contact);
         self.contact_sets.extend(halt);
         self.publish_contacts(u64::MAX).await
+    }
+
+    /// The robots whose torques of the last tick the bridge took (its loop timing says so in
+    /// real time) have them in the records too: the driver's copies come by another route and
+    /// can still be in flight (a retransmission on a lossy link). Waits at most [`FINAL_GRACE`].
+    async fn await_last_torques(&mut self, rec: &mut Records, settle: u64) {
+        let Some(last) = rec.truth.last() else { return };
+        let tick = last.header.tick;
+        let mut waiting: Vec<String> = last.loop_timing.iter().filter(|t| t.latency_us.is_some()).map(|t| t.robot.clone()).collect();
+        let until = tokio::time::Instant::now() + FINAL_GRACE;
+        loop {
+            waiting.retain(|r| !rec.torques.get(r).is_some_and(|v| v.iter().any(|(t, _)| *t == tick)));
+            if waiting.is_empty() {
+                return;
+            }
+            match tokio::time::timeout_at(until, self.torques.recv_async()).await {
+                Ok(Ok(sample)) => rec.take_torques(&sample, settle, self.tap.as_ref()),
+                Ok(Err(_)) => return,
+                Err(_) => {
+                    tracing::warn!(tick, robots = ?waiting, "the last tick's torques, taken by the bridge, never reached the driver");
+                    return;
+                }
+            }
+        }
     }
 
     /// Run until the ground truth of the last tick arrived, or `stop` turns true.
@@ -286,6 +313,7 @@ impl Driver {
                 }
             }
         }
+        self.await_last_torques(&mut rec, settle).await;
         // Whatever else already arrived (torques and diagnostics of the last ticks).
         while let Ok(Some(sample)) = self.torques.try_recv() {
             rec.take_torques(&sample, settle, self.tap.as_ref());
