@@ -2,9 +2,9 @@
 # The control rates a team keeps against the wall clock: runs each scenario with `team run
 # --realtime` at each rate (embedded, whole stack, MuJoCo in the loop) and prints, per run, the
 # deadline misses of the worst robot, the state-to-torque latency, the coordinator's tick and
-# whether every acceptance check passed, and the real-time factor: a tick that starts late gets
-# its whole period and the schedule slips, so a run whose factor is well below 1 did not keep
-# the rate. The highest rate with zero misses and a factor near 1 is the figure the README
+# whether every acceptance check passed, and the real-time factor: a loop that falls a whole
+# period behind slips its schedule, so a run whose factor is well below 1 did not keep the
+# rate. The highest rate with zero misses and a factor near 1 is the figure the README
 # reports; take it on an idle machine (name the machine and its load).
 #
 #   ./scripts/realtime-sweep.sh                      # 2, 4 and 8 robots at 125, 250, 500, 1000 Hz, 5 s each

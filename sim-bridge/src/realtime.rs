@@ -5,8 +5,8 @@
 //! that arrive late are taken as the newest available, also counted as misses of the tick.
 //!
 //! A tick that starts behind its schedule (the bridge's own work, or a loaded machine, overran
-//! the period) still gives the robots most of a period to answer ([`MIN_WINDOW`]): the schedule
-//! catches up a little each tick, and when it has fallen a whole period behind it slips instead
+//! the period) still gives the robots most of a period to answer ([`MIN_WINDOW`]), and when it
+//! has fallen a whole period behind the schedule slips instead
 //! (reported as [`RealtimeReport::slipped`]; the simulation then runs slower than the wall
 //! clock). A real robot's state stream never bursts; catching up at once sent states back to
 //! back with no time to answer them, every one a miss, and the burst loaded the machine that
@@ -39,7 +39,7 @@ pub struct RealtimeReport {
     pub wall_time: Duration,
     /// Per robot (plant order): ticks stepped without that tick's torques.
     pub missed: Vec<(String, u64)>,
-    /// Ticks whose own work (states, stepping) overran the control period.
+    /// Ticks that ended (torques taken, physics stepped) after the next tick was due.
     pub overruns: u64,
     /// Wall-clock time the schedule slipped: ticks that started more than a period late were
     /// rescheduled from when they started (the simulation ran slower than the wall clock).
@@ -73,20 +73,13 @@ pub async fn run(
     let mut drive_losses = vec![0u64; robots.len()];
     let mut overruns = 0u64;
     let mut rejected = 0u64;
-    let mut slipped = Duration::ZERO;
     let started = Instant::now();
-    let mut due = started;
+    let mut schedule = Schedule::new(started, period);
     for tick in extras.first_tick..extras.first_tick + cfg.ticks {
         if *stop.borrow() {
             return Err(BridgeError::Stopped);
         }
-        let now = Instant::now();
-        if now > due + period {
-            slipped += now - due;
-            due = now;
-        }
-        let deadline = (due + period).max(now + period.mul_f64(MIN_WINDOW));
-        due += period;
+        let deadline = schedule.start_tick(Instant::now());
         states.publish(plant, tick).await?;
         let sent = Instant::now();
         got.iter_mut().for_each(|g| *g = false);
@@ -168,10 +161,10 @@ pub async fn run(
         }
         side.step(plant, &cfg.team, tick, extras).await?;
         // Pace: wait for the next tick's start (the torques may all have come early).
-        if Instant::now() > due {
+        if Instant::now() > schedule.due {
             overruns += 1;
         }
-        while let Some(left) = due.checked_duration_since(Instant::now()).filter(|d| !d.is_zero()) {
+        while let Some(left) = schedule.due.checked_duration_since(Instant::now()).filter(|d| !d.is_zero()) {
             if left > Duration::from_millis(2) {
                 tokio::time::sleep(left - Duration::from_millis(1)).await;
             } else {
@@ -189,11 +182,101 @@ pub async fn run(
         drive_losses: robots.iter().cloned().zip(drive_losses).collect(),
         missed: robots.into_iter().zip(missed).collect(),
         overruns,
-        slipped,
+        slipped: schedule.slipped,
         rejected_torques: rejected,
     })
 }
 
 /// The least time a tick gives the robots to answer, in control periods: a tick that starts
-/// late has its deadline at least this long after its states leave.
+/// late has its deadline at least this long after it starts (its states leave then).
 pub const MIN_WINDOW: f64 = 0.75;
+
+/// When ticks are due and when their torques are: one period apart, no window for torques
+/// shorter than [`MIN_WINDOW`] periods, slipping once a whole period behind.
+#[derive(Debug, Clone, Copy)]
+pub struct Schedule {
+    period: Duration,
+    /// When the next tick is due to start.
+    pub due: Instant,
+    /// Time given up to slips so far.
+    pub slipped: Duration,
+}
+
+impl Schedule {
+    pub fn new(start: Instant, period: Duration) -> Self {
+        Schedule { period, due: start, slipped: Duration::ZERO }
+    }
+
+    /// A tick starts at `now`: its deadline for torques. Advances [`Schedule::due`] to the next.
+    pub fn start_tick(&mut self, now: Instant) -> Instant {
+        if now > self.due + self.period {
+            self.slipped += now - self.due;
+            self.due = now;
+        }
+        let deadline = (self.due + self.period).max(now + self.period.mul_f64(MIN_WINDOW));
+        self.due += self.period;
+        deadline
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const P: Duration = Duration::from_millis(8);
+
+    fn ms(x: f64) -> Duration {
+        Duration::from_micros((x * 1e3).round() as u64)
+    }
+
+    #[test]
+    fn on_time_ticks_keep_the_period_and_never_slip() {
+        let t0 = Instant::now();
+        let mut s = Schedule::new(t0, P);
+        for k in 0..100u32 {
+            // Each tick starts within 0.1 ms of when it is due.
+            let now = t0 + P * k + ms(0.1 * f64::from(k % 2));
+            assert_eq!(s.start_tick(now), t0 + P * (k + 1));
+        }
+        assert_eq!(s.slipped, Duration::ZERO);
+    }
+
+    #[test]
+    fn a_late_tick_gets_three_quarters_of_a_period_and_the_schedule_catches_up() {
+        let t0 = Instant::now();
+        let mut s = Schedule::new(t0, P);
+        // Tick 0 starts 5 ms late (of 8): due at 8, answered no earlier than 5 + 6 = 11.
+        assert_eq!(s.start_tick(t0 + ms(5.0)), t0 + ms(11.0));
+        // Ticks then start as soon as the last deadline passed; each gives 6 ms at least and
+        // the lag (3 ms after tick 0) shrinks by 2 ms a tick until it is gone.
+        let mut now = t0 + ms(11.0);
+        let mut windows = Vec::new();
+        for _ in 0..4 {
+            let d = s.start_tick(now);
+            windows.push(d - now);
+            now = d;
+        }
+        assert_eq!(windows, vec![ms(6.0), ms(7.0), P, P]);
+        assert_eq!(s.slipped, Duration::ZERO, "caught up without slipping");
+        assert_eq!(s.due, t0 + P * 5);
+    }
+
+    #[test]
+    fn a_tick_more_than_a_period_late_slips_the_schedule() {
+        let t0 = Instant::now();
+        let mut s = Schedule::new(t0, P);
+        s.start_tick(t0);
+        // Tick 1 was due at 8 ms and starts at 30 ms: 22 ms given up, a whole period to answer.
+        assert_eq!(s.start_tick(t0 + ms(30.0)), t0 + ms(38.0));
+        assert_eq!(s.slipped, ms(22.0));
+        assert_eq!(s.due, t0 + ms(38.0));
+        // No burst: whatever the start times, no window is shorter than MIN_WINDOW periods.
+        let mut now = t0 + ms(38.0);
+        for late in [0.0, 3.0, 9.0, 0.5, 20.0, 7.9] {
+            now += ms(late);
+            let d = s.start_tick(now);
+            assert!(d - now >= P.mul_f64(MIN_WINDOW), "window {:?}", d - now);
+            now = d;
+        }
+    }
+}

@@ -200,11 +200,12 @@ fn a_stalled_agent_is_noticed_at_once_and_the_team_rides_it_through() {
     assert!(cleared >= over && cleared <= over + 10, "fresh terms once the stall was over: {cleared}");
     assert!(records.statuses.iter().all(|st| st.silent.is_empty()), "never left out: the stall is shorter than the silence");
     // The others keep their loop: the bridge waits the whole period for r3's torques and steps
-    // late, and the next tick is then given its whole period (the schedule slips) instead of a
-    // shortened one. Catching up made r1 and r2 miss 9-12 of the stall's 15 ticks.
+    // late, and the next tick still gives them three quarters of a period (MIN_WINDOW).
+    // Catching up at once made r1 and r2 miss 9-12 of the stall's 15 ticks; now 0-1 (0-3 with
+    // two busy loops beside the test).
     for r in ["r1", "r2"] {
         let missed = records.truth.iter().filter(|g| (struck..over).contains(&g.header.tick)).flat_map(|g| &g.loop_timing).filter(|t| t.robot == r && t.latency_us.is_none()).count();
-        assert!(missed as u64 * 4 <= over - struck, "{r} missed {missed} of the stall's {} ticks", over - struck);
+        assert!(missed as u64 * 3 <= over - struck, "{r} missed {missed} of the stall's {} ticks", over - struck);
     }
     let last = records.last_status.as_ref().expect("status");
     assert!(last.reused_terms >= (over - struck) / 2, "its terms were reused while it stalled: {last:?}");
