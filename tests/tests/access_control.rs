@@ -345,3 +345,23 @@ async fn a_whole_team_runs_over_tls_with_the_acl() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--hosts` with `--tls` is refused with an error that says why, before any host is made:
+/// the test hosts' addresses are chosen per run, and certificates name the addresses they
+/// serve (run silently without TLS, it would carry a team's torques in the clear).
+#[test]
+fn test_hosts_with_tls_are_refused_with_a_reason() {
+    use team_runner::run::{self, RunError, RunOptions};
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let s = team_runner::scenario::Scenario::load(repo.join("scenarios/s4_object_circle.toml"), &["duration=0.1".to_string()]).expect("scenario");
+    let plan = team_runner::plan::plan(&s, &repo).expect("plan");
+    let out = std::env::temp_dir().join(format!("hosts-tls-{}", std::process::id()));
+    let result = run::run_recorded_secure(&plan, &RunOptions { distributed: true, hosts: true, progress: false }, Some(&out), &out, None);
+    match result {
+        Err(RunError::Task { what, reason }) => {
+            assert!(what.contains("TLS") && reason.contains("not supported"), "{what}: {reason}");
+        }
+        other => panic!("expected a refusal, got {:?}", other.map(|_| ())),
+    }
+    assert!(!out.exists(), "nothing was written for a refused run");
+}
