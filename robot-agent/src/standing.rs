@@ -49,8 +49,8 @@ pub fn standing_torques(g: &[f64], floating_base: bool, frames: &[FrameTerms], a
     for f in feet() {
         let jb = base_block(&f.jacobian.data, nv);
         let lambda: Vector3<f64> = jb * y;
+        let j = &f.jacobian.data;
         for (o, &i) in out.iter_mut().zip(actuated) {
-            let j = &f.jacobian.data;
             *o -= j[i] * lambda[0] + j[nv + i] * lambda[1] + j[2 * nv + i] * lambda[2];
         }
     }
