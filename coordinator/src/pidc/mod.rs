@@ -31,6 +31,7 @@ use crate::units::impedance::TaskStack;
 use crate::units::projection::ProjectionWorkspace;
 use crate::units::release::{GraspWatch, TickOutcome};
 use crate::{ControllerError, TeamController};
+use stages::by_robot::{decoupled, solve_by_robot, ByRobotScratch};
 use stages::contacts::{contact_jacobian, contact_list, unload_feet};
 use stages::limits::torque_limits;
 use stages::tasks::{task_torque, MotionSpaceTerms, TaskInput, Targets};
@@ -46,6 +47,7 @@ struct Workspace {
     torque: MotionTorqueScratch,
     map: ContactMapScratch,
     qp: QpWorkspace,
+    by_robot: ByRobotScratch,
 }
 
 /// The PIDC team controller (paper §III).
@@ -200,7 +202,8 @@ impl Pidc {
 /// wrenches for the torque sent. When the QP fails and `tau_0` asks more of a joint than its
 /// limit ([`saturate`]: a push, a task far from its target), the QP is solved again with `tau_0`
 /// saturated, so that the contact forces are chosen for a torque the joints can give; then
-/// the least-violation fallback ([`fallback`]). Feet named in `loads` (the references'
+/// the least-violation fallback ([`fallback`]), robot by robot when no grasp couples the
+/// robots ([`stages::by_robot`]). Feet named in `loads` (the references'
 /// unloading ramps) have their normal force bounded. Returns the build and QP times, µs.
 fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMap<String, RobotDescription>, cfg: &PidcConfig, loads: &[FootLoad]) -> Result<(f64, f64), ControllerError> {
     let (mut build_us, mut qp_us) = (0.0, 0.0);
@@ -217,8 +220,7 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
         let t1 = Instant::now();
         // F_c is kept out of the report while the QP reads it (no allocation: an empty vector).
         let mut f_c = std::mem::replace(&mut r.f_c, DVector::zeros(0));
-        let settings = qp::QpSettings { active_set_first: cfg.active_set_qp, ..qp::QpSettings::new(cfg.qp_max_iter, cfg.dense_qp) };
-        r.qp = qp::solve_with(&mut ws.qp, &qp_input(r, cfg), &settings, &mut f_c);
+        r.qp = qp::solve_with(&mut ws.qp, &qp_input(r, cfg), &qp_settings(cfg), &mut f_c);
         r.f_c = f_c;
         build_us += (t1 - t0).as_secs_f64() * 1e6;
         qp_us += t1.elapsed().as_secs_f64() * 1e6;
@@ -229,7 +231,18 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
         saturated = true;
     }
     let mut f_c = std::mem::replace(&mut r.f_c, DVector::zeros(0));
-    let fallback = fallback(&mut ws.qp, &qp_input(r, cfg), cfg.qp_max_iter, r.qp.status, saturated, &mut f_c);
+    let solved = matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved);
+    let fallback = if !solved && decoupled(&r.team) {
+        // No grasp couples the robots: one that cannot be held does not take the others'
+        // QP with it.
+        let t = Instant::now();
+        let by = solve_by_robot(&r.team, &qp_input(r, cfg), &qp_settings(cfg), saturated, &mut ws.by_robot, &mut f_c);
+        qp_us += t.elapsed().as_secs_f64() * 1e6;
+        r.qp = by.outcome;
+        by.fallback
+    } else {
+        fallback(&mut ws.qp, &qp_input(r, cfg), cfg.qp_max_iter, r.qp.status, saturated, &mut f_c)
+    };
     (r.f_c, r.fallback, r.saturated) = (f_c, fallback, saturated);
     // tau = tau_0 + Y F_c (eq. ua_solution), clamped to the limits after a fallback.
     let clamp = r.fallback.is_some().then_some(Clamp { actuated: &r.actuated, limits: &r.limits });
@@ -240,6 +253,11 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
     let wrench = WrenchInput { team: &r.team, proj: &r.proj, load: &r.load, rho: &r.rho, eta: &r.eta };
     contact_wrenches(&wrench, sent, &mut ws.map, &mut r.lambda, &mut r.lambda_real);
     Ok((build_us, qp_us))
+}
+
+/// The QP's settings from the configuration (the active set first when it is on).
+fn qp_settings(cfg: &PidcConfig) -> qp::QpSettings {
+    qp::QpSettings { active_set_first: cfg.active_set_qp, ..qp::QpSettings::new(cfg.qp_max_iter, cfg.dense_qp) }
 }
 
 /// The QP's data from the tick's report (`lambda_real` holds `eta_real` until the QP is solved).

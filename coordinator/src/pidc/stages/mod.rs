@@ -8,11 +8,13 @@
 //! | [`tasks`] | each task's target, the object's load `F_x`, `M_c^{-1} P` terms, `tau_M` | eqs. control_law, joint_space_tau_M, js_dynamics |
 //! | [`wrench`] | the contact map `lambda = rho F_c + eta`, and `lambda` for the torque sent | eqs. relation_between_lambda_and_Fc, constraint_force |
 //! | [`torque`] | `tau_0 = [P S]^+ P tau_M`, the fallback `F_c`, `tau = tau_0 + Y F_c` | eq. ua_solution |
+//! | [`by_robot`] | a team's QP that failed, solved robot by robot when no grasp couples them | eq. wrench_optim2 by blocks |
 //!
 //! Before them run the team's assembly ([`crate::team::Team::assemble_into`]) and the grasp
 //! ([`crate::units::grasp::GraspTracker`]); between them the projections
 //! ([`crate::units::projection::Projections`]) and the contact-force QP ([`crate::qp::solve`]).
 
+pub mod by_robot;
 pub mod contacts;
 pub mod limits;
 pub mod tasks;

@@ -1,0 +1,128 @@
+//! A team that holds nothing is solved robot by robot when its QP fails
+//! (`coordinator::pidc::stages::by_robot`): one robot that cannot be held must not change what
+//! the others are sent. The oracle is each robot alone, a one-robot team with the same terms.
+
+mod common;
+
+use common::{robot_id, Fixture, TEAM};
+use coordinator::pidc::stages::by_robot::{decoupled, solve_by_robot, ByRobotScratch};
+use coordinator::qp::{self, QpInput, QpSettings, QpWorkspace};
+use coordinator::{Pidc, PidcConfig, TeamController};
+use nalgebra::DVector;
+use protocol::{DynamicsTerms, FootLoad, Header, QpStatus, RobotDescription, TaskReferences, TorqueCommand};
+use robot_agent::terms::ContactSet;
+
+/// `count` robots standing, hands free, each perturbed a little (seeded), at rest.
+fn free_team(fx: &mut Fixture, count: usize, seed: u64) -> (Vec<DynamicsTerms>, Vec<RobotDescription>) {
+    let mut rng = common::rng(seed);
+    let nv = fx.robot.model.nv;
+    let free = ContactSet { stance: vec![true; fx.robot.foot_frames.len()], hand_in_grasp: false };
+    let mut terms = Vec::new();
+    let mut descs = Vec::new();
+    for k in 0..count {
+        let q = fx.perturbed_q(k, count, 0.05, &mut rng);
+        terms.push(fx.terms_with(&robot_id(k), &q, &DVector::zeros(nv), 1, &free));
+        descs.push(fx.description(&robot_id(k)));
+    }
+    (terms, descs)
+}
+
+/// References without targets (every task holds the pose it was first seen at).
+fn no_references() -> TaskReferences {
+    TaskReferences { header: Header::new(TEAM, None, 1, 0), object: None, torsos: Vec::new(), swing_feet: Vec::new(), foot_loads: Vec::new() }
+}
+
+/// References that unload every foot of `robots` to `max_normal_force` (a robot that cannot
+/// carry its weight: its QP is infeasible).
+fn unloaded(fx: &Fixture, robots: &[String], max_normal_force: f64) -> TaskReferences {
+    let mut r = no_references();
+    for id in robots {
+        for f in &fx.robot.foot_frames {
+            r.foot_loads.push(FootLoad { robot: id.clone(), frame: f.clone(), max_normal_force });
+        }
+    }
+    r
+}
+
+fn controller(descs: &[RobotDescription], refs: &TaskReferences) -> Pidc {
+    let mut c = Pidc::new(PidcConfig::default());
+    for d in descs {
+        c.set_description(d);
+    }
+    c.set_references(refs);
+    c
+}
+
+/// The torques one tick sends, by robot id.
+fn torques(c: &mut Pidc, tick: &[DynamicsTerms]) -> Vec<TorqueCommand> {
+    let mut out = Vec::new();
+    c.solve(tick, &mut out).expect("tick");
+    out
+}
+
+fn rel_err(a: &[f64], b: &[f64]) -> f64 {
+    let d = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>().sqrt();
+    let s = b.iter().map(|y| y * y).sum::<f64>().sqrt();
+    d / s.max(1.0)
+}
+
+#[test]
+fn one_robot_that_cannot_be_held_leaves_the_others_their_own_solution() {
+    let mut fx = Fixture::new();
+    let (terms, descs) = free_team(&mut fx, 3, 7);
+    // r2's feet may carry at most 5 N each: it cannot stand, its block is infeasible.
+    let refs = unloaded(&fx, &[robot_id(1)], 5.0);
+    let mut team = controller(&descs, &refs);
+    let sent = torques(&mut team, &terms);
+    let report = team.last().expect("tick");
+    assert!(decoupled(&report.team), "free hands: no grasp rows");
+    let note = report.fallback.clone().expect("r2 cannot be held: a fallback");
+    assert!(note.contains("robot by robot") && note.contains("r2:"), "the note names the robot that failed: {note}");
+    assert!(!note.contains("r1:") && !note.contains("r3:"), "r1 and r3 are solved: {note}");
+    assert!(!matches!(report.qp.status, QpStatus::Solved | QpStatus::AlmostSolved), "the worst robot's status is the team's: {:?}", report.qp.status);
+    for k in 0..3 {
+        // The oracle: robot k alone, with the same references.
+        let mut alone = controller(&descs[k..k + 1], &refs);
+        let own = torques(&mut alone, &terms[k..k + 1]);
+        let alone_fell_back = alone.last().expect("tick").fallback.is_some();
+        assert_eq!(alone_fell_back, k == 1, "robot {k} alone: a fallback only for r2");
+        let err = rel_err(&sent[k].tau, &own[0].tau);
+        assert!(err < 1e-6, "robot {} in the team is sent what it would be alone: relative difference {err:.2e}", robot_id(k));
+    }
+}
+
+#[test]
+fn blocks_solved_alone_give_the_team_qps_optimum() {
+    // Every robot holdable: the team's QP and the blocks' have the same unique optimum
+    // (the objective is strictly convex), so the blocks are checked against the team's QP.
+    let mut fx = Fixture::new();
+    for (count, seed) in [(2, 1), (3, 2), (4, 3)] {
+        let (terms, descs) = free_team(&mut fx, count, seed);
+        let mut c = controller(&descs, &no_references());
+        c.compute(&terms).expect("tick");
+        let r = c.last().expect("tick");
+        assert!(r.fallback.is_none(), "{count} robots standing: the team's QP is solved");
+        // Without a grasp the real wrenches' offset is eta itself (no hand carries G^+ F_x).
+        let inp = QpInput { y: &r.y, rho: &r.rho, eta: &r.eta, contacts: &r.contacts, actuated: &r.actuated, limits: &r.limits, tau0: &r.tau0, regularisation: PidcConfig::default().regularisation, dense_first: true };
+        let settings = QpSettings::new(200, true);
+        let (mut f_team, mut f_blocks) = (DVector::zeros(0), DVector::zeros(0));
+        let team = qp::solve_with(&mut QpWorkspace::default(), &inp, &settings, &mut f_team);
+        assert_eq!(team.status, QpStatus::Solved);
+        let by = solve_by_robot(&r.team, &inp, &settings, false, &mut ByRobotScratch::default(), &mut f_blocks);
+        assert_eq!(by.outcome.status, QpStatus::Solved, "{count} robots");
+        assert!(by.fallback.is_none(), "{count} robots: {:?}", by.fallback);
+        let err = rel_err(f_blocks.as_slice(), f_team.as_slice());
+        assert!(err < 1e-6, "{count} robots: F_c by blocks against the team's QP, relative {err:.2e}");
+    }
+}
+
+#[test]
+fn a_team_in_grasp_is_not_split() {
+    let mut fx = Fixture::new();
+    let (terms, descs) = fx.static_team(2);
+    let mut c = controller(&descs, &no_references());
+    c.compute(&terms).expect("tick");
+    let r = c.last().expect("tick");
+    assert!(!r.team.hands.is_empty());
+    assert!(!decoupled(&r.team), "the grasp couples the robots");
+}
