@@ -5,11 +5,11 @@
 mod common;
 
 use common::{robot_id, Fixture, TEAM};
-use coordinator::pidc::stages::by_robot::{decoupled, solve_by_robot, ByRobotScratch};
+use coordinator::pidc::stages::by_robot::{decoupled, ByRobotScratch};
 use coordinator::qp::{self, QpInput, QpSettings, QpWorkspace};
 use coordinator::{Pidc, PidcConfig, TeamController};
-use nalgebra::DVector;
-use protocol::{DynamicsTerms, FootLoad, Header, QpStatus, RobotDescription, TaskReferences, TorqueCommand};
+use nalgebra::{DVector, UnitQuaternion, Vector3};
+use protocol::{DynamicsTerms, FootLoad, Header, Pose, PoseReference, QpStatus, RobotDescription, TaskReferences, TorqueCommand, TorsoReference};
 use robot_agent::terms::ContactSet;
 
 /// `count` robots standing, hands free, each perturbed a little (seeded), at rest.
@@ -66,29 +66,57 @@ fn rel_err(a: &[f64], b: &[f64]) -> f64 {
     d / s.max(1.0)
 }
 
+/// Runs `refs` on the team and on each robot alone: each robot must be sent what it is sent
+/// alone, and the note names exactly the robots that fall back alone. Returns the note.
+fn check_against_alone(terms: &[DynamicsTerms], descs: &[RobotDescription], refs: &TaskReferences) -> String {
+    let mut team = controller(descs, refs);
+    let sent = torques(&mut team, terms);
+    let report = team.last().expect("tick");
+    assert!(decoupled(&report.team), "free hands: no grasp rows");
+    let note = report.fallback.clone().expect("a robot cannot be held: a fallback");
+    assert!(note.contains("robot by robot"), "{note}");
+    assert!(!matches!(report.qp.status, QpStatus::Solved | QpStatus::AlmostSolved), "the worst robot's status is the team's: {:?}", report.qp.status);
+    for k in 0..terms.len() {
+        // The oracle: robot k alone (a one-robot team takes the team's path), same references.
+        let mut alone = controller(&descs[k..k + 1], refs);
+        let own = torques(&mut alone, &terms[k..k + 1]);
+        let alone_fell_back = alone.last().expect("tick").fallback.is_some();
+        let id = robot_id(k);
+        assert_eq!(note.contains(&format!("{id}:")), alone_fell_back, "{id}: named in the note exactly when it falls back alone: {note}");
+        let err = rel_err(&sent[k].tau, &own[0].tau);
+        assert!(err < 1e-6, "{id} in the team is sent what it would be sent alone: relative difference {err:.2e}");
+    }
+    note
+}
+
 #[test]
 fn one_robot_that_cannot_be_held_leaves_the_others_their_own_solution() {
     let mut fx = Fixture::new();
     let (terms, descs) = free_team(&mut fx, 3, 7);
     // r2's feet may carry at most 5 N each: it cannot stand, its block is infeasible.
-    let refs = unloaded(&fx, &[robot_id(1)], 5.0);
-    let mut team = controller(&descs, &refs);
-    let sent = torques(&mut team, &terms);
-    let report = team.last().expect("tick");
-    assert!(decoupled(&report.team), "free hands: no grasp rows");
-    let note = report.fallback.clone().expect("r2 cannot be held: a fallback");
-    assert!(note.contains("robot by robot") && note.contains("r2:"), "the note names the robot that failed: {note}");
-    assert!(!note.contains("r1:") && !note.contains("r3:"), "r1 and r3 are solved: {note}");
-    assert!(!matches!(report.qp.status, QpStatus::Solved | QpStatus::AlmostSolved), "the worst robot's status is the team's: {:?}", report.qp.status);
-    for k in 0..3 {
-        // The oracle: robot k alone, with the same references.
-        let mut alone = controller(&descs[k..k + 1], &refs);
-        let own = torques(&mut alone, &terms[k..k + 1]);
-        let alone_fell_back = alone.last().expect("tick").fallback.is_some();
-        assert_eq!(alone_fell_back, k == 1, "robot {k} alone: a fallback only for r2");
-        let err = rel_err(&sent[k].tau, &own[0].tau);
-        assert!(err < 1e-6, "robot {} in the team is sent what it would be alone: relative difference {err:.2e}", robot_id(k));
-    }
+    let note = check_against_alone(&terms, &descs, &unloaded(&fx, &[robot_id(1)], 5.0));
+    assert!(note.contains("r2:") && !note.contains("r1:") && !note.contains("r3:"), "{note}");
+}
+
+#[test]
+fn only_the_robots_that_fail_are_saturated() {
+    let mut fx = Fixture::new();
+    let (terms, descs) = free_team(&mut fx, 3, 8);
+    // r1's torso is asked 0.4 m sideways at once: its tau_0 is over the joints' limits. r2
+    // cannot stand. r3 stands as it is.
+    let mut refs = unloaded(&fx, &[robot_id(1)], 5.0);
+    let mut probe = controller(&descs, &no_references());
+    probe.compute(&terms).expect("tick");
+    let torso = &probe.last().expect("tick").team.torsos[0];
+    let p = torso.position + Vector3::new(0.0, 0.4, 0.0);
+    let q = UnitQuaternion::from_rotation_matrix(&torso.rotation);
+    let pose = Pose { position: [p.x, p.y, p.z], orientation: [q.w, q.i, q.j, q.k] };
+    refs.torsos.push(TorsoReference { robot: robot_id(0), reference: PoseReference { pose, twist: [0.0; 6], acceleration: [0.0; 6] } });
+    let mut alone = controller(&descs[..1], &refs);
+    alone.compute(&terms[..1]).expect("tick");
+    assert!(alone.last().expect("tick").saturated, "the probe: r1's tau_0 is over its limits");
+    let note = check_against_alone(&terms, &descs, &refs);
+    assert!(note.contains("r1:") && note.contains("r2:") && !note.contains("r3:"), "{note}");
 }
 
 #[test]
@@ -108,9 +136,11 @@ fn blocks_solved_alone_give_the_team_qps_optimum() {
         let (mut f_team, mut f_blocks) = (DVector::zeros(0), DVector::zeros(0));
         let team = qp::solve_with(&mut QpWorkspace::default(), &inp, &settings, &mut f_team);
         assert_eq!(team.status, QpStatus::Solved);
-        let by = solve_by_robot(&r.team, &inp, &settings, false, &mut ByRobotScratch::default(), &mut f_blocks);
+        let mut blocks = ByRobotScratch::default();
+        blocks.solve(&r.team, &inp, &settings, false, &mut f_blocks);
+        let by = blocks.finish(&r.team, &inp, &settings, &mut f_blocks);
         assert_eq!(by.outcome.status, QpStatus::Solved, "{count} robots");
-        assert!(by.fallback.is_none(), "{count} robots: {:?}", by.fallback);
+        assert!(by.fallback.is_none() && !by.saturated, "{count} robots: {:?}", by.fallback);
         let err = rel_err(f_blocks.as_slice(), f_team.as_slice());
         assert!(err < 1e-6, "{count} robots: F_c by blocks against the team's QP, relative {err:.2e}");
     }

@@ -31,7 +31,7 @@ use crate::units::impedance::TaskStack;
 use crate::units::projection::ProjectionWorkspace;
 use crate::units::release::{GraspWatch, TickOutcome};
 use crate::{ControllerError, TeamController};
-use stages::by_robot::{decoupled, solve_by_robot, ByRobotScratch};
+use stages::by_robot::{decoupled, ByRobot, ByRobotScratch};
 use stages::contacts::{contact_jacobian, contact_list, unload_feet};
 use stages::limits::torque_limits;
 use stages::tasks::{task_torque, MotionSpaceTerms, TaskInput, Targets};
@@ -225,7 +225,8 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
         build_us += (t1 - t0).as_secs_f64() * 1e6;
         qp_us += t1.elapsed().as_secs_f64() * 1e6;
         let solved = matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved);
-        if solved || saturated || !saturate(&mut r.tau0, &r.actuated, &r.limits) {
+        // No grasp couples the robots: they take the next steps one by one (below).
+        if solved || saturated || decoupled(&r.team) || !saturate(&mut r.tau0, &r.actuated, &r.limits) {
             break;
         }
         saturated = true;
@@ -233,12 +234,10 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
     let mut f_c = std::mem::replace(&mut r.f_c, DVector::zeros(0));
     let solved = matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved);
     let fallback = if !solved && decoupled(&r.team) {
-        // No grasp couples the robots: one that cannot be held does not take the others'
-        // QP with it.
         let t = Instant::now();
-        let by = solve_by_robot(&r.team, &qp_input(r, cfg), &qp_settings(cfg), saturated, &mut ws.by_robot, &mut f_c);
+        let by = by_robot(r, ws, cfg, &mut f_c);
         qp_us += t.elapsed().as_secs_f64() * 1e6;
-        r.qp = by.outcome;
+        (r.qp, saturated) = (by.outcome, by.saturated);
         by.fallback
     } else {
         fallback(&mut ws.qp, &qp_input(r, cfg), cfg.qp_max_iter, r.qp.status, saturated, &mut f_c)
@@ -253,6 +252,21 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
     let wrench = WrenchInput { team: &r.team, proj: &r.proj, load: &r.load, rho: &r.rho, eta: &r.eta };
     contact_wrenches(&wrench, sent, &mut ws.map, &mut r.lambda, &mut r.lambda_real);
     Ok((build_us, qp_us))
+}
+
+/// The failed QP of a team without a grasp, robot by robot ([`stages::by_robot`]): every
+/// robot's block, then `tau_0` saturated on the robots whose block failed and their blocks
+/// again on the rebuilt contact map (it depends on `tau_0`), then the fallback on those that
+/// still fail.
+fn by_robot(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig, f_c: &mut DVector<f64>) -> ByRobot {
+    let settings = qp_settings(cfg);
+    ws.by_robot.solve(&r.team, &qp_input(r, cfg), &settings, false, f_c);
+    if ws.by_robot.saturate_failed(&r.team, &mut r.tau0, &r.actuated, &r.limits) {
+        let map = MapInput { team: &r.team, proj: &r.proj, j_c: &r.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
+        contact_map(&map, &mut ws.map, &mut r.y, &mut r.rho, &mut r.eta, &mut r.lambda_real);
+        ws.by_robot.solve(&r.team, &qp_input(r, cfg), &settings, true, f_c);
+    }
+    ws.by_robot.finish(&r.team, &qp_input(r, cfg), &settings, f_c)
 }
 
 /// The QP's settings from the configuration (the active set first when it is on).

@@ -2,14 +2,17 @@
 //! `rho` are block-diagonal by robot (eqs. aghili_21, bmatrix, relation_between_lambda_and_Fc),
 //! so robot `k`'s contact forces meet only its own contact rows and torque limits (eqs.
 //! unilateral_and_friction_cone_constraint, real_torque_limit). When the team's QP fails on
-//! such a team, [`solve_by_robot`] solves each robot's block alone and sends a fallback only
-//! to the robots whose block fails.
+//! such a team, [`ByRobotScratch`] takes the degradation steps robot by robot: each block is
+//! solved ([`ByRobotScratch::solve`]); only the robots whose block fails get their `tau_0`
+//! saturated and their block solved again on the rebuilt map
+//! ([`ByRobotScratch::saturate_failed`]), then the least-violation fallback if it still fails
+//! ([`ByRobotScratch::finish`]). A robot whose block is feasible gets its exact optimum.
 //!
 //! Why: solved as one problem, one robot that cannot be held (a torso that is falling, its
 //! rows violated by thousands of newtons) made the whole team's QP infeasible, and every robot
-//! got the least-violation fallback, whose iterations and step choice are the team's: three
-//! robots that had let go of a 2 kg object mid-walk all fell after one of them tipped
-//! (README "Walking while holding", Known limits).
+//! got the least-violation fallback, whose iterations and step choice are the team's
+//! (`tests/by_robot.rs`: a standing robot's torques then differed by 176 % from its own
+//! optimum).
 
 use nalgebra::{DMatrix, DVector};
 use protocol::QpStatus;
@@ -33,76 +36,127 @@ struct BlockData {
     limits: Vec<f64>,
 }
 
-/// A block's data, its forces and its solver's workspace (warm starts stay the robot's own).
+/// A block's data, its forces, its solver's workspace (warm starts stay the robot's own) and
+/// how its last solve went.
 #[derive(Default)]
 struct Block {
     data: BlockData,
     f: DVector<f64>,
     qp: QpWorkspace,
+    /// Its contact variables in `F_c`: `(first, count)`.
+    vars: (usize, usize),
+    out: QpOutcome,
+    /// Its `tau_0` was saturated at the limits ([`ByRobotScratch::saturate_failed`]).
+    saturated: bool,
 }
 
-/// Scratch of [`solve_by_robot`], one block per robot, kept between ticks.
+impl Block {
+    fn solved(&self) -> bool {
+        matches!(self.out.status, QpStatus::Solved | QpStatus::AlmostSolved)
+    }
+}
+
+/// Scratch of the robot-by-robot solve, one block per robot, kept between ticks.
 #[derive(Default)]
 pub struct ByRobotScratch {
     blocks: Vec<Block>,
 }
 
-/// What [`solve_by_robot`] did.
+/// What the robot-by-robot solve did ([`ByRobotScratch::finish`]).
 #[derive(Debug, Clone)]
 pub struct ByRobot {
     /// The worst of the robots' statuses and the sum of their iterations and times.
     pub outcome: QpOutcome,
     /// What was sent instead of a solved QP, robot by robot; `None` when every robot's block
-    /// was solved on an unsaturated `tau_0`.
+    /// was solved on its unsaturated `tau_0`.
     pub fallback: Option<String>,
+    /// Some robot's `tau_0` was saturated at the limits.
+    pub saturated: bool,
 }
 
-/// Whether [`solve_by_robot`] applies: two robots or more and no grasp rows in the QP.
+/// Whether the robot-by-robot solve applies: two robots or more and no grasp rows in the QP.
 pub fn decoupled(team: &Team) -> bool {
     team.robots.len() > 1 && team.hands.is_empty()
 }
 
-/// Solve the team's QP (`inp`, a [`decoupled`] team) robot by robot into `f_c` (m): each
-/// robot's block is solved, and a robot whose block fails gets [`fallback`] on its own
-/// block. `saturated`: `tau_0` was saturated at the limits before (see
-/// [`super::torque::saturate`]).
-pub fn solve_by_robot(team: &Team, inp: &QpInput, settings: &QpSettings, saturated: bool, ws: &mut ByRobotScratch, f_c: &mut DVector<f64>) -> ByRobot {
-    let m = inp.rho.ncols();
-    zeros_v(f_c, m);
-    ws.blocks.resize_with(team.robots.len(), Block::default);
-    let mut outcome = QpOutcome { status: QpStatus::Solved, rows: 0, solver: "by-robot", ..QpOutcome::default() };
-    let mut notes: Vec<String> = Vec::new();
-    let mut foot = 0;
-    for (k, robot) in team.robots.iter().enumerate() {
-        let feet = team.feet[foot..].iter().take_while(|f| f.robot == k).count();
-        let vars = (3 * foot, 3 * feet);
-        foot += feet;
-        let Block { data, f, qp: qp_ws } = &mut ws.blocks[k];
-        data.copy_from(inp, robot.offset, robot.nv, vars);
-        if feet == 0 {
-            // Nothing to choose: tau_0 alone, clamped when it is over a limit.
-            if data.actuated.iter().zip(&data.limits).any(|(&j, &lim)| data.tau0[j].abs() > lim) {
-                notes.push(format!("{}: no stance foot, tau_0 clamped to the torque limits", robot.id));
-            }
-            continue;
+impl ByRobotScratch {
+    /// Solve each robot's block of `inp` (a [`decoupled`] team's QP) into its range of `f_c`
+    /// (m): every block when `retry` is false, else only the blocks whose `tau_0` was just
+    /// saturated (their contact map was built again by the caller).
+    pub fn solve(&mut self, team: &Team, inp: &QpInput, settings: &QpSettings, retry: bool, f_c: &mut DVector<f64>) {
+        if !retry {
+            zeros_v(f_c, inp.rho.ncols());
+            self.blocks.resize_with(team.robots.len(), Block::default);
         }
-        // Saturation changed this robot's tau_0 only if an entry sits at its limit.
-        let saturated = saturated && data.actuated.iter().zip(&data.limits).any(|(&j, &lim)| data.tau0[j].abs() >= lim);
-        let sub = data.input(inp);
-        let out = qp::solve_with(qp_ws, &sub, settings, f);
-        let note = fallback(qp_ws, &sub, settings.max_iter, out.status, saturated, f);
-        f_c.rows_mut(vars.0, vars.1).copy_from(f);
-        outcome.iterations += out.iterations;
-        outcome.solve_us += out.solve_us;
-        outcome.setup_us += out.setup_us;
-        outcome.rows += out.rows;
-        outcome.status = worse(outcome.status, out.status);
-        if let Some(n) = note {
-            notes.push(format!("{}: {n}", robot.id));
+        let mut foot = 0;
+        for (k, robot) in team.robots.iter().enumerate() {
+            let feet = team.feet[foot..].iter().take_while(|f| f.robot == k).count();
+            let b = &mut self.blocks[k];
+            if !retry {
+                b.vars = (3 * foot, 3 * feet);
+                b.saturated = false;
+                b.out = QpOutcome { status: QpStatus::Solved, solver: "by-robot", ..QpOutcome::default() };
+            }
+            foot += feet;
+            if (retry && !b.saturated) || feet == 0 {
+                continue;
+            }
+            b.data.copy_from(inp, robot.offset, robot.nv, b.vars);
+            b.out = qp::solve_with(&mut b.qp, &b.data.input(inp), settings, &mut b.f);
+            f_c.rows_mut(b.vars.0, b.vars.1).copy_from(&b.f);
         }
     }
-    let fallback = (!notes.is_empty()).then(|| format!("solved robot by robot (no grasp couples them); {}", notes.join("; ")));
-    ByRobot { outcome, fallback }
+
+    /// Saturate `tau_0` at the limits on the robots whose block failed (as
+    /// [`super::torque::saturate`] does for the team; a robot without a stance foot has no
+    /// block and is clamped when over); whether any entry changed. Only those robots' blocks
+    /// are solved again.
+    pub fn saturate_failed(&mut self, team: &Team, tau0: &mut DVector<f64>, actuated: &[usize], limits: &[f64]) -> bool {
+        let mut any = false;
+        for (robot, b) in team.robots.iter().zip(&mut self.blocks) {
+            if b.solved() && b.vars.1 > 0 {
+                continue;
+            }
+            let range = robot.offset..robot.offset + robot.nv;
+            for (&j, &lim) in actuated.iter().zip(limits).filter(|(j, _)| range.contains(*j)) {
+                if tau0[j].abs() > lim {
+                    tau0[j] = tau0[j].clamp(-lim, lim);
+                    b.saturated = true;
+                }
+            }
+            any |= b.saturated;
+        }
+        any
+    }
+
+    /// The fallback ([`fallback`]) on every block that still fails, on the `tau_0` it was
+    /// last solved with; the tick's outcome and note.
+    pub fn finish(&mut self, team: &Team, inp: &QpInput, settings: &QpSettings, f_c: &mut DVector<f64>) -> ByRobot {
+        let mut outcome = QpOutcome { status: QpStatus::Solved, rows: 0, solver: "by-robot", ..QpOutcome::default() };
+        let mut notes: Vec<String> = Vec::new();
+        let mut saturated = false;
+        for (robot, b) in team.robots.iter().zip(&mut self.blocks) {
+            saturated |= b.saturated;
+            if b.vars.1 == 0 {
+                if b.saturated {
+                    notes.push(format!("{}: no stance foot, tau_0 clamped to the torque limits", robot.id));
+                }
+                continue;
+            }
+            let note = fallback(&mut b.qp, &b.data.input(inp), settings.max_iter, b.out.status, b.saturated, &mut b.f);
+            f_c.rows_mut(b.vars.0, b.vars.1).copy_from(&b.f);
+            outcome.iterations += b.out.iterations;
+            outcome.solve_us += b.out.solve_us;
+            outcome.setup_us += b.out.setup_us;
+            outcome.rows += b.out.rows;
+            outcome.status = worse(outcome.status, b.out.status);
+            if let Some(n) = note {
+                notes.push(format!("{}: {n}", robot.id));
+            }
+        }
+        let fallback = (!notes.is_empty()).then(|| format!("solved robot by robot (no grasp couples them); {}", notes.join("; ")));
+        ByRobot { outcome, fallback, saturated }
+    }
 }
 
 /// The worse of two statuses: anything not solved over `AlmostSolved` over `Solved`.
