@@ -14,6 +14,8 @@
 //! (`tests/by_robot.rs`: a standing robot's torques then differed by 176 % from its own
 //! optimum).
 
+use std::ops::Range;
+
 use nalgebra::{DMatrix, DVector};
 use protocol::QpStatus;
 
@@ -21,7 +23,7 @@ use crate::linalg::{zeros, zeros_v};
 use crate::qp::{self, ContactKind, QpInput, QpOutcome, QpSettings, QpWorkspace};
 use crate::team::Team;
 
-use super::torque::fallback;
+use super::torque::{fallback, saturate};
 
 /// One robot's block of the QP's data: its contact variables (a range of `F_c`) and its
 /// joints, copied out of the team's.
@@ -107,23 +109,17 @@ impl ByRobotScratch {
         }
     }
 
-    /// Saturate `tau_0` at the limits on the robots whose block failed (as
-    /// [`super::torque::saturate`] does for the team; a robot without a stance foot has no
-    /// block and is clamped when over); whether any entry changed. Only those robots' blocks
-    /// are solved again.
+    /// Saturate `tau_0` at the limits ([`saturate`]) on the robots whose block failed (a robot
+    /// without a stance foot has no block and is clamped when over); whether any entry
+    /// changed. Only those robots' blocks are solved again.
     pub fn saturate_failed(&mut self, team: &Team, tau0: &mut DVector<f64>, actuated: &[usize], limits: &[f64]) -> bool {
         let mut any = false;
         for (robot, b) in team.robots.iter().zip(&mut self.blocks) {
             if b.solved() && b.vars.1 > 0 {
                 continue;
             }
-            let range = robot.offset..robot.offset + robot.nv;
-            for (&j, &lim) in actuated.iter().zip(limits).filter(|(j, _)| range.contains(*j)) {
-                if tau0[j].abs() > lim {
-                    tau0[j] = tau0[j].clamp(-lim, lim);
-                    b.saturated = true;
-                }
-            }
+            let own = own_joints(actuated, robot.offset, robot.nv);
+            b.saturated = saturate(tau0, &actuated[own.clone()], &limits[own]);
             any |= b.saturated;
         }
         any
@@ -159,6 +155,12 @@ impl ByRobotScratch {
     }
 }
 
+/// Where a robot's joints `offset..offset + nv` sit in the team's `actuated` (team indices in
+/// robot order, [`super::limits::torque_limits`]): a contiguous range.
+fn own_joints(actuated: &[usize], offset: usize, nv: usize) -> Range<usize> {
+    actuated.partition_point(|&j| j < offset)..actuated.partition_point(|&j| j < offset + nv)
+}
+
 /// The worse of two statuses: anything not solved over `AlmostSolved` over `Solved`.
 fn worse(a: QpStatus, b: QpStatus) -> QpStatus {
     let rank = |s: QpStatus| match s {
@@ -187,14 +189,11 @@ impl BlockData {
         self.tau0.copy_from(&inp.tau0.rows(offset, nv));
         self.contacts.clear();
         self.contacts.extend(inp.contacts.iter().filter(|(row, _)| (v0..v0 + nvar).contains(row)).map(|(row, kind)| (row - v0, *kind)));
+        let own = own_joints(inp.actuated, offset, nv);
         self.actuated.clear();
+        self.actuated.extend(inp.actuated[own.clone()].iter().map(|j| j - offset));
         self.limits.clear();
-        for (&j, &lim) in inp.actuated.iter().zip(inp.limits) {
-            if (offset..offset + nv).contains(&j) {
-                self.actuated.push(j - offset);
-                self.limits.push(lim);
-            }
-        }
+        self.limits.extend_from_slice(&inp.limits[own]);
     }
 
     /// The block as a QP of its own, with the team's settings.
