@@ -34,7 +34,7 @@ use protocol::QpStatus;
 use super::problem::QpProblem;
 use super::settings::QpSettings;
 use super::{QpOutcome, QpSolver};
-use crate::linalg::{cholesky_in_place, lower_inverse, shape, zeros_v};
+use crate::linalg::{cholesky_in_place, lower_inverse, lower_solve_in_place, shape, zeros_v};
 
 /// Why [`DualActiveSet`] stopped without an answer (the caller then runs the interior-point
 /// path).
@@ -366,20 +366,11 @@ impl DualActiveSet {
         let l = self.l.as_slice();
         let mw = self.j.as_mut_slice();
         for (k, &i) in self.warm.iter().enumerate() {
-            let col = &mut mw[k * n..(k + 1) * n];
-            for (c, y) in col.iter_mut().enumerate() {
+            for (c, y) in mw[k * n..(k + 1) * n].iter_mut().enumerate() {
                 *y = -a[(i, c)];
             }
-            for c in 0..n {
-                let yc = col[c] / l[c * n + c];
-                col[c] = yc;
-                if yc != 0.0 {
-                    for (y, lc) in col[c + 1..n].iter_mut().zip(&l[c * n + c + 1..c * n + n]) {
-                        *y -= yc * lc;
-                    }
-                }
-            }
         }
+        lower_solve_in_place(l, n, n, mw, n, q);
         // Gram matrix M^T M (lower triangle) into `r`, then its Cholesky factor.
         let g = self.r.as_mut_slice();
         for k1 in 0..q {

@@ -12,7 +12,7 @@ use nalgebra::{DMatrix, DVector};
 use faer::MatRef;
 
 use super::rows::{contact_rows, ContactKind, MAX_CONTACT_ROWS};
-use crate::linalg::{gemm, mat, mat_mut, shape, zeros, zeros_v};
+use crate::linalg::{gemm, mat, mat_mut, shape, zeros_v};
 
 /// The QP's data.
 pub struct QpInput<'a> {
@@ -80,22 +80,30 @@ pub fn constraints_into(inp: &QpInput, a: &mut DMatrix<f64>, b: &mut DVector<f64
 /// `H = Y^T Y + eps I`: the objective `F^T H F` of eq. wrench_optim2, regularised.
 ///
 /// `H` is symmetric: only its blocks on and below the diagonal are multiplied (column blocks
-/// of [`OBJECTIVE_BLOCK`]), the rest is mirrored; about 60 % of the full product's work.
-pub fn objective_into(inp: &QpInput, h: &mut DMatrix<f64>) {
-    let m = inp.y.ncols();
-    zeros(h, m, m);
+/// of [`OBJECTIVE_BLOCK`]), the rest is mirrored; about 60 % of the full product's work. The
+/// left factor is `Y^T` copied into `yt` (m x n) first: the product's kernels run a third
+/// faster on a column-major left operand than on a transposed view (measured on the
+/// eight-robot `Y`, 192 x 144: 205 µs as a view, 145 µs with the copy).
+pub fn objective_into(inp: &QpInput, yt: &mut DMatrix<f64>, h: &mut DMatrix<f64>) {
+    let (n, m) = inp.y.shape();
+    // Every entry is written: the blocks on and below the diagonal by the products, the rest
+    // mirrored.
+    shape(h, m, m);
+    shape(yt, m, n);
+    inp.y.transpose_to(yt);
     let y = mat(inp.y);
     for j0 in (0..m).step_by(OBJECTIVE_BLOCK) {
         let nj = OBJECTIVE_BLOCK.min(m - j0);
         // Rows j0.. of the column block j0..j0 + nj: Y[:, j0..]^T Y[:, j0..j0 + nj].
         let dst = mat_mut(h).submatrix_mut(j0, j0, m - j0, nj);
-        gemm(dst, 0.0, 1.0, y.subcols(j0, m - j0).transpose(), y.subcols(j0, nj));
+        gemm(dst, 0.0, 1.0, mat(yt).subrows(j0, m - j0), y.subcols(j0, nj));
     }
+    let hs = h.as_mut_slice();
     for j in 0..m {
-        for i in 0..j {
-            h[(i, j)] = h[(j, i)];
+        hs[j * m + j] += inp.regularisation;
+        for i in j + 1..m {
+            hs[i * m + j] = hs[j * m + i];
         }
-        h[(j, j)] += inp.regularisation;
     }
 }
 
@@ -107,6 +115,8 @@ pub const OBJECTIVE_BLOCK: usize = 24;
 pub struct QpProblem {
     /// Objective `H` (m x m) of `F^T H F`.
     pub h: DMatrix<f64>,
+    /// `Y^T` (m x n), the left factor of [`objective_into`].
+    yt: DMatrix<f64>,
     /// `P = 2 H`: the solvers minimise `1/2 F^T P F`.
     pub p: DMatrix<f64>,
     /// Constraints `A F <= b`.
@@ -121,10 +131,11 @@ impl QpProblem {
     /// changes).
     pub fn assemble(&mut self, inp: &QpInput) {
         let m = inp.rho.ncols();
-        objective_into(inp, &mut self.h);
-        zeros(&mut self.p, m, m);
-        self.p.copy_from(&self.h);
-        self.p *= 2.0;
+        objective_into(inp, &mut self.yt, &mut self.h);
+        shape(&mut self.p, m, m);
+        for (p, h) in self.p.as_mut_slice().iter_mut().zip(self.h.as_slice()) {
+            *p = 2.0 * h;
+        }
         constraints_into(inp, &mut self.a, &mut self.b);
         self.pairs_from = self.a.nrows() - 2 * inp.actuated.len();
     }
