@@ -7,7 +7,7 @@
 
 use std::collections::BTreeMap;
 use std::net::Ipv4Addr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::atomic::{AtomicU32, Ordering};
 
@@ -25,11 +25,19 @@ pub enum HostsError {
     Script { args: String, reason: String },
     #[error("test hosts: no host {0} in the set")]
     UnknownHost(String),
+    #[error("test hosts: certificates from {dir}: {reason}")]
+    Certificates { dir: String, reason: String },
 }
 
 /// The script: `TEAM_TESTHOSTS_SCRIPT`, else the repository's `scripts/testhosts.sh`.
 fn script() -> PathBuf {
     std::env::var_os("TEAM_TESTHOSTS_SCRIPT").map(PathBuf::from).unwrap_or_else(|| PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../scripts/testhosts.sh")))
+}
+
+/// The certificate script: `TEAM_CERTS_SCRIPT`, else the repository's
+/// `scripts/make-test-certs.sh`.
+fn cert_script() -> PathBuf {
+    std::env::var_os("TEAM_CERTS_SCRIPT").map(PathBuf::from).unwrap_or_else(|| PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../scripts/make-test-certs.sh")))
 }
 
 fn call(args: &[&str]) -> Result<String, HostsError> {
@@ -96,11 +104,52 @@ impl TestHosts {
     /// connects to `hub`: it listens on its own address, so that the peers it meets through
     /// gossip can connect to it directly.
     pub fn zenoh_args(&self, host: Option<&str>, hub: &str) -> Result<protocol::transport::ZenohArgs, HostsError> {
-        let addr = match host {
-            Some(h) => self.addr(h)?,
-            None => self.gateway,
-        };
+        let addr = self.listen_addr(host)?;
         Ok(protocol::transport::ZenohArgs { listen: vec![format!("tcp/{addr}:0")], connect: vec![hub.to_string()], ..Default::default() })
+    }
+
+    /// Where a component on `host` listens: the host's address, or the bridge's for this
+    /// process (`None`).
+    pub fn listen_addr(&self, host: Option<&str>) -> Result<Ipv4Addr, HostsError> {
+        match host {
+            Some(h) => self.addr(h),
+            None => Ok(self.gateway),
+        }
+    }
+
+    /// Certificates for a run of `robots` on these hosts, into `out` (made anew): the test
+    /// CA of `ca` (`ca.pem` and `ca.key`, as `scripts/make-test-certs.sh` makes them) signs one
+    /// certificate per identity naming every host's address and the bridge's
+    /// (`make-test-certs.sh --san`), since a TLS client checks the address it connects to
+    /// against the certificate. The hosts' addresses are chosen per set, so the certificates
+    /// are too. The CA's key is not left in `out`.
+    pub fn issue_certs(&self, ca: &Path, robots: &[String], out: &Path) -> Result<(), HostsError> {
+        let certs = |reason: String| HostsError::Certificates { dir: ca.display().to_string(), reason };
+        for f in ["ca.pem", "ca.key"] {
+            if !ca.join(f).is_file() {
+                return Err(certs(format!("no {f}: test hosts over TLS need the test CA's certificate and key to sign certificates for the hosts' addresses (scripts/make-test-certs.sh DIR makes them)")));
+            }
+        }
+        if out.exists() {
+            std::fs::remove_dir_all(out).map_err(|e| certs(format!("removing {}: {e}", out.display())))?;
+        }
+        std::fs::create_dir_all(out).map_err(|e| certs(format!("creating {}: {e}", out.display())))?;
+        for f in ["ca.pem", "ca.key"] {
+            std::fs::copy(ca.join(f), out.join(f)).map_err(|e| certs(format!("copying {f}: {e}")))?;
+        }
+        let mut args: Vec<String> = Vec::new();
+        for addr in std::iter::once(&self.gateway).chain(self.addrs.values()) {
+            args.extend(["--san".to_string(), format!("IP:{addr}")]);
+        }
+        args.push(out.display().to_string());
+        args.extend(robots.iter().cloned());
+        let made = Command::new("timeout").arg(SCRIPT_TIMEOUT_S.to_string()).arg(cert_script()).args(&args).output();
+        let _ = std::fs::remove_file(out.join("ca.key"));
+        let made = made.map_err(|e| certs(format!("cannot start {}: {e}", cert_script().display())))?;
+        if !made.status.success() {
+            return Err(certs(String::from_utf8_lossy(&made.stderr).trim().to_string()));
+        }
+        Ok(())
     }
 
     /// The host's network namespace.

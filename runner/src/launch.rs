@@ -85,8 +85,10 @@ pub enum Mode {
     Distributed { dir: PathBuf },
     /// Processes on test hosts (`crate::hosts`): the coordinator on host `coordinator`, each
     /// agent on the host named after its robot, the sim-bridge on host `sim`; this process
-    /// (the scenario driver) reaches them through the hosts' bridge.
-    Hosts { dir: PathBuf, hosts: Arc<TestHosts> },
+    /// (the scenario driver) reaches them through the hosts' bridge. With `certs`, over mutual
+    /// TLS with the team's access control as [`Mode::Tls`], the certificates naming the hosts'
+    /// addresses ([`TestHosts::issue_certs`]).
+    Hosts { dir: PathBuf, hosts: Arc<TestHosts>, certs: Option<PathBuf> },
     /// Processes on loopback over mutual TLS with the team's access control: the identities'
     /// certificates are in `certs` (`scripts/make-test-certs.sh CERTS ROBOT...`), and each
     /// process's Zenoh configuration is written to `dir`. This process is the `runner`.
@@ -118,7 +120,8 @@ impl Mode {
         match self {
             Mode::Embedded => "embedded",
             Mode::Distributed { .. } => "distributed",
-            Mode::Hosts { .. } => "hosts",
+            Mode::Hosts { certs: None, .. } => "hosts",
+            Mode::Hosts { certs: Some(_), .. } => "hosts-tls",
             Mode::Tls { .. } => "distributed-tls",
         }
     }
@@ -127,7 +130,10 @@ impl Mode {
     /// port, or [`HUB_PORT`] on the coordinator's host.
     fn hub(&self) -> Result<String, LaunchError> {
         match self {
-            Mode::Hosts { hosts, .. } => Ok(format!("tcp/{}:{HUB_PORT}", hosts.addr(COORDINATOR_HOST).map_err(|e| LaunchError::Hosts(e.to_string()))?)),
+            Mode::Hosts { hosts, certs, .. } => {
+                let addr = hosts.addr(COORDINATOR_HOST).map_err(|e| LaunchError::Hosts(e.to_string()))?;
+                Ok(format!("{}/{addr}:{HUB_PORT}", if certs.is_some() { "tls" } else { "tcp" }))
+            }
             Mode::Tls { .. } => Ok(format!("tls/127.0.0.1:{}", free_port()?)),
             _ => Ok(format!("tcp/127.0.0.1:{}", free_port()?)),
         }
@@ -136,15 +142,12 @@ impl Mode {
     /// The Zenoh arguments of a process on `host` (`None`: this one) connecting to `hub`.
     fn zenoh_args(&self, host: Option<&str>, hub: &str, ids: &TeamIds) -> Result<ZenohArgs, LaunchError> {
         match self {
-            Mode::Hosts { hosts, .. } => hosts.zenoh_args(host, hub).map_err(|e| LaunchError::Hosts(e.to_string())),
-            Mode::Tls { dir, certs } => {
-                let identity = match host {
-                    None => Identity::Runner,
-                    Some(SIM_HOST) => Identity::SimBridge,
-                    Some(robot) => Identity::Agent(robot.to_string()),
-                };
-                secure_args(dir, certs, ids, identity, "tls/127.0.0.1:0", Some(hub))
+            Mode::Hosts { hosts, certs: None, .. } => hosts.zenoh_args(host, hub).map_err(|e| LaunchError::Hosts(e.to_string())),
+            Mode::Hosts { dir, hosts, certs: Some(certs) } => {
+                let addr = hosts.listen_addr(host).map_err(|e| LaunchError::Hosts(e.to_string()))?;
+                secure_args(dir, certs, ids, identity_of(host), &format!("tls/{addr}:0"), Some(hub))
             }
+            Mode::Tls { dir, certs } => secure_args(dir, certs, ids, identity_of(host), "tls/127.0.0.1:0", Some(hub)),
             _ => Ok(ZenohArgs::connecting(hub)),
         }
     }
@@ -152,7 +155,7 @@ impl Mode {
     /// The Zenoh arguments of the coordinator, which listens on `hub`.
     fn hub_args(&self, hub: &str, ids: &TeamIds) -> Result<ZenohArgs, LaunchError> {
         match self {
-            Mode::Tls { dir, certs } => secure_args(dir, certs, ids, Identity::Coordinator, hub, None),
+            Mode::Tls { dir, certs } | Mode::Hosts { dir, certs: Some(certs), .. } => secure_args(dir, certs, ids, Identity::Coordinator, hub, None),
             _ => Ok(ZenohArgs::listening(hub)),
         }
     }
@@ -163,6 +166,16 @@ impl Mode {
             Mode::Hosts { hosts, .. } => spawn_on(hosts, host, bin, args, what),
             _ => spawn(bin, args, what),
         }
+    }
+}
+
+/// The identity of a process on `host` (`None`: this one, the scenario driver) that is not the
+/// coordinator.
+fn identity_of(host: Option<&str>) -> Identity {
+    match host {
+        None => Identity::Runner,
+        Some(SIM_HOST) => Identity::SimBridge,
+        Some(robot) => Identity::Agent(robot.to_string()),
     }
 }
 

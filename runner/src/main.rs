@@ -48,8 +48,10 @@ enum Command {
         #[arg(long)]
         realtime: bool,
         /// Run distributed on loopback over mutual TLS with the team's access control, with the
-        /// certificates in DIR (make them with scripts/make-test-certs.sh DIR r1 r2 ...).
-        #[arg(long, value_name = "DIR", conflicts_with = "hosts")]
+        /// certificates in DIR (make them with scripts/make-test-certs.sh DIR r1 r2 ...). With
+        /// --hosts, the test CA in DIR (ca.pem, ca.key) signs certificates for the hosts'
+        /// addresses into the report folder's hosts-certs/.
+        #[arg(long, value_name = "DIR")]
         tls: Option<PathBuf>,
         /// Report folder (default: reports/<scenario file name>).
         #[arg(long)]
@@ -187,7 +189,7 @@ fn main() -> Result<()> {
         .init();
     match Cli::parse().command {
         Command::Run { scenario, set, distributed, hosts, realtime, tls, out, quiet, live } => {
-            let mode_name = if hosts { "hosts" } else if tls.is_some() { "distributed-tls" } else if distributed { "distributed" } else { "embedded" };
+            let mode_name = if hosts && tls.is_some() { "hosts-tls" } else if hosts { "hosts" } else if tls.is_some() { "distributed-tls" } else if distributed { "distributed" } else { "embedded" };
             let mode_name = if realtime { format!("{mode_name}, real time") } else { mode_name.to_string() };
             let mode_name = mode_name.as_str();
             let s = Scenario::load(&scenario, &set)?;

@@ -116,6 +116,8 @@ pub fn run_recorded(plan: &Plan, opts: &RunOptions, out: &Path, record: Option<&
 /// [`run_recorded`]; with `tls`, distributed on loopback over mutual TLS with the team's
 /// access control ([`Mode::Tls`]), the certificates in that folder
 /// (`scripts/make-test-certs.sh DIR ROBOT...`; README "Access control (mutual TLS and ACL)").
+/// With `tls` and test hosts, the test CA in that folder signs certificates for the hosts'
+/// addresses into `out/hosts-certs` ([`TestHosts::issue_certs`]).
 pub fn run_recorded_secure(
     plan: &Plan,
     opts: &RunOptions,
@@ -123,16 +125,20 @@ pub fn run_recorded_secure(
     out: &Path,
     record: Option<&RecordOptions>,
 ) -> Result<(Records, Option<RecordingSummary>), RunError> {
-    if opts.hosts && tls.is_some() {
-        // The test hosts' addresses are chosen per run; certificates name the addresses they
-        // serve (`make-test-certs.sh --san`), so they cannot be made for them beforehand.
-        return Err(RunError::Task { what: "test hosts with mutual TLS".into(), reason: "not supported: run --tls on loopback, or start each component on its own machine with its certificate (README \"Access control\")".into() });
-    }
     let rt = tokio::runtime::Runtime::new().map_err(|e| RunError::Task { what: "starting the async runtime".into(), reason: e.to_string() })?;
     let mode = if opts.hosts {
         let ids: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
         let hosts = TestHosts::up(&crate::launch::host_names(&ids)).map_err(|e| RunError::Task { what: "making the test hosts".into(), reason: e.to_string() })?;
-        Mode::Hosts { dir: out.to_path_buf(), hosts: std::sync::Arc::new(hosts) }
+        // Over TLS, certificates for this set's addresses, signed by the test CA in `tls`.
+        let certs = match tls {
+            Some(ca) => {
+                let dir = std::path::absolute(out.join("hosts-certs")).map_err(|e| RunError::Task { what: "the run's certificates".into(), reason: e.to_string() })?;
+                hosts.issue_certs(ca, &ids, &dir).map_err(|e| RunError::Task { what: "the run's certificates".into(), reason: e.to_string() })?;
+                Some(dir)
+            }
+            None => None,
+        };
+        Mode::Hosts { dir: out.to_path_buf(), hosts: std::sync::Arc::new(hosts), certs }
     } else if let Some(certs) = tls {
         Mode::Tls { dir: out.to_path_buf(), certs: certs.to_path_buf() }
     } else if opts.distributed {

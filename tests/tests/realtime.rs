@@ -130,7 +130,7 @@ fn s4_holds_in_real_time_across_hosts_with_five_percent_loss_on_one_link() {
         h.set_loss("r1", 5).expect("loss rule");
     }
     let mode = match &hosts {
-        Some(h) => Mode::Hosts { dir: dir.clone(), hosts: h.clone() },
+        Some(h) => Mode::Hosts { dir: dir.clone(), hosts: h.clone(), certs: None },
         None => Mode::Distributed { dir: dir.clone() },
     };
     let rt = tokio::runtime::Runtime::new().expect("runtime");
