@@ -2,7 +2,7 @@
 # Make a TEST certificate authority and one certificate per team identity, for Zenoh's mutual
 # TLS and access control (README "Access control (mutual TLS and ACL)").
 #
-#   scripts/make-test-certs.sh [--san SAN]... DIR [ROBOT...]
+#   scripts/make-test-certs.sh [--san SAN]... [--ca CADIR] DIR [ROBOT...]
 #
 # Writes into DIR (created if missing):
 #   ca.pem, ca.key                 the test CA (EC P-256, 10 years)
@@ -13,7 +13,9 @@
 # Every certificate is for both ends of a link (extendedKeyUsage serverAuth and clientAuth: a
 # Zenoh peer listens and connects) and names 127.0.0.1 and localhost (subjectAltName); add
 # other addresses with --san, e.g. --san IP:10.77.1.2 --san DNS:robot1.lan (the test hosts'
-# addresses, a robot's LAN name).
+# addresses, a robot's LAN name). With --ca CADIR the identities are signed by the CA already
+# in CADIR (ca.pem, ca.key): DIR gets a copy of ca.pem, never the key (team run --hosts --tls
+# issues a run's certificates this way).
 #
 # Idempotent: an existing CA is kept, and an identity whose certificate exists and verifies
 # against that CA is kept; missing ones are made. Remove DIR to start over.
@@ -23,11 +25,14 @@
 set -euo pipefail
 
 die() { echo "make-test-certs: error: $*" >&2; exit 1; }
-usage() { sed -n '2,22p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2; exit 2; }
+usage() { sed -n '2,24p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2; exit 2; }
 
 extra_sans=()
+ca_dir=""
 while [[ $# -gt 0 ]]; do
     case "$1" in
+        --ca) [[ $# -ge 2 ]] || die "--ca needs a folder with ca.pem and ca.key"
+              ca_dir="$2"; shift 2 ;;
         --san) [[ $# -ge 2 ]] || die "--san needs a value (IP:ADDR or DNS:NAME)"
                [[ "$2" =~ ^(IP|DNS):[A-Za-z0-9.:-]+$ ]] || die "--san $2: expected IP:ADDR or DNS:NAME"
                extra_sans+=("$2"); shift 2 ;;
@@ -55,7 +60,15 @@ days=3650
 san="IP:127.0.0.1,DNS:localhost"
 for s in "${extra_sans[@]+"${extra_sans[@]}"}"; do san="${san},${s}"; done
 
-if [[ -f "$dir/ca.pem" && -f "$dir/ca.key" ]]; then
+ca_pem="$dir/ca.pem"
+ca_key="$dir/ca.key"
+if [[ -n "$ca_dir" ]]; then
+    [[ -f "$ca_dir/ca.pem" && -f "$ca_dir/ca.key" ]] || die "--ca $ca_dir: no ca.pem and ca.key there (make them with $0 $ca_dir)"
+    [[ "$(cd "$ca_dir" && pwd -P)" != "$(cd "$dir" && pwd -P)" ]] || die "--ca $ca_dir is DIR itself"
+    cp "$ca_dir/ca.pem" "$dir/ca.pem" || die "cannot copy $ca_dir/ca.pem into $dir"
+    ca_key="$ca_dir/ca.key"
+    echo "make-test-certs: signing with the CA of $ca_dir"
+elif [[ -f "$dir/ca.pem" && -f "$dir/ca.key" ]]; then
     echo "make-test-certs: keeping the CA in $dir/ca.pem"
 else
     openssl req -x509 -new -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes \
@@ -83,7 +96,7 @@ keyUsage=critical,digitalSignature,keyEncipherment
 extendedKeyUsage=serverAuth,clientAuth
 subjectAltName=$san
 EOF
-    openssl x509 -req -in "$tmp/req.csr" -CA "$dir/ca.pem" -CAkey "$dir/ca.key" -CAcreateserial \
+    openssl x509 -req -in "$tmp/req.csr" -CA "$ca_pem" -CAkey "$ca_key" -CAserial "$dir/ca.srl" -CAcreateserial \
         -out "$tmp/cert.pem" -days "$days" -extfile "$tmp/ext.cnf" 2>/dev/null \
         || { rm -rf "$tmp"; die "openssl could not sign the certificate of $id"; }
     mv "$tmp/key.pem" "$dir/$id.key"

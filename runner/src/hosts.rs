@@ -21,7 +21,7 @@ const SCRIPT_TIMEOUT_S: u32 = 30;
 pub enum HostsError {
     #[error("test hosts: {0}")]
     Unavailable(String),
-    #[error("test hosts: `testhosts.sh {args}` failed: {reason}")]
+    #[error("test hosts: `{args}` failed: {reason}")]
     Script { args: String, reason: String },
     #[error("test hosts: no host {0} in the set")]
     UnknownHost(String),
@@ -41,13 +41,19 @@ fn cert_script() -> PathBuf {
 }
 
 fn call(args: &[&str]) -> Result<String, HostsError> {
-    let joined = args.join(" ");
+    call_script(&script(), args)
+}
+
+/// Run `script` with `args` under `timeout`; its stdout, or why it failed.
+fn call_script(script: &Path, args: &[&str]) -> Result<String, HostsError> {
+    let name = script.file_name().map_or_else(|| script.display().to_string(), |n| n.to_string_lossy().to_string());
+    let joined = format!("{name} {}", args.join(" "));
     let out = Command::new("timeout")
         .arg(SCRIPT_TIMEOUT_S.to_string())
-        .arg(script())
+        .arg(script)
         .args(args)
         .output()
-        .map_err(|e| HostsError::Script { args: joined.clone(), reason: format!("cannot start {}: {e}", script().display()) })?;
+        .map_err(|e| HostsError::Script { args: joined.clone(), reason: format!("cannot start {}: {e}", script.display()) })?;
     if !out.status.success() {
         let reason = String::from_utf8_lossy(&out.stderr).trim().to_string();
         return Err(HostsError::Script { args: joined, reason: if reason.is_empty() { out.status.to_string() } else { reason } });
@@ -84,11 +90,11 @@ impl TestHosts {
         let mut args = vec!["up", set.as_str(), net.as_str()];
         args.extend(names.iter().map(String::as_str));
         call(&args)?;
-        let gateway = format!("{net}.1").parse().map_err(|e| HostsError::Script { args: args.join(" "), reason: format!("network {net}: {e}") })?;
+        let gateway = format!("{net}.1").parse().map_err(|e| HostsError::Script { args: format!("testhosts.sh {}", args.join(" ")), reason: format!("network {net}: {e}") })?;
         let mut hosts = TestHosts { set, gateway, addrs: BTreeMap::new() };
         for name in names {
             let text = call(&["addr", &hosts.set, name])?;
-            let addr = text.parse().map_err(|e| HostsError::Script { args: format!("addr {} {name}", hosts.set), reason: format!("{text:?}: {e}") })?;
+            let addr = text.parse().map_err(|e| HostsError::Script { args: format!("testhosts.sh addr {} {name}", hosts.set), reason: format!("{text:?}: {e}") })?;
             hosts.addrs.insert(name.clone(), addr);
         }
         tracing::info!(set = %hosts.set, %net, hosts = ?hosts.addrs, "test hosts up");
@@ -118,36 +124,42 @@ impl TestHosts {
     }
 
     /// Certificates for a run of `robots` on these hosts, into `out` (made anew): the test
-    /// CA of `ca` (`ca.pem` and `ca.key`, as `scripts/make-test-certs.sh` makes them) signs one
-    /// certificate per identity naming every host's address and the bridge's
-    /// (`make-test-certs.sh --san`), since a TLS client checks the address it connects to
-    /// against the certificate. The hosts' addresses are chosen per set, so the certificates
-    /// are too. The CA's key is not left in `out`.
+    /// CA of `ca` ([`TestHosts::check_ca`]) signs one certificate per identity naming every
+    /// host's address and the bridge's (`make-test-certs.sh --ca CA --san IP:...`), since a TLS
+    /// client checks the address it connects to against the certificate. The hosts' addresses
+    /// are chosen per set, so the certificates are too. The CA's key stays in `ca`: `out` gets
+    /// a copy of `ca.pem` only.
     pub fn issue_certs(&self, ca: &Path, robots: &[String], out: &Path) -> Result<(), HostsError> {
+        TestHosts::check_ca(ca)?;
         let certs = |reason: String| HostsError::Certificates { dir: ca.display().to_string(), reason };
-        for f in ["ca.pem", "ca.key"] {
-            if !ca.join(f).is_file() {
-                return Err(certs(format!("no {f}: test hosts over TLS need the test CA's certificate and key to sign certificates for the hosts' addresses (scripts/make-test-certs.sh DIR makes them)")));
-            }
-        }
         if out.exists() {
+            let (ca_abs, out_abs) = (ca.canonicalize(), out.canonicalize());
+            if let (Ok(c), Ok(o)) = (&ca_abs, &out_abs) {
+                if c.starts_with(o) {
+                    return Err(certs(format!("{} is where the run's certificates go (it is made anew); keep the CA elsewhere", out.display())));
+                }
+            }
             std::fs::remove_dir_all(out).map_err(|e| certs(format!("removing {}: {e}", out.display())))?;
         }
-        std::fs::create_dir_all(out).map_err(|e| certs(format!("creating {}: {e}", out.display())))?;
-        for f in ["ca.pem", "ca.key"] {
-            std::fs::copy(ca.join(f), out.join(f)).map_err(|e| certs(format!("copying {f}: {e}")))?;
-        }
-        let mut args: Vec<String> = Vec::new();
+        let mut args: Vec<String> = vec!["--ca".into(), ca.display().to_string()];
         for addr in std::iter::once(&self.gateway).chain(self.addrs.values()) {
             args.extend(["--san".to_string(), format!("IP:{addr}")]);
         }
         args.push(out.display().to_string());
         args.extend(robots.iter().cloned());
-        let made = Command::new("timeout").arg(SCRIPT_TIMEOUT_S.to_string()).arg(cert_script()).args(&args).output();
-        let _ = std::fs::remove_file(out.join("ca.key"));
-        let made = made.map_err(|e| certs(format!("cannot start {}: {e}", cert_script().display())))?;
-        if !made.status.success() {
-            return Err(certs(String::from_utf8_lossy(&made.stderr).trim().to_string()));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        call_script(&cert_script(), &args).map_err(|e| certs(e.to_string()))?;
+        Ok(())
+    }
+
+    /// Whether `ca` holds a CA that can sign a run's certificates (`ca.pem` and `ca.key`, as
+    /// `scripts/make-test-certs.sh DIR` makes them); checked before any host is made.
+    pub fn check_ca(ca: &Path) -> Result<(), HostsError> {
+        for f in ["ca.pem", "ca.key"] {
+            if !ca.join(f).is_file() {
+                let reason = format!("no {f}: test hosts over TLS need the test CA's certificate and key to sign certificates for the hosts' addresses (scripts/make-test-certs.sh DIR makes them)");
+                return Err(HostsError::Certificates { dir: ca.display().to_string(), reason });
+            }
         }
         Ok(())
     }
@@ -174,7 +186,7 @@ impl TestHosts {
     pub fn dropped(&self, name: &str) -> Result<u64, HostsError> {
         self.addr(name)?;
         let text = call(&["dropped", &self.set, name])?;
-        text.parse().map_err(|e| HostsError::Script { args: format!("dropped {} {name}", self.set), reason: format!("{text:?}: {e}") })
+        text.parse().map_err(|e| HostsError::Script { args: format!("testhosts.sh dropped {} {name}", self.set), reason: format!("{text:?}: {e}") })
     }
 
     /// Take the host's link up or down.

@@ -16,7 +16,8 @@
 //!   folder;
 //! * [`Mode::Tls`]: as [`Mode::Distributed`], over mutual TLS with the team's access control
 //!   (`protocol::access`): each process gets a Zenoh configuration with its identity's
-//!   certificate, written into the run's folder.
+//!   certificate, written into the run's folder; [`Mode::Hosts`] with certificates does the
+//!   same across test hosts.
 //!
 //! The caller then declares what it observes on [`Running::session`] (the scenario driver),
 //! runs the state source to its end with [`Running::run_bridge`] (it ends the run: after its
@@ -115,7 +116,8 @@ pub const SIM_HOST: &str = "sim";
 pub const HUB_PORT: u16 = 7447;
 
 impl Mode {
-    /// `"embedded"`, `"distributed"` or `"hosts"`, as reports name it.
+    /// `"embedded"`, `"distributed"`, `"hosts"`, `"hosts-tls"` or `"distributed-tls"`, as
+    /// reports name it.
     pub fn name(&self) -> &'static str {
         match self {
             Mode::Embedded => "embedded",

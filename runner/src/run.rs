@@ -126,6 +126,10 @@ pub fn run_recorded_secure(
     record: Option<&RecordOptions>,
 ) -> Result<(Records, Option<RecordingSummary>), RunError> {
     let rt = tokio::runtime::Runtime::new().map_err(|e| RunError::Task { what: "starting the async runtime".into(), reason: e.to_string() })?;
+    if let (true, Some(ca)) = (opts.hosts, tls) {
+        // Before any host is made: the run's certificates need the test CA's key.
+        TestHosts::check_ca(ca).map_err(|e| RunError::Task { what: "the run's certificates".into(), reason: e.to_string() })?;
+    }
     let mode = if opts.hosts {
         let ids: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
         let hosts = TestHosts::up(&crate::launch::host_names(&ids)).map_err(|e| RunError::Task { what: "making the test hosts".into(), reason: e.to_string() })?;

@@ -18,8 +18,9 @@
 //! Needs the release binaries (`cargo build --release --bins`) and openssl. Each test has its
 //! own ports and folder; every wait is bounded.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::{Duration, Instant};
 
 use protocol::access::{Identity, SecureConfig};
@@ -34,14 +35,9 @@ const NEVER_WAIT: Duration = Duration::from_millis(1500);
 /// How long a put that must arrive may take (links, declarations).
 const ARRIVE_WAIT: Duration = Duration::from_secs(10);
 
-/// A fresh folder with test certificates for these robots (fails loudly without openssl).
+/// A fresh folder with test certificates for these robots (`common::certs`).
 fn certificates(test: &str, robots: &[&str]) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("acl-{test}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/make-test-certs.sh");
-    let out = Command::new(&script).arg(&dir).args(robots).output().unwrap_or_else(|e| panic!("cannot run {}: {e}", script.display()));
-    assert!(out.status.success(), "make-test-certs.sh failed: {}", String::from_utf8_lossy(&out.stderr));
-    dir
+    common::certs::make(&format!("acl-{test}"), robots)
 }
 
 fn robots(list: &[&str]) -> Vec<String> {
@@ -344,24 +340,4 @@ async fn a_whole_team_runs_over_tls_with_the_acl() {
         assert!(run_dir.join(format!("zenoh-{who}.json5")).is_file(), "no configuration for {who}");
     }
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// `--hosts` with `--tls` is refused with an error that says why, before any host is made:
-/// the test hosts' addresses are chosen per run, and certificates name the addresses they
-/// serve (run silently without TLS, it would carry a team's torques in the clear).
-#[test]
-fn test_hosts_with_tls_are_refused_with_a_reason() {
-    use team_runner::run::{self, RunError, RunOptions};
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let s = team_runner::scenario::Scenario::load(repo.join("scenarios/s4_object_circle.toml"), &["duration=0.1".to_string()]).expect("scenario");
-    let plan = team_runner::plan::plan(&s, &repo).expect("plan");
-    let out = std::env::temp_dir().join(format!("hosts-tls-{}", std::process::id()));
-    let result = run::run_recorded_secure(&plan, &RunOptions { distributed: true, hosts: true, progress: false }, Some(&out), &out, None);
-    match result {
-        Err(RunError::Task { what, reason }) => {
-            assert!(what.contains("TLS") && reason.contains("not supported"), "{what}: {reason}");
-        }
-        other => panic!("expected a refusal, got {:?}", other.map(|_| ())),
-    }
-    assert!(!out.exists(), "nothing was written for a refused run");
 }

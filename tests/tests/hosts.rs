@@ -120,14 +120,10 @@ fn a_robot_whose_link_is_down_is_named() {
     assert!(started.elapsed().as_secs() < 120, "bounded: {:?}", started.elapsed());
 }
 
-/// A fresh test CA with certificates for r1 and r2 (`scripts/make-test-certs.sh`); with
-/// `keep_key` false, the CA's key is removed (a folder an operator's site CA would give).
+/// A fresh test CA with certificates for r1 and r2 (`common::certs`); with `keep_key` false,
+/// the CA's key is removed (a folder an operator's site CA would give).
 fn test_ca(name: &str, keep_key: bool) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("hosts-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let script = common::scenario::repo().join("scripts/make-test-certs.sh");
-    let out = std::process::Command::new(&script).arg(&dir).args(["r1", "r2"]).output().expect("make-test-certs.sh runs");
-    assert!(out.status.success(), "make-test-certs.sh: {}", String::from_utf8_lossy(&out.stderr));
+    let dir = common::certs::make(&format!("hosts-{name}"), &["r1", "r2"]);
     if !keep_key {
         std::fs::remove_file(dir.join("ca.key")).expect("remove ca.key");
     }
@@ -151,6 +147,8 @@ fn s4_holds_across_hosts_over_mutual_tls() {
     }
     let before = namespaces();
     let dir = report_dir("hosts_tls");
+    // No configuration of an earlier run may stand in for this one's.
+    std::fs::remove_dir_all(&dir).and_then(|_| std::fs::create_dir_all(&dir)).expect("a fresh report folder");
     let (records, _) = run::run_recorded_secure(&plan, &RunOptions { distributed: true, hosts, progress: false }, Some(&ca), &dir, None).expect("the run completes");
     let eval = evaluate::evaluate(&plan, &records, if hosts { "hosts-tls" } else { "distributed-tls" });
     println!("{}", evaluate::summary(&eval.metrics, &dir));
@@ -175,16 +173,15 @@ fn s4_holds_across_hosts_over_mutual_tls() {
         let addr = hub.trim_start_matches("tls/").trim_end_matches(":7447");
         assert!(String::from_utf8_lossy(&text.stdout).contains(&format!("IP Address:{addr}")), "the coordinator's certificate names its host's address {addr}");
     }
+    let _ = std::fs::remove_dir_all(&ca);
 }
 
 /// Test hosts over TLS with a certificate folder that has no CA key: the run is refused with
-/// an error that names `ca.key`, before any component starts, and no host is left behind.
+/// an error that names `ca.key`, before any host is made (so also where namespaces cannot be
+/// made), and no host is left behind.
 #[test]
 fn hosts_over_tls_without_the_ca_key_are_refused_by_name() {
     let _one = serial();
-    if let Err(e) = TestHosts::check() {
-        return eprintln!("{e}: no test hosts, nothing to refuse");
-    }
     let plan = s4(0.5);
     let ca = test_ca("nokey", false);
     let before = namespaces();
@@ -192,4 +189,5 @@ fn hosts_over_tls_without_the_ca_key_are_refused_by_name() {
     let text = err.to_string();
     assert!(text.contains("ca.key") && text.contains("certificates"), "names the missing key: {text}");
     assert_eq!(namespaces(), before, "no host left behind");
+    let _ = std::fs::remove_dir_all(&ca);
 }

@@ -130,9 +130,8 @@ impl QpProblem {
     /// Build `H`, `P`, `A`, `b` from the controller's terms (reallocates only when the shape
     /// changes).
     pub fn assemble(&mut self, inp: &QpInput) {
-        let m = inp.rho.ncols();
         objective_into(inp, &mut self.yt, &mut self.h);
-        shape(&mut self.p, m, m);
+        shape(&mut self.p, self.h.nrows(), self.h.ncols());
         for (p, h) in self.p.as_mut_slice().iter_mut().zip(self.h.as_slice()) {
             *p = 2.0 * h;
         }
