@@ -9,7 +9,10 @@
 //! about 1000)
 //! (needs openssl; certificates are made into a temporary folder).
 
-use std::path::{Path, PathBuf};
+#[path = "../tests/common/certs.rs"]
+mod certs;
+
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use protocol::access::{Identity, SecureConfig};
@@ -111,20 +114,12 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
     sorted[((sorted.len() - 1) as f64 * q).round() as usize]
 }
 
-fn certificates() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("tls-rtt-{}", std::process::id()));
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/make-test-certs.sh");
-    let out = std::process::Command::new(&script).arg(&dir).arg("r1").output().expect("make-test-certs.sh runs");
-    assert!(out.status.success(), "make-test-certs.sh: {}", String::from_utf8_lossy(&out.stderr));
-    dir
-}
-
 #[tokio::main(flavor = "multi_thread", worker_threads = 2)]
 async fn main() {
     let args: Vec<u64> = std::env::args().skip(1).filter_map(|a| a.parse().ok()).collect();
     let (rounds, blocks) = (args.first().copied().unwrap_or(500), args.get(1).copied().unwrap_or(6));
     let floats = args.get(2).map_or(JOINTS, |&f| f as usize);
-    let certs = certificates();
+    let certs = certs::make("tls-rtt", &["r1"]);
     let mut pairs = [pair("tcp", Link::Tcp, &certs, floats).await, pair("tls", Link::Tls, &certs, floats).await, pair("tls+acl", Link::TlsAcl, &certs, floats).await];
     let mut tick = 0;
     // Links and declarations first: the first answered state on each pair.
