@@ -9,7 +9,7 @@
 //! records is for evaluation only. A walking scenario's contact sets go out
 //! [`CONTACT_LOOKAHEAD`] ticks ahead on each robot's `contacts` key (the agents keep a bounded
 //! schedule of them). When the coordinator reports that the team let go of the object
-//! ([`CoordinatorMode::Released`]), a walk halts at its next quiet point
+//! ([`CoordinatorMode::Released`]), a walk halts (at once before a lift-off, else at its next quiet point)
 //! ([`ReferencePlan::halt_walk`]): robots without the object do not walk on.
 
 use std::collections::BTreeMap;
@@ -180,14 +180,15 @@ impl Driver {
         Ok(())
     }
 
-    /// The team let go after `tick`: halt the walk at its next quiet point. The references
+    /// The team let go after `tick`: halt the walk, at once before a lift-off, else at its next
+    /// quiet point ([`crate::gait::GaitPlan::halt_point`]). The references
     /// already published from there on (up to `published_to`) are sent again, held; each
     /// walking robot gets a set with all its feet down from then on, which cancels the sets it
     /// has waiting; no later set goes out.
     async fn halt_walk(&mut self, tick: u64, published_to: u64) -> Result<(), TransportError> {
         let (Some(t), Some(walk)) = (self.plan.halt_walk(tick), self.plan.walk.clone()) else { return Ok(()) };
         let from = self.plan.clock.first_tick_at(t);
-        tracing::warn!(released_after = tick, halt_s = t, halt_tick = from, "the team let go of the object: the walk halts at its next quiet point");
+        tracing::warn!(released_after = tick, halt_s = t, halt_tick = from, "the team let go of the object: the walk halts (at once before a lift-off, else when the lifted foot has landed)");
         self.publish_refs(from, published_to).await?;
         let halt = walk.halt_sets(TEAM, &self.plan.clock, t);
         self.contact_sets.truncate(self.next_contact);

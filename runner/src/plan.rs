@@ -261,11 +261,12 @@ impl ReferencePlan {
         self.clock.scenario_time(tick)
     }
 
-    /// When a walk stops if the team lets go after `released_tick`: at the walk's first quiet
-    /// point from then on (`None` without a walk).
+    /// When a walk stops if the team lets go after `released_tick`: at once before a lift-off,
+    /// else at the walk's first quiet point from then on ([`crate::gait::GaitPlan::halt_point`];
+    /// `None` without a walk).
     pub fn walk_halt_time(&self, released_tick: u64) -> Option<f64> {
         let t = self.time_of_tick(released_tick).unwrap_or(0.0);
-        self.walk.as_ref().map(|w| w.gait.quiet_point(t))
+        self.walk.as_ref().map(|w| w.gait.halt_point(t))
     }
 
     /// Halt the walk for a release after `released_tick` ([`ReferencePlan::walk_halt_time`]),
@@ -284,10 +285,24 @@ impl ReferencePlan {
         self.walk.as_deref().map(|w| (t, w))
     }
 
+    /// The halt time if the walk is held at scenario time `t` (halted before `t`).
+    fn held_since(&self, t: Option<f64>) -> Option<f64> {
+        self.walk_halted_at.filter(|h| t.is_some_and(|t| t > *h))
+    }
+
+    /// A walk's pose reference, at rest once the walk is held (a halt before a lift-off stops
+    /// a torso in its shift).
+    fn walk_pose(&self, t: Option<f64>, r: PoseReference) -> PoseReference {
+        match self.held_since(t) {
+            Some(_) => PoseReference { twist: [0.0; 6], acceleration: [0.0; 6], ..r },
+            None => r,
+        }
+    }
+
     /// Object reference at scenario time `t` (`None`: the settling hold).
     pub fn object_at(&self, t: Option<f64>) -> PoseReference {
         if let Some(r) = self.walk_at(t).and_then(|(t, w)| w.object(t)) {
-            return r;
+            return self.walk_pose(t, r);
         }
         let (p, q) = &self.object_start;
         self.pose_at(&self.object, p, q, t)
@@ -296,7 +311,7 @@ impl ReferencePlan {
     /// Reference of torso `i` at scenario time `t`.
     pub fn torso_at(&self, i: usize, t: Option<f64>) -> PoseReference {
         if let Some(r) = self.walk_at(t).and_then(|(t, w)| w.torso(i, t)) {
-            return r;
+            return self.walk_pose(t, r);
         }
         let (_, m, p, q) = &self.torsos[i];
         self.pose_at(m, p, q, t)
@@ -319,8 +334,10 @@ impl ReferencePlan {
             swing_feet: Vec::new(),
             foot_loads: Vec::new(),
         };
-        if let Some((t, w)) = self.walk_at(t) {
-            w.feet_into(t, &mut refs);
+        match (self.walk_at(t), self.held_since(t)) {
+            (Some((t_h, w)), Some(_)) => w.feet_after_halt_into(t_h, t.unwrap_or(t_h), &mut refs),
+            (Some((t, w)), None) => w.feet_into(t, &mut refs),
+            (None, _) => {}
         }
         refs
     }

@@ -373,3 +373,44 @@ fn a_walk_halts_at_its_first_quiet_point_never_inside_a_step() {
     assert_eq!(plan.quiet_point(0.2), 0.2, "before the walk");
     assert_eq!(plan.quiet_point(end + 0.5), end + 0.5, "after it");
 }
+
+/// A release before a step's lift-off halts the walk at once (the step is cancelled with every
+/// foot down); after its lift-off, at the quiet point, once the foot has landed and loaded.
+/// After a halt inside an unloading, the foot's bound rises again from where it stood at the
+/// load ramp's rate (the ramp written out again here) until it is unbounded; the other feet
+/// stay unbounded.
+#[test]
+fn a_walk_released_before_a_lift_off_halts_at_once_and_loads_the_foot_again() {
+    let robots = vec![robot("r1", 0.0, 0.0, 0.0, &[[0.3, 0.1, 10.0]]), robot("r2", 2.3, 0.0, 180.0, &[[-0.3, -0.1, 10.0]])];
+    let plan = GaitPlan::new(&robots, None, &GaitParams::default(), 0.5).expect("plan");
+    let p = plan.params().clone();
+    assert!(!plan.steps().is_empty());
+    for s in plan.steps() {
+        let start = s.liftoff - p.t_unload - p.t_shift;
+        for frac in [0.1, 0.5, 0.9] {
+            for t in [start + frac * p.t_shift, s.liftoff - p.t_unload + frac * p.t_unload] {
+                assert_eq!(plan.halt_point(t), t, "robot {} foot {}: released at {t}, before the lift-off", s.robot, s.foot);
+                assert!(plan.stance(s.robot, t).iter().all(|&down| down), "every foot down at {t}");
+            }
+            let t = s.liftoff + frac * (s.touchdown - s.liftoff);
+            assert_eq!(plan.halt_point(t), plan.quiet_point(t), "released in the swing at {t}");
+            assert!(plan.halt_point(t) >= s.touchdown + p.t_load - 1e-9, "the lifted foot lands and loads first");
+        }
+        let t_h = s.liftoff - 0.5 * p.t_unload;
+        let f_h = plan.max_normal_force(s.robot, s.foot, t_h).expect("unloading at the halt");
+        let back = t_h + p.t_load * (1.0 - f_h / p.unload_force);
+        for tau in [0.0, 0.25, 0.5, 0.75, 0.99] {
+            let t = t_h + tau * (back - t_h);
+            let want = f_h + p.unload_force * (t - t_h) / p.t_load;
+            let got = plan.max_normal_force_after_halt(s.robot, s.foot, t_h, t).expect("still below full load");
+            assert!((got - want).abs() < 1e-9 * p.unload_force, "t {t}: bound {got}, ramp {want}");
+        }
+        assert_eq!(plan.max_normal_force_after_halt(s.robot, s.foot, t_h, back + 1e-6), None, "full load again");
+        for k in (0..4).filter(|&k| k != s.foot) {
+            assert_eq!(plan.max_normal_force_after_halt(s.robot, k, t_h, t_h + 0.01), None, "foot {k} was not unloading");
+        }
+    }
+    assert_eq!(plan.halt_point(0.2), 0.2, "before the walk");
+    let end = plan.end_time();
+    assert_eq!(plan.halt_point(end + 0.5), end + 0.5, "after it");
+}

@@ -129,6 +129,64 @@ fn a_team_that_lets_go_of_the_object_stops_walking() {
     }
 }
 
+/// The references a released walk sends when the release comes before a lift-off, halfway
+/// through the foot's unloading: the walk halts at the release itself; from then on the
+/// walking torso and the object hold their poses of that instant at rest (no twist, no
+/// acceleration), no swing-foot reference goes out, and the unloading foot's bound rises from
+/// where it stood at the load ramp's rate until it is gone; the halt's contact sets keep every
+/// foot down.
+#[test]
+fn a_walk_released_before_a_lift_off_holds_its_poses_and_loads_the_foot_again() {
+    let sets = ["walk.path=[[0.2, 0.0, 0.0]]".to_string(), "duration=16.5".into(), "settle=0.5".into()];
+    let scenario = team_runner::scenario::Scenario::load(common::scenario::repo().join("scenarios/transport2.toml"), &sets).expect("scenario");
+    let mut refs = team_runner::plan::plan(&scenario, &common::scenario::repo()).expect("plan").references;
+    let walk = refs.walk.clone().expect("walk");
+    let p = walk.gait.params().clone();
+    let step = walk.gait.steps()[2].clone();
+    let tick = refs.clock.first_tick_at(step.liftoff - 0.5 * p.t_unload);
+    let t_h = refs.time_of_tick(tick).expect("scenario time");
+    let f_h = walk.gait.max_normal_force(step.robot, step.foot, t_h).expect("unloading");
+    let before = refs.for_tick("team", tick);
+    assert_eq!(refs.halt_walk(tick), Some(t_h), "halted at the release");
+    let (robot, foot) = (&walk.robots[step.robot], &walk.feet[step.robot][step.foot]);
+    let period = refs.clock.scenario_time(tick + 1).expect("time") - t_h;
+    let back = (p.t_load * (1.0 - f_h / p.unload_force) / period).ceil() as u64;
+    for k in [1, 10, back / 2, back - 2, back + 1, back + 2000] {
+        let r = refs.for_tick("team", tick + k);
+        let t = refs.clock.scenario_time(tick + k).expect("time");
+        let torso = &r.torsos.iter().find(|x| &x.robot == robot).expect("torso").reference;
+        let torso_then = &before.torsos.iter().find(|x| &x.robot == robot).expect("torso").reference;
+        assert_eq!(torso.pose.position, torso_then.pose.position, "tick +{k}: the torso holds");
+        assert!(torso.twist.iter().chain(&torso.acceleration).all(|v| *v == 0.0), "tick +{k}: the held torso is at rest");
+        let object = r.object.as_ref().expect("object");
+        assert_eq!(object.pose.position, before.object.as_ref().expect("object").pose.position);
+        assert!(object.twist.iter().all(|v| *v == 0.0));
+        assert!(r.swing_feet.is_empty(), "tick +{k}: no swing foot");
+        // Every foot that was unloading at the halt (both robots' when they step together),
+        // and no other, is bounded on the load ramp from where it stood.
+        let mut bounded = 0;
+        for (i, id) in walk.robots.iter().enumerate() {
+            for (kf, frame) in walk.feet[i].iter().enumerate() {
+                let load = r.foot_loads.iter().find(|l| &l.robot == id && &l.frame == frame).map(|l| l.max_normal_force);
+                let want = walk.gait.max_normal_force(i, kf, t_h).map(|f| f + p.unload_force * (t - t_h) / p.t_load).filter(|f| *f < p.unload_force);
+                match (load, want) {
+                    (Some(got), Some(want)) => assert!((got - want).abs() < 1e-6 * p.unload_force, "tick +{k}, {id} {frame}: bound {got}, ramp {want}"),
+                    (None, None) => {}
+                    (got, want) => panic!("tick +{k}, {id} {frame}: bound {got:?}, ramp {want:?}"),
+                }
+                bounded += usize::from(load.is_some());
+            }
+        }
+        let own = r.foot_loads.iter().any(|l| &l.robot == robot && &l.frame == foot);
+        assert_eq!(own, k < back, "tick +{k}: the stepping foot is bounded until it is loaded again");
+        assert_eq!(r.foot_loads.len(), bounded, "no other foot bounded");
+    }
+    for set in walk.halt_sets("team", &refs.clock, t_h) {
+        assert_eq!(set.stance_feet.len(), 4, "every foot down");
+        assert_eq!(set.header.tick, tick);
+    }
+}
+
 /// A walk the arm cannot follow is refused before the run, naming the robot: S2 with the
 /// object at the other scenarios' height (0.60 m) and robot 1 at its standing distance asks
 /// its torso to go 0.27 m back plus the crawl's sway, past the stretched arm (run anyway, the

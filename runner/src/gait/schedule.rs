@@ -468,6 +468,29 @@ impl GaitPlan {
         at
     }
 
+    /// When a walk halts for a release at `t` ([`crate::plan::ReferencePlan::halt_walk`]): at
+    /// once while the step in progress has not lifted its foot (its torso shift or its foot's
+    /// unloading: the step is cancelled with every foot still down), else at the
+    /// [`GaitPlan::quiet_point`] (a lifted foot lands first).
+    pub fn halt_point(&self, t: f64) -> f64 {
+        let p = &self.params;
+        if self.steps.iter().any(|s| t > s.liftoff - p.t_unload - p.t_shift && t < s.liftoff) {
+            t
+        } else {
+            self.quiet_point(t)
+        }
+    }
+
+    /// The bound on robot `i`'s foot `k` normal force at `t` after a halt at `t_h`
+    /// ([`GaitPlan::halt_point`]): an unloading cut short at `t_h` is undone at the load ramp's
+    /// rate (`unload_force` over `t_load`); `None` once back at full load, and for a foot that
+    /// was not unloading at `t_h`.
+    pub fn max_normal_force_after_halt(&self, i: usize, k: usize, t_h: f64, t: f64) -> Option<f64> {
+        let p = &self.params;
+        let f = self.max_normal_force(i, k, t_h)? + p.unload_force * (t - t_h).max(0.0) / p.t_load;
+        (f < p.unload_force).then_some(f)
+    }
+
     /// Every change of a robot's planned stance: `(time, robot, stance)`, in time order.
     pub fn contact_changes(&self) -> Vec<(f64, usize, [bool; 4])> {
         let mut out = Vec::with_capacity(2 * self.steps.len());

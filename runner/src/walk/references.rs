@@ -39,6 +39,19 @@ impl Walk {
         }
     }
 
+    /// The unloading ramps of scenario time `t` after a halt at `t_h` into `refs`
+    /// ([`crate::gait::GaitPlan::max_normal_force_after_halt`]: a ramp cut short is undone). No
+    /// swing foot: none is lifted at a halt point.
+    pub fn feet_after_halt_into(&self, t_h: f64, t: f64, refs: &mut TaskReferences) {
+        for (i, id) in self.robots.iter().enumerate().filter(|(i, _)| self.walking[*i]) {
+            for (k, frame) in self.feet[i].iter().enumerate() {
+                if let Some(f) = self.gait.max_normal_force_after_halt(i, k, t_h, t) {
+                    refs.foot_loads.push(FootLoad { robot: id.clone(), frame: frame.clone(), max_normal_force: f });
+                }
+            }
+        }
+    }
+
     /// Every contact set of the walk, by tick: each change of a robot's planned stance, from
     /// the first tick at or after its time (the agent lifts the foot off then, and lands a
     /// foot once its force confirms the touchdown).
@@ -48,8 +61,8 @@ impl Walk {
         sets
     }
 
-    /// The sets that halt the walk at scenario time `t` (a quiet point,
-    /// [`crate::gait::GaitPlan::quiet_point`]): every walking robot on all its feet from then
+    /// The sets that halt the walk at scenario time `t` (a halt point,
+    /// [`crate::gait::GaitPlan::halt_point`]): every walking robot on all its feet from then
     /// on. An agent takes a set for an earlier tick than those it has waiting as the new plan
     /// and drops the later ones (`robot_agent::contact_switch`), so the walk's remaining
     /// lift-offs never happen.
