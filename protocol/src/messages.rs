@@ -442,7 +442,8 @@ pub enum CoordinatorMode {
     /// The last tick used the fallback (see [`QpStatus`]).
     Fallback,
     /// The team let go of the object it could not hold: the hands are free, the feet carry
-    /// the robots. A planner stops moving the team (a walk halts at its next quiet point);
+    /// the robots. A planner stops moving the team (a walk halts at once before a lift-off,
+    /// else at its next quiet point);
     /// the mode stays until the hands are in a grasp again.
     Released,
 }

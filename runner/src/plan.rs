@@ -247,7 +247,8 @@ pub struct ReferencePlan {
     /// and the swing feet's references.
     pub walk: Option<Arc<crate::walk::Walk>>,
     /// Scenario time at which the walk was halted ([`ReferencePlan::halt_walk`]): from then on
-    /// its references hold the values they had there.
+    /// its torso and object references hold their poses of then at rest, each foot holds where
+    /// it stands, and an unloading cut short is undone (`Walk::feet_after_halt_into`).
     pub walk_halted_at: Option<f64>,
 }
 

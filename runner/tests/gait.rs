@@ -5,7 +5,7 @@
 
 use nalgebra::{Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector2, Vector3};
 use team_runner::gait::support::centre_of_pressure;
-use team_runner::gait::{GaitError, GaitParams, GaitPlan, HandLoad, WalkingRobot};
+use team_runner::gait::{GaitError, GaitParams, GaitPlan, HandLoad, WalkingRobot, HALT_GUARD};
 
 /// A robot like the project's (feet 0.3 m ahead/behind, 0.2 m to each side of a torso 0.55 m
 /// up, foot centres 0.03 m above the ground), in description order LF, RF, LH, RH.
@@ -388,10 +388,13 @@ fn a_walk_released_before_a_lift_off_halts_at_once_and_loads_the_foot_again() {
     for s in plan.steps() {
         let start = s.liftoff - p.t_unload - p.t_shift;
         for frac in [0.1, 0.5, 0.9] {
-            for t in [start + frac * p.t_shift, s.liftoff - p.t_unload + frac * p.t_unload] {
+            for t in [start + frac * p.t_shift, s.liftoff - p.t_unload + frac * (p.t_unload - HALT_GUARD)] {
                 assert_eq!(plan.halt_point(t), t, "robot {} foot {}: released at {t}, before the lift-off", s.robot, s.foot);
                 assert!(plan.stance(s.robot, t).iter().all(|&down| down), "every foot down at {t}");
             }
+            // Closer to the lift-off than the release can travel: the step goes on.
+            let late = s.liftoff - frac * HALT_GUARD;
+            assert_eq!(plan.halt_point(late), plan.quiet_point(late), "released {:.3} s before the lift-off", s.liftoff - late);
             let t = s.liftoff + frac * (s.touchdown - s.liftoff);
             assert_eq!(plan.halt_point(t), plan.quiet_point(t), "released in the swing at {t}");
             assert!(plan.halt_point(t) >= s.touchdown + p.t_load - 1e-9, "the lifted foot lands and loads first");
@@ -409,6 +412,12 @@ fn a_walk_released_before_a_lift_off_halts_at_once_and_loads_the_foot_again() {
         for k in (0..4).filter(|&k| k != s.foot) {
             assert_eq!(plan.max_normal_force_after_halt(s.robot, k, t_h, t_h + 0.01), None, "foot {k} was not unloading");
         }
+        // The cancelled step's foot stays where it stands, pressed, at rest: its start (the
+        // last step's landing point, or where it stood before the walk).
+        let (held, v, a) = plan.foot_after_halt(s.robot, s.foot, t_h).expect("the stepping foot");
+        let pressed = s.from - nalgebra::Vector3::z() * p.touchdown_depth;
+        assert!((held - pressed).norm() < 1e-12, "held at {held:?}, stands at {pressed:?}");
+        assert!(v.iter().chain(&a).all(|x| *x == 0.0));
     }
     assert_eq!(plan.halt_point(0.2), 0.2, "before the walk");
     let end = plan.end_time();

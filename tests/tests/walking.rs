@@ -132,9 +132,10 @@ fn a_team_that_lets_go_of_the_object_stops_walking() {
 /// The references a released walk sends when the release comes before a lift-off, halfway
 /// through the foot's unloading: the walk halts at the release itself; from then on the
 /// walking torso and the object hold their poses of that instant at rest (no twist, no
-/// acceleration), no swing-foot reference goes out, and the unloading foot's bound rises from
-/// where it stood at the load ramp's rate until it is gone; the halt's contact sets keep every
-/// foot down.
+/// acceleration), each foot is held where it stands at rest (the stepping one at its start),
+/// and the unloading foot's bound rises from where it stood at the load ramp's rate until it
+/// is gone; the halt's contact sets keep every foot down. Released halfway through the torso
+/// shift, the moving torso is held where it was, at rest.
 #[test]
 fn a_walk_released_before_a_lift_off_holds_its_poses_and_loads_the_foot_again() {
     let sets = ["walk.path=[[0.2, 0.0, 0.0]]".to_string(), "duration=16.5".into(), "settle=0.5".into()];
@@ -161,7 +162,13 @@ fn a_walk_released_before_a_lift_off_holds_its_poses_and_loads_the_foot_again() 
         let object = r.object.as_ref().expect("object");
         assert_eq!(object.pose.position, before.object.as_ref().expect("object").pose.position);
         assert!(object.twist.iter().all(|v| *v == 0.0));
-        assert!(r.swing_feet.is_empty(), "tick +{k}: no swing foot");
+        // Each foot that steps is held where it stands, at rest (the stepping one at its start).
+        for f in &r.swing_feet {
+            assert!(f.reference.velocity.iter().chain(&f.reference.acceleration).all(|v| *v == 0.0), "tick +{k}: {} {} at rest", f.robot, f.frame);
+        }
+        let own = r.swing_feet.iter().find(|f| &f.robot == robot && &f.frame == foot).expect("the stepping foot's reference");
+        let stands = step.from - nalgebra::Vector3::z() * p.touchdown_depth;
+        assert!((nalgebra::Vector3::from(own.reference.position) - stands).norm() < 1e-9, "tick +{k}: the stepping foot held at {:?}", own.reference.position);
         // Every foot that was unloading at the halt (both robots' when they step together),
         // and no other, is bounded on the load ramp from where it stood.
         let mut bounded = 0;
@@ -180,6 +187,21 @@ fn a_walk_released_before_a_lift_off_holds_its_poses_and_loads_the_foot_again() 
         let own = r.foot_loads.iter().any(|l| &l.robot == robot && &l.frame == foot);
         assert_eq!(own, k < back, "tick +{k}: the stepping foot is bounded until it is loaded again");
         assert_eq!(r.foot_loads.len(), bounded, "no other foot bounded");
+    }
+    // Released halfway through the torso shift: the torso was moving then, and is held at rest
+    // from the next tick on, where it was.
+    let mut shifted = team_runner::plan::plan(&scenario, &common::scenario::repo()).expect("plan").references;
+    let mid = shifted.clock.first_tick_at(step.liftoff - p.t_unload - 0.5 * p.t_shift);
+    let moving = shifted.for_tick("team", mid);
+    let torso_mid = &moving.torsos.iter().find(|x| &x.robot == robot).expect("torso").reference;
+    assert!(torso_mid.twist.iter().any(|v| v.abs() > 1e-4), "the torso shifts: {:?}", torso_mid.twist);
+    assert_eq!(shifted.halt_walk(mid), shifted.time_of_tick(mid), "halted in the shift");
+    for k in [1, 500] {
+        let r = shifted.for_tick("team", mid + k);
+        let torso = &r.torsos.iter().find(|x| &x.robot == robot).expect("torso").reference;
+        assert_eq!(torso.pose.position, torso_mid.pose.position, "tick +{k}: held where it was");
+        assert!(torso.twist.iter().chain(&torso.acceleration).all(|v| *v == 0.0), "tick +{k}: at rest");
+        assert!(r.foot_loads.is_empty(), "no foot was unloading in the shift");
     }
     for set in walk.halt_sets("team", &refs.clock, t_h) {
         assert_eq!(set.stance_feet.len(), 4, "every foot down");

@@ -22,7 +22,7 @@ use nalgebra::{Isometry3, Vector3};
 use serde::Deserialize;
 use thiserror::Error;
 
-pub use schedule::{GaitPlan, Step};
+pub use schedule::{GaitPlan, Step, HALT_GUARD};
 pub use support::HandLoad;
 
 /// The crawl's parameters (a scenario's `[walk.gait]`; every field has a default).

@@ -334,6 +334,11 @@ impl Builder<'_> {
     }
 }
 
+/// How long before a lift-off a release still halts a walk at once, s
+/// ([`GaitPlan::halt_point`]): the release's way from the coordinator through the scenario
+/// driver to the agents, with room for a loaded machine (a few ticks in the runs measured).
+pub const HALT_GUARD: f64 = 0.05;
+
 impl GaitPlan {
     /// The crawl of `robots` along their waypoints (and the object's, moved with the same
     /// progress), starting at `t0` (scenario time, s).
@@ -469,16 +474,31 @@ impl GaitPlan {
     }
 
     /// When a walk halts for a release at `t` ([`crate::plan::ReferencePlan::halt_walk`]): at
-    /// once while the step in progress has not lifted its foot (its torso shift or its foot's
-    /// unloading: the step is cancelled with every foot still down), else at the
-    /// [`GaitPlan::quiet_point`] (a lifted foot lands first).
+    /// once while the step in progress is still [`HALT_GUARD`] or more from lifting its foot
+    /// (its torso shift or its foot's unloading: the step is cancelled with every foot still
+    /// down), else at the [`GaitPlan::quiet_point`] (a lifted foot lands first). The guard
+    /// covers the time the release takes to reach the agents, whose lift-offs were sent ahead:
+    /// a lift-off due before the halt arrives would still happen.
     pub fn halt_point(&self, t: f64) -> f64 {
         let p = &self.params;
-        if self.steps.iter().any(|s| t > s.liftoff - p.t_unload - p.t_shift && t < s.liftoff) {
+        if self.steps.iter().any(|s| t > s.liftoff - p.t_unload - p.t_shift && t + HALT_GUARD < s.liftoff) {
             t
         } else {
             self.quiet_point(t)
         }
+    }
+
+    /// Where robot `i`'s foot `k` stands after a halt at `t_h` ([`GaitPlan::halt_point`]), at
+    /// rest: its last step's pressed landing point, or, for a foot whose first step the halt
+    /// cancelled, its start pressed. A foot that lifted anyway (a lift-off the halt did not
+    /// reach in time) is brought back down there. `None` for a foot that never steps.
+    pub fn foot_after_halt(&self, i: usize, k: usize, t_h: f64) -> Option<PointTarget> {
+        let down = Vector3::z() * self.params.touchdown_depth;
+        if let Some((p, _, _)) = self.swing_foot(i, k, t_h) {
+            return Some((p, [0.0; 3], [0.0; 3]));
+        }
+        let first = self.swings.get(i)?.get(k)?.first().map(|&s| &self.steps[s])?;
+        Some((first.from - down, [0.0; 3], [0.0; 3]))
     }
 
     /// The bound on robot `i`'s foot `k` normal force at `t` after a halt at `t_h`

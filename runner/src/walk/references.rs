@@ -39,12 +39,18 @@ impl Walk {
         }
     }
 
-    /// The unloading ramps of scenario time `t` after a halt at `t_h` into `refs`
-    /// ([`crate::gait::GaitPlan::max_normal_force_after_halt`]: a ramp cut short is undone). No
-    /// swing foot: none is lifted at a halt point.
+    /// The feet's references of scenario time `t` after a halt at `t_h` into `refs`: each foot
+    /// where it stands, at rest ([`crate::gait::GaitPlan::foot_after_halt`]: a foot that lands
+    /// late, or lifted before the halt reached its agent, is pressed down there), and the
+    /// unloading ramps cut short at the halt undone
+    /// ([`crate::gait::GaitPlan::max_normal_force_after_halt`]).
     pub fn feet_after_halt_into(&self, t_h: f64, t: f64, refs: &mut TaskReferences) {
         for (i, id) in self.robots.iter().enumerate().filter(|(i, _)| self.walking[*i]) {
             for (k, frame) in self.feet[i].iter().enumerate() {
+                if let Some((p, v, a)) = self.gait.foot_after_halt(i, k, t_h) {
+                    let reference = PointReference { position: p.into(), velocity: v, acceleration: a };
+                    refs.swing_feet.push(SwingFootReference { robot: id.clone(), frame: frame.clone(), reference });
+                }
                 if let Some(f) = self.gait.max_normal_force_after_halt(i, k, t_h, t) {
                     refs.foot_loads.push(FootLoad { robot: id.clone(), frame: frame.clone(), max_normal_force: f });
                 }
