@@ -31,13 +31,18 @@ pub enum HostsError {
 
 /// The script: `TEAM_TESTHOSTS_SCRIPT`, else the repository's `scripts/testhosts.sh`.
 fn script() -> PathBuf {
-    std::env::var_os("TEAM_TESTHOSTS_SCRIPT").map(PathBuf::from).unwrap_or_else(|| PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../scripts/testhosts.sh")))
+    repo_script("TEAM_TESTHOSTS_SCRIPT", "testhosts.sh")
 }
 
 /// The certificate script: `TEAM_CERTS_SCRIPT`, else the repository's
 /// `scripts/make-test-certs.sh`.
 fn cert_script() -> PathBuf {
-    std::env::var_os("TEAM_CERTS_SCRIPT").map(PathBuf::from).unwrap_or_else(|| PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../scripts/make-test-certs.sh")))
+    repo_script("TEAM_CERTS_SCRIPT", "make-test-certs.sh")
+}
+
+/// The script named by the environment variable `var`, else the repository's `scripts/{file}`.
+fn repo_script(var: &str, file: &str) -> PathBuf {
+    std::env::var_os(var).map(PathBuf::from).unwrap_or_else(|| PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../scripts")).join(file))
 }
 
 fn call(args: &[&str]) -> Result<String, HostsError> {
