@@ -87,29 +87,68 @@ fn a_late_touchdown_is_waited_for_and_the_walk_goes_on() {
 
 /// A team that lets go of the object stops walking. Mid-walk the object is pushed sideways by
 /// `PUSH_N` for 0.3 s, more than the palms' friction can carry: the coordinator lets go
-/// (status `Released`), and the driver halts the walk at its next quiet point. The step in
-/// progress is finished; from shortly after the halt to the end every foot of both robots is on
-/// the ground in the simulator (the agents dropped the lift-offs they had waiting), and both
-/// robots stand: torsos within 5 cm and 10 deg of their references (held from the halt on), no
-/// stance foot sliding 1 cm.
+/// (status `Released`), and the driver halts the walk. In the swing of the team's third step
+/// it halts at the step's quiet point: the step in progress is finished. From shortly after the
+/// halt to the end every foot of both robots is on the ground in the simulator (the agents
+/// dropped the lift-offs they had waiting), and both robots stand: torsos within 5 cm and
+/// 10 deg of their references (held from the halt on), no stance foot sliding 1 cm.
 #[test]
 fn a_team_that_lets_go_of_the_object_stops_walking() {
+    // 0.1 s into the swing of robot 1's third step.
+    let (plan, m, records, halt) = let_go_mid_walk("transport2_released", |s, _| s.liftoff + 0.1);
+    let push_at = third_step(&plan).liftoff + 0.1;
+    let step_time = plan.references.walk.as_ref().expect("walk").gait.params().step_time();
+    assert!(halt > push_at && halt < push_at + 0.3 + step_time, "halted at {halt:.2} s, pushed from {push_at:.2} s");
+    let released = plan.references.time_of_tick(records.released_at.expect("released")).expect("after settling");
+    assert!(halt > released + 0.1, "a release in the swing waits for the quiet point: released {released:.3} s, halted {halt:.3} s");
+    let rep = m.walk.as_ref().expect("walk report");
+    assert_eq!(rep.steps_planned.get("r1"), Some(&3), "the third step, in its swing at the release, is finished: {:?}", rep.steps_planned);
+}
+
+/// The same push in the torso shift of robot 1's third step, 50 ms after the shift begins and
+/// more than a second before its lift-off: the release comes before the lift-off, so the walk
+/// halts at the release itself (`GaitPlan::halt_point`) and the third step is cancelled with
+/// every foot still down. Each robot takes exactly the steps it took before the release
+/// (counted from the simulator's contacts: the cancelled foot never leaves the ground), and
+/// the rest is as above.
+#[test]
+fn a_release_before_a_lift_off_halts_the_walk_at_once() {
+    let (plan, m, records, halt) = let_go_mid_walk("transport2_released_in_shift", |s, p| s.liftoff - p.t_unload - p.t_shift + 0.05);
+    let third = third_step(&plan);
+    let released = plan.references.time_of_tick(records.released_at.expect("released")).expect("after settling");
+    assert!((halt - released).abs() < 1e-9, "halted at the release: released {released:.3} s, halted {halt:.3} s");
+    assert!(halt < third.liftoff - team_runner::gait::HALT_GUARD, "released {released:.3} s, before the third lift-off at {:.3} s", third.liftoff);
+    let rep = m.walk.as_ref().expect("walk report");
+    assert_eq!(rep.steps_planned.get("r1"), Some(&2), "the third step is cancelled: {:?}", rep.steps_planned);
+    assert_eq!(rep.steps_taken, rep.steps_planned, "steps taken against planned up to the halt");
+}
+
+fn released_walk_sets() -> Vec<String> {
+    vec!["walk.path=[[0.2, 0.0, 0.0]]".to_string(), "duration=16.5".into(), "settle=0.5".into()]
+}
+
+fn third_step(plan: &Plan) -> team_runner::gait::Step {
+    plan.references.walk.as_ref().expect("walk").gait.steps().iter().filter(|s| s.robot == 0).nth(2).expect("a third step").clone()
+}
+
+/// Two robots walking 0.2 m forward (`transport2.toml`), the object pushed sideways by
+/// `PUSH_N` for 0.3 s from `push_at(robot 1's third step, the gait's parameters)`: the team lets go and the walk
+/// halts; from 0.2 s after the halt every foot is down, the torsos stand near their held
+/// references and no stance foot slides 1 cm. The run, its metrics and records, the halt time.
+fn let_go_mid_walk(name: &str, push_at: impl Fn(&team_runner::gait::Step, &team_runner::gait::GaitParams) -> f64) -> (Plan, Metrics, team_runner::driver::Records, f64) {
     const PUSH_N: f64 = 100.0;
-    let base = ["walk.path=[[0.2, 0.0, 0.0]]".to_string(), "duration=16.5".into(), "settle=0.5".into()];
+    let base = released_walk_sets();
     let scenario = team_runner::scenario::Scenario::load(common::scenario::repo().join("scenarios/transport2.toml"), &base).expect("scenario");
     let planned = team_runner::plan::plan(&scenario, &common::scenario::repo()).expect("plan");
-    let walk = planned.references.walk.as_ref().expect("walk");
-    let all_steps = walk.gait.steps().len();
-    // In the swing of the team's third step.
-    let push_at = walk.gait.steps().iter().filter(|s| s.robot == 0).nth(2).expect("a third step").liftoff + 0.1;
+    let gait = &planned.references.walk.as_ref().expect("walk").gait;
+    let all_steps = gait.steps().len();
+    let push_at = push_at(&third_step(&planned), gait.params());
     let push = format!("perturbations=[{{on = \"object\", start = {push_at:.3}, duration = 0.3, wrench = [0.0, {PUSH_N}, 0.0, 0.0, 0.0, 0.0]}}]");
     let sets: Vec<&str> = base.iter().map(String::as_str).chain([push.as_str()]).collect();
-    let (plan, m, records) = run_scenario_records("transport2.toml", &sets, false, "transport2_released");
+    let (plan, m, records) = run_scenario_records("transport2.toml", &sets, false, name);
     assert!(m.fallback_ticks.get("grasp released (hands free, feet only)").copied().unwrap_or(0) > 0, "the team let go: {:?}", m.fallback_ticks);
     let rep = m.walk.as_ref().expect("walk report");
     let halt = rep.halted_at_s.expect("the walk halted");
-    let step_time = plan.references.walk.as_ref().expect("walk").gait.params().step_time();
-    assert!(halt > push_at && halt < push_at + 0.3 + step_time, "halted at {halt:.2} s, pushed from {push_at:.2} s");
     let planned_before: usize = rep.steps_planned.values().sum();
     assert!(planned_before < all_steps / 2, "the halt cut the walk short: {planned_before} of {all_steps} steps");
     let after: Vec<_> = records.truth.iter().filter(|g| g.time > halt + 0.2).collect();
@@ -127,6 +166,7 @@ fn a_team_that_lets_go_of_the_object_stops_walking() {
     for (r, s) in &rep.stance_slide_m {
         assert!(*s < 0.01, "{r}'s stance feet slid {s:.3} m");
     }
+    (plan, m, records, halt)
 }
 
 /// The references a released walk sends when the release comes before a lift-off, halfway
