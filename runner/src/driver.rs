@@ -101,7 +101,8 @@ pub struct Driver {
     /// The recorder's queue: every message the driver decoded or published.
     tap: Option<Tap>,
     /// References of ticks below this went to the tap already (the first window is published
-    /// twice; the recording keeps one reference per tick).
+    /// twice; the recording keeps one reference per tick, and a second, held, for the ticks
+    /// after a walk's halt).
     tapped_refs: u64,
 }
 
@@ -182,13 +183,15 @@ impl Driver {
 
     /// The team let go after `tick`: halt the walk, at once before a lift-off, else at its next
     /// quiet point ([`crate::gait::GaitPlan::halt_point`]). The references
-    /// already published from there on (up to `published_to`) are sent again, held; each
+    /// already published from there on (up to `published_to`) are sent again, held, and
+    /// recorded again (the recording's last reference of a tick is the one that stood); each
     /// walking robot gets a set with all its feet down from then on, which cancels the sets it
     /// has waiting; no later set goes out.
     async fn halt_walk(&mut self, tick: u64, published_to: u64) -> Result<(), TransportError> {
         let (Some(t), Some(walk)) = (self.plan.halt_walk(tick), self.plan.walk.clone()) else { return Ok(()) };
         let from = self.plan.clock.first_tick_at(t);
         tracing::warn!(released_after = tick, halt_s = t, halt_tick = from, "the team let go of the object: the walk halts (at once before a lift-off, else when the lifted foot has landed)");
+        self.tapped_refs = self.tapped_refs.min(from);
         self.publish_refs(from, published_to).await?;
         let halt = walk.halt_sets(TEAM, &self.plan.clock, t);
         self.contact_sets.truncate(self.next_contact);

@@ -9,7 +9,7 @@
 
 mod common;
 
-use common::scenario::{run_scenario, run_scenario_records};
+use common::scenario::{run_scenario, run_scenario_recorded};
 use team_runner::evaluate::Metrics;
 use team_runner::plan::Plan;
 
@@ -121,6 +121,26 @@ fn a_release_before_a_lift_off_halts_the_walk_at_once() {
     let rep = m.walk.as_ref().expect("walk report");
     assert_eq!(rep.steps_planned.get("r1"), Some(&2), "the third step is cancelled: {:?}", rep.steps_planned);
     assert_eq!(rep.steps_taken, rep.steps_planned, "steps taken against planned up to the halt");
+    // The recording holds the references that stood: after the halt's tick, the last one
+    // recorded for a tick holds every torso where it was at the halt, at rest.
+    let from = plan.references.clock.first_tick_at(halt) + 1;
+    let bytes = std::fs::read(common::scenario::repo().join("target/test-reports/transport2_released_in_shift/run.mcap")).expect("the recording");
+    let mut last: std::collections::BTreeMap<u64, protocol::TaskReferences> = std::collections::BTreeMap::new();
+    for msg in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
+        let msg = msg.expect("a readable message");
+        if msg.channel.topic == "team/team/references" {
+            let r: protocol::TaskReferences = serde_json::from_slice(&msg.data).expect("references decode");
+            last.insert(r.header.tick, r);
+        }
+    }
+    let held: Vec<_> = last.range(from..).collect();
+    assert!(held.len() > 1000, "references recorded after the halt at tick {from}: {}", held.len());
+    let at_halt = &held[0].1.torsos;
+    for (tick, r) in &held {
+        for (t, t0) in r.torsos.iter().zip(at_halt) {
+            assert_eq!((t.reference.twist, &t.reference.pose), ([0.0; 6], &t0.reference.pose), "tick {tick}: {}'s recorded torso reference", t.robot);
+        }
+    }
 }
 
 fn released_walk_sets() -> Vec<String> {
@@ -145,7 +165,7 @@ fn let_go_mid_walk(name: &str, push_at: impl Fn(&team_runner::gait::Step, &team_
     let push_at = push_at(&third_step(&planned), gait.params());
     let push = format!("perturbations=[{{on = \"object\", start = {push_at:.3}, duration = 0.3, wrench = [0.0, {PUSH_N}, 0.0, 0.0, 0.0, 0.0]}}]");
     let sets: Vec<&str> = base.iter().map(String::as_str).chain([push.as_str()]).collect();
-    let (plan, m, records) = run_scenario_records("transport2.toml", &sets, false, name);
+    let (plan, m, records) = run_scenario_recorded("transport2.toml", &sets, name);
     assert!(m.fallback_ticks.get("grasp released (hands free, feet only)").copied().unwrap_or(0) > 0, "the team let go: {:?}", m.fallback_ticks);
     let rep = m.walk.as_ref().expect("walk report");
     let halt = rep.halted_at_s.expect("the walk halted");

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use team_runner::driver::Records;
 use team_runner::evaluate::{self, Metrics};
 use team_runner::plan::{self, Plan};
+use team_runner::record::{RecordOptions, ScenarioSource};
 use team_runner::run::{self, RunOptions};
 use team_runner::scenario::Scenario;
 
@@ -23,12 +24,28 @@ pub fn run_scenario(file: &str, sets: &[&str], distributed: bool, name: &str) ->
 
 /// [`run_scenario`], with what the run recorded (the ground truth among it).
 pub fn run_scenario_records(file: &str, sets: &[&str], distributed: bool, name: &str) -> (Plan, Metrics, Records) {
+    run_with(file, sets, distributed, name, false)
+}
+
+/// [`run_scenario_records`] embedded, also writing the MCAP recording `team run` writes, to
+/// `target/test-reports/<name>/run.mcap`.
+pub fn run_scenario_recorded(file: &str, sets: &[&str], name: &str) -> (Plan, Metrics, Records) {
+    run_with(file, sets, false, name, true)
+}
+
+fn run_with(file: &str, sets: &[&str], distributed: bool, name: &str, mcap: bool) -> (Plan, Metrics, Records) {
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-    let scenario = Scenario::load(repo().join("scenarios").join(file), &sets).expect("scenario loads");
+    let path = repo().join("scenarios").join(file);
+    let scenario = Scenario::load(&path, &sets).expect("scenario loads");
     let plan = plan::plan(&scenario, &repo()).expect("plan");
     let dir = repo().join("target/test-reports").join(name);
     std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(&plan, &RunOptions { distributed, hosts: false, progress: false }, &dir).expect("the run completes");
+    let opts = RunOptions { distributed, hosts: false, progress: false };
+    let rec = mcap.then(|| RecordOptions { path: dir.join("run.mcap"), scenario: ScenarioSource::read(&path, &sets).expect("scenario file"), live: None });
+    let (records, summary) = run::run_recorded(&plan, &opts, &dir, rec.as_ref()).expect("the run completes");
+    if let Some(s) = summary {
+        assert_eq!((s.dropped, s.failed), (0, 0), "the recording is complete: {s:?}");
+    }
     let eval = evaluate::evaluate(&plan, &records, if distributed { "distributed" } else { "embedded" });
     evaluate::write_report(&plan, &eval, &dir).expect("report written");
     team_runner::plots::write_all(&plan, &eval, &records, &dir).expect("figures drawn");
