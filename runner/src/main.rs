@@ -189,7 +189,8 @@ fn main() -> Result<()> {
         .init();
     match Cli::parse().command {
         Command::Run { scenario, set, distributed, hosts, realtime, tls, out, quiet, live } => {
-            let mode_name = if hosts && tls.is_some() { "hosts-tls" } else if hosts { "hosts" } else if tls.is_some() { "distributed-tls" } else if distributed { "distributed" } else { "embedded" };
+            let opts = RunOptions { distributed, hosts, progress: !quiet };
+            let mode_name = opts.mode_name(tls.is_some());
             let mode_name = if realtime { format!("{mode_name}, real time") } else { mode_name.to_string() };
             let mode_name = mode_name.as_str();
             let s = Scenario::load(&scenario, &set)?;
@@ -210,7 +211,7 @@ fn main() -> Result<()> {
             );
             let source = ScenarioSource::read(&scenario, &set).map_err(|e| anyhow::anyhow!("reading {}: {e}", scenario.display()))?;
             let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live };
-            let (records, recording) = scenario_run::run_recorded_secure(&plan, &RunOptions { distributed, hosts, progress: !quiet }, tls.as_deref(), &dir, Some(&rec))?;
+            let (records, recording) = scenario_run::run_recorded_secure(&plan, &opts, tls.as_deref(), &dir, Some(&rec))?;
             let eval = evaluate::evaluate(&plan, &records, mode_name);
             evaluate::write_report(&plan, &eval, &dir)?;
             plots::write_all(&plan, &eval, &records, &dir)?;

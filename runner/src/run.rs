@@ -76,6 +76,20 @@ pub struct RunOptions {
     pub progress: bool,
 }
 
+impl RunOptions {
+    /// The name reports give the mode these options (and `tls`, [`run_recorded_secure`]'s)
+    /// run in: [`Mode::name`] of the mode that function makes.
+    pub fn mode_name(&self, tls: bool) -> &'static str {
+        match (self.hosts, tls, self.distributed) {
+            (true, true, _) => "hosts-tls",
+            (true, false, _) => "hosts",
+            (false, true, _) => "distributed-tls",
+            (false, false, true) => "distributed",
+            (false, false, false) => "embedded",
+        }
+    }
+}
+
 /// The components of a scenario run.
 /// Lockstep runs wait long ([`AGENT_COMMAND_DEADLINE`], [`COORDINATOR_TICK_DEADLINE`]); real-time
 /// runs (`plan.scene.realtime`) keep a robot's deadlines ([`REALTIME_AGENT_COMMAND_DEADLINE`],
@@ -224,4 +238,24 @@ pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &Mode, recorder: Optio
     bridge_result?;
     finished?;
     Ok(records?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The report's mode name, chosen before the run, is the run's own ([`Mode::name`], which
+    /// the recording keeps) for the modes on loopback; the hosts' modes (a `Mode::Hosts`
+    /// needs hosts made) by their names.
+    #[test]
+    fn the_reported_mode_is_the_mode_that_runs() {
+        let dir = std::path::PathBuf::from("d");
+        let opts = |distributed| RunOptions { distributed, hosts: false, progress: false };
+        assert_eq!(opts(false).mode_name(false), Mode::Embedded.name());
+        assert_eq!(opts(true).mode_name(false), Mode::Distributed { dir: dir.clone() }.name());
+        assert_eq!(opts(true).mode_name(true), Mode::Tls { dir: dir.clone(), certs: dir.clone() }.name());
+        assert_eq!(opts(false).mode_name(true), Mode::Tls { dir: dir.clone(), certs: dir }.name(), "TLS runs distributed");
+        let hosts = RunOptions { distributed: false, hosts: true, progress: false };
+        assert_eq!((hosts.mode_name(false), hosts.mode_name(true)), ("hosts", "hosts-tls"));
+    }
 }
