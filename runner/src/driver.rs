@@ -102,7 +102,7 @@ pub struct Driver {
     tap: Option<Tap>,
     /// References of ticks below this went to the tap already (the first window is published
     /// twice; the recording keeps one reference per tick, and a second, held, for the ticks
-    /// after a walk's halt).
+    /// from a walk's halt to the last already sent).
     tapped_refs: u64,
 }
 
@@ -184,7 +184,8 @@ impl Driver {
     /// The team let go after `tick`: halt the walk, at once before a lift-off, else at its next
     /// quiet point ([`crate::gait::GaitPlan::halt_point`]). The references
     /// already published from there on (up to `published_to`) are sent again, held, and
-    /// recorded again (the recording's last reference of a tick is the one that stood); each
+    /// recorded again (the later of a tick's two references in the recording; the coordinator
+    /// may have used the first for the ticks it solved before the held ones arrived); each
     /// walking robot gets a set with all its feet down from then on, which cancels the sets it
     /// has waiting; no later set goes out.
     async fn halt_walk(&mut self, tick: u64, published_to: u64) -> Result<(), TransportError> {

@@ -127,6 +127,16 @@ pub fn run_recorded(plan: &Plan, opts: &RunOptions, out: &Path, record: Option<&
     run_recorded_secure(plan, opts, None, out, record)
 }
 
+/// The mode of a run on this computer's loopback (not on test hosts): over TLS when `tls`
+/// names the certificates (distributed or not), else distributed or embedded.
+fn loopback_mode(opts: &RunOptions, tls: Option<&Path>, out: &Path) -> Mode {
+    match tls {
+        Some(certs) => Mode::Tls { dir: out.to_path_buf(), certs: certs.to_path_buf() },
+        None if opts.distributed => Mode::Distributed { dir: out.to_path_buf() },
+        None => Mode::Embedded,
+    }
+}
+
 /// [`run_recorded`]; with `tls`, distributed on loopback over mutual TLS with the team's
 /// access control ([`Mode::Tls`]), the certificates in that folder
 /// (`scripts/make-test-certs.sh DIR ROBOT...`; README "Access control (mutual TLS and ACL)").
@@ -157,12 +167,8 @@ pub fn run_recorded_secure(
             None => None,
         };
         Mode::Hosts { dir: out.to_path_buf(), hosts: std::sync::Arc::new(hosts), certs }
-    } else if let Some(certs) = tls {
-        Mode::Tls { dir: out.to_path_buf(), certs: certs.to_path_buf() }
-    } else if opts.distributed {
-        Mode::Distributed { dir: out.to_path_buf() }
     } else {
-        Mode::Embedded
+        loopback_mode(opts, tls, out)
     };
     let recorder = match record {
         Some(r) => Some(rt.block_on(Recorder::start(plan, r))?),
@@ -244,17 +250,19 @@ pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &Mode, recorder: Optio
 mod tests {
     use super::*;
 
-    /// The report's mode name, chosen before the run, is the run's own ([`Mode::name`], which
-    /// the recording keeps) for the modes on loopback; the hosts' modes (a `Mode::Hosts`
-    /// needs hosts made) by their names.
+    /// The report's mode name, chosen before the run, is the name of the mode the run picks
+    /// ([`Mode::name`], which the recording keeps) on loopback; the hosts' modes (a
+    /// `Mode::Hosts` needs hosts made) by their names.
     #[test]
     fn the_reported_mode_is_the_mode_that_runs() {
-        let dir = std::path::PathBuf::from("d");
-        let opts = |distributed| RunOptions { distributed, hosts: false, progress: false };
-        assert_eq!(opts(false).mode_name(false), Mode::Embedded.name());
-        assert_eq!(opts(true).mode_name(false), Mode::Distributed { dir: dir.clone() }.name());
-        assert_eq!(opts(true).mode_name(true), Mode::Tls { dir: dir.clone(), certs: dir.clone() }.name());
-        assert_eq!(opts(false).mode_name(true), Mode::Tls { dir: dir.clone(), certs: dir }.name(), "TLS runs distributed");
+        let (out, certs) = (Path::new("out"), Path::new("certs"));
+        for distributed in [false, true] {
+            let opts = RunOptions { distributed, hosts: false, progress: false };
+            for tls in [None, Some(certs)] {
+                assert_eq!(opts.mode_name(tls.is_some()), loopback_mode(&opts, tls, out).name(), "distributed {distributed}, tls {tls:?}");
+            }
+        }
+        assert_eq!(loopback_mode(&RunOptions { distributed: false, hosts: false, progress: false }, Some(certs), out).name(), "distributed-tls", "TLS runs distributed");
         let hosts = RunOptions { distributed: false, hosts: true, progress: false };
         assert_eq!((hosts.mode_name(false), hosts.mode_name(true)), ("hosts", "hosts-tls"));
     }

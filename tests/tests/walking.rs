@@ -11,7 +11,7 @@ mod common;
 
 use common::scenario::{run_scenario, run_scenario_recorded};
 use team_runner::evaluate::Metrics;
-use team_runner::plan::Plan;
+use team_runner::plan::{Plan, TEAM};
 
 fn assert_walked(plan: &Plan, m: &Metrics) {
     for c in &m.checks {
@@ -121,24 +121,30 @@ fn a_release_before_a_lift_off_halts_the_walk_at_once() {
     let rep = m.walk.as_ref().expect("walk report");
     assert_eq!(rep.steps_planned.get("r1"), Some(&2), "the third step is cancelled: {:?}", rep.steps_planned);
     assert_eq!(rep.steps_taken, rep.steps_planned, "steps taken against planned up to the halt");
-    // The recording holds the references that stood: after the halt's tick, the last one
-    // recorded for a tick holds every torso where it was at the halt, at rest.
-    let from = plan.references.clock.first_tick_at(halt) + 1;
-    let bytes = std::fs::read(common::scenario::repo().join("target/test-reports/transport2_released_in_shift/run.mcap")).expect("the recording");
+    // The recording holds the held references: after the halt's tick, the last one recorded
+    // for a tick holds every torso at rest where the walk put it at the halt (the plan without
+    // the halt, at the halt's tick).
+    let from = plan.references.clock.first_tick_at(halt);
+    let at_halt = plan.references.for_tick(TEAM, from).torsos;
+    let topic = protocol::keys::references(TEAM).expect("the references' key").to_string();
+    let bytes = std::fs::read(common::scenario::report_dir("transport2_released_in_shift").join("run.mcap")).expect("the recording");
     let mut last: std::collections::BTreeMap<u64, protocol::TaskReferences> = std::collections::BTreeMap::new();
     for msg in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
         let msg = msg.expect("a readable message");
-        if msg.channel.topic == "team/team/references" {
+        if msg.channel.topic == topic {
             let r: protocol::TaskReferences = serde_json::from_slice(&msg.data).expect("references decode");
             last.insert(r.header.tick, r);
         }
     }
-    let held: Vec<_> = last.range(from..).collect();
+    let held: Vec<_> = last.range(from + 1..).collect();
     assert!(held.len() > 1000, "references recorded after the halt at tick {from}: {}", held.len());
-    let at_halt = &held[0].1.torsos;
     for (tick, r) in &held {
-        for (t, t0) in r.torsos.iter().zip(at_halt) {
-            assert_eq!((t.reference.twist, &t.reference.pose), ([0.0; 6], &t0.reference.pose), "tick {tick}: {}'s recorded torso reference", t.robot);
+        assert_eq!(r.torsos.len(), at_halt.len(), "tick {tick}: torsos");
+        for (t, t0) in r.torsos.iter().zip(&at_halt) {
+            assert_eq!(t.reference.twist, [0.0; 6], "tick {tick}: {}'s recorded torso reference moves", t.robot);
+            let (p, p0) = (&t.reference.pose, &t0.reference.pose);
+            let apart = p.position.iter().chain(&p.orientation).zip(p0.position.iter().chain(&p0.orientation)).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            assert!(apart < 1e-9, "tick {tick}: {}'s recorded torso reference is {apart} from its pose at the halt", t.robot);
         }
     }
 }

@@ -16,6 +16,11 @@ pub fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("repo root").to_path_buf()
 }
 
+/// The report folder of the run called `name`: `target/test-reports/<name>/`.
+pub fn report_dir(name: &str) -> PathBuf {
+    repo().join("target/test-reports").join(name)
+}
+
 /// Run `scenarios/{file}` with `sets`, embedded or `distributed`; the plan and the metrics.
 pub fn run_scenario(file: &str, sets: &[&str], distributed: bool, name: &str) -> (Plan, Metrics) {
     let (plan, metrics, _) = run_scenario_records(file, sets, distributed, name);
@@ -28,7 +33,7 @@ pub fn run_scenario_records(file: &str, sets: &[&str], distributed: bool, name: 
 }
 
 /// [`run_scenario_records`] embedded, also writing the MCAP recording `team run` writes, to
-/// `target/test-reports/<name>/run.mcap`.
+/// `run.mcap` in [`report_dir`].
 pub fn run_scenario_recorded(file: &str, sets: &[&str], name: &str) -> (Plan, Metrics, Records) {
     run_with(file, sets, false, name, true)
 }
@@ -38,7 +43,7 @@ fn run_with(file: &str, sets: &[&str], distributed: bool, name: &str, mcap: bool
     let path = repo().join("scenarios").join(file);
     let scenario = Scenario::load(&path, &sets).expect("scenario loads");
     let plan = plan::plan(&scenario, &repo()).expect("plan");
-    let dir = repo().join("target/test-reports").join(name);
+    let dir = report_dir(name);
     std::fs::create_dir_all(&dir).expect("report dir");
     let opts = RunOptions { distributed, hosts: false, progress: false };
     let rec = mcap.then(|| RecordOptions { path: dir.join("run.mcap"), scenario: ScenarioSource::read(&path, &sets).expect("scenario file"), live: None });
@@ -46,7 +51,7 @@ fn run_with(file: &str, sets: &[&str], distributed: bool, name: &str, mcap: bool
     if let Some(s) = summary {
         assert_eq!((s.dropped, s.failed), (0, 0), "the recording is complete: {s:?}");
     }
-    let eval = evaluate::evaluate(&plan, &records, if distributed { "distributed" } else { "embedded" });
+    let eval = evaluate::evaluate(&plan, &records, opts.mode_name(false));
     evaluate::write_report(&plan, &eval, &dir).expect("report written");
     team_runner::plots::write_all(&plan, &eval, &records, &dir).expect("figures drawn");
     println!("{}", evaluate::summary(&eval.metrics, &dir));
