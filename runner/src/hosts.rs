@@ -49,10 +49,20 @@ fn call(args: &[&str]) -> Result<String, HostsError> {
     call_script(&script(), args)
 }
 
+/// `testhosts.sh` answered `args` with `text` that does not parse.
+fn unparsed(args: &[&str], text: &str, e: impl std::fmt::Display) -> HostsError {
+    HostsError::Script { args: invocation(&script(), args), reason: format!("{text:?}: {e}") }
+}
+
+/// `script args...` as an error names it: the script's file name and its arguments.
+fn invocation(script: &Path, args: &[&str]) -> String {
+    let name = script.file_name().map_or_else(|| script.display().to_string(), |n| n.to_string_lossy().to_string());
+    format!("{name} {}", args.join(" "))
+}
+
 /// Run `script` with `args` under `timeout`; its stdout, or why it failed.
 fn call_script(script: &Path, args: &[&str]) -> Result<String, HostsError> {
-    let name = script.file_name().map_or_else(|| script.display().to_string(), |n| n.to_string_lossy().to_string());
-    let joined = format!("{name} {}", args.join(" "));
+    let joined = invocation(script, args);
     let out = Command::new("timeout")
         .arg(SCRIPT_TIMEOUT_S.to_string())
         .arg(script)
@@ -95,11 +105,11 @@ impl TestHosts {
         let mut args = vec!["up", set.as_str(), net.as_str()];
         args.extend(names.iter().map(String::as_str));
         call(&args)?;
-        let gateway = format!("{net}.1").parse().map_err(|e| HostsError::Script { args: format!("testhosts.sh {}", args.join(" ")), reason: format!("network {net}: {e}") })?;
+        let gateway = format!("{net}.1").parse().map_err(|e| HostsError::Script { args: invocation(&script(), &args), reason: format!("network {net}: {e}") })?;
         let mut hosts = TestHosts { set, gateway, addrs: BTreeMap::new() };
         for name in names {
             let text = call(&["addr", &hosts.set, name])?;
-            let addr = text.parse().map_err(|e| HostsError::Script { args: format!("testhosts.sh addr {} {name}", hosts.set), reason: format!("{text:?}: {e}") })?;
+            let addr = text.parse().map_err(|e| unparsed(&["addr", &hosts.set, name], &text, e))?;
             hosts.addrs.insert(name.clone(), addr);
         }
         tracing::info!(set = %hosts.set, %net, hosts = ?hosts.addrs, "test hosts up");
@@ -190,8 +200,9 @@ impl TestHosts {
     /// Packets the host's loss rule dropped so far.
     pub fn dropped(&self, name: &str) -> Result<u64, HostsError> {
         self.addr(name)?;
-        let text = call(&["dropped", &self.set, name])?;
-        text.parse().map_err(|e| HostsError::Script { args: format!("testhosts.sh dropped {} {name}", self.set), reason: format!("{text:?}: {e}") })
+        let args = ["dropped", self.set.as_str(), name];
+        let text = call(&args)?;
+        text.parse().map_err(|e| unparsed(&args, &text, e))
     }
 
     /// Take the host's link up or down.
