@@ -95,8 +95,7 @@ fn a_late_touchdown_is_waited_for_and_the_walk_goes_on() {
 #[test]
 fn a_team_that_lets_go_of_the_object_stops_walking() {
     // 0.1 s into the swing of robot 1's third step.
-    let (plan, m, records, halt) = let_go_mid_walk("transport2_released", |s, _| s.liftoff + 0.1);
-    let push_at = third_step(&plan).liftoff + 0.1;
+    let LetGo { plan, metrics: m, records, halt, push_at } = let_go_mid_walk("transport2_released", |s, _| s.liftoff + 0.1);
     let step_time = plan.references.walk.as_ref().expect("walk").gait.params().step_time();
     assert!(halt > push_at && halt < push_at + 0.3 + step_time, "halted at {halt:.2} s, pushed from {push_at:.2} s");
     let released = plan.references.time_of_tick(records.released_at.expect("released")).expect("after settling");
@@ -113,7 +112,7 @@ fn a_team_that_lets_go_of_the_object_stops_walking() {
 /// the rest is as above.
 #[test]
 fn a_release_before_a_lift_off_halts_the_walk_at_once() {
-    let (plan, m, records, halt) = let_go_mid_walk("transport2_released_in_shift", |s, p| s.liftoff - p.t_unload - p.t_shift + 0.05);
+    let LetGo { plan, metrics: m, records, halt, .. } = let_go_mid_walk("transport2_released_in_shift", |s, p| s.liftoff - p.t_unload - p.t_shift + 0.05);
     let third = third_step(&plan);
     let released = plan.references.time_of_tick(records.released_at.expect("released")).expect("after settling");
     assert!((halt - released).abs() < 1e-9, "halted at the release: released {released:.3} s, halted {halt:.3} s");
@@ -157,11 +156,21 @@ fn third_step(plan: &Plan) -> team_runner::gait::Step {
     plan.references.walk.as_ref().expect("walk").gait.steps().iter().filter(|s| s.robot == 0).nth(2).expect("a third step").clone()
 }
 
+/// A run of [`let_go_mid_walk`]: its plan, metrics and records, when the walk halted and when
+/// the push began (scenario time, s).
+struct LetGo {
+    plan: Plan,
+    metrics: Metrics,
+    records: team_runner::driver::Records,
+    halt: f64,
+    push_at: f64,
+}
+
 /// Two robots walking 0.2 m forward (`transport2.toml`), the object pushed sideways by
-/// `PUSH_N` for 0.3 s from `push_at(robot 1's third step, the gait's parameters)`: the team lets go and the walk
-/// halts; from 0.2 s after the halt every foot is down, the torsos stand near their held
-/// references and no stance foot slides 1 cm. The run, its metrics and records, the halt time.
-fn let_go_mid_walk(name: &str, push_at: impl Fn(&team_runner::gait::Step, &team_runner::gait::GaitParams) -> f64) -> (Plan, Metrics, team_runner::driver::Records, f64) {
+/// `PUSH_N` for 0.3 s from `push_at(robot 1's third step, the gait's parameters)`: the team
+/// lets go and the walk halts; from 0.2 s after the halt every foot is down, the torsos stand
+/// near their held references and no stance foot slides 1 cm.
+fn let_go_mid_walk(name: &str, push_at: impl Fn(&team_runner::gait::Step, &team_runner::gait::GaitParams) -> f64) -> LetGo {
     const PUSH_N: f64 = 100.0;
     let base = released_walk_sets();
     let scenario = team_runner::scenario::Scenario::load(common::scenario::repo().join("scenarios/transport2.toml"), &base).expect("scenario");
@@ -192,7 +201,7 @@ fn let_go_mid_walk(name: &str, push_at: impl Fn(&team_runner::gait::Step, &team_
     for (r, s) in &rep.stance_slide_m {
         assert!(*s < 0.01, "{r}'s stance feet slid {s:.3} m");
     }
-    (plan, m, records, halt)
+    LetGo { plan, metrics: m, records, halt, push_at }
 }
 
 /// The references a released walk sends when the release comes before a lift-off, halfway
@@ -204,8 +213,7 @@ fn let_go_mid_walk(name: &str, push_at: impl Fn(&team_runner::gait::Step, &team_
 /// shift, the moving torso is held where it was, at rest.
 #[test]
 fn a_walk_released_before_a_lift_off_holds_its_poses_and_loads_the_foot_again() {
-    let sets = ["walk.path=[[0.2, 0.0, 0.0]]".to_string(), "duration=16.5".into(), "settle=0.5".into()];
-    let scenario = team_runner::scenario::Scenario::load(common::scenario::repo().join("scenarios/transport2.toml"), &sets).expect("scenario");
+    let scenario = team_runner::scenario::Scenario::load(common::scenario::repo().join("scenarios/transport2.toml"), &released_walk_sets()).expect("scenario");
     let mut refs = team_runner::plan::plan(&scenario, &common::scenario::repo()).expect("plan").references;
     let walk = refs.walk.clone().expect("walk");
     let p = walk.gait.params().clone();
@@ -213,13 +221,13 @@ fn a_walk_released_before_a_lift_off_holds_its_poses_and_loads_the_foot_again() 
     let tick = refs.clock.first_tick_at(step.liftoff - 0.5 * p.t_unload);
     let t_h = refs.time_of_tick(tick).expect("scenario time");
     let f_h = walk.gait.max_normal_force(step.robot, step.foot, t_h).expect("unloading");
-    let before = refs.for_tick("team", tick);
+    let before = refs.for_tick(TEAM, tick);
     assert_eq!(refs.halt_walk(tick), Some(t_h), "halted at the release");
     let (robot, foot) = (&walk.robots[step.robot], &walk.feet[step.robot][step.foot]);
     let period = refs.clock.scenario_time(tick + 1).expect("time") - t_h;
     let back = (p.t_load * (1.0 - f_h / p.unload_force) / period).ceil() as u64;
     for k in [1, 10, back / 2, back - 2, back + 1, back + 2000] {
-        let r = refs.for_tick("team", tick + k);
+        let r = refs.for_tick(TEAM, tick + k);
         let t = refs.clock.scenario_time(tick + k).expect("time");
         let torso = &r.torsos.iter().find(|x| &x.robot == robot).expect("torso").reference;
         let torso_then = &before.torsos.iter().find(|x| &x.robot == robot).expect("torso").reference;
@@ -258,18 +266,18 @@ fn a_walk_released_before_a_lift_off_holds_its_poses_and_loads_the_foot_again() 
     // from the next tick on, where it was.
     let mut shifted = team_runner::plan::plan(&scenario, &common::scenario::repo()).expect("plan").references;
     let mid = shifted.clock.first_tick_at(step.liftoff - p.t_unload - 0.5 * p.t_shift);
-    let moving = shifted.for_tick("team", mid);
+    let moving = shifted.for_tick(TEAM, mid);
     let torso_mid = &moving.torsos.iter().find(|x| &x.robot == robot).expect("torso").reference;
     assert!(torso_mid.twist.iter().any(|v| v.abs() > 1e-4), "the torso shifts: {:?}", torso_mid.twist);
     assert_eq!(shifted.halt_walk(mid), shifted.time_of_tick(mid), "halted in the shift");
     for k in [1, 500] {
-        let r = shifted.for_tick("team", mid + k);
+        let r = shifted.for_tick(TEAM, mid + k);
         let torso = &r.torsos.iter().find(|x| &x.robot == robot).expect("torso").reference;
         assert_eq!(torso.pose.position, torso_mid.pose.position, "tick +{k}: held where it was");
         assert!(torso.twist.iter().chain(&torso.acceleration).all(|v| *v == 0.0), "tick +{k}: at rest");
         assert!(r.foot_loads.is_empty(), "no foot was unloading in the shift");
     }
-    for set in walk.halt_sets("team", &refs.clock, t_h) {
+    for set in walk.halt_sets(TEAM, &refs.clock, t_h) {
         assert_eq!(set.stance_feet.len(), 4, "every foot down");
         assert_eq!(set.header.tick, tick);
     }
