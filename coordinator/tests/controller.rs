@@ -459,3 +459,39 @@ fn a_swing_foot_without_a_reference_holds_where_it_lifted_off_this_time() {
     targets.keep_swing_feet(&again);
     assert_eq!(targets.swing_foot(None, "r1", &name, &p1).0, p1);
 }
+
+/// The diagnostics' `constraint_residual` is `|J_c v|`: written out here row by row from the
+/// tick's `J_c` and the team's velocity, on a team moving off its constraints (random
+/// velocities, not projected), where it is far from zero, and on the team at rest, where it
+/// is zero.
+#[test]
+fn the_constraint_residual_is_the_norm_of_the_constraints_velocity() {
+    use rand::Rng;
+    let mut fx = Fixture::new();
+    let (_, descs) = fx.static_team(2);
+    let mut rng = common::rng(41);
+    let nv = fx.robot.model.nv;
+    let qs: Vec<DVector<f64>> = (0..2).map(|k| fx.perturbed_q(k, 2, 0.05, &mut rng)).collect();
+    let mut c = controller(&descs, PidcConfig::default());
+    let mut cmds = Vec::new();
+    for moving in [false, true] {
+        let tick: Vec<DynamicsTerms> = (0..2)
+            .map(|k| {
+                let v = if moving { DVector::from_fn(nv, |_, _| rng.random_range(-0.3..0.3)) } else { DVector::zeros(nv) };
+                fx.terms(&robot_id(k), &qs[k], &v, 1 + moving as u64)
+            })
+            .collect();
+        c.solve(&tick, &mut cmds).expect("tick");
+        let r = c.last().expect("last");
+        let (j, v) = (&r.j_c, &r.team.velocity);
+        let written_out = (0..j.nrows()).map(|i| (0..j.ncols()).map(|k| j[(i, k)] * v[k]).sum::<f64>().powi(2)).sum::<f64>().sqrt();
+        let reported = c.diagnostics().expect("diagnostics").constraint_residual;
+        println!("moving {moving}: |J_c v| {written_out:.6e}, reported {reported:.6e}");
+        assert!((reported - written_out).abs() <= 1e-12 * (1.0 + written_out), "reported {reported}, written out {written_out}");
+        if moving {
+            assert!(written_out > 1e-2, "random velocities leave the constraints: {written_out}");
+        } else {
+            assert!(written_out == 0.0, "at rest: {written_out}");
+        }
+    }
+}

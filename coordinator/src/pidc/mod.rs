@@ -25,6 +25,7 @@ pub use config::PidcConfig;
 pub use report::{TickReport, Timing};
 use report::set_note;
 
+use crate::linalg::zeros_v;
 use crate::qp::{self, QpInput, QpWorkspace};
 use crate::units::grasp::GraspTracker;
 use crate::units::impedance::TaskStack;
@@ -155,6 +156,8 @@ impl Pidc {
         targets.keep_clear(&r.team, r.grasp.as_ref().map(|g| &g.object.translation.vector), cfg.release.retreat);
         // J_c = [J_cf; J_c,ee] (eq. jacobian_c).
         contact_jacobian(&r.team, r.grasp.as_ref(), &mut r.j_c, &mut r.jdv_c);
+        zeros_v(&mut r.jc_v, r.j_c.nrows());
+        r.jc_v.gemv(1.0, &r.j_c, &r.team.velocity, 0.0);
         let t_asm = us();
         // P, Pdot v, M_c, Mbar, [P S]^+, B (eqs. aghili_21, aghili_25, constraint_force, bmatrix).
         r.proj.compute(&mut ws.proj, &r.team, r.grasp.as_ref(), &r.j_c, &r.jdv_c, cfg.dense_projections)?;

@@ -19,6 +19,9 @@ pub struct TickReport {
     pub grasp: Option<GraspTerms>,
     pub j_c: DMatrix<f64>,
     pub jdv_c: DVector<f64>,
+    /// `J_c v`: the constraints' velocity, which a held contact keeps at zero (its norm is the
+    /// diagnostics' `constraint_residual`).
+    pub jc_v: DVector<f64>,
     pub proj: Projections,
     /// Motion torque `tau_M` and `tau_0 = [P S]^+ P tau_M`.
     pub tau_m: DVector<f64>,
@@ -104,9 +107,7 @@ impl TickReport {
             c.wrench.extend(self.lambda_real.rows(row, dim).iter());
             row += dim;
         }
-        // |J_c v|, without forming J_c v.
-        let v = &self.team.velocity;
-        let residual = (0..self.j_c.nrows()).map(|i| (0..v.len()).map(|j| self.j_c[(i, j)] * v[j]).sum::<f64>().powi(2)).sum::<f64>().sqrt();
+        let residual = self.jc_v.norm();
         d.qp_status = self.qp.status;
         d.qp_iterations = self.qp.iterations;
         d.qp_solve_us = self.qp.solve_us;

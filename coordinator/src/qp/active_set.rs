@@ -28,13 +28,15 @@
 //!
 //! [`ACTIVE_SET_TOL`]: super::settings::ACTIVE_SET_TOL
 
+use faer::{MatMut, MatRef};
 use nalgebra::{DMatrix, DVector};
 use protocol::QpStatus;
 
 use super::problem::QpProblem;
 use super::settings::QpSettings;
 use super::{QpOutcome, QpSolver};
-use crate::linalg::{cholesky_in_place, lower_inverse, lower_solve_in_place, shape, zeros_v};
+
+use crate::linalg::{cholesky_in_place, dot, gemm, lower_inverse, lower_solve_in_place, shape, zeros_v};
 
 /// Why [`DualActiveSet`] stopped without an answer (the caller then runs the interior-point
 /// path).
@@ -371,13 +373,12 @@ impl DualActiveSet {
             }
         }
         lower_solve_in_place(l, n, n, mw, n, q);
-        // Gram matrix M^T M (lower triangle) into `r`, then its Cholesky factor.
+        // Gram matrix M^T M into `r`'s leading q x q block (one product), then its Cholesky
+        // factor.
         let g = self.r.as_mut_slice();
-        for k1 in 0..q {
-            for k2 in k1..q {
-                let dot: f64 = mw[k1 * n..(k1 + 1) * n].iter().zip(&mw[k2 * n..(k2 + 1) * n]).map(|(x, y)| x * y).sum();
-                g[k1 * n + k2] = dot;
-            }
+        {
+            let m_w = MatRef::from_column_major_slice_with_stride(&mw[..], n, q, n);
+            gemm(MatMut::from_column_major_slice_with_stride_mut(&mut g[..], q, q, n), 0.0, 1.0, m_w.transpose(), m_w);
         }
         if cholesky_in_place(g, n, q, 1e-12).is_none() {
             return false;
@@ -410,8 +411,8 @@ impl DualActiveSet {
             }
         }
         for c in (0..n).rev() {
-            let dot: f64 = l[c * n + c + 1..c * n + n].iter().zip(&self.x.as_slice()[c + 1..n]).map(|(x, y)| x * y).sum();
-            self.x[c] = (self.z[c] - dot) / l[c * n + c];
+            let lx = dot(&l[c * n + c + 1..c * n + n], &self.x.as_slice()[c + 1..n]);
+            self.x[c] = (self.z[c] - lx) / l[c * n + c];
         }
         self.s.copy_from(b);
         self.s.gemv(-1.0, a, &self.x, 1.0);

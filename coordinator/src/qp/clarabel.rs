@@ -10,10 +10,10 @@ use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, NonnegativeCone
 use nalgebra::{DMatrix, DVector};
 use protocol::QpStatus;
 
-use super::problem::{all_finite, QpProblem};
+use super::problem::QpProblem;
 use super::settings::QpSettings;
 use super::{QpOutcome, QpSolver};
-use crate::linalg::zeros_v;
+use crate::linalg::{all_finite, zeros_v};
 
 /// Clarabel as a [`QpSolver`] (stateless: Clarabel keeps nothing between ticks here).
 #[derive(Debug, Default, Clone, Copy)]
@@ -74,7 +74,7 @@ impl QpSolver for Clarabel {
         let setup_us = setup_start.elapsed().as_secs_f64() * 1e6;
         solver.solve();
         let sol = &solver.solution;
-        if sol.x.len() == m && all_finite(sol.x.iter()) {
+        if sol.x.len() == m && all_finite(&sol.x) {
             if x.len() != m {
                 zeros_v(x, m);
             }

@@ -4,10 +4,10 @@
 use nalgebra::{DMatrix, DVector};
 use protocol::QpStatus;
 
-use super::problem::{all_finite, QpProblem};
+use super::problem::QpProblem;
 use super::settings::{QpSettings, REDUCED_TOL};
 use super::{QpOutcome, QpSolver};
-use crate::linalg::{add_product, mat, zeros, zeros_v};
+use crate::linalg::{add_product, all_finite, mat, zeros, zeros_v};
 
 /// A dense primal-dual interior-point method (Mehrotra predictor-corrector, normal equations
 /// `P + A^T (Z/S) A` by Cholesky) for `min 1/2 x^T P x  s.t.  A x <= b`: the QP is small and
@@ -155,7 +155,7 @@ impl DenseIpm {
             self.x.axpy(alpha, &self.dx, 1.0);
             self.s.axpy(alpha, &self.ds, 1.0);
             self.z.axpy(alpha, &self.dz, 1.0);
-            if !(all_finite(self.x.iter()) && self.s.iter().all(|v| v.is_finite() && *v > 0.0) && self.z.iter().all(|v| v.is_finite() && *v > 0.0)) {
+            if !(all_finite(self.x.as_slice()) && self.s.iter().all(|v| v.is_finite() && *v > 0.0) && self.z.iter().all(|v| v.is_finite() && *v > 0.0)) {
                 return Err(numerical);
             }
         }

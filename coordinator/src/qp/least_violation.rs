@@ -3,11 +3,11 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::problem::{all_finite, QpInput, QpProblem};
+use super::problem::{QpInput, QpProblem};
 use super::rows::{contact_rows, ContactKind};
 use super::settings::QpSettings;
 use super::QpWorkspace;
-use crate::linalg::{zeros, zeros_v};
+use crate::linalg::{all_finite, zeros, zeros_v};
 
 /// Scratch of [`solve_least_violation`], kept between ticks in the [`QpWorkspace`].
 #[derive(Default)]
@@ -66,7 +66,7 @@ pub fn solve_least_violation_with(ws: &mut QpWorkspace, inp: &QpInput, settings:
     ws.problem.assemble(inp);
     let QpWorkspace { problem: QpProblem { h, a, b, .. }, lv, .. } = ws;
     let LeastViolation { k: lv_k, rhs: lv_rhs, r: lv_r, hf: lv_hf, best: lv_best, active: lv_active, now: lv_now, weights } = lv;
-    if !(all_finite(b.iter()) && all_finite(a.iter()) && all_finite(h.iter())) {
+    if !(all_finite(b.as_slice()) && all_finite(a.as_slice()) && all_finite(h.as_slice())) {
         return None;
     }
     let rows = a.nrows();

@@ -12,7 +12,7 @@ use nalgebra::{DMatrix, DVector};
 use faer::MatRef;
 
 use super::rows::{contact_rows, ContactKind, MAX_CONTACT_ROWS};
-use crate::linalg::{gemm, mat, mat_mut, shape, zeros_v};
+use crate::linalg::{all_finite, gemm, mat, mat_mut, shape, transpose_into, zeros_v};
 
 /// The QP's data.
 pub struct QpInput<'a> {
@@ -90,7 +90,7 @@ pub fn objective_into(inp: &QpInput, yt: &mut DMatrix<f64>, h: &mut DMatrix<f64>
     // mirrored.
     shape(h, m, m);
     shape(yt, m, n);
-    inp.y.transpose_to(yt);
+    transpose_into(inp.y, yt);
     let y = mat(inp.y);
     for j0 in (0..m).step_by(OBJECTIVE_BLOCK) {
         let nj = OBJECTIVE_BLOCK.min(m - j0);
@@ -153,8 +153,4 @@ impl QpProblem {
     pub fn is_finite(&self) -> bool {
         all_finite(self.b.as_slice()) && all_finite(self.p.as_slice()) && all_finite(self.a.as_slice())
     }
-}
-
-pub(crate) fn all_finite<'a>(xs: impl IntoIterator<Item = &'a f64>) -> bool {
-    xs.into_iter().all(|x| x.is_finite())
 }

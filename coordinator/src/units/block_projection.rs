@@ -243,7 +243,8 @@ impl BlockFactors {
 
 impl BlockFactors {
     /// `out = op x` for `x` (n x c) (see [`BlockOp`]): each robot's block times its rows of
-    /// `x`, minus `S_r (W (T^T x))_h` through its hand (module docs). `out` is n x c.
+    /// `x`, minus `S_r (W (T^T x))_h` through its hand (module docs). `out` is n x c; every
+    /// entry is written (the robots' blocks tile the rows), so it need not be cleared.
     pub fn apply(&self, op: BlockOp, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>, s: &mut OpScratch) {
         let w = if op == BlockOp::P { &self.w_e } else { &self.w_d };
         let (hb, c) = (w.nrows(), x.ncols());
@@ -270,7 +271,8 @@ impl BlockFactors {
 
     /// `out = (J_c^T)^+ x` (m x c) for `x` (n x c): with `J_c^+ = [A^+ - R W_E J_ee A^+, R W_E]`,
     /// the hand rows are `W_E R^T x` and robot `r`'s feet rows `A_r^{+T} x_r - (J_h A_r^+)^T
-    /// (W_E R^T x)_h`.
+    /// (W_E R^T x)_h`. Every entry of `out` is written (the feet rows robot by robot, then
+    /// the hand rows), so it need not be cleared.
     pub fn jct_pinv_apply(&self, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>, s: &mut OpScratch) {
         let (hb, c) = (self.w_e.nrows(), x.ncols());
         zeros(&mut s.t, hb, c);

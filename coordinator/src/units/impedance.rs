@@ -17,7 +17,7 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3, Vector3, Vector6};
 
-use crate::linalg::{mat, mat_mut, product, rotation_error, zeros, zeros_v, Pinv, SpdInverse, RANK_TOL};
+use crate::linalg::{mat, mat_mut, product, rotation_error, shape, transpose_into, zeros, zeros_v, Pinv, SpdInverse, RANK_TOL};
 use crate::units::block_projection::{BlockOp, OpScratch};
 use crate::units::projection::Projections;
 use crate::ControllerError;
@@ -183,9 +183,8 @@ impl TaskStack {
             return Ok(());
         }
         let (k, n) = self.j.shape();
-        zeros(&mut self.jt, n, k);
-        self.j.transpose_to(&mut self.jt);
-        zeros(&mut self.phi_jt, n, k);
+        transpose_into(&self.j, &mut self.jt);
+        shape(&mut self.phi_jt, n, k); // every row written by the operator
         proj.blocks.apply(BlockOp::Phi, mat(&self.jt), mat_mut(&mut self.phi_jt), &mut self.ops);
         product(&mut self.lambda_inv, mat(&self.j), mat(&self.phi_jt));
         if self.spd.compute(mat(&self.lambda_inv), &mut self.lambda).is_none() {

@@ -13,7 +13,7 @@
 
 use nalgebra::{DMatrix, DVector, Vector6};
 
-use crate::linalg::{add_product, gemm, mat, mat_mut, product, shape, zeros, zeros_v};
+use crate::linalg::{add_product, gemm, mat, mat_mut, product, shape, transpose_into, zeros, zeros_v};
 use crate::team::Team;
 use crate::units::block_projection::{BlockOp, OpScratch};
 use crate::units::grasp::GraspTerms;
@@ -99,8 +99,7 @@ fn rho_by_blocks(team: &Team, proj: &Projections, j_c: &DMatrix<f64>, ws: &mut C
     for (c, &j) in unact.iter().enumerate() {
         ws.jc_u.column_mut(c).copy_from(&j_c.column(j));
     }
-    zeros(y, n, m);
-    j_c.transpose_to(y);
+    transpose_into(j_c, y);
     for ((f0, nf), (u0, nu)) in f.feet_and_unactuated() {
         let jc_u = mat(&ws.jc_u).submatrix(f0, u0, nf, nu);
         gemm(mat_mut(y).subcols_mut(f0, nf), 1.0, 1.0, mat(&ws.b_u).subcols(u0, nu), jc_u.transpose());
@@ -108,10 +107,12 @@ fn rho_by_blocks(team: &Team, proj: &Projections, j_c: &DMatrix<f64>, ws: &mut C
     let nf3 = f.rows().1;
     gemm(mat_mut(y).subcols_mut(nf3, m - nf3), 1.0, 1.0, mat(&ws.b_u), mat(&ws.jc_u).subrows(nf3, m - nf3).transpose());
     scaled_rows(y, &team.s_diag, &mut ws.sy);
-    zeros(&mut ws.t_a, n, m);
+    // Both operators write every row of their output (the robots' blocks tile the rows):
+    // shaped, not cleared.
+    shape(&mut ws.t_a, n, m);
     f.apply(BlockOp::MbarP, mat(&ws.sy), mat_mut(&mut ws.t_a), &mut ws.ops); // Mbar P S Y
     ws.t_a -= &ws.sy;
-    zeros(rho, m, m);
+    shape(rho, m, m);
     f.jct_pinv_apply(mat(&ws.t_a), mat_mut(rho), &mut ws.ops);
 }
 
