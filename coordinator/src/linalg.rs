@@ -375,8 +375,21 @@ impl SpdInverse {
             return None;
         }
         lower_inverse(l, n, self.x.as_mut_slice());
-        gemm(mat_mut(out), 0.0, 1.0, mat(&self.x).transpose(), mat(&self.x));
-        out.as_slice().iter().all(|x| x.is_finite()).then_some(())
+        // A^{-1} = X^T X with X = L^{-1} lower triangular: column block J of its lower
+        // triangle is X[j0.., j0..]^T X[j0.., J] (the rows of X above j0 are zero in both
+        // factors), a third of the full product's work; the upper triangle is mirrored.
+        let x = mat(&self.x);
+        for j0 in (0..n).step_by(CHOLESKY_BLOCK) {
+            let nj = CHOLESKY_BLOCK.min(n - j0);
+            gemm(mat_mut(out).submatrix_mut(j0, j0, n - j0, nj), 0.0, 1.0, x.submatrix(j0, j0, n - j0, n - j0).transpose(), x.submatrix(j0, j0, n - j0, nj));
+        }
+        let o = out.as_mut_slice();
+        for j in 0..n {
+            for i in j + 1..n {
+                o[i * n + j] = o[j * n + i];
+            }
+        }
+        all_finite(out.as_slice()).then_some(())
     }
 }
 
@@ -652,6 +665,17 @@ mod tests {
         assert!(ws.compute(mat(&(&low * low.transpose())), &mut x).is_none(), "rank-deficient");
         ws.compute(mat(&DMatrix::zeros(0, 0)), &mut x).expect("empty");
         assert_eq!(x.shape(), (0, 0));
+        // Across the column blocks of the product X^T X, into a dirty buffer of that shape,
+        // symmetric to the last bit (the upper triangle is mirrored).
+        for n in [16, 17, 40, 54] {
+            let j = DMatrix::<f64>::from_fn(n, n + 3, |i, k| ((i * 7 + k * 3) % 13) as f64 - 6.0 + if i == k { 9.0 } else { 0.0 });
+            let gram = &j * j.transpose();
+            let mut inv = DMatrix::from_element(n, n, f64::NAN);
+            ws.compute(mat(&gram), &mut inv).expect("positive definite");
+            let err = (&gram * &inv - DMatrix::identity(n, n)).amax();
+            assert!(err < 1e-9, "n = {n}: |A A^-1 - I| = {err:e}");
+            assert_eq!(inv, inv.transpose(), "n = {n}: symmetric");
+        }
     }
 
     /// The in-place Cholesky factor reproduces `A = L L^T` and `lower_inverse` gives
