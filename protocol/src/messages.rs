@@ -585,6 +585,10 @@ pub enum AgentMode {
     Commanded,
     /// No valid command in time: holding its posture locally.
     SafeMode,
+    /// The robot fell (its torso tipped over or sank far below its standing height): it applies
+    /// joint damping only, refuses commands and has left its team, until the agent is
+    /// restarted.
+    Fallen,
 }
 
 /// A robot-agent's status.

@@ -80,7 +80,9 @@ pub async fn run_with<S: DynamicsSource>(
     let mut io = Io::declare(session, team, robot, core.description().is_some(), sink).await?;
 
     let coordinator = transport::watch_coordinator(session, team).await?;
-    let _token = transport::declare_member(session, team, robot).await?;
+    // Withdrawn when the robot falls ([`crate::fall`]): the coordinator then solves the team
+    // without it.
+    let mut token = Some(transport::declare_member(session, team, robot).await?);
     tracing::info!(%robot, %team, joints = core.joints(), deadline = ?cfg.deadline, max_command_age = ?cfg.max_command_age, "agent joined the team");
     let out = core.start(Instant::now());
     let done = io.send(out).await?;
@@ -113,6 +115,14 @@ pub async fn run_with<S: DynamicsSource>(
                 let Ok(out) = core.on_state(&state, Instant::now()) else { continue };
                 let done = io.send(out).await?;
                 io.done(&mut core, done).await;
+                if core.fallen().is_some() {
+                    if let Some(t) = token.take() {
+                        if let Err(e) = t.undeclare().await {
+                            tracing::warn!(%robot, "withdrawing the membership after the fall: {e}");
+                        }
+                        tracing::warn!(%robot, "fallen: left the team");
+                    }
+                }
             }
             c = commands.recv_async() => {
                 let Ok(sample) = c else { break };

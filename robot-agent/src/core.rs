@@ -7,7 +7,7 @@
 //! | call | when | what it may return |
 //! | --- | --- | --- |
 //! | [`AgentCore::start`] | once, after the caller can send | the description, the status |
-//! | [`AgentCore::on_state`] | a measured state | terms to publish; hold torques in safe mode |
+//! | [`AgentCore::on_state`] | a measured state | terms to publish; hold torques in safe mode; limp torques once fallen ([`crate::fall`]) |
 //! | [`AgentCore::on_command`] | a torque command | checked, clamped torques to apply |
 //! | [`AgentCore::on_contacts`] | a contact set | nothing (scheduled for its tick, see [`crate::contact_switch`]) |
 //! | [`AgentCore::on_timer`] | housekeeping, a few times per deadline | hold torques on entering safe mode, status, description |
@@ -26,6 +26,7 @@ use thiserror::Error;
 
 use crate::contact_switch::{ContactSwitch, SwitchConfig};
 use crate::dynamics_source::DynamicsSource;
+use crate::fall::{limp_torques, Fall, FallDetector, FallLimits};
 use crate::gate::{CommandGate, CommandRejection};
 use crate::safe_mode::{CommandDeadline, HoldGains, PostureHold, Takeover, Watchdog};
 use crate::status::{AgentCounters, StatusBoard};
@@ -53,6 +54,8 @@ pub struct AgentConfig {
     /// [`Takeover`]) when they follow it: after safe mode, or after the coordinator's hold orders;
     /// and over which the hold takes over from the last command when it follows commands.
     pub takeover: Duration,
+    /// When the robot counts as fallen ([`crate::fall`]).
+    pub fall: FallLimits,
 }
 
 impl AgentConfig {
@@ -70,6 +73,7 @@ impl AgentConfig {
             description_period: Duration::from_secs(1),
             contacts: SwitchConfig::default(),
             takeover: DEFAULT_TAKEOVER,
+            fall: FallLimits::default(),
         }
     }
 
@@ -165,6 +169,8 @@ enum Apply {
     Command,
     /// The posture hold at the latest state.
     Hold,
+    /// Joint damping only: the robot fell ([`crate::fall`]).
+    Limp,
 }
 
 /// The agent's decisions, without I/O. See the module documentation for the calls.
@@ -177,6 +183,10 @@ pub struct AgentCore<S: DynamicsSource> {
     gate: CommandGate,
     watchdog: Watchdog,
     hold: PostureHold,
+    fall: FallDetector,
+    /// The posture hold's damping and the torque limits, for the limp torques.
+    limp_kd: Vec<f64>,
+    limits: Vec<f64>,
     /// Commands following the hold blend in from it.
     takeover: Takeover,
     /// The hold following commands blends in from the last of them (`entry_from`).
@@ -239,6 +249,9 @@ impl<S: DynamicsSource> AgentCore<S> {
             joints,
             gate: CommandGate::new(robot, limits.clone(), cfg.max_command_age),
             watchdog: Watchdog::new(cfg.deadline),
+            fall: FallDetector::new(cfg.fall),
+            limp_kd: gains.kd.clone(),
+            limits: limits.clone(),
             hold: PostureHold::new(gains, limits),
             takeover: Takeover::new(cfg.takeover),
             entry: Takeover::new(cfg.takeover),
@@ -292,6 +305,14 @@ impl<S: DynamicsSource> AgentCore<S> {
         self.watchdog.on_state(tick, now);
         self.q.copy_from_slice(&state.joint_positions);
         self.qdot.copy_from_slice(&state.joint_velocities);
+        if let Some(f) = self.fall.observe(tick, &state.base_pose) {
+            self.board.status.mode = AgentMode::Fallen;
+            tracing::error!(robot = %self.robot, tick, tilt_deg = f.tilt.to_degrees(), height_m = f.height, "the robot fell: limp (joint damping only), commands refused, leaving the team");
+        }
+        if self.fall.fallen().is_some() {
+            // No terms: the robot is out of the team.
+            return Ok(self.outputs(now, mode_before, false, Apply::Limp, false));
+        }
         self.switch_contacts(tick, &state.foot_forces);
         let terms = match self.source.compute(state, self.contacts.active(), &mut self.terms) {
             Ok(()) => {
@@ -350,6 +371,10 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// latest terms before this robot had that tick's state.
     pub fn on_command(&mut self, cmd: &TorqueCommand, now: Instant) -> Result<Outputs<'_>, CommandRejection> {
         let mode_before = self.board.status.mode;
+        if let Some(f) = self.fall.fallen() {
+            let r = CommandRejection::Fallen { tick: cmd.header.tick, fell: f.tick };
+            return Err(self.reject(r));
+        }
         match self.admit_command(cmd, now) {
             Ok(Some(apply)) => Ok(self.outputs(now, mode_before, false, apply, false)),
             Ok(None) => Ok(Outputs::default()),
@@ -508,7 +533,7 @@ impl<S: DynamicsSource> AgentCore<S> {
     pub fn on_timer(&mut self, now: Instant) -> Outputs<'_> {
         let mode_before = self.board.status.mode;
         let mut apply = Apply::Nothing;
-        if let Some(tick) = self.gate.latest_state_tick() {
+        if let Some(tick) = self.gate.latest_state_tick().filter(|_| self.fall.fallen().is_none()) {
             if self.watchdog.expired(tick, now) {
                 self.enter_safe_mode_at(tick, "no valid command in time");
                 apply = Apply::Hold;
@@ -540,7 +565,7 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// already in safe mode.
     pub fn enter_safe_mode(&mut self, why: &str, now: Instant) -> Outputs<'_> {
         let mode_before = self.board.status.mode;
-        if self.watchdog.safe_mode_since().is_some() {
+        if self.watchdog.safe_mode_since().is_some() || self.fall.fallen().is_some() {
             return Outputs::default();
         }
         let apply = match self.gate.latest_state_tick() {
@@ -601,6 +626,15 @@ impl<S: DynamicsSource> AgentCore<S> {
                     torques = Some(&mut self.torques);
                 }
             }
+            Apply::Limp => {
+                if let Some(tick) = self.gate.latest_state_tick() {
+                    limp_torques(&self.limp_kd, &self.qdot, &self.limits, &mut self.torques.tau);
+                    self.torques.header.tick = tick;
+                    self.torques.hold = false;
+                    self.last_applied = Apply::Limp;
+                    torques = Some(&mut self.torques);
+                }
+            }
         }
         let status = self.board.status.mode != mode_before;
         if status {
@@ -620,7 +654,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         match self.last_applied {
             Apply::Command => self.hold.hold_carrying(&self.q, &self.last_command, &self.gravity),
             Apply::Hold => self.hold.move_to(&self.q),
-            Apply::Nothing => self.hold.hold(&self.q),
+            Apply::Nothing | Apply::Limp => self.hold.hold(&self.q),
         }
     }
 
@@ -694,6 +728,11 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// The robot description the agent publishes, if its source has a model.
     pub fn description(&self) -> Option<&RobotDescription> {
         self.description.as_ref()
+    }
+
+    /// The fall, once the robot fell ([`crate::fall`]): the agent is limp and out of the team.
+    pub fn fallen(&self) -> Option<&Fall> {
+        self.fall.fallen()
     }
 
     /// Latest state tick at safe-mode entry, if in safe mode.

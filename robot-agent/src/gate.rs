@@ -30,6 +30,8 @@ pub enum CommandRejection {
     NoState,
     #[error("command for tick {tick} was made before safe mode was entered at tick {entered}; safe mode is left only on a fresh tick")]
     BeforeSafeMode { tick: u64, entered: u64 },
+    #[error("command for tick {tick} refused: the robot fell at tick {fell} and is limp (restart the agent once it stands)")]
+    Fallen { tick: u64, fell: u64 },
     #[error("undecodable command: {0}")]
     Undecodable(String),
 }

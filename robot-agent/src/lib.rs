@@ -21,12 +21,14 @@
 //! * [`contact_switch`]: the contact sets' schedule, lift-offs and force-confirmed touchdowns.
 //! * [`gate`]: the checks of incoming commands and clamping to the torque limits.
 //! * [`safe_mode`]: the watchdog and the posture hold of safe mode.
+//! * [`fall`]: a fallen robot goes limp and leaves its team.
 //! * [`status`]: the agent's status message and counters.
 
 pub mod agent;
 pub mod contact_switch;
 pub mod core;
 pub mod dynamics_source;
+pub mod fall;
 pub mod gate;
 pub mod hardware;
 pub mod inspect;

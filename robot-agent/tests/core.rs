@@ -265,3 +265,42 @@ fn timer_paces_the_status_and_latencies_come_from_what_was_sent() {
     let e = AgentCore::new(&cfg, Stub { feet: vec![], last_contacts: None }).err().unwrap();
     assert!(e.to_string().contains("posture-hold gains have 1 kp"), "{e}");
 }
+
+/// A robot that tips over goes limp for good: from the state that passes the tilt limit on,
+/// each state yields joint damping only (`-K_d qdot`, clamped; written out here with the
+/// posture hold's gains), no terms, commands are refused and the timer never enters safe mode;
+/// the status says so once. Standing up again does not undo it.
+#[test]
+fn a_fallen_robot_goes_limp_refuses_commands_and_sends_no_terms() {
+    let t0 = Instant::now();
+    let mut c = core(CommandDeadline { ticks: 5, time: Some(ms(25)) });
+    c.start(t0);
+    let posed = |tick: u64, q: [f64; 4], v: [f64; 3]| RobotState { base_pose: Pose { position: [0.0, 0.0, 0.55], orientation: q }, ..state(tick, [0.1, 0.2, 0.3], v) };
+    let upright = [1.0, 0.0, 0.0, 0.0];
+    let tipped = |deg: f64| [(deg.to_radians() / 2.0).cos(), (deg.to_radians() / 2.0).sin(), 0.0, 0.0];
+    assert_eq!(summary(c.on_state(&posed(0, upright, [0.0; 3]), t0).unwrap()).0, Some(0));
+    c.on_command(&command(ID, 0, &[1.0, 1.0, 1.0]), t0).unwrap();
+    // 55 degrees of roll: still standing (the limit is 60).
+    assert_eq!(summary(c.on_state(&posed(1, tipped(55.0), [0.0; 3]), t0 + ms(1)).unwrap()), (Some(1), None, false));
+    assert_eq!(c.mode(), AgentMode::Commanded);
+    // 65 degrees: fallen at tick 2; limp torques, no terms, the status is due.
+    let v = [3.0, -40.0, 0.5];
+    let kd = HoldGains::from_torque_limits(&LIMITS).kd;
+    let limp: Vec<f64> = (0..3).map(|i| (-kd[i] * v[i]).clamp(-LIMITS[i], LIMITS[i])).collect();
+    let out = summary(c.on_state(&posed(2, tipped(65.0), v), t0 + ms(2)).unwrap());
+    assert_eq!(out, (None, Some((2, limp.clone())), true));
+    assert!(limp.iter().zip(&v).all(|(t, v)| t * v <= 0.0), "damping opposes the motion: {limp:?}");
+    assert_eq!((c.mode(), c.fallen().map(|f| f.tick)), (AgentMode::Fallen, Some(2)));
+    // Its commands are refused, counted, and nothing is applied.
+    let r = c.on_command(&command(ID, 2, &[1.0; 3]), t0 + ms(2)).unwrap_err();
+    assert_eq!(r, CommandRejection::Fallen { tick: 2, fell: 2 });
+    assert_eq!(c.status().mode, AgentMode::Fallen);
+    // No command for long: no safe mode (the timer yields no hold), still limp.
+    assert!(c.on_timer(t0 + ms(200)).torques.is_none());
+    assert_eq!((c.mode(), c.safe_mode_since()), (AgentMode::Fallen, None));
+    // Upright and still: zero torque, still fallen, still no terms.
+    let out = summary(c.on_state(&posed(3, upright, [0.0; 3]), t0 + ms(201)).unwrap());
+    assert_eq!(out, (None, Some((3, vec![0.0; 3])), false));
+    assert_eq!(c.mode(), AgentMode::Fallen);
+    assert!(c.counters().rejected >= 1);
+}

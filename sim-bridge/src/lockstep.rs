@@ -75,9 +75,11 @@ pub enum AgentLoss {
     #[default]
     EndRun,
     /// Go on without it: its drives do what [`DriveLoss`] says (unpowered, or frozen where
-    /// they are) and no tick waits for it. When its agent joins again (restarted), the loop
-    /// waits for its torques from the next tick on, and the first torques it sends drive the
-    /// robot again. The run ends with [`BridgeError::RobotLeft`] when every agent has left.
+    /// they are) and no tick waits for it. Torques its agent still sends for the tick being
+    /// stepped drive it (an agent that left the team alive: a fallen robot's damping,
+    /// `robot_agent::fall`). When its agent joins again (restarted), the loop waits for its
+    /// torques from the next tick on, and the first torques it sends drive the robot again.
+    /// The run ends with [`BridgeError::RobotLeft`] when every agent has left.
     Drives(DriveLoss),
 }
 
@@ -247,7 +249,10 @@ pub async fn run_with(
                         tracing::warn!(robot = %robots[i], "torques of the wrong size: {} for {} joints", cmd.tau.len(), plant.joints(i));
                         continue;
                     }
-                    if !got[i] {
+                    if !got[i] || lost[i] {
+                        // A robot whose agent left the team but still answers its states (a
+                        // fallen robot's damping, robot_agent::fall) is driven by what it
+                        // sends; no tick waits for it.
                         if plant.drives_lost(i) {
                             tracing::info!(robot = %robots[i], tick, "the robot's drives take torques again");
                             plant.restore_drives(i);

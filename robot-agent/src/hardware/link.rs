@@ -39,6 +39,9 @@ pub trait TeamLink {
     fn recv_command(&mut self, deadline: Instant) -> Inbound<TorqueCommand>;
     /// The next contact set, if one is waiting.
     fn try_recv_contacts(&mut self) -> Inbound<ContactSet>;
+    /// Withdraw the robot's team membership (it fell, [`crate::fall`]): the coordinator then
+    /// solves the team without it. Called once.
+    fn leave_team(&mut self) -> Result<(), TransportError>;
 }
 
 /// A publisher of one message type for a synchronous caller: validates, encodes into a reused
@@ -78,7 +81,8 @@ pub struct ZenohLink {
     dynamics: SyncPublisher<DynamicsTerms>,
     status: SyncPublisher<AgentStatus>,
     description: SyncPublisher<RobotDescription>,
-    _token: LivelinessToken,
+    /// The membership, until [`TeamLink::leave_team`].
+    token: Option<LivelinessToken>,
 }
 
 impl ZenohLink {
@@ -96,7 +100,7 @@ impl ZenohLink {
         let description = SyncPublisher::declare(session, key(RobotTopic::Description)?, Priority::Data)?;
         let member = keys::member(team, robot)?;
         let token = session.liveliness().declare_token(member.clone()).wait().map_err(|e| zenoh_err("declare_token", &member, e))?;
-        Ok(ZenohLink { commands, contacts, dynamics, status, description, _token: token })
+        Ok(ZenohLink { commands, contacts, dynamics, status, description, token: Some(token) })
     }
 }
 
@@ -119,6 +123,13 @@ impl TeamLink for ZenohLink {
 
     fn try_recv_contacts(&mut self) -> Inbound<ContactSet> {
         inbound(self.contacts.handler().try_recv())
+    }
+
+    fn leave_team(&mut self) -> Result<(), TransportError> {
+        match self.token.take() {
+            Some(t) => t.undeclare().wait().map_err(|e| zenoh_err("undeclare_token", "member", e)),
+            None => Ok(()),
+        }
     }
 }
 

@@ -75,6 +75,8 @@ pub struct MockHardware {
     lifecycle: Lifecycle,
     faults: Vec<MockFault>,
     history: Option<Vec<MockStep>>,
+    /// From this read on, the base reports this pose (a robot that tipped over).
+    tipped: Option<(u64, Pose)>,
 }
 
 impl MockHardware {
@@ -90,7 +92,14 @@ impl MockHardware {
             lifecycle: Lifecycle::Unconfigured,
             faults: Vec::new(),
             history: cfg.record.then(Vec::new),
+            tipped: None,
         }
+    }
+
+    /// From the read of `tick` on, report the base at `pose` (upright at the origin before).
+    pub fn tipped_at(mut self, tick: u64, pose: Pose) -> Self {
+        self.tipped = Some((tick, pose));
+        self
     }
 
     /// Inject a fault.
@@ -181,7 +190,10 @@ impl RobotHardware for MockHardware {
         if let Some(status) = self.fault(false) {
             return status;
         }
-        state.base_pose = Pose::IDENTITY;
+        state.base_pose = match self.tipped {
+            Some((from, pose)) if self.reads > from => pose,
+            _ => Pose::IDENTITY,
+        };
         state.base_twist = [0.0; 6];
         state.joint_positions.clear();
         state.joint_positions.extend_from_slice(&self.q);
