@@ -305,8 +305,9 @@ impl<S: DynamicsSource> AgentCore<S> {
         self.watchdog.on_state(tick, now);
         self.q.copy_from_slice(&state.joint_positions);
         self.qdot.copy_from_slice(&state.joint_velocities);
-        if let Some(f) = self.fall.observe(tick, &state.base_pose) {
+        if let Some(f) = self.source.floating_base().then(|| self.fall.observe(tick, &state.base_pose)).flatten() {
             self.board.status.mode = AgentMode::Fallen;
+            self.early_pending = false;
             tracing::error!(robot = %self.robot, tick, tilt_deg = f.tilt.to_degrees(), height_m = f.height, "the robot fell: limp (joint damping only), commands refused, leaving the team");
         }
         if self.fall.fallen().is_some() {

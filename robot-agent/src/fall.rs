@@ -7,9 +7,13 @@
 //! "Walking while holding"). Like a legged robot's own fall handling, the agent decides this
 //! locally, from each state ([`FallDetector::observe`]):
 //!
-//! * **fallen** when the torso's tilt (the angle of its z axis from the world's) exceeds
+//! * **fallen** when the torso's tilt (the angle of its z axis from the world's: the model's
+//!   base frame is z-up when the robot stands, as the URDF convention has it) exceeds
 //!   [`FallLimits::max_tilt`], or its height is below [`FallLimits::min_height_ratio`] of the
-//!   height of the first state (the robot stood when it started);
+//!   height of the first state (the robot stood when it started; the height check is off when
+//!   that height is under [`MIN_REFERENCE_HEIGHT`], a state estimator's origin rather than a
+//!   standing torso, and a walk down a ramp or stairs by half the torso's height would trip it);
+//! * only for a floating-base robot: a fixed base cannot fall (the core does not watch it);
 //! * then, for good (until the agent is restarted), the agent applies only joint damping
 //!   ([`limp_torques`], `tau = clamp(-K_d qdot)` with the posture hold's `K_d`): it neither
 //!   stands up nor swings its limbs; it refuses commands, stops sending dynamics terms and
@@ -34,6 +38,9 @@ impl Default for FallLimits {
         FallLimits { max_tilt: 60f64.to_radians(), min_height_ratio: 0.5 }
     }
 }
+
+/// Smallest starting torso height, m, for the height check (below it the check is off).
+pub const MIN_REFERENCE_HEIGHT: f64 = 0.1;
 
 /// How and when the robot fell.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -68,7 +75,7 @@ impl FallDetector {
         let height = base.position[2];
         let start = *self.start_height.get_or_insert(height);
         let tilt = tilt(&base.orientation);
-        let low = start > 0.0 && height < self.limits.min_height_ratio * start;
+        let low = start >= MIN_REFERENCE_HEIGHT && height < self.limits.min_height_ratio * start;
         if tilt > self.limits.max_tilt || low {
             let fall = Fall { tick, tilt, height };
             self.fallen = Some(fall);
@@ -147,6 +154,11 @@ mod tests {
         d.observe(10, &pose(0.6, [1.0, 0.0, 0.0, 0.0]));
         assert_eq!(d.observe(11, &pose(0.31, [1.0, 0.0, 0.0, 0.0])), None);
         assert_eq!(d.observe(12, &pose(0.29, [1.0, 0.0, 0.0, 0.0])).map(|f| f.tick), Some(12));
+        // A start near the ground (an estimator's origin): no height check, the tilt still.
+        let mut d = FallDetector::new(limits);
+        d.observe(20, &pose(0.05, [1.0, 0.0, 0.0, 0.0]));
+        assert_eq!(d.observe(21, &pose(0.001, [1.0, 0.0, 0.0, 0.0])), None);
+        assert_eq!(d.observe(22, &pose(0.001, roll(1.2))).map(|f| f.tick), Some(22));
     }
 
     #[test]

@@ -18,6 +18,8 @@ const GRAVITY: [f64; 3] = [1.5, -0.5, 0.25];
 struct Stub {
     feet: Vec<String>,
     last_contacts: Option<ContactSet>,
+    /// A floating base (the fall test); fixed otherwise.
+    floating: bool,
 }
 
 impl DynamicsSource for Stub {
@@ -25,7 +27,7 @@ impl DynamicsSource for Stub {
         3
     }
     fn floating_base(&self) -> bool {
-        false
+        self.floating
     }
     fn torque_limits(&self) -> Vec<f64> {
         LIMITS.to_vec()
@@ -57,7 +59,7 @@ fn core(deadline: CommandDeadline) -> AgentCore<Stub> {
     cfg.max_command_age = Duration::from_millis(25);
     // Commands apply at once after a hold (the takeover's blend: tests/agent_loop.rs).
     cfg.takeover = Duration::ZERO;
-    AgentCore::new(&cfg, Stub { feet: vec!["LF".into(), "RF".into()], last_contacts: None }).unwrap()
+    AgentCore::new(&cfg, Stub { feet: vec!["LF".into(), "RF".into()], last_contacts: None, floating: false }).unwrap()
 }
 
 fn state(tick: u64, q: [f64; 3], v: [f64; 3]) -> RobotState {
@@ -247,7 +249,7 @@ fn timer_paces_the_status_and_latencies_come_from_what_was_sent() {
     let mut cfg = AgentConfig::new("t", ID);
     cfg.deadline = CommandDeadline { ticks: 0, time: None };
     cfg.status_period = ms(100);
-    let mut c = AgentCore::new(&cfg, Stub { feet: vec![], last_contacts: None }).unwrap();
+    let mut c = AgentCore::new(&cfg, Stub { feet: vec![], last_contacts: None, floating: false }).unwrap();
     let out = c.start(t0);
     assert!(out.status && out.description.is_none(), "a source without a model has no description");
     assert!(!c.on_timer(t0 + ms(99)).status);
@@ -262,7 +264,7 @@ fn timer_paces_the_status_and_latencies_come_from_what_was_sent() {
 
     // A configuration the core cannot run with is refused at construction.
     cfg.hold_gains = Some(HoldGains { kp: vec![1.0], kd: vec![1.0] });
-    let e = AgentCore::new(&cfg, Stub { feet: vec![], last_contacts: None }).err().unwrap();
+    let e = AgentCore::new(&cfg, Stub { feet: vec![], last_contacts: None, floating: false }).err().unwrap();
     assert!(e.to_string().contains("posture-hold gains have 1 kp"), "{e}");
 }
 
@@ -273,7 +275,10 @@ fn timer_paces_the_status_and_latencies_come_from_what_was_sent() {
 #[test]
 fn a_fallen_robot_goes_limp_refuses_commands_and_sends_no_terms() {
     let t0 = Instant::now();
-    let mut c = core(CommandDeadline { ticks: 5, time: Some(ms(25)) });
+    let mut cfg = AgentConfig::new("t", ID);
+    cfg.deadline = CommandDeadline { ticks: 5, time: Some(ms(25)) };
+    cfg.takeover = Duration::ZERO;
+    let mut c = AgentCore::new(&cfg, Stub { feet: vec![], last_contacts: None, floating: true }).unwrap();
     c.start(t0);
     let posed = |tick: u64, q: [f64; 4], v: [f64; 3]| RobotState { base_pose: Pose { position: [0.0, 0.0, 0.55], orientation: q }, ..state(tick, [0.1, 0.2, 0.3], v) };
     let upright = [1.0, 0.0, 0.0, 0.0];
@@ -303,4 +308,12 @@ fn a_fallen_robot_goes_limp_refuses_commands_and_sends_no_terms() {
     assert_eq!(out, (None, Some((3, vec![0.0; 3])), false));
     assert_eq!(c.mode(), AgentMode::Fallen);
     assert!(c.counters().rejected >= 1);
+
+    // A fixed base does not fall: the same states leave it commanded.
+    let mut fixed = core(CommandDeadline { ticks: 5, time: Some(ms(25)) });
+    fixed.start(t0);
+    fixed.on_state(&posed(0, upright, [0.0; 3]), t0).unwrap();
+    fixed.on_command(&command(ID, 0, &[1.0; 3]), t0).unwrap();
+    assert_eq!(summary(fixed.on_state(&posed(1, tipped(90.0), [0.0; 3]), t0 + ms(1)).unwrap()).0, Some(1));
+    assert_eq!((fixed.mode(), fixed.fallen()), (AgentMode::Commanded, None));
 }

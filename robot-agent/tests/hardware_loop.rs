@@ -281,16 +281,18 @@ async fn mock_robot_with_a_real_coordinator_over_zenoh() {
     session.close().await.unwrap();
 }
 
-/// The hardware loop with a robot that tips over at tick 20 (its base reported rolled by 90
-/// degrees): the agent falls at that state, the link leaves the team once, no terms go out
+/// The hardware loop with a floating-base robot that tips over at tick 20 (its base reported
+/// rolled by 90 degrees): the agent falls at that state, the link leaves the team once, no terms go out
 /// after it, and every torque written from then on is the limp law `-K_d qdot` of that tick's
-/// velocity (the posture hold's `K_d`), not the coordinator's damping; the loop runs on until
+/// velocity (the posture hold's `K_d`), not the safe mode's posture hold; the loop runs on until
 /// the hardware asks to stop.
 #[test]
 fn a_robot_that_tips_over_is_limp_and_leaves_the_team_in_the_hardware_loop() {
     let deadline = CommandDeadline { ticks: 5, time: None };
-    let mut core = AgentCore::new(&agent_config("mem-fall", deadline), unit_joints()).unwrap();
-    let mut link = TeamInMemory::new(1000, |_| true);
+    // A floating base (a fixed one cannot fall); no commands: the agent holds its posture in
+    // safe mode until it falls.
+    let mut core = AgentCore::new(&agent_config("mem-fall", deadline), PlaceholderDynamics::floating(JOINTS)).unwrap();
+    let mut link = TeamInMemory::new(1000, |_| false);
     let h = std::f64::consts::FRAC_1_SQRT_2;
     let rolled = protocol::Pose { position: [0.0, 0.0, 0.0], orientation: [h, h, 0.0, 0.0] };
     let mut hw = mock().tipped_at(20, rolled).with_fault(MockFault { tick: 40, on_write: true, status: HwStatus::Deactivate });
@@ -299,7 +301,7 @@ fn a_robot_that_tips_over_is_limp_and_leaves_the_team_in_the_hardware_loop() {
     assert_eq!(report.exit, DriverExit::Deactivated { tick: 40 });
     assert_eq!((core.mode(), core.fallen().map(|f| f.tick), link.left), (AgentMode::Fallen, Some(20), 1));
     assert_eq!(report.counters.dynamics, 20, "terms for ticks 0..19 only");
-    let kd = HoldGains::from_torque_limits(&robot_agent::dynamics_source::DynamicsSource::torque_limits(&unit_joints())).kd;
+    let kd = HoldGains::from_torque_limits(&robot_agent::dynamics_source::DynamicsSource::torque_limits(&PlaceholderDynamics::floating(JOINTS))).kd;
     for step in hw.history().iter().filter(|s| s.tick >= 20 && s.tick < 40) {
         let tau = step.tau.as_ref().expect("a torque written every cycle");
         assert!((tau[0] - (-kd[0] * step.v[0])).abs() <= 1e-12, "tick {}: {} vs -K_d v {}", step.tick, tau[0], -kd[0] * step.v[0]);

@@ -75,9 +75,10 @@ pub enum AgentLoss {
     #[default]
     EndRun,
     /// Go on without it: its drives do what [`DriveLoss`] says (unpowered, or frozen where
-    /// they are) and no tick waits for it. Torques its agent still sends for the tick being
-    /// stepped drive it (an agent that left the team alive: a fallen robot's damping,
-    /// `robot_agent::fall`). When its agent joins again (restarted), the loop waits for its
+    /// they are) and no tick waits for it. An agent that left the team alive (a fallen robot's,
+    /// `robot_agent::fall`) and still answers its states drives it with those torques as they
+    /// come (a tick late when they come after the tick's step), holding the last ones for up
+    /// to [`LOST_DRIVE_TICKS`] (then the drives are lost as above). When its agent joins again (restarted), the loop waits for its
     /// torques from the next tick on, and the first torques it sends drive the robot again.
     /// The run ends with [`BridgeError::RobotLeft`] when every agent has left.
     Drives(DriveLoss),
@@ -181,6 +182,8 @@ pub async fn run_with(
     let mut got = vec![false; robots.len()];
     // Robots whose agents left: no tick waits for them (until their agent joins again).
     let mut lost = vec![false; robots.len()];
+    // The tick of each robot's latest torques taken.
+    let mut answered: Vec<Option<u64>> = vec![None; robots.len()];
     let mut watch = Liveness::open(session, &cfg.team).await?;
     for tick in extras.first_tick..extras.first_tick + cfg.ticks {
         if *stop.borrow() {
@@ -216,7 +219,7 @@ pub async fn run_with(
                 ev = watch.next() => {
                     match watch.take(ev, tick, &robots)? {
                         Some(AgentChange::Left(i)) => {
-                            lose_agent(cfg, plant, &robots, i, tick, &mut lost)?;
+                            lose_agent(cfg, plant, &robots, i, tick, answered[i] == Some(tick), &mut lost)?;
                             got[i] = true;
                         }
                         Some(AgentChange::Joined(i)) if lost[i] => {
@@ -240,10 +243,13 @@ pub async fn run_with(
                             continue;
                         }
                     };
-                    if cmd.header.tick != tick {
+                    let Some(i) = robots.iter().position(|r| r == cmd.header.robot_id()) else { continue };
+                    // A robot whose agent left is not waited for: its torques of a recent tick
+                    // that came after that tick's step drive it now (the latest only).
+                    let recent = lost[i] && cmd.header.tick < tick && tick - cmd.header.tick < LOST_DRIVE_TICKS && answered[i].is_none_or(|t| cmd.header.tick > t);
+                    if cmd.header.tick != tick && !recent {
                         continue; // a repeat of an earlier tick
                     }
-                    let Some(i) = robots.iter().position(|r| r == cmd.header.robot_id()) else { continue };
                     if cmd.tau.len() != plant.joints(i) {
                         rejected += 1;
                         tracing::warn!(robot = %robots[i], "torques of the wrong size: {} for {} joints", cmd.tau.len(), plant.joints(i));
@@ -259,6 +265,7 @@ pub async fn run_with(
                         }
                         plant.set_torques(i, &cmd.tau);
                         got[i] = true;
+                        answered[i] = Some(cmd.header.tick);
                     }
                 }
                 None => {
@@ -270,6 +277,7 @@ pub async fn run_with(
                 }
             }
         }
+        silence_lost_drives(cfg, plant, &robots, tick, &lost, &answered);
         side.step(plant, &cfg.team, tick, extras).await?;
         if cfg.progress_every > 0 && (tick + 1 - extras.first_tick) % cfg.progress_every == 0 {
             tracing::info!(tick = tick + 1, of = cfg.ticks, sim_time = plant.time(), "progress");
@@ -285,21 +293,46 @@ pub async fn run_with(
 }
 
 
-/// Robot `i`'s agent left during `tick`: end the run, or its drives are lost ([`AgentLoss`]).
-fn lose_agent(cfg: &LockstepConfig, plant: &mut impl Plant, robots: &[String], i: usize, tick: u64, lost: &mut [bool]) -> Result<(), BridgeError> {
+/// Robot `i`'s agent left during `tick`: end the run, or its drives are lost ([`AgentLoss`]),
+/// at once unless it has `answered` this tick (an agent that left alive, a fallen robot's: its
+/// torques keep driving it while they come, [`silence_lost_drives`]).
+fn lose_agent(cfg: &LockstepConfig, plant: &mut impl Plant, robots: &[String], i: usize, tick: u64, answered: bool, lost: &mut [bool]) -> Result<(), BridgeError> {
     let robot = robots[i].clone();
     let Some(loss) = cfg.agent_loss.drive_loss() else {
         return Err(BridgeError::RobotLeft { robot, tick });
     };
     if !lost[i] {
-        tracing::warn!(robot = %robot, tick, ?loss, "the robot's agent left: its drives lose their commands from this tick on");
-        plant.lose_drives(i, loss);
+        if answered {
+            tracing::warn!(robot = %robot, tick, "the robot's agent left the team; its torques drive it while they come");
+        } else {
+            tracing::warn!(robot = %robot, tick, ?loss, "the robot's agent left: its drives lose their commands from this tick on");
+            plant.lose_drives(i, loss);
+        }
         lost[i] = true;
     }
     if lost.iter().all(|u| *u) {
         return Err(BridgeError::RobotLeft { robot, tick });
     }
     Ok(())
+}
+
+/// Ticks a robot whose agent left keeps its last torques without new ones before its drives
+/// are lost: the agents' own command deadline (5 ticks). Its torques are not waited for: one
+/// that comes after its tick's step drives the robot from the next step on (if no newer one
+/// came), the last one applied meanwhile.
+pub const LOST_DRIVE_TICKS: u64 = 5;
+
+/// Before stepping `tick`: a robot whose agent left and whose drives its torques still drive
+/// (a fallen robot's damping) loses them once no torques came for [`LOST_DRIVE_TICKS`] (its
+/// agent died after leaving).
+fn silence_lost_drives(cfg: &LockstepConfig, plant: &mut impl Plant, robots: &[String], tick: u64, lost: &[bool], answered: &[Option<u64>]) {
+    let Some(loss) = cfg.agent_loss.drive_loss() else { return };
+    for (i, robot) in robots.iter().enumerate() {
+        if lost[i] && !plant.drives_lost(i) && answered[i].is_none_or(|t| tick.saturating_sub(t) >= LOST_DRIVE_TICKS) {
+            tracing::warn!(%robot, tick, since = ?answered[i], ?loss, "no torques from the robot whose agent left: its drives lose their commands");
+            plant.lose_drives(i, loss);
+        }
+    }
 }
 
 /// A robot's agent that left or joined the team during a run (index in the plant's robots).

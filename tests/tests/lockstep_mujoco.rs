@@ -1,6 +1,7 @@
 //! The MuJoCo plant in the lockstep loop over real Zenoh (one in-process session per test,
 //! `Role::Alone`, its own team name): standing under a real robot-agent for 5 s, determinism,
-//! and the missing robot named in the timeout error.
+//! the missing robot named in the timeout error, and (on the placeholder plant) a robot whose
+//! agent left alive driven by its torques until they stop.
 
 use std::time::Duration;
 
@@ -285,4 +286,73 @@ async fn a_perturbation_from_the_key_pushes_the_object() {
     let x0 = rec.records.first().unwrap().object.as_ref().unwrap().pose.position[0];
     let x1 = rec.records.last().unwrap().object.as_ref().unwrap().pose.position[0];
     assert!(x1 - x0 > 0.05, "pushed object moved {} m", x1 - x0);
+}
+
+/// A robot whose agent leaves the team but keeps answering its states (a fallen robot's
+/// damping, `robot_agent::fall`) is driven by those torques; once they stop, its drives are
+/// lost after `LOST_DRIVE_TICKS`. On the unit-inertia placeholder plant (`v += dt tau`), with
+/// both robots sent `tau = 1` on every joint: r1 answers all 80 ticks, r2 leaves at tick 20,
+/// answers until tick 39 and then falls silent. Its torques are not waited for (they may drive
+/// it a tick late) and the last is held for 5 ticks, so its velocity gains `dt` on 42 to 45
+/// steps and none after tick 44; before, on ticks 0..=19 only (the drives were cut when its
+/// agent left and its later torques ignored).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_agent_that_left_alive_drives_its_robot_until_its_torques_stop() {
+    use protocol::keys::{self, RobotTopic};
+    use protocol::transport::{decode_sample, Qos, TypedPublisher};
+    use protocol::{Header, RobotState, TorqueCommand};
+    use sim_bridge::plant::{DriveLoss, Plant, PlaceholderPlant};
+    let team = "left-alive";
+    let session = transport::open(&ZenohArgs::default(), Role::Alone).await.unwrap();
+    let (dt, v0, ticks) = (0.001, 0.5, 80u64);
+    let mut plant = PlaceholderPlant::new(vec!["r1".into(), "r2".into()], 2, v0, dt);
+    let states = transport::subscribe(&session, keys::all_robots(team, RobotTopic::State).unwrap()).await.unwrap();
+    let mut pubs = Vec::new();
+    for id in ["r1", "r2"] {
+        pubs.push(TypedPublisher::<TorqueCommand>::declare(&session, keys::robot(team, id, RobotTopic::Torque).unwrap(), Qos::HotPath).await.unwrap());
+    }
+    let r1_token = transport::declare_member(&session, team, "r1").await.unwrap();
+    let mut r2_token = Some(transport::declare_member(&session, team, "r2").await.unwrap());
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let mut stop = stop_rx.clone();
+    let responder = tokio::spawn(async move {
+        let mut answered = [None::<u64>; 2];
+        loop {
+            let sample = tokio::select! {
+                _ = stop.changed() => break,
+                s = states.recv_async() => match s { Ok(s) => s, Err(_) => break },
+            };
+            let Ok(st) = decode_sample::<RobotState>(&sample) else { continue };
+            let (tick, i) = (st.header.tick, if st.header.robot_id() == "r1" { 0 } else { 1 });
+            if answered[i].is_some_and(|t| t >= tick) {
+                continue; // a repeat
+            }
+            answered[i] = Some(tick);
+            if i == 1 {
+                if tick == 20 {
+                    if let Some(t) = r2_token.take() {
+                        t.undeclare().await.unwrap();
+                    }
+                }
+                if tick >= 40 {
+                    continue;
+                }
+            }
+            let cmd = TorqueCommand { header: Header::new(team, Some(if i == 0 { "r1" } else { "r2" }), tick, 0), tau: vec![1.0; 2], hold: false };
+            pubs[i].put(&cmd).await.unwrap();
+        }
+    });
+    let mut c = cfg(team, ticks);
+    c.agent_loss = sim_bridge::lockstep::AgentLoss::Drives(DriveLoss::Unpowered);
+    let report = lockstep::run(&session, &c, &mut plant, stop_rx).await.unwrap();
+    stop_tx.send(true).unwrap();
+    responder.await.unwrap();
+    drop(r1_token);
+    assert_eq!(report.ticks, ticks);
+    let gained = |i: usize| (plant.velocities(i)[0] - v0) / dt;
+    println!("r1 driven for {:.1} ticks, r2 for {:.1}", gained(0), gained(1));
+    assert!((gained(0) - ticks as f64).abs() < 1e-6, "r1 is driven every tick: {}", gained(0));
+    let steps = gained(1).round();
+    assert!((gained(1) - steps).abs() < 1e-6 && (42.0..=45.0).contains(&steps), "r2 driven for {} steps, expected 42-45", gained(1));
+    assert!(plant.drives_lost(1) && !plant.drives_lost(0), "r2's drives lost at the end, r1's not");
 }

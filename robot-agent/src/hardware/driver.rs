@@ -200,7 +200,9 @@ impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
             }
             Err(e) => self.core.on_undecodable_state(&e.to_string()),
         }
-        self.commands(tick, now + self.cfg.command_wait);
+        // A fallen robot takes no commands: nothing to wait for.
+        let wait = if self.core.fallen().is_some() { Duration::ZERO } else { self.cfg.command_wait };
+        self.commands(tick, now + wait);
         self.contacts();
         let out = self.core.on_timer(Instant::now());
         let status = send(self.link, &mut self.out, out);
