@@ -26,7 +26,7 @@ use thiserror::Error;
 
 use crate::contact_switch::{ContactSwitch, SwitchConfig};
 use crate::dynamics_source::DynamicsSource;
-use crate::fall::{limp_torques, Fall, FallDetector, FallLimits};
+use crate::fall::{Fall, FallDetector, FallLimits};
 use crate::gate::{CommandGate, CommandRejection};
 use crate::safe_mode::{CommandDeadline, HoldGains, PostureHold, Takeover, Watchdog};
 use crate::status::{AgentCounters, StatusBoard};
@@ -184,9 +184,6 @@ pub struct AgentCore<S: DynamicsSource> {
     watchdog: Watchdog,
     hold: PostureHold,
     fall: FallDetector,
-    /// The posture hold's damping and the torque limits, for the limp torques.
-    limp_kd: Vec<f64>,
-    limits: Vec<f64>,
     /// Commands following the hold blend in from it.
     takeover: Takeover,
     /// The hold following commands blends in from the last of them (`entry_from`).
@@ -250,8 +247,6 @@ impl<S: DynamicsSource> AgentCore<S> {
             gate: CommandGate::new(robot, limits.clone(), cfg.max_command_age),
             watchdog: Watchdog::new(cfg.deadline),
             fall: FallDetector::new(cfg.fall),
-            limp_kd: gains.kd.clone(),
-            limits: limits.clone(),
             hold: PostureHold::new(gains, limits),
             takeover: Takeover::new(cfg.takeover),
             entry: Takeover::new(cfg.takeover),
@@ -629,7 +624,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             }
             Apply::Limp => {
                 if let Some(tick) = self.gate.latest_state_tick() {
-                    limp_torques(&self.limp_kd, &self.qdot, &self.limits, &mut self.torques.tau);
+                    self.hold.damping(&self.qdot, &mut self.torques.tau);
                     self.torques.header.tick = tick;
                     self.torques.hold = false;
                     self.last_applied = Apply::Limp;

@@ -15,10 +15,11 @@
 //!   standing torso, and a walk down a ramp or stairs by half the torso's height would trip it);
 //! * only for a floating-base robot: a fixed base cannot fall (the core does not watch it);
 //! * then, for good (until the agent is restarted), the agent applies only joint damping
-//!   ([`limp_torques`], `tau = clamp(-K_d qdot)` with the posture hold's `K_d`): it neither
-//!   stands up nor swings its limbs; it refuses commands, stops sending dynamics terms and
-//!   withdraws its team membership, so the coordinator solves the team without it (a
-//!   member that left: with three or more robots the rest keep the object).
+//!   (the posture hold's, [`crate::safe_mode::PostureHold::damping`]:
+//!   `tau = clamp(-K_d qdot)`): it neither stands up nor swings its limbs; it refuses
+//!   commands, stops sending dynamics terms and withdraws its team membership, so the
+//!   coordinator solves the team without it (a member that left: with three or more robots
+//!   the rest keep the object).
 
 use protocol::Pose;
 
@@ -101,12 +102,6 @@ pub fn tilt(q: &[f64; 4]) -> f64 {
     rzz.clamp(-1.0, 1.0).acos()
 }
 
-/// `out = clamp(-kd qdot, -limit, limit)` per joint: damping only, no gravity compensation.
-pub fn limp_torques(kd: &[f64], qdot: &[f64], limits: &[f64], out: &mut Vec<f64>) {
-    out.clear();
-    out.extend(kd.iter().zip(qdot).zip(limits).map(|((k, v), &l)| (-k * v).clamp(-l, l)));
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -159,12 +154,5 @@ mod tests {
         d.observe(20, &pose(0.05, [1.0, 0.0, 0.0, 0.0]));
         assert_eq!(d.observe(21, &pose(0.001, [1.0, 0.0, 0.0, 0.0])), None);
         assert_eq!(d.observe(22, &pose(0.001, roll(1.2))).map(|f| f.tick), Some(22));
-    }
-
-    #[test]
-    fn limp_torques_damp_and_stay_within_the_limits() {
-        let mut out = Vec::new();
-        limp_torques(&[2.0, 10.0, 1.0], &[0.5, -3.0, 0.0], &[40.0, 20.0, 5.0], &mut out);
-        assert_eq!(out, vec![-1.0, 20.0, 0.0]);
     }
 }

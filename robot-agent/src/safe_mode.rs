@@ -179,6 +179,13 @@ impl PostureHold {
         &self.carried
     }
 
+    /// Its damping alone, `tau = clamp(-Kd qdot, ±limit)`, into `out`: what a fallen robot
+    /// applies ([`crate::fall`]), no position gain, no gravity compensation.
+    pub fn damping(&self, qdot: &[f64], out: &mut Vec<f64>) {
+        out.clear();
+        out.extend(self.gains.kd.iter().zip(qdot).zip(&self.limits).map(|((k, v), &l)| (-k * v).clamp(-l, l)));
+    }
+
     /// `tau = clamp(Kp (q_hold - q) - Kd qdot + g + tau_c, ±limit)` into `out`; returns how many
     /// joints were clamped. Lengths must agree (the agent checks states against its size
     /// first); missing entries are treated as zero error, zero velocity, zero gravity.
@@ -283,6 +290,15 @@ mod tests {
         assert_eq!(w.safe_mode_since(), None);
         let no_time = Watchdog::new(CommandDeadline { ticks: 0, time: None });
         assert!(!no_time.expired(u64::MAX, t0 + Duration::from_secs(100)));
+    }
+
+    #[test]
+    fn the_damping_alone_opposes_the_velocity_within_the_limits() {
+        let gains = HoldGains { kp: vec![100.0; 3], kd: vec![2.0, 10.0, 1.0] };
+        let hold = PostureHold::new(gains, vec![40.0, 20.0, 5.0]);
+        let mut out = Vec::new();
+        hold.damping(&[0.5, -3.0, 0.0], &mut out);
+        assert_eq!(out, vec![-1.0, 20.0, 0.0]);
     }
 
     #[test]
