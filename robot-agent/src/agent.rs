@@ -113,15 +113,14 @@ pub async fn run_with<S: DynamicsSource>(
                     StateEvent::Closed => break,
                 };
                 let Ok(out) = core.on_state(&state, Instant::now()) else { continue };
+                let leave = out.leave_team;
                 let done = io.send(out).await?;
                 io.done(&mut core, done).await;
-                if core.fallen().is_some() {
-                    if let Some(t) = token.take() {
-                        if let Err(e) = t.undeclare().await {
-                            tracing::warn!(%robot, "withdrawing the membership after the fall: {e}");
-                        }
-                        tracing::warn!(%robot, "fallen: left the team");
+                if let Some(t) = token.take_if(|_| leave) {
+                    if let Err(e) = t.undeclare().await {
+                        tracing::warn!(%robot, "withdrawing the membership after the fall: {e}");
                     }
+                    tracing::warn!(%robot, "fallen: left the team");
                 }
             }
             c = commands.recv_async() => {

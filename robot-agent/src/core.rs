@@ -141,8 +141,9 @@ pub enum ContactRejection {
 /// What the caller sends or applies after a core call, in this order: publish `terms` on the
 /// robot's `dynamics` key, `description` on its `description` key, apply `torques` (a checked
 /// command or the posture hold; the caller stamps each before sending), then publish
-/// [`AgentCore::status`] if `status` is set. The status comes last and is fetched then because
-/// it carries the latency of the terms the caller has just published.
+/// [`AgentCore::status`] if `status` is set, and withdraw the robot's team membership if
+/// `leave_team` is set. The status comes last and is fetched then because it carries the
+/// latency of the terms the caller has just published.
 #[derive(Debug, Default)]
 pub struct Outputs<'a> {
     pub terms: Option<&'a mut DynamicsTerms>,
@@ -150,6 +151,8 @@ pub struct Outputs<'a> {
     pub torques: Option<&'a mut TorqueCommand>,
     /// Publish the status: the mode changed, or its period is due.
     pub status: bool,
+    /// The robot fell at this state ([`crate::fall`]): leave the team (once).
+    pub leave_team: bool,
 }
 
 /// What the caller did with [`Outputs`], reported back with [`AgentCore::sent`].
@@ -300,14 +303,16 @@ impl<S: DynamicsSource> AgentCore<S> {
         self.watchdog.on_state(tick, now);
         self.q.copy_from_slice(&state.joint_positions);
         self.qdot.copy_from_slice(&state.joint_velocities);
-        if let Some(f) = self.source.floating_base().then(|| self.fall.observe(tick, &state.base_pose)).flatten() {
+        let fell = self.source.floating_base().then(|| self.fall.observe(tick, &state.base_pose)).flatten();
+        if let Some(f) = fell {
             self.board.status.mode = AgentMode::Fallen;
             self.early_pending = false;
             tracing::error!(robot = %self.robot, tick, tilt_deg = f.tilt.to_degrees(), height_m = f.height, "the robot fell: limp (joint damping only), commands refused, leaving the team");
         }
         if self.fall.fallen().is_some() {
             // No terms: the robot is out of the team.
-            return Ok(self.outputs(now, mode_before, false, Apply::Limp, false));
+            let out = self.outputs(now, mode_before, false, Apply::Limp, false);
+            return Ok(Outputs { leave_team: fell.is_some(), ..out });
         }
         self.switch_contacts(tick, &state.foot_forces);
         let terms = match self.source.compute(state, self.contacts.active(), &mut self.terms) {
@@ -641,6 +646,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             description: if description { self.description.as_mut() } else { None },
             torques,
             status,
+            leave_team: false,
         }
     }
 

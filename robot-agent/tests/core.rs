@@ -271,7 +271,8 @@ fn timer_paces_the_status_and_latencies_come_from_what_was_sent() {
 /// A robot that tips over goes limp for good: from the state that passes the tilt limit on,
 /// each state yields joint damping only (`-K_d qdot`, clamped; written out here with the
 /// posture hold's gains), no terms, commands are refused and the timer never enters safe mode;
-/// the status says so once. Standing up again does not undo it.
+/// the status says so, and the caller is told to leave the team, once. Standing up again does
+/// not undo it.
 #[test]
 fn a_fallen_robot_goes_limp_refuses_commands_and_sends_no_terms() {
     let t0 = Instant::now();
@@ -292,8 +293,9 @@ fn a_fallen_robot_goes_limp_refuses_commands_and_sends_no_terms() {
     let v = [3.0, -40.0, 0.5];
     let kd = HoldGains::from_torque_limits(&LIMITS).kd;
     let limp: Vec<f64> = (0..3).map(|i| (-kd[i] * v[i]).clamp(-LIMITS[i], LIMITS[i])).collect();
-    let out = summary(c.on_state(&posed(2, tipped(65.0), v), t0 + ms(2)).unwrap());
-    assert_eq!(out, (None, Some((2, limp.clone())), true));
+    let out = c.on_state(&posed(2, tipped(65.0), v), t0 + ms(2)).unwrap();
+    assert!(out.leave_team, "the caller is told to leave the team at the fall");
+    assert_eq!(summary(out), (None, Some((2, limp.clone())), true));
     assert!(limp.iter().zip(&v).all(|(t, v)| t * v <= 0.0), "damping opposes the motion: {limp:?}");
     assert_eq!((c.mode(), c.fallen().map(|f| f.tick)), (AgentMode::Fallen, Some(2)));
     // Its commands are refused, counted, and nothing is applied.
@@ -304,8 +306,9 @@ fn a_fallen_robot_goes_limp_refuses_commands_and_sends_no_terms() {
     assert!(c.on_timer(t0 + ms(200)).torques.is_none());
     assert_eq!((c.mode(), c.safe_mode_since()), (AgentMode::Fallen, None));
     // Upright and still: zero torque, still fallen, still no terms.
-    let out = summary(c.on_state(&posed(3, upright, [0.0; 3]), t0 + ms(201)).unwrap());
-    assert_eq!(out, (None, Some((3, vec![0.0; 3])), false));
+    let out = c.on_state(&posed(3, upright, [0.0; 3]), t0 + ms(201)).unwrap();
+    assert!(!out.leave_team, "once");
+    assert_eq!(summary(out), (None, Some((3, vec![0.0; 3])), false));
     assert_eq!(c.mode(), AgentMode::Fallen);
     assert!(c.counters().rejected >= 1);
 

@@ -122,8 +122,6 @@ struct Driver<'a, S: DynamicsSource, H, L> {
     /// Ticks read so far (the next tick's number).
     tick: u64,
     overruns: u64,
-    /// The robot fell and the link left the team.
-    left: bool,
 }
 
 /// The torques this loop writes, and the link's failures.
@@ -146,7 +144,7 @@ impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
             foot_forces: Vec::new(),
         };
         let out = Written { torques: vec![0.0; joints], have: false, link_errors: 0 };
-        Driver { core, hardware, link, cfg: *cfg, state, out, tick: 0, overruns: 0, left: false }
+        Driver { core, hardware, link, cfg: *cfg, state, out, tick: 0, overruns: 0 }
     }
 
     fn cycles(&mut self, stop: &AtomicBool) -> Result<DriverExit, DriverError> {
@@ -187,14 +185,14 @@ impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
         match self.state.validate() {
             Ok(()) => {
                 if let Ok(out) = self.core.on_state(&self.state, now) {
+                    let leave = out.leave_team;
                     let status = send(self.link, &mut self.out, out);
                     self.done(status);
-                }
-                if self.core.fallen().is_some() && !self.left {
                     // The robot fell: limp, and out of the team (crate::fall).
-                    self.left = true;
-                    if let Err(e) = self.link.leave_team() {
-                        tracing::warn!(robot = %self.core.robot(), "leaving the team after the fall: {e}");
+                    if leave {
+                        if let Err(e) = self.link.leave_team() {
+                            tracing::warn!(robot = %self.core.robot(), "leaving the team after the fall: {e}");
+                        }
                     }
                 }
             }
