@@ -78,9 +78,10 @@ pub enum AgentLoss {
     /// they are) and no tick waits for it. An agent that left the team alive (a fallen robot's,
     /// `robot_agent::fall`) and still answers its states drives it with those torques as they
     /// come (a tick late when they come after the tick's step), holding the last ones for up
-    /// to [`LOST_DRIVE_TICKS`] (then the drives are lost as above). When its agent joins again (restarted), the loop waits for its
-    /// torques from the next tick on, and the first torques it sends drive the robot again.
-    /// The run ends with [`BridgeError::RobotLeft`] when every agent has left.
+    /// to [`LOST_DRIVE_TICKS`] (then the drives are lost as above). When its agent joins again
+    /// (restarted), the loop waits for its torques from the next tick on, and the first
+    /// torques it sends drive the robot again. The run ends with [`BridgeError::RobotLeft`]
+    /// when every agent has left.
     Drives(DriveLoss),
 }
 
