@@ -7,7 +7,7 @@
 //!
 //! On the ground truth and the recording: r3's agent says it fell at the first state whose
 //! torso tilt passes 60 degrees; the coordinator solves the team without r3 within 3 ticks of
-//! it and its members leave r3 out; from
+//! it, never takes it back, and its members leave r3 out; from
 //! then on every tick of the two robots left is solved by the QP and they stand (torsos within
 //! 2 cm and 3 deg of their holds); and every torque r3 applies after the fall is the limp law
 //! written out again here, `clamp(-K_d qdot)` with the posture hold's `K_d`, from the joint
@@ -69,8 +69,20 @@ fn a_robot_pushed_over_goes_limp_and_the_rest_of_the_team_stands() {
     let left = records.diagnostics.iter().filter(|d| d.header.tick >= fell).find(|d| d.contacts.iter().all(|c| c.robot != "r3")).map(|d| d.header.tick).expect("r3 leaves the team");
     println!("the coordinator solves without r3 from tick {left}");
     assert!(left <= fell + 3, "r3 fell at tick {fell}, the team was solved without it from {left}");
-    let later: Vec<_> = records.statuses.iter().filter(|s| s.header.tick > left).collect();
-    assert!(!later.is_empty() && later.iter().all(|s| !s.members.iter().any(|m| m == "r3")), "r3 stays out of the members");
+    // The coordinator's status says so at once (it goes out on a change of the team; otherwise
+    // about once a second). Which of the agent's two signs comes first is a race: its membership
+    // withdrawn (liveliness), or its terms missing past the reuse deadline (r3 is then silent
+    // until the withdrawal arrives). Either way, from the first status that leaves r3 out of
+    // the team, no status takes it back, and by the last r3 is no member at all.
+    let in_team = |s: &&protocol::CoordinatorStatus| s.members.iter().any(|m| m == "r3") && !s.silent.iter().any(|m| m == "r3");
+    let joined = records.statuses.iter().position(|s| in_team(&s)).expect("r3 was in the team");
+    let out = joined + records.statuses[joined..].iter().position(|s| !in_team(&s)).expect("a status leaves r3 out of the team");
+    let said = records.statuses[out].header.tick;
+    assert!(said + 1 >= fell && said <= fell + 3, "r3 fell at tick {fell}; the status that leaves it out is of tick {said}");
+    let back = records.statuses[out..].iter().find(in_team);
+    assert!(back.is_none(), "r3 is back in the team at tick {:?}", back.map(|s| s.header.tick));
+    let last = records.statuses.last().expect("statuses");
+    assert!(!last.members.iter().any(|m| m == "r3"), "r3 withdrew its membership: still a member at tick {}", last.header.tick);
 
     // The two robots left: every tick solved, no contact of r3's.
     let after: Vec<_> = records.diagnostics.iter().filter(|d| d.header.tick > left + 1).collect();
