@@ -587,3 +587,84 @@ fn object_pose_fit_follows_any_number_of_hands_and_reports_slip() {
         assert!((slipped.pose.translation.vector - expected.translation.vector).norm() < slip, "the fit moves less than the slip");
     }
 }
+
+/// Terms like `t` but with `k` velocities: random `M`, `h`, `v` and frame Jacobians of the
+/// new size (assembly checks only shapes and finiteness), so that a team of these lays its
+/// robots' blocks out differently from the default robot's at the same team size.
+fn resized(t: &DynamicsTerms, k: usize, rng: &mut impl rand::Rng) -> DynamicsTerms {
+    let mut out = t.clone();
+    out.nv = k.try_into().expect("nv");
+    let mut random = |r: usize, c: usize| DMatrix::from_fn(r, c, |_, _| rng.random_range(-1.0..1.0));
+    out.mass_matrix = protocol::Matrix::from_dmatrix(&random(k, k));
+    out.bias = random(k, 1).as_slice().to_vec();
+    out.velocity = random(k, 1).as_slice().to_vec();
+    for f in &mut out.frames {
+        f.jacobian = protocol::Matrix::from_dmatrix(&random(f.role.dim(), k));
+    }
+    out
+}
+
+/// Block-diagonal `M` of the tick, written out from the protocol's row-major blocks.
+fn mass_written_out(terms: &[DynamicsTerms]) -> DMatrix<f64> {
+    let n: usize = terms.iter().map(|t| t.nv()).sum();
+    let mut m = DMatrix::zeros(n, n);
+    let mut off = 0;
+    for t in terms {
+        let k = t.nv();
+        for i in 0..k {
+            for j in 0..k {
+                m[(off + i, off + j)] = t.mass_matrix.data[i * k + j];
+            }
+        }
+        off += k;
+    }
+    m
+}
+
+#[test]
+fn a_team_assembled_into_used_buffers_is_the_team_assembled_afresh() {
+    // The team's stacked Jacobians and `J_c` are written row by row into the last tick's
+    // buffers without clearing them first: a sequence of ticks whose blocks move (a foot
+    // lifts, a hand lets go, other robot sizes at the same team size, fewer robots, then the
+    // first tick again) must leave nothing behind.
+    let mut fx = Fixture::new();
+    let mut rng = common::rng(17);
+    let nv = fx.robot.model.nv;
+    let (all, _) = fx.static_team(3);
+    let lifted = ContactSet { stance: vec![false, true, true, true], hand_in_grasp: false };
+    let mut moved = all.clone();
+    moved[1] = fx.terms_with(&robot_id(1), &fx.standing_q(1, 3), &DVector::zeros(nv), 1, &lifted);
+    let other_sizes = vec![resized(&all[0], nv + 6, &mut rng), resized(&all[1], nv - 6, &mut rng), all[2].clone()];
+    let reordered = vec![resized(&all[0], nv - 6, &mut rng), resized(&all[1], nv + 6, &mut rng), resized(&all[2], nv, &mut rng)];
+    let fewer = vec![all[0].clone(), all[2].clone()];
+    let ticks = [&all, &moved, &other_sizes, &reordered, &fewer, &all];
+
+    let (mut team, mut j_c, mut jdv_c) = (Team::default(), DMatrix::zeros(0, 0), DVector::zeros(0));
+    for (i, tick) in ticks.iter().enumerate() {
+        team.assemble_into(tick, None, false).expect("team");
+        let mut fresh = Team::default();
+        fresh.assemble_into(tick, None, false).expect("team");
+        assert_eq!(team.mass, mass_written_out(tick), "tick {i}: M");
+        assert_eq!(team.j_cf, stacked(tick, FrameRole::StanceFoot).0, "tick {i}: J_cf");
+        assert_eq!(team.j_ee, stacked(tick, FrameRole::Hand).0, "tick {i}: J_ee");
+        for (used, new, what) in [(&team.feet, &fresh.feet, "feet"), (&team.hands, &fresh.hands, "hands"), (&team.free_hands, &fresh.free_hands, "free hands"), (&team.torsos, &fresh.torsos, "torsos"), (&team.swing_feet, &fresh.swing_feet, "swing feet")] {
+            assert_eq!(used.len(), new.len(), "tick {i}: {what}");
+            for (a, b) in used.iter().zip(new) {
+                assert_eq!(a.jacobian, b.jacobian, "tick {i}: {what} {}", b.name);
+            }
+        }
+        // J_c with the grasp's rows (into the used buffers and into new ones), then without a
+        // grasp: the feet's rows, then zero rows for the hands in grasp.
+        let mut grasp: Option<GraspTerms> = None;
+        GraspTracker::default().update(&team, None, &[], &mut grasp).expect("grasp");
+        let grasp = grasp.expect("grasp terms");
+        let (mut new_j_c, mut new_jdv_c) = (DMatrix::zeros(0, 0), DVector::zeros(0));
+        contact_jacobian(&team, Some(&grasp), &mut j_c, &mut jdv_c);
+        contact_jacobian(&team, Some(&grasp), &mut new_j_c, &mut new_jdv_c);
+        assert_eq!((&j_c, &jdv_c), (&new_j_c, &new_jdv_c), "tick {i}: J_c with the grasp");
+        contact_jacobian(&team, None, &mut j_c, &mut jdv_c);
+        let mut expect = DMatrix::zeros(team.contact_rows(), team.n);
+        expect.rows_mut(0, team.j_cf.nrows()).copy_from(&stacked(tick, FrameRole::StanceFoot).0);
+        assert_eq!(j_c, expect, "tick {i}: J_c without a grasp");
+    }
+}

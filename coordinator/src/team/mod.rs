@@ -16,7 +16,7 @@ pub mod membership;
 use nalgebra::{DMatrix, DVector, Rotation3, Vector3};
 use protocol::{DynamicsTerms, FrameRole, FrameTerms};
 
-use crate::linalg::{rotation_from_row_major, zeros, zeros_v};
+use crate::linalg::{rotation_from_row_major, shape, zeros, zeros_v};
 use crate::ControllerError;
 
 /// One robot's block in the team vectors.
@@ -224,7 +224,8 @@ fn team_frame_into(tf: &mut TeamFrame, robot: usize, f: &FrameTerms, off: usize,
 
 /// Frames' Jacobians and `Jdot*v` stacked (`d` rows each) into `j` and `jdv`.
 fn stack(frames: &[TeamFrame], d: usize, n: usize, j: &mut DMatrix<f64>, jdv: &mut DVector<f64>) {
-    zeros(j, d * frames.len(), n);
+    // Not cleared: the frames' whole rows tile it.
+    shape(j, d * frames.len(), n);
     zeros_v(jdv, d * frames.len());
     for (k, f) in frames.iter().enumerate() {
         j.rows_mut(d * k, d).copy_from(&f.jacobian);

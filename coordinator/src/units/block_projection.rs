@@ -179,11 +179,11 @@ impl BlockFactors {
         }
         for rb in self.robots.iter_mut() {
             let (o, k, f) = (rb.o, rb.k, 3 * rb.feet);
-            zeros(&mut rb.a, f, k);
+            shape(&mut rb.a, f, k);
             rb.a.copy_from(&team.j_cf.view((3 * rb.foot0, o), (f, k)));
             let h = rb.hand.unwrap_or(0);
             let rows = if rb.hand.is_some() { 6 } else { 0 };
-            zeros(&mut rb.j_h, rows, k);
+            shape(&mut rb.j_h, rows, k);
             rb.j_h.copy_from(&team.j_ee.view((6 * h, o), (rows, k)));
         }
         Some(())
@@ -217,7 +217,7 @@ impl BlockFactors {
         zeros(pu, n, nu);
         let OpScratch { t, u } = &mut self.scratch;
         zeros(t, hb, nu);
-        zeros(u, hb, nu);
+        shape(u, hb, nu);
         for rb in &self.robots {
             for c in rb.u0..rb.u0 + rb.nu {
                 let jl = self.unact[c] - rb.o;
@@ -254,8 +254,8 @@ impl BlockFactors {
         if hb == 0 {
             return;
         }
-        zeros(&mut s.t, hb, c);
-        zeros(&mut s.u, hb, c);
+        shape(&mut s.t, hb, c);
+        shape(&mut s.u, hb, c);
         for rb in &self.robots {
             if let Some(h) = rb.hand {
                 gemm(mat_mut(&mut s.t).subrows_mut(6 * h, 6), 0.0, 1.0, mat(rb.operator(op)[2]).transpose(), x.subrows(rb.o, rb.k));
@@ -275,8 +275,8 @@ impl BlockFactors {
     /// the hand rows), so it need not be cleared.
     pub fn jct_pinv_apply(&self, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>, s: &mut OpScratch) {
         let (hb, c) = (self.w_e.nrows(), x.ncols());
-        zeros(&mut s.t, hb, c);
-        zeros(&mut s.u, hb, c);
+        shape(&mut s.t, hb, c);
+        shape(&mut s.u, hb, c);
         for rb in &self.robots {
             if let Some(h) = rb.hand.filter(|_| hb > 0) {
                 gemm(mat_mut(&mut s.t).subrows_mut(6 * h, 6), 0.0, 1.0, mat(&rb.r_h).transpose(), x.subrows(rb.o, rb.k));
@@ -335,7 +335,7 @@ impl BlockFactors {
     /// `(B - I)_{:u} = P_{:u} K - E_u K` (n x nu, eq. bmatrix on the unactuated columns, the
     /// only ones where `B` differs from `I`), and the unactuated indices.
     pub fn b_minus_i_u(&self, out: &mut DMatrix<f64>) -> &[usize] {
-        zeros(out, self.pk.nrows(), self.unact.len());
+        shape(out, self.pk.nrows(), self.unact.len());
         out.copy_from(&self.pk);
         for (r, &i) in self.unact.iter().enumerate() {
             for c in 0..self.unact.len() {
@@ -418,7 +418,7 @@ impl RobotBlocks {
         gram_inv.compute(mat(&self.gram), &mut self.gram_inv)?;
         shape(&mut self.a_pinv, k, f);
         gemm(mat_mut(&mut self.a_pinv), 0.0, 1.0, mat(&self.a).transpose(), mat(&self.gram_inv));
-        zeros(&mut self.n_f, k, k);
+        shape(&mut self.n_f, k, k);
         self.n_f.fill_with_identity();
         gemm(mat_mut(&mut self.n_f), 1.0, -1.0, mat(&self.a_pinv), mat(&self.a));
         // Phi_f = M^{-1} - M^{-1} A^T (A M^{-1} A^T)^{-1} A M^{-1}.
@@ -429,7 +429,7 @@ impl RobotBlocks {
         ama_inv.compute(mat(&self.gram), &mut self.gram_inv)?;
         shape(&mut self.t, k, f);
         gemm(mat_mut(&mut self.t), 0.0, 1.0, mat(&self.ma), mat(&self.gram_inv));
-        zeros(&mut self.phi_f, k, k);
+        shape(&mut self.phi_f, k, k);
         self.phi_f.copy_from(&self.m_inv);
         gemm(mat_mut(&mut self.phi_f), 1.0, -1.0, mat(&self.t), mat(&self.ma).transpose());
         symmetrise(&mut self.phi_f);
@@ -438,7 +438,7 @@ impl RobotBlocks {
         // The hand's R_h = N_f J_h^T, L_h = Phi_f J_h^T, M_r L_h, J_h A^+.
         let rows = self.j_h.nrows();
         for (out, left) in [(&mut self.r_h, &self.n_f), (&mut self.l_h, &self.phi_f)] {
-            zeros(out, k, rows);
+            shape(out, k, rows);
             gemm(mat_mut(out), 0.0, 1.0, mat(left), mat(&self.j_h).transpose());
         }
         shape(&mut self.ml_h, k, rows);

@@ -17,7 +17,7 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3, Vector3, Vector6};
 
-use crate::linalg::{mat, mat_mut, product, rotation_error, shape, transpose_into, zeros, zeros_v, Pinv, SpdInverse, RANK_TOL};
+use crate::linalg::{mat, mat_mut, product, rotation_error, shape, transpose_into, zeros_v, Pinv, SpdInverse, RANK_TOL};
 use crate::units::block_projection::{BlockOp, OpScratch};
 use crate::units::projection::Projections;
 use crate::ControllerError;
@@ -113,7 +113,9 @@ impl TaskStack {
     pub fn begin(&mut self, k: usize, n: usize) {
         self.n = n;
         self.at = 0;
-        zeros(&mut self.j, k, n);
+        // Not cleared: every row is written by `push` before `joint_torque` uses it (it
+        // refuses a stack with rows left unfilled).
+        shape(&mut self.j, k, n);
         for v in [&mut self.jdv, &mut self.e, &mut self.edot, &mut self.acc_d, &mut self.kp, &mut self.kd, &mut self.ff] {
             zeros_v(v, k);
         }

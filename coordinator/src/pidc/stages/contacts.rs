@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use nalgebra::{DMatrix, DVector};
 use protocol::{FootLoad, RobotDescription};
 
-use crate::linalg::{zeros, zeros_v};
+use crate::linalg::{shape, zeros_v};
 use crate::pidc::PidcConfig;
 use crate::qp::ContactKind;
 use crate::team::Team;
@@ -21,14 +21,19 @@ pub fn contact_jacobian(team: &Team, grasp: Option<&GraspTerms>, j_c: &mut DMatr
     let n = team.n;
     let nf = team.feet.len();
     let m = team.contact_rows();
-    zeros(j_c, m, n);
+    // Every row is written: the feet's, then the grasp's or zeros.
+    shape(j_c, m, n);
     zeros_v(jdv_c, m);
     j_c.rows_mut(0, 3 * nf).copy_from(&team.j_cf);
     jdv_c.rows_mut(0, 3 * nf).copy_from(&team.jdv_cf);
+    let mut filled = 3 * nf;
     if let Some(g) = grasp {
-        j_c.rows_mut(3 * nf, g.j_cee.nrows()).copy_from(&g.j_cee);
-        jdv_c.rows_mut(3 * nf, g.j_cee.nrows()).copy_from(&g.jdv_cee);
+        j_c.rows_mut(filled, g.j_cee.nrows()).copy_from(&g.j_cee);
+        jdv_c.rows_mut(filled, g.j_cee.nrows()).copy_from(&g.jdv_cee);
+        filled += g.j_cee.nrows();
     }
+    j_c.rows_mut(filled, m - filled).fill(0.0);
+
 }
 
 /// The QP's contacts into `out`: `(first row in J_c, kind)` for every stance foot (friction

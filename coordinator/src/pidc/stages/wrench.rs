@@ -95,7 +95,7 @@ fn rho_dense(team: &Team, proj: &Projections, j_c: &DMatrix<f64>, ws: &mut Conta
 fn rho_by_blocks(team: &Team, proj: &Projections, j_c: &DMatrix<f64>, ws: &mut ContactMapScratch, y: &mut DMatrix<f64>, rho: &mut DMatrix<f64>) {
     let (n, m, f) = (team.n, j_c.nrows(), &proj.blocks);
     let unact = f.b_minus_i_u(&mut ws.b_u);
-    zeros(&mut ws.jc_u, m, unact.len());
+    shape(&mut ws.jc_u, m, unact.len());
     for (c, &j) in unact.iter().enumerate() {
         ws.jc_u.column_mut(c).copy_from(&j_c.column(j));
     }
