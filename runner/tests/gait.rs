@@ -423,3 +423,52 @@ fn a_walk_released_before_a_lift_off_halts_at_once_and_loads_the_foot_again() {
     let end = plan.end_time();
     assert_eq!(plan.halt_point(end + 0.5), end + 0.5, "after it");
 }
+
+/// With `min_share`, every support foot carries at least that share of the weight at every
+/// lift-off: the three feet's normal forces by the statics written out again
+/// ([`foot_normal_forces`]), for the bare CoM and, with `hand_load`, with the hand's load.
+/// The default planner (a distance margin only) leaves less on some foot of the same walks,
+/// so the share is what moves the torso there. `support::shares` is the same statics.
+#[test]
+fn with_a_least_share_every_support_foot_carries_it_at_every_liftoff() {
+    let g = protocol::conventions::GRAVITY;
+    let least_share = |params: &GaitParams, r: &WalkingRobot, path: &[[f64; 3]]| -> f64 {
+        let plan = GaitPlan::new(std::slice::from_ref(r), None, params, 0.0).unwrap();
+        let mut feet: Vec<Vector3<f64>> = r.feet.iter().map(|(_, p)| *p).collect();
+        let mut least = f64::INFINITY;
+        for s in plan.steps() {
+            let (torso, _, _) = plan.torso(0, s.liftoff);
+            let com = (torso * Point3::from(r.com_offset)).coords;
+            let tri: Vec<Vector2<f64>> = (0..4).filter(|f| *f != s.foot).map(|f| feet[f].xy()).collect();
+            let loads: Vec<Option<&HandLoad>> = if params.hand_load { vec![None, r.hand.as_ref()] } else { vec![None] };
+            for load in loads {
+                let f = foot_normal_forces(r.mass, &com, load, r.ground_z, &tri);
+                least = least.min(f.min() / f.sum());
+                if load.is_none() {
+                    let (cop, _) = centre_of_pressure(r.mass, &com, None, r.ground_z).expect("weight");
+                    let shares = team_runner::gait::support::shares(&cop, &[tri[0], tri[1], tri[2]]);
+                    for k in 0..3 {
+                        assert!((shares[k] - f[k] / (r.mass * g)).abs() < 1e-9, "path {path:?}: share {k} {} vs statics {}", shares[k], f[k] / (r.mass * g));
+                    }
+                }
+            }
+            feet[s.foot] = s.to;
+        }
+        least
+    };
+    for (path, hand) in [(&S2[..], false), (&[[0.0, 0.3, 0.0]][..], false), (&[[0.25, 0.0, 45.0]][..], true)] {
+        let r = robot("r1", 0.0, 0.0, 30.0, path);
+        let r = if hand { with_hand(r) } else { r };
+        let base = GaitParams { hand_load: hand, ..GaitParams::default() };
+        let plain = least_share(&base, &r, path);
+        let shared = least_share(&GaitParams { min_share: 0.2, ..base.clone() }, &r, path);
+        println!("path {path:?}: least share {plain:.3} with the margin only, {shared:.3} asking 0.2");
+        assert!(plain < 0.2 - 0.01, "path {path:?}: the margin alone already leaves {plain}");
+        assert!(shared >= 0.2 - 1e-9, "path {path:?}: least share {shared}");
+    }
+    let ok = robot("r1", 0.0, 0.0, 0.0, &[[0.1, 0.0, 0.0]]);
+    for bad in [0.34, -0.01, f64::NAN] {
+        let p = GaitParams { min_share: bad, ..GaitParams::default() };
+        assert!(matches!(GaitPlan::new(std::slice::from_ref(&ok), None, &p, 0.0), Err(GaitError::Params(_))), "min_share {bad}");
+    }
+}

@@ -45,6 +45,12 @@ pub struct GaitParams {
     /// Required distance of the centre of pressure (the robot's weight and its hand's load)
     /// inside the support triangle at lift-off, m.
     pub margin: f64,
+    /// Least share of the weight each support foot carries at lift-off (`0`: none asked; at
+    /// most `1/3`, the triangle's centroid): the centre of pressure's barycentric coordinate in
+    /// the support triangle, its distance from a foot's opposite edge over the foot's own
+    /// distance from it. A distance margin alone leaves little on the far foot of a long, thin
+    /// triangle (README, "Known limits").
+    pub min_share: f64,
     /// The swing ends this far below the foothold, pressing the foot down, m.
     pub touchdown_depth: f64,
     /// The contact set that lands the foot is due this long before the planned touchdown, s
@@ -71,6 +77,7 @@ impl Default for GaitParams {
             t_swing: 0.5,
             t_load: 0.15,
             margin: 0.04,
+            min_share: 0.0,
             touchdown_depth: 0.01,
             touchdown_window: 0.08,
             unload_force: 250.0,
@@ -92,6 +99,9 @@ impl GaitParams {
             if !(x.is_finite() && x >= 0.0) {
                 return Err(GaitError::Params(format!("{what} = {x} must be non-negative")));
             }
+        }
+        if !(self.min_share.is_finite() && (0.0..1.0 / 3.0).contains(&self.min_share)) {
+            return Err(GaitError::Params(format!("min_share = {} must be at least 0 and less than 1/3 (the centroid's share)", self.min_share)));
         }
         if self.touchdown_window >= self.t_swing {
             return Err(GaitError::Params(format!("touchdown_window = {} must be shorter than t_swing = {}", self.touchdown_window, self.t_swing)));
@@ -133,6 +143,6 @@ pub enum GaitError {
     Robot { robot: String, reason: String },
     #[error("the object has {got} waypoints, the robots {expected}")]
     ObjectWaypoints { expected: usize, got: usize },
-    #[error("robot {robot}, step {step} (foot {foot}): the centre of pressure cannot be {margin} m inside the support triangle (its inradius is {inradius:.3} m); lower walk.gait.margin or step shorter")]
-    Margin { robot: String, step: usize, foot: String, margin: f64, inradius: f64 },
+    #[error("robot {robot}, step {step} (foot {foot}): the centre of pressure cannot be {margin} m inside the support triangle with every foot carrying {min_share} of the weight (its inradius is {inradius:.3} m); lower walk.gait.margin or walk.gait.min_share, or step shorter")]
+    Margin { robot: String, step: usize, foot: String, margin: f64, min_share: f64, inradius: f64 },
 }

@@ -227,8 +227,8 @@ fn place(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], foot
     let (cop, gain) = centre_of_pressure(r.mass, &com, load.as_ref(), r.ground_z)?;
     // A shift `alpha dir` moves the CoM by that, the centre of pressure `gain` times as far.
     let dir = incentre(&tri).0 - com.xy();
-    let (lo_com, hi_com) = along(&com.xy(), &dir, &tri, p.margin)?;
-    let (lo_cop, hi_cop) = along(&cop, &(gain * dir), &tri, p.margin)?;
+    let (lo_com, hi_com) = along(&com.xy(), &dir, &tri, p.margin, p.min_share)?;
+    let (lo_cop, hi_cop) = along(&cop, &(gain * dir), &tri, p.margin, p.min_share)?;
     let alpha = lo_com.max(lo_cop);
     if alpha > hi_com.min(hi_cop) {
         return None;
@@ -305,7 +305,7 @@ impl Builder<'_> {
             let Some(pl) = place(r, &self.offsets[i], &self.feet[i], foot, at, self.object, self.p) else {
                 let others: Vec<Vector2<f64>> = (0..4).filter(|f| *f != foot).map(|f| self.feet[i][f].xy()).collect();
                 let inradius = super::support::incentre(&[others[0], others[1], others[2]]).1;
-                return Err(GaitError::Margin { robot: r.robot.clone(), step: self.steps.len(), foot: r.feet[foot].0.clone(), margin: self.p.margin, inradius });
+                return Err(GaitError::Margin { robot: r.robot.clone(), step: self.steps.len(), foot: r.feet[foot].0.clone(), margin: self.p.margin, min_share: self.p.min_share, inradius });
             };
             self.torsos[i].push(self.t, t_shift_end, pl.target);
             self.steps.push(Step { robot: i, foot, liftoff, touchdown, from: self.feet[i][foot], to: pl.to, margin: pl.margin, cop_margin: pl.cop_margin });

@@ -1,7 +1,8 @@
 //! The support triangle of a crawl (the three feet on the ground while one swings): where the
 //! ground pushes a standing robot that also carries a load in its hand ([`centre_of_pressure`]),
-//! how far a point lies inside the triangle ([`margin`]) and how far along a line it must move
-//! to be a given margin inside ([`along`]).
+//! how far a point lies inside the triangle ([`margin`]), what share of the weight each foot
+//! carries ([`shares`]) and how far along a line it must move to be a given margin inside with
+//! every foot carrying a given share ([`along`]).
 
 use nalgebra::{Isometry3, Vector2, Vector3};
 use protocol::conventions::GRAVITY;
@@ -79,11 +80,32 @@ pub fn incentre(tri: &[Vector2<f64>; 3]) -> (Vector2<f64>, f64) {
     (centre, margin(&centre, tri))
 }
 
-/// The least `alpha >= 0` with `margin(p + alpha dir) >= required`, and the largest for which
-/// that still holds (`None` when no `alpha` does): each edge's distance is affine in `alpha`.
-pub fn along(p: &Vector2<f64>, dir: &Vector2<f64>, tri: &[Vector2<f64>; 3], required: f64) -> Option<(f64, f64)> {
+/// Each edge's height: the distance of the opposite vertex from it (edge `k` runs from vertex
+/// `k` to `k + 1`, so the opposite vertex is `k + 2`).
+fn heights(tri: &[Vector2<f64>; 3]) -> [f64; 3] {
+    let e = edges(tri);
+    std::array::from_fn(|k| e[k].1.dot(&(tri[(k + 2) % 3] - e[k].0)))
+}
+
+/// The share of a vertical load at `p` that each vertex of `tri` carries (three feet carry it
+/// statically determinately): `p`'s barycentric coordinates, vertex `k`'s being the distance of
+/// `p` from the opposite edge over the vertex's own distance from it. Negative outside.
+pub fn shares(p: &Vector2<f64>, tri: &[Vector2<f64>; 3]) -> [f64; 3] {
+    let (e, h) = (edges(tri), heights(tri));
+    std::array::from_fn(|v| {
+        let k = (v + 1) % 3;
+        e[k].1.dot(&(p - e[k].0)) / h[k].max(1e-12)
+    })
+}
+
+/// The least `alpha >= 0` with `p + alpha dir` at least `required` inside `tri` and leaving
+/// every vertex at least `min_share` of the load ([`shares`]; `0`: no share asked), and the
+/// largest for which that still holds (`None` when no `alpha` does): each edge's distance is
+/// affine in `alpha`, and a share is an edge's distance over its height.
+pub fn along(p: &Vector2<f64>, dir: &Vector2<f64>, tri: &[Vector2<f64>; 3], required: f64, min_share: f64) -> Option<(f64, f64)> {
     let (mut lo, mut hi): (f64, f64) = (0.0, f64::INFINITY);
-    for (a, n) in edges(tri) {
+    for ((a, n), h) in edges(tri).into_iter().zip(heights(tri)) {
+        let required = required.max(min_share * h);
         let (d0, rate) = (n.dot(&(p - a)), n.dot(dir));
         if rate.abs() < 1e-15 {
             if d0 < required {

@@ -37,6 +37,10 @@ pub struct WalkReport {
     /// foot's unloading starts (torso shifted, every foot down): the planned margin as the
     /// simulator realises it, m.
     pub cop_margin_m: BTreeMap<String, f64>,
+    /// Per walking robot, at the same instants, the least share of its weight that one of the
+    /// three other feet carries (the measured centre of pressure's least barycentric
+    /// coordinate in their triangle; `walk.gait.min_share` plans it).
+    pub cop_share: BTreeMap<String, f64>,
     /// Per walking robot, the longest a foot that should stand was off the ground while
     /// another swung (the robot rocked onto a diagonal), ms.
     pub stance_lift_ms: BTreeMap<String, f64>,
@@ -143,8 +147,9 @@ fn measured_cop(g: &GroundTruth, robot: &str) -> Option<Vector2<f64>> {
 
 impl Walk {
     /// Robot `i`'s measured centre of pressure margin in the triangle of its other three feet
-    /// (their centres in the ground truth) as the unloading of `step`'s foot starts.
-    fn cop_margin_at_unload(&self, truth: &[&GroundTruth], i: usize, step: &Step) -> Option<f64> {
+    /// (their centres in the ground truth) as the unloading of `step`'s foot starts, and the
+    /// least share of the weight one of them carries there.
+    fn cop_margin_at_unload(&self, truth: &[&GroundTruth], i: usize, step: &Step) -> Option<(f64, f64)> {
         let id = &self.robots[i];
         let start = step.liftoff - self.gait.params().t_unload;
         let g = truth.iter().rev().find(|g| g.time <= start)?;
@@ -154,7 +159,9 @@ impl Walk {
             .map(|b| Vector2::new(b.pose.position[0], b.pose.position[1]))
             .collect();
         let [a, b, c] = tri.as_slice() else { return None };
-        Some(crate::gait::support::margin(&measured_cop(g, id)?, &[*a, *b, *c]))
+        let (cop, tri) = (measured_cop(g, id)?, [*a, *b, *c]);
+        let share = crate::gait::support::shares(&cop, &tri).into_iter().fold(f64::INFINITY, f64::min);
+        Some((crate::gait::support::margin(&cop, &tri), share))
     }
 
     /// The longest time any foot of robot `i` was off the ground during the swing of another
@@ -199,9 +206,11 @@ impl Walk {
                 slide = slide.max(stance_slide(&times, &track));
             }
             rep.steps_taken.insert(id.clone(), taken);
-            let cop = planned.iter().filter(|s| s.robot == i).filter_map(|s| self.cop_margin_at_unload(truth, i, s)).fold(f64::INFINITY, f64::min);
+            let measured: Vec<(f64, f64)> = planned.iter().filter(|s| s.robot == i).filter_map(|s| self.cop_margin_at_unload(truth, i, s)).collect();
+            let cop = measured.iter().map(|m| m.0).fold(f64::INFINITY, f64::min);
             if cop.is_finite() {
                 rep.cop_margin_m.insert(id.clone(), cop);
+                rep.cop_share.insert(id.clone(), measured.iter().map(|m| m.1).fold(f64::INFINITY, f64::min));
                 rep.stance_lift_ms.insert(id.clone(), 1e3 * self.stance_lift(truth, &times, i, &planned));
             }
             for s in planned.iter().filter(|s| s.robot == i) {
