@@ -133,9 +133,10 @@ fn inside(p: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>, c: Vector2<f64>) ->
 
 #[test]
 fn at_every_liftoff_the_centre_of_mass_is_the_margin_inside_the_other_three_feet() {
-    for path in [&S2[..], &[[0.0, 0.3, 0.0]][..], &[[0.25, 0.0, 45.0]][..]] {
+    use team_runner::gait::ShiftRule;
+    for (path, shift) in [&S2[..], &[[0.0, 0.3, 0.0]][..], &[[0.25, 0.0, 45.0]][..]].into_iter().flat_map(|p| [(p, ShiftRule::Least), (p, ShiftRule::Incentre)]) {
         let robots = vec![robot("r1", 0.0, 0.0, 30.0, path)];
-        let params = GaitParams::default();
+        let params = GaitParams { shift, ..GaitParams::default() };
         let plan = GaitPlan::new(&robots, None, &params, 0.0).unwrap();
         assert!(!plan.steps().is_empty());
         // Where every foot is, replayed step by step.
@@ -470,5 +471,85 @@ fn with_a_least_share_every_support_foot_carries_it_at_every_liftoff() {
     for bad in [0.34, -0.01, f64::NAN] {
         let p = GaitParams { min_share: bad, ..GaitParams::default() };
         assert!(matches!(GaitPlan::new(std::slice::from_ref(&ok), None, &p, 0.0), Err(GaitError::Params(_))), "min_share {bad}");
+    }
+}
+
+/// Barycentric coordinates of `p` in the triangle `a b c`, written out (areas).
+fn barycentric(p: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>, c: Vector2<f64>) -> [f64; 3] {
+    let area = |u: Vector2<f64>, v: Vector2<f64>, w: Vector2<f64>| (v.x - u.x) * (w.y - u.y) - (w.x - u.x) * (v.y - u.y);
+    let t = area(a, b, c);
+    [area(p, b, c) / t, area(a, p, c) / t, area(a, b, p) / t]
+}
+
+/// `support::least_shift` against the conditions written out again (the distance inside and
+/// the barycentric shares of each point after the shift) and against a search: no shift
+/// shorter than the one returned meets them, among many drawn at random in its disc. Then
+/// the planner with `shift = "least"`: every lift-off meets the margin and the share.
+#[test]
+fn the_least_shift_is_the_shortest_that_meets_the_margin_and_the_shares() {
+    use team_runner::gait::support::least_shift;
+    let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+    let mut uniform = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (margin, share) = (0.03, 0.12);
+    let meets = |pts: &[(Vector2<f64>, f64)], tri: &[Vector2<f64>; 3], d: &Vector2<f64>, tol: f64| {
+        pts.iter().all(|(p, g)| {
+            let q = p + *g * d;
+            inside(q, tri[0], tri[1], tri[2]) >= margin - tol && barycentric(q, tri[0], tri[1], tri[2]).iter().all(|l| *l >= share - tol)
+        })
+    };
+    let mut found = 0;
+    for case in 0..200 {
+        // A triangle around the origin (angles about a third of a turn apart, some thin) and
+        // two points anywhere near it.
+        let mut corner = |k: f64| {
+            let (a, r) = (std::f64::consts::TAU * k / 3.0 + (uniform() - 0.5) * 1.6, 0.2 + 0.3 * uniform());
+            Vector2::new(r * a.cos(), r * a.sin())
+        };
+        let tri = [corner(0.0), corner(1.0), corner(2.0)];
+        let mut v = || Vector2::new(uniform() - 0.5, uniform() - 0.5) * 0.6;
+        let (p, q) = (v(), v());
+        let pts = [(p, 1.0), (q, 0.5 + 0.5 * uniform())];
+        match least_shift(&pts, &tri, margin, share) {
+            Some(d) => {
+                found += 1;
+                assert!(meets(&pts, &tri, &d, 1e-9), "case {case}: the shift {d:?} does not meet the conditions");
+                let r = d.norm();
+                for _ in 0..4000 {
+                    let (rho, phi) = (r * uniform().sqrt(), std::f64::consts::TAU * uniform());
+                    let e = Vector2::new(rho * phi.cos(), rho * phi.sin());
+                    assert!(!(e.norm() < r * (1.0 - 1e-6) - 1e-9 && meets(&pts, &tri, &e, 0.0)), "case {case}: {e:?} is shorter than {d:?} and meets them");
+                }
+            }
+            None => {
+                // Then the conditions cannot hold: the inradius is under the margin, or a
+                // share ring is empty, or no shift meets both points (searched in a wide disc).
+                for _ in 0..4000 {
+                    let e = Vector2::new(uniform() - 0.5, uniform() - 0.5) * 4.0;
+                    assert!(!meets(&pts, &tri, &e, 0.0), "case {case}: no shift returned, but {e:?} meets the conditions");
+                }
+            }
+        }
+    }
+    println!("{found} of 200 random cases feasible");
+    assert!(found > 20, "only {found} of 200 random cases feasible");
+
+    let params = GaitParams { shift: team_runner::gait::ShiftRule::Least, min_share: share, ..GaitParams::default() };
+    for path in [&S2[..], &[[0.0, 0.3, 0.0]][..], &[[0.25, 0.0, 45.0]][..]] {
+        let r = robot("r1", 0.0, 0.0, 30.0, path);
+        let plan = GaitPlan::new(std::slice::from_ref(&r), None, &params, 0.0).unwrap();
+        let mut feet: Vec<Vector3<f64>> = r.feet.iter().map(|(_, p)| *p).collect();
+        for s in plan.steps() {
+            let (torso, _, _) = plan.torso(0, s.liftoff);
+            let com = (torso * Point3::from(r.com_offset)).coords.xy();
+            let tri: Vec<Vector2<f64>> = (0..4).filter(|f| *f != s.foot).map(|f| feet[f].xy()).collect();
+            assert!(inside(com, tri[0], tri[1], tri[2]) >= params.margin - 1e-9, "path {path:?}: margin at lift-off of foot {}", s.foot);
+            assert!(barycentric(com, tri[0], tri[1], tri[2]).iter().all(|l| *l >= share - 1e-9), "path {path:?}: share at lift-off of foot {}", s.foot);
+            feet[s.foot] = s.to;
+        }
     }
 }

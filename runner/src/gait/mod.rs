@@ -64,6 +64,22 @@ pub struct GaitParams {
     /// 2 kg from falling in one run, but in the CI's four-robot and three-robot walks the palms
     /// slipped 2 cm at the fourth step and the team let go (README, "Known limits").
     pub hand_load: bool,
+    /// Which way the torso shifts before a lift-off (`"least"`, the default, or `"incentre"`).
+    pub shift: ShiftRule,
+}
+
+/// Which way the torso shifts before a lift-off to put the centre of mass (and of pressure)
+/// where [`GaitParams::margin`] and [`GaitParams::min_share`] ask.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ShiftRule {
+    /// Towards the incentre of the support triangle until the conditions hold (the rule
+    /// before 2026-11-27: its shifts are longer and mostly fore and aft, and three-robot
+    /// teams rocked onto a diagonal with it; README, "Known limits").
+    Incentre,
+    /// The shortest shift that meets them ([`support::least_shift`]): across the triangle's
+    /// nearest edge, often mostly sideways, rather than towards its incentre.
+    Least,
 }
 
 impl Default for GaitParams {
@@ -82,6 +98,7 @@ impl Default for GaitParams {
             touchdown_window: 0.08,
             unload_force: 250.0,
             hand_load: false,
+            shift: ShiftRule::Least,
         }
     }
 }

@@ -17,9 +17,9 @@
 
 use nalgebra::{Isometry3, Translation3, Vector2, Vector3};
 
-use super::support::{along, centre_of_pressure, incentre, margin, HandLoad};
+use super::support::{along, centre_of_pressure, incentre, least_shift, margin, HandLoad};
 use super::swing::{quintic, swing};
-use super::{GaitError, GaitParams, WalkingRobot};
+use super::{GaitError, GaitParams, ShiftRule, WalkingRobot};
 
 /// A planned step: `robot`'s `foot` (description index) from `from` to `to` (foot centres),
 /// lifting off at `liftoff` and touching down at `touchdown` (scenario time, s), with the
@@ -210,10 +210,11 @@ fn hand_load(r: &WalkingRobot, object: Option<&[Isometry3<f64>]>, at: PathAt) ->
 }
 
 /// Robot `r`'s step of `foot` with its feet at `feet`, the path at `at`; `None` when no shift
-/// reaches the margin. The torso is shifted towards the incentre of the other three feet until
-/// both the centre of mass and the centre of pressure (its weight and the hand's load, which
-/// stays on the object) are `margin` inside: the CoM so that the robot stands if the team lets
-/// go mid-step, the centre of pressure while it holds. The reported margin is the lesser.
+/// reaches the margin. The torso is shifted (towards the incentre of the other three feet, or
+/// by the shortest shift: [`GaitParams::shift`]) until both the centre of mass and the centre
+/// of pressure (its weight and the hand's load, which stays on the object) are `margin` inside
+/// with every foot carrying `min_share`: the CoM so that the robot stands if the team lets go
+/// mid-step, the centre of pressure while it holds. The reported margin is the lesser.
 fn place(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], foot: usize, at: PathAt, object: Option<&[Isometry3<f64>]>, p: &GaitParams) -> Option<Placement> {
     let (a, b) = (&r.waypoints[at.k], &r.waypoints[at.k + 1]);
     let nominal = interp(a, b, at.progress);
@@ -225,15 +226,20 @@ fn place(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], foot
     let real = hand_load(r, object, at);
     let load = if p.hand_load { real } else { None };
     let (cop, gain) = centre_of_pressure(r.mass, &com, load.as_ref(), r.ground_z)?;
-    // A shift `alpha dir` moves the CoM by that, the centre of pressure `gain` times as far.
-    let dir = incentre(&tri).0 - com.xy();
-    let (lo_com, hi_com) = along(&com.xy(), &dir, &tri, p.margin, p.min_share)?;
-    let (lo_cop, hi_cop) = along(&cop, &(gain * dir), &tri, p.margin, p.min_share)?;
-    let alpha = lo_com.max(lo_cop);
-    if alpha > hi_com.min(hi_cop) {
-        return None;
-    }
-    let d = alpha * dir;
+    // A shift `d` moves the CoM by that, the centre of pressure `gain` times as far.
+    let d = match p.shift {
+        ShiftRule::Incentre => {
+            let dir = incentre(&tri).0 - com.xy();
+            let (lo_com, hi_com) = along(&com.xy(), &dir, &tri, p.margin, p.min_share)?;
+            let (lo_cop, hi_cop) = along(&cop, &(gain * dir), &tri, p.margin, p.min_share)?;
+            let alpha = lo_com.max(lo_cop);
+            if alpha > hi_com.min(hi_cop) {
+                return None;
+            }
+            alpha * dir
+        }
+        ShiftRule::Least => least_shift(&[(com.xy(), 1.0), (cop, gain)], &tri, p.margin, p.min_share)?,
+    };
     let least = margin(&(com.xy() + d), &tri).min(margin(&(cop + gain * d), &tri));
     let shifted = com + Vector3::new(d.x, d.y, 0.0);
     let cop_margin = real.and_then(|l| centre_of_pressure(r.mass, &shifted, Some(&l), r.ground_z)).map(|(c, _)| margin(&c, &tri));

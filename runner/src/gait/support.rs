@@ -119,3 +119,37 @@ pub fn along(p: &Vector2<f64>, dir: &Vector2<f64>, tri: &[Vector2<f64>; 3], requ
     }
     (lo <= hi).then_some((lo, hi))
 }
+
+/// The shortest horizontal shift `d` of a robot's torso that puts each of `points` (`p`, and
+/// how far it moves per metre of shift) `required` inside `tri` with every vertex carrying at
+/// least `min_share` ([`along`]'s conditions): the least-norm point of the intersection of
+/// half-planes `n_k . (p + gain d - a_k) >= r_k`. In the plane that point is `0`, the
+/// projection onto one boundary line, or the corner of two; the shortest feasible candidate
+/// is it. `None` when no shift satisfies them all.
+pub fn least_shift(points: &[(Vector2<f64>, f64)], tri: &[Vector2<f64>; 3], required: f64, min_share: f64) -> Option<Vector2<f64>> {
+    // Each condition as `w . d >= b`.
+    let mut rows: Vec<(Vector2<f64>, f64)> = Vec::with_capacity(3 * points.len());
+    for &(p, gain) in points {
+        for ((a, n), h) in edges(tri).into_iter().zip(heights(tri)) {
+            rows.push((gain * n, required.max(min_share * h) - n.dot(&(p - a))));
+        }
+    }
+    let feasible = |d: &Vector2<f64>| rows.iter().all(|(w, b)| w.dot(d) >= b - 1e-12);
+    let mut candidates = vec![Vector2::zeros()];
+    for (w, b) in &rows {
+        let w2 = w.norm_squared();
+        if w2 > 1e-24 {
+            candidates.push(w * (b / w2));
+        }
+    }
+    for (i, (wi, bi)) in rows.iter().enumerate() {
+        for (wj, bj) in &rows[i + 1..] {
+            let det = wi.perp(wj);
+            if det.abs() > 1e-15 {
+                // Solve [wi^T; wj^T] d = [bi; bj] by Cramer's rule.
+                candidates.push(Vector2::new(bi * wj.y - bj * wi.y, wi.x * bj - wj.x * bi) / det);
+            }
+        }
+    }
+    candidates.into_iter().filter(feasible).min_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))
+}
