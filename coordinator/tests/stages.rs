@@ -635,9 +635,9 @@ fn a_team_assembled_into_used_buffers_is_the_team_assembled_afresh() {
     let mut moved = all.clone();
     moved[1] = fx.terms_with(&robot_id(1), &fx.standing_q(1, 3), &DVector::zeros(nv), 1, &lifted);
     let other_sizes = vec![resized(&all[0], nv + 6, &mut rng), resized(&all[1], nv - 6, &mut rng), all[2].clone()];
-    let reordered = vec![resized(&all[0], nv - 6, &mut rng), resized(&all[1], nv + 6, &mut rng), resized(&all[2], nv, &mut rng)];
+    let resized_again = vec![resized(&all[0], nv - 6, &mut rng), resized(&all[1], nv + 6, &mut rng), resized(&all[2], nv, &mut rng)];
     let fewer = vec![all[0].clone(), all[2].clone()];
-    let ticks = [&all, &moved, &other_sizes, &reordered, &fewer, &all];
+    let ticks = [&all, &moved, &other_sizes, &resized_again, &fewer, &all];
 
     let (mut team, mut j_c, mut jdv_c) = (Team::default(), DMatrix::zeros(0, 0), DVector::zeros(0));
     for (i, tick) in ticks.iter().enumerate() {

@@ -10,7 +10,8 @@
 //! unloading ramps, the planned stance and every contact change.
 //!
 //! * [`support`]: the centre of pressure with the hand's load, the support triangle, a point's
-//!   margin in it and the shift that reaches a margin.
+//!   margin in it and each foot's share of the weight, and the shift that reaches a margin and
+//!   a share (along a line, or the shortest).
 //! * [`swing`]: the quintic blend and the swing-foot trajectory.
 //! * [`schedule`]: waypoints to cycles and steps, the timed plan and its queries.
 

@@ -1,8 +1,9 @@
 //! The support triangle of a crawl (the three feet on the ground while one swings): where the
 //! ground pushes a standing robot that also carries a load in its hand ([`centre_of_pressure`]),
 //! how far a point lies inside the triangle ([`margin`]), what share of the weight each foot
-//! carries ([`shares`]) and how far along a line it must move to be a given margin inside with
-//! every foot carrying a given share ([`along`]).
+//! carries ([`shares`]), how far along a line it must move to be a given margin inside with
+//! every foot carrying a given share ([`along`]), and the shortest shift that gets it there
+//! ([`least_shift`]).
 
 use nalgebra::{Isometry3, Vector2, Vector3};
 use protocol::conventions::GRAVITY;
@@ -145,7 +146,7 @@ pub fn least_shift(points: &[(Vector2<f64>, f64)], tri: &[Vector2<f64>; 3], requ
     for (i, (wi, bi)) in rows.iter().enumerate() {
         for (wj, bj) in &rows[i + 1..] {
             let det = wi.perp(wj);
-            if det.abs() > 1e-15 {
+            if det.abs() > 1e-12 * wi.norm() * wj.norm() {
                 // Solve [wi^T; wj^T] d = [bi; bj] by Cramer's rule.
                 candidates.push(Vector2::new(bi * wj.y - bj * wi.y, wi.x * bj - wj.x * bi) / det);
             }

@@ -15,8 +15,8 @@ use crate::units::grasp::GraspTerms;
 use crate::ControllerError;
 
 /// `J_c = [J_cf; J_c,ee]` (eq. jacobian_c) and `Jdot_c v = [Jdot_cf v; d/dt(J_c,ee) v]` into
-/// `j_c` (`3 nf + 6 B` x n) and `jdv_c`: the stance feet's rows, then the grasp's (none
-/// without a grasp).
+/// `j_c` (`3 nf + 6 B` x n) and `jdv_c`: the stance feet's rows, then the grasp's (zero rows
+/// for the hands in grasp when there is no grasp).
 pub fn contact_jacobian(team: &Team, grasp: Option<&GraspTerms>, j_c: &mut DMatrix<f64>, jdv_c: &mut DVector<f64>) {
     let n = team.n;
     let nf = team.feet.len();
@@ -33,7 +33,6 @@ pub fn contact_jacobian(team: &Team, grasp: Option<&GraspTerms>, j_c: &mut DMatr
         filled += g.j_cee.nrows();
     }
     j_c.rows_mut(filled, m - filled).fill(0.0);
-
 }
 
 /// The QP's contacts into `out`: `(first row in J_c, kind)` for every stance foot (friction
