@@ -460,7 +460,7 @@ fn with_a_least_share_every_support_foot_carries_it_at_every_liftoff() {
     for (path, hand) in [(&S2[..], false), (&[[0.0, 0.3, 0.0]][..], false), (&[[0.25, 0.0, 45.0]][..], true)] {
         let r = robot("r1", 0.0, 0.0, 30.0, path);
         let r = if hand { with_hand(r) } else { r };
-        let base = GaitParams { hand_load: hand, ..GaitParams::default() };
+        let base = GaitParams { hand_load: hand, min_share: 0.0, ..GaitParams::default() };
         let plain = least_share(&base, &r, path);
         let shared = least_share(&GaitParams { min_share: 0.2, ..base.clone() }, &r, path);
         println!("path {path:?}: least share {plain:.3} with the margin only, {shared:.3} asking 0.2");

@@ -46,11 +46,11 @@ pub struct GaitParams {
     /// Required distance of the centre of pressure (the robot's weight and its hand's load)
     /// inside the support triangle at lift-off, m.
     pub margin: f64,
-    /// Least share of the weight each support foot carries at lift-off (`0`: none asked; at
-    /// most `1/3`, the triangle's centroid): the centre of pressure's barycentric coordinate in
-    /// the support triangle, its distance from a foot's opposite edge over the foot's own
-    /// distance from it. A distance margin alone leaves little on the far foot of a long, thin
-    /// triangle (README, "Known limits").
+    /// Least share of the weight each support foot carries at lift-off (`0`: none asked; less
+    /// than `1/3`, the triangle's centroid; default 0.1): the centre of pressure's barycentric
+    /// coordinate in the support triangle, its distance from a foot's opposite edge over the
+    /// foot's own distance from it. A distance margin alone leaves little on the far foot of a
+    /// long, thin triangle (README, "Walking while holding").
     pub min_share: f64,
     /// The swing ends this far below the foothold, pressing the foot down, m.
     pub touchdown_depth: f64,
@@ -94,7 +94,7 @@ impl Default for GaitParams {
             t_swing: 0.5,
             t_load: 0.15,
             margin: 0.04,
-            min_share: 0.0,
+            min_share: 0.1,
             touchdown_depth: 0.01,
             touchdown_window: 0.08,
             unload_force: 250.0,
