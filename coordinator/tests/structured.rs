@@ -119,23 +119,29 @@ fn compare(blocks: &TickReport, dense: &TickReport) -> (f64, &'static str) {
 fn agree(fx: &mut Fixture, case: Case) -> (f64, f64) {
     let ticks = team_states(fx, case);
     let (mut blocks, mut dense) = (controller(fx, case, false), controller(fx, case, true));
-    let (mut worst, mut worst_sent) = (0.0f64, 0.0f64);
+    let mut w = (0.0f64, 0.0f64);
     for (t, tick) in ticks.iter().enumerate() {
-        let on_tick = blocks.compute(tick).expect("block tick");
-        // The block path forms no team-sized matrix on the tick (only its factors).
-        assert!(on_tick.proj.p.is_empty() && on_tick.proj.mc_inv.is_empty() && on_tick.proj.mbar.is_empty(), "an n x n matrix on the block path's tick");
-        let b = blocks.materialized().expect("block tick").clone();
-        let d = dense.compute(tick).expect("dense tick");
-        assert_eq!(b.qp.status, d.qp.status);
-        let (err, what) = compare(&b, d);
-        let sent = rel(b.tau.as_slice(), d.tau.as_slice());
-        println!("{} robots (seed {}) tick {}: worst {what} {err:.2e}; torques sent {sent:.2e}", case.robots, case.seed, t + 1);
-        assert!(err <= TOL, "{} robots, tick {}: {what} differs by {err:e} relative", case.robots, t + 1);
-        assert!(sent <= 10.0 * coordinator::qp::DENSE_TOL, "{} robots, tick {}: the torques sent differ by {sent:e} relative", case.robots, t + 1);
-        worst = worst.max(err);
-        worst_sent = worst_sent.max(sent);
+        w = worst(w, agree_on_tick(&mut blocks, &mut dense, tick, &format!("{} robots (seed {}) tick {}", case.robots, case.seed, t + 1)));
     }
-    (worst, worst_sent)
+    w
+}
+
+/// One tick on both paths: the block path forms no team-sized matrix, both QPs end the same
+/// way, [`compare`] is within [`TOL`] and the torques sent within the QP's tolerance. Returns
+/// both differences; `what` names the tick in the messages.
+fn agree_on_tick(blocks: &mut Pidc, dense: &mut Pidc, tick: &[DynamicsTerms], what: &str) -> (f64, f64) {
+    let on_tick = blocks.compute(tick).expect("block tick");
+    // The block path forms no team-sized matrix on the tick (only its factors).
+    assert!(on_tick.proj.p.is_empty() && on_tick.proj.mc_inv.is_empty() && on_tick.proj.mbar.is_empty(), "{what}: an n x n matrix on the block path's tick");
+    let b = blocks.materialized().expect("block tick").clone();
+    let d = dense.compute(tick).expect("dense tick");
+    assert_eq!(b.qp.status, d.qp.status, "{what}");
+    let (err, quantity) = compare(&b, d);
+    let sent = rel(b.tau.as_slice(), d.tau.as_slice());
+    println!("{what}: worst {quantity} {err:.2e}; torques sent {sent:.2e}");
+    assert!(err <= TOL, "{what}: {quantity} differs by {err:e} relative");
+    assert!(sent <= 10.0 * coordinator::qp::DENSE_TOL, "{what}: the torques sent differ by {sent:e} relative");
+    (err, sent)
 }
 
 fn worst(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
@@ -188,14 +194,7 @@ fn blocks_match_the_dense_oracle_through_changes_of_contacts() {
             for t in &mut terms {
                 t.header.tick = tick;
             }
-            blocks.compute(&terms).expect("block tick");
-            let b = blocks.materialized().expect("block tick").clone();
-            let d = dense.compute(&terms).expect("dense tick");
-            let (err, what) = compare(&b, d);
-            let sent = rel(b.tau.as_slice(), d.tau.as_slice());
-            println!("layout {l} (swing {}, grasp {}) tick {tick}: worst {what} {err:.2e}; torques sent {sent:.2e}", layout.swing, layout.grasp);
-            assert!(err <= TOL, "layout {l}, tick {tick}: {what} differs by {err:e} relative");
-            assert!(sent <= 10.0 * coordinator::qp::DENSE_TOL, "layout {l}, tick {tick}: the torques sent differ by {sent:e} relative");
+            agree_on_tick(&mut blocks, &mut dense, &terms, &format!("layout {l} (swing {}, grasp {}) tick {tick}", layout.swing, layout.grasp));
         }
     }
 }
