@@ -99,14 +99,21 @@ pub fn shares(p: &Vector2<f64>, tri: &[Vector2<f64>; 3]) -> [f64; 3] {
     })
 }
 
+/// The conditions of [`along`] and [`least_shift`], edge by edge: a point `q` meets them when
+/// `n . (q - a) >= r` for each edge's point `a` and inward normal `n`, with `r` the larger of
+/// `required` and `min_share` of the edge's height (a share is an edge's distance over it).
+fn conditions(tri: &[Vector2<f64>; 3], required: f64, min_share: f64) -> [(Vector2<f64>, Vector2<f64>, f64); 3] {
+    let (e, h) = (edges(tri), heights(tri));
+    std::array::from_fn(|k| (e[k].0, e[k].1, required.max(min_share * h[k])))
+}
+
 /// The least `alpha >= 0` with `p + alpha dir` at least `required` inside `tri` and leaving
 /// every vertex at least `min_share` of the load ([`shares`]; `0`: no share asked), and the
 /// largest for which that still holds (`None` when no `alpha` does): each edge's distance is
 /// affine in `alpha`, and a share is an edge's distance over its height.
 pub fn along(p: &Vector2<f64>, dir: &Vector2<f64>, tri: &[Vector2<f64>; 3], required: f64, min_share: f64) -> Option<(f64, f64)> {
     let (mut lo, mut hi): (f64, f64) = (0.0, f64::INFINITY);
-    for ((a, n), h) in edges(tri).into_iter().zip(heights(tri)) {
-        let required = required.max(min_share * h);
+    for (a, n, required) in conditions(tri, required, min_share) {
         let (d0, rate) = (n.dot(&(p - a)), n.dot(dir));
         if rate.abs() < 1e-15 {
             if d0 < required {
@@ -130,9 +137,10 @@ pub fn along(p: &Vector2<f64>, dir: &Vector2<f64>, tri: &[Vector2<f64>; 3], requ
 pub fn least_shift(points: &[(Vector2<f64>, f64)], tri: &[Vector2<f64>; 3], required: f64, min_share: f64) -> Option<Vector2<f64>> {
     // Each condition as `w . d >= b`.
     let mut rows: Vec<(Vector2<f64>, f64)> = Vec::with_capacity(3 * points.len());
+    let edges = conditions(tri, required, min_share);
     for &(p, gain) in points {
-        for ((a, n), h) in edges(tri).into_iter().zip(heights(tri)) {
-            rows.push((gain * n, required.max(min_share * h) - n.dot(&(p - a))));
+        for (a, n, r) in edges {
+            rows.push((gain * n, r - n.dot(&(p - a))));
         }
     }
     let feasible = |d: &Vector2<f64>| rows.iter().all(|(w, b)| w.dot(d) >= b - 1e-12);

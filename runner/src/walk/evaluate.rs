@@ -149,7 +149,7 @@ impl Walk {
     /// Robot `i`'s measured centre of pressure margin in the triangle of its other three feet
     /// (their centres in the ground truth) as the unloading of `step`'s foot starts, and the
     /// least share of the weight one of them carries there.
-    fn cop_margin_at_unload(&self, truth: &[&GroundTruth], i: usize, step: &Step) -> Option<(f64, f64)> {
+    fn cop_at_unload(&self, truth: &[&GroundTruth], i: usize, step: &Step) -> Option<(f64, f64)> {
         let id = &self.robots[i];
         let start = step.liftoff - self.gait.params().t_unload;
         let g = truth.iter().rev().find(|g| g.time <= start)?;
@@ -206,7 +206,7 @@ impl Walk {
                 slide = slide.max(stance_slide(&times, &track));
             }
             rep.steps_taken.insert(id.clone(), taken);
-            let measured: Vec<(f64, f64)> = planned.iter().filter(|s| s.robot == i).filter_map(|s| self.cop_margin_at_unload(truth, i, s)).collect();
+            let measured: Vec<(f64, f64)> = planned.iter().filter(|s| s.robot == i).filter_map(|s| self.cop_at_unload(truth, i, s)).collect();
             let cop = measured.iter().map(|m| m.0).fold(f64::INFINITY, f64::min);
             if cop.is_finite() {
                 rep.cop_margin_m.insert(id.clone(), cop);
