@@ -487,14 +487,10 @@ fn barycentric(p: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>, c: Vector2<f64
 /// the planner with `shift = "least"`: every lift-off meets the margin and the share.
 #[test]
 fn the_least_shift_is_the_shortest_that_meets_the_margin_and_the_shares() {
+    use rand::{Rng, SeedableRng};
     use team_runner::gait::support::least_shift;
-    let mut seed = 0x2545_f491_4f6c_dd1d_u64;
-    let mut uniform = move || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rng = rand::rngs::StdRng::seed_from_u64(17);
+    let mut uniform = move || rng.random::<f64>();
     let (margin, share) = (0.03, 0.12);
     let meets = |pts: &[(Vector2<f64>, f64)], tri: &[Vector2<f64>; 3], d: &Vector2<f64>, tol: f64| {
         pts.iter().all(|(p, g)| {
