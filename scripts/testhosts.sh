@@ -13,6 +13,9 @@
 #                                          0 removes the rule
 #   testhosts.sh dropped SET NAME          print how many packets the loss rule dropped
 #   testhosts.sh link SET NAME up|down     take the host's link up or down
+#   testhosts.sh cut SET NAME PEER         reset the host's TCP connections to host PEER (ss -K:
+#                                          both ends see the connection drop, as when a router
+#                                          or a NIC resets); print how many were cut
 #
 # SET is at most 6 characters (interface names are at most 15). This kernel may have no netem:
 # fixed delay cannot be added with tc, only loss and link failures.
@@ -113,6 +116,13 @@ cmd_link() {
   ip -n "$n" link set eth0 "$3"
 }
 
+cmd_cut() {
+  local n; n=$(ns "$1" "$2")
+  local peer; peer=$(cmd_addr "$1" "$3")
+  [[ -n "$peer" ]] || die "no host $3 in set $1"
+  ip netns exec "$n" ss -tnK dst "$peer" | tail -n +2 | grep -c . || true
+}
+
 case "${1:-}" in
   check) cmd_check ;;
   up) [[ $# -ge 4 ]] || die "usage: up SET NET NAME..."; shift; cmd_up "$@" ;;
@@ -121,5 +131,6 @@ case "${1:-}" in
   loss) [[ $# -eq 4 ]] || die "usage: loss SET NAME PERCENT"; cmd_loss "$2" "$3" "$4" ;;
   dropped) [[ $# -eq 3 ]] || die "usage: dropped SET NAME"; cmd_dropped "$2" "$3" ;;
   link) [[ $# -eq 4 ]] || die "usage: link SET NAME up|down"; cmd_link "$2" "$3" "$4" ;;
-  *) die "usage: testhosts.sh check | up SET NET NAME... | down SET | addr SET NAME | loss SET NAME PERCENT | dropped SET NAME | link SET NAME up|down" ;;
+  cut) [[ $# -eq 4 ]] || die "usage: cut SET NAME PEER"; cmd_cut "$2" "$3" "$4" ;;
+  *) die "usage: testhosts.sh check | up SET NET NAME... | down SET | addr SET NAME | loss SET NAME PERCENT | dropped SET NAME | link SET NAME up|down | cut SET NAME PEER" ;;
 esac

@@ -12,6 +12,7 @@ use protocol::transport::{self, decode_sample, MemberEvent, Qos, TransportError,
 use protocol::{CoordinatorMode, CoordinatorStatus, DynamicsTerms, Header, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
 use protocol::validate::Validate;
 use tokio::sync::watch;
+use zenoh::sample::SampleKind;
 use zenoh::Session;
 
 use crate::team::assembly::{Reuse, Reused, TickAssembler, TickOutcome};
@@ -135,19 +136,18 @@ pub async fn run(
         // Late terms are reused only once the team has formed: before its first tick every
         // member's own terms are waited for (one not heard of yet is not silent).
         let reuse_at = if svc.roster.started() { assembler.reuse_at() } else { None };
+        let departure = svc.roster.next_departure();
         tokio::select! {
             _ = stop.changed() => { if *stop.borrow() { break; } }
             m = members_q.recv_async() => {
                 let Ok(sample) = m else { break };
                 if let Some(ev) = MemberEvent::from_sample(&sample) {
-                    team_changed = svc.roster.apply(&ev);
+                    team_changed = svc.roster.apply(&ev, Instant::now());
                     publish_status = true;
-                    if let MemberEvent::Left(r) = &ev {
-                        svc.command_pubs.remove(r);
-                    }
                     svc.detail = match &ev {
                         MemberEvent::Joined(r) => format!("robot {r} joined"),
-                        MemberEvent::Left(r) => format!("robot {r} left"),
+                        MemberEvent::Left(r) if svc.roster.is_departing(r) => format!("robot {r}'s token vanished: waiting for its link to come back"),
+                        MemberEvent::Left(r) => svc.left(r),
                     };
                 }
             }
@@ -179,6 +179,13 @@ pub async fn run(
                 if let Some((tick, terms)) = newest {
                     publish_status |= svc.solve(controller.as_mut(), tick, terms, &references, Vec::new()).await?;
                 }
+            }
+            _ = sleep_until(departure), if departure.is_some() => {
+                for r in svc.roster.depart_due(Instant::now()) {
+                    team_changed = true;
+                    svc.detail = svc.left(&r);
+                }
+                publish_status = true;
             }
             _ = sleep_until(reuse_at), if reuse_at.is_some() => {
                 let (solved, changed) = svc.reuse_due(&mut assembler, controller.as_mut(), &references).await?;
@@ -234,6 +241,17 @@ impl Service<'_> {
         let mut team_changed = false;
         let mut next = Some(first);
         while let Some(sample) = next {
+            if sample.kind() == SampleKind::Delete {
+                // A robot that leaves deletes its dynamics key first: out at once.
+                if let Some(robot) = keys::robot_of(sample.key_expr().as_str()) {
+                    if self.roster.leave(robot) {
+                        team_changed = true;
+                        self.detail = self.left(robot);
+                    }
+                }
+                next = if newest.is_some() { queue.try_recv().ok().flatten() } else { None };
+                continue;
+            }
             if let Some(terms) = decode_terms(&sample, &mut self.counters) {
                 let (robot, tick) = (terms.header.robot_id().to_string(), terms.header.tick);
                 let waiting = self.roster.forming(Instant::now());
@@ -279,6 +297,12 @@ impl Service<'_> {
             next = if newest.is_some() { queue.try_recv().ok().flatten() } else { None };
         }
         Ok((newest, team_changed))
+    }
+
+    /// `robot` has left the team: its command publisher goes. Returns the status's detail.
+    fn left(&mut self, robot: &str) -> String {
+        self.command_pubs.remove(robot);
+        format!("robot {robot} left")
     }
 
     /// A hold order for `robot` at `tick` (it is outside the team this tick, `why`).

@@ -216,6 +216,13 @@ impl<M: Message> TypedPublisher<M> {
             .map_err(|e| zenoh_err("put", &key, e))
     }
 
+    /// Delete the key: its subscribers see that its publisher is gone for good (an agent that
+    /// leaves the team deletes its dynamics key before it withdraws its token).
+    pub async fn delete(&self) -> Result<(), TransportError> {
+        let key = self.publisher.key_expr().to_string();
+        self.publisher.delete().await.map_err(|e| zenoh_err("delete", &key, e))
+    }
+
     pub fn key(&self) -> String {
         self.publisher.key_expr().to_string()
     }

@@ -117,6 +117,8 @@ pub async fn run_with<S: DynamicsSource>(
                 let done = io.send(out).await?;
                 io.done(&mut core, done).await;
                 if let Some(t) = token.take_if(|_| leave) {
+                    // Said first, so that the coordinator does not wait for a link to come back.
+                    io.announce_leaving(robot).await;
                     if let Err(e) = t.undeclare().await {
                         tracing::warn!(%robot, "withdrawing the membership after the fall: {e}");
                     }
@@ -163,6 +165,9 @@ pub async fn run_with<S: DynamicsSource>(
                 io.done(&mut core, done).await;
             }
         }
+    }
+    if token.is_some() {
+        io.announce_leaving(robot).await;
     }
     io.publish_status(&mut core).await;
     tracing::info!(%robot, counters = ?core.counters(), "agent stopped");
@@ -216,6 +221,15 @@ impl<K: TorqueSink> Io<K> {
             self.sink.apply(torques).await?;
         }
         Ok(Done { sent, status })
+    }
+
+    /// Tell the coordinator that this robot leaves the team for good (its dynamics key deleted):
+    /// a token that vanishes alone may be a link that comes back
+    /// (`coordinator::team::membership::DEPARTURE_GRACE`).
+    async fn announce_leaving(&self, robot: &str) {
+        if let Err(e) = self.dynamics.delete().await {
+            tracing::warn!(%robot, "leaving not announced: {e}");
+        }
     }
 
     /// Report what was sent to the core, then publish the status if the core asked for it.

@@ -11,7 +11,7 @@
 //! | [`AgentCore::on_command`] | a torque command | checked, clamped torques to apply |
 //! | [`AgentCore::on_contacts`] | a contact set | nothing (scheduled for its tick, see [`crate::contact_switch`]) |
 //! | [`AgentCore::on_timer`] | housekeeping, a few times per deadline | hold torques on entering safe mode, status, description |
-//! | [`AgentCore::on_coordinator`] | the coordinator appeared (liveliness) | the description |
+//! | [`AgentCore::on_coordinator`] | the coordinator appeared (liveliness) | the description; the latest terms again |
 //!
 //! Each returns [`Outputs`]: references into the core's preallocated buffers that the caller
 //! stamps (`header.stamp_ns`) and sends or applies, in the field order, then reports back with
@@ -553,12 +553,15 @@ impl<S: DynamicsSource> AgentCore<S> {
         out
     }
 
-    /// The coordinator appeared (it started, or came back after a restart): it needs this
-    /// robot's description before it can command it, so it goes out now rather than at its
-    /// next period.
+    /// The coordinator appeared (it started, came back after a restart, or its link did): it
+    /// needs this robot's description before it can command it, so it goes out now rather than
+    /// at its next period.
     pub fn on_coordinator(&mut self, now: Instant) -> Outputs<'_> {
         self.last_description = Some(now);
-        Outputs { description: self.description.as_mut(), ..Outputs::default() }
+        // The latest terms go again: a link that dropped may have lost them, and the tick waits
+        // for them (a coordinator that solved it already drops them as stale).
+        let again = self.fall.fallen().is_none() && self.counters.dynamics > 0 && self.gate.latest_state_tick() == Some(self.terms.header.tick);
+        Outputs { terms: again.then_some(&mut self.terms), description: self.description.as_mut(), ..Outputs::default() }
     }
 
     /// Enter safe mode now, for a reason outside the core (the hardware asked to deactivate or

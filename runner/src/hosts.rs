@@ -1,7 +1,7 @@
 //! Test hosts: the team's components on separate machines of one computer, as Linux network
 //! namespaces joined by veth pairs to one bridge (`scripts/testhosts.sh` makes and removes
 //! them; root needed). [`TestHosts`] is one such set for one run: a host per component name,
-//! its address, packet loss (nftables) and link failures, and the command line that starts a
+//! its address, packet loss (nftables), link failures and connection resets, and the command line that starts a
 //! program on a host. The set is removed when dropped. Where namespaces cannot be made
 //! ([`TestHosts::check`]), callers say so and run on loopback instead.
 
@@ -201,6 +201,16 @@ impl TestHosts {
     pub fn dropped(&self, name: &str) -> Result<u64, HostsError> {
         self.addr(name)?;
         let args = ["dropped", self.set.as_str(), name];
+        let text = call(&args)?;
+        text.parse().map_err(|e| unparsed(&args, &text, e))
+    }
+
+    /// Reset the host's TCP connections to host `peer` (both ends see them drop; Zenoh
+    /// reconnects). Returns how many were cut.
+    pub fn cut(&self, name: &str, peer: &str) -> Result<u32, HostsError> {
+        self.addr(name)?;
+        self.addr(peer)?;
+        let args = ["cut", self.set.as_str(), name, peer];
         let text = call(&args)?;
         text.parse().map_err(|e| unparsed(&args, &text, e))
     }

@@ -1,7 +1,9 @@
 //! A lockstep run never waits without bound (the teams issue): a controller that fails a
 //! tick still commands every robot (hold orders, said in the diagnostics); an agent that
 //! leaves ends the run at once, naming its robot; when the coordinator leaves, the agents hold
-//! their posture at once and the run ends after a grace counted in simulated ticks.
+//! their posture at once and the run ends after a grace counted in simulated ticks; a member
+//! whose token vanishes is waited for a bounded grace (its link may come back), one that says
+//! it leaves is not.
 //!
 //! Every component runs in this process on one Zenoh session (the embedded mode), each with
 //! its own stop signal so that one can be taken away mid-run. The plant is the placeholder
@@ -222,5 +224,77 @@ async fn a_controller_that_is_not_ready_still_commands_the_tick() {
     assert_eq!(cmd.header.robot_id(), "r8");
     let counters = stop(c).await;
     assert!(counters.not_ready >= 1 && counters.commands_sent >= 1, "{counters:?}");
+    s.close().await.unwrap();
+}
+
+/// The latest coordinator status on `queue` within 5 s that `pred` accepts.
+async fn status_where(queue: &transport::SampleQueue, pred: impl Fn(&protocol::CoordinatorStatus) -> bool, what: &str) -> protocol::CoordinatorStatus {
+    let until = Instant::now() + Duration::from_secs(5);
+    while Instant::now() < until {
+        match tokio::time::timeout(Duration::from_millis(50), queue.recv_async()).await {
+            Ok(Ok(sample)) => {
+                let st: protocol::CoordinatorStatus = decode_sample(&sample).unwrap();
+                if pred(&st) {
+                    return st;
+                }
+            }
+            Ok(Err(_)) => break,
+            Err(_) => {}
+        }
+    }
+    panic!("no coordinator status within 5 s: {what}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_vanished_token_is_waited_for_and_an_announced_leave_is_not() {
+    use coordinator::team::membership::DEPARTURE_GRACE;
+    let team = "hang6";
+    let s = session().await;
+    let statuses = transport::subscribe(&s, keys::coordinator_status(team).unwrap()).await.unwrap();
+    let c = coordinator(&s, team, Box::new(FailsEvery { every: u64::MAX }));
+    let mut tokens = vec![Some(transport::declare_member(&s, team, "r1").await.unwrap()), Some(transport::declare_member(&s, team, "r2").await.unwrap())];
+    let mut queues = Vec::new();
+    let mut pubs = Vec::new();
+    for r in ["r1", "r2"] {
+        queues.push(transport::subscribe(&s, keys::robot(team, r, keys::RobotTopic::Command).unwrap()).await.unwrap());
+        pubs.push(transport::TypedPublisher::declare(&s, keys::robot(team, r, keys::RobotTopic::Dynamics).unwrap(), transport::Qos::HotPath).await.unwrap());
+    }
+    status_where(&statuses, |st| st.members.len() == 2, "both members").await;
+    // Tick 1, the team's first: both commanded.
+    for (i, r) in ["r1", "r2"].into_iter().enumerate() {
+        pubs[i].put(&terms(team, r, 1)).await.unwrap();
+    }
+    for q in &queues {
+        let cmd: TorqueCommand = decode_sample(&tokio::time::timeout(Duration::from_secs(5), q.recv_async()).await.expect("a command").unwrap()).unwrap();
+        assert_eq!((cmd.header.tick, cmd.hold), (1, false), "{cmd:?}");
+    }
+    // r2's token vanishes and comes back (a link that dropped): tick 2 waits for r2's terms and
+    // is solved with both; no status leaves r2 out.
+    tokens[1].take().unwrap().undeclare().await.unwrap();
+    pubs[0].put(&terms(team, "r1", 2)).await.unwrap();
+    let st = status_where(&statuses, |st| st.detail.contains("r2") && st.detail.contains("vanished"), "r2's token vanished").await;
+    assert!(st.members.iter().any(|m| m == "r2"), "r2 still a member while it is waited for: {st:?}");
+    tokens[1] = Some(transport::declare_member(&s, team, "r2").await.unwrap());
+    pubs[1].put(&terms(team, "r2", 2)).await.unwrap();
+    for q in &queues {
+        let cmd: TorqueCommand = decode_sample(&tokio::time::timeout(Duration::from_secs(5), q.recv_async()).await.expect("a command").unwrap()).unwrap();
+        assert_eq!((cmd.header.tick, cmd.hold), (2, false), "tick 2 solved with both: {cmd:?}");
+    }
+    let st = status_where(&statuses, |st| st.detail.contains("r2") && st.detail.contains("joined"), "r2's token back").await;
+    assert!(st.late.is_empty() && st.silent.is_empty() && st.members.len() == 2, "r2 never left: {st:?}");
+    // r2 says it leaves (its dynamics key deleted) with its token still held: out at once.
+    pubs[1].delete().await.unwrap();
+    let st = status_where(&statuses, |st| st.detail == "robot r2 left", "r2 leaves").await;
+    assert_eq!(st.members, vec!["r1".to_string()], "{st:?}");
+    pubs[0].put(&terms(team, "r1", 3)).await.unwrap();
+    let cmd: TorqueCommand = decode_sample(&tokio::time::timeout(Duration::from_secs(5), queues[0].recv_async()).await.expect("a command").unwrap()).unwrap();
+    assert_eq!((cmd.header.tick, cmd.hold), (3, false), "tick 3 solved without r2: {cmd:?}");
+    // r1's token vanishes for good: it has left once the grace has passed, not before.
+    let gone = Instant::now();
+    tokens[0].take().unwrap().undeclare().await.unwrap();
+    let st = status_where(&statuses, |st| st.detail == "robot r1 left", "r1 leaves after the grace").await;
+    assert!(gone.elapsed() >= DEPARTURE_GRACE, "r1 left {:?} after its token vanished, before the grace {DEPARTURE_GRACE:?}", gone.elapsed());
+    assert!(st.members.is_empty(), "{st:?}");
+    stop(c).await;
     s.close().await.unwrap();
 }

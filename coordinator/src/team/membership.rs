@@ -1,9 +1,17 @@
 //! Who is in the team: liveliness tokens seen join and leave ([`Membership`]), and of those
 //! members, whom the coordinator commands tick by tick ([`Roster`]).
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
+use std::time::{Duration, Instant};
 
 use protocol::transport::MemberEvent;
+
+/// How long a member of a running team whose liveliness token vanished stays in the team,
+/// waiting for the token to come back ([`Roster::apply`]). A link that drops and reconnects
+/// (Zenoh reopens it within milliseconds) withdraws and redeclares every token across it; a
+/// robot that truly leaves announces it ([`Roster::leave`]: a fallen or stopping agent deletes
+/// its dynamics key first) or goes silent ([`Roster::silence`]), and is out at once.
+pub const DEPARTURE_GRACE: Duration = Duration::from_millis(100);
 
 /// The present members, sorted by robot id.
 #[derive(Debug, Clone, Default)]
@@ -92,10 +100,18 @@ pub enum Admission {
 ///   hold order first was tried: a restarted agent's own posture hold, without the weight its
 ///   legs carry, let the torso sag 3 cm before the commands took over, which then swung it
 ///   4 cm; commanded at once it stays within 2 mm.)
+/// * **Departures.** A team member whose liveliness token vanishes stays in the team for
+///   [`DEPARTURE_GRACE`] (its ticks wait for its terms, as in lockstep they always do): a
+///   link that drops and reconnects withdraws and redeclares the token within milliseconds,
+///   and the grasp it holds must not be let go of for that. Its token back within the grace,
+///   nothing changed; past it ([`Roster::depart_due`]), it has left. A robot that announces
+///   its leaving ([`Roster::leave`]) is out at once.
 /// * A member the controller cannot command yet (no description) holds its posture.
 #[derive(Debug, Clone, Default)]
 pub struct Roster {
     members: Membership,
+    /// Team members whose token vanished, and until when they are waited for.
+    departing: BTreeMap<String, Instant>,
     silent: BTreeSet<String>,
     /// Late members, and of them those admitted (their terms came).
     late: BTreeSet<String>,
@@ -124,8 +140,55 @@ impl Roster {
         self.expected.iter().filter(|r| !self.members.contains(r)).map(String::as_str).collect()
     }
 
-    /// A liveliness event; returns whether the team changed.
-    pub fn apply(&mut self, event: &MemberEvent) -> bool {
+    /// A liveliness event at `now`; returns whether the team changed. A team member's leaving
+    /// is only a departure until [`DEPARTURE_GRACE`] has passed (see [`Roster::depart_due`]).
+    pub fn apply(&mut self, event: &MemberEvent, now: Instant) -> bool {
+        match event {
+            MemberEvent::Left(r) if self.departing.contains_key(r) => return false,
+            MemberEvent::Left(r) if self.started && self.in_team(r) => {
+                tracing::warn!(robot = %r, grace_ms = DEPARTURE_GRACE.as_millis() as u64, "a member's token vanished: it stays in the team while its link may come back");
+                self.departing.insert(r.clone(), now + DEPARTURE_GRACE);
+                return false;
+            }
+            MemberEvent::Joined(r) if self.departing.remove(r).is_some() => {
+                tracing::info!(robot = %r, "a departing member's token is back: it never left the team");
+                return false;
+            }
+            _ => {}
+        }
+        self.depart(event)
+    }
+
+    /// When the next departure is due ([`Roster::depart_due`]), if one is pending.
+    pub fn next_departure(&self) -> Option<Instant> {
+        self.departing.values().min().copied()
+    }
+
+    /// The departures due at `now`: those members have left. Returns them.
+    pub fn depart_due(&mut self, now: Instant) -> Vec<String> {
+        let due: Vec<String> = self.departing.iter().filter(|(_, at)| **at <= now).map(|(r, _)| r.clone()).collect();
+        for r in &due {
+            self.departing.remove(r);
+            tracing::warn!(robot = %r, "a departing member's token did not come back");
+            self.depart(&MemberEvent::Left(r.clone()));
+        }
+        due
+    }
+
+    /// `robot` announced that it leaves (a fallen or stopping agent): out at once, without a
+    /// grace. Returns whether the team changed.
+    pub fn leave(&mut self, robot: &str) -> bool {
+        self.departing.remove(robot);
+        self.depart(&MemberEvent::Left(robot.to_string()))
+    }
+
+    /// Whether `robot`'s token vanished and it is waited for.
+    pub fn is_departing(&self, robot: &str) -> bool {
+        self.departing.contains_key(robot)
+    }
+
+    /// Apply `event` to the membership and the lists that follow from it.
+    fn depart(&mut self, event: &MemberEvent) -> bool {
         if !self.members.apply(event) {
             return false;
         }
@@ -243,6 +306,10 @@ mod tests {
         assert_eq!(m.to_vec(), vec!["r2"]);
     }
 
+    fn now() -> Instant {
+        Instant::now()
+    }
+
     fn joined(r: &str) -> MemberEvent {
         MemberEvent::Joined(r.into())
     }
@@ -250,8 +317,8 @@ mod tests {
     #[test]
     fn a_team_forms_whole_then_late_robots_are_admitted_beside_it() {
         let mut r = Roster::default();
-        assert!(r.apply(&joined("r2")));
-        assert!(r.apply(&joined("r1")));
+        assert!(r.apply(&joined("r2"), now()));
+        assert!(r.apply(&joined("r1"), now()));
         assert_eq!(r.team(), ["r1", "r2"]);
         // Before the start a robot without a description is in the team: the controller
         // itself waits for the whole team.
@@ -260,7 +327,7 @@ mod tests {
         r.start();
         assert!(matches!(r.admit("r2", false, true), Admission::Hold(why) if why.contains("description")));
         // r3 joins the running team: in from its first terms, late.
-        assert!(!r.apply(&joined("r3")), "not in the team before its first terms");
+        assert!(!r.apply(&joined("r3"), now()), "not in the team before its first terms");
         assert!(!r.in_team("r3"));
         assert_eq!(r.admit("r3", true, true), Admission::Team);
         assert!(r.in_team("r3") && r.is_late("r3"));
@@ -275,12 +342,12 @@ mod tests {
         let mut r = Roster::default();
         r.expect(&["r1".to_string(), "r2".to_string()], t0 + std::time::Duration::from_secs(1));
         assert_eq!(r.forming(t0), vec!["r1", "r2"]);
-        r.apply(&joined("r1"));
+        r.apply(&joined("r1"), now());
         assert_eq!(r.forming(t0), vec!["r2"]);
         assert!(r.forming(t0 + std::time::Duration::from_secs(2)).is_empty(), "not waited for past the deadline");
-        r.apply(&joined("r2"));
+        r.apply(&joined("r2"), now());
         assert!(r.forming(t0).is_empty());
-        r.apply(&MemberEvent::Left("r2".into()));
+        r.apply(&MemberEvent::Left("r2".into()), now());
         r.start();
         assert!(r.forming(t0).is_empty(), "once started it never waits again");
     }
@@ -289,7 +356,7 @@ mod tests {
     fn a_silent_member_is_left_out_and_comes_back_late() {
         let mut r = Roster::default();
         for id in ["r1", "r2", "r3"] {
-            r.apply(&joined(id));
+            r.apply(&joined(id), now());
         }
         r.start();
         assert!(r.silence("r3"));
@@ -305,8 +372,72 @@ mod tests {
         assert_eq!(r.team(), ["r1", "r2", "r3"]);
         assert!(r.is_late("r3"));
         // Leaving takes it out of every list.
-        assert!(r.apply(&MemberEvent::Left("r3".into())));
+        assert!(r.leave("r3"));
         assert_eq!(r.team(), ["r1", "r2"]);
         assert!(r.late().is_empty());
+    }
+
+    fn left(r: &str) -> MemberEvent {
+        MemberEvent::Left(r.into())
+    }
+
+    #[test]
+    fn a_member_whose_token_comes_back_within_the_grace_never_left() {
+        let t0 = Instant::now();
+        let mut r = Roster::default();
+        for id in ["r1", "r2"] {
+            r.apply(&joined(id), t0);
+        }
+        r.start();
+        // A link drops and reconnects: the token goes and comes back within the grace.
+        assert!(!r.apply(&left("r1"), t0), "a departure does not change the team");
+        assert!(r.is_departing("r1") && r.in_team("r1"));
+        assert!(!r.apply(&left("r1"), t0), "a second withdrawal changes nothing either");
+        assert_eq!(r.next_departure(), Some(t0 + DEPARTURE_GRACE));
+        assert!(r.depart_due(t0 + DEPARTURE_GRACE / 2).is_empty());
+        assert!(!r.apply(&joined("r1"), t0 + DEPARTURE_GRACE / 2), "back: the team is unchanged");
+        assert!(!r.is_departing("r1") && !r.is_late("r1"), "not late: its hand stays in the grasp");
+        assert_eq!(r.team(), ["r1", "r2"]);
+        assert_eq!(r.next_departure(), None);
+        assert_eq!(r.admit("r1", true, true), Admission::Team);
+    }
+
+    #[test]
+    fn a_member_whose_token_stays_away_past_the_grace_has_left_and_comes_back_late() {
+        let t0 = Instant::now();
+        let mut r = Roster::default();
+        for id in ["r1", "r2"] {
+            r.apply(&joined(id), t0);
+        }
+        r.start();
+        r.apply(&left("r2"), t0);
+        assert!(r.depart_due(t0 + DEPARTURE_GRACE - Duration::from_millis(1)).is_empty());
+        assert_eq!(r.depart_due(t0 + DEPARTURE_GRACE), vec!["r2"]);
+        assert_eq!(r.team(), ["r1"]);
+        assert!(!r.members().contains("r2") && !r.is_departing("r2"));
+        assert_eq!(r.admit("r2", true, true), Admission::NotAMember);
+        // Its token back after that: a late joiner, hand out of the grasp.
+        r.apply(&joined("r2"), t0 + DEPARTURE_GRACE * 2);
+        assert_eq!(r.admit("r2", true, true), Admission::Team);
+        assert!(r.is_late("r2"));
+    }
+
+    #[test]
+    fn an_announced_leave_a_silent_member_and_a_team_not_started_leave_at_once() {
+        let t0 = Instant::now();
+        let mut r = Roster::default();
+        for id in ["r1", "r2", "r3", "r4"] {
+            r.apply(&joined(id), t0);
+        }
+        assert!(r.apply(&left("r4"), t0), "before the first tick a token's loss is a leave");
+        r.start();
+        assert!(r.leave("r1"), "announced: out at once");
+        r.apply(&left("r2"), t0);
+        assert!(r.leave("r2"), "announced while departing: out at once");
+        assert!(!r.is_departing("r2"));
+        assert!(r.silence("r3"));
+        assert!(!r.apply(&left("r3"), t0), "a silent member is out of the team already");
+        assert!(!r.members().contains("r3") && !r.is_departing("r3"), "and it is no member any more");
+        assert!(r.team().is_empty());
     }
 }

@@ -39,8 +39,9 @@ pub trait TeamLink {
     fn recv_command(&mut self, deadline: Instant) -> Inbound<TorqueCommand>;
     /// The next contact set, if one is waiting.
     fn try_recv_contacts(&mut self) -> Inbound<ContactSet>;
-    /// Withdraw the robot's team membership (it fell, [`crate::fall`]): the coordinator then
-    /// solves the team without it. Called once.
+    /// Withdraw the robot's team membership (it fell, [`crate::fall`]), saying so first (its
+    /// dynamics key deleted): the coordinator then solves the team without it at once. Called
+    /// once.
     fn leave_team(&mut self) -> Result<(), TransportError>;
 }
 
@@ -68,6 +69,11 @@ impl<M: Message> SyncPublisher<M> {
         msg.validate()?;
         protocol::codec::encode_into(msg, &mut self.buffer)?;
         self.publisher.put(self.buffer.as_slice()).wait().map_err(|e| zenoh_err("put", self.publisher.key_expr().as_str(), e))
+    }
+
+    /// Delete the key: its publisher is gone for good.
+    pub fn delete(&mut self) -> Result<(), TransportError> {
+        self.publisher.delete().wait().map_err(|e| zenoh_err("delete", self.publisher.key_expr().as_str(), e))
     }
 }
 
@@ -127,8 +133,24 @@ impl TeamLink for ZenohLink {
 
     fn leave_team(&mut self) -> Result<(), TransportError> {
         match self.token.take() {
-            Some(t) => t.undeclare().wait().map_err(|e| zenoh_err("undeclare_token", "member", e)),
+            Some(t) => {
+                // Said first: a token that vanishes alone may be a link that comes back, which
+                // the coordinator waits for (`coordinator::team::membership::DEPARTURE_GRACE`).
+                self.dynamics.delete()?;
+                t.undeclare().wait().map_err(|e| zenoh_err("undeclare_token", "member", e))
+            }
             None => Ok(()),
+        }
+    }
+}
+
+impl Drop for ZenohLink {
+    /// A loop that ends leaves the team: said, as [`TeamLink::leave_team`] says it.
+    fn drop(&mut self) {
+        if self.token.is_some() {
+            if let Err(e) = self.dynamics.delete() {
+                tracing::warn!("leaving not announced: {e}");
+            }
         }
     }
 }
