@@ -321,10 +321,20 @@ impl Service<'_> {
         let mut team_changed = false;
         loop {
             match assembler.reuse_due(Instant::now(), self.roster.team()) {
-                Some(Reused::Complete { tick, terms, reused }) => {
-                    self.counters.reused_terms += reused.len() as u64;
+                Some(Reused::Complete { tick, mut terms, reused }) => {
                     tracing::debug!(tick, ?reused, "late terms: solved with the latest of each");
-                    let stale = reused.into_iter().map(|(r, _)| r).collect();
+                    let mut stale = Vec::with_capacity(reused.len());
+                    for (r, from) in reused {
+                        // A departing member whose terms stopped too has left (a dead agent).
+                        if self.roster.reused(&r, tick.saturating_sub(from)) {
+                            terms.retain(|t| t.header.robot_id() != r);
+                            team_changed = true;
+                            self.detail = self.left(&r);
+                        } else {
+                            stale.push(r);
+                        }
+                    }
+                    self.counters.reused_terms += stale.len() as u64;
                     self.solve(controller, tick, terms, references, stale).await?;
                     return Ok((true, team_changed));
                 }

@@ -218,3 +218,34 @@ fn a_stalled_agent_is_noticed_at_once_and_the_team_rides_it_through() {
     }
     assert!(m.object.position_max_m < HELD_OBJECT_MAX_M, "object error up to {} m", m.object.position_max_m);
 }
+
+/// Real time, separate processes: r3's agent killed (SIGKILL, so its token vanishes with no word
+/// from it, as when a link drops). The coordinator first waits for the token to come back
+/// (`DEPARTURE_GRACE`, 100 ms), reusing r3's terms; once they are `DEPARTURE_TICKS` (3) old,
+/// r3 has left: noticed within 3 ticks of the kill, not at the end of the grace. r1 and r2
+/// keep the object.
+#[test]
+fn an_agent_killed_in_real_time_is_noticed_within_three_ticks_and_the_others_hold() {
+    use coordinator::team::membership::DEPARTURE_TICKS;
+    let _one = serial();
+    let sets = ["duration=1.5", "settle=0.5", "control_hz=125", "drive_loss=\"freeze\"", "faults=[{kind=\"agent-stops\",robot=\"r3\",at=0.5}]"];
+    let s = Scenario::load(common::scenario::repo().join("scenarios/team3_cube.toml"), &sets.map(String::from)).expect("scenario");
+    let mut plan = plan::plan(&s, &common::scenario::repo()).expect("plan");
+    plan.scene.realtime = true;
+    let dir = common::scenario::repo().join("target/test-reports/realtime_kill");
+    std::fs::create_dir_all(&dir).expect("report dir");
+    let records = run::run(&plan, &RunOptions { distributed: true, hosts: false, progress: false }, &dir).expect("the run completes");
+    let m = evaluated(&plan, &records, "distributed, real time", "realtime_kill");
+    let struck = plan.references.clock.first_tick_at(0.5);
+    let r3 = "r3".to_string();
+    let out = records.statuses.iter().filter(|st| st.header.tick + 1 >= struck).find(|st| !st.members.contains(&r3)).map(|st| st.header.tick).expect("a status without r3");
+    println!("r3's agent killed at tick {struck}: no member from the status of tick {out}");
+    assert!(out <= struck + DEPARTURE_TICKS, "noticed within {DEPARTURE_TICKS} ticks: at {out}, killed at {struck}");
+    assert!(records.statuses.iter().filter(|st| st.header.tick > out).all(|st| !st.members.contains(&r3)), "r3 stays out");
+    assert_eq!(records.released_at, None, "r1 and r2 keep the object");
+    assert!(!m.drop.dropped, "the object is held");
+    for r in ["r1", "r2"] {
+        assert!(m.slip_m[r] < HELD_SLIP_M, "palm {r} slipped {} m", m.slip_m[r]);
+    }
+    assert!(m.object.position_max_m < HELD_OBJECT_MAX_M, "object error up to {} m", m.object.position_max_m);
+}

@@ -13,6 +13,12 @@ use protocol::transport::MemberEvent;
 /// its dynamics key first) or goes silent ([`Roster::silence`]), and is out at once.
 pub const DEPARTURE_GRACE: Duration = Duration::from_millis(100);
 
+/// In real time, a departing member whose terms stopped too (the coordinator reused them) has
+/// left once they are this many ticks old ([`Roster::reused`]): an agent that died is noticed
+/// within 3 ticks, not at the end of [`DEPARTURE_GRACE`]; a link that comes back sooner keeps
+/// its robot in the team.
+pub const DEPARTURE_TICKS: u64 = 3;
+
 /// The present members, sorted by robot id.
 #[derive(Debug, Clone, Default)]
 pub struct Membership {
@@ -104,8 +110,9 @@ pub enum Admission {
 ///   [`DEPARTURE_GRACE`] (its ticks wait for its terms, as in lockstep they always do): a
 ///   link that drops and reconnects withdraws and redeclares the token within milliseconds,
 ///   and the grasp it holds must not be let go of for that. Its token back within the grace,
-///   nothing changed; past it ([`Roster::depart_due`]), it has left. A robot that announces
-///   its leaving ([`Roster::leave`]) is out at once.
+///   nothing changed; past it ([`Roster::depart_due`]), it has left. In real time it has also
+///   left once its terms, reused meanwhile, are [`DEPARTURE_TICKS`] old ([`Roster::reused`]).
+///   A robot that announces its leaving ([`Roster::leave`]) is out at once.
 /// * A member the controller cannot command yet (no description) holds its posture.
 #[derive(Debug, Clone, Default)]
 pub struct Roster {
@@ -175,11 +182,31 @@ impl Roster {
         due
     }
 
-    /// `robot` announced that it leaves (a fallen or stopping agent): out at once, without a
-    /// grace. Returns whether the team changed.
+    /// `robot` announced that it leaves (a fallen or stopping agent): out of the team at once,
+    /// without a grace. Returns whether the team changed. A departing robot (its token gone
+    /// already) has left; one whose token still holds is left out as if silent until the token
+    /// goes (its withdrawal may arrive after a new agent's token under the same name: the new
+    /// agent's first terms then bring it back, late, rather than never).
     pub fn leave(&mut self, robot: &str) -> bool {
-        self.departing.remove(robot);
-        self.depart(&MemberEvent::Left(robot.to_string()))
+        if self.departing.remove(robot).is_some() {
+            return self.depart(&MemberEvent::Left(robot.to_string()));
+        }
+        if !self.members.contains(robot) || !self.silent.insert(robot.to_string()) {
+            return false;
+        }
+        tracing::warn!(robot, "the robot says it leaves: solving without it");
+        self.recompute()
+    }
+
+    /// `robot`'s terms were reused for a tick, `age` ticks old (real time): a departing member
+    /// whose terms are [`DEPARTURE_TICKS`] old has left. Returns whether it left now.
+    pub fn reused(&mut self, robot: &str, age: u64) -> bool {
+        if age < DEPARTURE_TICKS || !self.departing.contains_key(robot) {
+            return false;
+        }
+        tracing::warn!(robot, age, "a departing member's terms stopped too: it has left");
+        self.leave(robot);
+        true
     }
 
     /// Whether `robot`'s token vanished and it is waited for.
@@ -371,8 +398,10 @@ mod tests {
         assert!(r.silent().is_empty());
         assert_eq!(r.team(), ["r1", "r2", "r3"]);
         assert!(r.is_late("r3"));
-        // Leaving takes it out of every list.
-        assert!(r.leave("r3"));
+        // Leaving (its token gone past the grace) takes it out of every list.
+        let t0 = Instant::now();
+        r.apply(&MemberEvent::Left("r3".into()), t0);
+        assert_eq!(r.depart_due(t0 + DEPARTURE_GRACE), vec!["r3"]);
         assert_eq!(r.team(), ["r1", "r2"]);
         assert!(r.late().is_empty());
     }
@@ -423,6 +452,24 @@ mod tests {
     }
 
     #[test]
+    fn a_departing_member_whose_terms_stop_too_leaves_within_departure_ticks() {
+        let t0 = Instant::now();
+        let mut r = Roster::default();
+        for id in ["r1", "r2", "r3"] {
+            r.apply(&joined(id), t0);
+        }
+        r.start();
+        assert!(!r.reused("r3", DEPARTURE_TICKS + 5), "a member with its token (a slow link) is reused, not left out");
+        r.apply(&left("r3"), t0);
+        assert!(!r.reused("r3", DEPARTURE_TICKS - 1), "younger terms: still waited for");
+        assert!(r.in_team("r3"));
+        assert!(r.reused("r3", DEPARTURE_TICKS), "its terms stopped with its token: it has left");
+        assert_eq!(r.team(), ["r1", "r2"]);
+        assert!(!r.is_departing("r3") && !r.members().contains("r3"));
+        assert!(r.depart_due(t0 + DEPARTURE_GRACE).is_empty(), "its grace is over with it");
+    }
+
+    #[test]
     fn an_announced_leave_a_silent_member_and_a_team_not_started_leave_at_once() {
         let t0 = Instant::now();
         let mut r = Roster::default();
@@ -432,12 +479,36 @@ mod tests {
         assert!(r.apply(&left("r4"), t0), "before the first tick a token's loss is a leave");
         r.start();
         assert!(r.leave("r1"), "announced: out at once");
+        assert!(!r.leave("r1"), "once");
+        assert!(!r.in_team("r1") && r.members().contains("r1"), "out of the team; its token still holds");
         r.apply(&left("r2"), t0);
         assert!(r.leave("r2"), "announced while departing: out at once");
-        assert!(!r.is_departing("r2"));
+        assert!(!r.is_departing("r2") && !r.members().contains("r2"));
         assert!(r.silence("r3"));
         assert!(!r.apply(&left("r3"), t0), "a silent member is out of the team already");
         assert!(!r.members().contains("r3") && !r.is_departing("r3"), "and it is no member any more");
         assert!(r.team().is_empty());
+        // r1's token goes after its announcement: no member any more, no grace.
+        assert!(!r.apply(&left("r1"), t0));
+        assert!(!r.members().contains("r1") && !r.is_departing("r1"));
+        assert!(!r.leave("r9"), "not a member");
+    }
+
+    #[test]
+    fn an_announcement_that_arrives_after_a_new_agents_token_does_not_shut_it_out() {
+        // A stopping agent's deletion is handled after its token went and a new agent's came.
+        let t0 = Instant::now();
+        let mut r = Roster::default();
+        for id in ["r1", "r2"] {
+            r.apply(&joined(id), t0);
+        }
+        r.start();
+        r.apply(&left("r2"), t0);
+        r.apply(&joined("r2"), t0);
+        assert!(r.leave("r2"));
+        assert!(!r.in_team("r2"));
+        // The new agent's first terms bring it back: late, its hand out of the grasp.
+        assert_eq!(r.admit("r2", true, true), Admission::Team);
+        assert!(r.in_team("r2") && r.is_late("r2"));
     }
 }

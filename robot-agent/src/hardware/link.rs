@@ -145,7 +145,8 @@ impl TeamLink for ZenohLink {
 }
 
 impl Drop for ZenohLink {
-    /// A loop that ends leaves the team: said, as [`TeamLink::leave_team`] says it.
+    /// The link dropped with its token still held (the robot's owner is done with it): the
+    /// leaving is said first, as [`TeamLink::leave_team`] says it, then the token goes with it.
     fn drop(&mut self) {
         if self.token.is_some() {
             if let Err(e) = self.dynamics.delete() {
