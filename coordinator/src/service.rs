@@ -242,17 +242,8 @@ impl Service<'_> {
         let mut next = Some(first);
         while let Some(sample) = next {
             if sample.kind() == SampleKind::Delete {
-                // A robot that leaves deletes its dynamics key first: out at once.
-                if let Some(robot) = keys::robot_of(sample.key_expr().as_str()) {
-                    if self.roster.leave(robot) {
-                        team_changed = true;
-                        self.detail = self.left(robot);
-                    }
-                }
-                next = if newest.is_some() { queue.try_recv().ok().flatten() } else { None };
-                continue;
-            }
-            if let Some(terms) = decode_terms(&sample, &mut self.counters) {
+                team_changed |= self.announced_leave(&sample);
+            } else if let Some(terms) = decode_terms(&sample, &mut self.counters) {
                 let (robot, tick) = (terms.header.robot_id().to_string(), terms.header.tick);
                 let waiting = self.roster.forming(Instant::now());
                 if !waiting.is_empty() {
@@ -297,6 +288,17 @@ impl Service<'_> {
             next = if newest.is_some() { queue.try_recv().ok().flatten() } else { None };
         }
         Ok((newest, team_changed))
+    }
+
+    /// A robot that leaves deletes its dynamics key first (`sample`): out at once. Returns
+    /// whether the team changed.
+    fn announced_leave(&mut self, sample: &zenoh::sample::Sample) -> bool {
+        let Some(robot) = keys::robot_of(sample.key_expr().as_str()) else { return false };
+        if !self.roster.leave(robot) {
+            return false;
+        }
+        self.detail = self.left(robot);
+        true
     }
 
     /// `robot` has left the team: its command publisher goes. Returns the status's detail.

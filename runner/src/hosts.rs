@@ -1,8 +1,8 @@
 //! Test hosts: the team's components on separate machines of one computer, as Linux network
 //! namespaces joined by veth pairs to one bridge (`scripts/testhosts.sh` makes and removes
 //! them; root needed). [`TestHosts`] is one such set for one run: a host per component name,
-//! its address, packet loss (nftables), link failures and connection resets, and the command line that starts a
-//! program on a host. The set is removed when dropped. Where namespaces cannot be made
+//! its address, packet loss (nftables), link failures and connection resets, and the command
+//! line that starts a program on a host. The set is removed when dropped. Where namespaces cannot be made
 //! ([`TestHosts::check`]), callers say so and run on loopback instead.
 
 use std::collections::BTreeMap;

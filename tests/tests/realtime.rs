@@ -37,6 +37,25 @@ fn s4_realtime(hz: f64, duration: f64) -> Plan {
     plan
 }
 
+/// `team3_cube.toml` with `sets`, paced by the wall clock.
+fn team3_realtime(sets: &[&str]) -> Plan {
+    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+    let s = Scenario::load(common::scenario::repo().join("scenarios/team3_cube.toml"), &sets).expect("scenario");
+    let mut plan = plan::plan(&s, &common::scenario::repo()).expect("plan");
+    plan.scene.realtime = true;
+    plan
+}
+
+/// `plan` run on this computer, embedded or as processes on loopback, reported into
+/// `target/test-reports/{name}`: its records and metrics.
+fn run_here(plan: &Plan, distributed: bool, mode: &str, name: &str) -> (Records, Metrics) {
+    let dir = common::scenario::repo().join("target/test-reports").join(name);
+    std::fs::create_dir_all(&dir).expect("report dir");
+    let records = run::run(plan, &RunOptions { distributed, hosts: false, progress: false }, &dir).expect("the run completes");
+    let m = evaluated(plan, &records, mode, name);
+    (records, m)
+}
+
 fn evaluated(plan: &Plan, records: &Records, mode: &str, name: &str) -> Metrics {
     let dir = common::scenario::repo().join("target/test-reports").join(name);
     std::fs::create_dir_all(&dir).expect("report dir");
@@ -85,10 +104,7 @@ fn assert_loop_consistent(plan: &Plan, records: &Records, report: &LoopReport) {
 fn s4_holds_in_real_time_and_reports_its_loop() {
     let _one = serial();
     let plan = s4_realtime(250.0, 2.0);
-    let dir = common::scenario::repo().join("target/test-reports/realtime_s4");
-    std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(&plan, &RunOptions { distributed: false, hosts: false, progress: false }, &dir).expect("the run completes");
-    let m = evaluated(&plan, &records, "embedded, real time", "realtime_s4");
+    let (records, m) = run_here(&plan, false, "embedded, real time", "realtime_s4");
     for c in &m.checks {
         assert!(c.passed, "{} = {} not below {}", c.name, c.value, c.bound);
     }
@@ -175,14 +191,8 @@ const STANDING_TORSO_MAX_M: f64 = 0.08;
 #[test]
 fn a_stalled_agent_is_noticed_at_once_and_the_team_rides_it_through() {
     let _one = serial();
-    let sets = ["duration=2.0", "settle=0.5", "control_hz=125", "drive_loss=\"freeze\"", "faults=[{kind=\"agent-stalls\",robot=\"r3\",at=0.5,duration=0.12}]"];
-    let s = Scenario::load(common::scenario::repo().join("scenarios/team3_cube.toml"), &sets.map(String::from)).expect("scenario");
-    let mut plan = plan::plan(&s, &common::scenario::repo()).expect("plan");
-    plan.scene.realtime = true;
-    let dir = common::scenario::repo().join("target/test-reports/realtime_stall");
-    std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(&plan, &RunOptions { distributed: false, hosts: false, progress: false }, &dir).expect("the run completes");
-    let m = evaluated(&plan, &records, "embedded, real time", "realtime_stall");
+    let plan = team3_realtime(&["duration=2.0", "settle=0.5", "control_hz=125", "drive_loss=\"freeze\"", "faults=[{kind=\"agent-stalls\",robot=\"r3\",at=0.5,duration=0.12}]"]);
+    let (records, m) = run_here(&plan, false, "embedded, real time", "realtime_stall");
     let clock = &plan.references.clock;
     let (struck, over) = (clock.first_tick_at(0.5), clock.first_tick_at(0.62));
     let r3 = "r3".to_string();
@@ -228,14 +238,8 @@ fn a_stalled_agent_is_noticed_at_once_and_the_team_rides_it_through() {
 fn an_agent_killed_in_real_time_is_noticed_within_three_ticks_and_the_others_hold() {
     use coordinator::team::membership::DEPARTURE_TICKS;
     let _one = serial();
-    let sets = ["duration=1.5", "settle=0.5", "control_hz=125", "drive_loss=\"freeze\"", "faults=[{kind=\"agent-stops\",robot=\"r3\",at=0.5}]"];
-    let s = Scenario::load(common::scenario::repo().join("scenarios/team3_cube.toml"), &sets.map(String::from)).expect("scenario");
-    let mut plan = plan::plan(&s, &common::scenario::repo()).expect("plan");
-    plan.scene.realtime = true;
-    let dir = common::scenario::repo().join("target/test-reports/realtime_kill");
-    std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(&plan, &RunOptions { distributed: true, hosts: false, progress: false }, &dir).expect("the run completes");
-    let m = evaluated(&plan, &records, "distributed, real time", "realtime_kill");
+    let plan = team3_realtime(&["duration=1.5", "settle=0.5", "control_hz=125", "drive_loss=\"freeze\"", "faults=[{kind=\"agent-stops\",robot=\"r3\",at=0.5}]"]);
+    let (records, m) = run_here(&plan, true, "distributed, real time", "realtime_kill");
     let struck = plan.references.clock.first_tick_at(0.5);
     let r3 = "r3".to_string();
     let out = records.statuses.iter().filter(|st| st.header.tick + 1 >= struck).find(|st| !st.members.contains(&r3)).map(|st| st.header.tick).expect("a status without r3");

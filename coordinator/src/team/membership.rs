@@ -337,6 +337,16 @@ mod tests {
         Instant::now()
     }
 
+    /// A roster whose team of `ids` joined at `t0` and has solved its first tick.
+    fn started(ids: &[&str], t0: Instant) -> Roster {
+        let mut r = Roster::default();
+        for id in ids {
+            r.apply(&joined(id), t0);
+        }
+        r.start();
+        r
+    }
+
     fn joined(r: &str) -> MemberEvent {
         MemberEvent::Joined(r.into())
     }
@@ -381,11 +391,7 @@ mod tests {
 
     #[test]
     fn a_silent_member_is_left_out_and_comes_back_late() {
-        let mut r = Roster::default();
-        for id in ["r1", "r2", "r3"] {
-            r.apply(&joined(id), now());
-        }
-        r.start();
+        let mut r = started(&["r1", "r2", "r3"], now());
         assert!(r.silence("r3"));
         assert!(!r.silence("r3"), "once");
         assert!(!r.silence("r7"), "not a member");
@@ -413,11 +419,7 @@ mod tests {
     #[test]
     fn a_member_whose_token_comes_back_within_the_grace_never_left() {
         let t0 = Instant::now();
-        let mut r = Roster::default();
-        for id in ["r1", "r2"] {
-            r.apply(&joined(id), t0);
-        }
-        r.start();
+        let mut r = started(&["r1", "r2"], t0);
         // A link drops and reconnects: the token goes and comes back within the grace.
         assert!(!r.apply(&left("r1"), t0), "a departure does not change the team");
         assert!(r.is_departing("r1") && r.in_team("r1"));
@@ -434,11 +436,7 @@ mod tests {
     #[test]
     fn a_member_whose_token_stays_away_past_the_grace_has_left_and_comes_back_late() {
         let t0 = Instant::now();
-        let mut r = Roster::default();
-        for id in ["r1", "r2"] {
-            r.apply(&joined(id), t0);
-        }
-        r.start();
+        let mut r = started(&["r1", "r2"], t0);
         r.apply(&left("r2"), t0);
         assert!(r.depart_due(t0 + DEPARTURE_GRACE - Duration::from_millis(1)).is_empty());
         assert_eq!(r.depart_due(t0 + DEPARTURE_GRACE), vec!["r2"]);
@@ -454,11 +452,7 @@ mod tests {
     #[test]
     fn a_departing_member_whose_terms_stop_too_leaves_within_departure_ticks() {
         let t0 = Instant::now();
-        let mut r = Roster::default();
-        for id in ["r1", "r2", "r3"] {
-            r.apply(&joined(id), t0);
-        }
-        r.start();
+        let mut r = started(&["r1", "r2", "r3"], t0);
         assert!(!r.reused("r3", DEPARTURE_TICKS + 5), "a member with its token (a slow link) is reused, not left out");
         r.apply(&left("r3"), t0);
         assert!(!r.reused("r3", DEPARTURE_TICKS - 1), "younger terms: still waited for");
@@ -498,11 +492,7 @@ mod tests {
     fn an_announcement_that_arrives_after_a_new_agents_token_does_not_shut_it_out() {
         // A stopping agent's deletion is handled after its token went and a new agent's came.
         let t0 = Instant::now();
-        let mut r = Roster::default();
-        for id in ["r1", "r2"] {
-            r.apply(&joined(id), t0);
-        }
-        r.start();
+        let mut r = started(&["r1", "r2"], t0);
         r.apply(&left("r2"), t0);
         r.apply(&joined("r2"), t0);
         assert!(r.leave("r2"));
