@@ -611,13 +611,23 @@ impl Running {
     /// The first agent or coordinator task that failed is the error.
     pub async fn finish(mut self) -> Result<(), LaunchError> {
         self.stop();
+        // With processes, the session is this process's own: it closes before they are killed.
+        // Zenoh's TLS link reads and writes one rustls stream from two tasks without a lock
+        // (eclipse-zenoh/zenoh#2557): a peer's close read while a write was in flight once
+        // aborted the test process (a garbage `rustls::Error` cloned in the write).
+        let shared = matches!(self.mode, Mode::Embedded);
+        if !shared {
+            let _ = self.session.close().await;
+        }
         let mut first_error = None;
         for (who, c) in std::mem::take(&mut self.components) {
             if let (Err(reason), None) = (c.finish().await, &first_error) {
                 first_error = Some(if who == COORDINATOR { LaunchError::Coordinator(reason) } else { LaunchError::Agent { robot: who, reason } });
             }
         }
-        let _ = self.session.close().await;
+        if shared {
+            let _ = self.session.close().await;
+        }
         first_error.map_or(Ok(()), Err)
     }
 }
