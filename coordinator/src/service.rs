@@ -69,6 +69,9 @@ pub struct CoordinatorCounters {
     pub reused_terms: u64,
     /// Times a member went silent and was left out.
     pub silenced: u64,
+    /// Commands sent again: a member sent the terms of the tick last solved with them again
+    /// (its command was lost; [`Service::repeat_command`]).
+    pub repeated_commands: u64,
 }
 
 /// The service's publishers, buffers and bookkeeping between ticks.
@@ -281,13 +284,40 @@ impl Service<'_> {
                             tracing::debug!(tick = old, newer = tick, "complete tick overtaken by a newer one: not solved");
                         }
                     }
-                    TickOutcome::Stale(t) => tracing::debug!(tick = t, "late dynamics terms dropped"),
+                    TickOutcome::Stale(t) => {
+                        tracing::debug!(tick = t, "late dynamics terms dropped");
+                        if assembler.last_completed() == Some(t) {
+                            self.repeat_command(&robot, t).await?;
+                        }
+                    }
                     TickOutcome::Pending => {}
                 }
             }
             next = if newest.is_some() { queue.try_recv().ok().flatten() } else { None };
         }
         Ok((newest, team_changed))
+    }
+
+    /// Terms of the tick last solved from a member whose own terms it was solved with: its
+    /// agent is asking again, so its command did not arrive (a link that dropped and came back;
+    /// in lockstep the bridge republishes a state whose torques it waits for, and the agent
+    /// answers each with its terms). Its command goes again; an agent that has it already
+    /// refuses the repeat as stale. Terms reused for that tick (a late member in real time) are
+    /// not a repeat: the command answered other terms, and a late one is dropped.
+    async fn repeat_command(&mut self, robot: &str, tick: u64) -> Result<(), TransportError> {
+        if self.stale.iter().any(|r| r == robot) {
+            return Ok(());
+        }
+        let Some(cmd) = self.commands.iter().find(|c| c.header.tick == tick && c.header.robot_id() == robot) else { return Ok(()) };
+        let Some(publisher) = self.command_pubs.get_mut(robot) else { return Ok(()) };
+        // What was sent: the controller's command, or the hold order that replaced an invalid one.
+        match cmd.validate() {
+            Ok(()) => publisher.put(cmd).await?,
+            Err(_) => publisher.put(&TorqueCommand::hold(&self.cfg.team, robot, tick)).await?,
+        }
+        self.counters.repeated_commands += 1;
+        tracing::info!(robot, tick, "terms of the tick last solved came again: its command sent again");
+        Ok(())
     }
 
     /// A robot that leaves deletes its dynamics key first (`sample`): out at once. Returns

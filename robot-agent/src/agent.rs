@@ -153,9 +153,9 @@ pub async fn run_with<S: DynamicsSource>(
                     io.done(&mut core, done).await;
                     continue;
                 }
-                // The coordinator is gone: hold posture now rather than at the deadline.
-                tracing::warn!(%robot, "the coordinator left");
-                let out = core.enter_safe_mode("the coordinator left", Instant::now());
+                // The coordinator's token went: safe mode if it is not back within the grace
+                // (a link that drops and comes back), or at the command deadline if that is sooner.
+                let out = core.on_coordinator_lost(Instant::now());
                 let done = io.send(out).await?;
                 io.done(&mut core, done).await;
             }

@@ -12,6 +12,7 @@
 //! | [`AgentCore::on_contacts`] | a contact set | nothing (scheduled for its tick, see [`crate::contact_switch`]) |
 //! | [`AgentCore::on_timer`] | housekeeping, a few times per deadline | hold torques on entering safe mode, status, description |
 //! | [`AgentCore::on_coordinator`] | the coordinator appeared (liveliness) | the description; the latest terms again |
+//! | [`AgentCore::on_coordinator_lost`] | the coordinator's token went (liveliness) | nothing: safe mode follows from [`AgentCore::on_timer`] if it is not back within [`AgentConfig::coordinator_grace`] |
 //!
 //! Each returns [`Outputs`]: references into the core's preallocated buffers that the caller
 //! stamps (`header.stamp_ns`) and sends or applies, in the field order, then reports back with
@@ -56,6 +57,9 @@ pub struct AgentConfig {
     pub takeover: Duration,
     /// When the robot counts as fallen ([`crate::fall`]).
     pub fall: FallLimits,
+    /// How long the coordinator's liveliness token may be gone before the agent holds its
+    /// posture (unless the command deadline comes first); default [`COORDINATOR_GRACE`].
+    pub coordinator_grace: Duration,
 }
 
 impl AgentConfig {
@@ -74,6 +78,7 @@ impl AgentConfig {
             contacts: SwitchConfig::default(),
             takeover: DEFAULT_TAKEOVER,
             fall: FallLimits::default(),
+            coordinator_grace: COORDINATOR_GRACE,
         }
     }
 
@@ -95,6 +100,15 @@ impl AgentConfig {
 /// [`AgentConfig::takeover`] by default: 100 ms, a tenth of the robot's slowest task
 /// impedance period, long against a torque step, short against a fall.
 pub const DEFAULT_TAKEOVER: Duration = Duration::from_millis(100);
+
+/// [`AgentConfig::coordinator_grace`] by default: 100 ms, as the coordinator's own
+/// `DEPARTURE_GRACE` for a robot's token. A link to the coordinator that drops and comes back
+/// withdraws and declares its token again within a few milliseconds (Zenoh's first reconnect
+/// attempt is at 50 ms); the robot rides through it on its commands instead of entering the
+/// hold and blending back. A coordinator that is really gone sends no commands either: in real
+/// time the command deadline (25 ms by default) puts the agent in safe mode first; in lockstep,
+/// where that deadline is 20 s and the simulation waits for the robots, the grace does.
+pub const COORDINATOR_GRACE: Duration = Duration::from_millis(100);
 
 /// How far ahead of the latest state a command may be and still wait for its state: in real
 /// time the coordinator answers a tick with a late member's latest terms, and that member's
@@ -222,6 +236,9 @@ pub struct AgentCore<S: DynamicsSource> {
     description_period: Duration,
     last_status: Option<Instant>,
     last_description: Option<Instant>,
+    /// When the coordinator's token went, while it is gone ([`AgentCore::on_coordinator_lost`]).
+    coordinator_lost: Option<Instant>,
+    coordinator_grace: Duration,
 }
 
 impl<S: DynamicsSource> AgentCore<S> {
@@ -275,6 +292,8 @@ impl<S: DynamicsSource> AgentCore<S> {
             description_period: cfg.description_period,
             last_status: None,
             last_description: None,
+            coordinator_lost: None,
+            coordinator_grace: cfg.coordinator_grace,
             source,
         })
     }
@@ -540,6 +559,12 @@ impl<S: DynamicsSource> AgentCore<S> {
                 apply = Apply::Hold;
             }
         }
+        if self.coordinator_lost.take_if(|t| now.duration_since(*t) >= self.coordinator_grace).is_some() {
+            apply = match self.enter_hold("the coordinator left") {
+                Apply::Nothing => apply,
+                hold => hold,
+            };
+        }
         let status_due = self.last_status.is_none_or(|t| now.duration_since(t) >= self.status_period);
         if status_due {
             self.last_status = Some(now);
@@ -558,10 +583,24 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// at its next period.
     pub fn on_coordinator(&mut self, now: Instant) -> Outputs<'_> {
         self.last_description = Some(now);
+        self.coordinator_lost = None;
         // The latest terms go again: a link that dropped may have lost them, and the tick waits
         // for them (a coordinator that solved it already drops them as stale).
         let again = self.fall.fallen().is_none() && self.counters.dynamics > 0 && self.gate.latest_state_tick() == Some(self.terms.header.tick);
         Outputs { terms: again.then_some(&mut self.terms), description: self.description.as_mut(), ..Outputs::default() }
+    }
+
+    /// The coordinator's liveliness token went at `now`. Nothing changes yet: if it is not back
+    /// ([`AgentCore::on_coordinator`]) within [`AgentConfig::coordinator_grace`], the next
+    /// [`AgentCore::on_timer`] enters safe mode; with a zero grace this call does at once.
+    pub fn on_coordinator_lost(&mut self, now: Instant) -> Outputs<'_> {
+        self.coordinator_lost.get_or_insert(now);
+        if self.coordinator_grace.is_zero() {
+            self.coordinator_lost = None;
+            return self.enter_safe_mode("the coordinator left", now);
+        }
+        tracing::warn!(robot = %self.robot, grace = ?self.coordinator_grace, "the coordinator's token went; holding posture unless it is back within the grace");
+        Outputs::default()
     }
 
     /// Enter safe mode now, for a reason outside the core (the hardware asked to deactivate or
@@ -569,10 +608,17 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// already in safe mode.
     pub fn enter_safe_mode(&mut self, why: &str, now: Instant) -> Outputs<'_> {
         let mode_before = self.board.status.mode;
+        let apply = self.enter_hold(why);
+        self.outputs(now, mode_before, false, apply, false)
+    }
+
+    /// Safe mode for `why`, unless already in it or fallen: the hold at the latest state
+    /// ([`Apply::Hold`]), or, before any state, announced only ([`Apply::Nothing`]).
+    fn enter_hold(&mut self, why: &str) -> Apply {
         if self.watchdog.safe_mode_since().is_some() || self.fall.fallen().is_some() {
-            return Outputs::default();
+            return Apply::Nothing;
         }
-        let apply = match self.gate.latest_state_tick() {
+        match self.gate.latest_state_tick() {
             Some(tick) => {
                 self.enter_safe_mode_at(tick, why);
                 Apply::Hold
@@ -585,8 +631,7 @@ impl<S: DynamicsSource> AgentCore<S> {
                 tracing::warn!(robot = %self.robot, "entering safe mode before any state: {why}");
                 Apply::Nothing
             }
-        };
-        self.outputs(now, mode_before, false, apply, false)
+        }
     }
 
     fn enter_safe_mode_at(&mut self, tick: u64, why: &str) {

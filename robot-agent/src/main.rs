@@ -44,6 +44,11 @@ struct RunCmd {
     /// Without a valid command for this many state ticks the agent enters safe mode (0: off).
     #[arg(long, value_name = "TICKS", default_value_t = 5)]
     command_deadline_ticks: u64,
+    /// Hold posture when the coordinator's liveliness token has been gone this long (unless
+    /// the command deadline comes first); a link that drops and comes back within it changes
+    /// nothing. 0: hold at once.
+    #[arg(long, value_name = "MS", default_value_t = robot_agent::core::COORDINATOR_GRACE.as_millis() as u64)]
+    coordinator_grace_ms: u64,
     /// A swing foot counts as landed once its measured normal force reaches this, N (default:
     /// `contact_switch::SwitchConfig`'s, 20 N).
     #[arg(long, value_name = "N")]
@@ -80,6 +85,7 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
         .init();
     let mut cfg = AgentConfig::new(&cmd.team, &cmd.id).with_deadline_time(Duration::from_millis(cmd.command_deadline_ms));
     cfg.deadline.ticks = cmd.command_deadline_ticks;
+    cfg.coordinator_grace = Duration::from_millis(cmd.coordinator_grace_ms);
     if let Some(f) = cmd.touchdown_force {
         cfg.contacts.touchdown_force = f;
     }

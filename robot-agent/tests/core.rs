@@ -4,7 +4,7 @@
 use std::time::{Duration, Instant};
 
 use protocol::{AgentMode, ContactSet as ContactMsg, DynamicsTerms, Header, Matrix, Pose, RobotDescription, RobotState, TorqueCommand};
-use robot_agent::core::{AgentConfig, AgentCore, ContactRejection, Outputs, Sent, StateRejection};
+use robot_agent::core::{AgentConfig, AgentCore, ContactRejection, Outputs, Sent, StateRejection, COORDINATOR_GRACE};
 use robot_agent::dynamics_source::{DynamicsSource, SourceError};
 use robot_agent::gate::CommandRejection;
 use robot_agent::safe_mode::{CommandDeadline, HoldGains};
@@ -153,6 +153,51 @@ fn deadline_safe_mode_and_recovery_only_on_a_fresh_tick() {
     assert_eq!((counters.applied, counters.rejected, counters.hold_torques), (2, 3, 4));
     assert_eq!(c.status().commands_rejected, 3);
     assert!(c.status().last_rejection.as_deref().unwrap().contains("not newer"));
+}
+
+/// The coordinator's token going is not safe mode yet: back within the grace, commands go on
+/// as if nothing happened; gone for the grace, the next timer holds posture (the hold at the
+/// latest state, once), unless the command deadline came first.
+#[test]
+fn the_coordinator_gone_for_its_grace_is_safe_mode_and_back_within_it_is_nothing() {
+    // Lockstep-like: no time deadline, so only the grace can end the wait.
+    let t0 = Instant::now();
+    let grace = COORDINATOR_GRACE;
+    let mut c = core(CommandDeadline { ticks: 0, time: None });
+    c.start(t0);
+    let q = [0.1, -0.2, 0.3];
+    c.on_state(&state(0, q, [0.0; 3]), t0).unwrap();
+    c.on_command(&command(ID, 0, &[1.0, 2.0, 0.5]), t0).unwrap();
+    // A link that drops and comes back: the token goes and is back 5 ms later.
+    assert_eq!(summary(c.on_coordinator_lost(t0 + ms(10))), (None, None, false));
+    c.on_coordinator(t0 + ms(15));
+    assert_eq!(summary(c.on_timer(t0 + ms(10) + grace * 2)).1, None, "no hold after the token came back");
+    assert_eq!((c.mode(), c.counters().safe_mode_entries), (AgentMode::Commanded, 0));
+    c.on_state(&state(1, q, [0.0; 3]), t0 + grace * 2).unwrap();
+    let out = c.on_command(&command(ID, 1, &[1.5, 2.0, 0.5]), t0 + grace * 2).unwrap();
+    assert_eq!(summary(out).1, Some((1, vec![1.5, 2.0, 0.5])), "commands still apply");
+
+    // Gone for good: nothing before the grace, the hold at the first timer after it.
+    let lost = t0 + grace * 3;
+    c.on_coordinator_lost(lost);
+    c.on_coordinator_lost(lost + ms(20)); // a second event does not restart the grace
+    assert_eq!(summary(c.on_timer(lost + grace - ms(1))).1, None);
+    assert_eq!(c.mode(), AgentMode::Commanded);
+    let out = c.on_timer(lost + grace);
+    let (_, torques, status) = summary(out);
+    assert_eq!((torques.map(|t| t.0), status), (Some(1), true), "the hold at the latest state, announced");
+    assert_eq!((c.mode(), c.safe_mode_since(), c.counters().safe_mode_entries), (AgentMode::SafeMode, Some(1), 1));
+    assert_eq!(summary(c.on_timer(lost + grace * 2)).1, None, "entered once");
+    assert_eq!(c.counters().safe_mode_entries, 1);
+
+    // A zero grace holds at once, on the event.
+    let mut cfg = AgentConfig::new("t", ID);
+    cfg.coordinator_grace = Duration::ZERO;
+    let mut c = AgentCore::new(&cfg, Stub { feet: vec!["LF".into(), "RF".into()], last_contacts: None, floating: false }).unwrap();
+    c.on_state(&state(0, q, [0.0; 3]), t0).unwrap();
+    c.on_command(&command(ID, 0, &[1.0; 3]), t0).unwrap();
+    assert_eq!(summary(c.on_coordinator_lost(t0 + ms(1))).1.map(|t| t.0), Some(0));
+    assert_eq!(c.mode(), AgentMode::SafeMode);
 }
 
 #[test]

@@ -165,7 +165,8 @@ fn largest_step(records: &Records, robot: &str, from: u64, to: u64) -> (f64, u64
 }
 
 /// Fault 2: the coordinator dies mid-carry and a new one starts 0.2 s later. The agents hold
-/// their posture at once (its liveliness token goes; the hold carries the load the last
+/// their posture (its liveliness token gone for `COORDINATOR_GRACE`, the lockstep simulation
+/// waiting meanwhile; the hold carries the load the last
 /// command carried, so the object stays held), the new coordinator forms the team again (it
 /// waits for every robot of the plan), fits the object from the hands with the planned grasp,
 /// gets the references again from the driver, and the agents blend from their hold into its

@@ -1,7 +1,7 @@
 //! A lockstep run never waits without bound (the teams issue): a controller that fails a
 //! tick still commands every robot (hold orders, said in the diagnostics); an agent that
 //! leaves ends the run at once, naming its robot; when the coordinator leaves, the agents hold
-//! their posture at once and the run ends after a grace counted in simulated ticks; a member
+//! their posture after its grace (`COORDINATOR_GRACE`) and the run ends after a grace counted in simulated ticks; a member
 //! whose token vanishes is waited for a bounded grace (its link may come back), one that says
 //! it leaves is not.
 //!
@@ -132,7 +132,7 @@ async fn when_the_coordinator_leaves_the_robots_hold_and_the_run_ends_after_the_
     assert!(gone.elapsed() >= Duration::from_millis(grace * 9 / 10), "the outage's ticks were paced: {:?}", gone.elapsed());
     for a in agents {
         let counters = stop(a).await;
-        assert_eq!(counters.safe_mode_entries, 1, "safe mode at once, on the liveliness event");
+        assert_eq!(counters.safe_mode_entries, 1, "safe mode once, the coordinator's grace after its token went");
         // Every tick of the grace but possibly the one on which the bridge saw the token go
         // (the agent may have applied the coordinator's last command for it).
         assert!(counters.hold_torques >= grace - 1, "the robots held their posture through the grace: {}", counters.hold_torques);
@@ -299,4 +299,51 @@ async fn a_vanished_token_is_waited_for_and_an_announced_leave_is_not() {
     assert_eq!(st.members, vec!["r2".to_string()], "r1 gone, r2 (its token held) still listed: {st:?}");
     stop(c).await;
     s.close().await.unwrap();
+}
+
+/// A command lost on the way (a link that dropped just after the coordinator sent it): the
+/// agent's terms of that tick come again (the bridge republishes the state it waits on, or the
+/// coordinator reappears), and the coordinator sends that robot's command of the tick again,
+/// not the other's; terms of an older tick get nothing. Without the repeat a lockstep run
+/// waited out the agents' 20 s deadline (found resetting a robot's link across test hosts).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn terms_sent_again_for_the_tick_last_solved_get_its_command_again() {
+    let team = "hang7";
+    let s = session().await;
+    let statuses = transport::subscribe(&s, keys::coordinator_status(team).unwrap()).await.unwrap();
+    let c = coordinator(&s, team, Box::new(FailsEvery { every: u64::MAX }));
+    let _tokens = [transport::declare_member(&s, team, "r1").await.unwrap(), transport::declare_member(&s, team, "r2").await.unwrap()];
+    let mut queues = Vec::new();
+    let mut pubs = Vec::new();
+    for r in ["r1", "r2"] {
+        queues.push(transport::subscribe(&s, keys::robot(team, r, keys::RobotTopic::Command).unwrap()).await.unwrap());
+        pubs.push(transport::TypedPublisher::declare(&s, keys::robot(team, r, keys::RobotTopic::Dynamics).unwrap(), transport::Qos::HotPath).await.unwrap());
+    }
+    status_where(&statuses, |st| st.members.len() == 2, "both members").await;
+    for tick in [1, 2] {
+        for (i, r) in ["r1", "r2"].into_iter().enumerate() {
+            pubs[i].put(&terms(team, r, tick)).await.unwrap();
+        }
+        for q in &queues {
+            let cmd = next_command(q).await.expect("a command");
+            assert_eq!((cmd.header.tick, cmd.hold), (tick, false), "{cmd:?}");
+        }
+    }
+    // r1's terms of tick 2 again: its command of tick 2 again, the same torques; none for r2.
+    pubs[0].put(&terms(team, "r1", 2)).await.unwrap();
+    let again = next_command(&queues[0]).await.expect("r1's command of tick 2 sent again");
+    assert_eq!((again.header.tick, again.hold, again.tau.len()), (2, false, JOINTS));
+    assert!(next_command(&queues[1]).await.is_none(), "r2 asked nothing");
+    // Terms of tick 1, older than the last solved: dropped, nothing sent.
+    pubs[0].put(&terms(team, "r1", 1)).await.unwrap();
+    assert!(next_command(&queues[0]).await.is_none(), "no command for a tick older than the last solved");
+    let counters = stop(c).await;
+    assert_eq!(counters.repeated_commands, 1, "{counters:?}");
+    s.close().await.unwrap();
+}
+
+/// The next command on `queue`, if one comes within 2 s.
+async fn next_command(queue: &transport::SampleQueue) -> Option<TorqueCommand> {
+    let sample = tokio::time::timeout(Duration::from_secs(2), queue.recv_async()).await.ok()?;
+    Some(decode_sample(&sample.expect("the queue is open")).expect("a command"))
 }
