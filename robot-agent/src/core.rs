@@ -585,7 +585,8 @@ impl<S: DynamicsSource> AgentCore<S> {
         self.last_description = Some(now);
         self.coordinator_lost = None;
         // The latest terms go again: a link that dropped may have lost them, and the tick waits
-        // for them (a coordinator that solved it already drops them as stale).
+        // for them (a coordinator that solved it already sends its command again: it may be
+        // the command that was lost).
         let again = self.fall.fallen().is_none() && self.counters.dynamics > 0 && self.gate.latest_state_tick() == Some(self.terms.header.tick);
         Outputs { terms: again.then_some(&mut self.terms), description: self.description.as_mut(), ..Outputs::default() }
     }
