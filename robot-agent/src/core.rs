@@ -584,10 +584,14 @@ impl<S: DynamicsSource> AgentCore<S> {
     pub fn on_coordinator(&mut self, now: Instant) -> Outputs<'_> {
         self.last_description = Some(now);
         self.coordinator_lost = None;
-        // The latest terms go again: a link that dropped may have lost them, and the tick waits
-        // for them (a coordinator that solved it already sends its command again: it may be
-        // the command that was lost).
-        let again = self.fall.fallen().is_none() && self.counters.dynamics > 0 && self.gate.latest_state_tick() == Some(self.terms.header.tick);
+        // The latest terms go again while their state is unanswered: a link that dropped may
+        // have lost them, and the tick waits for them (a coordinator that solved it already
+        // sends its command again: it may be the command that was lost). Once the state is
+        // answered (its command applied, or the hold in safe mode) nobody waits for them, and
+        // a restarted coordinator would solve a tick the robots have passed.
+        let latest = self.gate.latest_state_tick();
+        let unanswered = self.watchdog.safe_mode_since().is_none() && self.gate.last_applied_tick() != latest;
+        let again = unanswered && self.fall.fallen().is_none() && self.counters.dynamics > 0 && latest == Some(self.terms.header.tick);
         Outputs { terms: again.then_some(&mut self.terms), description: self.description.as_mut(), ..Outputs::default() }
     }
 

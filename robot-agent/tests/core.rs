@@ -168,12 +168,15 @@ fn the_coordinator_gone_for_its_grace_is_safe_mode_and_back_within_it_is_nothing
     let q = [0.1, -0.2, 0.3];
     c.on_state(&state(0, q, [0.0; 3]), t0).unwrap();
     c.on_command(&command(ID, 0, &[1.0, 2.0, 0.5]), t0).unwrap();
-    // A link that drops and comes back: the token goes and is back 5 ms later.
+    // A link that drops and comes back: the token goes and is back 5 ms later. Tick 0 is
+    // answered (its command applied): its terms do not go again.
     assert_eq!(summary(c.on_coordinator_lost(t0 + ms(10))), (None, None, false));
-    c.on_coordinator(t0 + ms(15));
+    assert_eq!(summary(c.on_coordinator(t0 + ms(15))).0, None, "an answered state's terms do not go again");
     assert_eq!(summary(c.on_timer(t0 + ms(10) + grace * 2)).1, None, "no hold after the token came back");
     assert_eq!((c.mode(), c.counters().safe_mode_entries), (AgentMode::Commanded, 0));
     c.on_state(&state(1, q, [0.0; 3]), t0 + grace * 2).unwrap();
+    // Tick 1 unanswered (its terms or its command may be lost in a drop): its terms go again.
+    assert_eq!(summary(c.on_coordinator(t0 + grace * 2)).0, Some(1), "the unanswered state's terms again");
     let out = c.on_command(&command(ID, 1, &[1.5, 2.0, 0.5]), t0 + grace * 2).unwrap();
     assert_eq!(summary(out).1, Some((1, vec![1.5, 2.0, 0.5])), "commands still apply");
 
@@ -189,6 +192,10 @@ fn the_coordinator_gone_for_its_grace_is_safe_mode_and_back_within_it_is_nothing
     assert_eq!((c.mode(), c.safe_mode_since(), c.counters().safe_mode_entries), (AgentMode::SafeMode, Some(1), 1));
     assert_eq!(summary(c.on_timer(lost + grace * 2)).1, None, "entered once");
     assert_eq!(c.counters().safe_mode_entries, 1);
+    // A coordinator that comes back (restarted) to an agent in safe mode: its hold answered the
+    // state, so no terms of a tick the robot has passed.
+    c.on_state(&state(2, q, [0.0; 3]), lost + grace * 2).unwrap();
+    assert_eq!(summary(c.on_coordinator(lost + grace * 3)).0, None, "no terms again in safe mode");
 
     // A zero grace holds at once, on the event.
     let mut cfg = AgentConfig::new("t", ID);
