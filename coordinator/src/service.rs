@@ -81,6 +81,7 @@ struct Service<'a> {
     diag_pub: TypedPublisher<TickDiagnostics>,
     status_pub: TypedPublisher<CoordinatorStatus>,
     command_pubs: BTreeMap<String, TypedPublisher<TorqueCommand>>,
+    /// The commands of the last solved tick (what `repeat_command` sends again).
     commands: Vec<TorqueCommand>,
     counters: CoordinatorCounters,
     refs: ReferenceBuffer,
@@ -300,8 +301,8 @@ impl Service<'_> {
 
     /// Terms of the tick last solved from a member whose own terms it was solved with: its
     /// agent is asking again, so its command did not arrive (a link that dropped and came back;
-    /// in lockstep the bridge republishes a state whose torques it waits for, and the agent
-    /// answers each with its terms). Its command goes again; an agent that has it already
+    /// in lockstep the bridge republishes the tick's states while it waits for some robot's
+    /// torques, and an agent whose state is still unanswered answers each with its terms). Its command goes again; an agent that has it already
     /// refuses the repeat as stale. Terms reused for that tick (a late member in real time) are
     /// not a repeat: the command answered other terms, and a late one is dropped.
     async fn repeat_command(&mut self, robot: &str, tick: u64) -> Result<(), TransportError> {
@@ -341,9 +342,9 @@ impl Service<'_> {
     async fn hold_one(&mut self, robot: &str, tick: u64, why: &str) -> Result<(), TransportError> {
         self.counters.held += 1;
         tracing::debug!(robot, tick, "{why}: it holds its posture this tick");
-        self.commands.clear();
-        self.commands.push(TorqueCommand::hold(&self.cfg.team, robot, tick));
-        publish_commands(self.session, &self.cfg, &self.commands, &mut self.command_pubs, &mut self.counters).await
+        // Not into `commands`: they stay the last solved tick's, for `repeat_command`.
+        let order = TorqueCommand::hold(&self.cfg.team, robot, tick);
+        publish_commands(self.session, &self.cfg, std::slice::from_ref(&order), &mut self.command_pubs, &mut self.counters).await
     }
 
     /// Ticks due for reuse: solve the newest (with its late members' latest terms), leaving out

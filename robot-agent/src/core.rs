@@ -311,6 +311,9 @@ impl<S: DynamicsSource> AgentCore<S> {
     pub fn on_state(&mut self, state: &RobotState, now: Instant) -> Result<Outputs<'_>, StateRejection> {
         let mode_before = self.board.status.mode;
         let tick = state.header.tick;
+        // The same state again (the lockstep bridge republishes while it waits for some robot's
+        // torques): its terms go again only while it is unanswered, as in `on_coordinator`.
+        let repeat = self.gate.latest_state_tick() == Some(tick) && !self.unanswered();
         if let Err(r) = self.admit_state(state, now) {
             self.counters.states_rejected += 1;
             tracing::warn!(robot = %self.robot, "{r}");
@@ -354,7 +357,13 @@ impl<S: DynamicsSource> AgentCore<S> {
             self.enter_safe_mode_at(tick, "no valid command in time");
         }
         let apply = if self.watchdog.safe_mode_since().is_some() { Apply::Hold } else { Apply::Nothing };
-        Ok(self.outputs(now, mode_before, terms, apply, false))
+        Ok(self.outputs(now, mode_before, terms && !repeat, apply, false))
+    }
+
+    /// Whether the latest state still waits for its answer: no command applied for it, and not
+    /// in safe mode (whose hold answers every state).
+    fn unanswered(&self) -> bool {
+        self.watchdog.safe_mode_since().is_none() && self.gate.last_applied_tick() != self.gate.latest_state_tick()
     }
 
     fn admit_state(&mut self, state: &RobotState, now: Instant) -> Result<(), StateRejection> {
@@ -589,9 +598,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         // sends its command again: it may be the command that was lost). Once the state is
         // answered (its command applied, or the hold in safe mode) nobody waits for them, and
         // a restarted coordinator would solve a tick the robots have passed.
-        let latest = self.gate.latest_state_tick();
-        let unanswered = self.watchdog.safe_mode_since().is_none() && self.gate.last_applied_tick() != latest;
-        let again = unanswered && self.fall.fallen().is_none() && self.counters.dynamics > 0 && latest == Some(self.terms.header.tick);
+        let again = self.unanswered() && self.fall.fallen().is_none() && self.counters.dynamics > 0 && self.gate.latest_state_tick() == Some(self.terms.header.tick);
         Outputs { terms: again.then_some(&mut self.terms), description: self.description.as_mut(), ..Outputs::default() }
     }
 

@@ -175,10 +175,14 @@ fn the_coordinator_gone_for_its_grace_is_safe_mode_and_back_within_it_is_nothing
     assert_eq!(summary(c.on_timer(t0 + ms(10) + grace * 2)).1, None, "no hold after the token came back");
     assert_eq!((c.mode(), c.counters().safe_mode_entries), (AgentMode::Commanded, 0));
     c.on_state(&state(1, q, [0.0; 3]), t0 + grace * 2).unwrap();
-    // Tick 1 unanswered (its terms or its command may be lost in a drop): its terms go again.
+    // Tick 1 unanswered (its terms or its command may be lost in a drop): its terms go again,
+    // to a coordinator that appears and for the state republished.
     assert_eq!(summary(c.on_coordinator(t0 + grace * 2)).0, Some(1), "the unanswered state's terms again");
+    assert_eq!(summary(c.on_state(&state(1, q, [0.0; 3]), t0 + grace * 2).unwrap()).0, Some(1), "the republished unanswered state's terms");
     let out = c.on_command(&command(ID, 1, &[1.5, 2.0, 0.5]), t0 + grace * 2).unwrap();
     assert_eq!(summary(out).1, Some((1, vec![1.5, 2.0, 0.5])), "commands still apply");
+    // Answered: republished for another robot's sake, it sends nothing.
+    assert_eq!(summary(c.on_state(&state(1, q, [0.0; 3]), t0 + grace * 2).unwrap()), (None, None, false), "an answered state republished: no terms");
 
     // Gone for good: nothing before the grace, the hold at the first timer after it.
     let lost = t0 + grace * 3;
