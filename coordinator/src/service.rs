@@ -70,7 +70,7 @@ pub struct CoordinatorCounters {
     /// Times a member went silent and was left out.
     pub silenced: u64,
     /// Commands sent again: a member sent the terms of the tick last solved with them again
-    /// (its command was lost; [`Service::repeat_command`]).
+    /// (its command was lost; [`Service::answer_again`]).
     pub repeated_commands: u64,
 }
 
@@ -81,7 +81,7 @@ struct Service<'a> {
     diag_pub: TypedPublisher<TickDiagnostics>,
     status_pub: TypedPublisher<CoordinatorStatus>,
     command_pubs: BTreeMap<String, TypedPublisher<TorqueCommand>>,
-    /// The commands of the last solved tick (what `repeat_command` sends again).
+    /// The commands of the last solved tick (what `answer_again` sends again).
     commands: Vec<TorqueCommand>,
     counters: CoordinatorCounters,
     refs: ReferenceBuffer,
@@ -273,8 +273,12 @@ impl Service<'_> {
                     Admission::Hold(why) => {
                         team_changed |= self.roster.team().len() != before;
                         self.hold_one(&robot, tick, &why).await?;
-                        // The tick goes on without it (admitted, it is in from the next tick).
-                        assembler.hold(&robot, tick, self.roster.team())
+                        // The tick goes on without it (admitted, it is in from the next tick);
+                        // a tick solved already needs nothing more: the hold order answered it.
+                        match assembler.hold(&robot, tick, self.roster.team()) {
+                            TickOutcome::Stale(_) => TickOutcome::Pending,
+                            outcome => outcome,
+                        }
                     }
                     Admission::Team => assembler.add(terms, self.roster.team()),
                 };
@@ -286,9 +290,9 @@ impl Service<'_> {
                         }
                     }
                     TickOutcome::Stale(t) => {
-                        tracing::debug!(tick = t, "late dynamics terms dropped");
+                        tracing::debug!(tick = t, "dynamics terms of a tick solved already");
                         if assembler.last_completed() == Some(t) {
-                            self.repeat_command(&robot, t).await?;
+                            self.answer_again(&robot, t).await?;
                         }
                     }
                     TickOutcome::Pending => {}
@@ -299,17 +303,24 @@ impl Service<'_> {
         Ok((newest, team_changed))
     }
 
-    /// Terms of the tick last solved from a member whose own terms it was solved with: its
-    /// agent is asking again, so its command did not arrive (a link that dropped and came back;
-    /// in lockstep the bridge republishes the tick's states while it waits for some robot's
-    /// torques, and an agent whose state is still unanswered answers each with its terms). Its command goes again; an agent that has it already
-    /// refuses the repeat as stale. Terms reused for that tick (a late member in real time) are
-    /// not a repeat: the command answered other terms, and a late one is dropped.
-    async fn repeat_command(&mut self, robot: &str, tick: u64) -> Result<(), TransportError> {
+    /// Terms of the tick last solved, arriving after it was solved (a robot of the team sends
+    /// them again, or one that joined sends them late). Nobody is left waiting for a command:
+    /// * a robot solved with its own terms is asking again, so its command did not arrive (a
+    ///   link that dropped and came back; in lockstep the bridge republishes the tick's states
+    ///   while it waits for some robot's torques, and an agent whose state is still unanswered
+    ///   answers each with its terms): its command goes again;
+    /// * a robot that was not in that tick (it joined, or came back, after the tick was
+    ///   solved without it; the lockstep bridge waits for its torques from the tick it joined)
+    ///   gets a hold order for it, as a robot whose terms beat its token does;
+    /// * a robot whose terms that tick reused (a late member in real time) was commanded: its
+    ///   late terms are dropped.
+    async fn answer_again(&mut self, robot: &str, tick: u64) -> Result<(), TransportError> {
         if self.stale.iter().any(|r| r == robot) {
             return Ok(());
         }
-        let Some(cmd) = self.commands.iter().find(|c| c.header.tick == tick && c.header.robot_id() == robot) else { return Ok(()) };
+        let Some(cmd) = self.commands.iter().find(|c| c.header.tick == tick && c.header.robot_id() == robot) else {
+            return self.hold_one(robot, tick, "its terms came after its tick was solved without it").await;
+        };
         let Some(publisher) = self.command_pubs.get_mut(robot) else { return Ok(()) };
         // What was sent: the controller's command, or the hold order that replaced an invalid one.
         match cmd.validate() {
@@ -342,7 +353,7 @@ impl Service<'_> {
     async fn hold_one(&mut self, robot: &str, tick: u64, why: &str) -> Result<(), TransportError> {
         self.counters.held += 1;
         tracing::debug!(robot, tick, "{why}: it holds its posture this tick");
-        // Not into `commands`: they stay the last solved tick's, for `repeat_command`.
+        // Not into `commands`: they stay the last solved tick's, for `answer_again`.
         let order = TorqueCommand::hold(&self.cfg.team, robot, tick);
         publish_commands(self.session, &self.cfg, std::slice::from_ref(&order), &mut self.command_pubs, &mut self.counters).await
     }

@@ -304,7 +304,8 @@ async fn a_vanished_token_is_waited_for_and_an_announced_leave_is_not() {
 /// A command lost on the way (a link that dropped just after the coordinator sent it): the
 /// agent's terms of that tick come again (the bridge republishes the state it waits on, or the
 /// coordinator reappears), and the coordinator sends that robot's command of the tick again,
-/// not the other's; terms of an older tick get nothing. Without the repeat a lockstep run
+/// not the other's; terms of an older tick get nothing; a robot that joined after the tick was
+/// solved gets a hold order for it. Without the repeat a lockstep run
 /// waited out the agents' 20 s deadline (found resetting a robot's link across test hosts).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn terms_sent_again_for_the_tick_last_solved_get_its_command_again() {
@@ -337,6 +338,17 @@ async fn terms_sent_again_for_the_tick_last_solved_get_its_command_again() {
     // Terms of tick 1, older than the last solved: dropped, nothing sent.
     pubs[0].put(&terms(team, "r1", 1)).await.unwrap();
     assert!(next_command(&queues[0]).await.is_none(), "no command for a tick older than the last solved");
+    // r3 joins after tick 2 was solved without it and sends its terms of tick 2 (a restarted
+    // agent's first state; the lockstep bridge waits for its torques of that tick): a hold order
+    // for tick 2, not silence (before: lockstep waited out the 20 s deadline,
+    // faults.rs an_agent_restarted...).
+    let q3 = transport::subscribe(&s, keys::robot(team, "r3", keys::RobotTopic::Command).unwrap()).await.unwrap();
+    let mut p3 = transport::TypedPublisher::declare(&s, keys::robot(team, "r3", keys::RobotTopic::Dynamics).unwrap(), transport::Qos::HotPath).await.unwrap();
+    let _t3 = transport::declare_member(&s, team, "r3").await.unwrap();
+    status_where(&statuses, |st| st.members.len() == 3, "r3 a member").await;
+    p3.put(&terms(team, "r3", 2)).await.unwrap();
+    let held = next_command(&q3).await.expect("r3 answered for tick 2");
+    assert_eq!((held.header.tick, held.hold), (2, true), "a hold order for the tick solved without it: {held:?}");
     let counters = stop(c).await;
     assert_eq!(counters.repeated_commands, 1, "{counters:?}");
     s.close().await.unwrap();
