@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, MemberEvent, Qos, TransportError, TypedPublisher};
-use protocol::{CoordinatorMode, CoordinatorStatus, DynamicsTerms, Header, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
+use protocol::{CoordinatorMode, CoordinatorStatus, DynamicsTerms, Header, ProtocolError, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
 use protocol::validate::Validate;
 use tokio::sync::watch;
 use zenoh::sample::SampleKind;
@@ -322,11 +322,9 @@ impl Service<'_> {
             return self.hold_one(robot, tick, "its terms came after its tick was solved without it").await;
         };
         let Some(publisher) = self.command_pubs.get_mut(robot) else { return Ok(()) };
-        // What was sent: the controller's command, or the hold order that replaced an invalid one.
-        match cmd.validate() {
-            Ok(()) => publisher.put(cmd).await?,
-            Err(_) => publisher.put(&TorqueCommand::hold(&self.cfg.team, robot, tick)).await?,
-        }
+        // What was sent: the controller's command, or the hold order that replaced an invalid
+        // one (counted as a controller error when it was first sent).
+        let _ = put_checked(publisher, &self.cfg.team, cmd).await?;
         self.counters.repeated_commands += 1;
         tracing::info!(robot, tick, "terms of the tick last solved came again: its command sent again");
         Ok(())
@@ -587,18 +585,26 @@ async fn publish_commands(
             command_pubs.insert(robot.to_string(), TypedPublisher::declare(session, key, Qos::HotPath).await?);
         }
         let publisher = command_pubs.get_mut(robot).expect("declared above");
-        match cmd.validate() {
-            Ok(()) => publisher.put(cmd).await?,
-            Err(e) => {
-                // A controller's bad message never ends the coordinator: that robot holds.
-                counters.controller_errors += 1;
-                tracing::error!(robot, tick = cmd.header.tick, "invalid command from the controller ({e}); the robot holds its posture this tick");
-                publisher.put(&TorqueCommand::hold(&cfg.team, robot, cmd.header.tick)).await?;
-            }
+        if let Err(e) = put_checked(publisher, &cfg.team, cmd).await? {
+            // A controller's bad message never ends the coordinator: that robot holds.
+            counters.controller_errors += 1;
+            tracing::error!(robot, tick = cmd.header.tick, "invalid command from the controller ({e}); the robot holds its posture this tick");
         }
         counters.commands_sent += 1;
     }
     Ok(())
+}
+
+/// Put `cmd` on its robot's `publisher`, or, if it is invalid, a hold order for its tick in its
+/// place (the robot holds its posture). Returns why it was invalid.
+async fn put_checked(publisher: &mut TypedPublisher<TorqueCommand>, team: &str, cmd: &TorqueCommand) -> Result<Result<(), ProtocolError>, TransportError> {
+    match cmd.validate() {
+        Ok(()) => publisher.put(cmd).await.map(Ok),
+        Err(e) => {
+            publisher.put(&TorqueCommand::hold(team, cmd.header.robot_id(), cmd.header.tick)).await?;
+            Ok(Err(e))
+        }
+    }
 }
 
 

@@ -606,11 +606,10 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// ([`AgentCore::on_coordinator`]) within [`AgentConfig::coordinator_grace`], the next
     /// [`AgentCore::on_timer`] enters safe mode; with a zero grace this call does at once.
     pub fn on_coordinator_lost(&mut self, now: Instant) -> Outputs<'_> {
-        self.coordinator_lost.get_or_insert(now);
         if self.coordinator_grace.is_zero() {
-            self.coordinator_lost = None;
             return self.enter_safe_mode("the coordinator left", now);
         }
+        self.coordinator_lost.get_or_insert(now);
         tracing::warn!(robot = %self.robot, grace = ?self.coordinator_grace, "the coordinator's token went; holding posture unless it is back within the grace");
         Outputs::default()
     }

@@ -253,11 +253,11 @@ async fn a_vanished_token_is_waited_for_and_an_announced_leave_is_not() {
     let statuses = transport::subscribe(&s, keys::coordinator_status(team).unwrap()).await.unwrap();
     let c = coordinator(&s, team, Box::new(FailsEvery { every: u64::MAX }));
     let mut tokens = vec![Some(transport::declare_member(&s, team, "r1").await.unwrap()), Some(transport::declare_member(&s, team, "r2").await.unwrap())];
-    let mut queues = Vec::new();
-    let mut pubs = Vec::new();
+    let (mut queues, mut pubs) = (Vec::new(), Vec::new());
     for r in ["r1", "r2"] {
-        queues.push(transport::subscribe(&s, keys::robot(team, r, keys::RobotTopic::Command).unwrap()).await.unwrap());
-        pubs.push(transport::TypedPublisher::declare(&s, keys::robot(team, r, keys::RobotTopic::Dynamics).unwrap(), transport::Qos::HotPath).await.unwrap());
+        let (q, p) = robot_keys(&s, team, r).await;
+        queues.push(q);
+        pubs.push(p);
     }
     status_where(&statuses, |st| st.members.len() == 2, "both members").await;
     // Tick 1, the team's first: both commanded.
@@ -314,11 +314,11 @@ async fn terms_sent_again_for_the_tick_last_solved_get_its_command_again() {
     let statuses = transport::subscribe(&s, keys::coordinator_status(team).unwrap()).await.unwrap();
     let c = coordinator(&s, team, Box::new(FailsEvery { every: u64::MAX }));
     let _tokens = [transport::declare_member(&s, team, "r1").await.unwrap(), transport::declare_member(&s, team, "r2").await.unwrap()];
-    let mut queues = Vec::new();
-    let mut pubs = Vec::new();
+    let (mut queues, mut pubs) = (Vec::new(), Vec::new());
     for r in ["r1", "r2"] {
-        queues.push(transport::subscribe(&s, keys::robot(team, r, keys::RobotTopic::Command).unwrap()).await.unwrap());
-        pubs.push(transport::TypedPublisher::declare(&s, keys::robot(team, r, keys::RobotTopic::Dynamics).unwrap(), transport::Qos::HotPath).await.unwrap());
+        let (q, p) = robot_keys(&s, team, r).await;
+        queues.push(q);
+        pubs.push(p);
     }
     status_where(&statuses, |st| st.members.len() == 2, "both members").await;
     for tick in [1, 2] {
@@ -342,8 +342,7 @@ async fn terms_sent_again_for_the_tick_last_solved_get_its_command_again() {
     // agent's first state; the lockstep bridge waits for its torques of that tick): a hold order
     // for tick 2, not silence (before: lockstep waited out the 20 s deadline,
     // faults.rs an_agent_restarted...).
-    let q3 = transport::subscribe(&s, keys::robot(team, "r3", keys::RobotTopic::Command).unwrap()).await.unwrap();
-    let mut p3 = transport::TypedPublisher::declare(&s, keys::robot(team, "r3", keys::RobotTopic::Dynamics).unwrap(), transport::Qos::HotPath).await.unwrap();
+    let (q3, mut p3) = robot_keys(&s, team, "r3").await;
     let _t3 = transport::declare_member(&s, team, "r3").await.unwrap();
     status_where(&statuses, |st| st.members.len() == 3, "r3 a member").await;
     p3.put(&terms(team, "r3", 2)).await.unwrap();
@@ -358,4 +357,11 @@ async fn terms_sent_again_for_the_tick_last_solved_get_its_command_again() {
 async fn next_command(queue: &transport::SampleQueue) -> Option<TorqueCommand> {
     let sample = tokio::time::timeout(Duration::from_secs(2), queue.recv_async()).await.ok()?;
     Some(decode_sample(&sample.expect("the queue is open")).expect("a command"))
+}
+
+/// A stand-in robot's two keys: the queue of its commands and the publisher of its terms.
+async fn robot_keys(s: &zenoh::Session, team: &str, robot: &str) -> (transport::SampleQueue, transport::TypedPublisher<DynamicsTerms>) {
+    let commands = transport::subscribe(s, keys::robot(team, robot, keys::RobotTopic::Command).unwrap()).await.unwrap();
+    let dynamics = transport::TypedPublisher::declare(s, keys::robot(team, robot, keys::RobotTopic::Dynamics).unwrap(), transport::Qos::HotPath).await.unwrap();
+    (commands, dynamics)
 }
