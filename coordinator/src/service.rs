@@ -83,6 +83,8 @@ struct Service<'a> {
     command_pubs: BTreeMap<String, TypedPublisher<TorqueCommand>>,
     /// The commands of the last solved tick (what `answer_again` sends again).
     commands: Vec<TorqueCommand>,
+    /// The tick `commands` belong to (none before the first solve).
+    solved_tick: Option<u64>,
     counters: CoordinatorCounters,
     refs: ReferenceBuffer,
     roster: Roster,
@@ -117,6 +119,7 @@ pub async fn run(
         status_pub: TypedPublisher::declare(session, keys::coordinator_status(&cfg.team)?, Qos::Telemetry).await?,
         command_pubs: BTreeMap::new(),
         commands: Vec::new(),
+        solved_tick: None,
         counters: CoordinatorCounters::default(),
         refs: ReferenceBuffer::default(),
         roster: Roster::default(),
@@ -313,9 +316,12 @@ impl Service<'_> {
     ///   solved without it; the lockstep bridge waits for its torques from the tick it joined)
     ///   gets a hold order for it, as a robot whose terms beat its token does;
     /// * a robot whose terms that tick reused (a late member in real time) was commanded: its
-    ///   late terms are dropped.
+    ///   late terms are dropped;
+    /// * a tick complete but not solved yet (`gather` drains the queue before solving it) is
+    ///   answered by its solve: nothing is sent now. A hold order here would reach the robot
+    ///   before its command, which it would then refuse as not newer.
     async fn answer_again(&mut self, robot: &str, tick: u64) -> Result<(), TransportError> {
-        if self.stale.iter().any(|r| r == robot) {
+        if self.solved_tick != Some(tick) || self.stale.iter().any(|r| r == robot) {
             return Ok(());
         }
         let Some(cmd) = self.commands.iter().find(|c| c.header.tick == tick && c.header.robot_id() == robot) else {
@@ -416,6 +422,7 @@ impl Service<'_> {
         self.refs.drain(references);
         self.refs.apply(tick, controller);
         let solved = solve_and_publish(self.session, &self.cfg, controller, tick, &terms, &mut self.commands, &mut self.command_pubs, &mut self.diag_pub, &mut self.counters).await?;
+        self.solved_tick = Some(tick);
         if solved && !self.roster.started() {
             tracing::info!(tick, team = ?self.roster.team(), "the team's first tick is solved");
             self.roster.start();

@@ -494,7 +494,12 @@ impl<S: DynamicsSource> AgentCore<S> {
 
     fn reject(&mut self, r: CommandRejection) -> CommandRejection {
         self.counters.rejected += 1;
-        tracing::warn!(robot = %self.robot, "rejected command: {r}");
+        match r {
+            // A copy of the command applied last: the coordinator sent it again for terms of
+            // the tick that crossed it (the lockstep bridge republishes states while it waits).
+            CommandRejection::Stale { tick, last } if tick == last => tracing::debug!(robot = %self.robot, "rejected command: {r} (a copy)"),
+            _ => tracing::warn!(robot = %self.robot, "rejected command: {r}"),
+        }
         self.board.status.last_rejection = Some(r.to_string());
         r
     }
