@@ -16,7 +16,7 @@ use robot_agent::core::{AgentConfig, AgentCore};
 use robot_agent::dynamics_source::PlaceholderDynamics;
 use robot_agent::hardware::driver::{self, DriverConfig, DriverError, DriverExit};
 use robot_agent::hardware::mock::Lifecycle;
-use robot_agent::hardware::{HwStatus, Inbound, MockConfig, MockFault, MockHardware, TeamLink, ZenohLink};
+use robot_agent::hardware::{HwStatus, Inbound, MockConfig, MockFault, MockHardware, Presence, TeamLink, ZenohLink};
 use robot_agent::safe_mode::{CommandDeadline, HoldGains};
 
 const ID: &str = "r1";
@@ -66,6 +66,11 @@ struct TeamInMemory {
     stop: Arc<AtomicBool>,
     /// Times the loop withdrew the membership.
     left: u32,
+    /// The coordinator's comings and goings, each reported once the loop has sent the terms
+    /// of its tick.
+    presence: VecDeque<(u64, Presence)>,
+    /// The tick of the last terms sent.
+    last_terms: Option<u64>,
 }
 
 impl TeamInMemory {
@@ -79,6 +84,8 @@ impl TeamInMemory {
             ticks,
             stop: Arc::new(AtomicBool::new(false)),
             left: 0,
+            presence: VecDeque::new(),
+            last_terms: None,
         }
     }
 }
@@ -86,6 +93,7 @@ impl TeamInMemory {
 impl TeamLink for TeamInMemory {
     fn send_terms(&mut self, terms: &DynamicsTerms) -> Result<(), TransportError> {
         let tick = terms.header.tick;
+        self.last_terms = Some(tick);
         if (self.answering)(tick) {
             self.controller.solve(std::slice::from_ref(terms), &mut self.out).unwrap();
             self.commands.extend(self.out.drain(..));
@@ -107,6 +115,10 @@ impl TeamLink for TeamInMemory {
     }
     fn try_recv_contacts(&mut self) -> Inbound<ContactSet> {
         Inbound::Empty
+    }
+    fn try_recv_coordinator(&mut self) -> Option<Presence> {
+        let due = self.presence.front().is_some_and(|(t, _)| self.last_terms.is_some_and(|l| l >= *t));
+        due.then(|| self.presence.pop_front().map(|(_, p)| p)).flatten()
     }
     fn leave_team(&mut self) -> Result<(), TransportError> {
         self.left += 1;
@@ -154,6 +166,56 @@ fn in_memory_team_damps_the_mock_exactly_then_safe_mode_holds_when_it_goes_silen
     assert_eq!((safe[0].header.tick, safe[0].last_applied_tick), (54, Some(49)));
     let c = &report.counters;
     assert_eq!((c.states, c.dynamics, c.applied, c.rejected, c.safe_mode_entries, c.hold_torques), (80, 80, 50, 0, 1, 26));
+}
+
+/// The coordinator's token, as the hardware loop sees it: with a zero grace, its going puts the
+/// robot in safe mode in that very cycle (the hold written at that tick; the next tick's
+/// command takes over again); with a grace, a token gone for the grace holds the robot, one
+/// that comes back within it changes nothing. Before, the hardware loop did
+/// not watch the token at all and only the command deadline could hold the robot.
+#[test]
+fn the_hardware_loop_watches_the_coordinators_token() {
+    let deadline = CommandDeadline { ticks: 5, time: None };
+    let kd = HoldGains::from_torque_limits(&[f64::INFINITY]).kd[0];
+
+    let mut cfg = agent_config("mem-token0", deadline);
+    cfg.coordinator_grace = Duration::ZERO;
+    let mut core = AgentCore::new(&cfg, unit_joints()).unwrap();
+    let mut link = TeamInMemory::new(60, |_| true);
+    link.presence.push_back((30, Presence::Went));
+    let mut hw = mock();
+    let stop = link.stop.clone();
+    let report = driver::run(&mut core, &mut hw, &mut link, &fast(), &stop).unwrap();
+    let h = hw.history();
+    let carried = h[30].tau.as_deref().map(|_| -DAMPING * h[30].v[0]).unwrap();
+    for t in h[30].tau.as_deref().unwrap() {
+        assert!((t - (-kd * h[30].v[0] + carried)).abs() < 1e-12, "tick 30 writes the hold carrying tick 30's command: {t}");
+    }
+    for step in h.iter().filter(|s| s.tick != 30) {
+        assert_eq!(step.tau.as_deref(), Some(&[-DAMPING * step.v[0]; JOINTS][..]), "tick {}: its command", step.tick);
+    }
+    let safe: Vec<u64> = link.statuses.iter().filter(|s| s.mode == AgentMode::SafeMode).map(|s| s.header.tick).collect();
+    assert_eq!(safe.first(), Some(&30), "safe mode said at tick 30: {safe:?}");
+    assert_eq!((report.counters.safe_mode_entries, report.counters.applied), (1, 60), "{:?}", report.counters);
+
+    // A grace of 200 ms, 400 cycles of at least 1 ms: the token gone from tick 30 on holds the
+    // robot 200 ms later; gone at tick 30 and back at tick 32, never.
+    for (back, entries) in [(None, 1), (Some(32), 0)] {
+        let mut cfg = agent_config("mem-token1", deadline);
+        cfg.coordinator_grace = Duration::from_millis(200);
+        let mut core = AgentCore::new(&cfg, unit_joints()).unwrap();
+        let mut link = TeamInMemory::new(400, |_| true);
+        link.presence.push_back((30, Presence::Went));
+        link.presence.extend(back.map(|t| (t, Presence::Came)));
+        let mut hw = mock();
+        let stop = link.stop.clone();
+        let report = driver::run(&mut core, &mut hw, &mut link, &fast(), &stop).unwrap();
+        assert_eq!(report.counters.safe_mode_entries, entries, "back at {back:?}: {:?}", report.counters);
+        let safe: Vec<u64> = link.statuses.iter().filter(|s| s.mode == AgentMode::SafeMode).map(|s| s.header.tick).collect();
+        if entries == 1 {
+            assert!(safe[0] >= 230 && safe[0] < 400, "safe mode 200 ms after the token went at tick 30: {safe:?}");
+        }
+    }
 }
 
 #[test]
@@ -242,7 +304,9 @@ async fn mock_robot_with_a_real_coordinator_over_zenoh() {
     next_where::<CoordinatorStatus>(&coordinator_status, Duration::from_secs(10), |s| s.members.iter().any(|m| m == ID)).await;
     go_tx.send(()).unwrap();
 
-    // 150 ticks commanded, then the coordinator stops: safe mode at the tick deadline.
+    // 150 ticks commanded, then the coordinator stops: safe mode at the tick deadline or when
+    // its token has been gone for the agent's grace (100 ms), whichever is first (each cycle
+    // here waits up to 200 ms for its command, so the grace usually is).
     next_where::<AgentStatus>(&status, Duration::from_secs(30), |s| s.commands_applied >= 150).await;
     stop_coordinator.send(true).unwrap();
     coordinator.await.unwrap().unwrap();
@@ -250,7 +314,7 @@ async fn mock_robot_with_a_real_coordinator_over_zenoh() {
     let stopped = Instant::now();
     let safe = next_where::<AgentStatus>(&status, Duration::from_secs(10), |s| s.mode == AgentMode::SafeMode).await;
     let last = safe.last_applied_tick.unwrap();
-    assert_eq!(safe.header.tick, last + deadline.ticks, "safe mode at the deadline: 5 ticks after the last command");
+    assert!(safe.header.tick > last && safe.header.tick <= last + deadline.ticks, "safe mode by the deadline, 5 ticks after the last command: {safe:?}");
     assert!(stopped.elapsed() < deadline.time.unwrap(), "safe mode {:?} after the coordinator stopped", stopped.elapsed());
     assert_eq!(safe.safe_mode_entries, 1, "no safe mode while the coordinator answered");
 

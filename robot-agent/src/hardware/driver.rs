@@ -5,11 +5,14 @@
 //! 3. take the commands that have arrived, waiting at most [`DriverConfig::command_wait`] for
 //!    this tick's, each through [`AgentCore::on_command`];
 //! 4. take the contact sets that have arrived ([`AgentCore::on_contacts`]);
-//! 5. housekeeping ([`AgentCore::on_timer`]: the watchdog by time, status, description);
-//! 6. `write` the torques of this cycle ([`RobotHardware::write`]): the last applied command,
+//! 5. take the coordinator's comings and goings ([`AgentCore::on_coordinator`],
+//!    [`AgentCore::on_coordinator_lost`]: safe mode if it is not back within the core's grace,
+//!    as in the async agent);
+//! 6. housekeeping ([`AgentCore::on_timer`]: the watchdog by time, status, description);
+//! 7. `write` the torques of this cycle ([`RobotHardware::write`]): the last applied command,
 //!    or the posture hold in safe mode; a cycle without new torques writes the previous ones
 //!    again (nothing is written before the first command or safe mode);
-//! 7. sleep until the next period.
+//! 8. sleep until the next period.
 //!
 //! Every wait is bounded: the command wait, the sleep (one period), Zenoh puts (they drop
 //! under congestion instead of waiting). The loop stops when `stop` is set (within a period
@@ -23,7 +26,7 @@ use std::time::{Duration, Instant};
 use protocol::{Header, Pose, RobotState, Validate};
 use thiserror::Error;
 
-use super::link::{Inbound, TeamLink, INBOX};
+use super::link::{Inbound, Presence, TeamLink, INBOX};
 use super::{HardwareError, HwStatus, RobotHardware};
 use crate::core::{AgentCore, Outputs, Sent};
 use crate::dynamics_source::DynamicsSource;
@@ -202,6 +205,7 @@ impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
         let wait = if self.core.fallen().is_some() { Duration::ZERO } else { self.cfg.command_wait };
         self.commands(tick, now + wait);
         self.contacts();
+        self.coordinator();
         let out = self.core.on_timer(Instant::now());
         let status = send(self.link, &mut self.out, out);
         self.done(status);
@@ -248,6 +252,25 @@ impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
                 }
                 Inbound::Empty => return,
             }
+        }
+    }
+
+    /// The coordinator's comings and goings that have arrived (at most [`INBOX`]): one that came
+    /// gets the description (and the latest terms while they are unanswered), one that went
+    /// starts the core's grace.
+    fn coordinator(&mut self) {
+        for _ in 0..INBOX {
+            let now = Instant::now();
+            let out = match self.link.try_recv_coordinator() {
+                Some(Presence::Came) => {
+                    tracing::info!(robot = %self.core.robot(), "the coordinator is present");
+                    self.core.on_coordinator(now)
+                }
+                Some(Presence::Went) => self.core.on_coordinator_lost(now),
+                None => return,
+            };
+            let status = send(self.link, &mut self.out, out);
+            self.done(status);
         }
     }
 

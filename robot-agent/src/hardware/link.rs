@@ -6,7 +6,7 @@ use std::marker::PhantomData;
 use std::time::Instant;
 
 use protocol::keys::{self, RobotTopic};
-use protocol::transport::{decode_sample, TransportError};
+use protocol::transport::{self, decode_sample, TransportError};
 use protocol::{AgentStatus, ContactSet, DynamicsTerms, Message, RobotDescription, TorqueCommand};
 use zenoh::handlers::{RingChannel, RingChannelHandler};
 use zenoh::liveliness::LivelinessToken;
@@ -28,6 +28,15 @@ pub enum Inbound<M> {
     Empty,
 }
 
+/// A change of the coordinator's presence, as its liveliness token says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Presence {
+    /// Its token appeared: it started, came back after a restart, or its link did.
+    Came,
+    /// Its token went: it stopped, or its link dropped (it may come back).
+    Went,
+}
+
 /// The team as the synchronous loop sees it. Sending never blocks (a message may be dropped
 /// under congestion, and the error is for the log: the loop carries on and its watchdog
 /// protects the robot); receiving waits at most until the deadline given.
@@ -39,6 +48,8 @@ pub trait TeamLink {
     fn recv_command(&mut self, deadline: Instant) -> Inbound<TorqueCommand>;
     /// The next contact set, if one is waiting.
     fn try_recv_contacts(&mut self) -> Inbound<ContactSet>;
+    /// The next change of the coordinator's presence, if one is waiting.
+    fn try_recv_coordinator(&mut self) -> Option<Presence>;
     /// Withdraw the robot's team membership (it fell, [`crate::fall`]), saying so first (its
     /// dynamics key deleted): the coordinator then solves the team without it at once. Called
     /// once.
@@ -77,13 +88,14 @@ impl<M: Message> SyncPublisher<M> {
     }
 }
 
-/// The team over Zenoh: the robot's `command` and `contacts` keys in (each a ring of
-/// [`INBOX`] samples that never blocks Zenoh), `dynamics`, `status` and `description` out,
-/// and the membership token. Declare it from a thread outside any async runtime (it uses
+/// The team over Zenoh: the robot's `command` and `contacts` keys and the coordinator's
+/// liveliness token in (each a ring of [`INBOX`] samples that never blocks Zenoh), `dynamics`,
+/// `status` and `description` out, and the membership token. Declare it from a thread outside any async runtime (it uses
 /// Zenoh's blocking API).
 pub struct ZenohLink {
     commands: Subscriber<RingChannelHandler<Sample>>,
     contacts: Subscriber<RingChannelHandler<Sample>>,
+    coordinator: Subscriber<RingChannelHandler<Sample>>,
     dynamics: SyncPublisher<DynamicsTerms>,
     status: SyncPublisher<AgentStatus>,
     description: SyncPublisher<RobotDescription>,
@@ -101,12 +113,22 @@ impl ZenohLink {
         };
         let commands = subscribe(key(RobotTopic::Command)?)?;
         let contacts = subscribe(keys::contacts(team, robot)?)?;
+        // A coordinator already present is reported first (history), as the async agent's
+        // `transport::watch_coordinator` does.
+        let alive = keys::coordinator_alive(team)?;
+        let coordinator = session
+            .liveliness()
+            .declare_subscriber(alive.clone())
+            .history(true)
+            .with(RingChannel::new(INBOX))
+            .wait()
+            .map_err(|e| zenoh_err("declare_liveliness_subscriber", &alive, e))?;
         let dynamics = SyncPublisher::declare(session, key(RobotTopic::Dynamics)?, Priority::RealTime)?;
         let status = SyncPublisher::declare(session, key(RobotTopic::Status)?, Priority::Data)?;
         let description = SyncPublisher::declare(session, key(RobotTopic::Description)?, Priority::Data)?;
         let member = keys::member(team, robot)?;
         let token = session.liveliness().declare_token(member.clone()).wait().map_err(|e| zenoh_err("declare_token", &member, e))?;
-        Ok(ZenohLink { commands, contacts, dynamics, status, description, token: Some(token) })
+        Ok(ZenohLink { commands, contacts, coordinator, dynamics, status, description, token: Some(token) })
     }
 }
 
@@ -129,6 +151,14 @@ impl TeamLink for ZenohLink {
 
     fn try_recv_contacts(&mut self) -> Inbound<ContactSet> {
         inbound(self.contacts.handler().try_recv())
+    }
+
+    fn try_recv_coordinator(&mut self) -> Option<Presence> {
+        match self.coordinator.handler().try_recv() {
+            Ok(Some(sample)) if transport::coordinator_alive(&sample) => Some(Presence::Came),
+            Ok(Some(_)) => Some(Presence::Went),
+            Ok(None) | Err(_) => None,
+        }
     }
 
     fn leave_team(&mut self) -> Result<(), TransportError> {

@@ -95,7 +95,7 @@ use protocol::RobotState;
 use thiserror::Error;
 
 pub use driver::{DriverConfig, DriverError, DriverExit, DriverReport};
-pub use link::{Inbound, TeamLink, ZenohLink};
+pub use link::{Inbound, Presence, TeamLink, ZenohLink};
 pub use mock::{MockConfig, MockFault, MockHardware};
 
 /// What [`RobotHardware::read`] and [`RobotHardware::write`] report, as ros2_control's
