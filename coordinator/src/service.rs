@@ -319,7 +319,8 @@ impl Service<'_> {
     ///   late terms are dropped;
     /// * a tick complete but not solved yet (`gather` drains the queue before solving it) is
     ///   answered by its solve: nothing is sent now. A hold order here would reach the robot
-    ///   before its command, which it would then refuse as not newer.
+    ///   before its command, which it would then refuse as not newer. (A robot that is not in
+    ///   that tick gets its hold order when its terms come again, after the solve.)
     async fn answer_again(&mut self, robot: &str, tick: u64) -> Result<(), TransportError> {
         if self.solved_tick != Some(tick) || self.stale.iter().any(|r| r == robot) {
             return Ok(());

@@ -238,6 +238,8 @@ pub struct AgentCore<S: DynamicsSource> {
     last_description: Option<Instant>,
     /// When the coordinator's token went, while it is gone ([`AgentCore::on_coordinator_lost`]).
     coordinator_lost: Option<Instant>,
+    /// Tick, stamp and hold flag of the command applied last (to tell a copy of it).
+    applied: (u64, u64, bool),
     coordinator_grace: Duration,
 }
 
@@ -293,6 +295,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             last_status: None,
             last_description: None,
             coordinator_lost: None,
+            applied: (0, 0, false),
             coordinator_grace: cfg.coordinator_grace,
             source,
         })
@@ -407,7 +410,13 @@ impl<S: DynamicsSource> AgentCore<S> {
         match self.admit_command(cmd, now) {
             Ok(Some(apply)) => Ok(self.outputs(now, mode_before, false, apply, false)),
             Ok(None) => Ok(Outputs::default()),
-            Err(r) => Err(self.reject(r)),
+            Err(r) => {
+                // The very command applied last, again: the coordinator sent it again for
+                // terms of the tick that crossed it (the lockstep bridge republishes states
+                // while it waits). Refused and counted, but not worth a warning.
+                let copy = matches!(r, CommandRejection::Stale { tick, last } if tick == last) && self.applied == (cmd.header.tick, cmd.header.stamp_ns, cmd.hold);
+                Err(self.refuse(r, copy))
+            }
         }
     }
 
@@ -464,6 +473,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         self.torques.header.tick = tick;
         self.gate.mark_applied(tick);
+        self.applied = (tick, cmd.header.stamp_ns, cmd.hold);
         self.counters.applied += 1;
         if clamped > 0 {
             self.counters.clamped += 1;
@@ -493,12 +503,17 @@ impl<S: DynamicsSource> AgentCore<S> {
     }
 
     fn reject(&mut self, r: CommandRejection) -> CommandRejection {
+        self.refuse(r, false)
+    }
+
+    /// Count and log a refused command (`copy`: a copy of the one applied last, logged at
+    /// debug only).
+    fn refuse(&mut self, r: CommandRejection, copy: bool) -> CommandRejection {
         self.counters.rejected += 1;
-        match r {
-            // A copy of the command applied last: the coordinator sent it again for terms of
-            // the tick that crossed it (the lockstep bridge republishes states while it waits).
-            CommandRejection::Stale { tick, last } if tick == last => tracing::debug!(robot = %self.robot, "rejected command: {r} (a copy)"),
-            _ => tracing::warn!(robot = %self.robot, "rejected command: {r}"),
+        if copy {
+            tracing::debug!(robot = %self.robot, "rejected command: {r} (a copy of the command applied)");
+        } else {
+            tracing::warn!(robot = %self.robot, "rejected command: {r}");
         }
         self.board.status.last_rejection = Some(r.to_string());
         r

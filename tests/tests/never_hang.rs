@@ -45,10 +45,12 @@ impl TeamController for FailsEvery {
     }
 }
 
-/// Joint damping that takes `pause` to solve tick `tick` (a coordinator busy with one tick).
+/// Joint damping that takes `pause` to solve tick `tick` (a coordinator busy with one tick);
+/// `paused` turns true when that solve begins.
 struct PausesAt {
     tick: u64,
     pause: Duration,
+    paused: std::sync::Arc<std::sync::atomic::AtomicBool>,
 }
 
 impl TeamController for PausesAt {
@@ -58,6 +60,7 @@ impl TeamController for PausesAt {
 
     fn solve(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError> {
         if tick[0].header.tick == self.tick {
+            self.paused.store(true, std::sync::atomic::Ordering::Release);
             std::thread::sleep(self.pause);
         }
         FailsEvery { every: u64::MAX }.solve(tick, out)
@@ -383,7 +386,8 @@ async fn terms_sent_again_before_their_tick_is_solved_get_only_its_command() {
     let team = "hang8";
     let s = session().await;
     let statuses = transport::subscribe(&s, keys::coordinator_status(team).unwrap()).await.unwrap();
-    let c = coordinator(&s, team, Box::new(PausesAt { tick: 1, pause: Duration::from_secs(1) }));
+    let paused = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let c = coordinator(&s, team, Box::new(PausesAt { tick: 1, pause: Duration::from_secs(1), paused: paused.clone() }));
     let _tokens = [transport::declare_member(&s, team, "r1").await.unwrap(), transport::declare_member(&s, team, "r2").await.unwrap()];
     let (mut queues, mut pubs) = (Vec::new(), Vec::new());
     for r in ["r1", "r2"] {
@@ -395,8 +399,13 @@ async fn terms_sent_again_before_their_tick_is_solved_get_only_its_command() {
     for (i, r) in ["r1", "r2"].into_iter().enumerate() {
         pubs[i].put(&terms(team, r, 1)).await.unwrap();
     }
-    // The coordinator is inside tick 1's solve for 1 s: tick 2's terms and their copies queue.
-    tokio::time::sleep(Duration::from_millis(100)).await;
+    // Once the coordinator is inside tick 1's solve (for 1 s), tick 2's terms and their copies
+    // queue.
+    let until = Instant::now() + Duration::from_secs(10);
+    while !paused.load(std::sync::atomic::Ordering::Acquire) {
+        assert!(Instant::now() < until, "tick 1 not solved within 10 s");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
     for _ in 0..2 {
         for (i, r) in ["r1", "r2"].into_iter().enumerate() {
             pubs[i].put(&terms(team, r, 2)).await.unwrap();

@@ -157,6 +157,8 @@ impl TeamLink for ZenohLink {
         match self.coordinator.handler().try_recv() {
             Ok(Some(sample)) if transport::coordinator_alive(&sample) => Some(Presence::Came),
             Ok(Some(_)) => Some(Presence::Went),
+            // A closed subscriber reports nothing more: the command deadline still holds the
+            // robot if the commands stop.
             Ok(None) | Err(_) => None,
         }
     }
