@@ -200,13 +200,19 @@ impl Driver {
         self.publish_contacts(u64::MAX).await
     }
 
-    /// The robots whose torques of the last tick the bridge took (its loop timing says so in
-    /// real time) have them in the records too: the driver's copies come by another route and
-    /// can still be in flight (a retransmission on a lossy link). Waits at most [`FINAL_GRACE`].
+    /// The robots whose torques of the last tick the bridge took have them in the records too:
+    /// the driver's copies come by another route and can still be in flight (a retransmission
+    /// on a lossy link, or only a loaded machine: the ground truth of the last tick can come
+    /// first). In real time the loop timing names them; in lockstep (no loop timing) the bridge
+    /// waited for every robot that answered the tick before. Waits at most [`FINAL_GRACE`].
     async fn await_last_torques(&mut self, rec: &mut Records, settle: u64) {
         let Some(last) = rec.truth.last() else { return };
         let tick = last.header.tick;
-        let mut waiting: Vec<String> = last.loop_timing.iter().filter(|t| t.latency_us.is_some()).map(|t| t.robot.clone()).collect();
+        let mut waiting: Vec<String> = if last.loop_timing.is_empty() {
+            rec.torques.iter().filter(|(_, v)| v.iter().rev().any(|(t, _)| *t + 1 == tick)).map(|(r, _)| r.clone()).collect()
+        } else {
+            last.loop_timing.iter().filter(|t| t.latency_us.is_some()).map(|t| t.robot.clone()).collect()
+        };
         let until = tokio::time::Instant::now() + FINAL_GRACE;
         loop {
             waiting.retain(|r| !rec.torques.get(r).is_some_and(|v| v.iter().any(|(t, _)| *t == tick)));
