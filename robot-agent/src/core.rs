@@ -238,8 +238,9 @@ pub struct AgentCore<S: DynamicsSource> {
     last_description: Option<Instant>,
     /// When the coordinator's token went, while it is gone ([`AgentCore::on_coordinator_lost`]).
     coordinator_lost: Option<Instant>,
-    /// Tick, stamp and hold flag of the command applied last (to tell a copy of it).
-    applied: (u64, u64, bool),
+    /// Stamp and hold flag of the command applied last (its tick is the gate's): to tell a
+    /// copy of it.
+    applied: (u64, bool),
     coordinator_grace: Duration,
 }
 
@@ -295,7 +296,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             last_status: None,
             last_description: None,
             coordinator_lost: None,
-            applied: (0, 0, false),
+            applied: (0, false),
             coordinator_grace: cfg.coordinator_grace,
             source,
         })
@@ -414,7 +415,7 @@ impl<S: DynamicsSource> AgentCore<S> {
                 // The very command applied last, again: the coordinator sent it again for
                 // terms of the tick that crossed it (the lockstep bridge republishes states
                 // while it waits). Refused and counted, but not worth a warning.
-                let copy = matches!(r, CommandRejection::Stale { tick, last } if tick == last) && self.applied == (cmd.header.tick, cmd.header.stamp_ns, cmd.hold);
+                let copy = matches!(r, CommandRejection::Stale { tick, last } if tick == last) && self.applied == (cmd.header.stamp_ns, cmd.hold);
                 Err(self.refuse(r, copy))
             }
         }
@@ -473,7 +474,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         self.torques.header.tick = tick;
         self.gate.mark_applied(tick);
-        self.applied = (tick, cmd.header.stamp_ns, cmd.hold);
+        self.applied = (cmd.header.stamp_ns, cmd.hold);
         self.counters.applied += 1;
         if clamped > 0 {
             self.counters.clamped += 1;

@@ -275,17 +275,9 @@ async fn a_vanished_token_is_waited_for_and_an_announced_leave_is_not() {
     let statuses = transport::subscribe(&s, keys::coordinator_status(team).unwrap()).await.unwrap();
     let c = coordinator(&s, team, Box::new(FailsEvery { every: u64::MAX }));
     let mut tokens = vec![Some(transport::declare_member(&s, team, "r1").await.unwrap()), Some(transport::declare_member(&s, team, "r2").await.unwrap())];
-    let (mut queues, mut pubs) = (Vec::new(), Vec::new());
-    for r in ["r1", "r2"] {
-        let (q, p) = robot_keys(&s, team, r).await;
-        queues.push(q);
-        pubs.push(p);
-    }
-    status_where(&statuses, |st| st.members.len() == 2, "both members").await;
+    let (queues, mut pubs) = both_members(&s, team, &statuses).await;
     // Tick 1, the team's first: both commanded.
-    for (i, r) in ["r1", "r2"].into_iter().enumerate() {
-        pubs[i].put(&terms(team, r, 1)).await.unwrap();
-    }
+    put_terms(&mut pubs, team, 1).await;
     for q in &queues {
         let cmd: TorqueCommand = decode_sample(&tokio::time::timeout(Duration::from_secs(5), q.recv_async()).await.expect("a command").unwrap()).unwrap();
         assert_eq!((cmd.header.tick, cmd.hold), (1, false), "{cmd:?}");
@@ -336,17 +328,9 @@ async fn terms_sent_again_for_the_tick_last_solved_get_its_command_again() {
     let statuses = transport::subscribe(&s, keys::coordinator_status(team).unwrap()).await.unwrap();
     let c = coordinator(&s, team, Box::new(FailsEvery { every: u64::MAX }));
     let _tokens = [transport::declare_member(&s, team, "r1").await.unwrap(), transport::declare_member(&s, team, "r2").await.unwrap()];
-    let (mut queues, mut pubs) = (Vec::new(), Vec::new());
-    for r in ["r1", "r2"] {
-        let (q, p) = robot_keys(&s, team, r).await;
-        queues.push(q);
-        pubs.push(p);
-    }
-    status_where(&statuses, |st| st.members.len() == 2, "both members").await;
+    let (queues, mut pubs) = both_members(&s, team, &statuses).await;
     for tick in [1, 2] {
-        for (i, r) in ["r1", "r2"].into_iter().enumerate() {
-            pubs[i].put(&terms(team, r, tick)).await.unwrap();
-        }
+        put_terms(&mut pubs, team, tick).await;
         for q in &queues {
             let cmd = next_command(q).await.expect("a command");
             assert_eq!((cmd.header.tick, cmd.hold), (tick, false), "{cmd:?}");
@@ -389,16 +373,8 @@ async fn terms_sent_again_before_their_tick_is_solved_get_only_its_command() {
     let paused = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let c = coordinator(&s, team, Box::new(PausesAt { tick: 1, pause: Duration::from_secs(1), paused: paused.clone() }));
     let _tokens = [transport::declare_member(&s, team, "r1").await.unwrap(), transport::declare_member(&s, team, "r2").await.unwrap()];
-    let (mut queues, mut pubs) = (Vec::new(), Vec::new());
-    for r in ["r1", "r2"] {
-        let (q, p) = robot_keys(&s, team, r).await;
-        queues.push(q);
-        pubs.push(p);
-    }
-    status_where(&statuses, |st| st.members.len() == 2, "both members").await;
-    for (i, r) in ["r1", "r2"].into_iter().enumerate() {
-        pubs[i].put(&terms(team, r, 1)).await.unwrap();
-    }
+    let (queues, mut pubs) = both_members(&s, team, &statuses).await;
+    put_terms(&mut pubs, team, 1).await;
     // Once the coordinator is inside tick 1's solve (for 1 s), tick 2's terms and their copies
     // queue.
     let until = Instant::now() + Duration::from_secs(10);
@@ -407,9 +383,7 @@ async fn terms_sent_again_before_their_tick_is_solved_get_only_its_command() {
         tokio::time::sleep(Duration::from_millis(5)).await;
     }
     for _ in 0..2 {
-        for (i, r) in ["r1", "r2"].into_iter().enumerate() {
-            pubs[i].put(&terms(team, r, 2)).await.unwrap();
-        }
+        put_terms(&mut pubs, team, 2).await;
     }
     for (q, r) in queues.iter().zip(["r1", "r2"]) {
         for tick in [1, 2] {
@@ -427,6 +401,26 @@ async fn terms_sent_again_before_their_tick_is_solved_get_only_its_command() {
 async fn next_command(queue: &transport::SampleQueue) -> Option<TorqueCommand> {
     let sample = tokio::time::timeout(Duration::from_secs(2), queue.recv_async()).await.ok()?;
     Some(decode_sample(&sample.expect("the queue is open")).expect("a command"))
+}
+
+/// Stand-in robots r1 and r2, members of `team` (their tokens declared): their command queues
+/// and terms publishers ([`robot_keys`]), once the coordinator's status lists both.
+async fn both_members(s: &zenoh::Session, team: &str, statuses: &transport::SampleQueue) -> (Vec<transport::SampleQueue>, Vec<transport::TypedPublisher<DynamicsTerms>>) {
+    let (mut queues, mut pubs) = (Vec::new(), Vec::new());
+    for r in ["r1", "r2"] {
+        let (q, p) = robot_keys(s, team, r).await;
+        queues.push(q);
+        pubs.push(p);
+    }
+    status_where(statuses, |st| st.members.len() == 2, "both members").await;
+    (queues, pubs)
+}
+
+/// [`both_members`]' terms of `tick`, r1's then r2's.
+async fn put_terms(pubs: &mut [transport::TypedPublisher<DynamicsTerms>], team: &str, tick: u64) {
+    for (p, r) in pubs.iter_mut().zip(["r1", "r2"]) {
+        p.put(&terms(team, r, tick)).await.unwrap();
+    }
 }
 
 /// A stand-in robot's two keys: the queue of its commands and the publisher of its terms.

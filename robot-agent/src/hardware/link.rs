@@ -90,8 +90,8 @@ impl<M: Message> SyncPublisher<M> {
 
 /// The team over Zenoh: the robot's `command` and `contacts` keys and the coordinator's
 /// liveliness token in (each a ring of [`INBOX`] samples that never blocks Zenoh), `dynamics`,
-/// `status` and `description` out, and the membership token. Declare it from a thread outside any async runtime (it uses
-/// Zenoh's blocking API).
+/// `status` and `description` out, and the membership token. Declare it from a thread outside
+/// any async runtime (it uses Zenoh's blocking API).
 pub struct ZenohLink {
     commands: Subscriber<RingChannelHandler<Sample>>,
     contacts: Subscriber<RingChannelHandler<Sample>>,
