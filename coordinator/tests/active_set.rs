@@ -2,7 +2,9 @@
 //! oracle, on the real team QPs of 2, 3, 4 and 8 robots (random moving states of the default
 //! robot, with a swing foot or free hands too), cold and hot-started from the previous tick:
 //! the KKT conditions written out here (rows held, multipliers of the active rows
-//! non-negative, stationarity), the objective, and the torques `Y F` and wrenches `rho F` the
+//! non-negative, stationarity; at a degenerate vertex, where a hand's friction faces meet, the
+//! multipliers are not unique and non-negative ones are looked for by Lawson and Hanson's
+//! method), the objective, and the torques `Y F` and wrenches `rho F` the
 //! forces make (F itself is not unique to Clarabel's tolerance: `Y` has rank about 60 % of
 //! `F`'s size, so `F`'s components in its null space cost only `eps |F|^2`). Infeasible and
 //! non-finite problems keep their statuses.
@@ -80,6 +82,43 @@ impl Worst {
     }
 }
 
+/// `min |A u - g|^2` over `u >= 0`: Lawson and Hanson's active-set method (least squares on
+/// the free set, exact at its end).
+fn nonnegative_least_squares(a: &DMatrix<f64>, g: &DVector<f64>) -> DVector<f64> {
+    let k = a.ncols();
+    let tol = 1e-12 * (1.0 + (a.transpose() * g).amax());
+    let ls = |free: &[bool]| {
+        let cols: Vec<usize> = (0..k).filter(|&i| free[i]).collect();
+        let a_f = DMatrix::from_fn(a.nrows(), cols.len(), |r, c| a[(r, cols[c])]);
+        let s_f = a_f.svd(true, true).solve(g, 1e-14).expect("least squares");
+        let mut s = DVector::zeros(k);
+        cols.iter().zip(s_f.iter()).for_each(|(&i, &x)| s[i] = x);
+        s
+    };
+    let (mut x, mut free) = (DVector::zeros(k), vec![false; k]);
+    for _ in 0..3 * k {
+        let w = a.transpose() * (g - a * &x);
+        let Some(j) = (0..k).filter(|&i| !free[i] && w[i] > tol).max_by(|&i, &j| w[i].total_cmp(&w[j])) else { break };
+        free[j] = true;
+        loop {
+            let s = ls(&free);
+            if (0..k).filter(|&i| free[i]).all(|i| s[i] > 0.0) {
+                x = s;
+                break;
+            }
+            let alpha = (0..k).filter(|&i| free[i] && s[i] <= 0.0).map(|i| x[i] / (x[i] - s[i])).fold(f64::INFINITY, f64::min);
+            x += (&s - &x) * alpha;
+            for i in 0..k {
+                if free[i] && x[i] <= 1e-15 {
+                    free[i] = false;
+                    x[i] = 0.0;
+                }
+            }
+        }
+    }
+    x
+}
+
 /// `F` against Clarabel's `fc` on `p`, the KKT conditions written out: rows
 /// `(a_i F - b_i) / (1 + |b_i|)`; the multipliers of the rows within 1e-7 of binding by least
 /// squares on `2 H F + A_W^T u = 0`, their most negative value and the residual (relative to
@@ -98,7 +137,13 @@ fn check(p: &QpProblem, d: &Data, f: &DVector<f64>, fc: &DVector<f64>) -> Worst 
     let (mut multiplier, mut stationarity) = (0.0, grad.amax() / (1.0 + grad.amax()));
     if !active.is_empty() {
         let aw_t = DMatrix::from_fn(p.n(), active.len(), |c, k| p.a[(active[k], c)]);
-        let u = aw_t.clone().svd(true, true).solve(&(-&grad), 1e-12).expect("least squares");
+        let mut u = aw_t.clone().svd(true, true).solve(&(-&grad), 1e-12).expect("least squares");
+        if u.min() < 0.0 {
+            // A degenerate vertex (a hand's friction faces meet where a component is zero:
+            // more rows bind than the vertex needs) has many multipliers; least squares picks
+            // one, which may be negative where non-negative ones exist. Look for those.
+            u = nonnegative_least_squares(&aw_t, &(-&grad));
+        }
         multiplier = (-u.min()).max(0.0) / (1.0 + u.amax());
         stationarity = (&grad + &aw_t * &u).amax() / (1.0 + grad.amax());
     }

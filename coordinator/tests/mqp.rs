@@ -162,8 +162,9 @@ fn mqp_solution_satisfies_the_team_dynamics_to_1e_8() {
 /// How far the wrenches `w` (feet 3, hands 6, team order) and the torques `tau` (actuated,
 /// team order) exceed the limits, each written out as its physical statement: feet
 /// `f_z >= f_min`, `|f_x|, |f_y| <= mu f_z`; hands (palm axes `t_x, t_y`, outward normal `n`,
-/// `f_n = -n . f`) `f_n >= f_min`, `|t . f| <= mu f_n`, torsion `|n . m| <= xi f_n`, centre
-/// of pressure in the patch `|t_x . m| <= delta_y f_n`, `|t_y . m| <= delta_x f_n`;
+/// `f_n = -n . f`) `f_n >= f_min`, sliding and torsional friction in one cone
+/// `|t_x . f| / mu + |t_y . f| / mu + |n . m| / xi <= f_n`, centre of pressure in the patch
+/// `|t_x . m| <= delta_y f_n`, `|t_y . m| <= delta_x f_n`;
 /// `|tau_j| <= tau_max,j`. Friction and patch sizes scaled by the margins both controllers
 /// share. Returns the largest excess (<= 0 when every limit holds).
 fn limit_excess(terms: &[DynamicsTerms], descs: &[RobotDescription], cfg: &PidcConfig, w: &[f64], tau: &[f64]) -> f64 {
@@ -190,9 +191,7 @@ fn limit_excess(terms: &[DynamicsTerms], descs: &[RobotDescription], cfg: &PidcC
         let (mu, xi) = (d.hand_mu * cfg.friction_margin, d.hand_xi * cfg.friction_margin);
         let (dx, dy) = (d.hand_half_size[0] * cfg.patch_margin, d.hand_half_size[1] * cfg.patch_margin);
         check(cfg.f_min_hand, f_n);
-        check(tx.dot(&f).abs(), mu * f_n);
-        check(ty.dot(&f).abs(), mu * f_n);
-        check(n.dot(&m).abs(), xi * f_n);
+        check(mu * (tx.dot(&f).abs() / mu + ty.dot(&f).abs() / mu + n.dot(&m).abs() / xi), mu * f_n);
         check(tx.dot(&m).abs(), dy * f_n);
         check(ty.dot(&m).abs(), dx * f_n);
         row += 6;

@@ -4,8 +4,9 @@
 //! `A F <= b`. Here each constraint is written out again the way the physics states it, without
 //! rows: for a foot the friction pyramid and the normal force in the world frame (normal +z);
 //! for a hand, in its frame `(t_x, t_y, n)` with `n` the palm's outward normal, the normal force
-//! `f_n = -n . f` (the object pushes the palm back), the friction pyramid on the tangential
-//! force, the torsional friction, and the centre of pressure `p` in the rectangular patch,
+//! `f_n = -n . f` (the object pushes the palm back), sliding and torsional friction in one
+//! cone (`|t_x . f| / mu + |t_y . f| / mu + |n . m| / xi <= f_n`, one face per sign), and the
+//! centre of pressure `p` in the rectangular patch,
 //! found from the moment of the normal force (`m_tilt = p x (-f_n n)`, so `p = -(n x m) / f_n`);
 //! for the actuated joints `|tau_0 + Y F|_j <= lim_j` (eq. real_torque_limit).
 //!
@@ -17,7 +18,12 @@
 //! comes from pressure displaced along `t_y`) makes one of these fail: the inside samples reach
 //! 98 % of each bound and the patch's half-sizes are drawn independently.
 
+mod common;
+
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SecondOrderConeT, SolverStatus, ZeroConeT};
 use coordinator::qp::{self, constraints_into, contact_rows, ContactKind, DenseIpm, QpInput, QpSettings, QpSolver, QpWorkspace, DENSE_TOL};
+use coordinator::PidcConfig;
 use nalgebra::{DMatrix, DVector, Rotation3, UnitQuaternion, Vector3, Vector4};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -97,19 +103,20 @@ impl Contact {
                 // patch plane. Without a normal force there is none: outside the patch.
                 let p = if f_n > 0.0 { -n.cross(&m) / f_n } else { Vector3::repeat(f64::INFINITY) };
                 let (p_x, p_y) = (tx.dot(&p), ty.dot(&p));
-                vec![
-                    ("t_x.f <= mu f_n", mu * f_n - tx.dot(&f_t)),
-                    ("-t_x.f <= mu f_n", mu * f_n + tx.dot(&f_t)),
-                    ("t_y.f <= mu f_n", mu * f_n - ty.dot(&f_t)),
-                    ("-t_y.f <= mu f_n", mu * f_n + ty.dot(&f_t)),
+                // Sliding and torsional friction in one cone: the cross-polytope
+                // |t_x.f| / mu + |t_y.f| / mu + |n.m| / xi <= f_n, one face per sign.
+                let mut out: Vec<(&'static str, f64)> = HAND_FACES
+                    .iter()
+                    .map(|&(name, [sx, sy, sz])| (name, f_n - (sx * tx.dot(&f_t) / mu + sy * ty.dot(&f_t) / mu + sz * n.dot(&m) / xi)))
+                    .collect();
+                out.extend([
                     ("f_n >= f_min", f_n - f_min),
-                    ("n.m <= xi f_n", xi * f_n - n.dot(&m)),
-                    ("-n.m <= xi f_n", xi * f_n + n.dot(&m)),
                     ("p_x <= delta_x", half[0] - p_x),
                     ("-p_x <= delta_x", half[0] + p_x),
                     ("p_y <= delta_y", half[1] - p_y),
                     ("-p_y <= delta_y", half[1] + p_y),
-                ]
+                ]);
+                out
             }
         }
     }
@@ -117,7 +124,7 @@ impl Contact {
     fn count(&self) -> usize {
         match self {
             Contact::Foot { .. } => 5,
-            Contact::Hand { .. } => 11,
+            Contact::Hand { .. } => 13,
         }
     }
 
@@ -126,7 +133,7 @@ impl Contact {
     /// forces, a normal force, a torsional moment and the normal force at a centre of pressure.
     fn sample(&self, rng: &mut StdRng, violate: Option<usize>) -> Vec<f64> {
         // Ratio to a two-sided bound, constraints `plus` (coordinate <= bound) and `minus`.
-        let mut ratio = |plus: usize, minus: usize| {
+        let ratio = |rng: &mut StdRng, plus: usize, minus: usize| {
             let out = rng.random_range(1.02..1.5);
             match violate {
                 Some(v) if v == plus => out,
@@ -134,21 +141,59 @@ impl Contact {
                 _ => rng.random_range(-0.98..0.98),
             }
         };
-        let (r0, r1, f_n_index) = (ratio(0, 1), ratio(2, 3), 4);
-        let (f_min, rest) = match *self {
-            Contact::Foot { f_min, .. } => (f_min, [0.0; 3]),
-            Contact::Hand { f_min, .. } => (f_min, [ratio(5, 6), ratio(7, 8), ratio(9, 10)]),
+        let f_n_index = match self {
+            Contact::Foot { .. } => 4,
+            Contact::Hand { .. } => HAND_FACES.len(),
+        };
+        let f_min = match *self {
+            Contact::Foot { f_min, .. } | Contact::Hand { f_min, .. } => f_min,
         };
         let f_n = if violate == Some(f_n_index) { f_min * rng.random_range(0.3..0.98) } else { f_min * rng.random_range(1.02..20.0) };
         match *self {
-            Contact::Foot { mu, .. } => vec![r0 * mu * f_n, r1 * mu * f_n, f_n],
+            Contact::Foot { mu, .. } => {
+                let (r0, r1) = (ratio(rng, 0, 1), ratio(rng, 2, 3));
+                vec![r0 * mu * f_n, r1 * mu * f_n, f_n]
+            }
             Contact::Hand { rot, mu, xi, half, .. } => {
+                let [a, b, c] = cross_polytope_point(rng, violate.filter(|v| *v < HAND_FACES.len()));
+                let (p_x, p_y) = (ratio(rng, f_n_index + 1, f_n_index + 2), ratio(rng, f_n_index + 3, f_n_index + 4));
                 let (tx, ty, n) = (rot * Vector3::x(), rot * Vector3::y(), rot * Vector3::z());
-                let f = r0 * mu * f_n * tx + r1 * mu * f_n * ty - f_n * n;
-                let p = rest[1] * half[0] * tx + rest[2] * half[1] * ty;
-                let m = p.cross(&(-f_n * n)) + rest[0] * xi * f_n * n;
+                let f = a * mu * f_n * tx + b * mu * f_n * ty - f_n * n;
+                let p = p_x * half[0] * tx + p_y * half[1] * ty;
+                let m = p.cross(&(-f_n * n)) + c * xi * f_n * n;
                 vec![f.x, f.y, f.z, m.x, m.y, m.z]
             }
+        }
+    }
+}
+
+/// A hand's friction faces: `s_x t_x.f / mu + s_y t_y.f / mu + s_z n.m / xi <= f_n`.
+const HAND_FACES: [(&str, [f64; 3]); 8] = [
+    ("+t_x.f/mu +t_y.f/mu +n.m/xi <= f_n", [1.0, 1.0, 1.0]),
+    ("+t_x.f/mu +t_y.f/mu -n.m/xi <= f_n", [1.0, 1.0, -1.0]),
+    ("+t_x.f/mu -t_y.f/mu +n.m/xi <= f_n", [1.0, -1.0, 1.0]),
+    ("+t_x.f/mu -t_y.f/mu -n.m/xi <= f_n", [1.0, -1.0, -1.0]),
+    ("-t_x.f/mu +t_y.f/mu +n.m/xi <= f_n", [-1.0, 1.0, 1.0]),
+    ("-t_x.f/mu +t_y.f/mu -n.m/xi <= f_n", [-1.0, 1.0, -1.0]),
+    ("-t_x.f/mu -t_y.f/mu +n.m/xi <= f_n", [-1.0, -1.0, 1.0]),
+    ("-t_x.f/mu -t_y.f/mu -n.m/xi <= f_n", [-1.0, -1.0, -1.0]),
+];
+
+/// `(a, b, c)` (tangential forces in `mu f_n`, torsion in `xi f_n`): with `|a| + |b| + |c|`
+/// up to 0.98 (`face` None), or past face `face` alone by 2 % to 50 % (every other face's
+/// sum, one sign flipped, stays below 0.98).
+fn cross_polytope_point(rng: &mut StdRng, face: Option<usize>) -> [f64; 3] {
+    let (signs, sum) = match face {
+        Some(k) => (HAND_FACES[k].1, rng.random_range(1.02..1.5)),
+        None => ([0; 3].map(|_: i32| if rng.random_bool(0.5) { 1.0 } else { -1.0 }), rng.random_range(0.0..0.98)),
+    };
+    loop {
+        let w = [0; 3].map(|_: i32| rng.random_range(0.05..1.0));
+        let total: f64 = w.iter().sum();
+        let x = w.map(|wi| wi / total * sum);
+        // Flipping component i's sign takes 2 x_i off the sum.
+        if face.is_none() || x.iter().all(|xi| sum - 2.0 * xi < 0.98) {
+            return [signs[0] * x[0], signs[1] * x[1], signs[2] * x[2]];
         }
     }
 }
@@ -251,7 +296,7 @@ fn tilt_rows_pair_each_moment_with_the_half_size_across_it_not_the_papers() {
     assert!((m_x.abs() - 0.065 * f_n).abs() < 1e-9);
     let paper_row_holds = m_x.abs() <= 0.075 * f_n;
     assert!(paper_row_holds, "the paper's pairing accepts it");
-    assert_eq!(broken_physics(&contact, &off_y), vec![9], "p_y <= delta_y");
+    assert_eq!(broken_physics(&contact, &off_y), vec![11], "p_y <= delta_y");
     assert_eq!(broken_rows(&kind, &off_y).len(), 1, "our rows stop it");
     // On the patch near its t_x edge (within delta_x, past delta_y): accepted, where the
     // paper's |m_y| <= delta_y f_n would refuse it.
@@ -260,6 +305,109 @@ fn tilt_rows_pair_each_moment_with_the_half_size_across_it_not_the_papers() {
     assert!(broken_rows(&kind, &near_x).is_empty(), "our rows accept it");
     let m_y = ty.dot(&Vector3::new(near_x[3], near_x[4], near_x[5]));
     assert!(m_y.abs() > 0.05 * f_n, "the paper's pairing would refuse it");
+}
+
+/// Whether four contact points at the palm's corners, each with MuJoCo's condim-6 elliptic
+/// cone `f_n,i >= |(f_x,i / mu, f_y,i / mu, tau_i / xi)|` (rolling friction left at zero),
+/// can carry the palm wrench `[f_x, f_y, m_x, m_y, m_z]` (palm frame, moments about its centre)
+/// with a normal force of 1: a second-order cone program (Clarabel), feasible or not.
+/// Independent of `contact_rows`: the physics of the simulated palm, written out.
+fn corners_carry(mu: f64, xi: f64, half: [f64; 2], w: [f64; 5]) -> bool {
+    let corners = [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)].map(|(sx, sy)| (sx * half[0], sy * half[1]));
+    // Variables per corner i: (f_n, u, v, t) with f_x = mu u, f_y = mu v, tau = xi t.
+    let n = 16;
+    let mut a = DMatrix::<f64>::zeros(6 + n, n);
+    for (i, &(x, y)) in corners.iter().enumerate() {
+        let c = 4 * i;
+        a[(0, c)] = 1.0; // sum f_n = 1
+        a[(1, c + 1)] = mu; // sum f_x
+        a[(2, c + 2)] = mu; // sum f_y
+        // The force on the palm at (x, y, 0) is (f_x, f_y, -f_n): its moment about the centre
+        // is (-y f_n, x f_n, x f_y - y f_x), plus the point's torsion along the normal.
+        a[(3, c)] = -y;
+        a[(4, c)] = x;
+        a[(5, c + 1)] = -y * mu;
+        a[(5, c + 2)] = x * mu;
+        a[(5, c + 3)] = xi;
+        for k in 0..4 {
+            a[(6 + c + k, c + k)] = -1.0; // s = (f_n, u, v, t) in the cone
+        }
+    }
+    let mut b = vec![0.0; 6 + n];
+    b[0] = 1.0;
+    b[1..6].copy_from_slice(&w);
+    let csc = |m: &DMatrix<f64>| {
+        let (mut colptr, mut rowval, mut nzval) = (vec![0], Vec::new(), Vec::new());
+        for j in 0..m.ncols() {
+            for i in 0..m.nrows() {
+                if m[(i, j)] != 0.0 {
+                    rowval.push(i);
+                    nzval.push(m[(i, j)]);
+                }
+            }
+            colptr.push(rowval.len());
+        }
+        CscMatrix::new(m.nrows(), m.ncols(), colptr, rowval, nzval)
+    };
+    let p = CscMatrix::new(n, n, vec![0; n + 1], vec![], vec![]);
+    let cones = [ZeroConeT(6), SecondOrderConeT(4), SecondOrderConeT(4), SecondOrderConeT(4), SecondOrderConeT(4)];
+    let settings = DefaultSettings::<f64> { verbose: false, ..DefaultSettings::default() };
+    let mut solver = DefaultSolver::new(&p, &vec![0.0; n], &csc(&a), &b, &cones, settings).expect("the cone program");
+    solver.solve();
+    match solver.solution.status {
+        SolverStatus::Solved | SolverStatus::AlmostSolved => true,
+        SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => false,
+        s => panic!("the cone program ended {s:?} on {w:?}"),
+    }
+}
+
+/// The hand's rows with the default margins hold only wrenches that the simulated palm can
+/// carry: every vertex of their polytope (at a normal force of 1: the cross-polytope of the
+/// sliding and torsional friction times the rectangle of the centre of pressure, 24 vertices;
+/// the set the palm carries is convex, so the vertices are enough) is carried by the palm's
+/// four corners with MuJoCo's cones. The paper's separate rows are not: tangential force at
+/// the pyramid's corner with torsion at its bound, the vertex three robots on the cube sat at
+/// when they dropped a 3 kg object, is beyond the corners.
+#[test]
+fn every_wrench_the_hand_rows_allow_is_one_the_palm_corners_carry() {
+    let fx = common::Fixture::new();
+    let d = fx.description(&common::robot_id(0));
+    let cfg = PidcConfig::default();
+    let (mu, xi, half) = (d.hand_mu, d.hand_xi, d.hand_half_size);
+    let kind = ContactKind::Hand {
+        tx: Vector3::x(),
+        ty: Vector3::y(),
+        n: Vector3::z(),
+        mu: mu * cfg.friction_margin,
+        xi: xi * cfg.friction_margin,
+        half: [half[0] * cfg.patch_margin, half[1] * cfg.patch_margin],
+        f_min: 0.0,
+    };
+    let (m, x) = (mu * cfg.friction_margin, xi * cfg.friction_margin);
+    let friction = [[m, 0.0, 0.0], [-m, 0.0, 0.0], [0.0, m, 0.0], [0.0, -m, 0.0], [0.0, 0.0, x], [0.0, 0.0, -x]];
+    let (px, py) = (half[0] * cfg.patch_margin, half[1] * cfg.patch_margin);
+    for [f_x, f_y, m_z] in friction {
+        for (sx, sy) in [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)] {
+            let (p_x, p_y) = (sx * px, sy * py);
+            // Wrench on the palm (its frame, normal force 1 along -n): m_x = -p_y, m_y = p_x.
+            let w = [f_x, f_y, -p_y, p_x, m_z];
+            let lambda = [f_x, f_y, -1.0, w[2], w[3], w[4]];
+            let broken = broken_rows(&kind, &lambda);
+            assert!(broken.iter().all(|&r| on_its_bound(&kind, r, &lambda)), "vertex {w:?} breaks rows {broken:?}");
+            assert!(corners_carry(mu, xi, half, w), "the rows allow {w:?}, the palm's corners cannot carry it");
+        }
+    }
+    // The paper's rows allowed this one (|f_x|, |f_y| <= mu' f_n, |m_z| <= xi' f_n); ours do not.
+    let corner = [m, m, -py, px, x];
+    assert!(!corners_carry(mu, xi, half, corner), "the paper's corner is beyond the palm");
+    assert!(!broken_rows(&kind, &[m, m, -1.0, -py, px, x]).is_empty(), "our rows refuse it");
+}
+
+/// Row `r` of `kind` holds with equality (to round-off) at `lambda`: a vertex sits on its rows.
+fn on_its_bound(kind: &ContactKind, r: usize, lambda: &[f64]) -> bool {
+    let rows = contact_rows(kind);
+    let (c, lo) = rows.iter().nth(r).expect("row");
+    (c.iter().zip(lambda).map(|(a, b)| a * b).sum::<f64>() - lo).abs() < 1e-12
 }
 
 /// A random QP input: contacts, `rho` (well conditioned), `eta`, `Y` (n x m, n > m), actuated

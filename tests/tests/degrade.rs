@@ -60,11 +60,6 @@ fn beyond_the_capacity(controller: &str) -> Metrics {
     let plan = plan::plan(&heavy, &repo()).expect("the check is overridden");
     let m = run_plan(&plan, &format!("degrade-heavy-{controller}"));
     println!("capacity {:.3} kg, object {mass:.3} kg", cap.mass);
-    let released = m.fallback_ticks.get(RELEASED).copied().unwrap_or(0);
-    assert!(released > 0, "the team let go of the object: {:?}", m.fallback_ticks);
-    // Let go soon: every tick after the release is reported as such.
-    let ticks: u64 = m.qp_status.values().sum();
-    assert!(released as f64 > 0.7 * ticks as f64, "released after {} of {ticks} ticks", ticks - released);
     assert_team_standing(&m, 2);
     m
 }
@@ -72,16 +67,27 @@ fn beyond_the_capacity(controller: &str) -> Metrics {
 #[test]
 fn an_object_beyond_the_capacity_is_let_go_and_the_team_stays_standing() {
     let m = beyond_the_capacity("pidc");
+    let released = m.fallback_ticks.get(RELEASED).copied().unwrap_or(0);
+    assert!(released > 0, "the team let go of the object: {:?}", m.fallback_ticks);
+    // Let go soon: every tick after the release is reported as such.
+    let ticks: u64 = m.qp_status.values().sum();
+    assert!(released as f64 > 0.7 * ticks as f64, "released after {} of {ticks} ticks", ticks - released);
     let infeasible = m.qp_status.get("Infeasible").copied().unwrap_or(0);
     assert!(infeasible > 0, "the QP was infeasible on some ticks: {:?}", m.qp_status);
     assert!(m.fallback_ticks.get("QP fallback").copied().unwrap_or(0) > 0, "the run says so: {:?}", m.fallback_ticks);
 }
 
+/// MQP's QP stays feasible: it lets the object's task yield, and the object comes down. With
+/// the paper's separate friction and torsion rows it slid out of the palms (2 cm of fit
+/// residual) and the team let go; with the palms' sliding and torsion in one cone MQP squeezes
+/// harder (180 N) and lowers it in the grasp (24 cm in 1.5 s, the palms slipping 6 mm). Either
+/// way the object yields and the robots stand; before the release existed, both torsos ended
+/// 8-9 cm off and tilted 40 deg.
 #[test]
-fn the_mqp_baseline_lets_go_too() {
-    // MQP's QP stays feasible longer (the object slides out under it, 2 cm of fit residual);
-    // before it let go, both torsos ended 8-9 cm off and tilted 40 deg.
-    beyond_the_capacity("mqp");
+fn the_mqp_baseline_lets_the_object_yield_too() {
+    let m = beyond_the_capacity("mqp");
+    let released = m.fallback_ticks.get(RELEASED).copied().unwrap_or(0);
+    assert!(released > 0 || m.object.position_max_m > 0.1, "the object yielded: let go ({released} ticks) or came down {:.3} m", m.object.position_max_m);
 }
 
 #[test]

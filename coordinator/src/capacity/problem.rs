@@ -10,7 +10,7 @@ use protocol::{DynamicsTerms, RobotDescription};
 
 use super::report::CapacityError;
 use crate::pidc::stages::{contacts::contact_list, limits::torque_limits};
-use crate::qp::{contact_rows, ContactKind};
+use crate::qp::{contact_rows, ContactKind, FRICTION_SIGNS};
 use crate::team::Team;
 use crate::units::grasp::GraspTerms;
 use crate::PidcConfig;
@@ -37,8 +37,9 @@ pub enum Limit {
     Friction { axis: char, positive: bool },
     /// Normal force at least `f_min`, N.
     MinNormal { f_min: f64 },
-    /// Moment about the normal within `xi f_n`, Nm.
-    Torsion { positive: bool },
+    /// A hand's sliding and torsional friction together, `s_x t_x.f / mu + s_y t_y.f / mu +
+    /// s_z n.m / xi <= f_n` (`x`, `y`, `torsion`: the signs `s` are `+`), in N of `mu f_n`.
+    FrictionAndTorsion { x: bool, y: bool, torsion: bool },
     /// Centre of pressure within the palm patch along `axis` (the tilt moment), Nm.
     CentreOfPressure { axis: char, positive: bool },
 }
@@ -47,7 +48,7 @@ impl Limit {
     /// The unit of the row's excess.
     pub fn unit(&self) -> &'static str {
         match self {
-            Limit::Friction { .. } | Limit::MinNormal { .. } => "N",
+            Limit::Friction { .. } | Limit::FrictionAndTorsion { .. } | Limit::MinNormal { .. } => "N",
             _ => "Nm",
         }
     }
@@ -68,21 +69,17 @@ fn contact_limits(kind: &ContactKind) -> Vec<Limit> {
         ContactKind::Foot { f_min, .. } => vec![fr('x', true), fr('x', false), fr('y', true), fr('y', false), Limit::MinNormal { f_min: *f_min }],
         ContactKind::Hand { f_min, .. } => {
             let cop = |axis, positive| Limit::CentreOfPressure { axis, positive };
-            vec![
-                fr('x', true),
-                fr('x', false),
-                fr('y', true),
-                fr('y', false),
+            let mut names: Vec<Limit> = FRICTION_SIGNS.iter().map(|&(x, y, z)| Limit::FrictionAndTorsion { x: x > 0.0, y: y > 0.0, torsion: z > 0.0 }).collect();
+            names.extend([
                 Limit::MinNormal { f_min: *f_min },
-                Limit::Torsion { positive: true },
-                Limit::Torsion { positive: false },
                 // The tilt moments (rows.rs): m_x = -p_y f_n, m_y = p_x f_n, so the row
                 // `t_x . m <= delta_y f_n` keeps p_y >= -delta_y, `t_y . m <= delta_x f_n` p_x <= delta_x.
                 cop('y', false),
                 cop('y', true),
                 cop('x', true),
                 cop('x', false),
-            ]
+            ]);
+            names
         }
     }
 }

@@ -35,7 +35,9 @@ impl fmt::Display for BindingLimit {
             (Limit::Torque { upper, max }, None) => write!(f, "torque limit {}{max:.2} Nm", sign(upper))?,
             (Limit::Friction { axis, positive }, _) => write!(f, "friction along {}{axis}", sign(positive))?,
             (Limit::MinNormal { f_min }, _) => write!(f, "normal force below its minimum {f_min:.2} N")?,
-            (Limit::Torsion { positive }, _) => write!(f, "torsion ({}) beyond xi f_n", sign(positive))?,
+            (Limit::FrictionAndTorsion { x, y, torsion }, _) => {
+                write!(f, "friction along {}x and {}y with torsion ({}) beyond the palm's cone", sign(x), sign(y), sign(torsion))?
+            }
             (Limit::CentreOfPressure { axis, positive }, _) => write!(f, "centre of pressure past the patch's {}{axis} edge", sign(positive))?,
         }
         if self.over > 0.0 {

@@ -14,7 +14,8 @@
 //!   - the grasp wrench is internal, `G lambda_ee = 0` (its part along `G^T` does no work
 //!     through `J_c,ee^T` and would otherwise be free in the contact rows);
 //! * non-negative cone (inequalities):
-//!   - friction pyramids, minimum normal forces, hands' torsion and centre of pressure
+//!   - friction pyramids, minimum normal forces, hands' sliding and torsion in one cone and
+//!     centre of pressure
 //!     ([`crate::qp::contact_rows`], eqns. unilateral_and_friction_cone_constraint and
 //!     moment_constraint) on the real wrenches (hands: `lambda_ee + G^+ F_x`);
 //!   - torque limits `|tau_j| <= tau_max,j` (eq. original_torque_limit);

@@ -37,7 +37,9 @@ pub struct PidcConfig {
     pub f_min_hand: f64,
     /// Share of each contact's friction the QP may use (`mu` and `xi` are scaled by it). The
     /// paper's pyramid `|f_x|, |f_y| <= mu f_n` reaches `sqrt(2) mu f_n` at its corners, outside
-    /// the real (circular) cone; `1/sqrt(2)` makes it the inscribed pyramid.
+    /// the real (circular) cone; `1/sqrt(2)` makes it the inscribed pyramid. A hand's rows are
+    /// inscribed in its cone already (`qp::rows`); the margin is kept there against what the
+    /// model does not know (the palm's real friction, the object's).
     pub friction_margin: f64,
     /// Share of the palm's half-sizes the centre of pressure may use (the tilt rows of eqn.
     /// moment_constraint). At 1 the optimal grasp puts the whole squeeze on one palm edge,

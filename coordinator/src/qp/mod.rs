@@ -42,7 +42,7 @@ pub use clarabel::{to_csc, Clarabel};
 pub use dense_ipm::DenseIpm;
 pub use least_violation::{solve_least_violation, solve_least_violation_with};
 pub use problem::{constraints_into, objective_into, QpInput, QpProblem};
-pub use rows::{contact_rows, ContactKind, ContactRows, MAX_CONTACT_ROWS};
+pub use rows::{contact_rows, ContactKind, ContactRows, FRICTION_SIGNS, MAX_CONTACT_ROWS};
 pub use settings::{QpSettings, ACTIVE_SET_MAX_ITER, ACTIVE_SET_TOL, DENSE_TOL, HARD_ROW_FACTOR, LEAST_VIOLATION_MIN_ITER, REDUCED_TOL, VIOLATION_WEIGHT};
 
 use crate::linalg::zeros_v;

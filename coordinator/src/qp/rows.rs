@@ -7,8 +7,24 @@
 //!   Feet and hands have their own `f_min` (a hand's is the squeeze it keeps at least).
 //! * hands: `hand_contact` +z `n` is the palm's OUTWARD normal, pointing into the object; the
 //!   object pushes the palm back, so the force on the robot has `n . f <= 0`. With the normal
-//!   force `f_n = -n . f >= f_min`: `|t_x . f|, |t_y . f| <= mu f_n`, `|n . m| <= xi f_n`,
-//!   and the tilt moments.
+//!   force `f_n = -n . f >= f_min`: sliding and torsional friction together,
+//!   `|t_x . f| / mu + |t_y . f| / mu + |n . m| / xi <= f_n` (below), and the tilt moments.
+//!
+//! **Sliding and torsion share one cone, which DEVIATES from the paper.** Eqns.
+//! unilateral_and_friction_cone_constraint and moment_constraint bound the tangential force
+//! (`|t_x . f|, |t_y . f| <= mu f_n`) and the torsion (`|n . m| <= xi f_n`) each on its own.
+//! A palm cannot give both at once: every point of the patch has one friction cone for its
+//! sliding and its torsional friction (MuJoCo's condim-6 contact: `(f_t / mu)^2 + (m_z /
+//! xi)^2 <= f_n^2`, elliptic, per contact point), so the paper's corner (tangential force at
+//! the pyramid's corner, torsion at its bound) is outside what the palm can carry, and a
+//! torque-optimal grasp of three or more hands sits there: three robots on the cube dropped a
+//! 3 kg object in MuJoCo (palms turning on it from the first tick) that the static problem
+//! with the paper's rows held up to 4.39 kg. The rows here are the cross-polytope with
+//! vertices `mu f_n t_x`, `mu f_n t_y`, `xi f_n n` (and their negatives), one row per sign
+//! combination: it is inside the elliptic cone of every point (`|a| + |b| + |c| >= |(a, b,
+//! c)|`), so each point can carry its share of a wrench that meets them.
+//! `tests/qp_rows.rs` checks the vertices against four palm corners with MuJoCo's cones
+//! (a second-order cone program each).
 //!
 //! **Tilt moments: the physical pairing, which DEVIATES from the paper.** The matrix of eqn.
 //! moment_constraint pairs `delta_x` with `m_x`. A centre of pressure at `(p_x, p_y)` in the
@@ -16,7 +32,7 @@
 //! `m_y = p_x f_n`: the moment about `t_x` comes from pressure displaced along `t_y`. The
 //! centre of pressure stays in the patch `|p_x| <= delta_x`, `|p_y| <= delta_y` iff
 //! `|t_x . m| <= delta_y f_n` and `|t_y . m| <= delta_x f_n`. `tests/qp_rows.rs` checks every
-//! row against this statement written out independently.
+//! row against these statements written out independently.
 
 use nalgebra::Vector3;
 
@@ -41,8 +57,11 @@ impl ContactKind {
     }
 }
 
-/// Most constraint rows of one contact (a hand's 11).
-pub const MAX_CONTACT_ROWS: usize = 11;
+/// Most constraint rows of one contact (a hand's 13).
+pub const MAX_CONTACT_ROWS: usize = 13;
+
+/// The sign combinations `(s_x, s_y, s_z)` of a hand's friction rows, in their order.
+pub const FRICTION_SIGNS: [(f64, f64, f64); 8] = [(1.0, 1.0, 1.0), (-1.0, 1.0, 1.0), (1.0, -1.0, 1.0), (-1.0, -1.0, 1.0), (1.0, 1.0, -1.0), (-1.0, 1.0, -1.0), (1.0, -1.0, -1.0), (-1.0, -1.0, -1.0)];
 
 /// The rows `c . lambda_k >= lo` of one contact, `c` with [`ContactKind::dim`] entries.
 #[derive(Debug, Clone, Copy)]
@@ -78,8 +97,8 @@ impl ContactRows {
 
 /// Rows `c . lambda_k >= lo` of one contact (3 or 6 columns): a foot's 5 (friction pyramid,
 /// normal force; a 6th, `f_z <= f_max`, while it is being unloaded, with the minimum lowered
-/// to `f_max` when the ramp goes below it), a hand's 11 (friction pyramid, normal force,
-/// torsion, tilt).
+/// to `f_max` when the ramp goes below it), a hand's 13 (sliding and torsional friction, one
+/// row per sign in [`FRICTION_SIGNS`]' order, normal force, tilt).
 pub fn contact_rows(kind: &ContactKind) -> ContactRows {
     let mut rows = ContactRows::new(kind.dim());
     match kind {
@@ -99,15 +118,13 @@ pub fn contact_rows(kind: &ContactKind) -> ContactRows {
         ContactKind::Hand { tx, ty, n, mu, xi, half, f_min } => {
             let row = |f: Vector3<f64>, m: Vector3<f64>| [f.x, f.y, f.z, m.x, m.y, m.z];
             let z = Vector3::zeros();
-            // eqn. unilateral_and_friction_cone_constraint on f_n = -n.f
-            rows.push(row(-*mu * n - tx, z), 0.0);
-            rows.push(row(-*mu * n + tx, z), 0.0);
-            rows.push(row(-*mu * n - ty, z), 0.0);
-            rows.push(row(-*mu * n + ty, z), 0.0);
+            // eqns. unilateral_and_friction_cone_constraint and moment_constraint (torsion),
+            // in one cone (see the module's docs): s_x t_x.f + s_y t_y.f + s_z (mu / xi) n.m
+            // <= mu f_n for every sign combination.
+            for (sx, sy, sz) in FRICTION_SIGNS {
+                rows.push(row(-*mu * n - sx * tx - sy * ty, -(sz * mu / xi) * n), 0.0);
+            }
             rows.push(row(-n, z), *f_min);
-            // eqn. moment_constraint, torsion: |n.m| <= xi f_n
-            rows.push(row(-*xi * n, -n), 0.0);
-            rows.push(row(-*xi * n, *n), 0.0);
             // eqn. moment_constraint, tilt: |t_x.m| <= delta_y f_n, |t_y.m| <= delta_x f_n
             // (physical pairing, see the module's docs)
             rows.push(row(-half[1] * n, -tx), 0.0);

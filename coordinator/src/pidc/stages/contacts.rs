@@ -37,7 +37,7 @@ pub fn contact_jacobian(team: &Team, grasp: Option<&GraspTerms>, j_c: &mut DMatr
 
 /// The QP's contacts into `out`: `(first row in J_c, kind)` for every stance foot (friction
 /// pyramid and minimum normal force) and every hand in grasp (its contact frame's axes, the
-/// pyramid, torsion and centre-of-pressure rows), with the robot's friction and patch sizes
+/// sliding-and-torsion, normal-force and centre-of-pressure rows), with the robot's friction and patch sizes
 /// scaled by the configuration's margins.
 pub fn contact_list(team: &Team, descriptions: &BTreeMap<String, RobotDescription>, cfg: &PidcConfig, out: &mut Vec<(usize, ContactKind)>) -> Result<(), ControllerError> {
     let description = |robot: usize| {
