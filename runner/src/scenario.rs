@@ -263,6 +263,9 @@ fn default_capacity_check() -> bool {
 
 /// Top-level keys with a default that `--set` may give although the file leaves them out.
 pub const OPTIONAL_KEYS: [&str; 12] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations", "noslip_iterations", "faults", "drive_loss"];
+/// Keys inside a table with a default that `--set` may give although the file leaves them
+/// out (`--set team.spacing=0.7` on a layout of one robot per face).
+pub const OPTIONAL_NESTED_KEYS: [&str; 7] = ["team.spacing", "team.standoff", "team.description", "references.ramp", "walk.robots", "walk.frame", "walk.start"];
 /// Top-level tables a scenario may leave out that `--set` may still reach into
 /// (`--set release.after_failed_ticks=50`); their own fields are checked when the file is read.
 pub const OPTIONAL_TABLES: [&str; 1] = ["release"];
@@ -520,7 +523,8 @@ impl TaskGains {
 }
 
 /// Apply one `key=value` override to a TOML tree. Array elements are addressed by index
-/// (`robots.1.yaw`); the key must exist (or be one of [`OPTIONAL_KEYS`]), so a typo is an
+/// (`robots.1.yaw`); the key must exist (or be one of [`OPTIONAL_KEYS`] or
+/// [`OPTIONAL_NESTED_KEYS`]), so a typo is an
 /// error rather than a silent no-op.
 pub fn apply_override(root: &mut toml::Value, assignment: &str) -> Result<(), ScenarioError> {
     let (key, raw) = assignment.split_once('=').ok_or_else(|| ScenarioError::OverrideSyntax(assignment.to_string()))?;
@@ -540,7 +544,7 @@ pub fn apply_override(root: &mut toml::Value, assignment: &str) -> Result<(), Sc
         let last = i == parts.len() - 1;
         node = match node {
             toml::Value::Table(t) => {
-                let optional = i == 0 && last && OPTIONAL_KEYS.contains(part);
+                let optional = last && if i == 0 { OPTIONAL_KEYS.contains(part) } else { OPTIONAL_NESTED_KEYS.contains(&parts[..=i].join(".").as_str()) };
                 if i == 0 && !last && OPTIONAL_TABLES.contains(part) && !t.contains_key(*part) {
                     t.insert(part.to_string(), toml::Value::Table(toml::Table::new()));
                 }
@@ -611,6 +615,16 @@ mod tests {
         for bad in ["release.after_failed=7", "release=3", "release.retreat=[1]"] {
             assert!(Scenario::load(&p, &[bad.to_string()]).is_err(), "{bad} accepted");
         }
+        // So may a layout's defaulted keys: four robots two per face, 0.4 m apart.
+        let cube = scenarios_dir().join("team4_cube.toml");
+        let sets: Vec<String> = ["team.faces=[\"-x\", \"+x\"]", "team.per_face=2", "team.spacing=0.4"].map(String::from).to_vec();
+        let s = Scenario::load(&cube, &sets).unwrap();
+        let ys: Vec<f64> = s.robots.iter().map(|r| r.base_xy[1]).collect();
+        assert_eq!(s.robots.len(), 4);
+        assert!(ys.iter().all(|y| (y.abs() - 0.2).abs() < 1e-9), "two a face, 0.4 m apart: {ys:?}");
+        let e = Scenario::load(&cube, &["team.spacng=0.7".into()]).unwrap_err().to_string();
+        assert!(e.contains("no such key \"spacng\""), "{e}");
+        assert!(Scenario::load(&p, &["team.spacing=0.7".into()]).is_err(), "a file without a [team] layout");
         // The controller is chosen by its kind; the old name says what it became.
         assert_eq!(Scenario::load(&p, &[]).unwrap().controller, "pidc");
         assert_eq!(Scenario::load(&p, &["controller=joint-damping".into()]).unwrap().controller, "joint-damping");
