@@ -95,7 +95,7 @@ impl FallDetector {
 /// `cos = R_zz = 1 - 2 (x^2 + y^2)` for a unit quaternion (normalised here).
 pub fn tilt(q: &[f64; 4]) -> f64 {
     let n2 = q.iter().map(|c| c * c).sum::<f64>();
-    if !(n2 > 0.0) {
+    if n2.is_nan() || n2 <= 0.0 {
         return 0.0;
     }
     let rzz = 1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]) / n2;

@@ -68,7 +68,7 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
     anyhow::ensure!(cmd.command_deadline_ms > 0, "--command-deadline-ms must be positive");
     anyhow::ensure!(cmd.touchdown_force.is_none_or(|f| f.is_finite() && f > 0.0), "--touchdown-force must be a positive force (N)");
     enum Source {
-        Model(ModelDynamics),
+        Model(Box<ModelDynamics>),
         Placeholder(PlaceholderDynamics),
     }
     let source = match cmd.placeholder_joints {
@@ -76,7 +76,7 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
         Some(n) => Source::Placeholder(PlaceholderDynamics::floating(n)),
         None => {
             let path = cmd.robot.clone().unwrap_or_else(default_robot_path);
-            Source::Model(ModelDynamics::new(Robot::load(&path)?)?)
+            Source::Model(Box::new(ModelDynamics::new(Robot::load(&path)?)?))
         }
     };
     tracing_subscriber::fmt()
@@ -98,7 +98,7 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
             let _ = tx.send(true);
         });
         match source {
-            Source::Model(s) => agent::run(&session, cfg, s, rx).await?,
+            Source::Model(s) => agent::run(&session, cfg, *s, rx).await?,
             Source::Placeholder(s) => agent::run(&session, cfg, s, rx).await?,
         };
         session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;

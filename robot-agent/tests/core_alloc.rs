@@ -61,7 +61,7 @@ fn per_tick_calls_do_not_allocate() {
 
 #[test]
 fn the_agents_tick_on_the_robots_model_does_not_allocate() {
-    let robot = robot_model::Robot::load(&robot_model::default_robot_path()).unwrap();
+    let robot = robot_model::Robot::load(robot_model::default_robot_path()).unwrap();
     let q = robot.standing_q.clone();
     let n = q.len() - 7;
     let state = RobotState {

@@ -25,8 +25,11 @@ fn state_of(robot: &Robot, q: &DVector<f64>, v: &DVector<f64>) -> RobotState {
     }
 }
 
-/// Stance-foot frames of the terms at `(q, v)`: (position, rotation, J (3 x nv), Jdot v).
-fn feet(robot: &Robot, b: &mut TermsBuilder, q: &DVector<f64>, v: &DVector<f64>) -> Vec<(Vector3<f64>, Matrix3<f64>, nalgebra::DMatrix<f64>, Vector3<f64>)> {
+/// A stance foot's frame in the terms: position, rotation, J (3 x nv), Jdot v.
+type FootFrame = (Vector3<f64>, Matrix3<f64>, nalgebra::DMatrix<f64>, Vector3<f64>);
+
+/// Stance-foot frames of the terms at `(q, v)`.
+fn feet(robot: &Robot, b: &mut TermsBuilder, q: &DVector<f64>, v: &DVector<f64>) -> Vec<FootFrame> {
     let mut terms = empty_terms("t", "r1");
     b.load_state(robot, &state_of(robot, q, v)).unwrap();
     b.compute(robot, &ContactSet::all_stance(robot), &mut terms).unwrap();

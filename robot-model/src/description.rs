@@ -44,22 +44,28 @@ pub enum DescriptionError {
     BadValue { path: PathBuf, what: String, value: f64, rule: &'static str },
     #[error("robot description {path}: {what}")]
     Invalid { path: PathBuf, what: String },
-    #[error(
-        "robot description {path}: at standing the URDF puts {frame} at {actual_position:?} (base frame), \
-         quaternion {actual_orientation:?}, but standing.hand_position = {position:?} and \
-         standing.hand_orientation = {orientation:?}: {distance_mm:.3} mm and {angle_deg:.3} deg apart \
-         (tolerance 1 mm, 0.5 deg)"
-    )]
-    HandPose {
-        path: PathBuf,
-        frame: String,
-        position: [f64; 3],
-        orientation: [f64; 4],
-        actual_position: [f64; 3],
-        actual_orientation: [f64; 4],
-        distance_mm: f64,
-        angle_deg: f64,
-    },
+    #[error("{0}")]
+    HandPose(Box<HandPoseMismatch>),
+}
+
+/// The standing hand pose a description says against the one its URDF gives (boxed in
+/// [`DescriptionError::HandPose`]: it is the largest error).
+#[derive(Debug, Error)]
+#[error(
+    "robot description {path}: at standing the URDF puts {frame} at {actual_position:?} (base frame), \
+     quaternion {actual_orientation:?}, but standing.hand_position = {position:?} and \
+     standing.hand_orientation = {orientation:?}: {distance_mm:.3} mm and {angle_deg:.3} deg apart \
+     (tolerance 1 mm, 0.5 deg)"
+)]
+pub struct HandPoseMismatch {
+    pub path: PathBuf,
+    pub frame: String,
+    pub position: [f64; 3],
+    pub orientation: [f64; 4],
+    pub actual_position: [f64; 3],
+    pub actual_orientation: [f64; 4],
+    pub distance_mm: f64,
+    pub angle_deg: f64,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -413,7 +419,7 @@ fn check_standing_hand(
         return Ok(());
     }
     let aq = actual_q.quaternion();
-    Err(DescriptionError::HandPose {
+    Err(DescriptionError::HandPose(Box::new(HandPoseMismatch {
         path: path.to_path_buf(),
         frame: hand.to_string(),
         position: s.hand_position,
@@ -422,5 +428,5 @@ fn check_standing_hand(
         actual_orientation: [aq.w, aq.i, aq.j, aq.k],
         distance_mm: distance * 1e3,
         angle_deg: angle.to_degrees(),
-    })
+    })))
 }

@@ -64,7 +64,7 @@ pub use algorithm::{
     frame_velocity, gravity, kinetic_energy, nonlinear_effects, point_jacobian, potential_energy, rnea, update_frame_placements,
 };
 pub use data::Data;
-pub use description::{default_robot_path, DescriptionError, FeetContact, HandContact, Robot, RobotCache};
+pub use description::{default_robot_path, DescriptionError, FeetContact, HandContact, HandPoseMismatch, Robot, RobotCache};
 pub use error::{DynamicsError, ModelError};
 pub use ik::{IkError, IkOptions, IkSolution};
 pub use model::{Body, FloatingBase, Frame, FrameId, FrameKind, JointType, Model, GRAVITY};

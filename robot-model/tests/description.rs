@@ -71,11 +71,11 @@ fn a_wrong_standing_hand_pose_is_named_with_both_poses() {
     // 2 mm off in x: beyond the 1 mm tolerance.
     let e = load_modified(|s| s.replace("hand_position = [0.85, 0.0, 0.05118]", "hand_position = [0.852, 0.0, 0.05118]")).unwrap_err();
     match &e {
-        DescriptionError::HandPose { frame, distance_mm, angle_deg, actual_position, .. } => {
-            assert_eq!(frame, "hand_contact");
-            assert!((distance_mm - 2.0).abs() < 0.05, "{distance_mm}");
-            assert!(*angle_deg < 0.01);
-            assert!((actual_position[0] - 0.85).abs() < 1e-4);
+        DescriptionError::HandPose(m) => {
+            assert_eq!(m.frame, "hand_contact");
+            assert!((m.distance_mm - 2.0).abs() < 0.05, "{}", m.distance_mm);
+            assert!(m.angle_deg < 0.01);
+            assert!((m.actual_position[0] - 0.85).abs() < 1e-4);
         }
         other => panic!("expected HandPose, got {other}"),
     }
@@ -89,7 +89,7 @@ fn a_wrong_standing_hand_pose_is_named_with_both_poses() {
     let q = [0.5 * c - 0.5 * s1, 0.5 * c + 0.5 * s1, 0.5 * c - 0.5 * s1, 0.5 * c + 0.5 * s1];
     let line = format!("hand_orientation = [{}, {}, {}, {}]", q[0], q[1], q[2], q[3]);
     let e = load_modified(|s| s.replace("hand_orientation = [0.5, 0.5, 0.5, 0.5]", &line)).unwrap_err();
-    assert!(matches!(&e, DescriptionError::HandPose { angle_deg, .. } if (angle_deg - 1.0).abs() < 0.01), "{e}");
+    assert!(matches!(&e, DescriptionError::HandPose(m) if (m.angle_deg - 1.0).abs() < 0.01), "{e}");
     // Not a unit quaternion.
     let e = load_modified(|s| s.replace("hand_orientation = [0.5, 0.5, 0.5, 0.5]", "hand_orientation = [1.0, 0.5, 0.5, 0.5]")).unwrap_err();
     assert!(matches!(&e, DescriptionError::BadValue { what, .. } if what.contains("hand_orientation")), "{e}");

@@ -299,7 +299,7 @@ pub struct SmokePlant {
 #[derive(Debug, Clone)]
 pub enum BridgeArgs {
     /// A MuJoCo scene (world, pushes, settle and run lengths) with the robots already loaded.
-    Scene { scene: Scene, robots: Vec<Arc<Robot>> },
+    Scene { scene: Box<Scene>, robots: Vec<Arc<Robot>> },
     Smoke(SmokePlant),
 }
 

@@ -61,11 +61,11 @@ pub fn detect_drop(times: &[f64], object_z: &[f64], z0: f64, hand_contact: &[Vec
             report.at = Some(t);
             report.reason = Some(format!("object {fall:.3} m below its start height"));
         }
-        for h in 0..hands {
+        for (h, lost) in lost_since.iter_mut().enumerate() {
             let touching = hand_contact[k].get(h).copied().unwrap_or(false);
-            match (touching, lost_since[h]) {
-                (true, _) => lost_since[h] = None,
-                (false, None) => lost_since[h] = Some(t),
+            match (touching, *lost) {
+                (true, _) => *lost = None,
+                (false, None) => *lost = Some(t),
                 (false, Some(t0)) => {
                     let gap = t - t0;
                     report.longest_gap = report.longest_gap.max(gap);

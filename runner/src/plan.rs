@@ -28,7 +28,7 @@ pub const TEAM: &str = "team";
 #[derive(Debug, Error)]
 pub enum PlanError {
     #[error("robot {robot}: {source}")]
-    Description { robot: String, source: DescriptionError },
+    Description { robot: String, source: Box<DescriptionError> },
     #[error("placing the hands on the object: {0}")]
     Ik(#[from] crate::grasp_plan::GraspPlanError),
     #[error(transparent)]
@@ -84,7 +84,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
     let mut cache = RobotCache::new();
     for r in &s.robots {
         let path = if r.description.is_absolute() { r.description.clone() } else { root.join(&r.description) };
-        let robot = cache.load(&path).map_err(|source| PlanError::Description { robot: r.id.clone(), source })?;
+        let robot = cache.load(&path).map_err(|source| PlanError::Description { robot: r.id.clone(), source: Box::new(source) })?;
         placements.push(sim_bridge::placement::standing(&r.id, path.clone(), &robot, r.base_xy, r.yaw)?);
         robots.push(PlannedRobot { id: r.id.clone(), description: path, joints: robot.actuated_joints.clone(), robot });
     }

@@ -112,7 +112,7 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
             command_deadline,
         })
         .collect();
-    let bridge = BridgeArgs::Scene { scene: plan.scene.clone(), robots: plan.loaded_robots() };
+    let bridge = BridgeArgs::Scene { scene: Box::new(plan.scene.clone()), robots: plan.loaded_robots() };
     (Launch { coordinator, agents }, bridge)
 }
 

@@ -274,7 +274,7 @@ async fn a_vanished_token_is_waited_for_and_an_announced_leave_is_not() {
     let s = session().await;
     let statuses = transport::subscribe(&s, keys::coordinator_status(team).unwrap()).await.unwrap();
     let c = coordinator(&s, team, Box::new(FailsEvery { every: u64::MAX }));
-    let mut tokens = vec![Some(transport::declare_member(&s, team, "r1").await.unwrap()), Some(transport::declare_member(&s, team, "r2").await.unwrap())];
+    let mut tokens = [Some(transport::declare_member(&s, team, "r1").await.unwrap()), Some(transport::declare_member(&s, team, "r2").await.unwrap())];
     let (queues, mut pubs) = both_members(&s, team, &statuses).await;
     // Tick 1, the team's first: both commanded.
     put_terms(&mut pubs, team, 1).await;

@@ -399,7 +399,7 @@ impl DualActiveSet {
             self.u[k] = (self.u[k] - dot) / g[k * n + k];
         }
         let umax = (0..q).map(|k| self.u[k].abs()).fold(0.0, f64::max);
-        if (0..q).any(|k| !(self.u[k] >= -tol * (1.0 + umax))) {
+        if (0..q).any(|k| self.u[k].is_nan() || self.u[k] < -tol * (1.0 + umax)) {
             return false;
         }
         // x = L^{-T} (M u).
@@ -417,7 +417,7 @@ impl DualActiveSet {
         self.s.copy_from(b);
         self.s.gemv(-1.0, a, &self.x, 1.0);
         for i in 0..b.len() {
-            if !(self.s[i] >= -tol * (1.0 + b[i].abs())) {
+            if self.s[i].is_nan() || self.s[i] < -tol * (1.0 + b[i].abs()) {
                 return false;
             }
         }

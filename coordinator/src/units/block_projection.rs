@@ -491,8 +491,8 @@ fn coupling(x: &[Matrix6<f64>], g: &DMatrix<f64>, x_inv: &mut Vec<Matrix6<f64>>,
     let f_inv = spd6_inverse(&((f + f.transpose()) * 0.5))?;
     for h in 0..b {
         let yf = y[h] * f_inv;
-        for h2 in 0..b {
-            let mut blk = -(yf * y[h2].transpose());
+        for (h2, y2) in y.iter().enumerate().take(b) {
+            let mut blk = -(yf * y2.transpose());
             if h == h2 {
                 blk += x_inv[h];
             }

@@ -249,6 +249,7 @@ fn place(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], foot
 /// The foot order of robot `i` in segment `k` (`n` cycles): of the 24, the one whose first
 /// cycle needs the least total torso shift (walking backwards, the front feet lead; sideways,
 /// the feet away from the motion), the crawl order on a tie; `None` when none reaches the margin.
+#[allow(clippy::too_many_arguments)]
 fn best_order(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], crawl: [usize; 4], k: usize, n: usize, object: Option<&[Isometry3<f64>]>, p: &GaitParams) -> Option<[usize; 4]> {
     let mut best: Option<([usize; 4], f64)> = None;
     for perm in permutations(crawl) {

@@ -44,7 +44,7 @@ pub fn centre_of_pressure(mass: f64, com: &Vector3<f64>, load: Option<&HandLoad>
         force -= h.force;
         moment -= h.point.cross(&h.force) + h.moment;
     }
-    if !(force.z > 0.0) {
+    if force.z.is_nan() || force.z <= 0.0 {
         return None;
     }
     let x = (ground_z * force.x - moment.y) / force.z;
