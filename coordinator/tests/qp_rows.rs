@@ -261,7 +261,15 @@ fn check_contact_rows(hand: bool, seed: u64) {
                 map.record(v, &broken_rows(&kind, &w), &format!("{kind_name} case {case} {contact:?}"));
             }
         }
-        map.assert_bijection(rows.len());
+        let row_of = map.assert_bijection(rows.len());
+        if hand {
+            // Each friction face is the row of its signs in FRICTION_SIGNS' order (the order
+            // the capacity report names them in).
+            for (k, (name, signs)) in HAND_FACES.iter().enumerate() {
+                let named = qp::FRICTION_SIGNS.iter().position(|&(x, y, z)| [x, y, z] == *signs).expect("a sign combination");
+                assert_eq!(row_of[k], named, "`{name}` is row {}, FRICTION_SIGNS says {named}", row_of[k]);
+            }
+        }
     }
 }
 
@@ -361,43 +369,54 @@ fn corners_carry(mu: f64, xi: f64, half: [f64; 2], w: [f64; 5]) -> bool {
     }
 }
 
+/// The vertices of a hand's rows at a normal force of 1, with friction margin `fm` and patch
+/// margin `pm` (the cross-polytope of the sliding and torsional friction times the rectangle of
+/// the centre of pressure: 24), each as the palm wrench `[f_x, f_y, m_x, m_y, m_z]`.
+fn hand_vertices(mu: f64, xi: f64, half: [f64; 2], fm: f64, pm: f64) -> Vec<[f64; 5]> {
+    let (m, x) = (mu * fm, xi * fm);
+    let (px, py) = (half[0] * pm, half[1] * pm);
+    let mut out = Vec::new();
+    for [f_x, f_y, m_z] in [[m, 0.0, 0.0], [-m, 0.0, 0.0], [0.0, m, 0.0], [0.0, -m, 0.0], [0.0, 0.0, x], [0.0, 0.0, -x]] {
+        for (sx, sy) in [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)] {
+            // Normal force 1 along -n at (p_x, p_y): m_x = -p_y, m_y = p_x.
+            out.push([f_x, f_y, -sy * py, sx * px, m_z]);
+        }
+    }
+    out
+}
+
 /// The hand's rows with the default margins hold only wrenches that the simulated palm can
-/// carry: every vertex of their polytope (at a normal force of 1: the cross-polytope of the
-/// sliding and torsional friction times the rectangle of the centre of pressure, 24 vertices;
-/// the set the palm carries is convex, so the vertices are enough) is carried by the palm's
-/// four corners with MuJoCo's cones. The paper's separate rows are not: tangential force at
-/// the pyramid's corner with torsion at its bound, the vertex three robots on the cube sat at
-/// when they dropped a 3 kg object, is beyond the corners.
+/// carry: every vertex of their polytope is carried by the palm's four corners with MuJoCo's
+/// cones (the set the palm carries is convex, so the vertices are enough). So with margins up
+/// to 0.8 (friction) and 0.6 (patch); not at a friction margin of 1 (the torsion about the
+/// palm's centre then needs friction the corners no longer have when the centre of pressure is
+/// off the centre) nor with the whole patch (all the load on one corner): the "relaxed"
+/// capacities are beyond the palm. The paper's separate rows are not carried even at the
+/// defaults: tangential force at the pyramid's corner with torsion at its bound, the vertex
+/// three robots on the cube sat at when they dropped a 3 kg object.
 #[test]
 fn every_wrench_the_hand_rows_allow_is_one_the_palm_corners_carry() {
     let fx = common::Fixture::new();
     let d = fx.description(&common::robot_id(0));
     let cfg = PidcConfig::default();
     let (mu, xi, half) = (d.hand_mu, d.hand_xi, d.hand_half_size);
-    let kind = ContactKind::Hand {
-        tx: Vector3::x(),
-        ty: Vector3::y(),
-        n: Vector3::z(),
-        mu: mu * cfg.friction_margin,
-        xi: xi * cfg.friction_margin,
-        half: [half[0] * cfg.patch_margin, half[1] * cfg.patch_margin],
-        f_min: 0.0,
-    };
-    let (m, x) = (mu * cfg.friction_margin, xi * cfg.friction_margin);
-    let friction = [[m, 0.0, 0.0], [-m, 0.0, 0.0], [0.0, m, 0.0], [0.0, -m, 0.0], [0.0, 0.0, x], [0.0, 0.0, -x]];
-    let (px, py) = (half[0] * cfg.patch_margin, half[1] * cfg.patch_margin);
-    for [f_x, f_y, m_z] in friction {
-        for (sx, sy) in [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)] {
-            let (p_x, p_y) = (sx * px, sy * py);
-            // Wrench on the palm (its frame, normal force 1 along -n): m_x = -p_y, m_y = p_x.
-            let w = [f_x, f_y, -p_y, p_x, m_z];
-            let lambda = [f_x, f_y, -1.0, w[2], w[3], w[4]];
-            let broken = broken_rows(&kind, &lambda);
-            assert!(broken.iter().all(|&r| on_its_bound(&kind, r, &lambda)), "vertex {w:?} breaks rows {broken:?}");
-            assert!(corners_carry(mu, xi, half, w), "the rows allow {w:?}, the palm's corners cannot carry it");
-        }
+    let (fm, pm) = (cfg.friction_margin, cfg.patch_margin);
+    let kind = ContactKind::Hand { tx: Vector3::x(), ty: Vector3::y(), n: Vector3::z(), mu: mu * fm, xi: xi * fm, half: [half[0] * pm, half[1] * pm], f_min: 0.0 };
+    for w in hand_vertices(mu, xi, half, fm, pm) {
+        let lambda = [w[0], w[1], -1.0, w[2], w[3], w[4]];
+        let broken = broken_rows(&kind, &lambda);
+        assert!(broken.iter().all(|&r| on_its_bound(&kind, r, &lambda)), "vertex {w:?} breaks rows {broken:?}");
+        assert!(corners_carry(mu, xi, half, w), "the rows allow {w:?}, the palm's corners cannot carry it");
+    }
+    let carried = |fm: f64, pm: f64| hand_vertices(mu, xi, half, fm, pm).into_iter().all(|w| corners_carry(mu, xi, half, w));
+    for (fm, pm) in [(0.8, 0.6), (0.5, 0.9), (0.9, 0.25)] {
+        assert!(carried(fm, pm), "margins {fm}, {pm}");
+    }
+    for (fm, pm) in [(1.0, 0.25), (1.0, 1.0), (fm, 1.0)] {
+        assert!(!carried(fm, pm), "margins {fm}, {pm}: beyond the palm");
     }
     // The paper's rows allowed this one (|f_x|, |f_y| <= mu' f_n, |m_z| <= xi' f_n); ours do not.
+    let (m, x, px, py) = (mu * fm, xi * fm, half[0] * pm, half[1] * pm);
     let corner = [m, m, -py, px, x];
     assert!(!corners_carry(mu, xi, half, corner), "the paper's corner is beyond the palm");
     assert!(!broken_rows(&kind, &[m, m, -1.0, -py, px, x]).is_empty(), "our rows refuse it");
@@ -661,3 +680,4 @@ fn an_unloading_foot_has_its_normal_force_bounded_above() {
     // No ramp: the five rows of a foot.
     assert_eq!(contact_rows(&ContactKind::Foot { mu: 0.5, f_min: 5.0, f_max: f64::INFINITY }).len(), 5);
 }
+

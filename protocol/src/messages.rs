@@ -662,7 +662,8 @@ impl Validate for RobotDescription {
             "contact parameters",
             &[self.foot_mu, self.hand_mu, self.hand_xi, self.hand_half_size[0], self.hand_half_size[1], self.total_mass],
         )?;
-        if self.foot_mu <= 0.0 || self.hand_mu <= 0.0 || self.hand_xi < 0.0 || self.hand_half_size.iter().any(|d| *d <= 0.0) {
+        // xi > 0 too: a hand's friction rows divide by it (sliding and torsion share one cone).
+        if self.foot_mu <= 0.0 || self.hand_mu <= 0.0 || self.hand_xi <= 0.0 || self.hand_half_size.iter().any(|d| *d <= 0.0) {
             return Err(ProtocolError::invalid("contact parameters", "friction and patch sizes must be positive"));
         }
         Ok(())

@@ -278,3 +278,35 @@ fn contact_set_round_trips_and_refuses_duplicates_and_bad_names() {
     // Another kind's bytes are not a contact set.
     assert!(matches!(decode::<ContactSet>(&encode(&command(3)).unwrap()), Err(ProtocolError::WrongKind { .. })));
 }
+
+fn description() -> RobotDescription {
+    RobotDescription {
+        header: header(true),
+        joint_names: vec!["j1".into(), "j2".into()],
+        torque_limits: vec![10.0, 20.0],
+        floating_base: true,
+        nq: 9,
+        nv: 8,
+        foot_frames: vec!["foot".into()],
+        hand_frame: "hand".into(),
+        torso_frame: "base".into(),
+        foot_mu: 0.8,
+        hand_mu: 0.8,
+        hand_xi: 0.03,
+        hand_half_size: [0.075, 0.05],
+        total_mass: 10.0,
+    }
+}
+
+#[test]
+fn contact_parameters_must_be_positive() {
+    decode::<RobotDescription>(&raw(&description())).expect("a valid description");
+    // xi = 0 too: a hand's friction rows divide by it (coordinator/src/qp/rows.rs).
+    let bad: [fn(&mut RobotDescription); 4] = [|d| d.foot_mu = 0.0, |d| d.hand_mu = -0.1, |d| d.hand_xi = 0.0, |d| d.hand_half_size[1] = 0.0];
+    for (k, edit) in bad.iter().enumerate() {
+        let mut d = description();
+        edit(&mut d);
+        let e = decode::<RobotDescription>(&raw(&d)).expect_err("refused").to_string();
+        assert!(e.contains("contact parameters"), "case {k}: {e}");
+    }
+}

@@ -56,7 +56,8 @@ pub struct Scenario {
     #[serde(default = "default_min_hand_force")]
     pub min_hand_force: f64,
     /// Share of each contact's friction the controller's QP may use (PIDC's
-    /// `friction_margin`, in (0, 1]; 1/sqrt(2) inscribes the pyramid in the cone).
+    /// `friction_margin`, in (0, 1]; 1/sqrt(2) inscribes a foot's pyramid in its cone; a hand's
+    /// rows are carried by the palm up to 0.8, see `coordinator::qp::rows`).
     #[serde(default = "default_friction_margin")]
     pub friction_margin: f64,
     /// Share of the palm's half-sizes the centre of pressure may use (PIDC's `patch_margin`).
@@ -265,10 +266,11 @@ fn default_capacity_check() -> bool {
 pub const OPTIONAL_KEYS: [&str; 12] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations", "noslip_iterations", "faults", "drive_loss"];
 /// Keys inside a table with a default that `--set` may give although the file leaves them
 /// out (`--set team.spacing=0.7` on a layout of one robot per face).
-pub const OPTIONAL_NESTED_KEYS: [&str; 7] = ["team.spacing", "team.standoff", "team.description", "references.ramp", "walk.robots", "walk.frame", "walk.start"];
+pub const OPTIONAL_NESTED_KEYS: [&str; 6] = ["team.spacing", "team.standoff", "team.description", "walk.robots", "walk.frame", "walk.start"];
 /// Top-level tables a scenario may leave out that `--set` may still reach into
-/// (`--set release.after_failed_ticks=50`); their own fields are checked when the file is read.
-pub const OPTIONAL_TABLES: [&str; 1] = ["release"];
+/// (`--set release.after_failed_ticks=50`, `--set references.ramp=0.5` on a walk); their own
+/// fields are checked when the file is read.
+pub const OPTIONAL_TABLES: [&str; 2] = ["release", "references"];
 
 /// The carried box.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -625,6 +627,10 @@ mod tests {
         let e = Scenario::load(&cube, &["team.spacng=0.7".into()]).unwrap_err().to_string();
         assert!(e.contains("no such key \"spacng\""), "{e}");
         assert!(Scenario::load(&p, &["team.spacing=0.7".into()]).is_err(), "a file without a [team] layout");
+        // A file without [references] (a walk) takes its ramp from --set; a typo there is refused.
+        let walk = scenarios_dir().join("s2_walk.toml");
+        assert_eq!(Scenario::load(&walk, &["references.ramp=0.5".into()]).unwrap().references.ramp, 0.5);
+        assert!(Scenario::load(&walk, &["references.rmap=0.5".into()]).is_err());
         // The controller is chosen by its kind; the old name says what it became.
         assert_eq!(Scenario::load(&p, &[]).unwrap().controller, "pidc");
         assert_eq!(Scenario::load(&p, &["controller=joint-damping".into()]).unwrap().controller, "joint-damping");

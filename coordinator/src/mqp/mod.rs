@@ -5,8 +5,8 @@
 //! robot; the weighted task accelerations of the object, the torsos and the swing feet
 //! (`xdd_ref = xdd_des + K_p (x_des - x) + K_d (xd_des - xd)`) plus a small regularisation,
 //! under the floating-base dynamics, contact kinematics (stance feet and the grasp), torque,
-//! joint acceleration and velocity limits, friction pyramids and the hands' centre of
-//! pressure. Solved by Clarabel. It composes the coordinator's units: the team assembly
+//! joint acceleration and velocity limits, friction (a palm's sliding and torsion in one cone)
+//! and the hands' centre of pressure. Solved by Clarabel. It composes the coordinator's units: the team assembly
 //! ([`crate::team`]), the grasp ([`crate::units::grasp`]), the task errors
 //! ([`crate::units::impedance`]), the targets and object load of PIDC's task stage, the torque
 //! limits and contact list of PIDC's stages and the QP's contact rows ([`crate::qp::rows`]).

@@ -37,9 +37,9 @@ pub struct PidcConfig {
     pub f_min_hand: f64,
     /// Share of each contact's friction the QP may use (`mu` and `xi` are scaled by it). The
     /// paper's pyramid `|f_x|, |f_y| <= mu f_n` reaches `sqrt(2) mu f_n` at its corners, outside
-    /// the real (circular) cone; `1/sqrt(2)` makes it the inscribed pyramid. A hand's rows are
-    /// inscribed in its cone already (`qp::rows`); the margin is kept there against what the
-    /// model does not know (the palm's real friction, the object's).
+    /// the real (circular) cone; `1/sqrt(2)` makes it the inscribed pyramid. A hand's rows
+    /// (sliding and torsion in one cone, `qp::rows`) are carried by the palm up to 0.8 with
+    /// `patch_margin` up to 0.6 (checked in `tests/qp_rows.rs`), not at 1.
     pub friction_margin: f64,
     /// Share of the palm's half-sizes the centre of pressure may use (the tilt rows of eqn.
     /// moment_constraint). At 1 the optimal grasp puts the whole squeeze on one palm edge,

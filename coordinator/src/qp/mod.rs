@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! min_F  F^T (J_c B^T B J_c^T + eps I) F
-//! s.t.   C_k (rho F + eta)_k >= d_k     friction pyramid + unilateral (eqn. unilateral_and_friction_cone_constraint)
+//! s.t.   C_k (rho F + eta)_k >= d_k     friction + unilateral (eqn. unilateral_and_friction_cone_constraint)
 //!                                       and hand moments (eqn. moment_constraint), per contact k
 //!        tau_min - tau_0 <= Xi F <= tau_max - tau_0     (eq. real_torque_limit, Xi = S_ns^T B J_c^T)
 //! ```
@@ -15,7 +15,7 @@
 //!
 //! | file | job |
 //! | --- | --- |
-//! | [`rows`] | one contact's rows `c . lambda_k >= lo` ([`ContactKind`], [`contact_rows`]); the sign conventions and the tilt-moment pairing that deviates from the paper |
+//! | [`rows`] | one contact's rows `c . lambda_k >= lo` ([`ContactKind`], [`contact_rows`]); the sign conventions, a palm's sliding and torsion in one cone and the tilt-moment pairing, which deviate from the paper |
 //! | [`problem`] | the controller's terms ([`QpInput`]) and the assembled `min 1/2 F^T P F, A F <= b` ([`QpProblem`], [`constraints_into`], [`objective_into`]) |
 //! | [`settings`] | [`QpSettings`]: dense first or not, iterations, tolerances, the fallback's price |
 //! | [`active_set`] | [`DualActiveSet`], the Goldfarb–Idnani dual active-set method hot-started from the last tick, tried first |

@@ -21,10 +21,12 @@
 //! 3 kg object in MuJoCo (palms turning on it from the first tick) that the static problem
 //! with the paper's rows held up to 4.39 kg. The rows here are the cross-polytope with
 //! vertices `mu f_n t_x`, `mu f_n t_y`, `xi f_n n` (and their negatives), one row per sign
-//! combination: it is inside the elliptic cone of every point (`|a| + |b| + |c| >= |(a, b,
-//! c)|`), so each point can carry its share of a wrench that meets them.
-//! `tests/qp_rows.rs` checks the vertices against four palm corners with MuJoCo's cones
-//! (a second-order cone program each).
+//! combination, inside each point's elliptic cone (`|a| + |b| + |c| >= |(a, b, c)|`). With
+//! the centre of pressure off the palm's centre the tangential force's lever arm adds torsion
+//! that the points must carry too, so the margins matter: `tests/qp_rows.rs` checks the
+//! vertices against four palm corners with MuJoCo's cones (a second-order cone program each),
+//! carried with the default margins and up to 0.8 (friction) and 0.6 (patch), not at a
+//! friction margin of 1 or with the whole patch.
 //!
 //! **Tilt moments: the physical pairing, which DEVIATES from the paper.** The matrix of eqn.
 //! moment_constraint pairs `delta_x` with `m_x`. A centre of pressure at `(p_x, p_y)` in the
