@@ -20,7 +20,6 @@
 
 mod common;
 
-use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SecondOrderConeT, SolverStatus, ZeroConeT};
 use coordinator::qp::{self, constraints_into, contact_rows, ContactKind, DenseIpm, QpInput, QpSettings, QpSolver, QpWorkspace, DENSE_TOL};
 use coordinator::PidcConfig;
@@ -344,23 +343,10 @@ fn corners_carry(mu: f64, xi: f64, half: [f64; 2], w: [f64; 5]) -> bool {
     let mut b = vec![0.0; 6 + n];
     b[0] = 1.0;
     b[1..6].copy_from_slice(&w);
-    let csc = |m: &DMatrix<f64>| {
-        let (mut colptr, mut rowval, mut nzval) = (vec![0], Vec::new(), Vec::new());
-        for j in 0..m.ncols() {
-            for i in 0..m.nrows() {
-                if m[(i, j)] != 0.0 {
-                    rowval.push(i);
-                    nzval.push(m[(i, j)]);
-                }
-            }
-            colptr.push(rowval.len());
-        }
-        CscMatrix::new(m.nrows(), m.ncols(), colptr, rowval, nzval)
-    };
-    let p = CscMatrix::new(n, n, vec![0; n + 1], vec![], vec![]);
+    let p = qp::to_csc(&DMatrix::zeros(n, n), true);
     let cones = [ZeroConeT(6), SecondOrderConeT(4), SecondOrderConeT(4), SecondOrderConeT(4), SecondOrderConeT(4)];
     let settings = DefaultSettings::<f64> { verbose: false, ..DefaultSettings::default() };
-    let mut solver = DefaultSolver::new(&p, &vec![0.0; n], &csc(&a), &b, &cones, settings).expect("the cone program");
+    let mut solver = DefaultSolver::new(&p, &vec![0.0; n], &qp::to_csc(&a, false), &b, &cones, settings).expect("the cone program");
     solver.solve();
     match solver.solution.status {
         SolverStatus::Solved | SolverStatus::AlmostSolved => true,

@@ -146,7 +146,6 @@ pub async fn run_with<S: DynamicsSource>(
             c = coordinator.recv_async() => {
                 let Ok(sample) = c else { break };
                 if transport::coordinator_alive(&sample) {
-                    tracing::info!(%robot, "the coordinator is present");
                     // A coordinator that (re)started needs the description to command us.
                     let out = core.on_coordinator(Instant::now());
                     let done = io.send(out).await?;

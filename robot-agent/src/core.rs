@@ -612,6 +612,7 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// needs this robot's description before it can command it, so it goes out now rather than
     /// at its next period.
     pub fn on_coordinator(&mut self, now: Instant) -> Outputs<'_> {
+        tracing::info!(robot = %self.robot, "the coordinator is present");
         self.last_description = Some(now);
         self.coordinator_lost = None;
         // The latest terms go again while their state is unanswered: a link that dropped may

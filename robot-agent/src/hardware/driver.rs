@@ -262,10 +262,7 @@ impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
         for _ in 0..INBOX {
             let now = Instant::now();
             let out = match self.link.try_recv_coordinator() {
-                Some(Presence::Came) => {
-                    tracing::info!(robot = %self.core.robot(), "the coordinator is present");
-                    self.core.on_coordinator(now)
-                }
+                Some(Presence::Came) => self.core.on_coordinator(now),
                 Some(Presence::Went) => self.core.on_coordinator_lost(now),
                 None => return,
             };
