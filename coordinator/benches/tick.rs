@@ -5,7 +5,8 @@
 //! projections by dense SVDs of the team's matrices (`PidcConfig::dense_projections`, the
 //! formulation before the team's blocks were used, kept as the oracle). `ACTIVE_SET=1` tries the
 //! dual active-set method first (`PidcConfig::active_set_qp`, hot-started from the last tick;
-//! the default), `DENSE_IPM=1` forces it off.
+//! the default), `DENSE_IPM=1` forces it off. `TEAM_SIZED_QP=1` builds the team-sized QP on
+//! every tick (`PidcConfig::qp_by_blocks = false`): without the hot start by the robots' blocks.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -49,7 +50,8 @@ fn bench(c: &mut Criterion) {
         let (terms, descs) = fx.static_team(count);
         let dense_projections = std::env::var_os("DENSE_PROJECTIONS").is_some();
         let active_set_qp = std::env::var_os("DENSE_IPM").is_none() && (std::env::var_os("ACTIVE_SET").is_some() || PidcConfig::default().active_set_qp);
-        let mut ctl = Pidc::new(PidcConfig { dense_qp: std::env::var_os("CLARABEL_ONLY").is_none(), active_set_qp, dense_projections, ..PidcConfig::default() });
+        let qp_by_blocks = std::env::var_os("TEAM_SIZED_QP").is_none();
+        let mut ctl = Pidc::new(PidcConfig { dense_qp: std::env::var_os("CLARABEL_ONLY").is_none(), active_set_qp, dense_projections, qp_by_blocks, ..PidcConfig::default() });
         for d in &descs {
             ctl.set_description(d);
         }

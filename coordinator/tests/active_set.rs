@@ -282,7 +282,7 @@ fn moving_team(fx: &mut Fixture, robots: usize) {
     let nv = fx.robot.model.nv;
     let qs: Vec<DVector<f64>> = (0..robots).map(|k| fx.perturbed_q(k, robots, 0.05, &mut rng)).collect();
     let vs: Vec<DVector<f64>> = (0..robots).map(|_| DVector::from_fn(nv, |i, _| if i < 6 { 0.0 } else { rng.random_range(-0.2..0.2) })).collect();
-    let configs = [PidcConfig { active_set_qp: true, ..PidcConfig::default() }, PidcConfig { active_set_qp: false, ..PidcConfig::default() }, PidcConfig { dense_qp: false, ..PidcConfig::default() }];
+    let configs = [PidcConfig { active_set_qp: true, qp_by_blocks: false, ..PidcConfig::default() }, PidcConfig { active_set_qp: false, ..PidcConfig::default() }, PidcConfig { dense_qp: false, ..PidcConfig::default() }];
     let mut cs: Vec<Pidc> = configs.into_iter().map(Pidc::new).collect();
     for c in &mut cs {
         for k in 0..robots {

@@ -105,6 +105,7 @@ fn the_tick_allocates_nothing_once_the_team_shape_is_known() {
     println!("2 robots: first tick {first} allocations, then {steady:?}; inside faer's decompositions {:?}; QP {:?} by {}", &l.inside[1..], r.qp.status, r.qp.solver);
     assert!(first > 0, "the first tick sizes the buffers (the counter counts)");
     assert!(matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved) && r.qp.solver != "clarabel");
+    assert_eq!(r.qp.solver, coordinator::qp::by_blocks::SOLVER, "the steady ticks' QP by the robots' blocks (the default)");
     assert!(r.proj.by_blocks, "the projections by the team's blocks (the default)");
     assert_eq!(steady, vec![0; 20], "steady ticks allocate nothing");
     assert!(l.c.diagnostics().is_some_and(|d| d.contacts.len() == 10));
@@ -155,7 +156,7 @@ fn the_active_set_path_allocates_nothing_either() {
     // a contact set that changes (cold again on the new shape).
     let mut fx = Fixture::new();
     let (mut terms, descs) = fx.static_team(2);
-    let mut l = Loop::with(&descs, PidcConfig { active_set_qp: true, ..PidcConfig::default() });
+    let mut l = Loop::with(&descs, PidcConfig { active_set_qp: true, qp_by_blocks: false, ..PidcConfig::default() });
     l.run(&mut terms, 2);
     let steady = l.run(&mut terms, 10);
     assert_eq!(l.c.last().map(|r| r.qp.solver), Some("active-set"));

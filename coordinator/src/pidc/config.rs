@@ -60,6 +60,11 @@ pub struct PidcConfig {
     /// before that, `tests/tests/degrade.rs`'s
     /// 300 N push kept the team standing only with the interior point's 1e-7 answers.
     pub active_set_qp: bool,
+    /// With `active_set_qp`: first try the last tick's active rows by the robots' blocks
+    /// (`qp::BlockHotStart`, the QP in the wrenches' change `z = rho F`, linear in the team),
+    /// before `Y`, `rho` and the team-sized QP are built; the same torques to the solvers'
+    /// tolerance (`tests/qp_by_blocks.rs`). Off: every tick builds the team-sized QP.
+    pub qp_by_blocks: bool,
     /// `S = I` (treat the base as actuated): the [Lin2018] comparison only.
     pub fully_actuated: bool,
     /// Compute the projections by dense SVDs of the team's matrices (the oracle) instead of
@@ -93,6 +98,7 @@ impl Default for PidcConfig {
             qp_max_iter: 50,
             dense_qp: true,
             active_set_qp: true,
+            qp_by_blocks: true,
             fully_actuated: false,
             dense_projections: false,
         }

@@ -37,7 +37,7 @@ use stages::contacts::{contact_jacobian, contact_list, unload_feet};
 use stages::limits::torque_limits;
 use stages::tasks::{task_torque, MotionSpaceTerms, TaskInput, Targets};
 use stages::torque::{compose, fallback, motion_torque, saturate, Clamp, MotionTorqueScratch};
-use stages::wrench::{contact_map, contact_wrenches, Actuation, ContactMapScratch, MapInput, WrenchInput};
+use stages::wrench::{contact_map, contact_offset, contact_wrenches, Actuation, ContactMapScratch, MapInput, WrenchInput};
 
 /// Scratch of a tick that the report does not keep: each stage's workspace.
 #[derive(Default)]
@@ -48,6 +48,7 @@ struct Workspace {
     torque: MotionTorqueScratch,
     map: ContactMapScratch,
     qp: QpWorkspace,
+    blocks: qp::BlockHotStart,
     by_robot: ByRobotScratch,
 }
 
@@ -120,14 +121,26 @@ impl Pidc {
     }
 
     /// The last tick with its team-sized projection matrices formed ([`Projections::materialize`]:
-    /// the block path keeps only factors on the tick). For tests and reports; it allocates.
+    /// the block path keeps only factors on the tick), and, when the QP was answered by the
+    /// robots' blocks ([`qp::BlockHotStart`]), `Y`, `rho` and an `F_c` with
+    /// `tau = tau_0 + Y F_c` (the least-norm one, `Y^+ (tau - tau_0)`; then also
+    /// `lambda = rho F_c + eta`, since `rho` and `Y` share their null space). For tests and
+    /// reports; it allocates.
     ///
     /// [`Projections::materialize`]: crate::units::projection::Projections::materialize
     pub fn materialized(&mut self) -> Option<&TickReport> {
         if !self.valid {
             return None;
         }
-        self.report.proj.materialize(&self.report.team);
+        let r = &mut self.report;
+        r.proj.materialize(&r.team);
+        if r.qp.solver == qp::by_blocks::SOLVER {
+            let map = MapInput { team: &r.team, proj: &r.proj, j_c: &r.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
+            let (mut eta, mut eta_real) = (DVector::zeros(0), DVector::zeros(0));
+            contact_map(&map, &mut self.ws.map, &mut r.y, &mut r.rho, &mut eta, &mut eta_real);
+            let (y_pinv, _) = crate::linalg::pinv(&r.y, crate::linalg::RANK_TOL)?;
+            r.f_c = y_pinv * (&r.tau - &r.tau0);
+        }
         Some(&self.report)
     }
 
@@ -215,6 +228,19 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
     contact_list(&r.team, descriptions, cfg, &mut r.contacts)?;
     unload_feet(&r.team, loads, &mut r.contacts);
     build_us += t_list.elapsed().as_secs_f64() * 1e6;
+    r.blocks_declined = None;
+    if cfg.qp_by_blocks && cfg.active_set_qp && cfg.dense_qp {
+        let t0 = Instant::now();
+        let map = MapInput { team: &r.team, proj: &r.proj, j_c: &r.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
+        contact_offset(&map, &mut ws.map, &mut r.eta, &mut r.lambda_real);
+        let t1 = Instant::now();
+        build_us += (t1 - t0).as_secs_f64() * 1e6;
+        let solved = solve_by_blocks(r, ws, cfg);
+        qp_us += t1.elapsed().as_secs_f64() * 1e6;
+        if solved {
+            return Ok((build_us, qp_us));
+        }
+    }
     loop {
         // The contact map depends on tau_0: built again after a saturation.
         let t0 = Instant::now();
@@ -255,6 +281,33 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
     let wrench = WrenchInput { team: &r.team, proj: &r.proj, load: &r.load, rho: &r.rho, eta: &r.eta };
     contact_wrenches(&wrench, sent, &mut ws.map, &mut r.lambda, &mut r.lambda_real);
     Ok((build_us, qp_us))
+}
+
+/// The QP on the last tick's active rows by the robots' blocks ([`qp::BlockHotStart`]), with
+/// `eta` and `eta_real` (in `lambda_real`) of the tick: when it is the optimum,
+/// `tau = tau_0 - J_c^T z`, `lambda = eta + z`, `lambda_real = eta_real + z`, and whether it
+/// was. `Y`, `rho` and `F_c` are not formed (`F_c` is left zero; see [`Pidc::materialized`]).
+fn solve_by_blocks(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> bool {
+    let t = Instant::now();
+    let (warm, shape) = ws.qp.warm();
+    let input = qp::BlockInput { team: &r.team, g: r.grasp.as_ref().map(|g| &g.g), contacts: &r.contacts, eta_real: &r.lambda_real, tau0: &r.tau0, actuated: &r.actuated, limits: &r.limits };
+    r.blocks_declined = ws.blocks.solve(&input, warm, shape, qp_settings(cfg).active_set_tol).err();
+    if r.blocks_declined.is_some() {
+        return false;
+    }
+    let b = &ws.blocks;
+    zeros_v(&mut r.tau, r.tau0.len());
+    r.tau.copy_from(&r.tau0);
+    r.tau += &b.dtau;
+    zeros_v(&mut r.lambda, r.eta.len());
+    r.lambda.copy_from(&r.eta);
+    r.lambda += &b.z;
+    r.lambda_real += &b.z;
+    zeros_v(&mut r.f_c, b.z.len());
+    let solve_us = t.elapsed().as_secs_f64() * 1e6;
+    r.qp = qp::QpOutcome { status: QpStatus::Solved, iterations: 0, solve_us, setup_us: 0.0, rows: b.rows, solver: qp::by_blocks::SOLVER };
+    (r.fallback, r.saturated) = (None, false);
+    true
 }
 
 /// The failed QP of a team without a grasp, robot by robot ([`stages::by_robot`]): every

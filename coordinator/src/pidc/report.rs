@@ -30,6 +30,9 @@ pub struct TickReport {
     pub load: DVector<f64>,
     /// `F_x` at the object centre.
     pub f_x: Vector6<f64>,
+    /// `F_c`, and `rho`, `Y` below: not formed on a tick the QP's hot start by the robots'
+    /// blocks answered (`qp.solver == "blocks"`, [`qp::BlockHotStart`]): `F_c` is then zero
+    /// and `rho`, `Y` are a previous tick's; [`super::Pidc::materialized`] forms all three.
     pub f_c: DVector<f64>,
     pub rho: DMatrix<f64>,
     /// `eta` of eq. relation_between_lambda_and_Fc (without the hand-load offset).
@@ -44,6 +47,9 @@ pub struct TickReport {
     pub limits: Vec<f64>,
     pub actuated: Vec<usize>,
     pub qp: qp::QpOutcome,
+    /// Why the hot start by the robots' blocks did not answer this tick (`None` when it did
+    /// or was not tried).
+    pub blocks_declined: Option<qp::Decline>,
     pub fallback: Option<String>,
     /// `tau0` was saturated at the torque limits after the QP failed on it (it is then no
     /// longer `[P S]^+ P tau_M`; see [`super::stages::torque`]).

@@ -161,6 +161,12 @@ impl DualActiveSet {
         result
     }
 
+    /// The active rows of the last successful solve and its problem's shape `(variables,
+    /// rows)`: what the next tick's hot start begins from ([`super::BlockHotStart`] too).
+    pub fn warm(&self) -> (&[usize], (usize, usize)) {
+        (&self.warm, self.warm_shape)
+    }
+
     fn run(&mut self, problem: &QpProblem, settings: &QpSettings) -> Result<(), ActiveSetError> {
         let (a, b) = (&problem.a, &problem.b);
         let (rows, n) = a.shape();

@@ -18,6 +18,7 @@
 //! | [`rows`] | one contact's rows `c . lambda_k >= lo` ([`ContactKind`], [`contact_rows`]); the sign conventions, a palm's sliding and torsion in one cone and the tilt-moment pairing, which deviate from the paper |
 //! | [`problem`] | the controller's terms ([`QpInput`]) and the assembled `min 1/2 F^T P F, A F <= b` ([`QpProblem`], [`constraints_into`], [`objective_into`]) |
 //! | [`settings`] | [`QpSettings`]: dense first or not, iterations, tolerances, the fallback's price |
+//! | [`by_blocks`] | [`BlockHotStart`], the hot start by the robots' blocks in the wrenches' change `z = rho F`, tried before the team-sized QP is built |
 //! | [`active_set`] | [`DualActiveSet`], the Goldfarb–Idnani dual active-set method hot-started from the last tick, tried first |
 //! | [`dense_ipm`] | [`DenseIpm`], the dense interior-point method tried next |
 //! | [`clarabel`] | [`Clarabel`], the adapter to Clarabel 0.11 ([`to_csc`]) |
@@ -25,6 +26,7 @@
 //! | here | the [`QpSolver`] interface, [`QpOutcome`], [`QpWorkspace`] and [`solve`] (active set, dense, then Clarabel) |
 
 pub mod active_set;
+pub mod by_blocks;
 pub mod clarabel;
 pub mod dense_ipm;
 pub mod least_violation;
@@ -38,6 +40,7 @@ use nalgebra::DVector;
 pub use protocol::QpStatus;
 
 pub use active_set::{ActiveSetError, DualActiveSet};
+pub use by_blocks::{BlockHotStart, BlockInput, Decline};
 pub use clarabel::{to_csc, Clarabel};
 pub use dense_ipm::DenseIpm;
 pub use least_violation::{solve_least_violation, solve_least_violation_with};
@@ -88,6 +91,11 @@ impl QpWorkspace {
     /// The problem last assembled by [`solve`] or [`solve_least_violation`].
     pub fn problem(&self) -> &QpProblem {
         &self.problem
+    }
+
+    /// The dual active set's last active rows and problem shape ([`DualActiveSet::warm`]).
+    pub fn warm(&self) -> (&[usize], (usize, usize)) {
+        self.active_set.warm()
     }
 }
 

@@ -49,15 +49,23 @@ pub struct MapInput<'a> {
 /// `Y = B J_c^T` (n x m), `rho` (m x m), `eta` (m) and `eta_real` (m: `eta` with `G^+ F_x` on
 /// the hand rows) of eq. relation_between_lambda_and_Fc.
 pub fn contact_map(inp: &MapInput, ws: &mut ContactMapScratch, y: &mut DMatrix<f64>, rho: &mut DMatrix<f64>, eta: &mut DVector<f64>, eta_real: &mut DVector<f64>) {
-    let MapInput { team, proj, j_c, tau0, load, grasp, f_x } = inp;
-    let n = team.n;
-    let m = j_c.nrows();
-    let nf = team.feet.len();
+    let MapInput { team, proj, j_c, .. } = inp;
     if proj.by_blocks {
         rho_by_blocks(team, proj, j_c, ws, y, rho);
     } else {
         rho_dense(team, proj, j_c, ws, y, rho);
     }
+    contact_offset(inp, ws, eta, eta_real);
+}
+
+/// `eta` and `eta_real` of [`contact_map`] alone (the contact wrenches at `F_c = 0`), without
+/// `Y` and `rho`: what the QP's hot start by the robots' blocks reads
+/// ([`crate::qp::BlockHotStart`]).
+pub fn contact_offset(inp: &MapInput, ws: &mut ContactMapScratch, eta: &mut DVector<f64>, eta_real: &mut DVector<f64>) {
+    let MapInput { team, proj, j_c, tau0, load, grasp, f_x } = inp;
+    let n = team.n;
+    let m = j_c.nrows();
+    let nf = team.feet.len();
     zeros_v(&mut ws.u, n);
     ws.u.copy_from(*tau0);
     ws.u.component_mul_assign(&team.s_diag);

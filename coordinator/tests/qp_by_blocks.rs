@@ -1,0 +1,213 @@
+//! The QP's hot start by the robots' blocks (`qp::BlockHotStart`, on by default) against the
+//! team-sized QP in `F` (the oracle, `PidcConfig::qp_by_blocks = false`), on random moving
+//! team states of 2, 3, 4 and 8 robots of the real default robot, with a swing foot, with
+//! the hands free and fully actuated:
+//!
+//! * the identity the block form rests on, `J_c^T rho = -Y` (eq. bmatrix), and that `rho` and
+//!   `Y` have the same null space;
+//! * the block answer is the optimum of the paper's QP without `eps |F|^2`, the KKT
+//!   conditions written out again in `F`: `F = Y^+ dtau` makes the block answer's wrenches
+//!   (`rho F = z`), holds every row of the assembled `A F <= b`, binds the rows of the last
+//!   active set, and `2 Y^T Y F + A_W^T u = 0` has non-negative multipliers `u` (Lawson and
+//!   Hanson's non-negative least squares, written here);
+//! * its torques against the team-sized QP's (with `eps |F|^2`, as the paper's), and the
+//!   contact wrenches `lambda`, to the regularisation's effect;
+//! * a tick whose last active set is no longer optimal, and a change of shape, go to the
+//!   team-sized QP, whose answer the controller then sends.
+
+mod common;
+
+use common::{robot_id, Fixture};
+use coordinator::pidc::TickReport;
+use coordinator::qp::{self, QpInput, QpProblem};
+use coordinator::{Pidc, PidcConfig};
+use nalgebra::{DMatrix, DVector};
+use protocol::DynamicsTerms;
+use rand::Rng;
+use robot_agent::terms::ContactSet;
+
+#[derive(Clone, Copy, Debug)]
+struct Case {
+    robots: usize,
+    seed: u64,
+    swing: bool,
+    grasp: bool,
+    fully_actuated: bool,
+}
+
+const CASES: [Case; 7] = [
+    Case { robots: 2, seed: 21, swing: false, grasp: true, fully_actuated: false },
+    Case { robots: 3, seed: 2, swing: false, grasp: true, fully_actuated: false },
+    Case { robots: 4, seed: 3, swing: true, grasp: true, fully_actuated: false },
+    Case { robots: 8, seed: 4, swing: false, grasp: true, fully_actuated: false },
+    Case { robots: 2, seed: 5, swing: true, grasp: true, fully_actuated: false },
+    Case { robots: 3, seed: 6, swing: false, grasp: false, fully_actuated: false },
+    Case { robots: 2, seed: 27, swing: false, grasp: true, fully_actuated: true },
+];
+
+fn controller(fx: &Fixture, case: Case, by_blocks: bool) -> Pidc {
+    let mut c = Pidc::new(PidcConfig { qp_by_blocks: by_blocks, fully_actuated: case.fully_actuated, ..PidcConfig::default() });
+    for k in 0..case.robots {
+        c.set_description(&fx.description(&robot_id(k)));
+    }
+    c
+}
+
+/// `ticks` consecutive ticks (1 ms apart) of a randomly perturbed team moving at `speed`.
+fn ticks(fx: &mut Fixture, case: Case, ticks: usize, speed: f64) -> Vec<Vec<DynamicsTerms>> {
+    let mut rng = common::rng(case.seed);
+    let nv = fx.robot.model.nv;
+    let mut set = ContactSet::all_stance(&fx.robot);
+    set.hand_in_grasp = case.grasp;
+    let qs: Vec<DVector<f64>> = (0..case.robots).map(|k| fx.perturbed_q(k, case.robots, 0.1, &mut rng)).collect();
+    let vs: Vec<DVector<f64>> = (0..case.robots).map(|_| DVector::from_fn(nv, |i, _| if i < 6 { 0.0 } else { rng.random_range(-speed..speed) })).collect();
+    (0..ticks)
+        .map(|t| {
+            (0..case.robots)
+                .map(|k| {
+                    let mut s = set.clone();
+                    s.stance[0] = !(case.swing && k == 0);
+                    let q = fx.robot.model.integrate(qs[k].as_slice(), vs[k].as_slice(), 1e-3 * t as f64);
+                    fx.terms_with(&robot_id(k), &q, &vs[k], 1 + t as u64, &s)
+                })
+                .collect()
+        })
+        .collect()
+}
+
+fn rel(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
+    (a - b).amax() / b.amax().max(f64::MIN_POSITIVE)
+}
+
+/// `min |A u - g|^2` over `u >= 0` (Lawson and Hanson; a failure shows as a residual).
+fn nonnegative_least_squares(a: &DMatrix<f64>, g: &DVector<f64>) -> DVector<f64> {
+    let k = a.ncols();
+    let tol = 1e-12 * (1.0 + (a.transpose() * g).amax());
+    let ls = |free: &[bool]| {
+        let cols: Vec<usize> = (0..k).filter(|&i| free[i]).collect();
+        let a_f = DMatrix::from_fn(a.nrows(), cols.len(), |r, c| a[(r, cols[c])]);
+        let s_f = a_f.svd(true, true).solve(g, 1e-14).expect("least squares");
+        let mut s = DVector::zeros(k);
+        cols.iter().zip(s_f.iter()).for_each(|(&i, &x)| s[i] = x);
+        s
+    };
+    let (mut x, mut free) = (DVector::zeros(k), vec![false; k]);
+    for _ in 0..3 * k {
+        let w = a.transpose() * (g - a * &x);
+        let Some(j) = (0..k).filter(|&i| !free[i] && w[i] > tol).max_by(|&i, &j| w[i].total_cmp(&w[j])) else { break };
+        free[j] = true;
+        for _ in 0..k {
+            let s = ls(&free);
+            if (0..k).filter(|&i| free[i]).all(|i| s[i] > 0.0) {
+                x = s;
+                break;
+            }
+            let alpha = (0..k).filter(|&i| free[i] && s[i] <= 0.0).map(|i| if x[i] <= 0.0 { 0.0 } else { x[i] / (x[i] - s[i]) }).fold(1.0, f64::min);
+            x += (&s - &x) * alpha;
+            let scale = x.amax().max(f64::MIN_POSITIVE);
+            for i in 0..k {
+                if free[i] && x[i] <= 1e-14 * scale {
+                    free[i] = false;
+                    x[i] = 0.0;
+                }
+            }
+        }
+        if free.iter().all(|f| *f) {
+            break;
+        }
+    }
+    x
+}
+
+/// The assembled QP in `F` of a report whose `Y` and `rho` are formed, without `eps |F|^2`.
+fn problem(r: &TickReport) -> QpProblem {
+    let eta_real = &r.lambda_real - &r.lambda + &r.eta;
+    let inp = QpInput { y: &r.y, rho: &r.rho, eta: &eta_real, contacts: &r.contacts, actuated: &r.actuated, limits: &r.limits, tau0: &r.tau0, regularisation: 0.0, dense_first: true };
+    let mut p = QpProblem::default();
+    p.assemble(&inp);
+    p
+}
+
+/// The KKT conditions of `p` at `f`, written out: the worst row `(a_i F - b_i) / (1 + |b_i|)`,
+/// and the stationarity residual of `2 H F + A_W^T u = 0` over the rows within `1e-7` of
+/// binding with `u >= 0`, relative to `|2 H F|` (and the largest `|2 H F|`).
+fn kkt(p: &QpProblem, f: &DVector<f64>) -> (f64, f64, f64) {
+    let s = &p.a * f - &p.b;
+    let rows = (0..p.rows()).map(|i| s[i] / (1.0 + p.b[i].abs())).fold(f64::NEG_INFINITY, f64::max);
+    let grad = &p.p * f;
+    let w: Vec<usize> = (0..p.rows()).filter(|&i| s[i].abs() <= 1e-7 * (1.0 + p.b[i].abs())).collect();
+    let a_w = DMatrix::from_fn(p.n(), w.len(), |c, k| p.a[(w[k], c)]);
+    let u = nonnegative_least_squares(&a_w, &(-&grad));
+    let residual = (&grad + &a_w * &u).amax() / grad.amax().max(1.0);
+    (rows, residual, grad.amax())
+}
+
+#[test]
+fn the_blocks_answer_is_the_qps_optimum_and_the_team_sized_qps_torque() {
+    let mut fx = Fixture::new();
+    let (mut worst_kkt, mut worst_tau, mut worst_lambda, mut worst_id): (f64, f64, f64, f64) = (0.0, 0.0, 0.0, 0.0);
+    let mut answered = 0;
+    let mut total = 0;
+    for case in CASES {
+        let seq = ticks(&mut fx, case, 6, 0.2);
+        let (mut blocks, mut dense) = (controller(&fx, case, true), controller(&fx, case, false));
+        for (t, tick) in seq.iter().enumerate() {
+            blocks.compute(tick).expect("block tick");
+            let d = dense.compute(tick).expect("dense tick").clone();
+            let b = blocks.materialized().expect("block tick").clone();
+            assert!(matches!(d.qp.status, qp::QpStatus::Solved | qp::QpStatus::AlmostSolved), "{case:?} tick {t}: the oracle's QP {:?}", d.qp.status);
+            if let Some(why) = b.blocks_declined {
+                println!("{case:?} tick {t}: {why}");
+            }
+            // J_c^T rho = -Y, on every tick (the block form's premise).
+            let id = (b.j_c.transpose() * &b.rho + &b.y).amax() / b.y.amax();
+            worst_id = worst_id.max(id);
+            total += 1;
+            if b.qp.solver != qp::by_blocks::SOLVER {
+                continue;
+            }
+            answered += 1;
+            // F = Y^+ dtau makes the block answer: the torque and the wrenches.
+            let dtau = &b.tau - &b.tau0;
+            assert!(rel(&(&b.y * &b.f_c), &dtau) < 1e-9, "{case:?} tick {t}: Y F != dtau");
+            assert!(rel(&(&b.rho * &b.f_c + &b.eta), &b.lambda) < 1e-9, "{case:?} tick {t}: rho F + eta != lambda");
+            let p = problem(&b);
+            let (rows, stationarity, _) = kkt(&p, &b.f_c);
+            worst_kkt = worst_kkt.max(rows.max(stationarity));
+            assert!(rows < 1e-8, "{case:?} tick {t}: a row misses by {rows:.2e}");
+            assert!(stationarity < 1e-7, "{case:?} tick {t}: stationarity {stationarity:.2e}");
+            let (dt, dl) = (rel(&b.tau, &d.tau), rel(&b.lambda_real, &d.lambda_real));
+            worst_tau = worst_tau.max(dt);
+            worst_lambda = worst_lambda.max(dl);
+        }
+    }
+    println!("{answered} of {total} ticks answered by the blocks; J_c^T rho + Y {worst_id:.1e}; KKT {worst_kkt:.1e}; against the team-sized QP (eps = 1e-6): torque {worst_tau:.1e}, wrenches {worst_lambda:.1e} relative");
+    assert!(worst_id < 1e-12, "J_c^T rho = -Y misses by {worst_id:.2e}");
+    // Every case but the first tick of each (no active set yet) is answered by the blocks.
+    assert!(answered >= total - 2 * CASES.len(), "only {answered} of {total} ticks by the blocks");
+    assert!(worst_tau < 1e-4 && worst_lambda < 1e-4, "torque {worst_tau:.2e}, wrenches {worst_lambda:.2e}");
+}
+
+#[test]
+fn a_stale_active_set_or_a_new_shape_goes_to_the_team_sized_qp() {
+    let mut fx = Fixture::new();
+    let case = Case { robots: 3, seed: 11, swing: false, grasp: true, fully_actuated: false };
+    let (mut blocks, mut dense) = (controller(&fx, case, true), controller(&fx, case, false));
+    // A fast team: its active rows change from tick to tick.
+    let seq = ticks(&mut fx, case, 12, 3.0);
+    let mut declined = 0;
+    for tick in &seq {
+        let b = blocks.compute(tick).expect("tick").clone();
+        let d = dense.compute(tick).expect("tick").clone();
+        declined += usize::from(b.qp.solver != qp::by_blocks::SOLVER);
+        assert!(rel(&b.tau, &d.tau) < 1e-4, "torque {:.2e} by {}", rel(&b.tau, &d.tau), b.qp.solver);
+    }
+    assert!(declined > 1, "the blocks answered every tick of a fast team ({declined} declined)");
+    // A foot lifts: another shape of QP, which the blocks must not answer from the old rows.
+    let swing = Case { swing: true, ..case };
+    let lifted = ticks(&mut fx, swing, 2, 0.2);
+    let b = blocks.compute(&lifted[0]).expect("tick").clone();
+    let d = dense.compute(&lifted[0]).expect("tick").clone();
+    assert_eq!(b.blocks_declined, Some(qp::Decline::NoHotStart), "a new shape was answered from the old active set");
+    assert!(rel(&b.tau, &d.tau) < 1e-4);
+}
