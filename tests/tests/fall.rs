@@ -1,7 +1,11 @@
 //! A robot that falls goes limp and leaves its team (`robot_agent::fall`), with the whole
 //! stack and MuJoCo in the loop: three robots hold the cube (`team3_cube.toml`) and robot r3
-//! is pushed over (600 N on its base along +x for 0.4 s; the team lets go of the cube as its
-//! hand slips). Before the fall handling, r3 stayed in the team lying on its side: the
+//! is pushed over (600 N on its base for 0.4 s, sideways and away from the team: r3 stands at
+//! -y facing the cube, the push is along (+x, -y) / sqrt 2; the team lets go of the cube as
+//! its hand slips). Pushed along +x alone, r3 slid up to 1.8 m sideways into r2 and dragged it
+//! down in most runs: whether it got that far was chaotic (a QP regularisation 20 % higher or
+//! lower, or the QP's answer by the robots' blocks, 1e-6 apart in torque, decided it), and a
+//! robot knocked over by a falling teammate is not what this test is about. Before the fall handling, r3 stayed in the team lying on its side: the
 //! contact-force QP was infeasible on every tick from the push to the end (2856 of 4000 in a
 //! 4 s run, its feet in the air) and its drives fought the floor.
 //!
@@ -37,24 +41,10 @@ fn tilt_deg(q: &[f64; 4]) -> f64 {
 
 #[test]
 fn a_robot_pushed_over_goes_limp_and_the_rest_of_the_team_stands() {
-    let sets = ["duration=3.0", "settle=0.5", "perturbations=[{on=\"r3\",body=\"base\",start=1.0,duration=0.4,wrench=[600.0,0.0,0.0,0.0,0.0,0.0]}]"];
+    let sets = ["duration=3.0", "settle=0.5", "perturbations=[{on=\"r3\",body=\"base\",start=1.0,duration=0.4,wrench=[424.26,-424.26,0.0,0.0,0.0,0.0]}]"];
     let (plan, metrics, records) = common::scenario::run_scenario_recorded("team3_cube.toml", &sets, NAME);
 
-    // The ground truth: the first tick at which r3's torso is tilted past the limit or has sunk
-    // below half its first height (the agent's two signs, `robot_agent::fall`).
-    let tilt_at = |id: &str| -> Vec<(u64, f64)> {
-        records.truth.iter().map(|g| (g.header.tick, g.torsos.iter().find(|t| t.name == id).map_or(0.0, |t| tilt_deg(&t.pose.orientation)))).collect()
-    };
-    let height_of = |g: &protocol::GroundTruth| g.torsos.iter().find(|t| t.name == "r3").map_or(f64::NAN, |t| t.pose.position[2]);
-    let h0 = height_of(records.truth.first().expect("ground truth"));
-    let fallen = |g: &protocol::GroundTruth| height_of(g) < HEIGHT_RATIO * h0 || tilt_at_tick(g, "r3") > TILT_LIMIT_DEG;
-    let fell = records.truth.iter().find(|g| fallen(g)).map(|g| g.header.tick).expect("r3 is pushed over");
-    for id in ["r1", "r2"] {
-        let worst = tilt_at(id).into_iter().map(|(_, t)| t).fold(0.0, f64::max);
-        assert!(worst < 3.0, "{id} tilts {worst:.2} deg");
-    }
-
-    // The recording: r3's agent status and its states.
+    // r3's agent status and the states it judged, from the recording.
     let bytes = std::fs::read(common::scenario::report_dir(NAME).join("run.mcap")).expect("the recording");
     let (status_key, state_key) = ("team/team/robot/r3/status", "team/team/robot/r3/state");
     let (mut fallen_status, mut states): (Option<AgentStatus>, BTreeMap<u64, RobotState>) = (None, BTreeMap::new());
@@ -69,6 +59,23 @@ fn a_robot_pushed_over_goes_limp_and_the_rest_of_the_team_stands() {
             let s: RobotState = serde_json::from_slice(&msg.data).expect("state decodes");
             states.insert(s.header.tick, s);
         }
+    }
+    // The agent's two signs (`robot_agent::fall`) written out again on the states it received:
+    // the first whose torso tilts past the limit or has sunk below half the height of its
+    // first state (tick 0, before the settling the ground truth leaves out).
+    let h0 = states.values().next().expect("r3's states").base_pose.position[2];
+    let fallen = |s: &RobotState| s.base_pose.position[2] < HEIGHT_RATIO * h0 || tilt_deg(&s.base_pose.orientation) > TILT_LIMIT_DEG;
+    let fell = states.values().find(|s| fallen(s)).map(|s| s.header.tick).expect("r3 is pushed over");
+    // The ground truth agrees within a tick (a state is the world at its tick's start).
+    let height_of = |g: &protocol::GroundTruth| g.torsos.iter().find(|t| t.name == "r3").map_or(f64::NAN, |t| t.pose.position[2]);
+    let truth_fell = records.truth.iter().find(|g| height_of(g) < HEIGHT_RATIO * h0 || tilt_at_tick(g, "r3") > TILT_LIMIT_DEG).map(|g| g.header.tick).expect("r3 falls in the ground truth");
+    assert!(truth_fell.abs_diff(fell) <= 1, "r3's states fall at tick {fell}, the ground truth at {truth_fell}");
+    let tilt_at = |id: &str| -> Vec<(u64, f64)> {
+        records.truth.iter().map(|g| (g.header.tick, g.torsos.iter().find(|t| t.name == id).map_or(0.0, |t| tilt_deg(&t.pose.orientation)))).collect()
+    };
+    for id in ["r1", "r2"] {
+        let worst = tilt_at(id).into_iter().map(|(_, t)| t).fold(0.0, f64::max);
+        assert!(worst < 3.0, "{id} tilts {worst:.2} deg");
     }
     let status = fallen_status.expect("r3's agent reports that it fell");
     println!("r3 tilted past {TILT_LIMIT_DEG} deg or sank below half its height at tick {fell}; its agent reported Fallen with the state of tick {}", status.header.tick);
