@@ -341,6 +341,39 @@ fn pivots_ok(diag: impl Iterator<Item = f64>) -> bool {
     hi.is_finite() && lo > 0.0 && lo * lo > SPD_TOL * hi * hi
 }
 
+/// `A = L L^T` into `l`'s lower triangle (`a` square, symmetric: its lower triangle is read),
+/// with the pivot rule of [`SpdInverse`]: for solving with [`spd_solve_in_place`] where the
+/// inverse itself is not needed. `None` when `a` is not positive definite or its pivots fail
+/// [`SPD_TOL`].
+pub fn spd_factor(a: MatRef<'_, f64>, l: &mut DMatrix<f64>) -> Option<()> {
+    let n = a.nrows();
+    shape(l, n, n);
+    let ls = l.as_mut_slice();
+    for j in 0..n {
+        for i in j..n {
+            ls[j * n + i] = a[(i, j)];
+        }
+    }
+    cholesky_in_place(ls, n, n, 0.0)?;
+    pivots_ok((0..n).map(|i| ls[i * n + i])).then_some(())
+}
+
+/// `x = A^{-1} x` with `l` from [`spd_factor`]: `L y = x`, then `L^T x = y`.
+pub fn spd_solve_in_place(l: &DMatrix<f64>, x: &mut [f64]) {
+    let n = l.nrows();
+    lower_solve_in_place(l.as_slice(), n, n, x, n, 1);
+    lower_transpose_solve_in_place(l.as_slice(), n, n, x);
+}
+
+/// `x = L^{-T} x` for the lower triangle of `l`'s leading `n x n` block (leading dimension
+/// `ld`, as [`cholesky_in_place`] leaves it): back substitution on one vector.
+pub fn lower_transpose_solve_in_place(l: &[f64], ld: usize, n: usize, x: &mut [f64]) {
+    for i in (0..n).rev() {
+        let s = dot(&l[i * ld + i + 1..i * ld + n], &x[i + 1..n]);
+        x[i] = (x[i] - s) / l[i * ld + i];
+    }
+}
+
 /// Workspace of the inverse of a symmetric positive definite matrix by Cholesky, kept
 /// between ticks (no allocation once shaped): `A = L L^T` in place ([`cholesky_in_place`]),
 /// `X = L^{-1}` ([`lower_inverse`]), `A^{-1} = X^T X` by [`gemm`]. (nalgebra's
@@ -676,6 +709,29 @@ mod tests {
             assert!(err < 1e-9, "n = {n}: |A A^-1 - I| = {err:e}");
             assert_eq!(inv, inv.transpose(), "n = {n}: symmetric");
         }
+    }
+
+    /// `spd_factor` then `spd_solve_in_place` solve `A x = b` (residual written out), across
+    /// the factor's column blocks and in a dirty buffer, and the factor refuses what
+    /// `SpdInverse` refuses: a rank-deficient Gram matrix.
+    #[test]
+    fn spd_factor_solves_and_declines_as_the_inverse_does() {
+        let mut l = DMatrix::from_element(3, 3, f64::NAN);
+        for n in [1, 5, 16, 17, 54] {
+            let j = DMatrix::<f64>::from_fn(n, n + 3, |i, k| ((i * 7 + k * 3) % 13) as f64 - 6.0 + if i == k { 9.0 } else { 0.0 });
+            let gram = &j * j.transpose();
+            spd_factor(mat(&gram), &mut l).expect("positive definite");
+            let b = DVector::from_fn(n, |i, _| (i as f64 * 0.37).sin() + 0.5);
+            let mut x = b.clone();
+            spd_solve_in_place(&l, x.as_mut_slice());
+            let err = (&gram * &x - &b).amax() / b.amax();
+            assert!(err < 1e-10, "n = {n}: |A x - b| = {err:e}");
+        }
+        let j = DMatrix::<f64>::from_fn(5, 8, |i, k| ((i * 3 + k * 5) % 7) as f64 - 3.0 + if i == k { 4.0 } else { 0.0 });
+        let mut low = j.clone();
+        let r0 = low.row(0).into_owned();
+        low.row_mut(4).copy_from(&(r0 * 2.0));
+        assert!(spd_factor(mat(&(&low * low.transpose())), &mut l).is_none(), "rank-deficient");
     }
 
     /// The in-place Cholesky factor reproduces `A = L L^T` and `lower_inverse` gives

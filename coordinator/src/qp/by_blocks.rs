@@ -34,7 +34,7 @@
 use nalgebra::{DMatrix, DVector, Matrix6, Vector6};
 
 use super::rows::{contact_rows, ContactKind};
-use crate::linalg::{cholesky_in_place, lower_solve_in_place, spd6_inverse, zeros, zeros_v};
+use crate::linalg::{cholesky_in_place, lower_solve_in_place, lower_transpose_solve_in_place, spd6_inverse, zeros, zeros_v};
 use crate::team::Team;
 
 /// Smallest Cholesky pivot, relative to the largest diagonal entry, of a robot's blocks (the
@@ -318,13 +318,13 @@ impl BlockHotStart {
             for c in 0..k {
                 rq.nu[c] = rq.y[c] - (0..6).map(|b| rq.x[(c, b)] * nu_c[b]).sum::<f64>();
             }
-            upper_solve(rq.d.as_slice(), mr, k, rq.nu.as_mut_slice());
+            lower_transpose_solve_in_place(rq.d.as_slice(), mr, k, rq.nu.as_mut_slice());
             zeros_v(&mut rq.z, mr);
             for c in 0..k {
                 rq.z.axpy(rq.nu[c], &rq.at.column(c), 1.0);
             }
             rq.z.gemv(1.0, &rq.u, nu_c, 1.0);
-            upper_solve(rq.l.as_slice(), mr, mr, rq.z.as_mut_slice());
+            lower_transpose_solve_in_place(rq.l.as_slice(), mr, mr, rq.z.as_mut_slice());
             for (v, &row) in rq.vars.iter().enumerate() {
                 self.z[row] = rq.z[v];
             }
@@ -434,14 +434,5 @@ fn robot_of_contact(team: &Team, start: usize) -> Option<usize> {
         team.feet.get(start / 3).map(|f| f.robot)
     } else {
         team.hands.get((start - nf3) / 6).map(|h| h.robot)
-    }
-}
-
-/// `x = L^{-T} x` for the lower triangle of `l`'s leading `n x n` block (leading dimension
-/// `ld`): back substitution.
-fn upper_solve(l: &[f64], ld: usize, n: usize, x: &mut [f64]) {
-    for i in (0..n).rev() {
-        let s: f64 = (i + 1..n).map(|r| l[i * ld + r] * x[r]).sum();
-        x[i] = (x[i] - s) / l[i * ld + i];
     }
 }

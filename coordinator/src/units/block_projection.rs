@@ -95,6 +95,7 @@ pub enum BlockOp {
 pub struct OpScratch {
     t: DMatrix<f64>,
     u: DMatrix<f64>,
+    v: DVector<f64>,
 }
 
 /// The block path's factors, kept between ticks (see the module docs).
@@ -108,12 +109,12 @@ pub struct BlockFactors {
     y: Vec<Matrix6<f64>>,
     w_e: DMatrix<f64>,
     w_d: DMatrix<f64>,
-    /// The unactuated team indices `u`; `P_{:u}`, `I - P_uu`, its inverse `K`, `P_{:u} K`.
+    /// The unactuated team indices `u`; `P_{:u}`, `I - P_uu` and its inverse `K` (`P_{:u} K`,
+    /// n x 6B, is not formed on the tick: [`BlockFactors::ps_pinv_apply`] applies it).
     unact: Vec<usize>,
     pu: DMatrix<f64>,
     quu: DMatrix<f64>,
     k_inv: DMatrix<f64>,
-    pk: DMatrix<f64>,
     k_spd: SpdInverse,
     /// Rows of `J_c`: `3 nf + 6 B`; `3 nf`.
     m: usize,
@@ -189,8 +190,7 @@ impl BlockFactors {
         Some(())
     }
 
-    /// `P_{:u}` (by [`BlockFactors::unit_columns`]), `K = (I - P_uu)^{-1}` and `P_{:u} K`;
-    /// `None` when `I - P_uu` is too ill-conditioned for the rank of `P S` to be full.
+    /// `P_{:u}` (by [`BlockFactors::unit_columns`]) and `K = (I - P_uu)^{-1}`; `None` when `I - P_uu` is too ill-conditioned for the rank of `P S` to be full.
     fn actuation(&mut self, team: &Team) -> Option<()> {
         let nu = self.unact.len();
         let mut pu = std::mem::take(&mut self.pu);
@@ -203,10 +203,7 @@ impl BlockFactors {
             }
             self.quu[(r, r)] += 1.0;
         }
-        self.k_spd.compute(mat(&self.quu), &mut self.k_inv)?;
-        shape(&mut self.pk, team.n, nu);
-        gemm(mat_mut(&mut self.pk), 0.0, 1.0, mat(&self.pu), mat(&self.k_inv));
-        Some(())
+        self.k_spd.compute(mat(&self.quu), &mut self.k_inv)
     }
 
     /// `P_{:u} = P E_u` (n x nu) from the factors: robot `r`'s unit columns touch only its own
@@ -215,7 +212,7 @@ impl BlockFactors {
         let nu = self.unact.len();
         let hb = self.w_e.nrows();
         zeros(pu, n, nu);
-        let OpScratch { t, u } = &mut self.scratch;
+        let OpScratch { t, u, .. } = &mut self.scratch;
         zeros(t, hb, nu);
         shape(u, hb, nu);
         for rb in &self.robots {
@@ -328,15 +325,18 @@ impl BlockFactors {
         zeros_v(px, self.unact.len());
         self.apply(BlockOp::P, vmat(x), vmat_mut(out), s);
         px.gemv_tr(1.0, &self.pu, x, 0.0);
-        out.gemv(1.0, &self.pk, px, 1.0);
+        // P_{:u} (K P_{u:} x): two products with vectors instead of the n x 6B P_{:u} K.
+        zeros_v(&mut s.v, px.len());
+        s.v.gemv(1.0, &self.k_inv, px, 0.0);
+        out.gemv(1.0, &self.pu, &s.v, 1.0);
         out.component_mul_assign(s_diag);
     }
 
     /// `(B - I)_{:u} = P_{:u} K - E_u K` (n x nu, eq. bmatrix on the unactuated columns, the
     /// only ones where `B` differs from `I`), and the unactuated indices.
     pub fn b_minus_i_u(&self, out: &mut DMatrix<f64>) -> &[usize] {
-        shape(out, self.pk.nrows(), self.unact.len());
-        out.copy_from(&self.pk);
+        shape(out, self.pu.nrows(), self.unact.len());
+        gemm(mat_mut(out), 0.0, 1.0, mat(&self.pu), mat(&self.k_inv));
         for (r, &i) in self.unact.iter().enumerate() {
             for c in 0..self.unact.len() {
                 out[(i, c)] -= self.k_inv[(r, c)];
@@ -382,7 +382,7 @@ impl BlockFactors {
         proj.mc_inv = &id + &proj.mcinv_p - &proj.mcinv_p * &team.mass;
         mc_into(team, proj);
         mbar_into(team, proj);
-        let mut ps = &proj.p + &self.pk * self.pu.transpose();
+        let mut ps = &proj.p + &self.pu * &self.k_inv * self.pu.transpose();
         for &i in &self.unact {
             ps.row_mut(i).fill(0.0);
         }

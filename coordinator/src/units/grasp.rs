@@ -15,7 +15,9 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix6, Rotation3, Translation3, UnitQuaternion, Vector3, Vector6};
 
-use crate::linalg::{mat, product, skew, zeros, zeros_v};
+use faer::MatRef;
+
+use crate::linalg::{gemm, mat, mat_mut, skew, zeros, zeros_v};
 use crate::team::Team;
 use crate::ControllerError;
 
@@ -282,7 +284,7 @@ impl GraspTerms {
         let j_ee = &team.j_ee;
         zeros_v(&mut self.ee_twist, 6 * b);
         self.ee_twist.gemv(1.0, j_ee, &team.velocity, 0.0);
-        product(&mut self.j_o, mat(&self.g_pinv).transpose(), mat(j_ee));
+        times_hand_jacobians(team, mat(&self.g_pinv).transpose(), &mut self.j_o);
         self.object_twist.gemv(1.0, &self.j_o, &team.velocity, 0.0);
         self.object = object;
         let vo = self.object_twist.fixed_rows::<3>(0).into_owned();
@@ -317,8 +319,20 @@ impl GraspTerms {
             let mut o = self.jdv_o.fixed_rows_mut::<6>(0);
             o += dgp_i.transpose() * ee_i + gp_i.transpose() * jdv_i;
         }
-        product(&mut self.j_cee, mat(&self.n), mat(j_ee));
+        times_hand_jacobians(team, mat(&self.n), &mut self.j_cee);
         debug_assert_eq!(self.j_cee.ncols(), n);
         Some(())
+    }
+}
+
+/// `out = X J_ee` (X: rows x 6B) by the hands' blocks: hand `i`'s six rows of `J_ee` are its
+/// robot's frame Jacobian, zero outside that robot's columns, so column block `i` of `X`
+/// meets only those columns (`6 B x 6 x k` per hand instead of `6 B x 6 B x n`).
+fn times_hand_jacobians(team: &Team, x: MatRef<'_, f64>, out: &mut DMatrix<f64>) {
+    zeros(out, x.nrows(), team.n);
+    for (i, h) in team.hands.iter().enumerate() {
+        let rb = &team.robots[h.robot];
+        let dst = mat_mut(out).submatrix_mut(0, rb.offset, x.nrows(), rb.nv);
+        gemm(dst, 1.0, 1.0, x.subcols(6 * i, 6), mat(&team.j_ee).submatrix(6 * i, rb.offset, 6, rb.nv));
     }
 }

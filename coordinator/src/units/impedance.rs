@@ -17,7 +17,7 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3, Vector3, Vector6};
 
-use crate::linalg::{mat, mat_mut, product, rotation_error, shape, transpose_into, zeros_v, Pinv, SpdInverse, RANK_TOL};
+use crate::linalg::{gemm, mat, mat_mut, product, rotation_error, shape, spd_factor, spd_solve_in_place, transpose_into, zeros_v, Pinv, RANK_TOL};
 use crate::units::block_projection::{BlockOp, OpScratch};
 use crate::units::projection::Projections;
 use crate::ControllerError;
@@ -101,9 +101,14 @@ pub struct TaskStack {
     phi_jt: DMatrix<f64>,
     ops: OpScratch,
     lambda_inv: DMatrix<f64>,
+    /// `Lambda_c` by the pseudo-inverse (dense path, or a Cholesky that failed), else the
+    /// Cholesky factor of `Lambda_c^{-1}` in `chol` (`factored`).
     lambda: DMatrix<f64>,
+    chol: DMatrix<f64>,
+    factored: bool,
     pinv: Pinv,
-    spd: SpdInverse,
+    /// Each task's rows and the columns its Jacobian is non-zero on: `(row, rows, col, cols)`.
+    spans: Vec<(usize, usize, usize, usize)>,
     u: DVector<f64>,
     f: DVector<f64>,
 }
@@ -113,6 +118,7 @@ impl TaskStack {
     pub fn begin(&mut self, k: usize, n: usize) {
         self.n = n;
         self.at = 0;
+        self.spans.clear();
         // Not cleared: every row is written by `push` before `joint_torque` uses it (it
         // refuses a stack with rows left unfilled).
         shape(&mut self.j, k, n);
@@ -133,6 +139,12 @@ impl TaskStack {
         }
         let at = self.at;
         self.j.rows_mut(at, d).copy_from(j_x);
+        // The columns the task moves: a torso's, a swing foot's or a free hand's are its
+        // robot's; the object's span the grasping robots'.
+        let nonzero = |c: &usize| j_x.column(*c).iter().any(|x| *x != 0.0);
+        let c0 = (0..self.n).find(nonzero).unwrap_or(0);
+        let c1 = (c0..self.n).rev().find(nonzero).map_or(c0, |c| c + 1);
+        self.spans.push((at, d, c0, c1 - c0));
         self.jdv.rows_mut(at, d).copy_from(jdv_x);
         self.e.rows_mut(at, d).copy_from(&err.e.rows(0, d));
         self.edot.rows_mut(at, d).copy_from(&err.edot.rows(0, d));
@@ -164,7 +176,12 @@ impl TaskStack {
         self.u -= &self.jdv;
         self.u.gemv(1.0, &self.j, ms.mcinv_bias, 1.0);
         zeros_v(&mut self.f, k);
-        self.f.gemv(1.0, &self.lambda, &self.u, 0.0);
+        if self.factored {
+            self.f.copy_from(&self.u);
+            spd_solve_in_place(&self.chol, self.f.as_mut_slice());
+        } else {
+            self.f.gemv(1.0, &self.lambda, &self.u, 0.0);
+        }
         for i in 0..k {
             self.f[i] += self.ff[i] - self.kd[i] * self.edot[i] - self.kp[i] * self.e[i];
         }
@@ -172,12 +189,15 @@ impl TaskStack {
         Ok(())
     }
 
-    /// `Lambda_c = (J M_c^{-1} P J^T)^+` (eq. control_law) into `lambda`. Dense path: the
-    /// projections' `M_c^{-1} P` and an SVD (the oracle). Block path: `M_c^{-1} P J^T` by the
-    /// operator, and Cholesky when its pivots pass [`crate::linalg::SPD_TOL`] (the
-    /// pseudo-inverse is then the inverse), the SVD otherwise.
+    /// `Lambda_c = (J M_c^{-1} P J^T)^+` (eq. control_law): into `lambda`, or factored. Dense
+    /// path: the projections' `M_c^{-1} P` and an SVD (the oracle). Block path:
+    /// `M_c^{-1} P J^T` by the operator, `J` times it by each task's columns (a torso's
+    /// rows meet only its robot's), and the Cholesky factor of the result when its pivots
+    /// pass [`crate::linalg::SPD_TOL`] (the pseudo-inverse is then the inverse, applied by
+    /// two triangular solves), the SVD otherwise.
     fn lambda_c(&mut self, proj: &Projections) -> Result<(), ControllerError> {
         let singular = || ControllerError::Singular { what: "operational-space inertia".into() };
+        self.factored = false;
         if !proj.by_blocks {
             product(&mut self.j_mcinv_p, mat(&self.j), mat(&proj.mcinv_p));
             product(&mut self.lambda_inv, mat(&self.j_mcinv_p), mat(&self.j).transpose());
@@ -188,10 +208,20 @@ impl TaskStack {
         transpose_into(&self.j, &mut self.jt);
         shape(&mut self.phi_jt, n, k); // every row written by the operator
         proj.blocks.apply(BlockOp::Phi, mat(&self.jt), mat_mut(&mut self.phi_jt), &mut self.ops);
-        product(&mut self.lambda_inv, mat(&self.j), mat(&self.phi_jt));
-        if self.spd.compute(mat(&self.lambda_inv), &mut self.lambda).is_none() {
-            self.pinv.compute(mat(&self.lambda_inv), RANK_TOL, &mut self.lambda).ok_or_else(singular)?;
+        // Every row block is written by its task's product.
+        shape(&mut self.lambda_inv, k, k);
+        for &(r0, d, c0, nc) in &self.spans {
+            if nc == 0 {
+                self.lambda_inv.rows_mut(r0, d).fill(0.0);
+                continue;
+            }
+            gemm(mat_mut(&mut self.lambda_inv).subrows_mut(r0, d), 0.0, 1.0, mat(&self.j).submatrix(r0, c0, d, nc), mat(&self.phi_jt).subrows(c0, nc));
         }
+        if spd_factor(mat(&self.lambda_inv), &mut self.chol).is_some() {
+            self.factored = true;
+            return Ok(());
+        }
+        self.pinv.compute(mat(&self.lambda_inv), RANK_TOL, &mut self.lambda).ok_or_else(singular)?;
         Ok(())
     }
 }
