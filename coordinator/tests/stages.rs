@@ -668,3 +668,49 @@ fn a_team_assembled_into_used_buffers_is_the_team_assembled_afresh() {
         assert_eq!(j_c, expect, "tick {i}: J_c without a grasp");
     }
 }
+
+/// `d/dt (J_c,ee) v` and `d/dt (J_o) v` of `GraspTerms` against central differences in time of
+/// `J_c,ee(q) v` and `J_o(q) v` along `q(t) = q + v t`, on a moving team of three robots (three
+/// hands, so every hand's share of the sums over the grasp counts) whose velocities keep the
+/// grasp (`v = P x`): the object is fitted again from the hands at each time, with the offsets
+/// captured at `t = 0`.
+#[test]
+fn grasp_jdot_v_is_the_time_derivative_of_j_cee_v_and_j_o_v() {
+    use rand::Rng;
+    let mut fx = Fixture::new();
+    let (robots, nv, h) = (3, fx.robot.model.nv, 1e-6);
+    let mut rng = common::rng(17);
+    let qs: Vec<DVector<f64>> = (0..robots).map(|k| fx.perturbed_q(k, robots, 0.1, &mut rng)).collect();
+    let mut c = Pidc::new(PidcConfig::default());
+    for k in 0..robots {
+        c.set_description(&fx.description(&robot_id(k)));
+    }
+    let still: Vec<_> = (0..robots).map(|k| fx.terms(&robot_id(k), &qs[k], &DVector::zeros(nv), 1)).collect();
+    c.compute(&still).expect("tick");
+    let p = c.materialized().expect("tick").proj.p.clone();
+    let v = &p * DVector::from_fn(robots * nv, |_, _| rng.random_range(-0.5..0.5));
+    let mut tracker = GraspTracker::default();
+    let mut grasp_at = |t: f64| {
+        let terms: Vec<_> = (0..robots)
+            .map(|k| {
+                let vk = v.rows(k * nv, nv).into_owned();
+                let q = fx.robot.model.integrate(qs[k].as_slice(), vk.as_slice(), t);
+                fx.terms(&robot_id(k), &q, &vk, 2)
+            })
+            .collect();
+        let mut team = Team::default();
+        team.assemble_into(&terms, None, false).expect("team");
+        let mut g: Option<GraspTerms> = None;
+        tracker.update(&team, None, &[], &mut g).expect("grasp");
+        g.expect("hands in grasp")
+    };
+    let g0 = grasp_at(0.0);
+    let (gp, gm) = (grasp_at(h), grasp_at(-h));
+    let fd_cee = (&gp.j_cee * &v - &gm.j_cee * &v) / (2.0 * h);
+    let fd_o = (&gp.j_o * &v - &gm.j_o * &v) / (2.0 * h);
+    let rel_to = |a: &DVector<f64>, b: &DVector<f64>| (a - b).amax() / b.amax();
+    let (e_cee, e_o) = (rel_to(&g0.jdv_cee, &fd_cee), rel_to(&DVector::from_column_slice(g0.jdv_o.as_slice()), &fd_o));
+    println!("d/dt(J_c,ee) v vs central differences: {e_cee:.1e} (|.| {:.2}); d/dt(J_o) v: {e_o:.1e} (|.| {:.2})", fd_cee.amax(), fd_o.amax());
+    assert!(fd_cee.amax() > 1e-3 && fd_o.amax() > 1e-3, "a team that moves");
+    assert!(e_cee < 1e-6 && e_o < 1e-6, "relative to the differences: {e_cee:.1e}, {e_o:.1e}");
+}

@@ -26,7 +26,7 @@
 //!
 //! **Operators.** `P`, `Phi` and `Mbar P = M Phi` are each "blocks minus a coupling",
 //! `diag(D_r) - S W T^T` with `S`, `T` block-diagonal (k x 6 per robot) and `W` of 6B x 6B:
-//! applied to `c` columns they cost `sum_r k^2 c + 12 B k c + 36 B^2 c` instead of `n^2 c`
+//! applied to `c` columns they cost `sum_r k^2 c + 12 B k c + 108 B c` (`W` kept factored, [`Coupling`]) instead of `n^2 c`
 //! ([`BlockFactors::apply`]). `(J_c^T)^+` likewise ([`BlockFactors::jct_pinv_apply`]).
 //! [`BlockFactors::materialize`] forms the team-sized matrices from the same factors, for
 //! tests and reports only.
@@ -96,19 +96,20 @@ pub struct OpScratch {
     t: DMatrix<f64>,
     u: DMatrix<f64>,
     v: DVector<f64>,
+    /// The couplings' `Y^T t` and `F^{-1} Y^T t` (6 x columns).
+    r: DMatrix<f64>,
+    q: DMatrix<f64>,
 }
 
 /// The block path's factors, kept between ticks (see the module docs).
 #[derive(Debug, Clone, Default)]
 pub struct BlockFactors {
     robots: Vec<RobotBlocks>,
-    /// Per hand: `E_h`, `D_h` and, for [`coupling`], their inverses and `X_h^{-1} G_h^T`.
+    /// Per hand: `E_h`, `D_h`; the couplings `W_E`, `W_D` they make, kept factored.
     e: Vec<Matrix6<f64>>,
     d: Vec<Matrix6<f64>>,
-    x_inv: Vec<Matrix6<f64>>,
-    y: Vec<Matrix6<f64>>,
-    w_e: DMatrix<f64>,
-    w_d: DMatrix<f64>,
+    w_e: Coupling,
+    w_d: Coupling,
     /// The unactuated team indices `u`; `P_{:u}`, `I - P_uu` and its inverse `K` (`P_{:u} K`,
     /// n x 6B, is not formed on the tick: [`BlockFactors::ps_pinv_apply`] applies it).
     unact: Vec<usize>,
@@ -139,18 +140,18 @@ impl BlockFactors {
             self.d.push(hand_gram(&rb.j_h, &rb.l_h));
         }
         if let Some(g) = grasp {
-            coupling(&self.e, &g.g, &mut self.x_inv, &mut self.y, &mut self.w_e)?;
-            coupling(&self.d, &g.g, &mut self.x_inv, &mut self.y, &mut self.w_d)?;
+            self.w_e.compute(&self.e, &g.g)?;
+            self.w_d.compute(&self.d, &g.g)?;
         } else {
-            zeros(&mut self.w_e, 0, 0);
-            zeros(&mut self.w_d, 0, 0);
+            self.w_e.clear();
+            self.w_d.clear();
         }
         self.actuation(team)
     }
 
     /// The rank of `J_c`: `3 nf + 6 (B - 1)` (`J_c,ee` loses the object's 6 directions).
     pub fn jc_rank(&self) -> usize {
-        let b = self.w_e.nrows() / 6;
+        let b = self.w_e.rows / 6;
         self.nf3 + 6 * b.saturating_sub(1)
     }
 
@@ -210,9 +211,9 @@ impl BlockFactors {
     /// blocks, `N_f E_u` is a copy of columns and `R^T E_u` a copy of rows.
     fn unit_columns(&mut self, n: usize, pu: &mut DMatrix<f64>) {
         let nu = self.unact.len();
-        let hb = self.w_e.nrows();
+        let hb = self.w_e.rows;
         zeros(pu, n, nu);
-        let OpScratch { t, u, .. } = &mut self.scratch;
+        let OpScratch { t, u, r, q, .. } = &mut self.scratch;
         zeros(t, hb, nu);
         shape(u, hb, nu);
         for rb in &self.robots {
@@ -229,7 +230,7 @@ impl BlockFactors {
         if hb == 0 {
             return;
         }
-        gemm(mat_mut(u), 0.0, 1.0, mat(&self.w_e), mat(t));
+        self.w_e.apply(mat(t), mat_mut(u), r, q);
         for rb in &self.robots {
             if let Some(h) = rb.hand {
                 gemm(mat_mut(pu).subrows_mut(rb.o, rb.k), 1.0, -1.0, mat(&rb.r_h), mat(u).subrows(6 * h, 6));
@@ -244,7 +245,7 @@ impl BlockFactors {
     /// entry is written (the robots' blocks tile the rows), so it need not be cleared.
     pub fn apply(&self, op: BlockOp, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>, s: &mut OpScratch) {
         let w = if op == BlockOp::P { &self.w_e } else { &self.w_d };
-        let (hb, c) = (w.nrows(), x.ncols());
+        let (hb, c) = (w.rows, x.ncols());
         for rb in &self.robots {
             gemm(out.as_mut().subrows_mut(rb.o, rb.k), 0.0, 1.0, mat(rb.operator(op)[0]), x.subrows(rb.o, rb.k));
         }
@@ -258,7 +259,7 @@ impl BlockFactors {
                 gemm(mat_mut(&mut s.t).subrows_mut(6 * h, 6), 0.0, 1.0, mat(rb.operator(op)[2]).transpose(), x.subrows(rb.o, rb.k));
             }
         }
-        gemm(mat_mut(&mut s.u), 0.0, 1.0, mat(w), mat(&s.t));
+        w.apply(mat(&s.t), mat_mut(&mut s.u), &mut s.r, &mut s.q);
         for rb in &self.robots {
             if let Some(h) = rb.hand {
                 gemm(out.as_mut().subrows_mut(rb.o, rb.k), 1.0, -1.0, mat(rb.operator(op)[1]), mat(&s.u).subrows(6 * h, 6));
@@ -271,7 +272,7 @@ impl BlockFactors {
     /// (W_E R^T x)_h`. Every entry of `out` is written (the feet rows robot by robot, then
     /// the hand rows), so it need not be cleared.
     pub fn jct_pinv_apply(&self, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>, s: &mut OpScratch) {
-        let (hb, c) = (self.w_e.nrows(), x.ncols());
+        let (hb, c) = (self.w_e.rows, x.ncols());
         shape(&mut s.t, hb, c);
         shape(&mut s.u, hb, c);
         for rb in &self.robots {
@@ -279,7 +280,7 @@ impl BlockFactors {
                 gemm(mat_mut(&mut s.t).subrows_mut(6 * h, 6), 0.0, 1.0, mat(&rb.r_h).transpose(), x.subrows(rb.o, rb.k));
             }
         }
-        gemm(mat_mut(&mut s.u), 0.0, 1.0, mat(&self.w_e), mat(&s.t));
+        self.w_e.apply(mat(&s.t), mat_mut(&mut s.u), &mut s.r, &mut s.q);
         for rb in &self.robots {
             let (f0, f) = (3 * rb.foot0, 3 * rb.feet);
             gemm(out.as_mut().subrows_mut(f0, f), 0.0, 1.0, mat(&rb.a_pinv).transpose(), x.subrows(rb.o, rb.k));
@@ -292,7 +293,7 @@ impl BlockFactors {
 
     /// `out = alpha J_c^+ y` (n) for `y` (m): `A^+ y_f + R W_E (y_h - J_ee A^+ y_f)`.
     pub fn jc_pinv_apply(&self, alpha: f64, y: &DVector<f64>, out: &mut DVector<f64>, s: &mut OpScratch) {
-        let hb = self.w_e.nrows();
+        let hb = self.w_e.rows;
         zeros_v(out, self.robots.iter().map(|rb| rb.k).sum());
         zeros(&mut s.t, hb, 1);
         zeros(&mut s.u, hb, 1);
@@ -309,7 +310,7 @@ impl BlockFactors {
         if hb == 0 {
             return;
         }
-        gemm(mat_mut(&mut s.u), 0.0, 1.0, mat(&self.w_e), mat(&s.t));
+        self.w_e.apply(mat(&s.t), mat_mut(&mut s.u), &mut s.r, &mut s.q);
         for rb in &self.robots {
             if let Some(h) = rb.hand {
                 out.rows_mut(rb.o, rb.k).gemv(alpha, &rb.r_h, &s.u.fixed_view::<6, 1>(6 * h, 0), 1.0);
@@ -469,35 +470,74 @@ fn hand_gram(j_h: &DMatrix<f64>, x: &DMatrix<f64>) -> Matrix6<f64> {
 }
 
 /// `W = X^{-1} - X^{-1} G^T (G X^{-1} G^T)^{-1} G X^{-1}` (6B x 6B) for `X = diag(x_h)`:
-/// `U (U^T X U)^{-1} U^T` with `U` a basis of `N(G)` (module docs). Zero for one hand
-/// (`N(G) = 0`). `None` when a block or `G X^{-1} G^T` fails the pivot rule.
-fn coupling(x: &[Matrix6<f64>], g: &DMatrix<f64>, x_inv: &mut Vec<Matrix6<f64>>, y: &mut Vec<Matrix6<f64>>, w: &mut DMatrix<f64>) -> Option<()> {
-    let b = x.len();
-    zeros(w, 6 * b, 6 * b);
-    if b <= 1 {
-        return Some(());
+/// `U (U^T X U)^{-1} U^T` with `U` a basis of `N(G)` (module docs). Kept factored,
+/// `W = X^{-1} - Y F^{-1} Y^T` with `Y = X^{-1} G^T` (6 x 6 per hand) and
+/// `F = G X^{-1} G^T` (6 x 6): applied to `c` columns it costs `108 B c` multiply-adds
+/// instead of the dense `36 B^2 c`, and forming it `B` 6 x 6 products instead of `B^2`.
+#[derive(Debug, Clone, Default)]
+struct Coupling {
+    x_inv: Vec<Matrix6<f64>>,
+    y: Vec<Matrix6<f64>>,
+    f_inv: Matrix6<f64>,
+    /// `6 B`, zero without a grasp.
+    rows: usize,
+}
+
+/// A 6 x 6 matrix as a faer view.
+fn m6(m: &Matrix6<f64>) -> MatRef<'_, f64> {
+    MatRef::from_column_major_slice(m.as_slice(), 6, 6)
+}
+
+impl Coupling {
+    /// From the hands' blocks `x` and `G`. `None` when a block or `G X^{-1} G^T` fails the
+    /// pivot rule. One hand: `N(G) = 0`, `W = 0`.
+    fn compute(&mut self, x: &[Matrix6<f64>], g: &DMatrix<f64>) -> Option<()> {
+        self.rows = 6 * x.len();
+        self.x_inv.clear();
+        self.y.clear();
+        if x.len() <= 1 {
+            return Some(());
+        }
+        let mut f = Matrix6::zeros();
+        for (h, xh) in x.iter().enumerate() {
+            let g_h: Matrix6<f64> = g.fixed_view::<6, 6>(0, 6 * h).into_owned();
+            let xi = spd6_inverse(xh)?;
+            let yh = xi * g_h.transpose();
+            f += g_h * yh;
+            self.x_inv.push(xi);
+            self.y.push(yh);
+        }
+        self.f_inv = spd6_inverse(&((f + f.transpose()) * 0.5))?;
+        Some(())
     }
-    x_inv.clear();
-    y.clear();
-    let mut f = Matrix6::zeros();
-    for (h, xh) in x.iter().enumerate() {
-        let g_h: Matrix6<f64> = g.fixed_view::<6, 6>(0, 6 * h).into_owned();
-        let xi = spd6_inverse(xh)?;
-        let yh = xi * g_h.transpose();
-        f += g_h * yh;
-        x_inv.push(xi);
-        y.push(yh);
+
+    /// No grasp: no rows.
+    fn clear(&mut self) {
+        self.rows = 0;
+        self.x_inv.clear();
+        self.y.clear();
     }
-    let f_inv = spd6_inverse(&((f + f.transpose()) * 0.5))?;
-    for h in 0..b {
-        let yf = y[h] * f_inv;
-        for (h2, y2) in y.iter().enumerate().take(b) {
-            let mut blk = -(yf * y2.transpose());
-            if h == h2 {
-                blk += x_inv[h];
+
+    /// `u = W t` (`t`, `u`: 6B x c); `r`, `q` are scratch.
+    fn apply(&self, t: MatRef<'_, f64>, mut u: MatMut<'_, f64>, r: &mut DMatrix<f64>, q: &mut DMatrix<f64>) {
+        let c = t.ncols();
+        if self.x_inv.is_empty() {
+            for j in 0..c {
+                for i in 0..self.rows {
+                    u[(i, j)] = 0.0;
+                }
             }
-            w.fixed_view_mut::<6, 6>(6 * h, 6 * h2).copy_from(&blk);
+            return;
+        }
+        shape(r, 6, c);
+        shape(q, 6, c);
+        for (h, y) in self.y.iter().enumerate() {
+            gemm(mat_mut(r), if h == 0 { 0.0 } else { 1.0 }, 1.0, m6(y).transpose(), t.subrows(6 * h, 6));
+        }
+        gemm(mat_mut(q), 0.0, 1.0, m6(&self.f_inv), mat(r));
+        for (h, (xi, y)) in self.x_inv.iter().zip(&self.y).enumerate() {
+            gemm(u.as_mut().subrows_mut(6 * h, 6), 0.0, 1.0, m6(xi), t.subrows(6 * h, 6));
+            gemm(u.as_mut().subrows_mut(6 * h, 6), 1.0, -1.0, m6(y), mat(q));
         }
     }
-    Some(())
 }

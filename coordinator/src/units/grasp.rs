@@ -303,16 +303,22 @@ impl GraspTerms {
         let x = w * x * w;
         let dgp = |i: usize| gdot(i).transpose() * w - gi(i).transpose() * x;
         // jdv_cee = Ndot (J_ee v) + N Jdot_ee v; jdv_o = d(G^+)^T (J_ee v) + (G^+)^T Jdot_ee v.
+        // With Ndot_ij = -(d(G^+)_i G_j + G^+_i Gdot_j) and N_ij = delta_ij I - G^+_i G_j, hand
+        // i's rows are -(d(G^+)_i (G ee) + G^+_i (Gdot ee)) + jd_i - G^+_i (G jd) (ee = J_ee v,
+        // jd = Jdot_ee v): three 6-vectors summed over the hands once, not B^2 blocks.
+        let (mut g_ee, mut gdot_ee, mut g_jd) = (Vector6::zeros(), Vector6::zeros(), Vector6::zeros());
+        for j in 0..b {
+            let (g, ee, jd) = (gi(j), self.ee_twist.fixed_rows::<6>(6 * j), team.jdv_ee.fixed_rows::<6>(6 * j));
+            g_ee += g * ee;
+            gdot_ee += gdot(j) * ee;
+            g_jd += g * jd;
+        }
         zeros_v(&mut self.jdv_cee, 6 * b);
         zeros_v(&mut self.jdv_o, 6);
         for i in 0..b {
             let gp_i: Matrix6<f64> = self.g_pinv.fixed_view::<6, 6>(6 * i, 0).into_owned();
             let dgp_i = dgp(i);
-            let mut acc = Vector6::zeros();
-            for j in 0..b {
-                let ndot_ij = -(dgp_i * gi(j) + gp_i * gdot(j));
-                acc += ndot_ij * self.ee_twist.fixed_rows::<6>(6 * j) + self.n.fixed_view::<6, 6>(6 * i, 6 * j) * team.jdv_ee.fixed_rows::<6>(6 * j);
-            }
+            let acc = -(dgp_i * g_ee + gp_i * gdot_ee) + team.jdv_ee.fixed_rows::<6>(6 * i) - gp_i * g_jd;
             self.jdv_cee.fixed_rows_mut::<6>(6 * i).copy_from(&acc);
             let ee_i = self.ee_twist.fixed_rows::<6>(6 * i);
             let jdv_i = team.jdv_ee.fixed_rows::<6>(6 * i);
