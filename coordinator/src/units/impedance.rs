@@ -141,9 +141,12 @@ impl TaskStack {
         self.j.rows_mut(at, d).copy_from(j_x);
         // The columns the task moves: a torso's, a swing foot's or a free hand's are its
         // robot's; the object's span the grasping robots'.
-        let nonzero = |c: &usize| j_x.column(*c).iter().any(|x| *x != 0.0);
-        let c0 = (0..self.n).find(nonzero).unwrap_or(0);
-        let c1 = (c0..self.n).rev().find(nonzero).map_or(c0, |c| c + 1);
+        // (Over the column-major storage, column by column: nalgebra's column iterators were a
+        // third of the stack's time.)
+        let nonzero = |c: &[f64]| c.iter().any(|x| *x != 0.0);
+        let mut cols = j_x.as_slice().chunks_exact(d.max(1));
+        let c0 = cols.clone().position(nonzero).unwrap_or(0);
+        let c1 = cols.rposition(nonzero).map_or(c0, |c| c + 1);
         self.spans.push((at, d, c0, c1 - c0));
         self.jdv.rows_mut(at, d).copy_from(jdv_x);
         self.e.rows_mut(at, d).copy_from(&err.e.rows(0, d));
