@@ -291,10 +291,12 @@ fn solve_by_blocks(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> 
     let t = Instant::now();
     let (warm, shape) = ws.qp.warm();
     let input = qp::BlockInput { team: &r.team, g: r.grasp.as_ref().map(|g| &g.g), contacts: &r.contacts, eta_real: &r.lambda_real, tau0: &r.tau0, actuated: &r.actuated, limits: &r.limits };
-    r.blocks_declined = ws.blocks.solve(&input, warm, shape, qp_settings(cfg).active_set_tol).err();
+    r.blocks_declined = ws.blocks.solve(&input, warm, shape, qp_settings(cfg).active_set_tol, qp::BLOCK_REPAIRS).err();
     if r.blocks_declined.is_some() {
         return false;
     }
+    // The next tick starts from the rows found optimal here (mended or not).
+    ws.qp.set_warm(&ws.blocks.active, shape);
     let b = &ws.blocks;
     zeros_v(&mut r.tau, r.tau0.len());
     r.tau.copy_from(&r.tau0);
@@ -305,7 +307,7 @@ fn solve_by_blocks(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> 
     r.lambda_real += &b.z;
     zeros_v(&mut r.f_c, b.z.len());
     let solve_us = t.elapsed().as_secs_f64() * 1e6;
-    r.qp = qp::QpOutcome { status: QpStatus::Solved, iterations: 0, solve_us, setup_us: 0.0, rows: b.rows, solver: qp::by_blocks::SOLVER };
+    r.qp = qp::QpOutcome { status: QpStatus::Solved, iterations: b.repairs, solve_us, setup_us: 0.0, rows: b.rows, solver: qp::by_blocks::SOLVER };
     (r.fallback, r.saturated) = (None, false);
     true
 }

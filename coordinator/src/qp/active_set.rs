@@ -167,6 +167,14 @@ impl DualActiveSet {
         (&self.warm, self.warm_shape)
     }
 
+    /// Start the next hot start from `rows` of a problem of `shape` (what
+    /// [`super::BlockHotStart`] found optimal on a tick this method did not solve).
+    pub fn set_warm(&mut self, rows: &[usize], shape: (usize, usize)) {
+        self.warm.clear();
+        self.warm.extend_from_slice(rows);
+        self.warm_shape = shape;
+    }
+
     fn run(&mut self, problem: &QpProblem, settings: &QpSettings) -> Result<(), ActiveSetError> {
         let (a, b) = (&problem.a, &problem.b);
         let (rows, n) = a.shape();

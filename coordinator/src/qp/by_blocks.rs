@@ -113,6 +113,19 @@ pub struct BlockHotStart {
     pub dtau: DVector<f64>,
     /// Rows of the assembled problem (contacts' and torque limits').
     pub rows: usize,
+    /// The active rows of the last call (its answer's, when it answered), and how many times
+    /// that call mended them.
+    pub active: Vec<usize>,
+    pub repairs: u32,
+}
+
+/// What [`BlockHotStart::verify`] found.
+enum Verdict {
+    Optimal,
+    /// Not the optimum by `worst`: the active row with the most negative multiplier (`leave`)
+    /// and the most violated inactive row (`enter`), when there are.
+    NotOptimal { worst: f64, leave: Option<usize>, enter: Option<usize> },
+    Declined(Decline),
 }
 
 /// [`super::QpOutcome::solver`] of a tick this hot start answered.
@@ -121,12 +134,17 @@ pub const SOLVER: &str = "blocks";
 impl BlockHotStart {
     /// The minimum on the active rows `warm` of the assembled problem of shape `warm_shape`
     /// (variables, rows) into [`BlockHotStart::z`] and [`BlockHotStart::dtau`], if it is the
-    /// QP's optimum to `tol`.
-    pub fn solve(&mut self, inp: &BlockInput, warm: &[usize], warm_shape: (usize, usize), tol: f64) -> Result<(), Decline> {
+    /// QP's optimum to `tol`. When it is not, up to `repairs` times the active set is mended
+    /// and the minimum taken again: the row with the most negative multiplier leaves, or if
+    /// none, the most violated row enters (one step of the primal active-set method; the
+    /// answer is accepted only when its KKT conditions hold, so a wrong guess costs a solve,
+    /// never a wrong torque). The active rows of the answer are in [`BlockHotStart::active`].
+    pub fn solve(&mut self, inp: &BlockInput, warm: &[usize], warm_shape: (usize, usize), tol: f64, repairs: u32) -> Result<(), Decline> {
         let m = inp.eta_real.len();
         let nc: usize = inp.contacts.iter().map(|(_, k)| contact_rows(k).len()).sum();
         let rows = nc + 2 * inp.actuated.len();
         self.rows = rows;
+        self.repairs = 0;
         // Sized before any decline: the first tick of a shape (which has no active set yet)
         // allocates, the next ones do not.
         self.setup(inp)?;
@@ -134,20 +152,37 @@ impl BlockHotStart {
         if warm_shape != (m, rows) || warm.iter().any(|&i| i >= rows) {
             return Err(Decline::NoHotStart);
         }
-        self.in_w.iter_mut().for_each(|w| *w = false);
-        for &i in warm {
-            self.in_w[i] = true;
+        self.active.clear();
+        self.active.extend_from_slice(warm);
+        loop {
+            self.in_w.iter_mut().for_each(|w| *w = false);
+            for &i in &self.active {
+                self.in_w[i] = true;
+            }
+            let active = std::mem::take(&mut self.active);
+            let rows_set = self.equality_rows(inp, &active, nc);
+            self.active = active;
+            rows_set?;
+            let nu_c = self.coupling(inp)?;
+            self.answer(inp, &nu_c);
+            match self.verify(inp, nc, tol) {
+                Verdict::Optimal => return Ok(()),
+                Verdict::Declined(d) => return Err(d),
+                Verdict::NotOptimal { worst, .. } if self.repairs >= repairs => return Err(Decline::NotOptimal(worst)),
+                Verdict::NotOptimal { leave: Some(i), .. } => self.active.retain(|&r| r != i),
+                Verdict::NotOptimal { enter: Some(i), .. } => self.active.push(i),
+                Verdict::NotOptimal { worst, .. } => return Err(Decline::NotOptimal(worst)),
+            }
+            self.repairs += 1;
         }
-        self.equality_rows(inp, warm, nc)?;
-        let nu_c = self.coupling(inp)?;
-        self.answer(inp, &nu_c);
-        self.verify(inp, nc, tol)
     }
 
     /// Every buffer at its shape for `m` variables, `n` joints and `rows` rows (reallocated only
     /// when the shape changes).
     fn size(&mut self, m: usize, n: usize, rows: usize) {
         self.in_w.resize(rows, false);
+        self.active.clear();
+        self.active.reserve(rows);
         zeros_v(&mut self.z, m);
         zeros_v(&mut self.dtau, n);
         for rq in &mut self.robots {
@@ -337,12 +372,17 @@ impl BlockHotStart {
     /// problem held (slack `>= -tol (1 + |b_i|)`, `b_i` its value at `z = 0`), the rows of `W`
     /// with equality, the base rows and the coupling at zero, every multiplier of `W`
     /// non-negative (to `tol` of the largest).
-    fn verify(&self, inp: &BlockInput, nc: usize, tol: f64) -> Result<(), Decline> {
+    fn verify(&self, inp: &BlockInput, nc: usize, tol: f64) -> Verdict {
         let mut worst: f64 = 0.0;
+        let mut enter: Option<(usize, f64)> = None;
+        let mut finite = true;
         let mut row = |slack: f64, b: f64, i: usize| {
-            let miss = if self.in_w[i] { slack.abs() } else { -slack };
-            worst = worst.max(miss / (1.0 + b.abs()));
-            slack.is_finite()
+            let miss = if self.in_w[i] { slack.abs() } else { -slack } / (1.0 + b.abs());
+            worst = worst.max(miss);
+            if !self.in_w[i] && miss > tol && enter.is_none_or(|(_, m)| miss > m) {
+                enter = Some((i, miss));
+            }
+            finite &= slack.is_finite();
         };
         let mut i = 0;
         for (start, kind) in inp.contacts {
@@ -350,26 +390,27 @@ impl BlockHotStart {
                 let dim = kind.dim();
                 let b: f64 = (0..dim).map(|d| c[d] * inp.eta_real[start + d]).sum::<f64>() - lo;
                 let slack = b + (0..dim).map(|d| c[d] * self.z[start + d]).sum::<f64>();
-                if !row(slack, b, i) {
-                    return Err(Decline::NonFinite);
-                }
+                row(slack, b, i);
                 i += 1;
             }
         }
         debug_assert_eq!(i, nc);
         for (p, (&j, &lim)) in inp.actuated.iter().zip(inp.limits).enumerate() {
             let t = inp.tau0[j] + self.dtau[j];
-            if !(row(lim - t, lim - inp.tau0[j], nc + 2 * p) && row(lim + t, lim + inp.tau0[j], nc + 2 * p + 1)) {
-                return Err(Decline::NonFinite);
-            }
+            row(lim - t, lim - inp.tau0[j], nc + 2 * p);
+            row(lim + t, lim + inp.tau0[j], nc + 2 * p + 1);
+        }
+        if !finite {
+            return Verdict::Declined(Decline::NonFinite);
         }
         // The equalities hold by construction; checked against round-off at the scale of the
         // answer.
         let scale = 1.0 + self.dtau.amax() + self.z.amax();
+        let mut equalities: f64 = 0.0;
         for rq in &self.robots {
             for c in 0..rq.nv {
                 if inp.team.s_diag[rq.offset + c] == 0.0 {
-                    worst = worst.max(self.dtau[rq.offset + c].abs() / scale);
+                    equalities = equalities.max(self.dtau[rq.offset + c].abs() / scale);
                 }
             }
         }
@@ -377,24 +418,29 @@ impl BlockHotStart {
             let nf3 = 3 * inp.team.feet.len();
             for a in 0..6 {
                 let gz: f64 = (0..g.ncols()).map(|c| g[(a, c)] * self.z[nf3 + c]).sum();
-                worst = worst.max(gz.abs() / scale);
+                equalities = equalities.max(gz.abs() / scale);
             }
         }
-        let numax = self.robots.iter().flat_map(|rq| rq.rows.iter().zip(rq.nu.iter())).filter(|(w, _)| w.is_some()).fold(0.0f64, |m, (_, u)| m.max(u.abs()));
-        for rq in &self.robots {
-            for (w, u) in rq.rows.iter().zip(rq.nu.iter()) {
-                if !u.is_finite() {
-                    return Err(Decline::NonFinite);
-                }
-                if w.is_some() {
-                    worst = worst.max(-u / (1.0 + numax));
-                }
+        if equalities.is_nan() || equalities > tol {
+            return Verdict::Declined(Decline::NotOptimal(equalities));
+        }
+        let multipliers = || self.robots.iter().flat_map(|rq| rq.rows.iter().zip(rq.nu.iter())).filter_map(|(w, u)| w.map(|i| (i, *u)));
+        if multipliers().any(|(_, u)| !u.is_finite()) {
+            return Verdict::Declined(Decline::NonFinite);
+        }
+        let numax = multipliers().fold(0.0f64, |m, (_, u)| m.max(u.abs()));
+        let mut leave: Option<(usize, f64)> = None;
+        for (i, u) in multipliers() {
+            let miss = -u / (1.0 + numax);
+            worst = worst.max(miss);
+            if miss > tol && leave.is_none_or(|(_, m)| miss > m) {
+                leave = Some((i, miss));
             }
         }
         if worst > tol || worst.is_nan() {
-            return Err(Decline::NotOptimal(worst));
+            return Verdict::NotOptimal { worst, leave: leave.map(|l| l.0), enter: enter.map(|e| e.0) };
         }
-        Ok(())
+        Verdict::Optimal
     }
 }
 

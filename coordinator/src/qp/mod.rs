@@ -46,7 +46,7 @@ pub use dense_ipm::DenseIpm;
 pub use least_violation::{solve_least_violation, solve_least_violation_with};
 pub use problem::{constraints_into, objective_into, QpInput, QpProblem};
 pub use rows::{contact_rows, ContactKind, ContactRows, FRICTION_SIGNS, MAX_CONTACT_ROWS};
-pub use settings::{QpSettings, ACTIVE_SET_MAX_ITER, ACTIVE_SET_TOL, DENSE_TOL, HARD_ROW_FACTOR, LEAST_VIOLATION_MIN_ITER, REDUCED_TOL, VIOLATION_WEIGHT};
+pub use settings::{QpSettings, ACTIVE_SET_MAX_ITER, BLOCK_REPAIRS, ACTIVE_SET_TOL, DENSE_TOL, HARD_ROW_FACTOR, LEAST_VIOLATION_MIN_ITER, REDUCED_TOL, VIOLATION_WEIGHT};
 
 use crate::linalg::zeros_v;
 use least_violation::LeastViolation;
@@ -96,6 +96,11 @@ impl QpWorkspace {
     /// The dual active set's last active rows and problem shape ([`DualActiveSet::warm`]).
     pub fn warm(&self) -> (&[usize], (usize, usize)) {
         self.active_set.warm()
+    }
+
+    /// The next hot start's rows ([`DualActiveSet::set_warm`]).
+    pub fn set_warm(&mut self, rows: &[usize], shape: (usize, usize)) {
+        self.active_set.set_warm(rows, shape);
     }
 }
 

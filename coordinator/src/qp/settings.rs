@@ -18,6 +18,11 @@ pub const ACTIVE_SET_TOL: f64 = 1e-9;
 /// start of the eight-robot QP takes about 30, a hot start none to a few.
 pub const ACTIVE_SET_MAX_ITER: u32 = 1000;
 
+/// How many times [`super::BlockHotStart`] may mend the last tick's active rows (one row in or
+/// out each time) before the team-sized QP is built: one or two rows change on most ticks
+/// where the active set changes at all.
+pub const BLOCK_REPAIRS: u32 = 3;
+
 /// Relative tolerance of a reduced-accuracy (AlmostSolved) answer of [`super::DenseIpm`].
 pub const REDUCED_TOL: f64 = 1e-5;
 
