@@ -215,3 +215,44 @@ fn a_stale_active_set_or_a_new_shape_goes_to_the_team_sized_qp() {
     assert_eq!(b.blocks_declined, Some(qp::Decline::NoHotStart), "a new shape was answered from the old active set");
     assert!(rel(&b.tau, &d.tau) < 1e-4);
 }
+
+/// A torque limit that binds: robot 0's most loaded joint limited to 97 % of the torque the
+/// QP gave it, so the team must shift internal forces to keep it. The block answers keep the
+/// limit as an active row (a torque row binds in the assembled problem) and are the QP's
+/// optimum by the same written-out KKT conditions.
+#[test]
+fn a_binding_torque_limit_is_an_active_row_of_the_block_answer() {
+    let mut fx = Fixture::new();
+    let case = Case { robots: 3, seed: 2, swing: false, grasp: true, fully_actuated: false };
+    let seq = ticks(&mut fx, case, 6, 0.2);
+    let mut probe = controller(&fx, case, false);
+    let r = probe.compute(&seq[0]).expect("tick").clone();
+    let joints = fx.description(&robot_id(0)).torque_limits.len();
+    let p = (0..joints).max_by(|&a, &b| r.tau[r.actuated[a]].abs().total_cmp(&r.tau[r.actuated[b]].abs())).expect("joints");
+    let mut d0 = fx.description(&robot_id(0));
+    d0.torque_limits[p] = 0.97 * r.tau[r.actuated[p]].abs();
+    let (mut blocks, mut dense) = (controller(&fx, case, true), controller(&fx, case, false));
+    blocks.set_description(&d0);
+    dense.set_description(&d0);
+    let (mut binding, mut answered) = (0, 0);
+    for (t, tick) in seq.iter().enumerate() {
+        blocks.compute(tick).expect("tick");
+        let d = dense.compute(tick).expect("tick").clone();
+        let b = blocks.materialized().expect("tick").clone();
+        assert!(matches!(d.qp.status, qp::QpStatus::Solved), "tick {t}: the oracle's QP {:?}", d.qp.status);
+        assert!(b.tau[b.actuated[p]].abs() <= d0.torque_limits[p] * (1.0 + 1e-9), "tick {t}: the limit holds");
+        if b.qp.solver != qp::by_blocks::SOLVER {
+            continue;
+        }
+        answered += 1;
+        let prob = problem(&b);
+        let (rows, stationarity, _) = kkt(&prob, &b.f_c);
+        assert!(rows < 1e-8 && stationarity < 1e-7, "tick {t}: rows {rows:.2e}, stationarity {stationarity:.2e}");
+        let slack = &prob.a * &b.f_c - &prob.b;
+        let torque_rows = prob.pairs_from..prob.rows();
+        binding += usize::from(torque_rows.clone().any(|i| slack[i].abs() <= 1e-7 * (1.0 + prob.b[i].abs())));
+        assert!(rel(&b.tau, &d.tau) < 1e-4, "tick {t}: torque {:.2e}", rel(&b.tau, &d.tau));
+    }
+    println!("limit {:.2} N m on joint {p}: {answered} ticks by the blocks, {binding} with a torque row binding", d0.torque_limits[p]);
+    assert!(answered >= seq.len() - 1 && binding == answered, "{answered} answered, {binding} binding");
+}

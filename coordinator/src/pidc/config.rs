@@ -60,7 +60,7 @@ pub struct PidcConfig {
     /// before that, `tests/tests/degrade.rs`'s
     /// 300 N push kept the team standing only with the interior point's 1e-7 answers.
     pub active_set_qp: bool,
-    /// With `active_set_qp`: first try the last tick's active rows by the robots' blocks
+    /// With `dense_qp` and `active_set_qp`: first try the last tick's active rows by the robots' blocks
     /// (`qp::BlockHotStart`, the QP in the wrenches' change `z = rho F`, linear in the team),
     /// before `Y`, `rho` and the team-sized QP are built; the same torques to the solvers'
     /// tolerance (`tests/qp_by_blocks.rs`). Off: every tick builds the team-sized QP.

@@ -125,7 +125,7 @@ impl Pidc {
     /// robots' blocks ([`qp::BlockHotStart`]), `Y`, `rho` and an `F_c` with
     /// `tau = tau_0 + Y F_c` (the least-norm one, `Y^+ (tau - tau_0)`; then also
     /// `lambda = rho F_c + eta`, since `rho` and `Y` share their null space). For tests and
-    /// reports; it allocates.
+    /// reports; it allocates. `None` without a completed tick, or when the SVD of `Y` fails.
     ///
     /// [`Projections::materialize`]: crate::units::projection::Projections::materialize
     pub fn materialized(&mut self) -> Option<&TickReport> {

@@ -61,6 +61,8 @@ pub struct BlockInput<'a> {
 pub enum Decline {
     #[error("the last active set belongs to another shape of QP")]
     NoHotStart,
+    #[error("the contact variables are not one block per robot")]
+    NotByRobots,
     #[error("robot {robot}'s contacts are not independent (J_r J_r^T or its active rows' Gram is singular)")]
     Singular { robot: usize },
     #[error("the grasp's coupling is singular on the active rows")]
@@ -136,9 +138,14 @@ impl BlockHotStart {
     /// (variables, rows) into [`BlockHotStart::z`] and [`BlockHotStart::dtau`], if it is the
     /// QP's optimum to `tol`. When it is not, up to `repairs` times the active set is mended
     /// and the minimum taken again: the row with the most negative multiplier leaves, or if
-    /// none, the most violated row enters (one step of the primal active-set method; the
-    /// answer is accepted only when its KKT conditions hold, so a wrong guess costs a solve,
-    /// never a wrong torque). The active rows of the answer are in [`BlockHotStart::active`].
+    /// none, the most violated row enters (a swap guessed from the multipliers and the
+    /// violations, without a step length; the answer is accepted only when its KKT conditions
+    /// hold, so a wrong guess costs a solve, never a wrong torque). The active rows of the
+    /// answer are in [`BlockHotStart::active`].
+    ///
+    /// It declines (and the caller builds the team-sized QP) on a robot without contacts or
+    /// with fewer contact variables than unactuated joints (its block has no solution), and on
+    /// linearly dependent active rows, as when both bounds of a foot being unloaded bind.
     pub fn solve(&mut self, inp: &BlockInput, warm: &[usize], warm_shape: (usize, usize), tol: f64, repairs: u32) -> Result<(), Decline> {
         let m = inp.eta_real.len();
         let nc: usize = inp.contacts.iter().map(|(_, k)| contact_rows(k).len()).sum();
@@ -149,6 +156,12 @@ impl BlockHotStart {
         // allocates, the next ones do not.
         self.setup(inp)?;
         self.size(m, inp.team.n, rows);
+        // Every variable must belong to one robot's block: a variable no block holds would
+        // stay at zero unchecked (a robot with two hands in grasp, which the team refuses
+        // today, or a hand without a grasp).
+        if self.robots.iter().map(|rq| rq.vars.len()).sum::<usize>() != m {
+            return Err(Decline::NotByRobots);
+        }
         if warm_shape != (m, rows) || warm.iter().any(|&i| i >= rows) {
             return Err(Decline::NoHotStart);
         }
@@ -243,14 +256,14 @@ impl BlockHotStart {
     /// `A_r^T`, and `V = L^{-1} A_r^T`.
     fn equality_rows(&mut self, inp: &BlockInput, warm: &[usize], nc: usize) -> Result<(), Decline> {
         let team = inp.team;
-        for rq in &mut self.robots {
+        for (r, rq) in self.robots.iter_mut().enumerate() {
             let mr = rq.vars.len();
             zeros(&mut rq.at, mr, mr);
             zeros_v(&mut rq.beta, mr);
             rq.rows.clear();
             for c in 0..rq.nv {
                 if team.s_diag[rq.offset + c] == 0.0 {
-                    push_jt_row(rq, c, 1.0, 0.0, None)?;
+                    push_jt_row(rq, r, c, 1.0, 0.0, None)?;
                 }
             }
         }
@@ -279,8 +292,8 @@ impl BlockHotStart {
                 let (j, lim) = (inp.actuated[p], inp.limits[p]);
                 let r = team.robots.iter().position(|b| (b.offset..b.offset + b.nv).contains(&j)).ok_or(Decline::NoHotStart)?;
                 let rq = &mut self.robots[r];
-                let (sign, beta) = if (i - nc).is_multiple_of(2) { (1.0, inp.tau0[j] - lim) } else { (-1.0, -(lim + inp.tau0[j])) };
-                push_jt_row(rq, j - rq.offset, sign, beta, Some(i)).map_err(|_| Decline::Singular { robot: r })?;
+                let (sign, beta) = if (i - nc) & 1 == 0 { (1.0, inp.tau0[j] - lim) } else { (-1.0, -(lim + inp.tau0[j])) };
+                push_jt_row(rq, r, j - rq.offset, sign, beta, Some(i))?;
             }
         }
         for rq in &mut self.robots {
@@ -446,10 +459,10 @@ impl BlockHotStart {
 
 /// Append `sign` times row `c` of `J_r^T` as an equality column `a^T z_r = beta`; an error when
 /// the robot already has as many as it has variables (they cannot be independent).
-fn push_jt_row(rq: &mut RobotQp, c: usize, sign: f64, beta: f64, row: Option<usize>) -> Result<(), Decline> {
+fn push_jt_row(rq: &mut RobotQp, robot: usize, c: usize, sign: f64, beta: f64, row: Option<usize>) -> Result<(), Decline> {
     let col = rq.rows.len();
     if col >= rq.vars.len() {
-        return Err(Decline::Singular { robot: usize::MAX });
+        return Err(Decline::Singular { robot });
     }
     for v in 0..rq.vars.len() {
         rq.at[(v, col)] = sign * rq.jt[(c, v)];

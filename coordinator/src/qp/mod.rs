@@ -19,7 +19,7 @@
 //! | [`problem`] | the controller's terms ([`QpInput`]) and the assembled `min 1/2 F^T P F, A F <= b` ([`QpProblem`], [`constraints_into`], [`objective_into`]) |
 //! | [`settings`] | [`QpSettings`]: dense first or not, iterations, tolerances, the fallback's price |
 //! | [`by_blocks`] | [`BlockHotStart`], the hot start by the robots' blocks in the wrenches' change `z = rho F`, tried before the team-sized QP is built |
-//! | [`active_set`] | [`DualActiveSet`], the Goldfarb–Idnani dual active-set method hot-started from the last tick, tried first |
+//! | [`active_set`] | [`DualActiveSet`], the Goldfarb–Idnani dual active-set method hot-started from the last tick, tried first on the team-sized QP |
 //! | [`dense_ipm`] | [`DenseIpm`], the dense interior-point method tried next |
 //! | [`clarabel`] | [`Clarabel`], the adapter to Clarabel 0.11 ([`to_csc`]) |
 //! | [`least_violation`] | [`solve_least_violation`], the fallback when the QP is infeasible |
@@ -68,7 +68,8 @@ pub struct QpOutcome {
     pub solve_us: f64,
     pub setup_us: f64,
     pub rows: usize,
-    /// Which solver produced the answer: "active-set", "dense-ipm" or "clarabel".
+    /// Which solver produced the answer: "blocks" ([`BlockHotStart`], run by `Pidc` before the
+    /// team-sized QP), "active-set", "dense-ipm" or "clarabel".
     pub solver: &'static str,
 }
 

@@ -111,7 +111,7 @@ pub struct BlockFactors {
     w_e: Coupling,
     w_d: Coupling,
     /// The unactuated team indices `u`; `P_{:u}`, `I - P_uu` and its inverse `K` (`P_{:u} K`,
-    /// n x 6B, is not formed on the tick: [`BlockFactors::ps_pinv_apply`] applies it).
+    /// n x n_u, is not formed on the tick: [`BlockFactors::ps_pinv_apply`] applies it).
     unact: Vec<usize>,
     pu: DMatrix<f64>,
     quu: DMatrix<f64>,
@@ -191,7 +191,8 @@ impl BlockFactors {
         Some(())
     }
 
-    /// `P_{:u}` (by [`BlockFactors::unit_columns`]) and `K = (I - P_uu)^{-1}`; `None` when `I - P_uu` is too ill-conditioned for the rank of `P S` to be full.
+    /// `P_{:u}` (by [`BlockFactors::unit_columns`]) and `K = (I - P_uu)^{-1}`; `None` when
+    /// `I - P_uu` is too ill-conditioned for the rank of `P S` to be full.
     fn actuation(&mut self, team: &Team) -> Option<()> {
         let nu = self.unact.len();
         let mut pu = std::mem::take(&mut self.pu);
@@ -326,7 +327,7 @@ impl BlockFactors {
         zeros_v(px, self.unact.len());
         self.apply(BlockOp::P, vmat(x), vmat_mut(out), s);
         px.gemv_tr(1.0, &self.pu, x, 0.0);
-        // P_{:u} (K P_{u:} x): two products with vectors instead of the n x 6B P_{:u} K.
+        // P_{:u} (K P_{u:} x): two products with vectors instead of the n x n_u P_{:u} K.
         zeros_v(&mut s.v, px.len());
         s.v.gemv(1.0, &self.k_inv, px, 0.0);
         out.gemv(1.0, &self.pu, &s.v, 1.0);
