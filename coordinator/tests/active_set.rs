@@ -11,7 +11,7 @@
 
 mod common;
 
-use common::{robot_id, Fixture};
+use common::{nonnegative_least_squares, robot_id, Fixture};
 use coordinator::pidc::TickReport;
 use coordinator::qp::{self, DualActiveSet, QpInput, QpProblem, QpSettings, QpSolver, QpWorkspace};
 use coordinator::{Pidc, PidcConfig};
@@ -80,50 +80,6 @@ impl Worst {
             stationarity: self.stationarity.max(o.stationarity),
         }
     }
-}
-
-/// `min |A u - g|^2` over `u >= 0`: Lawson and Hanson's active-set method (least squares on
-/// the free set, exact at its end; a bounded number of steps, a failure shows as a stationarity
-/// residual, never as a false pass).
-fn nonnegative_least_squares(a: &DMatrix<f64>, g: &DVector<f64>) -> DVector<f64> {
-    let k = a.ncols();
-    let tol = 1e-12 * (1.0 + (a.transpose() * g).amax());
-    let ls = |free: &[bool]| {
-        let cols: Vec<usize> = (0..k).filter(|&i| free[i]).collect();
-        let a_f = DMatrix::from_fn(a.nrows(), cols.len(), |r, c| a[(r, cols[c])]);
-        let s_f = a_f.svd(true, true).solve(g, 1e-14).expect("least squares");
-        let mut s = DVector::zeros(k);
-        cols.iter().zip(s_f.iter()).for_each(|(&i, &x)| s[i] = x);
-        s
-    };
-    let (mut x, mut free) = (DVector::zeros(k), vec![false; k]);
-    let mut rejected = None;
-    for _ in 0..3 * k {
-        let w = a.transpose() * (g - a * &x);
-        let Some(j) = (0..k).filter(|&i| !free[i] && Some(i) != rejected && w[i] > tol).max_by(|&i, &j| w[i].total_cmp(&w[j])) else { break };
-        free[j] = true;
-        rejected = None;
-        for _ in 0..k {
-            let s = ls(&free);
-            if (0..k).filter(|&i| free[i]).all(|i| s[i] > 0.0) {
-                x = s;
-                break;
-            }
-            // The longest step from x towards s that keeps the free set non-negative (an x_i
-            // already at zero with s_i <= 0 allows none).
-            let alpha = (0..k).filter(|&i| free[i] && s[i] <= 0.0).map(|i| if x[i] <= 0.0 { 0.0 } else { x[i] / (x[i] - s[i]) }).fold(1.0, f64::min);
-            x += (&s - &x) * alpha;
-            let scale = x.amax().max(f64::MIN_POSITIVE);
-            for i in 0..k {
-                if free[i] && x[i] <= 1e-14 * scale {
-                    free[i] = false;
-                    x[i] = 0.0;
-                    rejected = Some(i);
-                }
-            }
-        }
-    }
-    x
 }
 
 /// `F` against Clarabel's `fc` on `p`, the KKT conditions written out: rows

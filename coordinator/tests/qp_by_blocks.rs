@@ -18,7 +18,7 @@
 
 mod common;
 
-use common::{robot_id, Fixture};
+use common::{nonnegative_least_squares, robot_id, Fixture};
 use coordinator::pidc::TickReport;
 use coordinator::qp::{self, QpInput, QpProblem};
 use coordinator::{Pidc, PidcConfig};
@@ -78,46 +78,6 @@ fn ticks(fx: &mut Fixture, case: Case, ticks: usize, speed: f64) -> Vec<Vec<Dyna
 
 fn rel(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
     (a - b).amax() / b.amax().max(f64::MIN_POSITIVE)
-}
-
-/// `min |A u - g|^2` over `u >= 0` (Lawson and Hanson; a failure shows as a residual).
-fn nonnegative_least_squares(a: &DMatrix<f64>, g: &DVector<f64>) -> DVector<f64> {
-    let k = a.ncols();
-    let tol = 1e-12 * (1.0 + (a.transpose() * g).amax());
-    let ls = |free: &[bool]| {
-        let cols: Vec<usize> = (0..k).filter(|&i| free[i]).collect();
-        let a_f = DMatrix::from_fn(a.nrows(), cols.len(), |r, c| a[(r, cols[c])]);
-        let s_f = a_f.svd(true, true).solve(g, 1e-14).expect("least squares");
-        let mut s = DVector::zeros(k);
-        cols.iter().zip(s_f.iter()).for_each(|(&i, &x)| s[i] = x);
-        s
-    };
-    let (mut x, mut free) = (DVector::zeros(k), vec![false; k]);
-    for _ in 0..3 * k {
-        let w = a.transpose() * (g - a * &x);
-        let Some(j) = (0..k).filter(|&i| !free[i] && w[i] > tol).max_by(|&i, &j| w[i].total_cmp(&w[j])) else { break };
-        free[j] = true;
-        for _ in 0..k {
-            let s = ls(&free);
-            if (0..k).filter(|&i| free[i]).all(|i| s[i] > 0.0) {
-                x = s;
-                break;
-            }
-            let alpha = (0..k).filter(|&i| free[i] && s[i] <= 0.0).map(|i| if x[i] <= 0.0 { 0.0 } else { x[i] / (x[i] - s[i]) }).fold(1.0, f64::min);
-            x += (&s - &x) * alpha;
-            let scale = x.amax().max(f64::MIN_POSITIVE);
-            for i in 0..k {
-                if free[i] && x[i] <= 1e-14 * scale {
-                    free[i] = false;
-                    x[i] = 0.0;
-                }
-            }
-        }
-        if free.iter().all(|f| *f) {
-            break;
-        }
-    }
-    x
 }
 
 /// The assembled QP in `F` of a report whose `Y` and `rho` are formed, without `eps |F|^2`.
