@@ -11,14 +11,13 @@
 
 mod common;
 
-use common::{nonnegative_least_squares, robot_id, Fixture};
+use common::{moving_ticks, nonnegative_least_squares, robot_id, Case, Fixture};
 use coordinator::pidc::TickReport;
 use coordinator::qp::{self, DualActiveSet, QpInput, QpProblem, QpSettings, QpSolver, QpWorkspace};
 use coordinator::{Pidc, PidcConfig};
 use nalgebra::{DMatrix, DVector};
 use protocol::{DynamicsTerms, QpStatus};
 use rand::Rng;
-use robot_agent::terms::ContactSet;
 
 /// The QP's data of a tick, from its report (`eta_real = lambda_real - lambda + eta`).
 struct Data {
@@ -37,23 +36,8 @@ impl Data {
 }
 
 /// Two consecutive ticks (1 ms apart) of a randomly perturbed, moving team.
-fn ticks(fx: &mut Fixture, robots: usize, seed: u64, swing: bool, grasp: bool) -> [Vec<DynamicsTerms>; 2] {
-    let mut rng = common::rng(seed);
-    let nv = fx.robot.model.nv;
-    let mut set = ContactSet::all_stance(&fx.robot);
-    set.hand_in_grasp = grasp;
-    let qs: Vec<DVector<f64>> = (0..robots).map(|k| fx.perturbed_q(k, robots, 0.1, &mut rng)).collect();
-    let vs: Vec<DVector<f64>> = (0..robots).map(|_| DVector::from_fn(nv, |i, _| if i < 6 { 0.0 } else { rng.random_range(-0.3..0.3) })).collect();
-    let mut out = [Vec::new(), Vec::new()];
-    for (t, o) in out.iter_mut().enumerate() {
-        for k in 0..robots {
-            let mut s = set.clone();
-            s.stance[0] = !(swing && k == 0);
-            let q = fx.robot.model.integrate(qs[k].as_slice(), vs[k].as_slice(), 1e-3 * t as f64);
-            o.push(fx.terms_with(&robot_id(k), &q, &vs[k], 1 + t as u64, &s));
-        }
-    }
-    out
+fn ticks(fx: &mut Fixture, robots: usize, seed: u64, swing: bool, grasp: bool) -> Vec<Vec<DynamicsTerms>> {
+    moving_ticks(fx, Case { robots, seed, swing, grasp, fully_actuated: false }, 2, 0.3)
 }
 
 /// Worst differences of one comparison.
@@ -192,7 +176,7 @@ fn active_set_matches_clarabel_cold_and_hot_on_teams_of_2_3_4_and_8_robots() {
 #[test]
 fn infeasible_and_non_finite_problems_keep_their_statuses() {
     let mut fx = Fixture::new();
-    let [tick, _] = ticks(&mut fx, 2, 5, false, true);
+    let tick = ticks(&mut fx, 2, 5, false, true).swap_remove(0);
     let mut c = Pidc::new(PidcConfig { dense_qp: false, ..PidcConfig::default() });
     for k in 0..2 {
         c.set_description(&fx.description(&robot_id(k)));

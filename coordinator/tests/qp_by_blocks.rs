@@ -18,23 +18,11 @@
 
 mod common;
 
-use common::{nonnegative_least_squares, robot_id, Fixture};
+use common::{moving_ticks, nonnegative_least_squares, robot_id, Case, Fixture};
 use coordinator::pidc::TickReport;
 use coordinator::qp::{self, QpInput, QpProblem};
 use coordinator::{Pidc, PidcConfig};
 use nalgebra::{DMatrix, DVector};
-use protocol::DynamicsTerms;
-use rand::Rng;
-use robot_agent::terms::ContactSet;
-
-#[derive(Clone, Copy, Debug)]
-struct Case {
-    robots: usize,
-    seed: u64,
-    swing: bool,
-    grasp: bool,
-    fully_actuated: bool,
-}
 
 const CASES: [Case; 7] = [
     Case { robots: 2, seed: 21, swing: false, grasp: true, fully_actuated: false },
@@ -52,28 +40,6 @@ fn controller(fx: &Fixture, case: Case, by_blocks: bool) -> Pidc {
         c.set_description(&fx.description(&robot_id(k)));
     }
     c
-}
-
-/// `ticks` consecutive ticks (1 ms apart) of a randomly perturbed team moving at `speed`.
-fn ticks(fx: &mut Fixture, case: Case, ticks: usize, speed: f64) -> Vec<Vec<DynamicsTerms>> {
-    let mut rng = common::rng(case.seed);
-    let nv = fx.robot.model.nv;
-    let mut set = ContactSet::all_stance(&fx.robot);
-    set.hand_in_grasp = case.grasp;
-    let qs: Vec<DVector<f64>> = (0..case.robots).map(|k| fx.perturbed_q(k, case.robots, 0.1, &mut rng)).collect();
-    let vs: Vec<DVector<f64>> = (0..case.robots).map(|_| DVector::from_fn(nv, |i, _| if i < 6 { 0.0 } else { rng.random_range(-speed..speed) })).collect();
-    (0..ticks)
-        .map(|t| {
-            (0..case.robots)
-                .map(|k| {
-                    let mut s = set.clone();
-                    s.stance[0] = !(case.swing && k == 0);
-                    let q = fx.robot.model.integrate(qs[k].as_slice(), vs[k].as_slice(), 1e-3 * t as f64);
-                    fx.terms_with(&robot_id(k), &q, &vs[k], 1 + t as u64, &s)
-                })
-                .collect()
-        })
-        .collect()
 }
 
 fn rel(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
@@ -110,7 +76,7 @@ fn the_blocks_answer_is_the_qps_optimum_and_the_team_sized_qps_torque() {
     let (mut answered, mut repaired) = (0, 0);
     let mut total = 0;
     for case in CASES {
-        let seq = ticks(&mut fx, case, 6, 0.2);
+        let seq = moving_ticks(&mut fx, case, 6, 0.2);
         let (mut blocks, mut dense) = (controller(&fx, case, true), controller(&fx, case, false));
         for (t, tick) in seq.iter().enumerate() {
             blocks.compute(tick).expect("block tick");
@@ -158,7 +124,7 @@ fn a_stale_active_set_or_a_new_shape_goes_to_the_team_sized_qp() {
     let case = Case { robots: 3, seed: 11, swing: false, grasp: true, fully_actuated: false };
     let (mut blocks, mut dense) = (controller(&fx, case, true), controller(&fx, case, false));
     // A fast team: its active rows change from tick to tick.
-    let seq = ticks(&mut fx, case, 12, 3.0);
+    let seq = moving_ticks(&mut fx, case, 12, 3.0);
     let mut declined = 0;
     for tick in &seq {
         let b = blocks.compute(tick).expect("tick").clone();
@@ -169,7 +135,7 @@ fn a_stale_active_set_or_a_new_shape_goes_to_the_team_sized_qp() {
     assert!(declined > 1, "the blocks answered every tick of a fast team ({declined} declined)");
     // A foot lifts: another shape of QP, which the blocks must not answer from the old rows.
     let swing = Case { swing: true, ..case };
-    let lifted = ticks(&mut fx, swing, 2, 0.2);
+    let lifted = moving_ticks(&mut fx, swing, 2, 0.2);
     let b = blocks.compute(&lifted[0]).expect("tick").clone();
     let d = dense.compute(&lifted[0]).expect("tick").clone();
     assert_eq!(b.blocks_declined, Some(qp::Decline::NoHotStart), "a new shape was answered from the old active set");
@@ -184,7 +150,7 @@ fn a_stale_active_set_or_a_new_shape_goes_to_the_team_sized_qp() {
 fn a_binding_torque_limit_is_an_active_row_of_the_block_answer() {
     let mut fx = Fixture::new();
     let case = Case { robots: 3, seed: 2, swing: false, grasp: true, fully_actuated: false };
-    let seq = ticks(&mut fx, case, 6, 0.2);
+    let seq = moving_ticks(&mut fx, case, 6, 0.2);
     let mut probe = controller(&fx, case, false);
     let r = probe.compute(&seq[0]).expect("tick").clone();
     let joints = fx.description(&robot_id(0)).torque_limits.len();

@@ -10,14 +10,13 @@
 
 mod common;
 
-use common::{robot_id, Fixture};
+use common::{robot_id, Case, Fixture};
 use coordinator::pidc::TickReport;
 use coordinator::units::projection::WrenchScratch;
 use coordinator::{Pidc, PidcConfig};
 use nalgebra::{DMatrix, DVector};
 use protocol::DynamicsTerms;
 use rand::Rng;
-use robot_agent::terms::ContactSet;
 
 /// Agreement asked of every compared quantity: `|a - b|_max <= TOL |b|_max`.
 const TOL: f64 = 1e-9;
@@ -28,18 +27,6 @@ fn rel(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs())) / scale
 }
 
-/// How a random team is set up.
-#[derive(Clone, Copy)]
-struct Case {
-    robots: usize,
-    seed: u64,
-    /// Robot 0 lifts its first foot.
-    swing: bool,
-    /// Hands in grasp (else every hand is a free task).
-    grasp: bool,
-    fully_actuated: bool,
-}
-
 fn controller(fx: &Fixture, case: Case, dense: bool) -> Pidc {
     let mut c = Pidc::new(PidcConfig { dense_projections: dense, fully_actuated: case.fully_actuated, ..PidcConfig::default() });
     for k in 0..case.robots {
@@ -48,25 +35,18 @@ fn controller(fx: &Fixture, case: Case, dense: bool) -> Pidc {
     c
 }
 
-fn contacts(fx: &Fixture, case: Case, k: usize) -> ContactSet {
-    let mut set = ContactSet::all_stance(&fx.robot);
-    set.stance[0] = !(case.swing && k == 0);
-    set.hand_in_grasp = case.grasp;
-    set
-}
-
 /// A random configuration of the team at rest (tick 1), then moving with velocities in the
 /// constraints' null space (tick 2).
 fn team_states(fx: &mut Fixture, case: Case) -> [Vec<DynamicsTerms>; 2] {
     let mut rng = common::rng(case.seed);
     let nv = fx.robot.model.nv;
     let qs: Vec<DVector<f64>> = (0..case.robots).map(|k| fx.perturbed_q(k, case.robots, 0.1, &mut rng)).collect();
-    let still: Vec<_> = (0..case.robots).map(|k| fx.terms_with(&robot_id(k), &qs[k], &DVector::zeros(nv), 1, &contacts(fx, case, k))).collect();
+    let still: Vec<_> = (0..case.robots).map(|k| fx.terms_with(&robot_id(k), &qs[k], &DVector::zeros(nv), 1, &case.contacts(fx, k))).collect();
     let mut c = controller(fx, case, true);
     c.compute(&still).expect("tick");
     let p = c.materialized().expect("tick").proj.p.clone();
     let v = &p * DVector::from_fn(case.robots * nv, |_, _| rng.random_range(-0.5..0.5));
-    let moving = (0..case.robots).map(|k| fx.terms_with(&robot_id(k), &qs[k], &v.rows(k * nv, nv).into_owned(), 2, &contacts(fx, case, k))).collect();
+    let moving = (0..case.robots).map(|k| fx.terms_with(&robot_id(k), &qs[k], &v.rows(k * nv, nv).into_owned(), 2, &case.contacts(fx, k))).collect();
     [still, moving]
 }
 

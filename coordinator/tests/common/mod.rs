@@ -152,3 +152,46 @@ pub fn nonnegative_least_squares(a: &DMatrix<f64>, g: &DVector<f64>) -> DVector<
     }
     x
 }
+
+/// How a random team of the oracle tests is set up.
+#[derive(Clone, Copy, Debug)]
+pub struct Case {
+    pub robots: usize,
+    pub seed: u64,
+    /// Robot 0 lifts its first foot.
+    pub swing: bool,
+    /// Hands in grasp (else every hand is a free task).
+    pub grasp: bool,
+    pub fully_actuated: bool,
+}
+
+impl Case {
+    /// Robot `k`'s contacts: every foot in stance but robot 0's first with `swing`, the hand
+    /// in grasp with `grasp`.
+    pub fn contacts(&self, fx: &Fixture, k: usize) -> ContactSet {
+        let mut set = ContactSet::all_stance(&fx.robot);
+        set.stance[0] = !(self.swing && k == 0);
+        set.hand_in_grasp = self.grasp;
+        set
+    }
+}
+
+/// `ticks` consecutive ticks (1 ms apart) of `case`'s team, each robot's joints perturbed by
+/// up to 0.1 and moving at random joint velocities within `speed` (the bases at rest at first).
+pub fn moving_ticks(fx: &mut Fixture, case: Case, ticks: usize, speed: f64) -> Vec<Vec<DynamicsTerms>> {
+    let mut rng = rng(case.seed);
+    let nv = fx.robot.model.nv;
+    let qs: Vec<DVector<f64>> = (0..case.robots).map(|k| fx.perturbed_q(k, case.robots, 0.1, &mut rng)).collect();
+    let vs: Vec<DVector<f64>> = (0..case.robots).map(|_| DVector::from_fn(nv, |i, _| if i < 6 { 0.0 } else { rng.random_range(-speed..speed) })).collect();
+    (0..ticks)
+        .map(|t| {
+            (0..case.robots)
+                .map(|k| {
+                    let q = fx.robot.model.integrate(qs[k].as_slice(), vs[k].as_slice(), 1e-3 * t as f64);
+                    let set = case.contacts(fx, k);
+                    fx.terms_with(&robot_id(k), &q, &vs[k], 1 + t as u64, &set)
+                })
+                .collect()
+        })
+        .collect()
+}
