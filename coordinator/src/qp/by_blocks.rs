@@ -276,16 +276,11 @@ impl BlockHotStart {
                 let dim = kind.dim();
                 let rq = &mut self.robots[r];
                 let local = rq.vars.iter().position(|&v| v == start).ok_or(Decline::NoHotStart)?;
-                let col = rq.rows.len();
-                if col >= rq.vars.len() {
-                    return Err(Decline::Singular { robot: r });
-                }
                 let e: f64 = (0..dim).map(|d| c[d] * inp.eta_real[start + d]).sum();
+                let col = new_column(rq, r, lo - e, Some(i))?;
                 for (d, x) in c.iter().enumerate() {
                     rq.at[(local + d, col)] = *x;
                 }
-                rq.beta[col] = lo - e;
-                rq.rows.push(Some(i));
             } else {
                 // Torque row pair p: tau_0 - (J^T z)_j <= lim (even) and >= -lim (odd).
                 let p = (i - nc) / 2;
@@ -457,18 +452,26 @@ impl BlockHotStart {
     }
 }
 
-/// Append `sign` times row `c` of `J_r^T` as an equality column `a^T z_r = beta`; an error when
-/// the robot already has as many as it has variables (they cannot be independent).
-fn push_jt_row(rq: &mut RobotQp, robot: usize, c: usize, sign: f64, beta: f64, row: Option<usize>) -> Result<(), Decline> {
+/// A new equality column `a^T z_r = beta` of robot `robot`'s block, from the assembled
+/// problem's row `row` (`None` for a base row): its index, its entries left at zero for the
+/// caller to write; an error when the robot already has as many as it has variables (they
+/// cannot be independent).
+fn new_column(rq: &mut RobotQp, robot: usize, beta: f64, row: Option<usize>) -> Result<usize, Decline> {
     let col = rq.rows.len();
     if col >= rq.vars.len() {
         return Err(Decline::Singular { robot });
     }
+    rq.beta[col] = beta;
+    rq.rows.push(row);
+    Ok(col)
+}
+
+/// `sign` times row `c` of `J_r^T` as a new equality column ([`new_column`]).
+fn push_jt_row(rq: &mut RobotQp, robot: usize, c: usize, sign: f64, beta: f64, row: Option<usize>) -> Result<(), Decline> {
+    let col = new_column(rq, robot, beta, row)?;
     for v in 0..rq.vars.len() {
         rq.at[(v, col)] = sign * rq.jt[(c, v)];
     }
-    rq.beta[col] = beta;
-    rq.rows.push(row);
     Ok(())
 }
 
