@@ -390,24 +390,15 @@ impl SpdInverse {
     /// unspecified contents. A 0 x 0 `a` gives a 0 x 0 `out`.
     pub fn compute(&mut self, a: MatRef<'_, f64>, out: &mut DMatrix<f64>) -> Option<()> {
         let n = a.nrows();
-        // `l`'s lower triangle is written below, `x` by lower_inverse, `out` by gemm.
+        // `l` is written by spd_factor, `x` by lower_inverse, `out` by gemm.
         shape(out, n, n);
         shape(&mut self.l, n, n);
         shape(&mut self.x, n, n);
         if n == 0 {
             return Some(());
         }
-        let l = self.l.as_mut_slice();
-        for j in 0..n {
-            for i in j..n {
-                l[j * n + i] = a[(i, j)];
-            }
-        }
-        cholesky_in_place(l, n, n, 0.0)?;
-        if !pivots_ok((0..n).map(|i| l[i * n + i])) {
-            return None;
-        }
-        lower_inverse(l, n, self.x.as_mut_slice());
+        spd_factor(a, &mut self.l)?;
+        lower_inverse(self.l.as_slice(), n, self.x.as_mut_slice());
         // A^{-1} = X^T X with X = L^{-1} lower triangular: column block J of its lower
         // triangle is X[j0.., j0..]^T X[j0.., J] (the rows of X above j0 are zero in both
         // factors), a third of the full product's work; the upper triangle is mirrored.
