@@ -359,6 +359,85 @@ impl BlockFactors {
     }
 }
 
+/// Scratch of [`BlockFactors::task_gram`] (task-sized: rows of the task stack by 6 or by a
+/// robot's `k`).
+#[derive(Debug, Clone, Default)]
+pub struct GramScratch {
+    /// One task's rows times a robot's `Phi_f` (d x k), and its `Q X^{-1}` (d x 6), in
+    /// buffers of 6 rows and the largest `k` (one shape for the tick: no allocation).
+    b: DMatrix<f64>,
+    c: DMatrix<f64>,
+    /// `Q = J L` on the current robot's hand (rows x 6), `V = Q Y` summed over the hands
+    /// (rows x 6) and `V F^{-1}`.
+    q: DMatrix<f64>,
+    v: DMatrix<f64>,
+    vf: DMatrix<f64>,
+    /// The tasks whose columns meet the current robot's.
+    touching: Vec<usize>,
+}
+
+/// One task of a stack: its first row and row count, and the columns its Jacobian is
+/// non-zero on (first, count).
+pub type TaskSpan = (usize, usize, usize, usize);
+
+impl BlockFactors {
+    /// `out = J Phi J^T` (rows x rows; eq. control_law's `Lambda_c^{-1}` with
+    /// `Phi = M_c^{-1} P`) for a stack of tasks `j` (rows x n) laid out by `spans`, without
+    /// the n x rows `Phi J^T`. With `Phi = Phi_f - L W_D L^T` and `W_D = X^{-1} - Y F^{-1} Y^T`
+    /// (module docs), `Q = J L`:
+    ///
+    /// `J Phi J^T = sum_r J_r Phi_f,r J_r^T - sum_h Q_h X_h^{-1} Q_h^T + (Q Y) F^{-1} (Q Y)^T`
+    ///
+    /// each sum robot by robot over the tasks whose columns meet its own (a torso's meet one
+    /// robot, the object's every grasping robot): linear in the team but for the result.
+    pub fn task_gram(&self, j: MatRef<'_, f64>, spans: &[TaskSpan], out: &mut DMatrix<f64>, s: &mut GramScratch) {
+        let rows = j.nrows();
+        zeros(out, rows, rows);
+        let coupled = !self.w_d.x_inv.is_empty();
+        zeros(&mut s.q, rows, 6);
+        zeros(&mut s.v, rows, 6);
+        shape(&mut s.b, 6, self.robots.iter().map(|rb| rb.k).max().unwrap_or(0));
+        shape(&mut s.c, 6, 6);
+        for rb in &self.robots {
+            s.touching.clear();
+            s.touching.extend((0..spans.len()).filter(|&t| {
+                let (_, d, c0, nc) = spans[t];
+                d > 0 && c0 < rb.o + rb.k && rb.o < c0 + nc
+            }));
+            let j_r = j.subcols(rb.o, rb.k);
+            for &ti in &s.touching {
+                let (ri, di, ..) = spans[ti];
+                gemm(mat_mut(&mut s.b).submatrix_mut(0, 0, di, rb.k), 0.0, 1.0, j_r.subrows(ri, di), mat(&rb.phi_f));
+                for &tj in &s.touching {
+                    let (rj, dj, ..) = spans[tj];
+                    gemm(mat_mut(out).submatrix_mut(ri, rj, di, dj), 1.0, 1.0, mat(&s.b).submatrix(0, 0, di, rb.k), j_r.subrows(rj, dj).transpose());
+                }
+            }
+            let Some(h) = rb.hand.filter(|_| coupled) else { continue };
+            let (x_inv, y) = (&self.w_d.x_inv[h], &self.w_d.y[h]);
+            for &ti in &s.touching {
+                let (ri, di, ..) = spans[ti];
+                gemm(mat_mut(&mut s.q).subrows_mut(ri, di), 0.0, 1.0, j_r.subrows(ri, di), mat(&rb.l_h));
+            }
+            for &ti in &s.touching {
+                let (ri, di, ..) = spans[ti];
+                let q_i = mat(&s.q).subrows(ri, di);
+                gemm(mat_mut(&mut s.c).subrows_mut(0, di), 0.0, 1.0, q_i, m6(x_inv));
+                for &tj in &s.touching {
+                    let (rj, dj, ..) = spans[tj];
+                    gemm(mat_mut(out).submatrix_mut(ri, rj, di, dj), 1.0, -1.0, mat(&s.c).subrows(0, di), mat(&s.q).subrows(rj, dj).transpose());
+                }
+                gemm(mat_mut(&mut s.v).subrows_mut(ri, di), 1.0, 1.0, q_i, m6(y));
+            }
+        }
+        if coupled {
+            shape(&mut s.vf, rows, 6);
+            gemm(mat_mut(&mut s.vf), 0.0, 1.0, mat(&s.v), m6(&self.w_d.f_inv));
+            gemm(mat_mut(out), 1.0, 1.0, mat(&s.vf), mat(&s.v).transpose());
+        }
+    }
+}
+
 impl BlockFactors {
     /// The team-sized matrices of `proj` from these factors, each operator applied to the
     /// identity (it allocates: for tests and reports, never on the tick):

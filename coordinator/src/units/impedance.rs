@@ -17,8 +17,8 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3, Vector3, Vector6};
 
-use crate::linalg::{gemm, mat, mat_mut, product, rotation_error, shape, spd_factor, spd_solve_in_place, transpose_into, zeros_v, Pinv, RANK_TOL};
-use crate::units::block_projection::{BlockOp, OpScratch};
+use crate::linalg::{mat, product, rotation_error, shape, spd_factor, spd_solve_in_place, zeros_v, Pinv, RANK_TOL};
+use crate::units::block_projection::{GramScratch, TaskSpan};
 use crate::units::projection::Projections;
 use crate::ControllerError;
 
@@ -97,9 +97,7 @@ pub struct TaskStack {
     ff: DVector<f64>,
     // Scratch of `joint_torque`.
     j_mcinv_p: DMatrix<f64>,
-    jt: DMatrix<f64>,
-    phi_jt: DMatrix<f64>,
-    ops: OpScratch,
+    gram: GramScratch,
     lambda_inv: DMatrix<f64>,
     /// `Lambda_c` by the pseudo-inverse (dense path, or a Cholesky that failed), else the
     /// Cholesky factor of `Lambda_c^{-1}` in `chol` (`factored`).
@@ -108,7 +106,7 @@ pub struct TaskStack {
     factored: bool,
     pinv: Pinv,
     /// Each task's rows and the columns its Jacobian is non-zero on: `(row, rows, col, cols)`.
-    spans: Vec<(usize, usize, usize, usize)>,
+    spans: Vec<TaskSpan>,
     u: DVector<f64>,
     f: DVector<f64>,
 }
@@ -194,8 +192,8 @@ impl TaskStack {
 
     /// `Lambda_c = (J M_c^{-1} P J^T)^+` (eq. control_law): into `lambda`, or factored. Dense
     /// path: the projections' `M_c^{-1} P` and an SVD (the oracle). Block path:
-    /// `M_c^{-1} P J^T` by the operator, `J` times it by each task's columns (a torso's
-    /// rows meet only its robot's), and the Cholesky factor of the result when its pivots
+    /// `J M_c^{-1} P J^T` by the robots' blocks and the grasp's coupling
+    /// ([`crate::units::block_projection::BlockFactors::task_gram`]), and the Cholesky factor of the result when its pivots
     /// pass [`crate::linalg::SPD_TOL`] (the pseudo-inverse is then the inverse, applied by
     /// two triangular solves), the SVD otherwise.
     fn lambda_c(&mut self, proj: &Projections) -> Result<(), ControllerError> {
@@ -207,19 +205,7 @@ impl TaskStack {
             self.pinv.compute(mat(&self.lambda_inv), RANK_TOL, &mut self.lambda).ok_or_else(singular)?;
             return Ok(());
         }
-        let (k, n) = self.j.shape();
-        transpose_into(&self.j, &mut self.jt);
-        shape(&mut self.phi_jt, n, k); // every row written by the operator
-        proj.blocks.apply(BlockOp::Phi, mat(&self.jt), mat_mut(&mut self.phi_jt), &mut self.ops);
-        // Every row block is written by its task's product.
-        shape(&mut self.lambda_inv, k, k);
-        for &(r0, d, c0, nc) in &self.spans {
-            if nc == 0 {
-                self.lambda_inv.rows_mut(r0, d).fill(0.0);
-                continue;
-            }
-            gemm(mat_mut(&mut self.lambda_inv).subrows_mut(r0, d), 0.0, 1.0, mat(&self.j).submatrix(r0, c0, d, nc), mat(&self.phi_jt).subrows(c0, nc));
-        }
+        proj.blocks.task_gram(mat(&self.j), &self.spans, &mut self.lambda_inv, &mut self.gram);
         if spd_factor(mat(&self.lambda_inv), &mut self.chol).is_some() {
             self.factored = true;
             return Ok(());
