@@ -623,10 +623,11 @@ fn mass_written_out(terms: &[DynamicsTerms]) -> DMatrix<f64> {
 
 #[test]
 fn a_team_assembled_into_used_buffers_is_the_team_assembled_afresh() {
-    // The team's stacked Jacobians and `J_c` are written row by row into the last tick's
-    // buffers without clearing them first: a sequence of ticks whose blocks move (a foot
-    // lifts, a hand lets go, other robot sizes at the same team size, fewer robots, then the
-    // first tick again) must leave nothing behind.
+    // The team's `M`, frame Jacobians and stacked Jacobians are written on their robots'
+    // columns only, into the last tick's buffers, and `J_c` row by row without clearing it
+    // first: a sequence of ticks whose blocks move (a foot lifts, a hand lets go, other robot
+    // sizes at the same team size, fewer robots, then the first tick again, the foot lifted
+    // and set down again on the same sizes) must leave nothing behind.
     let mut fx = Fixture::new();
     let mut rng = common::rng(17);
     let nv = fx.robot.model.nv;
@@ -637,7 +638,7 @@ fn a_team_assembled_into_used_buffers_is_the_team_assembled_afresh() {
     let other_sizes = vec![resized(&all[0], nv + 6, &mut rng), resized(&all[1], nv - 6, &mut rng), all[2].clone()];
     let resized_again = vec![resized(&all[0], nv - 6, &mut rng), resized(&all[1], nv + 6, &mut rng), resized(&all[2], nv, &mut rng)];
     let fewer = vec![all[0].clone(), all[2].clone()];
-    let ticks = [&all, &moved, &other_sizes, &resized_again, &fewer, &all];
+    let ticks = [&all, &moved, &other_sizes, &resized_again, &fewer, &all, &moved, &all];
 
     let (mut team, mut j_c, mut jdv_c) = (Team::default(), DMatrix::zeros(0, 0), DVector::zeros(0));
     for (i, tick) in ticks.iter().enumerate() {

@@ -16,7 +16,7 @@ pub mod membership;
 use nalgebra::{DMatrix, DVector, Rotation3, Vector3};
 use protocol::{DynamicsTerms, FrameRole, FrameTerms};
 
-use crate::linalg::{rotation_from_row_major, shape, zeros, zeros_v};
+use crate::linalg::{rotation_from_row_major, zeros, zeros_v};
 use crate::ControllerError;
 
 /// One robot's block in the team vectors.
@@ -40,6 +40,8 @@ pub struct TeamFrame {
     pub rotation: Rotation3<f64>,
     /// `dim x n` team Jacobian (world-aligned, rows `[linear; angular]`).
     pub jacobian: DMatrix<f64>,
+    /// Its robot's team columns (first, count): `jacobian` is zero outside them.
+    pub cols: (usize, usize),
     pub jdot_v: DVector<f64>,
 }
 
@@ -70,6 +72,9 @@ pub struct Team {
     pub jdv_cf: DVector<f64>,
     pub j_ee: DMatrix<f64>,
     pub jdv_ee: DVector<f64>,
+    /// The columns each row block of `j_cf` and `j_ee` was written on ([`stack`]).
+    cf_cols: Vec<(usize, usize)>,
+    ee_cols: Vec<(usize, usize)>,
 }
 
 impl Team {
@@ -98,7 +103,12 @@ impl Team {
         }
         let n: usize = tick.iter().map(|t| t.nv()).sum();
         self.n = n;
-        zeros(&mut self.mass, n, n);
+        // M is written by its robots' blocks: the zeros between them are the last tick's
+        // when the robots' sizes are.
+        let same_blocks = self.mass.shape() == (n, n) && self.robots.len() == tick.len() && self.robots.iter().zip(tick).all(|(r, t)| r.nv == t.nv());
+        if !same_blocks {
+            zeros(&mut self.mass, n, n);
+        }
         zeros_v(&mut self.bias, n);
         zeros_v(&mut self.velocity, n);
         zeros_v(&mut self.s_diag, n);
@@ -153,8 +163,8 @@ impl Team {
         self.free_hands.truncate(free_hands);
         self.torsos.truncate(torsos);
         self.swing_feet.truncate(swing);
-        stack(&self.feet, 3, n, &mut self.j_cf, &mut self.jdv_cf);
-        stack(&self.hands, 6, n, &mut self.j_ee, &mut self.jdv_ee);
+        stack(&self.feet, 3, n, &mut self.j_cf, &mut self.jdv_cf, &mut self.cf_cols);
+        stack(&self.hands, 6, n, &mut self.j_ee, &mut self.jdv_ee, &mut self.ee_cols);
         Ok(())
     }
 
@@ -203,10 +213,12 @@ fn check_terms(t: &DynamicsTerms) -> Result<(), ControllerError> {
     Ok(())
 }
 
+/// A frame's terms into `tf`, its Jacobian on its robot's columns `off ..+ nv` of `n`: only
+/// those are written when `tf` held a frame on the same columns (the rest are its zeros).
 fn team_frame_into(tf: &mut TeamFrame, robot: usize, f: &FrameTerms, off: usize, n: usize) {
     let d = f.role.dim();
     let nv = f.jacobian.cols();
-    zeros(&mut tf.jacobian, d, n);
+    move_columns(&mut tf.jacobian, d, n, &mut tf.cols, (off, nv));
     for i in 0..d {
         for j in 0..nv {
             tf.jacobian[(i, off + j)] = f.jacobian.data[i * nv + j];
@@ -222,13 +234,37 @@ fn team_frame_into(tf: &mut TeamFrame, robot: usize, f: &FrameTerms, off: usize,
     tf.jdot_v.copy_from_slice(&f.jdot_v);
 }
 
-/// Frames' Jacobians and `Jdot*v` stacked (`d` rows each) into `j` and `jdv`.
-fn stack(frames: &[TeamFrame], d: usize, n: usize, j: &mut DMatrix<f64>, jdv: &mut DVector<f64>) {
-    // Not cleared: the frames' whole rows tile it.
-    shape(j, d * frames.len(), n);
-    zeros_v(jdv, d * frames.len());
+/// Make `a` a `rows x n` matrix that is zero outside `cols` (first, count), when `written`
+/// says which columns it may be non-zero on: a new shape is cleared whole, the same shape
+/// only on the columns that were written and are not `cols`. `written` becomes `cols`. The
+/// caller then writes `cols`.
+fn move_columns(a: &mut DMatrix<f64>, rows: usize, n: usize, written: &mut (usize, usize), cols: (usize, usize)) {
+    if a.shape() != (rows, n) {
+        zeros(a, rows, n);
+    } else if *written != cols {
+        a.columns_mut(written.0, written.1).fill(0.0);
+    }
+    *written = cols;
+}
+
+/// Frames' Jacobians and `Jdot*v` stacked (`d` rows each) into `j` and `jdv`, each frame on
+/// its robot's columns; `cols` records them for the next tick's (see [`move_columns`]).
+fn stack(frames: &[TeamFrame], d: usize, n: usize, j: &mut DMatrix<f64>, jdv: &mut DVector<f64>, cols: &mut Vec<(usize, usize)>) {
+    let rows = d * frames.len();
+    if j.shape() != (rows, n) || cols.len() != frames.len() {
+        zeros(j, rows, n);
+        cols.clear();
+        cols.resize(frames.len(), (0, 0));
+    }
+    zeros_v(jdv, rows);
     for (k, f) in frames.iter().enumerate() {
-        j.rows_mut(d * k, d).copy_from(&f.jacobian);
+        let (c0, nc) = f.cols;
+        let old = cols[k];
+        if old != f.cols {
+            j.view_mut((d * k, old.0), (d, old.1)).fill(0.0);
+            cols[k] = f.cols;
+        }
+        j.view_mut((d * k, c0), (d, nc)).copy_from(&f.jacobian.columns(c0, nc));
         jdv.rows_mut(d * k, d).copy_from(&f.jdot_v);
     }
 }
