@@ -374,6 +374,19 @@ fn task_torque_is_the_stacked_impedance_law_written_out() {
     let inp = TaskInput { team, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view(proj) };
     let (mut tau_m, mut load, mut f_x) = (DVector::zeros(0), DVector::zeros(0), Vector6::zeros());
     task_torque(&inp, &mut Targets::default(), &mut TaskStack::default(), &mut tau_m, &mut load, &mut f_x).expect("tau_M");
+    // The same by the dense projections (formed by `materialized`), in a stack whose buffers
+    // were first used by the torsos in the other order (the same shape, each task's rows on
+    // other columns): nothing of that tick may be left behind.
+    let mut dense = proj.clone();
+    dense.by_blocks = false;
+    let mut stack = TaskStack::default();
+    let mut swapped = team.clone();
+    swapped.torsos.reverse();
+    let (mut tau_m_dense, mut load_dense, mut f_x_dense) = (DVector::zeros(0), DVector::zeros(0), Vector6::zeros());
+    for t in [&swapped, team] {
+        let inp = TaskInput { team: t, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view(&dense) };
+        task_torque(&inp, &mut Targets::default(), &mut stack, &mut tau_m_dense, &mut load_dense, &mut f_x_dense).expect("tau_M, dense");
+    }
 
     // eq. control_law for the stacked task x = [x_o; x_t1; x_t2] (J_x = [J_o; J_t1; J_t2]):
     // F = Lambda_c (J M_c^{-1} (P h - Pdot v) - Jdot v + a_d) - K_d edot - K_p e (+ w_ff on the
@@ -408,8 +421,9 @@ fn task_torque_is_the_stacked_impedance_law_written_out() {
     let f = &lambda * u - kd.component_mul(&edot) - kp.component_mul(&e) + ff;
     let expect = j.transpose() * f;
     let err = relv(&tau_m, &expect);
-    println!("tau_M vs eq. control_law written out: {err:.1e} (|tau_M| {:.1})", expect.amax());
-    assert!(err < 1e-8);
+    let err_dense = relv(&tau_m_dense, &expect);
+    println!("tau_M vs eq. control_law written out: {err:.1e}, by the dense projections {err_dense:.1e} (|tau_M| {:.1})", expect.amax());
+    assert!(err < 1e-8 && err_dense < 1e-8);
     // The object's load: F_x = -w_ff, J_x^T F_x with J_x = J_o.
     assert_eq!(f_x, -w_ff);
     assert!(relv(&load, &(g.j_o.transpose() * (-w_ff))) < 1e-13);

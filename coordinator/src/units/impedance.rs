@@ -17,7 +17,7 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3, Vector3, Vector6};
 
-use crate::linalg::{mat, product, rotation_error, shape, spd_factor, spd_solve_in_place, zeros_v, Pinv, RANK_TOL};
+use crate::linalg::{mat, product, rotation_error, spd_factor, spd_solve_in_place, zeros, zeros_v, Pinv, RANK_TOL};
 use crate::units::block_projection::{GramScratch, TaskSpan};
 use crate::units::projection::Projections;
 use crate::ControllerError;
@@ -105,8 +105,10 @@ pub struct TaskStack {
     chol: DMatrix<f64>,
     factored: bool,
     pinv: Pinv,
-    /// Each task's rows and the columns its Jacobian is non-zero on: `(row, rows, col, cols)`.
+    /// Each task's rows and the columns its Jacobian is non-zero on: `(row, rows, col, cols)`,
+    /// this tick's first `tasks`, then the last tick's (what `j` holds: see `begin`).
     spans: Vec<TaskSpan>,
+    tasks: usize,
     u: DVector<f64>,
     f: DVector<f64>,
 }
@@ -116,36 +118,47 @@ impl TaskStack {
     pub fn begin(&mut self, k: usize, n: usize) {
         self.n = n;
         self.at = 0;
-        self.spans.clear();
-        // Not cleared: every row is written by `push` before `joint_torque` uses it (it
-        // refuses a stack with rows left unfilled).
-        shape(&mut self.j, k, n);
+        // `j` is kept between ticks of one shape: a task on the same rows and columns as the
+        // last tick's writes its columns only (the rest of its rows are zeros already), others
+        // clear their rows first (`push`). `joint_torque` refuses a stack with rows unfilled.
+        self.tasks = 0;
+        if self.j.shape() != (k, n) {
+            zeros(&mut self.j, k, n);
+            self.spans.clear();
+        }
         for v in [&mut self.jdv, &mut self.e, &mut self.edot, &mut self.acc_d, &mut self.kp, &mut self.kd, &mut self.ff] {
             zeros_v(v, k);
         }
     }
 
-    /// Add a task: Jacobian `j_x` (d x n), `Jdot_x v`, its errors and gains, and an optional
-    /// feed-forward wrench added to its `F` (the object's load).
-    pub fn push(&mut self, j_x: &DMatrix<f64>, jdv_x: &DVector<f64>, err: &TaskError, gains: &Gains, feed_forward: Option<&Vector6<f64>>) -> Result<(), ControllerError> {
+    /// Add a task: Jacobian `j_x` (d x n), zero outside the columns `cols` (first, count: a
+    /// torso's, a swing foot's or a free hand's are its robot's, the object's span the
+    /// grasping robots'), `Jdot_x v`, its errors and gains, and an optional feed-forward
+    /// wrench added to its `F` (the object's load).
+    pub fn push(&mut self, j_x: &DMatrix<f64>, cols: (usize, usize), jdv_x: &DVector<f64>, err: &TaskError, gains: &Gains, feed_forward: Option<&Vector6<f64>>) -> Result<(), ControllerError> {
         let d = j_x.nrows();
-        if j_x.ncols() != self.n || jdv_x.len() != d || err.dim != d || gains.kp.len() != d || gains.kd.len() != d || self.at + d > self.j.nrows() {
+        let (c0, nc) = cols;
+        if j_x.ncols() != self.n || c0 + nc > self.n || jdv_x.len() != d || err.dim != d || gains.kp.len() != d || gains.kd.len() != d || self.at + d > self.j.nrows() {
             return Err(ControllerError::Dimension {
                 what: "impedance task".into(),
-                detail: format!("{d}-row task with {} columns, error {}, gains {}/{}, {} of {} rows used", j_x.ncols(), err.dim, gains.kp.len(), gains.kd.len(), self.at, self.j.nrows()),
+                detail: format!("{d}-row task with {} columns (non-zero on {c0}..{}), error {}, gains {}/{}, {} of {} rows used", j_x.ncols(), c0 + nc, err.dim, gains.kp.len(), gains.kd.len(), self.at, self.j.nrows()),
             });
         }
         let at = self.at;
-        self.j.rows_mut(at, d).copy_from(j_x);
-        // The columns the task moves: a torso's, a swing foot's or a free hand's are its
-        // robot's; the object's span the grasping robots'.
-        // (Over the column-major storage, column by column: nalgebra's column iterators were a
-        // third of the stack's time.)
-        let nonzero = |c: &[f64]| c.iter().any(|x| *x != 0.0);
-        let mut cols = j_x.as_slice().chunks_exact(d.max(1));
-        let c0 = cols.clone().position(nonzero).unwrap_or(0);
-        let c1 = cols.rposition(nonzero).map_or(c0, |c| c + 1);
-        self.spans.push((at, d, c0, c1 - c0));
+        let span = (at, d, c0, nc);
+        match self.spans.get_mut(self.tasks) {
+            Some(last) if *last == span => {}
+            Some(last) => {
+                self.j.rows_mut(at, d).fill(0.0);
+                *last = span;
+            }
+            None => {
+                self.j.rows_mut(at, d).fill(0.0);
+                self.spans.push(span);
+            }
+        }
+        self.tasks += 1;
+        self.j.view_mut((at, c0), (d, nc)).copy_from(&j_x.columns(c0, nc));
         self.jdv.rows_mut(at, d).copy_from(jdv_x);
         self.e.rows_mut(at, d).copy_from(&err.e.rows(0, d));
         self.edot.rows_mut(at, d).copy_from(&err.edot.rows(0, d));
@@ -175,7 +188,9 @@ impl TaskStack {
         zeros_v(&mut self.u, k);
         self.u.copy_from(&self.acc_d);
         self.u -= &self.jdv;
-        self.u.gemv(1.0, &self.j, ms.mcinv_bias, 1.0);
+        for &(r0, d, c0, nc) in &self.spans[..self.tasks] {
+            self.u.rows_mut(r0, d).gemv(1.0, &self.j.view((r0, c0), (d, nc)), &ms.mcinv_bias.rows(c0, nc), 1.0);
+        }
         zeros_v(&mut self.f, k);
         if self.factored {
             self.f.copy_from(&self.u);
@@ -186,7 +201,9 @@ impl TaskStack {
         for i in 0..k {
             self.f[i] += self.ff[i] - self.kd[i] * self.edot[i] - self.kp[i] * self.e[i];
         }
-        tau_m.gemv_tr(1.0, &self.j, &self.f, 0.0);
+        for &(r0, d, c0, nc) in &self.spans[..self.tasks] {
+            tau_m.rows_mut(c0, nc).gemv_tr(1.0, &self.j.view((r0, c0), (d, nc)), &self.f.rows(r0, d), 1.0);
+        }
         Ok(())
     }
 
@@ -205,7 +222,7 @@ impl TaskStack {
             self.pinv.compute(mat(&self.lambda_inv), RANK_TOL, &mut self.lambda).ok_or_else(singular)?;
             return Ok(());
         }
-        proj.blocks.task_gram(mat(&self.j), &self.spans, &mut self.lambda_inv, &mut self.gram);
+        proj.blocks.task_gram(mat(&self.j), &self.spans[..self.tasks], &mut self.lambda_inv, &mut self.gram);
         if spd_factor(mat(&self.lambda_inv), &mut self.chol).is_some() {
             self.factored = true;
             return Ok(());

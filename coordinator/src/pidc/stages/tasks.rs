@@ -116,7 +116,7 @@ pub fn task_torque(
         // Object load feed-forward w_ff and the load F_x = -w_ff on the robots.
         let w_ff = object_load(&g.object, &g.object_twist, &acc_d, cfg.object_mass, &cfg.object_inertia);
         *f_x = -w_ff;
-        stack.push(&g.j_o, &g.jdv_o, &err, &cfg.object_gains, Some(&w_ff))?;
+        stack.push(&g.j_o, hands_columns(team), &g.jdv_o, &err, &cfg.object_gains, Some(&w_ff))?;
         load.gemv_tr(1.0, &g.j_o, f_x, 0.0);
     }
     for tf in &team.torsos {
@@ -124,7 +124,7 @@ pub fn task_torque(
         let (x, twist) = frame_pose(tf, &team.velocity);
         let (x_d, tw_d, acc_d) = targets.torso(*refs, id, &x);
         let err = pose_error(&x, &twist, &x_d, &tw_d, &acc_d);
-        stack.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.torso_gains, None)?;
+        stack.push(&tf.jacobian, tf.cols, &tf.jdot_v, &err, &cfg.torso_gains, None)?;
     }
     for tf in &team.swing_feet {
         let id = &team.robots[tf.robot].id;
@@ -132,7 +132,7 @@ pub fn task_torque(
         let mut vel = Vector3::zeros();
         vel.gemv(1.0, &tf.jacobian, &team.velocity, 0.0);
         let err = point_error(&tf.position, &vel, &p_d, &v_d, &a_d);
-        stack.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.swing_gains, None)?;
+        stack.push(&tf.jacobian, tf.cols, &tf.jdot_v, &err, &cfg.swing_gains, None)?;
     }
     targets.keep_free_hands(team);
     targets.keep_swing_feet(team);
@@ -140,7 +140,15 @@ pub fn task_torque(
         let (x, twist) = frame_pose(tf, &team.velocity);
         let (x_d, tw_d, acc_d) = targets.free_hand(&team.robots[tf.robot].id, &x);
         let err = pose_error(&x, &twist, &x_d, &tw_d, &acc_d);
-        stack.push(&tf.jacobian, &tf.jdot_v, &err, &cfg.hand_gains, None)?;
+        stack.push(&tf.jacobian, tf.cols, &tf.jdot_v, &err, &cfg.hand_gains, None)?;
     }
     stack.joint_torque(motion, tau_m)
+}
+
+/// The team columns the hands in grasp's robots span (first, count): the object's Jacobian
+/// `J_o` is zero outside them.
+fn hands_columns(team: &Team) -> (usize, usize) {
+    let c0 = team.hands.iter().map(|h| h.cols.0).min().unwrap_or(0);
+    let c1 = team.hands.iter().map(|h| h.cols.0 + h.cols.1).max().unwrap_or(0);
+    (c0, c1.saturating_sub(c0))
 }
