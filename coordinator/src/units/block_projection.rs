@@ -22,7 +22,8 @@
 //! `P M Phi = P`). The actuation (eqs. ua_solution, bmatrix) needs one inverse of the
 //! unactuated rows, `K = (I - P_uu)^{-1}` (6 per robot):
 //! `[P S]^+ = S (P + P_{:u} K P_{u:})`, `[(I - S)(I - P)]^+ = (I - P)_{:u} K` on the
-//! unactuated columns.
+//! unactuated columns. `I - P_uu` is block-diagonal by robots but for the grasp's 6-row
+//! coupling, so `K` is kept factored by Woodbury ([`UnactuatedInverse`]).
 //!
 //! **Operators.** `P`, `Phi` and `Mbar P = M Phi` are each "blocks minus a coupling",
 //! `diag(D_r) - S W T^T` with `S`, `T` block-diagonal (k x 6 per robot) and `W` of 6B x 6B:
@@ -38,7 +39,7 @@
 //! caller runs the dense path.
 
 use faer::{MatMut, MatRef};
-use nalgebra::{DMatrix, DVector, Matrix6};
+use nalgebra::{DMatrix, DVector, Matrix6, Vector6};
 
 use crate::linalg::{gemm, mat, mat_mut, shape, spd6_inverse, zeros, zeros_v, SpdInverse};
 use crate::team::Team;
@@ -99,6 +100,20 @@ pub struct OpScratch {
     /// The couplings' `Y^T t` and `F^{-1} Y^T t` (6 x columns).
     r: DMatrix<f64>,
     q: DMatrix<f64>,
+    /// A team-sized vector ([`BlockFactors::ps_pinv_apply`]).
+    z: DVector<f64>,
+}
+
+/// Scratch of [`BlockFactors::b_minus_i_u`] (its own: its shapes are not the operators'):
+/// `P_{:u}`'s coupling terms (`6B x n_u`, `6 x n_u`) and `K`'s right application (`n x 6`).
+#[derive(Debug, Clone, Default)]
+pub struct ActuationScratch {
+    t: DMatrix<f64>,
+    u: DMatrix<f64>,
+    r: DMatrix<f64>,
+    q: DMatrix<f64>,
+    k_t: DMatrix<f64>,
+    k_u: DMatrix<f64>,
 }
 
 /// The block path's factors, kept between ticks (see the module docs).
@@ -110,17 +125,13 @@ pub struct BlockFactors {
     d: Vec<Matrix6<f64>>,
     w_e: Coupling,
     w_d: Coupling,
-    /// The unactuated team indices `u`; `P_{:u}`, `I - P_uu` and its inverse `K` (`P_{:u} K`,
-    /// n x n_u, is not formed on the tick: [`BlockFactors::ps_pinv_apply`] applies it).
+    /// The unactuated team indices `u` and `K = (I - P_uu)^{-1}`, factored (neither `P_{:u}`
+    /// nor `K` is formed on the tick: [`BlockFactors::ps_pinv_apply`] applies them).
     unact: Vec<usize>,
-    pu: DMatrix<f64>,
-    quu: DMatrix<f64>,
-    k_inv: DMatrix<f64>,
-    k_spd: SpdInverse,
+    k: UnactuatedInverse,
     /// Rows of `J_c`: `3 nf + 6 B`; `3 nf`.
     m: usize,
     nf3: usize,
-    scratch: OpScratch,
 }
 
 impl BlockFactors {
@@ -146,7 +157,7 @@ impl BlockFactors {
             self.w_e.clear();
             self.w_d.clear();
         }
-        self.actuation(team)
+        self.actuation()
     }
 
     /// The rank of `J_c`: `3 nf + 6 (B - 1)` (`J_c,ee` loses the object's 6 directions).
@@ -191,30 +202,26 @@ impl BlockFactors {
         Some(())
     }
 
-    /// `P_{:u}` (by [`BlockFactors::unit_columns`]) and `K = (I - P_uu)^{-1}`; `None` when
-    /// `I - P_uu` is too ill-conditioned for the rank of `P S` to be full.
-    fn actuation(&mut self, team: &Team) -> Option<()> {
-        let nu = self.unact.len();
-        let mut pu = std::mem::take(&mut self.pu);
-        self.unit_columns(team.n, &mut pu);
-        self.pu = pu;
-        zeros(&mut self.quu, nu, nu);
-        for (r, &i) in self.unact.iter().enumerate() {
-            for c in 0..nu {
-                self.quu[(r, c)] = -self.pu[(i, c)];
+    /// `K = (I - P_uu)^{-1}` ([`UnactuatedInverse`]); `None` when a robot's unactuated
+    /// velocities are not its first six, or `I - P_uu` is too ill-conditioned for the rank of
+    /// `P S` to be full.
+    fn actuation(&mut self) -> Option<()> {
+        for rb in &self.robots {
+            let first_six = rb.nu == 6 && self.unact[rb.u0] == rb.o && self.unact[rb.u0 + 5] == rb.o + 5;
+            if rb.nu != 0 && !first_six {
+                return None;
             }
-            self.quu[(r, r)] += 1.0;
         }
-        self.k_spd.compute(mat(&self.quu), &mut self.k_inv)
+        self.k.compute(&self.robots, &self.w_e)
     }
 
     /// `P_{:u} = P E_u` (n x nu) from the factors: robot `r`'s unit columns touch only its own
     /// blocks, `N_f E_u` is a copy of columns and `R^T E_u` a copy of rows.
-    fn unit_columns(&mut self, n: usize, pu: &mut DMatrix<f64>) {
+    fn unit_columns(&self, n: usize, pu: &mut DMatrix<f64>, s: &mut ActuationScratch) {
         let nu = self.unact.len();
         let hb = self.w_e.rows;
         zeros(pu, n, nu);
-        let OpScratch { t, u, r, q, .. } = &mut self.scratch;
+        let ActuationScratch { t, u, r, q, .. } = s;
         zeros(t, hb, nu);
         shape(u, hb, nu);
         for rb in &self.robots {
@@ -319,31 +326,39 @@ impl BlockFactors {
         }
     }
 
-    /// `out = [P S]^+ x = S (P x + P_{:u} K P_{u:} x)` (eq. ua_solution) for a vector `x`;
-    /// `px` is scratch.
+    /// `out = [P S]^+ x = S (P x + P_{:u} K P_{u:} x)` (eq. ua_solution) for a vector `x`, as
+    /// `S P (x + E_u w)` with `w = K (P x)_u` (`P` is symmetric: `P_{u:} x = (P x)_u`): two
+    /// applications of `P` and one of `K`'s factors; `px` is scratch.
     pub fn ps_pinv_apply(&self, x: &DVector<f64>, s_diag: &DVector<f64>, out: &mut DVector<f64>, px: &mut DVector<f64>, s: &mut OpScratch) {
-        let n = x.len();
+        let (n, nu) = (x.len(), self.unact.len());
         zeros_v(out, n);
-        zeros_v(px, self.unact.len());
         self.apply(BlockOp::P, vmat(x), vmat_mut(out), s);
-        px.gemv_tr(1.0, &self.pu, x, 0.0);
-        // P_{:u} (K P_{u:} x): two products with vectors instead of the n x n_u P_{:u} K.
-        zeros_v(&mut s.v, px.len());
-        s.v.gemv(1.0, &self.k_inv, px, 0.0);
-        out.gemv(1.0, &self.pu, &s.v, 1.0);
+        zeros_v(px, nu);
+        for (c, &i) in self.unact.iter().enumerate() {
+            px[c] = out[i];
+        }
+        zeros_v(&mut s.v, nu);
+        self.k.apply(&self.robots, px, &mut s.v);
+        let mut z = std::mem::take(&mut s.z);
+        zeros_v(&mut z, n);
+        z.copy_from(x);
+        for (c, &i) in self.unact.iter().enumerate() {
+            z[i] += s.v[c];
+        }
+        self.apply(BlockOp::P, vmat(&z), vmat_mut(out), s);
+        s.z = z;
         out.component_mul_assign(s_diag);
     }
 
     /// `(B - I)_{:u} = P_{:u} K - E_u K` (n x nu, eq. bmatrix on the unactuated columns, the
     /// only ones where `B` differs from `I`), and the unactuated indices.
-    pub fn b_minus_i_u(&self, out: &mut DMatrix<f64>) -> &[usize] {
-        shape(out, self.pu.nrows(), self.unact.len());
-        gemm(mat_mut(out), 0.0, 1.0, mat(&self.pu), mat(&self.k_inv));
-        for (r, &i) in self.unact.iter().enumerate() {
-            for c in 0..self.unact.len() {
-                out[(i, c)] -= self.k_inv[(r, c)];
-            }
+    pub fn b_minus_i_u(&self, out: &mut DMatrix<f64>, s: &mut ActuationScratch) -> &[usize] {
+        let n = self.robots.iter().map(|rb| rb.k).sum();
+        self.unit_columns(n, out, s);
+        for (c, &i) in self.unact.iter().enumerate() {
+            out[(i, c)] -= 1.0;
         }
+        self.k.right_apply(&self.robots, out, s);
         &self.unact
     }
 
@@ -463,13 +478,16 @@ impl BlockFactors {
         proj.mc_inv = &id + &proj.mcinv_p - &proj.mcinv_p * &team.mass;
         mc_into(team, proj);
         mbar_into(team, proj);
-        let mut ps = &proj.p + &self.pu * &self.k_inv * self.pu.transpose();
+        let mut pu = DMatrix::zeros(0, 0);
+        let mut act = ActuationScratch::default();
+        self.unit_columns(n, &mut pu, &mut act);
+        let mut ps = &proj.p + &pu * self.k.dense(&self.robots, self.unact.len()) * pu.transpose();
         for &i in &self.unact {
             ps.row_mut(i).fill(0.0);
         }
         proj.ps_pinv = ps;
         let mut z = DMatrix::zeros(0, 0);
-        self.b_minus_i_u(&mut z);
+        self.b_minus_i_u(&mut z, &mut act);
         proj.b = id;
         for (c, &j) in self.unact.iter().enumerate() {
             let mut col = proj.b.column_mut(j);
@@ -558,6 +576,7 @@ fn hand_gram(j_h: &DMatrix<f64>, x: &DMatrix<f64>) -> Matrix6<f64> {
 struct Coupling {
     x_inv: Vec<Matrix6<f64>>,
     y: Vec<Matrix6<f64>>,
+    f: Matrix6<f64>,
     f_inv: Matrix6<f64>,
     /// `6 B`, zero without a grasp.
     rows: usize,
@@ -587,7 +606,8 @@ impl Coupling {
             self.x_inv.push(xi);
             self.y.push(yh);
         }
-        self.f_inv = spd6_inverse(&((f + f.transpose()) * 0.5))?;
+        self.f = (f + f.transpose()) * 0.5;
+        self.f_inv = spd6_inverse(&self.f)?;
         Some(())
     }
 
@@ -619,5 +639,111 @@ impl Coupling {
             gemm(u.as_mut().subrows_mut(6 * h, 6), 0.0, 1.0, m6(xi), t.subrows(6 * h, 6));
             gemm(u.as_mut().subrows_mut(6 * h, 6), 1.0, -1.0, m6(y), mat(q));
         }
+    }
+}
+
+/// `K = (I - P_uu)^{-1}` (eq. bmatrix's inverse on the unactuated rows), kept factored.
+/// With `P = N_f - R W_E R^T` and `W_E = X^{-1} - Y F^{-1} Y^T` (module docs),
+/// `I - P_uu = D - V F^{-1} V^T` with `D = diag_r(I - (N_f,r)_uu + R_u,r X_h^{-1} R_u,r^T)` (6 x 6
+/// per floating-base robot, `R_u,r` its unactuated rows of `R_h`) and `V = R_u Y` (6 x 6 per
+/// robot with a hand). By Woodbury, `K = D^{-1} + D^{-1} V S^{-1} V^T D^{-1}` with
+/// `S = F - V^T D^{-1} V`: a 6 x 6 inverse per robot and one for the grasp instead of the
+/// team's `n_u x n_u`. `D` and `S` are positive definite exactly when `I - P_uu` is (`D`
+/// exceeds it, `S` is the Schur complement of `D` in `[D V; V^T F]`); each passes
+/// [`spd6_inverse`]'s pivot rule or the block path declines. Without the grasp's coupling
+/// (`W_E = 0`, one hand or none) `K = D^{-1}` with `D = diag_r(I - (N_f,r)_uu)`.
+#[derive(Debug, Clone, Default)]
+struct UnactuatedInverse {
+    /// Per robot: `D_r^{-1}` and `D_r^{-1} V_r` (zeros for a robot without unactuated joints
+    /// or without a hand in the coupling).
+    d_inv: Vec<Matrix6<f64>>,
+    dv: Vec<Matrix6<f64>>,
+    /// `S^{-1}`, and whether the grasp couples the robots.
+    s_inv: Matrix6<f64>,
+    coupled: bool,
+}
+
+impl UnactuatedInverse {
+    /// From the robots' blocks (each with no or exactly its first six velocities unactuated,
+    /// [`BlockFactors::actuation`]) and `W_E`.
+    fn compute(&mut self, robots: &[RobotBlocks], w_e: &Coupling) -> Option<()> {
+        self.coupled = !w_e.x_inv.is_empty();
+        self.d_inv.clear();
+        self.dv.clear();
+        let mut s = w_e.f;
+        for rb in robots {
+            let (mut d_inv, mut dv) = (Matrix6::zeros(), Matrix6::zeros());
+            if rb.nu == 6 {
+                let mut d = Matrix6::identity() - rb.n_f.fixed_view::<6, 6>(0, 0);
+                // The hand's unactuated rows of R_h (k x 6), when the grasp couples it.
+                let hand = rb.hand.filter(|_| self.coupled).map(|h| (h, rb.r_h.fixed_view::<6, 6>(0, 0).into_owned()));
+                if let Some((h, r_u)) = hand {
+                    d += r_u * w_e.x_inv[h] * r_u.transpose();
+                }
+                d_inv = spd6_inverse(&((d + d.transpose()) * 0.5))?;
+                if let Some((h, r_u)) = hand {
+                    let v = r_u * w_e.y[h];
+                    dv = d_inv * v;
+                    s -= v.transpose() * dv;
+                }
+            }
+            self.d_inv.push(d_inv);
+            self.dv.push(dv);
+        }
+        if self.coupled {
+            self.s_inv = spd6_inverse(&((s + s.transpose()) * 0.5))?;
+        }
+        Some(())
+    }
+
+    /// `out = K w` (`w`, `out`: n_u, each robot's six unactuated entries in robot order).
+    fn apply(&self, robots: &[RobotBlocks], w: &DVector<f64>, out: &mut DVector<f64>) {
+        let mut q = Vector6::zeros();
+        if self.coupled {
+            for (r, rb) in robots.iter().enumerate().filter(|(_, rb)| rb.nu == 6) {
+                q += self.dv[r].tr_mul(&w.fixed_rows::<6>(rb.u0));
+            }
+            q = self.s_inv * q;
+        }
+        for (r, rb) in robots.iter().enumerate().filter(|(_, rb)| rb.nu == 6) {
+            let k_w = self.d_inv[r] * w.fixed_rows::<6>(rb.u0) + self.dv[r] * q;
+            out.fixed_rows_mut::<6>(rb.u0).copy_from(&k_w);
+        }
+    }
+
+    /// `a = a K` in place (`a`: rows x n_u); `s`'s `k_t` and `k_u` are scratch.
+    fn right_apply(&self, robots: &[RobotBlocks], a: &mut DMatrix<f64>, s: &mut ActuationScratch) {
+        let rows = a.nrows();
+        // T = A D^{-1} V S^{-1} (rows x 6), from A before it is overwritten.
+        zeros(&mut s.k_t, rows, 6);
+        if self.coupled {
+            for (r, rb) in robots.iter().enumerate().filter(|(_, rb)| rb.nu == 6) {
+                gemm(mat_mut(&mut s.k_t), 1.0, 1.0, mat(a).subcols(rb.u0, 6), m6(&self.dv[r]));
+            }
+            shape(&mut s.k_u, rows, 6);
+            gemm(mat_mut(&mut s.k_u), 0.0, 1.0, mat(&s.k_t), m6(&self.s_inv));
+        }
+        for (r, rb) in robots.iter().enumerate().filter(|(_, rb)| rb.nu == 6) {
+            shape(&mut s.k_t, rows, 6);
+            mat_mut(&mut s.k_t).copy_from(mat(a).subcols(rb.u0, 6));
+            gemm(mat_mut(a).subcols_mut(rb.u0, 6), 0.0, 1.0, mat(&s.k_t), m6(&self.d_inv[r]));
+            if self.coupled {
+                gemm(mat_mut(a).subcols_mut(rb.u0, 6), 1.0, 1.0, mat(&s.k_u), m6(&self.dv[r]).transpose());
+            }
+        }
+    }
+
+    /// `K` formed (n_u x n_u; for reports and tests, it allocates).
+    fn dense(&self, robots: &[RobotBlocks], nu: usize) -> DMatrix<f64> {
+        let mut k = DMatrix::zeros(nu, nu);
+        let mut w = DVector::zeros(nu);
+        let mut col = DVector::zeros(nu);
+        for c in 0..nu {
+            w.fill(0.0);
+            w[c] = 1.0;
+            self.apply(robots, &w, &mut col);
+            k.set_column(c, &col);
+        }
+        k
     }
 }

@@ -15,7 +15,7 @@ use nalgebra::{DMatrix, DVector, Vector6};
 
 use crate::linalg::{add_product, gemm, mat, mat_mut, product, shape, transpose_into, zeros, zeros_v};
 use crate::team::Team;
-use crate::units::block_projection::{BlockOp, OpScratch};
+use crate::units::block_projection::{ActuationScratch, BlockOp, OpScratch};
 use crate::units::grasp::GraspTerms;
 use crate::units::projection::{Projections, WrenchScratch};
 
@@ -31,6 +31,7 @@ pub struct ContactMapScratch {
     u: DVector<f64>,
     wrench: WrenchScratch,
     ops: OpScratch,
+    act: ActuationScratch,
 }
 
 /// What [`contact_map`] reads.
@@ -102,7 +103,7 @@ fn rho_dense(team: &Team, proj: &Projections, j_c: &DMatrix<f64>, ws: &mut Conta
 /// blocks ([`crate::units::block_projection`]).
 fn rho_by_blocks(team: &Team, proj: &Projections, j_c: &DMatrix<f64>, ws: &mut ContactMapScratch, y: &mut DMatrix<f64>, rho: &mut DMatrix<f64>) {
     let (n, m, f) = (team.n, j_c.nrows(), &proj.blocks);
-    let unact = f.b_minus_i_u(&mut ws.b_u);
+    let unact = f.b_minus_i_u(&mut ws.b_u, &mut ws.act);
     shape(&mut ws.jc_u, m, unact.len());
     for (c, &j) in unact.iter().enumerate() {
         ws.jc_u.column_mut(c).copy_from(&j_c.column(j));
