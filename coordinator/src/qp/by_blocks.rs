@@ -110,6 +110,8 @@ pub struct BlockHotStart {
     robots: Vec<RobotQp>,
     /// Which rows of the assembled problem are in `W`.
     in_w: Vec<bool>,
+    /// Each contact's first row in the assembled problem.
+    row0: Vec<usize>,
     /// The answer: the wrenches' change `z` (m) and the torque's change `-J_c^T z` (n).
     pub z: DVector<f64>,
     pub dtau: DVector<f64>,
@@ -148,7 +150,12 @@ impl BlockHotStart {
     /// linearly dependent active rows, as when both bounds of a foot being unloaded bind.
     pub fn solve(&mut self, inp: &BlockInput, warm: &[usize], warm_shape: (usize, usize), tol: f64, repairs: u32) -> Result<(), Decline> {
         let m = inp.eta_real.len();
-        let nc: usize = inp.contacts.iter().map(|(_, k)| contact_rows(k).len()).sum();
+        self.row0.clear();
+        let mut nc = 0;
+        for (_, kind) in inp.contacts {
+            self.row0.push(nc);
+            nc += contact_rows(kind).len();
+        }
         let rows = nc + 2 * inp.actuated.len();
         self.rows = rows;
         self.repairs = 0;
@@ -256,6 +263,7 @@ impl BlockHotStart {
     /// `A_r^T`, and `V = L^{-1} A_r^T`.
     fn equality_rows(&mut self, inp: &BlockInput, warm: &[usize], nc: usize) -> Result<(), Decline> {
         let team = inp.team;
+        let row0 = &self.row0;
         for (r, rq) in self.robots.iter_mut().enumerate() {
             let mr = rq.vars.len();
             zeros(&mut rq.at, mr, mr);
@@ -269,7 +277,7 @@ impl BlockHotStart {
         }
         for &i in warm {
             if i < nc {
-                let (start, kind, k) = contact_of_row(inp.contacts, i).ok_or(Decline::NoHotStart)?;
+                let (start, kind, k) = contact_of_row(inp.contacts, row0, i).ok_or(Decline::NoHotStart)?;
                 let r = robot_of_contact(team, start).ok_or(Decline::NoHotStart)?;
                 let cr = contact_rows(&kind);
                 let (c, lo) = cr.iter().nth(k).ok_or(Decline::NoHotStart)?;
@@ -475,18 +483,13 @@ fn push_jt_row(rq: &mut RobotQp, robot: usize, c: usize, sign: f64, beta: f64, r
     Ok(())
 }
 
-/// The contact of the assembled problem's row `i` (`i` below the contacts' rows): its first
-/// row in `lambda`, its kind and the row's number among its rows.
-fn contact_of_row(contacts: &[(usize, ContactKind)], i: usize) -> Option<(usize, ContactKind, usize)> {
-    let mut first = 0;
-    for (start, kind) in contacts {
-        let n = contact_rows(kind).len();
-        if i < first + n {
-            return Some((*start, *kind, i - first));
-        }
-        first += n;
-    }
-    None
+/// The contact of the assembled problem's row `i` (`i` below the contacts' rows), with
+/// `row0` each contact's first row: its first row in `lambda`, its kind and the row's number
+/// among its rows.
+fn contact_of_row(contacts: &[(usize, ContactKind)], row0: &[usize], i: usize) -> Option<(usize, ContactKind, usize)> {
+    let c = row0.partition_point(|&first| first <= i).checked_sub(1)?;
+    let (start, kind) = *contacts.get(c)?;
+    (i - row0[c] < contact_rows(&kind).len()).then_some((start, kind, i - row0[c]))
 }
 
 /// The robot of the contact whose first row in `lambda` is `start` (feet, then hands).
