@@ -9,7 +9,7 @@ mod common;
 use std::collections::BTreeMap;
 
 use common::{robot_id, Fixture};
-use coordinator::pidc::stages::contacts::{contact_jacobian, contact_list};
+use coordinator::pidc::stages::contacts::{contact_jacobian, contact_list, contact_velocity};
 use coordinator::pidc::stages::limits::{torque_limits, UNBOUNDED_BASE_LIMIT};
 use coordinator::pidc::stages::tasks::{object_load, task_torque, MotionSpaceTerms, TaskInput, Targets};
 use coordinator::pidc::stages::torque::{compose, motion_torque, Clamp, MotionTorqueScratch};
@@ -677,6 +677,15 @@ fn a_team_assembled_into_used_buffers_is_the_team_assembled_afresh() {
         contact_jacobian(&team, Some(&grasp), &mut j_c, &mut jdv_c);
         contact_jacobian(&team, Some(&grasp), &mut new_j_c, &mut new_jdv_c);
         assert_eq!((&j_c, &jdv_c), (&new_j_c, &new_jdv_c), "tick {i}: J_c with the grasp");
+        // [J_cf; N J_ee] written out (eqs. jacobian_c, jacobian_cee), and J_c v by the frames.
+        let mut expect = DMatrix::zeros(team.contact_rows(), team.n);
+        expect.rows_mut(0, team.j_cf.nrows()).copy_from(&stacked(tick, FrameRole::StanceFoot).0);
+        expect.rows_mut(team.j_cf.nrows(), grasp.n.nrows()).copy_from(&(&grasp.n * &stacked(tick, FrameRole::Hand).0));
+        assert!((&j_c - &expect).amax() <= 1e-12 * expect.amax(), "tick {i}: J_c = [J_cf; N J_ee]");
+        let mut jc_v = DVector::zeros(0);
+        contact_velocity(&team, Some(&grasp), &mut jc_v);
+        let v_expect = &expect * &team.velocity;
+        assert!((&jc_v - &v_expect).amax() <= 1e-12 * v_expect.amax().max(1.0), "tick {i}: J_c v");
         contact_jacobian(&team, None, &mut j_c, &mut jdv_c);
         let mut expect = DMatrix::zeros(team.contact_rows(), team.n);
         expect.rows_mut(0, team.j_cf.nrows()).copy_from(&stacked(tick, FrameRole::StanceFoot).0);
@@ -717,11 +726,17 @@ fn grasp_jdot_v_is_the_time_derivative_of_j_cee_v_and_j_o_v() {
         team.assemble_into(&terms, None, false).expect("team");
         let mut g: Option<GraspTerms> = None;
         tracker.update(&team, None, &[], &mut g).expect("grasp");
-        g.expect("hands in grasp")
+        let g = g.expect("hands in grasp");
+        // J_c,ee = N J_ee (eq. jacobian_cee), written out.
+        let j_cee = &g.n * &team.j_ee;
+        (g, j_cee)
     };
-    let g0 = grasp_at(0.0);
-    let (gp, gm) = (grasp_at(h), grasp_at(-h));
-    let fd_cee = (&gp.j_cee * &v - &gm.j_cee * &v) / (2.0 * h);
+    let (g0, j_cee0) = grasp_at(0.0);
+    let ((gp, j_cee_p), (gm, j_cee_m)) = (grasp_at(h), grasp_at(-h));
+    // J_c,ee v by the hands' sums (what the constraint residual reads) is N J_ee v.
+    let cee_v = &j_cee0 * &v;
+    assert!((&g0.jcee_v - &cee_v).amax() <= 1e-12 * cee_v.amax().max(1.0), "J_c,ee v");
+    let fd_cee = (&j_cee_p * &v - &j_cee_m * &v) / (2.0 * h);
     let fd_o = (&gp.j_o * &v - &gm.j_o * &v) / (2.0 * h);
     let rel_to = |a: &DVector<f64>, b: &DVector<f64>| (a - b).amax() / b.amax();
     let (e_cee, e_o) = (rel_to(&g0.jdv_cee, &fd_cee), rel_to(&DVector::from_column_slice(g0.jdv_o.as_slice()), &fd_o));

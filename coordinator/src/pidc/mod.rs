@@ -33,7 +33,7 @@ use crate::units::projection::ProjectionWorkspace;
 use crate::units::release::{GraspWatch, TickOutcome};
 use crate::{ControllerError, TeamController};
 use stages::by_robot::{decoupled, ByRobot, ByRobotScratch};
-use stages::contacts::{contact_jacobian, contact_list, unload_feet};
+use stages::contacts::{contact_drift, contact_jacobian, contact_list, contact_velocity, unload_feet};
 use stages::limits::torque_limits;
 use stages::tasks::{task_torque, MotionSpaceTerms, TaskInput, Targets};
 use stages::torque::{compose, fallback, motion_torque, saturate, Clamp, MotionTorqueScratch};
@@ -120,8 +120,8 @@ impl Pidc {
         self.valid.then_some(&self.report)
     }
 
-    /// The last tick with its team-sized projection matrices formed ([`Projections::materialize`]:
-    /// the block path keeps only factors on the tick), and, when the QP was answered by the
+    /// The last tick with `J_c` and its team-sized projection matrices formed
+    /// ([`Projections::materialize`]: the block path keeps only factors on the tick), and, when the QP was answered by the
     /// robots' blocks ([`qp::BlockHotStart`]), `Y`, `rho` and an `F_c` with
     /// `tau = tau_0 + Y F_c` (the least-norm one, `Y^+ (tau - tau_0)`; then also
     /// `lambda = rho F_c + eta`, since `rho` and `Y` share their null space). For tests and
@@ -133,6 +133,7 @@ impl Pidc {
             return None;
         }
         let r = &mut self.report;
+        form_j_c(r);
         r.proj.materialize(&r.team);
         if r.qp.solver == qp::by_blocks::SOLVER {
             let map = MapInput { team: &r.team, proj: &r.proj, j_c: &r.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
@@ -167,13 +168,18 @@ impl Pidc {
         grasp.update(&r.team, cfg.object_pose_at_grasp, &cfg.planned_grasp, &mut r.grasp)?;
         // Late robots' free hands keep clear of the object the others hold.
         targets.keep_clear(&r.team, r.grasp.as_ref().map(|g| &g.object.translation.vector), cfg.release.retreat);
-        // J_c = [J_cf; J_c,ee] (eq. jacobian_c).
-        contact_jacobian(&r.team, r.grasp.as_ref(), &mut r.j_c, &mut r.jdv_c);
-        zeros_v(&mut r.jc_v, r.j_c.nrows());
-        r.jc_v.gemv(1.0, &r.j_c, &r.team.velocity, 0.0);
+        // Jdot_c v and J_c v (eq. jacobian_c); J_c itself only where it is needed (form_j_c).
+        r.j_c_formed = false;
+        contact_drift(&r.team, r.grasp.as_ref(), &mut r.jdv_c);
+        contact_velocity(&r.team, r.grasp.as_ref(), &mut r.jc_v);
         let t_asm = us();
-        // P, Pdot v, M_c, Mbar, [P S]^+, B (eqs. aghili_21, aghili_25, constraint_force, bmatrix).
-        r.proj.compute(&mut ws.proj, &r.team, r.grasp.as_ref(), &r.j_c, &r.jdv_c, cfg.dense_projections)?;
+        // P, Pdot v, M_c, Mbar, [P S]^+, B (eqs. aghili_21, aghili_25, constraint_force,
+        // bmatrix): by the team's blocks, or by dense SVDs of J_c when asked or when the blocks
+        // decline.
+        if cfg.dense_projections || !r.proj.by_blocks_into(&mut ws.proj, &r.team, r.grasp.as_ref(), &r.jdv_c) {
+            form_j_c(r);
+            r.proj.compute_into(&mut ws.proj, &r.team, &r.j_c, &r.jdv_c)?;
+        }
         ws.motion.compute_into(&r.proj, &r.team);
         let t_proj = us();
         // tau_M of the object, torso and swing-foot impedances (eqs. control_law,
@@ -241,6 +247,7 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
             return Ok((build_us, qp_us));
         }
     }
+    form_j_c(r);
     loop {
         // The contact map depends on tau_0: built again after a saturation.
         let t0 = Instant::now();
@@ -281,6 +288,15 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
     let wrench = WrenchInput { team: &r.team, proj: &r.proj, load: &r.load, rho: &r.rho, eta: &r.eta };
     contact_wrenches(&wrench, sent, &mut ws.map, &mut r.lambda, &mut r.lambda_real);
     Ok((build_us, qp_us))
+}
+
+/// `J_c = [J_cf; J_c,ee]` (eq. jacobian_c) into the report, once per tick: the dense
+/// projections, the team-sized QP and [`Pidc::materialized`] read it; the block path does not.
+fn form_j_c(r: &mut TickReport) {
+    if !r.j_c_formed {
+        contact_jacobian(&r.team, r.grasp.as_ref(), &mut r.j_c, &mut r.jdv_c);
+        r.j_c_formed = true;
+    }
 }
 
 /// The QP on the last tick's active rows by the robots' blocks ([`qp::BlockHotStart`]), with

@@ -17,7 +17,11 @@ use crate::units::projection::Projections;
 pub struct TickReport {
     pub team: Team,
     pub grasp: Option<GraspTerms>,
+    /// `J_c` (eq. jacobian_c), formed on the ticks that read it (`j_c_formed`: the dense
+    /// projections, the team-sized QP) and by [`super::Pidc::materialized`]; on the others it
+    /// holds an earlier tick's. `Jdot_c v` is every tick's.
     pub j_c: DMatrix<f64>,
+    pub j_c_formed: bool,
     pub jdv_c: DVector<f64>,
     /// `J_c v`: the constraints' velocity, which a held contact keeps at zero (its norm is the
     /// diagnostics' `constraint_residual`).

@@ -135,12 +135,12 @@ pub struct BlockFactors {
 }
 
 impl BlockFactors {
-    /// The factors of the team with contact Jacobian `j_c` (`[J_cf; N_G J_ee]`). `None`
-    /// when the team is not laid out by robots or a Gram matrix is too ill-conditioned: run
-    /// the dense path then.
-    pub fn compute_into(&mut self, team: &Team, grasp: Option<&GraspTerms>, j_c: &DMatrix<f64>) -> Option<()> {
+    /// The factors of the team whose contact Jacobian is `[J_cf; N_G J_ee]` (read from its
+    /// frames: `J_c` itself is not needed). `None` when the team is not laid out by robots or
+    /// a Gram matrix is too ill-conditioned: run the dense path then.
+    pub fn compute_into(&mut self, team: &Team, grasp: Option<&GraspTerms>) -> Option<()> {
         let b = grasp.map_or(0, |_| team.hands.len());
-        self.layout(team, b, j_c.nrows())?;
+        self.layout(team, b, team.contact_rows())?;
         for rb in &mut self.robots {
             rb.compute(team)?;
         }

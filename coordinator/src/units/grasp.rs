@@ -15,7 +15,7 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix6, Rotation3, Translation3, UnitQuaternion, Vector3, Vector6};
 
-use faer::MatRef;
+use faer::{MatMut, MatRef};
 
 use crate::linalg::{gemm, mat, mat_mut, skew, zeros, zeros_v};
 use crate::team::Team;
@@ -223,8 +223,10 @@ pub struct GraspTerms {
     pub g_pinv: DMatrix<f64>,
     /// `N = I - G^T (G^+)^T` (6B x 6B), the internal-wrench projector.
     pub n: DMatrix<f64>,
-    /// `J_c,ee = N J_ee` (eq. jacobian_cee) and `d/dt(J_c,ee) v = Ndot J_ee v + N Jdot_ee v`.
-    pub j_cee: DMatrix<f64>,
+    /// `J_c,ee v = N J_ee v` and `d/dt(J_c,ee) v = Ndot J_ee v + N Jdot_ee v` (eq.
+    /// jacobian_cee), by the hands' sums. `J_c,ee` itself (6B x n) is formed only where `J_c`
+    /// is ([`crate::pidc::stages::contacts::contact_jacobian`]).
+    pub jcee_v: DVector<f64>,
     pub jdv_cee: DVector<f64>,
     /// `J_o = (G^+)^T J_ee` (eq. obj_jacobian) and `d/dt(J_o) v`.
     pub j_o: DMatrix<f64>,
@@ -284,7 +286,8 @@ impl GraspTerms {
         let j_ee = &team.j_ee;
         zeros_v(&mut self.ee_twist, 6 * b);
         self.ee_twist.gemv(1.0, j_ee, &team.velocity, 0.0);
-        times_hand_jacobians(team, mat(&self.g_pinv).transpose(), &mut self.j_o);
+        zeros(&mut self.j_o, 6, n);
+        times_hand_jacobians(team, mat(&self.g_pinv).transpose(), mat_mut(&mut self.j_o));
         self.object_twist.gemv(1.0, &self.j_o, &team.velocity, 0.0);
         self.object = object;
         let vo = self.object_twist.fixed_rows::<3>(0).into_owned();
@@ -314,9 +317,13 @@ impl GraspTerms {
             g_jd += g * jd;
         }
         zeros_v(&mut self.jdv_cee, 6 * b);
+        zeros_v(&mut self.jcee_v, 6 * b);
         zeros_v(&mut self.jdv_o, 6);
         for i in 0..b {
             let gp_i: Matrix6<f64> = self.g_pinv.fixed_view::<6, 6>(6 * i, 0).into_owned();
+            // (N J_ee v)_i = ee_i - G^+_i (G ee).
+            let cee_v = self.ee_twist.fixed_rows::<6>(6 * i) - gp_i * g_ee;
+            self.jcee_v.fixed_rows_mut::<6>(6 * i).copy_from(&cee_v);
             let dgp_i = dgp(i);
             let acc = -(dgp_i * g_ee + gp_i * gdot_ee) + team.jdv_ee.fixed_rows::<6>(6 * i) - gp_i * g_jd;
             self.jdv_cee.fixed_rows_mut::<6>(6 * i).copy_from(&acc);
@@ -325,20 +332,18 @@ impl GraspTerms {
             let mut o = self.jdv_o.fixed_rows_mut::<6>(0);
             o += dgp_i.transpose() * ee_i + gp_i.transpose() * jdv_i;
         }
-        times_hand_jacobians(team, mat(&self.n), &mut self.j_cee);
-        debug_assert_eq!(self.j_cee.ncols(), n);
         Some(())
     }
 }
 
-/// `out = X J_ee` (X: rows x 6B) by the hands' blocks: hand `i`'s six rows of `J_ee` are its
-/// robot's frame Jacobian, zero outside that robot's columns, so column block `i` of `X`
-/// meets only those columns (`6 B x 6 x k` per hand instead of `6 B x 6 B x n`).
-fn times_hand_jacobians(team: &Team, x: MatRef<'_, f64>, out: &mut DMatrix<f64>) {
-    zeros(out, x.nrows(), team.n);
+/// `out += X J_ee` (X: rows x 6B, `out`: rows x n) by the hands' blocks: hand `i`'s six rows
+/// of `J_ee` are its robot's frame Jacobian, zero outside that robot's columns, so column
+/// block `i` of `X` meets only those columns (`6 B x 6 x k` per hand instead of
+/// `6 B x 6 B x n`).
+pub fn times_hand_jacobians(team: &Team, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>) {
     for (i, h) in team.hands.iter().enumerate() {
         let rb = &team.robots[h.robot];
-        let dst = mat_mut(out).submatrix_mut(0, rb.offset, x.nrows(), rb.nv);
+        let dst = out.as_mut().submatrix_mut(0, rb.offset, x.nrows(), rb.nv);
         gemm(dst, 1.0, 1.0, x.subcols(6 * i, 6), mat(&team.j_ee).submatrix(6 * i, rb.offset, 6, rb.nv));
     }
 }

@@ -149,14 +149,14 @@ impl Projections {
         }
     }
 
-    /// All projections of the team: by the team's blocks unless `dense` (or the blocks
-    /// decline: see [`crate::units::block_projection`]), else by dense SVDs
-    /// ([`Projections::compute_into`]). Both give the same matrices (`coordinator/tests/
-    /// structured.rs`).
-    pub fn compute(&mut self, ws: &mut ProjectionWorkspace, team: &Team, grasp: Option<&GraspTerms>, j_c: &DMatrix<f64>, jdv_c: &DVector<f64>, dense: bool) -> Result<(), ControllerError> {
-        self.by_blocks = !dense && self.blocks.compute_into(team, grasp, j_c).is_some();
+    /// All projections of the team by the team's blocks ([`crate::units::block_projection`];
+    /// `J_c` is not formed), with `Jdot_c v` (`jdv_c`). Returns whether the blocks answered:
+    /// when they decline, run the dense SVDs ([`Projections::compute_into`]). Both give the
+    /// same matrices (`coordinator/tests/structured.rs`).
+    pub fn by_blocks_into(&mut self, ws: &mut ProjectionWorkspace, team: &Team, grasp: Option<&GraspTerms>, jdv_c: &DVector<f64>) -> bool {
+        self.by_blocks = self.blocks.compute_into(team, grasp).is_some();
         if !self.by_blocks {
-            return self.compute_into(ws, team, j_c, jdv_c);
+            return false;
         }
         self.jc_rank = self.blocks.jc_rank();
         // Pdot v = -J_c^+ (Jdot_c v) (see compute_into).
@@ -164,7 +164,7 @@ impl Projections {
         for m in [&mut self.jc_pinv, &mut self.jct_pinv, &mut self.p, &mut self.ip, &mut self.mc, &mut self.mc_inv, &mut self.mcinv_p, &mut self.mbar, &mut self.ps_pinv, &mut self.b] {
             zeros(m, 0, 0);
         }
-        Ok(())
+        true
     }
 
     /// All projections of the team with contact Jacobian `j_c` and its `Jdot*v`, by dense
@@ -176,6 +176,7 @@ impl Projections {
     /// `Jdot`. The measured `|J_c v|` is reported in the diagnostics. Checked against a finite
     /// difference of `P` in time in `tests/controller.rs`.
     pub fn compute_into(&mut self, ws: &mut ProjectionWorkspace, team: &Team, j_c: &DMatrix<f64>, jdv_c: &DVector<f64>) -> Result<(), ControllerError> {
+        self.by_blocks = false;
         let n = team.n;
         let m = j_c.nrows();
         let singular = |what: &str| ControllerError::Singular { what: what.to_string() };

@@ -38,6 +38,7 @@ pub struct ContactMapScratch {
 pub struct MapInput<'a> {
     pub team: &'a Team,
     pub proj: &'a Projections,
+    /// `J_c` ([`contact_map`] reads it; [`contact_offset`] does not).
     pub j_c: &'a DMatrix<f64>,
     /// `tau_0 = [P S]^+ P tau_M` and the object's load `J_x^T F_x` (n).
     pub tau0: &'a DVector<f64>,
@@ -63,9 +64,9 @@ pub fn contact_map(inp: &MapInput, ws: &mut ContactMapScratch, y: &mut DMatrix<f
 /// `Y` and `rho`: what the QP's hot start by the robots' blocks reads
 /// ([`crate::qp::BlockHotStart`]).
 pub fn contact_offset(inp: &MapInput, ws: &mut ContactMapScratch, eta: &mut DVector<f64>, eta_real: &mut DVector<f64>) {
-    let MapInput { team, proj, j_c, tau0, load, grasp, f_x } = inp;
+    let MapInput { team, proj, tau0, load, grasp, f_x, .. } = inp;
     let n = team.n;
-    let m = j_c.nrows();
+    let m = team.contact_rows();
     let nf = team.feet.len();
     zeros_v(&mut ws.u, n);
     ws.u.copy_from(*tau0);
