@@ -79,7 +79,7 @@ fn bench(c: &mut Criterion) {
         println!(
             "robots {count}: n {} F_c {} QP rows {} status {:?} by {} iterations {} projections by {}",
             r.team.n,
-            r.j_c.nrows(),
+            r.team.contact_rows(),
             r.qp.rows,
             r.qp.status,
             r.qp.solver,

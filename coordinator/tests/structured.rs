@@ -111,8 +111,10 @@ fn agree(fx: &mut Fixture, case: Case) -> (f64, f64) {
 /// both differences; `what` names the tick in the messages.
 fn agree_on_tick(blocks: &mut Pidc, dense: &mut Pidc, tick: &[DynamicsTerms], what: &str) -> (f64, f64) {
     let on_tick = blocks.compute(tick).expect("block tick");
-    // The block path forms no team-sized matrix on the tick (only its factors).
+    // The block path forms no team-sized matrix on the tick (only its factors), nor J_c when
+    // the QP's blocks answered.
     assert!(on_tick.proj.p.is_empty() && on_tick.proj.mc_inv.is_empty() && on_tick.proj.mbar.is_empty(), "{what}: an n x n matrix on the block path's tick");
+    assert!(on_tick.qp.solver != coordinator::qp::by_blocks::SOLVER || !on_tick.j_c_formed, "{what}: J_c formed on a tick the blocks answered");
     let b = blocks.materialized().expect("block tick").clone();
     let d = dense.compute(tick).expect("dense tick");
     assert_eq!(b.qp.status, d.qp.status, "{what}");

@@ -41,7 +41,7 @@
 use faer::{MatMut, MatRef};
 use nalgebra::{DMatrix, DVector, Matrix6, Vector6};
 
-use crate::linalg::{gemm, mat, mat_mut, shape, spd6_inverse, zeros, zeros_v, SpdInverse};
+use crate::linalg::{gemm, mat, mat_mut, shape, spd6_inverse, zeros, zeros_v, SpdInverse, SPD_TOL};
 use crate::team::Team;
 use crate::units::grasp::GraspTerms;
 use crate::units::projection::{complement, mbar_into, mc_into, symmetrise, Projections};
@@ -91,7 +91,7 @@ pub enum BlockOp {
     MbarP,
 }
 
-/// Scratch of the operators (coupling-sized: 6B x columns).
+/// Scratch of the operators (coupling-sized, `6B x columns`, but `z`: n).
 #[derive(Debug, Clone, Default)]
 pub struct OpScratch {
     t: DMatrix<f64>,
@@ -125,8 +125,9 @@ pub struct BlockFactors {
     d: Vec<Matrix6<f64>>,
     w_e: Coupling,
     w_d: Coupling,
-    /// The unactuated team indices `u` and `K = (I - P_uu)^{-1}`, factored (neither `P_{:u}`
-    /// nor `K` is formed on the tick: [`BlockFactors::ps_pinv_apply`] applies them).
+    /// The unactuated team indices `u` and `K = (I - P_uu)^{-1}`, factored (on the block
+    /// path's tick neither `P_{:u}` nor `K` is formed: [`BlockFactors::ps_pinv_apply`] applies
+    /// them; the team-sized QP's `(B - I)_{:u}` forms `P_{:u}`).
     unact: Vec<usize>,
     k: UnactuatedInverse,
     /// Rows of `J_c`: `3 nf + 6 B`; `3 nf`.
@@ -136,8 +137,9 @@ pub struct BlockFactors {
 
 impl BlockFactors {
     /// The factors of the team whose contact Jacobian is `[J_cf; N_G J_ee]` (read from its
-    /// frames: `J_c` itself is not needed). `None` when the team is not laid out by robots or
-    /// a Gram matrix is too ill-conditioned: run the dense path then.
+    /// frames: `J_c` itself is not needed). `None` when the team is not laid out by robots, a
+    /// robot's unactuated velocities are not its first six, or a Gram matrix (or `I - P_uu`)
+    /// is too ill-conditioned: run the dense path then.
     pub fn compute_into(&mut self, team: &Team, grasp: Option<&GraspTerms>) -> Option<()> {
         let b = grasp.map_or(0, |_| team.hands.len());
         self.layout(team, b, team.contact_rows())?;
@@ -650,7 +652,8 @@ impl Coupling {
 /// `S = F - V^T D^{-1} V`: a 6 x 6 inverse per robot and one for the grasp instead of the
 /// team's `n_u x n_u`. `D` and `S` are positive definite exactly when `I - P_uu` is (`D`
 /// exceeds it, `S` is the Schur complement of `D` in `[D V; V^T F]`); each passes
-/// [`spd6_inverse`]'s pivot rule or the block path declines. Without the grasp's coupling
+/// [`spd6_inverse`]'s pivot rule, and `K`'s norm (which bounds the condition of
+/// `I - P_uu`) [`SPD_TOL`], or the block path declines. Without the grasp's coupling
 /// (`W_E = 0`, one hand or none) `K = D^{-1}` with `D = diag_r(I - (N_f,r)_uu)`.
 #[derive(Debug, Clone, Default)]
 struct UnactuatedInverse {
@@ -693,7 +696,15 @@ impl UnactuatedInverse {
         if self.coupled {
             self.s_inv = spd6_inverse(&((s + s.transpose()) * 0.5))?;
         }
-        Some(())
+        // The blocks' pivot rules are each relative to their block: `S` small beside `F` but
+        // well-conditioned passes them. The team-sized inverse this replaces had one rule over
+        // all of `I - P_uu`, whose eigenvalues are at most 1 (`P` is a projector), so its
+        // condition is at most `|K|`, bounded by the factors:
+        // `|K| <= max_r |D_r^{-1}| + sum_r |D_r^{-1} V_r|^2 |S^{-1}|` (Frobenius norms).
+        let d_max = self.d_inv.iter().map(|d| d.norm()).fold(0.0, f64::max);
+        let w2: f64 = self.dv.iter().map(|w| w.norm_squared()).sum();
+        let k_bound = d_max + if self.coupled { w2 * self.s_inv.norm() } else { 0.0 };
+        (k_bound.is_finite() && k_bound * SPD_TOL < 1.0).then_some(())
     }
 
     /// `out = K w` (`w`, `out`: n_u, each robot's six unactuated entries in robot order).

@@ -285,7 +285,10 @@ impl GraspTerms {
         }
         let j_ee = &team.j_ee;
         zeros_v(&mut self.ee_twist, 6 * b);
-        self.ee_twist.gemv(1.0, j_ee, &team.velocity, 0.0);
+        for (i, h) in team.hands.iter().enumerate() {
+            let (c0, nc) = h.cols;
+            self.ee_twist.rows_mut(6 * i, 6).gemv(1.0, &j_ee.view((6 * i, c0), (6, nc)), &team.velocity.rows(c0, nc), 0.0);
+        }
         zeros(&mut self.j_o, 6, n);
         times_hand_jacobians(team, mat(&self.g_pinv).transpose(), mat_mut(&mut self.j_o));
         self.object_twist.gemv(1.0, &self.j_o, &team.velocity, 0.0);

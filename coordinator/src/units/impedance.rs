@@ -105,8 +105,9 @@ pub struct TaskStack {
     chol: DMatrix<f64>,
     factored: bool,
     pinv: Pinv,
-    /// Each task's rows and the columns its Jacobian is non-zero on: `(row, rows, col, cols)`,
-    /// this tick's first `tasks`, then the last tick's (what `j` holds: see `begin`).
+    /// Each task's rows and the columns its Jacobian is non-zero on: `(row, rows, col, cols)`:
+    /// this tick's first `tasks`, then the earlier tasks whose rows `j` still holds as
+    /// written (see `begin`; `push` forgets them from the first task that differs).
     spans: Vec<TaskSpan>,
     tasks: usize,
     u: DVector<f64>,
@@ -131,14 +132,14 @@ impl TaskStack {
         }
     }
 
-    /// Add a task: Jacobian `j_x` (d x n), zero outside the columns `cols` (first, count: a
+    /// Add a task: Jacobian `j_x` (d x n, `d <= 6`), zero outside the columns `cols` (first, count: a
     /// torso's, a swing foot's or a free hand's are its robot's, the object's span the
     /// grasping robots'), `Jdot_x v`, its errors and gains, and an optional feed-forward
     /// wrench added to its `F` (the object's load).
     pub fn push(&mut self, j_x: &DMatrix<f64>, cols: (usize, usize), jdv_x: &DVector<f64>, err: &TaskError, gains: &Gains, feed_forward: Option<&Vector6<f64>>) -> Result<(), ControllerError> {
         let d = j_x.nrows();
         let (c0, nc) = cols;
-        if j_x.ncols() != self.n || c0 + nc > self.n || jdv_x.len() != d || err.dim != d || gains.kp.len() != d || gains.kd.len() != d || self.at + d > self.j.nrows() {
+        if d > 6 || j_x.ncols() != self.n || c0 + nc > self.n || jdv_x.len() != d || err.dim != d || gains.kp.len() != d || gains.kd.len() != d || self.at + d > self.j.nrows() {
             return Err(ControllerError::Dimension {
                 what: "impedance task".into(),
                 detail: format!("{d}-row task with {} columns (non-zero on {c0}..{}), error {}, gains {}/{}, {} of {} rows used", j_x.ncols(), c0 + nc, err.dim, gains.kp.len(), gains.kd.len(), self.at, self.j.nrows()),
@@ -146,16 +147,13 @@ impl TaskStack {
         }
         let at = self.at;
         let span = (at, d, c0, nc);
-        match self.spans.get_mut(self.tasks) {
-            Some(last) if *last == span => {}
-            Some(last) => {
-                self.j.rows_mut(at, d).fill(0.0);
-                *last = span;
-            }
-            None => {
-                self.j.rows_mut(at, d).fill(0.0);
-                self.spans.push(span);
-            }
+        if self.spans.get(self.tasks) != Some(&span) {
+            // A task unlike the last tick's here: its rows are cleared, and the later spans
+            // recorded may describe rows this one overwrote, so they are forgotten (their
+            // tasks clear their rows again).
+            self.spans.truncate(self.tasks);
+            self.j.rows_mut(at, d).fill(0.0);
+            self.spans.push(span);
         }
         self.tasks += 1;
         self.j.view_mut((at, c0), (d, nc)).copy_from(&j_x.columns(c0, nc));
@@ -229,5 +227,45 @@ impl TaskStack {
         }
         self.pinv.compute(mat(&self.lambda_inv), RANK_TOL, &mut self.lambda).ok_or_else(singular)?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A `d`-row task on columns `cols` of 10 (entries `seed + i + j / 10`, zero elsewhere).
+    fn task(d: usize, cols: (usize, usize), seed: f64) -> DMatrix<f64> {
+        DMatrix::from_fn(d, 10, |i, j| if (cols.0..cols.0 + cols.1).contains(&j) { seed + i as f64 + j as f64 / 10.0 } else { 0.0 })
+    }
+
+    fn push_all(stack: &mut TaskStack, tasks: &[(usize, (usize, usize), f64)]) {
+        let k = tasks.iter().map(|t| t.0).sum();
+        stack.begin(k, 10);
+        for &(d, cols, seed) in tasks {
+            let err = TaskError { dim: d, e: Vector6::zeros(), edot: Vector6::zeros(), acc_d: Vector6::zeros() };
+            let gains = Gains::new(&vec![1.0; d], &vec![1.0; d]);
+            stack.push(&task(d, cols, seed), cols, &DVector::zeros(d), &err, &gains, None).expect("task");
+        }
+    }
+
+    #[test]
+    fn a_reused_stack_holds_exactly_its_tasks_rows() {
+        // The same shape (18 x 10) three times; the middle tick's third task covers the rows
+        // of the first tick's third and fourth. The third tick (the first again) must not
+        // keep anything of the second's.
+        let first = [(6, (0, 5), 1.0), (6, (5, 5), 2.0), (3, (0, 5), 3.0), (3, (5, 5), 4.0)];
+        let middle = [(6, (0, 5), 1.0), (6, (5, 5), 2.0), (6, (0, 5), 5.0)];
+        let mut stack = TaskStack::default();
+        for tick in [&first[..], &middle[..], &first[..]] {
+            push_all(&mut stack, tick);
+            let mut fresh = TaskStack::default();
+            push_all(&mut fresh, tick);
+            assert_eq!(stack.j, fresh.j);
+        }
+        // A task with more than six rows is refused (the stack's products assume six at most).
+        stack.begin(7, 10);
+        let err = TaskError { dim: 7, e: Vector6::zeros(), edot: Vector6::zeros(), acc_d: Vector6::zeros() };
+        assert!(stack.push(&DMatrix::zeros(7, 10), (0, 10), &DVector::zeros(7), &err, &Gains::new(&[1.0; 7], &[1.0; 7]), None).is_err());
     }
 }
