@@ -70,7 +70,7 @@ pub struct CoordinatorCounters {
     /// Times a member went silent and was left out.
     pub silenced: u64,
     /// Commands sent again: a member sent the terms of the tick last solved with them again
-    /// (its command was lost; [`Service::answer_again`]).
+    /// (its command was lost; `Service::answer_again`).
     pub repeated_commands: u64,
 }
 

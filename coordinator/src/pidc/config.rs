@@ -65,7 +65,7 @@ pub struct PidcConfig {
     /// before `Y`, `rho` and the team-sized QP are built; the same torques to the solvers'
     /// tolerance (`tests/qp_by_blocks.rs`). Off: every tick builds the team-sized QP.
     pub qp_by_blocks: bool,
-    /// `S = I` (treat the base as actuated): the [Lin2018] comparison only.
+    /// `S = I` (treat the base as actuated): the \[Lin2018\] comparison only.
     pub fully_actuated: bool,
     /// Compute the projections by dense SVDs of the team's matrices (the oracle) instead of
     /// by the team's blocks (`units::block_projection`, the default; it falls back to the

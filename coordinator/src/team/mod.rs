@@ -80,7 +80,7 @@ pub struct Team {
 impl Team {
     /// Assemble from one tick's terms, into this team's buffers (the previous tick's).
     /// `expected` (sorted ids), when given, must match the robots of the tick.
-    /// `fully_actuated` sets `S = I` (the [Lin2018] comparison). Every check runs before
+    /// `fully_actuated` sets `S = I` (the \[Lin2018\] comparison). Every check runs before
     /// anything is written: on an error the team is unchanged.
     pub fn assemble_into(&mut self, tick: &[DynamicsTerms], expected: Option<&[String]>, fully_actuated: bool) -> Result<(), ControllerError> {
         if tick.is_empty() {

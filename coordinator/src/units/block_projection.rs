@@ -23,11 +23,11 @@
 //! unactuated rows, `K = (I - P_uu)^{-1}` (6 per robot):
 //! `[P S]^+ = S (P + P_{:u} K P_{u:})`, `[(I - S)(I - P)]^+ = (I - P)_{:u} K` on the
 //! unactuated columns. `I - P_uu` is block-diagonal by robots but for the grasp's 6-row
-//! coupling, so `K` is kept factored by Woodbury ([`UnactuatedInverse`]).
+//! coupling, so `K` is kept factored by Woodbury (`UnactuatedInverse`).
 //!
 //! **Operators.** `P`, `Phi` and `Mbar P = M Phi` are each "blocks minus a coupling",
 //! `diag(D_r) - S W T^T` with `S`, `T` block-diagonal (k x 6 per robot) and `W` of 6B x 6B:
-//! applied to `c` columns they cost `sum_r k^2 c + 12 B k c + 108 B c` (`W` kept factored, [`Coupling`]) instead of `n^2 c`
+//! applied to `c` columns they cost `sum_r k^2 c + 12 B k c + 108 B c` (`W` kept factored, `Coupling`) instead of `n^2 c`
 //! ([`BlockFactors::apply`]). `(J_c^T)^+` likewise ([`BlockFactors::jct_pinv_apply`]).
 //! [`BlockFactors::materialize`] forms the team-sized matrices from the same factors, for
 //! tests and reports only.

@@ -6,8 +6,8 @@
 //! `rho = (J_c^T)^+ K S Y` and
 //! `eta = (J_c^T)^+ [K (S tau_0 + J_x^T F_x) + (I - P)(Mbar (Pdot v - P h) + h)]`
 //! (see [`Projections::contact_wrench`]); `rho` is formed right to left, without `K`
-//! ([`rho_dense`]), or with the identities and the projections' operators of
-//! [`rho_by_blocks`] when the projections came from the team's blocks (no `n x n` matrix).
+//! (`rho_dense`), or with the identities and the projections' operators of
+//! `rho_by_blocks` when the projections came from the team's blocks (no `n x n` matrix).
 //! The real wrenches on the hands add the object's load distribution `G^+ F_x` (see
 //! [`super::tasks`]): `eta_real` and `lambda_real` are `eta` and `lambda` with it.
 
