@@ -13,7 +13,7 @@
 pub mod assembly;
 pub mod membership;
 
-use nalgebra::{DMatrix, DVector, Rotation3, Vector3};
+use nalgebra::{DMatrix, DVector, Rotation3, Vector3, Vector6};
 use protocol::{DynamicsTerms, FrameRole, FrameTerms};
 
 use crate::linalg::{rotation_from_row_major, zeros, zeros_v};
@@ -43,6 +43,17 @@ pub struct TeamFrame {
     /// Its robot's team columns (first, count): `jacobian` is zero outside them.
     pub cols: (usize, usize),
     pub jdot_v: DVector<f64>,
+}
+
+impl TeamFrame {
+    /// `J v`, the frame's velocity (world-aligned `[linear; angular]`; a point frame's 3 rows
+    /// first, the rest zero), by its robot's columns of the team velocity `v`.
+    pub fn velocity(&self, v: &DVector<f64>) -> Vector6<f64> {
+        let (c0, nc) = self.cols;
+        let mut out = Vector6::zeros();
+        out.rows_mut(0, self.jacobian.nrows()).gemv(1.0, &self.jacobian.columns(c0, nc), &v.rows(c0, nc), 0.0);
+        out
+    }
 }
 
 /// The team of one tick.

@@ -283,11 +283,9 @@ impl GraspTerms {
                 self.n.fixed_view_mut::<6, 6>(6 * i, 6 * j).copy_from(&blk);
             }
         }
-        let j_ee = &team.j_ee;
         zeros_v(&mut self.ee_twist, 6 * b);
         for (i, h) in team.hands.iter().enumerate() {
-            let (c0, nc) = h.cols;
-            self.ee_twist.rows_mut(6 * i, 6).gemv(1.0, &j_ee.view((6 * i, c0), (6, nc)), &team.velocity.rows(c0, nc), 0.0);
+            self.ee_twist.fixed_rows_mut::<6>(6 * i).copy_from(&h.velocity(&team.velocity));
         }
         zeros(&mut self.j_o, 6, n);
         times_hand_jacobians(team, mat(&self.g_pinv).transpose(), mat_mut(&mut self.j_o));

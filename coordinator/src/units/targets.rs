@@ -147,8 +147,5 @@ fn pose_ref(r: &PoseReference) -> PoseTarget {
 /// A 6-row frame's pose and twist `J v` (world, `[linear; angular]`).
 pub fn frame_pose(tf: &TeamFrame, velocity: &DVector<f64>) -> (Isometry3<f64>, Vector6<f64>) {
     let x = Isometry3::from_parts(Translation3::from(tf.position), UnitQuaternion::from_rotation_matrix(&tf.rotation));
-    let mut twist = Vector6::zeros();
-    let (c0, nc) = tf.cols;
-    twist.gemv(1.0, &tf.jacobian.columns(c0, nc), &velocity.rows(c0, nc), 0.0);
-    (x, twist)
+    (x, tf.velocity(velocity))
 }

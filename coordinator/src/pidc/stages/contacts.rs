@@ -50,8 +50,7 @@ pub fn contact_velocity(team: &Team, grasp: Option<&GraspTerms>, jc_v: &mut DVec
     let nf3 = 3 * team.feet.len();
     zeros_v(jc_v, team.contact_rows());
     for (k, f) in team.feet.iter().enumerate() {
-        let (c0, nc) = f.cols;
-        jc_v.rows_mut(3 * k, 3).gemv(1.0, &f.jacobian.columns(c0, nc), &team.velocity.rows(c0, nc), 0.0);
+        jc_v.rows_mut(3 * k, 3).copy_from(&f.velocity(&team.velocity).fixed_rows::<3>(0));
     }
     if let Some(g) = grasp {
         jc_v.rows_mut(nf3, g.jcee_v.len()).copy_from(&g.jcee_v);

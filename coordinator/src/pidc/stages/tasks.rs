@@ -129,8 +129,7 @@ pub fn task_torque(
     for tf in &team.swing_feet {
         let id = &team.robots[tf.robot].id;
         let (p_d, v_d, a_d) = targets.swing_foot(*refs, id, &tf.name, &tf.position);
-        let mut vel = Vector3::zeros();
-        vel.gemv(1.0, &tf.jacobian, &team.velocity, 0.0);
+        let vel: Vector3<f64> = tf.velocity(&team.velocity).fixed_rows::<3>(0).into();
         let err = point_error(&tf.position, &vel, &p_d, &v_d, &a_d);
         stack.push(&tf.jacobian, tf.cols, &tf.jdot_v, &err, &cfg.swing_gains, None)?;
     }
