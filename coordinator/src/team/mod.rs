@@ -229,7 +229,11 @@ fn check_terms(t: &DynamicsTerms) -> Result<(), ControllerError> {
 fn team_frame_into(tf: &mut TeamFrame, robot: usize, f: &FrameTerms, off: usize, n: usize) {
     let d = f.role.dim();
     let nv = f.jacobian.cols();
-    move_columns(&mut tf.jacobian, d, n, &mut tf.cols, (off, nv));
+    if tf.jacobian.shape() != (d, n) {
+        zeros(&mut tf.jacobian, d, n);
+        tf.cols = (0, 0);
+    }
+    move_columns(&mut tf.jacobian, 0, d, &mut tf.cols, (off, nv));
     for i in 0..d {
         for j in 0..nv {
             tf.jacobian[(i, off + j)] = f.jacobian.data[i * nv + j];
@@ -245,17 +249,14 @@ fn team_frame_into(tf: &mut TeamFrame, robot: usize, f: &FrameTerms, off: usize,
     tf.jdot_v.copy_from_slice(&f.jdot_v);
 }
 
-/// Make `a` a `rows x n` matrix that is zero outside `cols` (first, count), when `written`
-/// says which columns it may be non-zero on: a new shape is cleared whole, the same shape
-/// only on the columns that were written and are not `cols`. `written` becomes `cols`. The
-/// caller then writes `cols`.
-fn move_columns(a: &mut DMatrix<f64>, rows: usize, n: usize, written: &mut (usize, usize), cols: (usize, usize)) {
-    if a.shape() != (rows, n) {
-        zeros(a, rows, n);
-    } else if *written != cols {
-        a.columns_mut(written.0, written.1).fill(0.0);
+/// Rows `r0 ..+ d` of `a`, non-zero at most on the columns `written` (first, count), made
+/// zero outside `cols`: the columns written and not `cols` are cleared, and `written`
+/// becomes `cols`. The caller then writes `cols`.
+fn move_columns(a: &mut DMatrix<f64>, r0: usize, d: usize, written: &mut (usize, usize), cols: (usize, usize)) {
+    if *written != cols {
+        a.view_mut((r0, written.0), (d, written.1)).fill(0.0);
+        *written = cols;
     }
-    *written = cols;
 }
 
 /// Frames' Jacobians and `Jdot*v` stacked (`d` rows each) into `j` and `jdv`, each frame on
@@ -270,11 +271,7 @@ fn stack(frames: &[TeamFrame], d: usize, n: usize, j: &mut DMatrix<f64>, jdv: &m
     zeros_v(jdv, rows);
     for (k, f) in frames.iter().enumerate() {
         let (c0, nc) = f.cols;
-        let old = cols[k];
-        if old != f.cols {
-            j.view_mut((d * k, old.0), (d, old.1)).fill(0.0);
-            cols[k] = f.cols;
-        }
+        move_columns(j, d * k, d, &mut cols[k], f.cols);
         j.view_mut((d * k, c0), (d, nc)).copy_from(&f.jacobian.columns(c0, nc));
         jdv.rows_mut(d * k, d).copy_from(&f.jdot_v);
     }
