@@ -483,7 +483,10 @@ impl BlockFactors {
         let mut pu = DMatrix::zeros(0, 0);
         let mut act = ActuationScratch::default();
         self.unit_columns(n, &mut pu, &mut act);
-        let mut ps = &proj.p + &pu * self.k.dense(&self.robots, self.unact.len()) * pu.transpose();
+        // K itself: I K (K is symmetric).
+        let mut k = DMatrix::identity(self.unact.len(), self.unact.len());
+        self.k.right_apply(&self.robots, &mut k, &mut act);
+        let mut ps = &proj.p + &pu * k * pu.transpose();
         for &i in &self.unact {
             ps.row_mut(i).fill(0.0);
         }
@@ -742,19 +745,5 @@ impl UnactuatedInverse {
                 gemm(mat_mut(a).subcols_mut(rb.u0, 6), 1.0, 1.0, mat(&s.k_u), m6(&self.dv[r]).transpose());
             }
         }
-    }
-
-    /// `K` formed (n_u x n_u; for reports and tests, it allocates).
-    fn dense(&self, robots: &[RobotBlocks], nu: usize) -> DMatrix<f64> {
-        let mut k = DMatrix::zeros(nu, nu);
-        let mut w = DVector::zeros(nu);
-        let mut col = DVector::zeros(nu);
-        for c in 0..nu {
-            w.fill(0.0);
-            w[c] = 1.0;
-            self.apply(robots, &w, &mut col);
-            k.set_column(c, &col);
-        }
-        k
     }
 }
