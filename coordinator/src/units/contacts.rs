@@ -1,67 +1,23 @@
-//! The contacts of a tick: the constraint Jacobian `J_c = [J_cf; J_c,ee]` with its `Jdot_c v`
-//! (eq. jacobian_c), and the list of contacts the QP constrains (eqn.
-//! unilateral_and_friction_cone_constraint for feet, with eqn. moment_constraint for hands).
+//! The contacts a tick's rows constrain: every stance foot (eq.
+//! unilateral_and_friction_cone_constraint) and every hand in grasp (with eq.
+//! moment_constraint), with the robot's friction and patch scaled by the [`ContactMargins`]
+//! ([`contact_list`]), and the references' unloading ramps on the feet ([`unload_feet`]).
+//! PIDC's and MQP's QPs and the static team problem ([`crate::capacity`]) read this list.
 
 use std::collections::BTreeMap;
 
-use nalgebra::{DMatrix, DVector};
 use protocol::{FootLoad, RobotDescription};
 
-use crate::linalg::{mat, mat_mut, shape, zeros_v};
-use crate::pidc::PidcConfig;
 use crate::qp::ContactKind;
 use crate::team::Team;
-use crate::units::grasp::{times_hand_jacobians, GraspTerms};
+use crate::units::contact_margins::ContactMargins;
 use crate::ControllerError;
-
-/// `J_c = [J_cf; J_c,ee]` (eq. jacobian_c, `J_c,ee = N J_ee`, eq. jacobian_cee) and
-/// `Jdot_c v` ([`contact_drift`]) into `j_c` (`3 nf + 6 B` x n) and `jdv_c`: the stance
-/// feet's rows, then the grasp's (zero rows for the hands in grasp when there is no grasp).
-/// The block path does not need `J_c` on the tick: `Pidc` forms it only for the dense
-/// projections and the team-sized QP.
-pub fn contact_jacobian(team: &Team, grasp: Option<&GraspTerms>, j_c: &mut DMatrix<f64>, jdv_c: &mut DVector<f64>) {
-    let n = team.n;
-    let nf = team.feet.len();
-    let m = team.contact_rows();
-    // Every row is written: the feet's, then the grasp's or zeros.
-    shape(j_c, m, n);
-    j_c.rows_mut(0, 3 * nf).copy_from(&team.j_cf);
-    j_c.rows_mut(3 * nf, m - 3 * nf).fill(0.0);
-    if let Some(g) = grasp {
-        times_hand_jacobians(team, mat(&g.n), mat_mut(j_c).subrows_mut(3 * nf, g.n.nrows()));
-    }
-    contact_drift(team, grasp, jdv_c);
-}
-
-/// `Jdot_c v = [Jdot_cf v; d/dt(J_c,ee) v]` (m; zeros for the hands in grasp when there is no
-/// grasp).
-pub fn contact_drift(team: &Team, grasp: Option<&GraspTerms>, jdv_c: &mut DVector<f64>) {
-    let nf3 = 3 * team.feet.len();
-    zeros_v(jdv_c, team.contact_rows());
-    jdv_c.rows_mut(0, nf3).copy_from(&team.jdv_cf);
-    if let Some(g) = grasp {
-        jdv_c.rows_mut(nf3, g.jdv_cee.len()).copy_from(&g.jdv_cee);
-    }
-}
-
-/// `J_c v` (m) by the frames: each stance foot's Jacobian on its robot's columns, then
-/// `J_c,ee v = N J_ee v` ([`GraspTerms::jcee_v`]; zeros without a grasp).
-pub fn contact_velocity(team: &Team, grasp: Option<&GraspTerms>, jc_v: &mut DVector<f64>) {
-    let nf3 = 3 * team.feet.len();
-    zeros_v(jc_v, team.contact_rows());
-    for (k, f) in team.feet.iter().enumerate() {
-        jc_v.rows_mut(3 * k, 3).copy_from(&f.velocity(&team.velocity).fixed_rows::<3>(0));
-    }
-    if let Some(g) = grasp {
-        jc_v.rows_mut(nf3, g.jcee_v.len()).copy_from(&g.jcee_v);
-    }
-}
 
 /// The QP's contacts into `out`: `(first row in J_c, kind)` for every stance foot (friction
 /// pyramid and minimum normal force) and every hand in grasp (its contact frame's axes, the
 /// sliding-and-torsion, normal-force and centre-of-pressure rows), with the robot's friction and patch sizes
-/// scaled by the configuration's margins.
-pub fn contact_list(team: &Team, descriptions: &BTreeMap<String, RobotDescription>, cfg: &PidcConfig, out: &mut Vec<(usize, ContactKind)>) -> Result<(), ControllerError> {
+/// scaled by the `margins`.
+pub fn contact_list(team: &Team, descriptions: &BTreeMap<String, RobotDescription>, margins: &ContactMargins, out: &mut Vec<(usize, ContactKind)>) -> Result<(), ControllerError> {
     let description = |robot: usize| {
         let id = &team.robots[robot].id;
         descriptions.get(id).ok_or_else(|| ControllerError::MissingDescription { robot: id.clone() })
@@ -70,7 +26,7 @@ pub fn contact_list(team: &Team, descriptions: &BTreeMap<String, RobotDescriptio
     out.clear();
     for (k, f) in team.feet.iter().enumerate() {
         let d = description(f.robot)?;
-        out.push((3 * k, ContactKind::Foot { mu: d.foot_mu * cfg.friction_margin, f_min: cfg.f_min_foot, f_max: f64::INFINITY }));
+        out.push((3 * k, ContactKind::Foot { mu: d.foot_mu * margins.friction_margin, f_min: margins.f_min_foot, f_max: f64::INFINITY }));
     }
     for (k, h) in team.hands.iter().enumerate() {
         let d = description(h.robot)?;
@@ -81,10 +37,10 @@ pub fn contact_list(team: &Team, descriptions: &BTreeMap<String, RobotDescriptio
                 tx: rot.column(0).into(),
                 ty: rot.column(1).into(),
                 n: rot.column(2).into(),
-                mu: d.hand_mu * cfg.friction_margin,
-                xi: d.hand_xi * cfg.friction_margin,
-                half: [d.hand_half_size[0] * cfg.patch_margin, d.hand_half_size[1] * cfg.patch_margin],
-                f_min: cfg.f_min_hand,
+                mu: d.hand_mu * margins.friction_margin,
+                xi: d.hand_xi * margins.friction_margin,
+                half: [d.hand_half_size[0] * margins.patch_margin, d.hand_half_size[1] * margins.patch_margin],
+                f_min: margins.f_min_hand,
             },
         ));
     }
