@@ -1,12 +1,10 @@
 //! One full tick of the paper's controller (assembly, projections, impedance, QP) for 2, 4
 //! and 8 robots built from the real default robot. Besides criterion's estimates it prints
-//! p50/p99 of the total and of each stage over 600/N ticks. `CLARABEL_ONLY=1` solves the QP
-//! with Clarabel alone (`PidcConfig::dense_qp = false`); `DENSE_PROJECTIONS=1` computes the
-//! projections by dense SVDs of the team's matrices (`PidcConfig::dense_projections`, the
-//! formulation before the team's blocks were used, kept as the oracle). `ACTIVE_SET=1` tries the
-//! dual active-set method first (`PidcConfig::active_set_qp`, hot-started from the last tick;
-//! the default), `DENSE_IPM=1` forces it off. `TEAM_SIZED_QP=1` builds the team-sized QP on
-//! every tick (`PidcConfig::qp_by_blocks = false`): without the hot start by the robots' blocks.
+//! p50/p99 of the total and of each stage over 600/N ticks. `QP_PATH=...` chooses where the
+//! QP's solve starts (`PidcConfig::qp_path`: `by-blocks`, the default; `active-set` builds the
+//! team-sized QP on every tick, without the hot start by the robots' blocks; `dense-ipm`;
+//! `clarabel`, Clarabel alone). `PROJECTIONS=dense` computes the projections by dense SVDs of
+//! the team's matrices (`PidcConfig::projections`, the oracle; `by-blocks` is the default).
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -14,6 +12,8 @@ mod common;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 
+use coordinator::qp::QpPath;
+use coordinator::units::projection::ProjectionPath;
 use coordinator::{Pidc, PidcConfig};
 use criterion::{criterion_group, criterion_main, Criterion};
 
@@ -48,10 +48,9 @@ fn bench(c: &mut Criterion) {
     let mut fx = common::Fixture::new();
     for &count in &[2usize, 4, 8] {
         let (terms, descs) = fx.static_team(count);
-        let dense_projections = std::env::var_os("DENSE_PROJECTIONS").is_some();
-        let active_set_qp = std::env::var_os("DENSE_IPM").is_none() && (std::env::var_os("ACTIVE_SET").is_some() || PidcConfig::default().active_set_qp);
-        let qp_by_blocks = std::env::var_os("TEAM_SIZED_QP").is_none();
-        let mut ctl = Pidc::new(PidcConfig { dense_qp: std::env::var_os("CLARABEL_ONLY").is_none(), active_set_qp, dense_projections, qp_by_blocks, ..PidcConfig::default() });
+        let qp_path = std::env::var("QP_PATH").map_or(Ok(QpPath::default()), |s| s.parse()).expect("QP_PATH");
+        let projections = std::env::var("PROJECTIONS").map_or(Ok(ProjectionPath::default()), |s| s.parse()).expect("PROJECTIONS");
+        let mut ctl = Pidc::new(PidcConfig { qp_path, projections, ..PidcConfig::default() });
         for d in &descs {
             ctl.set_description(d);
         }

@@ -1,4 +1,4 @@
-//! Linear algebra of the tick: rank-revealing pseudo-inverse (DESIGN.md §4), LU inverse and
+//! Linear algebra of the tick: rank-revealing pseudo-inverse (`docs/controller.md`), LU inverse and
 //! matrix products into preallocated buffers, SO(3) maps.
 //!
 //! The team's matrices are nalgebra `DMatrix` (column-major); the decompositions run in faer

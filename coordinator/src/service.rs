@@ -15,7 +15,7 @@ use tokio::sync::watch;
 use zenoh::sample::SampleKind;
 use zenoh::Session;
 
-use crate::team::assembly::{Reuse, Reused, TickAssembler, TickOutcome};
+use crate::team::assembly::{AssemblyStatus, Reuse, Reused, TickAssembler};
 use crate::team::membership::{Admission, Roster};
 use crate::TeamController;
 
@@ -113,23 +113,7 @@ pub async fn run(
     let descriptions = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Description)?).await?;
     // A planner may send many ticks' references at once (the scenario driver does).
     let references = transport::subscribe_with_capacity(session, keys::references(&cfg.team)?, REFERENCE_QUEUE).await?;
-    let mut svc = Service {
-        session,
-        diag_pub: TypedPublisher::declare(session, keys::diagnostics(&cfg.team)?, Qos::Telemetry).await?,
-        status_pub: TypedPublisher::declare(session, keys::coordinator_status(&cfg.team)?, Qos::Telemetry).await?,
-        command_pubs: BTreeMap::new(),
-        commands: Vec::new(),
-        solved_tick: None,
-        counters: CoordinatorCounters::default(),
-        refs: ReferenceBuffer::default(),
-        roster: Roster::default(),
-        stale: Vec::new(),
-        solved_members: Vec::new(),
-        status_tick: 0,
-        detail: String::from("waiting for members"),
-        released_reported: false,
-        cfg,
-    };
+    let mut svc = Service::start(session, cfg).await?;
     tracing::info!(team = %svc.cfg.team, controller = controller.name(), reuse = ?svc.cfg.reuse, "coordinator running");
 
     let mut assembler = TickAssembler::new(svc.cfg.tick_deadline).with_reuse(svc.cfg.reuse);
@@ -149,31 +133,13 @@ pub async fn run(
             m = members_q.recv_async() => {
                 let Ok(sample) = m else { break };
                 if let Some(ev) = MemberEvent::from_sample(&sample) {
-                    team_changed = svc.roster.apply(&ev, Instant::now());
+                    team_changed = svc.member_event(&ev);
                     publish_status = true;
-                    svc.detail = match &ev {
-                        MemberEvent::Joined(r) => format!("robot {r} joined"),
-                        MemberEvent::Left(r) if svc.roster.is_departing(r) => format!("robot {r}'s token vanished: waiting for its link to come back"),
-                        MemberEvent::Left(r) => svc.left(r),
-                    };
                 }
             }
             d = descriptions.recv_async() => {
                 let Ok(sample) = d else { break };
-                match decode_sample::<RobotDescription>(&sample) {
-                    Ok(desc) => {
-                        // Agents repeat their description every second: log the first only.
-                        if described.insert(desc.header.robot_id().to_string()) {
-                            tracing::info!(robot = desc.header.robot_id(), "robot description received");
-                            // Readiness may have changed: say so now (a lockstep bridge waits for it).
-                            publish_status = true;
-                        } else {
-                            tracing::debug!(robot = desc.header.robot_id(), "robot description received again");
-                        }
-                        controller.set_description(&desc);
-                    }
-                    Err(e) => tracing::warn!(key = %sample.key_expr(), "rejected description: {e}"),
-                }
+                publish_status |= description(&sample, &mut described, controller.as_mut());
             }
             r = references.recv_async() => {
                 let Ok(sample) = r else { break };
@@ -188,10 +154,7 @@ pub async fn run(
                 }
             }
             _ = sleep_until(departure), if departure.is_some() => {
-                for r in svc.roster.depart_due(Instant::now()) {
-                    team_changed = true;
-                    svc.detail = svc.left(&r);
-                }
+                team_changed |= svc.depart_due();
                 publish_status = true;
             }
             _ = sleep_until(reuse_at), if reuse_at.is_some() => {
@@ -200,20 +163,12 @@ pub async fn run(
                 publish_status |= solved;
             }
             _ = housekeeping.tick() => {
-                for (tick, missing) in assembler.expire(svc.roster.team()) {
-                    svc.counters.deadline_misses += 1;
-                    tracing::warn!(tick, ?missing, "tick abandoned: terms missing at the deadline");
-                }
+                svc.expire(&mut assembler);
                 publish_status = true;
             }
         }
         if team_changed {
-            // A robot that left (or went silent) no longer holds up the ticks it had not sent.
-            for tick in assembler.pending_ticks() {
-                if let TickOutcome::Complete(t, terms) = assembler.try_complete(tick, svc.roster.team()) {
-                    svc.solve(controller.as_mut(), t, terms, &references, Vec::new()).await?;
-                }
-            }
+            svc.team_changed(&mut assembler, controller.as_mut(), &references).await?;
             publish_status = true;
         }
         if publish_status {
@@ -224,6 +179,28 @@ pub async fn run(
     Ok(svc.counters)
 }
 
+/// A robot's description arrived in `sample`: handed to the controller; whether it is the
+/// robot's first (readiness may have changed: the status says so now, a lockstep bridge waits
+/// for it). Agents repeat their description every second: only the first is logged.
+fn description(sample: &zenoh::sample::Sample, described: &mut std::collections::BTreeSet<String>, controller: &mut dyn TeamController) -> bool {
+    match decode_sample::<RobotDescription>(sample) {
+        Ok(desc) => {
+            let first = described.insert(desc.header.robot_id().to_string());
+            if first {
+                tracing::info!(robot = desc.header.robot_id(), "robot description received");
+            } else {
+                tracing::debug!(robot = desc.header.robot_id(), "robot description received again");
+            }
+            controller.set_description(&desc);
+            first
+        }
+        Err(e) => {
+            tracing::warn!(key = %sample.key_expr(), "rejected description: {e}");
+            false
+        }
+    }
+}
+
 /// Sleep until `at` (forever without one: the branch is disabled then).
 async fn sleep_until(at: Option<Instant>) {
     match at {
@@ -232,7 +209,69 @@ async fn sleep_until(at: Option<Instant>) {
     }
 }
 
-impl Service<'_> {
+impl<'a> Service<'a> {
+    /// The service's publishers on `session`, with nothing solved yet.
+    async fn start(session: &'a Session, cfg: CoordinatorConfig) -> Result<Service<'a>, TransportError> {
+        Ok(Service {
+            session,
+            diag_pub: TypedPublisher::declare(session, keys::diagnostics(&cfg.team)?, Qos::Telemetry).await?,
+            status_pub: TypedPublisher::declare(session, keys::coordinator_status(&cfg.team)?, Qos::Telemetry).await?,
+            command_pubs: BTreeMap::new(),
+            commands: Vec::new(),
+            solved_tick: None,
+            counters: CoordinatorCounters::default(),
+            refs: ReferenceBuffer::default(),
+            roster: Roster::default(),
+            stale: Vec::new(),
+            solved_members: Vec::new(),
+            status_tick: 0,
+            detail: String::from("waiting for members"),
+            released_reported: false,
+            cfg,
+        })
+    }
+
+    /// A member joined or its token vanished: the roster and the status's detail follow;
+    /// whether the team changed.
+    fn member_event(&mut self, ev: &MemberEvent) -> bool {
+        let changed = self.roster.apply(ev, Instant::now());
+        self.detail = match ev {
+            MemberEvent::Joined(r) => format!("robot {r} joined"),
+            MemberEvent::Left(r) if self.roster.is_departing(r) => format!("robot {r}'s token vanished: waiting for its link to come back"),
+            MemberEvent::Left(r) => self.left(r),
+        };
+        changed
+    }
+
+    /// Members whose link did not come back in time leave; whether any did.
+    fn depart_due(&mut self) -> bool {
+        let mut any = false;
+        for r in self.roster.depart_due(Instant::now()) {
+            any = true;
+            self.detail = self.left(&r);
+        }
+        any
+    }
+
+    /// Ticks whose terms are still missing at the deadline are abandoned (and counted).
+    fn expire(&mut self, assembler: &mut TickAssembler) {
+        for (tick, missing) in assembler.expire(self.roster.team()) {
+            self.counters.deadline_misses += 1;
+            tracing::warn!(tick, ?missing, "tick abandoned: terms missing at the deadline");
+        }
+    }
+
+    /// The team changed: a robot that left (or went silent) no longer holds up the ticks it
+    /// had not sent, so every pending tick complete without it is solved.
+    async fn team_changed(&mut self, assembler: &mut TickAssembler, controller: &mut dyn TeamController, references: &transport::SampleQueue) -> Result<(), TransportError> {
+        for tick in assembler.pending_ticks() {
+            if let AssemblyStatus::Complete(t, terms) = assembler.try_complete(tick, self.roster.team()) {
+                self.solve(controller, t, terms, references, Vec::new()).await?;
+            }
+        }
+        Ok(())
+    }
+
     /// Take `first` and, once a tick is complete, the terms already queued: only the newest
     /// complete tick is returned for solving (a coordinator that fell behind in real time
     /// catches up instead of sending commands too old to apply). Terms of robots outside the
@@ -264,14 +303,14 @@ impl Service<'_> {
                 let before = self.roster.team().len();
                 let fresh = assembler.last_completed().is_none_or(|t| tick > t);
                 let outcome = match self.roster.admit(&robot, controller.ready(&robot), fresh) {
-                    Admission::Stale => TickOutcome::Stale(tick),
+                    Admission::Stale => AssemblyStatus::Stale(tick),
                     Admission::NotAMember => {
                         // Its terms can beat its liveliness token: it is told to hold its
                         // posture this tick rather than left waiting for a command.
                         self.counters.rejected_terms += 1;
                         tracing::warn!(robot = %robot, tick, "dynamics from a robot that is not a member (no liveliness token): it holds its posture this tick");
                         self.hold_one(&robot, tick, "not a member").await?;
-                        TickOutcome::Pending
+                        AssemblyStatus::Pending
                     }
                     Admission::Hold(why) => {
                         team_changed |= self.roster.team().len() != before;
@@ -279,26 +318,26 @@ impl Service<'_> {
                         // The tick goes on without it (admitted, it is in from the next tick);
                         // a tick solved already needs nothing more: the hold order answered it.
                         match assembler.hold(&robot, tick, self.roster.team()) {
-                            TickOutcome::Stale(_) => TickOutcome::Pending,
+                            AssemblyStatus::Stale(_) => AssemblyStatus::Pending,
                             outcome => outcome,
                         }
                     }
                     Admission::Team => assembler.add(terms, self.roster.team()),
                 };
                 match outcome {
-                    TickOutcome::Complete(tick, terms) => {
+                    AssemblyStatus::Complete(tick, terms) => {
                         if let Some((old, _)) = newest.replace((tick, terms)) {
                             self.counters.overtaken += 1;
                             tracing::debug!(tick = old, newer = tick, "complete tick overtaken by a newer one: not solved");
                         }
                     }
-                    TickOutcome::Stale(t) => {
+                    AssemblyStatus::Stale(t) => {
                         tracing::debug!(tick = t, "dynamics terms of a tick solved already");
                         if assembler.last_completed() == Some(t) {
                             self.answer_again(&robot, t).await?;
                         }
                     }
-                    TickOutcome::Pending => {}
+                    AssemblyStatus::Pending => {}
                 }
             }
             next = if newest.is_some() { queue.try_recv().ok().flatten() } else { None };
@@ -395,7 +434,7 @@ impl Service<'_> {
                             self.detail = format!("robot {r} silent since before tick {tick}: solving without it");
                         }
                     }
-                    if let TickOutcome::Complete(t, terms) = assembler.try_complete(tick, self.roster.team()) {
+                    if let AssemblyStatus::Complete(t, terms) = assembler.try_complete(tick, self.roster.team()) {
                         self.solve(controller, t, terms, references, Vec::new()).await?;
                         return Ok((true, team_changed));
                     }

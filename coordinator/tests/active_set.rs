@@ -12,8 +12,8 @@
 mod common;
 
 use common::{moving_ticks, nonnegative_least_squares, robot_id, Case, Fixture};
-use coordinator::pidc::TickReport;
-use coordinator::qp::{self, DualActiveSet, QpInput, QpProblem, QpSettings, QpSolver, QpWorkspace};
+use coordinator::pidc::MaterializedTick;
+use coordinator::qp::{self, DualActiveSet, QpInput, QpPath, QpProblem, QpSettings, QpSolver, QpWorkspace};
 use coordinator::{Pidc, PidcConfig};
 use nalgebra::{DMatrix, DVector};
 use protocol::{DynamicsTerms, QpStatus};
@@ -21,17 +21,17 @@ use rand::Rng;
 
 /// The QP's data of a tick, from its report (`eta_real = lambda_real - lambda + eta`).
 struct Data {
-    r: TickReport,
+    r: MaterializedTick,
     eta: DVector<f64>,
 }
 
 impl Data {
-    fn new(r: &TickReport) -> Self {
+    fn new(r: &MaterializedTick) -> Self {
         Data { eta: &r.lambda_real - &r.lambda + &r.eta, r: r.clone() }
     }
     fn input(&self) -> QpInput<'_> {
         let r = &self.r;
-        QpInput { y: &r.y, rho: &r.rho, eta: &self.eta, contacts: &r.contacts, actuated: &r.actuated, limits: &r.limits, tau0: &r.tau0, regularisation: 1e-6, dense_first: true }
+        QpInput { y: &r.y, rho: &r.rho, eta: &self.eta, contacts: &r.contacts, actuated: &r.actuated, limits: &r.limits, tau0: &r.tau0, regularisation: 1e-6 }
     }
 }
 
@@ -131,16 +131,17 @@ fn active_set_matches_clarabel_cold_and_hot_on_teams_of_2_3_4_and_8_robots() {
     let (mut cold, mut hot, mut hot_fast, mut skipped) = (Worst::default(), Worst::default(), 0, 0);
     let settings = QpSettings::default();
     for &(robots, seed, swing, grasp) in &cases {
-        let mut c = Pidc::new(PidcConfig { dense_qp: false, ..PidcConfig::default() });
+        let mut c = Pidc::new(PidcConfig { qp_path: QpPath::Clarabel, ..PidcConfig::default() });
         for k in 0..robots {
             c.set_description(&fx.description(&robot_id(k)));
         }
         let mut solver = DualActiveSet::default();
         let mut ws = QpWorkspace::default();
         for (t, tick) in ticks(&mut fx, robots, seed, swing, grasp).iter().enumerate() {
-            let d = Data::new(c.compute(tick).expect("tick"));
+            c.compute(tick).expect("tick");
+            let d = Data::new(&c.materialized().expect("tick"));
             let mut fc = DVector::zeros(0);
-            let oracle = qp::solve_with(&mut ws, &d.input(), &QpSettings::new(50, false), &mut fc);
+            let oracle = qp::solve_with(&mut ws, &d.input(), &QpSettings::new(50, QpPath::Clarabel), &mut fc);
             let p = ws.problem();
             let mut f = DVector::zeros(0);
             let out = solver.solve_problem(p, &settings, &mut f);
@@ -177,16 +178,17 @@ fn active_set_matches_clarabel_cold_and_hot_on_teams_of_2_3_4_and_8_robots() {
 fn infeasible_and_non_finite_problems_keep_their_statuses() {
     let mut fx = Fixture::new();
     let tick = ticks(&mut fx, 2, 5, false, true).swap_remove(0);
-    let mut c = Pidc::new(PidcConfig { dense_qp: false, ..PidcConfig::default() });
+    let mut c = Pidc::new(PidcConfig { qp_path: QpPath::Clarabel, ..PidcConfig::default() });
     for k in 0..2 {
         c.set_description(&fx.description(&robot_id(k)));
     }
-    let mut d = Data::new(c.compute(&tick).expect("tick"));
+    c.compute(&tick).expect("tick");
+    let mut d = Data::new(&c.materialized().expect("tick"));
     // Joints that can give almost no torque: the load cannot be carried.
     d.r.limits.iter_mut().for_each(|l| *l = 1e-3);
     d.r.tau0.fill(0.0);
     let (mut ws, mut f) = (QpWorkspace::default(), DVector::zeros(0));
-    let oracle = qp::solve_with(&mut ws, &d.input(), &QpSettings::new(50, false), &mut f);
+    let oracle = qp::solve_with(&mut ws, &d.input(), &QpSettings::new(50, QpPath::Clarabel), &mut f);
     let ours = qp::solve_with(&mut ws, &d.input(), &QpSettings::default(), &mut f);
     let mut solver = DualActiveSet::default();
     let alone = solver.solve_problem(ws.problem(), &QpSettings::default(), &mut f);
@@ -208,9 +210,9 @@ fn infeasible_and_non_finite_problems_keep_their_statuses() {
 
 #[test]
 fn the_controller_sends_the_same_torques_with_each_qp_path_over_moving_ticks() {
-    // 4 and 8 robots, 20 ticks of a moving team: the active set (`active_set_qp`), the dense
-    // interior-point method first (`active_set_qp = false`) and Clarabel alone (`dense_qp =
-    // false`). Prints each path's QP time (median and worst over the ticks after the first).
+    // 4 and 8 robots, 20 ticks of a moving team: the active set (`QpPath::ActiveSet`), the
+    // dense interior-point method first (`QpPath::DenseIpm`) and Clarabel alone
+    // (`QpPath::Clarabel`). Prints each path's QP time (median and worst over the ticks after the first).
     let mut fx = Fixture::new();
     for robots in [4, 8] {
         moving_team(&mut fx, robots);
@@ -222,7 +224,7 @@ fn moving_team(fx: &mut Fixture, robots: usize) {
     let nv = fx.robot.model.nv;
     let qs: Vec<DVector<f64>> = (0..robots).map(|k| fx.perturbed_q(k, robots, 0.05, &mut rng)).collect();
     let vs: Vec<DVector<f64>> = (0..robots).map(|_| DVector::from_fn(nv, |i, _| if i < 6 { 0.0 } else { rng.random_range(-0.2..0.2) })).collect();
-    let configs = [PidcConfig { active_set_qp: true, qp_by_blocks: false, ..PidcConfig::default() }, PidcConfig { active_set_qp: false, ..PidcConfig::default() }, PidcConfig { dense_qp: false, ..PidcConfig::default() }];
+    let configs = [PidcConfig { qp_path: QpPath::ActiveSet, ..PidcConfig::default() }, PidcConfig { qp_path: QpPath::DenseIpm, ..PidcConfig::default() }, PidcConfig { qp_path: QpPath::Clarabel, ..PidcConfig::default() }];
     let mut cs: Vec<Pidc> = configs.into_iter().map(Pidc::new).collect();
     for c in &mut cs {
         for k in 0..robots {

@@ -152,11 +152,11 @@ fn four_robots_allocate_nothing_either() {
 
 #[test]
 fn the_active_set_path_allocates_nothing_either() {
-    // The dual active-set method (`active_set_qp`): a cold first tick, hot ticks after it, and
+    // The dual active-set method (`qp_path = QpPath::ActiveSet`): a cold first tick, hot ticks after it, and
     // a contact set that changes (cold again on the new shape).
     let mut fx = Fixture::new();
     let (mut terms, descs) = fx.static_team(2);
-    let mut l = Loop::with(&descs, PidcConfig { active_set_qp: true, qp_by_blocks: false, ..PidcConfig::default() });
+    let mut l = Loop::with(&descs, PidcConfig { qp_path: coordinator::qp::QpPath::ActiveSet, ..PidcConfig::default() });
     l.run(&mut terms, 2);
     let steady = l.run(&mut terms, 10);
     assert_eq!(l.c.last().map(|r| r.qp.solver), Some("active-set"));

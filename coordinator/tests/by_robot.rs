@@ -6,7 +6,7 @@ mod common;
 
 use common::{robot_id, Fixture, TEAM};
 use coordinator::pidc::stages::by_robot::{decoupled, ByRobotScratch};
-use coordinator::qp::{self, QpInput, QpSettings, QpWorkspace};
+use coordinator::qp::{self, QpInput, QpPath, QpSettings, QpWorkspace};
 use coordinator::{Pidc, PidcConfig, TeamController};
 use nalgebra::{DVector, UnitQuaternion, Vector3};
 use protocol::{DynamicsTerms, FootLoad, Header, Pose, PoseReference, QpStatus, RobotDescription, TaskReferences, TorqueCommand, TorsoReference};
@@ -128,11 +128,11 @@ fn blocks_solved_alone_give_the_team_qps_optimum() {
         let (terms, descs) = free_team(&mut fx, count, seed);
         let mut c = controller(&descs, &no_references());
         c.compute(&terms).expect("tick");
-        let r = c.last().expect("tick");
+        let r = c.materialized().expect("tick");
         assert!(r.fallback.is_none(), "{count} robots standing: the team's QP is solved");
         // Without a grasp the real wrenches' offset is eta itself (no hand carries G^+ F_x).
-        let inp = QpInput { y: &r.y, rho: &r.rho, eta: &r.eta, contacts: &r.contacts, actuated: &r.actuated, limits: &r.limits, tau0: &r.tau0, regularisation: PidcConfig::default().regularisation, dense_first: true };
-        let settings = QpSettings::new(200, true);
+        let inp = QpInput { y: &r.y, rho: &r.rho, eta: &r.eta, contacts: &r.contacts, actuated: &r.actuated, limits: &r.limits, tau0: &r.tau0, regularisation: PidcConfig::default().regularisation };
+        let settings = QpSettings::new(200, QpPath::ByBlocks);
         let (mut f_team, mut f_blocks) = (DVector::zeros(0), DVector::zeros(0));
         let team = qp::solve_with(&mut QpWorkspace::default(), &inp, &settings, &mut f_team);
         assert_eq!(team.status, QpStatus::Solved);

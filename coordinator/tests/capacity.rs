@@ -29,7 +29,7 @@ fn static_solution_balances_each_robot_and_the_object() {
     let mut fx = Fixture::new();
     let (terms, descs, centre) = pair(&mut fx);
     let cfg = PidcConfig::default();
-    let problem = StaticProblem::build(&terms, &descs, &cfg, centre).expect("problem");
+    let problem = StaticProblem::build(&terms, &descs, &cfg.contact_margins(), centre).expect("problem");
     let mass = 1.0;
     let sol = problem.solve(mass).expect("1 kg is held");
     assert!(sol.equality_residual < 1e-8 && sol.worst_limit < 1e-6, "{} {}", sol.equality_residual, sol.worst_limit);
@@ -88,7 +88,7 @@ fn static_solution_balances_each_robot_and_the_object() {
 fn fifty_kilograms_is_refused_naming_a_robot_and_a_joint() {
     let mut fx = Fixture::new();
     let (terms, descs, centre) = pair(&mut fx);
-    let problem = StaticProblem::build(&terms, &descs, &PidcConfig::default(), centre).expect("problem");
+    let problem = StaticProblem::build(&terms, &descs, &PidcConfig::default().contact_margins(), centre).expect("problem");
     let Err(CapacityError::Infeasible { mass, binding }) = problem.solve(50.0) else { panic!("50 kg must be refused") };
     assert_eq!(mass, 50.0);
     assert!(binding.windows(2).all(|w| w[0].over >= w[1].over), "largest first");
@@ -105,7 +105,7 @@ fn fifty_kilograms_is_refused_naming_a_robot_and_a_joint() {
 fn capacity_bisection_is_monotone() {
     let mut fx = Fixture::new();
     let (terms, descs, centre) = pair(&mut fx);
-    let problem = StaticProblem::build(&terms, &descs, &PidcConfig::default(), centre).expect("problem");
+    let problem = StaticProblem::build(&terms, &descs, &PidcConfig::default().contact_margins(), centre).expect("problem");
     let cap = problem.capacity(1e-3).expect("capacity");
     assert!(cap.mass > 1.0 && cap.infeasible_at - cap.mass <= 1e-3, "{cap:?}");
     assert!(!cap.binding.is_empty());
@@ -117,7 +117,7 @@ fn capacity_bisection_is_monotone() {
     }
     // Relaxing the margins can only add forces: the capacity does not drop.
     let relaxed = PidcConfig { friction_margin: 1.0, patch_margin: 1.0, f_min_hand: 0.0, ..PidcConfig::default() };
-    let wide = StaticProblem::build(&terms, &descs, &relaxed, centre).expect("problem").capacity(1e-3).expect("capacity");
+    let wide = StaticProblem::build(&terms, &descs, &relaxed.contact_margins(), centre).expect("problem").capacity(1e-3).expect("capacity");
     assert!(wide.mass >= cap.mass - 1e-3, "{} vs {}", wide.mass, cap.mass);
 }
 
@@ -126,22 +126,22 @@ fn bad_input_gives_typed_errors() {
     let mut fx = Fixture::new();
     let (terms, descs, centre) = pair(&mut fx);
     let cfg = PidcConfig::default();
-    let problem = StaticProblem::build(&terms, &descs, &cfg, centre).expect("problem");
+    let problem = StaticProblem::build(&terms, &descs, &cfg.contact_margins(), centre).expect("problem");
     assert!(matches!(problem.solve(f64::NAN), Err(CapacityError::InvalidMass(m)) if m.is_nan()));
     assert!(matches!(problem.solve(-1.0), Err(CapacityError::InvalidMass(_))));
     assert!(matches!(problem.capacity(0.0), Err(CapacityError::Input(_))));
-    assert!(matches!(StaticProblem::build(&terms, &descs, &cfg, Vector3::new(f64::NAN, 0.0, 0.0)), Err(CapacityError::Input(_))));
+    assert!(matches!(StaticProblem::build(&terms, &descs, &cfg.contact_margins(), Vector3::new(f64::NAN, 0.0, 0.0)), Err(CapacityError::Input(_))));
     // No hand in grasp.
     let nv = fx.robot.model.nv;
     let open = ContactSet { hand_in_grasp: false, ..ContactSet::all_stance(&fx.robot) };
     let free: Vec<_> = (0..2).map(|k| fx.terms_with(&robot_id(k), &fx.standing_q(k, 2), &DVector::zeros(nv), 1, &open)).collect();
-    assert!(matches!(StaticProblem::build(&free, &descs, &cfg, centre), Err(CapacityError::NoHands)));
+    assert!(matches!(StaticProblem::build(&free, &descs, &cfg.contact_margins(), centre), Err(CapacityError::NoHands)));
     // Moving: h is not g(q).
     let mut v = DVector::zeros(nv);
     v[8] = 0.3;
     let mut moving = terms.clone();
     moving[1] = fx.terms(&robot_id(1), &fx.standing_q(1, 2), &v, 1);
-    assert!(matches!(StaticProblem::build(&moving, &descs, &cfg, centre), Err(CapacityError::NotAtRest { robot }) if robot == "r2"));
+    assert!(matches!(StaticProblem::build(&moving, &descs, &cfg.contact_margins(), centre), Err(CapacityError::NotAtRest { robot }) if robot == "r2"));
     // A robot without its description.
-    assert!(matches!(StaticProblem::build(&terms, &descs[..1], &cfg, centre), Err(CapacityError::Team(_))));
+    assert!(matches!(StaticProblem::build(&terms, &descs[..1], &cfg.contact_margins(), centre), Err(CapacityError::Team(_))));
 }

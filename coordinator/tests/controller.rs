@@ -225,7 +225,7 @@ fn static_team_holds_the_object() {
     assert_eq!(r.qp.status, QpStatus::Solved, "{:?}", r.fallback);
     assert_eq!(cmds.len(), 2);
     assert!(cmds.iter().all(|c| c.tau.len() == 18));
-    let (wc, wt) = worst_violation(r);
+    let (wc, wt) = worst_violation(&r);
     println!("QP {:?} in {} iterations, {} rows; worst constraint violation {wc:.2e} N, worst torque excess {wt:.2e} Nm", r.qp.status, r.qp.iterations, r.qp.rows);
     assert!(wc < 1e-5 && wt < 1e-5);
     // Net hand wrench on the object balances its weight: hands push with -lambda.
@@ -267,7 +267,7 @@ fn static_team_holds_the_object() {
     // The dense interior-point method and Clarabel agree on the same QP.
     let solver = r.qp.solver;
     let tau_a = r.tau.clone();
-    let mut cc = controller(&descs, PidcConfig { dense_qp: false, ..PidcConfig::default() });
+    let mut cc = controller(&descs, PidcConfig { qp_path: coordinator::qp::QpPath::Clarabel, ..PidcConfig::default() });
     cc.set_references(&refs);
     let rc = cc.compute(&terms).expect("tick");
     let d_tau = (&rc.tau - &tau_a).amax();
@@ -358,21 +358,23 @@ fn contact_set_changes_and_more_robots() {
     let cs = ContactSet { stance: vec![false, true, true, true], hand_in_grasp: true };
     terms[0] = fx.terms_with("r1", &q, &DVector::zeros(nv), 1, &cs);
     let mut c = controller(&descs, PidcConfig::default());
-    let r = c.compute(&terms).expect("tick");
+    c.compute(&terms).expect("tick");
+    let r = c.materialized().expect("tick");
     assert_eq!(r.team.feet.len(), 7);
     assert_eq!(r.team.swing_feet.len(), 1);
     assert_eq!(r.j_c.nrows(), 21 + 12);
     println!("swing foot: QP {:?}", r.qp.status);
     // Back to all stance: the next tick reassembles.
     let (terms, _) = fx.static_team(2);
-    let r = c.compute(&terms).expect("tick");
+    c.compute(&terms).expect("tick");
+    let r = c.materialized().expect("tick");
     assert_eq!(r.j_c.nrows(), 36);
     // 4 robots on a circle.
     let (terms, descs) = fx.static_team(4);
     let mut c = controller(&descs, PidcConfig::default());
     let mut out = Vec::new();
     c.solve(&terms, &mut out).expect("tick");
-    let r = c.last().expect("last");
+    let r = c.materialized().expect("last");
     println!("4 robots: n {} m {} QP {:?} rows {} in {:.0} us", r.team.n, r.j_c.nrows(), r.qp.status, r.qp.rows, r.timing.total_us);
     assert_eq!(out.len(), 4);
 }
@@ -485,7 +487,7 @@ fn the_constraint_residual_is_the_norm_of_the_constraints_velocity() {
         let reported = c.diagnostics().expect("diagnostics").constraint_residual;
         // J_c as formed for this tick (the block path reports J_c v without forming it).
         let r = c.materialized().expect("last");
-        assert!(r.j_c_formed);
+        assert!(c.contact_matrices().j_c_formed);
         let (j, v) = (&r.j_c, &r.team.velocity);
         let written_out = (0..j.nrows()).map(|i| (0..j.ncols()).map(|k| j[(i, k)] * v[k]).sum::<f64>().powi(2)).sum::<f64>().sqrt();
         println!("moving {moving}: |J_c v| {written_out:.6e}, reported {reported:.6e}");

@@ -7,6 +7,7 @@
 mod common;
 
 use common::{robot_id, Fixture};
+use coordinator::units::contact_margins::ContactMargins;
 use coordinator::{Mqp, MqpConfig, Pidc, PidcConfig};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3, Vector6};
 use protocol::conventions::GRAVITY_VECTOR;
@@ -167,7 +168,7 @@ fn mqp_solution_satisfies_the_team_dynamics_to_1e_8() {
 /// `|t_x . m| <= delta_y f_n`, `|t_y . m| <= delta_x f_n`;
 /// `|tau_j| <= tau_max,j`. Friction and patch sizes scaled by the margins both controllers
 /// share. Returns the largest excess (<= 0 when every limit holds).
-fn limit_excess(terms: &[DynamicsTerms], descs: &[RobotDescription], cfg: &PidcConfig, w: &[f64], tau: &[f64]) -> f64 {
+fn limit_excess(terms: &[DynamicsTerms], descs: &[RobotDescription], cfg: &ContactMargins, w: &[f64], tau: &[f64]) -> f64 {
     let mut excess = f64::NEG_INFINITY;
     let mut check = |value: f64, bound: f64| excess = excess.max(value - bound);
     let mut row = 0;
@@ -215,7 +216,7 @@ fn with_the_same_state_both_controllers_keep_the_contact_wrenches_and_torques_in
     for seed in 10..13 {
         states.push(random_team(&mut fx, seed, 0.05, 0.05));
     }
-    let shared = MqpConfig::default().contact_parameters();
+    let shared = MqpConfig::default().contact_margins();
     for (k, (terms, descs)) in states.iter().enumerate() {
         let mut pidc = Pidc::new(PidcConfig::default());
         descs.iter().for_each(|d| pidc.set_description(d));

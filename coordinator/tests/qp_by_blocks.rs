@@ -1,5 +1,5 @@
 //! The QP's hot start by the robots' blocks (`qp::BlockHotStart`, on by default) against the
-//! team-sized QP in `F` (the oracle, `PidcConfig::qp_by_blocks = false`), on random moving
+//! team-sized QP in `F` (the oracle, `PidcConfig::qp_path = QpPath::ActiveSet`), on random moving
 //! team states of 2, 3, 4 and 8 robots of the real default robot, with a swing foot, with
 //! the hands free and fully actuated:
 //!
@@ -19,8 +19,8 @@
 mod common;
 
 use common::{moving_ticks, nonnegative_least_squares, robot_id, Case, Fixture};
-use coordinator::pidc::TickReport;
-use coordinator::qp::{self, QpInput, QpProblem};
+use coordinator::pidc::MaterializedTick;
+use coordinator::qp::{self, QpInput, QpPath, QpProblem};
 use coordinator::{Pidc, PidcConfig};
 use nalgebra::{DMatrix, DVector};
 
@@ -35,7 +35,7 @@ const CASES: [Case; 7] = [
 ];
 
 fn controller(fx: &Fixture, case: Case, by_blocks: bool) -> Pidc {
-    let mut c = Pidc::new(PidcConfig { qp_by_blocks: by_blocks, fully_actuated: case.fully_actuated, ..PidcConfig::default() });
+    let mut c = Pidc::new(PidcConfig { qp_path: if by_blocks { QpPath::ByBlocks } else { QpPath::ActiveSet }, fully_actuated: case.fully_actuated, ..PidcConfig::default() });
     for k in 0..case.robots {
         c.set_description(&fx.description(&robot_id(k)));
     }
@@ -47,9 +47,9 @@ fn rel(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
 }
 
 /// The assembled QP in `F` of a report whose `Y` and `rho` are formed, without `eps |F|^2`.
-fn problem(r: &TickReport) -> QpProblem {
+fn problem(r: &MaterializedTick) -> QpProblem {
     let eta_real = &r.lambda_real - &r.lambda + &r.eta;
-    let inp = QpInput { y: &r.y, rho: &r.rho, eta: &eta_real, contacts: &r.contacts, actuated: &r.actuated, limits: &r.limits, tau0: &r.tau0, regularisation: 0.0, dense_first: true };
+    let inp = QpInput { y: &r.y, rho: &r.rho, eta: &eta_real, contacts: &r.contacts, actuated: &r.actuated, limits: &r.limits, tau0: &r.tau0, regularisation: 0.0 };
     let mut p = QpProblem::default();
     p.assemble(&inp);
     p

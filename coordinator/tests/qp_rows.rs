@@ -21,7 +21,7 @@
 mod common;
 
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SecondOrderConeT, SolverStatus, ZeroConeT};
-use coordinator::qp::{self, constraints_into, contact_rows, ContactKind, DenseIpm, QpInput, QpSettings, QpSolver, QpWorkspace, DENSE_TOL};
+use coordinator::qp::{self, constraints_into, contact_rows, ContactKind, DenseIpm, QpInput, QpPath, QpSettings, QpSolver, QpWorkspace, DENSE_TOL};
 use coordinator::PidcConfig;
 use nalgebra::{DMatrix, DVector, Rotation3, UnitQuaternion, Vector3, Vector4};
 use rand::rngs::StdRng;
@@ -460,7 +460,6 @@ impl Problem {
             limits: &self.limits,
             tau0: &self.tau0,
             regularisation: 1e-6,
-            dense_first: true,
         }
     }
 
@@ -573,7 +572,7 @@ fn paired_torque_rows_in_the_dense_ipm_give_clarabels_solution() {
     const MIN_SOLVED: usize = 36;
     let mut rng = StdRng::seed_from_u64(4);
     let mut ws = QpWorkspace::default();
-    let clarabel_only = QpSettings::new(50, false);
+    let clarabel_only = QpSettings::new(50, QpPath::Clarabel);
     let (mut worst_clarabel, mut worst_unpaired, mut binding, mut solved) = (0.0f64, 0.0f64, 0, 0);
     let cases = 40;
     for case in 0..cases {
@@ -585,7 +584,7 @@ fn paired_torque_rows_in_the_dense_ipm_give_clarabels_solution() {
         let problem = ws.problem();
         let mut paired = DenseIpm::default();
         let mut f_dense = DVector::zeros(0);
-        let out = paired.solve_problem(problem, &QpSettings::new(50, true), &mut f_dense);
+        let out = paired.solve_problem(problem, &QpSettings::new(50, QpPath::ByBlocks), &mut f_dense);
         if out.status != protocol::QpStatus::Solved {
             println!("case {case}: dense IPM {:?} after {} iterations (Clarabel finishes such ticks)", out.status, out.iterations);
             continue;
@@ -625,7 +624,7 @@ fn least_violation_gives_up_the_grasp_before_the_joints() {
     ];
     let tau0 = DVector::<f64>::zeros(1);
     let (actuated, limits) = (vec![0usize], vec![10.0]);
-    let input = QpInput { y: &y, rho: &rho, eta: &eta, contacts: &contacts, actuated: &actuated, limits: &limits, tau0: &tau0, regularisation: 1e-6, dense_first: true };
+    let input = QpInput { y: &y, rho: &rho, eta: &eta, contacts: &contacts, actuated: &actuated, limits: &limits, tau0: &tau0, regularisation: 1e-6 };
     let solve = |hard: f64| {
         let mut ws = QpWorkspace::default();
         let mut f = DVector::zeros(m);

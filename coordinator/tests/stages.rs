@@ -9,12 +9,14 @@ mod common;
 use std::collections::BTreeMap;
 
 use common::{robot_id, Fixture};
-use coordinator::pidc::stages::contacts::{contact_jacobian, contact_list, contact_velocity};
-use coordinator::pidc::stages::limits::{torque_limits, UNBOUNDED_BASE_LIMIT};
-use coordinator::pidc::stages::tasks::{object_load, task_torque, MotionSpaceTerms, TaskInput, Targets};
+use coordinator::pidc::stages::tasks::{task_torque, MotionSpaceTerms, TaskTorqueInput, Targets};
 use coordinator::pidc::stages::torque::{compose, motion_torque, Clamp, MotionTorqueScratch};
 use coordinator::pidc::stages::wrench::{contact_map, contact_wrenches, Actuation, ContactMapScratch, MapInput, WrenchInput};
 use coordinator::pidc::TickReport;
+use coordinator::units::contact_jacobian::{contact_jacobian, contact_velocity};
+use coordinator::units::contacts::contact_list;
+use coordinator::units::limits::{torque_limits, UNBOUNDED_BASE_LIMIT};
+use coordinator::units::object_load::object_load;
 use coordinator::qp::ContactKind;
 use coordinator::team::Team;
 use coordinator::units::grasp::{GraspTerms, GraspTracker, PlannedHand};
@@ -173,7 +175,7 @@ fn contact_list_scales_each_robots_friction_and_patch_by_the_margins() {
     team.assemble_into(&terms, None, false).expect("team");
     let cfg = PidcConfig { friction_margin: 0.5, patch_margin: 0.25, f_min_foot: 7.0, f_min_hand: 11.0, ..PidcConfig::default() };
     let mut out = Vec::new();
-    contact_list(&team, &by_id, &cfg, &mut out).expect("contacts");
+    contact_list(&team, &by_id, &cfg.contact_margins(), &mut out).expect("contacts");
     assert_eq!(out.len(), 8 + 2);
     let d = &descs[0];
     for (k, (row, kind)) in out.iter().take(8).enumerate() {
@@ -195,7 +197,7 @@ fn contact_list_scales_each_robots_friction_and_patch_by_the_margins() {
         assert_eq!(*half, [d.hand_half_size[0] * 0.25, d.hand_half_size[1] * 0.25]);
     }
     let one: BTreeMap<_, _> = by_id.into_iter().take(1).collect();
-    assert!(matches!(contact_list(&team, &one, &cfg, &mut out), Err(ControllerError::MissingDescription { .. })));
+    assert!(matches!(contact_list(&team, &one, &cfg.contact_margins(), &mut out), Err(ControllerError::MissingDescription { .. })));
 }
 
 #[test]
@@ -363,7 +365,7 @@ fn task_torque_is_the_stacked_impedance_law_written_out() {
     let (_, _, mut c) = moving_team(&mut fx, 5);
     let r = c.materialized().expect("tick");
     let cfg = PidcConfig::default();
-    let refs = displaced_references(r);
+    let refs = displaced_references(&r);
     let (team, proj, g) = (&r.team, &r.proj, r.grasp.as_ref().expect("grasp"));
     let n = team.n;
 
@@ -371,7 +373,7 @@ fn task_torque_is_the_stacked_impedance_law_written_out() {
     motion.compute_into(proj, team);
     let p_bias = &proj.p * &team.bias - &proj.pdot_v;
     assert!(relv(&motion.mcinv_bias, &(&proj.mc_inv * &p_bias)) < 1e-12);
-    let inp = TaskInput { team, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view(proj) };
+    let inp = TaskTorqueInput { team, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view(proj) };
     let (mut tau_m, mut load, mut f_x) = (DVector::zeros(0), DVector::zeros(0), Vector6::zeros());
     task_torque(&inp, &mut Targets::default(), &mut TaskStack::default(), &mut tau_m, &mut load, &mut f_x).expect("tau_M");
     // The same by the dense projections (formed by `materialized`), in a stack whose buffers
@@ -384,7 +386,7 @@ fn task_torque_is_the_stacked_impedance_law_written_out() {
     swapped.torsos.reverse();
     let (mut tau_m_dense, mut load_dense, mut f_x_dense) = (DVector::zeros(0), DVector::zeros(0), Vector6::zeros());
     for t in [&swapped, team] {
-        let inp = TaskInput { team: t, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view(&dense) };
+        let inp = TaskTorqueInput { team: t, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view(&dense) };
         task_torque(&inp, &mut Targets::default(), &mut stack, &mut tau_m_dense, &mut load_dense, &mut f_x_dense).expect("tau_M, dense");
     }
 

@@ -1,5 +1,5 @@
 //! The projections by the team's blocks (`units::block_projection`, the default) against the
-//! dense SVDs of the team's matrices (`PidcConfig::dense_projections`, the oracle): the same
+//! dense SVDs of the team's matrices (`PidcConfig::projections = ProjectionPath::Dense`, the oracle): the same
 //! `P`, `J_c^+`, `M_c^{-1}`, `[P S]^+`, `B` (the block path's operators applied to the
 //! identity), the same motion torque `tau_M` (the operational-space inertia by the operator
 //! and Cholesky against the dense matrices and an SVD), QP data (`tau_0`, `Y`, `rho`, `eta`),
@@ -11,8 +11,8 @@
 mod common;
 
 use common::{robot_id, Case, Fixture};
-use coordinator::pidc::TickReport;
-use coordinator::units::projection::WrenchScratch;
+use coordinator::pidc::MaterializedTick;
+use coordinator::units::projection::{ProjectionPath, WrenchScratch};
 use coordinator::{Pidc, PidcConfig};
 use nalgebra::{DMatrix, DVector};
 use protocol::DynamicsTerms;
@@ -28,7 +28,7 @@ fn rel(a: &[f64], b: &[f64]) -> f64 {
 }
 
 fn controller(fx: &Fixture, case: Case, dense: bool) -> Pidc {
-    let mut c = Pidc::new(PidcConfig { dense_projections: dense, fully_actuated: case.fully_actuated, ..PidcConfig::default() });
+    let mut c = Pidc::new(PidcConfig { projections: if dense { ProjectionPath::Dense } else { ProjectionPath::ByBlocks }, fully_actuated: case.fully_actuated, ..PidcConfig::default() });
     for k in 0..case.robots {
         c.set_description(&fx.description(&robot_id(k)));
     }
@@ -53,15 +53,15 @@ fn team_states(fx: &mut Fixture, case: Case) -> [Vec<DynamicsTerms>; 2] {
 /// The largest relative difference of the block path's tick from the dense path's over the
 /// projections, the QP's data and the torque map `tau = tau_0 + Y F_c` (at the dense path's
 /// `F_c`), with its name.
-fn compare(blocks: &TickReport, dense: &TickReport) -> (f64, &'static str) {
+fn compare(blocks: &MaterializedTick, dense: &MaterializedTick) -> (f64, &'static str) {
     let (a, b) = (&blocks.proj, &dense.proj);
     assert!(a.by_blocks && !b.by_blocks, "the block path declined");
     assert_eq!(a.jc_rank, b.jc_rank, "rank of J_c");
     let m = |x: &DMatrix<f64>| x.as_slice().to_vec();
     let v = |x: &DVector<f64>| x.as_slice().to_vec();
-    let torque = |r: &TickReport| &r.tau0 + &r.y * &dense.f_c;
+    let torque = |r: &MaterializedTick| &r.tau0 + &r.y * &dense.f_c;
     // eq. constraint_force for one torque (the sent one of the dense path), by each path.
-    let wrench = |r: &TickReport| {
+    let wrench = |r: &MaterializedTick| {
         let u = dense.tau.component_mul(&r.team.s_diag) + &r.load;
         let mut out = DVector::zeros(0);
         r.proj.contact_wrench(&r.team, &u, &mut out, &mut WrenchScratch::default());
@@ -114,9 +114,11 @@ fn agree_on_tick(blocks: &mut Pidc, dense: &mut Pidc, tick: &[DynamicsTerms], wh
     // The block path forms no team-sized matrix on the tick (only its factors), nor J_c when
     // the QP's blocks answered.
     assert!(on_tick.proj.p.is_empty() && on_tick.proj.mc_inv.is_empty() && on_tick.proj.mbar.is_empty(), "{what}: an n x n matrix on the block path's tick");
-    assert!(on_tick.qp.solver != coordinator::qp::by_blocks::SOLVER || !on_tick.j_c_formed, "{what}: J_c formed on a tick the blocks answered");
+    let solver = on_tick.qp.solver;
+    assert!(solver != coordinator::qp::by_blocks::SOLVER || !blocks.contact_matrices().j_c_formed, "{what}: J_c formed on a tick the blocks answered");
     let b = blocks.materialized().expect("block tick").clone();
-    let d = dense.compute(tick).expect("dense tick");
+    dense.compute(tick).expect("dense tick");
+    let d = &dense.materialized().expect("dense tick");
     assert_eq!(b.qp.status, d.qp.status, "{what}");
     let (err, quantity) = compare(&b, d);
     let sent = rel(b.tau.as_slice(), d.tau.as_slice());

@@ -87,7 +87,7 @@ pub fn start_terms(world: &WorldSpec, robots: &[Arc<Robot>]) -> Result<(Vec<Dyna
 pub fn static_problem(world: &WorldSpec, robots: &[Arc<Robot>], cfg: &PidcConfig) -> Result<StaticProblem, CheckError> {
     let object = world.object.ok_or(CheckError::NoObject)?;
     let (terms, descs) = start_terms(world, robots)?;
-    Ok(StaticProblem::build(&terms, &descs, cfg, Vector3::from(object.position))?)
+    Ok(StaticProblem::build(&terms, &descs, &cfg.contact_margins(), Vector3::from(object.position))?)
 }
 
 /// The statics of a plan's start pose from one solve of the static team problem: with

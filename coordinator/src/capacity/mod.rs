@@ -1,7 +1,7 @@
 //! Payload capacity: the static team problem at a pose (every robot at rest, `v = 0`).
 //!
 //! Given one tick's dynamics terms of the team at rest (so `h = g(q)`), the robots'
-//! descriptions and the controller's [`PidcConfig`] (margins and minimum forces), find contact
+//! descriptions and the controller's [`ContactMargins`] (margins and minimum forces), find contact
 //! wrenches `lambda` (3 per stance foot, 6 per hand in grasp, world-aligned, acting ON the
 //! robot, the real hand wrenches) such that
 //!
@@ -14,8 +14,8 @@
 //!   object pushes each palm with `-lambda_k`);
 //! * every contact keeps the controller's rows (eqn. unilateral_and_friction_cone_constraint,
 //!   eqn. moment_constraint) with the controller's margins and minimum forces: the rows are
-//!   [`crate::qp::contact_rows`] of [`crate::pidc::stages::contacts::contact_list`], the torque
-//!   limits [`crate::pidc::stages::limits::torque_limits`], `G` [`crate::units::grasp::GraspTerms`].
+//!   [`crate::qp::contact_rows`] of [`crate::units::contacts::contact_list`], the torque
+//!   limits [`crate::units::limits::torque_limits`], `G` [`crate::units::grasp::GraspTerms`].
 //!
 //! At rest the controller's QP has no task acceleration to produce, so any `lambda` it may
 //! choose must satisfy this problem: a scenario this problem refuses, the controller's QP
@@ -41,4 +41,4 @@ pub use report::{BindingLimit, CapacityError};
 pub use solve::{Capacity, Relaxed, StaticSolution, CAPACITY_TOLERANCE, FEASIBILITY_TOL, REACHED_TOL};
 
 #[cfg(doc)]
-use crate::PidcConfig;
+use crate::units::contact_margins::ContactMargins;

@@ -9,11 +9,12 @@ use protocol::conventions::GRAVITY_VECTOR;
 use protocol::{DynamicsTerms, RobotDescription};
 
 use super::report::CapacityError;
-use crate::pidc::stages::{contacts::contact_list, limits::torque_limits};
 use crate::qp::{contact_rows, ContactKind, FRICTION_SIGNS};
 use crate::team::Team;
+use crate::units::contact_margins::ContactMargins;
+use crate::units::contacts::contact_list;
 use crate::units::grasp::GraspTerms;
-use crate::PidcConfig;
+use crate::units::limits::torque_limits;
 
 /// Largest joint speed taken as rest, rad/s or m/s: the terms' `h` is then `g(q)`.
 pub const REST_SPEED: f64 = 1e-9;
@@ -109,12 +110,13 @@ pub struct StaticProblem {
 
 impl StaticProblem {
     /// Build from one tick's terms of the team at rest, the robots' descriptions and the
-    /// controller's configuration (margins, minimum forces), the object's centre at `centre`.
-    pub fn build(terms: &[DynamicsTerms], descriptions: &[RobotDescription], cfg: &PidcConfig, centre: Vector3<f64>) -> Result<Self, CapacityError> {
+    /// controller's contact parameters (margins, minimum forces, e.g. `PidcConfig::contact_margins`),
+    /// the object's centre at `centre`.
+    pub fn build(terms: &[DynamicsTerms], descriptions: &[RobotDescription], margins: &ContactMargins, centre: Vector3<f64>) -> Result<Self, CapacityError> {
         if centre.iter().any(|x| !x.is_finite()) {
             return Err(CapacityError::Input(format!("object centre {centre:?} must be finite")));
         }
-        cfg.check()?;
+        margins.check()?;
         let mut team = Team::default();
         team.assemble_into(terms, None, false)?;
         if let Some(t) = terms.iter().find(|t| t.velocity.iter().any(|v| v.abs() > REST_SPEED)) {
@@ -126,7 +128,7 @@ impl StaticProblem {
         let descs: BTreeMap<String, RobotDescription> = descriptions.iter().map(|d| (d.header.robot_id().to_string(), d.clone())).collect();
         let (mut actuated, mut limits, mut contacts) = (Vec::new(), Vec::new(), Vec::new());
         torque_limits(&team, &descs, false, &mut actuated, &mut limits)?;
-        contact_list(&team, &descs, cfg, &mut contacts)?;
+        contact_list(&team, &descs, margins, &mut contacts)?;
         let mut j_c = DMatrix::zeros(team.contact_rows(), team.n);
         j_c.rows_mut(0, team.j_cf.nrows()).copy_from(&team.j_cf);
         j_c.rows_mut(team.j_cf.nrows(), team.j_ee.nrows()).copy_from(&team.j_ee);

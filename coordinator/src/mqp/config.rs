@@ -4,6 +4,7 @@
 
 use nalgebra::{Isometry3, Matrix3};
 
+use crate::units::contact_margins::ContactMargins;
 use crate::units::impedance::Gains;
 use crate::units::release::ReleasePolicy;
 use crate::ControllerError;
@@ -113,24 +114,19 @@ impl MqpConfig {
             ("regularisation_qdd", self.regularisation_qdd),
             ("regularisation_lambda", self.regularisation_lambda),
             ("regularisation_tau", self.regularisation_tau),
-            ("f_min_foot", self.f_min_foot),
-            ("f_min_hand", self.f_min_hand),
         ];
         for (what, x) in non_negative {
             if !(x.is_finite() && x >= 0.0) {
                 return bad(what, format!("{x} must be finite and non-negative"));
             }
         }
+        self.contact_margins().check_forces()?;
         for (what, x) in [("joint_acceleration_limit", self.joint_acceleration_limit), ("joint_velocity_limit", self.joint_velocity_limit), ("dt", self.dt)] {
             if !(x.is_finite() && x > 0.0) {
                 return bad(what, format!("{x} must be finite and positive"));
             }
         }
-        for (what, x) in [("friction_margin", self.friction_margin), ("patch_margin", self.patch_margin)] {
-            if !(x.is_finite() && x > 0.0 && x <= 1.0) {
-                return bad(what, format!("{x} must be in (0, 1]"));
-            }
-        }
+        self.contact_margins().check_margins()?;
         for h in &self.planned_grasp {
             if let Err(why) = h.check() {
                 return bad("planned_grasp", why);
@@ -145,15 +141,9 @@ impl MqpConfig {
         Ok(())
     }
 
-    /// The contact parameters in PIDC's configuration, for the shared contact rows
-    /// ([`crate::pidc::stages::contacts::contact_list`]): margins and minimum forces.
-    pub fn contact_parameters(&self) -> crate::PidcConfig {
-        crate::PidcConfig {
-            f_min_foot: self.f_min_foot,
-            f_min_hand: self.f_min_hand,
-            friction_margin: self.friction_margin,
-            patch_margin: self.patch_margin,
-            ..crate::PidcConfig::default()
-        }
+    /// The contact parameters of the shared contact rows
+    /// ([`crate::units::contacts::contact_list`]): margins and minimum forces.
+    pub fn contact_margins(&self) -> ContactMargins {
+        ContactMargins { f_min_foot: self.f_min_foot, f_min_hand: self.f_min_hand, friction_margin: self.friction_margin, patch_margin: self.patch_margin }
     }
 }

@@ -8,8 +8,9 @@
 //! joint acceleration and velocity limits, friction (a palm's sliding and torsion in one cone)
 //! and the hands' centre of pressure. Solved by Clarabel. It composes the coordinator's units: the team assembly
 //! ([`crate::team`]), the grasp ([`crate::units::grasp`]), the task errors
-//! ([`crate::units::impedance`]), the targets and object load of PIDC's task stage, the torque
-//! limits and contact list of PIDC's stages and the QP's contact rows ([`crate::qp::rows`]).
+//! ([`crate::units::impedance`]), the targets ([`crate::units::targets`]), the object's load
+//! ([`crate::units::object_load`]), the torque limits ([`crate::units::limits`]), the contact
+//! list ([`crate::units::contacts`]) and the QP's contact rows ([`crate::qp::rows`]).
 //!
 //! * [`config`]: [`MqpConfig`], task weights and gains, the object, margins, limits.
 //! * [`tasks`]: the task rows of the objective.
@@ -40,21 +41,20 @@ pub use config::MqpConfig;
 pub use report::{MqpReport, MqpTiming};
 
 use crate::linalg::zeros_v;
-use crate::pidc::stages::contacts::{contact_jacobian, contact_list, unload_feet};
-use crate::pidc::stages::limits::torque_limits;
-use crate::units::targets::Targets;
+use crate::units::contact_jacobian::contact_jacobian;
+use crate::units::contacts::{contact_list, unload_feet};
 use crate::units::grasp::GraspTracker;
-use crate::pidc::report::set_note;
-use crate::units::release::{GraspWatch, TickOutcome};
-use crate::{ControllerError, PidcConfig, TeamController};
+use crate::units::limits::torque_limits;
+use crate::units::messages::set_note;
+use crate::units::release::{GraspWatch, GraspObservation};
+use crate::units::targets::Targets;
+use crate::{ControllerError, TeamController};
 use problem::ProblemInput;
-use tasks::{task_rows, TaskInput};
+use tasks::{task_rows, TaskRowsInput};
 
 /// The multi-robot QP team controller.
 pub struct Mqp {
     pub config: MqpConfig,
-    /// The contact margins and minimum forces in the form PIDC's contact list reads.
-    contact_parameters: PidcConfig,
     descriptions: BTreeMap<String, RobotDescription>,
     expected: Option<Vec<String>>,
     references: Option<TaskReferences>,
@@ -74,7 +74,6 @@ pub struct Mqp {
 impl Mqp {
     pub fn new(config: MqpConfig) -> Self {
         Mqp {
-            contact_parameters: config.contact_parameters(),
             config,
             descriptions: BTreeMap::new(),
             expected: None,
@@ -120,7 +119,7 @@ impl Mqp {
         self.valid = false;
         let start = Instant::now();
         let us = || start.elapsed().as_secs_f64() * 1e6;
-        let Mqp { config: cfg, contact_parameters, descriptions, expected, references, targets, grasp, watch, report: r, last_tau, n_jdv, .. } = self;
+        let Mqp { config: cfg, descriptions, expected, references, targets, grasp, watch, report: r, last_tau, n_jdv, .. } = self;
         // Degrade, never collapse: once the team has let go of the object, every hand is free.
         watch.rearm(tick.iter().any(|t| t.hand_in_grasp));
         r.team.hands_released = watch.released().is_some();
@@ -140,9 +139,9 @@ impl Mqp {
             r.jdv_c.rows_mut(first, g.n.nrows()).copy_from(n_jdv);
         }
         r.object.compute_into(r.grasp.as_ref(), r.team.n, cfg.object_mass, &cfg.object_inertia);
-        let tasks = TaskInput { team: &r.team, grasp: r.grasp.as_ref(), references: references.as_ref(), config: cfg };
+        let tasks = TaskRowsInput { team: &r.team, grasp: r.grasp.as_ref(), references: references.as_ref(), config: cfg };
         task_rows(&tasks, targets, &mut r.tasks)?;
-        contact_list(&r.team, descriptions, contact_parameters, &mut r.contacts)?;
+        contact_list(&r.team, descriptions, &cfg.contact_margins(), &mut r.contacts)?;
         unload_feet(&r.team, references.as_ref().map_or(&[][..], |refs| &refs.foot_loads[..]), &mut r.contacts);
         let input = ProblemInput {
             team: &r.team,
@@ -172,7 +171,7 @@ impl Mqp {
             r.fallback = Some(fallback_torque(r, last_tau));
         }
         // Degrade, never collapse: let go of an object the team cannot hold.
-        let outcome = TickOutcome::of(tick[0].header.tick, &r.team, r.grasp.as_ref(), r.fallback.is_some());
+        let outcome = GraspObservation::of(tick[0].header.tick, &r.team, r.grasp.as_ref(), r.fallback.is_some());
         set_note(&mut r.release, watch.after_tick(&cfg.release, outcome, &r.team, r.grasp.as_ref(), targets, grasp));
         r.timing = MqpTiming { build_us: t_build, solve_us: r.outcome.solve_us, total_us: us() };
         self.valid = true;

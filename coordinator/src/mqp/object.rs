@@ -9,12 +9,12 @@
 //!
 //! with `M_o = diag(m I, R I_o R^T)` and `b_o = [-m g; omega x I omega]`. The real wrench on
 //! hand `i` is `lambda_ee,i + (G^+ F_x)_i = lambda_ee,i - (G^+ M_o J_o qdd)_i - (G^+ c_o)_i`,
-//! `c_o = M_o Jdot_o v + b_o` (see `pidc::stages::tasks` for the load's distribution).
+//! `c_o = M_o Jdot_o v + b_o` (see [`crate::units::object_load`] for the load's distribution).
 
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector6};
 
 use crate::linalg::{mat, product, zeros, zeros_v};
-use crate::pidc::stages::tasks::object_load;
+use crate::units::object_load::object_load;
 use crate::units::grasp::GraspTerms;
 
 /// The object's terms of one tick (all zero-sized without a grasp).

@@ -12,6 +12,7 @@ use crate::mqp::tasks::TaskRows;
 use crate::qp::ContactKind;
 use crate::team::Team;
 use crate::units::grasp::GraspTerms;
+use crate::units::messages::{set_header, set_string};
 
 /// Where the time of a tick went, µs.
 #[derive(Debug, Clone, Copy, Default)]
@@ -89,14 +90,7 @@ impl MqpReport {
             let cmd = &mut out[i];
             // The message may be last tick's hold order (the service reuses the buffer).
             cmd.hold = false;
-            cmd.header.version = protocol::PROTOCOL_VERSION;
-            set_string(&mut cmd.header.team, &t.header.team);
-            match &mut cmd.header.robot {
-                Some(old) => set_string(old, &r.id),
-                slot => *slot = Some(r.id.clone()),
-            }
-            cmd.header.tick = t.header.tick;
-            cmd.header.stamp_ns = 0;
+            set_header(&mut cmd.header, &t.header.team, Some(&r.id), t.header.tick, 0);
             cmd.tau.clear();
             cmd.tau.extend(self.tau.rows(k, r.actuated.len()).iter());
             k += r.actuated.len();
@@ -107,11 +101,7 @@ impl MqpReport {
     /// `|J_c v|`, the object estimate.
     pub fn diagnostics_into(&self, tick: &[DynamicsTerms], d: &mut TickDiagnostics) {
         let (team_id, tick_no) = tick.first().map_or(("", 0), |t| (t.header.team.as_str(), t.header.tick));
-        d.header.version = protocol::PROTOCOL_VERSION;
-        set_string(&mut d.header.team, team_id);
-        d.header.robot = None;
-        d.header.tick = tick_no;
-        d.header.stamp_ns = protocol::wall_clock_ns();
+        set_header(&mut d.header, team_id, None, tick_no, protocol::wall_clock_ns());
         let frames = self.team.feet.iter().map(|f| (f, 3)).chain(self.team.hands.iter().map(|h| (h, 6)));
         d.contacts.truncate(self.team.feet.len() + self.team.hands.len());
         let mut row = 0;
@@ -141,13 +131,5 @@ impl MqpReport {
         d.object_estimate = self.grasp.as_ref().map(|g| protocol::Pose { position: g.object.translation.vector.into(), orientation: quat_wxyz(&g.object.rotation.to_rotation_matrix()) });
         d.grasp_slip = self.grasp.as_ref().map_or(0.0, |g| g.fit_residual);
         d.fallback.clone_from(if self.fallback.is_some() { &self.fallback } else { &self.release });
-    }
-}
-
-/// `s = value`, keeping `s`'s buffer.
-fn set_string(s: &mut String, value: &str) {
-    if s != value {
-        s.clear();
-        s.push_str(value);
     }
 }

@@ -1,5 +1,5 @@
-//! The MQP solved by Clarabel (sparse, interior point; certifies infeasibility), and the
-//! fallback torque when it fails.
+//! The MQP solved by Clarabel (sparse, interior point; certifies infeasibility) through the
+//! coordinator's one Clarabel call ([`crate::qp::clarabel::run`]).
 //!
 //! **Allocations.** The problem's dense and CSC matrices are kept between ticks
 //! ([`super::problem`]); Clarabel's `DefaultSolver::new` builds its KKT system, factorisation
@@ -8,12 +8,12 @@
 
 use std::time::Instant;
 
-use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus, ZeroConeT};
+use ::clarabel::solver::{NonnegativeConeT, ZeroConeT};
 use nalgebra::DVector;
 use protocol::QpStatus;
 
-use crate::linalg::zeros_v;
 use crate::mqp::problem::MqpProblem;
+use crate::qp::clarabel::{self, Accept, ConicProblem};
 
 /// The solve's outcome (the solution is written to the caller's vector).
 #[derive(Debug, Clone, Copy)]
@@ -30,17 +30,6 @@ impl Default for SolveOutcome {
     }
 }
 
-/// Clarabel's status in the protocol's terms.
-fn status(s: SolverStatus) -> QpStatus {
-    match s {
-        SolverStatus::Solved => QpStatus::Solved,
-        SolverStatus::AlmostSolved => QpStatus::AlmostSolved,
-        SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible | SolverStatus::DualInfeasible | SolverStatus::AlmostDualInfeasible => QpStatus::Infeasible,
-        SolverStatus::MaxIterations | SolverStatus::MaxTime => QpStatus::MaxIterations,
-        _ => QpStatus::NumericalError,
-    }
-}
-
 /// Solve `problem` with Clarabel into `x` (sized to the problem). `x` is written only when the
 /// status is `Solved` or `AlmostSolved` and the point is finite; otherwise it is left as it was.
 pub fn solve(problem: &MqpProblem, max_iter: u32, x: &mut DVector<f64>) -> SolveOutcome {
@@ -52,20 +41,12 @@ pub fn solve(problem: &MqpProblem, max_iter: u32, x: &mut DVector<f64>) -> Solve
         return SolveOutcome { status: QpStatus::NumericalError, iterations: 0, solve_us: us() };
     }
     let cones = [ZeroConeT(l.eq), NonnegativeConeT(l.ineq)];
-    let settings = DefaultSettings::<f64> { verbose: false, max_iter, presolve_enable: false, ..DefaultSettings::default() };
-    let Ok(mut solver) = DefaultSolver::new(&problem.p_csc, problem.q.as_slice(), &problem.a_csc, problem.b.as_slice(), &cones, settings) else {
+    let conic = ConicProblem { p: &problem.p_csc, q: problem.q.as_slice(), a: &problem.a_csc, b: problem.b.as_slice(), cones: &cones };
+    let Some(run) = clarabel::run(&conic, max_iter, Accept::Solved, x) else {
         return SolveOutcome { status: QpStatus::NumericalError, iterations: 0, solve_us: us() };
     };
-    solver.solve();
-    let sol = &solver.solution;
-    let st = status(sol.status);
-    if matches!(st, QpStatus::Solved | QpStatus::AlmostSolved) && sol.x.len() == l.vars() && sol.x.iter().all(|v| v.is_finite()) {
-        if x.len() != l.vars() {
-            zeros_v(x, l.vars());
-        }
-        x.copy_from_slice(&sol.x);
-        return SolveOutcome { status: st, iterations: sol.iterations, solve_us: us() };
-    }
-    let st = if matches!(st, QpStatus::Solved | QpStatus::AlmostSolved) { QpStatus::NumericalError } else { st };
-    SolveOutcome { status: st, iterations: sol.iterations, solve_us: us() }
+    // A solved status without a finite point of the right size is a numerical error.
+    let solved = matches!(run.status, QpStatus::Solved | QpStatus::AlmostSolved);
+    let status = if solved && !run.written { QpStatus::NumericalError } else { run.status };
+    SolveOutcome { status, iterations: run.iterations, solve_us: us() }
 }

@@ -48,7 +48,7 @@ impl TaskRows {
 }
 
 /// What [`task_rows`] reads.
-pub struct TaskInput<'a> {
+pub struct TaskRowsInput<'a> {
     pub team: &'a Team,
     pub grasp: Option<&'a GraspTerms>,
     pub references: Option<&'a TaskReferences>,
@@ -57,8 +57,8 @@ pub struct TaskInput<'a> {
 
 /// The tick's tasks into `rows`; also returns the object's desired acceleration (zero without
 /// a grasp), which the report keeps.
-pub fn task_rows(inp: &TaskInput, targets: &mut Targets, rows: &mut TaskRows) -> Result<Vector6<f64>, ControllerError> {
-    let TaskInput { team, grasp, references: refs, config: cfg } = inp;
+pub fn task_rows(inp: &TaskRowsInput, targets: &mut Targets, rows: &mut TaskRows) -> Result<Vector6<f64>, ControllerError> {
+    let TaskRowsInput { team, grasp, references: refs, config: cfg } = inp;
     let frames = team.torsos.iter().chain(&team.swing_feet).chain(&team.free_hands);
     let k = grasp.map_or(0, |g| g.j_o.nrows()) + frames.map(|t| t.jacobian.nrows()).sum::<usize>();
     rows.begin(k, team.n);

@@ -3,7 +3,10 @@
 
 use nalgebra::{Isometry3, Matrix3};
 
+use crate::qp::QpPath;
+use crate::units::contact_margins::ContactMargins;
 use crate::units::impedance::Gains;
+use crate::units::projection::ProjectionPath;
 use crate::units::release::ReleasePolicy;
 use crate::ControllerError;
 
@@ -49,28 +52,19 @@ pub struct PidcConfig {
     /// Added to the diagonal of the semi-definite QP objective.
     pub regularisation: f64,
     pub qp_max_iter: u32,
-    /// Solve the QP with the dense interior-point method first, Clarabel when it does not
-    /// converge (or always Clarabel when false). See `qp::DenseIpm`.
-    pub dense_qp: bool,
-    /// With `dense_qp`: try the dual active-set method (`qp::DualActiveSet`, hot-started from
-    /// the previous tick's active rows) before the dense interior-point method: the same
-    /// forces to the interior point's tolerance, 7 times faster for eight robots. On by
-    /// default since the release lets go at half its slip limit once the QP has failed 10
-    /// ticks in a row (`units::release::SLIP_WHILE_FAILING`, `SLIP_WHILE_FAILING_TICKS`):
-    /// before that, `tests/tests/degrade.rs`'s
-    /// 300 N push kept the team standing only with the interior point's 1e-7 answers.
-    pub active_set_qp: bool,
-    /// With `dense_qp` and `active_set_qp`: first try the last tick's active rows by the robots' blocks
-    /// (`qp::BlockHotStart`, the QP in the wrenches' change `z = rho F`, linear in the team),
-    /// before `Y`, `rho` and the team-sized QP are built; the same torques to the solvers'
-    /// tolerance (`tests/qp_by_blocks.rs`). Off: every tick builds the team-sized QP.
-    pub qp_by_blocks: bool,
+    /// Where the QP's solve starts, falling back down the chain `by-blocks -> active-set ->
+    /// dense-ipm -> clarabel` ([`QpPath`]). The default, `by-blocks`, tries the last tick's
+    /// active rows by the robots' blocks first; the dual active-set method it falls back to
+    /// (and that the release relies on: it lets go at half its slip limit once the QP has
+    /// failed 10 ticks in a row, `units::release::SLIP_WHILE_FAILING`) kept
+    /// `tests/tests/degrade.rs`'s 300 N push standing as the interior point's 1e-7 answers do.
+    pub qp_path: QpPath,
     /// `S = I` (treat the base as actuated): the \[Lin2018\] comparison only.
     pub fully_actuated: bool,
-    /// Compute the projections by dense SVDs of the team's matrices (the oracle) instead of
-    /// by the team's blocks (`units::block_projection`, the default; it falls back to the
-    /// dense path by itself when a block is too ill-conditioned).
-    pub dense_projections: bool,
+    /// How the projections are computed ([`ProjectionPath`]): by the team's blocks (the
+    /// default; it falls back to the dense path by itself when a block is too
+    /// ill-conditioned) or by dense SVDs of the team's matrices (the oracle).
+    pub projections: ProjectionPath,
 }
 
 impl Default for PidcConfig {
@@ -96,11 +90,9 @@ impl Default for PidcConfig {
             patch_margin: 0.5,
             regularisation: 1e-6,
             qp_max_iter: 50,
-            dense_qp: true,
-            active_set_qp: true,
-            qp_by_blocks: true,
+            qp_path: QpPath::ByBlocks,
             fully_actuated: false,
-            dense_projections: false,
+            projections: ProjectionPath::ByBlocks,
         }
     }
 }
@@ -108,7 +100,11 @@ impl Default for PidcConfig {
 impl PidcConfig {
     /// Parse a TOML controller configuration and check it.
     pub fn from_toml(text: &str) -> Result<Self, ControllerError> {
-        let c: PidcConfig = toml::from_str(text).map_err(|e| ControllerError::Config(e.to_string()))?;
+        let table: toml::Table = toml::from_str(text).map_err(|e| ControllerError::Config(e.to_string()))?;
+        if let Some(why) = retired_key(&table) {
+            return Err(ControllerError::Config(why));
+        }
+        let c: PidcConfig = toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| ControllerError::Config(e.to_string()))?;
         c.check()?;
         Ok(c)
     }
@@ -116,6 +112,12 @@ impl PidcConfig {
     /// The TOML text of this configuration.
     pub fn to_toml(&self) -> Result<String, ControllerError> {
         toml::to_string(self).map_err(|e| ControllerError::Config(e.to_string()))
+    }
+
+    /// The contact parameters of the contact rows ([`crate::units::contacts::contact_list`]):
+    /// margins and minimum forces.
+    pub fn contact_margins(&self) -> ContactMargins {
+        ContactMargins { f_min_foot: self.f_min_foot, f_min_hand: self.f_min_hand, friction_margin: self.friction_margin, patch_margin: self.patch_margin }
     }
 
     /// Gains of the right sizes, finite and non-negative; masses, forces and limits sane.
@@ -129,16 +131,11 @@ impl PidcConfig {
         if !(self.object_mass.is_finite() && self.object_mass >= 0.0) || self.object_inertia.iter().any(|x| !x.is_finite()) {
             return bad("object", "mass and inertia must be finite, mass non-negative".into());
         }
-        for (what, x) in [("f_min_foot", self.f_min_foot), ("f_min_hand", self.f_min_hand), ("regularisation", self.regularisation)] {
-            if !(x.is_finite() && x >= 0.0) {
-                return bad(what, format!("{x} must be finite and non-negative"));
-            }
+        self.contact_margins().check_forces()?;
+        if !(self.regularisation.is_finite() && self.regularisation >= 0.0) {
+            return bad("regularisation", format!("{} must be finite and non-negative", self.regularisation));
         }
-        for (what, x) in [("friction_margin", self.friction_margin), ("patch_margin", self.patch_margin)] {
-            if !(x.is_finite() && x > 0.0 && x <= 1.0) {
-                return bad(what, format!("{x} must be in (0, 1]"));
-            }
-        }
+        self.contact_margins().check_margins()?;
         for h in &self.planned_grasp {
             if let Err(why) = h.check() {
                 return bad("planned_grasp", why);
@@ -152,4 +149,19 @@ impl PidcConfig {
         }
         Ok(())
     }
+}
+
+/// Keys the configuration no longer has, and what took their place: the four booleans that
+/// chose among the contact forces' paths are now two named choices.
+const RETIRED_KEYS: [(&str, &str); 4] = [
+    ("dense_qp", "`qp_path` (`dense_qp = false` is `qp_path = \"clarabel\"`)"),
+    ("active_set_qp", "`qp_path` (`active_set_qp = false` is `qp_path = \"dense-ipm\"`)"),
+    ("qp_by_blocks", "`qp_path` (`qp_by_blocks = false` is `qp_path = \"active-set\"`)"),
+    ("dense_projections", "`projections` (`dense_projections = true` is `projections = \"dense\"`)"),
+];
+
+/// What is wrong with a PIDC table that holds a retired key: the key that replaced it (a
+/// retired key is refused, not taken for an unknown field, and never ignored).
+pub fn retired_key(table: &toml::Table) -> Option<String> {
+    RETIRED_KEYS.iter().find(|(old, _)| table.contains_key(*old)).map(|(old, new)| format!("`{old}` is no longer a key: use {new}"))
 }

@@ -22,26 +22,29 @@ use nalgebra::DVector;
 use protocol::{DynamicsTerms, FootLoad, QpStatus, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
 
 pub use config::PidcConfig;
-pub use report::{TickReport, Timing};
-use report::set_note;
+pub use report::{ContactMatrices, MaterializedTick, TickReport, Timing};
 
 use crate::linalg::zeros_v;
 use crate::qp::{self, QpInput, QpWorkspace};
+use crate::units::contact_jacobian::{contact_drift, contact_jacobian, contact_velocity};
+use crate::units::contacts::{contact_list, unload_feet};
 use crate::units::grasp::GraspTracker;
 use crate::units::impedance::TaskStack;
-use crate::units::projection::ProjectionWorkspace;
-use crate::units::release::{GraspWatch, TickOutcome};
+use crate::units::limits::torque_limits;
+use crate::units::messages::set_note;
+use crate::units::projection::{ProjectionPath, ProjectionWorkspace};
+use crate::units::release::{GraspWatch, GraspObservation};
 use crate::{ControllerError, TeamController};
 use stages::by_robot::{decoupled, ByRobot, ByRobotScratch};
-use stages::contacts::{contact_drift, contact_jacobian, contact_list, contact_velocity, unload_feet};
-use stages::limits::torque_limits;
-use stages::tasks::{task_torque, MotionSpaceTerms, TaskInput, Targets};
+use stages::tasks::{task_torque, MotionSpaceTerms, TaskTorqueInput, Targets};
 use stages::torque::{compose, fallback, motion_torque, saturate, Clamp, MotionTorqueScratch};
 use stages::wrench::{contact_map, contact_offset, contact_wrenches, Actuation, ContactMapScratch, MapInput, WrenchInput};
 
-/// Scratch of a tick that the report does not keep: each stage's workspace.
+/// Scratch of a tick that the report does not keep: each stage's workspace and the contact
+/// map's matrices.
 #[derive(Default)]
 struct Workspace {
+    contact: ContactMatrices,
     proj: ProjectionWorkspace,
     motion: MotionSpaceTerms,
     tasks: TaskStack,
@@ -120,29 +123,39 @@ impl Pidc {
         self.valid.then_some(&self.report)
     }
 
-    /// The last tick with `J_c` and its team-sized projection matrices formed
-    /// ([`Projections::materialize`]: the block path keeps only factors on the tick), and, when the QP was answered by the
-    /// robots' blocks ([`qp::BlockHotStart`]), `Y`, `rho` and an `F_c` with
+    /// The contact map's matrices as the last tick left them ([`ContactMatrices`]: formed only
+    /// on the ticks that read them).
+    pub fn contact_matrices(&self) -> &ContactMatrices {
+        &self.ws.contact
+    }
+
+    /// The last tick with `J_c`, `Y`, `rho` and its team-sized projection matrices formed
+    /// ([`Projections::materialize`]: the block path keeps only factors on the tick), and, when
+    /// the QP was answered by the robots' blocks ([`qp::BlockHotStart`]), an `F_c` with
     /// `tau = tau_0 + Y F_c` (the least-norm one, `Y^+ (tau - tau_0)`; then also
     /// `lambda = rho F_c + eta`, since `rho` and `Y` share their null space). For tests and
-    /// reports; it allocates. `None` without a completed tick, or when the SVD of `Y` fails.
+    /// reports; it allocates, and leaves the tick's report as it was. `None` without a
+    /// completed tick, or when the SVD of `Y` fails.
     ///
     /// [`Projections::materialize`]: crate::units::projection::Projections::materialize
-    pub fn materialized(&mut self) -> Option<&TickReport> {
+    pub fn materialized(&mut self) -> Option<MaterializedTick> {
         if !self.valid {
             return None;
         }
-        let r = &mut self.report;
-        form_j_c(r);
+        let ws = &mut self.ws;
+        form_j_c(&mut self.report, &mut ws.contact);
+        let c = &ws.contact;
+        let mut tick = MaterializedTick { report: self.report.clone(), j_c: c.j_c.clone(), y: c.y.clone(), rho: c.rho.clone() };
+        let MaterializedTick { report: r, j_c, y, rho } = &mut tick;
         r.proj.materialize(&r.team);
         if r.qp.solver == qp::by_blocks::SOLVER {
-            let map = MapInput { team: &r.team, proj: &r.proj, j_c: &r.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
+            let map = MapInput { team: &r.team, proj: &r.proj, j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
             let (mut eta, mut eta_real) = (DVector::zeros(0), DVector::zeros(0));
-            contact_map(&map, &mut self.ws.map, &mut r.y, &mut r.rho, &mut eta, &mut eta_real);
-            let (y_pinv, _) = crate::linalg::pinv(&r.y, crate::linalg::RANK_TOL)?;
+            contact_map(&map, &mut ws.map, y, rho, &mut eta, &mut eta_real);
+            let (y_pinv, _) = crate::linalg::pinv(y, crate::linalg::RANK_TOL)?;
             r.f_c = y_pinv * (&r.tau - &r.tau0);
         }
-        Some(&self.report)
+        Some(tick)
     }
 
     /// Run one tick: the full team torque and every intermediate, stage by stage (§III).
@@ -169,29 +182,29 @@ impl Pidc {
         // Late robots' free hands keep clear of the object the others hold.
         targets.keep_clear(&r.team, r.grasp.as_ref().map(|g| &g.object.translation.vector), cfg.release.retreat);
         // Jdot_c v and J_c v (eq. jacobian_c); J_c itself only where it is needed (form_j_c).
-        r.j_c_formed = false;
+        ws.contact.j_c_formed = false;
         contact_drift(&r.team, r.grasp.as_ref(), &mut r.jdv_c);
         contact_velocity(&r.team, r.grasp.as_ref(), &mut r.jc_v);
         let t_asm = us();
         // P, Pdot v, M_c, Mbar, [P S]^+, B (eqs. aghili_21, aghili_25, constraint_force,
         // bmatrix): by the team's blocks, or by dense SVDs of J_c when asked or when the blocks
         // decline.
-        if cfg.dense_projections || !r.proj.by_blocks_into(&mut ws.proj, &r.team, r.grasp.as_ref(), &r.jdv_c) {
-            form_j_c(r);
-            r.proj.compute_into(&mut ws.proj, &r.team, &r.j_c, &r.jdv_c)?;
+        if cfg.projections == ProjectionPath::Dense || !r.proj.by_blocks_into(&mut ws.proj, &r.team, r.grasp.as_ref(), &r.jdv_c) {
+            form_j_c(r, &mut ws.contact);
+            r.proj.compute_into(&mut ws.proj, &r.team, &ws.contact.j_c, &r.jdv_c)?;
         }
         ws.motion.compute_into(&r.proj, &r.team);
         let t_proj = us();
         // tau_M of the object, torso and swing-foot impedances (eqs. control_law,
         // joint_space_tau_M) with the object's load J_x^T F_x; tau_0 = [P S]^+ P tau_M.
-        let tasks = TaskInput { team: &r.team, grasp: r.grasp.as_ref(), references: references.as_ref(), config: cfg, motion: ws.motion.view(&r.proj) };
+        let tasks = TaskTorqueInput { team: &r.team, grasp: r.grasp.as_ref(), references: references.as_ref(), config: cfg, motion: ws.motion.view(&r.proj) };
         task_torque(&tasks, targets, &mut ws.tasks, &mut r.tau_m, &mut r.load, &mut r.f_x)?;
         motion_torque(&r.proj, &r.team.s_diag, &r.tau_m, &mut r.tau0, &mut ws.torque);
         let t_imp = us();
         let loads = references.as_ref().map_or(&[][..], |refs| &refs.foot_loads[..]);
         let (build_us, qp_us) = contact_forces(r, ws, descriptions, cfg, loads)?;
         // Degrade, never collapse: let go of an object the team cannot hold.
-        let outcome = TickOutcome::of(tick[0].header.tick, &r.team, r.grasp.as_ref(), r.fallback.is_some());
+        let outcome = GraspObservation::of(tick[0].header.tick, &r.team, r.grasp.as_ref(), r.fallback.is_some());
         set_note(&mut r.release, watch.after_tick(&cfg.release, outcome, &r.team, r.grasp.as_ref(), targets, grasp));
         r.timing = Timing {
             assembly_us: t_asm,
@@ -231,13 +244,13 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
     let (mut build_us, mut qp_us) = (0.0, 0.0);
     let mut saturated = false;
     let t_list = Instant::now();
-    contact_list(&r.team, descriptions, cfg, &mut r.contacts)?;
+    contact_list(&r.team, descriptions, &cfg.contact_margins(), &mut r.contacts)?;
     unload_feet(&r.team, loads, &mut r.contacts);
     build_us += t_list.elapsed().as_secs_f64() * 1e6;
     r.blocks_declined = None;
-    if cfg.qp_by_blocks && cfg.active_set_qp && cfg.dense_qp {
+    if cfg.qp_path.tries_blocks() {
         let t0 = Instant::now();
-        let map = MapInput { team: &r.team, proj: &r.proj, j_c: &r.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
+        let map = MapInput { team: &r.team, proj: &r.proj, j_c: &ws.contact.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
         contact_offset(&map, &mut ws.map, &mut r.eta, &mut r.lambda_real);
         let t1 = Instant::now();
         build_us += (t1 - t0).as_secs_f64() * 1e6;
@@ -247,16 +260,17 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
             return Ok((build_us, qp_us));
         }
     }
-    form_j_c(r);
+    form_j_c(r, &mut ws.contact);
     loop {
         // The contact map depends on tau_0: built again after a saturation.
         let t0 = Instant::now();
-        let map = MapInput { team: &r.team, proj: &r.proj, j_c: &r.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
-        contact_map(&map, &mut ws.map, &mut r.y, &mut r.rho, &mut r.eta, &mut r.lambda_real);
+        let c = &mut ws.contact;
+        let map = MapInput { team: &r.team, proj: &r.proj, j_c: &c.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
+        contact_map(&map, &mut ws.map, &mut c.y, &mut c.rho, &mut r.eta, &mut r.lambda_real);
         let t1 = Instant::now();
         // F_c is kept out of the report while the QP reads it (no allocation: an empty vector).
         let mut f_c = std::mem::replace(&mut r.f_c, DVector::zeros(0));
-        r.qp = qp::solve_with(&mut ws.qp, &qp_input(r, cfg), &qp_settings(cfg), &mut f_c);
+        r.qp = qp::solve_with(&mut ws.qp, &qp_input(r, &ws.contact, cfg), &qp_settings(cfg), &mut f_c);
         r.f_c = f_c;
         build_us += (t1 - t0).as_secs_f64() * 1e6;
         qp_us += t1.elapsed().as_secs_f64() * 1e6;
@@ -276,26 +290,27 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
         (r.qp, saturated) = (by.outcome, by.saturated);
         by.fallback
     } else {
-        fallback(&mut ws.qp, &qp_input(r, cfg), cfg.qp_max_iter, r.qp.status, saturated, &mut f_c)
+        fallback(&mut ws.qp, &qp_input(r, &ws.contact, cfg), cfg.qp_max_iter, r.qp.status, saturated, &mut f_c)
     };
     (r.f_c, r.fallback, r.saturated) = (f_c, fallback, saturated);
     // tau = tau_0 + Y F_c (eq. ua_solution), clamped to the limits after a fallback.
     let clamp = r.fallback.is_some().then_some(Clamp { actuated: &r.actuated, limits: &r.limits });
-    compose(&r.tau0, &r.y, &r.f_c, clamp, &mut r.tau)?;
+    compose(&r.tau0, &ws.contact.y, &r.f_c, clamp, &mut r.tau)?;
     // lambda for the torque sent (eq. relation_between_lambda_and_Fc, or eq.
     // constraint_force for a clamped torque).
     let sent = if r.fallback.is_some() { Actuation::Torque(&r.tau) } else { Actuation::ContactForces(&r.f_c) };
-    let wrench = WrenchInput { team: &r.team, proj: &r.proj, load: &r.load, rho: &r.rho, eta: &r.eta };
+    let wrench = WrenchInput { team: &r.team, proj: &r.proj, load: &r.load, rho: &ws.contact.rho, eta: &r.eta };
     contact_wrenches(&wrench, sent, &mut ws.map, &mut r.lambda, &mut r.lambda_real);
     Ok((build_us, qp_us))
 }
 
-/// `J_c = [J_cf; J_c,ee]` (eq. jacobian_c) into the report, once per tick: the dense
-/// projections, the team-sized QP and [`Pidc::materialized`] read it; the block path does not.
-fn form_j_c(r: &mut TickReport) {
-    if !r.j_c_formed {
-        contact_jacobian(&r.team, r.grasp.as_ref(), &mut r.j_c, &mut r.jdv_c);
-        r.j_c_formed = true;
+/// `J_c = [J_cf; J_c,ee]` (eq. jacobian_c) into the workspace, once per tick (with the same
+/// `Jdot_c v` into the report): the dense projections, the team-sized QP and
+/// [`Pidc::materialized`] read it; the block path does not.
+fn form_j_c(r: &mut TickReport, c: &mut ContactMatrices) {
+    if !c.j_c_formed {
+        contact_jacobian(&r.team, r.grasp.as_ref(), &mut c.j_c, &mut r.jdv_c);
+        c.j_c_formed = true;
     }
 }
 
@@ -334,32 +349,33 @@ fn solve_by_blocks(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> 
 /// still fail.
 fn by_robot(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig, f_c: &mut DVector<f64>) -> ByRobot {
     let settings = qp_settings(cfg);
-    ws.by_robot.solve(&r.team, &qp_input(r, cfg), &settings, false, f_c);
+    ws.by_robot.solve(&r.team, &qp_input(r, &ws.contact, cfg), &settings, false, f_c);
     if ws.by_robot.saturate_failed(&r.team, &mut r.tau0, &r.actuated, &r.limits) {
-        let map = MapInput { team: &r.team, proj: &r.proj, j_c: &r.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
-        contact_map(&map, &mut ws.map, &mut r.y, &mut r.rho, &mut r.eta, &mut r.lambda_real);
-        ws.by_robot.solve(&r.team, &qp_input(r, cfg), &settings, true, f_c);
+        let c = &mut ws.contact;
+        let map = MapInput { team: &r.team, proj: &r.proj, j_c: &c.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
+        contact_map(&map, &mut ws.map, &mut c.y, &mut c.rho, &mut r.eta, &mut r.lambda_real);
+        ws.by_robot.solve(&r.team, &qp_input(r, &ws.contact, cfg), &settings, true, f_c);
     }
-    ws.by_robot.finish(&r.team, &qp_input(r, cfg), &settings, f_c)
+    ws.by_robot.finish(&r.team, &qp_input(r, &ws.contact, cfg), &settings, f_c)
 }
 
-/// The QP's settings from the configuration (the active set first when it is on).
+/// The QP's settings from the configuration (its iteration limit and path).
 fn qp_settings(cfg: &PidcConfig) -> qp::QpSettings {
-    qp::QpSettings { active_set_first: cfg.active_set_qp, ..qp::QpSettings::new(cfg.qp_max_iter, cfg.dense_qp) }
+    qp::QpSettings::new(cfg.qp_max_iter, cfg.qp_path)
 }
 
-/// The QP's data from the tick's report (`lambda_real` holds `eta_real` until the QP is solved).
-fn qp_input<'a>(r: &'a TickReport, cfg: &PidcConfig) -> QpInput<'a> {
+/// The QP's data from the tick's report and contact map (`lambda_real` holds `eta_real` until
+/// the QP is solved).
+fn qp_input<'a>(r: &'a TickReport, c: &'a ContactMatrices, cfg: &PidcConfig) -> QpInput<'a> {
     QpInput {
-        y: &r.y,
-        rho: &r.rho,
+        y: &c.y,
+        rho: &c.rho,
         eta: &r.lambda_real,
         contacts: &r.contacts,
         actuated: &r.actuated,
         limits: &r.limits,
         tau0: &r.tau0,
         regularisation: cfg.regularisation,
-        dense_first: cfg.dense_qp,
     }
 }
 

@@ -1,27 +1,30 @@
-//! [`TickReport`]: everything one PIDC tick computed, kept for tests and reports, and the
-//! tick's outputs written from it (each robot's torque slice, the tick's diagnostics).
+//! [`TickReport`]: what one PIDC tick computed, kept for tests and reports, and the tick's
+//! outputs written from it (each robot's torque slice, the tick's diagnostics); the matrices
+//! a tick forms only where it reads them ([`ContactMatrices`], the controller's workspace);
+//! and a tick with every matrix formed ([`MaterializedTick`]).
+
+use std::ops::{Deref, DerefMut};
 
 use nalgebra::{DMatrix, DVector, Vector6};
 use protocol::{ContactWrench, DynamicsTerms, Header, TickDiagnostics, TorqueCommand};
 
 use crate::linalg::quat_wxyz;
+use crate::units::messages::{set_header, set_note, set_string};
 use crate::qp::{self, ContactKind};
 use crate::team::Team;
 use crate::units::grasp::GraspTerms;
 use crate::units::projection::Projections;
 
-/// Everything computed in the last tick (kept for tests and reports). It is also the tick's
-/// workspace: every matrix is overwritten in place by the next tick, so a tick allocates
-/// nothing once the team's shape is set (see [`super::Pidc::compute`]).
+/// What the last tick computed (kept for tests and reports): every field is written on every
+/// tick, none holds an earlier tick's value. Its buffers are overwritten in place by the next
+/// tick, so a tick allocates nothing once the team's shape is set (see
+/// [`super::Pidc::compute`]); the matrices a tick forms only on some paths are the
+/// workspace's ([`ContactMatrices`]).
 #[derive(Debug, Clone, Default)]
 pub struct TickReport {
     pub team: Team,
     pub grasp: Option<GraspTerms>,
-    /// `J_c` (eq. jacobian_c), formed on the ticks that read it (`j_c_formed`: the dense
-    /// projections, the team-sized QP) and by [`super::Pidc::materialized`]; on the others it
-    /// holds an earlier tick's. `Jdot_c v` is every tick's.
-    pub j_c: DMatrix<f64>,
-    pub j_c_formed: bool,
+    /// `Jdot_c v` (eq. jacobian_c).
     pub jdv_c: DVector<f64>,
     /// `J_c v`: the constraints' velocity, which a held contact keeps at zero (its norm is the
     /// diagnostics' `constraint_residual`).
@@ -34,11 +37,10 @@ pub struct TickReport {
     pub load: DVector<f64>,
     /// `F_x` at the object centre.
     pub f_x: Vector6<f64>,
-    /// `F_c`, and `rho`, `Y` below: not formed on a tick the QP's hot start by the robots'
-    /// blocks answered (`qp.solver == "blocks"`, [`qp::BlockHotStart`]): `F_c` is then zero
-    /// and `rho`, `Y` are a previous tick's; [`super::Pidc::materialized`] forms all three.
+    /// `F_c`: zero on a tick the QP's hot start by the robots' blocks answered
+    /// (`qp.solver == "blocks"`, [`qp::BlockHotStart`]), which does not form it;
+    /// [`super::Pidc::materialized`] forms one.
     pub f_c: DVector<f64>,
-    pub rho: DMatrix<f64>,
     /// `eta` of eq. relation_between_lambda_and_Fc (without the hand-load offset).
     pub eta: DVector<f64>,
     /// `lambda = rho F_c + eta`, and the real contact wrenches (hand rows + `G^+ F_x`).
@@ -46,7 +48,6 @@ pub struct TickReport {
     pub lambda_real: DVector<f64>,
     /// Full team torque (n) and the QP pieces.
     pub tau: DVector<f64>,
-    pub y: DMatrix<f64>,
     pub contacts: Vec<(usize, ContactKind)>,
     pub limits: Vec<f64>,
     pub actuated: Vec<usize>,
@@ -62,6 +63,45 @@ pub struct TickReport {
     /// ([`crate::units::release`]); `None` while the grasp holds.
     pub release: Option<String>,
     pub timing: Timing,
+}
+
+/// The contact map's matrices, formed on the ticks that read them and kept between ticks (part
+/// of the controller's workspace, not of the tick's result): `J_c` (eq. jacobian_c; the dense
+/// projections and the team-sized QP read it, `j_c_formed` says whether this tick formed it),
+/// `Y = B J_c^T` and `rho` (eq. relation_between_lambda_and_Fc; not formed on a tick the hot
+/// start by the robots' blocks answered). [`super::Pidc::materialized`] forms all three.
+#[derive(Debug, Clone, Default)]
+pub struct ContactMatrices {
+    pub j_c: DMatrix<f64>,
+    pub j_c_formed: bool,
+    pub y: DMatrix<f64>,
+    pub rho: DMatrix<f64>,
+}
+
+/// The last tick with every matrix formed ([`super::Pidc::materialized`], for tests and
+/// reports; it allocates): the tick's report (its projections materialized; on a tick answered
+/// by the robots' blocks, the least-norm `F_c` with `tau = tau_0 + Y F_c`), and `J_c`, `Y`,
+/// `rho` of that tick. Reads as a [`TickReport`] too.
+#[derive(Debug, Clone)]
+pub struct MaterializedTick {
+    pub report: TickReport,
+    pub j_c: DMatrix<f64>,
+    pub y: DMatrix<f64>,
+    pub rho: DMatrix<f64>,
+}
+
+impl Deref for MaterializedTick {
+    type Target = TickReport;
+
+    fn deref(&self) -> &TickReport {
+        &self.report
+    }
+}
+
+impl DerefMut for MaterializedTick {
+    fn deref_mut(&mut self) -> &mut TickReport {
+        &mut self.report
+    }
 }
 
 /// Where the time of a tick went, µs.
@@ -131,33 +171,4 @@ impl TickReport {
         d.grasp_slip = self.grasp.as_ref().map_or(0.0, |g| g.fit_residual);
         set_note(&mut d.fallback, self.fallback.as_deref().or(self.release.as_deref()));
     }
-}
-
-/// `note = value`, keeping `note`'s buffer.
-pub(crate) fn set_note(note: &mut Option<String>, value: Option<&str>) {
-    match (value, note) {
-        (None, n) => *n = None,
-        (Some(v), Some(n)) => set_string(n, v),
-        (Some(v), n) => *n = Some(v.to_string()),
-    }
-}
-
-/// `s = value`, keeping `s`'s buffer.
-fn set_string(s: &mut String, value: &str) {
-    if s != value {
-        s.clear();
-        s.push_str(value);
-    }
-}
-
-/// A header's fields set in place (no new strings when they are unchanged).
-fn set_header(h: &mut Header, team: &str, robot: Option<&str>, tick: u64, stamp_ns: u64) {
-    h.version = protocol::PROTOCOL_VERSION;
-    set_string(&mut h.team, team);
-    match (robot, &mut h.robot) {
-        (Some(r), Some(old)) => set_string(old, r),
-        (r, old) => *old = r.map(str::to_string),
-    }
-    h.tick = tick;
-    h.stamp_ns = stamp_ns;
 }

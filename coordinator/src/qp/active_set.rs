@@ -175,6 +175,9 @@ impl DualActiveSet {
         self.warm_shape = shape;
     }
 
+    /// The Goldfarb–Idnani iterations on `problem`: the hot answer when the last active rows
+    /// still are the optimum, else from the unconstrained minimum (or the last active rows) add
+    /// the most violated row until every row holds.
     fn run(&mut self, problem: &QpProblem, settings: &QpSettings) -> Result<(), ActiveSetError> {
         let (a, b) = (&problem.a, &problem.b);
         let (rows, n) = a.shape();
@@ -190,68 +193,16 @@ impl DualActiveSet {
             self.hot = true;
             return Ok(());
         }
-        self.x.as_mut_slice().fill(0.0);
-        self.u.as_mut_slice().fill(0.0);
-        self.r.as_mut_slice().fill(0.0);
-        self.invert();
-        // Row norms, by columns (A is column-major).
-        self.norms.as_mut_slice().fill(0.0);
-        for c in 0..n {
-            for (nm, v) in self.norms.iter_mut().zip(a.column(c).iter()) {
-                *nm += v * v;
-            }
-        }
-        for nm in self.norms.iter_mut() {
-            *nm = nm.sqrt();
-        }
-        // Hot start: the previous active rows, then drop negative multipliers.
+        self.cold_start(a);
         if hot {
             self.hot = true;
-            for w in 0..self.warm.len() {
-                let i = self.warm[w];
-                if i >= rows || self.active.len() >= n {
-                    continue;
-                }
-                self.set_np(a, i);
-                self.d.gemv_tr(1.0, &self.j, &self.np, 0.0);
-                let q = self.active.len();
-                let d2 = self.d.rows(q, n - q).norm();
-                // Skip rows (nearly) dependent on those already in.
-                if d2 > 1e-9 * self.d.norm() {
-                    self.add(i);
-                }
-            }
-            self.equality_point(b);
-            while let Some(k) = (0..self.active.len()).filter(|&k| self.u[k] < 0.0).min_by(|&p, &q| self.u[p].total_cmp(&self.u[q])) {
-                self.drop(k);
-                self.equality_point(b);
-            }
+            self.start_from_warm(a, b);
         }
         let max_iter = settings.active_set_max_iter;
         let mut refined = false;
         loop {
             // Step 1: the most violated row (by distance, |a_i| scaled).
-            self.s.copy_from(b);
-            self.s.gemv(-1.0, a, &self.x, 1.0);
-            let mut p = None;
-            let mut worst = 0.0;
-            for i in 0..rows {
-                let si = self.s[i];
-                if !si.is_finite() {
-                    return Err(ActiveSetError::NonFinite);
-                }
-                if si < -tol * (1.0 + b[i].abs()) {
-                    if self.norms[i] == 0.0 {
-                        return Err(ActiveSetError::Infeasible { row: i });
-                    }
-                    let v = -si / self.norms[i];
-                    if v > worst {
-                        worst = v;
-                        p = Some(i);
-                    }
-                }
-            }
-            let Some(p) = p else {
+            let Some(p) = self.most_violated(a, b, tol)? else {
                 // Every row holds: recompute the point from the factors, check it once more.
                 self.equality_point(b);
                 if !refined {
@@ -264,77 +215,163 @@ impl DualActiveSet {
             if self.iterations >= max_iter {
                 return Err(ActiveSetError::IterationLimit(self.iterations));
             }
-            self.set_np(a, p);
-            let mut u_p = 0.0;
-            // Step 2: move until row p holds (it enters) or a multiplier reaches 0 (it leaves).
-            loop {
-                self.iterations += 1;
-                if self.iterations > max_iter {
-                    return Err(ActiveSetError::IterationLimit(self.iterations));
-                }
-                let q = self.active.len();
-                self.d.gemv_tr(1.0, &self.j, &self.np, 0.0);
-                // z = J_2 d_2, r = R^{-1} d_1.
-                self.z.as_mut_slice().fill(0.0);
-                for k in q..n {
-                    self.z.axpy(self.d[k], &self.j.column(k), 1.0);
-                }
-                for k in 0..q {
-                    self.rv[k] = self.d[k];
-                }
-                for k in (0..q).rev() {
-                    self.rv[k] /= self.r[(k, k)];
-                    let rk = self.rv[k];
-                    for i in 0..k {
-                        self.rv[i] -= self.r[(i, k)] * rk;
-                    }
-                }
-                // Partial step: the first multiplier to reach zero.
-                let mut t1 = f64::INFINITY;
-                let mut leave = 0;
-                for k in 0..q {
-                    if self.rv[k] > 0.0 {
-                        let t = self.u[k] / self.rv[k];
-                        if t < t1 {
-                            t1 = t;
-                            leave = k;
-                        }
-                    }
-                }
-                // Full step: row p holds with equality.
-                let zn = self.z.dot(&self.np);
-                let sp = b[p] + self.np.dot(&self.x);
-                // zn = |d_2|^2: zero when n_p is in the span of the active rows.
-                let t2 = if zn > 1e-18 * self.d.norm_squared() { -sp / zn } else { f64::INFINITY };
-                if !t1.is_finite() && !t2.is_finite() {
-                    return Err(ActiveSetError::Infeasible { row: p });
-                }
-                if !t2.is_finite() {
-                    // Dual step only.
-                    for k in 0..q {
-                        self.u[k] -= t1 * self.rv[k];
-                    }
-                    u_p += t1;
-                    self.drop(leave);
-                    continue;
-                }
-                let t = t1.min(t2);
-                self.x.axpy(t, &self.z, 1.0);
-                for k in 0..q {
-                    self.u[k] -= t * self.rv[k];
-                }
-                u_p += t;
-                if t2 <= t1 {
-                    if q >= n {
-                        return Err(ActiveSetError::Infeasible { row: p });
-                    }
-                    self.add(p);
-                    self.u[q] = u_p;
-                    break;
-                }
-                self.drop(leave);
+            self.add_violated(a, b, p, max_iter)?;
+        }
+    }
+
+    /// The unconstrained minimum `x = 0` with no active row, `J = L^{-T}`, and the rows' norms.
+    fn cold_start(&mut self, a: &DMatrix<f64>) {
+        self.x.as_mut_slice().fill(0.0);
+        self.u.as_mut_slice().fill(0.0);
+        self.r.as_mut_slice().fill(0.0);
+        self.invert();
+        // Row norms, by columns (A is column-major).
+        self.norms.as_mut_slice().fill(0.0);
+        for c in 0..a.ncols() {
+            for (nm, v) in self.norms.iter_mut().zip(a.column(c).iter()) {
+                *nm += v * v;
             }
         }
+        for nm in self.norms.iter_mut() {
+            *nm = nm.sqrt();
+        }
+    }
+
+    /// Hot start: the previous active rows (skipping rows nearly dependent on those already
+    /// in), then drop negative multipliers.
+    fn start_from_warm(&mut self, a: &DMatrix<f64>, b: &DVector<f64>) {
+        let (rows, n) = a.shape();
+        for w in 0..self.warm.len() {
+            let i = self.warm[w];
+            if i >= rows || self.active.len() >= n {
+                continue;
+            }
+            self.set_np(a, i);
+            self.d.gemv_tr(1.0, &self.j, &self.np, 0.0);
+            let q = self.active.len();
+            let d2 = self.d.rows(q, n - q).norm();
+            // Skip rows (nearly) dependent on those already in.
+            if d2 > 1e-9 * self.d.norm() {
+                self.add(i);
+            }
+        }
+        self.equality_point(b);
+        while let Some(k) = (0..self.active.len()).filter(|&k| self.u[k] < 0.0).min_by(|&p, &q| self.u[p].total_cmp(&self.u[q])) {
+            self.drop(k);
+            self.equality_point(b);
+        }
+    }
+
+    /// The slacks `s = b - A x` and the most violated row by distance (`|a_i|` scaled), if a
+    /// row misses by more than the tolerance.
+    fn most_violated(&mut self, a: &DMatrix<f64>, b: &DVector<f64>, tol: f64) -> Result<Option<usize>, ActiveSetError> {
+        self.s.copy_from(b);
+        self.s.gemv(-1.0, a, &self.x, 1.0);
+        let mut p = None;
+        let mut worst = 0.0;
+        for i in 0..a.nrows() {
+            let si = self.s[i];
+            if !si.is_finite() {
+                return Err(ActiveSetError::NonFinite);
+            }
+            if si < -tol * (1.0 + b[i].abs()) {
+                if self.norms[i] == 0.0 {
+                    return Err(ActiveSetError::Infeasible { row: i });
+                }
+                let v = -si / self.norms[i];
+                if v > worst {
+                    worst = v;
+                    p = Some(i);
+                }
+            }
+        }
+        Ok(p)
+    }
+
+    /// Step 2: move until row `p` holds (it enters the active set) or a multiplier reaches
+    /// zero (its row leaves, and the step goes on).
+    fn add_violated(&mut self, a: &DMatrix<f64>, b: &DVector<f64>, p: usize, max_iter: u32) -> Result<(), ActiveSetError> {
+        let n = a.ncols();
+        self.set_np(a, p);
+        let mut u_p = 0.0;
+        loop {
+            self.iterations += 1;
+            if self.iterations > max_iter {
+                return Err(ActiveSetError::IterationLimit(self.iterations));
+            }
+            let q = self.active.len();
+            self.step_direction(q, n);
+            let (t1, leave) = self.partial_step(q);
+            // Full step: row p holds with equality.
+            let zn = self.z.dot(&self.np);
+            let sp = b[p] + self.np.dot(&self.x);
+            // zn = |d_2|^2: zero when n_p is in the span of the active rows.
+            let t2 = if zn > 1e-18 * self.d.norm_squared() { -sp / zn } else { f64::INFINITY };
+            if !t1.is_finite() && !t2.is_finite() {
+                return Err(ActiveSetError::Infeasible { row: p });
+            }
+            if !t2.is_finite() {
+                // Dual step only.
+                for k in 0..q {
+                    self.u[k] -= t1 * self.rv[k];
+                }
+                u_p += t1;
+                self.drop(leave);
+                continue;
+            }
+            let t = t1.min(t2);
+            self.x.axpy(t, &self.z, 1.0);
+            for k in 0..q {
+                self.u[k] -= t * self.rv[k];
+            }
+            u_p += t;
+            if t2 <= t1 {
+                if q >= n {
+                    return Err(ActiveSetError::Infeasible { row: p });
+                }
+                self.add(p);
+                self.u[q] = u_p;
+                return Ok(());
+            }
+            self.drop(leave);
+        }
+    }
+
+    /// The step's primal and dual directions with `q` active rows: `d = J^T n_p`,
+    /// `z = J_2 d_2`, `r = R^{-1} d_1`.
+    fn step_direction(&mut self, q: usize, n: usize) {
+        self.d.gemv_tr(1.0, &self.j, &self.np, 0.0);
+        self.z.as_mut_slice().fill(0.0);
+        for k in q..n {
+            self.z.axpy(self.d[k], &self.j.column(k), 1.0);
+        }
+        for k in 0..q {
+            self.rv[k] = self.d[k];
+        }
+        for k in (0..q).rev() {
+            self.rv[k] /= self.r[(k, k)];
+            let rk = self.rv[k];
+            for i in 0..k {
+                self.rv[i] -= self.r[(i, k)] * rk;
+            }
+        }
+    }
+
+    /// Partial step: the first multiplier to reach zero along `r`, and its place in the
+    /// active set (`t = inf` when none decreases).
+    fn partial_step(&self, q: usize) -> (f64, usize) {
+        let mut t1 = f64::INFINITY;
+        let mut leave = 0;
+        for k in 0..q {
+            if self.rv[k] > 0.0 {
+                let t = self.u[k] / self.rv[k];
+                if t < t1 {
+                    t1 = t;
+                    leave = k;
+                }
+            }
+        }
+        (t1, leave)
     }
 
     /// Size the buffers for `n` variables and `rows` rows; clears the active set and sets

@@ -1,5 +1,5 @@
 //! [`BlockHotStart`]: the hot start of the contact-force QP by the robots' blocks, tried
-//! before the team-sized problem is built (issue 15).
+//! before the team-sized problem is built (`docs/scale.md`).
 //!
 //! The QP of eq. wrench_optim2 written in the contact wrenches' change `z = rho F` instead of
 //! `F`. Since `J_c^T rho = -Y` (eq. bmatrix: `Y = B J_c^T` has no unactuated rows;
@@ -47,7 +47,7 @@ pub struct BlockInput<'a> {
     /// The grasp matrix `G` (6 x 6B) when hands hold the object.
     pub g: Option<&'a DMatrix<f64>>,
     /// The QP's contacts, `(first row in lambda, kind)`, feet then hands (see
-    /// `pidc::stages::contacts::contact_list`).
+    /// [`crate::units::contacts::contact_list`]).
     pub contacts: &'a [(usize, ContactKind)],
     /// `eta` with the object's load on the hand rows (what the contact rows constrain at `z = 0`).
     pub eta_real: &'a DVector<f64>,

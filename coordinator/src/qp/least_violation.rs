@@ -42,6 +42,52 @@ fn row_weights(inp: &QpInput, w: f64, hard_factor: f64, out: &mut Vec<f64>) {
     out.extend(std::iter::repeat_n(w * hard_factor, 2 * inp.actuated.len()));
 }
 
+/// What one Newton step of [`solve_least_violation_with`] reads: the objective `H`, the rows
+/// `A F <= b`, their prices and which rows are violated.
+struct NewtonRows<'a> {
+    h: &'a DMatrix<f64>,
+    a: &'a DMatrix<f64>,
+    b: &'a DVector<f64>,
+    weights: &'a [f64],
+    active: &'a [bool],
+}
+
+/// One Newton step with the violated rows `V`: `F` (into `f`) from
+/// `(H + A_V^T W_V A_V) F = A_V^T W_V b_V`, with `k` and `rhs` as scratch. The hard rows'
+/// prices (1e9) against `H`'s regularisation (1e-6) can leave `K` numerically indefinite:
+/// Cholesky is retried with a ridge relative to `K`'s largest diagonal entry ([`RIDGES`]).
+/// Whether one of them factored.
+fn newton_step(rows: NewtonRows, k: &mut DMatrix<f64>, rhs: &mut DVector<f64>, f: &mut DVector<f64>) -> bool {
+    let NewtonRows { h, a, b, weights, active } = rows;
+    let m = h.nrows();
+    // K = H + A_V^T W_V A_V, rhs = A_V^T W_V b_V.
+    let build = |k: &mut DMatrix<f64>, rhs: &mut DVector<f64>| {
+        zeros(k, m, m);
+        k.copy_from(h);
+        rhs.fill(0.0);
+        for i in (0..a.nrows()).filter(|&i| active[i]) {
+            let ai = a.row(i);
+            k.ger(weights[i], &ai.transpose(), &ai.transpose(), 1.0);
+            rhs.axpy(weights[i] * b[i], &ai.transpose(), 1.0);
+        }
+    };
+    for ridge in RIDGES {
+        build(k, rhs);
+        let top = k.diagonal().amax();
+        for i in 0..m {
+            k[(i, i)] += ridge * top;
+        }
+        let kk = std::mem::replace(k, DMatrix::zeros(0, 0));
+        if let Some(chol) = kk.cholesky() {
+            f.copy_from(rhs);
+            chol.solve_mut(f);
+            *k = chol.unpack_dirty();
+            return true;
+        }
+    }
+    false
+}
+
 /// The fallback when the QP is infeasible: every row `A F <= b` may be violated at a price,
 /// `min F^T H F + sum_i w_i max(0, a_i F - b_i)^2`, `w_i` = [`super::VIOLATION_WEIGHT`] on the
 /// hands' rows and [`super::HARD_ROW_FACTOR`] times that on the feet's rows and the torque
@@ -49,13 +95,13 @@ fn row_weights(inp: &QpInput, w: f64, hard_factor: f64, out: &mut Vec<f64>) {
 /// and the joints, then as much squeeze as is left) instead of dropping every contact force.
 /// Solved by the active-set Newton method of this piecewise quadratic: with the violated rows
 /// `V`, `(H + A_V^T W_V A_V) F = A_V^T W_V b_V`, until `V` repeats (a few 36 x 36
-/// solves; a first version put a slack per row into the interior-point method, 170 variables,
-/// and took a second per tick). Writes `F` into `f` and returns the largest violation, or
+/// solves; a slack per row in the interior-point method instead, 170 variables, takes a
+/// second per tick). Writes `F` into `f` and returns the largest violation, or
 /// `None` if a solve fails. It builds `H`, `A` and `b` into `ws` itself (as [`super::solve`]
 /// does), so it does not depend on what ran before; on this rare path that is cheap next to
 /// its solves.
 pub fn solve_least_violation(ws: &mut QpWorkspace, inp: &QpInput, max_iter: u32, f: &mut DVector<f64>) -> Option<f64> {
-    solve_least_violation_with(ws, inp, &QpSettings::new(max_iter, inp.dense_first), f)
+    solve_least_violation_with(ws, inp, &QpSettings { max_iter, ..QpSettings::default() }, f)
 }
 
 /// [`solve_least_violation`] with explicit settings (`max_iter`, `violation_weight`,
@@ -100,36 +146,7 @@ pub fn solve_least_violation_with(ws: &mut QpWorkspace, inp: &QpInput, settings:
         }
         first = false;
         std::mem::swap(lv_active, lv_now);
-        // K = H + A_V^T W_V A_V, rhs = A_V^T W_V b_V.
-        let build = |k: &mut DMatrix<f64>, rhs: &mut DVector<f64>| {
-            zeros(k, m, m);
-            k.copy_from(h);
-            rhs.fill(0.0);
-            for i in (0..rows).filter(|&i| lv_active[i]) {
-                let ai = a.row(i);
-                k.ger(weights[i], &ai.transpose(), &ai.transpose(), 1.0);
-                rhs.axpy(weights[i] * b[i], &ai.transpose(), 1.0);
-            }
-        };
-        // The hard rows' prices (1e9) against H's regularisation (1e-6) can leave K numerically
-        // indefinite: Cholesky is retried with a ridge relative to K's largest diagonal entry.
-        let mut solved = false;
-        for ridge in RIDGES {
-            build(lv_k, lv_rhs);
-            let top = lv_k.diagonal().amax();
-            for i in 0..m {
-                lv_k[(i, i)] += ridge * top;
-            }
-            let k = std::mem::replace(lv_k, DMatrix::zeros(0, 0));
-            if let Some(chol) = k.cholesky() {
-                f.copy_from(lv_rhs);
-                chol.solve_mut(f);
-                *lv_k = chol.unpack_dirty();
-                solved = true;
-                break;
-            }
-        }
-        if !solved {
+        if !newton_step(NewtonRows { h, a, b, weights, active: lv_active }, lv_k, lv_rhs, f) {
             return None;
         }
         let c = cost(f, lv_r, lv_hf);

@@ -17,13 +17,13 @@
 //! | --- | --- |
 //! | [`rows`] | one contact's rows `c . lambda_k >= lo` ([`ContactKind`], [`contact_rows`]); the sign conventions, a palm's sliding and torsion in one cone and the tilt-moment pairing, which deviate from the paper |
 //! | [`problem`] | the controller's terms ([`QpInput`]) and the assembled `min 1/2 F^T P F, A F <= b` ([`QpProblem`], [`constraints_into`], [`objective_into`]) |
-//! | [`settings`] | [`QpSettings`]: dense first or not, iterations, tolerances, the fallback's price |
+//! | [`settings`] | [`QpSettings`]: where the solve starts ([`QpPath`]), iterations, tolerances, the fallback's price |
 //! | [`by_blocks`] | [`BlockHotStart`], the hot start by the robots' blocks in the wrenches' change `z = rho F`, tried before the team-sized QP is built |
 //! | [`active_set`] | [`DualActiveSet`], the Goldfarb–Idnani dual active-set method hot-started from the last tick, tried first on the team-sized QP |
 //! | [`dense_ipm`] | [`DenseIpm`], the dense interior-point method tried next |
 //! | [`clarabel`] | [`Clarabel`], the adapter to Clarabel 0.11 ([`to_csc`]) |
 //! | [`least_violation`] | [`solve_least_violation`], the fallback when the QP is infeasible |
-//! | here | the [`QpSolver`] interface, [`QpOutcome`], [`QpWorkspace`] and [`solve`] (active set, dense, then Clarabel) |
+//! | here | the [`QpSolver`] interface, [`QpOutcome`], [`QpWorkspace`] and [`solve`] (down the [`QpPath`] chain: active set, dense, then Clarabel) |
 
 pub mod active_set;
 pub mod by_blocks;
@@ -46,7 +46,7 @@ pub use dense_ipm::DenseIpm;
 pub use least_violation::{solve_least_violation, solve_least_violation_with};
 pub use problem::{constraints_into, objective_into, QpInput, QpProblem};
 pub use rows::{contact_rows, ContactKind, ContactRows, FRICTION_SIGNS, MAX_CONTACT_ROWS};
-pub use settings::{QpSettings, ACTIVE_SET_MAX_ITER, BLOCK_REPAIRS, ACTIVE_SET_TOL, DENSE_TOL, HARD_ROW_FACTOR, LEAST_VIOLATION_MIN_ITER, REDUCED_TOL, VIOLATION_WEIGHT};
+pub use settings::{QpPath, QpSettings, ACTIVE_SET_MAX_ITER, BLOCK_REPAIRS, ACTIVE_SET_TOL, DENSE_TOL, HARD_ROW_FACTOR, LEAST_VIOLATION_MIN_ITER, REDUCED_TOL, VIOLATION_WEIGHT};
 
 use crate::linalg::zeros_v;
 use least_violation::LeastViolation;
@@ -105,20 +105,20 @@ impl QpWorkspace {
     }
 }
 
-/// Solve the QP into `f` (length m), with [`QpSettings::new`]`(max_iter, inp.dense_first)`.
+/// Solve the QP into `f` (length m), with [`QpSettings::new`]`(max_iter, QpPath::default())`.
 /// Never panics; a solver error is a `NumericalError` status with `F = 0`.
 ///
 /// The dense interior-point method runs in `ws` and allocates nothing once the team's shape
 /// is set; Clarabel, when it has to finish a tick, builds its problem anew (it allocates).
 pub fn solve(ws: &mut QpWorkspace, inp: &QpInput, max_iter: u32, f: &mut DVector<f64>) -> QpOutcome {
-    solve_with(ws, inp, &QpSettings::new(max_iter, inp.dense_first), f)
+    solve_with(ws, inp, &QpSettings::new(max_iter, QpPath::default()), f)
 }
 
-/// [`solve`] with explicit settings (`inp.dense_first` is not read: `settings.dense_first`
-/// decides). With `settings.dense_first`: [`DualActiveSet`] first if
-/// `settings.active_set_first` (hot-started from the last call's active rows), then
-/// [`DenseIpm`] when it does not solve the QP; [`Clarabel`] when neither does (it also
-/// certifies infeasibility, so the status of an infeasible QP is Clarabel's as before).
+/// [`solve`] with explicit settings, down the chain of `settings.path` ([`QpPath`]; the hot
+/// start by the robots' blocks of [`QpPath::ByBlocks`] is the controller's, before this):
+/// [`DualActiveSet`] (hot-started from the last call's active rows), then [`DenseIpm`] when
+/// it does not solve the QP, [`Clarabel`] when neither does (it also certifies
+/// infeasibility, so the status of an infeasible QP is always Clarabel's).
 /// `solve_us` is the whole call's time, assembly included.
 pub fn solve_with(ws: &mut QpWorkspace, inp: &QpInput, settings: &QpSettings, f: &mut DVector<f64>) -> QpOutcome {
     let t0 = Instant::now();
@@ -128,13 +128,13 @@ pub fn solve_with(ws: &mut QpWorkspace, inp: &QpInput, settings: &QpSettings, f:
         let rows = ws.problem.rows();
         return QpOutcome { status: QpStatus::NumericalError, iterations: 0, solve_us: 0.0, setup_us: 0.0, rows, solver: "clarabel" };
     }
-    if settings.dense_first && settings.active_set_first {
+    if settings.path.tries_active_set() {
         let out = ws.active_set.solve_problem(&ws.problem, settings, f);
         if out.status == QpStatus::Solved {
             return QpOutcome { solve_us: t0.elapsed().as_secs_f64() * 1e6, ..out };
         }
     }
-    if settings.dense_first {
+    if settings.path.tries_dense_ipm() {
         let out = ws.ipm.solve_problem(&ws.problem, settings, f);
         if matches!(out.status, QpStatus::Solved | QpStatus::AlmostSolved) {
             return QpOutcome { solve_us: t0.elapsed().as_secs_f64() * 1e6, ..out };

@@ -29,9 +29,6 @@ pub struct QpInput<'a> {
     /// `tau_0 = [P S]^+ P tau_M`.
     pub tau0: &'a DVector<f64>,
     pub regularisation: f64,
-    /// Try [`super::DenseIpm`] first (Clarabel if it does not converge). Read into
-    /// [`super::QpSettings::dense_first`] by [`super::solve`].
-    pub dense_first: bool,
 }
 
 /// The constraint matrix `A F <= b` of the QP (friction, moments, torque limits), into `a`

@@ -112,7 +112,7 @@ pub fn contact_rows(kind: &ContactKind) -> ContactRows {
             rows.push(row(0.0, -1.0, *mu), 0.0);
             rows.push(row(0.0, 1.0, *mu), 0.0);
             rows.push(row(0.0, 0.0, 1.0), f_min.min(*f_max));
-            // The unloading ramp before a lift-off (DESIGN.md §10): f_z <= f_max.
+            // The unloading ramp before a lift-off (`docs/walking.md`): f_z <= f_max.
             if f_max.is_finite() {
                 rows.push(row(0.0, 0.0, -1.0), -*f_max);
             }

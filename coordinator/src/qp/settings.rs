@@ -1,6 +1,7 @@
-//! [`QpSettings`]: how the QP is solved (which solver first, iterations, tolerances, the
-//! fallback's price), apart from what is solved ([`super::problem`]). Clarabel's
-//! `DefaultSettings` plays the same part for Clarabel; [`super::clarabel`] builds it from these.
+//! [`QpSettings`]: how the QP is solved (where the solve starts, [`QpPath`]; iterations,
+//! tolerances, the fallback's price), apart from what is solved ([`super::problem`]).
+//! Clarabel's `DefaultSettings` plays the same part for Clarabel; [`super::clarabel`] builds
+//! it from these.
 
 /// Relative tolerance of [`super::DenseIpm`] on the QP (residuals and complementarity). At 1e-8
 /// the dual residual stalled at round-off on 12 % of S1's ticks (the normal equations'
@@ -39,17 +40,75 @@ pub const HARD_ROW_FACTOR: f64 = 1e3;
 /// `max_iter` says.
 pub const LEAST_VIOLATION_MIN_ITER: u32 = 30;
 
+/// Where the contact-force QP's solve starts. Each path falls back down the chain
+/// `ByBlocks -> ActiveSet -> DenseIpm -> Clarabel`: a method that does not answer hands the
+/// tick to the next one, and Clarabel (which also certifies infeasibility) ends every chain.
+/// In TOML (`qp_path = ...`) the names are kebab-case: `"by-blocks"`, `"active-set"`,
+/// `"dense-ipm"`, `"clarabel"`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum QpPath {
+    /// The last tick's active rows by the robots' blocks first ([`super::BlockHotStart`], the
+    /// QP in the wrenches' change `z = rho F`, before `Y`, `rho` and the team-sized QP are
+    /// built; run by the controller), then the team-sized QP from [`QpPath::ActiveSet`] on.
+    /// The default: the same torques to the solvers' tolerance (`tests/qp_by_blocks.rs`).
+    #[default]
+    ByBlocks,
+    /// The dual active-set method ([`super::DualActiveSet`], hot-started from the last tick's
+    /// active rows) on the team-sized QP, then [`QpPath::DenseIpm`]: the same forces to the
+    /// interior point's tolerance, 7 times faster for eight robots.
+    ActiveSet,
+    /// The dense interior-point method ([`super::DenseIpm`]), then Clarabel.
+    DenseIpm,
+    /// Clarabel alone ([`super::Clarabel`]).
+    Clarabel,
+}
+
+impl QpPath {
+    /// Every path with its name in files, in the chain's order.
+    pub const NAMES: [(QpPath, &'static str); 4] = [(QpPath::ByBlocks, "by-blocks"), (QpPath::ActiveSet, "active-set"), (QpPath::DenseIpm, "dense-ipm"), (QpPath::Clarabel, "clarabel")];
+
+    /// The path's name in files (`qp_path = "by-blocks"`).
+    pub fn name(self) -> &'static str {
+        Self::NAMES.iter().find(|(p, _)| *p == self).map_or("", |(_, n)| n)
+    }
+
+    /// Whether the hot start by the robots' blocks is tried first.
+    pub fn tries_blocks(self) -> bool {
+        self == QpPath::ByBlocks
+    }
+
+    /// Whether the dual active-set method is tried on the team-sized QP.
+    pub fn tries_active_set(self) -> bool {
+        matches!(self, QpPath::ByBlocks | QpPath::ActiveSet)
+    }
+
+    /// Whether the dense interior-point method is tried before Clarabel.
+    pub fn tries_dense_ipm(self) -> bool {
+        !matches!(self, QpPath::Clarabel)
+    }
+}
+
+impl std::str::FromStr for QpPath {
+    type Err = String;
+
+    /// A path by its name in files (`"by-blocks"`, ...); the error lists the names.
+    fn from_str(s: &str) -> Result<Self, String> {
+        match Self::NAMES.iter().find(|(_, n)| *n == s) {
+            Some((p, _)) => Ok(*p),
+            None => Err(format!("unknown QP path `{s}` (one of: {})", Self::NAMES.map(|(_, n)| n).join(", "))),
+        }
+    }
+}
+
 /// How the contact-force QP is solved.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct QpSettings {
     /// Iteration limit of each solver (the least-violation fallback takes at least
     /// [`QpSettings::least_violation_min_iter`]).
     pub max_iter: u32,
-    /// Try [`super::DenseIpm`] first (Clarabel if it does not converge); Clarabel alone if false.
-    pub dense_first: bool,
-    /// With `dense_first`: try [`super::DualActiveSet`] (hot-started from the last tick) before
-    /// [`super::DenseIpm`].
-    pub active_set_first: bool,
+    /// Where the solve starts, and the chain it falls back down ([`QpPath`]).
+    pub path: QpPath,
     /// [`ACTIVE_SET_TOL`].
     pub active_set_tol: f64,
     /// [`ACTIVE_SET_MAX_ITER`].
@@ -68,9 +127,9 @@ pub struct QpSettings {
 
 impl QpSettings {
     /// The defaults with the controller's two choices (`PidcConfig::qp_max_iter`,
-    /// `PidcConfig::dense_qp`).
-    pub fn new(max_iter: u32, dense_first: bool) -> Self {
-        QpSettings { max_iter, dense_first, ..QpSettings::default() }
+    /// `PidcConfig::qp_path`).
+    pub fn new(max_iter: u32, path: QpPath) -> Self {
+        QpSettings { max_iter, path, ..QpSettings::default() }
     }
 }
 
@@ -78,8 +137,7 @@ impl Default for QpSettings {
     fn default() -> Self {
         QpSettings {
             max_iter: 50,
-            dense_first: true,
-            active_set_first: true,
+            path: QpPath::default(),
             active_set_tol: ACTIVE_SET_TOL,
             active_set_max_iter: ACTIVE_SET_MAX_ITER,
             dense_tol: DENSE_TOL,

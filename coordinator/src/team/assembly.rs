@@ -33,7 +33,7 @@ pub struct TickAssembler {
 
 /// What became of a tick.
 #[derive(Debug, Clone, PartialEq)]
-pub enum TickOutcome {
+pub enum AssemblyStatus {
     /// Not complete yet.
     Pending,
     /// Every member's terms are here, sorted by robot id.
@@ -69,7 +69,7 @@ impl TickAssembler {
 
     /// Add one team member's terms; the tick completes when every member of `team` (sorted)
     /// has sent.
-    pub fn add(&mut self, terms: DynamicsTerms, team: &[String]) -> TickOutcome {
+    pub fn add(&mut self, terms: DynamicsTerms, team: &[String]) -> AssemblyStatus {
         let tick = terms.header.tick;
         if self.reuse.is_some() {
             let robot = terms.header.robot_id();
@@ -82,7 +82,7 @@ impl TickAssembler {
             }
         }
         if self.last_completed.is_some_and(|t| tick <= t) {
-            return TickOutcome::Stale(tick);
+            return AssemblyStatus::Stale(tick);
         }
         let robot = terms.header.robot_id().to_string();
         let entry = self.pending.entry(tick).or_insert_with(|| (Instant::now(), BTreeMap::new()));
@@ -92,9 +92,9 @@ impl TickAssembler {
 
     /// Team member `robot` holds its posture at `tick` (a hold order went out): the tick does
     /// not wait for its terms and is solved without it.
-    pub fn hold(&mut self, robot: &str, tick: u64, team: &[String]) -> TickOutcome {
+    pub fn hold(&mut self, robot: &str, tick: u64, team: &[String]) -> AssemblyStatus {
         if self.last_completed.is_some_and(|t| tick <= t) {
-            return TickOutcome::Stale(tick);
+            return AssemblyStatus::Stale(tick);
         }
         let entry = self.pending.entry(tick).or_insert_with(|| (Instant::now(), BTreeMap::new()));
         entry.1.insert(robot.to_string(), None);
@@ -102,14 +102,14 @@ impl TickAssembler {
     }
 
     /// Re-check a tick after the team changed (a robot that left no longer holds it up).
-    pub fn try_complete(&mut self, tick: u64, team: &[String]) -> TickOutcome {
-        let Some((_, got)) = self.pending.get(&tick) else { return TickOutcome::Pending };
+    pub fn try_complete(&mut self, tick: u64, team: &[String]) -> AssemblyStatus {
+        let Some((_, got)) = self.pending.get(&tick) else { return AssemblyStatus::Pending };
         if team.is_empty() || !team.iter().all(|m| got.contains_key(m)) {
-            return TickOutcome::Pending;
+            return AssemblyStatus::Pending;
         }
         let (_, got) = self.pending.remove(&tick).expect("present");
         self.complete(tick);
-        TickOutcome::Complete(tick, solved(got, team))
+        AssemblyStatus::Complete(tick, solved(got, team))
     }
 
     /// The tick is done: older ones can never complete now.
@@ -204,13 +204,13 @@ mod tests {
     fn a_tick_completes_when_every_member_sent_and_later_terms_are_stale() {
         let mut a = TickAssembler::new(Duration::from_secs(1));
         let t = team(&["r1", "r2"]);
-        assert_eq!(a.add(terms("r2", 5), &t), TickOutcome::Pending);
+        assert_eq!(a.add(terms("r2", 5), &t), AssemblyStatus::Pending);
         match a.add(terms("r1", 5), &t) {
-            TickOutcome::Complete(5, got) => assert_eq!(got.iter().map(|x| x.header.robot_id()).collect::<Vec<_>>(), ["r1", "r2"]),
+            AssemblyStatus::Complete(5, got) => assert_eq!(got.iter().map(|x| x.header.robot_id()).collect::<Vec<_>>(), ["r1", "r2"]),
             other => panic!("{other:?}"),
         }
-        assert_eq!(a.add(terms("r1", 5), &t), TickOutcome::Stale(5));
-        assert_eq!(a.add(terms("r1", 4), &t), TickOutcome::Stale(4));
+        assert_eq!(a.add(terms("r1", 5), &t), AssemblyStatus::Stale(5));
+        assert_eq!(a.add(terms("r1", 4), &t), AssemblyStatus::Stale(4));
         assert_eq!(a.reuse_at(), None, "no reuse unless asked");
     }
 
@@ -221,11 +221,11 @@ mod tests {
         let t = team(&["r1", "r2"]);
         for k in 10..=11 {
             a.add(terms("r1", k), &t);
-            assert!(matches!(a.add(terms("r2", k), &t), TickOutcome::Complete(..)));
+            assert!(matches!(a.add(terms("r2", k), &t), AssemblyStatus::Complete(..)));
         }
         // r2's terms of 12 and 13 are late: r1's alone are pending.
-        assert_eq!(a.add(terms("r1", 12), &t), TickOutcome::Pending);
-        assert_eq!(a.add(terms("r1", 13), &t), TickOutcome::Pending);
+        assert_eq!(a.add(terms("r1", 12), &t), AssemblyStatus::Pending);
+        assert_eq!(a.add(terms("r1", 13), &t), AssemblyStatus::Pending);
         let due = a.reuse_at().expect("a due time");
         assert_eq!(a.reuse_due(due - Duration::from_millis(1), &t), None, "not before it is due");
         let later = Instant::now() + Duration::from_millis(5);
@@ -238,7 +238,7 @@ mod tests {
             other => panic!("{other:?}"),
         }
         assert_eq!(a.pending_ticks(), Vec::<u64>::new(), "tick 12 was overtaken");
-        assert_eq!(a.add(terms("r2", 12), &t), TickOutcome::Stale(12));
+        assert_eq!(a.add(terms("r2", 12), &t), AssemblyStatus::Stale(12));
         // r2 stays silent: at tick 16 its latest (12) is 4 ticks old.
         a.add(terms("r1", 16), &t);
         match a.reuse_due(Instant::now() + Duration::from_millis(5), &t) {
@@ -246,7 +246,7 @@ mod tests {
             other => panic!("{other:?}"),
         }
         // Without r2 the tick completes.
-        assert!(matches!(a.try_complete(16, &team(&["r1"])), TickOutcome::Complete(16, got) if got.len() == 1));
+        assert!(matches!(a.try_complete(16, &team(&["r1"])), AssemblyStatus::Complete(16, got) if got.len() == 1));
     }
 
     #[test]
@@ -254,12 +254,12 @@ mod tests {
         let mut a = TickAssembler::new(Duration::from_secs(1));
         let t = team(&["r1", "r2", "r3"]);
         a.add(terms("r1", 7), &t);
-        assert_eq!(a.hold("r3", 7, &t), TickOutcome::Pending);
+        assert_eq!(a.hold("r3", 7, &t), AssemblyStatus::Pending);
         match a.add(terms("r2", 7), &t) {
-            TickOutcome::Complete(7, got) => assert_eq!(got.iter().map(|x| x.header.robot_id()).collect::<Vec<_>>(), ["r1", "r2"], "r3 holds"),
+            AssemblyStatus::Complete(7, got) => assert_eq!(got.iter().map(|x| x.header.robot_id()).collect::<Vec<_>>(), ["r1", "r2"], "r3 holds"),
             other => panic!("{other:?}"),
         }
-        assert_eq!(a.hold("r3", 7, &t), TickOutcome::Stale(7));
+        assert_eq!(a.hold("r3", 7, &t), AssemblyStatus::Stale(7));
     }
 
     #[test]

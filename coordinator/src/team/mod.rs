@@ -88,30 +88,47 @@ pub struct Team {
     ee_cols: Vec<(usize, usize)>,
 }
 
+/// How many frames of each role the robots assembled so far have.
+#[derive(Default)]
+struct FrameCounts {
+    feet: usize,
+    hands: usize,
+    free_hands: usize,
+    torsos: usize,
+    swing: usize,
+}
+
+/// A tick is usable: not empty, the `expected` robots exactly (when given), every robot's
+/// terms well-formed.
+fn check_tick(tick: &[DynamicsTerms], expected: Option<&[String]>) -> Result<(), ControllerError> {
+    if tick.is_empty() {
+        return Err(ControllerError::Dimension { what: "tick".into(), detail: "no robot in the tick".into() });
+    }
+    if let Some(exp) = expected {
+        for id in exp {
+            if !tick.iter().any(|t| t.header.robot_id() == id) {
+                return Err(ControllerError::MissingRobot { robot: id.clone() });
+            }
+        }
+        for t in tick {
+            if !exp.iter().any(|e| e == t.header.robot_id()) {
+                return Err(ControllerError::UnknownRobot { robot: t.header.robot_id().to_string() });
+            }
+        }
+    }
+    for t in tick {
+        check_terms(t)?;
+    }
+    Ok(())
+}
+
 impl Team {
     /// Assemble from one tick's terms, into this team's buffers (the previous tick's).
     /// `expected` (sorted ids), when given, must match the robots of the tick.
     /// `fully_actuated` sets `S = I` (the \[Lin2018\] comparison). Every check runs before
     /// anything is written: on an error the team is unchanged.
     pub fn assemble_into(&mut self, tick: &[DynamicsTerms], expected: Option<&[String]>, fully_actuated: bool) -> Result<(), ControllerError> {
-        if tick.is_empty() {
-            return Err(ControllerError::Dimension { what: "tick".into(), detail: "no robot in the tick".into() });
-        }
-        if let Some(exp) = expected {
-            for id in exp {
-                if !tick.iter().any(|t| t.header.robot_id() == id) {
-                    return Err(ControllerError::MissingRobot { robot: id.clone() });
-                }
-            }
-            for t in tick {
-                if !exp.iter().any(|e| e == t.header.robot_id()) {
-                    return Err(ControllerError::UnknownRobot { robot: t.header.robot_id().to_string() });
-                }
-            }
-        }
-        for t in tick {
-            check_terms(t)?;
-        }
+        check_tick(tick, expected)?;
         let n: usize = tick.iter().map(|t| t.nv()).sum();
         self.n = n;
         // M is written by its robots' blocks: the zeros between them are the last tick's
@@ -125,58 +142,65 @@ impl Team {
         zeros_v(&mut self.s_diag, n);
         self.s_diag.fill(1.0);
         self.robots.truncate(tick.len());
-        let (mut feet, mut hands, mut free_hands, mut torsos, mut swing) = (0, 0, 0, 0, 0);
+        let mut counts = FrameCounts::default();
         let mut off = 0;
         for (k, t) in tick.iter().enumerate() {
-            let nv = t.nv();
-            for j in 0..nv {
-                for i in 0..nv {
-                    self.mass[(off + i, off + j)] = t.mass_matrix.data[i * nv + j];
-                }
-            }
-            self.bias.rows_mut(off, nv).copy_from_slice(&t.bias);
-            self.velocity.rows_mut(off, nv).copy_from_slice(&t.velocity);
-            let base = if t.floating_base { 6 } else { 0 };
-            if !fully_actuated {
-                self.s_diag.rows_mut(off, base).fill(0.0);
-            }
-            if k == self.robots.len() {
-                self.robots.push(RobotBlock { id: String::new(), offset: 0, nv: 0, actuated: Vec::new(), floating_base: false });
-            }
-            let rb = &mut self.robots[k];
-            if rb.id != t.header.robot_id() {
-                rb.id.clear();
-                rb.id.push_str(t.header.robot_id());
-            }
-            rb.offset = off;
-            rb.nv = nv;
-            rb.actuated.clear();
-            rb.actuated.extend(off + base..off + nv);
-            rb.floating_base = t.floating_base;
-            for f in &t.frames {
-                let (list, count) = match f.role {
-                    FrameRole::StanceFoot => (&mut self.feet, &mut feet),
-                    FrameRole::SwingFoot => (&mut self.swing_feet, &mut swing),
-                    FrameRole::Hand if t.hand_in_grasp && !self.hands_released => (&mut self.hands, &mut hands),
-                    FrameRole::Hand => (&mut self.free_hands, &mut free_hands),
-                    FrameRole::Torso => (&mut self.torsos, &mut torsos),
-                };
-                if *count == list.len() {
-                    list.push(TeamFrame::default());
-                }
-                team_frame_into(&mut list[*count], k, f, off, n);
-                *count += 1;
-            }
-            off += nv;
+            self.robot_into(k, t, off, fully_actuated, &mut counts);
+            off += t.nv();
         }
-        self.feet.truncate(feet);
-        self.hands.truncate(hands);
-        self.free_hands.truncate(free_hands);
-        self.torsos.truncate(torsos);
-        self.swing_feet.truncate(swing);
+        self.feet.truncate(counts.feet);
+        self.hands.truncate(counts.hands);
+        self.free_hands.truncate(counts.free_hands);
+        self.torsos.truncate(counts.torsos);
+        self.swing_feet.truncate(counts.swing);
         stack(&self.feet, 3, n, &mut self.j_cf, &mut self.jdv_cf, &mut self.cf_cols);
         stack(&self.hands, 6, n, &mut self.j_ee, &mut self.jdv_ee, &mut self.ee_cols);
         Ok(())
+    }
+
+    /// Robot `k`'s terms `t` into the team's buffers at columns `off..`: its block of `M`, its
+    /// `h`, `v` and `S`, its [`RobotBlock`] and its frames (counted in `counts`).
+    fn robot_into(&mut self, k: usize, t: &DynamicsTerms, off: usize, fully_actuated: bool, counts: &mut FrameCounts) {
+        let n = self.n;
+        let nv = t.nv();
+        for j in 0..nv {
+            for i in 0..nv {
+                self.mass[(off + i, off + j)] = t.mass_matrix.data[i * nv + j];
+            }
+        }
+        self.bias.rows_mut(off, nv).copy_from_slice(&t.bias);
+        self.velocity.rows_mut(off, nv).copy_from_slice(&t.velocity);
+        let base = if t.floating_base { 6 } else { 0 };
+        if !fully_actuated {
+            self.s_diag.rows_mut(off, base).fill(0.0);
+        }
+        if k == self.robots.len() {
+            self.robots.push(RobotBlock { id: String::new(), offset: 0, nv: 0, actuated: Vec::new(), floating_base: false });
+        }
+        let rb = &mut self.robots[k];
+        if rb.id != t.header.robot_id() {
+            rb.id.clear();
+            rb.id.push_str(t.header.robot_id());
+        }
+        rb.offset = off;
+        rb.nv = nv;
+        rb.actuated.clear();
+        rb.actuated.extend(off + base..off + nv);
+        rb.floating_base = t.floating_base;
+        for f in &t.frames {
+            let (list, count) = match f.role {
+                FrameRole::StanceFoot => (&mut self.feet, &mut counts.feet),
+                FrameRole::SwingFoot => (&mut self.swing_feet, &mut counts.swing),
+                FrameRole::Hand if t.hand_in_grasp && !self.hands_released => (&mut self.hands, &mut counts.hands),
+                FrameRole::Hand => (&mut self.free_hands, &mut counts.free_hands),
+                FrameRole::Torso => (&mut self.torsos, &mut counts.torsos),
+            };
+            if *count == list.len() {
+                list.push(TeamFrame::default());
+            }
+            team_frame_into(&mut list[*count], k, f, off, n);
+            *count += 1;
+        }
     }
 
     /// Rows of `J_c`: 3 per stance foot, 6 per hand in grasp (eq. jacobian_c).

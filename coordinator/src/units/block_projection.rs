@@ -1,4 +1,4 @@
-//! The projections of PIDC by the team's structure (issue 15; DESIGN.md §9): the same
+//! The projections of PIDC by the team's structure (`docs/scale.md`): the same
 //! [`Projections`] as the dense SVDs of [`Projections::compute_into`], from per-robot blocks
 //! and one coupling of the hands through the grasp, kept as factors ([`BlockFactors`]) and
 //! applied as operators: no team-sized `n x n` matrix is formed on the tick.

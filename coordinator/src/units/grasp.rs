@@ -11,7 +11,7 @@
 //! The object is NOT in the generalized coordinates: the grasp constraint only constrains
 //! the hands' relative motion (`J_c,ee = (I - G^+ G) J_ee`, symmetric projector since
 //! `G^T (G^+)^T = G^+ G`). The object's weight and inertia enter as a known external wrench
-//! at the object centre (the paper's `J_x^T F_x` term with `J_x = J_o`), see `pidc::stages::tasks`.
+//! at the object centre (the paper's `J_x^T F_x` term with `J_x = J_o`), see [`crate::units::object_load`].
 
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix6, Rotation3, Translation3, UnitQuaternion, Vector3, Vector6};
 
@@ -225,7 +225,7 @@ pub struct GraspTerms {
     pub n: DMatrix<f64>,
     /// `J_c,ee v = N J_ee v` and `d/dt(J_c,ee) v = Ndot J_ee v + N Jdot_ee v` (eq.
     /// jacobian_cee), by the hands' sums. `J_c,ee` itself (6B x n) is formed only where `J_c`
-    /// is ([`crate::pidc::stages::contacts::contact_jacobian`]).
+    /// is ([`crate::units::contact_jacobian::contact_jacobian`]).
     pub jcee_v: DVector<f64>,
     pub jdv_cee: DVector<f64>,
     /// `J_o = (G^+)^T J_ee` (eq. obj_jacobian) and `d/dt(J_o) v`.
@@ -255,8 +255,24 @@ impl GraspTerms {
         if b == 0 {
             return None;
         }
-        let n = team.n;
         let po = object.translation.vector;
+        let w = self.grasp_matrices(team, &po)?;
+        zeros_v(&mut self.ee_twist, 6 * b);
+        for (i, h) in team.hands.iter().enumerate() {
+            self.ee_twist.fixed_rows_mut::<6>(6 * i).copy_from(&h.velocity(&team.velocity));
+        }
+        zeros(&mut self.j_o, 6, team.n);
+        times_hand_jacobians(team, mat(&self.g_pinv).transpose(), mat_mut(&mut self.j_o));
+        self.object_twist.gemv(1.0, &self.j_o, &team.velocity, 0.0);
+        self.object = object;
+        self.drift_terms(team, &po, &w);
+        Some(())
+    }
+
+    /// `G`, `G^+ = G^T W` and `N = I - G^+ G` for the object's centre at `po`; returns
+    /// `W = (G G^T)^{-1}`, `None` when `G G^T` is singular.
+    fn grasp_matrices(&mut self, team: &Team, po: &Vector3<f64>) -> Option<Matrix6<f64>> {
+        let b = team.hands.len();
         let gi = |i: usize| partial_grasp(&(team.hands[i].position - po));
         let mut ggt = Matrix6::zeros();
         for i in 0..b {
@@ -283,14 +299,14 @@ impl GraspTerms {
                 self.n.fixed_view_mut::<6, 6>(6 * i, 6 * j).copy_from(&blk);
             }
         }
-        zeros_v(&mut self.ee_twist, 6 * b);
-        for (i, h) in team.hands.iter().enumerate() {
-            self.ee_twist.fixed_rows_mut::<6>(6 * i).copy_from(&h.velocity(&team.velocity));
-        }
-        zeros(&mut self.j_o, 6, n);
-        times_hand_jacobians(team, mat(&self.g_pinv).transpose(), mat_mut(&mut self.j_o));
-        self.object_twist.gemv(1.0, &self.j_o, &team.velocity, 0.0);
-        self.object = object;
+        Some(w)
+    }
+
+    /// The velocity-dependent terms from the hands' twists and the object's: `J_c,ee v`,
+    /// `d/dt(J_c,ee) v` and `Jdot_o v` (`w`: `(G G^T)^{-1}`).
+    fn drift_terms(&mut self, team: &Team, po: &Vector3<f64>, w: &Matrix6<f64>) {
+        let (b, w) = (team.hands.len(), *w);
+        let gi = |i: usize| partial_grasp(&(team.hands[i].position - po));
         let vo = self.object_twist.fixed_rows::<3>(0).into_owned();
         let gdot = |i: usize| {
             let vi = self.ee_twist.fixed_rows::<3>(6 * i).into_owned();
@@ -333,7 +349,6 @@ impl GraspTerms {
             let mut o = self.jdv_o.fixed_rows_mut::<6>(0);
             o += dgp_i.transpose() * ee_i + gp_i.transpose() * jdv_i;
         }
-        Some(())
     }
 }
 

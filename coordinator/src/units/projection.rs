@@ -1,8 +1,8 @@
 //! The projections of PIDC (paper §II-B..D): `P` (eq. aghili_21), `Pdot v`, `M_c` and the
 //! constraint inertia `Mbar = M M_c^{-1}` (eq. aghili_25, constraint_force), `[P S]^+` and
-//! `B` (eqs. ua_solution, bmatrix), all with rank-revealing pseudo-inverses (DESIGN.md §4).
+//! `B` (eqs. ua_solution, bmatrix), all with rank-revealing pseudo-inverses (`docs/controller.md`).
 //!
-//! Two paths: by the team's blocks ([`crate::units::block_projection`], the default), which
+//! Two paths ([`ProjectionPath`]): by the team's blocks ([`crate::units::block_projection`], the default), which
 //! keeps factors and applies the projections as operators without forming a team-sized
 //! matrix, and by dense SVDs ([`Projections::compute_into`], the oracle), which fills every
 //! matrix below. [`Projections::materialize`] fills them on the block path too (tests,
@@ -17,6 +17,36 @@ use crate::team::Team;
 use crate::units::block_projection::{vmat, vmat_mut, BlockFactors, BlockOp, OpScratch};
 use crate::units::grasp::GraspTerms;
 use crate::ControllerError;
+
+/// How the projections are computed. In TOML (`projections = ...`): `"by-blocks"` or
+/// `"dense"`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ProjectionPath {
+    /// By the team's blocks ([`Projections::by_blocks_into`], the default), falling back to
+    /// [`ProjectionPath::Dense`] by itself when a block is too ill-conditioned.
+    #[default]
+    ByBlocks,
+    /// By dense SVDs of the team's matrices ([`Projections::compute_into`], the oracle).
+    Dense,
+}
+
+impl ProjectionPath {
+    /// Every path with its name in files.
+    pub const NAMES: [(ProjectionPath, &'static str); 2] = [(ProjectionPath::ByBlocks, "by-blocks"), (ProjectionPath::Dense, "dense")];
+}
+
+impl std::str::FromStr for ProjectionPath {
+    type Err = String;
+
+    /// A path by its name in files (`"by-blocks"`, `"dense"`); the error lists the names.
+    fn from_str(s: &str) -> Result<Self, String> {
+        match Self::NAMES.iter().find(|(_, n)| *n == s) {
+            Some((p, _)) => Ok(*p),
+            None => Err(format!("unknown projection path `{s}` (one of: {})", Self::NAMES.map(|(_, n)| n).join(", "))),
+        }
+    }
+}
 
 /// The projected quantities of one tick. On the block path (`by_blocks`) only `jc_rank`,
 /// `pdot_v` and the factors are computed on the tick; the matrices are empty until

@@ -92,7 +92,7 @@ pub const SLIP_WHILE_FAILING_TICKS: u32 = 10;
 
 /// What one tick showed (see [`GraspWatch::observe`]).
 #[derive(Debug, Clone, Copy)]
-pub struct TickOutcome {
+pub struct GraspObservation {
     pub tick: u64,
     /// Hands in grasp as modelled this tick (0 once released).
     pub hands: usize,
@@ -102,10 +102,10 @@ pub struct TickOutcome {
     pub fit_residual: Option<f64>,
 }
 
-impl TickOutcome {
+impl GraspObservation {
     /// The outcome of a tick of `team` (its hands in grasp as modelled) with `grasp`'s fit.
     pub fn of(tick: u64, team: &Team, grasp: Option<&GraspTerms>, qp_failed: bool) -> Self {
-        TickOutcome { tick, hands: team.hands.len(), qp_failed, fit_residual: grasp.map(|g| g.fit_residual) }
+        GraspObservation { tick, hands: team.hands.len(), qp_failed, fit_residual: grasp.map(|g| g.fit_residual) }
     }
 }
 
@@ -135,7 +135,7 @@ impl GraspWatch {
     /// After a tick of `team` with `grasp` (the controllers' last step): [`GraspWatch::observe`];
     /// on the tick the team lets go, the hands' targets back away from the object
     /// ([`Targets::let_go`]) and the grasp is forgotten. The release in force, as its note.
-    pub fn after_tick(&mut self, policy: &ReleasePolicy, t: TickOutcome, team: &Team, grasp: Option<&GraspTerms>, targets: &mut Targets, tracker: &mut GraspTracker) -> Option<&str> {
+    pub fn after_tick(&mut self, policy: &ReleasePolicy, t: GraspObservation, team: &Team, grasp: Option<&GraspTerms>, targets: &mut Targets, tracker: &mut GraspTracker) -> Option<&str> {
         if let Some(release) = self.observe(policy, t) {
             tracing::warn!(tick = release.tick, "{}", release.note);
             if let Some(g) = grasp {
@@ -148,7 +148,7 @@ impl GraspWatch {
     }
 
     /// After a tick: count failed ticks and check the fit; `Some` on the tick the team lets go.
-    pub fn observe(&mut self, policy: &ReleasePolicy, t: TickOutcome) -> Option<&Release> {
+    pub fn observe(&mut self, policy: &ReleasePolicy, t: GraspObservation) -> Option<&Release> {
         let last_hands = std::mem::replace(&mut self.last_hands, t.hands);
         if self.released.is_some() || t.hands == 0 {
             self.failed_run = 0;
@@ -179,8 +179,8 @@ impl GraspWatch {
 mod tests {
     use super::*;
 
-    fn tick(tick: u64, qp_failed: bool, fit_residual: Option<f64>) -> TickOutcome {
-        TickOutcome { tick, hands: 2, qp_failed, fit_residual }
+    fn tick(tick: u64, qp_failed: bool, fit_residual: Option<f64>) -> GraspObservation {
+        GraspObservation { tick, hands: 2, qp_failed, fit_residual }
     }
 
     #[test]
@@ -188,13 +188,13 @@ mod tests {
         let p = ReleasePolicy::default();
         let mut w = GraspWatch::default();
         // One hand closing before the other (a contact set a tick ahead) is not a loss.
-        assert!(w.observe(&p, TickOutcome { hands: 1, ..tick(1, false, Some(0.0)) }).is_none());
+        assert!(w.observe(&p, GraspObservation { hands: 1, ..tick(1, false, Some(0.0)) }).is_none());
         for t in 2..5 {
-            assert!(w.observe(&p, TickOutcome { hands: 3, ..tick(t, false, Some(0.0)) }).is_none());
+            assert!(w.observe(&p, GraspObservation { hands: 3, ..tick(t, false, Some(0.0)) }).is_none());
         }
         // Three to two: the rest still hold.
         assert!(w.observe(&p, tick(5, false, Some(0.0))).is_none());
-        let r = w.observe(&p, TickOutcome { hands: 1, ..tick(6, false, Some(0.0)) }).expect("one hand left").clone();
+        let r = w.observe(&p, GraspObservation { hands: 1, ..tick(6, false, Some(0.0)) }).expect("one hand left").clone();
         assert_eq!(r.tick, 6);
         assert!(r.note.contains("one hand is left of the 2"), "{}", r.note);
     }

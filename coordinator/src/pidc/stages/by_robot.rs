@@ -207,7 +207,6 @@ impl BlockData {
             limits: &self.limits,
             tau0: &self.tau0,
             regularisation: team.regularisation,
-            dense_first: team.dense_first,
         }
     }
 }

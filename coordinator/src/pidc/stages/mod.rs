@@ -3,20 +3,18 @@
 //!
 //! | stage | job | paper |
 //! | --- | --- | --- |
-//! | [`limits`] | the actuated joints and their torque limits, from the descriptions | eq. original_torque_limit |
-//! | [`contacts`] | `J_c = [J_cf; J_c,ee]` and `Jdot_c v`; the QP's contact list | eqs. jacobian_c, unilateral_and_friction_cone_constraint, moment_constraint |
 //! | [`tasks`] | each task's target, the object's load `F_x`, `M_c^{-1} P` terms, `tau_M` | eqs. control_law, joint_space_tau_M, js_dynamics |
 //! | [`wrench`] | the contact map `lambda = rho F_c + eta`, and `lambda` for the torque sent | eqs. relation_between_lambda_and_Fc, constraint_force |
 //! | [`torque`] | `tau_0 = [P S]^+ P tau_M`, the fallback `F_c`, `tau = tau_0 + Y F_c` | eq. ua_solution |
 //! | [`by_robot`] | a team's QP that failed, solved robot by robot when no grasp couples them | eq. wrench_optim2 by blocks |
 //!
-//! Before them run the team's assembly ([`crate::team::Team::assemble_into`]) and the grasp
-//! ([`crate::units::grasp::GraspTracker`]); between them the projections
-//! ([`crate::units::projection::Projections`]) and the contact-force QP ([`crate::qp::solve`]).
+//! Before them run the team's assembly ([`crate::team::Team::assemble_into`]), the torque
+//! limits ([`crate::units::limits`]), the grasp ([`crate::units::grasp::GraspTracker`]) and
+//! the contacts (`J_c`, `Jdot_c v`: [`crate::units::contact_jacobian`]); between them the
+//! projections ([`crate::units::projection::Projections`]), the contact list
+//! ([`crate::units::contacts`]) and the contact-force QP ([`crate::qp::solve`]).
 
 pub mod by_robot;
-pub mod contacts;
-pub mod limits;
 pub mod tasks;
 pub mod torque;
 pub mod wrench;

@@ -1,23 +1,10 @@
 //! The motion tasks of a tick: each task's target ([`Targets`], from
-//! [`crate::units::targets`]), the carried object's load ([`object_load`], the paper's
-//! `J_x^T F_x` of eq. js_dynamics), the motion-space terms every task shares
+//! [`crate::units::targets`]), the carried object's load (the paper's `J_x^T F_x` of eq.
+//! js_dynamics, from [`crate::units::object_load`]), the motion-space terms every task shares
 //! ([`MotionSpaceTerms`]) and the motion torque `tau_M` (eqs. control_law,
 //! joint_space_tau_M; [`task_torque`]).
-//!
-//! **Object weight.** The object is not in the generalized coordinates. Its load on the
-//! robots is modelled as the paper's external wrench `J_x^T F_x` (eq. js_dynamics) with
-//! `J_x = J_o` and `F_x = -w_ff`, `w_ff = [m_o (a_d - g); I_o alpha_d + omega x I_o omega]`
-//! (the object's gravity and inertial load at its reference acceleration, acting on the
-//! rigid grasp), and compensated by the same feed-forward in the object's impedance task:
-//! `F_o = (eq. control_law) + w_ff`. `J_o^T F_x = J_ee^T G^+ F_x`, so the real wrench the object
-//! exerts on hand `i` is `lambda_ee,i + (G^+ F_x)_i` (the internal part from the constraint
-//! plus the load distribution); that sum is what the diagnostics report and what the QP
-//! constrains (see [`super::wrench`]). The hands push the object with the negative of it, so
-//! their net wrench on the object is `-G (G^+ F_x) = w_ff`: it balances the weight in a
-//! static hold.
 
-use nalgebra::{DVector, Isometry3, Matrix3, Vector3, Vector6};
-use protocol::conventions::GRAVITY_VECTOR;
+use nalgebra::{DVector, Vector3, Vector6};
 use protocol::TaskReferences;
 
 use crate::linalg::zeros_v;
@@ -26,23 +13,10 @@ use crate::team::Team;
 use crate::units::grasp::GraspTerms;
 use crate::units::block_projection::{vmat, vmat_mut, BlockOp, OpScratch};
 use crate::units::impedance::{point_error, pose_error, MotionSpace, TaskStack};
+use crate::units::object_load::object_load;
 use crate::units::projection::{mass_times, Projections};
 pub use crate::units::targets::{frame_pose, PointTarget, PoseTarget, Targets};
 use crate::ControllerError;
-
-/// The object's load feed-forward `w_ff = [m_o (a_d - g); I_o alpha_d + omega x I_o omega]` at
-/// its centre (world): `object` its pose, `twist` its twist `[v; omega]`, `acc_d` the reference
-/// acceleration `[a_d; alpha_d]`, `inertia` about the centre in the object's frame. The load
-/// on the robots is `F_x = -w_ff` (see the module docs).
-pub fn object_load(object: &Isometry3<f64>, twist: &Vector6<f64>, acc_d: &[f64; 6], mass: f64, inertia: &Matrix3<f64>) -> Vector6<f64> {
-    let r_o = object.rotation.to_rotation_matrix();
-    let i_w = r_o.matrix() * *inertia * r_o.matrix().transpose();
-    let w = twist.fixed_rows::<3>(3).into_owned();
-    let alpha = Vector3::new(acc_d[3], acc_d[4], acc_d[5]);
-    let force = mass * (Vector3::new(acc_d[0], acc_d[1], acc_d[2]) - Vector3::from(GRAVITY_VECTOR));
-    let moment = i_w * alpha + w.cross(&(i_w * w));
-    Vector6::new(force.x, force.y, force.z, moment.x, moment.y, moment.z)
-}
 
 /// The motion-space term of the tasks' bias, `M_c^{-1} (P h - Pdot v)` (eq. control_law's
 /// `mu_c`), kept between ticks; its `M_c^{-1} P` (`Lambda_c`) is the projections' own
@@ -82,7 +56,7 @@ impl MotionSpaceTerms {
 }
 
 /// What [`task_torque`] reads.
-pub struct TaskInput<'a> {
+pub struct TaskTorqueInput<'a> {
     pub team: &'a Team,
     pub grasp: Option<&'a GraspTerms>,
     pub references: Option<&'a TaskReferences>,
@@ -96,14 +70,14 @@ pub struct TaskInput<'a> {
 /// whole (every task's rows stacked; see [`crate::units::impedance`]). Also the object's load
 /// `F_x` (zero without a grasp) and `J_x^T F_x` (`load`, n).
 pub fn task_torque(
-    inp: &TaskInput,
+    inp: &TaskTorqueInput,
     targets: &mut Targets,
     stack: &mut TaskStack,
     tau_m: &mut DVector<f64>,
     load: &mut DVector<f64>,
     f_x: &mut Vector6<f64>,
 ) -> Result<(), ControllerError> {
-    let TaskInput { team, grasp, references: refs, config: cfg, motion } = inp;
+    let TaskTorqueInput { team, grasp, references: refs, config: cfg, motion } = inp;
     let n = team.n;
     let frames = team.torsos.iter().chain(&team.swing_feet).chain(&team.free_hands);
     let k_rows = grasp.map_or(0, |g| g.j_o.nrows()) + frames.map(|t| t.jacobian.nrows()).sum::<usize>();
