@@ -1,21 +1,21 @@
-//! A scenario's walk (DESIGN.md §10): the crawl of [`crate::gait`] planned from the
-//! scenario's waypoints and the robots' standing poses ([`Walk::plan`]), and what a run sends
-//! for it ([`references`]): the torso, object and swing-foot references, the feet's unloading
-//! ramps, and each robot's contact sets, published ahead of time with the tick they apply
-//! from. [`evaluate`] measures a walk from the ground truth: steps taken, stance feet that
-//! slid, final torso poses.
+//! A scenario's walk (`docs/walking.md`): its specification ([`spec`]), the crawl of
+//! [`crate::gait`] planned from the scenario's waypoints and the robots' standing poses
+//! ([`Walk::plan`]), the arm's reach along it ([`reach`]), and what a run sends for it
+//! ([`references`]): the torso, object and swing-foot references, the feet's unloading ramps,
+//! and each robot's contact sets, published ahead of time with the tick they apply from. A
+//! walk is measured from the ground truth by the runner (`team_runner::walk::evaluate`).
 
-pub mod evaluate;
 pub mod reach;
 pub mod references;
+pub mod spec;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use robot_model::Robot;
-use sim_bridge::world::RobotPlacement;
 use thiserror::Error;
 
 use crate::gait::{GaitError, GaitPlan, HandLoad, WalkingRobot};
-use crate::scenario::{WalkFrame, WalkSpec};
+use crate::placement::BasePlacement;
+pub use spec::{WalkFrame, WalkSpec, WalkSpecError};
 
 /// Why a walk cannot be planned.
 #[derive(Debug, Error)]
@@ -62,7 +62,7 @@ struct Standing {
 
 /// A robot's configuration at its placement: the standing pose, the placement's joint
 /// overrides (the hands on the object), the base where the placement puts it.
-fn placed_q(robot: &Robot, placement: &RobotPlacement) -> Result<Vec<f64>, String> {
+fn placed_q(robot: &Robot, placement: &BasePlacement) -> Result<Vec<f64>, String> {
     let model = &robot.model;
     let mut q: Vec<f64> = robot.standing_q.iter().copied().collect();
     let off = model.nq - model.joint_names.len();
@@ -76,7 +76,7 @@ fn placed_q(robot: &Robot, placement: &RobotPlacement) -> Result<Vec<f64>, Strin
     Ok(q)
 }
 
-fn standing(robot: &Robot, placement: &RobotPlacement) -> Result<Standing, String> {
+fn standing(robot: &Robot, placement: &BasePlacement) -> Result<Standing, String> {
     let model = &robot.model;
     let q = placed_q(robot, placement)?;
     let mut data = robot_model::Data::new(model);
@@ -107,7 +107,7 @@ impl Walk {
     /// `object_start`, on a scenario of `duration` s, with what the object applies to each
     /// robot's hand at the start (`hand_loads`, by robot id; a robot not named carries nothing:
     /// the planner then keeps its bare centre of mass inside the support triangle).
-    pub fn plan(spec: &WalkSpec, robots: &[(String, std::sync::Arc<Robot>)], placements: &[RobotPlacement], object_start: &Isometry3<f64>, hand_loads: &[(String, HandLoad)], duration: f64) -> Result<Walk, WalkError> {
+    pub fn plan(spec: &WalkSpec, robots: &[(String, std::sync::Arc<Robot>)], placements: &[BasePlacement], object_start: &Isometry3<f64>, hand_loads: &[(String, HandLoad)], duration: f64) -> Result<Walk, WalkError> {
         let centre = object_start.translation.vector;
         let mut inputs = Vec::new();
         let mut walking = Vec::new();
