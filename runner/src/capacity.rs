@@ -26,7 +26,7 @@ use robot_model::Robot;
 use sim_bridge::world::WorldSpec;
 use thiserror::Error;
 
-use crate::gait::HandLoad;
+use planner::gait::HandLoad;
 use crate::plan::{Plan, TEAM};
 
 /// Why the check could not run or refused the load.

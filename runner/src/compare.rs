@@ -17,7 +17,7 @@ use thiserror::Error;
 use crate::driver::Records;
 use crate::evaluate::{self, Evaluation};
 use crate::plan::{self, Plan};
-use crate::reference::Motion;
+use planner::reference::Motion;
 use crate::report::{self, ReportError, TimeSeries};
 use crate::run::{self, RunOptions};
 use crate::scenario::Scenario;
@@ -289,7 +289,7 @@ fn write_table(rows: &[Row], out: &Path, name: &str) -> Result<(), CompareError>
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::reference::{Plane, Segment};
+    use planner::reference::{Plane, Segment};
 
     #[test]
     fn a_sweep_scales_amplitudes_or_speeds_and_nothing_else() {

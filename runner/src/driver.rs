@@ -182,7 +182,7 @@ impl Driver {
     }
 
     /// The team let go after `tick`: halt the walk, at once before a lift-off, else at its next
-    /// quiet point ([`crate::gait::GaitPlan::halt_point`]). The references
+    /// quiet point ([`planner::gait::GaitPlan::halt_point`]). The references
     /// already published from there on (up to `published_to`) are sent again, held, and
     /// recorded again (the later of a tick's two references in the recording; the coordinator
     /// may have used the first for the ticks it solved before the held ones arrived); each

@@ -325,7 +325,7 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
     }
     check("object position RMS [m]".into(), object.position_rms_m, MAX_OBJECT_POSITION_RMS);
     check("object orientation RMS [deg]".into(), object.orientation_rms_deg, MAX_OBJECT_ORIENTATION_RMS_DEG);
-    let walk = refs.walk.as_ref().map(|w| w.evaluate(&truth, refs.walk_halted_at));
+    let walk = refs.walk.as_ref().map(|w| crate::walk::evaluate::evaluate(w, &truth, refs.walk_halted_at));
     for (r, t) in torsos.iter().filter(|(r, _)| !faulted(r)) {
         // A walking torso follows a moving reference: its own bound.
         let i = robots.iter().position(|x| x == r);

@@ -10,7 +10,8 @@
 //!   each robot's description is loaded there, once, and shared (`Arc<robot_model::Robot>`).
 //! * [`capacity`]: the payload check of a plan (the static team problem at the start pose) and
 //!   the team's capacity (`team capacity`).
-//! * [`grasp_plan`]: where the hands start: flat on the object's faces (arm IK from `robot_model::ik`).
+//! * [`placing`]: the planner (`planner`: robot placement, hands on the object, references,
+//!   the walk) on the simulator's world spec and the controller's planned grasp.
 //! * [`run`]: `team run`: the scenario with the whole stack, embedded or distributed.
 //! * [`priority`]: a real-time run's scheduling priority (raised where permitted).
 //! * [`driver`]: the runner's participant during a run: references out, records in, progress.
@@ -18,10 +19,8 @@
 //!   sweep; [`compare_plot`] draws its object-Z figure.
 //! * [`evaluate`]: metrics, time series, plots and acceptance checks of a run.
 //! * [`scenario`]: scenario files (TOML) with `--set key=value` overrides.
-//! * [`reference`]: the scenarios' reference trajectories.
-//! * [`gait`]: the static walk (crawl) planner: steps, CoM shifts, swing trajectories, ramps.
-//! * [`walk`]: a scenario's walk: the crawl planned from its waypoints, the references and
-//!   contact sets a run sends for it, and its evaluation (steps, slides, final poses).
+//! * [`walk`]: a walk's evaluation from the ground truth (steps, slides, final poses); the
+//!   walk itself is planned by `planner::walk`.
 //! * [`metrics`]: the measures of success of DESIGN.md §8.
 //! * [`report`]: CSV time series, `metrics.json` and plots of a run.
 //! * [`record`]: the run as MCAP (`run.mcap`), live to Foxglove (`--live`), and read back
@@ -35,17 +34,15 @@ pub mod hosts;
 pub mod echo;
 pub mod evaluate;
 pub mod faults;
-pub mod gait;
-pub mod grasp_plan;
 pub mod launch;
 pub mod loop_timing;
 pub mod metrics;
+pub mod placing;
 pub mod plan;
 pub mod priority;
 pub mod plots;
 pub mod processes;
 pub mod record;
-pub mod reference;
 pub mod report;
 pub mod run;
 pub mod scenario;

@@ -18,7 +18,7 @@ use sim_bridge::scene::Scene;
 use sim_bridge::world::{ContactParams, SolverParams, WorldSpec};
 use thiserror::Error;
 
-use crate::reference::PoseMotion;
+use planner::reference::PoseMotion;
 use crate::scenario::Scenario;
 
 /// The team name every scenario run uses on the bus.
@@ -30,16 +30,18 @@ pub enum PlanError {
     #[error("robot {robot}: {source}")]
     Description { robot: String, source: Box<DescriptionError> },
     #[error("placing the hands on the object: {0}")]
-    Ik(#[from] crate::grasp_plan::GraspPlanError),
+    Ik(#[from] planner::grasp::GraspPlanError),
     #[error(transparent)]
     World(#[from] sim_bridge::world::WorldError),
+    #[error("invalid world: {0}")]
+    Placement(#[from] planner::placement::PlacementError),
     #[error("controller: {0}")]
     Controller(#[from] coordinator::ControllerError),
     /// Not `#[from]`: the message holds the check's whole error, no source chain repeats it.
     #[error("payload check at the start pose: {0} (`capacity_check = false` runs anyway)")]
     Capacity(crate::capacity::CheckError),
     #[error(transparent)]
-    Walk(#[from] crate::walk::WalkError),
+    Walk(#[from] planner::walk::WalkError),
 }
 
 /// Everything a scenario run needs, for either mode.
@@ -85,12 +87,12 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
     for r in &s.robots {
         let path = if r.description.is_absolute() { r.description.clone() } else { root.join(&r.description) };
         let robot = cache.load(&path).map_err(|source| PlanError::Description { robot: r.id.clone(), source: Box::new(source) })?;
-        placements.push(sim_bridge::placement::standing(&r.id, path.clone(), &robot, r.base_xy, r.yaw)?);
+        placements.push(sim_bridge::world::RobotPlacement::standing(&r.id, path.clone(), &robot, r.base_xy, r.yaw)?);
         robots.push(PlannedRobot { id: r.id.clone(), description: path, joints: robot.actuated_joints.clone(), robot });
     }
     // Robots must not stand in each other (a dense layout is refused, naming the pair).
-    let footprints = robots.iter().map(|r| sim_bridge::placement::Footprint::of(&r.robot)).collect::<Result<Vec<_>, _>>()?;
-    sim_bridge::placement::check_clearance(&placements, &footprints)?;
+    let footprints = robots.iter().map(|r| planner::placement::Footprint::of(&r.robot)).collect::<Result<Vec<_>, _>>()?;
+    planner::placement::check_clearance(&crate::placing::base_placements(&placements), &footprints)?;
     let object = s.object.world();
     let mut world = WorldSpec {
         robots: placements,
@@ -104,7 +106,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
     };
     world.substeps()?;
     let loaded: Vec<Arc<Robot>> = robots.iter().map(|r| r.robot.clone()).collect();
-    let arms = crate::grasp_plan::place_hands(&mut world, &loaded)?;
+    let arms = crate::placing::place_hands(&mut world, &loaded)?;
 
     let perturbations = s
         .perturbations
@@ -139,7 +141,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
     let principal = object.principal_inertia();
     let object_at_grasp = Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation));
     // Each hand's grasp as planned: a coordinator (re)started mid-carry finds the object by it.
-    let planned_grasp = crate::grasp_plan::planned_grasp(&scene.world, &loaded, &arms, &object_at_grasp)?;
+    let planned_grasp = crate::placing::planned_grasp(&scene.world, &loaded, &arms, &object_at_grasp)?;
     // The PIDC configuration of the scenario: its gains, object, minimum forces and margins.
     let pidc = PidcConfig {
         object_gains: s.gains.object.gains(),
@@ -195,7 +197,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
         Some(w) => {
             let ids: Vec<(String, Arc<Robot>)> = robots.iter().map(|r| (r.id.clone(), r.robot.clone())).collect();
             let object_start = Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation));
-            let walk = crate::walk::Walk::plan(w, &ids, &scene.world.robots, &object_start, &hand_loads, s.duration)?;
+            let walk = planner::walk::Walk::plan(w, &ids, &crate::placing::base_placements(&scene.world.robots), &object_start, &hand_loads, s.duration)?;
             for st in walk.gait.steps() {
                 tracing::debug!(robot = %walk.robots[st.robot], foot = %walk.feet[st.robot][st.foot], liftoff = st.liftoff, margin = st.margin, cop_margin = ?st.cop_margin, "planned step");
             }
@@ -245,7 +247,7 @@ pub struct ReferencePlan {
     pub torsos: Vec<(String, PoseMotion, Vector3<f64>, UnitQuaternion<f64>)>,
     /// The walk, if the scenario has one: it gives the walking torsos', the carried object's
     /// and the swing feet's references.
-    pub walk: Option<Arc<crate::walk::Walk>>,
+    pub walk: Option<Arc<planner::walk::Walk>>,
     /// Scenario time at which the walk was halted ([`ReferencePlan::halt_walk`]): from then on
     /// its torso and object references hold their poses of then at rest, each foot holds where
     /// it stands, and an unloading cut short is undone (`Walk::feet_after_halt_into`).
@@ -263,7 +265,7 @@ impl ReferencePlan {
     }
 
     /// When a walk stops if the team lets go after `released_tick`: at once before a lift-off,
-    /// else at the walk's first quiet point from then on ([`crate::gait::GaitPlan::halt_point`];
+    /// else at the walk's first quiet point from then on ([`planner::gait::GaitPlan::halt_point`];
     /// `None` without a walk).
     pub fn walk_halt_time(&self, released_tick: u64) -> Option<f64> {
         let t = self.time_of_tick(released_tick).unwrap_or(0.0);
@@ -281,7 +283,7 @@ impl ReferencePlan {
     }
 
     /// The walk and the time to ask it for at scenario time `t` (held at the halt).
-    fn walk_at(&self, t: Option<f64>) -> Option<(f64, &crate::walk::Walk)> {
+    fn walk_at(&self, t: Option<f64>) -> Option<(f64, &planner::walk::Walk)> {
         let t = t?.min(self.walk_halted_at.unwrap_or(f64::INFINITY));
         self.walk.as_deref().map(|w| (t, w))
     }

@@ -6,15 +6,16 @@
 //!
 //! `controller` is the kind of the team controller (`"pidc"`, the default; the kinds are the
 //! coordinator's, [`coordinator::ControllerSpec::KINDS`]). `[walk]` makes robots walk a
-//! static crawl along waypoints ([`WalkSpec`], planned by [`crate::gait`], run by
-//! [`crate::walk`]); without it every foot stays in stance.
+//! static crawl along waypoints ([`WalkSpec`], planned by [`planner::gait`] and
+//! [`planner::walk`]); without it every foot stays in stance.
 
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 use thiserror::Error;
 
-use crate::reference::PoseMotion;
+use planner::reference::PoseMotion;
+use planner::walk::WalkSpec;
 
 /// What can be wrong with a scenario.
 #[derive(Debug, Error)]
@@ -76,7 +77,7 @@ pub struct Scenario {
     /// The robots, each with its floor pose; or, instead, `team`.
     #[serde(default)]
     pub robots: Vec<RobotSpec>,
-    /// The robots laid out around the object's faces (`sim_bridge::placement::around_object`),
+    /// The robots laid out around the object's faces (`planner::placement::around_object`),
     /// named `r1`, `r2`, ... face by face; expanded into `robots` when the file is loaded.
     #[serde(default)]
     pub team: Option<TeamSpec>,
@@ -176,61 +177,6 @@ impl Fault {
     }
 }
 
-/// The frame of a walk's waypoints.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum WalkFrame {
-    /// Each walking robot's start torso frame (forward, left, yaw); the object holds its pose
-    /// (the paper's S2).
-    #[default]
-    Robot,
-    /// The whole team moves rigidly: world offsets (x, y) and a turn about the object's
-    /// start centre; every robot walks and the object's reference moves with the team.
-    Team,
-}
-
-/// A walk (DESIGN.md §10): waypoints `[dx, dy, yaw_deg]`, each an offset from the start pose
-/// (not from the previous waypoint), in `frame`.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct WalkSpec {
-    /// Robots that walk (ids); empty: every robot. In the `team` frame every robot walks.
-    #[serde(default)]
-    pub robots: Vec<String>,
-    #[serde(default)]
-    pub frame: WalkFrame,
-    pub path: Vec<[f64; 3]>,
-    /// Scenario time the first step starts, s.
-    #[serde(default)]
-    pub start: f64,
-    /// The crawl's parameters (stride, lift height, phase durations, margin, ...).
-    #[serde(default)]
-    pub gait: crate::gait::GaitParams,
-}
-
-impl WalkSpec {
-    fn check(&self, robots: &[RobotSpec]) -> Result<(), String> {
-        if self.path.is_empty() {
-            return Err("walk.path needs at least one waypoint".into());
-        }
-        if self.path.iter().flatten().chain([&self.start]).any(|x| !x.is_finite()) || self.start < 0.0 {
-            return Err("walk.path and walk.start must be finite, start >= 0".into());
-        }
-        if let Some(r) = self.robots.iter().find(|r| !robots.iter().any(|x| &x.id == *r)) {
-            return Err(format!("walk.robots names unknown robot {r:?}"));
-        }
-        if self.frame == WalkFrame::Team && !self.robots.is_empty() && self.robots.len() != robots.len() {
-            return Err("walk.frame = \"team\" moves the whole team: leave walk.robots empty".into());
-        }
-        Ok(())
-    }
-
-    /// Whether robot `id` walks.
-    pub fn walks(&self, id: &str) -> bool {
-        self.robots.is_empty() || self.robots.iter().any(|r| r == id)
-    }
-}
-
 fn default_settle() -> f64 {
     1.0
 }
@@ -306,7 +252,7 @@ pub struct TeamSpec {
     /// Every robot's description (default: the project's legged manipulator).
     #[serde(default = "default_description")]
     pub description: PathBuf,
-    pub faces: Vec<sim_bridge::placement::Face>,
+    pub faces: Vec<planner::placement::Face>,
     pub per_face: usize,
     #[serde(default)]
     pub spacing: f64,
@@ -318,14 +264,14 @@ fn default_description() -> PathBuf {
     PathBuf::from("robot-model/models/legged_manipulator.toml")
 }
 fn default_standoff() -> f64 {
-    sim_bridge::placement::DEFAULT_STANDOFF
+    planner::placement::DEFAULT_STANDOFF
 }
 
 impl TeamSpec {
     /// The robots of this layout around `object`.
     pub fn robots(&self, object: &ObjectSpec) -> Result<Vec<RobotSpec>, String> {
-        let layout = sim_bridge::placement::FaceLayout { faces: self.faces.clone(), per_face: self.per_face, spacing: self.spacing, standoff: self.standoff };
-        let poses = sim_bridge::placement::around_object(&object.world(), &layout).map_err(|e| e.to_string())?;
+        let layout = planner::placement::FaceLayout { faces: self.faces.clone(), per_face: self.per_face, spacing: self.spacing, standoff: self.standoff };
+        let poses = planner::placement::around_object(&crate::placing::object_box(&object.world()), &layout).map_err(|e| e.to_string())?;
         Ok(poses.into_iter().enumerate().map(|(i, (base_xy, yaw))| RobotSpec { id: format!("r{}", i + 1), description: self.description.clone(), base_xy, yaw }).collect())
     }
 }
@@ -493,7 +439,7 @@ impl Scenario {
             t.motion.check(&format!("references.torsos[{i}]")).map_err(|e| e.0)?;
         }
         if let Some(w) = &self.walk {
-            w.check(&self.robots)?;
+            w.check(&self.robots.iter().map(|r| r.id.as_str()).collect::<Vec<_>>()).map_err(|e| e.0)?;
         }
         for (i, f) in self.faults.iter().enumerate() {
             f.check(i, &self.robots, self.duration)?;

@@ -10,7 +10,9 @@
 //!   the robots' own models (`robot_model::Robot`, loaded once by the caller and shared).
 //! * [`mujoco_plant`]: the [`plant::Plant`] over that world.
 //! * [`perturbation`]: timed external wrenches.
-//! * [`placement`]: where robots stand (the one place floor poses become placements).
+//!
+//! Where robots stand around the object is planning (`planner::placement`); the world takes
+//! the placements it is given ([`world::RobotPlacement`]).
 
 // Index loops over MuJoCo's raw arrays read more plainly than iterator chains; the crate's
 // rust-version (1.85) predates `is_multiple_of`.
@@ -20,7 +22,6 @@ pub mod ground_truth;
 pub mod lockstep;
 pub mod mujoco_plant;
 pub mod perturbation;
-pub mod placement;
 pub mod plant;
 pub mod realtime;
 pub mod scene;

@@ -188,8 +188,8 @@ fn build_world(a: &RunArgs) -> Result<(sim_bridge::world::WorldSpec, sim_bridge:
     let n = a.robots.len();
     let description = a.description.clone().unwrap_or_else(robot_model::default_robot_path);
     let robot = std::sync::Arc::new(robot_model::Robot::load(&description).map_err(|e| anyhow::anyhow!("{}: {e}", description.display()))?);
-    for (id, (xy, yaw)) in a.robots.iter().zip(sim_bridge::placement::facing_ring([0.0, 0.0], a.spacing / 2.0, n)) {
-        spec.robots.push(sim_bridge::placement::standing(id, description.clone(), &robot, xy, yaw)?);
+    for (id, (xy, yaw)) in a.robots.iter().zip(planner::placement::facing_ring([0.0, 0.0], a.spacing / 2.0, n)) {
+        spec.robots.push(sim_bridge::world::RobotPlacement::standing(id, description.clone(), &robot, xy, yaw)?);
     }
     if !a.no_object {
         let mut o = ObjectSpec::paper_cube([a.object_position[0], a.object_position[1], a.object_position[2]]);

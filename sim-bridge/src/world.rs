@@ -66,11 +66,30 @@ pub struct RobotPlacement {
     pub joint_overrides: BTreeMap<String, f64>,
 }
 
+/// Base height of the default robot's standing pose (`robot-model/models/legged_manipulator.toml`,
+/// `[standing] base_position`), m: for worlds built without loading it first (tests, the
+/// paper's pair).
+pub const DEFAULT_STANDING_HEIGHT: f64 = 0.54882015;
+
 impl RobotPlacement {
-    /// The default robot at `(x, y)` at its standing height, facing `yaw`
-    /// ([`crate::placement::default_robot`]).
+    /// The default robot at `(x, y)` at its standing height ([`DEFAULT_STANDING_HEIGHT`]),
+    /// facing `yaw`.
     pub fn default_robot(id: &str, x: f64, y: f64, yaw: f64) -> Self {
-        crate::placement::default_robot(id, [x, y], yaw)
+        Self::at_height(id, robot_model::default_robot_path(), [x, y, DEFAULT_STANDING_HEIGHT], yaw)
+    }
+
+    /// `robot` (loaded from `description`) at `(x, y)` facing `yaw`, its base at the height of
+    /// its own description's standing pose (so its feet touch the floor). A fixed-base robot
+    /// has no base to place on the floor: an error.
+    pub fn standing(id: &str, description: PathBuf, robot: &Robot, xy: [f64; 2], yaw: f64) -> Result<Self, WorldError> {
+        if !robot.model.floating_base {
+            return Err(WorldError::Invalid(format!("robot {id}: {} has a fixed base; only a floating-base robot stands on the floor", description.display())));
+        }
+        Ok(Self::at_height(id, description, [xy[0], xy[1], robot.standing_q[2]], yaw))
+    }
+
+    fn at_height(id: &str, description: PathBuf, base_position: [f64; 3], base_yaw: f64) -> Self {
+        RobotPlacement { id: id.to_string(), description, base_position, base_yaw, joint_overrides: BTreeMap::new() }
     }
 }
 

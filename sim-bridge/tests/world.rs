@@ -2,7 +2,7 @@
 
 use sim_bridge::mujoco_plant::MujocoPlant;
 use sim_bridge::plant::{empty_state, Plant};
-use sim_bridge::world::{check_against_model, load_robots, World, WorldError, WorldSpec};
+use sim_bridge::world::{check_against_model, load_robots, RobotPlacement, World, WorldError, WorldSpec, DEFAULT_STANDING_HEIGHT};
 
 #[test]
 fn pair_world_builds_and_matches_the_models() {
@@ -58,4 +58,13 @@ fn robots_are_loaded_once_per_description_and_must_match_the_spec() {
     spec.robots[0].description = "/nonexistent/robot.toml".into();
     let e = load_robots(&spec).unwrap_err();
     assert!(matches!(&e, WorldError::Description { id, .. } if id == "r9"), "{e}");
+}
+
+#[test]
+fn the_default_height_is_the_default_robots_standing_height() {
+    let robot = robot_model::Robot::load(robot_model::default_robot_path()).unwrap();
+    assert_eq!(robot.standing_q[2], DEFAULT_STANDING_HEIGHT);
+    let p = RobotPlacement::standing("r1", robot_model::default_robot_path(), &robot, [1.0, 2.0], 0.5).unwrap();
+    assert_eq!(p.base_position, [1.0, 2.0, DEFAULT_STANDING_HEIGHT]);
+    assert_eq!(p, RobotPlacement::default_robot("r1", 1.0, 2.0, 0.5));
 }

@@ -6,7 +6,7 @@ use sim_bridge::ground_truth::{self, Recorder};
 use sim_bridge::mujoco_plant::MujocoPlant;
 use sim_bridge::plant::{empty_state, Plant};
 use sim_bridge::world::{load_robots, World, WorldSpec};
-use team_runner::grasp_plan::place_hands;
+use team_runner::placing::place_hands;
 use team_tests::standing::{HandLoad, StandingController, StandingGains};
 
 fn hold(squeeze: f64, seconds: f64) -> (f64, f64, usize, Recorder) {

@@ -1,5 +1,5 @@
 //! Teams of any size (the teams issue): three and four robots on the 0.6 m cube, six and eight
-//! on a 2.4 m beam, each laid out by `sim_bridge::placement::around_object`, holding and then
+//! on a 2.4 m beam, each laid out by `planner::placement::around_object`, holding and then
 //! moving the object on S4's circle, with the whole stack in the loop. Acceptance as S4 (never
 //! dropped, slip < 5 mm, object position RMS < 1 cm, orientation RMS < 2 deg, torso RMS < 1 cm),
 //! evaluated on the ground truth; shortened for CI (the README's figures run them whole).

@@ -116,7 +116,7 @@ fn a_release_before_a_lift_off_halts_the_walk_at_once() {
     let third = third_step(&plan);
     let released = plan.references.time_of_tick(records.released_at.expect("released")).expect("after settling");
     assert!((halt - released).abs() < 1e-9, "halted at the release: released {released:.3} s, halted {halt:.3} s");
-    assert!(halt < third.liftoff - team_runner::gait::HALT_GUARD, "released {released:.3} s, before the third lift-off at {:.3} s", third.liftoff);
+    assert!(halt < third.liftoff - planner::gait::HALT_GUARD, "released {released:.3} s, before the third lift-off at {:.3} s", third.liftoff);
     let rep = m.walk.as_ref().expect("walk report");
     assert_eq!(rep.steps_planned.get("r1"), Some(&2), "the third step is cancelled: {:?}", rep.steps_planned);
     assert_eq!(rep.steps_taken, rep.steps_planned, "steps taken against planned up to the halt");
@@ -152,7 +152,7 @@ fn released_walk_sets() -> Vec<String> {
     vec!["walk.path=[[0.2, 0.0, 0.0]]".to_string(), "duration=16.5".into(), "settle=0.5".into()]
 }
 
-fn third_step(plan: &Plan) -> team_runner::gait::Step {
+fn third_step(plan: &Plan) -> planner::gait::Step {
     plan.references.walk.as_ref().expect("walk").gait.steps().iter().filter(|s| s.robot == 0).nth(2).expect("a third step").clone()
 }
 
@@ -170,7 +170,7 @@ struct LetGo {
 /// `PUSH_N` for 0.3 s from `push_at(robot 1's third step, the gait's parameters)`: the team
 /// lets go and the walk halts; from 0.2 s after the halt every foot is down, the torsos stand
 /// near their held references and no stance foot slides 1 cm.
-fn let_go_mid_walk(name: &str, push_at: impl Fn(&team_runner::gait::Step, &team_runner::gait::GaitParams) -> f64) -> LetGo {
+fn let_go_mid_walk(name: &str, push_at: impl Fn(&planner::gait::Step, &planner::gait::GaitParams) -> f64) -> LetGo {
     const PUSH_N: f64 = 100.0;
     let base = released_walk_sets();
     let scenario = team_runner::scenario::Scenario::load(common::scenario::repo().join("scenarios/transport2.toml"), &base).expect("scenario");

@@ -6,7 +6,7 @@ use nalgebra::Vector3;
 
 use super::draw::{Line, Panel, Stroke, GREY, PALETTE, RED};
 use crate::driver::Records;
-use crate::walk::Walk;
+use planner::walk::Walk;
 
 /// The walk's figures: (file stem, caption), after the report's own.
 pub const FIGURES: [(&str, &str); 3] = [

@@ -10,15 +10,16 @@ use nalgebra::{Isometry3, Translation3, Vector2, Vector3};
 use protocol::GroundTruth;
 use serde::Serialize;
 
-use super::Walk;
-use crate::gait::Step;
+use planner::gait::Step;
+use planner::walk::Walk;
+
 use crate::metrics;
 
 /// A foot must be off the ground at least this long for a step to count, s.
 pub const MIN_AIRBORNE: f64 = 0.03;
 /// A stance foot's slide is measured from this long after its touchdown, s.
 pub const SLIDE_AFTER_TOUCHDOWN: f64 = 0.03;
-/// Acceptance bounds of a walk (issue: walking while holding).
+/// Acceptance bounds of a walk while holding.
 pub const MAX_STANCE_SLIDE: f64 = 0.01;
 pub const MAX_FINAL_TORSO_POSITION: f64 = 0.02;
 pub const MAX_FINAL_TORSO_ANGLE_DEG: f64 = 3.0;
@@ -145,92 +146,90 @@ fn measured_cop(g: &GroundTruth, robot: &str) -> Option<Vector2<f64>> {
     (weight > 1e-6).then(|| sum / weight)
 }
 
-impl Walk {
-    /// Robot `i`'s measured centre of pressure margin in the triangle of its other three feet
-    /// (their centres in the ground truth) as the unloading of `step`'s foot starts, and the
-    /// least share of the weight one of them carries there.
-    fn cop_at_unload(&self, truth: &[&GroundTruth], i: usize, step: &Step) -> Option<(f64, f64)> {
-        let id = &self.robots[i];
-        let start = step.liftoff - self.gait.params().t_unload;
-        let g = truth.iter().rev().find(|g| g.time <= start)?;
-        let tri: Vec<Vector2<f64>> = (0..self.feet[i].len())
-            .filter(|f| *f != step.foot)
-            .filter_map(|f| g.feet.iter().find(|b| b.name == format!("{id}/{}", self.feet[i][f])))
-            .map(|b| Vector2::new(b.pose.position[0], b.pose.position[1]))
-            .collect();
-        let [a, b, c] = tri.as_slice() else { return None };
-        let (cop, tri) = (measured_cop(g, id)?, [*a, *b, *c]);
-        let share = crate::gait::support::shares(&cop, &tri).into_iter().fold(f64::INFINITY, f64::min);
-        Some((crate::gait::support::margin(&cop, &tri), share))
-    }
+/// Robot `i`'s measured centre of pressure margin in the triangle of its other three feet
+/// (their centres in the ground truth) as the unloading of `step`'s foot starts, and the
+/// least share of the weight one of them carries there.
+fn cop_at_unload(walk: &Walk, truth: &[&GroundTruth], i: usize, step: &Step) -> Option<(f64, f64)> {
+    let id = &walk.robots[i];
+    let start = step.liftoff - walk.gait.params().t_unload;
+    let g = truth.iter().rev().find(|g| g.time <= start)?;
+    let tri: Vec<Vector2<f64>> = (0..walk.feet[i].len())
+        .filter(|f| *f != step.foot)
+        .filter_map(|f| g.feet.iter().find(|b| b.name == format!("{id}/{}", walk.feet[i][f])))
+        .map(|b| Vector2::new(b.pose.position[0], b.pose.position[1]))
+        .collect();
+    let [a, b, c] = tri.as_slice() else { return None };
+    let (cop, tri) = (measured_cop(g, id)?, [*a, *b, *c]);
+    let share = planner::gait::support::shares(&cop, &tri).into_iter().fold(f64::INFINITY, f64::min);
+    Some((planner::gait::support::margin(&cop, &tri), share))
+}
 
-    /// The longest time any foot of robot `i` was off the ground during the swing of another
-    /// of its feet (from `MIN_AIRBORNE` after the lift-off to the landing set), s.
-    fn stance_lift(&self, truth: &[&GroundTruth], times: &[f64], i: usize, planned: &[&Step]) -> f64 {
-        let window = self.gait.params().touchdown_window;
-        // The foot in mid-swing at each sample (one swings at a time): O(samples + steps).
-        let mut swinging_foot: Vec<Option<usize>> = vec![None; times.len()];
+/// The longest time any foot of robot `i` was off the ground during the swing of another
+/// of its feet (from `MIN_AIRBORNE` after the lift-off to the landing set), s.
+fn stance_lift(walk: &Walk, truth: &[&GroundTruth], times: &[f64], i: usize, planned: &[&Step]) -> f64 {
+    let window = walk.gait.params().touchdown_window;
+    // The foot in mid-swing at each sample (one swings at a time): O(samples + steps).
+    let mut swinging_foot: Vec<Option<usize>> = vec![None; times.len()];
+    for s in planned.iter().filter(|s| s.robot == i) {
+        let (from, to) = (times.partition_point(|t| *t < s.liftoff + MIN_AIRBORNE), times.partition_point(|t| *t <= s.touchdown - window));
+        swinging_foot[from..to.max(from)].fill(Some(s.foot));
+    }
+    let mut worst = 0.0_f64;
+    for f in 0..walk.feet[i].len() {
+        let track = foot_track(truth, &walk.robots[i], &walk.feet[i][f], &walk.foot_links[i][f], walk.foot_radius[i]);
+        let mut since: Option<f64> = None;
+        for (k, t) in times.iter().enumerate() {
+            let swinging = swinging_foot[k].is_some_and(|g| g != f);
+            since = if swinging && !track.contact[k] { Some(since.unwrap_or(*t)) } else { None };
+            if let Some(t0) = since {
+                worst = worst.max(t - t0);
+            }
+        }
+    }
+    worst
+}
+
+/// The walk's report from the run's ground truth (scenario samples, in time order), for a
+/// walk halted at `halted_at` (s) if the team let go.
+pub fn evaluate(walk: &Walk, truth: &[&GroundTruth], halted_at: Option<f64>) -> WalkReport {
+    let times: Vec<f64> = truth.iter().map(|g| g.time).collect();
+    let end = halted_at.unwrap_or(f64::INFINITY);
+    let planned: Vec<&Step> = walk.gait.steps().iter().filter(|s| s.liftoff < end).collect();
+    let least_margin_m = planned.iter().map(|s| s.margin).fold(f64::INFINITY, f64::min);
+    let mut rep = WalkReport { touchdown_offset_ms: [f64::INFINITY, f64::NEG_INFINITY], least_margin_m, halted_at_s: halted_at, ..WalkReport::default() };
+    for (i, id) in walk.robots.iter().enumerate() {
+        rep.steps_planned.insert(id.clone(), planned.iter().filter(|s| s.robot == i).count());
+        let (mut taken, mut slide) = (0, 0.0_f64);
+        for (frame, link) in walk.feet[i].iter().zip(&walk.foot_links[i]) {
+            let track = foot_track(truth, id, frame, link, walk.foot_radius[i]);
+            taken += steps(&times, &track.contact);
+            slide = slide.max(stance_slide(&times, &track));
+        }
+        rep.steps_taken.insert(id.clone(), taken);
+        let measured: Vec<(f64, f64)> = planned.iter().filter(|s| s.robot == i).filter_map(|s| cop_at_unload(walk, truth, i, s)).collect();
+        let cop = measured.iter().map(|m| m.0).fold(f64::INFINITY, f64::min);
+        if cop.is_finite() {
+            rep.cop_margin_m.insert(id.clone(), cop);
+            rep.cop_share.insert(id.clone(), measured.iter().map(|m| m.1).fold(f64::INFINITY, f64::min));
+            rep.stance_lift_ms.insert(id.clone(), 1e3 * stance_lift(walk, truth, &times, i, &planned));
+        }
         for s in planned.iter().filter(|s| s.robot == i) {
-            let (from, to) = (times.partition_point(|t| *t < s.liftoff + MIN_AIRBORNE), times.partition_point(|t| *t <= s.touchdown - window));
-            swinging_foot[from..to.max(from)].fill(Some(s.foot));
-        }
-        let mut worst = 0.0_f64;
-        for f in 0..self.feet[i].len() {
-            let track = foot_track(truth, &self.robots[i], &self.feet[i][f], &self.foot_links[i][f], self.foot_radius[i]);
-            let mut since: Option<f64> = None;
-            for (k, t) in times.iter().enumerate() {
-                let swinging = swinging_foot[k].is_some_and(|g| g != f);
-                since = if swinging && !track.contact[k] { Some(since.unwrap_or(*t)) } else { None };
-                if let Some(t0) = since {
-                    worst = worst.max(t - t0);
-                }
+            let track = foot_track(truth, id, &walk.feet[i][s.foot], &walk.foot_links[i][s.foot], walk.foot_radius[i]);
+            if let Some(dt) = first_contact_after(&times, &track.contact, s.liftoff).map(|t| 1e3 * (t - s.touchdown)) {
+                let o = &mut rep.touchdown_offset_ms;
+                (o[0], o[1]) = (o[0].min(dt), o[1].max(dt));
             }
         }
-        worst
+        rep.stance_slide_m.insert(id.clone(), slide);
+        let last = truth.last().and_then(|g| g.torsos.iter().find(|b| &b.name == id));
+        if let (true, Some(b)) = (walk.walking[i], last) {
+            let goal = halted_at.map_or(walk.gait.final_torso(i), |t| walk.gait.torso(i, t).0);
+            let at = Isometry3::from_parts(Translation3::from(Vector3::from(b.pose.position)), protocol::conventions::quat_from_wxyz(b.pose.orientation));
+            rep.final_torso_m.insert(id.clone(), (at.translation.vector - goal.translation.vector).norm());
+            rep.final_torso_deg.insert(id.clone(), metrics::geodesic_angle(&at.rotation, &goal.rotation).to_degrees());
+        }
     }
-
-    /// The walk's report from the run's ground truth (scenario samples, in time order), for a
-    /// walk halted at `halted_at` (s) if the team let go.
-    pub fn evaluate(&self, truth: &[&GroundTruth], halted_at: Option<f64>) -> WalkReport {
-        let times: Vec<f64> = truth.iter().map(|g| g.time).collect();
-        let end = halted_at.unwrap_or(f64::INFINITY);
-        let planned: Vec<&Step> = self.gait.steps().iter().filter(|s| s.liftoff < end).collect();
-        let least_margin_m = planned.iter().map(|s| s.margin).fold(f64::INFINITY, f64::min);
-        let mut rep = WalkReport { touchdown_offset_ms: [f64::INFINITY, f64::NEG_INFINITY], least_margin_m, halted_at_s: halted_at, ..WalkReport::default() };
-        for (i, id) in self.robots.iter().enumerate() {
-            rep.steps_planned.insert(id.clone(), planned.iter().filter(|s| s.robot == i).count());
-            let (mut taken, mut slide) = (0, 0.0_f64);
-            for (frame, link) in self.feet[i].iter().zip(&self.foot_links[i]) {
-                let track = foot_track(truth, id, frame, link, self.foot_radius[i]);
-                taken += steps(&times, &track.contact);
-                slide = slide.max(stance_slide(&times, &track));
-            }
-            rep.steps_taken.insert(id.clone(), taken);
-            let measured: Vec<(f64, f64)> = planned.iter().filter(|s| s.robot == i).filter_map(|s| self.cop_at_unload(truth, i, s)).collect();
-            let cop = measured.iter().map(|m| m.0).fold(f64::INFINITY, f64::min);
-            if cop.is_finite() {
-                rep.cop_margin_m.insert(id.clone(), cop);
-                rep.cop_share.insert(id.clone(), measured.iter().map(|m| m.1).fold(f64::INFINITY, f64::min));
-                rep.stance_lift_ms.insert(id.clone(), 1e3 * self.stance_lift(truth, &times, i, &planned));
-            }
-            for s in planned.iter().filter(|s| s.robot == i) {
-                let track = foot_track(truth, id, &self.feet[i][s.foot], &self.foot_links[i][s.foot], self.foot_radius[i]);
-                if let Some(dt) = first_contact_after(&times, &track.contact, s.liftoff).map(|t| 1e3 * (t - s.touchdown)) {
-                    let o = &mut rep.touchdown_offset_ms;
-                    (o[0], o[1]) = (o[0].min(dt), o[1].max(dt));
-                }
-            }
-            rep.stance_slide_m.insert(id.clone(), slide);
-            let last = truth.last().and_then(|g| g.torsos.iter().find(|b| &b.name == id));
-            if let (true, Some(b)) = (self.walking[i], last) {
-                let goal = halted_at.map_or(self.gait.final_torso(i), |t| self.gait.torso(i, t).0);
-                let at = Isometry3::from_parts(Translation3::from(Vector3::from(b.pose.position)), protocol::conventions::quat_from_wxyz(b.pose.orientation));
-                rep.final_torso_m.insert(id.clone(), (at.translation.vector - goal.translation.vector).norm());
-                rep.final_torso_deg.insert(id.clone(), metrics::geodesic_angle(&at.rotation, &goal.rotation).to_degrees());
-            }
-        }
-        rep
-    }
+    rep
 }
 
 /// The acceptance checks of a walk: every planned step taken (and no other), stance feet

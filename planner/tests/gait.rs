@@ -4,8 +4,8 @@
 //! errors of impossible input.
 
 use nalgebra::{Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector2, Vector3};
-use team_runner::gait::support::centre_of_pressure;
-use team_runner::gait::{GaitError, GaitParams, GaitPlan, HandLoad, WalkingRobot, HALT_GUARD};
+use planner::gait::support::centre_of_pressure;
+use planner::gait::{GaitError, GaitParams, GaitPlan, HandLoad, WalkingRobot, HALT_GUARD};
 
 /// A robot like the project's (feet 0.3 m ahead/behind, 0.2 m to each side of a torso 0.55 m
 /// up, foot centres 0.03 m above the ground), in description order LF, RF, LH, RH.
@@ -133,7 +133,7 @@ fn inside(p: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>, c: Vector2<f64>) ->
 
 #[test]
 fn at_every_liftoff_the_centre_of_mass_is_the_margin_inside_the_other_three_feet() {
-    use team_runner::gait::ShiftRule;
+    use planner::gait::ShiftRule;
     for (path, shift) in [&S2[..], &[[0.0, 0.3, 0.0]][..], &[[0.25, 0.0, 45.0]][..]].into_iter().flat_map(|p| [(p, ShiftRule::Least), (p, ShiftRule::Incentre)]) {
         let robots = vec![robot("r1", 0.0, 0.0, 30.0, path)];
         let params = GaitParams { shift, ..GaitParams::default() };
@@ -447,7 +447,7 @@ fn with_a_least_share_every_support_foot_carries_it_at_every_liftoff() {
                 least = least.min(f.min() / f.sum());
                 if load.is_none() {
                     let (cop, _) = centre_of_pressure(r.mass, &com, None, r.ground_z).expect("weight");
-                    let shares = team_runner::gait::support::shares(&cop, &[tri[0], tri[1], tri[2]]);
+                    let shares = planner::gait::support::shares(&cop, &[tri[0], tri[1], tri[2]]);
                     for k in 0..3 {
                         assert!((shares[k] - f[k] / (r.mass * g)).abs() < 1e-9, "path {path:?}: share {k} {} vs statics {}", shares[k], f[k] / (r.mass * g));
                     }
@@ -488,7 +488,7 @@ fn barycentric(p: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>, c: Vector2<f64
 #[test]
 fn the_least_shift_is_the_shortest_that_meets_the_margin_and_the_shares() {
     use rand::{Rng, SeedableRng};
-    use team_runner::gait::support::least_shift;
+    use planner::gait::support::least_shift;
     let mut rng = rand::rngs::StdRng::seed_from_u64(17);
     let mut uniform = move || rng.random::<f64>();
     let (margin, share) = (0.03, 0.12);
@@ -534,7 +534,7 @@ fn the_least_shift_is_the_shortest_that_meets_the_margin_and_the_shares() {
     println!("{found} of 200 random cases feasible");
     assert!(found > 20, "only {found} of 200 random cases feasible");
 
-    let params = GaitParams { shift: team_runner::gait::ShiftRule::Least, min_share: share, ..GaitParams::default() };
+    let params = GaitParams { shift: planner::gait::ShiftRule::Least, min_share: share, ..GaitParams::default() };
     for path in [&S2[..], &[[0.0, 0.3, 0.0]][..], &[[0.25, 0.0, 45.0]][..]] {
         let r = robot("r1", 0.0, 0.0, 30.0, path);
         let plan = GaitPlan::new(std::slice::from_ref(&r), None, &params, 0.0).unwrap();

@@ -4,8 +4,8 @@
 
 use nalgebra::Vector3;
 use robot_model::{default_robot_path, forward_kinematics, potential_energy, Data, Robot};
-use team_runner::gait::HandLoad;
-use team_runner::walk::reach::arm_torques;
+use planner::gait::HandLoad;
+use planner::walk::reach::arm_torques;
 
 #[test]
 fn arm_torques_are_the_virtual_work_of_gravity_and_the_hand_load() {

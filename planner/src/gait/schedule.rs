@@ -480,7 +480,7 @@ impl GaitPlan {
         at
     }
 
-    /// When a walk halts for a release at `t` ([`crate::plan::ReferencePlan::halt_walk`]): at
+    /// When a walk halts for a release at `t` (the runner's `ReferencePlan::halt_walk`): at
     /// once while the step in progress is still [`HALT_GUARD`] or more from lifting its foot
     /// (its torso shift or its foot's unloading: the step is cancelled with every foot still
     /// down), else at the [`GaitPlan::quiet_point`] (a lifted foot lands first). The guard

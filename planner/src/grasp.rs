@@ -15,13 +15,12 @@ use std::sync::Arc;
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use protocol::conventions::quat_from_wxyz;
-use coordinator::units::grasp::PlannedHand;
 use nalgebra::Isometry3;
 use robot_model::ik::{self, IkError, IkOptions, IkSolution};
 use robot_model::{Data, Robot};
-use sim_bridge::placement::FACE_END_MARGIN;
-use sim_bridge::world::{ObjectSpec, WorldSpec};
 use thiserror::Error;
+
+use crate::placement::{BasePlacement, ObjectBox, FACE_END_MARGIN};
 
 /// Why the hands could not be placed.
 #[derive(Debug, Error)]
@@ -39,7 +38,7 @@ pub enum GraspPlanError {
 }
 
 /// Target pose of the hand frame on the face of `object` that faces a base at `base`.
-pub fn face_target(object: &ObjectSpec, base: &Vector3<f64>, hand_height: Option<f64>) -> (Vector3<f64>, Matrix3<f64>) {
+pub fn face_target(object: &ObjectBox, base: &Vector3<f64>, hand_height: Option<f64>) -> (Vector3<f64>, Matrix3<f64>) {
     let ro = quat_from_wxyz(object.orientation);
     let po = Vector3::from(object.position);
     let to_base = ro.inverse_transform_vector(&(base - po));
@@ -83,16 +82,15 @@ pub fn face_target(object: &ObjectSpec, base: &Vector3<f64>, hand_height: Option
     (p, Matrix3::from_columns(&[x, y, z]))
 }
 
-/// Put every robot's hand flat on its face of the object: solves each arm on the robot's own
-/// model (`robots`: loaded, in the spec's order) from its placement and writes the arm joints
-/// into the placement's overrides. Returns the solutions in robot order.
-pub fn place_hands(spec: &mut WorldSpec, robots: &[Arc<Robot>]) -> Result<Vec<IkSolution>, GraspPlanError> {
-    let object = spec.object.ok_or(GraspPlanError::NoObject)?;
-    if robots.len() != spec.robots.len() {
-        return Err(GraspPlanError::RobotCount { robots: robots.len(), placements: spec.robots.len() });
+/// Put every robot's hand flat on its face of `object`: solves each arm on the robot's own
+/// model (`robots`: loaded, in the placements' order) from its placement and writes the arm
+/// joints into the placement's overrides. Returns the solutions in robot order.
+pub fn place_hands(object: &ObjectBox, placements: &mut [BasePlacement], robots: &[Arc<Robot>]) -> Result<Vec<IkSolution>, GraspPlanError> {
+    if robots.len() != placements.len() {
+        return Err(GraspPlanError::RobotCount { robots: robots.len(), placements: placements.len() });
     }
     let mut out = Vec::new();
-    for (r, robot) in spec.robots.iter_mut().zip(robots) {
+    for (r, robot) in placements.iter_mut().zip(robots) {
         if !robot.model.floating_base {
             return Err(GraspPlanError::FixedBase { robot: r.id.clone() });
         }
@@ -107,7 +105,7 @@ pub fn place_hands(spec: &mut WorldSpec, robots: &[Arc<Robot>]) -> Result<Vec<Ik
         let yaw = UnitQuaternion::from_euler_angles(0.0, 0.0, r.base_yaw);
         q[3..7].copy_from_slice(&[yaw.w, yaw.i, yaw.j, yaw.k]);
         let base = Vector3::from(r.base_position);
-        let (p, rot) = face_target(&object, &base, None);
+        let (p, rot) = face_target(object, &base, None);
         let sol = ik::solve_hand(robot, &q, &p, &rot, &IkOptions::default()).map_err(|source| GraspPlanError::Ik { robot: r.id.clone(), source })?;
         for (name, v) in &sol.joints {
             r.joint_overrides.insert(name.clone(), *v);
@@ -118,19 +116,19 @@ pub fn place_hands(spec: &mut WorldSpec, robots: &[Arc<Robot>]) -> Result<Vec<Ik
     Ok(out)
 }
 
-/// Each hand's grasp as planned (`coordinator::units::grasp::PlannedHand`): its frame's pose at
-/// the solved configuration (`solutions`, from [`place_hands`], robot order) against the object
-/// at `object`. The controller fits the object from the hands with these whenever it starts.
-pub fn planned_grasp(spec: &WorldSpec, robots: &[Arc<Robot>], solutions: &[IkSolution], object: &Isometry3<f64>) -> Result<Vec<PlannedHand>, GraspPlanError> {
+/// Each hand's pose as planned: its frame's world pose at the solved configuration
+/// (`solutions`, from [`place_hands`], robot order). With the object's pose at the grasp it
+/// is the hand's grasp on the object, which the controller fits the object from whenever it
+/// starts (the runner hands it over as `coordinator::units::grasp::PlannedHand`).
+pub fn hand_poses(placements: &[BasePlacement], robots: &[Arc<Robot>], solutions: &[IkSolution]) -> Result<Vec<Isometry3<f64>>, GraspPlanError> {
     let mut out = Vec::with_capacity(robots.len());
-    for ((r, robot), sol) in spec.robots.iter().zip(robots).zip(solutions) {
+    for ((r, robot), sol) in placements.iter().zip(robots).zip(solutions) {
         let fail = |e: &dyn std::fmt::Display| GraspPlanError::Kinematics { robot: r.id.clone(), reason: e.to_string() };
         let frame = robot.model.frame_id(&robot.hand_frame).map_err(|e| fail(&e))?;
         let mut data = Data::new(&robot.model);
         robot_model::forward_kinematics(&robot.model, &mut data, &sol.q, &vec![0.0; robot.model.nv]).map_err(|e| fail(&e))?;
         let m = robot_model::frame_placement(&robot.model, &data, frame).map_err(|e| fail(&e))?;
-        let hand = Isometry3::from_parts(m.trans.into(), UnitQuaternion::from_matrix(&m.rot));
-        out.push(PlannedHand::new(&r.id, &robot.hand_frame, &hand, object));
+        out.push(Isometry3::from_parts(m.trans.into(), UnitQuaternion::from_matrix(&m.rot)));
     }
     Ok(out)
 }

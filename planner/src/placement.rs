@@ -1,48 +1,61 @@
-//! Where robots stand: the one place that turns floor positions into [`RobotPlacement`]s.
+//! Where robots stand around the object: pure floor geometry, no simulator.
 //!
-//! * [`standing`]: a robot at `(x, y)` facing `yaw`, its base at the height of its own
-//!   description's standing pose (so its feet touch the floor);
 //! * [`facing_ring`]: `n` floor poses on a circle around a centre, each facing it (the first at
 //!   the circle's `-x` point; two robots are the paper's facing pair);
 //! * [`around_object`]: a team around a box or beam, robots spaced along the object's vertical
 //!   faces ([`FaceLayout`]: which faces, how many per face, spacing, standoff), each facing its
 //!   face;
-//! * [`DEFAULT_STANDING_HEIGHT`]: the default robot's base height, for worlds built without
-//!   loading it first (tests, the paper's pair).
+//! * [`Footprint`] and [`check_clearance`]: the floor a standing robot takes, and the refusal
+//!   of robots that would stand in each other.
 //!
-//! Scenarios name each robot's floor pose (`base_xy`, `yaw`) or a [`FaceLayout`]; the runner's
-//! plan and the `sim-bridge run` command both place robots through these functions.
+//! The planner's own geometric types: [`ObjectBox`] (the object's box and pose) and
+//! [`BasePlacement`] (a robot's base on the floor and the joints set apart from its standing
+//! pose). Scenarios name each robot's floor pose (`base_xy`, `yaw`) or a [`FaceLayout`]; the
+//! runner turns the floor poses into the simulator's world and its robots into
+//! [`BasePlacement`]s for the planner.
 
 use std::collections::BTreeMap;
 use std::f64::consts::PI;
-use std::path::PathBuf;
 
 use nalgebra::Vector3;
 use protocol::conventions::quat_from_wxyz;
 use robot_model::Robot;
+use thiserror::Error;
 
-use crate::world::{ObjectSpec, RobotPlacement, WorldError};
-
-/// Base height of the default robot's standing pose (`robot-model/models/legged_manipulator.toml`,
-/// `[standing] base_position`), m.
-pub const DEFAULT_STANDING_HEIGHT: f64 = 0.54882015;
-
-/// `robot` (loaded from `description`) at `(x, y)` facing `yaw`, its base at its standing
-/// height. A fixed-base robot has no base to place on the floor: an error.
-pub fn standing(id: &str, description: PathBuf, robot: &Robot, xy: [f64; 2], yaw: f64) -> Result<RobotPlacement, WorldError> {
-    if !robot.model.floating_base {
-        return Err(WorldError::Invalid(format!("robot {id}: {} has a fixed base; only a floating-base robot stands on the floor", description.display())));
-    }
-    Ok(at_height(id, description, [xy[0], xy[1], robot.standing_q[2]], yaw))
+/// Why robots cannot stand where they are asked to.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum PlacementError {
+    #[error("team layout: {0}")]
+    Layout(String),
+    #[error("{robot}: footprint: {reason}")]
+    Footprint { robot: String, reason: String },
+    #[error("robots {first} and {second} would stand in each other (their footprints, feet plus {margin} m, overlap): space them further apart", margin = FOOTPRINT_MARGIN)]
+    Clearance { first: String, second: String },
 }
 
-/// The default robot at `(x, y)` facing `yaw`, at [`DEFAULT_STANDING_HEIGHT`].
-pub fn default_robot(id: &str, xy: [f64; 2], yaw: f64) -> RobotPlacement {
-    at_height(id, robot_model::default_robot_path(), [xy[0], xy[1], DEFAULT_STANDING_HEIGHT], yaw)
+/// The carried object as the planner sees it: a box.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjectBox {
+    /// Edge lengths, m.
+    pub size: [f64; 3],
+    /// Centre, world, m.
+    pub position: [f64; 3],
+    /// `(w, x, y, z)`.
+    pub orientation: [f64; 4],
 }
 
-fn at_height(id: &str, description: PathBuf, base_position: [f64; 3], base_yaw: f64) -> RobotPlacement {
-    RobotPlacement { id: id.to_string(), description, base_position, base_yaw, joint_overrides: BTreeMap::new() }
+/// A robot where it stands: its base on the floor and the joints whose positions replace its
+/// standing configuration's (the arm once its hand is on the object).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BasePlacement {
+    /// Robot id.
+    pub id: String,
+    /// Base position in the world, m.
+    pub base_position: [f64; 3],
+    /// Base yaw about world z, rad.
+    pub base_yaw: f64,
+    /// Joint positions that replace the standing configuration's, by joint name.
+    pub joint_overrides: BTreeMap<String, f64>,
 }
 
 /// `n` floor poses `((x, y), yaw)` on a circle of `radius` about `centre`, each facing the
@@ -128,8 +141,8 @@ pub const FACE_END_MARGIN: f64 = 0.06;
 /// vertical z axis; its yaw may be any). Robots come face by face, along each face in the
 /// direction of `z x n`. An error when the layout is empty, repeats a face, does not fit on a
 /// face (the hands would leave it) or is not finite.
-pub fn around_object(object: &ObjectSpec, layout: &FaceLayout) -> Result<Vec<([f64; 2], f64)>, WorldError> {
-    let bad = |why: String| Err(WorldError::Invalid(format!("team layout: {why}")));
+pub fn around_object(object: &ObjectBox, layout: &FaceLayout) -> Result<Vec<([f64; 2], f64)>, PlacementError> {
+    let bad = |why: String| Err(PlacementError::Layout(why));
     if layout.faces.is_empty() || layout.per_face == 0 {
         return bad("needs at least one face and one robot per face".into());
     }
@@ -188,8 +201,8 @@ pub const FOOTPRINT_MARGIN: f64 = 0.04;
 
 impl Footprint {
     /// The footprint of `robot` standing (feet from forward kinematics at its standing pose).
-    pub fn of(robot: &Robot) -> Result<Self, WorldError> {
-        let invalid = |e: String| WorldError::Invalid(format!("{}: footprint: {e}", robot.name));
+    pub fn of(robot: &Robot) -> Result<Self, PlacementError> {
+        let invalid = |reason: String| PlacementError::Footprint { robot: robot.name.clone(), reason };
         let model = &robot.model;
         let mut data = robot_model::Data::new(model);
         let q: Vec<f64> = robot.standing_q.iter().copied().collect();
@@ -237,15 +250,12 @@ fn overlap(a: &[[f64; 2]; 4], b: &[[f64; 2]; 4]) -> bool {
 
 /// Refuse placements whose robots would stand in each other: the footprints of every pair
 /// (robot `i` at `placements[i]` with `footprints[i]`) must not overlap. The error names both.
-pub fn check_clearance(placements: &[RobotPlacement], footprints: &[Footprint]) -> Result<(), WorldError> {
+pub fn check_clearance(placements: &[BasePlacement], footprints: &[Footprint]) -> Result<(), PlacementError> {
     let corners: Vec<[[f64; 2]; 4]> = placements.iter().zip(footprints).map(|(p, f)| f.corners([p.base_position[0], p.base_position[1]], p.base_yaw)).collect();
     for i in 0..corners.len() {
         for j in i + 1..corners.len() {
             if overlap(&corners[i], &corners[j]) {
-                return Err(WorldError::Invalid(format!(
-                    "robots {} and {} would stand in each other (their footprints, feet plus {FOOTPRINT_MARGIN} m, overlap): space them further apart",
-                    placements[i].id, placements[j].id
-                )));
+                return Err(PlacementError::Clearance { first: placements[i].id.clone(), second: placements[j].id.clone() });
             }
         }
     }
@@ -278,17 +288,8 @@ mod tests {
         assert_eq!(facing_ring([1.0, 2.0], 5.0, 1), vec![([1.0, 2.0], 0.0)]);
     }
 
-    #[test]
-    fn the_default_height_is_the_default_robots_standing_height() {
-        let robot = Robot::load(robot_model::default_robot_path()).unwrap();
-        assert_eq!(robot.standing_q[2], DEFAULT_STANDING_HEIGHT);
-        let p = standing("r1", robot_model::default_robot_path(), &robot, [1.0, 2.0], 0.5).unwrap();
-        assert_eq!(p.base_position, [1.0, 2.0, DEFAULT_STANDING_HEIGHT]);
-        assert_eq!(p, default_robot("r1", [1.0, 2.0], 0.5));
-    }
-
-    fn beam() -> ObjectSpec {
-        ObjectSpec { size: [2.4, 0.4, 0.4], mass: 4.0, inertia: None, friction: [0.8, 0.005, 0.0001], position: [1.0, 2.0, 0.6], orientation: [1.0, 0.0, 0.0, 0.0] }
+    fn beam() -> ObjectBox {
+        ObjectBox { size: [2.4, 0.4, 0.4], position: [1.0, 2.0, 0.6], orientation: [1.0, 0.0, 0.0, 0.0] }
     }
 
     /// Each base at the standoff from its face plane, facing it, spaced along the face and
@@ -314,7 +315,7 @@ mod tests {
         }
         // A cube yawed by 30 deg: the base of the +x face lies on the rotated x axis.
         let yaw = 30f64.to_radians();
-        let cube = ObjectSpec { orientation: [(yaw / 2.0).cos(), 0.0, 0.0, (yaw / 2.0).sin()], ..ObjectSpec::paper_cube([0.0, 0.0, 0.6]) };
+        let cube = ObjectBox { size: [0.6; 3], position: [0.0, 0.0, 0.6], orientation: [(yaw / 2.0).cos(), 0.0, 0.0, (yaw / 2.0).sin()] };
         let one = around_object(&cube, &FaceLayout { faces: vec![Face::PlusX], per_face: 1, spacing: 0.0, standoff: 0.85 }).unwrap();
         let ([x, y], heading) = one[0];
         assert!((x - 1.15 * yaw.cos()).abs() < 1e-12 && (y - 1.15 * yaw.sin()).abs() < 1e-12);
@@ -349,7 +350,8 @@ mod tests {
         assert!(f.max[0] > 0.3 && f.min[0] < -0.3, "feet fore and aft of the base: {f:?}");
         let width = f.max[1] - f.min[1];
         assert!(width > 0.6 && width < 0.7, "side by side the robots need between 0.6 and 0.7 m: width {width}");
-        let pair = |d: f64, yaw_b: f64| vec![default_robot("a", [0.0, 0.0], PI / 2.0), default_robot("b", [d, 0.0], yaw_b)];
+        let at = |id: &str, x: f64, yaw: f64| BasePlacement { id: id.into(), base_position: [x, 0.0, 0.54882015], base_yaw: yaw, joint_overrides: BTreeMap::new() };
+        let pair = |d: f64, yaw_b: f64| vec![at("a", 0.0, PI / 2.0), at("b", d, yaw_b)];
         assert!(check_clearance(&pair(0.7, PI / 2.0), &[f, f]).is_ok());
         let e = check_clearance(&pair(0.6, PI / 2.0), &[f, f]).unwrap_err().to_string();
         assert!(e.contains("robots a and b"), "{e}");
