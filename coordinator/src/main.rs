@@ -89,10 +89,7 @@ fn controller_spec(kind: Option<ControllerSpec>, file: Option<&Path>, damping: O
 
 #[tokio::main]
 async fn main() -> Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
-        .with_writer(std::io::stderr)
-        .init();
+    protocol::logging::init(protocol::logging::Verbosity::Info);
     match Cli::parse().command {
         Command::Run { team, tick_deadline_ms, controller, controller_config, damping, reuse_after_us, reuse_max_age, expect, zenoh } => {
             let controller = controller_spec(controller, controller_config.as_deref(), damping)?.build()?;

@@ -78,6 +78,8 @@ pub mod clock;
 pub mod transport;
 #[cfg(feature = "transport")]
 pub mod access;
+#[cfg(feature = "transport")]
+pub mod logging;
 
 pub use codec::{decode, encode, from_json, schema_id, to_json, Message, MessageKind, Wire, MAX_MESSAGE_BYTES};
 pub use clock::RunClock;

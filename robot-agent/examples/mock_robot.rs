@@ -35,10 +35,7 @@ struct Args {
 
 fn main() -> anyhow::Result<()> {
     let args = Args::parse();
-    tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
-        .with_writer(std::io::stderr)
-        .init();
+    protocol::logging::init(protocol::logging::Verbosity::Info);
     let joints = 3;
     let rate = DriverConfig::new(Duration::from_millis(1));
     let cfg = AgentConfig::new(&args.team, &args.id);

@@ -79,10 +79,7 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
             Source::Model(Box::new(ModelDynamics::new(Robot::load(&path)?)?))
         }
     };
-    tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
-        .with_writer(std::io::stderr)
-        .init();
+    protocol::logging::init(protocol::logging::Verbosity::Info);
     let mut cfg = AgentConfig::new(&cmd.team, &cmd.id).with_deadline_time(Duration::from_millis(cmd.command_deadline_ms));
     cfg.deadline.ticks = cmd.command_deadline_ticks;
     cfg.coordinator_grace = Duration::from_millis(cmd.coordinator_grace_ms);

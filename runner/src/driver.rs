@@ -16,7 +16,7 @@ use std::collections::BTreeMap;
 use std::io::IsTerminal;
 use std::time::{Duration, Instant};
 
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, SampleQueue, TransportError, TypedPublisher};
 use protocol::{ContactSet, CoordinatorMode, CoordinatorStatus, GroundTruth, TaskReferences, TickDiagnostics, TorqueCommand};
@@ -113,8 +113,8 @@ pub const FINAL_GRACE: Duration = Duration::from_millis(500);
 pub const RECORD_QUEUE: usize = 1 << 15;
 
 impl Driver {
-    /// Declare everything on `session`. `show_progress`: a progress bar on a terminal, log
-    /// lines every 10 % otherwise.
+    /// Declare everything on `session`. `show_progress`: a progress bar on a terminal, lines
+    /// every 10 % otherwise, on stdout.
     pub async fn start(session: &Session, plan: ReferencePlan, total_ticks: u64, show_progress: bool) -> Result<Driver, TransportError> {
         // What the report is made of: room for seconds of a real-time run whose driver fell
         // behind (a queue drops its oldest when full, see `transport::SampleQueue`).
@@ -133,9 +133,10 @@ impl Driver {
                 slot.insert(TypedPublisher::declare(session, key, Qos::HotPath).await?);
             }
         }
-        let terminal = std::io::stderr().is_terminal();
+        // Progress goes to stdout with the summary; stderr is the log's.
+        let terminal = std::io::stdout().is_terminal();
         let progress = if show_progress && terminal {
-            let pb = ProgressBar::new(total_ticks);
+            let pb = ProgressBar::with_draw_target(Some(total_ticks), ProgressDrawTarget::stdout());
             pb.set_style(
                 ProgressStyle::with_template("{prefix:>8} [{bar:40}] {pos}/{len} ticks  {msg}  eta {eta}")
                     .unwrap_or_else(|_| ProgressStyle::default_bar())
@@ -308,7 +309,7 @@ impl Driver {
                     }
                     if self.log_progress && (tick + 1) * 10 / self.total > last_logged {
                         last_logged = (tick + 1) * 10 / self.total;
-                        tracing::info!("progress {}% ({}/{} ticks, {:.1} s wall)", last_logged * 10, tick + 1, self.total, started.elapsed().as_secs_f64());
+                        println!("progress {}% ({}/{} ticks, {:.1} s wall)", last_logged * 10, tick + 1, self.total, started.elapsed().as_secs_f64());
                     }
                     if tick + 1 >= self.total {
                         break;

@@ -4,6 +4,8 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use std::path::{Path, PathBuf};
 
+use protocol::logging::{self, Verbosity};
+
 use team_runner::compare;
 use team_runner::capacity;
 use team_runner::echo;
@@ -56,9 +58,15 @@ enum Command {
         /// Report folder (default: reports/<scenario file name>).
         #[arg(long)]
         out: Option<PathBuf>,
-        /// No progress bar or progress lines.
-        #[arg(long)]
+        /// Print the summary alone: no progress, and on stderr nothing but errors (a failed
+        /// run's error among them).
+        #[arg(long, short, conflicts_with = "verbose")]
         quiet: bool,
+        /// The components' log on stderr: -v what an operator follows (joins, leaves, safe
+        /// mode, phases), -vv per-tick events and Zenoh's own lines, -vvv everything. Without
+        /// it, warnings and errors only; RUST_LOG, when set, overrides both flags.
+        #[arg(long, short, action = clap::ArgAction::Count)]
+        verbose: u8,
         /// Serve the run live to Foxglove (WebSocket on 127.0.0.1:PORT; open Foxglove and
         /// connect to ws://127.0.0.1:PORT). The run is recorded to run.mcap either way.
         #[arg(long, value_name = "PORT", num_args = 0..=1, default_missing_value = "8765")]
@@ -183,12 +191,10 @@ enum Command {
 }
 
 fn main() -> Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
-        .with_writer(std::io::stderr)
-        .init();
-    match Cli::parse().command {
-        Command::Run { scenario, set, distributed, hosts, realtime, tls, out, quiet, live } => {
+    let cli = Cli::parse();
+    logging::init(verbosity(&cli.command));
+    match cli.command {
+        Command::Run { scenario, set, distributed, hosts, realtime, tls, out, quiet, verbose: _, live } => {
             let opts = RunOptions { distributed, hosts, progress: !quiet };
             let mode_name = opts.mode_name(tls.is_some());
             let mode_name = if realtime { format!("{mode_name}, real time") } else { mode_name.to_string() };
@@ -198,17 +204,14 @@ fn main() -> Result<()> {
             let dir = out.unwrap_or_else(|| PathBuf::from("reports").join(stem));
             std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
             let root = repo_root();
-            eprintln!("{}: planning (hands placed on the object by IK)...", s.name);
+            if !quiet {
+                println!("{}: planning (hands placed on the object by IK)...", s.name);
+            }
             let mut plan = plan::plan(&s, &root)?;
             plan.scene.realtime = realtime;
-            eprintln!(
-                "{}: settling {:.1} s, then {:.1} s of scenario at {} Hz ({} mode)",
-                s.name,
-                s.settle,
-                s.duration,
-                s.control_hz,
-                mode_name
-            );
+            if !quiet {
+                println!("{}: settling {:.1} s, then {:.1} s of scenario at {} Hz ({} mode)", s.name, s.settle, s.duration, s.control_hz, mode_name);
+            }
             let source = ScenarioSource::read(&scenario, &set).map_err(|e| anyhow::anyhow!("reading {}: {e}", scenario.display()))?;
             let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live };
             let (records, recording) = scenario_run::run_recorded_secure(&plan, &opts, tls.as_deref(), &dir, Some(&rec))?;
@@ -319,6 +322,15 @@ fn main() -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// How much a command logs: `team run`'s from its flags, the other commands' what an operator
+/// follows.
+fn verbosity(command: &Command) -> Verbosity {
+    match command {
+        Command::Run { quiet, verbose, .. } => Verbosity::from_flags(*quiet, *verbose),
+        _ => Verbosity::Info,
+    }
 }
 
 fn create_dir(dir: &Path) -> Result<()> {

@@ -66,6 +66,10 @@ pub fn spawn_on(hosts: &crate::hosts::TestHosts, host: &str, bin: &str, args: &[
 
 /// Start `command` (which runs the binary at `path`) with arguments.
 fn spawn_with(mut command: Command, path: PathBuf, args: &[String], what: &str) -> Result<ChildGuard, ProcessError> {
+    // The child logs as this process does (`team run -v`, `--quiet`).
+    if let Some(directives) = protocol::logging::directives() {
+        command.env(protocol::logging::LOG_ENV, directives);
+    }
     let mut child = command
         .args(args)
         .stdin(Stdio::null())

@@ -72,7 +72,7 @@ pub struct RunOptions {
     /// Distributed across test hosts (`crate::hosts`), one per component, made for the run
     /// and removed after it.
     pub hosts: bool,
-    /// A progress bar (terminal) or progress log lines.
+    /// A progress bar (terminal) or progress lines, on stdout.
     pub progress: bool,
 }
 
@@ -175,7 +175,7 @@ pub fn run_recorded_secure(
         None => None,
     };
     if let Some(port) = recorder.as_ref().and_then(Recorder::live_port) {
-        tracing::info!("live: open Foxglove and connect to ws://127.0.0.1:{port}");
+        println!("live: open Foxglove and connect to ws://127.0.0.1:{port}");
     }
     let result = rt.block_on(run_in(plan, opts, &mode, recorder.as_ref()));
     // The recording is closed whatever happened: a failed run's recording shows why.

@@ -120,10 +120,7 @@ struct RunArgs {
 
 #[tokio::main]
 async fn main() -> Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
-        .with_writer(std::io::stderr)
-        .init();
+    protocol::logging::init(protocol::logging::Verbosity::Info);
     match Cli::parse().command {
         Command::Smoke { robots, team, joints, ticks, v0, dt, command_timeout, zenoh } => {
             anyhow::ensure!(v0.is_finite(), "--v0 must be a finite number");
