@@ -24,7 +24,7 @@ use tokio::sync::watch;
 use zenoh::Session;
 
 use crate::plan::{ReferencePlan, TEAM};
-use crate::record::{Message, Tap};
+use crate::record::{RecordedMessage, Tap};
 
 /// References are published this many ticks ahead of the last simulated tick (10 s at 2 kHz;
 /// below the coordinator's reference queue, `coordinator::service::REFERENCE_QUEUE`).
@@ -59,7 +59,7 @@ impl Records {
     fn take_torques(&mut self, sample: &zenoh::sample::Sample, settle: u64, tap: Option<&Tap>) {
         if let Ok(cmd) = decode_sample::<TorqueCommand>(sample) {
             if let Some(tap) = tap {
-                tap.send(sample.key_expr().as_str(), Message::Torque(cmd.clone()));
+                tap.send(sample.key_expr().as_str(), RecordedMessage::Torque(cmd.clone()));
             }
             if cmd.header.tick >= settle {
                 self.torques.entry(cmd.header.robot_id().to_string()).or_default().push((cmd.header.tick, cmd.tau));
@@ -71,7 +71,7 @@ impl Records {
     fn take_diagnostics(&mut self, sample: &zenoh::sample::Sample, settle: u64, tap: Option<&Tap>) {
         if let Ok(d) = decode_sample::<TickDiagnostics>(sample) {
             if let Some(tap) = tap {
-                tap.send(sample.key_expr().as_str(), Message::Diagnostics(d.clone()));
+                tap.send(sample.key_expr().as_str(), RecordedMessage::Diagnostics(d.clone()));
             }
             if d.header.tick >= settle {
                 self.diagnostics.push(d);
@@ -160,7 +160,7 @@ impl Driver {
             let refs = self.plan.for_tick(TEAM, tick);
             self.refs_pub.put(&refs).await?;
             if let Some(tap) = self.tap.as_ref().filter(|_| tick >= self.tapped_refs) {
-                tap.send(&self.refs_pub.key(), Message::References(refs));
+                tap.send(&self.refs_pub.key(), RecordedMessage::References(refs));
                 self.tapped_refs = tick + 1;
             }
         }
@@ -173,7 +173,7 @@ impl Driver {
             if let Some(p) = self.contact_pubs.get_mut(c.header.robot_id()) {
                 p.put(c).await?;
                 if let Some(tap) = &self.tap {
-                    tap.send(&p.key(), Message::Contacts(c.clone()));
+                    tap.send(&p.key(), RecordedMessage::Contacts(c.clone()));
                 }
             }
             self.next_contact += 1;
@@ -263,7 +263,7 @@ impl Driver {
                     let Ok(sample) = s else { break };
                     if let Ok(st) = decode_sample::<CoordinatorStatus>(&sample) {
                         if let Some(tap) = &self.tap {
-                            tap.send(sample.key_expr().as_str(), Message::Status(st.clone()));
+                            tap.send(sample.key_expr().as_str(), RecordedMessage::Status(st.clone()));
                         }
                         if st.mode == CoordinatorMode::Released && rec.released_at.is_none() {
                             rec.released_at = Some(st.header.tick);
@@ -284,7 +284,7 @@ impl Driver {
                         Err(e) => { tracing::warn!("rejected ground truth: {e}"); continue; }
                     };
                     if let Some(tap) = &self.tap {
-                        tap.send(sample.key_expr().as_str(), Message::Truth(gt.clone()));
+                        tap.send(sample.key_expr().as_str(), RecordedMessage::Truth(gt.clone()));
                     }
                     let tick = gt.header.tick;
                     rec.ticks_seen = rec.ticks_seen.max(tick + 1);

@@ -13,7 +13,7 @@ use team_runner::plots;
 use team_runner::record::{self, RecordOptions, ScenarioSource};
 use team_runner::run::{self as scenario_run, RunOptions};
 use team_runner::scenario::Scenario;
-use team_runner::launch::{BridgeOutcome, Mode};
+use team_runner::launch::{BridgeOutcome, RunMode};
 use team_runner::smoke::{self, SmokeConfig};
 
 #[derive(Parser)]
@@ -289,9 +289,9 @@ fn main() -> Result<()> {
             let dir = std::env::temp_dir().join(format!("team-smoke-{}", std::process::id()));
             let distributed = distributed || tls.is_some();
             let mode = match tls {
-                Some(certs) => Mode::Tls { dir: dir.clone(), certs },
-                None if distributed => Mode::Distributed { dir: dir.clone() },
-                None => Mode::Embedded,
+                Some(certs) => RunMode::Tls { dir: dir.clone(), certs },
+                None if distributed => RunMode::Distributed { dir: dir.clone() },
+                None => RunMode::Embedded,
             };
             if distributed {
                 std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;

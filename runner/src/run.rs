@@ -12,7 +12,7 @@ use thiserror::Error;
 
 use crate::driver::{Driver, Records};
 use crate::hosts::TestHosts;
-use crate::launch::{AgentArgs, AgentModel, BridgeArgs, CoordinatorArgs, Launch, LaunchError, Mode};
+use crate::launch::{AgentArgs, AgentModel, BridgeArgs, CoordinatorArgs, Launch, LaunchError, RunMode};
 use crate::plan::{Plan, TEAM};
 use crate::record::{self, RecordError, RecordOptions, Recorder, RecordingSummary, RunFacts};
 
@@ -78,7 +78,7 @@ pub struct RunOptions {
 
 impl RunOptions {
     /// The name reports give the mode these options (and `tls`, [`run_recorded_secure`]'s)
-    /// run in: [`Mode::name`] of the mode that function makes.
+    /// run in: [`RunMode::name`] of the mode that function makes.
     pub fn mode_name(&self, tls: bool) -> &'static str {
         match (self.hosts, tls, self.distributed) {
             (true, true, _) => "hosts-tls",
@@ -129,16 +129,16 @@ pub fn run_recorded(plan: &Plan, opts: &RunOptions, out: &Path, record: Option<&
 
 /// The mode of a run on this computer's loopback (not on test hosts): over TLS when `tls`
 /// names the certificates (distributed or not), else distributed or embedded.
-fn loopback_mode(opts: &RunOptions, tls: Option<&Path>, out: &Path) -> Mode {
+fn loopback_mode(opts: &RunOptions, tls: Option<&Path>, out: &Path) -> RunMode {
     match tls {
-        Some(certs) => Mode::Tls { dir: out.to_path_buf(), certs: certs.to_path_buf() },
-        None if opts.distributed => Mode::Distributed { dir: out.to_path_buf() },
-        None => Mode::Embedded,
+        Some(certs) => RunMode::Tls { dir: out.to_path_buf(), certs: certs.to_path_buf() },
+        None if opts.distributed => RunMode::Distributed { dir: out.to_path_buf() },
+        None => RunMode::Embedded,
     }
 }
 
 /// [`run_recorded`]; with `tls`, distributed on loopback over mutual TLS with the team's
-/// access control ([`Mode::Tls`]), the certificates in that folder
+/// access control ([`RunMode::Tls`]), the certificates in that folder
 /// (`scripts/make-test-certs.sh DIR ROBOT...`; README "Access control (mutual TLS and ACL)").
 /// With `tls` and test hosts, the test CA in that folder signs certificates for the hosts'
 /// addresses into `out/hosts-certs` ([`TestHosts::issue_certs`]).
@@ -166,7 +166,7 @@ pub fn run_recorded_secure(
             }
             None => None,
         };
-        Mode::Hosts { dir: out.to_path_buf(), hosts: std::sync::Arc::new(hosts), certs }
+        RunMode::Hosts { dir: out.to_path_buf(), hosts: std::sync::Arc::new(hosts), certs }
     } else {
         loopback_mode(opts, tls, out)
     };
@@ -193,7 +193,7 @@ pub fn run_recorded_secure(
 
 /// Launch the team in `mode`, drive the scenario until the bridge ends it, stop everything.
 /// With a `recorder`, the driver and the recorder's subscriptions feed it.
-pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &Mode, recorder: Option<&Recorder>) -> Result<Records, RunError> {
+pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &RunMode, recorder: Option<&Recorder>) -> Result<Records, RunError> {
     if plan.scene.realtime {
         crate::priority::raise_for_realtime();
     }
@@ -251,8 +251,8 @@ mod tests {
     use super::*;
 
     /// The report's mode name, chosen before the run, is the name of the mode the run picks
-    /// ([`Mode::name`], which the recording keeps) on loopback; the hosts' modes (a
-    /// `Mode::Hosts` needs hosts made) by their names.
+    /// ([`RunMode::name`], which the recording keeps) on loopback; the hosts' modes (a
+    /// `RunMode::Hosts` needs hosts made) by their names.
     #[test]
     fn the_reported_mode_is_the_mode_that_runs() {
         let (out, certs) = (Path::new("out"), Path::new("certs"));

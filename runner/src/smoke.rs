@@ -8,7 +8,7 @@ use coordinator::joint_damping::JointDampingConfig;
 use coordinator::ControllerSpec;
 use thiserror::Error;
 
-use crate::launch::{AgentArgs, AgentModel, BridgeArgs, BridgeOutcome, CoordinatorArgs, Launch, LaunchError, Mode, SmokePlant};
+use crate::launch::{AgentArgs, AgentModel, BridgeArgs, BridgeOutcome, CoordinatorArgs, Launch, LaunchError, RunMode, SmokePlant};
 
 /// The smoke run's agents wait as long as the bridge does for a command before they hold
 /// their posture: a lockstep tick that is merely slow must not see safe-mode torques.
@@ -65,7 +65,7 @@ impl SmokeConfig {
 
 /// Run the smoke run in `mode`; embedded runs report the plant's lockstep figures and final
 /// joint velocities, distributed ones only that the sim-bridge process succeeded.
-pub async fn run(cfg: &SmokeConfig, mode: &Mode) -> Result<BridgeOutcome, SmokeError> {
+pub async fn run(cfg: &SmokeConfig, mode: &RunMode) -> Result<BridgeOutcome, SmokeError> {
     let (launch, bridge) = cfg.launch();
     let mut running = launch.start(mode).await?;
     let outcome = running.run_bridge(&bridge).await;
