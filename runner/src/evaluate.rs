@@ -165,7 +165,7 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
     let mut palm_in_object: Vec<Vec<Vector3<f64>>> = vec![Vec::new(); robots.len()];
     let mut palm_rot0: Vec<Option<UnitQuaternion<f64>>> = vec![None; robots.len()];
     let mut squeeze_sum = vec![0.0; robots.len()];
-    let every = ((plan.scenario.control_hz / SERIES_HZ).round() as usize).max(1);
+    let every = refs.clock.ticks_per_sample(SERIES_HZ) as usize;
     for (sample, g) in truth.iter().enumerate() {
         let t = g.time;
         let o = iso(&g.object.as_ref().expect("filtered").pose);
@@ -342,7 +342,7 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
         }
     }
     let passed = checks.iter().all(|c| c.passed);
-    let sim = plan.scene.ticks as f64 / plan.scenario.control_hz;
+    let sim = refs.clock.scenario_duration();
     let metrics = Metrics {
         scenario: plan.scenario.name.clone(),
         mode: mode.to_string(),
@@ -460,7 +460,8 @@ mod tests {
         let mut rec = Records::default();
         let refs = &plan.references;
         for k in 0..plan.scene.ticks {
-            let t = (k + 1) as f64 / plan.scenario.control_hz;
+            // Settling is 0: the state after tick k's step is at scenario time (k + 1) / rate.
+            let t = plan.references.clock.scenario_time(k + 1).expect("no settling");
             let o = refs.object_at(Some(t));
             let mut op = Vector3::from(o.pose.position);
             op.z -= fall(t);

@@ -120,13 +120,13 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
             duration: p.duration,
         })
         .collect();
-    let settle_ticks = (s.settle * s.control_hz).round() as u64;
+    let clock = s.clock();
     let scene = Scene {
         team: TEAM.into(),
         world,
         perturbations,
-        settle_ticks,
-        ticks: s.ticks(),
+        settle_ticks: clock.settle_ticks,
+        ticks: clock.ticks,
         // Lockstep waits this long for a tick's torques: generous, a loaded machine is slow
         // but a missing robot is still named.
         command_timeout: 30.0,
@@ -171,7 +171,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
             object_inertia: Matrix3::from_diagonal(&Vector3::from(principal)),
             f_min_foot: s.min_foot_force,
             f_min_hand: s.min_hand_force,
-            dt: 1.0 / s.control_hz,
+            dt: clock.dt(),
             release: s.release,
             object_pose_at_grasp: Some(object_at_grasp),
             planned_grasp,

@@ -34,9 +34,9 @@ pub const REALTIME_COORDINATOR_TICK_DEADLINE: Duration = Duration::from_millis(5
 /// terms arrived (half a period left too little of it for the solve, the agents and the
 /// bridge: every robot missed its deadline while one stalled), with a late member's latest terms (`coordinator::team::assembly::Reuse`), as
 /// long as they are at most [`REALTIME_SILENCE`] old; a member silent for longer is left out.
-pub fn realtime_reuse(control_hz: f64) -> coordinator::team::assembly::Reuse {
-    let period = 1.0 / control_hz;
-    coordinator::team::assembly::Reuse { after: Duration::from_secs_f64(period / 4.0), max_age: (REALTIME_SILENCE.as_secs_f64() / period).ceil().max(1.0) as u64 }
+pub fn realtime_reuse(clock: &protocol::RunClock) -> coordinator::team::assembly::Reuse {
+    let period = clock.dt();
+    coordinator::team::assembly::Reuse { after: Duration::from_secs_f64(period / 4.0), max_age: clock.ticks_lasting(REALTIME_SILENCE.as_secs_f64()).max(1) }
 }
 
 /// How long a member may send no terms in real time before the coordinator leaves it out of
@@ -96,7 +96,7 @@ impl RunOptions {
 /// [`REALTIME_COORDINATOR_TICK_DEADLINE`]).
 pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
     let (tick_deadline, command_deadline, reuse) = if plan.scene.realtime {
-        (REALTIME_COORDINATOR_TICK_DEADLINE, REALTIME_AGENT_COMMAND_DEADLINE, Some(realtime_reuse(plan.scenario.control_hz)))
+        (REALTIME_COORDINATOR_TICK_DEADLINE, REALTIME_AGENT_COMMAND_DEADLINE, Some(realtime_reuse(&plan.references.clock)))
     } else {
         (COORDINATOR_TICK_DEADLINE, AGENT_COMMAND_DEADLINE, None)
     };

@@ -434,9 +434,14 @@ impl Scenario {
         Ok(s)
     }
 
+    /// The run's ticks: `settle` and `duration` at `control_hz`, each to the nearest tick.
+    pub fn clock(&self) -> protocol::RunClock {
+        protocol::RunClock::from_seconds(self.control_hz, self.settle, self.duration)
+    }
+
     /// Number of control ticks of the scenario proper (after settling).
     pub fn ticks(&self) -> u64 {
-        (self.duration * self.control_hz).round() as u64
+        protocol::RunClock::ticks_in(self.duration, self.control_hz)
     }
 
     fn check(&self) -> Result<(), String> {

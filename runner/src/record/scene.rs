@@ -13,7 +13,7 @@ use foxglove::messages::{
 };
 use foxglove::{Channel, ChannelBuilder, Context, PartialMetadata};
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
-use protocol::{ContactTruth, GroundTruth, RobotState};
+use protocol::{ContactTruth, GroundTruth, RobotState, RunClock};
 use robot_model::{forward_kinematics, Data, Robot};
 
 use super::RecordedMessage;
@@ -41,7 +41,7 @@ struct RobotView {
 
 /// Builds `/tf` and `/scene` from the states and the ground truth.
 pub struct SceneBuilder {
-    control_hz: f64,
+    clock: RunClock,
     every: u64,
     object_size: Option<[f64; 3]>,
     robots: BTreeMap<String, RobotView>,
@@ -59,10 +59,10 @@ impl SceneBuilder {
                 (r.id.clone(), view)
             })
             .collect();
-        let control_hz = plan.scenario.control_hz;
+        let clock = plan.references.clock;
         SceneBuilder {
-            control_hz,
-            every: ((control_hz / super::SCENE_HZ).round() as u64).max(1),
+            clock,
+            every: clock.ticks_per_sample(super::SCENE_HZ),
             object_size: plan.scene.world.object.as_ref().map(|o| o.size),
             robots,
             channels: None,
@@ -82,7 +82,7 @@ impl SceneBuilder {
             RecordedMessage::Status(m) => &m.header,
             RecordedMessage::References(m) => &m.header,
         };
-        (h.tick as f64 * 1e9 / self.control_hz) as u64
+        self.clock.run_time_ns(h.tick)
     }
 
     /// Keep states; on the ground truth of every `every`-th tick, log the view.
