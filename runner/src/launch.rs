@@ -116,6 +116,17 @@ pub const SIM_HOST: &str = "sim";
 pub const HUB_PORT: u16 = 7447;
 
 impl RunMode {
+    /// A run on this computer's loopback: over mutual TLS when `certs` names the identities'
+    /// certificates, else as processes when `distributed`, else embedded; `dir` receives the
+    /// processes' files.
+    pub fn on_loopback(distributed: bool, certs: Option<&Path>, dir: &Path) -> RunMode {
+        match certs {
+            Some(certs) => RunMode::Tls { dir: dir.to_path_buf(), certs: certs.to_path_buf() },
+            None if distributed => RunMode::Distributed { dir: dir.to_path_buf() },
+            None => RunMode::Embedded,
+        }
+    }
+
     /// `"embedded"`, `"distributed"`, `"hosts"`, `"hosts-tls"` or `"distributed-tls"`, as
     /// reports name it.
     pub fn name(&self) -> &'static str {

@@ -5,7 +5,7 @@
 //! recorded). Embedded or distributed, the same [`crate::plan::Plan`] is simulated and every
 //! message goes over Zenoh.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use thiserror::Error;
@@ -88,6 +88,20 @@ impl RunOptions {
             (false, false, false) => "embedded",
         }
     }
+
+    /// The mode as the report names it: [`RunOptions::mode_name`], and `", real time"` after
+    /// it for a real-time run.
+    pub fn mode_label(&self, tls: bool, realtime: bool) -> String {
+        let name = self.mode_name(tls);
+        if realtime { format!("{name}, real time") } else { name.to_string() }
+    }
+}
+
+/// The report folder of a run of the scenario file `scenario` when none is given:
+/// `reports/<file name without extension>` (`reports/scenario` for a path without one).
+pub fn default_report_dir(scenario: &Path) -> PathBuf {
+    let stem = scenario.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scenario".into());
+    PathBuf::from("reports").join(stem)
 }
 
 /// The components of a scenario run.
@@ -130,11 +144,7 @@ pub fn run_recorded(plan: &Plan, opts: &RunOptions, out: &Path, record: Option<&
 /// The mode of a run on this computer's loopback (not on test hosts): over TLS when `tls`
 /// names the certificates (distributed or not), else distributed or embedded.
 fn loopback_mode(opts: &RunOptions, tls: Option<&Path>, out: &Path) -> RunMode {
-    match tls {
-        Some(certs) => RunMode::Tls { dir: out.to_path_buf(), certs: certs.to_path_buf() },
-        None if opts.distributed => RunMode::Distributed { dir: out.to_path_buf() },
-        None => RunMode::Embedded,
-    }
+    RunMode::on_loopback(opts.distributed, tls, out)
 }
 
 /// [`run_recorded`]; with `tls`, distributed on loopback over mutual TLS with the team's
@@ -265,5 +275,13 @@ mod tests {
         assert_eq!(loopback_mode(&RunOptions { distributed: false, hosts: false, progress: false }, Some(certs), out).name(), "distributed-tls", "TLS runs distributed");
         let hosts = RunOptions { distributed: false, hosts: true, progress: false };
         assert_eq!((hosts.mode_name(false), hosts.mode_name(true)), ("hosts", "hosts-tls"));
+        assert_eq!(hosts.mode_label(true, true), "hosts-tls, real time");
+        assert_eq!(hosts.mode_label(false, false), "hosts");
+    }
+
+    #[test]
+    fn a_run_reports_into_a_folder_named_after_its_scenario() {
+        assert_eq!(default_report_dir(Path::new("scenarios/s4_object_circle.toml")), Path::new("reports/s4_object_circle"));
+        assert_eq!(default_report_dir(Path::new("/")), Path::new("reports/scenario"));
     }
 }
