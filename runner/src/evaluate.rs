@@ -1,5 +1,5 @@
-//! From a run's records to the report: every measure of DESIGN.md §8 (`metrics.json`), the
-//! time series (`timeseries.csv`, `torques.csv`) and the
+//! From a run's records to the report: every measure of success (`metrics.json`; see
+//! `docs/scenarios.md`), the time series (`timeseries.csv`, `torques.csv`) and the
 //! acceptance checks of the team demo. Measured values come from the ground truth only.
 
 use std::collections::BTreeMap;
@@ -14,7 +14,7 @@ use crate::metrics::{self, DropReport, Percentiles};
 use crate::plan::{Plan, ReferencePlan};
 use crate::report::{self, ReportError, TimeSeries};
 
-/// Bounds of the acceptance checks (issue: the team demo).
+/// Bounds of the acceptance checks of the team demo.
 pub const MAX_SLIP: f64 = 0.005;
 pub const MAX_OBJECT_POSITION_RMS: f64 = 0.01;
 pub const MAX_OBJECT_ORIENTATION_RMS_DEG: f64 = 2.0;

@@ -22,7 +22,7 @@
 //! * [`gait`]: the static walk (crawl) planner: steps, CoM shifts, swing trajectories, ramps.
 //! * [`walk`]: a scenario's walk: the crawl planned from its waypoints, the references and
 //!   contact sets a run sends for it, and its evaluation (steps, slides, final poses).
-//! * [`metrics`]: the measures of success of DESIGN.md §8.
+//! * [`metrics`]: the measures of success (`docs/scenarios.md`).
 //! * [`report`]: CSV time series, `metrics.json` and plots of a run.
 //! * [`record`]: the run as MCAP (`run.mcap`), live to Foxglove (`--live`), and read back
 //!   (`team report run.mcap`).

@@ -1,5 +1,5 @@
 //! Scenario files: the robots and their poses, the object, the references, the gains per task,
-//! the perturbations, duration, rates and seed (DESIGN.md §7). Every number is a parameter,
+//! the perturbations, duration, rates and seed (`docs/scenarios.md`). Every number is a parameter,
 //! and `--set key=value` overrides any of them: `key` is a dotted path into the TOML
 //! (`gains.object.stiffness`, `robots.1.base_position`, `duration`), `value` a TOML value
 //! (`12.5`, `[1, 2, 3]`, `"pidc"`).
