@@ -216,6 +216,24 @@ pub fn compare(files: &[PathBuf], controllers: &[String], sets: &[String], out: 
 /// Per controller, the largest motion factor at which it met every bound (`None`: not even the first).
 pub type Limits = Vec<(String, Option<f64>)>;
 
+/// A sweep's report folder when none is given: `reports/sweep-<file name without extension>`.
+pub fn default_sweep_dir(file: &Path) -> PathBuf {
+    PathBuf::from("reports").join(format!("sweep-{}", file.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default()))
+}
+
+/// One line per controller of a sweep's [`Limits`]: the largest factor of `scales` at which it
+/// met every bound, or that it missed one already at the first.
+pub fn limits_summary(limits: &Limits, what: Scaling, scales: &[f64]) -> String {
+    let mut s = String::new();
+    for (c, k) in limits {
+        match k {
+            Some(k) => s.push_str(&format!("{c}: meets every bound up to motion {what:?} x {k}\n")),
+            None => s.push_str(&format!("{c}: misses a bound already at motion {what:?} x {}\n", scales.first().copied().unwrap_or(0.0))),
+        }
+    }
+    s
+}
+
 /// `file` with its motion amplitudes (or speeds) scaled by each of `scales`, with every controller, into
 /// `out` (`sweep.md` / `sweep.json` and one sub-folder per run). Returns the rows and, per
 /// controller, the largest scale at which it met every bound before its first failure.
@@ -327,5 +345,13 @@ mod tests {
         assert!(lines[2].starts_with("| S | mqp | 1 |") && lines[2].ends_with("| yes |"), "{md}");
         assert!(lines[3].contains("hand 1 without contact for 50 ms") && lines[3].ends_with("| NO |"), "{md}");
         assert!(lines[4].contains("run failed: run: no torques / from r2"), "{md}");
+    }
+
+    #[test]
+    fn a_sweep_says_up_to_which_scale_each_controller_met_the_bounds() {
+        let limits: Limits = vec![("pidc".into(), Some(1.5)), ("mqp".into(), None)];
+        let s = limits_summary(&limits, Scaling::Speed, &[0.5, 1.0, 1.5]);
+        assert_eq!(s, "pidc: meets every bound up to motion Speed x 1.5\nmqp: misses a bound already at motion Speed x 0.5\n");
+        assert_eq!(default_sweep_dir(Path::new("scenarios/s1_torso_and_object.toml")), Path::new("reports/sweep-s1_torso_and_object"));
     }
 }

@@ -24,7 +24,7 @@ use tokio::sync::watch;
 use zenoh::Session;
 
 use crate::plan::{ReferencePlan, TEAM};
-use crate::record::{Message, Tap};
+use crate::record::{RecordedMessage, Tap};
 
 /// References are published this many ticks ahead of the last simulated tick (10 s at 2 kHz;
 /// below the coordinator's reference queue, `coordinator::service::REFERENCE_QUEUE`).
@@ -59,7 +59,7 @@ impl Records {
     fn take_torques(&mut self, sample: &zenoh::sample::Sample, settle: u64, tap: Option<&Tap>) {
         if let Ok(cmd) = decode_sample::<TorqueCommand>(sample) {
             if let Some(tap) = tap {
-                tap.send(sample.key_expr().as_str(), Message::Torque(cmd.clone()));
+                tap.send(sample.key_expr().as_str(), RecordedMessage::Torque(cmd.clone()));
             }
             if cmd.header.tick >= settle {
                 self.torques.entry(cmd.header.robot_id().to_string()).or_default().push((cmd.header.tick, cmd.tau));
@@ -71,7 +71,7 @@ impl Records {
     fn take_diagnostics(&mut self, sample: &zenoh::sample::Sample, settle: u64, tap: Option<&Tap>) {
         if let Ok(d) = decode_sample::<TickDiagnostics>(sample) {
             if let Some(tap) = tap {
-                tap.send(sample.key_expr().as_str(), Message::Diagnostics(d.clone()));
+                tap.send(sample.key_expr().as_str(), RecordedMessage::Diagnostics(d.clone()));
             }
             if d.header.tick >= settle {
                 self.diagnostics.push(d);
@@ -113,8 +113,8 @@ pub const FINAL_GRACE: Duration = Duration::from_millis(500);
 pub const RECORD_QUEUE: usize = 1 << 15;
 
 impl Driver {
-    /// Declare everything on `session`. `show_progress`: a progress bar on a terminal, lines
-    /// every 10 % otherwise, on stdout.
+    /// Declare everything on `session`. `show_progress`: a progress bar on a terminal, log
+    /// lines every 10 % otherwise.
     pub async fn start(session: &Session, plan: ReferencePlan, total_ticks: u64, show_progress: bool) -> Result<Driver, TransportError> {
         // What the report is made of: room for seconds of a real-time run whose driver fell
         // behind (a queue drops its oldest when full, see `transport::SampleQueue`).
@@ -161,7 +161,7 @@ impl Driver {
             let refs = self.plan.for_tick(TEAM, tick);
             self.refs_pub.put(&refs).await?;
             if let Some(tap) = self.tap.as_ref().filter(|_| tick >= self.tapped_refs) {
-                tap.send(&self.refs_pub.key(), Message::References(refs));
+                tap.send(&self.refs_pub.key(), RecordedMessage::References(refs));
                 self.tapped_refs = tick + 1;
             }
         }
@@ -174,7 +174,7 @@ impl Driver {
             if let Some(p) = self.contact_pubs.get_mut(c.header.robot_id()) {
                 p.put(c).await?;
                 if let Some(tap) = &self.tap {
-                    tap.send(&p.key(), Message::Contacts(c.clone()));
+                    tap.send(&p.key(), RecordedMessage::Contacts(c.clone()));
                 }
             }
             self.next_contact += 1;
@@ -233,98 +233,122 @@ impl Driver {
 
     /// Run until the ground truth of the last tick arrived, or `stop` turns true.
     pub async fn run(mut self, mut stop: watch::Receiver<bool>) -> Result<Records, TransportError> {
-        let mut rec = Records::default();
-        let settle = self.plan.clock.settle_ticks;
-        let started = Instant::now();
-        let mut run_started: Option<Instant> = None;
-        let mut last_logged = 0u64;
+        let mut st = RunState::new(self.plan.clock.settle_ticks, LOOKAHEAD.min(self.total));
         // The first window goes out now, and again when the coordinator is first heard of (it
         // may not have subscribed yet): the settling ticks hold the start poses, which is also
         // what the controller holds before any reference arrives.
-        let mut next_ref = LOOKAHEAD.min(self.total);
-        self.publish_refs(0, next_ref).await?;
-        let mut coordinator_heard = false;
-        // Whether the coordinator was seen to go (its liveliness token): the next one to come
-        // is a restarted coordinator, which has none of the references sent ahead.
-        let mut coordinator_lost = false;
+        self.publish_refs(0, st.next_ref).await?;
         loop {
             tokio::select! {
                 _ = stop.changed() => { if *stop.borrow() { break; } }
                 c = self.coordinator.recv_async() => {
                     let Ok(sample) = c else { break };
-                    if !transport::coordinator_alive(&sample) {
-                        coordinator_lost = true;
-                    } else if std::mem::take(&mut coordinator_lost) {
-                        let from = rec.ticks_seen.saturating_sub(1);
-                        tracing::warn!(from, to = next_ref, "the coordinator is back: the references are sent again");
-                        self.publish_refs(from, next_ref).await?;
-                    }
+                    self.on_coordinator(&mut st, &sample).await?;
                 }
                 s = self.status.recv_async() => {
                     let Ok(sample) = s else { break };
-                    if let Ok(st) = decode_sample::<CoordinatorStatus>(&sample) {
-                        if let Some(tap) = &self.tap {
-                            tap.send(sample.key_expr().as_str(), Message::Status(st.clone()));
-                        }
-                        if st.mode == CoordinatorMode::Released && rec.released_at.is_none() {
-                            rec.released_at = Some(st.header.tick);
-                            self.halt_walk(st.header.tick, next_ref).await?;
-                        }
-                        rec.statuses.push(st.clone());
-                        rec.last_status = Some(st);
-                        if !coordinator_heard {
-                            coordinator_heard = true;
-                            self.publish_refs(0, next_ref).await?;
-                        }
-                    }
+                    self.on_status(&mut st, &sample).await?;
                 }
                 s = self.truth.recv_async() => {
                     let Ok(sample) = s else { break };
-                    let gt = match decode_sample::<GroundTruth>(&sample) {
-                        Ok(g) => g,
-                        Err(e) => { tracing::warn!("rejected ground truth: {e}"); continue; }
-                    };
-                    if let Some(tap) = &self.tap {
-                        tap.send(sample.key_expr().as_str(), Message::Truth(gt.clone()));
-                    }
-                    let tick = gt.header.tick;
-                    rec.ticks_seen = rec.ticks_seen.max(tick + 1);
-                    let ahead = (tick + 1 + LOOKAHEAD).min(self.total);
-                    if ahead > next_ref {
-                        self.publish_refs(next_ref, ahead).await?;
-                        next_ref = ahead;
-                    }
-                    self.publish_contacts(tick + 1 + CONTACT_LOOKAHEAD).await?;
-                    if tick >= settle {
-                        if run_started.is_none() {
-                            rec.settle_wall = started.elapsed();
-                            run_started = Some(Instant::now());
-                            self.progress.set_prefix("running");
-                        }
-                        rec.truth.push(gt);
-                    }
-                    self.progress.set_position(tick + 1);
-                    if tick % 200 == 0 {
-                        self.progress.set_message(format!("t = {:.2} s", self.plan.time_of_tick(tick).unwrap_or(0.0)));
-                    }
-                    if self.log_progress && (tick + 1) * 10 / self.total > last_logged {
-                        last_logged = (tick + 1) * 10 / self.total;
-                        println!("progress {}% ({}/{} ticks, {:.1} s wall)", last_logged * 10, tick + 1, self.total, started.elapsed().as_secs_f64());
-                    }
-                    if tick + 1 >= self.total {
+                    if self.on_truth(&mut st, &sample).await? {
                         break;
                     }
                 }
                 s = self.torques.recv_async() => {
                     let Ok(sample) = s else { break };
-                    rec.take_torques(&sample, settle, self.tap.as_ref());
+                    st.rec.take_torques(&sample, st.settle, self.tap.as_ref());
                 }
                 s = self.diagnostics.recv_async() => {
                     let Ok(sample) = s else { break };
-                    rec.take_diagnostics(&sample, settle, self.tap.as_ref());
+                    st.rec.take_diagnostics(&sample, st.settle, self.tap.as_ref());
                 }
             }
         }
+        self.finish(st).await
+    }
+
+    /// The coordinator's liveliness changed: one that comes back after it was seen to go is a
+    /// restarted coordinator, which has none of the references sent ahead.
+    async fn on_coordinator(&mut self, st: &mut RunState, sample: &zenoh::sample::Sample) -> Result<(), TransportError> {
+        if !transport::coordinator_alive(sample) {
+            st.coordinator_lost = true;
+        } else if std::mem::take(&mut st.coordinator_lost) {
+            let from = st.rec.ticks_seen.saturating_sub(1);
+            tracing::warn!(from, to = st.next_ref, "the coordinator is back: the references are sent again");
+            self.publish_refs(from, st.next_ref).await?;
+        }
+        Ok(())
+    }
+
+    /// A coordinator status: kept; the first that reports the team let go halts the walk; the
+    /// first heard sends the first window of references again.
+    async fn on_status(&mut self, st: &mut RunState, sample: &zenoh::sample::Sample) -> Result<(), TransportError> {
+        let Ok(status) = decode_sample::<CoordinatorStatus>(sample) else { return Ok(()) };
+        if let Some(tap) = &self.tap {
+            tap.send(sample.key_expr().as_str(), RecordedMessage::Status(status.clone()));
+        }
+        if status.mode == CoordinatorMode::Released && st.rec.released_at.is_none() {
+            st.rec.released_at = Some(status.header.tick);
+            self.halt_walk(status.header.tick, st.next_ref).await?;
+        }
+        st.rec.statuses.push(status.clone());
+        st.rec.last_status = Some(status);
+        if !st.coordinator_heard {
+            st.coordinator_heard = true;
+            self.publish_refs(0, st.next_ref).await?;
+        }
+        Ok(())
+    }
+
+    /// A ground truth: the references and contact sets move ahead with it, a scenario tick's
+    /// is kept, the progress moves. Whether it was the last tick's.
+    async fn on_truth(&mut self, st: &mut RunState, sample: &zenoh::sample::Sample) -> Result<bool, TransportError> {
+        let gt = match decode_sample::<GroundTruth>(sample) {
+            Ok(g) => g,
+            Err(e) => {
+                tracing::warn!("rejected ground truth: {e}");
+                return Ok(false);
+            }
+        };
+        if let Some(tap) = &self.tap {
+            tap.send(sample.key_expr().as_str(), RecordedMessage::Truth(gt.clone()));
+        }
+        let tick = gt.header.tick;
+        st.rec.ticks_seen = st.rec.ticks_seen.max(tick + 1);
+        let ahead = (tick + 1 + LOOKAHEAD).min(self.total);
+        if ahead > st.next_ref {
+            self.publish_refs(st.next_ref, ahead).await?;
+            st.next_ref = ahead;
+        }
+        self.publish_contacts(tick + 1 + CONTACT_LOOKAHEAD).await?;
+        if tick >= st.settle {
+            if st.run_started.is_none() {
+                st.rec.settle_wall = st.started.elapsed();
+                st.run_started = Some(Instant::now());
+                self.progress.set_prefix("running");
+            }
+            st.rec.truth.push(gt);
+        }
+        self.show_progress(st, tick);
+        Ok(tick + 1 >= self.total)
+    }
+
+    /// The progress bar at `tick`, or a log line every 10 %.
+    fn show_progress(&self, st: &mut RunState, tick: u64) {
+        self.progress.set_position(tick + 1);
+        if tick % 200 == 0 {
+            self.progress.set_message(format!("t = {:.2} s", self.plan.time_of_tick(tick).unwrap_or(0.0)));
+        }
+        if self.log_progress && (tick + 1) * 10 / self.total > st.last_logged {
+            st.last_logged = (tick + 1) * 10 / self.total;
+            println!("progress {}% ({}/{} ticks, {:.1} s wall)", st.last_logged * 10, tick + 1, self.total, st.started.elapsed().as_secs_f64());
+        }
+    }
+
+    /// After the loop: the last tick's torques, whatever else already arrived, the wall time.
+    async fn finish(mut self, st: RunState) -> Result<Records, TransportError> {
+        let RunState { mut rec, settle, run_started, .. } = st;
         self.await_last_torques(&mut rec, settle).await;
         // Whatever else already arrived (torques and diagnostics of the last ticks).
         while let Ok(Some(sample)) = self.torques.try_recv() {
@@ -336,5 +360,29 @@ impl Driver {
         rec.run_wall = run_started.map(|s| s.elapsed()).unwrap_or_default();
         self.progress.finish_and_clear();
         Ok(rec)
+    }
+}
+
+/// The driver's bookkeeping during a run.
+struct RunState {
+    rec: Records,
+    /// Settling ticks (not evaluated).
+    settle: u64,
+    started: Instant,
+    /// When the first scenario tick's ground truth arrived.
+    run_started: Option<Instant>,
+    /// Tenths of the run logged so far (progress without a terminal).
+    last_logged: u64,
+    /// References of ticks below this are published.
+    next_ref: u64,
+    coordinator_heard: bool,
+    /// Whether the coordinator was seen to go (its liveliness token): the next one to come is
+    /// a restarted coordinator.
+    coordinator_lost: bool,
+}
+
+impl RunState {
+    fn new(settle: u64, next_ref: u64) -> RunState {
+        RunState { rec: Records::default(), settle, started: Instant::now(), run_started: None, last_logged: 0, next_ref, coordinator_heard: false, coordinator_lost: false }
     }
 }

@@ -1,5 +1,5 @@
-//! From a run's records to the report: every measure of DESIGN.md §8 (`metrics.json`), the
-//! time series (`timeseries.csv`, `torques.csv`) and the
+//! From a run's records to the report: every measure of success (`metrics.json`; see
+//! `docs/scenarios.md`), the time series (`timeseries.csv`, `torques.csv`) and the
 //! acceptance checks of the team demo. Measured values come from the ground truth only.
 
 use std::collections::BTreeMap;
@@ -11,10 +11,10 @@ use serde::Serialize;
 
 use crate::driver::Records;
 use crate::metrics::{self, DropReport, Percentiles};
-use crate::plan::Plan;
+use crate::plan::{Plan, ReferencePlan};
 use crate::report::{self, ReportError, TimeSeries};
 
-/// Bounds of the acceptance checks (issue: the team demo).
+/// Bounds of the acceptance checks of the team demo.
 pub const MAX_SLIP: f64 = 0.005;
 pub const MAX_OBJECT_POSITION_RMS: f64 = 0.01;
 pub const MAX_OBJECT_ORIENTATION_RMS_DEG: f64 = 2.0;
@@ -120,32 +120,88 @@ pub struct Evaluation {
 
 /// Evaluate the records of a run of `plan`.
 pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
-    // The references the run sent: a walk halts when the team lets go (crate::driver).
+    let refs = references_sent(plan, records);
+    let run = RunView { plan, refs: &refs, robots: plan.robots.iter().map(|r| r.id.clone()).collect() };
+    let truth: Vec<&GroundTruth> = records.truth.iter().filter(|g| g.object.is_some()).collect();
+    let every = refs.clock.ticks_per_sample(SERIES_HZ) as usize;
+    let pass = TruthPass::over(&run, &truth, every);
+    let (torque_rms, torques) = torque_series(plan, records, &refs, every);
+    let n = truth.len().max(1) as f64;
+    let sim = refs.clock.scenario_duration();
+    let mut metrics = Metrics {
+        scenario: plan.scenario.name.clone(),
+        mode: mode.to_string(),
+        duration_s: plan.scenario.duration,
+        control_hz: plan.scenario.control_hz,
+        physics_hz: plan.scenario.physics_hz,
+        samples: truth.len(),
+        object: tracking(&pass.obj_pos_err, &pass.obj_ang_err),
+        torsos: run.robots.iter().enumerate().map(|(i, r)| (r.clone(), tracking(&pass.torso_pos_err[i], &pass.torso_ang_err[i]))).collect(),
+        drop: metrics::detect_drop(&pass.times, &pass.object_z, refs.object_start.0.z, &pass.hand_contact, 0.05, 0.10),
+        slip_m: run.robots.iter().enumerate().map(|(i, r)| (r.clone(), metrics::slip(&pass.palm_in_object[i]))).collect(),
+        mean_squeeze_n: run.robots.iter().enumerate().map(|(i, r)| (r.clone(), pass.squeeze_sum[i] / n)).collect(),
+        torque_rms,
+        qp_status: qp_status_counts(records),
+        fallback_ticks: fallback_counts(records),
+        grasp_fit_residual_max_m: records.diagnostics.iter().map(|d| d.grasp_slip).fold(0.0, f64::max),
+        qp_iterations: metrics::percentiles(&records.diagnostics.iter().map(|d| d.qp_iterations as f64).collect::<Vec<_>>()),
+        qp_solve_us: metrics::percentiles(&records.diagnostics.iter().map(|d| d.qp_solve_us).collect::<Vec<_>>()),
+        controller_tick_us: metrics::percentiles(&records.diagnostics.iter().map(|d| d.total_us).collect::<Vec<_>>()),
+        coordinator_deadline_misses: records.last_status.as_ref().map(|s| s.deadline_misses),
+        loop_timing: crate::loop_timing::LoopReport::from_truth(&records.truth),
+        coordinator_fallbacks: records.last_status.as_ref().map(|s| s.fallbacks),
+        recoveries: recoveries(&run, &pass),
+        walk: refs.walk.as_ref().map(|w| crate::walk::evaluate::evaluate(w, &truth, refs.walk_halted_at)),
+        settle_wall_s: records.settle_wall.as_secs_f64(),
+        run_wall_s: records.run_wall.as_secs_f64(),
+        real_time_factor: if records.run_wall.is_zero() { 0.0 } else { sim / records.run_wall.as_secs_f64() },
+        checks: Vec::new(),
+        passed: false,
+    };
+    metrics.checks = acceptance(&run, &metrics);
+    metrics.passed = metrics.checks.iter().all(|c| c.passed);
+    Evaluation { metrics, series: pass.series, torques }
+}
+
+/// The references the run sent: a walk halts when the team lets go (crate::driver).
+fn references_sent(plan: &Plan, records: &Records) -> ReferencePlan {
     let mut halted = plan.references.clone();
     if let Some(tick) = records.released_at {
         halted.halt_walk(tick);
     }
-    let refs = &halted;
-    let robots: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
-    // Robots whose agent a fault stops or stalls: their drives lose their commands (they fall,
-    // or freeze); their torso, palm and hand contact are reported, not judged.
-    let faulted = |r: &String| plan.scenario.faults.iter().any(|f| f.robot() == Some(r.as_str()));
-    let truth: Vec<&GroundTruth> = records.truth.iter().filter(|g| g.object.is_some()).collect();
-    let (o_p0, o_q0) = refs.object_start;
+    halted
+}
 
-    // Time series: references at the ground truth's time (the end of the tick's step).
+/// The run being evaluated: its plan, the references it sent and its robots' ids.
+struct RunView<'a> {
+    plan: &'a Plan,
+    refs: &'a ReferencePlan,
+    robots: Vec<String>,
+}
+
+impl RunView<'_> {
+    /// Whether a fault stops or stalls robot `r`'s agent: its drives lose their commands (they
+    /// fall, or freeze); its torso, palm and hand contact are reported, not judged.
+    fn faulted(&self, r: &str) -> bool {
+        self.plan.scenario.faults.iter().any(|f| f.robot() == Some(r))
+    }
+}
+
+/// The time series' columns: the object's and each torso's reference and measured pose, each
+/// hand's contact, and the object's errors.
+fn series_columns(robots: &[String]) -> Vec<String> {
     let mut names: Vec<String> = Vec::new();
     for a in ["x", "y", "z", "rx", "ry", "rz"] {
         names.push(format!("object_{a}_des"));
         names.push(format!("object_{a}_mrt"));
     }
-    for r in &robots {
+    for r in robots {
         for a in ["x", "y", "z"] {
             names.push(format!("{r}_torso_{a}_des"));
             names.push(format!("{r}_torso_{a}_mrt"));
         }
     }
-    for r in &robots {
+    for r in robots {
         names.push(format!("{r}_hand_normal_force"));
         names.push(format!("{r}_palm_slip"));
         names.push(format!("{r}_palm_turn_deg"));
@@ -153,30 +209,74 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
     }
     names.push("object_position_error".into());
     names.push("object_orientation_error_deg".into());
-    let mut series = TimeSeries::with_columns(&names);
+    names
+}
 
-    let mut obj_pos_err = Vec::new();
-    let mut obj_ang_err = Vec::new();
-    let mut torso_pos_err: Vec<Vec<f64>> = vec![Vec::new(); robots.len()];
-    let mut torso_ang_err: Vec<Vec<f64>> = vec![Vec::new(); robots.len()];
-    let mut times = Vec::new();
-    let mut object_z = Vec::new();
-    let mut hand_contact: Vec<Vec<bool>> = Vec::new();
-    let mut palm_in_object: Vec<Vec<Vector3<f64>>> = vec![Vec::new(); robots.len()];
-    let mut palm_rot0: Vec<Option<UnitQuaternion<f64>>> = vec![None; robots.len()];
-    let mut squeeze_sum = vec![0.0; robots.len()];
-    let every = ((plan.scenario.control_hz / SERIES_HZ).round() as usize).max(1);
-    for (sample, g) in truth.iter().enumerate() {
+/// What one pass over the ground truth gathers, sample by sample: the time series (every
+/// `every`-th sample) and every tick's errors, hand contacts and palms on the object.
+struct TruthPass {
+    series: TimeSeries,
+    times: Vec<f64>,
+    object_z: Vec<f64>,
+    obj_pos_err: Vec<f64>,
+    obj_ang_err: Vec<f64>,
+    torso_pos_err: Vec<Vec<f64>>,
+    torso_ang_err: Vec<Vec<f64>>,
+    /// Per sample, whether each robot not faulted has a hand on the object.
+    hand_contact: Vec<Vec<bool>>,
+    /// Each palm's position in the object frame, per sample.
+    palm_in_object: Vec<Vec<Vector3<f64>>>,
+    /// Each palm's first orientation relative to the object.
+    palm_rot0: Vec<Option<UnitQuaternion<f64>>>,
+    /// Sum over the samples of each hand's normal force, N.
+    squeeze_sum: Vec<f64>,
+}
+
+impl TruthPass {
+    /// Go through `truth` (references at the ground truth's time: the end of the tick's step).
+    fn over(run: &RunView, truth: &[&GroundTruth], every: usize) -> TruthPass {
+        let n = run.robots.len();
+        let names = series_columns(&run.robots);
+        let mut pass = TruthPass {
+            series: TimeSeries::with_columns(&names),
+            times: Vec::new(),
+            object_z: Vec::new(),
+            obj_pos_err: Vec::new(),
+            obj_ang_err: Vec::new(),
+            torso_pos_err: vec![Vec::new(); n],
+            torso_ang_err: vec![Vec::new(); n],
+            hand_contact: Vec::new(),
+            palm_in_object: vec![Vec::new(); n],
+            palm_rot0: vec![None; n],
+            squeeze_sum: vec![0.0; n],
+        };
+        for (sample, g) in truth.iter().enumerate() {
+            let mut row = Vec::with_capacity(names.len());
+            let (o, ep, ea) = pass.object_columns(run, g, &mut row);
+            pass.torso_columns(run, g, &mut row);
+            pass.hand_columns(run, g, &o, &mut row);
+            row.push(ep);
+            row.push(ea.to_degrees());
+            if sample % every == 0 {
+                pass.series.push(g.time, &row);
+            }
+        }
+        pass
+    }
+
+    /// The object's reference and measured pose (rotations as rotation vectors from the start
+    /// orientation); its measured pose and position and orientation errors.
+    fn object_columns(&mut self, run: &RunView, g: &GroundTruth, row: &mut Vec<f64>) -> (Isometry3<f64>, f64, f64) {
         let t = g.time;
+        let o_q0 = run.refs.object_start.1;
         let o = iso(&g.object.as_ref().expect("filtered").pose);
-        let od = ref_iso(&refs.object_at(Some(t)));
+        let od = ref_iso(&run.refs.object_at(Some(t)));
         let ep = (o.translation.vector - od.translation.vector).norm();
         let ea = metrics::geodesic_angle(&o.rotation, &od.rotation);
-        obj_pos_err.push(ep);
-        obj_ang_err.push(ea);
-        times.push(t);
-        object_z.push(o.translation.vector.z);
-        let mut row = Vec::with_capacity(names.len());
+        self.obj_pos_err.push(ep);
+        self.obj_ang_err.push(ea);
+        self.times.push(t);
+        self.object_z.push(o.translation.vector.z);
         let (rd, rm) = (rotvec(&od.rotation, &o_q0), rotvec(&o.rotation, &o_q0));
         for a in 0..3 {
             row.push(od.translation.vector[a]);
@@ -186,62 +286,68 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
             row.push(rd[a]);
             row.push(rm[a]);
         }
-        for (i, r) in robots.iter().enumerate() {
-            let tr = ref_iso(&refs.torso_at(i, Some(t)));
+        (o, ep, ea)
+    }
+
+    /// Each torso's reference and measured position, and its errors.
+    fn torso_columns(&mut self, run: &RunView, g: &GroundTruth, row: &mut Vec<f64>) {
+        for (i, r) in run.robots.iter().enumerate() {
+            let tr = ref_iso(&run.refs.torso_at(i, Some(g.time)));
             let tm = g.torsos.iter().find(|b| &b.name == r).map(|b| iso(&b.pose)).unwrap_or(tr);
-            torso_pos_err[i].push((tm.translation.vector - tr.translation.vector).norm());
-            torso_ang_err[i].push(metrics::geodesic_angle(&tm.rotation, &tr.rotation));
+            self.torso_pos_err[i].push((tm.translation.vector - tr.translation.vector).norm());
+            self.torso_ang_err[i].push(metrics::geodesic_angle(&tm.rotation, &tr.rotation));
             for a in 0..3 {
                 row.push(tr.translation.vector[a]);
                 row.push(tm.translation.vector[a]);
             }
         }
-        let mut flags = Vec::with_capacity(robots.len());
-        for (i, r) in robots.iter().enumerate() {
+    }
+
+    /// Each hand's normal force on the object (`o`), how far its palm slid and turned on the
+    /// object since the start, and its contacts.
+    fn hand_columns(&mut self, run: &RunView, g: &GroundTruth, o: &Isometry3<f64>, row: &mut Vec<f64>) {
+        let mut flags = Vec::with_capacity(run.robots.len());
+        for (i, r) in run.robots.iter().enumerate() {
             // Normal force: along the palm's outward normal (hand frame z), what the hand
             // applies to the object.
             let palm = g.hands.iter().find(|b| &b.name == r).map(|b| iso(&b.pose));
             let n = palm.map(|p| p.rotation * Vector3::z()).unwrap_or_else(Vector3::zeros);
             let f: f64 = g.hand_contacts.iter().filter(|c| &c.robot == r).map(|c| n.dot(&Vector3::new(c.wrench[0], c.wrench[1], c.wrench[2]))).sum();
             row.push(f);
-            squeeze_sum[i] += f;
-            if !faulted(r) {
+            self.squeeze_sum[i] += f;
+            if !run.faulted(r) {
                 flags.push(g.hand_contacts.iter().any(|c| &c.robot == r));
             }
             // Where the palm is on the object, and how far it turned on it, since the start.
             let (mut slip_now, mut turn_now) = (0.0, 0.0);
             if let Some(p) = palm {
                 let local = o.inverse_transform_point(&p.translation.vector.into()).coords;
-                slip_now = palm_in_object[i].first().map_or(0.0, |p0| (local - p0).norm());
-                palm_in_object[i].push(local);
+                slip_now = self.palm_in_object[i].first().map_or(0.0, |p0| (local - p0).norm());
+                self.palm_in_object[i].push(local);
                 let rel = o.rotation.inverse() * p.rotation;
-                turn_now = metrics::geodesic_angle(palm_rot0[i].get_or_insert(rel), &rel).to_degrees();
+                turn_now = metrics::geodesic_angle(self.palm_rot0[i].get_or_insert(rel), &rel).to_degrees();
             }
             row.push(slip_now);
             row.push(turn_now);
             row.push(g.hand_contacts.iter().filter(|c| &c.robot == r).count() as f64);
         }
-        hand_contact.push(flags);
-        row.push(ep);
-        row.push(ea.to_degrees());
-        if sample % every == 0 {
-            series.push(t, &row);
-        }
+        self.hand_contact.push(flags);
     }
-    let tracking = |pe: &[f64], ae: &[f64]| Tracking {
+}
+
+/// Tracking of a pose task from its position and orientation errors.
+fn tracking(pe: &[f64], ae: &[f64]) -> Tracking {
+    Tracking {
         position_rms_m: metrics::rms(pe.iter().copied()),
         position_max_m: pe.iter().copied().fold(0.0, f64::max),
         orientation_rms_deg: metrics::rms(ae.iter().copied()).to_degrees(),
         orientation_max_deg: ae.iter().copied().fold(0.0, f64::max).to_degrees(),
-    };
-    let object = tracking(&obj_pos_err, &obj_ang_err);
-    let torsos: BTreeMap<String, Tracking> = robots.iter().enumerate().map(|(i, r)| (r.clone(), tracking(&torso_pos_err[i], &torso_ang_err[i]))).collect();
-    let drop = metrics::detect_drop(&times, &object_z, o_p0.z, &hand_contact, 0.05, 0.10);
-    let slip_m: BTreeMap<String, f64> = robots.iter().enumerate().map(|(i, r)| (r.clone(), metrics::slip(&palm_in_object[i]))).collect();
-    let n = truth.len().max(1) as f64;
-    let mean_squeeze_n = robots.iter().enumerate().map(|(i, r)| (r.clone(), squeeze_sum[i] / n)).collect();
+    }
+}
 
-    // Torques: one sample per tick (the first applied for it), in joint order.
+/// Torques: one sample per tick (the first applied for it), in joint order; each joint's RMS
+/// by robot, and the time series of every `every`-th tick all robots have.
+fn torque_series(plan: &Plan, records: &Records, refs: &ReferencePlan, every: usize) -> (BTreeMap<String, Vec<(String, f64)>>, TimeSeries) {
     let mut torque_rms = BTreeMap::new();
     let mut torque_names = Vec::new();
     let mut per_robot: Vec<BTreeMap<u64, &Vec<f64>>> = Vec::new();
@@ -270,14 +376,23 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
             }
         }
     }
+    (torque_rms, torques)
+}
 
+/// Ticks by the QP's status.
+fn qp_status_counts(records: &Records) -> BTreeMap<String, u64> {
     let mut qp_status = BTreeMap::new();
     for d in &records.diagnostics {
         *qp_status.entry(format!("{:?}", d.qp_status)).or_insert(0u64) += 1;
     }
+    qp_status
+}
+
+/// Ticks whose command did not come from the controller's normal path, grouped by what was
+/// done, not by the numbers in the message.
+fn fallback_counts(records: &Records) -> BTreeMap<String, u64> {
     let mut fallback_ticks = BTreeMap::new();
     for f in records.diagnostics.iter().filter_map(|d| d.fallback.as_deref()) {
-        // Group by what was done, not by the numbers in the message.
         let kind = if f.starts_with("controller error") {
             "hold orders after a controller error"
         } else if f.starts_with("controller not ready") {
@@ -289,13 +404,12 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
         };
         *fallback_ticks.entry(kind.to_string()).or_insert(0u64) += 1;
     }
-    let grasp_fit_residual_max_m = records.diagnostics.iter().map(|d| d.grasp_slip).fold(0.0, f64::max);
-    let qp_iterations = metrics::percentiles(&records.diagnostics.iter().map(|d| d.qp_iterations as f64).collect::<Vec<_>>());
-    let qp_solve_us = metrics::percentiles(&records.diagnostics.iter().map(|d| d.qp_solve_us).collect::<Vec<_>>());
-    let controller_tick_us = metrics::percentiles(&records.diagnostics.iter().map(|d| d.total_us).collect::<Vec<_>>());
+    fallback_ticks
+}
 
-    // Recovery after each push: from push end + 2 s until the next push starts.
-    let pushes = &plan.scene.perturbations;
+/// Recovery after each push: from push end + [`RECOVERY_AFTER`] until the next push starts.
+fn recoveries(run: &RunView, pass: &TruthPass) -> Vec<Recovery> {
+    let pushes = &run.plan.scene.perturbations;
     let mut recoveries = Vec::new();
     for p in pushes {
         let end = p.start + p.duration;
@@ -304,76 +418,47 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
         let (on, torso_err) = match &p.target {
             protocol::PerturbationTarget::Object => ("object".to_string(), None),
             protocol::PerturbationTarget::RobotBody { robot, body } => {
-                let i = robots.iter().position(|r| r == robot);
-                (format!("{robot}/{body}"), i.and_then(|i| metrics::recovery_error(&times, &torso_pos_err[i], end, RECOVERY_AFTER, window)))
+                let i = run.robots.iter().position(|r| r == robot);
+                (format!("{robot}/{body}"), i.and_then(|i| metrics::recovery_error(&pass.times, &pass.torso_pos_err[i], end, RECOVERY_AFTER, window)))
             }
         };
         recoveries.push(Recovery {
             on,
             push_end_s: end,
-            object_error_after_m: metrics::recovery_error(&times, &obj_pos_err, end, RECOVERY_AFTER, window),
+            object_error_after_m: metrics::recovery_error(&pass.times, &pass.obj_pos_err, end, RECOVERY_AFTER, window),
             torso_error_after_m: torso_err,
         });
     }
+    recoveries
+}
 
-    // Acceptance.
+/// The acceptance checks of the measures in `m` (robots a fault stops or stalls are not
+/// judged).
+fn acceptance(run: &RunView, m: &Metrics) -> Vec<Check> {
     let mut checks = Vec::new();
     let mut check = |name: String, value: f64, bound: f64| checks.push(Check { passed: value < bound, name, value, bound });
-    check("object never dropped (1 = dropped)".into(), if drop.dropped { 1.0 } else { 0.0 }, 0.5);
-    for (r, s) in slip_m.iter().filter(|(r, _)| !faulted(r)) {
+    check("object never dropped (1 = dropped)".into(), if m.drop.dropped { 1.0 } else { 0.0 }, 0.5);
+    for (r, s) in m.slip_m.iter().filter(|(r, _)| !run.faulted(r)) {
         check(format!("{r} palm slip [m]"), *s, MAX_SLIP);
     }
-    check("object position RMS [m]".into(), object.position_rms_m, MAX_OBJECT_POSITION_RMS);
-    check("object orientation RMS [deg]".into(), object.orientation_rms_deg, MAX_OBJECT_ORIENTATION_RMS_DEG);
-    let walk = refs.walk.as_ref().map(|w| crate::walk::evaluate::evaluate(w, &truth, refs.walk_halted_at));
-    for (r, t) in torsos.iter().filter(|(r, _)| !faulted(r)) {
+    check("object position RMS [m]".into(), m.object.position_rms_m, MAX_OBJECT_POSITION_RMS);
+    check("object orientation RMS [deg]".into(), m.object.orientation_rms_deg, MAX_OBJECT_ORIENTATION_RMS_DEG);
+    for (r, t) in m.torsos.iter().filter(|(r, _)| !run.faulted(r)) {
         // A walking torso follows a moving reference: its own bound.
-        let i = robots.iter().position(|x| x == r);
-        let walking = refs.walk.as_ref().zip(i).is_some_and(|(w, i)| w.walking[i]);
+        let i = run.robots.iter().position(|x| x == r);
+        let walking = run.refs.walk.as_ref().zip(i).is_some_and(|(w, i)| w.walking[i]);
         let (what, bound) = if walking { ("walking torso", crate::walk::evaluate::MAX_WALKING_TORSO_POSITION_RMS) } else { ("torso", MAX_TORSO_POSITION_RMS) };
         check(format!("{r} {what} position RMS [m]"), t.position_rms_m, bound);
     }
-    for (name, value, bound) in walk.iter().flat_map(crate::walk::evaluate::checks) {
+    for (name, value, bound) in m.walk.iter().flat_map(crate::walk::evaluate::checks) {
         check(name, value, bound);
     }
-    for rec in &recoveries {
+    for rec in &m.recoveries {
         if let Some(e) = rec.object_error_after_m {
             check(format!("object error {RECOVERY_AFTER} s after the push on {} ending at {:.1} s [m]", rec.on, rec.push_end_s), e, MAX_RECOVERY_ERROR);
         }
     }
-    let passed = checks.iter().all(|c| c.passed);
-    let sim = plan.scene.ticks as f64 / plan.scenario.control_hz;
-    let metrics = Metrics {
-        scenario: plan.scenario.name.clone(),
-        mode: mode.to_string(),
-        duration_s: plan.scenario.duration,
-        control_hz: plan.scenario.control_hz,
-        physics_hz: plan.scenario.physics_hz,
-        samples: truth.len(),
-        object,
-        torsos,
-        drop,
-        slip_m,
-        mean_squeeze_n,
-        torque_rms,
-        qp_status,
-        fallback_ticks,
-        grasp_fit_residual_max_m,
-        qp_iterations,
-        qp_solve_us,
-        controller_tick_us,
-        coordinator_deadline_misses: records.last_status.as_ref().map(|s| s.deadline_misses),
-        loop_timing: crate::loop_timing::LoopReport::from_truth(&records.truth),
-        coordinator_fallbacks: records.last_status.as_ref().map(|s| s.fallbacks),
-        recoveries,
-        walk,
-        settle_wall_s: records.settle_wall.as_secs_f64(),
-        run_wall_s: records.run_wall.as_secs_f64(),
-        real_time_factor: if records.run_wall.is_zero() { 0.0 } else { sim / records.run_wall.as_secs_f64() },
-        checks,
-        passed,
-    };
-    Evaluation { metrics, series, torques }
+    checks
 }
 
 /// Write the report folder's data: `metrics.json`, `timeseries.csv`, `torques.csv` (the
@@ -460,7 +545,8 @@ mod tests {
         let mut rec = Records::default();
         let refs = &plan.references;
         for k in 0..plan.scene.ticks {
-            let t = (k + 1) as f64 / plan.scenario.control_hz;
+            // Settling is 0: the state after tick k's step is at scenario time (k + 1) / rate.
+            let t = plan.references.clock.scenario_time(k + 1).expect("no settling");
             let o = refs.object_at(Some(t));
             let mut op = Vector3::from(o.pose.position);
             op.z -= fall(t);

@@ -5,18 +5,18 @@
 //! one [`AgentArgs`] per robot (its id, its model or placeholder dynamics, its command
 //! deadline) and one [`BridgeArgs`] (the state source: a MuJoCo scene or the smoke run's
 //! placeholder plant). [`Launch::start`] starts the coordinator and the agents in the chosen
-//! [`Mode`]:
+//! [`RunMode`]:
 //!
-//! * [`Mode::Embedded`]: every component is a task of this process on one Zenoh session;
-//! * [`Mode::Distributed`]: every component is its own process on loopback (the coordinator
+//! * [`RunMode::Embedded`]: every component is a task of this process on one Zenoh session;
+//! * [`RunMode::Distributed`]: every component is its own process on loopback (the coordinator
 //!   listens on a free port, the others connect), or on its own test host
-//!   ([`Mode::Hosts`], `crate::hosts`), started with the command line that
+//!   ([`RunMode::Hosts`], `crate::hosts`), started with the command line that
 //!   [`CoordinatorArgs::to_cli`], [`AgentArgs::to_cli`] and [`BridgeArgs::to_cli`] write from
 //!   the same values; files they need (the controller spec, the scene) go into the run's
 //!   folder;
-//! * [`Mode::Tls`]: as [`Mode::Distributed`], over mutual TLS with the team's access control
+//! * [`RunMode::Tls`]: as [`RunMode::Distributed`], over mutual TLS with the team's access control
 //!   (`protocol::access`): each process gets a Zenoh configuration with its identity's
-//!   certificate, written into the run's folder; [`Mode::Hosts`] with certificates does the
+//!   certificate, written into the run's folder; [`RunMode::Hosts`] with certificates does the
 //!   same across test hosts.
 //!
 //! The caller then declares what it observes on [`Running::session`] (the scenario driver),
@@ -79,7 +79,7 @@ pub enum LaunchError {
 
 /// Where the components run.
 #[derive(Debug, Clone)]
-pub enum Mode {
+pub enum RunMode {
     /// Tasks of this process on one Zenoh session.
     Embedded,
     /// Processes on loopback; `dir` receives the files they read (controller spec, scene).
@@ -87,7 +87,7 @@ pub enum Mode {
     /// Processes on test hosts (`crate::hosts`): the coordinator on host `coordinator`, each
     /// agent on the host named after its robot, the sim-bridge on host `sim`; this process
     /// (the scenario driver) reaches them through the hosts' bridge. With `certs`, over mutual
-    /// TLS with the team's access control as [`Mode::Tls`], the certificates naming the hosts'
+    /// TLS with the team's access control as [`RunMode::Tls`], the certificates naming the hosts'
     /// addresses ([`TestHosts::issue_certs`]).
     Hosts { dir: PathBuf, hosts: Arc<TestHosts>, certs: Option<PathBuf> },
     /// Processes on loopback over mutual TLS with the team's access control: the identities'
@@ -115,16 +115,27 @@ pub const SIM_HOST: &str = "sim";
 /// The coordinator's port on its host (every host has its own ports).
 pub const HUB_PORT: u16 = 7447;
 
-impl Mode {
+impl RunMode {
+    /// A run on this computer's loopback: over mutual TLS when `certs` names the identities'
+    /// certificates, else as processes when `distributed`, else embedded; `dir` receives the
+    /// processes' files.
+    pub fn on_loopback(distributed: bool, certs: Option<&Path>, dir: &Path) -> RunMode {
+        match certs {
+            Some(certs) => RunMode::Tls { dir: dir.to_path_buf(), certs: certs.to_path_buf() },
+            None if distributed => RunMode::Distributed { dir: dir.to_path_buf() },
+            None => RunMode::Embedded,
+        }
+    }
+
     /// `"embedded"`, `"distributed"`, `"hosts"`, `"hosts-tls"` or `"distributed-tls"`, as
     /// reports name it.
     pub fn name(&self) -> &'static str {
         match self {
-            Mode::Embedded => "embedded",
-            Mode::Distributed { .. } => "distributed",
-            Mode::Hosts { certs: None, .. } => "hosts",
-            Mode::Hosts { certs: Some(_), .. } => "hosts-tls",
-            Mode::Tls { .. } => "distributed-tls",
+            RunMode::Embedded => "embedded",
+            RunMode::Distributed { .. } => "distributed",
+            RunMode::Hosts { certs: None, .. } => "hosts",
+            RunMode::Hosts { certs: Some(_), .. } => "hosts-tls",
+            RunMode::Tls { .. } => "distributed-tls",
         }
     }
 
@@ -132,11 +143,11 @@ impl Mode {
     /// port, or [`HUB_PORT`] on the coordinator's host.
     fn hub(&self) -> Result<String, LaunchError> {
         match self {
-            Mode::Hosts { hosts, certs, .. } => {
+            RunMode::Hosts { hosts, certs, .. } => {
                 let addr = hosts.addr(COORDINATOR_HOST).map_err(|e| LaunchError::Hosts(e.to_string()))?;
                 Ok(format!("{}/{addr}:{HUB_PORT}", if certs.is_some() { "tls" } else { "tcp" }))
             }
-            Mode::Tls { .. } => Ok(format!("tls/127.0.0.1:{}", free_port()?)),
+            RunMode::Tls { .. } => Ok(format!("tls/127.0.0.1:{}", free_port()?)),
             _ => Ok(format!("tcp/127.0.0.1:{}", free_port()?)),
         }
     }
@@ -144,12 +155,12 @@ impl Mode {
     /// The Zenoh arguments of a process on `host` (`None`: this one) connecting to `hub`.
     fn zenoh_args(&self, host: Option<&str>, hub: &str, ids: &TeamIds) -> Result<ZenohArgs, LaunchError> {
         match self {
-            Mode::Hosts { hosts, certs: None, .. } => hosts.zenoh_args(host, hub).map_err(|e| LaunchError::Hosts(e.to_string())),
-            Mode::Hosts { dir, hosts, certs: Some(certs) } => {
+            RunMode::Hosts { hosts, certs: None, .. } => hosts.zenoh_args(host, hub).map_err(|e| LaunchError::Hosts(e.to_string())),
+            RunMode::Hosts { dir, hosts, certs: Some(certs) } => {
                 let addr = hosts.listen_addr(host).map_err(|e| LaunchError::Hosts(e.to_string()))?;
                 secure_args(dir, certs, ids, identity_of(host), &format!("tls/{addr}:0"), Some(hub))
             }
-            Mode::Tls { dir, certs } => secure_args(dir, certs, ids, identity_of(host), "tls/127.0.0.1:0", Some(hub)),
+            RunMode::Tls { dir, certs } => secure_args(dir, certs, ids, identity_of(host), "tls/127.0.0.1:0", Some(hub)),
             _ => Ok(ZenohArgs::connecting(hub)),
         }
     }
@@ -157,7 +168,7 @@ impl Mode {
     /// The Zenoh arguments of the coordinator, which listens on `hub`.
     fn hub_args(&self, hub: &str, ids: &TeamIds) -> Result<ZenohArgs, LaunchError> {
         match self {
-            Mode::Tls { dir, certs } | Mode::Hosts { dir, certs: Some(certs), .. } => secure_args(dir, certs, ids, Identity::Coordinator, hub, None),
+            RunMode::Tls { dir, certs } | RunMode::Hosts { dir, certs: Some(certs), .. } => secure_args(dir, certs, ids, Identity::Coordinator, hub, None),
             _ => Ok(ZenohArgs::listening(hub)),
         }
     }
@@ -165,7 +176,7 @@ impl Mode {
     /// Start one of the team's binaries: on `host` with test hosts, else on this machine.
     fn spawn(&self, host: &str, bin: &str, args: &[String], what: &str) -> Result<ChildGuard, ProcessError> {
         match self {
-            Mode::Hosts { hosts, .. } => spawn_on(hosts, host, bin, args, what),
+            RunMode::Hosts { hosts, .. } => spawn_on(hosts, host, bin, args, what),
             _ => spawn(bin, args, what),
         }
     }
@@ -356,7 +367,7 @@ pub struct Running {
     session: Session,
     stop_tx: watch::Sender<bool>,
     stop_rx: watch::Receiver<bool>,
-    mode: Mode,
+    mode: RunMode,
     /// Distributed: the Zenoh arguments of the sim-bridge (the coordinator's endpoint, which
     /// the others connect to; on test hosts also the bridge host's own endpoint).
     connect: ZenohArgs,
@@ -390,7 +401,7 @@ struct ComponentState {
 /// How a component is started (again).
 enum Starter {
     Task(TaskStarter),
-    Process { mode: Mode, host: String, bin: String, args: Vec<String> },
+    Process { mode: RunMode, host: String, bin: String, args: Vec<String> },
 }
 
 /// A running incarnation.
@@ -512,10 +523,10 @@ fn own_stop(all: &watch::Receiver<bool>) -> (Arc<watch::Sender<bool>>, watch::Re
 
 impl Launch {
     /// Start the coordinator, then the agents.
-    pub async fn start(&self, mode: &Mode) -> Result<Running, LaunchError> {
+    pub async fn start(&self, mode: &RunMode) -> Result<Running, LaunchError> {
         let (stop_tx, stop_rx) = watch::channel(false);
         match mode {
-            Mode::Embedded => {
+            RunMode::Embedded => {
                 let session = transport::open(&ZenohArgs::default(), Role::Alone).await?;
                 let c = (self.coordinator.clone(), session.clone());
                 let mut components = vec![(COORDINATOR.to_string(), Component::new(COORDINATOR, &stop_rx, Starter::Task(Box::new(move |stop, stall| c.0.start_task(&c.1, stop, stall))))?)];
@@ -526,7 +537,7 @@ impl Launch {
                 }
                 Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect: ZenohArgs::default(), components })
             }
-            Mode::Distributed { dir } | Mode::Hosts { dir, .. } | Mode::Tls { dir, .. } => {
+            RunMode::Distributed { dir } | RunMode::Hosts { dir, .. } | RunMode::Tls { dir, .. } => {
                 let hub = mode.hub()?;
                 let ids = TeamIds { team: self.coordinator.team.clone(), robots: self.agents.iter().map(|a| a.id.clone()).collect() };
                 let process = |host: &str, bin: &str, args: Vec<String>| Starter::Process { mode: mode.clone(), host: host.to_string(), bin: bin.to_string(), args };
@@ -573,8 +584,8 @@ impl Running {
     /// Run the state source until it ends the run. An error stops every component.
     pub async fn run_bridge(&mut self, bridge: &BridgeArgs) -> Result<BridgeOutcome, LaunchError> {
         let result = match &self.mode {
-            Mode::Embedded => self.run_bridge_here(bridge).await,
-            Mode::Distributed { dir } | Mode::Hosts { dir, .. } | Mode::Tls { dir, .. } => {
+            RunMode::Embedded => self.run_bridge_here(bridge).await,
+            RunMode::Distributed { dir } | RunMode::Hosts { dir, .. } | RunMode::Tls { dir, .. } => {
                 let mut child = self.mode.spawn(SIM_HOST, "sim-bridge", &bridge.to_cli(dir, &self.connect)?, "sim-bridge")?;
                 tokio::task::spawn_blocking(move || child.wait_success())
                     .await
@@ -615,7 +626,7 @@ impl Running {
         // Zenoh's TLS link reads and writes one rustls stream from two tasks without a lock
         // (eclipse-zenoh/zenoh#2557): a peer's close read while a write was in flight once
         // aborted the test process (a garbage `rustls::Error` cloned in the write).
-        let shared = matches!(self.mode, Mode::Embedded);
+        let shared = matches!(self.mode, RunMode::Embedded);
         if !shared {
             let _ = self.session.close().await;
         }

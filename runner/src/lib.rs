@@ -21,7 +21,7 @@
 //! * [`scenario`]: scenario files (TOML) with `--set key=value` overrides.
 //! * [`walk`]: a walk's evaluation from the ground truth (steps, slides, final poses); the
 //!   walk itself is planned by `planner::walk`.
-//! * [`metrics`]: the measures of success of DESIGN.md §8.
+//! * [`metrics`]: the measures of success (`docs/scenarios.md`).
 //! * [`report`]: CSV time series, `metrics.json` and plots of a run.
 //! * [`record`]: the run as MCAP (`run.mcap`), live to Foxglove (`--live`), and read back
 //!   (`team report run.mcap`).

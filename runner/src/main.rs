@@ -1,7 +1,7 @@
 //! `team`: the main job. Runs the whole team in simulation.
 
 use anyhow::Result;
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand};
 use std::path::{Path, PathBuf};
 
 use protocol::logging::{self, Verbosity};
@@ -10,12 +10,12 @@ use team_runner::compare;
 use team_runner::capacity;
 use team_runner::echo;
 use team_runner::evaluate;
-use team_runner::plan;
+use team_runner::plan::{self, repo_root};
 use team_runner::plots;
 use team_runner::record::{self, RecordOptions, ScenarioSource};
 use team_runner::run::{self as scenario_run, RunOptions};
 use team_runner::scenario::Scenario;
-use team_runner::launch::{BridgeOutcome, Mode};
+use team_runner::launch::RunMode;
 use team_runner::smoke::{self, SmokeConfig};
 
 #[derive(Parser)]
@@ -30,48 +30,7 @@ enum Command {
     /// Run a scenario (scenarios/*.toml) with the whole stack in the loop: MuJoCo, one agent
     /// per robot, the paper's coordinator. Writes a report folder (metrics.json, CSV time
     /// series, plots, report.html, the recording run.mcap) and prints a summary; exits with an error if an acceptance check fails.
-    Run {
-        /// Scenario file (TOML).
-        scenario: PathBuf,
-        /// Override any number of the scenario: --set duration=5 --set gains.object.stiffness=[...]
-        #[arg(long = "set", value_name = "KEY=VALUE")]
-        set: Vec<String>,
-        /// Run every component as its own process on loopback instead of one process.
-        #[arg(long)]
-        distributed: bool,
-        /// Run every component as its own process on its own test host (a Linux network
-        /// namespace, made for the run by scripts/testhosts.sh and removed after it; root).
-        #[arg(long)]
-        hosts: bool,
-        /// Run the scenario against the wall clock: the sim-bridge paces physics at the
-        /// control period, a robot whose torques are late keeps its last ones, agents keep
-        /// their real deadlines (25 ms or 5 ticks), and the report adds the loop's timing.
-        /// Settling stays lockstep. Combines with --distributed, --hosts and --tls.
-        #[arg(long)]
-        realtime: bool,
-        /// Run distributed on loopback over mutual TLS with the team's access control, with the
-        /// certificates in DIR (make them with scripts/make-test-certs.sh DIR r1 r2 ...). With
-        /// --hosts, the test CA in DIR (ca.pem, ca.key) signs certificates for the hosts'
-        /// addresses into the report folder's hosts-certs/.
-        #[arg(long, value_name = "DIR")]
-        tls: Option<PathBuf>,
-        /// Report folder (default: reports/<scenario file name>).
-        #[arg(long)]
-        out: Option<PathBuf>,
-        /// Print the summary alone: no progress, and on stderr nothing but errors (a failed
-        /// run's error among them).
-        #[arg(long, short, conflicts_with = "verbose")]
-        quiet: bool,
-        /// The components' log on stderr: -v what an operator follows (joins, leaves, safe
-        /// mode, phases), -vv per-tick events and Zenoh's own lines, -vvv everything. Without
-        /// it, warnings and errors only; RUST_LOG, when set, overrides both flags.
-        #[arg(long, short, action = clap::ArgAction::Count)]
-        verbose: u8,
-        /// Serve the run live to Foxglove (WebSocket on 127.0.0.1:PORT; open Foxglove and
-        /// connect to ws://127.0.0.1:PORT). The run is recorded to run.mcap either way.
-        #[arg(long, value_name = "PORT", num_args = 0..=1, default_missing_value = "8765")]
-        live: Option<u16>,
-    },
+    Run(RunArgs),
     /// Rebuild a run's report (metrics, time series, plots, report.html) from its recording
     /// alone (the run.mcap that `team run` wrote).
     Report {
@@ -173,57 +132,75 @@ enum Command {
     },
     /// Smoke run of the whole stack: sim-bridge, agents and coordinator exchange real
     /// messages over Zenoh for N ticks (placeholder physics and controller).
-    Smoke {
-        /// Number of robots (named r1, r2, ...).
-        #[arg(long, default_value_t = 2)]
-        robots: usize,
-        #[arg(long, default_value_t = 2000)]
-        ticks: u64,
-        #[arg(long, default_value_t = 18)]
-        joints: usize,
-        /// Run every component as its own process on loopback instead of one process.
-        #[arg(long)]
-        distributed: bool,
-        /// Distributed over mutual TLS with the team's access control, certificates in DIR.
-        #[arg(long, value_name = "DIR")]
-        tls: Option<PathBuf>,
-    },
+    Smoke(SmokeArgs),
+}
+
+#[derive(Args)]
+struct RunArgs {
+    /// Scenario file (TOML).
+    scenario: PathBuf,
+    /// Override any number of the scenario: --set duration=5 --set gains.object.stiffness=[...]
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Run every component as its own process on loopback instead of one process.
+    #[arg(long)]
+    distributed: bool,
+    /// Run every component as its own process on its own test host (a Linux network
+    /// namespace, made for the run by scripts/testhosts.sh and removed after it; root).
+    #[arg(long)]
+    hosts: bool,
+    /// Run the scenario against the wall clock: the sim-bridge paces physics at the
+    /// control period, a robot whose torques are late keeps its last ones, agents keep
+    /// their real deadlines (25 ms or 5 ticks), and the report adds the loop's timing.
+    /// Settling stays lockstep. Combines with --distributed, --hosts and --tls.
+    #[arg(long)]
+    realtime: bool,
+    /// Run distributed on loopback over mutual TLS with the team's access control, with the
+    /// certificates in DIR (make them with scripts/make-test-certs.sh DIR r1 r2 ...). With
+    /// --hosts, the test CA in DIR (ca.pem, ca.key) signs certificates for the hosts'
+    /// addresses into the report folder's hosts-certs/.
+    #[arg(long, value_name = "DIR")]
+    tls: Option<PathBuf>,
+    /// Report folder (default: reports/<scenario file name>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Print the summary alone: no progress, and on stderr nothing but errors (a failed
+    /// run's error among them).
+    #[arg(long, short, conflicts_with = "verbose")]
+    quiet: bool,
+    /// The components' log on stderr: -v what an operator follows (joins, leaves, safe
+    /// mode, phases), -vv per-tick events and Zenoh's own lines, -vvv everything. Without
+    /// it, warnings and errors only; RUST_LOG, when set, overrides both flags.
+    #[arg(long, short, action = clap::ArgAction::Count)]
+    verbose: u8,
+    /// Serve the run live to Foxglove (WebSocket on 127.0.0.1:PORT; open Foxglove and
+    /// connect to ws://127.0.0.1:PORT). The run is recorded to run.mcap either way.
+    #[arg(long, value_name = "PORT", num_args = 0..=1, default_missing_value = "8765")]
+    live: Option<u16>,
+}
+
+#[derive(Args)]
+struct SmokeArgs {
+    /// Number of robots (named r1, r2, ...).
+    #[arg(long, default_value_t = 2)]
+    robots: usize,
+    #[arg(long, default_value_t = 2000)]
+    ticks: u64,
+    #[arg(long, default_value_t = 18)]
+    joints: usize,
+    /// Run every component as its own process on loopback instead of one process.
+    #[arg(long)]
+    distributed: bool,
+    /// Distributed over mutual TLS with the team's access control, certificates in DIR.
+    #[arg(long, value_name = "DIR")]
+    tls: Option<PathBuf>,
 }
 
 fn main() -> Result<()> {
     let cli = Cli::parse();
     logging::init(verbosity(&cli.command));
     match cli.command {
-        Command::Run { scenario, set, distributed, hosts, realtime, tls, out, quiet, verbose: _, live } => {
-            let opts = RunOptions { distributed, hosts, progress: !quiet };
-            let mode_name = opts.mode_name(tls.is_some());
-            let mode_name = if realtime { format!("{mode_name}, real time") } else { mode_name.to_string() };
-            let mode_name = mode_name.as_str();
-            let s = Scenario::load(&scenario, &set)?;
-            let stem = scenario.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scenario".into());
-            let dir = out.unwrap_or_else(|| PathBuf::from("reports").join(stem));
-            std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
-            let root = repo_root();
-            if !quiet {
-                println!("{}: planning (hands placed on the object by IK)...", s.name);
-            }
-            let mut plan = plan::plan(&s, &root)?;
-            plan.scene.realtime = realtime;
-            if !quiet {
-                println!("{}: settling {:.1} s, then {:.1} s of scenario at {} Hz ({} mode)", s.name, s.settle, s.duration, s.control_hz, mode_name);
-            }
-            let source = ScenarioSource::read(&scenario, &set).map_err(|e| anyhow::anyhow!("reading {}: {e}", scenario.display()))?;
-            let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live };
-            let (records, recording) = scenario_run::run_recorded_secure(&plan, &opts, tls.as_deref(), &dir, Some(&rec))?;
-            let eval = evaluate::evaluate(&plan, &records, mode_name);
-            evaluate::write_report(&plan, &eval, &dir)?;
-            plots::write_all(&plan, &eval, &records, &dir)?;
-            print!("{}", evaluate::summary(&eval.metrics, &dir));
-            if let Some(r) = recording {
-                println!("  recording: {} ({:.1} MB, {} messages, {} dropped)", r.path.display(), r.bytes as f64 / 1e6, r.messages, r.dropped);
-            }
-            anyhow::ensure!(eval.metrics.passed, "acceptance checks failed (see {})", dir.join("metrics.json").display());
-        }
+        Command::Run(a) => run_scenario(a)?,
         Command::Compare { scenarios, controllers, set, out, quiet } => {
             let dir = out.unwrap_or_else(|| PathBuf::from("reports/compare"));
             create_dir(&dir)?;
@@ -232,17 +209,12 @@ fn main() -> Result<()> {
             println!("report: {}", dir.display());
         }
         Command::Sweep { scenario, controllers, scales, speed, set, out, quiet } => {
-            let dir = out.unwrap_or_else(|| PathBuf::from("reports").join(format!("sweep-{}", scenario.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default())));
+            let dir = out.unwrap_or_else(|| compare::default_sweep_dir(&scenario));
             create_dir(&dir)?;
             let what = if speed { compare::Scaling::Speed } else { compare::Scaling::Amplitude };
             let (rows, limits) = compare::sweep(&scenario, &controllers, (&scales, what), &set, &dir, &repo_root(), !quiet)?;
             print!("{}", compare::markdown(&rows));
-            for (c, k) in limits {
-                match k {
-                    Some(k) => println!("{c}: meets every bound up to motion {what:?} x {k}"),
-                    None => println!("{c}: misses a bound already at motion {what:?} x {}", scales.first().copied().unwrap_or(0.0)),
-                }
-            }
+            print!("{}", compare::limits_summary(&limits, what, &scales));
             println!("report: {}", dir.display());
         }
         Command::Capacity { scenario, mut set, tolerance } => {
@@ -255,71 +227,17 @@ fn main() -> Result<()> {
         }
         Command::Report { recording, out } => {
             let dir = out.unwrap_or_else(|| recording.parent().map(Path::to_path_buf).unwrap_or_default());
-            std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
+            create_dir(&dir)?;
             let (plan, records, eval) = record::replay::evaluate_recording(&recording, &repo_root())?;
-            evaluate::write_report(&plan, &eval, &dir)?;
-            plots::write_all(&plan, &eval, &records, &dir)?;
-            print!("{}", evaluate::summary(&eval.metrics, &dir));
+            write_report(&plan, &eval, &records, &dir)?;
         }
-        Command::Echo { key, count, wait, zenoh } => {
-            anyhow::ensure!(wait.is_finite() && wait > 0.0, "--wait must be a positive number of seconds");
-            let rt = tokio::runtime::Runtime::new()?;
-            let opts = echo::EchoOptions { key, count, wait: std::time::Duration::from_secs_f64(wait) };
-            rt.block_on(async {
-                let session = protocol::transport::open(&zenoh, protocol::transport::Role::Member).await?;
-                let result = echo::echo(&session, &opts, &mut std::io::stdout().lock()).await;
-                let _ = session.close().await;
-                result.map(|_| ()).map_err(anyhow::Error::from)
-            })?;
-        }
+        Command::Echo { key, count, wait, zenoh } => echo_key(key, count, wait, &zenoh)?,
         Command::ZenohConfig { certs, robots, team, hub, out } => {
             for path in protocol::access::write_team(&certs, &team, &robots, &hub, &out)? {
                 println!("{}", path.display());
             }
         }
-        Command::Smoke { robots, ticks, joints, distributed, tls } => {
-            anyhow::ensure!((1..=64).contains(&robots), "--robots must be between 1 and 64");
-            anyhow::ensure!(joints > 0, "--joints must be positive");
-            let cfg = SmokeConfig {
-                team: "team".into(),
-                robots: (1..=robots).map(|i| format!("r{i}")).collect(),
-                joints,
-                ticks,
-                dt: 0.001,
-                damping: 2.0,
-                v0: 0.5,
-            };
-            let dir = std::env::temp_dir().join(format!("team-smoke-{}", std::process::id()));
-            let distributed = distributed || tls.is_some();
-            let mode = match tls {
-                Some(certs) => Mode::Tls { dir: dir.clone(), certs },
-                None if distributed => Mode::Distributed { dir: dir.clone() },
-                None => Mode::Embedded,
-            };
-            if distributed {
-                std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
-            }
-            let rt = tokio::runtime::Runtime::new()?;
-            let outcome = rt.block_on(smoke::run(&cfg, &mode));
-            if distributed {
-                let _ = std::fs::remove_dir_all(&dir);
-            }
-            match outcome? {
-                BridgeOutcome::Smoke { report: r, final_velocities } => {
-                    println!(
-                        "embedded smoke run: {} robots, {} ticks, {:.3} s simulated in {:.3} s wall ({:.0} ticks/s, {:.0} us/tick)",
-                        cfg.robots.len(),
-                        r.ticks,
-                        r.sim_time,
-                        r.wall_time.as_secs_f64(),
-                        r.ticks as f64 / r.wall_time.as_secs_f64(),
-                        1e6 * r.wall_time.as_secs_f64() / r.ticks.max(1) as f64
-                    );
-                    println!("closed loop: joint velocity {:.6} rad/s, analytic {:.6} rad/s", final_velocities[0], cfg.expected_final_velocity());
-                }
-                _ => println!("{} smoke run finished: {} robots, {ticks} ticks", mode.name(), cfg.robots.len()),
-            }
-        }
+        Command::Smoke(a) => smoke_run(a)?,
     }
     Ok(())
 }
@@ -328,21 +246,79 @@ fn main() -> Result<()> {
 /// follows.
 fn verbosity(command: &Command) -> Verbosity {
     match command {
-        Command::Run { quiet, verbose, .. } => Verbosity::from_flags(*quiet, *verbose),
+        Command::Run(a) => Verbosity::from_flags(a.quiet, a.verbose),
         _ => Verbosity::Info,
     }
 }
 
-fn create_dir(dir: &Path) -> Result<()> {
-    std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))
+/// `team run`: plan, run (recorded), evaluate, report; an error if a check failed.
+fn run_scenario(a: RunArgs) -> Result<()> {
+    let opts = RunOptions { distributed: a.distributed, hosts: a.hosts, progress: !a.quiet };
+    let mode_name = opts.mode_label(a.tls.is_some(), a.realtime);
+    let s = Scenario::load(&a.scenario, &a.set)?;
+    let dir = a.out.unwrap_or_else(|| scenario_run::default_report_dir(&a.scenario));
+    create_dir(&dir)?;
+    if !a.quiet {
+        println!("{}: planning (hands placed on the object by IK)...", s.name);
+    }
+    let mut plan = plan::plan(&s, &repo_root())?;
+    plan.scene.realtime = a.realtime;
+    if !a.quiet {
+        println!("{}: settling {:.1} s, then {:.1} s of scenario at {} Hz ({} mode)", s.name, s.settle, s.duration, s.control_hz, mode_name);
+    }
+    let source = ScenarioSource::read(&a.scenario, &a.set).map_err(|e| anyhow::anyhow!("reading {}: {e}", a.scenario.display()))?;
+    let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live: a.live };
+    let (records, recording) = scenario_run::run_recorded_secure(&plan, &opts, a.tls.as_deref(), &dir, Some(&rec))?;
+    let eval = evaluate::evaluate(&plan, &records, &mode_name);
+    write_report(&plan, &eval, &records, &dir)?;
+    if let Some(r) = recording {
+        println!("  recording: {} ({:.1} MB, {} messages, {} dropped)", r.path.display(), r.bytes as f64 / 1e6, r.messages, r.dropped);
+    }
+    anyhow::ensure!(eval.metrics.passed, "acceptance checks failed (see {})", dir.join("metrics.json").display());
+    Ok(())
 }
 
-/// Where relative robot description paths of a scenario are resolved: the current directory
-/// when it holds them (a checkout), else the repository this binary was built from.
-fn repo_root() -> PathBuf {
-    let cwd = std::env::current_dir().unwrap_or_default();
-    if cwd.join("robot-model/models").is_dir() {
-        return cwd;
+/// The report folder (data, figures, report.html) and the summary on stdout.
+fn write_report(plan: &plan::Plan, eval: &evaluate::Evaluation, records: &team_runner::driver::Records, dir: &Path) -> Result<()> {
+    evaluate::write_report(plan, eval, dir)?;
+    plots::write_all(plan, eval, records, dir)?;
+    print!("{}", evaluate::summary(&eval.metrics, dir));
+    Ok(())
+}
+
+/// `team echo`: the messages on `key` as JSON lines.
+fn echo_key(key: String, count: Option<u64>, wait: f64, zenoh: &protocol::transport::ZenohArgs) -> Result<()> {
+    anyhow::ensure!(wait.is_finite() && wait > 0.0, "--wait must be a positive number of seconds");
+    let rt = tokio::runtime::Runtime::new()?;
+    let opts = echo::EchoOptions { key, count, wait: std::time::Duration::from_secs_f64(wait) };
+    rt.block_on(async {
+        let session = protocol::transport::open(zenoh, protocol::transport::Role::Member).await?;
+        let result = echo::echo(&session, &opts, &mut std::io::stdout().lock()).await;
+        let _ = session.close().await;
+        result.map(|_| ()).map_err(anyhow::Error::from)
+    })
+}
+
+/// `team smoke`: the placeholder team, embedded or as processes (in a temporary folder).
+fn smoke_run(a: SmokeArgs) -> Result<()> {
+    anyhow::ensure!((1..=64).contains(&a.robots), "--robots must be between 1 and 64");
+    anyhow::ensure!(a.joints > 0, "--joints must be positive");
+    let cfg = SmokeConfig::of_team(a.robots, a.joints, a.ticks);
+    let dir = std::env::temp_dir().join(format!("team-smoke-{}", std::process::id()));
+    let distributed = a.distributed || a.tls.is_some();
+    let mode = RunMode::on_loopback(distributed, a.tls.as_deref(), &dir);
+    if distributed {
+        create_dir(&dir)?;
     }
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or(cwd)
+    let rt = tokio::runtime::Runtime::new()?;
+    let outcome = rt.block_on(smoke::run(&cfg, &mode));
+    if distributed {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    println!("{}", smoke::summary(&cfg, &mode, &outcome?));
+    Ok(())
+}
+
+fn create_dir(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))
 }

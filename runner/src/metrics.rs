@@ -1,4 +1,4 @@
-//! The measures of success every report uses (DESIGN.md §8), computed from recorded series.
+//! The measures of success every report uses (`docs/scenarios.md`), computed from recorded series.
 //! Inputs are plain series so that any source (ground truth, diagnostics) can feed them.
 
 use nalgebra::{UnitQuaternion, Vector3};

@@ -8,6 +8,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use coordinator::units::grasp::PlannedHand;
 use coordinator::{ControllerSpec, MqpConfig, PidcConfig};
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use protocol::conventions::{quat_from_wxyz, quat_to_wxyz};
@@ -15,11 +16,12 @@ use protocol::{Header, Pose, PoseReference, RunClock, TaskReferences, TorsoRefer
 use robot_model::{DescriptionError, Robot, RobotCache};
 use sim_bridge::perturbation::Perturbation;
 use sim_bridge::scene::Scene;
-use sim_bridge::world::{ContactParams, SolverParams, WorldSpec};
+use sim_bridge::world::{ContactParams, ObjectSpec, RobotPlacement, SolverParams, WorldSpec};
 use thiserror::Error;
 
+use planner::gait::HandLoad;
 use planner::reference::PoseMotion;
-use crate::scenario::Scenario;
+use crate::scenario::{PushSection, Scenario};
 
 /// The team name every scenario run uses on the bus.
 pub const TEAM: &str = "team";
@@ -31,10 +33,10 @@ pub enum PlanError {
     Description { robot: String, source: Box<DescriptionError> },
     #[error("placing the hands on the object: {0}")]
     Ik(#[from] planner::grasp::GraspPlanError),
-    #[error(transparent)]
-    World(#[from] sim_bridge::world::WorldError),
     #[error("invalid world: {0}")]
     Placement(#[from] planner::placement::PlacementError),
+    #[error(transparent)]
+    World(#[from] sim_bridge::world::WorldError),
     #[error("controller: {0}")]
     Controller(#[from] coordinator::ControllerError),
     /// Not `#[from]`: the message holds the check's whole error, no source chain repeats it.
@@ -79,8 +81,42 @@ impl Plan {
     }
 }
 
+/// Where relative robot description paths of a scenario are resolved: the current directory
+/// when it holds them (a checkout), else the repository this crate was built from.
+pub fn repo_root() -> PathBuf {
+    let cwd = std::env::current_dir().unwrap_or_default();
+    if cwd.join("robot-model/models").is_dir() {
+        return cwd;
+    }
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or(cwd)
+}
+
 /// Build the plan; relative description paths are taken from `root` (the repository).
 pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
+    let (robots, placements) = load_robots(s, root)?;
+    let object = s.object.world();
+    let mut world = world_spec(s, placements, object);
+    world.substeps()?;
+    let loaded: Vec<Arc<Robot>> = robots.iter().map(|r| r.robot.clone()).collect();
+    let arms = crate::placing::place_hands(&mut world, &loaded)?;
+    let scene = scene_of(s, world);
+
+    let object_at_grasp = Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation));
+    // Each hand's grasp as planned: a coordinator (re)started mid-carry finds the object by it.
+    let planned_grasp = crate::placing::planned_grasp(&scene.world, &loaded, &arms, &object_at_grasp)?;
+    let grasp = GraspAtStart { principal: object.principal_inertia(), object_at_grasp, planned_grasp };
+    let pidc = pidc_config(s, &grasp);
+    let controller = controller_spec(s, &pidc, grasp)?;
+    controller.check()?;
+    let hand_loads = start_hand_loads(s, &scene, &loaded, &pidc, &controller)?;
+    let walk = plan_walk(s, &robots, &scene, &object, &hand_loads)?;
+    let references = reference_plan(s, &scene, walk);
+    Ok(Plan { scenario: s.clone(), scene, controller, robots, references })
+}
+
+/// Load each robot's description (once per file) and stand it at its floor pose; robots must
+/// not stand in each other (a dense layout is refused, naming the pair).
+fn load_robots(s: &Scenario, root: &Path) -> Result<(Vec<PlannedRobot>, Vec<RobotPlacement>), PlanError> {
     let mut placements = Vec::new();
     let mut robots = Vec::new();
     let mut cache = RobotCache::new();
@@ -90,11 +126,14 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
         placements.push(sim_bridge::world::RobotPlacement::standing(&r.id, path.clone(), &robot, r.base_xy, r.yaw)?);
         robots.push(PlannedRobot { id: r.id.clone(), description: path, joints: robot.actuated_joints.clone(), robot });
     }
-    // Robots must not stand in each other (a dense layout is refused, naming the pair).
     let footprints = robots.iter().map(|r| planner::placement::Footprint::of(&r.robot)).collect::<Result<Vec<_>, _>>()?;
     planner::placement::check_clearance(&crate::placing::base_placements(&placements), &footprints)?;
-    let object = s.object.world();
-    let mut world = WorldSpec {
+    Ok((robots, placements))
+}
+
+/// The simulator's world of the scenario: the placed robots, the object, rates and solver.
+fn world_spec(s: &Scenario, placements: Vec<RobotPlacement>, object: ObjectSpec) -> WorldSpec {
+    WorldSpec {
         robots: placements,
         object: Some(object),
         control_hz: s.control_hz,
@@ -103,32 +142,19 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
         solver: SolverParams { noslip_iterations: s.noslip_iterations, ..SolverParams::default() },
         seed: s.seed,
         initial_joint_noise: 0.0,
-    };
-    world.substeps()?;
-    let loaded: Vec<Arc<Robot>> = robots.iter().map(|r| r.robot.clone()).collect();
-    let arms = crate::placing::place_hands(&mut world, &loaded)?;
+    }
+}
 
-    let perturbations = s
-        .perturbations
-        .iter()
-        .map(|p| Perturbation {
-            target: if p.target.on == "object" {
-                protocol::PerturbationTarget::Object
-            } else {
-                protocol::PerturbationTarget::RobotBody { robot: p.target.on.clone(), body: p.target.body.clone().unwrap_or_else(|| "base".into()) }
-            },
-            wrench: p.wrench,
-            start: p.start,
-            duration: p.duration,
-        })
-        .collect();
-    let settle_ticks = (s.settle * s.control_hz).round() as u64;
-    let scene = Scene {
+/// The bridge's scene: `world` with the scenario's pushes, its settle and run lengths
+/// ([`Scenario::clock`]) and the lockstep's waits.
+fn scene_of(s: &Scenario, world: WorldSpec) -> Scene {
+    let clock = s.clock();
+    Scene {
         team: TEAM.into(),
         world,
-        perturbations,
-        settle_ticks,
-        ticks: s.ticks(),
+        perturbations: s.perturbations.iter().map(push_of).collect(),
+        settle_ticks: clock.settle_ticks,
+        ticks: clock.ticks,
         // Lockstep waits this long for a tick's torques: generous, a loaded machine is slow
         // but a missing robot is still named.
         command_timeout: 30.0,
@@ -136,32 +162,57 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
         // `team run --realtime` turns it on.
         realtime: false,
         drive_loss: s.drive_loss,
-    };
+    }
+}
 
-    let principal = object.principal_inertia();
-    let object_at_grasp = Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation));
-    // Each hand's grasp as planned: a coordinator (re)started mid-carry finds the object by it.
-    let planned_grasp = crate::placing::planned_grasp(&scene.world, &loaded, &arms, &object_at_grasp)?;
-    // The PIDC configuration of the scenario: its gains, object, minimum forces and margins.
-    let pidc = PidcConfig {
+/// The simulator's push of a scenario's `[[perturbations]]` entry.
+fn push_of(p: &PushSection) -> Perturbation {
+    Perturbation {
+        target: if p.target.on == "object" {
+            protocol::PerturbationTarget::Object
+        } else {
+            protocol::PerturbationTarget::RobotBody { robot: p.target.on.clone(), body: p.target.body.clone().unwrap_or_else(|| "base".into()) }
+        },
+        wrench: p.wrench,
+        start: p.start,
+        duration: p.duration,
+    }
+}
+
+/// The object and the hands as the grasp closes, which both controllers start from.
+struct GraspAtStart {
+    /// The object's principal moments of inertia, kg m^2.
+    principal: [f64; 3],
+    /// Where the object is when the grasp closes.
+    object_at_grasp: Isometry3<f64>,
+    /// Where each hand holds it.
+    planned_grasp: Vec<PlannedHand>,
+}
+
+/// The PIDC configuration of the scenario: its gains, object, minimum forces and margins.
+fn pidc_config(s: &Scenario, grasp: &GraspAtStart) -> PidcConfig {
+    PidcConfig {
         object_gains: s.gains.object.gains(),
         torso_gains: s.gains.torso.gains(),
         swing_gains: s.gains.feet.as_ref().map(|f| f.gains()).unwrap_or_else(|| PidcConfig::default().swing_gains),
         object_mass: s.object.mass,
-        object_inertia: Matrix3::from_diagonal(&Vector3::from(principal)),
+        object_inertia: Matrix3::from_diagonal(&Vector3::from(grasp.principal)),
         // Where the object is when the grasp closes, and where each hand holds it.
-        object_pose_at_grasp: Some(object_at_grasp),
-        planned_grasp: planned_grasp.clone(),
+        object_pose_at_grasp: Some(grasp.object_at_grasp),
+        planned_grasp: grasp.planned_grasp.clone(),
         f_min_foot: s.min_foot_force,
         f_min_hand: s.min_hand_force,
         friction_margin: s.friction_margin,
         patch_margin: s.patch_margin,
         release: s.release,
         ..PidcConfig::default()
-    };
-    // The scenario's controller; PIDC and MQP take the scenario's gains, object and minimum
-    // forces, other kinds run with their defaults.
-    let controller = match ControllerSpec::of_kind(&s.controller)? {
+    }
+}
+
+/// The scenario's controller; PIDC and MQP take the scenario's gains, object and minimum
+/// forces, other kinds run with their defaults.
+fn controller_spec(s: &Scenario, pidc: &PidcConfig, grasp: GraspAtStart) -> Result<ControllerSpec, PlanError> {
+    Ok(match ControllerSpec::of_kind(&s.controller)? {
         ControllerSpec::Pidc(_) => ControllerSpec::Pidc(pidc.clone()),
         // MQP: the same gains (as acceleration gains, see MqpConfig), object and minimum
         // forces; its velocity bound looks one control period ahead.
@@ -170,48 +221,54 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
             torso_gains: s.gains.torso.gains(),
             swing_gains: s.gains.feet.as_ref().map(|f| f.gains()).unwrap_or_else(|| MqpConfig::default().swing_gains),
             object_mass: s.object.mass,
-            object_inertia: Matrix3::from_diagonal(&Vector3::from(principal)),
+            object_inertia: Matrix3::from_diagonal(&Vector3::from(grasp.principal)),
             f_min_foot: s.min_foot_force,
             f_min_hand: s.min_hand_force,
-            dt: 1.0 / s.control_hz,
+            dt: s.clock().dt(),
             release: s.release,
-            object_pose_at_grasp: Some(object_at_grasp),
-            planned_grasp,
+            object_pose_at_grasp: Some(grasp.object_at_grasp),
+            planned_grasp: grasp.planned_grasp,
             ..MqpConfig::default()
         }),
         other => other,
-    };
-    controller.check()?;
-    // The static team problem at the start pose (crate::capacity), solved once: the payload
-    // check with the PIDC controller's limits, and the hands' loads a walk is planned with
-    // (the same forces whichever controller runs).
+    })
+}
+
+/// The static team problem at the start pose (crate::capacity), solved once: the payload
+/// check with the PIDC controller's limits, and the hands' loads a walk is planned with (the
+/// same forces whichever controller runs). Empty when neither is wanted.
+fn start_hand_loads(s: &Scenario, scene: &Scene, loaded: &[Arc<Robot>], pidc: &PidcConfig, controller: &ControllerSpec) -> Result<Vec<(String, HandLoad)>, PlanError> {
     let check = s.capacity_check && matches!(controller, ControllerSpec::Pidc(_));
     let mut hand_loads = Vec::new();
     if check || s.walk.is_some() {
         let t0 = std::time::Instant::now();
-        hand_loads = crate::capacity::start_hand_loads(&scene.world, &loaded, &pidc, check).map_err(PlanError::Capacity)?;
+        hand_loads = crate::capacity::start_hand_loads(&scene.world, loaded, pidc, check).map_err(PlanError::Capacity)?;
         tracing::info!(ms = 1e3 * t0.elapsed().as_secs_f64(), mass = s.object.mass, checked = check, "static team problem at the start pose solved");
     }
+    Ok(hand_loads)
+}
 
-    let walk = match &s.walk {
-        Some(w) => {
-            let ids: Vec<(String, Arc<Robot>)> = robots.iter().map(|r| (r.id.clone(), r.robot.clone())).collect();
-            let object_start = Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation));
-            let walk = planner::walk::Walk::plan(w, &ids, &crate::placing::base_placements(&scene.world.robots), &object_start, &hand_loads, s.duration)?;
-            for st in walk.gait.steps() {
-                tracing::debug!(robot = %walk.robots[st.robot], foot = %walk.feet[st.robot][st.foot], liftoff = st.liftoff, margin = st.margin, cop_margin = ?st.cop_margin, "planned step");
-            }
-            let least = walk.gait.steps().iter().map(|st| st.margin).fold(f64::INFINITY, f64::min);
-            tracing::info!(steps = walk.gait.steps().len(), end_s = walk.gait.end_time(), least_margin_m = least, "walk planned");
-            Some(Arc::new(walk))
-        }
-        None => None,
-    };
+/// The scenario's walk, planned from the robots' start poses (`None` without a `[walk]`).
+fn plan_walk(s: &Scenario, robots: &[PlannedRobot], scene: &Scene, object: &ObjectSpec, hand_loads: &[(String, HandLoad)]) -> Result<Option<Arc<planner::walk::Walk>>, PlanError> {
+    let Some(w) = &s.walk else { return Ok(None) };
+    let ids: Vec<(String, Arc<Robot>)> = robots.iter().map(|r| (r.id.clone(), r.robot.clone())).collect();
+    let object_start = Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation));
+    let walk = planner::walk::Walk::plan(w, &ids, &crate::placing::base_placements(&scene.world.robots), &object_start, hand_loads, s.duration)?;
+    for st in walk.gait.steps() {
+        tracing::debug!(robot = %walk.robots[st.robot], foot = %walk.feet[st.robot][st.foot], liftoff = st.liftoff, margin = st.margin, cop_margin = ?st.cop_margin, "planned step");
+    }
+    let least = walk.gait.steps().iter().map(|st| st.margin).fold(f64::INFINITY, f64::min);
+    tracing::info!(steps = walk.gait.steps().len(), end_s = walk.gait.end_time(), least_margin_m = least, "walk planned");
+    Ok(Some(Arc::new(walk)))
+}
+
+/// The references of the run: the scenario's motions about each task's start pose, or the walk.
+fn reference_plan(s: &Scenario, scene: &Scene, walk: Option<Arc<planner::walk::Walk>>) -> ReferencePlan {
     let torso_start = |i: usize| {
         let p = &scene.world.robots[i];
         (Vector3::from(p.base_position), UnitQuaternion::from_axis_angle(&Vector3::z_axis(), p.base_yaw))
     };
-    let references = ReferencePlan {
+    ReferencePlan {
         clock: scene.clock(),
         ramp: s.references.ramp,
         object: s.references.object.clone(),
@@ -228,8 +285,7 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
             .collect(),
         walk,
         walk_halted_at: None,
-    };
-    Ok(Plan { scenario: s.clone(), scene, controller, robots, references })
+    }
 }
 
 /// The scenario's references as a function of the tick: during settling every task holds its

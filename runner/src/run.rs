@@ -5,14 +5,14 @@
 //! recorded). Embedded or distributed, the same [`crate::plan::Plan`] is simulated and every
 //! message goes over Zenoh.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use thiserror::Error;
 
 use crate::driver::{Driver, Records};
 use crate::hosts::TestHosts;
-use crate::launch::{AgentArgs, AgentModel, BridgeArgs, CoordinatorArgs, Launch, LaunchError, Mode};
+use crate::launch::{AgentArgs, AgentModel, BridgeArgs, CoordinatorArgs, Launch, LaunchError, RunMode};
 use crate::plan::{Plan, TEAM};
 use crate::record::{self, RecordError, RecordOptions, Recorder, RecordingSummary, RunFacts};
 
@@ -34,9 +34,9 @@ pub const REALTIME_COORDINATOR_TICK_DEADLINE: Duration = Duration::from_millis(5
 /// terms arrived (half a period left too little of it for the solve, the agents and the
 /// bridge: every robot missed its deadline while one stalled), with a late member's latest terms (`coordinator::team::assembly::Reuse`), as
 /// long as they are at most [`REALTIME_SILENCE`] old; a member silent for longer is left out.
-pub fn realtime_reuse(control_hz: f64) -> coordinator::team::assembly::Reuse {
-    let period = 1.0 / control_hz;
-    coordinator::team::assembly::Reuse { after: Duration::from_secs_f64(period / 4.0), max_age: (REALTIME_SILENCE.as_secs_f64() / period).ceil().max(1.0) as u64 }
+pub fn realtime_reuse(clock: &protocol::RunClock) -> coordinator::team::assembly::Reuse {
+    let period = clock.dt();
+    coordinator::team::assembly::Reuse { after: Duration::from_secs_f64(period / 4.0), max_age: clock.ticks_lasting(REALTIME_SILENCE.as_secs_f64()).max(1) }
 }
 
 /// How long a member may send no terms in real time before the coordinator leaves it out of
@@ -78,7 +78,7 @@ pub struct RunOptions {
 
 impl RunOptions {
     /// The name reports give the mode these options (and `tls`, [`run_recorded_secure`]'s)
-    /// run in: [`Mode::name`] of the mode that function makes.
+    /// run in: [`RunMode::name`] of the mode that function makes.
     pub fn mode_name(&self, tls: bool) -> &'static str {
         match (self.hosts, tls, self.distributed) {
             (true, true, _) => "hosts-tls",
@@ -88,6 +88,20 @@ impl RunOptions {
             (false, false, false) => "embedded",
         }
     }
+
+    /// The mode as the report names it: [`RunOptions::mode_name`], and `", real time"` after
+    /// it for a real-time run.
+    pub fn mode_label(&self, tls: bool, realtime: bool) -> String {
+        let name = self.mode_name(tls);
+        if realtime { format!("{name}, real time") } else { name.to_string() }
+    }
+}
+
+/// The report folder of a run of the scenario file `scenario` when none is given:
+/// `reports/<file name without extension>` (`reports/scenario` for a path without one).
+pub fn default_report_dir(scenario: &Path) -> PathBuf {
+    let stem = scenario.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scenario".into());
+    PathBuf::from("reports").join(stem)
 }
 
 /// The components of a scenario run.
@@ -96,7 +110,7 @@ impl RunOptions {
 /// [`REALTIME_COORDINATOR_TICK_DEADLINE`]).
 pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
     let (tick_deadline, command_deadline, reuse) = if plan.scene.realtime {
-        (REALTIME_COORDINATOR_TICK_DEADLINE, REALTIME_AGENT_COMMAND_DEADLINE, Some(realtime_reuse(plan.scenario.control_hz)))
+        (REALTIME_COORDINATOR_TICK_DEADLINE, REALTIME_AGENT_COMMAND_DEADLINE, Some(realtime_reuse(&plan.references.clock)))
     } else {
         (COORDINATOR_TICK_DEADLINE, AGENT_COMMAND_DEADLINE, None)
     };
@@ -129,16 +143,12 @@ pub fn run_recorded(plan: &Plan, opts: &RunOptions, out: &Path, record: Option<&
 
 /// The mode of a run on this computer's loopback (not on test hosts): over TLS when `tls`
 /// names the certificates (distributed or not), else distributed or embedded.
-fn loopback_mode(opts: &RunOptions, tls: Option<&Path>, out: &Path) -> Mode {
-    match tls {
-        Some(certs) => Mode::Tls { dir: out.to_path_buf(), certs: certs.to_path_buf() },
-        None if opts.distributed => Mode::Distributed { dir: out.to_path_buf() },
-        None => Mode::Embedded,
-    }
+fn loopback_mode(opts: &RunOptions, tls: Option<&Path>, out: &Path) -> RunMode {
+    RunMode::on_loopback(opts.distributed, tls, out)
 }
 
 /// [`run_recorded`]; with `tls`, distributed on loopback over mutual TLS with the team's
-/// access control ([`Mode::Tls`]), the certificates in that folder
+/// access control ([`RunMode::Tls`]), the certificates in that folder
 /// (`scripts/make-test-certs.sh DIR ROBOT...`; README "Access control (mutual TLS and ACL)").
 /// With `tls` and test hosts, the test CA in that folder signs certificates for the hosts'
 /// addresses into `out/hosts-certs` ([`TestHosts::issue_certs`]).
@@ -166,7 +176,7 @@ pub fn run_recorded_secure(
             }
             None => None,
         };
-        Mode::Hosts { dir: out.to_path_buf(), hosts: std::sync::Arc::new(hosts), certs }
+        RunMode::Hosts { dir: out.to_path_buf(), hosts: std::sync::Arc::new(hosts), certs }
     } else {
         loopback_mode(opts, tls, out)
     };
@@ -193,7 +203,7 @@ pub fn run_recorded_secure(
 
 /// Launch the team in `mode`, drive the scenario until the bridge ends it, stop everything.
 /// With a `recorder`, the driver and the recorder's subscriptions feed it.
-pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &Mode, recorder: Option<&Recorder>) -> Result<Records, RunError> {
+pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &RunMode, recorder: Option<&Recorder>) -> Result<Records, RunError> {
     if plan.scene.realtime {
         crate::priority::raise_for_realtime();
     }
@@ -251,8 +261,8 @@ mod tests {
     use super::*;
 
     /// The report's mode name, chosen before the run, is the name of the mode the run picks
-    /// ([`Mode::name`], which the recording keeps) on loopback; the hosts' modes (a
-    /// `Mode::Hosts` needs hosts made) by their names.
+    /// ([`RunMode::name`], which the recording keeps) on loopback; the hosts' modes (a
+    /// `RunMode::Hosts` needs hosts made) by their names.
     #[test]
     fn the_reported_mode_is_the_mode_that_runs() {
         let (out, certs) = (Path::new("out"), Path::new("certs"));
@@ -265,5 +275,13 @@ mod tests {
         assert_eq!(loopback_mode(&RunOptions { distributed: false, hosts: false, progress: false }, Some(certs), out).name(), "distributed-tls", "TLS runs distributed");
         let hosts = RunOptions { distributed: false, hosts: true, progress: false };
         assert_eq!((hosts.mode_name(false), hosts.mode_name(true)), ("hosts", "hosts-tls"));
+        assert_eq!(hosts.mode_label(true, true), "hosts-tls, real time");
+        assert_eq!(hosts.mode_label(false, false), "hosts");
+    }
+
+    #[test]
+    fn a_run_reports_into_a_folder_named_after_its_scenario() {
+        assert_eq!(default_report_dir(Path::new("scenarios/s4_object_circle.toml")), Path::new("reports/s4_object_circle"));
+        assert_eq!(default_report_dir(Path::new("/")), Path::new("reports/scenario"));
     }
 }

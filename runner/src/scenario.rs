@@ -1,5 +1,5 @@
 //! Scenario files: the robots and their poses, the object, the references, the gains per task,
-//! the perturbations, duration, rates and seed (DESIGN.md §7). Every number is a parameter,
+//! the perturbations, duration, rates and seed (`docs/scenarios.md`). Every number is a parameter,
 //! and `--set key=value` overrides any of them: `key` is a dotted path into the TOML
 //! (`gains.object.stiffness`, `robots.1.base_position`, `duration`), `value` a TOML value
 //! (`12.5`, `[1, 2, 3]`, `"pidc"`).
@@ -73,7 +73,7 @@ pub struct Scenario {
     /// ticks of failed QPs in a row; `release.max_fit_residual`: m; 0 turns a limit off).
     #[serde(default)]
     pub release: coordinator::units::release::ReleasePolicy,
-    pub object: ObjectSpec,
+    pub object: ObjectSection,
     /// The robots, each with its floor pose; or, instead, `team`.
     #[serde(default)]
     pub robots: Vec<RobotSpec>,
@@ -81,11 +81,11 @@ pub struct Scenario {
     /// named `r1`, `r2`, ... face by face; expanded into `robots` when the file is loaded.
     #[serde(default)]
     pub team: Option<TeamSpec>,
-    pub gains: Gains,
+    pub gains: GainsSection,
     #[serde(default)]
     pub references: References,
     #[serde(default)]
-    pub perturbations: Vec<Perturbation>,
+    pub perturbations: Vec<PushSection>,
     /// MuJoCo's no-slip iterations (`sim_bridge::world::SolverParams::noslip_iterations`; 0:
     /// off). Walking scenarios use 20: without them a standing robot's feet creep.
     #[serde(default)]
@@ -218,10 +218,10 @@ pub const OPTIONAL_NESTED_KEYS: [&str; 6] = ["team.spacing", "team.standoff", "t
 /// fields are checked when the file is read.
 pub const OPTIONAL_TABLES: [&str; 2] = ["release", "references"];
 
-/// The carried box.
+/// The carried box (`[object]`).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct ObjectSpec {
+pub struct ObjectSection {
     /// Full edge lengths, m.
     pub size: [f64; 3],
     pub mass: f64,
@@ -269,14 +269,14 @@ fn default_standoff() -> f64 {
 
 impl TeamSpec {
     /// The robots of this layout around `object`.
-    pub fn robots(&self, object: &ObjectSpec) -> Result<Vec<RobotSpec>, String> {
+    pub fn robots(&self, object: &ObjectSection) -> Result<Vec<RobotSpec>, String> {
         let layout = planner::placement::FaceLayout { faces: self.faces.clone(), per_face: self.per_face, spacing: self.spacing, standoff: self.standoff };
         let poses = planner::placement::around_object(&crate::placing::object_box(&object.world()), &layout).map_err(|e| e.to_string())?;
         Ok(poses.into_iter().enumerate().map(|(i, (base_xy, yaw))| RobotSpec { id: format!("r{}", i + 1), description: self.description.clone(), base_xy, yaw }).collect())
     }
 }
 
-impl ObjectSpec {
+impl ObjectSection {
     /// The simulator's object: this box, world-aligned, a uniform inertia.
     pub fn world(&self) -> sim_bridge::world::ObjectSpec {
         sim_bridge::world::ObjectSpec {
@@ -298,10 +298,10 @@ pub struct TaskGains {
     pub damping: Vec<f64>,
 }
 
-/// Gains of every task kind.
+/// Gains of every task kind (`[gains]`).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Gains {
+pub struct GainsSection {
     pub object: TaskGains,
     pub torso: TaskGains,
     pub feet: Option<TaskGains>,
@@ -341,10 +341,10 @@ pub struct PushTarget {
     pub body: Option<String>,
 }
 
-/// A timed external wrench `[f; m]` in the world frame.
+/// A timed external wrench `[f; m]` in the world frame (an entry of `[[perturbations]]`).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Perturbation {
+pub struct PushSection {
     #[serde(flatten)]
     pub target: PushTarget,
     /// Start, s after the scenario clock starts.
@@ -380,9 +380,14 @@ impl Scenario {
         Ok(s)
     }
 
+    /// The run's ticks: `settle` and `duration` at `control_hz`, each to the nearest tick.
+    pub fn clock(&self) -> protocol::RunClock {
+        protocol::RunClock::from_seconds(self.control_hz, self.settle, self.duration)
+    }
+
     /// Number of control ticks of the scenario proper (after settling).
     pub fn ticks(&self) -> u64 {
-        (self.duration * self.control_hz).round() as u64
+        protocol::RunClock::ticks_in(self.duration, self.control_hz)
     }
 
     fn check(&self) -> Result<(), String> {

@@ -8,7 +8,7 @@ use coordinator::joint_damping::JointDampingConfig;
 use coordinator::ControllerSpec;
 use thiserror::Error;
 
-use crate::launch::{AgentArgs, AgentModel, BridgeArgs, BridgeOutcome, CoordinatorArgs, Launch, LaunchError, Mode, SmokePlant};
+use crate::launch::{AgentArgs, AgentModel, BridgeArgs, BridgeOutcome, CoordinatorArgs, Launch, LaunchError, RunMode, SmokePlant};
 
 /// The smoke run's agents wait as long as the bridge does for a command before they hold
 /// their posture: a lockstep tick that is merely slow must not see safe-mode torques.
@@ -38,6 +38,12 @@ pub struct SmokeConfig {
 }
 
 impl SmokeConfig {
+    /// `team smoke`'s run: team `team`, robots `r1` to `rN` with `joints` joints each, `ticks`
+    /// ticks of 1 ms, damping 2 s^-1 from 0.5 rad/s.
+    pub fn of_team(robots: usize, joints: usize, ticks: u64) -> SmokeConfig {
+        SmokeConfig { team: "team".into(), robots: (1..=robots).map(|i| format!("r{i}")).collect(), joints, ticks, dt: 0.001, damping: 2.0, v0: 0.5 }
+    }
+
     /// The joint velocity the closed loop must end at: the plant integrates
     /// `v <- v - dt * d * v` once per tick (semi-implicit Euler of `qdd = -d qd`).
     pub fn expected_final_velocity(&self) -> f64 {
@@ -63,9 +69,28 @@ impl SmokeConfig {
     }
 }
 
+/// What a finished smoke run in `mode` prints: an embedded run's lockstep figures and its
+/// closed loop against the analytic answer, else that it finished.
+pub fn summary(cfg: &SmokeConfig, mode: &RunMode, outcome: &BridgeOutcome) -> String {
+    match outcome {
+        BridgeOutcome::Smoke { report: r, final_velocities } => format!(
+            "embedded smoke run: {} robots, {} ticks, {:.3} s simulated in {:.3} s wall ({:.0} ticks/s, {:.0} us/tick)\nclosed loop: joint velocity {:.6} rad/s, analytic {:.6} rad/s",
+            cfg.robots.len(),
+            r.ticks,
+            r.sim_time,
+            r.wall_time.as_secs_f64(),
+            r.ticks as f64 / r.wall_time.as_secs_f64(),
+            1e6 * r.wall_time.as_secs_f64() / r.ticks.max(1) as f64,
+            final_velocities[0],
+            cfg.expected_final_velocity()
+        ),
+        _ => format!("{} smoke run finished: {} robots, {} ticks", mode.name(), cfg.robots.len(), cfg.ticks),
+    }
+}
+
 /// Run the smoke run in `mode`; embedded runs report the plant's lockstep figures and final
 /// joint velocities, distributed ones only that the sim-bridge process succeeded.
-pub async fn run(cfg: &SmokeConfig, mode: &Mode) -> Result<BridgeOutcome, SmokeError> {
+pub async fn run(cfg: &SmokeConfig, mode: &RunMode) -> Result<BridgeOutcome, SmokeError> {
     let (launch, bridge) = cfg.launch();
     let mut running = launch.start(mode).await?;
     let outcome = running.run_bridge(&bridge).await;

@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use futures_util::StreamExt;
 use team_runner::plan;
-use team_runner::record::{Message, RecordOptions, Recorder, RunFacts, ScenarioSource};
+use team_runner::record::{RecordedMessage, RecordOptions, Recorder, RunFacts, ScenarioSource};
 use team_runner::scenario::Scenario;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 use tokio_tungstenite::tungstenite::Message as Ws;
@@ -26,7 +26,7 @@ async fn a_websocket_client_sees_the_channels_advertised() {
     let tap = recorder.tap();
     let mut g = sim_bridge::ground_truth::empty("team");
     g.header.tick = 0;
-    tap.send("team/team/ground-truth", Message::Truth(g));
+    tap.send("team/team/ground-truth", RecordedMessage::Truth(g));
 
     let mut req = format!("ws://127.0.0.1:{port}").into_client_request().unwrap();
     req.headers_mut().insert("sec-websocket-protocol", "foxglove.sdk.v1".parse().unwrap());

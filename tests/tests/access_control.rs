@@ -13,7 +13,7 @@
 //! * Agent r2's identity cannot publish r1's state, torque or dynamics, while its own keys
 //!   arrive.
 //! * The grants are enough for a whole team: a distributed smoke run over TLS with the ACL
-//!   (`team smoke --tls`, the launcher's `Mode::Tls`) completes every tick.
+//!   (`team smoke --tls`, the launcher's `RunMode::Tls`) completes every tick.
 //!
 //! Needs the release binaries (`cargo build --release --bins`) and openssl. Each test has its
 //! own ports and folder; every wait is bounded.
@@ -327,13 +327,13 @@ fn the_shipped_configurations_are_the_generated_ones() {
 /// TLS with the ACL: the lockstep runs every tick (a missing grant would leave a robot out).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_whole_team_runs_over_tls_with_the_acl() {
-    use team_runner::launch::{BridgeOutcome, Mode};
+    use team_runner::launch::{BridgeOutcome, RunMode};
     use team_runner::smoke::{self, SmokeConfig};
     let dir = certificates("smoke", &["r1", "r2"]);
     let run_dir = dir.join("run");
     std::fs::create_dir_all(&run_dir).unwrap();
     let cfg = SmokeConfig { team: "team".into(), robots: robots(&["r1", "r2"]), joints: 6, ticks: 300, dt: 0.001, damping: 2.0, v0: 0.5 };
-    let mode = Mode::Tls { dir: run_dir.clone(), certs: dir.clone() };
+    let mode = RunMode::Tls { dir: run_dir.clone(), certs: dir.clone() };
     let outcome = tokio::time::timeout(Duration::from_secs(60), smoke::run(&cfg, &mode)).await.expect("the run ends in time");
     assert!(matches!(outcome, Ok(BridgeOutcome::Process)), "the TLS smoke run failed: {:?}", outcome.err());
     for who in ["coordinator", "r1", "r2", "sim-bridge", "runner"] {

@@ -12,7 +12,7 @@ use std::sync::{Arc, Mutex};
 
 use team_runner::evaluate;
 use team_runner::hosts::TestHosts;
-use team_runner::launch::{host_names, Mode};
+use team_runner::launch::{host_names, RunMode};
 use team_runner::plan::{self, Plan};
 use team_runner::run::{self, RunOptions};
 use team_runner::scenario::Scenario;
@@ -55,8 +55,8 @@ fn run_on(plan: &Plan, hosts: Option<&Arc<TestHosts>>, name: &str) -> Result<tea
     let dir = report_dir(name);
     let rt = tokio::runtime::Runtime::new().expect("runtime");
     let mode = match hosts {
-        Some(h) => Mode::Hosts { dir, hosts: h.clone(), certs: None },
-        None => Mode::Distributed { dir },
+        Some(h) => RunMode::Hosts { dir, hosts: h.clone(), certs: None },
+        None => RunMode::Distributed { dir },
     };
     rt.block_on(run::run_in(plan, &RunOptions { distributed: true, hosts: hosts.is_some(), progress: false }, &mode, None))
 }

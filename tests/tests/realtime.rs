@@ -15,7 +15,7 @@ use std::sync::Arc;
 use team_runner::driver::Records;
 use team_runner::evaluate::{self, Metrics};
 use team_runner::hosts::TestHosts;
-use team_runner::launch::{host_names, Mode};
+use team_runner::launch::{host_names, RunMode};
 use team_runner::loop_timing::LoopReport;
 use team_runner::plan::{self, Plan};
 use team_runner::run::{self, RunOptions};
@@ -146,8 +146,8 @@ fn s4_holds_in_real_time_across_hosts_with_five_percent_loss_on_one_link() {
         h.set_loss("r1", 5).expect("loss rule");
     }
     let mode = match &hosts {
-        Some(h) => Mode::Hosts { dir: dir.clone(), hosts: h.clone(), certs: None },
-        None => Mode::Distributed { dir: dir.clone() },
+        Some(h) => RunMode::Hosts { dir: dir.clone(), hosts: h.clone(), certs: None },
+        None => RunMode::Distributed { dir: dir.clone() },
     };
     let rt = tokio::runtime::Runtime::new().expect("runtime");
     let records = rt.block_on(run::run_in(&plan, &RunOptions { distributed: true, hosts: hosts.is_some(), progress: false }, &mode, None)).expect("the run completes");

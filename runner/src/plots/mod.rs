@@ -196,7 +196,7 @@ pub const LOOP_FIGURE: (&str, &str) = ("loop_timing", "State-to-torque latency p
 /// the run (a step is a tick its drive held its last torques).
 fn loop_timing(plan: &Plan, records: &Records) -> Vec<Panel> {
     let t = |tick: u64| plan.references.time_of_tick(tick).unwrap_or(0.0);
-    let period_us = 1e6 / plan.scenario.control_hz;
+    let period_us = plan.references.clock.dt_us();
     let robots: Vec<&str> = plan.robots.iter().map(|r| r.id.as_str()).collect();
     let mut latency = Vec::new();
     let mut missed = Vec::new();

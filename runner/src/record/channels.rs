@@ -12,7 +12,7 @@ use protocol::{DynamicsTerms, FrameRole, Header};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use super::{Item, Message};
+use super::{Item, RecordedMessage};
 
 /// The dynamics terms an agent published, in short: what a plot needs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -56,32 +56,32 @@ impl DynamicsSummary {
 }
 
 /// Schema name and JSON Schema of a message kind.
-pub fn schema_of(message: &Message) -> (&'static str, fn() -> schemars::Schema) {
+pub fn schema_of(message: &RecordedMessage) -> (&'static str, fn() -> schemars::Schema) {
     match message {
-        Message::State(_) => ("team.RobotState", || schemars::schema_for!(protocol::RobotState)),
-        Message::Dynamics(_) => ("team.DynamicsSummary", || schemars::schema_for!(DynamicsSummary)),
-        Message::Command(_) | Message::Torque(_) => ("team.TorqueCommand", || schemars::schema_for!(protocol::TorqueCommand)),
-        Message::Contacts(_) => ("team.ContactSet", || schemars::schema_for!(protocol::ContactSet)),
-        Message::AgentStatus(_) => ("team.AgentStatus", || schemars::schema_for!(protocol::AgentStatus)),
-        Message::Truth(_) => ("team.GroundTruth", || schemars::schema_for!(protocol::GroundTruth)),
-        Message::Diagnostics(_) => ("team.TickDiagnostics", || schemars::schema_for!(protocol::TickDiagnostics)),
-        Message::Status(_) => ("team.CoordinatorStatus", || schemars::schema_for!(protocol::CoordinatorStatus)),
-        Message::References(_) => ("team.TaskReferences", || schemars::schema_for!(protocol::TaskReferences)),
+        RecordedMessage::State(_) => ("team.RobotState", || schemars::schema_for!(protocol::RobotState)),
+        RecordedMessage::Dynamics(_) => ("team.DynamicsSummary", || schemars::schema_for!(DynamicsSummary)),
+        RecordedMessage::Command(_) | RecordedMessage::Torque(_) => ("team.TorqueCommand", || schemars::schema_for!(protocol::TorqueCommand)),
+        RecordedMessage::Contacts(_) => ("team.ContactSet", || schemars::schema_for!(protocol::ContactSet)),
+        RecordedMessage::AgentStatus(_) => ("team.AgentStatus", || schemars::schema_for!(protocol::AgentStatus)),
+        RecordedMessage::Truth(_) => ("team.GroundTruth", || schemars::schema_for!(protocol::GroundTruth)),
+        RecordedMessage::Diagnostics(_) => ("team.TickDiagnostics", || schemars::schema_for!(protocol::TickDiagnostics)),
+        RecordedMessage::Status(_) => ("team.CoordinatorStatus", || schemars::schema_for!(protocol::CoordinatorStatus)),
+        RecordedMessage::References(_) => ("team.TaskReferences", || schemars::schema_for!(protocol::TaskReferences)),
     }
 }
 
 /// The message as recorded (JSON).
-pub fn to_json(message: &Message) -> serde_json::Result<Vec<u8>> {
+pub fn to_json(message: &RecordedMessage) -> serde_json::Result<Vec<u8>> {
     match message {
-        Message::State(m) => serde_json::to_vec(m),
-        Message::Dynamics(m) => serde_json::to_vec(&DynamicsSummary::of(m)),
-        Message::Command(m) | Message::Torque(m) => serde_json::to_vec(m),
-        Message::Contacts(m) => serde_json::to_vec(m),
-        Message::AgentStatus(m) => serde_json::to_vec(m),
-        Message::Truth(m) => serde_json::to_vec(m),
-        Message::Diagnostics(m) => serde_json::to_vec(m),
-        Message::Status(m) => serde_json::to_vec(m),
-        Message::References(m) => serde_json::to_vec(m),
+        RecordedMessage::State(m) => serde_json::to_vec(m),
+        RecordedMessage::Dynamics(m) => serde_json::to_vec(&DynamicsSummary::of(m)),
+        RecordedMessage::Command(m) | RecordedMessage::Torque(m) => serde_json::to_vec(m),
+        RecordedMessage::Contacts(m) => serde_json::to_vec(m),
+        RecordedMessage::AgentStatus(m) => serde_json::to_vec(m),
+        RecordedMessage::Truth(m) => serde_json::to_vec(m),
+        RecordedMessage::Diagnostics(m) => serde_json::to_vec(m),
+        RecordedMessage::Status(m) => serde_json::to_vec(m),
+        RecordedMessage::References(m) => serde_json::to_vec(m),
     }
 }
 

@@ -54,7 +54,7 @@ pub enum RecordError {
 
 /// One decoded message of the run.
 #[derive(Debug, Clone)]
-pub enum Message {
+pub enum RecordedMessage {
     State(RobotState),
     Dynamics(DynamicsTerms),
     Command(TorqueCommand),
@@ -71,7 +71,7 @@ pub enum Message {
 #[derive(Debug, Clone)]
 pub struct Item {
     pub key: String,
-    pub message: Message,
+    pub message: RecordedMessage,
 }
 
 /// The scenario as the run loaded it: file, text and `--set` overrides (replayed by
@@ -110,7 +110,7 @@ pub struct Tap {
 
 impl Tap {
     /// Queue a message; if the queue is full it is dropped and counted.
-    pub fn send(&self, key: &str, message: Message) {
+    pub fn send(&self, key: &str, message: RecordedMessage) {
         match self.tx.try_send(Item { key: key.to_string(), message }) {
             Ok(()) => {
                 self.sent.fetch_add(1, Ordering::Relaxed);
@@ -314,11 +314,11 @@ fn forward(topic: protocol::keys::RobotTopic, s: &zenoh::sample::Sample, tap: &T
     use protocol::keys::RobotTopic;
     use protocol::transport::decode_sample;
     let m = match topic {
-        RobotTopic::State => decode_sample(s).map(Message::State),
-        RobotTopic::Dynamics => decode_sample(s).map(Message::Dynamics),
-        RobotTopic::Command => decode_sample(s).map(Message::Command),
-        RobotTopic::Contacts => decode_sample(s).map(Message::Contacts),
-        RobotTopic::Status => decode_sample(s).map(Message::AgentStatus),
+        RobotTopic::State => decode_sample(s).map(RecordedMessage::State),
+        RobotTopic::Dynamics => decode_sample(s).map(RecordedMessage::Dynamics),
+        RobotTopic::Command => decode_sample(s).map(RecordedMessage::Command),
+        RobotTopic::Contacts => decode_sample(s).map(RecordedMessage::Contacts),
+        RobotTopic::Status => decode_sample(s).map(RecordedMessage::AgentStatus),
         _ => return,
     };
     if let Ok(m) = m {

@@ -13,10 +13,10 @@ use foxglove::messages::{
 };
 use foxglove::{Channel, ChannelBuilder, Context, PartialMetadata};
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
-use protocol::{ContactTruth, GroundTruth, RobotState};
+use protocol::{ContactTruth, GroundTruth, RobotState, RunClock};
 use robot_model::{forward_kinematics, Data, Robot};
 
-use super::Message;
+use super::RecordedMessage;
 use crate::plan::Plan;
 
 /// Length of a contact force arrow per newton, m.
@@ -41,7 +41,7 @@ struct RobotView {
 
 /// Builds `/tf` and `/scene` from the states and the ground truth.
 pub struct SceneBuilder {
-    control_hz: f64,
+    clock: RunClock,
     every: u64,
     object_size: Option<[f64; 3]>,
     robots: BTreeMap<String, RobotView>,
@@ -59,10 +59,10 @@ impl SceneBuilder {
                 (r.id.clone(), view)
             })
             .collect();
-        let control_hz = plan.scenario.control_hz;
+        let clock = plan.references.clock;
         SceneBuilder {
-            control_hz,
-            every: ((control_hz / super::SCENE_HZ).round() as u64).max(1),
+            clock,
+            every: clock.ticks_per_sample(super::SCENE_HZ),
             object_size: plan.scene.world.object.as_ref().map(|o| o.size),
             robots,
             channels: None,
@@ -70,26 +70,26 @@ impl SceneBuilder {
     }
 
     /// The log time of a message: its tick in sim time, ns.
-    pub fn log_time(&self, message: &Message) -> u64 {
+    pub fn log_time(&self, message: &RecordedMessage) -> u64 {
         let h = match message {
-            Message::State(m) => &m.header,
-            Message::Dynamics(m) => &m.header,
-            Message::Command(m) | Message::Torque(m) => &m.header,
-            Message::Contacts(m) => &m.header,
-            Message::AgentStatus(m) => &m.header,
-            Message::Truth(m) => &m.header,
-            Message::Diagnostics(m) => &m.header,
-            Message::Status(m) => &m.header,
-            Message::References(m) => &m.header,
+            RecordedMessage::State(m) => &m.header,
+            RecordedMessage::Dynamics(m) => &m.header,
+            RecordedMessage::Command(m) | RecordedMessage::Torque(m) => &m.header,
+            RecordedMessage::Contacts(m) => &m.header,
+            RecordedMessage::AgentStatus(m) => &m.header,
+            RecordedMessage::Truth(m) => &m.header,
+            RecordedMessage::Diagnostics(m) => &m.header,
+            RecordedMessage::Status(m) => &m.header,
+            RecordedMessage::References(m) => &m.header,
         };
-        (h.tick as f64 * 1e9 / self.control_hz) as u64
+        self.clock.run_time_ns(h.tick)
     }
 
     /// Keep states; on the ground truth of every `every`-th tick, log the view.
-    pub fn observe(&mut self, ctx: &Arc<Context>, message: &Message, log_time: u64) {
+    pub fn observe(&mut self, ctx: &Arc<Context>, message: &RecordedMessage, log_time: u64) {
         match message {
-            Message::State(s) => self.take_state(s),
-            Message::Truth(g) if g.header.tick % self.every == 0 => self.log_view(ctx, g, log_time),
+            RecordedMessage::State(s) => self.take_state(s),
+            RecordedMessage::Truth(g) if g.header.tick % self.every == 0 => self.log_view(ctx, g, log_time),
             _ => {}
         }
     }
