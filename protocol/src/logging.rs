@@ -112,7 +112,7 @@ impl<S: Subscriber> Layer<S> for ZenohNoise {
         if *meta.level() != Level::ERROR || !meta.target().starts_with("zenoh::net::routing") {
             return true;
         }
-        let mut message = Message(String::new());
+        let mut message = MessageText(String::new());
         event.record(&mut message);
         !is_zenoh_noise(&message.0)
     }
@@ -125,9 +125,9 @@ fn is_zenoh_noise(message: &str) -> bool {
 }
 
 /// The `message` field of an event, as text.
-struct Message(String);
+struct MessageText(String);
 
-impl Visit for Message {
+impl Visit for MessageText {
     fn record_debug(&mut self, field: &Field, value: &dyn fmt::Debug) {
         if field.name() == "message" {
             self.0 = format!("{value:?}");
