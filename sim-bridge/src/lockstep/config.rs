@@ -6,7 +6,7 @@ use std::time::Duration;
 use protocol::transport::TransportError;
 use thiserror::Error;
 
-use crate::ground_truth::Recorder;
+use crate::ground_truth::GroundTruthLog;
 use crate::plant::DriveLoss;
 
 /// Errors of the bridge loop.
@@ -134,8 +134,8 @@ pub struct LockstepReport {
 pub struct Extras {
     /// Publish the plant's ground truth on `team/{team}/ground-truth` after every step.
     pub publish_ground_truth: bool,
-    /// Keep the ground truth in memory (every `Recorder::every` ticks).
-    pub recorder: Option<Recorder>,
+    /// Keep the ground truth in memory (every `GroundTruthLog::every` ticks).
+    pub truth_log: Option<GroundTruthLog>,
     /// Take perturbation requests from `team/{team}/perturbation`.
     pub perturbation_key: bool,
     /// Perturbation requests taken and refused.

@@ -53,11 +53,11 @@ impl TickSide {
             }
         }
         plant.step();
-        if (self.truth_pub.is_some() || extras.recorder.is_some()) && plant.ground_truth(team, tick, &mut self.truth) {
+        if (self.truth_pub.is_some() || extras.truth_log.is_some()) && plant.ground_truth(team, tick, &mut self.truth) {
             if let Some(p) = self.truth_pub.as_mut() {
                 p.put(&self.truth).await?;
             }
-            if let Some(r) = extras.recorder.as_mut() {
+            if let Some(r) = extras.truth_log.as_mut() {
                 r.offer(&self.truth);
             }
         }
