@@ -16,7 +16,7 @@ use common::{robot_id, Fixture};
 use coordinator::{Pidc, PidcConfig, TeamController};
 use nalgebra::DVector;
 use protocol::{DynamicsTerms, QpStatus, TorqueCommand};
-use robot_agent::terms::ContactSet;
+use robot_agent::terms::ActiveContacts;
 
 struct Counting;
 thread_local! {
@@ -122,7 +122,7 @@ fn a_new_contact_set_resizes_once_then_allocates_nothing() {
     let mut l = Loop::new(&descs);
     l.run(&mut terms, 2);
     let nv = fx.robot.model.nv;
-    let cs = ContactSet { stance: vec![false, true, true, true], hand_in_grasp: true };
+    let cs = ActiveContacts { stance: vec![false, true, true, true], hand_in_grasp: true };
     let all_stance = terms[0].clone();
     terms[0] = fx.terms_with("r1", &fx.standing_q(0, 2), &DVector::zeros(nv), terms[0].header.tick, &cs);
     let changed = l.run(&mut terms, 6);
@@ -162,7 +162,7 @@ fn the_active_set_path_allocates_nothing_either() {
     assert_eq!(l.c.last().map(|r| r.qp.solver), Some("active-set"));
     assert_eq!(steady, vec![0; 10]);
     let nv = fx.robot.model.nv;
-    let cs = ContactSet { stance: vec![false, true, true, true], hand_in_grasp: true };
+    let cs = ActiveContacts { stance: vec![false, true, true, true], hand_in_grasp: true };
     terms[0] = fx.terms_with("r1", &fx.standing_q(0, 2), &DVector::zeros(nv), terms[0].header.tick, &cs);
     let changed = l.run(&mut terms, 6);
     println!("active set: steady {steady:?}, a foot lifts {changed:?}");

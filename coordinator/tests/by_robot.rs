@@ -10,13 +10,13 @@ use coordinator::qp::{self, QpInput, QpPath, QpSettings, QpWorkspace};
 use coordinator::{Pidc, PidcConfig, TeamController};
 use nalgebra::{DVector, UnitQuaternion, Vector3};
 use protocol::{DynamicsTerms, FootLoad, Header, Pose, PoseReference, QpStatus, RobotDescription, TaskReferences, TorqueCommand, TorsoReference};
-use robot_agent::terms::ContactSet;
+use robot_agent::terms::ActiveContacts;
 
 /// `count` robots standing, hands free, each perturbed a little (seeded), at rest.
 fn free_team(fx: &mut Fixture, count: usize, seed: u64) -> (Vec<DynamicsTerms>, Vec<RobotDescription>) {
     let mut rng = common::rng(seed);
     let nv = fx.robot.model.nv;
-    let free = ContactSet { stance: vec![true; fx.robot.foot_frames.len()], hand_in_grasp: false };
+    let free = ActiveContacts { stance: vec![true; fx.robot.foot_frames.len()], hand_in_grasp: false };
     let mut terms = Vec::new();
     let mut descs = Vec::new();
     for k in 0..count {

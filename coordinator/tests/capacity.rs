@@ -10,7 +10,7 @@ use coordinator::capacity::{CapacityError, Limit, Place, StaticProblem};
 use coordinator::PidcConfig;
 use nalgebra::{DVector, Matrix3xX, Matrix6xX, Vector3};
 use protocol::{DynamicsTerms, FrameRole, RobotDescription};
-use robot_agent::terms::ContactSet;
+use robot_agent::terms::ActiveContacts;
 use robot_model::{forward_kinematics, frame_jacobian, point_jacobian, rnea, update_frame_placements, Data};
 
 /// The two robots of the paper facing each other, hands on the 0.6 m cube, and its centre.
@@ -133,7 +133,7 @@ fn bad_input_gives_typed_errors() {
     assert!(matches!(StaticProblem::build(&terms, &descs, &cfg.contact_margins(), Vector3::new(f64::NAN, 0.0, 0.0)), Err(CapacityError::Input(_))));
     // No hand in grasp.
     let nv = fx.robot.model.nv;
-    let open = ContactSet { hand_in_grasp: false, ..ContactSet::all_stance(&fx.robot) };
+    let open = ActiveContacts { hand_in_grasp: false, ..ActiveContacts::all_stance(&fx.robot) };
     let free: Vec<_> = (0..2).map(|k| fx.terms_with(&robot_id(k), &fx.standing_q(k, 2), &DVector::zeros(nv), 1, &open)).collect();
     assert!(matches!(StaticProblem::build(&free, &descs, &cfg.contact_margins(), centre), Err(CapacityError::NoHands)));
     // Moving: h is not g(q).

@@ -8,7 +8,7 @@ use coordinator::qp::contact_rows;
 use coordinator::{ControllerError, Pidc, PidcConfig, TeamController};
 use nalgebra::{DMatrix, DVector, Vector3};
 use protocol::{DynamicsTerms, QpStatus};
-use robot_agent::terms::ContactSet;
+use robot_agent::terms::ActiveContacts;
 
 fn controller(descs: &[protocol::RobotDescription], cfg: PidcConfig) -> Pidc {
     let mut c = Pidc::new(cfg);
@@ -355,7 +355,7 @@ fn contact_set_changes_and_more_robots() {
     let (mut terms, descs) = fx.static_team(2);
     let nv = fx.robot.model.nv;
     let q = fx.standing_q(0, 2);
-    let cs = ContactSet { stance: vec![false, true, true, true], hand_in_grasp: true };
+    let cs = ActiveContacts { stance: vec![false, true, true, true], hand_in_grasp: true };
     terms[0] = fx.terms_with("r1", &q, &DVector::zeros(nv), 1, &cs);
     let mut c = controller(&descs, PidcConfig::default());
     c.compute(&terms).expect("tick");
@@ -433,13 +433,13 @@ fn a_swing_foot_without_a_reference_holds_where_it_lifted_off_this_time() {
     use coordinator::units::targets::Targets;
     let mut fx = Fixture::new();
     let nv = fx.robot.model.nv;
-    let swing = ContactSet { stance: vec![false, true, true, true], hand_in_grasp: false };
-    let stance = ContactSet { stance: vec![true; 4], hand_in_grasp: false };
+    let swing = ActiveContacts { stance: vec![false, true, true, true], hand_in_grasp: false };
+    let stance = ActiveContacts { stance: vec![true; 4], hand_in_grasp: false };
     let q0 = fx.standing_q(0, 2);
     let mut q1 = q0.clone();
     let hfe = fx.robot.model.joint_names.iter().position(|j| j == "LF_HFE").expect("LF_HFE");
     q1[7 + hfe] += 0.2;
-    let mut team_at = |q: &DVector<f64>, cs: &ContactSet| {
+    let mut team_at = |q: &DVector<f64>, cs: &ActiveContacts| {
         let terms = fx.terms_with("r1", q, &DVector::zeros(nv), 1, cs);
         let mut team = Team::default();
         team.assemble_into(&[terms], None, false).expect("team");

@@ -24,7 +24,7 @@ use coordinator::units::impedance::TaskStack;
 use coordinator::{ControllerError, Pidc, PidcConfig};
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 use protocol::{DynamicsTerms, FrameRole, PoseReference, RobotDescription, TaskReferences, TorsoReference};
-use robot_agent::terms::ContactSet;
+use robot_agent::terms::ActiveContacts;
 
 fn max_abs(m: &DMatrix<f64>) -> f64 {
     m.iter().fold(0.0, |a, x| a.max(x.abs()))
@@ -131,7 +131,7 @@ fn contact_jacobian_is_the_feet_rows_then_the_grasp_projected_hand_rows() {
 
     // No hand in grasp: the feet's rows alone.
     let nv = fx.robot.model.nv;
-    let cs = ContactSet { stance: vec![true; 4], hand_in_grasp: false };
+    let cs = ActiveContacts { stance: vec![true; 4], hand_in_grasp: false };
     let free: Vec<_> = (0..2).map(|k| fx.terms_with(&robot_id(k), &fx.standing_q(k, 2), &DVector::zeros(nv), 1, &cs)).collect();
     let mut team = Team::default();
     team.assemble_into(&free, None, false).expect("team");
@@ -223,7 +223,7 @@ fn grasp_tracker_captures_the_object_at_the_hands_centroid_or_where_told() {
     assert!(object.rotation.angle_to(&at.rotation) < 1e-9);
     // Hands released: no grasp terms.
     let nv = fx.robot.model.nv;
-    let cs = ContactSet { stance: vec![true; 4], hand_in_grasp: false };
+    let cs = ActiveContacts { stance: vec![true; 4], hand_in_grasp: false };
     let free: Vec<_> = (0..2).map(|k| fx.terms_with(&robot_id(k), &fx.standing_q(k, 2), &DVector::zeros(nv), 1, &cs)).collect();
     team.assemble_into(&free, None, false).expect("team");
     tracker.update(&team, None, &[], &mut terms_out).expect("no grasp");
@@ -648,7 +648,7 @@ fn a_team_assembled_into_used_buffers_is_the_team_assembled_afresh() {
     let mut rng = common::rng(17);
     let nv = fx.robot.model.nv;
     let (all, _) = fx.static_team(3);
-    let lifted = ContactSet { stance: vec![false, true, true, true], hand_in_grasp: false };
+    let lifted = ActiveContacts { stance: vec![false, true, true, true], hand_in_grasp: false };
     let mut moved = all.clone();
     moved[1] = fx.terms_with(&robot_id(1), &fx.standing_q(1, 3), &DVector::zeros(nv), 1, &lifted);
     let other_sizes = vec![resized(&all[0], nv + 6, &mut rng), resized(&all[1], nv - 6, &mut rng), all[2].clone()];

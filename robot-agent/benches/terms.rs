@@ -4,7 +4,7 @@
 //! (the rigid-body algorithms alone: `cargo bench -p robot-model --bench dynamics`).
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use robot_agent::terms::{empty_terms, ContactSet, TermsBuilder};
+use robot_agent::terms::{empty_terms, ActiveContacts, TermsBuilder};
 use robot_model::{default_robot_path, Robot};
 use std::hint::black_box;
 
@@ -21,7 +21,7 @@ fn bench(c: &mut Criterion) {
         time: 0.0,
         foot_forces: Vec::new(),
     };
-    let contacts = ContactSet::all_stance(&robot);
+    let contacts = ActiveContacts::all_stance(&robot);
     let mut terms = empty_terms("bench", "r1");
     let mut g = c.benchmark_group("default_robot");
     g.bench_function("state_to_dynamics_terms", |b| {

@@ -11,9 +11,11 @@ use std::time::Instant;
 
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, TransportError, TypedPublisher};
-use protocol::{AgentStatus, DynamicsTerms, RobotDescription, TorqueCommand};
+use protocol::{AgentStatus, DynamicsTerms, RobotDescription, RobotState, TorqueCommand};
 use thiserror::Error;
 use tokio::sync::watch;
+use zenoh::liveliness::LivelinessToken;
+use zenoh::sample::Sample;
 use zenoh::Session;
 
 pub use crate::core::{AgentConfig, AgentCore, CoreError, Outputs, Sent};
@@ -93,16 +95,7 @@ pub async fn run_with<S: DynamicsSource>(
     housekeeping.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
 
     loop {
-        if *stall.borrow_and_update() {
-            tracing::warn!(%robot, "stalled: handling nothing, still a member");
-            while *stall.borrow_and_update() && !*stop.borrow() {
-                tokio::select! {
-                    r = stop.changed() => if r.is_err() { break },
-                    r = stall.changed() => if r.is_err() { break },
-                }
-            }
-            tracing::warn!(%robot, "stall over");
-        }
+        wait_out_stall(robot, &mut stop, &mut stall).await;
         tokio::select! {
             r = stop.changed() => { if r.is_err() || *stop.borrow() { break; } }
             r = stall.changed() => { if r.is_err() { break; } }
@@ -112,51 +105,22 @@ pub async fn run_with<S: DynamicsSource>(
                     StateEvent::Invalid(reason) => { core.on_undecodable_state(&reason); continue; }
                     StateEvent::Closed => break,
                 };
-                let Ok(out) = core.on_state(&state, Instant::now()) else { continue };
-                let leave = out.leave_team;
-                let done = io.send(out).await?;
-                io.done(&mut core, done).await;
+                let leave = on_state(&mut core, &mut io, &state).await?;
                 if let Some(t) = token.take_if(|_| leave) {
-                    // Said first, so that the coordinator does not wait for a link to come back.
-                    io.announce_leaving(robot).await;
-                    if let Err(e) = t.undeclare().await {
-                        tracing::warn!(%robot, "withdrawing the membership after the fall: {e}");
-                    }
-                    tracing::warn!(%robot, "fallen: left the team");
+                    leave_after_fall(&io, robot, t).await;
                 }
             }
             c = commands.recv_async() => {
                 let Ok(sample) = c else { break };
-                let now = Instant::now();
-                let out = match decode_sample::<TorqueCommand>(&sample) {
-                    Ok(cmd) => core.on_command(&cmd, now),
-                    Err(e) => Err(core.on_undecodable_command(&e.to_string())),
-                };
-                let Ok(out) = out else { continue };
-                let done = io.send(out).await?;
-                io.done(&mut core, done).await;
+                on_command(&mut core, &mut io, &sample).await?;
             }
             c = contacts.recv_async() => {
                 let Ok(sample) = c else { break };
-                let _ = match decode_sample::<protocol::ContactSet>(&sample) {
-                    Ok(msg) => core.on_contacts(&msg),
-                    Err(e) => Err(core.on_undecodable_contacts(&e.to_string())),
-                };
+                on_contacts(&mut core, &sample);
             }
             c = coordinator.recv_async() => {
                 let Ok(sample) = c else { break };
-                if transport::coordinator_alive(&sample) {
-                    // A coordinator that (re)started needs the description to command us.
-                    let out = core.on_coordinator(Instant::now());
-                    let done = io.send(out).await?;
-                    io.done(&mut core, done).await;
-                    continue;
-                }
-                // The coordinator's token went: safe mode if it is not back within the grace
-                // (a link that drops and comes back), or at the command deadline if that is sooner.
-                let out = core.on_coordinator_lost(Instant::now());
-                let done = io.send(out).await?;
-                io.done(&mut core, done).await;
+                on_coordinator(&mut core, &mut io, &sample).await?;
             }
             _ = housekeeping.tick() => {
                 let out = core.on_timer(Instant::now());
@@ -171,6 +135,75 @@ pub async fn run_with<S: DynamicsSource>(
     io.publish_status(&mut core).await;
     tracing::info!(%robot, counters = ?core.counters(), "agent stopped");
     Ok(core.counters().clone())
+}
+
+/// While `stall` is true: handle nothing (until `stop`), still a member.
+async fn wait_out_stall(robot: &str, stop: &mut watch::Receiver<bool>, stall: &mut watch::Receiver<bool>) {
+    if *stall.borrow_and_update() {
+        tracing::warn!(%robot, "stalled: handling nothing, still a member");
+        while *stall.borrow_and_update() && !*stop.borrow() {
+            tokio::select! {
+                r = stop.changed() => if r.is_err() { break },
+                r = stall.changed() => if r.is_err() { break },
+            }
+        }
+        tracing::warn!(%robot, "stall over");
+    }
+}
+
+/// A state in: the core's answer out. Whether the core says the robot leaves the team (it fell).
+async fn on_state<S: DynamicsSource, K: TorqueSink>(core: &mut AgentCore<S>, io: &mut Io<K>, state: &RobotState) -> Result<bool, AgentError> {
+    let Ok(out) = core.on_state(state, Instant::now()) else { return Ok(false) };
+    let leave = out.leave_team;
+    let done = io.send(out).await?;
+    io.done(core, done).await;
+    Ok(leave)
+}
+
+/// The fallen robot leaves the team: its leaving announced, then its membership withdrawn.
+async fn leave_after_fall<K: TorqueSink>(io: &Io<K>, robot: &str, token: LivelinessToken) {
+    // Said first, so that the coordinator does not wait for a link to come back.
+    io.announce_leaving(robot).await;
+    if let Err(e) = token.undeclare().await {
+        tracing::warn!(%robot, "withdrawing the membership after the fall: {e}");
+    }
+    tracing::warn!(%robot, "fallen: left the team");
+}
+
+/// A torque command in: the core's answer out.
+async fn on_command<S: DynamicsSource, K: TorqueSink>(core: &mut AgentCore<S>, io: &mut Io<K>, sample: &Sample) -> Result<(), AgentError> {
+    let now = Instant::now();
+    let out = match decode_sample::<TorqueCommand>(sample) {
+        Ok(cmd) => core.on_command(&cmd, now),
+        Err(e) => Err(core.on_undecodable_command(&e.to_string())),
+    };
+    let Ok(out) = out else { return Ok(()) };
+    let done = io.send(out).await?;
+    io.done(core, done).await;
+    Ok(())
+}
+
+/// A contact set in (the core schedules it or counts its rejection).
+fn on_contacts<S: DynamicsSource>(core: &mut AgentCore<S>, sample: &Sample) {
+    let _ = match decode_sample::<protocol::ContactSet>(sample) {
+        Ok(msg) => core.on_contacts(&msg),
+        Err(e) => Err(core.on_undecodable_contacts(&e.to_string())),
+    };
+}
+
+/// The coordinator's liveliness changed: the core's answer out.
+async fn on_coordinator<S: DynamicsSource, K: TorqueSink>(core: &mut AgentCore<S>, io: &mut Io<K>, sample: &Sample) -> Result<(), AgentError> {
+    let out = if transport::coordinator_alive(sample) {
+        // A coordinator that (re)started needs the description to command us.
+        core.on_coordinator(Instant::now())
+    } else {
+        // The coordinator's token went: safe mode if it is not back within the grace
+        // (a link that drops and comes back), or at the command deadline if that is sooner.
+        core.on_coordinator_lost(Instant::now())
+    };
+    let done = io.send(out).await?;
+    io.done(core, done).await;
+    Ok(())
 }
 
 /// What [`Io::send`] did.

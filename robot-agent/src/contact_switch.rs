@@ -18,7 +18,7 @@
 
 use std::collections::VecDeque;
 
-use crate::terms::ContactSet;
+use crate::terms::ActiveContacts;
 
 /// How contact sets are switched.
 #[derive(Debug, Clone, PartialEq)]
@@ -65,9 +65,9 @@ impl SwitchEvents {
 #[derive(Debug, Clone)]
 pub struct ContactSwitch {
     config: SwitchConfig,
-    scheduled: VecDeque<(u64, ContactSet)>,
-    goal: ContactSet,
-    active: ContactSet,
+    scheduled: VecDeque<(u64, ActiveContacts)>,
+    goal: ActiveContacts,
+    active: ActiveContacts,
 }
 
 /// The schedule is full: the set of `tick` is refused.
@@ -79,18 +79,18 @@ pub struct ScheduleFull {
 
 impl ContactSwitch {
     /// Starting with `initial` active (and as the goal).
-    pub fn new(config: SwitchConfig, initial: ContactSet) -> Self {
+    pub fn new(config: SwitchConfig, initial: ActiveContacts) -> Self {
         let scheduled = VecDeque::with_capacity(config.max_scheduled);
         ContactSwitch { config, scheduled, goal: initial.clone(), active: initial }
     }
 
     /// The set the dynamics terms are computed for.
-    pub fn active(&self) -> &ContactSet {
+    pub fn active(&self) -> &ActiveContacts {
         &self.active
     }
 
     /// The newest due set the active one moves towards.
-    pub fn goal(&self) -> &ContactSet {
+    pub fn goal(&self) -> &ActiveContacts {
         &self.goal
     }
 
@@ -104,7 +104,7 @@ impl ContactSwitch {
     /// later one (a planner that changes its mind, e.g. a walk halted when the team lets go,
     /// sends the set it wants from then on). A planner that sends its sets in tick order never
     /// cancels any.
-    pub fn schedule(&mut self, tick: u64, set: ContactSet) -> Result<(), ScheduleFull> {
+    pub fn schedule(&mut self, tick: u64, set: ActiveContacts) -> Result<(), ScheduleFull> {
         let at = self.scheduled.partition_point(|(t, _)| *t < tick);
         if at >= self.config.max_scheduled {
             return Err(ScheduleFull { tick, capacity: self.config.max_scheduled });

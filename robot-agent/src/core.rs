@@ -31,7 +31,7 @@ use crate::fall::{Fall, FallDetector, FallLimits};
 use crate::gate::{CommandGate, CommandRejection};
 use crate::safe_mode::{CommandDeadline, HoldGains, PostureHold, Takeover, Watchdog};
 use crate::status::{AgentCounters, StatusBoard};
-use crate::terms::{empty_terms, ContactSet};
+use crate::terms::{empty_terms, ActiveContacts};
 
 /// Identity and timing of an agent. The robot itself (size, limits, frames) comes from its
 /// [`DynamicsSource`].
@@ -278,7 +278,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             hold_tau: Vec::with_capacity(joints),
             last_command: Vec::with_capacity(joints),
             state_time: 0.0,
-            contacts: ContactSwitch::new(cfg.contacts.clone(), ContactSet { stance: vec![true; feet.len()], hand_in_grasp: true }),
+            contacts: ContactSwitch::new(cfg.contacts.clone(), ActiveContacts { stance: vec![true; feet.len()], hand_in_grasp: true }),
             feet,
             terms: empty_terms(team, robot),
             torques: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false },
@@ -566,7 +566,7 @@ impl<S: DynamicsSource> AgentCore<S> {
     }
 
     /// The contact set `msg` asks for, checked against this robot's id and feet.
-    fn contact_set(&self, msg: &protocol::ContactSet) -> Result<ContactSet, ContactRejection> {
+    fn contact_set(&self, msg: &protocol::ContactSet) -> Result<ActiveContacts, ContactRejection> {
         if msg.header.robot_id() != self.robot {
             return Err(ContactRejection::OtherRobot { robot: self.robot.clone(), got: msg.header.robot_id().to_string() });
         }
@@ -575,7 +575,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             return Err(ContactRejection::UnknownFeet { unknown, feet: self.feet.clone() });
         }
         let stance = self.feet.iter().map(|f| msg.stance_feet.contains(f)).collect();
-        Ok(ContactSet { stance, hand_in_grasp: msg.hand_in_grasp })
+        Ok(ActiveContacts { stance, hand_in_grasp: msg.hand_in_grasp })
     }
 
     /// Housekeeping at `now`: the watchdog by time (entering safe mode yields the hold torques
@@ -804,7 +804,7 @@ impl<S: DynamicsSource> AgentCore<S> {
     }
 
     /// The contact set the next terms are computed for.
-    pub fn contacts(&self) -> &ContactSet {
+    pub fn contacts(&self) -> &ActiveContacts {
         self.contacts.active()
     }
 

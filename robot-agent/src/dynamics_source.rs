@@ -9,7 +9,7 @@ use protocol::{Matrix, RobotDescription, RobotState};
 use robot_model::Robot;
 use thiserror::Error;
 
-use crate::terms::{ContactSet, TermsBuilder, TermsError};
+use crate::terms::{ActiveContacts, TermsBuilder, TermsError};
 
 /// Errors computing terms from a state.
 #[derive(Debug, Error)]
@@ -28,12 +28,12 @@ pub trait DynamicsSource: Send {
     fn floating_base(&self) -> bool;
     /// Symmetric torque limit per actuated joint (`f64::INFINITY`: none).
     fn torque_limits(&self) -> Vec<f64>;
-    /// Foot frames in description order (a [`ContactSet`] has one entry per foot).
+    /// Foot frames in description order (an [`ActiveContacts`] has one entry per foot).
     fn foot_frames(&self) -> &[String];
     /// The protocol description to publish for robot `id` of team `team`, if there is a model.
     fn description(&self, team: &str, id: &str) -> Option<RobotDescription>;
     /// Fill `out` (header excepted) with the terms at `state` for `contacts`.
-    fn compute(&mut self, state: &RobotState, contacts: &ContactSet, out: &mut protocol::DynamicsTerms) -> Result<(), SourceError>;
+    fn compute(&mut self, state: &RobotState, contacts: &ActiveContacts, out: &mut protocol::DynamicsTerms) -> Result<(), SourceError>;
     /// The joint torques that balance gravity at rest, the stance feet carrying the floating
     /// base ([`crate::standing`]), at the state and contacts of the last successful
     /// [`DynamicsSource::compute`] (zeros before).
@@ -106,7 +106,7 @@ impl DynamicsSource for ModelDynamics {
         Some(robot_description(&self.robot, team, id))
     }
 
-    fn compute(&mut self, state: &RobotState, contacts: &ContactSet, out: &mut protocol::DynamicsTerms) -> Result<(), SourceError> {
+    fn compute(&mut self, state: &RobotState, contacts: &ActiveContacts, out: &mut protocol::DynamicsTerms) -> Result<(), SourceError> {
         self.builder.load_state(&self.robot, state)?;
         self.builder.compute(&self.robot, contacts, out)?;
         let g = self.builder.data().g.as_slice();
@@ -156,7 +156,7 @@ impl DynamicsSource for PlaceholderDynamics {
         None
     }
 
-    fn compute(&mut self, state: &RobotState, _contacts: &ContactSet, out: &mut protocol::DynamicsTerms) -> Result<(), SourceError> {
+    fn compute(&mut self, state: &RobotState, _contacts: &ActiveContacts, out: &mut protocol::DynamicsTerms) -> Result<(), SourceError> {
         if state.joint_positions.len() != self.joints {
             return Err(SourceError::StateSize { expected: self.joints, got: state.joint_positions.len() });
         }

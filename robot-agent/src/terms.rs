@@ -22,17 +22,18 @@ pub enum TermsError {
 }
 
 /// Which contacts are closed: per foot of the description (same order), stance or not, and
-/// whether the hand holds the object.
+/// whether the hand holds the object. The agent's form of the wire's [`protocol::ContactSet`]
+/// (feet by index rather than by frame name).
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ContactSet {
+pub struct ActiveContacts {
     pub stance: Vec<bool>,
     pub hand_in_grasp: bool,
 }
 
-impl ContactSet {
+impl ActiveContacts {
     /// Every foot on the ground, hand in grasp: the paper's manipulation scenarios.
     pub fn all_stance(robot: &Robot) -> Self {
-        ContactSet { stance: vec![true; robot.foot_frames.len()], hand_in_grasp: true }
+        ActiveContacts { stance: vec![true; robot.foot_frames.len()], hand_in_grasp: true }
     }
 }
 
@@ -96,7 +97,7 @@ impl TermsBuilder {
     }
 
     /// Compute the terms at the loaded state into `out` (reusing its allocations).
-    pub fn compute(&mut self, robot: &Robot, contacts: &ContactSet, out: &mut DynamicsTerms) -> Result<(), TermsError> {
+    pub fn compute(&mut self, robot: &Robot, contacts: &ActiveContacts, out: &mut DynamicsTerms) -> Result<(), TermsError> {
         let m = &robot.model;
         compute_all_terms(m, &mut self.data, self.q.as_slice(), self.v.as_slice())?;
         let nv = m.nv;

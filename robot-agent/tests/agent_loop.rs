@@ -307,7 +307,7 @@ async fn rejects_stale_wrong_robot_wrong_size_nan_future_and_old_commands_and_cl
 /// agent's own solve; the contact Jacobians are the agent's terms).
 fn gravity_oracle(robot: &Robot, state: &RobotState) -> Vec<f64> {
     use robot_agent::agent::DynamicsSource;
-    use robot_agent::terms::{empty_terms, ContactSet as Contacts};
+    use robot_agent::terms::{empty_terms, ActiveContacts as Contacts};
     let mut q = robot.standing_q.clone();
     q.as_mut_slice()[7..].copy_from_slice(&state.joint_positions);
     let mut data = robot_model::Data::new(&robot.model);
@@ -541,7 +541,7 @@ async fn commands_take_over_from_the_posture_hold_without_a_jump() {
 #[test]
 fn posture_hold_at_the_standing_pose_is_gravity_compensation() {
     use robot_agent::agent::{DynamicsSource, PostureHold};
-    use robot_agent::terms::{empty_terms, ContactSet as Contacts};
+    use robot_agent::terms::{empty_terms, ActiveContacts as Contacts};
     let robot = robot();
     let state = standing_state(&robot, "t", 0, 0.0, 0.0);
     let oracle = gravity_oracle(&robot, &state);

@@ -2,10 +2,10 @@
 //! touchdown waits for the foot's force (early or late), and the schedule is bounded.
 
 use robot_agent::contact_switch::{ContactSwitch, SwitchConfig};
-use robot_agent::terms::ContactSet;
+use robot_agent::terms::ActiveContacts;
 
-fn set(stance: [bool; 4]) -> ContactSet {
-    ContactSet { stance: stance.to_vec(), hand_in_grasp: true }
+fn set(stance: [bool; 4]) -> ActiveContacts {
+    ActiveContacts { stance: stance.to_vec(), hand_in_grasp: true }
 }
 
 fn all_down() -> ContactSwitch {

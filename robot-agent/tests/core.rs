@@ -8,7 +8,7 @@ use robot_agent::core::{AgentConfig, AgentCore, ContactRejection, Outputs, Sent,
 use robot_agent::dynamics_source::{DynamicsSource, SourceError};
 use robot_agent::gate::CommandRejection;
 use robot_agent::safe_mode::{CommandDeadline, HoldGains};
-use robot_agent::terms::ContactSet;
+use robot_agent::terms::ActiveContacts;
 
 const ID: &str = "r1";
 const LIMITS: [f64; 3] = [10.0, 10.0, 2.0];
@@ -17,7 +17,7 @@ const GRAVITY: [f64; 3] = [1.5, -0.5, 0.25];
 /// Fixed base, unit mass matrix, constant gravity, two feet.
 struct Stub {
     feet: Vec<String>,
-    last_contacts: Option<ContactSet>,
+    last_contacts: Option<ActiveContacts>,
     /// A floating base (the fall test); fixed otherwise.
     floating: bool,
 }
@@ -38,7 +38,7 @@ impl DynamicsSource for Stub {
     fn description(&self, _team: &str, _id: &str) -> Option<RobotDescription> {
         None
     }
-    fn compute(&mut self, state: &RobotState, contacts: &ContactSet, out: &mut DynamicsTerms) -> Result<(), SourceError> {
+    fn compute(&mut self, state: &RobotState, contacts: &ActiveContacts, out: &mut DynamicsTerms) -> Result<(), SourceError> {
         out.floating_base = false;
         out.nv = 3;
         out.mass_matrix = Matrix::zeros(3, 3);
@@ -288,7 +288,7 @@ fn states_are_checked_and_contact_sets_apply_from_the_next_state() {
         stance_feet: feet.iter().map(|f| f.to_string()).collect(),
         hand_in_grasp: grasp,
     };
-    assert_eq!(c.contacts(), &ContactSet { stance: vec![true, true], hand_in_grasp: true });
+    assert_eq!(c.contacts(), &ActiveContacts { stance: vec![true, true], hand_in_grasp: true });
     c.on_contacts(&set(ID, &["RF"], false)).unwrap();
     assert!(matches!(c.on_contacts(&set(ID, &["XX"], true)), Err(ContactRejection::UnknownFeet { .. })));
     assert!(matches!(c.on_contacts(&set("r2", &["LF"], true)), Err(ContactRejection::OtherRobot { .. })));
@@ -296,7 +296,7 @@ fn states_are_checked_and_contact_sets_apply_from_the_next_state() {
     assert_eq!((c.counters().contacts_applied, c.counters().contacts_rejected), (1, 3));
     let out = c.on_state(&state(3, [0.0; 3], [0.0; 3]), t0).unwrap();
     assert!(!out.terms.unwrap().hand_in_grasp);
-    assert_eq!(c.source().last_contacts, Some(ContactSet { stance: vec![false, true], hand_in_grasp: false }));
+    assert_eq!(c.source().last_contacts, Some(ActiveContacts { stance: vec![false, true], hand_in_grasp: false }));
 }
 
 #[test]

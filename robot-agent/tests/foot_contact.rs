@@ -10,7 +10,7 @@ use common::*;
 use nalgebra::{DVector, Matrix3, Vector3};
 use protocol::{FrameRole, Header, Pose, RobotState};
 use robot_model::{default_robot_path, Robot};
-use robot_agent::terms::{empty_terms, ContactSet, TermsBuilder};
+use robot_agent::terms::{empty_terms, ActiveContacts, TermsBuilder};
 
 fn state_of(robot: &Robot, q: &DVector<f64>, v: &DVector<f64>) -> RobotState {
     let n = robot.joints();
@@ -32,7 +32,7 @@ type FootFrame = (Vector3<f64>, Matrix3<f64>, nalgebra::DMatrix<f64>, Vector3<f6
 fn feet(robot: &Robot, b: &mut TermsBuilder, q: &DVector<f64>, v: &DVector<f64>) -> Vec<FootFrame> {
     let mut terms = empty_terms("t", "r1");
     b.load_state(robot, &state_of(robot, q, v)).unwrap();
-    b.compute(robot, &ContactSet::all_stance(robot), &mut terms).unwrap();
+    b.compute(robot, &ActiveContacts::all_stance(robot), &mut terms).unwrap();
     terms
         .frames
         .iter()

@@ -7,7 +7,7 @@ use robot_model::{default_robot_path, Robot};
 
 #[test]
 fn terms_of_the_standing_robot_are_consistent_with_the_model() {
-    use robot_agent::terms::{empty_terms, ContactSet, TermsBuilder};
+    use robot_agent::terms::{empty_terms, ActiveContacts, TermsBuilder};
     let robot = Robot::load(default_robot_path()).unwrap();
     let mut b = TermsBuilder::new(&robot).unwrap();
     let q = robot.standing_q.as_slice();
@@ -21,7 +21,7 @@ fn terms_of_the_standing_robot_are_consistent_with_the_model() {
         foot_forces: Vec::new(),
     };
     b.load_state(&robot, &state).unwrap();
-    let mut contacts = ContactSet::all_stance(&robot);
+    let mut contacts = ActiveContacts::all_stance(&robot);
     contacts.stance[1] = false;
     let mut terms = empty_terms("t", "r1");
     b.compute(&robot, &contacts, &mut terms).unwrap();

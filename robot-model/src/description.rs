@@ -237,6 +237,47 @@ impl RobotCache {
 }
 
 fn check(file: File, model: Model, path: &Path, urdf_path: PathBuf) -> Result<Robot, DescriptionError> {
+    check_frames(&model, &file.frames, path)?;
+    check_contact(&file.contact, path)?;
+    let (actuated_joints, actuated_indices) = actuated_joints(&model);
+    let torque_limits = check_torque_limits(&model, &file.torque_limits, &actuated_joints, &actuated_indices, path)?;
+    let s = &file.standing;
+    check_standing_numbers(&model, s, path)?;
+    let standing_q = standing_configuration(&model, s, path)?;
+    check_standing_hand(&model, &standing_q, &file.frames.hand, s, path)?;
+
+    Ok(Robot {
+        standing_hand_position: s.hand_position,
+        standing_hand_orientation: s.hand_orientation,
+        path: path.to_path_buf(),
+        urdf_path,
+        name: file.robot.name,
+        torso_frame: file.frames.torso,
+        foot_frames: file.frames.feet,
+        hand_frame: file.frames.hand,
+        swing_foot_frames: file.frames.swing_feet,
+        feet: file.contact.feet,
+        hand: file.contact.hand,
+        actuated_joints,
+        actuated_indices,
+        torque_limits,
+        standing_q,
+        model,
+    })
+}
+
+/// `value` is a positive finite number, or the error naming `what`.
+fn positive(path: &Path, what: String, value: f64) -> Result<(), DescriptionError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(DescriptionError::BadValue { path: path.to_path_buf(), what, value, rule: "a positive finite number" })
+    }
+}
+
+/// Every frame the description names is a frame of the URDF; there are feet, and the swing
+/// feet are among them.
+fn check_frames(model: &Model, frames: &FramesSection, path: &Path) -> Result<(), DescriptionError> {
     let p = || path.to_path_buf();
     let frame = |what: &str, name: &str| -> Result<(), DescriptionError> {
         model.frame_id(name).map(|_| ()).map_err(|_| DescriptionError::UnknownFrame {
@@ -245,35 +286,36 @@ fn check(file: File, model: Model, path: &Path, urdf_path: PathBuf) -> Result<Ro
             frame: name.to_string(),
         })
     };
-    frame("frames.torso", &file.frames.torso)?;
-    frame("frames.hand", &file.frames.hand)?;
-    if file.frames.feet.is_empty() {
+    frame("frames.torso", &frames.torso)?;
+    frame("frames.hand", &frames.hand)?;
+    if frames.feet.is_empty() {
         return Err(DescriptionError::Invalid { path: p(), what: "frames.feet is empty".into() });
     }
-    for f in &file.frames.feet {
+    for f in &frames.feet {
         frame("frames.feet", f)?;
     }
-    for f in &file.frames.swing_feet {
+    for f in &frames.swing_feet {
         frame("frames.swing_feet", f)?;
-        if !file.frames.feet.contains(f) {
+        if !frames.feet.contains(f) {
             return Err(DescriptionError::Invalid { path: p(), what: format!("swing foot {f:?} is not one of frames.feet") });
         }
     }
-    let positive = |what: String, value: f64| -> Result<(), DescriptionError> {
-        if value.is_finite() && value > 0.0 {
-            Ok(())
-        } else {
-            Err(DescriptionError::BadValue { path: p(), what, value, rule: "a positive finite number" })
-        }
-    };
-    positive("contact.feet.mu".into(), file.contact.feet.mu)?;
-    positive("contact.feet.radius".into(), file.contact.feet.radius)?;
-    positive("contact.hand.mu".into(), file.contact.hand.mu)?;
-    positive("contact.hand.xi".into(), file.contact.hand.xi)?;
-    positive("contact.hand.half_size_x".into(), file.contact.hand.half_size_x)?;
-    positive("contact.hand.half_size_y".into(), file.contact.hand.half_size_y)?;
+    Ok(())
+}
 
-    // Actuated joints in velocity order.
+/// Every contact parameter is a positive finite number.
+fn check_contact(contact: &ContactSection, path: &Path) -> Result<(), DescriptionError> {
+    positive(path, "contact.feet.mu".into(), contact.feet.mu)?;
+    positive(path, "contact.feet.radius".into(), contact.feet.radius)?;
+    positive(path, "contact.hand.mu".into(), contact.hand.mu)?;
+    positive(path, "contact.hand.xi".into(), contact.hand.xi)?;
+    positive(path, "contact.hand.half_size_x".into(), contact.hand.half_size_x)?;
+    positive(path, "contact.hand.half_size_y".into(), contact.hand.half_size_y)?;
+    Ok(())
+}
+
+/// The model's actuated joints in velocity order: their names and velocity indices.
+fn actuated_joints(model: &Model) -> (Vec<String>, Vec<usize>) {
     let base = if model.floating_base { 6 } else { 0 };
     let mut actuated_joints = Vec::new();
     let mut actuated_indices = Vec::new();
@@ -283,17 +325,30 @@ fn check(file: File, model: Model, path: &Path, urdf_path: PathBuf) -> Result<Ro
             actuated_indices.push(base + k);
         }
     }
-    for (name, limit) in &file.torque_limits {
+    (actuated_joints, actuated_indices)
+}
+
+/// The torque limit of each actuated joint (velocity order): one positive limit per actuated
+/// joint and no other, none above the URDF's effort limit.
+fn check_torque_limits(
+    model: &Model,
+    limits: &BTreeMap<String, f64>,
+    actuated_joints: &[String],
+    actuated_indices: &[usize],
+    path: &Path,
+) -> Result<Vec<f64>, DescriptionError> {
+    let p = || path.to_path_buf();
+    for (name, limit) in limits {
         if !actuated_joints.contains(name) {
             return Err(DescriptionError::UnknownJoint { path: p(), what: "torque_limits".into(), joint: name.clone() });
         }
-        positive(format!("torque_limits.{name}"), *limit)?;
+        positive(path, format!("torque_limits.{name}"), *limit)?;
     }
-    let missing: Vec<String> = actuated_joints.iter().filter(|j| !file.torque_limits.contains_key(*j)).cloned().collect();
+    let missing: Vec<String> = actuated_joints.iter().filter(|j| !limits.contains_key(*j)).cloned().collect();
     if !missing.is_empty() {
         return Err(DescriptionError::MissingJoints { path: p(), what: "torque_limits".into(), missing });
     }
-    let torque_limits: Vec<f64> = actuated_joints.iter().map(|j| file.torque_limits[j]).collect();
+    let torque_limits: Vec<f64> = actuated_joints.iter().map(|j| limits[j]).collect();
     for (j, (&idx, &limit)) in actuated_indices.iter().zip(&torque_limits).enumerate() {
         let urdf_effort = model.effort_limit[idx];
         if urdf_effort.is_finite() && limit > urdf_effort * (1.0 + 1e-9) {
@@ -303,9 +358,13 @@ fn check(file: File, model: Model, path: &Path, urdf_path: PathBuf) -> Result<Ro
             });
         }
     }
+    Ok(torque_limits)
+}
 
-    // Standing configuration.
-    let s = &file.standing;
+/// The standing section's numbers: finite poses, unit quaternions, and one finite position for
+/// every joint of the model and no other.
+fn check_standing_numbers(model: &Model, s: &StandingSection, path: &Path) -> Result<(), DescriptionError> {
+    let p = || path.to_path_buf();
     for (what, xs) in [
         ("standing.base_position", &s.base_position[..]),
         ("standing.base_orientation", &s.base_orientation[..]),
@@ -334,6 +393,11 @@ fn check(file: File, model: Model, path: &Path, urdf_path: PathBuf) -> Result<Ro
     if !missing.is_empty() {
         return Err(DescriptionError::MissingJoints { path: p(), what: "standing.joints".into(), missing });
     }
+    Ok(())
+}
+
+/// The standing configuration `q` (the model's convention), each joint within its limits.
+fn standing_configuration(model: &Model, s: &StandingSection, path: &Path) -> Result<DVector<f64>, DescriptionError> {
     let mut standing_q = model.neutral();
     let qbase = if model.floating_base {
         standing_q.as_mut_slice()[0..3].copy_from_slice(&s.base_position);
@@ -347,33 +411,13 @@ fn check(file: File, model: Model, path: &Path, urdf_path: PathBuf) -> Result<Ro
         let (lo, hi) = (model.lower_position_limit[qbase + k], model.upper_position_limit[qbase + k]);
         if value < lo - 1e-9 || value > hi + 1e-9 {
             return Err(DescriptionError::Invalid {
-                path: p(),
+                path: path.to_path_buf(),
                 what: format!("standing.joints.{name} = {value} is outside the joint limits [{lo}, {hi}]"),
             });
         }
         standing_q[qbase + k] = value;
     }
-
-    check_standing_hand(&model, &standing_q, &file.frames.hand, s, path)?;
-
-    Ok(Robot {
-        standing_hand_position: s.hand_position,
-        standing_hand_orientation: s.hand_orientation,
-        path: p(),
-        urdf_path,
-        name: file.robot.name,
-        torso_frame: file.frames.torso,
-        foot_frames: file.frames.feet,
-        hand_frame: file.frames.hand,
-        swing_foot_frames: file.frames.swing_feet,
-        feet: file.contact.feet,
-        hand: file.contact.hand,
-        actuated_joints,
-        actuated_indices,
-        torque_limits,
-        standing_q,
-        model,
-    })
+    Ok(standing_q)
 }
 
 /// The hand frame at the standing configuration, relative to the root link, against what the

@@ -21,7 +21,7 @@ use coordinator::{ControllerSpec, PidcConfig};
 use nalgebra::{UnitQuaternion, Vector3};
 use protocol::{DynamicsTerms, Header, Pose, RobotDescription, RobotState};
 use robot_agent::dynamics_source::robot_description;
-use robot_agent::terms::{empty_terms, ContactSet, TermsBuilder, TermsError};
+use robot_agent::terms::{empty_terms, ActiveContacts, TermsBuilder, TermsError};
 use robot_model::Robot;
 use sim_bridge::world::WorldSpec;
 use thiserror::Error;
@@ -75,7 +75,7 @@ pub fn start_terms(world: &WorldSpec, robots: &[Arc<Robot>]) -> Result<(Vec<Dyna
         let mut builder = TermsBuilder::new(robot).map_err(terms_err)?;
         builder.load_state(robot, &state).map_err(terms_err)?;
         let mut out = empty_terms(TEAM, id);
-        builder.compute(robot, &ContactSet::all_stance(robot), &mut out).map_err(terms_err)?;
+        builder.compute(robot, &ActiveContacts::all_stance(robot), &mut out).map_err(terms_err)?;
         terms.push(out);
         descs.push(robot_description(robot, TEAM, id));
     }

@@ -108,14 +108,14 @@ pub fn empty(team: &str) -> GroundTruth {
 
 /// Ground truth kept in memory, every `every` ticks.
 #[derive(Debug, Default, Clone)]
-pub struct Recorder {
+pub struct GroundTruthLog {
     pub every: u64,
     pub records: Vec<GroundTruth>,
 }
 
-impl Recorder {
+impl GroundTruthLog {
     pub fn new(every: u64) -> Self {
-        Recorder { every: every.max(1), records: Vec::new() }
+        GroundTruthLog { every: every.max(1), records: Vec::new() }
     }
 
     pub fn offer(&mut self, gt: &GroundTruth) {

@@ -225,7 +225,7 @@ async fn run_world(a: RunArgs, world: sim_bridge::world::World, n: usize) -> Res
     let mut extras = lockstep::Extras {
         publish_ground_truth: true,
         perturbation_key: true,
-        recorder: a.ground_truth_csv.as_ref().map(|_| sim_bridge::ground_truth::Recorder::new(a.record_every)),
+        truth_log: a.ground_truth_csv.as_ref().map(|_| sim_bridge::ground_truth::GroundTruthLog::new(a.record_every)),
         ..Default::default()
     };
     let pace = if a.realtime { Pace::RealTime { period: Duration::from_secs_f64(1.0 / a.control_hz) } } else { Pace::Lockstep };
@@ -257,7 +257,7 @@ async fn run_world(a: RunArgs, world: sim_bridge::world::World, n: usize) -> Res
         println!("perturbations: {} taken, {} refused", extras.perturbations_taken, extras.perturbations_refused);
     }
     stop_tx.send(true).ok();
-    if let (Some(path), Some(rec)) = (&a.ground_truth_csv, &extras.recorder) {
+    if let (Some(path), Some(rec)) = (&a.ground_truth_csv, &extras.truth_log) {
         let f = std::fs::File::create(path).map_err(|e| anyhow::anyhow!("creating {}: {e}", path.display()))?;
         rec.write_csv(std::io::BufWriter::new(f))?;
         println!("ground truth: {} records in {}", rec.records.len(), path.display());

@@ -26,6 +26,7 @@ use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample};
 use protocol::TorqueCommand;
 use tokio::sync::watch;
+use zenoh::sample::Sample;
 use zenoh::Session;
 
 use crate::lockstep::{wait_for_members, BridgeError, Extras, LockstepConfig, StateOut, TickSide};
@@ -64,15 +65,10 @@ pub async fn run(
     let mut side = TickSide::open(session, &cfg.team, extras).await?;
     wait_for_members(session, cfg, &robots, &stop).await?;
 
-    let mut missed = vec![0u64; robots.len()];
-    let mut got = vec![false; robots.len()];
-    let mut last_tick: Vec<Option<u64>> = vec![None; robots.len()];
-    // The drive timeout in ticks, and the last tick each robot's torques came in time.
+    // The drive timeout in ticks.
     let timeout_ticks = (cfg.drive_timeout.as_secs_f64() / period.as_secs_f64()).ceil().max(1.0) as u64;
-    let mut last_fresh = vec![extras.first_tick; robots.len()];
-    let mut drive_losses = vec![0u64; robots.len()];
+    let mut arrivals = Arrivals::new(robots, extras.first_tick);
     let mut overruns = 0u64;
-    let mut rejected = 0u64;
     let started = Instant::now();
     let mut schedule = Schedule::new(started, period);
     for tick in extras.first_tick..extras.first_tick + cfg.ticks {
@@ -82,109 +78,174 @@ pub async fn run(
         let deadline = schedule.start_tick(Instant::now());
         states.publish(plant, tick).await?;
         let sent = Instant::now();
-        got.iter_mut().for_each(|g| *g = false);
-        for t in side.loop_timing(&robots) {
-            t.latency_us = None;
-            t.late = 0;
-        }
-        while !got.iter().all(|g| *g) {
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                break;
-            }
-            // Tokio's timers have 1 ms resolution, as long as a 1 kHz period: wait on the queue
-            // only while more than 2 ms are left, then poll and yield until the deadline.
-            let sample = match torques.try_recv() {
-                Ok(Some(s)) => s,
-                Ok(None) if left > Duration::from_millis(2) => match tokio::time::timeout(left - Duration::from_millis(1), torques.recv_async()).await {
-                    Ok(Ok(s)) => s,
-                    Ok(Err(_)) => return Err(BridgeError::Stopped),
-                    Err(_) => continue,
-                },
-                Ok(None) => {
-                    tokio::task::yield_now().await;
-                    continue;
-                }
-                Err(_) => return Err(BridgeError::Stopped),
-            };
-            let cmd = match decode_sample::<TorqueCommand>(&sample) {
-                Ok(c) => c,
-                Err(e) => {
-                    rejected += 1;
-                    tracing::warn!("rejected torques: {e}");
-                    continue;
-                }
-            };
-            let Some(i) = robots.iter().position(|r| r == cmd.header.robot_id()) else { continue };
-            if cmd.header.tick > tick {
-                continue;
-            }
-            let timing = &mut side.loop_timing(&robots)[i];
-            if cmd.header.tick < tick {
-                timing.late += 1;
-            }
-            if last_tick[i].is_some_and(|t| cmd.header.tick <= t) {
-                continue;
-            }
-            if cmd.tau.len() != plant.joints(i) {
-                rejected += 1;
-                continue;
-            }
-            if plant.drives_lost(i) {
-                if cmd.header.tick < tick {
-                    continue; // too old to wake the drives
-                }
-                tracing::info!(robot = %robots[i], tick, "the robot's drives take torques again");
-                plant.restore_drives(i);
-            }
-            plant.set_torques(i, &cmd.tau);
-            last_tick[i] = Some(cmd.header.tick);
-            got[i] = cmd.header.tick == tick;
-            if got[i] {
-                timing.latency_us = Some(sent.elapsed().as_secs_f64() * 1e6);
-            }
-        }
-        for (i, (g, timing)) in got.iter().zip(side.loop_timing(&robots)).enumerate() {
-            timing.applied_tick = last_tick[i];
-            if *g {
-                last_fresh[i] = tick;
-            } else {
-                missed[i] += 1;
-            }
-        }
-        for (i, r) in robots.iter().enumerate() {
-            if let Some(loss) = cfg.agent_loss.drive_loss().filter(|_| tick - last_fresh[i] >= timeout_ticks && !plant.drives_lost(i)) {
-                tracing::warn!(robot = %r, tick, since = last_fresh[i], ?loss, "no torques for the drive timeout: the robot's drives lose their commands");
-                plant.lose_drives(i, loss);
-                drive_losses[i] += 1;
-            }
-        }
+        arrivals.begin_tick(&mut side);
+        arrivals.collect(&torques, deadline, tick, sent, plant, &mut side).await?;
+        arrivals.end_tick(tick, &mut side);
+        arrivals.lose_silent_drives(cfg, plant, tick, timeout_ticks);
         side.step(plant, &cfg.team, tick, extras).await?;
         // Pace: wait for the next tick's start (the torques may all have come early).
         if Instant::now() > schedule.due {
             overruns += 1;
         }
-        while let Some(left) = schedule.due.checked_duration_since(Instant::now()).filter(|d| !d.is_zero()) {
-            if left > Duration::from_millis(2) {
-                tokio::time::sleep(left - Duration::from_millis(1)).await;
-            } else {
-                tokio::task::yield_now().await;
-            }
-        }
+        wait_until(schedule.due).await;
         if cfg.progress_every > 0 && (tick + 1 - extras.first_tick) % cfg.progress_every == 0 {
-            tracing::info!(tick = tick + 1, of = cfg.ticks, sim_time = plant.time(), missed = ?missed, "progress (real time)");
+            tracing::info!(tick = tick + 1, of = cfg.ticks, sim_time = plant.time(), missed = ?arrivals.missed, "progress (real time)");
         }
     }
     Ok(RealtimeReport {
         ticks: cfg.ticks,
         sim_time: plant.time(),
         wall_time: started.elapsed(),
-        drive_losses: robots.iter().cloned().zip(drive_losses).collect(),
-        missed: robots.into_iter().zip(missed).collect(),
+        drive_losses: arrivals.robots.iter().cloned().zip(arrivals.drive_losses).collect(),
+        missed: arrivals.robots.into_iter().zip(arrivals.missed).collect(),
         overruns,
         slipped: schedule.slipped,
-        rejected_torques: rejected,
+        rejected_torques: arrivals.rejected,
     })
+}
+
+/// Wait until `due`: sleeping while more than 2 ms are left, then yielding (Tokio's timers have
+/// 1 ms resolution).
+async fn wait_until(due: Instant) {
+    while let Some(left) = due.checked_duration_since(Instant::now()).filter(|d| !d.is_zero()) {
+        if left > Duration::from_millis(2) {
+            tokio::time::sleep(left - Duration::from_millis(1)).await;
+        } else {
+            tokio::task::yield_now().await;
+        }
+    }
+}
+
+/// The next torque sample before `left` runs out, if one came (`None`: look at the deadline
+/// again).
+async fn poll_torques(torques: &transport::SampleQueue, left: Duration) -> Result<Option<Sample>, BridgeError> {
+    // Tokio's timers have 1 ms resolution, as long as a 1 kHz period: wait on the queue
+    // only while more than 2 ms are left, then poll and yield until the deadline.
+    match torques.try_recv() {
+        Ok(Some(s)) => Ok(Some(s)),
+        Ok(None) if left > Duration::from_millis(2) => match tokio::time::timeout(left - Duration::from_millis(1), torques.recv_async()).await {
+            Ok(Ok(s)) => Ok(Some(s)),
+            Ok(Err(_)) => Err(BridgeError::Stopped),
+            Err(_) => Ok(None),
+        },
+        Ok(None) => {
+            tokio::task::yield_now().await;
+            Ok(None)
+        }
+        Err(_) => Err(BridgeError::Stopped),
+    }
+}
+
+/// The real-time loop's account of the robots' torques, per robot in plant order.
+struct Arrivals {
+    robots: Vec<String>,
+    /// Ticks stepped without that tick's torques.
+    missed: Vec<u64>,
+    /// This tick's torques came in time.
+    got: Vec<bool>,
+    /// The tick of the torques applied last.
+    last_tick: Vec<Option<u64>>,
+    /// The last tick whose torques came in time.
+    last_fresh: Vec<u64>,
+    /// Times the drives were lost for want of torques.
+    drive_losses: Vec<u64>,
+    rejected: u64,
+}
+
+impl Arrivals {
+    fn new(robots: Vec<String>, first_tick: u64) -> Self {
+        let n = robots.len();
+        Arrivals { robots, missed: vec![0; n], got: vec![false; n], last_tick: vec![None; n], last_fresh: vec![first_tick; n], drive_losses: vec![0; n], rejected: 0 }
+    }
+
+    /// A tick starts: no torques yet, and its loop timing cleared.
+    fn begin_tick(&mut self, side: &mut TickSide) {
+        self.got.iter_mut().for_each(|g| *g = false);
+        for t in side.loop_timing(&self.robots) {
+            t.latency_us = None;
+            t.late = 0;
+        }
+    }
+
+    /// Take torques until every robot's for `tick` came or the `deadline` passed; the states
+    /// left at `sent`.
+    async fn collect(&mut self, torques: &transport::SampleQueue, deadline: Instant, tick: u64, sent: Instant, plant: &mut impl Plant, side: &mut TickSide) -> Result<(), BridgeError> {
+        while !self.got.iter().all(|g| *g) {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                break;
+            }
+            let Some(sample) = poll_torques(torques, left).await? else { continue };
+            self.take(&sample, tick, sent, plant, side);
+        }
+        Ok(())
+    }
+
+    /// One torque sample during `tick`: the newest torques of a robot drive it (waking its
+    /// lost drives if they are this tick's); older ones are counted late.
+    fn take(&mut self, sample: &Sample, tick: u64, sent: Instant, plant: &mut impl Plant, side: &mut TickSide) {
+        let cmd = match decode_sample::<TorqueCommand>(sample) {
+            Ok(c) => c,
+            Err(e) => {
+                self.rejected += 1;
+                tracing::warn!("rejected torques: {e}");
+                return;
+            }
+        };
+        let Some(i) = self.robots.iter().position(|r| r == cmd.header.robot_id()) else { return };
+        if cmd.header.tick > tick {
+            return;
+        }
+        let timing = &mut side.loop_timing(&self.robots)[i];
+        if cmd.header.tick < tick {
+            timing.late += 1;
+        }
+        if self.last_tick[i].is_some_and(|t| cmd.header.tick <= t) {
+            return;
+        }
+        if cmd.tau.len() != plant.joints(i) {
+            self.rejected += 1;
+            return;
+        }
+        if plant.drives_lost(i) {
+            if cmd.header.tick < tick {
+                return; // too old to wake the drives
+            }
+            tracing::info!(robot = %self.robots[i], tick, "the robot's drives take torques again");
+            plant.restore_drives(i);
+        }
+        plant.set_torques(i, &cmd.tau);
+        self.last_tick[i] = Some(cmd.header.tick);
+        self.got[i] = cmd.header.tick == tick;
+        if self.got[i] {
+            timing.latency_us = Some(sent.elapsed().as_secs_f64() * 1e6);
+        }
+    }
+
+    /// The tick's deadline passed: the torques applied go in the loop timing, and a robot
+    /// whose torques did not come missed the tick.
+    fn end_tick(&mut self, tick: u64, side: &mut TickSide) {
+        for (i, (g, timing)) in self.got.iter().zip(side.loop_timing(&self.robots)).enumerate() {
+            timing.applied_tick = self.last_tick[i];
+            if *g {
+                self.last_fresh[i] = tick;
+            } else {
+                self.missed[i] += 1;
+            }
+        }
+    }
+
+    /// A robot whose torques have not come in time for `timeout_ticks` loses its drives
+    /// ([`LockstepConfig::agent_loss`]).
+    fn lose_silent_drives(&mut self, cfg: &LockstepConfig, plant: &mut impl Plant, tick: u64, timeout_ticks: u64) {
+        for (i, r) in self.robots.iter().enumerate() {
+            if let Some(loss) = cfg.agent_loss.drive_loss().filter(|_| tick - self.last_fresh[i] >= timeout_ticks && !plant.drives_lost(i)) {
+                tracing::warn!(robot = %r, tick, since = self.last_fresh[i], ?loss, "no torques for the drive timeout: the robot's drives lose their commands");
+                plant.lose_drives(i, loss);
+                self.drive_losses[i] += 1;
+            }
+        }
+    }
 }
 
 /// The least time a tick gives the robots to answer, in control periods: a tick that starts

@@ -193,7 +193,7 @@ impl PhaseReport {
 /// controller, then the physics clock restarts (scenario time 0), the timed `pushes` are added
 /// (their `start` is on the scenario clock), and `cfg.ticks` ticks run at `pace`; tick numbers
 /// continue across. `extras` serve both phases (ground truth is published while settling
-/// too); its recorder keeps the scenario phase only.
+/// too); its ground-truth log keeps the scenario phase only.
 #[allow(clippy::too_many_arguments)]
 pub async fn settle_then_run(
     session: &Session,
@@ -206,10 +206,10 @@ pub async fn settle_then_run(
     stop: watch::Receiver<bool>,
 ) -> Result<(lockstep::LockstepReport, PhaseReport), SceneError> {
     let settle = if settle_ticks > 0 {
-        let recorder = extras.recorder.take();
+        let truth_log = extras.truth_log.take();
         let settle_cfg = LockstepConfig { ticks: settle_ticks, progress_every: 0, ..cfg.clone() };
         let r = lockstep::run_with(session, &settle_cfg, plant, extras, stop.clone()).await;
-        extras.recorder = recorder;
+        extras.truth_log = truth_log;
         plant.restart_clock();
         r?
     } else {

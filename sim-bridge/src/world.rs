@@ -429,140 +429,177 @@ impl World {
         check_robots(spec, robots)?;
         let substeps = spec.substeps()?;
         let dt = 1.0 / spec.physics_hz;
-        // A contact time constant below two physics steps is unstable (MuJoCo docs).
-        let mut contact = spec.contact;
-        contact.foot_solref[0] = contact.foot_solref[0].max(2.0 * dt);
-        contact.hand_solref[0] = contact.hand_solref[0].max(2.0 * dt);
+        let contact = stable_contact(spec.contact, dt);
 
         let mut world = MjSpec::from_xml_string(&world_xml(spec, dt)).map_err(|e| WorldError::Build(e.to_string()))?;
-        let mut robots_loaded = Vec::new();
+        let mut hand_bodies = Vec::new();
         for (placement, robot) in spec.robots.iter().zip(robots) {
-            let id = &placement.id;
-            let urdf = std::fs::read_to_string(&robot.urdf_path).map_err(|e| WorldError::Urdf {
-                id: id.clone(),
-                path: robot.urdf_path.clone(),
-                reason: e.to_string(),
-            })?;
-            let text = mujoco_urdf_text(&urdf).map_err(|reason| WorldError::Import { id: id.clone(), reason })?;
-            let mut child = MjSpec::from_xml_string(&text).map_err(|e| WorldError::Import { id: id.clone(), reason: e.to_string() })?;
-            let root = robot.model.bodies[0].name.clone();
-            let hand_body = hand_body_name(robot)?;
-            let foot_bodies = foot_body_names(robot);
-            {
-                let root_body = child
-                    .world_body_mut()
-                    .child_mut(&root)
-                    .ok_or_else(|| WorldError::Import { id: id.clone(), reason: format!("no root body {root}") })?;
-                root_body.add_free_joint().set_name("base").map_err(|e| WorldError::Build(e.to_string()))?;
-            }
-            configure_geoms(&mut child, robot, &contact, &hand_body, &foot_bodies, id)?;
-            let q = yaw_quat(placement.base_yaw);
-            let frame = world.world_body_mut().add_frame();
-            *frame.pos_mut() = placement.base_position;
-            *frame.quat_mut() = q;
-            let body = child
-                .body_mut(&root)
-                .ok_or_else(|| WorldError::Import { id: id.clone(), reason: format!("no root body {root}") })?;
-            frame.attach_by_deep_copy(body, &format!("{id}/"), "").map_err(|e| WorldError::Build(format!("attaching {id}: {e}")))?;
-            robots_loaded.push((placement.clone(), robot.clone(), hand_body));
+            hand_bodies.push(attach_robot(&mut world, placement, robot, &contact)?);
         }
         // One motor per actuated joint, limited to the robot's torque limits.
-        for (placement, robot, _) in &robots_loaded {
-            for (name, limit) in robot.actuated_joints.iter().zip(&robot.torque_limits) {
-                let act = world.add_actuator();
-                act.set_name(&format!("{}/{name}", placement.id)).map_err(|e| WorldError::Build(e.to_string()))?;
-                act.set_target(&format!("{}/{name}", placement.id));
-                act.set_trntype(MjtTrn::mjTRN_JOINT);
-                act.set_to_motor();
-                *act.ctrlrange_mut() = [-limit, *limit];
-                act.set_ctrllimited(mujoco_rs::wrappers::mj_editing::MjtLimited::mjLIMITED_TRUE);
-            }
+        for (placement, robot) in spec.robots.iter().zip(robots) {
+            add_motors(&mut world, &placement.id, robot)?;
         }
         let mut model = world.compile().map_err(|e| WorldError::Build(e.to_string()))?;
-        // No joint damping, armature or friction loss: the simulator's robot is the model's robot.
-        {
-            let raw = unsafe { model.ffi_mut() };
-            for k in 0..raw.nv as usize {
-                unsafe {
-                    *raw.dof_armature.add(k) = 0.0;
-                    *raw.dof_damping.add(k) = 0.0;
-                    *raw.dof_frictionloss.add(k) = 0.0;
-                }
-            }
-        }
+        remove_joint_losses(&mut model);
         let model = std::sync::Arc::new(model);
         let raw = model.ffi();
-        let mut robots = Vec::new();
+        let mut indexed = Vec::new();
         let mut rng = SplitMix(spec.seed ^ 0x9e37_79b9_7f4a_7c15);
-        for (placement, robot, hand_body) in robots_loaded {
-            let id = placement.id.clone();
-            let p = |n: &str| format!("{id}/{n}");
-            let free = name2id(raw, mjtObj::mjOBJ_JOINT, "joint", &p("base"))?;
-            let free_qpos = unsafe { *raw.jnt_qposadr.add(free) } as usize;
-            let free_dof = unsafe { *raw.jnt_dofadr.add(free) } as usize;
-            let mut joint_qpos = Vec::new();
-            let mut joint_dof = Vec::new();
-            let mut actuator = Vec::new();
-            for name in &robot.actuated_joints {
-                let j = name2id(raw, mjtObj::mjOBJ_JOINT, "joint", &p(name))?;
-                joint_qpos.push(unsafe { *raw.jnt_qposadr.add(j) } as usize);
-                joint_dof.push(unsafe { *raw.jnt_dofadr.add(j) } as usize);
-                actuator.push(name2id(raw, mjtObj::mjOBJ_ACTUATOR, "actuator", &p(name))?);
-            }
-            let root = &robot.model.bodies[0].name;
-            let base_body = name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(root))?;
-            let bodies: Vec<usize> = (0..raw.nbody as usize).filter(|&b| id2name(raw, mjtObj::mjOBJ_BODY, b).starts_with(&format!("{id}/"))).collect();
-            let hb = name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(&hand_body))?;
-            let hand_geoms: Vec<usize> = (0..raw.ngeom as usize).filter(|&g| unsafe { *raw.geom_bodyid.add(g) } as usize == hb).collect();
-            let foot_geoms: Vec<usize> = (0..raw.ngeom as usize)
-                .filter(|&g| bodies.contains(&(unsafe { *raw.geom_bodyid.add(g) } as usize)) && unsafe { *raw.geom_condim.add(g) } == 3 && is_foot_geom(raw, g, robot.feet.radius))
-                .collect();
-            let foot_bodies = foot_body_names(&robot).iter().map(|b| name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(b))).collect::<Result<Vec<_>, _>>()?;
-            let hand_contact_body = name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(&robot.hand_frame))?;
-            let mut initial_q: Vec<f64> = robot.standing_q.iter().copied().collect();
-            let off = robot.model.nq - robot.model.joint_names.len();
-            for (j, v) in &placement.joint_overrides {
-                let k = robot.model.joint_names.iter().position(|n| n == j).ok_or_else(|| WorldError::UnknownJoint { id: id.clone(), joint: j.clone() })?;
-                initial_q[off + k] = *v;
-            }
-            if spec.initial_joint_noise > 0.0 {
-                for k in 0..robot.model.joint_names.len() {
-                    initial_q[off + k] += spec.initial_joint_noise * rng.gaussian();
-                }
-            }
-            initial_q[0..3].copy_from_slice(&placement.base_position);
-            initial_q[3..7].copy_from_slice(&yaw_quat(placement.base_yaw));
-            robots.push(RobotIndex {
-                id,
-                robot,
-                free_qpos,
-                free_dof,
-                joint_qpos,
-                joint_dof,
-                actuator,
-                base_body,
-                bodies,
-                hand_geoms,
-                foot_geoms,
-                foot_bodies,
-                hand_contact_body,
-                initial_q,
-            });
+        for ((placement, robot), hand_body) in spec.robots.iter().zip(robots).zip(hand_bodies) {
+            indexed.push(index_robot(raw, spec, placement, robot.clone(), &hand_body, &mut rng)?);
         }
-        let (object, object_geom) = if spec.object.is_some() {
-            let b = name2id(raw, mjtObj::mjOBJ_BODY, "body", "object")?;
-            let j = name2id(raw, mjtObj::mjOBJ_JOINT, "joint", "object")?;
-            let g = name2id(raw, mjtObj::mjOBJ_GEOM, "geom", "object")?;
-            (Some((b, unsafe { *raw.jnt_qposadr.add(j) } as usize, unsafe { *raw.jnt_dofadr.add(j) } as usize)), Some(g))
-        } else {
-            (None, None)
-        };
-        let world = World { model, robots, object, object_geom, substeps, control_dt: 1.0 / spec.control_hz, spec: spec.clone() };
+        let (object, object_geom) = index_object(raw, spec)?;
+        let world = World { model, robots: indexed, object, object_geom, substeps, control_dt: 1.0 / spec.control_hz, spec: spec.clone() };
         for r in &world.robots {
             check_against_model(&world.model, r)?;
         }
         Ok(world)
     }
+}
+
+/// The contact parameters with each time constant at least two physics steps of `dt`: a
+/// shorter one is unstable (MuJoCo docs).
+fn stable_contact(mut contact: ContactParams, dt: f64) -> ContactParams {
+    contact.foot_solref[0] = contact.foot_solref[0].max(2.0 * dt);
+    contact.hand_solref[0] = contact.hand_solref[0].max(2.0 * dt);
+    contact
+}
+
+/// Import the robot's URDF into its own mjSpec, give its root body a free joint named `base`,
+/// set its palm and foot contacts, and attach a copy under the prefix `{id}/` to a frame of
+/// `world` at its base pose. Returns the name of its hand body.
+fn attach_robot(world: &mut MjSpec, placement: &RobotPlacement, robot: &Robot, contact: &ContactParams) -> Result<String, WorldError> {
+    let id = &placement.id;
+    let urdf = std::fs::read_to_string(&robot.urdf_path).map_err(|e| WorldError::Urdf {
+        id: id.clone(),
+        path: robot.urdf_path.clone(),
+        reason: e.to_string(),
+    })?;
+    let text = mujoco_urdf_text(&urdf).map_err(|reason| WorldError::Import { id: id.clone(), reason })?;
+    let mut child = MjSpec::from_xml_string(&text).map_err(|e| WorldError::Import { id: id.clone(), reason: e.to_string() })?;
+    let root = robot.model.bodies[0].name.clone();
+    let hand_body = hand_body_name(robot)?;
+    let foot_bodies = foot_body_names(robot);
+    {
+        let root_body = child
+            .world_body_mut()
+            .child_mut(&root)
+            .ok_or_else(|| WorldError::Import { id: id.clone(), reason: format!("no root body {root}") })?;
+        root_body.add_free_joint().set_name("base").map_err(|e| WorldError::Build(e.to_string()))?;
+    }
+    configure_geoms(&mut child, robot, contact, &hand_body, &foot_bodies, id)?;
+    let q = yaw_quat(placement.base_yaw);
+    let frame = world.world_body_mut().add_frame();
+    *frame.pos_mut() = placement.base_position;
+    *frame.quat_mut() = q;
+    let body = child
+        .body_mut(&root)
+        .ok_or_else(|| WorldError::Import { id: id.clone(), reason: format!("no root body {root}") })?;
+    frame.attach_by_deep_copy(body, &format!("{id}/"), "").map_err(|e| WorldError::Build(format!("attaching {id}: {e}")))?;
+    Ok(hand_body)
+}
+
+/// One motor per actuated joint of robot `id`, its `ctrlrange` the joint's torque limit.
+fn add_motors(world: &mut MjSpec, id: &str, robot: &Robot) -> Result<(), WorldError> {
+    for (name, limit) in robot.actuated_joints.iter().zip(&robot.torque_limits) {
+        let act = world.add_actuator();
+        act.set_name(&format!("{id}/{name}")).map_err(|e| WorldError::Build(e.to_string()))?;
+        act.set_target(&format!("{id}/{name}"));
+        act.set_trntype(MjtTrn::mjTRN_JOINT);
+        act.set_to_motor();
+        *act.ctrlrange_mut() = [-limit, *limit];
+        act.set_ctrllimited(mujoco_rs::wrappers::mj_editing::MjtLimited::mjLIMITED_TRUE);
+    }
+    Ok(())
+}
+
+/// No joint damping, armature or friction loss: the simulator's robot is the model's robot.
+fn remove_joint_losses(model: &mut MjModel) {
+    let raw = unsafe { model.ffi_mut() };
+    for k in 0..raw.nv as usize {
+        unsafe {
+            *raw.dof_armature.add(k) = 0.0;
+            *raw.dof_damping.add(k) = 0.0;
+            *raw.dof_frictionloss.add(k) = 0.0;
+        }
+    }
+}
+
+/// Where the robot of `placement` lives in the compiled model, and its initial configuration
+/// (noise drawn from `rng`).
+fn index_robot(raw: &mjModel, spec: &WorldSpec, placement: &RobotPlacement, robot: Arc<Robot>, hand_body: &str, rng: &mut SplitMix) -> Result<RobotIndex, WorldError> {
+    let id = placement.id.clone();
+    let p = |n: &str| format!("{id}/{n}");
+    let free = name2id(raw, mjtObj::mjOBJ_JOINT, "joint", &p("base"))?;
+    let free_qpos = unsafe { *raw.jnt_qposadr.add(free) } as usize;
+    let free_dof = unsafe { *raw.jnt_dofadr.add(free) } as usize;
+    let mut joint_qpos = Vec::new();
+    let mut joint_dof = Vec::new();
+    let mut actuator = Vec::new();
+    for name in &robot.actuated_joints {
+        let j = name2id(raw, mjtObj::mjOBJ_JOINT, "joint", &p(name))?;
+        joint_qpos.push(unsafe { *raw.jnt_qposadr.add(j) } as usize);
+        joint_dof.push(unsafe { *raw.jnt_dofadr.add(j) } as usize);
+        actuator.push(name2id(raw, mjtObj::mjOBJ_ACTUATOR, "actuator", &p(name))?);
+    }
+    let root = &robot.model.bodies[0].name;
+    let base_body = name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(root))?;
+    let bodies: Vec<usize> = (0..raw.nbody as usize).filter(|&b| id2name(raw, mjtObj::mjOBJ_BODY, b).starts_with(&format!("{id}/"))).collect();
+    let hb = name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(hand_body))?;
+    let hand_geoms: Vec<usize> = (0..raw.ngeom as usize).filter(|&g| unsafe { *raw.geom_bodyid.add(g) } as usize == hb).collect();
+    let foot_geoms: Vec<usize> = (0..raw.ngeom as usize)
+        .filter(|&g| bodies.contains(&(unsafe { *raw.geom_bodyid.add(g) } as usize)) && unsafe { *raw.geom_condim.add(g) } == 3 && is_foot_geom(raw, g, robot.feet.radius))
+        .collect();
+    let foot_bodies = foot_body_names(&robot).iter().map(|b| name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(b))).collect::<Result<Vec<_>, _>>()?;
+    let hand_contact_body = name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(&robot.hand_frame))?;
+    let initial_q = initial_configuration(spec, placement, &robot, rng)?;
+    Ok(RobotIndex {
+        id,
+        robot,
+        free_qpos,
+        free_dof,
+        joint_qpos,
+        joint_dof,
+        actuator,
+        base_body,
+        bodies,
+        hand_geoms,
+        foot_geoms,
+        foot_bodies,
+        hand_contact_body,
+        initial_q,
+    })
+}
+
+/// The robot's initial `q`: standing, with the placement's joint overrides, the spec's joint
+/// noise (drawn from `rng`) and the placement's base pose.
+fn initial_configuration(spec: &WorldSpec, placement: &RobotPlacement, robot: &Robot, rng: &mut SplitMix) -> Result<Vec<f64>, WorldError> {
+    let mut initial_q: Vec<f64> = robot.standing_q.iter().copied().collect();
+    let off = robot.model.nq - robot.model.joint_names.len();
+    for (j, v) in &placement.joint_overrides {
+        let k = robot.model.joint_names.iter().position(|n| n == j).ok_or_else(|| WorldError::UnknownJoint { id: placement.id.clone(), joint: j.clone() })?;
+        initial_q[off + k] = *v;
+    }
+    if spec.initial_joint_noise > 0.0 {
+        for k in 0..robot.model.joint_names.len() {
+            initial_q[off + k] += spec.initial_joint_noise * rng.gaussian();
+        }
+    }
+    initial_q[0..3].copy_from_slice(&placement.base_position);
+    initial_q[3..7].copy_from_slice(&yaw_quat(placement.base_yaw));
+    Ok(initial_q)
+}
+
+/// The object's body id, free-joint qpos and dof addresses, and geom id (none without an object).
+fn index_object(raw: &mjModel, spec: &WorldSpec) -> Result<(Option<(usize, usize, usize)>, Option<usize>), WorldError> {
+    if spec.object.is_none() {
+        return Ok((None, None));
+    }
+    let b = name2id(raw, mjtObj::mjOBJ_BODY, "body", "object")?;
+    let j = name2id(raw, mjtObj::mjOBJ_JOINT, "joint", "object")?;
+    let g = name2id(raw, mjtObj::mjOBJ_GEOM, "geom", "object")?;
+    Ok((Some((b, unsafe { *raw.jnt_qposadr.add(j) } as usize, unsafe { *raw.jnt_dofadr.add(j) } as usize)), Some(g)))
 }
 
 fn is_foot_geom(raw: &mjModel, g: usize, radius: f64) -> bool {

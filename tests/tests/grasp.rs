@@ -2,14 +2,14 @@
 //! the 1 kg cube with the test-side controller. Checks the contact parameters do what the
 //! README says (rigid frictional patch contact: the cube neither slides down nor turns).
 
-use sim_bridge::ground_truth::{self, Recorder};
+use sim_bridge::ground_truth::{self, GroundTruthLog};
 use sim_bridge::mujoco_plant::MujocoPlant;
 use sim_bridge::plant::{empty_state, Plant};
 use sim_bridge::world::{load_robots, World, WorldSpec};
 use team_runner::placing::place_hands;
 use team_tests::standing::{HandLoad, StandingController, StandingGains};
 
-fn hold(squeeze: f64, seconds: f64) -> (f64, f64, usize, Recorder) {
+fn hold(squeeze: f64, seconds: f64) -> (f64, f64, usize, GroundTruthLog) {
     let mut spec = WorldSpec::paper_pair();
     let robots = load_robots(&spec).unwrap();
     place_hands(&mut spec, &robots).unwrap();
@@ -29,7 +29,7 @@ fn hold(squeeze: f64, seconds: f64) -> (f64, f64, usize, Recorder) {
     let mut s = empty_state("t", "r1");
     let mut tau = Vec::new();
     let mut gt = ground_truth::empty("t");
-    let mut rec = Recorder::new(10);
+    let mut rec = GroundTruthLog::new(10);
     let (mut zmin, mut ang_max, mut min_contacts) = (f64::MAX, 0.0f64, usize::MAX);
     let ticks = (seconds * 1000.0) as u64;
     for k in 0..ticks {

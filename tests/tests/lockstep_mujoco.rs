@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use protocol::transport::{self, Role, ZenohArgs};
 use robot_agent::agent::{self, AgentConfig, AgentCounters, AgentError, ModelDynamics};
-use sim_bridge::ground_truth::Recorder;
+use sim_bridge::ground_truth::GroundTruthLog;
 use sim_bridge::lockstep::{self, BridgeError, Extras, LockstepConfig};
 use sim_bridge::mujoco_plant::MujocoPlant;
 use sim_bridge::world::{load_robots, World, WorldSpec};
@@ -75,7 +75,7 @@ async fn default_robot_stands_5_s_under_its_agent() {
     // Settle 200 ticks, restart the scenario clock, then 5 s with tick numbers continuing.
     lockstep::run(&session, &cfg(team, 200), &mut plant, stop_rx.clone()).await.unwrap();
     plant.restart_clock();
-    let mut extras = Extras { recorder: Some(Recorder::new(10)), publish_ground_truth: true, first_tick: 200, ..Default::default() };
+    let mut extras = Extras { truth_log: Some(GroundTruthLog::new(10)), publish_ground_truth: true, first_tick: 200, ..Default::default() };
     let report = lockstep::run_with(&session, &cfg(team, 5000), &mut plant, &mut extras, stop_rx.clone()).await.unwrap();
     stop_tx.send(true).unwrap();
     let counters = agent.await.unwrap().unwrap();
@@ -84,7 +84,7 @@ async fn default_robot_stands_5_s_under_its_agent() {
     assert!((report.sim_time - 5.0).abs() < 1e-9);
     assert!(counters.applied >= 5200 && counters.rejected == 0, "{counters:?}");
     assert!(sent >= 5200);
-    let rec = extras.recorder.unwrap();
+    let rec = extras.truth_log.unwrap();
     assert_eq!(rec.records.len(), 500);
     let (mut dz, mut tilt) = (0.0f64, 0.0f64);
     for g in &rec.records {
@@ -117,12 +117,12 @@ async fn an_agent_alone_holds_its_robot_standing() {
     let (stop_tx, stop_rx) = watch::channel(false);
     let agent = spawn_agent(&session, AgentConfig::new(team, "r1"), stop_rx.clone());
     // The first tick waits for the agent's deadline (25 ms); the hold answers every tick after.
-    let mut extras = Extras { recorder: Some(Recorder::new(10)), ..Default::default() };
+    let mut extras = Extras { truth_log: Some(GroundTruthLog::new(10)), ..Default::default() };
     lockstep::run_with(&session, &cfg(team, 2000), &mut plant, &mut extras, stop_rx.clone()).await.unwrap();
     stop_tx.send(true).unwrap();
     let counters = agent.await.unwrap().unwrap();
     assert_eq!((counters.applied, counters.safe_mode_entries), (0, 1), "{counters:?}");
-    let rec = extras.recorder.unwrap();
+    let rec = extras.truth_log.unwrap();
     // From the first recorded tick (the robot as the hold found it) to the end of 2 s.
     let z0 = rec.records[0].torsos[0].pose.position[2];
     let (mut sink, mut tilt) = (0.0f64, 0.0f64);
@@ -155,13 +155,13 @@ async fn pair_run(team: &str, seed: u64, ticks: u64) -> (Vec<f64>, Vec<f64>) {
     let rx = stop_rx.clone();
     let t = team.to_string();
     let coord = tokio::spawn(async move { standing::serve(&s, &t, ctl, true, rx).await });
-    let mut extras = Extras { recorder: Some(Recorder::new(1)), ..Default::default() };
+    let mut extras = Extras { truth_log: Some(GroundTruthLog::new(1)), ..Default::default() };
     lockstep::run_with(&session, &cfg(team, ticks), &mut plant, &mut extras, stop_rx).await.unwrap();
     stop_tx.send(true).unwrap();
     coord.await.unwrap().unwrap();
     session.close().await.unwrap();
     let mut traj = Vec::new();
-    for g in extras.recorder.unwrap().records {
+    for g in extras.truth_log.unwrap().records {
         for b in g.object.iter().chain(&g.torsos) {
             traj.extend(b.pose.position);
             traj.extend(b.pose.orientation);
@@ -265,7 +265,7 @@ async fn a_perturbation_from_the_key_pushes_the_object() {
     let s = session.clone();
     let rx = stop_rx.clone();
     let run = tokio::spawn(async move {
-        let mut extras = Extras { perturbation_key: true, recorder: Some(Recorder::new(1)), ..Default::default() };
+        let mut extras = Extras { perturbation_key: true, truth_log: Some(GroundTruthLog::new(1)), ..Default::default() };
         lockstep::run_with(&s, &cfg(team, 500), &mut plant, &mut extras, rx).await.map(|_| extras)
     });
     tokio::time::sleep(Duration::from_millis(300)).await;
@@ -282,7 +282,7 @@ async fn a_perturbation_from_the_key_pushes_the_object() {
     stop_tx.send(true).unwrap();
     coord.await.unwrap().unwrap();
     assert_eq!((extras.perturbations_taken, extras.perturbations_refused), (1, 1));
-    let rec = extras.recorder.unwrap();
+    let rec = extras.truth_log.unwrap();
     let x0 = rec.records.first().unwrap().object.as_ref().unwrap().pose.position[0];
     let x1 = rec.records.last().unwrap().object.as_ref().unwrap().pose.position[0];
     assert!(x1 - x0 > 0.05, "pushed object moved {} m", x1 - x0);

@@ -5,7 +5,7 @@ use nalgebra::{DMatrix, DVector};
 use protocol::{DynamicsTerms, Header, Pose, RobotDescription, RobotState};
 use rand::{Rng, SeedableRng};
 use robot_agent::dynamics_source::robot_description;
-use robot_agent::terms::{empty_terms, ContactSet, TermsBuilder};
+use robot_agent::terms::{empty_terms, ActiveContacts, TermsBuilder};
 use robot_model::{default_robot_path, Robot};
 
 pub const TEAM: &str = "t";
@@ -42,10 +42,10 @@ impl Fixture {
 
     /// Terms of robot `id` at `(q, v)` with every foot in stance and the hand in grasp.
     pub fn terms(&mut self, id: &str, q: &DVector<f64>, v: &DVector<f64>, tick: u64) -> DynamicsTerms {
-        self.terms_with(id, q, v, tick, &ContactSet::all_stance(&self.robot))
+        self.terms_with(id, q, v, tick, &ActiveContacts::all_stance(&self.robot))
     }
 
-    pub fn terms_with(&mut self, id: &str, q: &DVector<f64>, v: &DVector<f64>, tick: u64, contacts: &ContactSet) -> DynamicsTerms {
+    pub fn terms_with(&mut self, id: &str, q: &DVector<f64>, v: &DVector<f64>, tick: u64, contacts: &ActiveContacts) -> DynamicsTerms {
         let state = RobotState {
             header: Header::new(TEAM, Some(id), tick, 0),
             base_pose: Pose { position: [q[0], q[1], q[2]], orientation: [q[3], q[4], q[5], q[6]] },
@@ -168,8 +168,8 @@ pub struct Case {
 impl Case {
     /// Robot `k`'s contacts: every foot in stance but robot 0's first with `swing`, the hand
     /// in grasp with `grasp`.
-    pub fn contacts(&self, fx: &Fixture, k: usize) -> ContactSet {
-        let mut set = ContactSet::all_stance(&fx.robot);
+    pub fn contacts(&self, fx: &Fixture, k: usize) -> ActiveContacts {
+        let mut set = ActiveContacts::all_stance(&fx.robot);
         set.stance[0] = !(self.swing && k == 0);
         set.hand_in_grasp = self.grasp;
         set

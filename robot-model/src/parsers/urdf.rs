@@ -219,19 +219,80 @@ impl ModelBuilder {
             children[j.parent].push(ji);
         }
         let floating = floating == FloatingBase::Yes;
-        let mut bodies: Vec<Body> = Vec::new();
-        let mut frames: Vec<Frame> = Vec::new();
-        let mut joint_names = Vec::new();
-        let mut lower = Vec::new();
-        let mut upper = Vec::new();
-        let mut vel = Vec::new();
-        let mut eff = Vec::new();
-        let mut actuated = Vec::new();
-        let (mut nq, mut nv) = (0usize, 0usize);
+        let mut t = Tables::with_root(&self.links[self.root], floating);
 
-        let root = &self.links[self.root];
+        // iterative depth-first traversal (no recursion on outside input): entries are
+        // (joint, parent body, parent body -> joint's parent link, parent link's frame);
+        // children are pushed in reverse so that they are visited in file order
+        let mut stack: Vec<(usize, usize, SE3, FrameId)> = children[self.root].iter().rev().map(|&ji| (ji, 0, SE3::identity(), 0)).collect();
+        while let Some((ji, body, b_m_l, parent_frame)) = stack.pop() {
+            let j = &self.joints[ji];
+            let child = &self.links[j.child];
+            let b_m_c = b_m_l.compose(&j.origin);
+            let (child_body, child_placement) = match j.kind {
+                JointKind::Fixed => t.merge_fixed(body, b_m_c, child, parent_frame),
+                kind => t.add_moving(kind, j, body, b_m_c, child, parent_frame),
+            };
+            let child_frame = t.frames.len() - 1;
+            for &cj in children[j.child].iter().rev() {
+                stack.push((cj, child_body, child_placement, child_frame));
+            }
+        }
+
+        let frame_index = frame_index(&t.frames)?;
+        let total_mass = self.links.iter().map(|l| l.inertia.mass).sum();
+        tracing::debug!(robot = %self.name, nq = t.nq, nv = t.nv, bodies = t.bodies.len(), frames = t.frames.len(), total_mass, "dynamics model built");
+        Ok(Model {
+            name: self.name.clone(),
+            bodies: t.bodies,
+            frames: t.frames,
+            frame_index,
+            floating_base: floating,
+            nq: t.nq,
+            nv: t.nv,
+            joint_names: t.joint_names,
+            lower_position_limit: t.lower.into(),
+            upper_position_limit: t.upper.into(),
+            velocity_limit: t.vel.into(),
+            effort_limit: t.eff.into(),
+            actuated: t.actuated,
+            total_mass,
+            gravity: Vector3::from(GRAVITY),
+        })
+    }
+}
+
+/// The model's tables as [`ModelBuilder::build`] fills them, body by body in depth-first order.
+struct Tables {
+    bodies: Vec<Body>,
+    frames: Vec<Frame>,
+    joint_names: Vec<String>,
+    lower: Vec<f64>,
+    upper: Vec<f64>,
+    vel: Vec<f64>,
+    eff: Vec<f64>,
+    actuated: Vec<bool>,
+    nq: usize,
+    nv: usize,
+}
+
+impl Tables {
+    /// The root body (on a free joint when `floating`, else fixed to the world) and its frame.
+    fn with_root(root: &LinkDesc, floating: bool) -> Self {
+        let mut t = Tables {
+            bodies: Vec::new(),
+            frames: Vec::new(),
+            joint_names: Vec::new(),
+            lower: Vec::new(),
+            upper: Vec::new(),
+            vel: Vec::new(),
+            eff: Vec::new(),
+            actuated: Vec::new(),
+            nq: 0,
+            nv: 0,
+        };
         let root_joint = if floating { JointType::Free } else { JointType::Fixed };
-        bodies.push(Body {
+        t.bodies.push(Body {
             name: root.name.clone(),
             joint_name: if floating { "base".into() } else { String::new() },
             parent: None,
@@ -243,97 +304,73 @@ impl ModelBuilder {
             support: (0..root_joint.nv()).collect(),
         });
         if floating {
-            nq = 7;
-            nv = 6;
-            lower.extend([f64::NEG_INFINITY; 3]);
-            upper.extend([f64::INFINITY; 3]);
-            lower.extend([-1.0; 4]);
-            upper.extend([1.0; 4]);
-            vel.extend([f64::INFINITY; 6]);
-            eff.extend([f64::INFINITY; 6]);
-            actuated.extend([false; 6]);
+            t.nq = 7;
+            t.nv = 6;
+            t.lower.extend([f64::NEG_INFINITY; 3]);
+            t.upper.extend([f64::INFINITY; 3]);
+            t.lower.extend([-1.0; 4]);
+            t.upper.extend([1.0; 4]);
+            t.vel.extend([f64::INFINITY; 6]);
+            t.eff.extend([f64::INFINITY; 6]);
+            t.actuated.extend([false; 6]);
         }
-        frames.push(Frame { name: root.name.clone(), body: 0, placement: SE3::identity(), kind: FrameKind::Body, parent_frame: None });
-
-        // iterative depth-first traversal (no recursion on outside input): entries are
-        // (joint, parent body, parent body -> joint's parent link, parent link's frame);
-        // children are pushed in reverse so that they are visited in file order
-        let mut stack: Vec<(usize, usize, SE3, FrameId)> = children[self.root].iter().rev().map(|&ji| (ji, 0, SE3::identity(), 0)).collect();
-        while let Some((ji, body, b_m_l, parent_frame)) = stack.pop() {
-            let j = &self.joints[ji];
-            let child = &self.links[j.child];
-            let b_m_c = b_m_l.compose(&j.origin);
-            let (child_body, child_placement) = match j.kind {
-                JointKind::Fixed => {
-                    // lump the child's inertia into the body (Featherstone eq. 2.71: I = sum X* I X)
-                    let lumped = b_m_c.act_inertia(&child.inertia);
-                    bodies[body].inertia = bodies[body].inertia.add(&lumped);
-                    frames.push(Frame { name: child.name.clone(), body, placement: b_m_c, kind: FrameKind::FixedLink, parent_frame: Some(parent_frame) });
-                    (body, b_m_c)
-                }
-                kind => {
-                    let joint = match kind {
-                        JointKind::Prismatic => JointType::Prismatic { axis: j.axis },
-                        _ => JointType::Revolute { axis: j.axis },
-                    };
-                    let mut support = bodies[body].support.clone();
-                    support.push(nv);
-                    bodies.push(Body {
-                        name: child.name.clone(),
-                        joint_name: j.name.clone(),
-                        parent: Some(body),
-                        joint,
-                        placement: b_m_c,
-                        inertia: child.inertia,
-                        idx_q: nq,
-                        idx_v: nv,
-                        support,
-                    });
-                    nq += 1;
-                    nv += 1;
-                    joint_names.push(j.name.clone());
-                    lower.push(j.lower);
-                    upper.push(j.upper);
-                    vel.push(j.velocity);
-                    eff.push(j.effort);
-                    actuated.push(j.effort > 0.0);
-                    let nb = bodies.len() - 1;
-                    frames.push(Frame { name: child.name.clone(), body: nb, placement: SE3::identity(), kind: FrameKind::Body, parent_frame: Some(parent_frame) });
-                    (nb, SE3::identity())
-                }
-            };
-            let child_frame = frames.len() - 1;
-            for &cj in children[j.child].iter().rev() {
-                stack.push((cj, child_body, child_placement, child_frame));
-            }
-        }
-
-        let mut frame_index = HashMap::new();
-        for (i, f) in frames.iter().enumerate() {
-            if frame_index.insert(f.name.clone(), i).is_some() {
-                return Err(ModelError::DuplicateName { kind: "frame", name: f.name.clone() });
-            }
-        }
-        let total_mass = self.links.iter().map(|l| l.inertia.mass).sum();
-        tracing::debug!(robot = %self.name, nq, nv, bodies = bodies.len(), frames = frames.len(), total_mass, "dynamics model built");
-        Ok(Model {
-            name: self.name.clone(),
-            bodies,
-            frames,
-            frame_index,
-            floating_base: floating,
-            nq,
-            nv,
-            joint_names,
-            lower_position_limit: lower.into(),
-            upper_position_limit: upper.into(),
-            velocity_limit: vel.into(),
-            effort_limit: eff.into(),
-            actuated,
-            total_mass,
-            gravity: Vector3::from(GRAVITY),
-        })
+        t.frames.push(Frame { name: root.name.clone(), body: 0, placement: SE3::identity(), kind: FrameKind::Body, parent_frame: None });
+        t
     }
+
+    /// A fixed joint: the child link's inertia is lumped into `body` and the link becomes a
+    /// frame of it at `b_m_c`. Returns the body and placement the link's children hang from.
+    fn merge_fixed(&mut self, body: usize, b_m_c: SE3, child: &LinkDesc, parent_frame: FrameId) -> (usize, SE3) {
+        // lump the child's inertia into the body (Featherstone eq. 2.71: I = sum X* I X)
+        let lumped = b_m_c.act_inertia(&child.inertia);
+        self.bodies[body].inertia = self.bodies[body].inertia.add(&lumped);
+        self.frames.push(Frame { name: child.name.clone(), body, placement: b_m_c, kind: FrameKind::FixedLink, parent_frame: Some(parent_frame) });
+        (body, b_m_c)
+    }
+
+    /// A moving joint `j` (of `kind`): a new body, child of `body` at `b_m_c`, with one
+    /// configuration and one velocity coordinate. Returns the new body and the identity.
+    fn add_moving(&mut self, kind: JointKind, j: &JointDesc, body: usize, b_m_c: SE3, child: &LinkDesc, parent_frame: FrameId) -> (usize, SE3) {
+        let joint = match kind {
+            JointKind::Prismatic => JointType::Prismatic { axis: j.axis },
+            _ => JointType::Revolute { axis: j.axis },
+        };
+        let mut support = self.bodies[body].support.clone();
+        support.push(self.nv);
+        self.bodies.push(Body {
+            name: child.name.clone(),
+            joint_name: j.name.clone(),
+            parent: Some(body),
+            joint,
+            placement: b_m_c,
+            inertia: child.inertia,
+            idx_q: self.nq,
+            idx_v: self.nv,
+            support,
+        });
+        self.nq += 1;
+        self.nv += 1;
+        self.joint_names.push(j.name.clone());
+        self.lower.push(j.lower);
+        self.upper.push(j.upper);
+        self.vel.push(j.velocity);
+        self.eff.push(j.effort);
+        self.actuated.push(j.effort > 0.0);
+        let nb = self.bodies.len() - 1;
+        self.frames.push(Frame { name: child.name.clone(), body: nb, placement: SE3::identity(), kind: FrameKind::Body, parent_frame: Some(parent_frame) });
+        (nb, SE3::identity())
+    }
+}
+
+/// Frame ids by name; every frame name once.
+fn frame_index(frames: &[Frame]) -> Result<HashMap<String, FrameId>, ModelError> {
+    let mut frame_index = HashMap::new();
+    for (i, f) in frames.iter().enumerate() {
+        if frame_index.insert(f.name.clone(), i).is_some() {
+            return Err(ModelError::DuplicateName { kind: "frame", name: f.name.clone() });
+        }
+    }
+    Ok(frame_index)
 }
 
 /// Inertia of a URDF link in the link frame.

@@ -1,0 +1,103 @@
+//! What the lockstep and real-time loops send each tick: every robot's state, and around each
+//! physics step the perturbations in and the ground truth out.
+
+use protocol::keys::{self, RobotTopic};
+use protocol::transport::{self, decode_sample, Qos, TypedPublisher};
+use protocol::{GroundTruth, PerturbationRequest, RobotState};
+use zenoh::Session;
+
+use super::config::{BridgeError, Extras};
+use crate::plant::{empty_state, Plant};
+
+/// What the lockstep and real-time loops do around every physics step: take the perturbation
+/// requests that arrived on the Zenoh key, step the plant, then publish and record the ground
+/// truth, as [`Extras`] asks.
+pub(crate) struct TickSide {
+    truth_pub: Option<TypedPublisher<GroundTruth>>,
+    perturbations: Option<transport::SampleQueue>,
+    truth: GroundTruth,
+}
+
+impl TickSide {
+    pub(crate) async fn open(session: &Session, team: &str, extras: &Extras) -> Result<Self, BridgeError> {
+        let truth_pub = if extras.publish_ground_truth {
+            Some(TypedPublisher::<GroundTruth>::declare(session, keys::ground_truth(team)?, Qos::Telemetry).await?)
+        } else {
+            None
+        };
+        let perturbations = if extras.perturbation_key { Some(transport::subscribe(session, keys::perturbation(team)?).await?) } else { None };
+        Ok(TickSide { truth_pub, perturbations, truth: crate::ground_truth::empty(team) })
+    }
+
+    /// The loop timing the next ground truth carries, one entry per robot (made on first use;
+    /// the real-time loop fills it every tick, lockstep never asks for it).
+    pub(crate) fn loop_timing(&mut self, robots: &[String]) -> &mut [protocol::LoopTiming] {
+        let t = &mut self.truth.loop_timing;
+        if t.len() != robots.len() || t.iter().zip(robots).any(|(a, r)| a.robot != *r) {
+            *t = robots.iter().map(|r| protocol::LoopTiming { robot: r.clone(), latency_us: None, applied_tick: None, late: 0 }).collect();
+        }
+        t
+    }
+
+    /// Perturbations in, one plant step, ground truth out.
+    pub(crate) async fn step(&mut self, plant: &mut impl Plant, team: &str, tick: u64, extras: &mut Extras) -> Result<(), BridgeError> {
+        if let Some(q) = &self.perturbations {
+            while let Ok(Some(sample)) = q.try_recv() {
+                match decode_sample::<PerturbationRequest>(&sample).map_err(|e| e.to_string()).and_then(|r| plant.perturb(&r)) {
+                    Ok(()) => extras.perturbations_taken += 1,
+                    Err(e) => {
+                        extras.perturbations_refused += 1;
+                        tracing::warn!("refused perturbation: {e}");
+                    }
+                }
+            }
+        }
+        plant.step();
+        if (self.truth_pub.is_some() || extras.truth_log.is_some()) && plant.ground_truth(team, tick, &mut self.truth) {
+            if let Some(p) = self.truth_pub.as_mut() {
+                p.put(&self.truth).await?;
+            }
+            if let Some(r) = extras.truth_log.as_mut() {
+                r.offer(&self.truth);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Every robot's state publisher and reused state message, for the lockstep and real-time loops.
+pub(crate) struct StateOut {
+    pubs: Vec<TypedPublisher<RobotState>>,
+    states: Vec<RobotState>,
+}
+
+impl StateOut {
+    pub(crate) async fn declare(session: &Session, team: &str, robots: &[String]) -> Result<Self, BridgeError> {
+        let mut out = StateOut { pubs: Vec::new(), states: Vec::new() };
+        for r in robots {
+            let key = keys::robot(team, r, RobotTopic::State)?;
+            out.pubs.push(TypedPublisher::<RobotState>::declare(session, key, Qos::HotPath).await?);
+            out.states.push(empty_state(team, r));
+        }
+        Ok(out)
+    }
+
+    /// Fill every robot's state of `tick` from the plant and publish it.
+    pub(crate) async fn publish(&mut self, plant: &impl Plant, tick: u64) -> Result<(), BridgeError> {
+        let now = protocol::wall_clock_ns();
+        for (i, s) in self.states.iter_mut().enumerate() {
+            plant.state(i, s);
+            s.header.tick = tick;
+            s.header.stamp_ns = now;
+        }
+        self.republish().await
+    }
+
+    /// Publish the last states again, unchanged.
+    pub(crate) async fn republish(&mut self) -> Result<(), BridgeError> {
+        for (p, s) in self.pubs.iter_mut().zip(&self.states) {
+            p.put(s).await?;
+        }
+        Ok(())
+    }
+}
