@@ -1,10 +1,10 @@
 //! Reference trajectories of the scenarios: holds, sinusoids, circles and sequences of them,
 //! for positions and for orientations, with exact velocities and accelerations.
 //!
-//! A [`Motion`] is an offset `x(t)` in R^3 from the task's initial value with `x(0) = 0`, so a
-//! scenario starts without a jump. A position reference is `p0 + x(t)`; an orientation
-//! reference is `exp([x(t)]) R0` (`x` a rotation vector in the world frame), whose angular
-//! velocity is `J_l(x) xdot` (the left Jacobian of SO(3)).
+//! An [`OffsetMotion`] is an offset `x(t)` in R^3 from the task's initial value with
+//! `x(0) = 0`, so a scenario starts without a jump. A position reference is `p0 + x(t)`; an
+//! orientation reference is `exp([x(t)]) R0` (`x` a rotation vector in the world frame), whose
+//! angular velocity is `J_l(x) xdot` (the left Jacobian of SO(3)).
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use protocol::conventions::quat_to_wxyz;
@@ -31,13 +31,13 @@ impl Plane {
     }
 }
 
-/// One segment of a [`Motion::Sequence`].
+/// One segment of a [`OffsetMotion::Sequence`].
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Segment {
     /// Length of the segment, s.
     pub duration: f64,
-    pub motion: Motion,
+    pub motion: OffsetMotion,
     /// Fade the segment's offset in over its first `ramp` seconds and out over its last (a
     /// smooth window: the segment starts and ends with zero offset, velocity and
     /// acceleration), so that switching segments does not step the velocity. 0: no window.
@@ -81,7 +81,7 @@ impl Sample {
 /// An offset trajectory in R^3 with `x(0) = 0`.
 #[derive(Debug, Clone, PartialEq, Deserialize, Default)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
-pub enum Motion {
+pub enum OffsetMotion {
     /// Stay at the initial value.
     #[default]
     Hold,
@@ -124,13 +124,13 @@ impl Sample {
 #[error("{0}")]
 pub struct MotionError(pub String);
 
-impl Motion {
+impl OffsetMotion {
     /// Finite numbers, non-negative frequencies and durations.
     pub fn check(&self, what: &str) -> Result<(), MotionError> {
         let bad = |m: String| Err(MotionError(format!("{what}: {m}")));
         match self {
-            Motion::Hold => Ok(()),
-            Motion::Sinusoid { amplitude, frequency, phase } => {
+            OffsetMotion::Hold => Ok(()),
+            OffsetMotion::Sinusoid { amplitude, frequency, phase } => {
                 if amplitude.iter().chain(frequency).chain(phase).any(|x| !x.is_finite()) {
                     return bad("non-finite sinusoid parameter".into());
                 }
@@ -139,13 +139,13 @@ impl Motion {
                 }
                 Ok(())
             }
-            Motion::Circle { radius, frequency, phase, .. } => {
+            OffsetMotion::Circle { radius, frequency, phase, .. } => {
                 if ![*radius, *frequency, *phase].iter().all(|x| x.is_finite()) || *frequency < 0.0 {
                     return bad("circle radius, frequency and phase must be finite, frequency >= 0".into());
                 }
                 Ok(())
             }
-            Motion::Sequence { segments } => {
+            OffsetMotion::Sequence { segments } => {
                 for (i, s) in segments.iter().enumerate() {
                     if !(s.duration.is_finite() && s.duration > 0.0) {
                         return bad(format!("segment {i} has duration {}", s.duration));
@@ -163,8 +163,8 @@ impl Motion {
     /// The offset and its derivatives at time `t` (s, from the scenario start).
     pub fn sample(&self, t: f64) -> Sample {
         match self {
-            Motion::Hold => Sample::ZERO,
-            Motion::Sinusoid { amplitude, frequency, phase } => {
+            OffsetMotion::Hold => Sample::ZERO,
+            OffsetMotion::Sinusoid { amplitude, frequency, phase } => {
                 let mut s = Sample::ZERO;
                 for i in 0..3 {
                     let w = TAU * frequency[i];
@@ -175,7 +175,7 @@ impl Motion {
                 }
                 s
             }
-            Motion::Circle { radius, frequency, plane, phase } => {
+            OffsetMotion::Circle { radius, frequency, plane, phase } => {
                 let (u, v) = plane.axes();
                 let w = TAU * frequency;
                 let th = w * t + phase;
@@ -188,7 +188,7 @@ impl Motion {
                 s.xdd[v] = -radius * w * w * th.sin();
                 s
             }
-            Motion::Sequence { segments } => {
+            OffsetMotion::Sequence { segments } => {
                 let mut start = 0.0;
                 let mut base = Vector3::zeros();
                 for seg in segments {
@@ -212,10 +212,10 @@ impl Motion {
 #[serde(deny_unknown_fields)]
 pub struct PoseMotion {
     #[serde(default)]
-    pub position: Motion,
+    pub position: OffsetMotion,
     /// Rotation-vector offset in the world frame, rad.
     #[serde(default)]
-    pub orientation: Motion,
+    pub orientation: OffsetMotion,
 }
 
 impl PoseMotion {
@@ -275,20 +275,20 @@ fn orientation(sample: impl Fn(f64) -> Sample, t: f64) -> (Rotation3<f64>, Vecto
 mod tests {
     use super::*;
 
-    fn fd(m: &Motion, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+    fn fd(m: &OffsetMotion, t: f64) -> (Vector3<f64>, Vector3<f64>) {
         let h = 1e-6;
         let (a, b, c) = (m.sample(t - h).x, m.sample(t).x, m.sample(t + h).x);
         ((c - a) / (2.0 * h), (c - 2.0 * b + a) / (h * h))
     }
 
-    fn motions() -> Vec<Motion> {
+    fn motions() -> Vec<OffsetMotion> {
         vec![
-            Motion::Sinusoid { amplitude: [0.03, 0.0, 0.02], frequency: [0.25, 0.5, 0.4], phase: [0.0, 1.0, 1.5] },
-            Motion::Circle { radius: 0.05, frequency: 0.2, plane: Plane::Xz, phase: 0.3 },
-            Motion::Sequence {
+            OffsetMotion::Sinusoid { amplitude: [0.03, 0.0, 0.02], frequency: [0.25, 0.5, 0.4], phase: [0.0, 1.0, 1.5] },
+            OffsetMotion::Circle { radius: 0.05, frequency: 0.2, plane: Plane::Xz, phase: 0.3 },
+            OffsetMotion::Sequence {
                 segments: vec![
-                    Segment { duration: 2.0, motion: Motion::Sinusoid { amplitude: [0.1, 0.0, 0.0], frequency: [0.5, 0.0, 0.0], phase: [0.0; 3] }, ramp: 0.0 },
-                    Segment { duration: 1.5, motion: Motion::Circle { radius: 0.02, frequency: 1.0, plane: Plane::Xy, phase: 0.0 }, ramp: 0.4 },
+                    Segment { duration: 2.0, motion: OffsetMotion::Sinusoid { amplitude: [0.1, 0.0, 0.0], frequency: [0.5, 0.0, 0.0], phase: [0.0; 3] }, ramp: 0.0 },
+                    Segment { duration: 1.5, motion: OffsetMotion::Circle { radius: 0.02, frequency: 1.0, plane: Plane::Xy, phase: 0.0 }, ramp: 0.4 },
                 ],
             },
         ]
@@ -320,8 +320,8 @@ mod tests {
     #[test]
     fn orientation_reference_has_the_right_angular_velocity() {
         let pm = PoseMotion {
-            position: Motion::Hold,
-            orientation: Motion::Sinusoid { amplitude: [0.17, 0.1, 0.15], frequency: [0.3, 0.2, 0.25], phase: [0.0, 0.5, 1.0] },
+            position: OffsetMotion::Hold,
+            orientation: OffsetMotion::Sinusoid { amplitude: [0.17, 0.1, 0.15], frequency: [0.3, 0.2, 0.25], phase: [0.0, 0.5, 1.0] },
         };
         let r0 = UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3);
         let p0 = Vector3::new(1.0, 0.0, 0.6);
@@ -352,7 +352,7 @@ mod tests {
     fn ramps_start_and_end_segments_at_rest_with_exact_derivatives() {
         // A faded-in sinusoid starts with zero velocity and acceleration, reaches the plain
         // sinusoid after the ramp, and its derivatives match finite differences inside the ramp.
-        let pm = PoseMotion { position: Motion::Sinusoid { amplitude: [0.03, 0.0, 0.02], frequency: [0.2, 0.0, 0.25], phase: [0.0; 3] }, orientation: Motion::Hold };
+        let pm = PoseMotion { position: OffsetMotion::Sinusoid { amplitude: [0.03, 0.0, 0.02], frequency: [0.2, 0.0, 0.25], phase: [0.0; 3] }, orientation: OffsetMotion::Hold };
         let (p0, r0) = (Vector3::new(1.0, 0.0, 0.6), UnitQuaternion::identity());
         let r = pm.reference(&p0, &r0, 0.0, 1.0);
         assert!(r.twist.iter().chain(&r.acceleration).all(|x| x.abs() < 1e-15), "{r:?}");
@@ -375,9 +375,9 @@ mod tests {
 
     #[test]
     fn bad_parameters_are_named() {
-        let m = Motion::Sinusoid { amplitude: [f64::NAN, 0.0, 0.0], frequency: [1.0; 3], phase: [0.0; 3] };
+        let m = OffsetMotion::Sinusoid { amplitude: [f64::NAN, 0.0, 0.0], frequency: [1.0; 3], phase: [0.0; 3] };
         assert!(m.check("object.position").unwrap_err().0.contains("object.position"));
-        let m = Motion::Sequence { segments: vec![Segment { duration: -1.0, motion: Motion::Hold, ramp: 0.0 }] };
+        let m = OffsetMotion::Sequence { segments: vec![Segment { duration: -1.0, motion: OffsetMotion::Hold, ramp: 0.0 }] };
         assert!(m.check("x").is_err());
     }
 }

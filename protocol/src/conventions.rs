@@ -1,4 +1,4 @@
-//! Conventions every component shares (DESIGN.md §3). Fixed here, converted here.
+//! Conventions every component shares (docs/conventions.md). Fixed here, converted here.
 //!
 //! * SI units, world frame with z up, gravity [`GRAVITY`] m/s² along -z.
 //! * Quaternions are stored `(w, x, y, z)` (MuJoCo's order), unit norm.

@@ -75,7 +75,7 @@ impl Pose {
 // ---------------------------------------------------------------------------------------------
 // State source -> agent
 
-/// One robot's measured state at a tick (DESIGN.md §2 step 1).
+/// One robot's measured state at a tick (docs/architecture.md, one tick, step 1).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct RobotState {
@@ -159,7 +159,7 @@ pub struct FrameTerms {
     pub jdot_v: Vec<f64>,
 }
 
-/// A robot's dynamics terms at a tick (DESIGN.md §2 step 2).
+/// A robot's dynamics terms at a tick (docs/architecture.md, one tick, step 2).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct DynamicsTerms {
@@ -242,7 +242,7 @@ impl Validate for DynamicsTerms {
 // ---------------------------------------------------------------------------------------------
 // Coordinator -> agent -> torque sink
 
-/// Joint torques for one robot's actuated joints, velocity order (DESIGN.md §2 step 3); or,
+/// Joint torques for one robot's actuated joints, velocity order (docs/architecture.md, one tick, step 3); or,
 /// from the coordinator, the order to hold posture this tick.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]

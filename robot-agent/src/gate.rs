@@ -1,4 +1,4 @@
-//! Checks of an incoming torque command (DESIGN.md §2 step 4): robot id, tick (not older than
+//! Checks of an incoming torque command (docs/architecture.md, one tick, step 4): robot id, tick (not older than
 //! the last applied, not from the future), age against a deadline, size, finite numbers; then
 //! clamping to the torque limits with a report of which joints were clamped.
 

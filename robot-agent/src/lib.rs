@@ -1,7 +1,7 @@
 //! # robot-agent
 //!
 //! One robot of the team. It turns its measured state into the dynamics terms the coordinator
-//! needs (DESIGN.md §2 step 2), checks the torque commands it receives and hands them to the
+//! needs (docs/architecture.md, one tick, step 2), checks the torque commands it receives and hands them to the
 //! robot (step 4). The robot itself (URDF model, rigid-body algorithms, the description
 //! TOML) is the `robot-model` crate; this crate turns it into protocol messages and runs it.
 //!

@@ -1,4 +1,4 @@
-//! The dynamics terms a robot publishes each tick (DESIGN.md §2 step 2), computed from its
+//! The dynamics terms a robot publishes each tick (docs/architecture.md, one tick, step 2), computed from its
 //! model: `M`, `h`, and for the frames of its current contact set (stance feet, swing feet,
 //! hand, torso) the pose, the world-aligned Jacobian and `Jdot*v`.
 

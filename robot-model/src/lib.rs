@@ -17,7 +17,7 @@
 //!
 //! The default robot (`models/legged_manipulator.{urdf,toml}`) is at [`default_robot_path`].
 //!
-//! # Coordinates (DESIGN.md §3)
+//! # Coordinates (docs/conventions.md)
 //!
 //! * Units SI, world z up, gravity 9.81 m/s^2 along -z ([`GRAVITY`]).
 //! * Floating base: `q = [p_base (3, world); quaternion (w, x, y, z); joint positions]`,

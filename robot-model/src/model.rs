@@ -15,7 +15,7 @@ use crate::spatial::{Inertia, SE3};
 /// Index of a frame in [`Model::frames`].
 pub type FrameId = usize;
 
-/// Gravity used by the model: 9.81 m/s^2 along -z (DESIGN.md §3; the same number as
+/// Gravity used by the model: 9.81 m/s^2 along -z (docs/conventions.md; the same number as
 /// `protocol::conventions::GRAVITY`, which robot-agent's tests check).
 pub const GRAVITY: [f64; 3] = [0.0, 0.0, -9.81];
 

@@ -3,7 +3,7 @@
 //!
 //! Ordering everywhere is `[linear; angular]`, both for motions (velocity `v`, angular
 //! velocity `w`) and for forces (force `f`, moment `n`), as in Pinocchio and as the
-//! project's wrench convention `[force; moment]` (DESIGN.md §3).
+//! project's wrench convention `[force; moment]` (docs/conventions.md).
 //!
 //! A motion or force "at frame A" is expressed in A's axes and refers to A's origin: the
 //! linear part of a motion is the velocity of the point coinciding with A's origin.

@@ -17,7 +17,7 @@ use thiserror::Error;
 use crate::driver::Records;
 use crate::evaluate::{self, Evaluation};
 use crate::plan::{self, Plan};
-use planner::reference::Motion;
+use planner::reference::OffsetMotion;
 use crate::report::{self, ReportError, TimeSeries};
 use crate::run::{self, RunOptions};
 use crate::scenario::Scenario;
@@ -83,14 +83,14 @@ pub enum Scaling {
 }
 
 /// Scale `m` by `k` (see [`Scaling`]).
-pub fn scale_motion(m: &mut Motion, k: f64, what: Scaling) {
+pub fn scale_motion(m: &mut OffsetMotion, k: f64, what: Scaling) {
     match (m, what) {
-        (Motion::Hold, _) => {}
-        (Motion::Sinusoid { amplitude, .. }, Scaling::Amplitude) => amplitude.iter_mut().for_each(|a| *a *= k),
-        (Motion::Sinusoid { frequency, .. }, Scaling::Speed) => frequency.iter_mut().for_each(|f| *f *= k),
-        (Motion::Circle { radius, .. }, Scaling::Amplitude) => *radius *= k,
-        (Motion::Circle { frequency, .. }, Scaling::Speed) => *frequency *= k,
-        (Motion::Sequence { segments }, _) => {
+        (OffsetMotion::Hold, _) => {}
+        (OffsetMotion::Sinusoid { amplitude, .. }, Scaling::Amplitude) => amplitude.iter_mut().for_each(|a| *a *= k),
+        (OffsetMotion::Sinusoid { frequency, .. }, Scaling::Speed) => frequency.iter_mut().for_each(|f| *f *= k),
+        (OffsetMotion::Circle { radius, .. }, Scaling::Amplitude) => *radius *= k,
+        (OffsetMotion::Circle { frequency, .. }, Scaling::Speed) => *frequency *= k,
+        (OffsetMotion::Sequence { segments }, _) => {
             for seg in segments {
                 scale_motion(&mut seg.motion, k, what);
                 if what == Scaling::Speed {
@@ -311,26 +311,26 @@ mod tests {
 
     #[test]
     fn a_sweep_scales_amplitudes_or_speeds_and_nothing_else() {
-        let sin = Motion::Sinusoid { amplitude: [0.03, 0.0, 0.02], frequency: [0.2, 0.0, 0.25], phase: [0.1, 0.0, 0.0] };
-        let circle = Motion::Circle { radius: 0.04, frequency: 0.2, plane: Plane::Xz, phase: 0.0 };
-        let seq = Motion::Sequence { segments: vec![Segment { duration: 2.0, motion: sin.clone(), ramp: 0.5 }] };
+        let sin = OffsetMotion::Sinusoid { amplitude: [0.03, 0.0, 0.02], frequency: [0.2, 0.0, 0.25], phase: [0.1, 0.0, 0.0] };
+        let circle = OffsetMotion::Circle { radius: 0.04, frequency: 0.2, plane: Plane::Xz, phase: 0.0 };
+        let seq = OffsetMotion::Sequence { segments: vec![Segment { duration: 2.0, motion: sin.clone(), ramp: 0.5 }] };
         let mut m = sin.clone();
         scale_motion(&mut m, 2.0, Scaling::Amplitude);
-        assert_eq!(m, Motion::Sinusoid { amplitude: [0.06, 0.0, 0.04], frequency: [0.2, 0.0, 0.25], phase: [0.1, 0.0, 0.0] });
+        assert_eq!(m, OffsetMotion::Sinusoid { amplitude: [0.06, 0.0, 0.04], frequency: [0.2, 0.0, 0.25], phase: [0.1, 0.0, 0.0] });
         let mut m = sin.clone();
         scale_motion(&mut m, 2.0, Scaling::Speed);
-        assert_eq!(m, Motion::Sinusoid { amplitude: [0.03, 0.0, 0.02], frequency: [0.4, 0.0, 0.5], phase: [0.1, 0.0, 0.0] });
+        assert_eq!(m, OffsetMotion::Sinusoid { amplitude: [0.03, 0.0, 0.02], frequency: [0.4, 0.0, 0.5], phase: [0.1, 0.0, 0.0] });
         let mut m = circle;
         scale_motion(&mut m, 3.0, Scaling::Amplitude);
-        assert!(matches!(m, Motion::Circle { radius, frequency, .. } if (radius - 0.12).abs() < 1e-15 && frequency == 0.2));
+        assert!(matches!(m, OffsetMotion::Circle { radius, frequency, .. } if (radius - 0.12).abs() < 1e-15 && frequency == 0.2));
         let mut m = seq;
         scale_motion(&mut m, 2.0, Scaling::Speed);
-        let Motion::Sequence { segments } = m else { panic!("a sequence") };
+        let OffsetMotion::Sequence { segments } = m else { panic!("a sequence") };
         assert_eq!((segments[0].duration, segments[0].ramp), (1.0, 0.25));
-        assert!(matches!(segments[0].motion, Motion::Sinusoid { frequency, .. } if frequency == [0.4, 0.0, 0.5]));
-        let mut hold = Motion::Hold;
+        assert!(matches!(segments[0].motion, OffsetMotion::Sinusoid { frequency, .. } if frequency == [0.4, 0.0, 0.5]));
+        let mut hold = OffsetMotion::Hold;
         scale_motion(&mut hold, 5.0, Scaling::Speed);
-        assert_eq!(hold, Motion::Hold);
+        assert_eq!(hold, OffsetMotion::Hold);
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! # sim-bridge
 //!
 //! Stands in for the robots' hardware: it publishes each robot's state every control tick
-//! and applies the torques that come back (DESIGN.md §2 steps 1 and 5).
+//! and applies the torques that come back (docs/architecture.md, one tick, steps 1 and 5).
 //!
 //! * [`plant`]: what is simulated (the [`plant::Plant`] trait).
 //! * [`lockstep`]: the lockstep loop over Zenoh: a tick advances only when every robot's

@@ -1,4 +1,4 @@
-//! The MuJoCo world of the team, built from the robots' own URDFs (DESIGN.md §5).
+//! The MuJoCo world of the team, built from the robots' own URDFs (docs/architecture.md).
 //!
 //! The robots come already loaded (`robot_model::Robot`, one `Arc` per description file,
 //! shared with the rest of the process): [`load_robots`] loads those of a [`WorldSpec`] when

@@ -41,14 +41,14 @@ impl Default for StandingGains {
 /// A force the hand applies to the held object (world frame): `squeeze` newtons along the
 /// palm normal plus `carry` newtons upward (a share of the object's weight).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct HandLoad {
+pub struct HandPush {
     pub squeeze: f64,
     pub carry: f64,
 }
 
 /// PD + stance-feet gravity compensation for one robot.
 pub struct StandingController {
-    hand: Option<(FrameId, HandLoad)>,
+    hand: Option<(FrameId, HandPush)>,
     robot: Arc<Robot>,
     data: Data,
     feet: Vec<FrameId>,
@@ -90,7 +90,7 @@ impl StandingController {
 
     /// Also push on a held object with the hand (feed-forward through the hand Jacobian, its
     /// reaction carried by the feet).
-    pub fn with_hand_load(mut self, load: HandLoad) -> Result<Self, String> {
+    pub fn with_hand_push(mut self, load: HandPush) -> Result<Self, String> {
         let f = self.robot.model.frame_id(&self.robot.hand_frame).map_err(|e| e.to_string())?;
         self.hand = Some((f, load));
         Ok(self)

@@ -7,7 +7,7 @@ use sim_bridge::mujoco_plant::MujocoPlant;
 use sim_bridge::plant::{empty_state, Plant};
 use sim_bridge::world::{load_robots, World, WorldSpec};
 use team_runner::placing::place_hands;
-use team_tests::standing::{HandLoad, StandingController, StandingGains};
+use team_tests::standing::{HandPush, StandingController, StandingGains};
 
 fn hold(squeeze: f64, seconds: f64) -> (f64, f64, usize, GroundTruthLog) {
     let mut spec = WorldSpec::paper_pair();
@@ -21,7 +21,7 @@ fn hold(squeeze: f64, seconds: f64) -> (f64, f64, usize, GroundTruthLog) {
             let off = r.robot.model.nq - r.robot.joints();
             StandingController::new(r.robot.clone(), Some(r.initial_q[off..].to_vec()), StandingGains::default())
                 .unwrap()
-                .with_hand_load(HandLoad { squeeze, carry: 9.81 / 2.0 })
+                .with_hand_push(HandPush { squeeze, carry: 9.81 / 2.0 })
                 .unwrap()
         })
         .collect();

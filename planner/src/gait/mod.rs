@@ -1,4 +1,4 @@
-//! The static walk (crawl) planner (DESIGN.md §10): one foot in swing at a time, the torso
+//! The static walk (crawl) planner (`docs/walking.md`): one foot in swing at a time, the torso
 //! shifted before each lift-off so that the centre of pressure (where the ground carries the
 //! robot's weight and the load in its hand) lies inside the triangle of the other three feet
 //! with a margin, the foot unloaded by a force ramp, swung with a lift
@@ -74,9 +74,9 @@ pub struct GaitParams {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ShiftRule {
-    /// Towards the incentre of the support triangle until the conditions hold (the rule
-    /// before 2026-11-27: its shifts are longer and mostly fore and aft, and three-robot
-    /// teams rocked onto a diagonal with it; README, "Known limits").
+    /// Towards the incentre of the support triangle until the conditions hold: its shifts are
+    /// longer and mostly fore and aft, and three-robot teams rocked onto a diagonal with it
+    /// (README, "Known limits").
     Incentre,
     /// The shortest shift that meets them ([`support::least_shift`]): across the triangle's
     /// nearest edge, often mostly sideways, rather than towards its incentre.

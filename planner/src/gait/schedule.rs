@@ -38,10 +38,10 @@ pub struct Step {
     pub cop_margin: Option<f64>,
 }
 
-/// A pose target: pose, twist and acceleration (world, `[linear; angular]`).
-pub type PoseTarget = (Isometry3<f64>, [f64; 6], [f64; 6]);
-/// A point target: position, velocity and acceleration (world).
-pub type PointTarget = (Vector3<f64>, [f64; 3], [f64; 3]);
+/// A planned pose: pose, twist and acceleration (world, `[linear; angular]`).
+pub type PlannedPose = (Isometry3<f64>, [f64; 6], [f64; 6]);
+/// A planned point: position, velocity and acceleration (world).
+pub type PlannedPoint = (Vector3<f64>, [f64; 3], [f64; 3]);
 
 /// A blend from `from` to `to` over `[t0, t1]`.
 #[derive(Debug, Clone)]
@@ -69,7 +69,7 @@ impl Track {
         self.moves.push(Move { t0, t1, from, to });
     }
 
-    fn at(&self, t: f64) -> PoseTarget {
+    fn at(&self, t: f64) -> PlannedPose {
         let k = self.moves.partition_point(|m| m.t0 <= t);
         let Some(m) = k.checked_sub(1).map(|k| &self.moves[k]) else { return (self.start, [0.0; 6], [0.0; 6]) };
         let dur = m.t1 - m.t0;
@@ -407,12 +407,12 @@ impl GaitPlan {
     }
 
     /// Robot `i`'s torso target at `t`.
-    pub fn torso(&self, i: usize, t: f64) -> PoseTarget {
+    pub fn torso(&self, i: usize, t: f64) -> PlannedPose {
         self.torsos[i].at(t)
     }
 
     /// The object's target at `t`, when the plan moves it.
-    pub fn object(&self, t: f64) -> Option<PoseTarget> {
+    pub fn object(&self, t: f64) -> Option<PlannedPose> {
         self.object.as_ref().map(|o| o.at(t))
     }
 
@@ -425,7 +425,7 @@ impl GaitPlan {
 
     /// Robot `i`'s foot `k` target at `t`, from its first lift-off on: the swing, then the
     /// pressed touchdown point at rest (for a foot that lands late).
-    pub fn swing_foot(&self, i: usize, k: usize, t: f64) -> Option<PointTarget> {
+    pub fn swing_foot(&self, i: usize, k: usize, t: f64) -> Option<PlannedPoint> {
         let s = self.last_step(i, k, t)?;
         let pressed = s.to - Vector3::z() * self.params.touchdown_depth;
         if t >= s.touchdown {
@@ -499,7 +499,7 @@ impl GaitPlan {
     /// rest: its last step's pressed landing point, or, for a foot whose first step the halt
     /// cancelled, its start pressed. A foot that lifted anyway (a lift-off the halt did not
     /// reach in time) is brought back down there. `None` for a foot that never steps.
-    pub fn foot_after_halt(&self, i: usize, k: usize, t_h: f64) -> Option<PointTarget> {
+    pub fn foot_after_halt(&self, i: usize, k: usize, t_h: f64) -> Option<PlannedPoint> {
         let down = Vector3::z() * self.params.touchdown_depth;
         if let Some((p, _, _)) = self.swing_foot(i, k, t_h) {
             return Some((p, [0.0; 3], [0.0; 3]));

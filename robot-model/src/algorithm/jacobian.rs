@@ -1,5 +1,5 @@
 //! Frame Jacobians, LOCAL_WORLD_ALIGNED: at the frame origin, axes of the world, rows
-//! `[linear; angular]` (DESIGN.md §3). `[v_origin; omega] = J v`.
+//! `[linear; angular]` (docs/conventions.md). `[v_origin; omega] = J v`.
 //! Use after [`crate::forward_kinematics`] or [`crate::compute_all_terms`].
 
 use nalgebra::{Matrix3xX, Matrix6xX, Vector3};
