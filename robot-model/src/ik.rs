@@ -6,8 +6,8 @@
 //! position limits.
 //!
 //! [`solve_hand`] is the arm of a described robot: the hand frame, every joint that moves it.
-//! Where the hand should go (a face of the object) is planning, not IK: the runner's
-//! `grasp_plan` decides it.
+//! Where the hand should go (a face of the object) is planning, not IK:
+//! `planner::grasp` decides it.
 
 use nalgebra::{Matrix3, Matrix6, Matrix6xX, Rotation3, UnitQuaternion, Vector3, Vector6};
 use thiserror::Error;
