@@ -1,5 +1,4 @@
-//! Faults with the whole stack and MuJoCo in the loop (the hosts-and-faults issue, fault 1): a
-//! robot's agent dies mid-carry. The scenario's `[[faults]]` kills the agent's task at a tick
+//! Faults with the whole stack and MuJoCo in the loop. Fault 1: a robot's agent dies mid-carry. The scenario's `[[faults]]` kills the agent's task at a tick
 //! (`team_runner::faults`); its simulated robot is then unpowered (zero joint torques,
 //! `sim_bridge::lockstep::AgentLoss::Unpowered`) and falls where it stands. The coordinator
 //! learns of it from the agent's liveliness token and completes the tick without it. What
@@ -165,26 +164,33 @@ fn largest_step(records: &Records, robot: &str, from: u64, to: u64) -> (f64, u64
 }
 
 /// Fault 2: the coordinator dies mid-carry and a new one starts 0.2 s later. The agents hold
-/// their posture (its liveliness token gone for `COORDINATOR_GRACE`, the lockstep simulation
-/// waiting meanwhile; the hold carries the load the last
-/// command carried, so the object stays held), the new coordinator forms the team again (it
-/// waits for every robot of the plan), fits the object from the hands with the planned grasp,
-/// gets the references again from the driver, and the agents blend from their hold into its
-/// torques: no torque steps larger than the carry's own.
+/// their posture (its liveliness token gone for `COORDINATOR_GRACE`; the hold carries the load
+/// the last command carried, so the object stays held), the new coordinator forms the team
+/// again (it waits for every robot of the plan), fits the object from the hands with the
+/// planned grasp, gets the references again from the driver, and the agents blend from their
+/// hold into its torques: no torque steps larger than the carry's own.
+///
+/// During the outage the lockstep ticks run at the wall clock's pace, so the outage lasts, in
+/// ticks, what the restart took on the machine: 0.2 s, plus the new process's start-up and the
+/// agents' reconnection, which grow with the machine's load. The test judges the outage by the
+/// ticks it lasted: the object may be off its moving reference by as much as the reference
+/// travelled while nobody commanded it, and must be back on it once the new coordinator took
+/// over.
 fn coordinator_restart(distributed: bool, name: &str) {
     let fault = "faults=[{kind=\"coordinator-stops\",at=0.5,restart_after=0.2}]";
-    let (plan, m, records) = run_scenario_records("s4_object_circle.toml", &["duration=1.5", "settle=0.5", fault], distributed, name);
+    let (plan, m, records) = run_scenario_records("s4_object_circle.toml", &["duration=3.0", "settle=0.5", fault], distributed, name);
     let clock = &plan.references.clock;
     let (struck, back) = (clock.first_tick_at(0.5), clock.first_tick_at(0.7));
     let solved: Vec<u64> = records.diagnostics.iter().filter(|d| d.qp_status != protocol::QpStatus::NotRun).map(|d| d.header.tick).collect();
     assert!(solved.iter().all(|t| *t <= struck + 1 || *t >= back), "no tick solved while the coordinator was dead: {:?}", solved.iter().filter(|t| **t > struck + 1 && **t < back).collect::<Vec<_>>());
     let after: Vec<(u64, protocol::QpStatus)> = records.diagnostics.iter().filter(|d| d.header.tick > struck).map(|d| (d.header.tick, d.qp_status)).take(5).collect();
     let resumed = *solved.iter().find(|t| **t >= back).unwrap_or_else(|| panic!("the new coordinator solves ticks; diagnostics after the fault: {after:?}"));
-    println!("coordinator killed at tick {struck}, started again at {back}, solving from {resumed}");
-    // During the outage lockstep runs at the wall clock's pace (the agents answer with their
-    // hold) and waits for the new coordinator to be ready; a new process meets its agents as
-    // they reconnect (up to their 0.5 s retry period).
-    assert!(resumed < back + 1000, "the new coordinator took the team back within a second: tick {resumed}");
+    let end = plan.total_ticks();
+    let outage = ObjectOutage::measure(&plan, &records, struck, resumed);
+    println!("coordinator killed at tick {struck}, started again at {back}, solving from {resumed}: an outage of {:.3} s; {outage:?}", outage.seconds);
+    // The lockstep bridge gives a coordinator `DEFAULT_COORDINATOR_GRACE_TICKS` to come back;
+    // a second is left after it to judge the takeover.
+    assert!(resumed + clock.ticks_lasting(1.0) <= end, "the new coordinator took the team back with a second of the run left: tick {resumed} of {end}");
     for r in ["r1", "r2"] {
         let ticks: std::collections::BTreeSet<u64> = records.torques[r].iter().map(|(t, _)| *t).collect();
         let missing: Vec<u64> = (plan.references.clock.settle_ticks..plan.total_ticks()).filter(|t| !ticks.contains(t)).collect();
@@ -206,7 +212,55 @@ fn coordinator_restart(distributed: bool, name: &str) {
     for (r, t) in &m.torsos {
         assert!(t.position_max_m < 0.01, "torso {r} moved {} m", t.position_max_m);
     }
-    assert!(m.object.position_max_m < 0.05, "the object stays within 5 cm of its moving reference: {} m", m.object.position_max_m);
+    // Measured with outages of 0.20-0.37 s (two busy loops beside the run): the hold let the
+    // object sag 6.3-6.4 mm; the error peaked up to 6 mm above the reference's travel (16-29
+    // mm) and the sag together, catching up after the takeover, and was 1.7-1.9 mm over the
+    // last second.
+    assert!(outage.held_m < 0.01, "the held object stays near where the last command left it: it moved {:.4} m", outage.held_m);
+    assert!(outage.worst_m < outage.travel_m + outage.held_m + 0.01, "the object is off its reference by no more than the reference travelled and the hold sagged during the outage, and 1 cm catching up: {outage:?}");
+    assert!(outage.last_second_m < 0.005, "the new coordinator brought the object back onto its reference: {outage:?}");
+}
+
+/// The object around a coordinator's outage from tick `struck` to tick `resumed`, m.
+#[derive(Debug)]
+struct ObjectOutage {
+    /// Length of the outage, s.
+    seconds: f64,
+    /// How far the object's reference moved from where it was at `struck`.
+    travel_m: f64,
+    /// How far the object moved from where it was at `struck`, until `resumed`.
+    held_m: f64,
+    /// The largest error from its reference, from `struck` on.
+    worst_m: f64,
+    /// The largest error from its reference over the run's last second.
+    last_second_m: f64,
+}
+
+impl ObjectOutage {
+    fn measure(plan: &Plan, records: &Records, struck: u64, resumed: u64) -> ObjectOutage {
+        let clock = &plan.references.clock;
+        let at = |tick: u64| -> Option<(nalgebra::Vector3<f64>, nalgebra::Vector3<f64>)> {
+            let g = records.truth.iter().find(|g| g.header.tick == tick)?;
+            let measured = nalgebra::Vector3::from(g.object.as_ref()?.pose.position);
+            let reference = nalgebra::Vector3::from(plan.references.object_at(clock.scenario_time(tick)).pose.position);
+            Some((measured, reference))
+        };
+        let (p0, r0) = at(struck).expect("the object's ground truth at the fault");
+        let (mut out, end) = (ObjectOutage { seconds: (resumed - struck) as f64 * clock.dt(), travel_m: 0.0, held_m: 0.0, worst_m: 0.0, last_second_m: 0.0 }, plan.total_ticks());
+        let last_second = end.saturating_sub(clock.ticks_lasting(1.0));
+        for (p, r, tick) in (struck..end).filter_map(|t| at(t).map(|(p, r)| (p, r, t))) {
+            let error = (p - r).norm();
+            out.worst_m = out.worst_m.max(error);
+            if tick <= resumed {
+                out.travel_m = out.travel_m.max((r - r0).norm());
+                out.held_m = out.held_m.max((p - p0).norm());
+            }
+            if tick >= last_second {
+                out.last_second_m = out.last_second_m.max(error);
+            }
+        }
+        out
+    }
 }
 
 #[test]
@@ -238,7 +292,9 @@ fn an_agent_restarted_mid_carry_rejoins_the_team_beside_it() {
     let rejoined = records.diagnostics.iter().find(|d| d.header.tick > back && feet_of(d, "r3") > 0).map(|d| d.header.tick).expect("r3 back in the team's solution");
     println!("r3's agent killed at tick {struck}: solved without it from {without}; started again at {back}: in the team again from {rejoined}");
     assert!(without <= struck + 3, "noticed within 3 ticks");
-    assert!(rejoined < back + 500, "rejoined within 0.5 s of its start: tick {rejoined}");
+    // The lockstep loop does not wait for a robot whose agent left: how many ticks the new
+    // agent's start-up takes depends on the machine. Judged are the ticks after it rejoined.
+    assert!(rejoined + clock.ticks_lasting(0.5) <= plan.total_ticks(), "rejoined with half a second of the run left to judge: tick {rejoined}");
     for d in records.diagnostics.iter().filter(|d| d.header.tick >= rejoined) {
         assert!(!hand_of(d, "r3"), "tick {}: r3's hand stays out of the grasp", d.header.tick);
         assert!(hand_of(d, "r1") && hand_of(d, "r2"), "tick {}: r1 and r2 hold the object", d.header.tick);

@@ -116,8 +116,11 @@ impl LockstepConfig {
     }
 }
 
-/// [`LockstepConfig::coordinator_grace_ticks`] by default: half a second at 1 kHz.
-pub const DEFAULT_COORDINATOR_GRACE_TICKS: u64 = 500;
+/// [`LockstepConfig::coordinator_grace_ticks`] by default: three seconds at 1 kHz. A new
+/// coordinator process takes up to a second to be back on a loaded machine (start-up, then the
+/// agents' reconnection to the hub, up to their half-second retry period); the robots hold
+/// their posture meanwhile, and a team that stands can hold for longer than that.
+pub const DEFAULT_COORDINATOR_GRACE_TICKS: u64 = 3000;
 
 /// What a lockstep run did.
 #[derive(Debug, Clone, PartialEq)]

@@ -54,6 +54,8 @@ impl TickSide {
         }
         plant.step();
         if (self.truth_pub.is_some() || extras.truth_log.is_some()) && plant.ground_truth(team, tick, &mut self.truth) {
+            // The bridge's wall clock when the step was done (time stays the simulated time).
+            self.truth.header.stamp_ns = protocol::wall_clock_ns();
             if let Some(p) = self.truth_pub.as_mut() {
                 p.put(&self.truth).await?;
             }

@@ -3,5 +3,6 @@
 #![allow(dead_code)]
 
 pub mod certs;
+pub mod hosts;
 pub mod scenario;
 pub mod team;
