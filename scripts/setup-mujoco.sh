@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Provision libmujoco 3.17.0 for mujoco-rs (DESIGN.md §5).
+# Provision libmujoco 3.17.0 for mujoco-rs (how it is found: docs/testing.md).
 #
 # MuJoCo's own release host cannot be reached from our machines, so the library comes from
 # the PyPI wheel `mujoco==3.17.0`, which ships `mujoco/libmujoco.so.3.17.0` and the C headers
