@@ -42,6 +42,12 @@ pub trait TeamController: Send {
     fn ready(&self, _robot: &str) -> bool {
         true
     }
+    /// Whether `terms` fit the controller (sizes, its robot's description), checked as they
+    /// arrive: terms that do not are refused and their robot holds its posture for that tick,
+    /// instead of failing the whole team's tick.
+    fn check_terms(&self, _terms: &protocol::DynamicsTerms) -> Result<(), ControllerError> {
+        Ok(())
+    }
 }
 
 /// Why a controller could not produce torques for a tick, or could not be configured.

@@ -72,6 +72,20 @@ pub struct CoordinatorCounters {
     /// Commands sent again: a member sent the terms of the tick last solved with them again
     /// (its command was lost; `Service::answer_again`).
     pub repeated_commands: u64,
+    /// Messages refused as they arrived (terms, descriptions, references): undecodable, out of
+    /// range, or from another sender than their key's (`protocol::keys::check_sender`).
+    pub refused: u64,
+    /// What the last refusal was, naming the key and the error.
+    pub last_refusal: Option<String>,
+}
+
+impl CoordinatorCounters {
+    /// Count and log a message of kind `what` refused on `key`.
+    fn refuse(&mut self, what: &str, key: &str, e: &dyn std::fmt::Display) {
+        self.refused += 1;
+        tracing::warn!(key, "refused {what}: {e}");
+        self.last_refusal = Some(format!("{what} on {key}: {e}"));
+    }
 }
 
 /// The service's publishers, buffers and bookkeeping between ticks.
@@ -139,11 +153,11 @@ pub async fn run(
             }
             d = descriptions.recv_async() => {
                 let Ok(sample) = d else { break };
-                publish_status |= description(&sample, &mut described, controller.as_mut());
+                publish_status |= description(&sample, &mut described, controller.as_mut(), &mut svc.counters);
             }
             r = references.recv_async() => {
                 let Ok(sample) = r else { break };
-                svc.refs.take(&sample);
+                svc.refs.take(&sample, &mut svc.counters);
             }
             d = dynamics.recv_async() => {
                 let Ok(sample) = d else { break };
@@ -182,7 +196,7 @@ pub async fn run(
 /// A robot's description arrived in `sample`: handed to the controller; whether it is the
 /// robot's first (readiness may have changed: the status says so now, a lockstep bridge waits
 /// for it). Agents repeat their description every second: only the first is logged.
-fn description(sample: &zenoh::sample::Sample, described: &mut std::collections::BTreeSet<String>, controller: &mut dyn TeamController) -> bool {
+fn description(sample: &zenoh::sample::Sample, described: &mut std::collections::BTreeSet<String>, controller: &mut dyn TeamController, counters: &mut CoordinatorCounters) -> bool {
     match decode_sample::<RobotDescription>(sample) {
         Ok(desc) => {
             let first = described.insert(desc.header.robot_id().to_string());
@@ -195,7 +209,7 @@ fn description(sample: &zenoh::sample::Sample, described: &mut std::collections:
             first
         }
         Err(e) => {
-            tracing::warn!(key = %sample.key_expr(), "rejected description: {e}");
+            counters.refuse("description", sample.key_expr().as_str(), &e);
             false
         }
     }
@@ -300,29 +314,17 @@ impl<'a> Service<'a> {
                     next = None;
                     continue;
                 }
-                let before = self.roster.team().len();
-                let fresh = assembler.last_completed().is_none_or(|t| tick > t);
-                let outcome = match self.roster.admit(&robot, controller.ready(&robot), fresh) {
-                    Admission::Stale => AssemblyStatus::Stale(tick),
-                    Admission::NotAMember => {
-                        // Its terms can beat its liveliness token: it is told to hold its
-                        // posture this tick rather than left waiting for a command.
-                        self.counters.rejected_terms += 1;
-                        tracing::warn!(robot = %robot, tick, "dynamics from a robot that is not a member (no liveliness token): it holds its posture this tick");
-                        self.hold_one(&robot, tick, "not a member").await?;
-                        AssemblyStatus::Pending
-                    }
-                    Admission::Hold(why) => {
-                        team_changed |= self.roster.team().len() != before;
-                        self.hold_one(&robot, tick, &why).await?;
-                        // The tick goes on without it (admitted, it is in from the next tick);
-                        // a tick solved already needs nothing more: the hold order answered it.
-                        match assembler.hold(&robot, tick, self.roster.team()) {
-                            AssemblyStatus::Stale(_) => AssemblyStatus::Pending,
-                            outcome => outcome,
-                        }
-                    }
-                    Admission::Team => assembler.add(terms, self.roster.team()),
+                let unfit = controller.check_terms(&terms).err().map(|e| e.to_string());
+                let ahead = assembler.ahead_of_team(&robot, tick, self.roster.team());
+                let outcome = if let Some(newest) = ahead {
+                    self.counters.rejected_terms += 1;
+                    let why = format!("terms of tick {tick}, more than {} ticks ahead of the team's newest, {newest}", crate::team::assembly::MAX_LEAD_TICKS);
+                    self.counters.refuse("dynamics terms", sample.key_expr().as_str(), &why);
+                    AssemblyStatus::Pending
+                } else if let Some(why) = unfit {
+                    self.refuse_terms(&sample, &robot, tick, &why, assembler).await?
+                } else {
+                    self.admit(&robot, tick, terms, assembler, controller, &mut team_changed).await?
                 };
                 match outcome {
                     AssemblyStatus::Complete(tick, terms) => {
@@ -343,6 +345,50 @@ impl<'a> Service<'a> {
             next = if newest.is_some() { queue.try_recv().ok().flatten() } else { None };
         }
         Ok((newest, team_changed))
+    }
+
+    /// Admit `robot`'s fitting terms of `tick` to the team's tick (the roster decides:
+    /// [`Admission`]); what became of the tick.
+    async fn admit(&mut self, robot: &str, tick: u64, terms: DynamicsTerms, assembler: &mut TickAssembler, controller: &mut dyn TeamController, team_changed: &mut bool) -> Result<AssemblyStatus, TransportError> {
+        let before = self.roster.team().len();
+        let fresh = assembler.last_completed().is_none_or(|t| tick > t);
+        Ok(match self.roster.admit(robot, controller.ready(robot), fresh) {
+            Admission::Stale => AssemblyStatus::Stale(tick),
+            Admission::NotAMember => {
+                // Its terms can beat its liveliness token: it is told to hold its
+                // posture this tick rather than left waiting for a command.
+                self.counters.rejected_terms += 1;
+                tracing::warn!(robot, tick, "dynamics from a robot that is not a member (no liveliness token): it holds its posture this tick");
+                self.hold_one(robot, tick, "not a member").await?;
+                AssemblyStatus::Pending
+            }
+            Admission::Hold(why) => {
+                *team_changed |= self.roster.team().len() != before;
+                self.hold_one(robot, tick, &why).await?;
+                // The tick goes on without it (admitted, it is in from the next tick);
+                // a tick solved already needs nothing more: the hold order answered it.
+                match assembler.hold(robot, tick, self.roster.team()) {
+                    AssemblyStatus::Stale(_) => AssemblyStatus::Pending,
+                    outcome => outcome,
+                }
+            }
+            Admission::Team => assembler.add(terms, self.roster.team()),
+        })
+    }
+
+    /// `robot`'s terms of `tick` do not fit the controller (`why`): refused and counted, and the
+    /// robot holds its posture this tick; a member's tick goes on without it.
+    async fn refuse_terms(&mut self, sample: &zenoh::sample::Sample, robot: &str, tick: u64, why: &str, assembler: &mut TickAssembler) -> Result<AssemblyStatus, TransportError> {
+        self.counters.rejected_terms += 1;
+        self.counters.refuse("dynamics terms", sample.key_expr().as_str(), &why);
+        self.hold_one(robot, tick, &format!("its terms were refused: {why}")).await?;
+        if !self.roster.team().iter().any(|m| m == robot) {
+            return Ok(AssemblyStatus::Pending);
+        }
+        Ok(match assembler.hold(robot, tick, self.roster.team()) {
+            AssemblyStatus::Stale(_) => AssemblyStatus::Pending,
+            outcome => outcome,
+        })
     }
 
     /// Terms of the tick last solved, arriving after it was solved (a robot of the team sends
@@ -461,7 +507,7 @@ impl<'a> Service<'a> {
             controller.set_members(&self.solved_members);
             controller.set_late(&self.roster.late());
         }
-        self.refs.drain(references);
+        self.refs.drain(references, &mut self.counters);
         self.refs.apply(tick, controller);
         let solved = solve_and_publish(self.session, &self.cfg, controller, tick, &terms, &mut self.commands, &mut self.command_pubs, &mut self.diag_pub, &mut self.counters).await?;
         self.solved_tick = Some(tick);
@@ -500,6 +546,8 @@ impl<'a> Service<'a> {
             silent: self.roster.silent(),
             late: self.roster.late(),
             reused_terms: self.counters.reused_terms,
+            refused: self.counters.refused,
+            last_refusal: self.counters.last_refusal.clone(),
         };
         self.released_reported = controller.released_at().is_some();
         self.status_pub.put(&status).await
@@ -512,7 +560,7 @@ fn decode_terms(sample: &zenoh::sample::Sample, counters: &mut CoordinatorCounte
         Ok(t) => Some(t),
         Err(e) => {
             counters.rejected_terms += 1;
-            tracing::warn!(key = %sample.key_expr(), "rejected dynamics terms: {e}");
+            counters.refuse("dynamics terms", sample.key_expr().as_str(), &e);
             None
         }
     }
@@ -539,18 +587,18 @@ struct ReferenceBuffer {
 }
 
 impl ReferenceBuffer {
-    fn take(&mut self, sample: &zenoh::sample::Sample) {
+    fn take(&mut self, sample: &zenoh::sample::Sample, counters: &mut CoordinatorCounters) {
         match decode_sample::<TaskReferences>(sample) {
             Ok(r) => {
                 self.by_tick.insert(r.header.tick, r);
             }
-            Err(e) => tracing::warn!(key = %sample.key_expr(), "rejected references: {e}"),
+            Err(e) => counters.refuse("references", sample.key_expr().as_str(), &e),
         }
     }
 
-    fn drain(&mut self, q: &transport::SampleQueue) {
+    fn drain(&mut self, q: &transport::SampleQueue, counters: &mut CoordinatorCounters) {
         while let Ok(Some(sample)) = q.try_recv() {
-            self.take(&sample);
+            self.take(&sample, counters);
         }
     }
 

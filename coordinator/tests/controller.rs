@@ -363,7 +363,7 @@ fn contact_set_changes_and_more_robots() {
     assert_eq!(r.team.feet.len(), 7);
     assert_eq!(r.team.swing_feet.len(), 1);
     assert_eq!(r.j_c.nrows(), 21 + 12);
-    println!("swing foot: QP {:?}", r.qp.status);
+    assert_eq!(r.qp.status, QpStatus::Solved, "a foot in swing and a hand released, standing still: {:?}", r.fallback);
     // Back to all stance: the next tick reassembles.
     let (terms, _) = fx.static_team(2);
     c.compute(&terms).expect("tick");
@@ -375,7 +375,8 @@ fn contact_set_changes_and_more_robots() {
     let mut out = Vec::new();
     c.solve(&terms, &mut out).expect("tick");
     let r = c.materialized().expect("last");
-    println!("4 robots: n {} m {} QP {:?} rows {} in {:.0} us", r.team.n, r.j_c.nrows(), r.qp.status, r.qp.rows, r.timing.total_us);
+    assert_eq!(r.qp.status, QpStatus::Solved, "four robots standing around the object: {:?}", r.fallback);
+    assert_eq!(r.team.n, 4 * nv, "four robots' velocities");
     assert_eq!(out.len(), 4);
 }
 
@@ -498,4 +499,34 @@ fn the_constraint_residual_is_the_norm_of_the_constraints_velocity() {
             assert!(written_out == 0.0, "at rest: {written_out}");
         }
     }
+}
+
+/// Terms are taken only when they fit their robot's description: the same velocity dimension,
+/// base and number of joints (each written out against the default robot: nv 24, a floating
+/// base, 18 joints). The controller says so through `TeamController::check_terms`, which the
+/// service asks before a tick takes them.
+#[test]
+fn terms_that_do_not_fit_the_robots_description_are_refused() {
+    let mut fx = Fixture::new();
+    let q = fx.standing_q(0, 2);
+    let terms = fx.terms("r1", &q, &DVector::zeros(fx.robot.model.nv), 3);
+    let d = fx.description("r1");
+    assert_eq!((terms.nv(), terms.floating_base, d.joint_names.len()), (24, true, 18));
+    assert!(coordinator::team::terms_fit(&terms, Some(&d)).is_ok());
+    assert!(coordinator::team::terms_fit(&terms, None).is_ok(), "before the description, the terms' own consistency only");
+    let mut wrong = d.clone();
+    wrong.nv = 26;
+    let e = coordinator::team::terms_fit(&terms, Some(&wrong)).expect_err("another nv");
+    assert!(e.to_string().contains("nv 24") && e.to_string().contains("nv 26"), "{e}");
+    let mut wrong = d.clone();
+    wrong.joint_names.pop();
+    assert!(coordinator::team::terms_fit(&terms, Some(&wrong)).is_err(), "17 joints described");
+    let mut wrong = d.clone();
+    wrong.floating_base = false;
+    assert!(coordinator::team::terms_fit(&terms, Some(&wrong)).is_err(), "a fixed base described");
+    let mut c = controller(&[d.clone(), fx.description("r2")], PidcConfig::default());
+    c.set_description(&wrong);
+    assert!(c.check_terms(&terms).is_err(), "the controller checks against the description it holds");
+    c.set_description(&d);
+    assert!(c.check_terms(&terms).is_ok());
 }

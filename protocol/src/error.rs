@@ -27,6 +27,10 @@ pub enum ProtocolError {
     Invalid { field: String, reason: String },
     #[error("json: {0}")]
     Json(String),
+    /// A message whose header names another sender than the key it came on (a robot publishing
+    /// terms for another robot on its own key, a team's message on another team's key).
+    #[error("sender mismatch: the key {key} is {key_sender}'s, the header says {header_sender}")]
+    WrongSender { key: String, key_sender: String, header_sender: String },
 }
 
 impl ProtocolError {

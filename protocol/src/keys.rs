@@ -128,6 +128,32 @@ pub fn robot_of(key: &str) -> Option<&str> {
     }
 }
 
+/// The team id in a key of the form `team/{team}/...`, if the key has that form.
+pub fn team_of(key: &str) -> Option<&str> {
+    let mut parts = key.split('/');
+    (parts.next()? == ROOT).then_some(())?;
+    parts.next()
+}
+
+/// Refuse a message whose `header` names another sender than `key`: another team than the
+/// key's, or, on a robot's key (`team/{team}/robot/{robot}/...`), another robot or none. With
+/// the access-control list, which lets each certificate publish its own keys only
+/// ([`crate::access`]), this binds the header to the identity that Zenoh authenticated.
+pub fn check_sender(key: &str, header: &crate::Header) -> Result<(), ProtocolError> {
+    let key_team = team_of(key);
+    let key_robot = if key.split('/').nth(2) == Some("robot") { robot_of(key) } else { None };
+    let team_ok = key_team == Some(header.team.as_str());
+    let robot_ok = key_robot.is_none_or(|r| header.robot.as_deref() == Some(r));
+    if team_ok && robot_ok {
+        return Ok(());
+    }
+    let name = |team: Option<&str>, robot: Option<&str>| match robot {
+        Some(r) => format!("robot {r} of team {}", team.unwrap_or("?")),
+        None => format!("team {}", team.unwrap_or("?")),
+    };
+    Err(ProtocolError::WrongSender { key: key.to_string(), key_sender: name(key_team, key_robot), header_sender: name(Some(&header.team), header.robot.as_deref()) })
+}
+
 /// `team/{team}/robot/{robot}/contacts`: the robot's contact set ([`crate::ContactSet`]).
 pub fn contacts(team: &str, robot_id: &str) -> Result<String, ProtocolError> {
     robot(team, robot_id, RobotTopic::Contacts)
@@ -173,6 +199,26 @@ pub fn is_liveliness(key: &str) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The rule written out: a robot's key takes a header of that robot of that team only; a
+    /// team's key a header of that team (any robot or none).
+    #[test]
+    fn a_header_must_name_the_sender_its_key_names() {
+        use crate::Header;
+        let h = |team: &str, robot: Option<&str>| Header::new(team, robot, 7, 0);
+        let terms = robot("t1", "r1", RobotTopic::Dynamics).unwrap();
+        assert!(check_sender(&terms, &h("t1", Some("r1"))).is_ok());
+        for (header, says) in [(h("t1", Some("r2")), "robot r2 of team t1"), (h("t2", Some("r1")), "robot r1 of team t2"), (h("t1", None), "team t1")] {
+            let e = check_sender(&terms, &header).expect_err("refused");
+            let text = e.to_string();
+            assert!(text.contains("robot r1 of team t1") && text.contains(says), "both names: {text}");
+        }
+        let status = coordinator_status("t1").unwrap();
+        assert!(check_sender(&status, &h("t1", None)).is_ok());
+        assert!(check_sender(&status, &h("t2", None)).is_err(), "another team's status on this team's key");
+        assert!(check_sender(&member("t1", "r1").unwrap(), &h("t1", None)).is_ok(), "a member token is not a robot's message key");
+        assert!(check_sender("elsewhere/t1", &h("t1", None)).is_err(), "a key outside the tree names no sender");
+    }
 
     #[test]
     fn keys_have_the_documented_shape() {

@@ -491,6 +491,13 @@ pub struct CoordinatorStatus {
     /// Terms reused in all (one per member per tick).
     #[serde(default)]
     pub reused_terms: u64,
+    /// Messages the coordinator refused as they arrived (terms, descriptions, references):
+    /// undecodable, out of range, or from another sender than their key's.
+    #[serde(default)]
+    pub refused: u64,
+    /// The last refusal, naming the key and the reason.
+    #[serde(default)]
+    pub last_refusal: Option<String>,
 }
 
 impl Validate for CoordinatorStatus {

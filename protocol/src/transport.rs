@@ -260,10 +260,14 @@ pub async fn subscribe_with_capacity(session: &Session, key: String, capacity: u
         .map_err(|e| zenoh_err("declare_subscriber", &key, e))
 }
 
-/// Decode a sample's payload as `M`, naming the key in the error.
+/// Decode a sample's payload as `M`, and refuse it when its header names another sender than
+/// its key ([`keys::check_sender`]): every component takes a message's team and robot from
+/// its header only once the key it came on agrees.
 pub fn decode_sample<M: Message>(sample: &Sample) -> Result<M, ProtocolError> {
     let bytes = sample.payload().to_bytes();
-    decode::<M>(&bytes)
+    let msg = decode::<M>(&bytes)?;
+    keys::check_sender(sample.key_expr().as_str(), msg.header())?;
+    Ok(msg)
 }
 
 /// A membership change seen through liveliness.

@@ -55,6 +55,8 @@ fn tool_facing_messages_are_json_with_the_version_checked() {
         silent: vec!["r2".into()],
         late: vec![],
         reused_terms: 3,
+        refused: 2,
+        last_refusal: Some("dynamics terms on team/t/robot/r2/dynamics: sender mismatch".into()),
     };
     assert_eq!(CoordinatorStatus::WIRE, Wire::Json);
     let bytes = encode(&st).unwrap();

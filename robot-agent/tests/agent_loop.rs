@@ -380,11 +380,11 @@ async fn enters_safe_mode_after_the_deadline_holds_posture_and_leaves_on_a_fresh
     h.state(&pushed).await;
     let t = h.torque().await;
     assert_eq!(t.header.tick, 6);
-    let gains = HoldGains::from_torque_limits(&robot.torque_limits);
     let (g6, g5) = (gravity_oracle(&robot, &pushed), g);
     for i in 0..n {
         let dq = if i == 0 { -0.01 } else { 0.0 };
-        let want = (gains.kp[i] * dq - gains.kd[i] * 0.1 + g6[i] + (1.0 - g5[i])).clamp(-robot.torque_limits[i], robot.torque_limits[i]);
+        let limit = robot.torque_limits[i];
+        let want = (hold_kp(limit) * dq - hold_kd(limit) * 0.1 + g6[i] + (1.0 - g5[i])).clamp(-robot.torque_limits[i], robot.torque_limits[i]);
         assert!((t.tau[i] - want).abs() < 1e-6, "joint {i}: {} vs {want}", t.tau[i]);
     }
 
@@ -460,7 +460,7 @@ async fn the_posture_hold_takes_over_from_the_last_command_without_a_jump() {
     let mut h = Harness::start("loop6", blending).await;
     let (team, n) = (h.team.clone(), robot.joints());
     let (cmd, qd) = (vec![3.0; n], 0.2);
-    let kd = HoldGains::from_torque_limits(&robot.torque_limits).kd;
+    let kd: Vec<f64> = robot.torque_limits.iter().map(|l| hold_kd(*l)).collect();
     for tick in 0..2 {
         h.state(&standing_state(&robot, &team, tick, 0.0, qd)).await;
         h.dynamics_of(tick).await;
@@ -561,4 +561,32 @@ fn posture_hold_at_the_standing_pose_is_gravity_compensation() {
     }
     // The arm's shoulder carries the arm: clearly non-zero, within its limit.
     assert!(oracle[13].abs() > 5.0 && oracle[13].abs() < limits[13], "arm_joint_2 gravity {}", oracle[13]);
+}
+
+/// The posture hold's gains written out from a joint's torque limit: the limit is reached at
+/// 0.5 rad of error (`Kp = limit / 0.5 rad`), `Kd = Kp * 25 ms`; 100 N m/rad and 2.5 N m s/rad
+/// for a joint without a finite limit.
+fn hold_kp(limit: f64) -> f64 {
+    if limit.is_finite() {
+        limit / 0.5
+    } else {
+        100.0
+    }
+}
+
+/// See [`hold_kp`].
+fn hold_kd(limit: f64) -> f64 {
+    hold_kp(limit) * 0.025
+}
+
+/// The gains the agent holds with by default are the law written out above: the default
+/// robot's legs (80 N m) 160 N m/rad and 4 N m s/rad, an arm's wrist (9 N m) 18 and 0.45.
+#[test]
+fn the_default_hold_gains_follow_the_torque_limits() {
+    let limits = [80.0, 9.0, f64::INFINITY];
+    let gains = HoldGains::from_torque_limits(&limits);
+    for (i, l) in limits.iter().enumerate() {
+        assert!((gains.kp[i] - hold_kp(*l)).abs() < 1e-12 && (gains.kd[i] - hold_kd(*l)).abs() < 1e-12, "joint {i}: {gains:?}");
+    }
+    assert!((gains.kp[0] - 160.0).abs() < 1e-12 && (gains.kd[0] - 4.0).abs() < 1e-12, "{gains:?}");
 }

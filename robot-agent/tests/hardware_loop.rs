@@ -17,7 +17,7 @@ use robot_agent::dynamics_source::PlaceholderDynamics;
 use robot_agent::hardware::driver::{self, DriverConfig, DriverError, DriverExit};
 use robot_agent::hardware::mock::Lifecycle;
 use robot_agent::hardware::{HwStatus, Inbound, MockConfig, MockFault, MockHardware, Presence, TeamLink, ZenohLink};
-use robot_agent::safe_mode::{CommandDeadline, HoldGains};
+use robot_agent::safe_mode::CommandDeadline;
 
 const ID: &str = "r1";
 const JOINTS: usize = 3;
@@ -165,7 +165,7 @@ fn in_memory_team_damps_the_mock_exactly_then_safe_mode_holds_when_it_goes_silen
     for step in &h[50..54] {
         assert_eq!(step.tau, h[49].tau, "tick {}", step.tick);
     }
-    let kd = HoldGains::from_torque_limits(&[f64::INFINITY]).kd[0];
+    let kd = hold_kd(f64::INFINITY);
     let entry = &h[54];
     let carried = h[49].tau.as_deref().unwrap()[0];
     for t in entry.tau.as_deref().unwrap() {
@@ -186,7 +186,7 @@ fn in_memory_team_damps_the_mock_exactly_then_safe_mode_holds_when_it_goes_silen
 #[test]
 fn the_hardware_loop_watches_the_coordinators_token() {
     let deadline = CommandDeadline { ticks: 5, time: None };
-    let kd = HoldGains::from_torque_limits(&[f64::INFINITY]).kd[0];
+    let kd = hold_kd(f64::INFINITY);
 
     let mut cfg = agent_config("mem-token0", deadline);
     cfg.coordinator_grace = Duration::ZERO;
@@ -351,7 +351,7 @@ async fn mock_robot_with_a_real_coordinator_over_zenoh() {
         assert_close(step.v[0], analytic(step.tick), &format!("v at tick {}", step.tick));
         assert_eq!(step.tau.as_deref(), Some(&[-DAMPING * step.v[0]; JOINTS][..]), "tick {}", step.tick);
     }
-    let kd = HoldGains::from_torque_limits(&[f64::INFINITY]).kd[0];
+    let kd = hold_kd(f64::INFINITY);
     let entry = &h[safe.header.tick as usize];
     // The hold carries the last command applied (the damping torque of tick `last`).
     let carried = h[last as usize].tau.as_deref().unwrap()[0];
@@ -381,10 +381,26 @@ fn a_robot_that_tips_over_is_limp_and_leaves_the_team_in_the_hardware_loop() {
     assert_eq!(report.exit, DriverExit::Deactivated { tick: 40 });
     assert_eq!((core.mode(), core.fallen().map(|f| f.tick), link.left), (AgentMode::Fallen, Some(20), 1));
     assert_eq!(report.counters.dynamics, 20, "terms for ticks 0..19 only");
-    let kd = HoldGains::from_torque_limits(&robot_agent::dynamics_source::DynamicsSource::torque_limits(&PlaceholderDynamics::floating(JOINTS))).kd;
+    let kd: Vec<f64> = robot_agent::dynamics_source::DynamicsSource::torque_limits(&PlaceholderDynamics::floating(JOINTS)).iter().map(|l| hold_kd(*l)).collect();
     for step in hw.history().iter().filter(|s| s.tick >= 20 && s.tick < 40) {
         let tau = step.tau.as_ref().expect("a torque written every cycle");
         assert!((tau[0] - (-kd[0] * step.v[0])).abs() <= 1e-12, "tick {}: {} vs -K_d v {}", step.tick, tau[0], -kd[0] * step.v[0]);
     }
     assert!(link.statuses.iter().any(|s| s.mode == AgentMode::Fallen), "the status says so");
+}
+
+/// The posture hold's gains written out from a joint's torque limit: the limit is reached at
+/// 0.5 rad of error (`Kp = limit / 0.5 rad`), `Kd = Kp * 25 ms`; 100 N m/rad and 2.5 N m s/rad
+/// for a joint without a finite limit.
+fn hold_kp(limit: f64) -> f64 {
+    if limit.is_finite() {
+        limit / 0.5
+    } else {
+        100.0
+    }
+}
+
+/// See [`hold_kp`].
+fn hold_kd(limit: f64) -> f64 {
+    hold_kp(limit) * 0.025
 }

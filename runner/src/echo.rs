@@ -109,7 +109,7 @@ mod tests {
         let v = line("team/t/robot/r1/state", "zenoh/bytes;team.RobotState/v1", &protocol::encode(&s).unwrap());
         assert_eq!(v["message"]["joint_positions"][0], 0.5);
         assert_eq!(v["message"]["header"]["tick"], 5);
-        let st = CoordinatorStatus { header: Header::new("t", None, 9, 0), mode: CoordinatorMode::Running, members: vec![], ticks: 9, commands_sent: 0, deadline_misses: 0, fallbacks: 0, detail: String::new(), stale: vec![], silent: vec![], late: vec![], reused_terms: 0 };
+        let st = CoordinatorStatus { header: Header::new("t", None, 9, 0), mode: CoordinatorMode::Running, members: vec![], ticks: 9, commands_sent: 0, deadline_misses: 0, fallbacks: 0, detail: String::new(), stale: vec![], silent: vec![], late: vec![], reused_terms: 0, refused: 0, last_refusal: None };
         let v = line("team/t/coordinator/status", "application/json", &protocol::encode(&st).unwrap());
         assert_eq!(v["message"]["mode"], "Running");
         // A payload of the wrong type, or a key without a type: an error line, no panic.

@@ -29,7 +29,7 @@ async fn echo_prints_messages_and_liveliness_tokens() {
     let mut publisher = TypedPublisher::<CoordinatorStatus>::declare(&hub, key.clone(), Qos::Telemetry).await.unwrap();
     let publishing = tokio::spawn(async move {
         for tick in 0..500u64 {
-            let st = CoordinatorStatus { header: Header::new(TEAM, None, tick, 0), mode: CoordinatorMode::Running, members: vec!["r1".into()], ticks: tick, commands_sent: 0, deadline_misses: 0, fallbacks: 0, detail: String::new(), stale: vec![], silent: vec![], late: vec![], reused_terms: 0 };
+            let st = CoordinatorStatus { header: Header::new(TEAM, None, tick, 0), mode: CoordinatorMode::Running, members: vec!["r1".into()], ticks: tick, commands_sent: 0, deadline_misses: 0, fallbacks: 0, detail: String::new(), stale: vec![], silent: vec![], late: vec![], reused_terms: 0, refused: 0, last_refusal: None };
             publisher.put(&st).await.unwrap();
             tokio::time::sleep(Duration::from_millis(20)).await;
         }

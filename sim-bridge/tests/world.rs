@@ -20,9 +20,23 @@ fn pair_world_builds_and_matches_the_models() {
     }
     let mut p = MujocoPlant::new(w).unwrap();
     let mut s = empty_state("t", "r1");
-    p.state(0, &mut s);
-    eprintln!("{:?}", s);
+    // Each robot's state is where the spec placed it: its base position, and its yaw as the
+    // quaternion (cos(yaw/2), 0, 0, sin(yaw/2)) up to sign.
+    for (i, placed) in spec.robots.iter().enumerate() {
+        p.state(i, &mut s);
+        let offset: f64 = s.base_pose.position.iter().zip(&placed.base_position).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
+        assert!(offset < 1e-9, "{}: base at {:?}, placed at {:?}", placed.id, s.base_pose.position, placed.base_position);
+        let [w, x, y, z] = s.base_pose.orientation;
+        let (c, sn) = ((placed.base_yaw / 2.0).cos(), (placed.base_yaw / 2.0).sin());
+        let dot = (w * c + z * sn).abs();
+        assert!(dot > 1.0 - 1e-9 && x.abs() < 1e-9 && y.abs() < 1e-9, "{}: orientation {:?} for yaw {}", placed.id, s.base_pose.orientation, placed.base_yaw);
+        assert_eq!(s.joint_positions.len(), 18);
+        assert_eq!(s.time, 0.0);
+    }
     p.step();
+    p.state(0, &mut s);
+    assert_eq!(p.ticks(), 1);
+    assert!((s.time - 1.0 / spec.control_hz).abs() < 1e-12, "one control period simulated: {}", s.time);
 }
 
 #[test]

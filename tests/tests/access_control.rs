@@ -19,15 +19,16 @@
 //! own ports and folder; every wait is bounded.
 
 mod common;
+use common::tls::{config, hub_endpoint, open};
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use protocol::access::{Identity, SecureConfig};
+use protocol::access::Identity;
 use protocol::keys::{self, RobotTopic};
-use protocol::transport::{self, decode_sample, Qos, Role, SampleQueue, TypedPublisher, ZenohArgs};
+use protocol::transport::{self, decode_sample, Qos, SampleQueue, TypedPublisher, ZenohArgs};
 use protocol::{AgentStatus, Header, Pose, RobotState, TorqueCommand};
-use team_runner::processes::{free_port, spawn};
+use team_runner::processes::spawn;
 use zenoh::Session;
 
 /// How long a put that must not arrive is given to arrive anyway.
@@ -42,33 +43,6 @@ fn certificates(test: &str, robots: &[&str]) -> PathBuf {
 
 fn robots(list: &[&str]) -> Vec<String> {
     list.iter().map(|r| r.to_string()).collect()
-}
-
-/// Write `who`'s configuration into `dir` and return the arguments that use it. `acl: false`
-/// drops the access-control section (what a component that ignores the rules would run).
-fn config(dir: &Path, team: &str, robots: &[String], who: Identity, listen: &str, connect: Option<&str>, acl: bool) -> ZenohArgs {
-    let name = who.name().to_string();
-    let mut cfg = SecureConfig::in_dir(dir, team, robots, who);
-    cfg.listen = vec![listen.to_string()];
-    cfg.connect = connect.map(|c| vec![c.to_string()]).unwrap_or_default();
-    let path = dir.join(format!("{name}{}.json5", if acl { "" } else { "-no-acl" }));
-    if acl {
-        cfg.write(&path).expect("configuration written");
-    } else {
-        let mut json = cfg.to_json().unwrap();
-        json.as_object_mut().unwrap().remove("access_control");
-        std::fs::write(&path, json.to_string()).unwrap();
-    }
-    ZenohArgs { config: Some(path), ..Default::default() }
-}
-
-async fn open(args: &ZenohArgs) -> Session {
-    tokio::time::timeout(Duration::from_secs(10), transport::open(args, Role::Member)).await.expect("session opened in time").expect("session")
-}
-
-/// A hub on a free TLS port: the endpoint others connect to.
-fn hub_endpoint() -> String {
-    format!("tls/127.0.0.1:{}", free_port().unwrap())
 }
 
 /// Put `payload` on `key` from `session` every 50 ms until `until` says stop or `wait` ends.

@@ -231,6 +231,10 @@ impl TeamController for Mqp {
         Mqp::set_description(self, d);
     }
 
+    fn check_terms(&self, terms: &protocol::DynamicsTerms) -> Result<(), ControllerError> {
+        crate::team::terms_fit(terms, self.descriptions.get(terms.header.robot_id()))
+    }
+
     fn set_references(&mut self, r: &TaskReferences) {
         Mqp::set_references(self, r);
     }

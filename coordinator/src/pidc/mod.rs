@@ -406,6 +406,10 @@ impl TeamController for Pidc {
         Pidc::set_description(self, d);
     }
 
+    fn check_terms(&self, terms: &protocol::DynamicsTerms) -> Result<(), ControllerError> {
+        crate::team::terms_fit(terms, self.descriptions.get(terms.header.robot_id()))
+    }
+
     fn set_references(&mut self, r: &TaskReferences) {
         Pidc::set_references(self, r);
     }

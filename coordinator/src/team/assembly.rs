@@ -29,7 +29,15 @@ pub struct TickAssembler {
     reuse: Option<Reuse>,
     /// Each robot's latest terms (any tick), kept for [`Reuse`].
     latest: BTreeMap<String, DynamicsTerms>,
+    /// Each robot's newest tick added.
+    newest: BTreeMap<String, u64>,
 }
+
+/// How many ticks a member's terms may be ahead of the newest terms of every other member
+/// ([`TickAssembler::ahead_of_team`]): a second at 1 kHz. Members answer the same states, so
+/// terms further ahead come from a broken clock or a forger, and would hold a tick open that
+/// the others never reach.
+pub const MAX_LEAD_TICKS: u64 = 1000;
 
 /// What became of a tick.
 #[derive(Debug, Clone, PartialEq)]
@@ -54,7 +62,7 @@ pub enum Reused {
 
 impl TickAssembler {
     pub fn new(deadline: Duration) -> Self {
-        TickAssembler { pending: BTreeMap::new(), last_completed: None, deadline, reuse: None, latest: BTreeMap::new() }
+        TickAssembler { pending: BTreeMap::new(), last_completed: None, deadline, reuse: None, latest: BTreeMap::new(), newest: BTreeMap::new() }
     }
 
     /// Reuse late terms ([`Reuse`]); `None` waits for every member's own (lockstep).
@@ -65,6 +73,15 @@ impl TickAssembler {
 
     pub fn last_completed(&self) -> Option<u64> {
         self.last_completed
+    }
+
+    /// The newest tick of the other members of `team` when `robot`'s terms of `tick` are more
+    /// than [`MAX_LEAD_TICKS`] ahead of it (or of the last completed tick): such terms are
+    /// refused. `None` when they are not, or when no other member has sent terms yet.
+    pub fn ahead_of_team(&self, robot: &str, tick: u64, team: &[String]) -> Option<u64> {
+        let others = team.iter().filter(|m| m.as_str() != robot).filter_map(|m| self.newest.get(m)).copied();
+        let reference = others.chain(self.last_completed).max()?;
+        (tick > reference.saturating_add(MAX_LEAD_TICKS)).then_some(reference)
     }
 
     /// Add one team member's terms; the tick completes when every member of `team` (sorted)
@@ -81,6 +98,8 @@ impl TickAssembler {
                 }
             }
         }
+        let newest = self.newest.entry(terms.header.robot_id().to_string()).or_insert(tick);
+        *newest = (*newest).max(tick);
         if self.last_completed.is_some_and(|t| tick <= t) {
             return AssemblyStatus::Stale(tick);
         }
@@ -212,6 +231,21 @@ mod tests {
         assert_eq!(a.add(terms("r1", 5), &t), AssemblyStatus::Stale(5));
         assert_eq!(a.add(terms("r1", 4), &t), AssemblyStatus::Stale(4));
         assert_eq!(a.reuse_at(), None, "no reuse unless asked");
+    }
+
+    /// Terms more than `MAX_LEAD_TICKS` (1000) ahead of every other member's newest are named;
+    /// at the bound, or with no other member heard yet, they are not.
+    #[test]
+    fn terms_far_ahead_of_the_team_are_named() {
+        let mut a = TickAssembler::new(Duration::from_secs(1));
+        let t = team(&["r1", "r2"]);
+        assert_eq!(a.ahead_of_team("r2", 1_000_000, &t), None, "nobody else heard yet");
+        a.add(terms("r1", 40), &t);
+        assert_eq!(a.ahead_of_team("r2", 1040, &t), None, "1000 ahead: within the lead");
+        assert_eq!(a.ahead_of_team("r2", 1041, &t), Some(40));
+        assert_eq!(a.ahead_of_team("r1", 5000, &t), None, "r1 is not compared with itself");
+        a.add(terms("r2", 40), &t);
+        assert_eq!(a.ahead_of_team("r1", 5000, &t), Some(40), "once the tick completed, nor with the last completed tick");
     }
 
     #[test]

@@ -14,7 +14,7 @@ pub mod assembly;
 pub mod membership;
 
 use nalgebra::{DMatrix, DVector, Rotation3, Vector3, Vector6};
-use protocol::{DynamicsTerms, FrameRole, FrameTerms};
+use protocol::{DynamicsTerms, FrameRole, FrameTerms, RobotDescription};
 
 use crate::linalg::{rotation_from_row_major, zeros, zeros_v};
 use crate::ControllerError;
@@ -212,6 +212,19 @@ impl Team {
     pub fn actuated(&self) -> usize {
         self.robots.iter().map(|r| r.actuated.len()).sum()
     }
+}
+
+/// Whether a robot's terms fit what the team can use: consistent in themselves
+/// ([`check_terms`]) and, once its description arrived, the size and base it describes.
+pub fn terms_fit(t: &DynamicsTerms, description: Option<&RobotDescription>) -> Result<(), ControllerError> {
+    check_terms(t)?;
+    let Some(d) = description else { return Ok(()) };
+    let robot = t.header.robot_id();
+    if t.nv() != d.nv as usize || t.floating_base != d.floating_base || t.actuated() != d.joint_names.len() {
+        let detail = format!("nv {} ({} actuated, floating base {}) against the description's nv {} ({} joints, floating base {})", t.nv(), t.actuated(), t.floating_base, d.nv, d.joint_names.len(), d.floating_base);
+        return Err(ControllerError::Dimension { what: format!("{robot}: terms"), detail });
+    }
+    Ok(())
 }
 
 fn check_terms(t: &DynamicsTerms) -> Result<(), ControllerError> {

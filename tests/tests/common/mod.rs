@@ -6,3 +6,4 @@ pub mod certs;
 pub mod hosts;
 pub mod scenario;
 pub mod team;
+pub mod tls;
