@@ -270,19 +270,28 @@ fn run_scenario(a: RunArgs) -> Result<()> {
     let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live: a.live };
     let (records, recording) = scenario_run::run_recorded_secure(&plan, &opts, a.tls.as_deref(), &dir, Some(&rec))?;
     let eval = evaluate::evaluate(&plan, &records, &mode_name);
-    write_report(&plan, &eval, &records, &dir)?;
-    if let Some(r) = recording {
-        println!("  recording: {} ({:.1} MB, {} messages, {} dropped)", r.path.display(), r.bytes as f64 / 1e6, r.messages, r.dropped);
+    // Whatever could not be written is named at the end, after the run's summary.
+    let mut errors = Vec::new();
+    if let Err(e) = write_report(&plan, &eval, &records, &dir) {
+        errors.push(format!("the report could not be written: {e:#}"));
     }
-    anyhow::ensure!(eval.metrics.passed, "acceptance checks failed (see {})", dir.join("metrics.json").display());
+    match recording {
+        Some(r) if r.error.is_some() => errors.push(format!("the recording {} is incomplete: {}", r.path.display(), r.error.unwrap_or_default())),
+        Some(r) => println!("  recording: {} ({:.1} MB, {} messages, {} dropped)", r.path.display(), r.bytes as f64 / 1e6, r.messages, r.dropped),
+        None => {}
+    }
+    if !eval.metrics.passed {
+        errors.push(format!("acceptance checks failed (see {})", dir.join("metrics.json").display()));
+    }
+    anyhow::ensure!(errors.is_empty(), "{}", errors.join("; "));
     Ok(())
 }
 
-/// The report folder (data, figures, report.html) and the summary on stdout.
+/// The summary on stdout, then the report folder (data, figures, report.html).
 fn write_report(plan: &plan::Plan, eval: &evaluate::Evaluation, records: &team_runner::driver::Records, dir: &Path) -> Result<()> {
+    print!("{}", evaluate::summary(&eval.metrics, dir));
     evaluate::write_report(plan, eval, dir)?;
     plots::write_all(plan, eval, records, dir)?;
-    print!("{}", evaluate::summary(&eval.metrics, dir));
     Ok(())
 }
 

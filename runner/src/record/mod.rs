@@ -133,6 +133,9 @@ pub struct RecordingSummary {
     /// Messages that could not be written (encoding errors).
     pub failed: u64,
     pub bytes: u64,
+    /// Why the recording could not be written whole (a full disk, an unwritable file), if so:
+    /// the run itself went on (the recorder only ever drops what it cannot write).
+    pub error: Option<String>,
 }
 
 /// The run's facts that are not messages, written as the [`RUN_METADATA`] record at the end.
@@ -209,17 +212,23 @@ impl Recorder {
         // The writer ends when every sender is gone; taps held elsewhere must be dropped by
         // then (the driver and the subscriptions end with the run).
         self.tap = Tap { tx: sync_channel(1).0, dropped: dropped.clone(), sent };
+        let mut error = None;
         let counts = match self.writer.take().map(|w| w.join()) {
-            Some(Ok(r)) => r?,
+            Some(Ok(Ok(counts))) => counts,
+            Some(Ok(Err(e))) => {
+                error = Some(e.to_string());
+                scene::WriterCounts::default()
+            }
             Some(Err(_)) => return Err(RecordError::Writer("panicked".into())),
             None => scene::WriterCounts::default(),
         };
         let dropped = dropped.load(Ordering::Relaxed);
         let handle = self.handle.lock().map_err(|_| RecordError::Writer("poisoned".into()))?.take();
-        let mcap_err = |e: String| RecordError::Mcap { path: self.path.display().to_string(), reason: e };
         if let Some(h) = handle {
-            h.write_metadata(RUN_METADATA, run_metadata(&self.scenario, facts, &counts, dropped)).map_err(|e| mcap_err(e.to_string()))?;
-            h.close().map_err(|e| mcap_err(e.to_string()))?;
+            let closed = h.write_metadata(RUN_METADATA, run_metadata(&self.scenario, facts, &counts, dropped)).map_err(|e| e.to_string()).and_then(|_| h.close().map(|_| ()).map_err(|e| e.to_string()));
+            if let Err(e) = closed {
+                error.get_or_insert_with(|| RecordError::Mcap { path: self.path.display().to_string(), reason: e }.to_string());
+            }
         }
         if let Some(live) = self.live.take() {
             drop(live.stop());
@@ -228,7 +237,10 @@ impl Recorder {
         if dropped > 0 {
             tracing::warn!(dropped, "the recorder dropped messages (queue of {QUEUE} full)");
         }
-        Ok(RecordingSummary { path: self.path.clone(), messages: counts.messages, dropped, failed: counts.failed, bytes })
+        if let Some(e) = &error {
+            tracing::error!("the recording is incomplete: {e}");
+        }
+        Ok(RecordingSummary { path: self.path.clone(), messages: counts.messages, dropped, failed: counts.failed, bytes, error })
     }
 }
 

@@ -49,7 +49,7 @@ fn run_with(file: &str, sets: &[&str], distributed: bool, name: &str, mcap: bool
     let rec = mcap.then(|| RecordOptions { path: dir.join("run.mcap"), scenario: ScenarioSource::read(&path, &sets).expect("scenario file"), live: None });
     let (records, summary) = run::run_recorded(&plan, &opts, &dir, rec.as_ref()).expect("the run completes");
     if let Some(s) = summary {
-        assert_eq!((s.dropped, s.failed), (0, 0), "the recording is complete: {s:?}");
+        assert_eq!((s.dropped, s.failed, s.error.as_deref()), (0, 0, None), "the recording is complete: {s:?}");
     }
     let eval = evaluate::evaluate(&plan, &records, opts.mode_name(false));
     evaluate::write_report(&plan, &eval, &dir).expect("report written");
