@@ -2,6 +2,9 @@
 //! (no listener, no connection: no test meets another's messages) and the test publishes states,
 //! commands and contact sets on that session, as the sim-bridge and the coordinator would.
 
+#[path = "common/hold_law.rs"]
+mod hold_law;
+use hold_law::{hold_kd, hold_kp};
 use std::time::Duration;
 
 use protocol::keys::{self, RobotTopic};
@@ -561,22 +564,6 @@ fn posture_hold_at_the_standing_pose_is_gravity_compensation() {
     }
     // The arm's shoulder carries the arm: clearly non-zero, within its limit.
     assert!(oracle[13].abs() > 5.0 && oracle[13].abs() < limits[13], "arm_joint_2 gravity {}", oracle[13]);
-}
-
-/// The posture hold's gains written out from a joint's torque limit: the limit is reached at
-/// 0.5 rad of error (`Kp = limit / 0.5 rad`), `Kd = Kp * 25 ms`; 100 N m/rad and 2.5 N m s/rad
-/// for a joint without a finite limit.
-fn hold_kp(limit: f64) -> f64 {
-    if limit.is_finite() {
-        limit / 0.5
-    } else {
-        100.0
-    }
-}
-
-/// See [`hold_kp`].
-fn hold_kd(limit: f64) -> f64 {
-    hold_kp(limit) * 0.025
 }
 
 /// The gains the agent holds with by default are the law written out above: the default

@@ -2,6 +2,9 @@
 //! memory (the coordinator's `JointDamping` controller called directly), then over a real
 //! Zenoh session on loopback (its own port) to a real coordinator service.
 
+#[path = "common/hold_law.rs"]
+mod hold_law;
+use hold_law::hold_kd;
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -387,20 +390,4 @@ fn a_robot_that_tips_over_is_limp_and_leaves_the_team_in_the_hardware_loop() {
         assert!((tau[0] - (-kd[0] * step.v[0])).abs() <= 1e-12, "tick {}: {} vs -K_d v {}", step.tick, tau[0], -kd[0] * step.v[0]);
     }
     assert!(link.statuses.iter().any(|s| s.mode == AgentMode::Fallen), "the status says so");
-}
-
-/// The posture hold's gains written out from a joint's torque limit: the limit is reached at
-/// 0.5 rad of error (`Kp = limit / 0.5 rad`), `Kd = Kp * 25 ms`; 100 N m/rad and 2.5 N m s/rad
-/// for a joint without a finite limit.
-fn hold_kp(limit: f64) -> f64 {
-    if limit.is_finite() {
-        limit / 0.5
-    } else {
-        100.0
-    }
-}
-
-/// See [`hold_kp`].
-fn hold_kd(limit: f64) -> f64 {
-    hold_kp(limit) * 0.025
 }

@@ -19,6 +19,9 @@
 
 mod common;
 
+#[path = "../../robot-agent/tests/common/hold_law.rs"]
+mod hold_law;
+use hold_law::hold_kd;
 use std::collections::BTreeMap;
 
 use protocol::{AgentMode, AgentStatus, QpStatus, RobotState};
@@ -128,20 +131,4 @@ fn a_robot_pushed_over_goes_limp_and_the_rest_of_the_team_stands() {
         moving += usize::from(v.iter().any(|x| x.abs() > 0.05));
     }
     assert!(moving > 10, "r3 moved while limp on {moving} ticks: the damping was exercised");
-}
-
-/// The posture hold's gains written out from a joint's torque limit: the limit is reached at
-/// 0.5 rad of error (`Kp = limit / 0.5 rad`), `Kd = Kp * 25 ms`; 100 N m/rad and 2.5 N m s/rad
-/// for a joint without a finite limit.
-fn hold_kp(limit: f64) -> f64 {
-    if limit.is_finite() {
-        limit / 0.5
-    } else {
-        100.0
-    }
-}
-
-/// See [`hold_kp`].
-fn hold_kd(limit: f64) -> f64 {
-    hold_kp(limit) * 0.025
 }
