@@ -314,15 +314,13 @@ impl<'a> Service<'a> {
                     next = None;
                     continue;
                 }
-                let unfit = controller.check_terms(&terms).err().map(|e| e.to_string());
-                let ahead = assembler.ahead_of_team(&robot, tick, self.roster.team());
-                let outcome = if let Some(newest) = ahead {
+                let outcome = if let Some(newest) = assembler.ahead_of_team(&robot, tick, self.roster.team()) {
                     self.counters.rejected_terms += 1;
                     let why = format!("terms of tick {tick}, more than {} ticks ahead of the team's newest, {newest}", crate::team::assembly::MAX_LEAD_TICKS);
                     self.counters.refuse("dynamics terms", sample.key_expr().as_str(), &why);
                     AssemblyStatus::Pending
-                } else if let Some(why) = unfit {
-                    self.refuse_terms(&sample, &robot, tick, &why, assembler).await?
+                } else if let Err(e) = controller.check_terms(&terms) {
+                    self.refuse_terms(&sample, &robot, tick, &e.to_string(), assembler).await?
                 } else {
                     self.admit(&robot, tick, terms, assembler, controller, &mut team_changed).await?
                 };
@@ -365,12 +363,8 @@ impl<'a> Service<'a> {
             Admission::Hold(why) => {
                 *team_changed |= self.roster.team().len() != before;
                 self.hold_one(robot, tick, &why).await?;
-                // The tick goes on without it (admitted, it is in from the next tick);
-                // a tick solved already needs nothing more: the hold order answered it.
-                match assembler.hold(robot, tick, self.roster.team()) {
-                    AssemblyStatus::Stale(_) => AssemblyStatus::Pending,
-                    outcome => outcome,
-                }
+                // The tick goes on without it (admitted, it is in from the next tick).
+                held_in_tick(assembler, robot, tick, self.roster.team())
             }
             Admission::Team => assembler.add(terms, self.roster.team()),
         })
@@ -385,10 +379,7 @@ impl<'a> Service<'a> {
         if !self.roster.team().iter().any(|m| m == robot) {
             return Ok(AssemblyStatus::Pending);
         }
-        Ok(match assembler.hold(robot, tick, self.roster.team()) {
-            AssemblyStatus::Stale(_) => AssemblyStatus::Pending,
-            outcome => outcome,
-        })
+        Ok(held_in_tick(assembler, robot, tick, self.roster.team()))
     }
 
     /// Terms of the tick last solved, arriving after it was solved (a robot of the team sends
@@ -551,6 +542,15 @@ impl<'a> Service<'a> {
         };
         self.released_reported = controller.released_at().is_some();
         self.status_pub.put(&status).await
+    }
+}
+
+/// Member `robot`, told to hold its posture at `tick`, is counted in the tick as holding: what
+/// became of the tick. A tick solved already needs nothing more (the hold order answered it).
+fn held_in_tick(assembler: &mut TickAssembler, robot: &str, tick: u64, team: &[String]) -> AssemblyStatus {
+    match assembler.hold(robot, tick, team) {
+        AssemblyStatus::Stale(_) => AssemblyStatus::Pending,
+        outcome => outcome,
     }
 }
 

@@ -275,10 +275,11 @@ fn run_scenario(a: RunArgs) -> Result<()> {
     if let Err(e) = write_report(&plan, &eval, &records, &dir) {
         errors.push(format!("the report could not be written: {e:#}"));
     }
-    match recording {
-        Some(r) if r.error.is_some() => errors.push(format!("the recording {} is incomplete: {}", r.path.display(), r.error.unwrap_or_default())),
-        Some(r) => println!("  recording: {} ({:.1} MB, {} messages, {} dropped)", r.path.display(), r.bytes as f64 / 1e6, r.messages, r.dropped),
-        None => {}
+    if let Some(r) = recording {
+        match &r.error {
+            Some(e) => errors.push(format!("the recording {} is incomplete: {e}", r.path.display())),
+            None => println!("  recording: {} ({:.1} MB, {} messages, {} dropped)", r.path.display(), r.bytes as f64 / 1e6, r.messages, r.dropped),
+        }
     }
     if !eval.metrics.passed {
         errors.push(format!("acceptance checks failed (see {})", dir.join("metrics.json").display()));

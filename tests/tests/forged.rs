@@ -21,7 +21,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use coordinator::{ControllerError, TeamController};
+use coordinator::{ControllerError, JointDamping, TeamController};
 use protocol::access::Identity;
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample};
@@ -36,22 +36,17 @@ use common::tls::{config, hub_endpoint, open};
 /// Lockstep ticks of the run.
 const TICKS: u64 = 600;
 
-/// Joint damping for every robot; terms are taken only with the placeholder's size, written
-/// out: a floating base and `JOINTS` joints.
-struct Damping;
+/// The smoke run's joint damping (`coordinator::JointDamping`), taking terms only with the
+/// placeholder's size, written out: a floating base and `JOINTS` joints.
+struct SizeChecked(JointDamping);
 
-impl TeamController for Damping {
+impl TeamController for SizeChecked {
     fn name(&self) -> &'static str {
-        "joint damping"
+        "joint damping, sizes checked"
     }
 
     fn solve(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError> {
-        out.clear();
-        for t in tick {
-            let v = &t.velocity[6..];
-            out.push(TorqueCommand { header: Header::new(&t.header.team, t.header.robot.as_deref(), t.header.tick, 0), tau: v.iter().map(|qd| -2.0 * qd).collect(), hold: false });
-        }
-        Ok(())
+        self.0.solve(tick, out)
     }
 
     fn check_terms(&self, t: &DynamicsTerms) -> Result<(), ControllerError> {
@@ -60,6 +55,15 @@ impl TeamController for Damping {
         }
         Ok(())
     }
+}
+
+/// Whether to forge on `tick`: every 20th tick from tick 20 on (`last`: the last one forged on).
+fn forge_on(tick: u64, last: &mut u64) -> bool {
+    if tick < 20 || tick < *last + 20 {
+        return false;
+    }
+    *last = tick;
+    true
 }
 
 /// What the forgers sent, by kind.
@@ -118,10 +122,9 @@ async fn forge_as_r2(r2: Session, team: String, sent: Arc<Sent>) {
     while let Ok(sample) = states.recv_async().await {
         let Ok(state) = decode_sample::<RobotState>(&sample) else { continue };
         let k = state.header.tick;
-        if k < 20 || k < last + 20 {
+        if !forge_on(k, &mut last) {
             continue;
         }
-        last = k;
         let put = |key: &str, bytes: Vec<u8>| {
             let (r2, key) = (r2.clone(), key.to_string());
             async move { r2.put(key, bytes).await.expect("put") }
@@ -150,10 +153,9 @@ async fn forge_as_coordinator(c: Session, team: String, sent: Arc<Sent>) {
     while let Ok(sample) = states.recv_async().await {
         let Ok(t) = decode_sample::<DynamicsTerms>(&sample) else { continue };
         let k = t.header.tick;
-        if k < 20 || k < last + 20 {
+        if !forge_on(k, &mut last) {
             continue;
         }
-        last = k;
         let cmd = TorqueCommand { header: Header::new(&team, Some("r2"), k, 0), tau: vec![50.0; JOINTS], hold: false };
         c.put(&command, protocol::encode(&cmd).unwrap()).await.expect("put");
         sent.impersonated_commands.fetch_add(1, Ordering::Relaxed);
@@ -174,7 +176,7 @@ async fn forged_messages_are_refused_counted_and_named() {
     let sim = open(&session(Identity::SimBridge, any, Some(&hub))).await;
     let (forger_r2, forger_c) = (open(&session(Identity::Agent("r2".into()), any, Some(&hub))).await, open(&session(Identity::Coordinator, any, Some(&hub))).await);
 
-    let c = coordinator(&cs, team, Box::new(Damping));
+    let c = coordinator(&cs, team, Box::new(SizeChecked(JointDamping { damping: 2.0 })));
     let agents = [agent(&a1, team, "r1"), agent(&a2, team, "r2")];
     let b = bridge(&sim, team, &["r1", "r2"], TICKS, sim_bridge::lockstep::DEFAULT_COORDINATOR_GRACE_TICKS);
     let sent = Arc::new(Sent::default());
