@@ -2,7 +2,8 @@
 # Make a TEST certificate authority and one certificate per team identity, for Zenoh's mutual
 # TLS and access control (README "Access control (mutual TLS and ACL)").
 #
-#   scripts/make-test-certs.sh [--san SAN]... [--ca CADIR] DIR [ROBOT...]
+#   scripts/make-test-certs.sh [--san SAN]... [--ca CADIR] [--team TEAM] DIR [ROBOT...]
+#   scripts/make-test-certs.sh [--san SAN]... --router DIR
 #
 # Writes into DIR (created if missing):
 #   ca.pem, ca.key                 the test CA (EC P-256, 10 years)
@@ -17,6 +18,13 @@
 # in CADIR (ca.pem, ca.key): DIR gets a copy of ca.pem, never the key (team run --hosts --tls
 # issues a run's certificates this way).
 #
+# A site (several teams on one Zenoh router, docs/realtime.md "A site"): --router makes the
+# site's CA and the router's certificate alone (router.pem, CN=router); --team TEAM names
+# every identity's certificate IDENTITY.TEAM (e.g. r1.alpha), the name the router's access
+# control gives it, the files still IDENTITY.pem. Sign each team's folder with the site's CA:
+#   scripts/make-test-certs.sh --router site
+#   scripts/make-test-certs.sh --ca site --team alpha site/alpha r1 r2
+#
 # Idempotent: an existing CA is kept, and an identity whose certificate exists and verifies
 # against that CA is kept; missing ones are made. Remove DIR to start over.
 #
@@ -25,10 +33,12 @@
 set -euo pipefail
 
 die() { echo "make-test-certs: error: $*" >&2; exit 1; }
-usage() { sed -n '2,24p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2; exit 2; }
+usage() { awk 'NR > 1 && !/^#/ { exit } NR > 1' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2; exit 2; }
 
 extra_sans=()
 ca_dir=""
+team=""
+router=0
 while [[ $# -gt 0 ]]; do
     case "$1" in
         --ca) [[ $# -ge 2 ]] || die "--ca needs a folder with ca.pem and ca.key"
@@ -36,6 +46,10 @@ while [[ $# -gt 0 ]]; do
         --san) [[ $# -ge 2 ]] || die "--san needs a value (IP:ADDR or DNS:NAME)"
                [[ "$2" =~ ^(IP|DNS):[A-Za-z0-9.:-]+$ ]] || die "--san $2: expected IP:ADDR or DNS:NAME"
                extra_sans+=("$2"); shift 2 ;;
+        --team) [[ $# -ge 2 ]] || die "--team needs a team name"
+                [[ "$2" =~ ^[A-Za-z0-9_-]{1,64}$ ]] || die "team name '$2' is not [A-Za-z0-9_-]{1,64} (protocol::validate_id)"
+                team="$2"; shift 2 ;;
+        --router) router=1; shift ;;
         -h|--help) usage ;;
         --) shift; break ;;
         -*) die "unknown option $1 (see --help)" ;;
@@ -45,6 +59,9 @@ done
 [[ $# -ge 1 ]] || usage
 dir="$1"; shift
 robots=("$@")
+if [[ $router -eq 1 ]]; then
+    [[ ${#robots[@]} -eq 0 && -z "$team" ]] || die "--router makes the router's certificate alone: no robots, no --team"
+fi
 [[ ${#robots[@]} -gt 0 ]] || robots=(r1 r2)
 
 command -v openssl >/dev/null 2>&1 || die "openssl is needed (apt-get install openssl)"
@@ -79,16 +96,23 @@ else
     echo "make-test-certs: made the CA $dir/ca.pem"
 fi
 
+# The certificate's common name: the identity, or IDENTITY.TEAM on a site.
+common_name() {
+    if [[ -n "$team" && "$1" != router ]]; then echo "$1.$team"; else echo "$1"; fi
+}
+
 make_identity() {
-    local id="$1" tmp
+    local id="$1" tmp cn
+    cn="$(common_name "$id")"
     if [[ -f "$dir/$id.pem" && -f "$dir/$id.key" ]] \
-        && openssl verify -CAfile "$dir/ca.pem" "$dir/$id.pem" >/dev/null 2>&1; then
+        && openssl verify -CAfile "$dir/ca.pem" "$dir/$id.pem" >/dev/null 2>&1 \
+        && [[ "$(openssl x509 -noout -subject -nameopt multiline -in "$dir/$id.pem" | sed -n 's/^ *commonName *= *//p')" == "$cn" ]]; then
         echo "make-test-certs: keeping $dir/$id.pem"
         return
     fi
     tmp="$(mktemp -d)"
     openssl req -new -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes \
-        -keyout "$tmp/key.pem" -out "$tmp/req.csr" -subj "/CN=$id" 2>/dev/null \
+        -keyout "$tmp/key.pem" -out "$tmp/req.csr" -subj "/CN=$cn" 2>/dev/null \
         || { rm -rf "$tmp"; die "openssl could not make a key for $id"; }
     cat > "$tmp/ext.cnf" <<EOF
 basicConstraints=critical,CA:FALSE
@@ -103,11 +127,15 @@ EOF
     mv "$tmp/cert.pem" "$dir/$id.pem"
     chmod 644 "$dir/$id.pem"
     rm -rf "$tmp"
-    echo "make-test-certs: made $dir/$id.pem (CN=$id, $san)"
+    echo "make-test-certs: made $dir/$id.pem (CN=$cn, $san)"
 }
 
 chmod 644 "$dir/ca.pem"
-for id in coordinator "${robots[@]}" sim-bridge runner tool; do
-    make_identity "$id"
-done
+if [[ $router -eq 1 ]]; then
+    make_identity router
+else
+    for id in coordinator "${robots[@]}" sim-bridge runner tool; do
+        make_identity "$id"
+    done
+fi
 rm -f "$dir/ca.srl"

@@ -26,13 +26,14 @@
 //!
 //! Peers in peer mode do not route for each other, so the remote at the end of a link is the
 //! origin of what it sends. A Zenoh router in between would be the remote of every message
-//! (its certificate name, not the origin's): use peer mode, as the team does, or enforce the
-//! ACL on the router.
+//! (its certificate name, not the origin's): a router enforces the ACL itself, by site names
+//! that carry the team ([`crate::site`]).
 //!
 //! [`SecureConfig`] writes one component's whole Zenoh configuration: peer mode, multicast
 //! scouting off, TLS endpoints, the certificate files ([`TlsFiles`]: CA, certificate, key;
 //! `enable_mtls`, so that a node without a certificate from the CA cannot open a link) and the
-//! ACL. `scripts/make-test-certs.sh` makes test certificates with these names.
+//! ACL. `scripts/make-test-certs.sh` makes test certificates with these names. Several teams on
+//! one network go through a router instead ([`crate::site`]).
 
 use std::path::{Path, PathBuf};
 
@@ -53,6 +54,8 @@ pub enum AccessError {
     MissingFile { what: &'static str, path: PathBuf },
     #[error("cannot write {path}: {reason}")]
     Write { path: PathBuf, reason: String },
+    #[error("site: {0}")]
+    Site(String),
     #[error("the configuration for {identity} is not a valid Zenoh configuration: {reason}")]
     Invalid { identity: String, reason: String },
 }
@@ -182,14 +185,14 @@ fn rule(id: String, messages: &[&str], flow: &str, keys: &[String]) -> Value {
     json!({ "id": id, "messages": messages, "flows": [flow], "permission": "allow", "key_exprs": keys })
 }
 
-/// The rules of one identity, as seen by the node at the other end of its links.
-fn identity_rules(team: &str, who: &Identity) -> Result<Vec<Value>, AccessError> {
+/// The rules of one identity of `team`, whose certificate is named `cert`, as seen by the node
+/// at the other end of its links.
+fn identity_rules(team: &str, who: &Identity, cert: &str) -> Result<Vec<Value>, AccessError> {
     let g = grants(team, who)?;
-    let n = who.name();
     let mut rules = Vec::new();
     let mut add = |suffix: &str, messages: &[&str], flow: &str, keys: &[String]| {
         if !keys.is_empty() {
-            rules.push(rule(format!("{n}/{suffix}"), messages, flow, keys));
+            rules.push(rule(format!("{cert}/{suffix}"), messages, flow, keys));
         }
     };
     add("puts", &["put", "delete"], "ingress", &g.puts);
@@ -201,29 +204,50 @@ fn identity_rules(team: &str, who: &Identity) -> Result<Vec<Value>, AccessError>
     Ok(rules)
 }
 
+/// The rules, subjects and policies of one team whose identities' certificates are named by
+/// `cert` (the identity's name on a team's own links, `{name}.{team}` on a site's router).
+/// Our own declarations (subscribers, liveliness subscribers) go out to every member: a
+/// declaration carries no data, and the remote checks it against its own rules.
+pub(crate) fn team_section(team: &str, robots: &[String], cert: &dyn Fn(&Identity) -> String, acl: &mut Acl) -> Result<(), AccessError> {
+    let identities = Identity::all(robots);
+    let mut names = Vec::new();
+    for who in &identities {
+        let name = cert(who);
+        let own = identity_rules(team, who, &name)?;
+        let ids: Vec<Value> = own.iter().map(|r| r["id"].clone()).collect();
+        acl.rules.extend(own);
+        acl.subjects.push(json!({ "id": name, "cert_common_names": [name] }));
+        if !ids.is_empty() {
+            acl.policies.push(json!({ "id": name, "rules": ids, "subjects": [name] }));
+        }
+        names.push(name);
+    }
+    let id = format!("{team}/declarations");
+    acl.rules.push(rule(id.clone(), &["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"], "egress", &[keys::everything(team)?]));
+    acl.policies.push(json!({ "id": id, "rules": [id], "subjects": names }));
+    Ok(())
+}
+
+/// Zenoh's `access_control` section being built: rules, subjects and policies, default deny.
+#[derive(Debug, Default)]
+pub(crate) struct Acl {
+    pub rules: Vec<Value>,
+    pub subjects: Vec<Value>,
+    pub policies: Vec<Value>,
+}
+
+impl Acl {
+    pub fn to_json(self) -> Value {
+        json!({ "enabled": true, "default_permission": "deny", "rules": self.rules, "subjects": self.subjects, "policies": self.policies })
+    }
+}
+
 /// Zenoh's `access_control` section for a team with these robots: default deny, one subject
 /// per identity (by certificate common name), each identity's grants as rules.
 pub fn access_control(team: &str, robots: &[String]) -> Result<Value, AccessError> {
-    let identities = Identity::all(robots);
-    let mut rules = Vec::new();
-    let mut subjects = Vec::new();
-    let mut policies = Vec::new();
-    for who in &identities {
-        let own = identity_rules(team, who)?;
-        let ids: Vec<Value> = own.iter().map(|r| r["id"].clone()).collect();
-        rules.extend(own);
-        subjects.push(json!({ "id": who.name(), "cert_common_names": [who.name()] }));
-        if !ids.is_empty() {
-            policies.push(json!({ "id": who.name(), "rules": ids, "subjects": [who.name()] }));
-        }
-    }
-    // Our own declarations (subscribers, liveliness subscribers) go out to every team member:
-    // a declaration carries no data, and the remote checks it against its own rules.
-    let everything = keys::everything(team)?;
-    rules.push(rule("declarations".into(), &["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"], "egress", &[everything]));
-    let names: Vec<&str> = identities.iter().map(Identity::name).collect();
-    policies.push(json!({ "id": "declarations", "rules": ["declarations"], "subjects": names }));
-    Ok(json!({ "enabled": true, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies }))
+    let mut acl = Acl::default();
+    team_section(team, robots, &|who| who.name().to_string(), &mut acl)?;
+    Ok(acl.to_json())
 }
 
 /// The CA, certificate and key of one identity.
@@ -238,11 +262,12 @@ impl TlsFiles {
     /// The files `scripts/make-test-certs.sh DIR` writes for `who`: `DIR/ca.pem`,
     /// `DIR/{name}.pem`, `DIR/{name}.key`.
     pub fn in_dir(dir: &Path, who: &Identity) -> Self {
-        TlsFiles {
-            root_ca: dir.join("ca.pem"),
-            certificate: dir.join(format!("{}.pem", who.name())),
-            private_key: dir.join(format!("{}.key", who.name())),
-        }
+        Self::named(dir, who.name())
+    }
+
+    /// `DIR/ca.pem`, `DIR/{name}.pem`, `DIR/{name}.key`.
+    pub fn named(dir: &Path, name: &str) -> Self {
+        TlsFiles { root_ca: dir.join("ca.pem"), certificate: dir.join(format!("{name}.pem")), private_key: dir.join(format!("{name}.key")) }
     }
 
     /// An error naming the first file that is missing.
@@ -312,19 +337,31 @@ impl SecureConfig {
 
     /// The configuration as a Zenoh configuration (checks that Zenoh accepts it).
     pub fn to_zenoh(&self) -> Result<zenoh::Config, AccessError> {
-        let invalid = |reason: String| AccessError::Invalid { identity: self.identity.name().to_string(), reason };
-        let text = serde_json::to_string(&self.to_json()?).map_err(|e| invalid(e.to_string()))?;
-        zenoh::Config::from_json5(&text).map_err(|e| invalid(e.to_string()))
+        to_zenoh(self.identity.name(), &self.to_json()?)
     }
 
     /// Check the certificate files and write the configuration to `path` (pretty JSON, which
     /// `--zenoh-config` reads as JSON5).
     pub fn write(&self, path: &Path) -> Result<(), AccessError> {
-        self.tls.check()?;
-        self.to_zenoh()?;
-        let text = serde_json::to_string_pretty(&self.to_json()?).map_err(|e| AccessError::Write { path: path.to_path_buf(), reason: e.to_string() })?;
-        std::fs::write(path, text + "\n").map_err(|e| AccessError::Write { path: path.to_path_buf(), reason: e.to_string() })
+        write_checked(path, self.identity.name(), &self.tls, &self.to_json()?)
     }
+}
+
+/// `config` as a Zenoh configuration: an error naming `who` when Zenoh refuses it.
+pub(crate) fn to_zenoh(who: &str, config: &Value) -> Result<zenoh::Config, AccessError> {
+    let invalid = |reason: String| AccessError::Invalid { identity: who.to_string(), reason };
+    let text = serde_json::to_string(config).map_err(|e| invalid(e.to_string()))?;
+    zenoh::Config::from_json5(&text).map_err(|e| invalid(e.to_string()))
+}
+
+/// Check `who`'s certificate files and that Zenoh accepts `config`, then write it to `path`
+/// (pretty JSON, which `--zenoh-config` reads as JSON5).
+pub(crate) fn write_checked(path: &Path, who: &str, tls: &TlsFiles, config: &Value) -> Result<(), AccessError> {
+    tls.check()?;
+    to_zenoh(who, config)?;
+    let failed = |e: String| AccessError::Write { path: path.to_path_buf(), reason: e };
+    let text = serde_json::to_string_pretty(config).map_err(|e| failed(e.to_string()))?;
+    std::fs::write(path, text + "\n").map_err(|e| failed(e.to_string()))
 }
 
 /// The configurations of every identity of a team, the certificates named from `certs` as

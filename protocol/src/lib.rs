@@ -79,6 +79,8 @@ pub mod transport;
 #[cfg(feature = "transport")]
 pub mod access;
 #[cfg(feature = "transport")]
+pub mod site;
+#[cfg(feature = "transport")]
 pub mod logging;
 
 pub use codec::{decode, encode, from_json, schema_id, to_json, Message, MessageKind, Wire, MAX_MESSAGE_BYTES};

@@ -23,7 +23,7 @@ use protocol::{ContactSet, CoordinatorMode, CoordinatorStatus, GroundTruth, Task
 use tokio::sync::watch;
 use zenoh::Session;
 
-use crate::plan::{ReferencePlan, TEAM};
+use crate::plan::ReferencePlan;
 use crate::record::{RecordedMessage, Tap};
 
 /// References are published this many ticks ahead of the last simulated tick (10 s at 2 kHz;
@@ -94,6 +94,8 @@ pub struct Driver {
     contact_sets: Vec<ContactSet>,
     next_contact: usize,
     contact_pubs: BTreeMap<String, TypedPublisher<ContactSet>>,
+    /// The team's name on the bus.
+    team: String,
     plan: ReferencePlan,
     total: u64,
     progress: ProgressBar,
@@ -115,21 +117,21 @@ pub const RECORD_QUEUE: usize = 1 << 15;
 impl Driver {
     /// Declare everything on `session`. `show_progress`: a progress bar on a terminal, log
     /// lines every 10 % otherwise.
-    pub async fn start(session: &Session, plan: ReferencePlan, total_ticks: u64, show_progress: bool) -> Result<Driver, TransportError> {
+    pub async fn start(session: &Session, team: &str, plan: ReferencePlan, total_ticks: u64, show_progress: bool) -> Result<Driver, TransportError> {
         // What the report is made of: room for seconds of a real-time run whose driver fell
         // behind (a queue drops its oldest when full, see `transport::SampleQueue`).
-        let truth = transport::subscribe_with_capacity(session, keys::ground_truth(TEAM)?, RECORD_QUEUE).await?;
-        let torques = transport::subscribe_with_capacity(session, keys::all_robots(TEAM, RobotTopic::Torque)?, RECORD_QUEUE).await?;
-        let diagnostics = transport::subscribe_with_capacity(session, keys::diagnostics(TEAM)?, RECORD_QUEUE).await?;
-        let status = transport::subscribe(session, keys::coordinator_status(TEAM)?).await?;
-        let coordinator = transport::watch_coordinator(session, TEAM).await?;
-        let refs_pub = TypedPublisher::declare(session, keys::references(TEAM)?, Qos::HotPath).await?;
-        let contact_sets = plan.walk.as_ref().map(|w| w.contact_sets(TEAM, &plan.clock)).unwrap_or_default();
+        let truth = transport::subscribe_with_capacity(session, keys::ground_truth(team)?, RECORD_QUEUE).await?;
+        let torques = transport::subscribe_with_capacity(session, keys::all_robots(team, RobotTopic::Torque)?, RECORD_QUEUE).await?;
+        let diagnostics = transport::subscribe_with_capacity(session, keys::diagnostics(team)?, RECORD_QUEUE).await?;
+        let status = transport::subscribe(session, keys::coordinator_status(team)?).await?;
+        let coordinator = transport::watch_coordinator(session, team).await?;
+        let refs_pub = TypedPublisher::declare(session, keys::references(team)?, Qos::HotPath).await?;
+        let contact_sets = plan.walk.as_ref().map(|w| w.contact_sets(team, &plan.clock)).unwrap_or_default();
         let mut contact_pubs = BTreeMap::new();
         for c in &contact_sets {
             let id = c.header.robot_id().to_string();
             if let std::collections::btree_map::Entry::Vacant(slot) = contact_pubs.entry(id) {
-                let key = keys::contacts(TEAM, slot.key())?;
+                let key = keys::contacts(team, slot.key())?;
                 slot.insert(TypedPublisher::declare(session, key, Qos::HotPath).await?);
             }
         }
@@ -147,7 +149,7 @@ impl Driver {
         } else {
             ProgressBar::hidden()
         };
-        Ok(Driver { truth, torques, diagnostics, status, coordinator, refs_pub, contact_sets, next_contact: 0, contact_pubs, plan, total: total_ticks, progress, log_progress: show_progress && !terminal, tap: None, tapped_refs: 0 })
+        Ok(Driver { team: team.to_string(), truth, torques, diagnostics, status, coordinator, refs_pub, contact_sets, next_contact: 0, contact_pubs, plan, total: total_ticks, progress, log_progress: show_progress && !terminal, tap: None, tapped_refs: 0 })
     }
 
     /// Hand every message the driver decodes or publishes to the recorder too.
@@ -158,7 +160,7 @@ impl Driver {
 
     async fn publish_refs(&mut self, from: u64, to: u64) -> Result<(), TransportError> {
         for tick in from..to.min(self.total) {
-            let refs = self.plan.for_tick(TEAM, tick);
+            let refs = self.plan.for_tick(&self.team, tick);
             self.refs_pub.put(&refs).await?;
             if let Some(tap) = self.tap.as_ref().filter(|_| tick >= self.tapped_refs) {
                 tap.send(&self.refs_pub.key(), RecordedMessage::References(refs));
@@ -195,7 +197,7 @@ impl Driver {
         tracing::warn!(released_after = tick, halt_s = t, halt_tick = from, "the team let go of the object: the walk halts (at once before a lift-off, else when the lifted foot has landed)");
         self.tapped_refs = self.tapped_refs.min(from);
         self.publish_refs(from, published_to).await?;
-        let halt = walk.halt_sets(TEAM, &self.plan.clock, t);
+        let halt = walk.halt_sets(&self.team, &self.plan.clock, t);
         self.contact_sets.truncate(self.next_contact);
         self.contact_sets.extend(halt);
         self.publish_contacts(u64::MAX).await

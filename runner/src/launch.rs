@@ -18,6 +18,8 @@
 //!   (`protocol::access`): each process gets a Zenoh configuration with its identity's
 //!   certificate, written into the run's folder; [`RunMode::Hosts`] with certificates does the
 //!   same across test hosts.
+//! * [`RunMode::Site`]: as [`RunMode::Distributed`], every process a client of a site's Zenoh
+//!   router (`protocol::site`), which may carry other teams too.
 //!
 //! The caller then declares what it observes on [`Running::session`] (the scenario driver),
 //! runs the state source to its end with [`Running::run_bridge`] (it ends the run: after its
@@ -94,6 +96,11 @@ pub enum RunMode {
     /// certificates are in `certs` (`scripts/make-test-certs.sh CERTS ROBOT...`), and each
     /// process's Zenoh configuration is written to `dir`. This process is the `runner`.
     Tls { dir: PathBuf, certs: PathBuf },
+    /// Processes on loopback, each a Zenoh client of a site's router at `router`
+    /// ([`protocol::site`]), with the team's site certificates in `certs`
+    /// (`scripts/make-test-certs.sh --ca SITE --team TEAM CERTS ROBOT...`); each process's
+    /// configuration is written to `dir`. Several teams share the router by their names.
+    Site { dir: PathBuf, certs: PathBuf, router: String },
 }
 
 /// The team a Zenoh configuration with access control is written for.
@@ -136,6 +143,7 @@ impl RunMode {
             RunMode::Hosts { certs: None, .. } => "hosts",
             RunMode::Hosts { certs: Some(_), .. } => "hosts-tls",
             RunMode::Tls { .. } => "distributed-tls",
+            RunMode::Site { .. } => "site",
         }
     }
 
@@ -148,6 +156,7 @@ impl RunMode {
                 Ok(format!("{}/{addr}:{HUB_PORT}", if certs.is_some() { "tls" } else { "tcp" }))
             }
             RunMode::Tls { .. } => Ok(format!("tls/127.0.0.1:{}", free_port()?)),
+            RunMode::Site { router, .. } => Ok(router.clone()),
             _ => Ok(format!("tcp/127.0.0.1:{}", free_port()?)),
         }
     }
@@ -161,6 +170,7 @@ impl RunMode {
                 secure_args(dir, certs, ids, identity_of(host), &format!("tls/{addr}:0"), Some(hub))
             }
             RunMode::Tls { dir, certs } => secure_args(dir, certs, ids, identity_of(host), "tls/127.0.0.1:0", Some(hub)),
+            RunMode::Site { dir, certs, router } => site_args(dir, certs, &ids.team, identity_of(host), router),
             _ => Ok(ZenohArgs::connecting(hub)),
         }
     }
@@ -169,6 +179,7 @@ impl RunMode {
     fn hub_args(&self, hub: &str, ids: &TeamIds) -> Result<ZenohArgs, LaunchError> {
         match self {
             RunMode::Tls { dir, certs } | RunMode::Hosts { dir, certs: Some(certs), .. } => secure_args(dir, certs, ids, Identity::Coordinator, hub, None),
+            RunMode::Site { dir, certs, router } => site_args(dir, certs, &ids.team, Identity::Coordinator, router),
             _ => Ok(ZenohArgs::listening(hub)),
         }
     }
@@ -198,6 +209,15 @@ fn secure_args(dir: &Path, certs: &Path, ids: &TeamIds, identity: Identity, list
     let mut cfg = SecureConfig::in_dir(certs, &ids.team, &ids.robots, identity);
     cfg.listen = vec![listen.to_string()];
     cfg.connect = connect.map(|c| vec![c.to_string()]).unwrap_or_default();
+    let path = dir.join(protocol::access::file_name(&cfg.identity));
+    cfg.write(&path)?;
+    Ok(ZenohArgs { config: Some(path), ..Default::default() })
+}
+
+/// Write `identity`'s configuration as a client of the site's router into `dir` and return
+/// the arguments that use it.
+fn site_args(dir: &Path, certs: &Path, team: &str, identity: Identity, router: &str) -> Result<ZenohArgs, LaunchError> {
+    let cfg = protocol::site::ClientConfig::in_dir(certs, team, identity, router);
     let path = dir.join(protocol::access::file_name(&cfg.identity));
     cfg.write(&path)?;
     Ok(ZenohArgs { config: Some(path), ..Default::default() })
@@ -537,7 +557,7 @@ impl Launch {
                 }
                 Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect: ZenohArgs::default(), components })
             }
-            RunMode::Distributed { dir } | RunMode::Hosts { dir, .. } | RunMode::Tls { dir, .. } => {
+            RunMode::Distributed { dir } | RunMode::Hosts { dir, .. } | RunMode::Tls { dir, .. } | RunMode::Site { dir, .. } => {
                 let hub = mode.hub()?;
                 let ids = TeamIds { team: self.coordinator.team.clone(), robots: self.agents.iter().map(|a| a.id.clone()).collect() };
                 let process = |host: &str, bin: &str, args: Vec<String>| Starter::Process { mode: mode.clone(), host: host.to_string(), bin: bin.to_string(), args };
@@ -585,7 +605,7 @@ impl Running {
     pub async fn run_bridge(&mut self, bridge: &BridgeArgs) -> Result<BridgeOutcome, LaunchError> {
         let result = match &self.mode {
             RunMode::Embedded => self.run_bridge_here(bridge).await,
-            RunMode::Distributed { dir } | RunMode::Hosts { dir, .. } | RunMode::Tls { dir, .. } => {
+            RunMode::Distributed { dir } | RunMode::Hosts { dir, .. } | RunMode::Tls { dir, .. } | RunMode::Site { dir, .. } => {
                 let mut child = self.mode.spawn(SIM_HOST, "sim-bridge", &bridge.to_cli(dir, &self.connect)?, "sim-bridge")?;
                 tokio::task::spawn_blocking(move || child.wait_success())
                     .await

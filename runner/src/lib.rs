@@ -13,6 +13,8 @@
 //! * [`placing`]: the planner (`planner`: robot placement, hands on the object, references,
 //!   the walk) on the simulator's world spec and the controller's planned grasp.
 //! * [`run`]: `team run`: the scenario with the whole stack, embedded or distributed.
+//! * [`site`]: `team router`: a site's Zenoh router, which several teams share
+//!   (`protocol::site`).
 //! * [`priority`]: a real-time run's scheduling priority (raised where permitted).
 //! * [`driver`]: the runner's participant during a run: references out, records in, progress.
 //! * [`compare`]: controllers side by side on the same scenarios (experiment S3) and the motion
@@ -46,5 +48,6 @@ pub mod record;
 pub mod report;
 pub mod run;
 pub mod scenario;
+pub mod site;
 pub mod smoke;
 pub mod walk;

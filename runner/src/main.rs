@@ -60,6 +60,8 @@ enum Command {
     /// Write every identity's Zenoh configuration (mutual TLS, the team's access control) into
     /// a folder: zenoh-coordinator.json5, zenoh-r1.json5, ..., zenoh-tool.json5, for any binary's
     /// --zenoh-config. Make the certificates first: scripts/make-test-certs.sh CERTS r1 r2.
+    /// With --router, the team's configurations as clients of a site's router (certificates
+    /// from scripts/make-test-certs.sh --ca SITE --team TEAM CERTS r1 r2).
     ZenohConfig {
         /// Folder of the certificates (ca.pem, IDENTITY.pem, IDENTITY.key); written into the
         /// files as given (a relative path is resolved from each component's working directory).
@@ -70,11 +72,35 @@ enum Command {
         #[arg(long, default_value = "team")]
         team: String,
         /// The coordinator's endpoint: it listens there, the others connect to it.
-        #[arg(long, default_value = "tls/127.0.0.1:7447")]
+        #[arg(long, default_value = "tls/127.0.0.1:7447", conflicts_with = "router")]
         hub: String,
+        /// A site's router endpoint (tls/HOST:PORT): every identity is a client of it.
+        #[arg(long)]
+        router: Option<String>,
         /// Output folder.
         #[arg(long, default_value = "config/zenoh")]
         out: PathBuf,
+    },
+    /// Write a site router's Zenoh configuration: router mode, mutual TLS with the site's CA,
+    /// and the access control that keeps each team to its own keys. Make the router's
+    /// certificate first: scripts/make-test-certs.sh --router CERTS.
+    RouterConfig {
+        /// Folder of the site's CA and the router's certificate (ca.pem, router.pem, router.key).
+        certs: PathBuf,
+        /// A team of the site and its robots, NAME=ROBOT,ROBOT,...; once per team.
+        #[arg(long = "team", value_name = "NAME=ROBOTS", required = true)]
+        teams: Vec<String>,
+        /// Endpoints the router listens on.
+        #[arg(long, default_value = "tls/0.0.0.0:7447")]
+        listen: Vec<String>,
+        /// Output file.
+        #[arg(long, default_value = "config/zenoh/site/router.json5")]
+        out: PathBuf,
+    },
+    /// Run a site's Zenoh router (written by team router-config) until interrupted.
+    Router {
+        /// The router's configuration.
+        config: PathBuf,
     },
     /// Run scenarios with several controllers side by side (experiment S3: `team compare
     /// scenarios/s3_hold.toml scenarios/s1_torso_and_object.toml --controllers pidc,mqp`):
@@ -161,6 +187,14 @@ struct RunArgs {
     /// addresses into the report folder's hosts-certs/.
     #[arg(long, value_name = "DIR")]
     tls: Option<PathBuf>,
+    /// As a client of a site's Zenoh router at this endpoint (tls/HOST:PORT), every component
+    /// its own process; needs --tls with the team's site certificates (docs/realtime.md,
+    /// "A site").
+    #[arg(long, value_name = "ENDPOINT", requires = "tls", conflicts_with = "hosts")]
+    router: Option<String>,
+    /// The team's name on the bus (team/NAME/...): teams that share a router differ by it.
+    #[arg(long, default_value = team_runner::plan::TEAM)]
+    team: String,
     /// Report folder (default: reports/<scenario file name>).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -232,11 +266,24 @@ fn main() -> Result<()> {
             write_report(&plan, &eval, &records, &dir)?;
         }
         Command::Echo { key, count, wait, zenoh } => echo_key(key, count, wait, &zenoh)?,
-        Command::ZenohConfig { certs, robots, team, hub, out } => {
-            for path in protocol::access::write_team(&certs, &team, &robots, &hub, &out)? {
+        Command::ZenohConfig { certs, robots, team, hub, router, out } => {
+            let written = match router {
+                Some(router) => protocol::site::write_clients(&certs, &protocol::site::SiteTeam { team, robots }, &router, &out)?,
+                None => protocol::access::write_team(&certs, &team, &robots, &hub, &out)?,
+            };
+            for path in written {
                 println!("{}", path.display());
             }
         }
+        Command::RouterConfig { certs, teams, listen, out } => {
+            let teams = teams.iter().map(|t| protocol::site::SiteTeam::parse(t)).collect::<Result<Vec<_>, _>>()?;
+            if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+                create_dir(dir)?;
+            }
+            protocol::site::RouterConfig::in_dir(&certs, teams, listen).write(&out)?;
+            println!("{}", out.display());
+        }
+        Command::Router { config } => run_router(&config)?,
         Command::Smoke(a) => smoke_run(a)?,
     }
     Ok(())
@@ -254,7 +301,11 @@ fn verbosity(command: &Command) -> Verbosity {
 /// `team run`: plan, run (recorded), evaluate, report; an error if a check failed.
 fn run_scenario(a: RunArgs) -> Result<()> {
     let opts = RunOptions { distributed: a.distributed, hosts: a.hosts, progress: !a.quiet };
-    let mode_name = opts.mode_label(a.tls.is_some(), a.realtime);
+    let mode_name = match a.router {
+        Some(_) if a.realtime => "site, real time".to_string(),
+        Some(_) => "site".to_string(),
+        None => opts.mode_label(a.tls.is_some(), a.realtime),
+    };
     let s = Scenario::load(&a.scenario, &a.set)?;
     let dir = a.out.unwrap_or_else(|| scenario_run::default_report_dir(&a.scenario));
     create_dir(&dir)?;
@@ -263,12 +314,19 @@ fn run_scenario(a: RunArgs) -> Result<()> {
     }
     let mut plan = plan::plan(&s, &repo_root())?;
     plan.scene.realtime = a.realtime;
+    plan.set_team(&a.team)?;
     if !a.quiet {
         println!("{}: settling {:.1} s, then {:.1} s of scenario at {} Hz ({} mode)", s.name, s.settle, s.duration, s.control_hz, mode_name);
     }
     let source = ScenarioSource::read(&a.scenario, &a.set).map_err(|e| anyhow::anyhow!("reading {}: {e}", a.scenario.display()))?;
     let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live: a.live };
-    let (records, recording) = scenario_run::run_recorded_secure(&plan, &opts, a.tls.as_deref(), &dir, Some(&rec))?;
+    let (records, recording) = match (&a.router, &a.tls) {
+        (Some(router), Some(certs)) => {
+            let mode = RunMode::Site { dir: dir.clone(), certs: std::path::absolute(certs)?, router: router.clone() };
+            scenario_run::run_recorded_in(&plan, &opts, &mode, Some(&rec))?
+        }
+        _ => scenario_run::run_recorded_secure(&plan, &opts, a.tls.as_deref(), &dir, Some(&rec))?,
+    };
     let eval = evaluate::evaluate(&plan, &records, &mode_name);
     // Whatever could not be written is named at the end, after the run's summary.
     let mut errors = Vec::new();
@@ -294,6 +352,18 @@ fn write_report(plan: &plan::Plan, eval: &evaluate::Evaluation, records: &team_r
     evaluate::write_report(plan, eval, dir)?;
     plots::write_all(plan, eval, records, dir)?;
     Ok(())
+}
+
+/// `team router`: the site's router until Ctrl-C (or SIGTERM's default end).
+fn run_router(config: &Path) -> Result<()> {
+    let rt = tokio::runtime::Runtime::new()?;
+    rt.block_on(async {
+        let session = team_runner::site::open_router(config).await?;
+        println!("router {} listening on {}", session.zid(), team_runner::site::listen_endpoints(config));
+        tokio::signal::ctrl_c().await?;
+        session.close().await.map_err(|e| anyhow::anyhow!("closing the router: {e}"))?;
+        Ok(())
+    })
 }
 
 /// `team echo`: the messages on `key` as JSON lines.

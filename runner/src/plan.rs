@@ -23,7 +23,7 @@ use planner::gait::HandLoad;
 use planner::reference::PoseMotion;
 use crate::scenario::{PushSection, Scenario};
 
-/// The team name every scenario run uses on the bus.
+/// The team's name on the bus when a run is given none ([`Plan::set_team`]).
 pub const TEAM: &str = "team";
 
 /// What can go wrong turning a scenario into a run.
@@ -70,6 +70,18 @@ pub struct PlannedRobot {
 }
 
 impl Plan {
+    /// The team's name on the bus (`team/{team}/...`).
+    pub fn team(&self) -> &str {
+        &self.scene.team
+    }
+
+    /// Run as team `name` on the bus (several teams share a site's router by name).
+    pub fn set_team(&mut self, name: &str) -> Result<(), protocol::ProtocolError> {
+        protocol::validate_id("team", name)?;
+        self.scene.team = name.to_string();
+        Ok(())
+    }
+
     /// Ticks of the whole run (settling included).
     pub fn total_ticks(&self) -> u64 {
         self.scene.clock().total_ticks()

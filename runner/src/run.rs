@@ -13,7 +13,7 @@ use thiserror::Error;
 use crate::driver::{Driver, Records};
 use crate::hosts::TestHosts;
 use crate::launch::{AgentArgs, AgentModel, BridgeArgs, CoordinatorArgs, Launch, LaunchError, RunMode};
-use crate::plan::{Plan, TEAM};
+use crate::plan::Plan;
 use crate::record::{self, RecordError, RecordOptions, Recorder, RecordingSummary, RunFacts};
 
 /// In lockstep, an agent waits this long for its command before it holds its posture: a tick
@@ -115,12 +115,12 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
         (COORDINATOR_TICK_DEADLINE, AGENT_COMMAND_DEADLINE, None)
     };
     let expected = plan.robots.iter().map(|r| r.id.clone()).collect();
-    let coordinator = CoordinatorArgs { team: TEAM.into(), tick_deadline, reuse, expected, controller: plan.controller.clone() };
+    let coordinator = CoordinatorArgs { team: plan.team().into(), tick_deadline, reuse, expected, controller: plan.controller.clone() };
     let agents = plan
         .robots
         .iter()
         .map(|r| AgentArgs {
-            team: TEAM.into(),
+            team: plan.team().into(),
             id: r.id.clone(),
             model: AgentModel::Robot { robot: r.robot.clone(), description: r.description.clone() },
             command_deadline,
@@ -159,7 +159,6 @@ pub fn run_recorded_secure(
     out: &Path,
     record: Option<&RecordOptions>,
 ) -> Result<(Records, Option<RecordingSummary>), RunError> {
-    let rt = tokio::runtime::Runtime::new().map_err(|e| RunError::Task { what: "starting the async runtime".into(), reason: e.to_string() })?;
     if let (true, Some(ca)) = (opts.hosts, tls) {
         // Before any host is made: the run's certificates need the test CA's key.
         TestHosts::check_ca(ca).map_err(|e| RunError::Task { what: "the run's certificates".into(), reason: e.to_string() })?;
@@ -180,6 +179,12 @@ pub fn run_recorded_secure(
     } else {
         loopback_mode(opts, tls, out)
     };
+    run_recorded_in(plan, opts, &mode, record)
+}
+
+/// [`run_recorded`] in a given mode (e.g. [`RunMode::Site`], a client of a site's router).
+pub fn run_recorded_in(plan: &Plan, opts: &RunOptions, mode: &RunMode, record: Option<&RecordOptions>) -> Result<(Records, Option<RecordingSummary>), RunError> {
+    let rt = tokio::runtime::Runtime::new().map_err(|e| RunError::Task { what: "starting the async runtime".into(), reason: e.to_string() })?;
     let recorder = match record {
         Some(r) => Some(rt.block_on(Recorder::start(plan, r))?),
         None => None,
@@ -187,7 +192,7 @@ pub fn run_recorded_secure(
     if let Some(port) = recorder.as_ref().and_then(Recorder::live_port) {
         println!("live: open Foxglove and connect to ws://127.0.0.1:{port}");
     }
-    let result = rt.block_on(run_in(plan, opts, &mode, recorder.as_ref()));
+    let result = rt.block_on(run_in(plan, opts, mode, recorder.as_ref()));
     // The recording is closed whatever happened: a failed run's recording shows why.
     let facts = |r: &Records| RunFacts { mode: mode.name().to_string(), settle_wall: r.settle_wall, run_wall: r.run_wall };
     let summary = match recorder {
@@ -210,12 +215,12 @@ pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &RunMode, recorder: Op
     let (launch, bridge) = launch_of(plan);
     let started = Instant::now();
     let mut running = launch.start(mode).await?;
-    let mut driver = Driver::start(running.session(), plan.references.clone(), plan.total_ticks(), opts.progress).await?;
+    let mut driver = Driver::start(running.session(), plan.team(), plan.references.clone(), plan.total_ticks(), opts.progress).await?;
     let (record_stop, record_stopped) = tokio::sync::watch::channel(false);
     let mut record_tasks = Vec::new();
     if let Some(rec) = recorder {
         driver = driver.with_tap(rec.tap());
-        record_tasks = record::subscribe(running.session(), TEAM, &rec.tap(), &record_stopped).await?;
+        record_tasks = record::subscribe(running.session(), plan.team(), &rec.tap(), &record_stopped).await?;
     }
     let mut fault_tasks = Vec::new();
     for f in &plan.scenario.faults {
@@ -226,7 +231,7 @@ pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &RunMode, recorder: Op
         }
         let component = running.component(who).ok_or_else(|| fault("no such component in the run"))?;
         let armed = crate::faults::Armed::new(f, &plan.references.clock, component, &plan.robots[0].id);
-        fault_tasks.push(crate::faults::inject(running.session(), TEAM, armed, running.stop_signal()).await?);
+        fault_tasks.push(crate::faults::inject(running.session(), plan.team(), armed, running.stop_signal()).await?);
     }
     let mut driver_task = tokio::spawn(driver.run(running.stop_signal()));
     let bridge_result = running.run_bridge(&bridge).await;

@@ -39,6 +39,13 @@ fn bad_arguments_and_files_are_one_clear_error() {
     refused(&run("coordinator", &["run", "--controller", "nosuch"]), "nosuch");
     refused(&run("sim-bridge", &["scene", "/nonexistent/scene.toml"]), "/nonexistent/scene.toml");
     refused(&run("sim-bridge", &["frobnicate"]), "frobnicate");
+    refused(&run("team", &["run", "scenarios/s4_object_circle.toml", "--router", "tls/127.0.0.1:7448"]), "--tls");
+    refused(&run("team", &["run", "scenarios/s4_object_circle.toml", "--team", "a/b"]), "a/b");
+    refused(&run("team", &["router-config", "/nonexistent", "--team", "alpha"]), "alpha");
+    refused(&run("team", &["router-config", "/nonexistent", "--team", "alpha=r1"]), "/nonexistent/ca.pem");
+    // A team's own (peer-mode) configuration is not a router's.
+    refused(&run("team", &["router", "config/zenoh/zenoh-coordinator.json5"]), "not a router");
+    refused(&run("team", &["router", "/nonexistent/router.json5"]), "/nonexistent/router.json5");
 }
 
 /// A push of 60 N on the object for 0.2 s: the palms slip and the object leaves its reference;
