@@ -122,11 +122,13 @@ pub async fn run(
 ) -> Result<CoordinatorCounters, TransportError> {
     let dynamics = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Dynamics)?).await?;
     let members_q = transport::watch_members(session, &cfg.team).await?;
-    // Agents and the bridge see the coordinator go when this token does.
-    let _alive = transport::declare_coordinator(session, &cfg.team).await?;
     let descriptions = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Description)?).await?;
     // A planner may send many ticks' references at once (the scenario driver does).
     let references = transport::subscribe_with_capacity(session, keys::references(&cfg.team)?, REFERENCE_QUEUE).await?;
+    // Agents and the bridge see the coordinator go when this token does. Declared after the
+    // subscribers: whoever sees it can send references and be heard (the scenario driver
+    // sends the first ones then, before the first tick, so that a lockstep run replays).
+    let _alive = transport::declare_coordinator(session, &cfg.team).await?;
     let mut svc = Service::start(session, cfg).await?;
     tracing::info!(team = %svc.cfg.team, controller = controller.name(), reuse = ?svc.cfg.reuse, "coordinator running");
 

@@ -96,6 +96,8 @@ pub struct Driver {
     contact_pubs: BTreeMap<String, TypedPublisher<ContactSet>>,
     /// The team's name on the bus.
     team: String,
+    /// The first window of references went out before the run ([`Driver::send_first_window`]).
+    first_window_sent: bool,
     plan: ReferencePlan,
     total: u64,
     progress: ProgressBar,
@@ -149,7 +151,7 @@ impl Driver {
         } else {
             ProgressBar::hidden()
         };
-        Ok(Driver { team: team.to_string(), truth, torques, diagnostics, status, coordinator, refs_pub, contact_sets, next_contact: 0, contact_pubs, plan, total: total_ticks, progress, log_progress: show_progress && !terminal, tap: None, tapped_refs: 0 })
+        Ok(Driver { team: team.to_string(), first_window_sent: false, truth, torques, diagnostics, status, coordinator, refs_pub, contact_sets, next_contact: 0, contact_pubs, plan, total: total_ticks, progress, log_progress: show_progress && !terminal, tap: None, tapped_refs: 0 })
     }
 
     /// Hand every message the driver decodes or publishes to the recorder too.
@@ -233,13 +235,34 @@ impl Driver {
         }
     }
 
+    /// Wait (at most `within`) for the coordinator's liveliness token, which it declares once
+    /// it listens for references, then send the first window of references. Before the first
+    /// tick, so that every tick is solved with its own reference whatever the processes'
+    /// timing (a lockstep run replays bit for bit). `false` if no coordinator came in time.
+    pub async fn send_first_window(&mut self, within: Duration) -> Result<bool, TransportError> {
+        let until = tokio::time::Instant::now() + within;
+        loop {
+            match tokio::time::timeout_at(until, self.coordinator.recv_async()).await {
+                Ok(Ok(sample)) if transport::coordinator_alive(&sample) => break,
+                Ok(Ok(_)) => continue,
+                Ok(Err(_)) | Err(_) => return Ok(false),
+            }
+        }
+        self.publish_refs(0, LOOKAHEAD.min(self.total)).await?;
+        self.first_window_sent = true;
+        Ok(true)
+    }
+
     /// Run until the ground truth of the last tick arrived, or `stop` turns true.
     pub async fn run(mut self, mut stop: watch::Receiver<bool>) -> Result<Records, TransportError> {
         let mut st = RunState::new(self.plan.clock.settle_ticks, LOOKAHEAD.min(self.total));
-        // The first window goes out now, and again when the coordinator is first heard of (it
-        // may not have subscribed yet): the settling ticks hold the start poses, which is also
-        // what the controller holds before any reference arrives.
-        self.publish_refs(0, st.next_ref).await?;
+        // The first window went out when the coordinator came ([`Driver::send_first_window`]),
+        // or goes out now; and again when the coordinator is first heard of: the settling
+        // ticks hold the start poses, which is also what the controller holds before any
+        // reference arrives.
+        if !self.first_window_sent {
+            self.publish_refs(0, st.next_ref).await?;
+        }
         loop {
             tokio::select! {
                 _ = stop.changed() => { if *stop.borrow() { break; } }

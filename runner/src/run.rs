@@ -50,6 +50,10 @@ pub const REALTIME_SILENCE: Duration = Duration::from_millis(200);
 /// After the bridge ended the run, how long the driver may take to record the last ticks.
 pub const DRIVER_DRAIN: Duration = Duration::from_secs(5);
 
+/// How long a run waits for its coordinator to come before the first tick (a process on a
+/// loaded machine starts in seconds); then the run fails, naming the coordinator.
+pub const COORDINATOR_WAIT: Duration = Duration::from_secs(60);
+
 /// Errors of a run.
 #[derive(Debug, Error)]
 pub enum RunError {
@@ -232,6 +236,9 @@ pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &RunMode, recorder: Op
         let component = running.component(who).ok_or_else(|| fault("no such component in the run"))?;
         let armed = crate::faults::Armed::new(f, &plan.references.clock, component, &plan.robots[0].id);
         fault_tasks.push(crate::faults::inject(running.session(), plan.team(), armed, running.stop_signal()).await?);
+    }
+    if !driver.send_first_window(COORDINATOR_WAIT).await? {
+        return Err(RunError::Task { what: "starting the run".into(), reason: format!("the coordinator did not come within {COORDINATOR_WAIT:?}") });
     }
     let mut driver_task = tokio::spawn(driver.run(running.stop_signal()));
     let bridge_result = running.run_bridge(&bridge).await;
