@@ -125,9 +125,7 @@ pub async fn run(
     let descriptions = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Description)?).await?;
     // A planner may send many ticks' references at once (the scenario driver does).
     let references = transport::subscribe_with_capacity(session, keys::references(&cfg.team)?, REFERENCE_QUEUE).await?;
-    // Agents and the bridge see the coordinator go when this token does. Declared after the
-    // subscribers: whoever sees it can send references and be heard (the scenario driver
-    // sends the first ones then, before the first tick, so that a lockstep run replays).
+    // Seen go by agents and bridge; declared last, so whoever sees it is heard (first references).
     let _alive = transport::declare_coordinator(session, &cfg.team).await?;
     let mut svc = Service::start(session, cfg).await?;
     tracing::info!(team = %svc.cfg.team, controller = controller.name(), reuse = ?svc.cfg.reuse, "coordinator running");
