@@ -222,6 +222,9 @@ fn the_product_speaks_of_the_product() {
     for c in CRATES {
         paths.extend(files(&root.join(c).join("src"), ".rs"));
     }
+    // The files people read besides the code: scenarios and scripts.
+    paths.extend(files(&root.join("scenarios"), ".toml"));
+    paths.extend(files(&root.join("scripts"), ".sh"));
     let mut found = Vec::new();
     for p in paths {
         let text = fs::read_to_string(&p).unwrap_or_default();
