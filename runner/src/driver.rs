@@ -96,8 +96,6 @@ pub struct Driver {
     contact_pubs: BTreeMap<String, TypedPublisher<ContactSet>>,
     /// The team's name on the bus.
     team: String,
-    /// The first window of references went out before the run ([`Driver::send_first_window`]).
-    first_window_sent: bool,
     plan: ReferencePlan,
     total: u64,
     progress: ProgressBar,
@@ -151,7 +149,7 @@ impl Driver {
         } else {
             ProgressBar::hidden()
         };
-        Ok(Driver { team: team.to_string(), first_window_sent: false, truth, torques, diagnostics, status, coordinator, refs_pub, contact_sets, next_contact: 0, contact_pubs, plan, total: total_ticks, progress, log_progress: show_progress && !terminal, tap: None, tapped_refs: 0 })
+        Ok(Driver { team: team.to_string(), truth, torques, diagnostics, status, coordinator, refs_pub, contact_sets, next_contact: 0, contact_pubs, plan, total: total_ticks, progress, log_progress: show_progress && !terminal, tap: None, tapped_refs: 0 })
     }
 
     /// Hand every message the driver decodes or publishes to the recorder too.
@@ -249,20 +247,13 @@ impl Driver {
             }
         }
         self.publish_refs(0, LOOKAHEAD.min(self.total)).await?;
-        self.first_window_sent = true;
         Ok(true)
     }
 
-    /// Run until the ground truth of the last tick arrived, or `stop` turns true.
+    /// Run until the ground truth of the last tick arrived, or `stop` turns true. The first
+    /// window of references went out before ([`Driver::send_first_window`]).
     pub async fn run(mut self, mut stop: watch::Receiver<bool>) -> Result<Records, TransportError> {
         let mut st = RunState::new(self.plan.clock.settle_ticks, LOOKAHEAD.min(self.total));
-        // The first window went out when the coordinator came ([`Driver::send_first_window`]),
-        // or goes out now; and again when the coordinator is first heard of: the settling
-        // ticks hold the start poses, which is also what the controller holds before any
-        // reference arrives.
-        if !self.first_window_sent {
-            self.publish_refs(0, st.next_ref).await?;
-        }
         loop {
             tokio::select! {
                 _ = stop.changed() => { if *stop.borrow() { break; } }
@@ -306,8 +297,7 @@ impl Driver {
         Ok(())
     }
 
-    /// A coordinator status: kept; the first that reports the team let go halts the walk; the
-    /// first heard sends the first window of references again.
+    /// A coordinator status: kept; the first that reports the team let go halts the walk.
     async fn on_status(&mut self, st: &mut RunState, sample: &zenoh::sample::Sample) -> Result<(), TransportError> {
         let Ok(status) = decode_sample::<CoordinatorStatus>(sample) else { return Ok(()) };
         if let Some(tap) = &self.tap {
@@ -319,10 +309,6 @@ impl Driver {
         }
         st.rec.statuses.push(status.clone());
         st.rec.last_status = Some(status);
-        if !st.coordinator_heard {
-            st.coordinator_heard = true;
-            self.publish_refs(0, st.next_ref).await?;
-        }
         Ok(())
     }
 
@@ -400,7 +386,6 @@ struct RunState {
     last_logged: u64,
     /// References of ticks below this are published.
     next_ref: u64,
-    coordinator_heard: bool,
     /// Whether the coordinator was seen to go (its liveliness token): the next one to come is
     /// a restarted coordinator.
     coordinator_lost: bool,
@@ -408,6 +393,6 @@ struct RunState {
 
 impl RunState {
     fn new(settle: u64, next_ref: u64) -> RunState {
-        RunState { rec: Records::default(), settle, started: Instant::now(), run_started: None, last_logged: 0, next_ref, coordinator_heard: false, coordinator_lost: false }
+        RunState { rec: Records::default(), settle, started: Instant::now(), run_started: None, last_logged: 0, next_ref, coordinator_lost: false }
     }
 }
