@@ -30,7 +30,7 @@
 //! that carry the team ([`crate::site`]).
 //!
 //! [`SecureConfig`] writes one component's whole Zenoh configuration: peer mode, multicast
-//! scouting off, TLS endpoints, the certificate files ([`TlsFiles`]: CA, certificate, key;
+//! scouting off, QUIC endpoints ([`SECURE_LINK`]), the certificate files ([`TlsFiles`]: CA, certificate, key;
 //! `enable_mtls`, so that a node without a certificate from the CA cannot open a link) and the
 //! ACL. `scripts/make-test-certs.sh` makes test certificates with these names. Several teams on
 //! one network go through a router instead ([`crate::site`]).
@@ -56,6 +56,8 @@ pub enum AccessError {
     Write { path: PathBuf, reason: String },
     #[error("site: {0}")]
     Site(String),
+    #[error("endpoint {0:?} is not a secure link: mutual TLS runs on QUIC endpoints, quic/HOST:PORT (Zenoh's tls/ link reads and writes one TLS session from two tasks at once, which can corrupt it under load)")]
+    NotSecure(String),
     #[error("the configuration for {identity} is not a valid Zenoh configuration: {reason}")]
     Invalid { identity: String, reason: String },
 }
@@ -250,6 +252,26 @@ pub fn access_control(team: &str, robots: &[String]) -> Result<Value, AccessErro
     Ok(acl.to_json())
 }
 
+/// The Zenoh link that carries mutual TLS: QUIC (TLS 1.3 inside, the same certificates and
+/// `transport/link/tls` settings, and the certificate's name for the ACL). Zenoh's `tls/` link
+/// (1.10) shares one TLS session between its reading and its writing task without a lock,
+/// which is unsound and was seen to corrupt a link under a router's load
+/// (<https://github.com/eclipse-zenoh/zenoh/issues/2557>); QUIC keeps the two directions apart.
+pub const SECURE_LINK: &str = "quic";
+
+/// A secure endpoint, `quic/HOST:PORT`.
+pub fn secure_endpoint(host: impl std::fmt::Display, port: u16) -> String {
+    format!("{SECURE_LINK}/{host}:{port}")
+}
+
+/// An error naming the first endpoint that is not a [`SECURE_LINK`] endpoint.
+pub fn check_secure(endpoints: &[String]) -> Result<(), AccessError> {
+    match endpoints.iter().find(|e| !e.starts_with(&format!("{SECURE_LINK}/"))) {
+        Some(e) => Err(AccessError::NotSecure(e.clone())),
+        None => Ok(()),
+    }
+}
+
 /// The CA, certificate and key of one identity.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct TlsFiles {
@@ -303,14 +325,14 @@ pub struct SecureConfig {
     pub robots: Vec<String>,
     pub identity: Identity,
     pub tls: TlsFiles,
-    /// `tls/HOST:PORT` endpoints (flags given to the binary override them).
+    /// `quic/HOST:PORT` endpoints (flags given to the binary override them).
     pub listen: Vec<String>,
     pub connect: Vec<String>,
 }
 
 impl SecureConfig {
     /// The configuration with the identity's files from `dir` (see [`TlsFiles::in_dir`]),
-    /// listening on a random loopback TLS port and connecting nowhere.
+    /// listening on a random loopback port and connecting nowhere.
     pub fn in_dir(dir: &Path, team: &str, robots: &[String], identity: Identity) -> Self {
         let tls = TlsFiles::in_dir(dir, &identity);
         SecureConfig {
@@ -318,13 +340,15 @@ impl SecureConfig {
             robots: robots.to_vec(),
             identity,
             tls,
-            listen: vec!["tls/127.0.0.1:0".into()],
+            listen: vec![secure_endpoint("127.0.0.1", 0)],
             connect: Vec::new(),
         }
     }
 
     /// The configuration as JSON (which is JSON5).
     pub fn to_json(&self) -> Result<Value, AccessError> {
+        check_secure(&self.listen)?;
+        check_secure(&self.connect)?;
         Ok(json!({
             "mode": "peer",
             "listen": { "endpoints": self.listen },
@@ -447,5 +471,18 @@ mod tests {
         assert!(z.get_json("transport/link/tls/connect_certificate").unwrap().contains("/certs/r1.pem"));
         let missing = cfg.write(Path::new("/nonexistent/zenoh.json5"));
         assert!(matches!(missing, Err(AccessError::MissingFile { .. })), "{missing:?}");
+    }
+
+    #[test]
+    fn only_quic_endpoints_carry_mutual_tls() {
+        let mut cfg = SecureConfig::in_dir(Path::new("/certs"), "t", &robots(), Identity::Coordinator);
+        assert!(cfg.listen.iter().all(|e| e.starts_with("quic/127.0.0.1:")), "{:?}", cfg.listen);
+        for bad in ["tls/127.0.0.1:7447", "tcp/127.0.0.1:7447", "quic127.0.0.1:7447"] {
+            cfg.connect = vec![bad.to_string()];
+            let refused = cfg.to_json();
+            assert!(matches!(&refused, Err(AccessError::NotSecure(e)) if e == bad), "{bad}: {refused:?}");
+        }
+        cfg.connect = vec![secure_endpoint("10.0.0.2", 7447)];
+        assert_eq!(cfg.to_json().unwrap()["connect"]["endpoints"][0], "quic/10.0.0.2:7447");
     }
 }

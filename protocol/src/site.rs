@@ -28,7 +28,7 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{json, Value};
 
-use crate::access::{team_section, to_zenoh, write_checked, Acl, AccessError, Identity, TlsFiles};
+use crate::access::{check_secure, team_section, to_zenoh, write_checked, Acl, AccessError, Identity, TlsFiles};
 use crate::keys;
 
 /// The common name of a site router's certificate.
@@ -102,7 +102,7 @@ pub struct RouterConfig {
     pub teams: Vec<SiteTeam>,
     /// The router's certificate (`DIR/router.pem`) and the site's CA.
     pub tls: TlsFiles,
-    /// `tls/HOST:PORT` endpoints the router listens on.
+    /// `quic/HOST:PORT` endpoints the router listens on.
     pub listen: Vec<String>,
 }
 
@@ -117,6 +117,7 @@ impl RouterConfig {
         if self.listen.is_empty() {
             return Err(AccessError::Site("a router needs an endpoint to listen on".into()));
         }
+        check_secure(&self.listen)?;
         Ok(json!({
             "mode": "router",
             "listen": { "endpoints": self.listen },
@@ -144,7 +145,7 @@ pub struct ClientConfig {
     pub identity: Identity,
     /// The identity's site certificate (`{identity}.{team}`), in its team's folder.
     pub tls: TlsFiles,
-    /// The router's endpoint, `tls/HOST:PORT`.
+    /// The router's endpoint, `quic/HOST:PORT`.
     pub router: String,
 }
 
@@ -156,6 +157,7 @@ impl ClientConfig {
 
     /// The configuration as JSON (which is JSON5).
     pub fn to_json(&self) -> Result<Value, AccessError> {
+        check_secure(std::slice::from_ref(&self.router))?;
         Ok(json!({
             "mode": "client",
             "connect": { "endpoints": [self.router] },
@@ -247,12 +249,12 @@ mod tests {
 
     #[test]
     fn zenoh_accepts_router_and_client_configurations() {
-        let router = RouterConfig::in_dir(Path::new("/site"), site(), vec!["tls/0.0.0.0:7447".into()]).to_zenoh().unwrap();
+        let router = RouterConfig::in_dir(Path::new("/site"), site(), vec!["quic/0.0.0.0:7447".into()]).to_zenoh().unwrap();
         assert_eq!(router.get_json("mode").unwrap(), "\"router\"");
         assert!(router.get_json("transport/link/tls/listen_certificate").unwrap().contains("/site/router.pem"));
-        let client = ClientConfig::in_dir(Path::new("/alpha"), "alpha", Identity::Agent("r1".into()), "tls/10.0.0.1:7447").to_zenoh().unwrap();
+        let client = ClientConfig::in_dir(Path::new("/alpha"), "alpha", Identity::Agent("r1".into()), "quic/10.0.0.1:7447").to_zenoh().unwrap();
         assert_eq!(client.get_json("mode").unwrap(), "\"client\"");
-        assert!(client.get_json("connect/endpoints").unwrap().contains("tls/10.0.0.1:7447"));
+        assert!(client.get_json("connect/endpoints").unwrap().contains("quic/10.0.0.1:7447"));
         assert!(client.get_json("access_control/subjects").unwrap().contains("\"router\""));
         assert_eq!(cert_name("alpha", &Identity::SimBridge), "sim-bridge.alpha");
     }

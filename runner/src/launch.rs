@@ -34,7 +34,7 @@ use std::time::Duration;
 use coordinator::service::{self as coordinator_service, CoordinatorConfig};
 use coordinator::team::assembly::Reuse;
 use coordinator::ControllerSpec;
-use protocol::access::{Identity, SecureConfig};
+use protocol::access::{secure_endpoint, Identity, SecureConfig};
 use protocol::transport::{self, Role, ZenohArgs};
 use robot_agent::agent::{self as agent_loop, AgentConfig};
 use robot_agent::dynamics_source::{ModelDynamics, PlaceholderDynamics};
@@ -153,9 +153,9 @@ impl RunMode {
         match self {
             RunMode::Hosts { hosts, certs, .. } => {
                 let addr = hosts.addr(COORDINATOR_HOST).map_err(|e| LaunchError::Hosts(e.to_string()))?;
-                Ok(format!("{}/{addr}:{HUB_PORT}", if certs.is_some() { "tls" } else { "tcp" }))
+                Ok(if certs.is_some() { secure_endpoint(addr, HUB_PORT) } else { format!("tcp/{addr}:{HUB_PORT}") })
             }
-            RunMode::Tls { .. } => Ok(format!("tls/127.0.0.1:{}", free_port()?)),
+            RunMode::Tls { .. } => Ok(secure_endpoint("127.0.0.1", free_port()?)),
             RunMode::Site { router, .. } => Ok(router.clone()),
             _ => Ok(format!("tcp/127.0.0.1:{}", free_port()?)),
         }
@@ -167,9 +167,9 @@ impl RunMode {
             RunMode::Hosts { hosts, certs: None, .. } => hosts.zenoh_args(host, hub).map_err(|e| LaunchError::Hosts(e.to_string())),
             RunMode::Hosts { dir, hosts, certs: Some(certs) } => {
                 let addr = hosts.listen_addr(host).map_err(|e| LaunchError::Hosts(e.to_string()))?;
-                secure_args(dir, certs, ids, identity_of(host), &format!("tls/{addr}:0"), Some(hub))
+                secure_args(dir, certs, ids, identity_of(host), &secure_endpoint(addr, 0), Some(hub))
             }
-            RunMode::Tls { dir, certs } => secure_args(dir, certs, ids, identity_of(host), "tls/127.0.0.1:0", Some(hub)),
+            RunMode::Tls { dir, certs } => secure_args(dir, certs, ids, identity_of(host), &secure_endpoint("127.0.0.1", 0), Some(hub)),
             RunMode::Site { dir, certs, router } => site_args(dir, certs, &ids.team, identity_of(host), router),
             _ => Ok(ZenohArgs::connecting(hub)),
         }

@@ -72,9 +72,9 @@ enum Command {
         #[arg(long, default_value = "team")]
         team: String,
         /// The coordinator's endpoint: it listens there, the others connect to it.
-        #[arg(long, default_value = "tls/127.0.0.1:7447", conflicts_with = "router")]
+        #[arg(long, default_value = "quic/127.0.0.1:7447", conflicts_with = "router")]
         hub: String,
-        /// A site's router endpoint (tls/HOST:PORT): every identity is a client of it.
+        /// A site's router endpoint (quic/HOST:PORT): every identity is a client of it.
         #[arg(long)]
         router: Option<String>,
         /// Output folder.
@@ -91,7 +91,7 @@ enum Command {
         #[arg(long = "team", value_name = "NAME=ROBOTS", required = true)]
         teams: Vec<String>,
         /// Endpoints the router listens on.
-        #[arg(long, default_value = "tls/0.0.0.0:7447")]
+        #[arg(long, default_value = "quic/0.0.0.0:7447")]
         listen: Vec<String>,
         /// Output file.
         #[arg(long, default_value = "config/zenoh/site/router.json5")]
@@ -187,7 +187,7 @@ struct RunArgs {
     /// addresses into the report folder's hosts-certs/.
     #[arg(long, value_name = "DIR")]
     tls: Option<PathBuf>,
-    /// As a client of a site's Zenoh router at this endpoint (tls/HOST:PORT), every component
+    /// As a client of a site's Zenoh router at this endpoint (quic/HOST:PORT), every component
     /// its own process; needs --tls with the team's site certificates (docs/realtime.md,
     /// "A site").
     #[arg(long, value_name = "ENDPOINT", requires = "tls", conflicts_with = "hosts")]

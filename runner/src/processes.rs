@@ -3,7 +3,7 @@
 //! tests).
 
 use std::io::{BufRead, BufReader};
-use std::net::TcpListener;
+use std::net::{TcpListener, UdpSocket};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
@@ -21,10 +21,18 @@ pub enum ProcessError {
     NoPort(String),
 }
 
-/// A free TCP port on loopback (bound, then released for the child to take).
+/// A loopback port free for both TCP and UDP (tcp/ and quic/ endpoints), bound, then
+/// released for the child to take.
 pub fn free_port() -> Result<u16, ProcessError> {
-    let l = TcpListener::bind("127.0.0.1:0").map_err(|e| ProcessError::NoPort(e.to_string()))?;
-    l.local_addr().map(|a| a.port()).map_err(|e| ProcessError::NoPort(e.to_string()))
+    let no_port = |e: std::io::Error| ProcessError::NoPort(e.to_string());
+    for _ in 0..16 {
+        let tcp = TcpListener::bind("127.0.0.1:0").map_err(no_port)?;
+        let port = tcp.local_addr().map_err(no_port)?.port();
+        if UdpSocket::bind(("127.0.0.1", port)).is_ok() {
+            return Ok(port);
+        }
+    }
+    Err(ProcessError::NoPort("no port free for both TCP and UDP in 16 tries".into()))
 }
 
 /// The directory of this executable, where cargo also puts the other binaries.

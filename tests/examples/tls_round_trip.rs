@@ -1,6 +1,7 @@
 //! The latency cost of mutual TLS and the ACL on the hot path: a state goes from the
 //! sim-bridge's identity to robot r1's, which answers with a torque command, between two Zenoh
-//! sessions on loopback: over plain TCP, over mutual TLS alone, and over mutual TLS with the
+//! sessions on loopback: over plain TCP, over mutual TLS alone (QUIC links, as every secure
+//! run), and over mutual TLS with the
 //! team's access control, in alternating blocks of one run (so all see the same machine load).
 //! Prints percentiles of the round trip.
 //!
@@ -15,7 +16,7 @@ mod certs;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use protocol::access::{Identity, SecureConfig};
+use protocol::access::{secure_endpoint, Identity, SecureConfig};
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, Role, SampleQueue, TypedPublisher, ZenohArgs};
 use protocol::{Header, Pose, RobotState, TorqueCommand};
@@ -61,8 +62,9 @@ async fn pair(name: &'static str, link: Link, certs: &Path, floats: usize) -> Pa
     let port = free_port().expect("a free port");
     let (bridge_args, r1_args) = match link {
         Link::Tls | Link::TlsAcl => {
-            let (hub, acl) = (format!("tls/127.0.0.1:{port}"), matches!(link, Link::TlsAcl));
-            (secure(certs, Identity::SimBridge, &hub, None, acl), secure(certs, Identity::Agent("r1".into()), "tls/127.0.0.1:0", Some(&hub), acl))
+            let (hub, acl) = (secure_endpoint("127.0.0.1", port), matches!(link, Link::TlsAcl));
+            let any = secure_endpoint("127.0.0.1", 0);
+            (secure(certs, Identity::SimBridge, &hub, None, acl), secure(certs, Identity::Agent("r1".into()), &any, Some(&hub), acl))
         }
         Link::Tcp => {
             let hub = format!("tcp/127.0.0.1:{port}");
@@ -120,7 +122,7 @@ async fn main() {
     let (rounds, blocks) = (args.first().copied().unwrap_or(500), args.get(1).copied().unwrap_or(6));
     let floats = args.get(2).map_or(JOINTS, |&f| f as usize);
     let certs = certs::make("tls-rtt", &["r1"]);
-    let mut pairs = [pair("tcp", Link::Tcp, &certs, floats).await, pair("tls", Link::Tls, &certs, floats).await, pair("tls+acl", Link::TlsAcl, &certs, floats).await];
+    let mut pairs = [pair("tcp", Link::Tcp, &certs, floats).await, pair("mtls", Link::Tls, &certs, floats).await, pair("mtls+acl", Link::TlsAcl, &certs, floats).await];
     let mut tick = 0;
     // Links and declarations first: the first answered state on each pair.
     for p in pairs.iter_mut() {

@@ -69,12 +69,12 @@ async fn a_component_without_a_certificate_cannot_connect() {
     let dir = certificates("nocert", &["r1"]);
     let other_ca = certificates("otherca", &["r1"]);
     let hub = hub_endpoint();
-    let plain_hub = hub.replacen("tls/", "tcp/", 1);
+    let plain_hub = hub.replacen("quic/", "tcp/", 1);
     let coordinator = open(&config(&dir, team, &rs, Identity::Coordinator, &hub, None, true)).await;
     let references = transport::subscribe(&coordinator, keys::references(team).unwrap()).await.unwrap();
     let key = keys::references(team).unwrap();
 
-    // Plain TCP to the TLS port; TLS with the CA but no certificate of its own; a runner
+    // Plain TCP to the hub's port (it takes QUIC only); TLS with the CA but no certificate of its own; a runner
     // certificate from another CA.
     let plain = open(&ZenohArgs::connecting(&plain_hub)).await;
     let anonymous_cfg = dir.join("anonymous.json5");
@@ -85,7 +85,7 @@ async fn a_component_without_a_certificate_cannot_connect() {
     });
     std::fs::write(&anonymous_cfg, anonymous_json.to_string()).unwrap();
     let anonymous = open(&ZenohArgs { config: Some(anonymous_cfg), ..Default::default() }).await;
-    let foreign = open(&config(&other_ca, team, &rs, Identity::Runner, "tls/127.0.0.1:0", Some(&hub), false)).await;
+    let foreign = open(&config(&other_ca, team, &rs, Identity::Runner, "quic/127.0.0.1:0", Some(&hub), false)).await;
 
     let intruders = [("plain tcp", &plain), ("tls without a certificate", &anonymous), ("a certificate from another CA", &foreign)];
     let started = Instant::now();
@@ -103,7 +103,7 @@ async fn a_component_without_a_certificate_cannot_connect() {
     assert!(got.is_empty(), "puts without a team certificate arrived: {got:?}");
 
     // The control: the runner's certificate from the team's CA, allowed to put references.
-    let runner = open(&config(&dir, team, &rs, Identity::Runner, "tls/127.0.0.1:0", Some(&hub), true)).await;
+    let runner = open(&config(&dir, team, &rs, Identity::Runner, "quic/127.0.0.1:0", Some(&hub), true)).await;
     let mut arrived = Vec::new();
     put_until(&runner, &key, b"runner", ARRIVE_WAIT, || {
         arrived.extend(drain(&references));
@@ -187,7 +187,7 @@ async fn only_the_coordinator_commands_a_robot() {
     let (team, rs) = ("acl2", robots(&["r1"]));
     let dir = certificates("command", &["r1"]);
     let hub = hub_endpoint();
-    let any = "tls/127.0.0.1:0";
+    let any = "quic/127.0.0.1:0";
     let coordinator = open(&config(&dir, team, &rs, Identity::Coordinator, &hub, None, true)).await;
     let members = transport::watch_members(&coordinator, team).await.unwrap();
     let dynamics = transport::subscribe(&coordinator, keys::robot(team, "r1", RobotTopic::Dynamics).unwrap()).await.unwrap();
@@ -239,7 +239,7 @@ async fn an_agent_cannot_publish_another_robots_keys() {
     let (team, rs) = ("acl3", robots(&["r1", "r2"]));
     let dir = certificates("impersonate", &["r1", "r2"]);
     let hub = hub_endpoint();
-    let any = "tls/127.0.0.1:0";
+    let any = "quic/127.0.0.1:0";
     let coordinator = open(&config(&dir, team, &rs, Identity::Coordinator, &hub, None, true)).await;
     let dynamics = transport::subscribe(&coordinator, keys::all_robots(team, RobotTopic::Dynamics).unwrap()).await.unwrap();
     let sim = open(&config(&dir, team, &rs, Identity::SimBridge, any, Some(&hub), true)).await;
@@ -283,11 +283,11 @@ async fn an_agent_cannot_publish_another_robots_keys() {
 }
 
 /// `config/zenoh/` is what `team zenoh-config certs` writes (team `team`, robots r1 and r2,
-/// the hub on tls/127.0.0.1:7447): the shipped files follow the rules.
+/// the hub on quic/127.0.0.1:7447): the shipped files follow the rules.
 #[test]
 fn the_shipped_configurations_are_the_generated_ones() {
     let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/zenoh");
-    let configs = protocol::access::team_configs(Path::new("certs"), "team", &robots(&["r1", "r2"]), "tls/127.0.0.1:7447");
+    let configs = protocol::access::team_configs(Path::new("certs"), "team", &robots(&["r1", "r2"]), "quic/127.0.0.1:7447");
     assert_eq!(configs.len(), 6);
     for cfg in configs {
         let path = shipped.join(protocol::access::file_name(&cfg.identity));

@@ -39,7 +39,7 @@ fn bad_arguments_and_files_are_one_clear_error() {
     refused(&run("coordinator", &["run", "--controller", "nosuch"]), "nosuch");
     refused(&run("sim-bridge", &["scene", "/nonexistent/scene.toml"]), "/nonexistent/scene.toml");
     refused(&run("sim-bridge", &["frobnicate"]), "frobnicate");
-    refused(&run("team", &["run", "scenarios/s4_object_circle.toml", "--router", "tls/127.0.0.1:7448"]), "--tls");
+    refused(&run("team", &["run", "scenarios/s4_object_circle.toml", "--router", "quic/127.0.0.1:7448"]), "--tls");
     refused(&run("team", &["run", "scenarios/s4_object_circle.toml", "--team", "a/b"]), "a/b");
     refused(&run("team", &["router-config", "/nonexistent", "--team", "alpha"]), "alpha");
     refused(&run("team", &["router-config", "/nonexistent", "--team", "alpha=r1"]), "/nonexistent/ca.pem");

@@ -180,7 +180,7 @@ fn test_ca(name: &str, keep_key: bool) -> std::path::PathBuf {
 }
 
 /// S4 across hosts over mutual TLS with the access control (`team run --hosts --tls`): every
-/// check passes; the coordinator listens on `tls/` at its host's address and every component
+/// check passes; the coordinator listens on `quic/` at its host's address and every component
 /// connects to it there; the run's certificates, signed for the hosts' addresses, are in the
 /// report folder without the CA's key; the hosts are gone after the run. (Certificates naming
 /// only 127.0.0.1 were refused by the TLS clients across hosts: no robot joined. Checked by
@@ -206,19 +206,19 @@ fn s4_holds_across_hosts_over_mutual_tls() {
     assert_eq!(namespaces(), before, "the run's hosts were removed");
     let config = |who: &str| std::fs::read_to_string(dir.join(format!("zenoh-{who}.json5"))).unwrap_or_else(|e| panic!("zenoh-{who}.json5: {e}"));
     let coordinator = config("coordinator");
-    let hub = coordinator.split('"').find(|t| t.starts_with("tls/") && t.ends_with(":7447") || t.starts_with("tls/127.0.0.1:")).expect("the coordinator listens on tls/").to_string();
+    let hub = coordinator.split('"').find(|t| t.starts_with("quic/") && t.ends_with(":7447") || t.starts_with("quic/127.0.0.1:")).expect("the coordinator listens on quic/").to_string();
     for who in ["coordinator", "r1", "r2", "sim-bridge", "runner"] {
         let text = config(who);
         assert!(text.contains(&hub), "{who} reaches the coordinator at {hub}");
         assert!(!text.contains("tcp/"), "{who}: no plain TCP endpoint");
     }
     {
-        assert!(!hub.starts_with("tls/127."), "across hosts, not on loopback: {hub}");
+        assert!(!hub.starts_with("quic/127."), "across hosts, not on loopback: {hub}");
         let certs = dir.join("hosts-certs");
         assert!(certs.join("coordinator.pem").is_file() && certs.join("r2.key").is_file(), "the run's certificates");
         assert!(!certs.join("ca.key").exists(), "the CA's key is not left in the report folder");
         let text = std::process::Command::new("openssl").args(["x509", "-noout", "-ext", "subjectAltName", "-in"]).arg(certs.join("coordinator.pem")).output().expect("openssl");
-        let addr = hub.trim_start_matches("tls/").trim_end_matches(":7447");
+        let addr = hub.trim_start_matches("quic/").trim_end_matches(":7447");
         assert!(String::from_utf8_lossy(&text.stdout).contains(&format!("IP Address:{addr}")), "the coordinator's certificate names its host's address {addr}");
     }
     let _ = std::fs::remove_dir_all(&ca);

@@ -5,7 +5,8 @@
 //!
 //! * Both teams carry their objects at once through the router: `team run --router` of S4
 //!   (alpha) and the three-robot cube (beta), each a process per component, both all checks
-//!   passed (S4's bounds).
+//!   passed (S4's bounds), and each team's time series and torques are, to the last bit, those
+//!   of its embedded run: the other team's traffic changes nothing.
 //! * The router keeps each team to its keys. A client holding a valid alpha certificate but
 //!   configured to speak for beta (so that its own access control lets everything through)
 //!   publishes beta's terms and commands and subscribes to beta's states: beta receives
@@ -53,7 +54,7 @@ fn site(tag: &str) -> Site {
     certs(&["--ca", d, "--team", "alpha", &format!("{d}/alpha"), "r1", "r2"]);
     certs(&["--ca", d, "--team", "beta", &format!("{d}/beta"), "r1", "r2", "r3"]);
     let port = free_port().unwrap();
-    let endpoint = format!("tls/127.0.0.1:{port}");
+    let endpoint = protocol::access::secure_endpoint("127.0.0.1", port);
     let config = format!("{d}/router.json5");
     let out = Command::new(sibling_binary("team"))
         .args(["router-config", d, "--team", "alpha=r1,r2", "--team", "beta=r1,r2,r3", "--listen", &endpoint, "--out", &config])
@@ -62,7 +63,8 @@ fn site(tag: &str) -> Site {
     assert!(out.status.success(), "team router-config: {}", String::from_utf8_lossy(&out.stderr));
     let router = spawn("team", &["router".to_string(), config], "site router").expect("team router starts");
     let deadline = Instant::now() + Duration::from_secs(20);
-    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+    // QUIC is UDP: the router listens once its port can no longer be bound.
+    while std::net::UdpSocket::bind(("127.0.0.1", port)).is_ok() {
         assert!(Instant::now() < deadline, "the router did not listen on {endpoint} within 20 s");
         std::thread::sleep(Duration::from_millis(50));
     }
@@ -160,6 +162,20 @@ fn team_run(site: &Site, scenario: &str, team: &str, limit: Duration) -> (Child,
     (child, Instant::now(), limit, out)
 }
 
+/// `team run` of `scenario` embedded, shortened as [`team_run`]; killed after `limit`.
+fn embedded_run(scenario: &str, out: &Path, limit: Duration) -> (Child, Instant, Duration, PathBuf) {
+    let child = Command::new(sibling_binary("team"))
+        .args(["run", scenario, "--set", "duration=2", "--quiet", "--out"])
+        .arg(out)
+        .current_dir(repo())
+        .env_remove("RUST_BACKTRACE")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("team run starts");
+    (child, Instant::now(), limit, out.to_path_buf())
+}
+
 /// Wait for a run (bounded), then its status and output.
 fn finish((mut child, started, limit, out): (Child, Instant, Duration, PathBuf)) -> (bool, String, PathBuf) {
     while child.try_wait().expect("the run's status").is_none() {
@@ -178,9 +194,11 @@ fn finish((mut child, started, limit, out): (Child, Instant, Duration, PathBuf))
 fn two_teams_carry_their_objects_through_one_router() {
     let site = site("site-teams");
     let limit = Duration::from_secs(600);
-    let alpha = team_run(&site, "scenarios/s4_object_circle.toml", "alpha", limit);
-    let beta = team_run(&site, "scenarios/team3_cube.toml", "beta", limit);
-    for (team, (ok, text, out)) in [("alpha", finish(alpha)), ("beta", finish(beta))] {
+    let scenarios = [("alpha", "scenarios/s4_object_circle.toml"), ("beta", "scenarios/team3_cube.toml")];
+    let alpha = team_run(&site, scenarios[0].1, "alpha", limit);
+    let beta = team_run(&site, scenarios[1].1, "beta", limit);
+    let runs = [("alpha", finish(alpha)), ("beta", finish(beta))];
+    for (team, (ok, text, out)) in &runs {
         assert!(ok, "team {team}'s run failed: {text}");
         assert!(text.contains("site mode") && text.contains("checks passed"), "team {team}: {text}");
         let metrics: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).expect("metrics.json")).unwrap();
@@ -190,12 +208,22 @@ fn two_teams_carry_their_objects_through_one_router() {
         let rms = metrics["object"]["position_rms_m"].as_f64().expect("the object's RMS");
         assert!(rms < 5e-3, "team {team}: the object within S4's 5 mm RMS: {rms}");
     }
+    // Neither team disturbed the other: each run is, to the last bit, the team's embedded run.
+    for ((team, scenario), (_, (_, _, out))) in scenarios.iter().zip(&runs) {
+        let alone = site.dir.join(format!("embedded-{team}"));
+        let (ok, text, _) = finish(embedded_run(scenario, &alone, limit));
+        assert!(ok, "the embedded run of {scenario} failed: {text}");
+        for file in ["timeseries.csv", "torques.csv"] {
+            let read = |dir: &PathBuf| std::fs::read(dir.join(file)).unwrap_or_else(|e| panic!("{}: {e}", dir.join(file).display()));
+            assert!(read(out) == read(&alone), "team {team}: {file} through the router differs from the embedded run's");
+        }
+    }
     let _ = std::fs::remove_dir_all(&site.dir);
 }
 
 /// `config/zenoh/site/` is what `team router-config site --team alpha=r1,r2 --team
-/// beta=r1,r2,r3 --listen tls/127.0.0.1:7448` and `team zenoh-config site/TEAM --team TEAM
-/// --robots ... --router tls/127.0.0.1:7448` write.
+/// beta=r1,r2,r3 --listen quic/127.0.0.1:7448` and `team zenoh-config site/TEAM --team TEAM
+/// --robots ... --router quic/127.0.0.1:7448` write.
 #[test]
 fn the_shipped_site_configurations_are_the_generated_ones() {
     let shipped = repo().join("config/zenoh/site");
@@ -203,7 +231,7 @@ fn the_shipped_site_configurations_are_the_generated_ones() {
         let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         serde_json::from_str(&text).unwrap()
     };
-    let router = "tls/127.0.0.1:7448";
+    let router = "quic/127.0.0.1:7448";
     let teams = [("alpha", vec!["r1", "r2"]), ("beta", vec!["r1", "r2", "r3"])];
     let site: Vec<protocol::site::SiteTeam> = teams.iter().map(|(t, r)| protocol::site::SiteTeam { team: t.to_string(), robots: r.iter().map(|s| s.to_string()).collect() }).collect();
     let generated = protocol::site::RouterConfig::in_dir(Path::new("site"), site.clone(), vec![router.into()]).to_json().unwrap();

@@ -31,8 +31,8 @@ pub async fn open(args: &ZenohArgs) -> Session {
     tokio::time::timeout(Duration::from_secs(10), transport::open(args, Role::Member)).await.expect("session opened in time").expect("session")
 }
 
-/// A hub on a free TLS port: the endpoint others connect to.
+/// A hub on a free port for mutual TLS: the endpoint others connect to.
 pub fn hub_endpoint() -> String {
-    format!("tls/127.0.0.1:{}", free_port().unwrap())
+    protocol::access::secure_endpoint("127.0.0.1", free_port().unwrap())
 }
 
