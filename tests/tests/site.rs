@@ -147,26 +147,18 @@ fn the_router_keeps_each_team_to_its_own_keys() {
 /// `team run` of `scenario` as `team` through the site's router, shortened; killed after
 /// `limit`.
 fn team_run(site: &Site, scenario: &str, team: &str, limit: Duration) -> (Child, Instant, Duration, PathBuf) {
-    let out = site.dir.join(format!("run-{team}"));
-    let child = Command::new(sibling_binary("team"))
-        .args(["run", scenario, "--set", "duration=2", "--router", &site.endpoint, "--team", team, "--quiet", "--out"])
-        .arg(&out)
-        .arg("--tls")
-        .arg(site.dir.join(team))
-        .current_dir(repo())
-        .env_remove("RUST_BACKTRACE")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("team run starts");
-    (child, Instant::now(), limit, out)
+    let (out, certs) = (site.dir.join(format!("run-{team}")), site.dir.join(team));
+    let through_router = ["--router", &site.endpoint, "--team", team, "--tls", certs.to_str().expect("a UTF-8 path")];
+    start_run(scenario, &out, &through_router, limit)
 }
 
-/// `team run` of `scenario` embedded, shortened as [`team_run`]; killed after `limit`.
-fn embedded_run(scenario: &str, out: &Path, limit: Duration) -> (Child, Instant, Duration, PathBuf) {
+/// `team run` of `scenario`, shortened to 2 s, into `out`, with `extra` flags (none: embedded);
+/// killed after `limit`.
+fn start_run(scenario: &str, out: &Path, extra: &[&str], limit: Duration) -> (Child, Instant, Duration, PathBuf) {
     let child = Command::new(sibling_binary("team"))
         .args(["run", scenario, "--set", "duration=2", "--quiet", "--out"])
         .arg(out)
+        .args(extra)
         .current_dir(repo())
         .env_remove("RUST_BACKTRACE")
         .stdout(Stdio::piped())
@@ -211,7 +203,7 @@ fn two_teams_carry_their_objects_through_one_router() {
     // Neither team disturbed the other: each run is, to the last bit, the team's embedded run.
     for ((team, scenario), (_, (_, _, out))) in scenarios.iter().zip(&runs) {
         let alone = site.dir.join(format!("embedded-{team}"));
-        let (ok, text, _) = finish(embedded_run(scenario, &alone, limit));
+        let (ok, text, _) = finish(start_run(scenario, &alone, &[], limit));
         assert!(ok, "the embedded run of {scenario} failed: {text}");
         for file in ["timeseries.csv", "torques.csv"] {
             let read = |dir: &PathBuf| std::fs::read(dir.join(file)).unwrap_or_else(|e| panic!("{}: {e}", dir.join(file).display()));
