@@ -105,7 +105,7 @@ async fn main() -> Result<()> {
                 let _ = tx.send(true);
             });
             service::run(&session, cfg, controller, rx).await?;
-            session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
+            protocol::transport::close(session).await?;
         }
     }
     Ok(())

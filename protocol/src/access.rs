@@ -50,7 +50,7 @@ pub enum AccessError {
     Key(#[from] ProtocolError),
     #[error("robot id {0:?} is the name of another identity (coordinator, sim-bridge, runner, tool)")]
     ReservedRobotId(String),
-    #[error("{what} {path} is missing (make test certificates with scripts/make-test-certs.sh DIR ROBOT...)")]
+    #[error("{what} {path} is missing (make test certificates with scripts/make-test-certs.sh DIR ROBOT..., or --router DIR for a site's router)")]
     MissingFile { what: &'static str, path: PathBuf },
     #[error("cannot write {path}: {reason}")]
     Write { path: PathBuf, reason: String },

@@ -17,6 +17,7 @@
 
 use std::marker::PhantomData;
 use std::path::PathBuf;
+use std::time::Duration;
 
 use thiserror::Error;
 use zenoh::pubsub::{Publisher, Subscriber};
@@ -167,6 +168,19 @@ pub async fn open(args: &ZenohArgs, role: Role) -> Result<Session, TransportErro
     let session = zenoh::open(config).await.map_err(|e| TransportError::Open(e.to_string()))?;
     tracing::debug!(zid = %session.zid(), ?role, "zenoh session open");
     Ok(session)
+}
+
+/// How long [`close`] lets what a session sent leave before it closes. A QUIC link (mutual
+/// TLS) discards data it has not sent yet when it closes, where a TCP socket's kernel buffer
+/// still delivers it: without the wait, a bridge that closes right after its last tick loses
+/// that tick's ground truth on a loaded machine.
+pub const CLOSE_LINGER: Duration = Duration::from_millis(500);
+
+/// Close a session after [`CLOSE_LINGER`], so that its last messages arrive. The one way the
+/// components end their session.
+pub async fn close(session: Session) -> Result<(), TransportError> {
+    tokio::time::sleep(CLOSE_LINGER).await;
+    session.close().await.map_err(|e| TransportError::Zenoh { op: "close", key: session.zid().to_string(), reason: e.to_string() })
 }
 
 /// Quality of service of a publisher.

@@ -98,7 +98,7 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
             Source::Model(s) => agent::run(&session, cfg, *s, rx).await?,
             Source::Placeholder(s) => agent::run(&session, cfg, s, rx).await?,
         };
-        session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
+        protocol::transport::close(session).await?;
         Ok(String::new())
     })
 }

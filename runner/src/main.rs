@@ -358,10 +358,10 @@ fn write_report(plan: &plan::Plan, eval: &evaluate::Evaluation, records: &team_r
 fn run_router(config: &Path) -> Result<()> {
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {
-        let session = team_runner::site::open_router(config).await?;
-        println!("router {} listening on {}", session.zid(), team_runner::site::listen_endpoints(config));
+        let router = team_runner::site::open_router(config).await?;
+        println!("router {} listening on {:?}", router.session.zid(), router.listen);
         tokio::signal::ctrl_c().await?;
-        session.close().await.map_err(|e| anyhow::anyhow!("closing the router: {e}"))?;
+        router.session.close().await.map_err(|e| anyhow::anyhow!("closing the router: {e}"))?;
         Ok(())
     })
 }

@@ -15,13 +15,23 @@ pub enum SiteError {
     NotARouter { path: String, mode: String },
     #[error("{path}: a router without access control would let every team into every other (write one with team router-config)")]
     NoAccessControl { path: String },
+    #[error("{path}: {reason}")]
+    NotSecure { path: String, reason: String },
     #[error("the router could not start: {0}")]
     Open(String),
 }
 
-/// Open a Zenoh router from the configuration at `path`: router mode and access control are
-/// required, so that a wrong file does not open a site to everyone.
-pub async fn open_router(path: &Path) -> Result<Session, SiteError> {
+/// A site's router, running.
+pub struct Router {
+    pub session: Session,
+    /// The endpoints its configuration listens on.
+    pub listen: Vec<String>,
+}
+
+/// Open a Zenoh router from the configuration at `path`: router mode, access control and
+/// mutual TLS endpoints ([`protocol::access::SECURE_LINK`]) are required, so that a wrong file
+/// does not open a site to everyone.
+pub async fn open_router(path: &Path) -> Result<Router, SiteError> {
     let shown = path.display().to_string();
     let config = zenoh::Config::from_file(path).map_err(|e| SiteError::Config { path: shown.clone(), reason: e.to_string() })?;
     let mode = config.get_json("mode").unwrap_or_default().trim_matches('"').to_string();
@@ -31,10 +41,8 @@ pub async fn open_router(path: &Path) -> Result<Session, SiteError> {
     if config.get_json("access_control/enabled").ok().as_deref() != Some("true") {
         return Err(SiteError::NoAccessControl { path: shown });
     }
-    zenoh::open(config).await.map_err(|e| SiteError::Open(e.to_string()))
-}
-
-/// The endpoints a configuration listens on, for the operator's first line.
-pub fn listen_endpoints(path: &Path) -> String {
-    zenoh::Config::from_file(path).ok().and_then(|c| c.get_json("listen/endpoints").ok()).unwrap_or_default()
+    let listen: Vec<String> = config.get_json("listen/endpoints").ok().and_then(|j| serde_json::from_str(&j).ok()).unwrap_or_default();
+    protocol::access::check_secure(&listen).map_err(|e| SiteError::NotSecure { path: shown, reason: e.to_string() })?;
+    let session = zenoh::open(config).await.map_err(|e| SiteError::Open(e.to_string()))?;
+    Ok(Router { session, listen })
 }

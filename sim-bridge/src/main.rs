@@ -139,7 +139,7 @@ async fn main() -> Result<()> {
                 report.ticks as f64 / report.wall_time.as_secs_f64(),
                 report.resends
             );
-            session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
+            protocol::transport::close(session).await?;
         }
         Command::Run(args) => run(args).await?,
         Command::Scene { path, zenoh } => {
@@ -161,7 +161,7 @@ async fn main() -> Result<()> {
             if let PhaseReport::RealTime(rt) = &r.run {
                 println!("real time: ticks without their torques by the deadline {:?}, overruns {}, schedule slipped {:.3} s", rt.missed, rt.overruns, rt.slipped.as_secs_f64());
             }
-            session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
+            protocol::transport::close(session).await?;
         }
     }
     Ok(())
@@ -262,6 +262,6 @@ async fn run_world(a: RunArgs, world: sim_bridge::world::World, n: usize) -> Res
         rec.write_csv(std::io::BufWriter::new(f))?;
         println!("ground truth: {} records in {}", rec.records.len(), path.display());
     }
-    session.close().await.map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
+    protocol::transport::close(session).await?;
     Ok(())
 }

@@ -46,6 +46,13 @@ fn bad_arguments_and_files_are_one_clear_error() {
     // A team's own (peer-mode) configuration is not a router's.
     refused(&run("team", &["router", "config/zenoh/zenoh-coordinator.json5"]), "not a router");
     refused(&run("team", &["router", "/nonexistent/router.json5"]), "/nonexistent/router.json5");
+    // Mutual TLS on Zenoh's tls/ link (unsound under load) or on plain TCP is refused by name.
+    let shipped = std::fs::read_to_string(repo().join("config/zenoh/site/router.json5")).expect("the shipped router configuration");
+    let on_tls = std::env::temp_dir().join(format!("router-on-tls-{}.json5", std::process::id()));
+    std::fs::write(&on_tls, shipped.replace("\"quic/", "\"tls/")).unwrap();
+    refused(&run("team", &["router", on_tls.to_str().unwrap()]), "\"tls/127.0.0.1:7448\" is not a secure link");
+    let _ = std::fs::remove_file(&on_tls);
+    refused(&run("team", &["zenoh-config", "/nonexistent", "--hub", "tcp/127.0.0.1:7447"]), "\"tcp/127.0.0.1:7447\" is not a secure link");
 }
 
 /// A push of 60 N on the object for 0.2 s: the palms slip and the object leaves its reference;
