@@ -266,7 +266,8 @@ pub fn secure_endpoint(host: impl std::fmt::Display, port: u16) -> String {
 
 /// An error naming the first endpoint that is not a [`SECURE_LINK`] endpoint.
 pub fn check_secure(endpoints: &[String]) -> Result<(), AccessError> {
-    match endpoints.iter().find(|e| !e.starts_with(&format!("{SECURE_LINK}/"))) {
+    let scheme = format!("{SECURE_LINK}/");
+    match endpoints.iter().find(|e| !e.starts_with(&scheme)) {
         Some(e) => Err(AccessError::NotSecure(e.clone())),
         None => Ok(()),
     }

@@ -85,7 +85,7 @@ async fn a_component_without_a_certificate_cannot_connect() {
     });
     std::fs::write(&anonymous_cfg, anonymous_json.to_string()).unwrap();
     let anonymous = open(&ZenohArgs { config: Some(anonymous_cfg), ..Default::default() }).await;
-    let foreign = open(&config(&other_ca, team, &rs, Identity::Runner, "quic/127.0.0.1:0", Some(&hub), false)).await;
+    let foreign = open(&config(&other_ca, team, &rs, Identity::Runner, &protocol::access::secure_endpoint("127.0.0.1", 0), Some(&hub), false)).await;
 
     let intruders = [("plain tcp", &plain), ("tls without a certificate", &anonymous), ("a certificate from another CA", &foreign)];
     let started = Instant::now();
@@ -103,7 +103,7 @@ async fn a_component_without_a_certificate_cannot_connect() {
     assert!(got.is_empty(), "puts without a team certificate arrived: {got:?}");
 
     // The control: the runner's certificate from the team's CA, allowed to put references.
-    let runner = open(&config(&dir, team, &rs, Identity::Runner, "quic/127.0.0.1:0", Some(&hub), true)).await;
+    let runner = open(&config(&dir, team, &rs, Identity::Runner, &protocol::access::secure_endpoint("127.0.0.1", 0), Some(&hub), true)).await;
     let mut arrived = Vec::new();
     put_until(&runner, &key, b"runner", ARRIVE_WAIT, || {
         arrived.extend(drain(&references));
@@ -187,7 +187,7 @@ async fn only_the_coordinator_commands_a_robot() {
     let (team, rs) = ("acl2", robots(&["r1"]));
     let dir = certificates("command", &["r1"]);
     let hub = hub_endpoint();
-    let any = "quic/127.0.0.1:0";
+    let any = &protocol::access::secure_endpoint("127.0.0.1", 0);
     let coordinator = open(&config(&dir, team, &rs, Identity::Coordinator, &hub, None, true)).await;
     let members = transport::watch_members(&coordinator, team).await.unwrap();
     let dynamics = transport::subscribe(&coordinator, keys::robot(team, "r1", RobotTopic::Dynamics).unwrap()).await.unwrap();
@@ -239,7 +239,7 @@ async fn an_agent_cannot_publish_another_robots_keys() {
     let (team, rs) = ("acl3", robots(&["r1", "r2"]));
     let dir = certificates("impersonate", &["r1", "r2"]);
     let hub = hub_endpoint();
-    let any = "quic/127.0.0.1:0";
+    let any = &protocol::access::secure_endpoint("127.0.0.1", 0);
     let coordinator = open(&config(&dir, team, &rs, Identity::Coordinator, &hub, None, true)).await;
     let dynamics = transport::subscribe(&coordinator, keys::all_robots(team, RobotTopic::Dynamics).unwrap()).await.unwrap();
     let sim = open(&config(&dir, team, &rs, Identity::SimBridge, any, Some(&hub), true)).await;

@@ -167,7 +167,7 @@ async fn forged_messages_are_refused_counted_and_named() {
     let (team, robots) = ("forged", vec!["r1".to_string(), "r2".to_string()]);
     let dir = common::certs::make("forged", &["r1", "r2"]);
     let hub = hub_endpoint();
-    let any = "quic/127.0.0.1:0";
+    let any = &protocol::access::secure_endpoint("127.0.0.1", 0);
     let session = |who: Identity, listen: &str, connect: Option<&str>| config(&dir, team, &robots, who, listen, connect, true);
     let cs = open(&session(Identity::Coordinator, &hub, None)).await;
     let statuses = transport::subscribe(&cs, keys::coordinator_status(team).unwrap()).await.unwrap();
