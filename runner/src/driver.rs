@@ -12,7 +12,7 @@
 //! ([`CoordinatorMode::Released`]), a walk halts (at once before a lift-off, else at its next quiet point)
 //! ([`ReferencePlan::halt_walk`]): robots without the object do not walk on.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::io::IsTerminal;
 use std::time::{Duration, Instant};
 
@@ -108,8 +108,10 @@ pub struct Driver {
     tapped_refs: u64,
 }
 
-/// How long the driver waits after the last tick for its copies of the torques the bridge took.
-pub const FINAL_GRACE: Duration = Duration::from_millis(500);
+/// How long the driver waits after the last tick for its copies of the torques the bridge took:
+/// a lost segment comes again after TCP's retransmission timeout, at least 200 ms on Linux and
+/// doubled at each further loss, so that 1 s covers two losses of the same copy.
+pub const FINAL_GRACE: Duration = Duration::from_millis(1000);
 
 /// Samples each of the driver's recording queues holds.
 pub const RECORD_QUEUE: usize = 1 << 15;
@@ -203,30 +205,26 @@ impl Driver {
         self.publish_contacts(u64::MAX).await
     }
 
-    /// The robots whose torques of the last tick the bridge took have them in the records too:
-    /// the driver's copies come by another route and can still be in flight (a retransmission
-    /// on a lossy link, or only a loaded machine: the ground truth of the last tick can come
-    /// first). In real time the loop timing names them; in lockstep (no loop timing) the bridge
-    /// waited for every robot that answered the tick before. Waits at most [`FINAL_GRACE`].
-    async fn await_last_torques(&mut self, rec: &mut Records, settle: u64) {
-        let Some(last) = rec.truth.last() else { return };
-        let tick = last.header.tick;
-        let mut waiting: Vec<String> = if last.loop_timing.is_empty() {
-            rec.torques.iter().filter(|(_, v)| v.iter().rev().any(|(t, _)| *t + 1 == tick)).map(|(r, _)| r.clone()).collect()
-        } else {
-            last.loop_timing.iter().filter(|t| t.latency_us.is_some()).map(|t| t.robot.clone()).collect()
-        };
+    /// Every torque command the bridge took is in the records too: the driver's copies come by
+    /// another route and can still be in flight (a retransmission on a lossy link, or only a
+    /// loaded machine: the ground truth of the last tick can come first). In real time the loop
+    /// timing of each tick names the robots whose torques came in time, the last tick's and any
+    /// before it (a robot that missed the last tick can still owe the one before); in lockstep
+    /// (no loop timing) the bridge waited at the last tick for every robot that answered the
+    /// tick before. Waits at most [`FINAL_GRACE`].
+    async fn await_applied_torques(&mut self, rec: &mut Records, settle: u64) {
+        let mut waiting = applied_not_recorded(rec);
         let until = tokio::time::Instant::now() + FINAL_GRACE;
-        loop {
-            waiting.retain(|r| !rec.torques.get(r).is_some_and(|v| v.iter().any(|(t, _)| *t == tick)));
-            if waiting.is_empty() {
-                return;
-            }
+        while !waiting.is_empty() {
             match tokio::time::timeout_at(until, self.torques.recv_async()).await {
-                Ok(Ok(sample)) => rec.take_torques(&sample, settle, self.tap.as_ref()),
+                Ok(Ok(sample)) => {
+                    rec.take_torques(&sample, settle, self.tap.as_ref());
+                    // A command just taken is the last of its robot's records.
+                    waiting.retain(|(r, tick)| !rec.torques.get(r).and_then(|v| v.last()).is_some_and(|(t, _)| t == tick));
+                }
                 Ok(Err(_)) => return,
                 Err(_) => {
-                    tracing::warn!(tick, robots = ?waiting, "the last tick's torques, taken by the bridge, never reached the driver");
+                    tracing::warn!(missing = ?waiting, "torques the bridge took never reached the driver");
                     return;
                 }
             }
@@ -360,7 +358,7 @@ impl Driver {
     /// After the loop: the last tick's torques, whatever else already arrived, the wall time.
     async fn finish(mut self, st: RunState) -> Result<Records, TransportError> {
         let RunState { mut rec, settle, run_started, .. } = st;
-        self.await_last_torques(&mut rec, settle).await;
+        self.await_applied_torques(&mut rec, settle).await;
         // Whatever else already arrived (torques and diagnostics of the last ticks).
         while let Ok(Some(sample)) = self.torques.try_recv() {
             rec.take_torques(&sample, settle, self.tap.as_ref());
@@ -394,5 +392,52 @@ struct RunState {
 impl RunState {
     fn new(settle: u64, next_ref: u64) -> RunState {
         RunState { rec: Records::default(), settle, started: Instant::now(), run_started: None, last_logged: 0, next_ref, coordinator_lost: false }
+    }
+}
+
+/// (robot, tick) of the torques the bridge took that the records lack: from the loop timing in
+/// real time, or in lockstep the last tick of every robot that answered the tick before.
+fn applied_not_recorded(rec: &Records) -> Vec<(String, u64)> {
+    let Some(last) = rec.truth.last() else { return Vec::new() };
+    if last.loop_timing.is_empty() {
+        let tick = last.header.tick;
+        let owes = |v: &Vec<(u64, Vec<f64>)>| v.last().is_some_and(|(t, _)| *t + 1 == tick);
+        return rec.torques.iter().filter(|(_, v)| owes(v)).map(|(r, _)| (r.clone(), tick)).collect();
+    }
+    let recorded: BTreeSet<(&str, u64)> = rec.torques.iter().flat_map(|(r, v)| v.iter().map(move |(t, _)| (r.as_str(), *t))).collect();
+    let applied = rec.truth.iter().flat_map(|g| g.loop_timing.iter().filter(|t| t.latency_us.is_some()).map(move |t| (t.robot.as_str(), g.header.tick)));
+    applied.filter(|k| !recorded.contains(k)).map(|(r, tick)| (r.to_string(), tick)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::{GroundTruth, Header, LoopTiming};
+
+    fn truth(tick: u64, timing: &[(&str, bool)]) -> GroundTruth {
+        let loop_timing = timing.iter().map(|(r, in_time)| LoopTiming { robot: r.to_string(), latency_us: in_time.then_some(900.0), applied_tick: Some(tick), late: 0 }).collect();
+        GroundTruth { header: Header::new("t", None, tick, 0), time: 0.0, object: None, torsos: vec![], hand_contacts: vec![], foot_contacts: vec![], hands: vec![], feet: vec![], loop_timing }
+    }
+
+    fn torques(of: &[(&str, &[u64])]) -> BTreeMap<String, Vec<(u64, Vec<f64>)>> {
+        of.iter().map(|(r, ticks)| (r.to_string(), ticks.iter().map(|t| (*t, vec![0.0])).collect())).collect()
+    }
+
+    /// A robot that missed the last tick still owes the tick before, which the bridge took.
+    #[test]
+    fn real_time_owes_every_applied_tick_not_only_the_last() {
+        let rec = Records {
+            truth: vec![truth(10, &[("r1", true), ("r2", true)]), truth(11, &[("r1", false), ("r2", true)])],
+            torques: torques(&[("r1", &[9]), ("r2", &[10, 11])]),
+            ..Default::default()
+        };
+        assert_eq!(applied_not_recorded(&rec), vec![("r1".to_string(), 10)]);
+    }
+
+    /// In lockstep the last tick is owed by every robot that answered the tick before.
+    #[test]
+    fn lockstep_owes_the_last_tick_of_who_answered_the_one_before() {
+        let rec = Records { truth: vec![truth(10, &[]), truth(11, &[])], torques: torques(&[("r1", &[10]), ("r2", &[10, 11]), ("r3", &[8])]), ..Default::default() };
+        assert_eq!(applied_not_recorded(&rec), vec![("r1".to_string(), 11)]);
     }
 }
