@@ -224,7 +224,8 @@ impl Driver {
                 }
                 Ok(Err(_)) => return,
                 Err(_) => {
-                    tracing::warn!(missing = ?waiting, "torques the bridge took never reached the driver");
+                    let (count, first) = (waiting.len(), waiting.first());
+                    tracing::warn!(count, ?first, "torques the bridge took never reached the driver");
                     return;
                 }
             }
@@ -355,7 +356,8 @@ impl Driver {
         }
     }
 
-    /// After the loop: the last tick's torques, whatever else already arrived, the wall time.
+    /// After the loop: the torques the bridge took that the driver still lacks, whatever else
+    /// already arrived, the wall time.
     async fn finish(mut self, st: RunState) -> Result<Records, TransportError> {
         let RunState { mut rec, settle, run_started, .. } = st;
         self.await_applied_torques(&mut rec, settle).await;
