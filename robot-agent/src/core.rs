@@ -29,7 +29,7 @@ use crate::contact_switch::{ContactSwitch, SwitchConfig};
 use crate::dynamics_source::DynamicsSource;
 use crate::fall::{Fall, FallDetector, FallLimits};
 use crate::gate::{CommandGate, CommandRejection};
-use crate::safe_mode::{CommandDeadline, HoldGains, PostureHold, Takeover, Watchdog};
+use crate::safe_mode::{CommandDeadline, HoldGains, PostureHold, Takeover, Watchdog, FIRST_COMMAND};
 use crate::status::{AgentCounters, StatusBoard};
 use crate::terms::{empty_terms, ActiveContacts};
 
@@ -41,7 +41,13 @@ pub struct AgentConfig {
     pub robot: String,
     /// Without a valid command for this long (ticks or time) the agent enters safe mode.
     pub deadline: CommandDeadline,
-    /// A command older than this is refused (see [`CommandGate::check`]).
+    /// The first command's deadline, from the first state (see [`Watchdog`]); default
+    /// [`FIRST_COMMAND`].
+    pub first_command: CommandDeadline,
+    /// A command more state ticks behind the latest state than this is refused (see
+    /// [`CommandGate::check`]); default the deadline's ticks.
+    pub max_command_age_ticks: u64,
+    /// A stamped command older than this by the team's clock is refused.
     pub max_command_age: Duration,
     /// Gains of the posture hold; default [`HoldGains::from_torque_limits`].
     pub hold_gains: Option<HoldGains>,
@@ -63,14 +69,17 @@ pub struct AgentConfig {
 }
 
 impl AgentConfig {
-    /// Defaults: deadline 5 ticks or 25 ms, maximum command age 25 ms, status every 100 ms,
-    /// description every second, takeover from the hold over 100 ms.
+    /// Defaults: deadline 5 ticks or 25 ms, the first command within 2 s, maximum command age
+    /// 5 ticks (25 ms by a stamp), status every 100 ms, description every second, takeover from
+    /// the hold over 100 ms.
     pub fn new(team: &str, robot: &str) -> Self {
         let deadline = CommandDeadline::default();
         AgentConfig {
             team: team.to_string(),
             robot: robot.to_string(),
             max_command_age: deadline.time.unwrap_or(Duration::from_millis(25)),
+            max_command_age_ticks: deadline.ticks,
+            first_command: FIRST_COMMAND,
             deadline,
             hold_gains: None,
             status_period: Duration::from_millis(100),
@@ -87,6 +96,14 @@ impl AgentConfig {
     pub fn with_deadline_time(mut self, d: Duration) -> Self {
         self.deadline.time = Some(d);
         self.max_command_age = d;
+        self
+    }
+
+    /// Set the tick deadline and the maximum command age in ticks together (the
+    /// `--command-deadline-ticks` flag; 0: neither).
+    pub fn with_deadline_ticks(mut self, ticks: u64) -> Self {
+        self.deadline.ticks = ticks;
+        self.max_command_age_ticks = if ticks == 0 { u64::MAX } else { ticks };
         self
     }
 
@@ -267,8 +284,8 @@ impl<S: DynamicsSource> AgentCore<S> {
             robot: robot.to_string(),
             description: source.description(team, robot),
             joints,
-            gate: CommandGate::new(robot, limits.clone(), cfg.max_command_age),
-            watchdog: Watchdog::new(cfg.deadline),
+            gate: CommandGate::new(robot, limits.clone(), cfg.max_command_age_ticks, cfg.max_command_age),
+            watchdog: Watchdog::new(cfg.deadline, cfg.first_command),
             fall: FallDetector::new(cfg.fall),
             hold: PostureHold::new(gains, limits),
             takeover: Takeover::new(cfg.takeover),
@@ -318,7 +335,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         // The same state again (the lockstep bridge republishes while it waits for some robot's
         // torques): its terms go again only while it is unanswered, as in `on_coordinator`.
         let repeat = self.gate.latest_state_tick() == Some(tick) && !self.unanswered();
-        if let Err(r) = self.admit_state(state, now) {
+        if let Err(r) = self.admit_state(state) {
             self.counters.states_rejected += 1;
             tracing::warn!(robot = %self.robot, "{r}");
             return Err(r);
@@ -370,7 +387,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         self.watchdog.safe_mode_since().is_none() && self.gate.last_applied_tick() != self.gate.latest_state_tick()
     }
 
-    fn admit_state(&mut self, state: &RobotState, now: Instant) -> Result<(), StateRejection> {
+    fn admit_state(&mut self, state: &RobotState) -> Result<(), StateRejection> {
         let tick = state.header.tick;
         if state.header.robot_id() != self.robot {
             return Err(StateRejection::OtherRobot { got: state.header.robot_id().to_string() });
@@ -384,7 +401,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         if got != 0 && got != feet {
             return Err(StateRejection::WrongFootForces { tick, expected: feet, got });
         }
-        if !self.gate.on_state(tick, state.header.stamp_ns, now) {
+        if !self.gate.on_state(tick, state.header.stamp_ns) {
             return Err(StateRejection::OutOfOrder { tick, latest: self.gate.latest_state_tick() });
         }
         Ok(())
@@ -460,7 +477,7 @@ impl<S: DynamicsSource> AgentCore<S> {
 
     /// The gate's checks and the bookkeeping of an applied command; `None`: kept as early.
     fn admit_command(&mut self, cmd: &TorqueCommand, now: Instant) -> Result<Option<Apply>, CommandRejection> {
-        let clamped = match self.gate.check(cmd, now, &mut self.torques.tau) {
+        let clamped = match self.gate.check(cmd, &mut self.torques.tau) {
             Ok(n) => n,
             Err(CommandRejection::FromTheFuture { tick, latest }) if tick <= latest + EARLY_TICKS => {
                 self.keep_early(cmd)?;

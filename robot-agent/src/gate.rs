@@ -2,14 +2,10 @@
 //! the last applied, not from the future), age against a deadline, size, finite numbers; then
 //! clamping to the torque limits with a report of which joints were clamped.
 
-use std::collections::VecDeque;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use protocol::TorqueCommand;
 use thiserror::Error;
-
-/// How many recent states the gate remembers (tick, stamp, arrival) to date commands.
-const RECENT_STATES: usize = 64;
 
 /// Why a command was refused. The command is dropped; nothing of it is applied.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -24,8 +20,10 @@ pub enum CommandRejection {
     WrongSize { expected: usize, got: usize },
     #[error("command torque {index} is not finite ({value})")]
     NonFinite { index: usize, value: f64 },
-    #[error("command for tick {tick} is {age_us} us old, the deadline is {max_us} us")]
+    #[error("command for tick {tick} is {age_us} us old by its stamp, the deadline is {max_us} us")]
     TooOld { tick: u64, age_us: u64, max_us: u64 },
+    #[error("command for tick {tick} came after the state of tick {latest}: {} ticks old, at most {max_ticks}", latest - tick)]
+    Behind { tick: u64, latest: u64, max_ticks: u64 },
     #[error("command arrived before any state")]
     NoState,
     #[error("command for tick {tick} was made before safe mode was entered at tick {entered}; safe mode is left only on a fresh tick")]
@@ -40,7 +38,6 @@ pub enum CommandRejection {
 struct SeenState {
     tick: u64,
     stamp_ns: u64,
-    at: Instant,
 }
 
 /// Tick and age bookkeeping plus the limits: accepts or refuses commands, clamps accepted ones.
@@ -49,21 +46,23 @@ pub struct CommandGate {
     robot: String,
     limits: Vec<f64>,
     max_age: Duration,
-    recent: VecDeque<SeenState>,
+    max_age_ticks: u64,
+    latest: Option<SeenState>,
     last_applied_tick: Option<u64>,
     clamped: Vec<usize>,
 }
 
 impl CommandGate {
     /// A gate for robot `robot` with one symmetric torque limit per actuated joint (use
-    /// `f64::INFINITY` for none) and a maximum command age.
-    pub fn new(robot: &str, limits: Vec<f64>, max_age: Duration) -> Self {
+    /// `f64::INFINITY` for none), a maximum command age in state ticks and one by the stamps.
+    pub fn new(robot: &str, limits: Vec<f64>, max_age_ticks: u64, max_age: Duration) -> Self {
         let n = limits.len();
         CommandGate {
             robot: robot.to_string(),
             limits,
             max_age,
-            recent: VecDeque::with_capacity(RECENT_STATES),
+            max_age_ticks,
+            latest: None,
             last_applied_tick: None,
             clamped: Vec::with_capacity(n),
         }
@@ -78,44 +77,44 @@ impl CommandGate {
         &self.limits
     }
 
-    /// A state arrived. Repeats of a tick keep the first arrival (a command answering it is as
-    /// old as the first copy). Returns false for a state older than the latest (out of order).
-    pub fn on_state(&mut self, tick: u64, stamp_ns: u64, at: Instant) -> bool {
-        match self.recent.back() {
-            Some(last) if tick < last.tick => return false,
-            Some(last) if tick == last.tick => return true,
-            _ => {}
+    /// A state arrived. Returns false for a state older than the latest (out of order).
+    pub fn on_state(&mut self, tick: u64, stamp_ns: u64) -> bool {
+        match self.latest {
+            Some(last) if tick < last.tick => false,
+            Some(last) if tick == last.tick => true,
+            _ => {
+                self.latest = Some(SeenState { tick, stamp_ns });
+                true
+            }
         }
-        if self.recent.len() == RECENT_STATES {
-            self.recent.pop_front();
-        }
-        self.recent.push_back(SeenState { tick, stamp_ns, at });
-        true
     }
 
     /// Tick of the latest state.
     pub fn latest_state_tick(&self) -> Option<u64> {
-        self.recent.back().map(|s| s.tick)
+        self.latest.map(|s| s.tick)
     }
 
     pub fn last_applied_tick(&self) -> Option<u64> {
         self.last_applied_tick
     }
 
-    /// Check `cmd` at local time `now`; on success write the (clamped) torques into `out` and
-    /// return how many joints were clamped (their indices: [`CommandGate::clamped`]). The command
-    /// does not become the last applied one until [`CommandGate::mark_applied`].
+    /// Check `cmd`; on success write the (clamped) torques into `out` and return how many
+    /// joints were clamped (their indices: [`CommandGate::clamped`]). The command does not
+    /// become the last applied one until [`CommandGate::mark_applied`].
     ///
-    /// Age: the command must arrive within `max_age` of the arrival of the state of its tick
-    /// (the agent's clock), and, when the sender stamped it (`stamp_ns > 0`), its stamp must not
-    /// be more than `max_age` older than the latest state's stamp (the state source's clock,
-    /// which the team shares). A stamp of 0 means unstamped: only the local check applies.
-    pub fn check(&mut self, cmd: &TorqueCommand, now: Instant, out: &mut Vec<f64>) -> Result<usize, CommandRejection> {
+    /// Age: the command's tick must be at most `max_age_ticks` behind the latest state's. The
+    /// robot's ticks are its clock: in real time they pass at the robot's rate, so that this
+    /// bounds the command's age in time; in lockstep no state comes while the team solves, and
+    /// a command is as young as its state however long its solve took (a wall-clock age would
+    /// refuse a slow first solve that the simulation waited for). When the sender stamped it
+    /// (`stamp_ns > 0`), its stamp must also not be more than `max_age` older than the latest
+    /// state's stamp (the state source's clock, which the team shares).
+    pub fn check(&mut self, cmd: &TorqueCommand, out: &mut Vec<f64>) -> Result<usize, CommandRejection> {
         let got = cmd.header.robot_id();
         if got != self.robot {
             return Err(CommandRejection::WrongRobot { expected: self.robot.clone(), got: got.to_string() });
         }
-        let latest = *self.recent.back().ok_or(CommandRejection::NoState)?;
+        let latest = self.latest.ok_or(CommandRejection::NoState)?;
         let tick = cmd.header.tick;
         if tick > latest.tick {
             return Err(CommandRejection::FromTheFuture { tick, latest: latest.tick });
@@ -133,22 +132,14 @@ impl CommandGate {
         if let Some(index) = cmd.tau.iter().position(|t| !t.is_finite()) {
             return Err(CommandRejection::NonFinite { index, value: cmd.tau[index] });
         }
-        let max_us = self.max_age.as_micros() as u64;
-        let too_old = |age: Duration| CommandRejection::TooOld { tick, age_us: age.as_micros() as u64, max_us };
-        match self.recent.iter().rev().find(|s| s.tick == tick) {
-            Some(s) => {
-                let age = now.saturating_duration_since(s.at);
-                if age > self.max_age {
-                    return Err(too_old(age));
-                }
-            }
-            // Older than anything remembered: far beyond any deadline of a few ticks.
-            None => return Err(too_old(now.saturating_duration_since(self.recent.front().map_or(now, |s| s.at)))),
+        if latest.tick - tick > self.max_age_ticks {
+            return Err(CommandRejection::Behind { tick, latest: latest.tick, max_ticks: self.max_age_ticks });
         }
         if cmd.header.stamp_ns > 0 {
             let age_ns = latest.stamp_ns.saturating_sub(cmd.header.stamp_ns);
             if age_ns > self.max_age.as_nanos() as u64 {
-                return Err(too_old(Duration::from_nanos(age_ns)));
+                let (age_us, max_us) = (age_ns / 1000, self.max_age.as_micros() as u64);
+                return Err(CommandRejection::TooOld { tick, age_us, max_us });
             }
         }
         out.clear();
@@ -196,32 +187,39 @@ mod tests {
 
     #[test]
     fn gate_checks_robot_tick_size_finiteness_age_and_clamps() {
-        let t0 = Instant::now();
-        let ms = Duration::from_millis;
-        let mut g = CommandGate::new("r1", vec![10.0, 10.0, 2.0], ms(25));
+        let mut g = CommandGate::new("r1", vec![10.0, 10.0, 2.0], 3, Duration::from_millis(25));
         let mut out = Vec::new();
-        assert_eq!(g.check(&cmd("r1", 0, vec![0.0; 3]), t0, &mut out), Err(CommandRejection::NoState));
-        assert!(g.on_state(5, 1_000_000_000, t0));
-        assert!(matches!(g.check(&cmd("r2", 5, vec![0.0; 3]), t0, &mut out), Err(CommandRejection::WrongRobot { .. })));
-        assert!(matches!(g.check(&cmd("r1", 6, vec![0.0; 3]), t0, &mut out), Err(CommandRejection::FromTheFuture { .. })));
-        assert!(matches!(g.check(&cmd("r1", 5, vec![0.0; 4]), t0, &mut out), Err(CommandRejection::WrongSize { .. })));
-        assert!(matches!(
-            g.check(&cmd("r1", 5, vec![0.0, f64::NAN, 0.0]), t0, &mut out),
-            Err(CommandRejection::NonFinite { index: 1, .. })
-        ));
-        assert!(matches!(g.check(&cmd("r1", 5, vec![0.0; 3]), t0 + ms(30), &mut out), Err(CommandRejection::TooOld { .. })));
+        assert_eq!(g.check(&cmd("r1", 0, vec![0.0; 3]), &mut out), Err(CommandRejection::NoState));
+        assert!(g.on_state(5, 1_000_000_000));
+        assert!(matches!(g.check(&cmd("r2", 5, vec![0.0; 3]), &mut out), Err(CommandRejection::WrongRobot { .. })));
+        assert!(matches!(g.check(&cmd("r1", 6, vec![0.0; 3]), &mut out), Err(CommandRejection::FromTheFuture { .. })));
+        assert!(matches!(g.check(&cmd("r1", 5, vec![0.0; 4]), &mut out), Err(CommandRejection::WrongSize { .. })));
+        assert!(matches!(g.check(&cmd("r1", 5, vec![0.0, f64::NAN, 0.0]), &mut out), Err(CommandRejection::NonFinite { index: 1, .. })));
         // Stamped 30 ms before the latest state: too old by the shared clock.
         let mut stamped = cmd("r1", 5, vec![0.0; 3]);
         stamped.header.stamp_ns = 1_000_000_000 - 30_000_000;
-        assert!(matches!(g.check(&stamped, t0, &mut out), Err(CommandRejection::TooOld { .. })));
-        assert_eq!(g.check(&cmd("r1", 5, vec![12.0, -3.0, -2.5]), t0 + ms(1), &mut out), Ok(2));
+        assert_eq!(g.check(&stamped, &mut out), Err(CommandRejection::TooOld { tick: 5, age_us: 30_000, max_us: 25_000 }));
+        assert_eq!(g.check(&cmd("r1", 5, vec![12.0, -3.0, -2.5]), &mut out), Ok(2));
         assert_eq!(out, vec![10.0, -3.0, -2.0]);
         assert_eq!(g.clamped(), &[0, 2]);
         g.mark_applied(5);
-        assert!(matches!(g.check(&cmd("r1", 5, vec![0.0; 3]), t0, &mut out), Err(CommandRejection::Stale { .. })));
-        assert!(g.on_state(6, 1_005_000_000, t0 + ms(5)));
-        assert!(!g.on_state(4, 0, t0 + ms(5)), "out-of-order state accepted");
-        assert_eq!(g.check(&cmd("r1", 6, vec![1.0; 3]), t0 + ms(6), &mut out), Ok(0));
+        assert!(matches!(g.check(&cmd("r1", 5, vec![0.0; 3]), &mut out), Err(CommandRejection::Stale { .. })));
+        assert!(g.on_state(6, 1_005_000_000));
+        assert!(!g.on_state(4, 0), "out-of-order state accepted");
+        assert_eq!(g.check(&cmd("r1", 6, vec![1.0; 3]), &mut out), Ok(0));
         assert!(g.clamped().is_empty());
+    }
+
+    /// Age in ticks: 3 ticks behind the latest state is the limit, 4 is refused, however long
+    /// (in time) the command took.
+    #[test]
+    fn a_command_is_as_old_as_the_states_that_came_after_it() {
+        let mut g = CommandGate::new("r1", vec![10.0; 3], 3, Duration::from_millis(25));
+        let mut out = Vec::new();
+        assert!(g.on_state(14, 0));
+        assert_eq!(g.check(&cmd("r1", 10, vec![0.0; 3]), &mut out), Err(CommandRejection::Behind { tick: 10, latest: 14, max_ticks: 3 }));
+        assert_eq!(g.check(&cmd("r1", 11, vec![0.0; 3]), &mut out), Ok(0));
+        let msg = CommandRejection::Behind { tick: 10, latest: 14, max_ticks: 3 }.to_string();
+        assert!(msg.contains("4 ticks old, at most 3"), "{msg}");
     }
 }

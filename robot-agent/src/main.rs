@@ -37,11 +37,13 @@ struct RunCmd {
     /// Team id.
     #[arg(long, default_value = "team")]
     team: String,
-    /// Without a valid command for this long the agent enters safe mode; commands older than
-    /// this are refused.
+    /// Without a valid command for this long the agent enters safe mode; commands stamped
+    /// longer before the latest state are refused.
     #[arg(long, value_name = "MS", default_value_t = 25)]
     command_deadline_ms: u64,
-    /// Without a valid command for this many state ticks the agent enters safe mode (0: off).
+    /// Without a valid command for this many state ticks the agent enters safe mode; commands
+    /// more ticks behind the latest state are refused (0: neither). The first command may take
+    /// up to 2 s from the first state.
     #[arg(long, value_name = "TICKS", default_value_t = 5)]
     command_deadline_ticks: u64,
     /// Hold posture when the coordinator's liveliness token has been gone this long (unless
@@ -80,8 +82,7 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
         }
     };
     protocol::logging::init(protocol::logging::Verbosity::Info);
-    let mut cfg = AgentConfig::new(&cmd.team, &cmd.id).with_deadline_time(Duration::from_millis(cmd.command_deadline_ms));
-    cfg.deadline.ticks = cmd.command_deadline_ticks;
+    let mut cfg = AgentConfig::new(&cmd.team, &cmd.id).with_deadline_time(Duration::from_millis(cmd.command_deadline_ms)).with_deadline_ticks(cmd.command_deadline_ticks);
     cfg.coordinator_grace = Duration::from_millis(cmd.coordinator_grace_ms);
     if let Some(f) = cmd.touchdown_force {
         cfg.contacts.touchdown_force = f;

@@ -46,40 +46,60 @@ impl Default for CommandDeadline {
     }
 }
 
+/// [`Watchdog`]'s deadline for the first command, from the first state: 2 s, long against a
+/// team's start-up work (the coordinator's first solve, its first window of references, a
+/// recorder's buffers: 50-70 ms measured on a loaded two-core machine), short against a
+/// coordinator that never comes.
+pub const FIRST_COMMAND: CommandDeadline = CommandDeadline { ticks: 0, time: Some(Duration::from_secs(2)) };
+
 /// Watches for the deadline; knows the tick at which safe mode was entered.
+///
+/// The deadline runs from every valid command applied. Before the first, a robot is not yet
+/// commanded and its team is still starting: the first command has its own deadline
+/// ([`FIRST_COMMAND`] by default), from the first state. A start slower than a tick's deadline
+/// is then not a fault (it used to send every robot to safe mode at tick 0, holding no load:
+/// the palms let go of the object before the first command came).
 #[derive(Debug, Clone)]
 pub struct Watchdog {
     deadline: CommandDeadline,
-    /// Tick and time from which the deadline runs: the first state, then every valid command.
-    reference: Option<(u64, Instant)>,
+    first_command: CommandDeadline,
+    /// Tick and time of the first state, from which the first command's deadline runs.
+    first_state: Option<(u64, Instant)>,
+    /// Tick and time of the latest valid command, from which the deadline runs.
+    applied: Option<(u64, Instant)>,
     in_safe_mode: Option<u64>,
 }
 
 impl Watchdog {
-    pub fn new(deadline: CommandDeadline) -> Self {
-        Watchdog { deadline, reference: None, in_safe_mode: None }
+    pub fn new(deadline: CommandDeadline, first_command: CommandDeadline) -> Self {
+        Watchdog { deadline, first_command, first_state: None, applied: None, in_safe_mode: None }
     }
 
     pub fn deadline(&self) -> CommandDeadline {
         self.deadline
     }
 
-    /// A state arrived: the first one arms the watchdog.
+    /// A state arrived: the first one starts the first command's deadline.
     pub fn on_state(&mut self, tick: u64, now: Instant) {
-        if self.reference.is_none() {
-            self.reference = Some((tick, now));
+        if self.first_state.is_none() {
+            self.first_state = Some((tick, now));
         }
     }
 
-    /// Whether the deadline has passed at the latest state tick `latest_tick` and time `now`
+    /// Whether the deadline has passed at the latest state tick `latest_tick` and time `now`:
+    /// the deadline from the latest command, or the first command's from the first state
     /// (false before the first state and while in safe mode).
     pub fn expired(&self, latest_tick: u64, now: Instant) -> bool {
-        let Some((tick, at)) = self.reference else { return false };
+        let (deadline, (tick, at)) = match (self.applied, self.first_state) {
+            (Some(applied), _) => (self.deadline, applied),
+            (None, Some(first)) => (self.first_command, first),
+            (None, None) => return false,
+        };
         if self.in_safe_mode.is_some() {
             return false;
         }
-        let by_ticks = self.deadline.ticks > 0 && latest_tick.saturating_sub(tick) >= self.deadline.ticks;
-        let by_time = self.deadline.time.is_some_and(|d| now.saturating_duration_since(at) > d);
+        let by_ticks = deadline.ticks > 0 && latest_tick.saturating_sub(tick) >= deadline.ticks;
+        let by_time = deadline.time.is_some_and(|d| now.saturating_duration_since(at) > d);
         by_ticks || by_time
     }
 
@@ -105,7 +125,7 @@ impl Watchdog {
     /// A valid command of `tick` was applied at `now`: the deadline restarts; returns true if
     /// this left safe mode.
     pub fn on_applied(&mut self, tick: u64, now: Instant) -> bool {
-        self.reference = Some((tick, now));
+        self.applied = Some((tick, now));
         self.in_safe_mode.take().is_some()
     }
 }
@@ -274,7 +294,8 @@ mod tests {
     #[test]
     fn deadline_by_ticks_or_time_and_leaving_only_on_a_fresh_tick() {
         let t0 = Instant::now();
-        let mut w = Watchdog::new(CommandDeadline { ticks: 5, time: Some(Duration::from_millis(25)) });
+        let deadline = CommandDeadline { ticks: 5, time: Some(Duration::from_millis(25)) };
+        let mut w = Watchdog::new(deadline, deadline);
         assert!(!w.expired(100, t0 + Duration::from_secs(1)), "expired before any state");
         w.on_state(10, t0);
         assert!(!w.expired(14, t0 + Duration::from_millis(20)));
@@ -288,8 +309,26 @@ mod tests {
         assert_eq!(w.admits(18), Ok(()));
         assert!(w.on_applied(18, t0 + Duration::from_millis(40)));
         assert_eq!(w.safe_mode_since(), None);
-        let no_time = Watchdog::new(CommandDeadline { ticks: 0, time: None });
+        let none = CommandDeadline { ticks: 0, time: None };
+        let no_time = Watchdog::new(none, none);
         assert!(!no_time.expired(u64::MAX, t0 + Duration::from_secs(100)));
+    }
+
+    /// The first command has its own deadline from the first state; once a command came, the
+    /// tick's deadline runs from it.
+    #[test]
+    fn the_first_command_has_its_own_deadline() {
+        let t0 = Instant::now();
+        let deadline = CommandDeadline { ticks: 5, time: Some(Duration::from_millis(25)) };
+        let mut w = Watchdog::new(deadline, FIRST_COMMAND);
+        w.on_state(0, t0);
+        assert!(!w.expired(0, t0 + Duration::from_millis(70)), "a slow first solve is not a miss");
+        assert!(!w.expired(40, t0 + Duration::from_millis(1999)), "ticks do not count before the first command");
+        assert!(w.expired(0, t0 + Duration::from_millis(2001)), "no first command in 2 s");
+        assert!(!w.on_applied(1, t0 + Duration::from_millis(70)));
+        assert!(!w.expired(5, t0 + Duration::from_millis(90)));
+        assert!(w.expired(6, t0 + Duration::from_millis(90)), "5 ticks after the first command");
+        assert!(w.expired(1, t0 + Duration::from_millis(96)), "25 ms after the first command");
     }
 
     #[test]

@@ -244,7 +244,7 @@ async fn rejects_stale_wrong_robot_wrong_size_nan_future_and_old_commands_and_cl
     let robot = robot();
     let mut h = Harness::start("loop2", |mut c| {
         c.deadline = CommandDeadline { ticks: 0, time: Some(Duration::from_secs(5)) };
-        c.max_command_age = Duration::from_millis(300);
+        c.max_command_age_ticks = 5;
         c
     })
     .await;
@@ -276,28 +276,29 @@ async fn rejects_stale_wrong_robot_wrong_size_nan_future_and_old_commands_and_cl
     assert!(s.last_rejection.as_deref().unwrap_or("").contains("non-finite"), "{:?}", s.last_rejection);
     h.no_torque_for(Duration::from_millis(200)).await;
 
-    // Too old: the state of tick 2 arrived 500 ms before its command (deadline 300 ms).
+    // Too old: the state of tick 2, then six ticks later that of tick 8 (at most 5 ticks).
     h.state(&standing_state(&robot, &team, 2, 0.0, 0.0)).await;
     h.dynamics_of(2).await;
-    tokio::time::sleep(Duration::from_millis(500)).await;
+    h.state(&standing_state(&robot, &team, 8, 0.0, 0.0)).await;
+    h.dynamics_of(8).await;
     h.command(&command(&team, ID, 2, good.clone())).await;
     let s = h.status_where(|s| s.commands_rejected == 6).await;
-    assert!(s.last_rejection.as_deref().unwrap_or("").contains("old"), "{:?}", s.last_rejection);
+    assert!(s.last_rejection.as_deref().unwrap_or("").contains("6 ticks old, at most 5"), "{:?}", s.last_rejection);
     h.no_torque_for(Duration::from_millis(100)).await;
 
     // Over the limits: clamped, applied, counted.
-    h.state(&standing_state(&robot, &team, 3, 0.0, 0.0)).await;
-    h.dynamics_of(3).await;
+    h.state(&standing_state(&robot, &team, 9, 0.0, 0.0)).await;
+    h.dynamics_of(9).await;
     let mut over = vec![1.0; n];
     over[0] = 100.0; // leg, limit 80
     over[12] = -50.0; // arm_joint_1, limit 39
     over[17] = 9.5; // arm_joint_6, limit 9
-    h.command(&command(&team, ID, 3, over)).await;
+    h.command(&command(&team, ID, 9, over)).await;
     let t = h.torque().await;
-    assert_eq!(t.header.tick, 3);
+    assert_eq!(t.header.tick, 9);
     assert_eq!((t.tau[0], t.tau[12], t.tau[17], t.tau[1]), (80.0, -39.0, 9.0, 1.0));
     let s = h.status_where(|s| s.commands_clamped == 1).await;
-    assert_eq!((s.commands_applied, s.commands_rejected, s.last_applied_tick), (2, 6, Some(3)));
+    assert_eq!((s.commands_applied, s.commands_rejected, s.last_applied_tick), (2, 6, Some(9)));
     assert_eq!(s.mode, AgentMode::Commanded);
 
     let c = h.stop().await;
@@ -413,6 +414,7 @@ async fn enters_safe_mode_by_time_without_new_states() {
     let robot = robot();
     let mut h = Harness::start("loop4", |mut c| {
         c.deadline = CommandDeadline { ticks: 0, time: Some(Duration::from_millis(50)) };
+        c.first_command = c.deadline;
         c.max_command_age = Duration::from_secs(5);
         c.takeover = Duration::ZERO;
         c

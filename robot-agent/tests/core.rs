@@ -227,7 +227,9 @@ fn rejected_commands_are_counted_and_nothing_is_applied() {
         assert!(format!("{r:?}").starts_with(what), "{r:?} is not {what}");
         assert_eq!(c.counters().rejected, i as u64 + 1);
     }
-    assert!(matches!(c.on_command(&command(ID, 3, &[0.0; 3]), t0 + ms(26)), Err(CommandRejection::TooOld { .. })));
+    let mut stamped = command(ID, 3, &[0.0; 3]);
+    stamped.header.stamp_ns = 1;
+    assert!(matches!(c.on_command(&stamped, t0 + ms(1)), Err(CommandRejection::TooOld { .. })), "stamped long before its state");
     assert_eq!(c.on_undecodable_command("bad magic"), CommandRejection::Undecodable("bad magic".into()));
     assert_eq!((c.counters().rejected, c.counters().applied, c.last_applied_tick()), (6, 0, None));
     let status = c.status();
@@ -256,12 +258,17 @@ fn a_command_ahead_of_its_state_waits_for_it_and_is_checked_then() {
     assert_eq!((c.counters().applied, c.last_applied_tick()), (1, Some(4)));
     // The next state brings nothing: the early command was used once.
     assert!(c.on_state(&state(5, [0.0; 3], [0.0; 3]), t0 + ms(10)).unwrap().torques.is_none());
-    // An early command whose state never comes (tick 7 skipped) is too old when tick 8 arrives.
+    // An early command whose state never comes (tick 7 skipped) is one tick old when tick 8
+    // arrives, within the 5 allowed (the default age): it answers tick 8.
     c.on_command(&command(ID, 7, &[0.0; 3]), t0 + ms(11)).unwrap();
     let out = c.on_state(&state(8, [0.0; 3], [0.0; 3]), t0 + ms(20)).unwrap();
-    assert!(out.torques.is_none_or(|t| t.header.tick == 8), "the skipped tick's command is not applied");
-    assert_eq!(c.last_applied_tick(), Some(4));
-    assert!(c.status().last_rejection.as_deref().unwrap().contains("old"), "{:?}", c.status().last_rejection);
+    assert_eq!(out.torques.map(|t| t.header.tick), Some(7));
+    // One whose next state comes 6 ticks after it (ticks 10-14 skipped) is too old then.
+    c.on_command(&command(ID, 9, &[0.0; 3]), t0 + ms(21)).unwrap();
+    let out = c.on_state(&state(15, [0.0; 3], [0.0; 3]), t0 + ms(40)).unwrap();
+    assert!(out.torques.is_none_or(|t| t.header.tick == 15), "the command 6 ticks behind is not applied");
+    assert_eq!(c.last_applied_tick(), Some(7));
+    assert!(c.status().last_rejection.as_deref().unwrap().contains("6 ticks old, at most 5"), "{:?}", c.status().last_rejection);
 }
 
 #[test]

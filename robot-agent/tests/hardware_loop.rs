@@ -373,8 +373,10 @@ async fn mock_robot_with_a_real_coordinator_over_zenoh() {
 fn a_robot_that_tips_over_is_limp_and_leaves_the_team_in_the_hardware_loop() {
     let deadline = CommandDeadline { ticks: 5, time: None };
     // A floating base (a fixed one cannot fall); no commands: the agent holds its posture in
-    // safe mode until it falls.
-    let mut core = AgentCore::new(&agent_config("mem-fall", deadline), PlaceholderDynamics::floating(JOINTS)).unwrap();
+    // safe mode (the first command's deadline is 5 ticks too) until it falls.
+    let mut cfg = agent_config("mem-fall", deadline);
+    cfg.first_command = deadline;
+    let mut core = AgentCore::new(&cfg, PlaceholderDynamics::floating(JOINTS)).unwrap();
     let mut link = TeamInMemory::new(1000, |_| false);
     let h = std::f64::consts::FRAC_1_SQRT_2;
     let rolled = protocol::Pose { position: [0.0, 0.0, 0.0], orientation: [h, h, 0.0, 0.0] };

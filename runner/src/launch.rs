@@ -282,6 +282,8 @@ pub struct AgentArgs {
     pub model: AgentModel,
     /// Without a valid command for this long the agent holds its posture (safe mode).
     pub command_deadline: Duration,
+    /// Or for this many state ticks; a command more ticks behind the latest state is refused.
+    pub command_deadline_ticks: u64,
 }
 
 impl AgentArgs {
@@ -293,12 +295,13 @@ impl AgentArgs {
             AgentModel::Placeholder { joints } => args.extend(["--placeholder-joints".into(), joints.to_string()]),
         }
         args.extend(["--command-deadline-ms".into(), self.command_deadline.as_millis().to_string()]);
+        args.extend(["--command-deadline-ticks".into(), self.command_deadline_ticks.to_string()]);
         args.extend(zenoh.to_cli());
         args
     }
 
     fn start_task(&self, session: &Session, stop: watch::Receiver<bool>, stall: watch::Receiver<bool>) -> Result<JoinHandle<Result<(), String>>, LaunchError> {
-        let cfg = AgentConfig::new(&self.team, &self.id).with_deadline_time(self.command_deadline);
+        let cfg = AgentConfig::new(&self.team, &self.id).with_deadline_time(self.command_deadline).with_deadline_ticks(self.command_deadline_ticks);
         let session = session.clone();
         Ok(match &self.model {
             AgentModel::Robot { robot, .. } => {
@@ -680,9 +683,9 @@ mod tests {
             assert!(args.windows(2).any(|w| w[0] == pair[0] && w[1] == pair[1]), "{pair:?} in {args:?}");
         }
         assert!(args.iter().any(|a| a.contains("7999")), "{args:?}");
-        let a = AgentArgs { team: "t1".into(), id: "r7".into(), model: AgentModel::Placeholder { joints: 5 }, command_deadline: Duration::from_secs(3) };
+        let a = AgentArgs { team: "t1".into(), id: "r7".into(), model: AgentModel::Placeholder { joints: 5 }, command_deadline: Duration::from_secs(3), command_deadline_ticks: 7 };
         let args = a.to_cli(&zenoh);
-        for pair in [["--id", "r7"], ["--placeholder-joints", "5"], ["--command-deadline-ms", "3000"]] {
+        for pair in [["--id", "r7"], ["--placeholder-joints", "5"], ["--command-deadline-ms", "3000"], ["--command-deadline-ticks", "7"]] {
             assert!(args.windows(2).any(|w| w[0] == pair[0] && w[1] == pair[1]), "{pair:?} in {args:?}");
         }
         let b = BridgeArgs::Smoke(SmokePlant { team: "t1".into(), robots: vec!["r1".into(), "r2".into()], joints: 4, ticks: 9, dt: 0.002, v0: 0.5 });

@@ -23,9 +23,13 @@ pub const AGENT_COMMAND_DEADLINE: Duration = Duration::from_secs(20);
 pub const COORDINATOR_TICK_DEADLINE: Duration = Duration::from_secs(20);
 
 /// In real time ([`sim_bridge::scene::Scene::realtime`]) an agent holds its posture after this
-/// long without a command (or `CommandDeadline::ticks` state ticks, whichever comes first): the
-/// agent's own default, a robot's real deadline.
+/// long without a command, or as many state ticks (whichever comes first), and refuses a
+/// command so many ticks behind its latest state: the agent's own default, a robot's real
+/// deadline.
 pub const REALTIME_AGENT_COMMAND_DEADLINE: Duration = Duration::from_millis(25);
+/// In lockstep the tick deadline is the agent's default (5 ticks); no state comes while the
+/// simulation waits for a command, so that it bounds only a robot that answers no tick.
+pub const LOCKSTEP_DEADLINE_TICKS: u64 = 5;
 /// In real time the coordinator abandons a tick whose terms are incomplete after this long
 /// (its states are long gone by then; the tick only holds memory).
 pub const REALTIME_COORDINATOR_TICK_DEADLINE: Duration = Duration::from_millis(50);
@@ -113,10 +117,12 @@ pub fn default_report_dir(scenario: &Path) -> PathBuf {
 /// runs (`plan.scene.realtime`) keep a robot's deadlines ([`REALTIME_AGENT_COMMAND_DEADLINE`],
 /// [`REALTIME_COORDINATOR_TICK_DEADLINE`]).
 pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
-    let (tick_deadline, command_deadline, reuse) = if plan.scene.realtime {
-        (REALTIME_COORDINATOR_TICK_DEADLINE, REALTIME_AGENT_COMMAND_DEADLINE, Some(realtime_reuse(&plan.references.clock)))
+    let clock = &plan.references.clock;
+    let (tick_deadline, command_deadline, command_deadline_ticks, reuse) = if plan.scene.realtime {
+        let ticks = clock.ticks_lasting(REALTIME_AGENT_COMMAND_DEADLINE.as_secs_f64()).max(1);
+        (REALTIME_COORDINATOR_TICK_DEADLINE, REALTIME_AGENT_COMMAND_DEADLINE, ticks, Some(realtime_reuse(clock)))
     } else {
-        (COORDINATOR_TICK_DEADLINE, AGENT_COMMAND_DEADLINE, None)
+        (COORDINATOR_TICK_DEADLINE, AGENT_COMMAND_DEADLINE, LOCKSTEP_DEADLINE_TICKS, None)
     };
     let expected = plan.robots.iter().map(|r| r.id.clone()).collect();
     let coordinator = CoordinatorArgs { team: plan.team().into(), tick_deadline, reuse, expected, controller: plan.controller.clone() };
@@ -128,6 +134,7 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
             id: r.id.clone(),
             model: AgentModel::Robot { robot: r.robot.clone(), description: r.description.clone() },
             command_deadline,
+            command_deadline_ticks,
         })
         .collect();
     let bridge = BridgeArgs::Scene { scene: Box::new(plan.scene.clone()), robots: plan.loaded_robots() };

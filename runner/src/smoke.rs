@@ -9,6 +9,7 @@ use coordinator::ControllerSpec;
 use thiserror::Error;
 
 use crate::launch::{AgentArgs, AgentModel, BridgeArgs, BridgeOutcome, CoordinatorArgs, Launch, LaunchError, RunMode, SmokePlant};
+use crate::run::LOCKSTEP_DEADLINE_TICKS;
 
 /// The smoke run's agents wait as long as the bridge does for a command before they hold
 /// their posture: a lockstep tick that is merely slow must not see safe-mode torques.
@@ -62,7 +63,7 @@ impl SmokeConfig {
         let agents = self
             .robots
             .iter()
-            .map(|r| AgentArgs { team: self.team.clone(), id: r.clone(), model: AgentModel::Placeholder { joints: self.joints }, command_deadline: SMOKE_COMMAND_DEADLINE })
+            .map(|r| AgentArgs { team: self.team.clone(), id: r.clone(), model: AgentModel::Placeholder { joints: self.joints }, command_deadline: SMOKE_COMMAND_DEADLINE, command_deadline_ticks: LOCKSTEP_DEADLINE_TICKS })
             .collect();
         let plant = SmokePlant { team: self.team.clone(), robots: self.robots.clone(), joints: self.joints, ticks: self.ticks, dt: self.dt, v0: self.v0 };
         (Launch { coordinator, agents }, BridgeArgs::Smoke(plant))
