@@ -157,7 +157,7 @@ pub async fn run(
             }
             r = references.recv_async() => {
                 let Ok(sample) = r else { break };
-                svc.refs.take(&sample, &mut svc.counters);
+                svc.refs.take_all(&sample, &references, &mut svc.counters);
             }
             d = dynamics.recv_async() => {
                 let Ok(sample) = d else { break };
@@ -594,6 +594,14 @@ impl ReferenceBuffer {
             }
             Err(e) => counters.refuse("references", sample.key_expr().as_str(), &e),
         }
+    }
+
+    /// `first` and every reference queued behind it, in one go: a window of references is
+    /// decoded as it arrives, not one per event while ticks wait (and the rest inside a tick's
+    /// solve).
+    fn take_all(&mut self, first: &zenoh::sample::Sample, q: &transport::SampleQueue, counters: &mut CoordinatorCounters) {
+        self.take(first, counters);
+        self.drain(q, counters);
     }
 
     fn drain(&mut self, q: &transport::SampleQueue, counters: &mut CoordinatorCounters) {

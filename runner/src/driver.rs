@@ -3,7 +3,9 @@
 //! run starts (the coordinator solves tick `k` with the newest reference of tick `<= k`), so
 //! that what the controller tracks does not depend on how fast this process keeps up with the
 //! simulation (a lagging driver with a 50-tick window let the references freeze and then jump
-//! on a loaded machine). It records what the evaluation needs (ground truth,
+//! on a loaded machine). In real time the window is [`REALTIME_LOOKAHEAD`] of ticks instead:
+//! the simulation cannot run ahead of the wall clock, and a first window as long as the run
+//! made the team's start-up work grow with the run's length. It records what the evaluation needs (ground truth,
 //! the torques the agents applied, the coordinator's diagnostics and status) and shows the
 //! progress. It never talks to the controller other than by references: the ground truth it
 //! records is for evaluation only. A walking scenario's contact sets go out
@@ -19,7 +21,7 @@ use std::time::{Duration, Instant};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, SampleQueue, TransportError, TypedPublisher};
-use protocol::{ContactSet, CoordinatorMode, CoordinatorStatus, GroundTruth, TaskReferences, TickDiagnostics, TorqueCommand};
+use protocol::{AgentStatus, ContactSet, CoordinatorMode, CoordinatorStatus, GroundTruth, TaskReferences, TickDiagnostics, TorqueCommand};
 use tokio::sync::watch;
 use zenoh::Session;
 
@@ -29,6 +31,8 @@ use crate::record::{RecordedMessage, Tap};
 /// References are published this many ticks ahead of the last simulated tick (10 s at 2 kHz;
 /// below the coordinator's reference queue, `coordinator::service::REFERENCE_QUEUE`).
 pub const LOOKAHEAD: u64 = 20_000;
+/// In real time references are published this far ahead (at most [`LOOKAHEAD`] ticks).
+pub const REALTIME_LOOKAHEAD: Duration = Duration::from_secs(2);
 /// Contact sets are published this many ticks ahead of the last simulated tick (well within
 /// the agent's schedule of `robot_agent::contact_switch::SwitchConfig::max_scheduled` sets).
 pub const CONTACT_LOOKAHEAD: u64 = 1_000;
@@ -51,6 +55,12 @@ pub struct Records {
     pub run_wall: Duration,
     /// Ticks seen (ground truth), settling included.
     pub ticks_seen: u64,
+    /// The bridge's wall-clock stamp of the last settling tick's ground truth: the hand-over
+    /// to the scenario is measured from it to the first scenario tick's.
+    pub settle_end_stamp_ns: Option<u64>,
+    /// Per robot, the most safe-mode entries its agent's statuses reported (robots whose agent
+    /// was not heard are absent).
+    pub agent_safe_mode: BTreeMap<String, u64>,
 }
 
 impl Records {
@@ -64,6 +74,14 @@ impl Records {
             if cmd.header.tick >= settle {
                 self.torques.entry(cmd.header.robot_id().to_string()).or_default().push((cmd.header.tick, cmd.tau));
             }
+        }
+    }
+
+    /// Keep the safe-mode entries an agent's status reports.
+    fn take_agent_status(&mut self, sample: &zenoh::sample::Sample) {
+        if let Ok(st) = decode_sample::<AgentStatus>(sample) {
+            let n = self.agent_safe_mode.entry(st.header.robot_id().to_string()).or_default();
+            *n = (*n).max(st.safe_mode_entries);
         }
     }
 
@@ -86,6 +104,7 @@ pub struct Driver {
     torques: SampleQueue,
     diagnostics: SampleQueue,
     status: SampleQueue,
+    agent_status: SampleQueue,
     /// The coordinator's liveliness: a coordinator that comes back (restarted) gets the
     /// references again.
     coordinator: transport::EventQueue,
@@ -106,6 +125,8 @@ pub struct Driver {
     /// twice; the recording keeps one reference per tick, and a second, held, for the ticks
     /// from a walk's halt to the last already sent).
     tapped_refs: u64,
+    /// References go out this many ticks ahead ([`LOOKAHEAD`], or [`Driver::paced`]'s).
+    lookahead: u64,
 }
 
 /// How long the driver waits after the last tick for its copies of the torques the bridge took:
@@ -126,6 +147,7 @@ impl Driver {
         let torques = transport::subscribe_with_capacity(session, keys::all_robots(team, RobotTopic::Torque)?, RECORD_QUEUE).await?;
         let diagnostics = transport::subscribe_with_capacity(session, keys::diagnostics(team)?, RECORD_QUEUE).await?;
         let status = transport::subscribe(session, keys::coordinator_status(team)?).await?;
+        let agent_status = transport::subscribe(session, keys::all_robots(team, RobotTopic::Status)?).await?;
         let coordinator = transport::watch_coordinator(session, team).await?;
         let refs_pub = TypedPublisher::declare(session, keys::references(team)?, Qos::HotPath).await?;
         let contact_sets = plan.walk.as_ref().map(|w| w.contact_sets(team, &plan.clock)).unwrap_or_default();
@@ -151,7 +173,13 @@ impl Driver {
         } else {
             ProgressBar::hidden()
         };
-        Ok(Driver { team: team.to_string(), truth, torques, diagnostics, status, coordinator, refs_pub, contact_sets, next_contact: 0, contact_pubs, plan, total: total_ticks, progress, log_progress: show_progress && !terminal, tap: None, tapped_refs: 0 })
+        Ok(Driver { team: team.to_string(), truth, torques, diagnostics, status, agent_status, coordinator, refs_pub, contact_sets, next_contact: 0, contact_pubs, plan, total: total_ticks, progress, log_progress: show_progress && !terminal, tap: None, tapped_refs: 0, lookahead: LOOKAHEAD })
+    }
+
+    /// A real-time run at `control_hz`: references go out [`REALTIME_LOOKAHEAD`] ahead.
+    pub fn paced(mut self, control_hz: f64) -> Driver {
+        self.lookahead = ((REALTIME_LOOKAHEAD.as_secs_f64() * control_hz).ceil() as u64).clamp(1, LOOKAHEAD);
+        self
     }
 
     /// Hand every message the driver decodes or publishes to the recorder too.
@@ -245,14 +273,14 @@ impl Driver {
                 Ok(Err(_)) | Err(_) => return Ok(false),
             }
         }
-        self.publish_refs(0, LOOKAHEAD.min(self.total)).await?;
+        self.publish_refs(0, self.lookahead.min(self.total)).await?;
         Ok(true)
     }
 
     /// Run until the ground truth of the last tick arrived, or `stop` turns true. The first
     /// window of references went out before ([`Driver::send_first_window`]).
     pub async fn run(mut self, mut stop: watch::Receiver<bool>) -> Result<Records, TransportError> {
-        let mut st = RunState::new(self.plan.clock.settle_ticks, LOOKAHEAD.min(self.total));
+        let mut st = RunState::new(self.plan.clock.settle_ticks, self.lookahead.min(self.total));
         loop {
             tokio::select! {
                 _ = stop.changed() => { if *stop.borrow() { break; } }
@@ -277,6 +305,10 @@ impl Driver {
                 s = self.diagnostics.recv_async() => {
                     let Ok(sample) = s else { break };
                     st.rec.take_diagnostics(&sample, st.settle, self.tap.as_ref());
+                }
+                s = self.agent_status.recv_async() => {
+                    let Ok(sample) = s else { break };
+                    st.rec.take_agent_status(&sample);
                 }
             }
         }
@@ -326,12 +358,15 @@ impl Driver {
         }
         let tick = gt.header.tick;
         st.rec.ticks_seen = st.rec.ticks_seen.max(tick + 1);
-        let ahead = (tick + 1 + LOOKAHEAD).min(self.total);
+        let ahead = (tick + 1 + self.lookahead).min(self.total);
         if ahead > st.next_ref {
             self.publish_refs(st.next_ref, ahead).await?;
             st.next_ref = ahead;
         }
         self.publish_contacts(tick + 1 + CONTACT_LOOKAHEAD).await?;
+        if tick + 1 == st.settle {
+            st.rec.settle_end_stamp_ns = Some(gt.header.stamp_ns);
+        }
         if tick >= st.settle {
             if st.run_started.is_none() {
                 st.rec.settle_wall = st.started.elapsed();
@@ -367,6 +402,9 @@ impl Driver {
         }
         while let Ok(Some(sample)) = self.diagnostics.try_recv() {
             rec.take_diagnostics(&sample, settle, self.tap.as_ref());
+        }
+        while let Ok(Some(sample)) = self.agent_status.try_recv() {
+            rec.take_agent_status(&sample);
         }
         rec.run_wall = run_started.map(|s| s.elapsed()).unwrap_or_default();
         self.progress.finish_and_clear();

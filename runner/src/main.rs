@@ -211,6 +211,9 @@ struct RunArgs {
     /// connect to ws://127.0.0.1:PORT). The run is recorded to run.mcap either way.
     #[arg(long, value_name = "PORT", num_args = 0..=1, default_missing_value = "8765")]
     live: Option<u16>,
+    /// Do not record the run (no run.mcap): the report is written all the same.
+    #[arg(long, conflicts_with = "live")]
+    no_record: bool,
 }
 
 #[derive(Args)]
@@ -320,18 +323,22 @@ fn run_scenario(a: RunArgs) -> Result<()> {
     }
     let source = ScenarioSource::read(&a.scenario, &a.set).map_err(|e| anyhow::anyhow!("reading {}: {e}", a.scenario.display()))?;
     let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live: a.live };
+    let rec = (!a.no_record).then_some(&rec);
     let (records, recording) = match (&a.router, &a.tls) {
         (Some(router), Some(certs)) => {
             let mode = RunMode::Site { dir: dir.clone(), certs: std::path::absolute(certs)?, router: router.clone() };
-            scenario_run::run_recorded_in(&plan, &opts, &mode, Some(&rec))?
+            scenario_run::run_recorded_in(&plan, &opts, &mode, rec)?
         }
-        _ => scenario_run::run_recorded_secure(&plan, &opts, a.tls.as_deref(), &dir, Some(&rec))?,
+        _ => scenario_run::run_recorded_secure(&plan, &opts, a.tls.as_deref(), &dir, rec)?,
     };
     let eval = evaluate::evaluate(&plan, &records, &mode_name);
     // Whatever could not be written is named at the end, after the run's summary.
     let mut errors = Vec::new();
     if let Err(e) = write_report(&plan, &eval, &records, &dir) {
         errors.push(format!("the report could not be written: {e:#}"));
+    }
+    if a.no_record {
+        println!("  recording: none (--no-record)");
     }
     if let Some(r) = recording {
         match &r.error {

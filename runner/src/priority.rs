@@ -12,11 +12,56 @@
 //!
 //! Components started by hand keep the priority they were started with (`nice -n -10
 //! robot-agent ...`, or systemd's `Nice=`).
+//!
+//! Work that is not the loop's (a recording's writer) runs below it, at [`BACKGROUND_NICE`], and
+//! [`raise`] leaves such a thread there ([`background_thread`]).
 
+use std::collections::BTreeSet;
 use std::io;
+use std::sync::Mutex;
 
 /// The nice value of a real-time run's threads.
 pub const REALTIME_NICE: i32 = -10;
+
+/// The nice value of a background thread ([`background_thread`]).
+pub const BACKGROUND_NICE: i32 = 10;
+
+/// Thread ids of the background threads, which [`raise`] leaves alone.
+static BACKGROUND: Mutex<BTreeSet<i64>> = Mutex::new(BTreeSet::new());
+
+/// The calling thread, made a background thread by [`background_thread`], until this drops.
+pub struct Background {
+    tid: i64,
+}
+
+impl Drop for Background {
+    fn drop(&mut self) {
+        BACKGROUND.lock().unwrap_or_else(|e| e.into_inner()).remove(&self.tid);
+    }
+}
+
+/// Run the calling thread at [`BACKGROUND_NICE`] (lowering a priority is always permitted) and
+/// keep [`raise`] from raising it, while the returned guard lives. Elsewhere than on Linux it
+/// changes nothing.
+pub fn background_thread() -> Background {
+    #[cfg(target_os = "linux")]
+    {
+        // SAFETY: gettid takes nothing and cannot fail.
+        let tid = unsafe { libc::gettid() };
+        BACKGROUND.lock().unwrap_or_else(|e| e.into_inner()).insert(i64::from(tid));
+        // SAFETY: setpriority takes plain integers; with PRIO_PROCESS a thread id names one thread.
+        if unsafe { libc::setpriority(libc::PRIO_PROCESS, tid as libc::id_t, BACKGROUND_NICE) } != 0 {
+            tracing::debug!("background thread at its inherited priority: {}", io::Error::last_os_error());
+        }
+        Background { tid: i64::from(tid) }
+    }
+    #[cfg(not(target_os = "linux"))]
+    Background { tid: -1 }
+}
+
+fn is_background(tid: i64) -> bool {
+    BACKGROUND.lock().unwrap_or_else(|e| e.into_inner()).contains(&tid)
+}
 
 #[derive(Debug, thiserror::Error)]
 pub enum PriorityError {
@@ -59,6 +104,9 @@ fn raise_listed(nice: i32) -> Result<usize, PriorityError> {
     let mut changed = 0;
     for entry in std::fs::read_dir("/proc/self/task")? {
         let Ok(tid) = entry?.file_name().to_string_lossy().parse::<libc::id_t>() else { continue };
+        if is_background(i64::from(tid)) {
+            continue;
+        }
         match thread_nice(tid) {
             Ok(now) if now <= nice => continue,
             Ok(_) => {}
@@ -146,5 +194,28 @@ mod tests {
             Err(e) => panic!("{e}"),
         }
         before.join().expect("thread");
+    }
+
+    #[test]
+    fn a_background_thread_runs_below_and_raising_leaves_it_there() {
+        let (go, wait) = mpsc::channel::<()>();
+        let (tell, told) = mpsc::channel();
+        let bg = std::thread::spawn(move || {
+            let guard = background_thread();
+            tell.send(own_nice()).ok();
+            wait.recv().ok();
+            tell.send(own_nice()).ok();
+            guard.tid
+        });
+        assert_eq!(told.recv().expect("told"), BACKGROUND_NICE, "lowered at once");
+        match raise(-5) {
+            Ok(_) => assert!(own_nice() <= -5, "the other threads were raised"),
+            Err(PriorityError::NotPermitted { .. }) => {}
+            Err(e) => panic!("{e}"),
+        }
+        go.send(()).expect("send");
+        assert_eq!(told.recv().expect("told"), BACKGROUND_NICE, "the raise left the background thread alone");
+        let tid = bg.join().expect("thread");
+        assert!(!is_background(tid), "the ended thread is no longer skipped");
     }
 }

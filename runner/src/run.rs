@@ -227,6 +227,9 @@ pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &RunMode, recorder: Op
     let started = Instant::now();
     let mut running = launch.start(mode).await?;
     let mut driver = Driver::start(running.session(), plan.team(), plan.references.clone(), plan.total_ticks(), opts.progress).await?;
+    if plan.scene.realtime {
+        driver = driver.paced(plan.scenario.control_hz);
+    }
     let (record_stop, record_stopped) = tokio::sync::watch::channel(false);
     let mut record_tasks = Vec::new();
     if let Some(rec) = recorder {

@@ -1,7 +1,9 @@
 //! Real-time mode: the simulation is paced by the wall clock, one control tick per control
 //! period. Each tick publishes every robot's state, collects torques until the tick's wall-clock
 //! deadline, and steps. A robot whose torques for the tick did not arrive in time keeps its last
-//! torques (zero before the first), and the miss is counted per robot. Torques of older ticks
+//! torques, and the miss is counted per robot. A run that starts in real time, with no settle
+//! before it, waits at its first tick for every robot's torques ([`Start`]); after a settle the
+//! robots are driven already and the first tick is paced like the others. Torques of older ticks
 //! that arrive late are taken as the newest available, also counted as misses of the tick.
 //!
 //! A tick that starts behind its schedule (the bridge's own work, or a loaded machine, overran
@@ -22,14 +24,13 @@
 
 use std::time::{Duration, Instant};
 
-use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample};
 use protocol::TorqueCommand;
 use tokio::sync::watch;
 use zenoh::sample::Sample;
 use zenoh::Session;
 
-use crate::lockstep::{wait_for_members, BridgeError, Extras, LockstepConfig, StateOut, TickSide};
+use crate::lockstep::{BridgeError, BridgeIo, Extras, LockstepConfig, TickSide};
 use crate::plant::Plant;
 
 /// What a real-time run did.
@@ -50,7 +51,8 @@ pub struct RealtimeReport {
     pub drive_losses: Vec<(String, u64)>,
 }
 
-/// Run `cfg.ticks` ticks of `plant` in real time with control period `period`.
+/// Run `cfg.ticks` ticks of `plant` in real time with control period `period`, from its first
+/// tick ([`Start::Driven`]: a robot stands with no torque until its first come).
 pub async fn run(
     session: &Session,
     cfg: &LockstepConfig,
@@ -60,29 +62,60 @@ pub async fn run(
     stop: watch::Receiver<bool>,
 ) -> Result<RealtimeReport, BridgeError> {
     let robots: Vec<String> = plant.robots().to_vec();
-    let torques = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Torque)?).await?;
-    let mut states = StateOut::declare(session, &cfg.team, &robots).await?;
-    let mut side = TickSide::open(session, &cfg.team, extras).await?;
-    wait_for_members(session, cfg, &robots, &stop).await?;
+    let mut io = BridgeIo::open(session, cfg, &robots, extras, &stop).await?;
+    run_on(&mut io, cfg, period, plant, extras, Start::Driven, stop).await
+}
 
+/// How a real-time phase starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Start {
+    /// The robots are driven already (a settle ran before, in lockstep, on the same
+    /// [`BridgeIo`]), or may stand undriven until their first torques: the first tick is paced
+    /// like any other, from its start.
+    Driven,
+    /// No torques have driven the robots yet: the first tick waits for every robot's (within
+    /// `cfg.command_timeout.max(cfg.start_timeout)`, as the lockstep loop's first tick), so that
+    /// the team's start-up work is not simulated time with the drives off; the pacing starts
+    /// after it.
+    WaitForFirstTorques,
+}
+
+/// Run `cfg.ticks` ticks of `plant` in real time through `io`, whose robots are present (a
+/// phase of a run that opened `io` once).
+pub async fn run_on(
+    io: &mut BridgeIo,
+    cfg: &LockstepConfig,
+    period: Duration,
+    plant: &mut impl Plant,
+    extras: &mut Extras,
+    start: Start,
+    stop: watch::Receiver<bool>,
+) -> Result<RealtimeReport, BridgeError> {
+    let BridgeIo { torques, states, side } = io;
     // The drive timeout in ticks.
     let timeout_ticks = (cfg.drive_timeout.as_secs_f64() / period.as_secs_f64()).ceil().max(1.0) as u64;
-    let mut arrivals = Arrivals::new(robots, extras.first_tick);
+    let mut arrivals = Arrivals::new(plant.robots().to_vec(), extras.first_tick);
     let mut overruns = 0u64;
     let started = Instant::now();
     let mut schedule = Schedule::new(started, period);
+    let mut waiting_first = start == Start::WaitForFirstTorques;
     for tick in extras.first_tick..extras.first_tick + cfg.ticks {
         if *stop.borrow() {
             return Err(BridgeError::Stopped);
         }
-        let deadline = schedule.start_tick(Instant::now());
+        let deadline = if waiting_first { Instant::now() + cfg.command_timeout.max(cfg.start_timeout) } else { schedule.start_tick(Instant::now()) };
         states.publish(plant, tick).await?;
         let sent = Instant::now();
-        arrivals.begin_tick(&mut side);
-        arrivals.collect(&torques, deadline, tick, sent, plant, &mut side).await?;
-        arrivals.end_tick(tick, &mut side);
+        arrivals.begin_tick(side);
+        arrivals.collect(torques, deadline, tick, sent, plant, side).await?;
+        arrivals.end_tick(tick, side);
         arrivals.lose_silent_drives(cfg, plant, tick, timeout_ticks);
         side.step(plant, &cfg.team, tick, extras).await?;
+        if std::mem::take(&mut waiting_first) {
+            // The pacing starts from the end of the first tick.
+            schedule = Schedule::new(Instant::now(), period);
+            continue;
+        }
         // Pace: wait for the next tick's start (the torques may all have come early).
         if Instant::now() > schedule.due {
             overruns += 1;

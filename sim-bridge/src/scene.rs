@@ -24,11 +24,11 @@ use serde::{Deserialize, Serialize};
 use tokio::sync::watch;
 use zenoh::Session;
 
-use crate::lockstep::{self, BridgeError, Extras, LockstepConfig};
+use crate::lockstep::{self, BridgeError, BridgeIo, Extras, LockstepConfig};
 use crate::mujoco_plant::MujocoPlant;
 use crate::perturbation::Perturbation;
 use crate::plant::DriveLoss;
-use crate::realtime::RealtimeReport;
+use crate::realtime::{RealtimeReport, Start};
 use crate::world::{World, WorldError, WorldSpec};
 
 /// Longest wait a scene may ask for, s (a day): every wait has a bound.
@@ -194,6 +194,10 @@ impl PhaseReport {
 /// (their `start` is on the scenario clock), and `cfg.ticks` ticks run at `pace`; tick numbers
 /// continue across. `extras` serve both phases (ground truth is published while settling
 /// too); its ground-truth log keeps the scenario phase only.
+///
+/// Both phases run on one [`BridgeIo`], opened (and the team waited for) once: the scenario's
+/// first tick follows the last settling step at once. A real-time phase after no settle waits
+/// at its first tick for every robot's torques ([`Start::WaitForFirstTorques`]).
 #[allow(clippy::too_many_arguments)]
 pub async fn settle_then_run(
     session: &Session,
@@ -205,10 +209,12 @@ pub async fn settle_then_run(
     extras: &mut Extras,
     stop: watch::Receiver<bool>,
 ) -> Result<(lockstep::LockstepReport, PhaseReport), SceneError> {
+    let robots = crate::plant::Plant::robots(plant).to_vec();
+    let mut io = BridgeIo::open(session, cfg, &robots, extras, &stop).await?;
     let settle = if settle_ticks > 0 {
         let truth_log = extras.truth_log.take();
         let settle_cfg = LockstepConfig { ticks: settle_ticks, progress_every: 0, ..cfg.clone() };
-        let r = lockstep::run_with(session, &settle_cfg, plant, extras, stop.clone()).await;
+        let r = lockstep::run_on(session, &mut io, &settle_cfg, plant, extras, stop.clone()).await;
         extras.truth_log = truth_log;
         plant.restart_clock();
         r?
@@ -219,9 +225,13 @@ pub async fn settle_then_run(
         plant.perturbations.add(&plant.world, p.clone())?;
     }
     extras.first_tick += settle_ticks;
+    io.drain_torques();
     let run = match pace {
-        Pace::Lockstep => PhaseReport::Lockstep(lockstep::run_with(session, cfg, plant, extras, stop).await?),
-        Pace::RealTime { period } => PhaseReport::RealTime(crate::realtime::run(session, cfg, period, plant, extras, stop).await?),
+        Pace::Lockstep => PhaseReport::Lockstep(lockstep::run_on(session, &mut io, cfg, plant, extras, stop).await?),
+        Pace::RealTime { period } => {
+            let start = if settle_ticks > 0 { Start::Driven } else { Start::WaitForFirstTorques };
+            PhaseReport::RealTime(crate::realtime::run_on(&mut io, cfg, period, plant, extras, start, stop).await?)
+        }
     };
     Ok((settle, run))
 }

@@ -69,6 +69,21 @@ fn team_run_exits_non_zero_when_a_check_fails() {
     let _ = std::fs::remove_dir_all(&out_dir);
 }
 
+/// `team run --no-record`: no recording, the report whole, the summary says so; `--live` needs
+/// a recording and is refused with it.
+#[test]
+fn team_run_without_a_recording_writes_the_report_only() {
+    let out_dir = std::env::temp_dir().join(format!("team-no-record-{}", std::process::id()));
+    let out = run("team", &["run", "scenarios/s4_object_circle.toml", "--set", "duration=0.3", "--set", "settle=0.2", "--quiet", "--no-record", "--out", out_dir.to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("recording: none (--no-record)"), "{stdout}");
+    assert!(out_dir.join("metrics.json").is_file() && out_dir.join("timeseries.csv").is_file(), "the report is written");
+    assert!(!out_dir.join("run.mcap").exists(), "no recording");
+    let _ = std::fs::remove_dir_all(&out_dir);
+    refused(&run("team", &["run", "scenarios/s4_object_circle.toml", "--no-record", "--live"]), "--live");
+}
+
 /// The report folder on a 1 MiB tmpfs: the recording (about 4 MB for this run) fills it. The
 /// run completes every tick and its checks pass (the summary says so); the status is non-zero
 /// and the error names the recording.

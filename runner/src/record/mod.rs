@@ -182,7 +182,11 @@ impl Recorder {
         let view = scene::SceneBuilder::new(plan);
         let writer = std::thread::Builder::new()
             .name("recorder".into())
-            .spawn(move || write_loop(&ctx, rx, view))
+            .spawn(move || {
+                // Below the team's threads: a recording never delays the control loop.
+                let _background = crate::priority::background_thread();
+                write_loop(&ctx, rx, view)
+            })
             .map_err(|e| RecordError::Writer(e.to_string()))?;
         Ok(Recorder {
             tap,

@@ -5,8 +5,8 @@
 //! * `answers`: the robots' torques of a tick, and agents that leave or come back.
 //! * `liveness`: the components' liveliness while the loop runs.
 //! * `members`: waiting for the team before the first tick.
-//! * `tick_io`: the states out and what happens around each physics step (shared with
-//!   [`crate::realtime`]).
+//! * `tick_io`: the states out, the torques in and what happens around each physics step
+//!   ([`BridgeIo`], shared with [`crate::realtime`]).
 
 mod answers;
 mod config;
@@ -16,7 +16,7 @@ mod tick_io;
 
 use std::time::Instant;
 
-use protocol::keys::{self, RobotTopic};
+use protocol::keys;
 use protocol::transport;
 use tokio::sync::watch;
 use zenoh::Session;
@@ -28,8 +28,8 @@ use members::coordinator_ready;
 
 pub use answers::LOST_DRIVE_TICKS;
 pub use config::{AgentLoss, BridgeError, Extras, LockstepConfig, LockstepReport, DEFAULT_COORDINATOR_GRACE_TICKS, DEFAULT_DRIVE_TIMEOUT};
-pub(crate) use members::wait_for_members;
-pub(crate) use tick_io::{StateOut, TickSide};
+pub use tick_io::BridgeIo;
+pub(crate) use tick_io::TickSide;
 
 /// Run `cfg.ticks` lockstep ticks of `plant`.
 pub async fn run(
@@ -49,16 +49,24 @@ pub async fn run_with(
     extras: &mut Extras,
     stop: watch::Receiver<bool>,
 ) -> Result<LockstepReport, BridgeError> {
-    let mut side = TickSide::open(session, &cfg.team, extras).await?;
     let robots: Vec<String> = plant.robots().to_vec();
-    let torques = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Torque)?).await?;
-    let mut states = StateOut::declare(session, &cfg.team, &robots).await?;
+    let mut io = BridgeIo::open(session, cfg, &robots, extras, &stop).await?;
+    run_on(session, &mut io, cfg, plant, extras, stop).await
+}
 
-    wait_for_members(session, cfg, &robots, &stop).await?;
-    tracing::info!(robots = ?robots, "all robots present, lockstep starts");
-
+/// Run `cfg.ticks` lockstep ticks of `plant` through `io`, whose robots are present (a phase of
+/// a run that opened `io` once).
+pub async fn run_on(
+    session: &Session,
+    io: &mut BridgeIo,
+    cfg: &LockstepConfig,
+    plant: &mut impl Plant,
+    extras: &mut Extras,
+    stop: watch::Receiver<bool>,
+) -> Result<LockstepReport, BridgeError> {
+    let BridgeIo { torques, states, side } = io;
     let run_started = Instant::now();
-    let mut answers = Answers::new(robots);
+    let mut answers = Answers::new(plant.robots().to_vec());
     let mut watch = Liveness::open(session, &cfg.team).await?;
     for tick in extras.first_tick..extras.first_tick + cfg.ticks {
         if *stop.borrow() {
@@ -72,7 +80,7 @@ pub async fn run_with(
         states.publish(plant, tick).await?;
         answers.got.copy_from_slice(&answers.lost);
         let timeout = if tick == extras.first_tick { cfg.command_timeout.max(cfg.start_timeout) } else { cfg.command_timeout };
-        answers.wait(cfg, tick, timeout, &torques, &mut watch, &mut states, plant).await?;
+        answers.wait(cfg, tick, timeout, torques, &mut watch, states, plant).await?;
         silence_lost_drives(cfg, plant, &answers.robots, tick, &answers.lost, &answers.answered);
         side.step(plant, &cfg.team, tick, extras).await?;
         if cfg.progress_every > 0 && (tick + 1 - extras.first_tick) % cfg.progress_every == 0 {

@@ -1,13 +1,49 @@
 //! What the lockstep and real-time loops send each tick: every robot's state, and around each
-//! physics step the perturbations in and the ground truth out.
+//! physics step the perturbations in and the ground truth out; and [`BridgeIo`], all of it with
+//! the robots' torques in, declared once for a whole run.
 
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, TypedPublisher};
 use protocol::{GroundTruth, PerturbationRequest, RobotState};
 use zenoh::Session;
 
-use super::config::{BridgeError, Extras};
+use super::config::{BridgeError, Extras, LockstepConfig};
+use super::members::wait_for_members;
 use crate::plant::{empty_state, Plant};
+
+/// Everything a bridge loop talks through: the robots' torques in, their states out, and the
+/// perturbations in and ground truth out around each step. Declared once for a whole run, so
+/// that the settle and the scenario phase share it and the hand-over between them declares and
+/// waits for nothing.
+pub struct BridgeIo {
+    pub(crate) torques: transport::SampleQueue,
+    pub(crate) states: StateOut,
+    pub(crate) side: TickSide,
+}
+
+impl BridgeIo {
+    /// Declare everything for the plant's `robots`, then wait (within `cfg.start_timeout`) for
+    /// every robot to join the team and, if `cfg` asks, for the coordinator to be ready.
+    pub async fn open(session: &Session, cfg: &LockstepConfig, robots: &[String], extras: &Extras, stop: &tokio::sync::watch::Receiver<bool>) -> Result<Self, BridgeError> {
+        let side = TickSide::open(session, &cfg.team, extras).await?;
+        let torques = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Torque)?).await?;
+        let states = StateOut::declare(session, &cfg.team, robots).await?;
+        wait_for_members(session, cfg, robots, stop).await?;
+        tracing::info!(robots = ?robots, "all robots present");
+        Ok(BridgeIo { torques, states, side })
+    }
+
+    /// Drop the torques still queued (copies of ticks already answered, which the lockstep
+    /// loop's resends of a state can draw): the next phase starts from the ticks it publishes.
+    /// How many were dropped.
+    pub fn drain_torques(&self) -> usize {
+        let mut n = 0;
+        while let Ok(Some(_)) = self.torques.try_recv() {
+            n += 1;
+        }
+        n
+    }
+}
 
 /// What the lockstep and real-time loops do around every physics step: take the perturbation
 /// requests that arrived on the Zenoh key, step the plant, then publish and record the ground
