@@ -180,11 +180,15 @@ impl Recorder {
         let (tx, rx) = sync_channel(QUEUE);
         let tap = Tap { tx, dropped: Arc::new(AtomicU64::new(0)), sent: Arc::new(AtomicU64::new(0)) };
         let view = scene::SceneBuilder::new(plan);
+        let paced = plan.scene.realtime;
         let writer = std::thread::Builder::new()
             .name("recorder".into())
             .spawn(move || {
-                // Below the team's threads: a recording never delays the control loop.
-                let _background = crate::priority::background_thread();
+                // In real time, below the team's threads: a recording never delays the control
+                // loop, and the wall clock bounds what it has to write. A lockstep run goes as
+                // fast as the team computes; a writer below it fell behind and dropped a tenth
+                // of a walk's messages.
+                let _background = paced.then(crate::priority::background_thread);
                 write_loop(&ctx, rx, view)
             })
             .map_err(|e| RecordError::Writer(e.to_string()))?;
