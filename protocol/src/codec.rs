@@ -34,6 +34,7 @@ pub enum MessageKind {
     RobotDescription = 9,
     ContactSet = 10,
     GroundTruth = 11,
+    DriveCommand = 12,
 }
 
 /// How a message type travels on the wire.
@@ -71,6 +72,7 @@ message!(RobotState, Binary);
 message!(DynamicsTerms, Binary);
 message!(TorqueCommand, Binary);
 message!(ContactSet, Binary);
+message!(DriveCommand, Binary);
 message!(TaskReferences, Json);
 message!(PerturbationRequest, Json);
 message!(CoordinatorStatus, Json);
@@ -181,6 +183,7 @@ pub fn decode_to_json(kind: MessageKind, bytes: &[u8]) -> Result<serde_json::Val
         MessageKind::RobotDescription => value::<RobotDescription>(bytes),
         MessageKind::ContactSet => value::<ContactSet>(bytes),
         MessageKind::GroundTruth => value::<GroundTruth>(bytes),
+        MessageKind::DriveCommand => value::<DriveCommand>(bytes),
     }
 }
 

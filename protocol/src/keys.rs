@@ -171,7 +171,8 @@ pub fn kind_of(key: &str) -> Option<crate::MessageKind> {
         ("robot", 5) => match parts[4] {
             "state" => Some(K::RobotState),
             "dynamics" => Some(K::DynamicsTerms),
-            "command" | "torque" => Some(K::TorqueCommand),
+            "command" => Some(K::TorqueCommand),
+            "torque" => Some(K::DriveCommand),
             "status" => Some(K::AgentStatus),
             "description" => Some(K::RobotDescription),
             "contacts" => Some(K::ContactSet),
@@ -230,7 +231,7 @@ mod tests {
         assert_eq!(robot_of("team/t1/coordinator/status"), None);
         assert_eq!(robot_of("other/t1/robot/r9/command"), None);
         use crate::MessageKind as K;
-        assert_eq!(kind_of("team/t1/robot/r2/torque"), Some(K::TorqueCommand));
+        assert_eq!(kind_of("team/t1/robot/r2/torque"), Some(K::DriveCommand));
         assert_eq!(kind_of(&coordinator_status("t1").unwrap()), Some(K::CoordinatorStatus));
         assert_eq!(kind_of(&diagnostics("t1").unwrap()), Some(K::TickDiagnostics));
         assert_eq!(kind_of(&ground_truth("t1").unwrap()), Some(K::GroundTruth));

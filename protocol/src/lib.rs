@@ -22,7 +22,7 @@
 //! | `team/{team}/robot/{robot}/state` | [`RobotState`] | state source (sim-bridge) → agent |
 //! | `team/{team}/robot/{robot}/dynamics` | [`DynamicsTerms`] | agent → coordinator |
 //! | `team/{team}/robot/{robot}/command` | [`TorqueCommand`] (torques, or a hold order) | coordinator → agent |
-//! | `team/{team}/robot/{robot}/torque` | [`TorqueCommand`] (checked) | agent → torque sink (sim-bridge) |
+//! | `team/{team}/robot/{robot}/torque` | [`DriveCommand`] (checked) | agent → the robot's drives (sim-bridge) |
 //! | `team/{team}/robot/{robot}/status` | [`AgentStatus`] | agent → tools |
 //! | `team/{team}/robot/{robot}/description` | [`RobotDescription`] | agent → coordinator, tools (queryable) |
 //! | `team/{team}/member/{robot}` | liveliness token | agent → coordinator |
@@ -91,7 +91,7 @@ pub use messages::*;
 pub use validate::{validate_id, Validate};
 
 /// Version of the wire protocol. Bump it whenever a message type changes.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 
 /// Wall-clock time in nanoseconds since the Unix epoch, for [`Header::stamp_ns`] (0 if the
 /// clock is before the epoch).

@@ -279,6 +279,112 @@ impl Validate for TorqueCommand {
     }
 }
 
+/// What a robot's drives execute at every drive step until the next command (agent → drives,
+/// the `torque` key): per actuated joint, velocity order,
+/// `tau = tau_ff + kp (q_des - q) + kd (qd_des - qd)` ([`DriveCommand::effort`]), which the
+/// drive clamps to its torque limit. The common low-level command of torque-controlled legs and
+/// arms, and ros2_control's effort-plus-position interfaces. Without gains (`kp` and `kd` empty)
+/// it is the torque `tau_ff`; a command late from the team leaves the drives following the last
+/// one, never a stale constant torque when it has gains.
+#[derive(Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
+pub struct DriveCommand {
+    /// Its tick: the state tick it answers.
+    pub header: Header,
+    /// Feed-forward torque, N·m (N for prismatic joints), one per actuated joint.
+    pub tau_ff: Vec<f64>,
+    /// Position target, rad (m); as many as `kp`.
+    pub q_des: Vec<f64>,
+    /// Velocity target, rad/s (m/s); as many as `kd`.
+    pub qd_des: Vec<f64>,
+    /// Stiffness, N·m/rad, non-negative; empty, or one per joint.
+    pub kp: Vec<f64>,
+    /// Damping, N·m·s/rad, non-negative; empty, or one per joint.
+    pub kd: Vec<f64>,
+}
+
+/// `clone_from` reuses the vectors' storage: a drive that keeps the last command copies each new
+/// one of the same size without allocating.
+impl Clone for DriveCommand {
+    fn clone(&self) -> Self {
+        DriveCommand {
+            header: self.header.clone(),
+            tau_ff: self.tau_ff.clone(),
+            q_des: self.q_des.clone(),
+            qd_des: self.qd_des.clone(),
+            kp: self.kp.clone(),
+            kd: self.kd.clone(),
+        }
+    }
+
+    fn clone_from(&mut self, src: &Self) {
+        self.header.version = src.header.version;
+        self.header.team.clone_from(&src.header.team);
+        self.header.robot.clone_from(&src.header.robot);
+        self.header.tick = src.header.tick;
+        self.header.stamp_ns = src.header.stamp_ns;
+        self.tau_ff.clone_from(&src.tau_ff);
+        self.q_des.clone_from(&src.q_des);
+        self.qd_des.clone_from(&src.qd_des);
+        self.kp.clone_from(&src.kp);
+        self.kd.clone_from(&src.kd);
+    }
+}
+
+impl DriveCommand {
+    /// The torque `tau_ff` at `tick`, with no gains.
+    pub fn torque(team: &str, robot: &str, tick: u64, tau: Vec<f64>) -> Self {
+        DriveCommand { header: Header::new(team, Some(robot), tick, 0), tau_ff: tau, q_des: Vec::new(), qd_des: Vec::new(), kp: Vec::new(), kd: Vec::new() }
+    }
+
+    /// Whether it has gains (else the drives apply `tau_ff` as it is).
+    pub fn has_gains(&self) -> bool {
+        !self.kp.is_empty() || !self.kd.is_empty()
+    }
+
+    /// The drive law at joint positions `q` and velocities `qd` (the actuated joints', velocity
+    /// order), into `out`: `tau_ff + kp (q_des - q) + kd (qd_des - qd)`, before the drive's
+    /// clamp. The sizes are the command's (checked by [`Validate`]); `q`, `qd` and `out` must
+    /// have as many entries as `tau_ff`.
+    pub fn effort(&self, q: &[f64], qd: &[f64], out: &mut [f64]) {
+        for (j, o) in out.iter_mut().enumerate().take(self.tau_ff.len()) {
+            let mut tau = self.tau_ff[j];
+            if let (Some(kp), Some(qs)) = (self.kp.get(j), self.q_des.get(j)) {
+                tau += kp * (qs - q[j]);
+            }
+            if let (Some(kd), Some(qds)) = (self.kd.get(j), self.qd_des.get(j)) {
+                tau += kd * (qds - qd[j]);
+            }
+            *o = tau;
+        }
+    }
+}
+
+impl Validate for DriveCommand {
+    fn validate(&self) -> Result<(), ProtocolError> {
+        self.header.check(true)?;
+        let n = self.tau_ff.len();
+        if n == 0 {
+            return Err(ProtocolError::invalid("tau_ff", "empty torque vector"));
+        }
+        check_finite("tau_ff", &self.tau_ff)?;
+        for (gain, target, gname, tname) in [(&self.kp, &self.q_des, "kp", "q_des"), (&self.kd, &self.qd_des, "kd", "qd_des")] {
+            if !gain.is_empty() && gain.len() != n {
+                return Err(ProtocolError::invalid(gname, format!("{} gains for {n} joints", gain.len())));
+            }
+            if target.len() != gain.len() {
+                return Err(ProtocolError::invalid(tname, format!("{} targets for {} gains", target.len(), gain.len())));
+            }
+            check_finite(gname, gain)?;
+            check_finite(tname, target)?;
+            if let Some(j) = gain.iter().position(|g| *g < 0.0) {
+                return Err(ProtocolError::invalid(gname, format!("joint {j}: {} is negative", gain[j])));
+            }
+        }
+        Ok(())
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Scenario runner -> coordinator
 

@@ -198,7 +198,7 @@ fn foot_loads_must_bound_a_pushing_force() {
         assert!(from_json::<TaskReferences>(&text).is_err(), "bound {bad} accepted");
     }
     // An older sender without the field: no foot is being unloaded.
-    let old = r#"{"header":{"version":1,"team":"t","robot":null,"tick":3,"stamp_ns":0},"object":null,"torsos":[],"swing_feet":[]}"#;
+    let old = r#"{"header":{"version":2,"team":"t","robot":null,"tick":3,"stamp_ns":0},"object":null,"torsos":[],"swing_feet":[]}"#;
     assert!(from_json::<TaskReferences>(old).unwrap().foot_loads.is_empty());
 }
 
@@ -207,6 +207,7 @@ fn any_kind_decode(bytes: &[u8]) {
     let _ = decode::<RobotState>(bytes);
     let _ = decode::<DynamicsTerms>(bytes);
     let _ = decode::<TorqueCommand>(bytes);
+    let _ = decode::<DriveCommand>(bytes);
     let _ = decode::<TaskReferences>(bytes);
     let _ = decode::<PerturbationRequest>(bytes);
     let _ = decode::<CoordinatorStatus>(bytes);
@@ -309,4 +310,70 @@ fn contact_parameters_must_be_positive() {
         let e = decode::<RobotDescription>(&raw(&d)).expect_err("refused").to_string();
         assert!(e.contains("contact parameters"), "case {k}: {e}");
     }
+}
+
+fn drive(n: usize, gains: bool) -> DriveCommand {
+    let mut d = DriveCommand::torque("team1", "r1", 42, (0..n).map(|j| 1.0 + j as f64).collect());
+    if gains {
+        d.kp = vec![100.0; n];
+        d.q_des = (0..n).map(|j| 0.1 * j as f64).collect();
+        d.kd = vec![5.0; n];
+        d.qd_des = vec![0.2; n];
+    }
+    d
+}
+
+#[test]
+fn a_drive_command_round_trips_and_its_law_is_the_pd_law_written_out() {
+    for gains in [false, true] {
+        let d = drive(6, gains);
+        assert_eq!(decode::<DriveCommand>(&encode(&d).unwrap()).unwrap(), d);
+    }
+    let d = drive(3, true);
+    let (q, qd) = ([0.05, -0.1, 0.3], [0.0, 1.0, -0.5]);
+    let mut out = [0.0; 3];
+    d.effort(&q, &qd, &mut out);
+    for j in 0..3 {
+        let written = d.tau_ff[j] + 100.0 * (0.1 * j as f64 - q[j]) + 5.0 * (0.2 - qd[j]);
+        assert!((out[j] - written).abs() < 1e-12, "joint {j}: {} against {written}", out[j]);
+    }
+    drive(3, false).effort(&q, &qd, &mut out);
+    assert_eq!(out, [1.0, 2.0, 3.0], "no gains: the torque as it is");
+}
+
+#[test]
+fn a_broken_drive_command_is_refused_naming_the_field() {
+    let field = |d: &DriveCommand| match d.validate() {
+        Err(ProtocolError::Invalid { field, .. }) | Err(ProtocolError::NonFinite { field, .. }) => field,
+        other => panic!("refused expected, got {other:?}"),
+    };
+    let mut d = drive(4, true);
+    d.kp.pop();
+    assert_eq!(field(&d), "kp", "3 gains for 4 joints");
+    let mut d = drive(4, true);
+    d.qd_des.clear();
+    assert_eq!(field(&d), "qd_des", "gains without targets");
+    let mut d = drive(4, true);
+    d.kd[2] = -1.0;
+    assert_eq!(field(&d), "kd", "negative damping");
+    let mut d = drive(4, true);
+    d.q_des[1] = f64::NAN;
+    assert_eq!(field(&d), "q_des");
+    let mut d = drive(4, false);
+    d.tau_ff[0] = f64::INFINITY;
+    assert_eq!(field(&d), "tau_ff");
+    assert_eq!(field(&drive(0, false)), "tau_ff", "no joints");
+    // Encoded without the checks (`encode_into`), a broken command is still refused where it arrives.
+    let mut d = drive(4, true);
+    d.kp[0] = -5.0;
+    let mut bytes = Vec::new();
+    encode_into(&d, &mut bytes).unwrap();
+    assert!(decode::<DriveCommand>(&bytes).is_err());
+}
+
+#[test]
+fn a_drive_command_of_the_first_protocol_version_is_refused() {
+    let mut bytes = encode(&drive(3, false)).unwrap();
+    bytes[2] = 1; // version 1, little endian
+    assert!(matches!(decode::<DriveCommand>(&bytes), Err(ProtocolError::VersionMismatch { found: 1, .. })), "{:?}", decode::<DriveCommand>(&bytes));
 }

@@ -25,6 +25,7 @@ fn published_schemas_are_the_types_schemas() {
         ("RobotState", schemars::schema_for!(RobotState)),
         ("DynamicsTerms", schemars::schema_for!(DynamicsTerms)),
         ("TorqueCommand", schemars::schema_for!(TorqueCommand)),
+        ("DriveCommand", schemars::schema_for!(DriveCommand)),
         ("ContactSet", schemars::schema_for!(ContactSet)),
     ];
     for (name, schema) in schemas {

@@ -248,9 +248,9 @@ impl<K: TorqueSink> Io<K> {
                 Err(e) => tracing::warn!("description not published: {e}"),
             }
         }
-        if let Some(torques) = out.torques {
-            torques.header.stamp_ns = protocol::wall_clock_ns();
-            self.sink.apply(torques).await?;
+        if let Some(drive) = out.drive {
+            drive.header.stamp_ns = protocol::wall_clock_ns();
+            self.sink.apply(drive).await?;
         }
         Ok(Done { sent, status })
     }

@@ -22,7 +22,7 @@
 
 use std::time::{Duration, Instant};
 
-use protocol::{AgentMode, AgentStatus, DynamicsTerms, Header, RobotDescription, RobotState, TorqueCommand};
+use protocol::{AgentMode, AgentStatus, DriveCommand, DynamicsTerms, Header, RobotDescription, RobotState, TorqueCommand};
 use thiserror::Error;
 
 use crate::contact_switch::{ContactSwitch, SwitchConfig};
@@ -179,7 +179,8 @@ pub enum ContactRejection {
 pub struct Outputs<'a> {
     pub terms: Option<&'a mut DynamicsTerms>,
     pub description: Option<&'a mut RobotDescription>,
-    pub torques: Option<&'a mut TorqueCommand>,
+    /// The drive command to apply: `tau_ff` the checked torques or the hold's.
+    pub drive: Option<&'a mut DriveCommand>,
     /// Publish the status: the mode changed, or its period is due.
     pub status: bool,
     /// The robot fell at this state ([`crate::fall`]): leave the team (once).
@@ -234,7 +235,7 @@ pub struct AgentCore<S: DynamicsSource> {
     state_time: f64,
     contacts: ContactSwitch,
     terms: DynamicsTerms,
-    torques: TorqueCommand,
+    drive: DriveCommand,
     /// A command that came before the state of its tick (see [`EARLY_TICKS`]); it is checked
     /// when that state arrives. `early_pending` says whether it holds one.
     early: TorqueCommand,
@@ -298,7 +299,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             contacts: ContactSwitch::new(cfg.contacts.clone(), ActiveContacts { stance: vec![true; feet.len()], hand_in_grasp: true }),
             feet,
             terms: empty_terms(team, robot),
-            torques: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false },
+            drive: DriveCommand::torque(team, robot, 0, Vec::with_capacity(joints)),
             early: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false },
             early_pending: false,
             q: vec![0.0; joints],
@@ -477,7 +478,7 @@ impl<S: DynamicsSource> AgentCore<S> {
 
     /// The gate's checks and the bookkeeping of an applied command; `None`: kept as early.
     fn admit_command(&mut self, cmd: &TorqueCommand, now: Instant) -> Result<Option<Apply>, CommandRejection> {
-        let clamped = match self.gate.check(cmd, &mut self.torques.tau) {
+        let clamped = match self.gate.check(cmd, &mut self.drive.tau_ff) {
             Ok(n) => n,
             Err(CommandRejection::FromTheFuture { tick, latest }) if tick <= latest + EARLY_TICKS => {
                 self.keep_early(cmd)?;
@@ -489,7 +490,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         if let Err(entered) = self.watchdog.admits(tick) {
             return Err(CommandRejection::BeforeSafeMode { tick, entered });
         }
-        self.torques.header.tick = tick;
+        self.drive.header.tick = tick;
         self.gate.mark_applied(tick);
         self.applied = (cmd.header.stamp_ns, cmd.hold);
         self.counters.applied += 1;
@@ -696,14 +697,14 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// or the hold torques of the latest state), the description if due, the status if the mode
     /// changed.
     fn outputs(&mut self, now: Instant, mode_before: AgentMode, terms: bool, apply: Apply, description: bool) -> Outputs<'_> {
-        let mut torques = None;
+        let mut drive = None;
         match apply {
             Apply::Nothing => {}
             Apply::Command => {
                 self.take_over();
                 self.last_applied = Apply::Command;
-                self.last_command.clone_from(&self.torques.tau);
-                torques = Some(&mut self.torques);
+                self.last_command.clone_from(&self.drive.tau_ff);
+                drive = Some(&mut self.drive);
             }
             Apply::Hold => {
                 if let Some(tick) = self.gate.latest_state_tick() {
@@ -718,20 +719,19 @@ impl<S: DynamicsSource> AgentCore<S> {
                     }
                     self.takeover.cancel();
                     self.hold_now();
-                    self.torques.tau.clone_from(&self.hold_tau);
-                    self.torques.header.tick = tick;
+                    self.drive.tau_ff.clone_from(&self.hold_tau);
+                    self.drive.header.tick = tick;
                     self.counters.hold_torques += 1;
                     self.last_applied = Apply::Hold;
-                    torques = Some(&mut self.torques);
+                    drive = Some(&mut self.drive);
                 }
             }
             Apply::Limp => {
                 if let Some(tick) = self.gate.latest_state_tick() {
-                    self.hold.damping(&self.qdot, &mut self.torques.tau);
-                    self.torques.header.tick = tick;
-                    self.torques.hold = false;
+                    self.hold.damping(&self.qdot, &mut self.drive.tau_ff);
+                    self.drive.header.tick = tick;
                     self.last_applied = Apply::Limp;
-                    torques = Some(&mut self.torques);
+                    drive = Some(&mut self.drive);
                 }
             }
         }
@@ -742,7 +742,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         Outputs {
             terms: if terms { Some(&mut self.terms) } else { None },
             description: if description { self.description.as_mut() } else { None },
-            torques,
+            drive,
             status,
             leave_team: false,
         }
@@ -771,11 +771,11 @@ impl<S: DynamicsSource> AgentCore<S> {
     fn take_over(&mut self) {
         if self.last_applied == Apply::Hold {
             self.takeover.start(self.state_time);
-            tracing::info!(robot = %self.robot, tick = self.torques.header.tick, over_s = self.takeover.duration(), "commands take over from the posture hold");
+            tracing::info!(robot = %self.robot, tick = self.drive.header.tick, over_s = self.takeover.duration(), "commands take over from the posture hold");
         }
         if self.takeover.active() {
             self.hold_now();
-            self.takeover.blend(self.state_time, &self.hold_tau, &mut self.torques.tau);
+            self.takeover.blend(self.state_time, &self.hold_tau, &mut self.drive.tau_ff);
             self.counters.blended += 1;
         }
     }

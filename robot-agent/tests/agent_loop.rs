@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, Role, SampleQueue, TypedPublisher, ZenohArgs};
-use protocol::{AgentMode, AgentStatus, ContactSet, DynamicsTerms, FrameRole, Header, Message, Pose, RobotDescription, RobotState, TorqueCommand, Validate};
+use protocol::{AgentMode, AgentStatus, ContactSet, DriveCommand, DynamicsTerms, FrameRole, Header, Message, Pose, RobotDescription, RobotState, TorqueCommand, Validate};
 use robot_agent::agent::{self, AgentConfig, AgentCounters, CommandDeadline, HoldGains, ModelDynamics};
 use robot_model::{default_robot_path, Robot};
 use tokio::sync::watch;
@@ -103,7 +103,7 @@ impl Harness {
         }
     }
 
-    async fn torque(&mut self) -> TorqueCommand {
+    async fn torque(&mut self) -> DriveCommand {
         Self::next(&self.torques).await
     }
 
@@ -122,8 +122,8 @@ impl Harness {
     /// No torque arrives within `d`.
     async fn no_torque_for(&mut self, d: Duration) {
         if let Ok(Ok(sample)) = tokio::time::timeout(d, self.torques.recv_async()).await {
-            let t: TorqueCommand = decode_sample(&sample).unwrap();
-            panic!("unexpected torque for tick {}: {:?}", t.header.tick, t.tau);
+            let t: DriveCommand = decode_sample(&sample).unwrap();
+            panic!("unexpected torque for tick {}: {:?}", t.header.tick, t.tau_ff);
         }
     }
 
@@ -257,7 +257,7 @@ async fn rejects_stale_wrong_robot_wrong_size_nan_future_and_old_commands_and_cl
     h.command(&command(&team, ID, 1, good.clone())).await;
     let t = h.torque().await;
     assert_eq!((t.header.tick, t.header.robot_id()), (1, ID));
-    assert_eq!(t.tau, good);
+    assert_eq!(t.tau_ff, good);
 
     // Stale (tick 1 again), another robot's, wrong size, from the future.
     h.command(&command(&team, ID, 1, good.clone())).await;
@@ -296,7 +296,7 @@ async fn rejects_stale_wrong_robot_wrong_size_nan_future_and_old_commands_and_cl
     h.command(&command(&team, ID, 9, over)).await;
     let t = h.torque().await;
     assert_eq!(t.header.tick, 9);
-    assert_eq!((t.tau[0], t.tau[12], t.tau[17], t.tau[1]), (80.0, -39.0, 9.0, 1.0));
+    assert_eq!((t.tau_ff[0], t.tau_ff[12], t.tau_ff[17], t.tau_ff[1]), (80.0, -39.0, 9.0, 1.0));
     let s = h.status_where(|s| s.commands_clamped == 1).await;
     assert_eq!((s.commands_applied, s.commands_rejected, s.last_applied_tick), (2, 6, Some(9)));
     assert_eq!(s.mode, AgentMode::Commanded);
@@ -372,7 +372,7 @@ async fn enters_safe_mode_after_the_deadline_holds_posture_and_leaves_on_a_fresh
     assert_eq!(t.header.tick, 5);
     let g = gravity_oracle(&robot, &standing);
     for i in 0..n {
-        assert!((t.tau[i] - 1.0).abs() < 1e-9, "joint {i}: hold {} vs the last command 1.0", t.tau[i]);
+        assert!((t.tau_ff[i] - 1.0).abs() < 1e-9, "joint {i}: hold {} vs the last command 1.0", t.tau_ff[i]);
     }
     assert!(g.iter().any(|x| x.abs() > 1.0), "gravity torques are not trivially zero");
     let s = h.status_where(|s| s.mode == AgentMode::SafeMode).await;
@@ -389,7 +389,7 @@ async fn enters_safe_mode_after_the_deadline_holds_posture_and_leaves_on_a_fresh
         let dq = if i == 0 { -0.01 } else { 0.0 };
         let limit = robot.torque_limits[i];
         let want = (hold_kp(limit) * dq - hold_kd(limit) * 0.1 + g6[i] + (1.0 - g5[i])).clamp(-robot.torque_limits[i], robot.torque_limits[i]);
-        assert!((t.tau[i] - want).abs() < 1e-6, "joint {i}: {} vs {want}", t.tau[i]);
+        assert!((t.tau_ff[i] - want).abs() < 1e-6, "joint {i}: {} vs {want}", t.tau_ff[i]);
     }
 
     // A command of tick 5 (before safe mode was entered) does not end it ...
@@ -401,7 +401,7 @@ async fn enters_safe_mode_after_the_deadline_holds_posture_and_leaves_on_a_fresh
     // ... a command of the fresh tick 6 does.
     h.command(&command(&team, ID, 6, vec![2.0; n])).await;
     let t = h.torque().await;
-    assert_eq!((t.header.tick, t.tau[0]), (6, 2.0));
+    assert_eq!((t.header.tick, t.tau_ff[0]), (6, 2.0));
     let s = h.status_where(|s| s.mode == AgentMode::Commanded).await;
     assert_eq!((s.commands_applied, s.last_applied_tick, s.safe_mode_entries), (2, Some(6), 1));
 
@@ -428,7 +428,7 @@ async fn enters_safe_mode_by_time_without_new_states() {
     let t = h.torque().await;
     assert_eq!(t.header.tick, 0);
     let g = gravity_oracle(&robot, &state);
-    assert!(t.tau.iter().zip(&g).all(|(a, b)| (a - b).abs() < 1e-6));
+    assert!(t.tau_ff.iter().zip(&g).all(|(a, b)| (a - b).abs() < 1e-6));
     let s = h.status_where(|s| s.mode == AgentMode::SafeMode).await;
     assert_eq!(s.safe_mode_entries, 1);
     // A command for tick 0 is not fresh; tick 1 is.
@@ -441,7 +441,7 @@ async fn enters_safe_mode_by_time_without_new_states() {
     assert_eq!(hold.header.tick, 1);
     h.command(&command(&team, ID, 1, vec![0.5; robot.joints()])).await;
     let t = h.torque().await;
-    assert_eq!((t.header.tick, t.tau[0]), (1, 0.5));
+    assert_eq!((t.header.tick, t.tau_ff[0]), (1, 0.5));
     h.status_where(|s| s.mode == AgentMode::Commanded).await;
     h.stop().await;
 }
@@ -470,7 +470,7 @@ async fn the_posture_hold_takes_over_from_the_last_command_without_a_jump() {
         h.state(&standing_state(&robot, &team, tick, 0.0, qd)).await;
         h.dynamics_of(tick).await;
         h.command(&command(&team, ID, tick, cmd.clone())).await;
-        assert_eq!(h.torque().await.tau, cmd);
+        assert_eq!(h.torque().await.tau_ff, cmd);
     }
     h.state(&standing_state(&robot, &team, 2, 0.0, qd)).await;
     h.dynamics_of(2).await;
@@ -483,7 +483,7 @@ async fn the_posture_hold_takes_over_from_the_last_command_without_a_jump() {
         let a = (k as f64 * 0.25).min(1.0);
         for i in 0..n {
             let want = cmd[i] - a * kd[i] * qd;
-            assert!((t.tau[i] - want).abs() < 1e-6, "tick {tick} joint {i}: {} vs {want} (weight of the hold {a})", t.tau[i]);
+            assert!((t.tau_ff[i] - want).abs() < 1e-6, "tick {tick} joint {i}: {} vs {want} (weight of the hold {a})", t.tau_ff[i]);
         }
     }
     assert_eq!(h.stop().await.safe_mode_entries, 1);
@@ -521,7 +521,7 @@ async fn commands_take_over_from_the_posture_hold_without_a_jump() {
         let a = (k as f64 * 0.25).min(1.0);
         for i in 0..n {
             let want = (1.0 - a) * g[i] + a * cmd[i];
-            assert!((t.tau[i] - want).abs() < 1e-6, "tick {tick} joint {i}: {} vs {want} (weight {a})", t.tau[i]);
+            assert!((t.tau_ff[i] - want).abs() < 1e-6, "tick {tick} joint {i}: {} vs {want} (weight {a})", t.tau_ff[i]);
         }
     }
     // A hold order, then a command: the blend starts again from the hold, which carries the
@@ -530,12 +530,12 @@ async fn commands_take_over_from_the_posture_hold_without_a_jump() {
     h.dynamics_of(9).await;
     h.command(&TorqueCommand::hold(&team, ID, 9)).await;
     let t = h.torque().await;
-    assert!(t.tau.iter().zip(&cmd).all(|(a, b)| (a - b).abs() < 1e-9), "the hold order holds, carrying the load: {:?}", t.tau);
+    assert!(t.tau_ff.iter().zip(&cmd).all(|(a, b)| (a - b).abs() < 1e-9), "the hold order holds, carrying the load: {:?}", t.tau_ff);
     h.state(&standing_state(&robot, &team, 10, 0.0, 0.0)).await;
     h.dynamics_of(10).await;
     h.command(&command(&team, ID, 10, vec![5.0; n])).await;
     let t = h.torque().await;
-    assert!(t.tau.iter().zip(&cmd).all(|(a, b)| (a - b).abs() < 1e-9), "the blend restarts at the hold, not at the new command: {:?}", t.tau);
+    assert!(t.tau_ff.iter().zip(&cmd).all(|(a, b)| (a - b).abs() < 1e-9), "the blend restarts at the hold, not at the new command: {:?}", t.tau_ff);
     let c = h.stop().await;
     assert_eq!(c.blended, 6, "ticks 3..6 and 10 blended, 7 and 8 were the command's alone");
 }

@@ -86,7 +86,7 @@ fn ms(k: u64) -> Duration {
 type Summary = (Option<u64>, Option<(u64, Vec<f64>)>, bool);
 
 fn summary(out: Outputs<'_>) -> Summary {
-    (out.terms.map(|t| t.header.tick), out.torques.map(|t| (t.header.tick, t.tau.clone())), out.status)
+    (out.terms.map(|t| t.header.tick), out.drive.map(|t| (t.header.tick, t.tau_ff.clone())), out.status)
 }
 
 #[test]
@@ -140,11 +140,11 @@ fn deadline_safe_mode_and_recovery_only_on_a_fresh_tick() {
 
     // By time, without new states: 25 ms after the last command the timer enters safe mode
     // with the hold of the latest state (tick 6); once only.
-    assert!(c.on_timer(t0 + ms(8 + 25)).torques.is_none(), "the deadline is exclusive");
+    assert!(c.on_timer(t0 + ms(8 + 25)).drive.is_none(), "the deadline is exclusive");
     let out = c.on_timer(t0 + ms(8 + 26));
     assert!(out.status);
-    assert_eq!(out.torques.map(|t| t.header.tick), Some(6));
-    assert!(c.on_timer(t0 + ms(40)).torques.is_none());
+    assert_eq!(out.drive.map(|t| t.header.tick), Some(6));
+    assert!(c.on_timer(t0 + ms(40)).drive.is_none());
     assert_eq!((c.mode(), c.safe_mode_since(), c.counters().safe_mode_entries), (AgentMode::SafeMode, Some(6), 2));
     // Tick 6 again is not fresh (repeats of the latest state are admitted, not fresh).
     c.on_state(&state(6, q6, v6), t0 + ms(41)).unwrap();
@@ -236,8 +236,8 @@ fn rejected_commands_are_counted_and_nothing_is_applied() {
     assert_eq!((status.commands_rejected, status.mode), (6, AgentMode::WaitingForState));
     assert_eq!(status.last_rejection.as_deref(), Some("undecodable command: bad magic"));
     // A good one still passes; no deadline, so the timer never holds.
-    assert!(c.on_command(&command(ID, 3, &[-20.0, 20.0, 0.5]), t0 + ms(2)).unwrap().torques.is_some_and(|t| t.tau == [-10.0, 10.0, 0.5]));
-    assert!(c.on_timer(t0 + Duration::from_secs(3600)).torques.is_none());
+    assert!(c.on_command(&command(ID, 3, &[-20.0, 20.0, 0.5]), t0 + ms(2)).unwrap().drive.is_some_and(|t| t.tau_ff == [-10.0, 10.0, 0.5]));
+    assert!(c.on_timer(t0 + Duration::from_secs(3600)).drive.is_none());
 }
 
 #[test]
@@ -247,26 +247,26 @@ fn a_command_ahead_of_its_state_waits_for_it_and_is_checked_then() {
     c.on_state(&state(3, [0.0; 3], [0.0; 3]), t0).unwrap();
     // Tick 4's command overtook tick 4's state: nothing now, nothing refused.
     let out = c.on_command(&command(ID, 4, &[1.0, -20.0, 0.5]), t0 + ms(1)).unwrap();
-    assert!(out.torques.is_none());
+    assert!(out.drive.is_none());
     assert_eq!((c.counters().rejected, c.counters().early, c.last_applied_tick()), (0, 1, None));
     // A newer early command replaces it; the wrong size is refused at once.
     assert!(matches!(c.on_command(&command(ID, 5, &[0.0; 2]), t0 + ms(1)), Err(CommandRejection::WrongSize { .. })));
     // Tick 4's state: its terms and its command, clamped, in the same outputs.
     let out = c.on_state(&state(4, [0.0; 3], [0.0; 3]), t0 + ms(5)).unwrap();
     assert!(out.terms.is_some());
-    assert_eq!(out.torques.map(|t| (t.header.tick, t.tau.clone())), Some((4, vec![1.0, -10.0, 0.5])));
+    assert_eq!(out.drive.map(|t| (t.header.tick, t.tau_ff.clone())), Some((4, vec![1.0, -10.0, 0.5])));
     assert_eq!((c.counters().applied, c.last_applied_tick()), (1, Some(4)));
     // The next state brings nothing: the early command was used once.
-    assert!(c.on_state(&state(5, [0.0; 3], [0.0; 3]), t0 + ms(10)).unwrap().torques.is_none());
+    assert!(c.on_state(&state(5, [0.0; 3], [0.0; 3]), t0 + ms(10)).unwrap().drive.is_none());
     // An early command whose state never comes (tick 7 skipped) is one tick old when tick 8
     // arrives, within the 5 allowed (the default age): it answers tick 8.
     c.on_command(&command(ID, 7, &[0.0; 3]), t0 + ms(11)).unwrap();
     let out = c.on_state(&state(8, [0.0; 3], [0.0; 3]), t0 + ms(20)).unwrap();
-    assert_eq!(out.torques.map(|t| t.header.tick), Some(7));
+    assert_eq!(out.drive.map(|t| t.header.tick), Some(7));
     // One whose next state comes 6 ticks after it (ticks 10-14 skipped) is too old then.
     c.on_command(&command(ID, 9, &[0.0; 3]), t0 + ms(21)).unwrap();
     let out = c.on_state(&state(15, [0.0; 3], [0.0; 3]), t0 + ms(40)).unwrap();
-    assert!(out.torques.is_none_or(|t| t.header.tick == 15), "the command 6 ticks behind is not applied");
+    assert!(out.drive.is_none_or(|t| t.header.tick == 15), "the command 6 ticks behind is not applied");
     assert_eq!(c.last_applied_tick(), Some(7));
     assert!(c.status().last_rejection.as_deref().unwrap().contains("6 ticks old, at most 5"), "{:?}", c.status().last_rejection);
 }
@@ -366,7 +366,7 @@ fn a_fallen_robot_goes_limp_refuses_commands_and_sends_no_terms() {
     assert_eq!(r, CommandRejection::Fallen { tick: 2, fell: 2 });
     assert_eq!(c.status().mode, AgentMode::Fallen);
     // No command for long: no safe mode (the timer yields no hold), still limp.
-    assert!(c.on_timer(t0 + ms(200)).torques.is_none());
+    assert!(c.on_timer(t0 + ms(200)).drive.is_none());
     assert_eq!((c.mode(), c.safe_mode_since()), (AgentMode::Fallen, None));
     // Upright and still: zero torque, still fallen, still no terms.
     let out = c.on_state(&posed(3, upright, [0.0; 3]), t0 + ms(201)).unwrap();

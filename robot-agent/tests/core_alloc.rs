@@ -99,10 +99,10 @@ fn ticks_allocations(source: impl DynamicsSource, mut state: RobotState, n: usiz
         }
         let now = t0 + Duration::from_micros(1000 * tick);
         state.header.tick = tick;
-        held += core.on_state(&state, now).unwrap().torques.is_some() as u32;
+        held += core.on_state(&state, now).unwrap().drive.is_some() as u32;
         if !(100..120).contains(&tick) {
             cmd.header.tick = tick;
-            applied += core.on_command(&cmd, now).unwrap().torques.is_some() as u32;
+            applied += core.on_command(&cmd, now).unwrap().drive.is_some() as u32;
         }
         let _ = core.on_timer(now);
         let _ = core.status();

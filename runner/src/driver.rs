@@ -21,7 +21,7 @@ use std::time::{Duration, Instant};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, SampleQueue, TransportError, TypedPublisher};
-use protocol::{AgentStatus, ContactSet, CoordinatorMode, CoordinatorStatus, GroundTruth, TaskReferences, TickDiagnostics, TorqueCommand};
+use protocol::{AgentStatus, ContactSet, CoordinatorMode, CoordinatorStatus, DriveCommand, GroundTruth, TaskReferences, TickDiagnostics};
 use tokio::sync::watch;
 use zenoh::Session;
 
@@ -67,12 +67,12 @@ impl Records {
     /// Keep an applied torque command of a scenario tick (settling ticks are not evaluated);
     /// every decoded one goes to the recorder.
     fn take_torques(&mut self, sample: &zenoh::sample::Sample, settle: u64, tap: Option<&Tap>) {
-        if let Ok(cmd) = decode_sample::<TorqueCommand>(sample) {
+        if let Ok(cmd) = decode_sample::<DriveCommand>(sample) {
             if let Some(tap) = tap {
                 tap.send(sample.key_expr().as_str(), RecordedMessage::Torque(cmd.clone()));
             }
             if cmd.header.tick >= settle {
-                self.torques.entry(cmd.header.robot_id().to_string()).or_default().push((cmd.header.tick, cmd.tau));
+                self.torques.entry(cmd.header.robot_id().to_string()).or_default().push((cmd.header.tick, cmd.tau_ff));
             }
         }
     }

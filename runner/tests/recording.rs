@@ -77,7 +77,7 @@ fn a_recorded_run_reads_back_and_replays_to_the_same_metrics() {
         assert!(per_tick(dynamics), "{} dynamics for {total} ticks", dynamics);
         let commands = json(&key("command"), "team.TorqueCommand");
         assert!(per_tick(commands), "{commands} commands for {total} ticks");
-        let torques = json(&key("torque"), "team.TorqueCommand");
+        let torques = json(&key("torque"), "team.DriveCommand");
         assert!(per_tick(torques), "{torques} torques for {total} ticks");
     }
     // The 3-D view: Foxglove's well-known schemas, every 10th tick at 1 kHz.

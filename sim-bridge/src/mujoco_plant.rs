@@ -7,10 +7,10 @@
 use mujoco_rs::mujoco_c::{self, mjData, mjModel};
 use mujoco_rs::prelude::*;
 use protocol::conventions::{base_twist_from_mujoco, base_twist_to_mujoco};
-use protocol::{GroundTruth, PerturbationRequest, Pose, RobotState};
+use protocol::{DriveCommand, GroundTruth, PerturbationRequest, Pose, RobotState};
 
 use crate::perturbation::Perturbations;
-use crate::plant::{DriveLoss, Plant};
+use crate::plant::{DriveLoss, DriveTargets, Plant};
 use crate::world::{World, WorldError};
 
 /// The team in MuJoCo.
@@ -23,6 +23,12 @@ pub struct MujocoPlant {
     pub perturbations: Perturbations,
     /// Robots whose drives are lost ([`Plant::lose_drives`]), with their freeze servos.
     lost: Vec<Option<LostDrives>>,
+    /// Each robot's drive command, run at every physics step while it has gains.
+    drives: Vec<DriveTargets>,
+    /// The drive law's joint positions, velocities and torques (the largest robot's size).
+    drive_q: Vec<f64>,
+    drive_qd: Vec<f64>,
+    drive_tau: Vec<f64>,
 }
 
 /// A robot's drives after they lost their commands: unpowered, or each joint held at `q_hold`
@@ -51,7 +57,10 @@ impl MujocoPlant {
         let data = MjData::new(model);
         let ids = world.robots.iter().map(|r| r.id.clone()).collect();
         let lost = vec![None; world.robots.len()];
-        let mut p = MujocoPlant { world, data, ids, ticks: 0, perturbations: Perturbations::default(), lost };
+        let drives = vec![DriveTargets::new(); world.robots.len()];
+        let most = world.robots.iter().map(|r| r.actuator.len()).max().unwrap_or(0);
+        let (drive_q, drive_qd, drive_tau) = (vec![0.0; most], vec![0.0; most], vec![0.0; most]);
+        let mut p = MujocoPlant { world, data, ids, ticks: 0, perturbations: Perturbations::default(), lost, drives, drive_q, drive_qd, drive_tau };
         for i in 0..p.world.robots.len() {
             let q = p.world.robots[i].initial_q.clone();
             p.set_configuration(i, &q, None);
@@ -168,6 +177,30 @@ impl MujocoPlant {
         }
     }
 
+    /// The drive law of every robot whose command has gains, for the coming physics step
+    /// ([`DriveCommand::effort`] at the current joint state; MuJoCo clamps to `ctrlrange`).
+    fn drive_commands(&mut self) {
+        for (i, drive) in self.drives.iter().enumerate() {
+            if !drive.active || self.lost[i].is_some() {
+                continue;
+            }
+            let r = &self.world.robots[i];
+            let n = r.actuator.len();
+            let d = unsafe { self.data.ffi_mut() };
+            for (k, (&qa, &va)) in r.joint_qpos.iter().zip(&r.joint_dof).enumerate() {
+                unsafe {
+                    self.drive_q[k] = *d.qpos.add(qa);
+                    self.drive_qd[k] = *d.qvel.add(va);
+                }
+            }
+            drive.cmd.effort(&self.drive_q[..n], &self.drive_qd[..n], &mut self.drive_tau[..n]);
+            for (k, &a) in r.actuator.iter().enumerate() {
+                let t = self.drive_tau[k];
+                unsafe { *d.ctrl.add(a) = if t.is_finite() { t } else { 0.0 } };
+            }
+        }
+    }
+
     /// Reset the tick count and simulated time (after settling): the scenario clock starts.
     pub fn restart_clock(&mut self) {
         self.ticks = 0;
@@ -214,6 +247,7 @@ impl Plant for MujocoPlant {
         if self.lost[robot].is_some() {
             return;
         }
+        self.drives[robot].active = false;
         let r = &self.world.robots[robot];
         let d = unsafe { self.data.ffi_mut() };
         for (&a, &t) in r.actuator.iter().zip(tau) {
@@ -221,7 +255,17 @@ impl Plant for MujocoPlant {
         }
     }
 
+    fn set_drive(&mut self, robot: usize, cmd: &DriveCommand) {
+        if self.lost[robot].is_some() {
+            return;
+        }
+        if !self.drives[robot].take(cmd) {
+            self.set_torques(robot, &cmd.tau_ff);
+        }
+    }
+
     fn lose_drives(&mut self, robot: usize, loss: DriveLoss) {
+        self.drives[robot].active = false;
         let servo = self.freeze_servo(robot, loss);
         let r = &self.world.robots[robot];
         let d = unsafe { self.data.ffi_mut() };
@@ -243,6 +287,7 @@ impl Plant for MujocoPlant {
         let m = self.world.model.ffi() as *const mjModel;
         for _ in 0..self.world.substeps {
             self.drive_lost();
+            self.drive_commands();
             let t = self.data.ffi().time;
             let d = unsafe { self.data.ffi_mut() as *mut mjData };
             unsafe { self.perturbations.apply(&*m, &mut *d, &self.world, t) };

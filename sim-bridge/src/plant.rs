@@ -1,6 +1,6 @@
 //! What the bridge simulates.
 
-use protocol::{GroundTruth, Header, PerturbationRequest, Pose, RobotState};
+use protocol::{DriveCommand, GroundTruth, Header, PerturbationRequest, Pose, RobotState};
 use serde::{Deserialize, Serialize};
 
 /// What a robot's drives do when its commands stop (its agent died, stalled, or lost its link):
@@ -27,8 +27,13 @@ pub trait Plant: Send {
     /// Write the state of robot `robot` (header fields other than tick/stamp are the caller's).
     fn state(&self, robot: usize, out: &mut RobotState);
     /// Set the torques of robot `robot` for the next step (already checked for size); ignored
-    /// while its drives are lost ([`Plant::lose_drives`]).
+    /// while its drives are lost ([`Plant::lose_drives`]). A torque is a drive command without
+    /// gains: it ends the last command's law.
     fn set_torques(&mut self, robot: usize, tau: &[f64]);
+    /// Robot `robot`'s drives execute `cmd` ([`DriveCommand::effort`], checked for size) at
+    /// every physics step until the next; without gains it is [`Plant::set_torques`] of
+    /// `tau_ff`. Ignored while its drives are lost.
+    fn set_drive(&mut self, robot: usize, cmd: &DriveCommand);
     /// Robot `robot`'s drives stop taking torques and do what `loss` says until
     /// [`Plant::restore_drives`].
     fn lose_drives(&mut self, robot: usize, loss: DriveLoss);
@@ -58,9 +63,41 @@ pub struct PlaceholderPlant {
     q: Vec<Vec<f64>>,
     v: Vec<Vec<f64>>,
     tau: Vec<Vec<f64>>,
+    /// Each robot's drive command, run at every step while it has gains.
+    drives: Vec<DriveTargets>,
     lost: Vec<Option<DriveLoss>>,
     dt: f64,
     steps: u64,
+}
+
+/// A robot's drive command kept by a plant, run at every physics step while `active` (it has
+/// gains). Preallocated: taking a command of the same size allocates nothing.
+#[derive(Debug, Clone)]
+pub struct DriveTargets {
+    pub cmd: DriveCommand,
+    pub active: bool,
+}
+
+impl DriveTargets {
+    /// No command yet.
+    pub fn new() -> Self {
+        DriveTargets { cmd: DriveCommand::torque("", "", 0, Vec::new()), active: false }
+    }
+
+    /// Keep `cmd` if it has gains (then `true`); a command without gains ends the law.
+    pub fn take(&mut self, cmd: &DriveCommand) -> bool {
+        self.active = cmd.has_gains();
+        if self.active {
+            self.cmd.clone_from(cmd);
+        }
+        self.active
+    }
+}
+
+impl Default for DriveTargets {
+    fn default() -> Self {
+        DriveTargets::new()
+    }
 }
 
 impl PlaceholderPlant {
@@ -72,6 +109,7 @@ impl PlaceholderPlant {
             q: vec![vec![0.0; joints]; n],
             v: vec![vec![v0; joints]; n],
             tau: vec![vec![0.0; joints]; n],
+            drives: vec![DriveTargets::new(); n],
             lost: vec![None; n],
             dt,
             steps: 0,
@@ -105,12 +143,23 @@ impl Plant for PlaceholderPlant {
     fn set_torques(&mut self, robot: usize, tau: &[f64]) {
         if self.lost[robot].is_none() {
             self.tau[robot].copy_from_slice(tau);
+            self.drives[robot].active = false;
+        }
+    }
+
+    fn set_drive(&mut self, robot: usize, cmd: &DriveCommand) {
+        if self.lost[robot].is_some() {
+            return;
+        }
+        if !self.drives[robot].take(cmd) {
+            self.tau[robot].copy_from_slice(&cmd.tau_ff);
         }
     }
 
     fn lose_drives(&mut self, robot: usize, loss: DriveLoss) {
         self.lost[robot] = Some(loss);
         self.tau[robot].iter_mut().for_each(|t| *t = 0.0);
+        self.drives[robot].active = false;
     }
 
     fn restore_drives(&mut self, robot: usize) {
@@ -127,6 +176,9 @@ impl Plant for PlaceholderPlant {
                 // Unit-inertia joints held where they are.
                 self.v[r].iter_mut().for_each(|v| *v = 0.0);
                 continue;
+            }
+            if self.drives[r].active {
+                self.drives[r].cmd.effort(&self.q[r], &self.v[r], &mut self.tau[r]);
             }
             for j in 0..self.q[r].len() {
                 self.v[r][j] += self.dt * self.tau[r][j];

@@ -25,7 +25,7 @@
 use std::time::{Duration, Instant};
 
 use protocol::transport::{self, decode_sample};
-use protocol::TorqueCommand;
+use protocol::DriveCommand;
 use tokio::sync::watch;
 use zenoh::sample::Sample;
 use zenoh::Session;
@@ -217,7 +217,7 @@ impl Arrivals {
     /// One torque sample during `tick`: the newest torques of a robot drive it (waking its
     /// lost drives if they are this tick's); older ones are counted late.
     fn take(&mut self, sample: &Sample, tick: u64, sent: Instant, plant: &mut impl Plant, side: &mut TickSide) {
-        let cmd = match decode_sample::<TorqueCommand>(sample) {
+        let cmd = match decode_sample::<DriveCommand>(sample) {
             Ok(c) => c,
             Err(e) => {
                 self.rejected += 1;
@@ -236,7 +236,7 @@ impl Arrivals {
         if self.last_tick[i].is_some_and(|t| cmd.header.tick <= t) {
             return;
         }
-        if cmd.tau.len() != plant.joints(i) {
+        if cmd.tau_ff.len() != plant.joints(i) {
             self.rejected += 1;
             return;
         }
@@ -247,7 +247,7 @@ impl Arrivals {
             tracing::info!(robot = %self.robots[i], tick, "the robot's drives take torques again");
             plant.restore_drives(i);
         }
-        plant.set_torques(i, &cmd.tau);
+        plant.set_drive(i, &cmd);
         self.last_tick[i] = Some(cmd.header.tick);
         self.got[i] = cmd.header.tick == tick;
         if self.got[i] {

@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 use protocol::access::{secure_endpoint, Identity, SecureConfig};
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, Role, SampleQueue, TypedPublisher, ZenohArgs};
-use protocol::{Header, Pose, RobotState, TorqueCommand};
+use protocol::{DriveCommand, Header, Pose, RobotState};
 use team_runner::processes::free_port;
 use zenoh::Session;
 
@@ -76,11 +76,11 @@ async fn pair(name: &'static str, link: Link, certs: &Path, floats: usize) -> Pa
     let torques = transport::subscribe(&bridge, keys::robot(TEAM, "r1", RobotTopic::Torque).unwrap()).await.unwrap();
     let states = TypedPublisher::declare(&bridge, keys::robot(TEAM, "r1", RobotTopic::State).unwrap(), Qos::HotPath).await.unwrap();
     let incoming = transport::subscribe(&r1, keys::robot(TEAM, "r1", RobotTopic::State).unwrap()).await.unwrap();
-    let mut out = TypedPublisher::<TorqueCommand>::declare(&r1, keys::robot(TEAM, "r1", RobotTopic::Torque).unwrap(), Qos::HotPath).await.unwrap();
+    let mut out = TypedPublisher::<DriveCommand>::declare(&r1, keys::robot(TEAM, "r1", RobotTopic::Torque).unwrap(), Qos::HotPath).await.unwrap();
     tokio::spawn(async move {
         while let Ok(sample) = incoming.recv_async().await {
             let Ok(state) = decode_sample::<RobotState>(&sample) else { continue };
-            let cmd = TorqueCommand { header: Header::new(TEAM, Some("r1"), state.header.tick, 0), tau: vec![0.1; floats], hold: false };
+            let cmd = DriveCommand::torque(TEAM, "r1", state.header.tick, vec![0.1; floats]);
             let _ = out.put(&cmd).await;
         }
     });
@@ -105,7 +105,7 @@ async fn round_trip(p: &mut Pair, tick: u64, floats: usize) -> Option<f64> {
     p.states.put(&state(tick, floats)).await.ok()?;
     loop {
         let s = tokio::time::timeout(Duration::from_secs(2), p.torques.recv_async()).await.ok()?.ok()?;
-        let cmd: TorqueCommand = decode_sample(&s).ok()?;
+        let cmd: DriveCommand = decode_sample(&s).ok()?;
         if cmd.header.tick == tick {
             return Some(t0.elapsed().as_secs_f64());
         }

@@ -16,7 +16,7 @@ use nalgebra::{DMatrix, DVector, Matrix6xX};
 use protocol::conventions::quat_from_wxyz;
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, TransportError, TypedPublisher};
-use protocol::{DynamicsTerms, Header, RobotState, TorqueCommand};
+use protocol::{DriveCommand, DynamicsTerms, Header, RobotState, TorqueCommand};
 use robot_model::{forward_kinematics, frame_jacobian, gravity, Data, FrameId, Robot};
 use tokio::sync::watch;
 use zenoh::Session;
@@ -153,6 +153,13 @@ impl StandingController {
     }
 }
 
+/// Where [`serve`] sends a robot's torques: the agent's command key, or (acting as the agent)
+/// the drives' torque key.
+enum Out {
+    Command(TypedPublisher<TorqueCommand>),
+    Drive(TypedPublisher<DriveCommand>),
+}
+
 /// Run standing controllers for `robots` over Zenoh as a stand-in coordinator: for each robot,
 /// it keeps the latest `state(k)` and, when the robot's agent publishes `dynamics(k)` (so the
 /// agent has seen the state), publishes `command(k)` on the command key. With `direct`, it
@@ -167,14 +174,15 @@ pub async fn serve(
 ) -> Result<u64, TransportError> {
     let states = transport::subscribe(session, keys::all_robots(team, RobotTopic::State)?).await?;
     let dynamics = transport::subscribe(session, keys::all_robots(team, RobotTopic::Dynamics)?).await?;
-    let topic = if direct { RobotTopic::Torque } else { RobotTopic::Command };
     let mut pubs = Vec::new();
     let mut tokens = Vec::new();
     for (id, _) in &robots {
-        pubs.push(TypedPublisher::<TorqueCommand>::declare(session, keys::robot(team, id, topic)?, Qos::HotPath).await?);
-        if direct {
+        pubs.push(if direct {
             tokens.push(transport::declare_member(session, team, id).await?);
-        }
+            Out::Drive(TypedPublisher::declare(session, keys::robot(team, id, RobotTopic::Torque)?, Qos::HotPath).await?)
+        } else {
+            Out::Command(TypedPublisher::declare(session, keys::robot(team, id, RobotTopic::Command)?, Qos::HotPath).await?)
+        });
     }
     let mut latest: Vec<Option<RobotState>> = vec![None; robots.len()];
     let mut sent: Vec<Option<u64>> = vec![None; robots.len()];
@@ -213,7 +221,10 @@ pub async fn serve(
         match robots[i].1.torques(st, &mut cmd.tau) {
             Ok(()) => {
                 cmd.header = Header::new(team, Some(&robots[i].0), tick, protocol::wall_clock_ns());
-                pubs[i].put(&cmd).await?;
+                match &mut pubs[i] {
+                    Out::Command(p) => p.put(&cmd).await?,
+                    Out::Drive(p) => p.put(&DriveCommand { header: cmd.header.clone(), ..DriveCommand::torque(team, &robots[i].0, tick, cmd.tau.clone()) }).await?,
+                }
                 sent[i] = Some(tick);
                 count += 1;
             }

@@ -27,7 +27,7 @@ use std::time::{Duration, Instant};
 use protocol::access::Identity;
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, SampleQueue, TypedPublisher, ZenohArgs};
-use protocol::{AgentStatus, Header, Pose, RobotState, TorqueCommand};
+use protocol::{AgentStatus, DriveCommand, Header, Pose, RobotState, TorqueCommand};
 use team_runner::processes::spawn;
 use zenoh::Session;
 
@@ -158,8 +158,8 @@ async fn state_answered(sim: &mut TypedPublisher<RobotState>, dynamics: &SampleQ
 fn commanded_torques(torques: &SampleQueue) -> Vec<u64> {
     let mut ticks = Vec::new();
     while let Ok(Some(s)) = torques.try_recv() {
-        let t: TorqueCommand = decode_sample(&s).unwrap();
-        if t.tau == TAU {
+        let t: DriveCommand = decode_sample(&s).unwrap();
+        if t.tau_ff == TAU {
             ticks.push(t.header.tick);
         }
     }

@@ -139,7 +139,7 @@ async fn forge_as_r2(r2: Session, team: String, sent: Arc<Sent>) {
         sent.huge_length.fetch_add(1, Ordering::Relaxed);
         put(&dynamics, protocol::encode(&terms(&state, "r2", k - 10, JOINTS)).unwrap()).await;
         sent.old_terms.fetch_add(1, Ordering::Relaxed);
-        let tau = TorqueCommand { header: Header::new(&team, Some("r1"), k, 0), tau: vec![50.0; JOINTS], hold: false };
+        let tau = protocol::DriveCommand::torque(&team, "r1", k, vec![50.0; JOINTS]);
         put(&torque, protocol::encode(&tau).unwrap()).await;
         sent.impersonated_torques.fetch_add(1, Ordering::Relaxed);
     }

@@ -300,7 +300,7 @@ async fn a_perturbation_from_the_key_pushes_the_object() {
 async fn an_agent_that_left_alive_drives_its_robot_until_its_torques_stop() {
     use protocol::keys::{self, RobotTopic};
     use protocol::transport::{decode_sample, Qos, TypedPublisher};
-    use protocol::{Header, RobotState, TorqueCommand};
+    use protocol::{DriveCommand, RobotState};
     use sim_bridge::plant::{DriveLoss, Plant, PlaceholderPlant};
     let team = "left-alive";
     let session = transport::open(&ZenohArgs::default(), Role::Alone).await.unwrap();
@@ -309,7 +309,7 @@ async fn an_agent_that_left_alive_drives_its_robot_until_its_torques_stop() {
     let states = transport::subscribe(&session, keys::all_robots(team, RobotTopic::State).unwrap()).await.unwrap();
     let mut pubs = Vec::new();
     for id in ["r1", "r2"] {
-        pubs.push(TypedPublisher::<TorqueCommand>::declare(&session, keys::robot(team, id, RobotTopic::Torque).unwrap(), Qos::HotPath).await.unwrap());
+        pubs.push(TypedPublisher::<DriveCommand>::declare(&session, keys::robot(team, id, RobotTopic::Torque).unwrap(), Qos::HotPath).await.unwrap());
     }
     let r1_token = transport::declare_member(&session, team, "r1").await.unwrap();
     let mut r2_token = Some(transport::declare_member(&session, team, "r2").await.unwrap());
@@ -338,7 +338,7 @@ async fn an_agent_that_left_alive_drives_its_robot_until_its_torques_stop() {
                     continue;
                 }
             }
-            let cmd = TorqueCommand { header: Header::new(team, Some(if i == 0 { "r1" } else { "r2" }), tick, 0), tau: vec![1.0; 2], hold: false };
+            let cmd = DriveCommand::torque(team, if i == 0 { "r1" } else { "r2" }, tick, vec![1.0; 2]);
             pubs[i].put(&cmd).await.unwrap();
         }
     });

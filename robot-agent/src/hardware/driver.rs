@@ -23,7 +23,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use protocol::{Header, Pose, RobotState, Validate};
+use protocol::{DriveCommand, Header, Pose, RobotState, Validate};
 use thiserror::Error;
 
 use super::link::{Inbound, Presence, TeamLink, INBOX};
@@ -129,7 +129,7 @@ struct Driver<'a, S: DynamicsSource, H, L> {
 
 /// The torques this loop writes, and the link's failures.
 struct Written {
-    torques: Vec<f64>,
+    drive: DriveCommand,
     have: bool,
     link_errors: u64,
 }
@@ -146,7 +146,7 @@ impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
             time: 0.0,
             foot_forces: Vec::new(),
         };
-        let out = Written { torques: vec![0.0; joints], have: false, link_errors: 0 };
+        let out = Written { drive: DriveCommand::torque(core.team(), core.robot(), 0, vec![0.0; joints]), have: false, link_errors: 0 };
         Driver { core, hardware, link, cfg: *cfg, state, out, tick: 0, overruns: 0 }
     }
 
@@ -210,7 +210,7 @@ impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
         let status = send(self.link, &mut self.out, out);
         self.done(status);
         if self.out.have {
-            let status = self.hardware.write(&self.out.torques);
+            let status = self.hardware.write(&self.out.drive);
             if status != HwStatus::Ok {
                 return self.halt(status, "write", tick);
             }
@@ -320,9 +320,9 @@ fn send<L: TeamLink>(link: &mut L, w: &mut Written, out: Outputs<'_>) -> (Sent, 
             Err(e) => link_error(w, "description", &e),
         }
     }
-    if let Some(t) = out.torques {
-        t.header.stamp_ns = protocol::wall_clock_ns();
-        w.torques.copy_from_slice(&t.tau);
+    if let Some(d) = out.drive {
+        d.header.stamp_ns = protocol::wall_clock_ns();
+        w.drive.clone_from(d);
         w.have = true;
     }
     (sent, out.status)

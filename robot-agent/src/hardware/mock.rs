@@ -3,7 +3,9 @@
 //! step `dt`, one step per [`RobotHardware::read`] after the first:
 //!
 //! ```text
-//! v <- v + dt tau,  q <- q + dt v      (tau: the torques of the last write)
+//! v <- v + dt tau,  q <- q + dt v
+//! tau = tau_ff + kp (q_des - q) + kd (qd_des - qd)   (the drive law of the last write, at
+//!                                                     the state before the step)
 //! ```
 //!
 //! The step is fixed, not measured, so a test knows the answer exactly: with joint damping
@@ -14,7 +16,7 @@
 
 use std::time::Instant;
 
-use protocol::{Pose, RobotState};
+use protocol::{DriveCommand, Pose, RobotState, Validate};
 
 use super::{HardwareError, HwStatus, RobotHardware};
 
@@ -68,7 +70,10 @@ pub struct MockStep {
 pub struct MockHardware {
     q: Vec<f64>,
     v: Vec<f64>,
+    /// The torques of the last step (the drive law's, or `tau_ff` without gains).
     tau: Vec<f64>,
+    /// The last write (a torque of zeros before).
+    drive: DriveCommand,
     dt: f64,
     reads: u64,
     writes: u64,
@@ -86,6 +91,7 @@ impl MockHardware {
             v: cfg.v0,
             q: cfg.q0,
             tau: vec![0.0; n],
+            drive: DriveCommand::torque("", "", 0, vec![0.0; n]),
             dt: cfg.dt,
             reads: 0,
             writes: 0,
@@ -116,9 +122,15 @@ impl MockHardware {
         &self.v
     }
 
-    /// Torques of the last write (zeros before).
+    /// Torques of the last step: the last write's drive law at the state before it (zeros
+    /// before the first write).
     pub fn torques(&self) -> &[f64] {
         &self.tau
+    }
+
+    /// The last drive command written.
+    pub fn drive(&self) -> &DriveCommand {
+        &self.drive
     }
 
     pub fn reads(&self) -> u64 {
@@ -173,6 +185,11 @@ impl RobotHardware for MockHardware {
             self.lifecycle = Lifecycle::Inactive;
         }
         self.tau.iter_mut().for_each(|t| *t = 0.0);
+        self.drive.tau_ff.iter_mut().for_each(|t| *t = 0.0);
+        self.drive.kp.clear();
+        self.drive.kd.clear();
+        self.drive.q_des.clear();
+        self.drive.qd_des.clear();
         Ok(())
     }
 
@@ -181,6 +198,7 @@ impl RobotHardware for MockHardware {
             return HwStatus::Error;
         }
         if self.reads > 0 {
+            self.drive.effort(&self.q, &self.v, &mut self.tau);
             for j in 0..self.q.len() {
                 self.v[j] += self.dt * self.tau[j];
                 self.q[j] += self.dt * self.v[j];
@@ -205,17 +223,17 @@ impl RobotHardware for MockHardware {
         HwStatus::Ok
     }
 
-    fn write(&mut self, torques: &[f64]) -> HwStatus {
-        if self.lifecycle != Lifecycle::Active || torques.len() != self.tau.len() || torques.iter().any(|t| !t.is_finite()) {
+    fn write(&mut self, cmd: &DriveCommand) -> HwStatus {
+        if self.lifecycle != Lifecycle::Active || cmd.tau_ff.len() != self.tau.len() || cmd.validate().is_err() {
             return HwStatus::Error;
         }
         if let Some(status) = self.fault(true) {
             return status;
         }
-        self.tau.copy_from_slice(torques);
+        self.drive.clone_from(cmd);
         self.writes += 1;
         if let Some(step) = self.history.as_mut().and_then(|h| h.last_mut()) {
-            step.tau = Some(torques.to_vec());
+            step.tau = Some(cmd.tau_ff.clone());
         }
         HwStatus::Ok
     }
@@ -238,6 +256,10 @@ mod tests {
         }
     }
 
+    fn torque(tau: &[f64]) -> DriveCommand {
+        DriveCommand::torque("t", "r", 0, tau.to_vec())
+    }
+
     #[test]
     fn lifecycle_integration_and_faults() {
         let mut hw = MockHardware::new(MockConfig { record: true, ..MockConfig::new(2, 1.0, 0.01) })
@@ -247,25 +269,58 @@ mod tests {
         assert_eq!(hw.read(t, &mut s), HwStatus::Error, "read before configure");
         assert!(hw.activate().is_err(), "activate before configure");
         hw.configure().unwrap();
-        assert_eq!(hw.write(&[0.0, 0.0]), HwStatus::Error, "write while inactive");
+        assert_eq!(hw.write(&torque(&[0.0, 0.0])), HwStatus::Error, "write while inactive");
         hw.activate().unwrap();
         // First read: the initial state, no step.
         assert_eq!(hw.read(t, &mut s), HwStatus::Ok);
         assert_eq!((s.joint_positions.clone(), s.joint_velocities.clone()), (vec![0.0, 0.0], vec![1.0, 1.0]));
-        assert_eq!(hw.write(&[-10.0, 0.0]), HwStatus::Ok);
-        assert_eq!(hw.write(&[0.0]), HwStatus::Error, "wrong size");
-        assert_eq!(hw.write(&[f64::NAN, 0.0]), HwStatus::Error, "not finite");
+        assert_eq!(hw.write(&torque(&[-10.0, 0.0])), HwStatus::Ok);
+        assert_eq!(hw.write(&torque(&[0.0])), HwStatus::Error, "wrong size");
+        assert_eq!(hw.write(&torque(&[f64::NAN, 0.0])), HwStatus::Error, "not finite");
         // Second read: v <- v + dt tau, q <- q + dt v.
         assert_eq!(hw.read(t, &mut s), HwStatus::Ok);
         assert_eq!(s.joint_velocities, vec![1.0 + 0.01 * -10.0, 1.0]);
         assert_eq!(s.joint_positions, vec![0.01 * 0.9, 0.01]);
         assert_eq!(hw.read(t, &mut s), HwStatus::Ok);
         assert_eq!(hw.read(t, &mut s), HwStatus::Ok);
-        assert_eq!(hw.write(&[0.0, 0.0]), HwStatus::Deactivate, "injected at tick 3");
+        assert_eq!(hw.write(&torque(&[0.0, 0.0])), HwStatus::Deactivate, "injected at tick 3");
         hw.deactivate().unwrap();
         assert_eq!(hw.lifecycle(), Lifecycle::Inactive);
         assert_eq!(hw.history().len(), 4);
         assert_eq!(hw.history()[0].tau, Some(vec![-10.0, 0.0]));
         assert_eq!(hw.history()[1].tau, None);
+    }
+
+    #[test]
+    fn the_drive_law_runs_at_every_step_from_the_last_write() {
+        // One write, then 500 steps: v += dt (tau_ff + kp (q_des - q) + kd (qd_des - v)),
+        // q += dt v, written out here; it settles where the spring balances the feed-forward.
+        let (dt, v0) = (0.002, 0.5);
+        let mut hw = MockHardware::new(MockConfig::new(2, v0, dt));
+        hw.configure().unwrap();
+        hw.activate().unwrap();
+        let mut s = state();
+        let t = Instant::now();
+        hw.read(t, &mut s);
+        let mut d = torque(&[1.0, 0.0]);
+        (d.q_des, d.qd_des, d.kp, d.kd) = (vec![0.2, -0.3], vec![0.0, 0.0], vec![400.0, 100.0], vec![40.0, 20.0]);
+        assert_eq!(hw.write(&d), HwStatus::Ok);
+        let (mut q, mut v) = ([0.0f64; 2], [v0; 2]);
+        for _ in 0..2000 {
+            hw.read(t, &mut s);
+            for j in 0..2 {
+                v[j] += dt * (d.tau_ff[j] + d.kp[j] * (d.q_des[j] - q[j]) + d.kd[j] * (d.qd_des[j] - v[j]));
+                q[j] += dt * v[j];
+            }
+        }
+        assert_eq!((s.joint_positions.as_slice(), s.joint_velocities.as_slice()), (&q[..], &v[..]));
+        assert!((q[0] - (0.2 + 1.0 / 400.0)).abs() < 1e-6 && (q[1] + 0.3).abs() < 1e-6, "{q:?}");
+        // A negative gain or targets without gains are refused, and the last law stays.
+        let mut bad = d.clone();
+        bad.kp[1] = -1.0;
+        assert_eq!(hw.write(&bad), HwStatus::Error);
+        bad.kp.clear();
+        assert_eq!(hw.write(&bad), HwStatus::Error, "q_des without kp");
+        assert_eq!(hw.drive(), &d);
     }
 }

@@ -7,7 +7,7 @@
 //! | `on_configure` | [`RobotHardware::configure`] | connect; states are readable, no torques yet (INACTIVE) |
 //! | `on_activate` | [`RobotHardware::activate`] | accept torques (ACTIVE) |
 //! | `read(time, period)` | [`RobotHardware::read`] | measured joint positions and velocities, base pose and twist |
-//! | `write(time, period)` | [`RobotHardware::write`] | the torques to apply until the next write |
+//! | `write(time, period)` | [`RobotHardware::write`] | the drive command to execute until the next write: `tau = tau_ff + kp (q_des - q) + kd (qd_des - qd)` per joint ([`DriveCommand::effort`]) |
 //! | `on_deactivate` | [`RobotHardware::deactivate`] | stop taking torques; leave the robot safe (brakes, damping) |
 //! | `return_type {OK, ERROR, DEACTIVATE}` | [`HwStatus`] | `Error` stops the loop with [`driver::DriverError`]; `Deactivate` stops it after safe mode |
 //!
@@ -31,7 +31,7 @@
 //! use std::time::{Duration, Instant};
 //!
 //! use protocol::transport::{self, Role, ZenohArgs};
-//! use protocol::RobotState;
+//! use protocol::{DriveCommand, RobotState};
 //! use robot_agent::core::{AgentConfig, AgentCore};
 //! use robot_model::Robot;
 //! use robot_agent::dynamics_source::ModelDynamics;
@@ -62,8 +62,10 @@
 //!         state.joint_velocities.copy_from_slice(&self.v);
 //!         HwStatus::Ok
 //!     }
-//!     fn write(&mut self, torques: &[f64]) -> HwStatus {
-//!         let _ = torques; // torques -> motor currents
+//!     fn write(&mut self, cmd: &DriveCommand) -> HwStatus {
+//!         // Per motor, the SDK's low-level command (e.g. tau, q, dq, kp, kd): the drive runs the
+//!         // law at its own rate. Without gains (`cmd.kp` empty) it is the torque `tau_ff`.
+//!         let _ = cmd;
 //!         HwStatus::Ok // a drive fault: HwStatus::Error; the e-stop: HwStatus::Deactivate
 //!     }
 //! }
@@ -91,7 +93,7 @@ pub mod zenoh_sim;
 
 use std::time::Instant;
 
-use protocol::RobotState;
+use protocol::{DriveCommand, RobotState};
 use thiserror::Error;
 
 pub use driver::{DriverConfig, DriverError, DriverExit, DriverReport};
@@ -148,7 +150,10 @@ pub trait RobotHardware {
     /// (team, robot, tick, stamp) and `time`.
     fn read(&mut self, now: Instant, state: &mut RobotState) -> HwStatus;
 
-    /// Apply `torques` (N m, one per actuated joint, already checked and clamped to the
-    /// torque limits) until the next write.
-    fn write(&mut self, torques: &[f64]) -> HwStatus;
+    /// Execute `cmd` until the next write: per actuated joint, at the drive's own rate,
+    /// `tau = tau_ff + kp (q_des - q) + kd (qd_des - qd)` ([`DriveCommand::effort`]), clamped to
+    /// the joint's torque limit. `tau_ff` is already checked and clamped; without gains (`kp`
+    /// and `kd` empty) the command is the torque `tau_ff`. Sizes are the robot's (checked).
+    /// A drive that only takes torques computes the law at each write from its latest reading.
+    fn write(&mut self, cmd: &DriveCommand) -> HwStatus;
 }

@@ -9,7 +9,7 @@ use std::future::Future;
 
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, SampleQueue, TransportError, TypedPublisher};
-use protocol::{RobotState, TorqueCommand};
+use protocol::{DriveCommand, RobotState};
 use zenoh::Session;
 
 /// What a state source yields. A state is carried by value, not boxed: one comes every tick,
@@ -32,9 +32,9 @@ pub trait StateSource: Send {
     fn next(&mut self) -> impl Future<Output = StateEvent> + Send;
 }
 
-/// Takes checked, clamped torques (commanded or safe mode) and applies them.
+/// Takes drive commands of checked, clamped torques (commanded or safe mode) and applies them.
 pub trait TorqueSink: Send {
-    fn apply(&mut self, torques: &TorqueCommand) -> impl Future<Output = Result<(), TransportError>> + Send;
+    fn apply(&mut self, drive: &DriveCommand) -> impl Future<Output = Result<(), TransportError>> + Send;
 }
 
 /// States published by the sim-bridge (or any state source) on `team/{team}/robot/{id}/state`.
@@ -62,9 +62,10 @@ impl StateSource for ZenohStateSource {
     }
 }
 
-/// Publishes the torques on `team/{team}/robot/{id}/torque` (hot-path QoS).
+/// Publishes the drive commands on `team/{team}/robot/{id}/torque` (hot-path QoS), which the
+/// simulated drives execute at every physics step.
 pub struct ZenohTorqueSink {
-    publisher: TypedPublisher<TorqueCommand>,
+    publisher: TypedPublisher<DriveCommand>,
 }
 
 impl ZenohTorqueSink {
@@ -75,7 +76,7 @@ impl ZenohTorqueSink {
 }
 
 impl TorqueSink for ZenohTorqueSink {
-    async fn apply(&mut self, torques: &TorqueCommand) -> Result<(), TransportError> {
-        self.publisher.put(torques).await
+    async fn apply(&mut self, drive: &DriveCommand) -> Result<(), TransportError> {
+        self.publisher.put(drive).await
     }
 }

@@ -60,7 +60,8 @@ pub fn schema_of(message: &RecordedMessage) -> (&'static str, fn() -> schemars::
     match message {
         RecordedMessage::State(_) => ("team.RobotState", || schemars::schema_for!(protocol::RobotState)),
         RecordedMessage::Dynamics(_) => ("team.DynamicsSummary", || schemars::schema_for!(DynamicsSummary)),
-        RecordedMessage::Command(_) | RecordedMessage::Torque(_) => ("team.TorqueCommand", || schemars::schema_for!(protocol::TorqueCommand)),
+        RecordedMessage::Command(_) => ("team.TorqueCommand", || schemars::schema_for!(protocol::TorqueCommand)),
+        RecordedMessage::Torque(_) => ("team.DriveCommand", || schemars::schema_for!(protocol::DriveCommand)),
         RecordedMessage::Contacts(_) => ("team.ContactSet", || schemars::schema_for!(protocol::ContactSet)),
         RecordedMessage::AgentStatus(_) => ("team.AgentStatus", || schemars::schema_for!(protocol::AgentStatus)),
         RecordedMessage::Truth(_) => ("team.GroundTruth", || schemars::schema_for!(protocol::GroundTruth)),
@@ -75,7 +76,8 @@ pub fn to_json(message: &RecordedMessage) -> serde_json::Result<Vec<u8>> {
     match message {
         RecordedMessage::State(m) => serde_json::to_vec(m),
         RecordedMessage::Dynamics(m) => serde_json::to_vec(&DynamicsSummary::of(m)),
-        RecordedMessage::Command(m) | RecordedMessage::Torque(m) => serde_json::to_vec(m),
+        RecordedMessage::Command(m) => serde_json::to_vec(m),
+        RecordedMessage::Torque(m) => serde_json::to_vec(m),
         RecordedMessage::Contacts(m) => serde_json::to_vec(m),
         RecordedMessage::AgentStatus(m) => serde_json::to_vec(m),
         RecordedMessage::Truth(m) => serde_json::to_vec(m),

@@ -28,7 +28,7 @@ use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
-use protocol::{AgentStatus, ContactSet, CoordinatorStatus, DynamicsTerms, GroundTruth, RobotState, TaskReferences, TickDiagnostics, TorqueCommand};
+use protocol::{AgentStatus, ContactSet, CoordinatorStatus, DriveCommand, DynamicsTerms, GroundTruth, RobotState, TaskReferences, TickDiagnostics, TorqueCommand};
 use thiserror::Error;
 
 use crate::plan::Plan;
@@ -58,7 +58,7 @@ pub enum RecordedMessage {
     State(RobotState),
     Dynamics(DynamicsTerms),
     Command(TorqueCommand),
-    Torque(TorqueCommand),
+    Torque(DriveCommand),
     Contacts(ContactSet),
     AgentStatus(AgentStatus),
     Truth(GroundTruth),

@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use protocol::{CoordinatorStatus, GroundTruth, TickDiagnostics, TorqueCommand};
+use protocol::{CoordinatorStatus, DriveCommand, GroundTruth, TickDiagnostics, TorqueCommand};
 use thiserror::Error;
 
 use super::{RunFacts, ScenarioSource, RUN_METADATA};
@@ -61,7 +61,8 @@ pub struct Recording {
     /// Messages the recorder dropped while recording (0: the recording is complete).
     pub dropped: u64,
     pub truth: Vec<GroundTruth>,
-    pub torques: Vec<TorqueCommand>,
+    /// What the robots' drives were commanded (`torque` keys).
+    pub torques: Vec<DriveCommand>,
     pub diagnostics: Vec<TickDiagnostics>,
     pub statuses: Vec<CoordinatorStatus>,
     /// Messages per channel topic.
@@ -83,7 +84,7 @@ impl Recording {
             ..Records::default()
         };
         for c in self.torques.iter().filter(|c| c.header.tick >= settle) {
-            rec.torques.entry(c.header.robot_id().to_string()).or_default().push((c.header.tick, c.tau.clone()));
+            rec.torques.entry(c.header.robot_id().to_string()).or_default().push((c.header.tick, c.tau_ff.clone()));
         }
         rec
     }
@@ -116,11 +117,18 @@ pub fn read(path: &Path) -> Result<Recording, ReplayError> {
         let bad = |e: serde_json::Error| ReplayError::Message { path: path.to_path_buf(), topic: topic.to_string(), reason: e.to_string() };
         match schema {
             "team.GroundTruth" => rec.truth.push(serde_json::from_slice(&m.data).map_err(bad)?),
-            "team.TorqueCommand" if topic.ends_with("/torque") => rec.torques.push(serde_json::from_slice(&m.data).map_err(bad)?),
+            "team.DriveCommand" if topic.ends_with("/torque") => rec.torques.push(serde_json::from_slice(&m.data).map_err(bad)?),
+            // Recordings of the first protocol version: torques on the torque keys.
+            "team.TorqueCommand" if topic.ends_with("/torque") => rec.torques.push(torque_as_drive(serde_json::from_slice(&m.data).map_err(bad)?)),
             "team.TickDiagnostics" => rec.diagnostics.push(serde_json::from_slice(&m.data).map_err(bad)?),
             "team.CoordinatorStatus" => rec.statuses.push(serde_json::from_slice(&m.data).map_err(bad)?),
             _ => {}
         }
     }
     Ok(rec)
+}
+
+/// A torque command of the first protocol version, as the drive command without gains it was.
+fn torque_as_drive(t: TorqueCommand) -> DriveCommand {
+    DriveCommand { header: t.header, tau_ff: t.tau, q_des: Vec::new(), qd_des: Vec::new(), kp: Vec::new(), kd: Vec::new() }
 }

@@ -74,7 +74,8 @@ impl SceneBuilder {
         let h = match message {
             RecordedMessage::State(m) => &m.header,
             RecordedMessage::Dynamics(m) => &m.header,
-            RecordedMessage::Command(m) | RecordedMessage::Torque(m) => &m.header,
+            RecordedMessage::Command(m) => &m.header,
+            RecordedMessage::Torque(m) => &m.header,
             RecordedMessage::Contacts(m) => &m.header,
             RecordedMessage::AgentStatus(m) => &m.header,
             RecordedMessage::Truth(m) => &m.header,

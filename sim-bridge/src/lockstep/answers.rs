@@ -4,7 +4,7 @@
 use std::time::{Duration, Instant};
 
 use protocol::transport::{self, decode_sample};
-use protocol::TorqueCommand;
+use protocol::DriveCommand;
 use zenoh::sample::Sample;
 
 use super::config::{BridgeError, LockstepConfig};
@@ -78,7 +78,7 @@ impl Answers {
     /// One torque sample during `tick`: this tick's torques of a robot drive it; so do those of
     /// a recent tick from a robot whose agent left.
     fn take(&mut self, sample: &Sample, tick: u64, plant: &mut impl Plant) {
-        let cmd = match decode_sample::<TorqueCommand>(sample) {
+        let cmd = match decode_sample::<DriveCommand>(sample) {
             Ok(c) => c,
             Err(e) => {
                 self.rejected += 1;
@@ -93,9 +93,9 @@ impl Answers {
         if cmd.header.tick != tick && !recent {
             return; // a repeat of an earlier tick
         }
-        if cmd.tau.len() != plant.joints(i) {
+        if cmd.tau_ff.len() != plant.joints(i) {
             self.rejected += 1;
-            tracing::warn!(robot = %self.robots[i], "torques of the wrong size: {} for {} joints", cmd.tau.len(), plant.joints(i));
+            tracing::warn!(robot = %self.robots[i], "torques of the wrong size: {} for {} joints", cmd.tau_ff.len(), plant.joints(i));
             return;
         }
         if !self.got[i] || self.lost[i] {
@@ -106,7 +106,7 @@ impl Answers {
                 tracing::info!(robot = %self.robots[i], tick, "the robot's drives take torques again");
                 plant.restore_drives(i);
             }
-            plant.set_torques(i, &cmd.tau);
+            plant.set_drive(i, &cmd);
             self.got[i] = true;
             self.answered[i] = Some(cmd.header.tick);
         }
