@@ -127,7 +127,7 @@ struct Driver<'a, S: DynamicsSource, H, L> {
     overruns: u64,
 }
 
-/// The torques this loop writes, and the link's failures.
+/// The drive command this loop writes, and the link's failures.
 struct Written {
     drive: DriveCommand,
     have: bool,

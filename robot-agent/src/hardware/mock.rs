@@ -293,7 +293,7 @@ mod tests {
 
     #[test]
     fn the_drive_law_runs_at_every_step_from_the_last_write() {
-        // One write, then 500 steps: v += dt (tau_ff + kp (q_des - q) + kd (qd_des - v)),
+        // One write, then 2000 steps: v += dt (tau_ff + kp (q_des - q) + kd (qd_des - v)),
         // q += dt v, written out here; it settles where the spring balances the feed-forward.
         let (dt, v0) = (0.002, 0.5);
         let mut hw = MockHardware::new(MockConfig::new(2, v0, dt));
