@@ -26,6 +26,7 @@ use protocol::{AgentMode, AgentStatus, DriveCommand, DynamicsTerms, Header, Robo
 use thiserror::Error;
 
 use crate::contact_switch::{ContactSwitch, SwitchConfig};
+use crate::drive_gains::{self, DriveGains, DriveGainsMode};
 use crate::dynamics_source::DynamicsSource;
 use crate::fall::{Fall, FallDetector, FallLimits};
 use crate::gate::{CommandGate, CommandRejection};
@@ -66,6 +67,11 @@ pub struct AgentConfig {
     /// How long the coordinator's liveliness token may be gone before the agent holds its
     /// posture (unless the command deadline comes first); default [`COORDINATOR_GRACE`].
     pub coordinator_grace: Duration,
+    /// The gains sent with each command ([`crate::drive_gains`]); default none (the torque).
+    pub drive_gains: DriveGainsMode,
+    /// The rate the robot's drives run their law at, Hz (the simulator's physics rate); `None`:
+    /// much faster than the team. Sets the reference's lead ([`crate::drive_gains::lead`]).
+    pub drive_hz: Option<f64>,
 }
 
 impl AgentConfig {
@@ -88,6 +94,8 @@ impl AgentConfig {
             takeover: DEFAULT_TAKEOVER,
             fall: FallLimits::default(),
             coordinator_grace: COORDINATOR_GRACE,
+            drive_gains: DriveGainsMode::None,
+            drive_hz: None,
         }
     }
 
@@ -179,7 +187,8 @@ pub enum ContactRejection {
 pub struct Outputs<'a> {
     pub terms: Option<&'a mut DynamicsTerms>,
     pub description: Option<&'a mut RobotDescription>,
-    /// The drive command to apply: `tau_ff` the checked torques or the hold's.
+    /// The drive command to apply: `tau_ff` the checked torques or the hold's; a command
+    /// carries the drive gains and its reference when [`AgentConfig::drive_gains`] has them.
     pub drive: Option<&'a mut DriveCommand>,
     /// Publish the status: the mode changed, or its period is due.
     pub status: bool,
@@ -233,6 +242,12 @@ pub struct AgentCore<S: DynamicsSource> {
     last_command: Vec<f64>,
     /// Robot time of the latest accepted state, s.
     state_time: f64,
+    /// The state before it (time, velocities), for the reference's acceleration; `have_prev`
+    /// once there is one. `had_state`: a state has been accepted.
+    prev_state_time: f64,
+    prev_qdot: Vec<f64>,
+    have_prev: bool,
+    had_state: bool,
     contacts: ContactSwitch,
     terms: DynamicsTerms,
     drive: DriveCommand,
@@ -260,6 +275,11 @@ pub struct AgentCore<S: DynamicsSource> {
     /// copy of it.
     applied: (u64, bool),
     coordinator_grace: Duration,
+    drive_gains: DriveGainsMode,
+    /// The drives' period, s (`None`: much faster than the team), for the reference's lead.
+    drive_period: Option<f64>,
+    /// The gains sent with commands, once made from the first terms ([`DriveGainsMode::Inertia`]).
+    gains: Option<DriveGains>,
 }
 
 impl<S: DynamicsSource> AgentCore<S> {
@@ -279,6 +299,9 @@ impl<S: DynamicsSource> AgentCore<S> {
                 gains.kd.len()
             )));
         }
+        if let Some(hz) = cfg.drive_hz.filter(|hz| !(hz.is_finite() && *hz > 0.0)) {
+            return Err(CoreError::Config(format!("drive rate {hz} Hz: must be positive and finite")));
+        }
         let feet: Vec<String> = source.foot_frames().to_vec();
         Ok(AgentCore {
             team: team.to_string(),
@@ -296,6 +319,10 @@ impl<S: DynamicsSource> AgentCore<S> {
             hold_tau: Vec::with_capacity(joints),
             last_command: Vec::with_capacity(joints),
             state_time: 0.0,
+            prev_state_time: 0.0,
+            prev_qdot: vec![0.0; joints],
+            have_prev: false,
+            had_state: false,
             contacts: ContactSwitch::new(cfg.contacts.clone(), ActiveContacts { stance: vec![true; feet.len()], hand_in_grasp: true }),
             feet,
             terms: empty_terms(team, robot),
@@ -316,6 +343,9 @@ impl<S: DynamicsSource> AgentCore<S> {
             coordinator_lost: None,
             applied: (0, false),
             coordinator_grace: cfg.coordinator_grace,
+            drive_gains: cfg.drive_gains,
+            drive_period: cfg.drive_hz.map(|hz| 1.0 / hz),
+            gains: None,
             source,
         })
     }
@@ -335,7 +365,8 @@ impl<S: DynamicsSource> AgentCore<S> {
         let tick = state.header.tick;
         // The same state again (the lockstep bridge republishes while it waits for some robot's
         // torques): its terms go again only while it is unanswered, as in `on_coordinator`.
-        let repeat = self.gate.latest_state_tick() == Some(tick) && !self.unanswered();
+        let same_tick = self.gate.latest_state_tick() == Some(tick);
+        let repeat = same_tick && !self.unanswered();
         if let Err(r) = self.admit_state(state) {
             self.counters.states_rejected += 1;
             tracing::warn!(robot = %self.robot, "{r}");
@@ -343,6 +374,13 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         self.counters.states += 1;
         self.state_at = Some(now);
+        if !same_tick {
+            // The state before, for the reference's acceleration (not a repeat of this one).
+            self.have_prev = self.had_state;
+            self.prev_state_time = self.state_time;
+            self.prev_qdot.copy_from_slice(&self.qdot);
+            self.had_state = true;
+        }
         self.state_time = state.time;
         self.watchdog.on_state(tick, now);
         self.q.copy_from_slice(&state.joint_positions);
@@ -364,6 +402,7 @@ impl<S: DynamicsSource> AgentCore<S> {
                 self.terms.header.tick = tick;
                 self.terms.state_tick = tick;
                 self.counters.dynamics += 1;
+                self.make_gains(tick);
                 true
             }
             Err(e) => {
@@ -704,6 +743,7 @@ impl<S: DynamicsSource> AgentCore<S> {
                 self.take_over();
                 self.last_applied = Apply::Command;
                 self.last_command.clone_from(&self.drive.tau_ff);
+                self.drive_targets();
                 drive = Some(&mut self.drive);
             }
             Apply::Hold => {
@@ -720,6 +760,7 @@ impl<S: DynamicsSource> AgentCore<S> {
                     self.takeover.cancel();
                     self.hold_now();
                     self.drive.tau_ff.clone_from(&self.hold_tau);
+                    self.torque_only();
                     self.drive.header.tick = tick;
                     self.counters.hold_torques += 1;
                     self.last_applied = Apply::Hold;
@@ -729,6 +770,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             Apply::Limp => {
                 if let Some(tick) = self.gate.latest_state_tick() {
                     self.hold.damping(&self.qdot, &mut self.drive.tau_ff);
+                    self.torque_only();
                     self.drive.header.tick = tick;
                     self.last_applied = Apply::Limp;
                     drive = Some(&mut self.drive);
@@ -746,6 +788,56 @@ impl<S: DynamicsSource> AgentCore<S> {
             status,
             leave_team: false,
         }
+    }
+
+    /// The drive gains from the first terms ([`DriveGainsMode::Inertia`]): each actuated
+    /// joint's inertia is the mass matrix's diagonal at the state of `tick`.
+    fn make_gains(&mut self, tick: u64) {
+        if self.drive_gains != DriveGainsMode::Inertia || self.gains.is_some() {
+            return;
+        }
+        let m = &self.terms.mass_matrix;
+        let offset = m.rows().saturating_sub(self.joints);
+        let inertia: Vec<f64> = (0..self.joints).map(|j| m.get(offset + j, offset + j).unwrap_or(f64::NAN)).collect();
+        match DriveGains::from_inertia(&inertia, self.gate.limits()) {
+            Ok(g) => {
+                tracing::info!(robot = %self.robot, tick, kp = ?g.kp, kd = ?g.kd, "drive gains from the joints' inertia");
+                self.gains = Some(g);
+            }
+            Err(e) => {
+                tracing::error!(robot = %self.robot, tick, "no drive gains, the drives get torques only: {e}");
+                self.drive_gains = DriveGainsMode::None;
+            }
+        }
+    }
+
+    /// The drive command's gains and reference for the command just checked: the latest
+    /// measured state carried over the lead ([`crate::drive_gains::reference`]); none without
+    /// gains.
+    fn drive_targets(&mut self) {
+        let Some(g) = &self.gains else {
+            return self.torque_only();
+        };
+        let h = self.state_time - self.prev_state_time;
+        let prev = self.have_prev.then_some(self.prev_qdot.as_slice());
+        let lead = if self.have_prev { drive_gains::lead(h, self.drive_period) } else { 0.0 };
+        drive_gains::reference(&self.q, &self.qdot, prev, h, lead, &mut self.drive.q_des, &mut self.drive.qd_des);
+        self.drive.kp.clone_from(&g.kp);
+        self.drive.kd.clone_from(&g.kd);
+    }
+
+    /// The drive command is its torque: no gains, no reference (the hold and the limp robot,
+    /// which the agent answers at every state).
+    fn torque_only(&mut self) {
+        self.drive.q_des.clear();
+        self.drive.qd_des.clear();
+        self.drive.kp.clear();
+        self.drive.kd.clear();
+    }
+
+    /// The gains sent with commands, once made.
+    pub fn drive_gains(&self) -> Option<&DriveGains> {
+        self.gains.as_ref()
     }
 
     /// Hold the posture of now, carrying the last command's load if a command was the last

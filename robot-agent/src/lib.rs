@@ -19,6 +19,8 @@
 //!   robot's model; [`dynamics_source::PlaceholderDynamics`] for the smoke run and the mock),
 //!   and the robot's protocol description ([`dynamics_source::robot_description`]).
 //! * [`contact_switch`]: the contact sets' schedule, lift-offs and force-confirmed touchdowns.
+//! * [`drive_gains`]: the gains sent with each drive command (none: the paper's torque loop;
+//!   or from each joint's inertia).
 //! * [`gate`]: the checks of incoming commands and clamping to the torque limits.
 //! * [`safe_mode`]: the watchdog and the posture hold of safe mode.
 //! * [`fall`]: a fallen robot goes limp and leaves its team.
@@ -27,6 +29,7 @@
 pub mod agent;
 pub mod contact_switch;
 pub mod core;
+pub mod drive_gains;
 pub mod dynamics_source;
 pub mod fall;
 pub mod gate;

@@ -55,6 +55,15 @@ struct RunCmd {
     /// `contact_switch::SwitchConfig`'s, 20 N).
     #[arg(long, value_name = "N")]
     touchdown_force: Option<f64>,
+    /// Gains sent to the drives with each command: `none` (the torque, the paper's loop) or
+    /// `inertia` (per joint from its inertia at the first state: a critically damped 5 Hz
+    /// loop; see `robot_agent::drive_gains`).
+    #[arg(long, value_name = "GAINS", default_value = "none")]
+    drive_gains: robot_agent::drive_gains::DriveGainsMode,
+    /// The rate the robot's drives run their law at, Hz (the simulator's physics rate); default:
+    /// much faster than the team. Sets how far ahead of the latest state the reference is.
+    #[arg(long, value_name = "HZ")]
+    drive_hz: Option<f64>,
     /// Smoke run only: placeholder dynamics (unit mass matrix, no frames, no limits) of this
     /// many joints instead of a robot model.
     #[arg(long, value_name = "N", conflicts_with = "robot", hide = true)]
@@ -68,6 +77,7 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
     protocol::validate_id("robot", &cmd.id)?;
     protocol::validate_id("team", &cmd.team)?;
     anyhow::ensure!(cmd.command_deadline_ms > 0, "--command-deadline-ms must be positive");
+    anyhow::ensure!(cmd.drive_hz.is_none_or(|hz| hz.is_finite() && hz > 0.0), "--drive-hz must be a positive rate (Hz)");
     anyhow::ensure!(cmd.touchdown_force.is_none_or(|f| f.is_finite() && f > 0.0), "--touchdown-force must be a positive force (N)");
     enum Source {
         Model(Box<ModelDynamics>),
@@ -84,6 +94,8 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
     protocol::logging::init(protocol::logging::Verbosity::Info);
     let mut cfg = AgentConfig::new(&cmd.team, &cmd.id).with_deadline_time(Duration::from_millis(cmd.command_deadline_ms)).with_deadline_ticks(cmd.command_deadline_ticks);
     cfg.coordinator_grace = Duration::from_millis(cmd.coordinator_grace_ms);
+    cfg.drive_gains = cmd.drive_gains;
+    cfg.drive_hz = cmd.drive_hz;
     if let Some(f) = cmd.touchdown_force {
         cfg.contacts.touchdown_force = f;
     }

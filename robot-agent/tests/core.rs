@@ -4,6 +4,7 @@
 use std::time::{Duration, Instant};
 
 use protocol::{AgentMode, ContactSet as ContactMsg, DynamicsTerms, Header, Matrix, Pose, RobotDescription, RobotState, TorqueCommand};
+use robot_agent::drive_gains::DriveGainsMode;
 use robot_agent::core::{AgentConfig, AgentCore, ContactRejection, Outputs, Sent, StateRejection, COORDINATOR_GRACE};
 use robot_agent::dynamics_source::{DynamicsSource, SourceError};
 use robot_agent::gate::CommandRejection;
@@ -13,8 +14,10 @@ use robot_agent::terms::ActiveContacts;
 const ID: &str = "r1";
 const LIMITS: [f64; 3] = [10.0, 10.0, 2.0];
 const GRAVITY: [f64; 3] = [1.5, -0.5, 0.25];
+/// The mass matrix's diagonal (its off-diagonal entries are zero).
+const INERTIA: [f64; 3] = [0.5, 1e-3, 0.2];
 
-/// Fixed base, unit mass matrix, constant gravity, two feet.
+/// Fixed base, diagonal mass matrix, constant gravity, two feet.
 struct Stub {
     feet: Vec<String>,
     last_contacts: Option<ActiveContacts>,
@@ -42,6 +45,9 @@ impl DynamicsSource for Stub {
         out.floating_base = false;
         out.nv = 3;
         out.mass_matrix = Matrix::zeros(3, 3);
+        for (j, m) in INERTIA.iter().enumerate() {
+            out.mass_matrix.data[j * 3 + j] = *m;
+        }
         out.bias = GRAVITY.to_vec();
         out.velocity = state.joint_velocities.clone();
         out.hand_in_grasp = contacts.hand_in_grasp;
@@ -382,4 +388,64 @@ fn a_fallen_robot_goes_limp_refuses_commands_and_sends_no_terms() {
     fixed.on_command(&command(ID, 0, &[1.0; 3]), t0).unwrap();
     assert_eq!(summary(fixed.on_state(&posed(1, tipped(90.0), [0.0; 3]), t0 + ms(1)).unwrap()).0, Some(1));
     assert_eq!((fixed.mode(), fixed.fallen()), (AgentMode::Commanded, None));
+}
+
+#[test]
+fn commands_carry_the_drive_gains_about_the_latest_state_and_the_hold_does_not() {
+    let t0 = Instant::now();
+    let mut cfg = AgentConfig::new("t", ID);
+    cfg.takeover = Duration::ZERO;
+    cfg.drive_gains = DriveGainsMode::Inertia;
+    let mut c = AgentCore::new(&cfg, Stub { feet: vec![], last_contacts: None, floating: false }).unwrap();
+    let _ = c.start(t0);
+    let (q0, q1, v1) = ([0.1, -0.2, 0.3], [0.12, -0.21, 0.35], [0.4, -0.1, 0.02]);
+    let _ = c.on_state(&state(0, q0, [0.0; 3]), t0).unwrap();
+    let _ = c.on_state(&state(1, q1, v1), t0 + ms(5)).unwrap();
+    assert!(c.drive_gains().is_some(), "made from the first terms");
+    // The command of tick 0 arrives after the state of tick 1: its reference is tick 1's state
+    // carried half a period (drives much faster than the team) at the acceleration measured
+    // from tick 0 to 1, 5 ms apart.
+    let out = c.on_command(&command(ID, 0, &[1.0, -0.5, 0.25]), t0 + ms(6)).unwrap();
+    let d = out.drive.unwrap().clone();
+    let (h, lead) = (0.005, 0.0025);
+    for j in 0..3 {
+        let a = v1[j] / h;
+        let (q, v) = (q1[j] + v1[j] * lead + 0.5 * a * lead * lead, v1[j] + a * lead);
+        assert!((d.q_des[j] - q).abs() < 1e-12 && (d.qd_des[j] - v).abs() < 1e-12, "joint {j}: {:?} {:?}", d.q_des, d.qd_des);
+    }
+    // Each joint a critically damped loop at the bandwidth on its inertia (stiffness and
+    // damping written out), the stiffness capped where 0.05 rad would exceed the torque limit.
+    let omega = 2.0 * std::f64::consts::PI * robot_agent::drive_gains::BANDWIDTH_HZ;
+    for j in 0..3 {
+        let kp = (omega * omega * INERTIA[j]).min(LIMITS[j] / 0.05);
+        assert!((d.kp[j] - kp).abs() < 1e-9 * kp, "joint {j}: kp {} vs {kp}", d.kp[j]);
+        assert!((d.kd[j] - 2.0 * omega * INERTIA[j]).abs() < 1e-12, "joint {j}: kd {}", d.kd[j]);
+    }
+    assert_eq!(d.kp[2], 40.0, "0.2 kg m^2 would want 197 N m/rad at 5 Hz; 2 N m at 0.05 rad caps it");
+    assert!(protocol::Validate::validate(&d).is_ok());
+    // At the reference the law is the command's torque; away from it, it pulls back.
+    let mut tau = [0.0; 3];
+    d.effort(&d.q_des, &d.qd_des, &mut tau);
+    assert_eq!(tau, [1.0, -0.5, 0.25]);
+    let pushed = [d.q_des[0] + 0.01, d.q_des[1], d.q_des[2]];
+    d.effort(&pushed, &d.qd_des, &mut tau);
+    assert!((tau[0] - (1.0 - d.kp[0] * 0.01)).abs() < 1e-12, "{tau:?}");
+
+    // The same state again (the lockstep bridge republishes it while it waits): the
+    // reference does not change.
+    let _ = c.on_state(&state(1, q1, v1), t0 + ms(7)).unwrap();
+    let again = c.on_command(&command(ID, 1, &[1.0, -0.5, 0.25]), t0 + ms(7)).unwrap().drive.unwrap().clone();
+    assert_eq!((again.q_des, again.qd_des), (d.q_des.clone(), d.qd_des.clone()));
+
+    // Safe mode: the hold, answered at every state, is a torque without gains.
+    let out = c.enter_safe_mode("test", t0 + ms(7));
+    let hold = out.drive.unwrap();
+    assert!(!hold.has_gains() && hold.q_des.is_empty() && hold.qd_des.is_empty(), "{hold:?}");
+
+    // Without the mode, a command is its torque.
+    let mut c = core(CommandDeadline { ticks: 5, time: None });
+    let _ = c.on_state(&state(0, q0, [0.0; 3]), t0).unwrap();
+    let d = c.on_command(&command(ID, 0, &[1.0, -0.5, 0.25]), t0).unwrap().drive.unwrap().clone();
+    assert!(!d.has_gains() && d.q_des.is_empty(), "{d:?}");
+    assert!(c.drive_gains().is_none());
 }

@@ -1,7 +1,8 @@
 //! The core's per-tick calls (state, command, timer, the posture hold) allocate nothing after
 //! start-up: a counting global allocator watches this thread. The first test uses the
 //! placeholder dynamics (unit mass matrix), so that only the core is measured; the second the
-//! robot's own model, the agent's whole tick.
+//! robot's own model, the agent's whole tick, with the drive gains on (each command carries
+//! gains and a reference).
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
@@ -9,6 +10,7 @@ use std::time::{Duration, Instant};
 
 use protocol::{Header, Pose, RobotState, TorqueCommand};
 use robot_agent::core::{AgentConfig, AgentCore};
+use robot_agent::drive_gains::DriveGainsMode;
 use robot_agent::dynamics_source::{DynamicsSource, ModelDynamics, PlaceholderDynamics};
 use robot_agent::safe_mode::CommandDeadline;
 
@@ -48,7 +50,7 @@ fn per_tick_calls_do_not_allocate() {
         time: 0.0,
         foot_forces: Vec::new(),
     };
-    let (count, applied, held) = ticks_allocations(PlaceholderDynamics::floating(n), state, n);
+    let (count, applied, held) = ticks_allocations(PlaceholderDynamics::floating(n), state, n, DriveGainsMode::None);
     assert_eq!(count, 0, "the core's tick allocated {count} times");
     assert_eq!((applied, held), (180, 17), "commanded and safe-mode ticks were both exercised");
     // The counter works: an allocation while watching is seen.
@@ -73,7 +75,7 @@ fn the_agents_tick_on_the_robots_model_does_not_allocate() {
         time: 0.0,
         foot_forces: Vec::new(),
     };
-    let (count, applied, held) = ticks_allocations(ModelDynamics::new(robot).unwrap(), state, n);
+    let (count, applied, held) = ticks_allocations(ModelDynamics::new(robot).unwrap(), state, n, DriveGainsMode::Inertia);
     assert_eq!(count, 0, "the agent's tick with the robot's model allocated {count} times");
     assert_eq!((applied, held), (180, 17), "commanded and safe-mode ticks were both exercised");
 }
@@ -81,8 +83,9 @@ fn the_agents_tick_on_the_robots_model_does_not_allocate() {
 /// 200 ticks of the core over `source` (10 to warm up, 20 without commands: safe mode from the
 /// 5th); the allocations counted after warm-up, the ticks that applied a command and the ticks
 /// that held the posture.
-fn ticks_allocations(source: impl DynamicsSource, mut state: RobotState, n: usize) -> (usize, u32, u32) {
+fn ticks_allocations(source: impl DynamicsSource, mut state: RobotState, n: usize, gains: DriveGainsMode) -> (usize, u32, u32) {
     let mut cfg = AgentConfig::new("t", "r1");
+    cfg.drive_gains = gains;
     cfg.deadline = CommandDeadline { ticks: 5, time: None };
     cfg.max_command_age = Duration::from_secs(10);
     let mut core = AgentCore::new(&cfg, source).unwrap();
@@ -102,7 +105,11 @@ fn ticks_allocations(source: impl DynamicsSource, mut state: RobotState, n: usiz
         held += core.on_state(&state, now).unwrap().drive.is_some() as u32;
         if !(100..120).contains(&tick) {
             cmd.header.tick = tick;
-            applied += core.on_command(&cmd, now).unwrap().drive.is_some() as u32;
+            let out = core.on_command(&cmd, now).unwrap();
+            if let Some(d) = out.drive {
+                applied += 1;
+                assert_eq!(d.has_gains(), gains == DriveGainsMode::Inertia, "tick {tick}");
+            }
         }
         let _ = core.on_timer(now);
         let _ = core.status();

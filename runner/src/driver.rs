@@ -41,8 +41,11 @@ pub const CONTACT_LOOKAHEAD: u64 = 1_000;
 #[derive(Debug, Clone, Default)]
 pub struct Records {
     pub truth: Vec<GroundTruth>,
-    /// Applied torques per robot: (tick, torques in actuated-joint order).
+    /// Applied torques per robot: (tick, torques in actuated-joint order; a drive command's
+    /// `tau_ff`).
     pub torques: BTreeMap<String, Vec<(u64, Vec<f64>)>>,
+    /// Per robot, how many of those drive commands carried gains (`drive_gains`).
+    pub with_gains: BTreeMap<String, u64>,
     pub diagnostics: Vec<TickDiagnostics>,
     pub last_status: Option<CoordinatorStatus>,
     /// Every coordinator status heard (it goes out on every change of mode, members, stale,
@@ -72,6 +75,9 @@ impl Records {
                 tap.send(sample.key_expr().as_str(), RecordedMessage::Torque(cmd.clone()));
             }
             if cmd.header.tick >= settle {
+                if cmd.has_gains() {
+                    *self.with_gains.entry(cmd.header.robot_id().to_string()).or_default() += 1;
+                }
                 self.torques.entry(cmd.header.robot_id().to_string()).or_default().push((cmd.header.tick, cmd.tau_ff));
             }
         }

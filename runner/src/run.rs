@@ -135,6 +135,8 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
             model: AgentModel::Robot { robot: r.robot.clone(), description: r.description.clone() },
             command_deadline,
             command_deadline_ticks,
+            drive_gains: plan.scenario.drive_gains,
+            drive_hz: Some(plan.scenario.physics_hz),
         })
         .collect();
     let bridge = BridgeArgs::Scene { scene: Box::new(plan.scene.clone()), robots: plan.loaded_robots() };

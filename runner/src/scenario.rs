@@ -102,6 +102,12 @@ pub struct Scenario {
     /// take it back).
     #[serde(default)]
     pub drive_loss: sim_bridge::plant::DriveLoss,
+    /// The gains the agents send their drives with each command
+    /// (`robot_agent::drive_gains`): `"none"` (the default: the drives apply the team's
+    /// torque, the paper's loop) or `"inertia"` (per joint from its inertia: the drives hold
+    /// the commanded state between team commands).
+    #[serde(default)]
+    pub drive_gains: robot_agent::drive_gains::DriveGainsMode,
 }
 
 /// A fault injected into a run, `at` s after the scenario clock starts
@@ -209,7 +215,7 @@ fn default_capacity_check() -> bool {
 }
 
 /// Top-level keys with a default that `--set` may give although the file leaves them out.
-pub const OPTIONAL_KEYS: [&str; 12] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations", "noslip_iterations", "faults", "drive_loss"];
+pub const OPTIONAL_KEYS: [&str; 13] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations", "noslip_iterations", "faults", "drive_loss", "drive_gains"];
 /// Keys inside a table with a default that `--set` may give although the file leaves them
 /// out (`--set team.spacing=0.7` on a layout of one robot per face).
 pub const OPTIONAL_NESTED_KEYS: [&str; 6] = ["team.spacing", "team.standoff", "team.description", "walk.robots", "walk.frame", "walk.start"];

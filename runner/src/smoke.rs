@@ -6,6 +6,7 @@ use std::time::Duration;
 
 use coordinator::joint_damping::JointDampingConfig;
 use coordinator::ControllerSpec;
+use robot_agent::drive_gains::DriveGainsMode;
 use thiserror::Error;
 
 use crate::launch::{AgentArgs, AgentModel, BridgeArgs, BridgeOutcome, CoordinatorArgs, Launch, LaunchError, RunMode, SmokePlant};
@@ -63,7 +64,7 @@ impl SmokeConfig {
         let agents = self
             .robots
             .iter()
-            .map(|r| AgentArgs { team: self.team.clone(), id: r.clone(), model: AgentModel::Placeholder { joints: self.joints }, command_deadline: SMOKE_COMMAND_DEADLINE, command_deadline_ticks: LOCKSTEP_DEADLINE_TICKS })
+            .map(|r| AgentArgs { team: self.team.clone(), id: r.clone(), model: AgentModel::Placeholder { joints: self.joints }, command_deadline: SMOKE_COMMAND_DEADLINE, command_deadline_ticks: LOCKSTEP_DEADLINE_TICKS, drive_gains: DriveGainsMode::None, drive_hz: None })
             .collect();
         let plant = SmokePlant { team: self.team.clone(), robots: self.robots.clone(), joints: self.joints, ticks: self.ticks, dt: self.dt, v0: self.v0 };
         (Launch { coordinator, agents }, BridgeArgs::Smoke(plant))

@@ -1,7 +1,10 @@
 //! The robots' drives execute a drive command (`protocol::DriveCommand`) at every physics step,
 //! `tau = tau_ff + kp (q_des - q) + kd (qd_des - qd)`, until the next command: the MuJoCo plant
 //! and the placeholder plant, each against the law written out here, in the test, at every
-//! physics step. Without gains a drive command is the torque it carries, bit for bit.
+//! physics step. Without gains a drive command is the torque it carries, bit for bit. And the
+//! team with the agents' drive gains on (`drive_gains = "inertia"`) against the torque loop.
+
+mod common;
 
 use protocol::{DriveCommand, Header, RobotState};
 use sim_bridge::mujoco_plant::MujocoPlant;
@@ -145,3 +148,29 @@ fn the_placeholder_drives_run_the_law_as_written() {
     // The PD pulls each joint to where the feed-forward balances it: q_des + tau_ff / kp.
     assert!((q[0] - (1.0 + 0.5 / 4.0)).abs() < 1e-3, "{q:?}");
 }
+
+/// S4 in lockstep with the agents' drive gains (`robot_agent::drive_gains`): every command
+/// reaches the drives with its gains, and the team holds S4 as the torque loop does. At the
+/// state a command is applied at its law is its torque; over the tick's second physics step
+/// it pulls the joints back towards that state, which the object's error barely shows.
+#[test]
+fn s4_with_the_drive_gains_holds_as_the_torque_loop_does() {
+    let sets = ["duration=2", "settle=0.5"];
+    let (_, torque) = common::scenario::run_scenario("s4_object_circle.toml", &sets, false, "drive_s4_torque");
+    let (plan, gains, records) = common::scenario::run_scenario_records("s4_object_circle.toml", &[sets[0], sets[1], "drive_gains=\"inertia\""], false, "drive_s4_inertia");
+    for c in &gains.checks {
+        assert!(c.passed, "with drive gains: {} = {} not below {}", c.name, c.value, c.bound);
+    }
+    for r in &plan.robots {
+        let commands = records.torques.get(&r.id).map_or(0, Vec::len) as u64;
+        assert_eq!(commands, plan.scene.ticks, "{}: a command every tick", r.id);
+        assert_eq!(records.with_gains.get(&r.id).copied(), Some(commands), "{}: every command with its gains", r.id);
+    }
+    let (a, b) = (torque.object.position_rms_m, gains.object.position_rms_m);
+    println!("object RMS: torque loop {:.4} mm, with drive gains {:.4} mm", a * 1e3, b * 1e3);
+    assert!(b < 1e-3, "object RMS with drive gains {b} m");
+    assert!((a - b).abs() < DIFFERENCE_M, "the gains change the object's RMS by {} mm", (a - b) * 1e3);
+}
+
+/// How much the drive gains may change S4's object RMS in lockstep.
+const DIFFERENCE_M: f64 = 1e-4;
