@@ -72,6 +72,11 @@ pub struct AgentConfig {
     /// The rate the robot's drives run their law at, Hz (the simulator's physics rate); `None`:
     /// much faster than the team. Sets the reference's lead ([`crate::drive_gains::lead`]).
     pub drive_hz: Option<f64>,
+    /// The team answers every this many state ticks (its rate is the robot's divided by it;
+    /// default 1). Between, the agent answers each state alone with the last command's torque
+    /// and, with drive gains, the reference at that state. The tick deadline and the
+    /// maximum command age in ticks count team ticks (this many state ticks each).
+    pub team_every: u64,
 }
 
 impl AgentConfig {
@@ -96,6 +101,7 @@ impl AgentConfig {
             coordinator_grace: COORDINATOR_GRACE,
             drive_gains: DriveGainsMode::None,
             drive_hz: None,
+            team_every: 1,
         }
     }
 
@@ -213,6 +219,9 @@ enum Apply {
     Command,
     /// The posture hold at the latest state.
     Hold,
+    /// Between team ticks: the last command's torque with the reference at the latest state
+    /// ([`AgentConfig::team_every`]).
+    Servo,
     /// Joint damping only: the robot fell ([`crate::fall`]).
     Limp,
 }
@@ -233,7 +242,8 @@ pub struct AgentCore<S: DynamicsSource> {
     /// The hold following commands blends in from the last of them (`entry_from`).
     entry: Takeover,
     entry_from: Vec<f64>,
-    /// What the agent applied last: a command or its own hold.
+    /// What the agent applied last: a command or its own hold (a servo tick leaves it at the
+    /// command).
     last_applied: Apply,
     /// The hold torques as they apply now ([`AgentCore::hold_now`]).
     hold_tau: Vec<f64>,
@@ -242,12 +252,11 @@ pub struct AgentCore<S: DynamicsSource> {
     last_command: Vec<f64>,
     /// Robot time of the latest accepted state, s.
     state_time: f64,
-    /// The state before it (time, velocities), for the reference's acceleration; `have_prev`
-    /// once there is one. `had_state`: a state has been accepted.
-    prev_state_time: f64,
-    prev_qdot: Vec<f64>,
-    have_prev: bool,
-    had_state: bool,
+    /// What drive commands' references are carried from ([`drive_gains::Reference`]).
+    reference: drive_gains::Reference,
+    /// Every how many state ticks the team answers (a team tick); the states between are
+    /// answered by the agent alone ([`Apply::Servo`]).
+    team_every: u64,
     contacts: ContactSwitch,
     terms: DynamicsTerms,
     drive: DriveCommand,
@@ -276,8 +285,6 @@ pub struct AgentCore<S: DynamicsSource> {
     applied: (u64, bool),
     coordinator_grace: Duration,
     drive_gains: DriveGainsMode,
-    /// The drives' period, s (`None`: much faster than the team), for the reference's lead.
-    drive_period: Option<f64>,
     /// The gains sent with commands, once made from the first terms ([`DriveGainsMode::Inertia`]).
     gains: Option<DriveGains>,
 }
@@ -302,14 +309,18 @@ impl<S: DynamicsSource> AgentCore<S> {
         if let Some(hz) = cfg.drive_hz.filter(|hz| !(hz.is_finite() && *hz > 0.0)) {
             return Err(CoreError::Config(format!("drive rate {hz} Hz: must be positive and finite")));
         }
+        if cfg.team_every == 0 {
+            return Err(CoreError::Config("the team must answer every 1 or more ticks, not 0".into()));
+        }
         let feet: Vec<String> = source.foot_frames().to_vec();
         Ok(AgentCore {
             team: team.to_string(),
             robot: robot.to_string(),
             description: source.description(team, robot),
             joints,
-            gate: CommandGate::new(robot, limits.clone(), cfg.max_command_age_ticks, cfg.max_command_age),
-            watchdog: Watchdog::new(cfg.deadline, cfg.first_command),
+            // Tick deadlines count the team's ticks: a command comes every `team_every` states.
+            gate: CommandGate::new(robot, limits.clone(), cfg.max_command_age_ticks.saturating_mul(cfg.team_every), cfg.max_command_age),
+            watchdog: Watchdog::new(CommandDeadline { ticks: cfg.deadline.ticks.saturating_mul(cfg.team_every), ..cfg.deadline }, cfg.first_command),
             fall: FallDetector::new(cfg.fall),
             hold: PostureHold::new(gains, limits),
             takeover: Takeover::new(cfg.takeover),
@@ -319,10 +330,8 @@ impl<S: DynamicsSource> AgentCore<S> {
             hold_tau: Vec::with_capacity(joints),
             last_command: Vec::with_capacity(joints),
             state_time: 0.0,
-            prev_state_time: 0.0,
-            prev_qdot: vec![0.0; joints],
-            have_prev: false,
-            had_state: false,
+            reference: drive_gains::Reference::new(joints, cfg.drive_hz.map(|hz| 1.0 / hz)),
+            team_every: cfg.team_every,
             contacts: ContactSwitch::new(cfg.contacts.clone(), ActiveContacts { stance: vec![true; feet.len()], hand_in_grasp: true }),
             feet,
             terms: empty_terms(team, robot),
@@ -344,7 +353,6 @@ impl<S: DynamicsSource> AgentCore<S> {
             applied: (0, false),
             coordinator_grace: cfg.coordinator_grace,
             drive_gains: cfg.drive_gains,
-            drive_period: cfg.drive_hz.map(|hz| 1.0 / hz),
             gains: None,
             source,
         })
@@ -374,17 +382,14 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         self.counters.states += 1;
         self.state_at = Some(now);
-        if !same_tick {
-            // The state before, for the reference's acceleration (not a repeat of this one).
-            self.have_prev = self.had_state;
-            self.prev_state_time = self.state_time;
-            self.prev_qdot.copy_from_slice(&self.qdot);
-            self.had_state = true;
-        }
         self.state_time = state.time;
         self.watchdog.on_state(tick, now);
         self.q.copy_from_slice(&state.joint_positions);
         self.qdot.copy_from_slice(&state.joint_velocities);
+        let team_tick = tick % self.team_every == 0;
+        if !same_tick {
+            self.reference.on_state(state.time, &self.q, &self.qdot);
+        }
         let fell = self.source.floating_base().then(|| self.fall.observe(tick, &state.base_pose)).flatten();
         if let Some(f) = fell {
             self.board.status.mode = AgentMode::Fallen;
@@ -397,6 +402,9 @@ impl<S: DynamicsSource> AgentCore<S> {
             return Ok(Outputs { leave_team: fell.is_some(), ..out });
         }
         self.switch_contacts(tick, &state.foot_forces);
+        if !team_tick {
+            return Ok(self.servo_tick(tick, now, mode_before));
+        }
         let terms = match self.source.compute(state, self.contacts.active(), &mut self.terms) {
             Ok(()) => {
                 self.terms.header.tick = tick;
@@ -419,6 +427,23 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         let apply = if self.watchdog.safe_mode_since().is_some() { Apply::Hold } else { Apply::Nothing };
         Ok(self.outputs(now, mode_before, terms && !repeat, apply, false))
+    }
+
+    /// A state between team ticks: no terms; the watchdog; the agent answers it alone, with
+    /// the last command's torque and the reference at this state ([`Apply::Servo`]), or the
+    /// hold in safe mode.
+    fn servo_tick(&mut self, tick: u64, now: Instant, mode_before: AgentMode) -> Outputs<'_> {
+        if self.watchdog.expired(tick, now) {
+            self.enter_safe_mode_at(tick, "no valid command in time");
+        }
+        let apply = if self.watchdog.safe_mode_since().is_some() {
+            Apply::Hold
+        } else if self.last_applied == Apply::Command {
+            Apply::Servo
+        } else {
+            Apply::Nothing
+        };
+        self.outputs(now, mode_before, false, apply, false)
     }
 
     /// Whether the latest state still waits for its answer: no command applied for it, and not
@@ -746,6 +771,14 @@ impl<S: DynamicsSource> AgentCore<S> {
                 self.drive_targets();
                 drive = Some(&mut self.drive);
             }
+            Apply::Servo => {
+                if let Some(tick) = self.gate.latest_state_tick() {
+                    self.drive.tau_ff.clone_from(&self.last_command);
+                    self.drive_targets();
+                    self.drive.header.tick = tick;
+                    drive = Some(&mut self.drive);
+                }
+            }
             Apply::Hold => {
                 if let Some(tick) = self.gate.latest_state_tick() {
                     if self.last_applied != Apply::Hold {
@@ -811,17 +844,13 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
     }
 
-    /// The drive command's gains and reference for the command just checked: the latest
-    /// measured state carried over the lead ([`crate::drive_gains::reference`]); none without
+    /// The drive command's gains and reference ([`drive_gains::Reference`]); none without
     /// gains.
     fn drive_targets(&mut self) {
         let Some(g) = &self.gains else {
             return self.torque_only();
         };
-        let h = self.state_time - self.prev_state_time;
-        let prev = self.have_prev.then_some(self.prev_qdot.as_slice());
-        let lead = if self.have_prev { drive_gains::lead(h, self.drive_period) } else { 0.0 };
-        drive_gains::reference(&self.q, &self.qdot, prev, h, lead, &mut self.drive.q_des, &mut self.drive.qd_des);
+        self.reference.fill(&mut self.drive.q_des, &mut self.drive.qd_des);
         self.drive.kp.clone_from(&g.kp);
         self.drive.kd.clone_from(&g.kd);
     }
@@ -844,7 +873,7 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// torque applied (after a hold, the load that hold carried).
     fn latch_hold(&mut self) {
         match self.last_applied {
-            Apply::Command => self.hold.hold_carrying(&self.q, &self.last_command, &self.gravity),
+            Apply::Command | Apply::Servo => self.hold.hold_carrying(&self.q, &self.last_command, &self.gravity),
             Apply::Hold => self.hold.move_to(&self.q),
             Apply::Nothing | Apply::Limp => self.hold.hold(&self.q),
         }

@@ -14,13 +14,14 @@
 //!
 //! with `kp` capped so that an error of [`FULL_TORQUE_ERROR`] reaches the joint's torque limit.
 //!
-//! The reference ([`reference`]) is the latest measured state carried forward over [`lead`]:
-//! the drives hold one `q_des` for the whole team period while the joint moves on, so the
+//! The reference ([`Reference`]) is the latest measured state carried forward over [`lead`]:
+//! the drives hold one `q_des` until the next state's command while the joint moves on, so the
 //! reference is where the joint is, on average, at the drive steps of that period. The
 //! acceleration it is carried with is the one measured over the last two states. On that
 //! trajectory the law adds nothing on average to `tau_ff`; a drive left with the command (a
-//! late command, a team slower than the drives) pulls the joint back to it instead of applying
-//! a stale torque open loop.
+//! late command) pulls the joint back to it instead of applying a stale torque open loop. With
+//! the team slower than the robot (`crate::core::AgentConfig::team_every`) the agent answers
+//! each state between team ticks with the last team torque and the reference at that state.
 //!
 //! The bandwidth is a trade: the law acts within each team period too, where the reference is
 //! only on average right. S4 in lockstep (2 s, 1 kHz team, 2 kHz drives) keeps an object RMS
@@ -96,21 +97,62 @@ pub fn lead(h: f64, drive_period: Option<f64>) -> f64 {
     ((h - drive_period.unwrap_or(0.0)) / 2.0).max(0.0)
 }
 
-/// The reference of a command: the latest state `q`, `qd` carried over `lead` s at the
-/// acceleration measured from the velocities `qd_prev` of the state `h` s before (zero without
-/// one, `h` not positive): `q_des = q + qd lead + a lead^2 / 2`, `qd_des = qd + a lead`.
-pub fn reference(q: &[f64], qd: &[f64], qd_prev: Option<&[f64]>, h: f64, lead: f64, q_des: &mut Vec<f64>, qd_des: &mut Vec<f64>) {
+/// `q + qd lead + a lead^2 / 2` into `q_des` and `qd + a lead` into `qd_des`: a state carried
+/// `lead` s at the acceleration `a`.
+pub fn carry(q: &[f64], qd: &[f64], a: &[f64], lead: f64, q_des: &mut Vec<f64>, qd_des: &mut Vec<f64>) {
     q_des.clear();
-    q_des.extend_from_slice(q);
     qd_des.clear();
-    qd_des.extend_from_slice(qd);
     for j in 0..q.len() {
-        let a = match qd_prev {
-            Some(p) if h > 0.0 => (qd[j] - p[j]) / h,
-            _ => 0.0,
-        };
-        q_des[j] += qd[j] * lead + 0.5 * a * lead * lead;
-        qd_des[j] += a * lead;
+        q_des.push(q[j] + qd[j] * lead + 0.5 * a[j] * lead * lead);
+        qd_des.push(qd[j] + a[j] * lead);
+    }
+}
+
+/// The reference a drive command goes with: the latest measured state, carried over [`lead`]
+/// at the acceleration measured from the state before it. On ticks between team ticks too:
+/// carrying the team tick's state over the ticks since instead pulled the joints towards an
+/// extrapolation that the team's next torques did not follow (S4 with the team at 100 Hz:
+/// object RMS 1.35 mm against 0.21 mm).
+#[derive(Debug, Clone)]
+pub struct Reference {
+    drive_period: Option<f64>,
+    /// Time of the latest state; the period from the one before (0: none yet).
+    last: Option<f64>,
+    period: f64,
+    q: Vec<f64>,
+    qd: Vec<f64>,
+    a: Vec<f64>,
+}
+
+impl Reference {
+    /// For `joints` joints whose drives run at `drive_period` s (`None`: much faster than the
+    /// team). Every buffer is allocated here.
+    pub fn new(joints: usize, drive_period: Option<f64>) -> Self {
+        let z = || vec![0.0; joints];
+        Reference { drive_period, last: None, period: 0.0, q: z(), qd: z(), a: z() }
+    }
+
+    /// A new state (not a repeat of the latest) at `time`.
+    pub fn on_state(&mut self, time: f64, q: &[f64], qd: &[f64]) {
+        let h = self.last.map(|t| time - t).filter(|h| *h > 0.0);
+        for j in 0..qd.len() {
+            self.a[j] = h.map_or(0.0, |h| (qd[j] - self.qd[j]) / h);
+        }
+        if let Some(h) = h {
+            self.period = h;
+        }
+        self.last = Some(time);
+        self.q.copy_from_slice(q);
+        self.qd.copy_from_slice(qd);
+    }
+
+    /// The reference at the latest state into `q_des`, `qd_des` (nothing before a state).
+    pub fn fill(&self, q_des: &mut Vec<f64>, qd_des: &mut Vec<f64>) {
+        if self.last.is_none() {
+            return;
+        }
+        let ahead = if self.period > 0.0 { lead(self.period, self.drive_period) } else { 0.0 };
+        carry(&self.q, &self.qd, &self.a, ahead, q_des, qd_des);
     }
 }
 
@@ -184,22 +226,34 @@ mod tests {
         assert_eq!(lead(h, None), h / 2.0);
     }
 
+    /// `q(t) = q0 + v0 t + a t^2 / 2` of two joints, with its velocity.
+    fn trajectory(t: f64) -> (Vec<f64>, Vec<f64>) {
+        let (q0, v0, a) = ([0.3, -1.0], [0.5, 2.0], [4.0, -10.0]);
+        (0..2).map(|j| (q0[j] + v0[j] * t + 0.5 * a[j] * t * t, v0[j] + a[j] * t)).unzip()
+    }
+
     #[test]
     fn at_constant_acceleration_the_reference_is_the_trajectory_ahead() {
-        // q(t) = q0 + v0 t + a t^2 / 2, measured at t1 - h and t1; the reference lead s ahead.
-        let (q0, v0, a, h, t1, ahead) = ([0.3, -1.0], [0.5, 2.0], [4.0, -10.0], 1e-3, 0.2, 2.5e-4);
-        let at = |t: f64, j: usize| (q0[j] + v0[j] * t + 0.5 * a[j] * t * t, v0[j] + a[j] * t);
-        let (q, qd): (Vec<f64>, Vec<f64>) = (0..2).map(|j| at(t1, j)).unzip();
-        let prev: Vec<f64> = (0..2).map(|j| at(t1 - h, j).1).collect();
+        // States 1 ms apart on the trajectory; drives at 4 kHz: the lead is 0.375 ms.
+        let (h, dt) = (1e-3, 2.5e-4);
+        let ahead = lead(h, Some(dt));
         let (mut q_des, mut qd_des) = (Vec::new(), Vec::new());
-        reference(&q, &qd, Some(&prev), h, ahead, &mut q_des, &mut qd_des);
-        for j in 0..2 {
-            let (qt, vt) = at(t1 + ahead, j);
-            assert!((q_des[j] - qt).abs() < 1e-12 && (qd_des[j] - vt).abs() < 1e-9, "joint {j}: {} {} vs {qt} {vt}", q_des[j], qd_des[j]);
+        let mut r = Reference::new(2, Some(dt));
+        for k in 0..4u32 {
+            let t = 0.2 + f64::from(k) * h;
+            let (q, qd) = trajectory(t);
+            r.on_state(t, &q, &qd);
+            r.fill(&mut q_des, &mut qd_des);
+            if k == 0 {
+                // No state before it: carried at constant velocity, over no lead.
+                assert_eq!((q_des.clone(), qd_des.clone()), (q, qd));
+                continue;
+            }
+            let (qt, vt) = trajectory(t + ahead);
+            for j in 0..2 {
+                assert!((q_des[j] - qt[j]).abs() < 1e-12 && (qd_des[j] - vt[j]).abs() < 1e-9, "state {k}, joint {j}: {q_des:?} {qd_des:?} vs {qt:?} {vt:?}");
+            }
         }
-        // Without a previous state: carried at constant velocity.
-        reference(&q, &qd, None, h, ahead, &mut q_des, &mut qd_des);
-        assert_eq!((q_des[0], qd_des[0]), (q[0] + qd[0] * ahead, qd[0]));
     }
 
     #[test]

@@ -64,6 +64,11 @@ struct RunCmd {
     /// much faster than the team. Sets how far ahead of the latest state the reference is.
     #[arg(long, value_name = "HZ")]
     drive_hz: Option<f64>,
+    /// The team answers every N-th state tick (the team loop at the robot's rate divided by N);
+    /// the agent answers the states between alone, with the last command's torque and, with
+    /// drive gains, the reference carried to each state.
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    team_every: u64,
     /// Smoke run only: placeholder dynamics (unit mass matrix, no frames, no limits) of this
     /// many joints instead of a robot model.
     #[arg(long, value_name = "N", conflicts_with = "robot", hide = true)]
@@ -96,6 +101,7 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
     cfg.coordinator_grace = Duration::from_millis(cmd.coordinator_grace_ms);
     cfg.drive_gains = cmd.drive_gains;
     cfg.drive_hz = cmd.drive_hz;
+    cfg.team_every = cmd.team_every;
     if let Some(f) = cmd.touchdown_force {
         cfg.contacts.touchdown_force = f;
     }

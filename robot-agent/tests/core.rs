@@ -390,13 +390,23 @@ fn a_fallen_robot_goes_limp_refuses_commands_and_sends_no_terms() {
     assert_eq!((fixed.mode(), fixed.fallen()), (AgentMode::Commanded, None));
 }
 
-#[test]
-fn commands_carry_the_drive_gains_about_the_latest_state_and_the_hold_does_not() {
-    let t0 = Instant::now();
+/// Drive gains on, commands at once after a hold.
+fn gains_config() -> AgentConfig {
     let mut cfg = AgentConfig::new("t", ID);
     cfg.takeover = Duration::ZERO;
     cfg.drive_gains = DriveGainsMode::Inertia;
-    let mut c = AgentCore::new(&cfg, Stub { feet: vec![], last_contacts: None, floating: false }).unwrap();
+    cfg
+}
+
+/// The stand-in without feet, fixed base.
+fn stub() -> Stub {
+    Stub { feet: vec![], last_contacts: None, floating: false }
+}
+
+#[test]
+fn commands_carry_the_drive_gains_about_the_latest_state_and_the_hold_does_not() {
+    let t0 = Instant::now();
+    let mut c = AgentCore::new(&gains_config(), stub()).unwrap();
     let _ = c.start(t0);
     let (q0, q1, v1) = ([0.1, -0.2, 0.3], [0.12, -0.21, 0.35], [0.4, -0.1, 0.02]);
     let _ = c.on_state(&state(0, q0, [0.0; 3]), t0).unwrap();
@@ -448,4 +458,52 @@ fn commands_carry_the_drive_gains_about_the_latest_state_and_the_hold_does_not()
     let d = c.on_command(&command(ID, 0, &[1.0, -0.5, 0.25]), t0).unwrap().drive.unwrap().clone();
     assert!(!d.has_gains() && d.q_des.is_empty(), "{d:?}");
     assert!(c.drive_gains().is_none());
+}
+
+/// The team answers every 4th state: the agent answers the three between alone, with the last
+/// command's torque and the reference at each state; no terms go out for them; the tick
+/// deadline counts the team's ticks.
+#[test]
+fn between_team_ticks_the_agent_answers_alone_with_the_last_torque() {
+    let t0 = Instant::now();
+    let mut cfg = gains_config();
+    cfg.team_every = 4;
+    cfg.deadline = CommandDeadline { ticks: 2, time: None };
+    cfg.max_command_age = Duration::from_secs(10);
+    let mut c = AgentCore::new(&cfg, stub()).unwrap();
+    let _ = c.start(t0);
+    let q = |k: u64| [0.1 + 0.001 * k as f64, -0.2, 0.3];
+    let v = [0.2, 0.0, 0.0];
+    // Tick 0, a team tick: terms, then its command.
+    assert_eq!(summary(c.on_state(&state(0, q(0), v), t0).unwrap()).0, Some(0));
+    let tau = [1.0, -0.5, 0.25];
+    assert!(c.on_command(&command(ID, 0, &tau), t0).unwrap().drive.is_some());
+    // Ticks 1-3: no terms; the drive command of the tick, the last torque, the reference at
+    // the state (its position and velocity, carried over the lead).
+    for k in 1..4 {
+        let out = c.on_state(&state(k, q(k), v), t0 + ms(5 * k)).unwrap();
+        assert!(out.terms.is_none(), "tick {k}: no terms between team ticks");
+        let d = out.drive.expect("answered alone");
+        assert_eq!((d.header.tick, d.tau_ff.as_slice()), (k, &tau[..]), "tick {k}");
+        assert!(d.has_gains());
+        assert!((d.q_des[0] - (q(k)[0] + v[0] * 0.0025)).abs() < 1e-12 && d.qd_des[0] == v[0], "tick {k}: {:?} {:?}", d.q_des, d.qd_des);
+    }
+    // Tick 4, a team tick: terms, and it waits for the team's command.
+    let (terms, drive, _) = summary(c.on_state(&state(4, q(4), v), t0 + ms(20)).unwrap());
+    assert_eq!((terms, drive), (Some(4), None));
+    // No command for 8 ticks (two team ticks) is the deadline, not 2 states.
+    for k in 5..8 {
+        let _ = c.on_state(&state(k, q(k), v), t0 + ms(5 * k)).unwrap();
+    }
+    assert_eq!(c.mode(), AgentMode::Commanded, "no safe mode before two team ticks without a command");
+    for k in 8..9 {
+        let _ = c.on_state(&state(k, q(k), v), t0 + ms(5 * k)).unwrap();
+    }
+    assert_eq!(c.mode(), AgentMode::SafeMode, "two team ticks without a command");
+    // Without a command yet, a state between team ticks gets nothing.
+    let mut fresh = AgentCore::new(&cfg, stub()).unwrap();
+    let _ = fresh.on_state(&state(0, q(0), v), t0).unwrap();
+    assert_eq!(summary(fresh.on_state(&state(1, q(1), v), t0 + ms(5)).unwrap()), (None, None, false));
+    cfg.team_every = 0;
+    assert!(AgentCore::new(&cfg, stub()).is_err());
 }

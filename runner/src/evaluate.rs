@@ -64,6 +64,10 @@ pub struct Metrics {
     pub duration_s: f64,
     pub control_hz: f64,
     pub physics_hz: f64,
+    /// The team loop's rate (the control rate unless `team_hz` set it lower).
+    pub team_hz: f64,
+    /// The gains the agents sent with their drive commands (`none`, `inertia`).
+    pub drive_gains: String,
     pub samples: usize,
     pub object: Tracking,
     pub torsos: BTreeMap<String, Tracking>,
@@ -134,6 +138,8 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
         duration_s: plan.scenario.duration,
         control_hz: plan.scenario.control_hz,
         physics_hz: plan.scenario.physics_hz,
+        team_hz: plan.scenario.control_hz / plan.scenario.team_every().unwrap_or(1) as f64,
+        drive_gains: plan.scenario.drive_gains.to_string(),
         samples: truth.len(),
         object: tracking(&pass.obj_pos_err, &pass.obj_ang_err),
         torsos: run.robots.iter().enumerate().map(|(i, r)| (r.clone(), tracking(&pass.torso_pos_err[i], &pass.torso_ang_err[i]))).collect(),
@@ -473,7 +479,9 @@ pub fn write_report(_plan: &Plan, eval: &Evaluation, dir: &Path) -> Result<(), R
 /// A short human summary of the metrics.
 pub fn summary(m: &Metrics, dir: &Path) -> String {
     let mut s = String::new();
-    s.push_str(&format!("{} ({} mode, {:.1} s at {} Hz control, {} Hz physics)\n", m.scenario, m.mode, m.duration_s, m.control_hz, m.physics_hz));
+    let team = if m.team_hz < m.control_hz { format!(", team {} Hz", m.team_hz) } else { String::new() };
+    let gains = if m.drive_gains == "none" { String::new() } else { format!(", drive gains {}", m.drive_gains) };
+    s.push_str(&format!("{} ({} mode, {:.1} s at {} Hz control{team}, {} Hz physics{gains})\n", m.scenario, m.mode, m.duration_s, m.control_hz, m.physics_hz));
     s.push_str(&format!(
         "  object: position RMS {:.2} mm (max {:.2} mm), orientation RMS {:.3} deg (max {:.3} deg), dropped: {}\n",
         m.object.position_rms_m * 1e3,

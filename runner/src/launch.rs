@@ -289,6 +289,8 @@ pub struct AgentArgs {
     pub drive_gains: DriveGainsMode,
     /// The rate the robot's drives run their law at (the simulator's physics rate), Hz.
     pub drive_hz: Option<f64>,
+    /// The team answers every this many state ticks.
+    pub team_every: u64,
 }
 
 impl AgentArgs {
@@ -302,6 +304,7 @@ impl AgentArgs {
         args.extend(["--command-deadline-ms".into(), self.command_deadline.as_millis().to_string()]);
         args.extend(["--command-deadline-ticks".into(), self.command_deadline_ticks.to_string()]);
         args.extend(["--drive-gains".into(), self.drive_gains.to_string()]);
+        args.extend(["--team-every".into(), self.team_every.to_string()]);
         if let Some(hz) = self.drive_hz {
             args.extend(["--drive-hz".into(), hz.to_string()]);
         }
@@ -313,6 +316,7 @@ impl AgentArgs {
         let mut cfg = AgentConfig::new(&self.team, &self.id).with_deadline_time(self.command_deadline).with_deadline_ticks(self.command_deadline_ticks);
         cfg.drive_gains = self.drive_gains;
         cfg.drive_hz = self.drive_hz;
+        cfg.team_every = self.team_every;
         let session = session.clone();
         Ok(match &self.model {
             AgentModel::Robot { robot, .. } => {
@@ -694,9 +698,9 @@ mod tests {
             assert!(args.windows(2).any(|w| w[0] == pair[0] && w[1] == pair[1]), "{pair:?} in {args:?}");
         }
         assert!(args.iter().any(|a| a.contains("7999")), "{args:?}");
-        let a = AgentArgs { team: "t1".into(), id: "r7".into(), model: AgentModel::Placeholder { joints: 5 }, command_deadline: Duration::from_secs(3), command_deadline_ticks: 7, drive_gains: DriveGainsMode::Inertia, drive_hz: Some(2000.0) };
+        let a = AgentArgs { team: "t1".into(), id: "r7".into(), model: AgentModel::Placeholder { joints: 5 }, command_deadline: Duration::from_secs(3), command_deadline_ticks: 7, drive_gains: DriveGainsMode::Inertia, drive_hz: Some(2000.0), team_every: 4 };
         let args = a.to_cli(&zenoh);
-        for pair in [["--id", "r7"], ["--placeholder-joints", "5"], ["--command-deadline-ms", "3000"], ["--command-deadline-ticks", "7"], ["--drive-gains", "inertia"], ["--drive-hz", "2000"]] {
+        for pair in [["--id", "r7"], ["--placeholder-joints", "5"], ["--command-deadline-ms", "3000"], ["--command-deadline-ticks", "7"], ["--drive-gains", "inertia"], ["--drive-hz", "2000"], ["--team-every", "4"]] {
             assert!(args.windows(2).any(|w| w[0] == pair[0] && w[1] == pair[1]), "{pair:?} in {args:?}");
         }
         let b = BridgeArgs::Smoke(SmokePlant { team: "t1".into(), robots: vec!["r1".into(), "r2".into()], joints: 4, ticks: 9, dt: 0.002, v0: 0.5 });

@@ -137,6 +137,8 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
             command_deadline_ticks,
             drive_gains: plan.scenario.drive_gains,
             drive_hz: Some(plan.scenario.physics_hz),
+            // Checked when the scenario loaded.
+            team_every: plan.scenario.team_every().unwrap_or(1),
         })
         .collect();
     let bridge = BridgeArgs::Scene { scene: Box::new(plan.scene.clone()), robots: plan.loaded_robots() };

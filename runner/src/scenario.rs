@@ -108,7 +108,16 @@ pub struct Scenario {
     /// the commanded state between team commands).
     #[serde(default)]
     pub drive_gains: robot_agent::drive_gains::DriveGainsMode,
+    /// The team loop's rate, Hz: the coordinator solves every `control_hz / team_hz`-th tick
+    /// (a whole number, 1 to [`MAX_TEAM_EVERY`]); the robots' own loop stays at `control_hz`
+    /// and each agent answers the ticks between alone (`robot_agent::core::AgentConfig::team_every`).
+    /// Default: `control_hz`, the paper's single loop.
+    #[serde(default)]
+    pub team_hz: Option<f64>,
 }
+
+/// The most robot ticks a team tick may span ([`Scenario::team_hz`]).
+pub const MAX_TEAM_EVERY: u64 = 20;
 
 /// A fault injected into a run, `at` s after the scenario clock starts
 /// (`crate::faults`):
@@ -215,7 +224,7 @@ fn default_capacity_check() -> bool {
 }
 
 /// Top-level keys with a default that `--set` may give although the file leaves them out.
-pub const OPTIONAL_KEYS: [&str; 13] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations", "noslip_iterations", "faults", "drive_loss", "drive_gains"];
+pub const OPTIONAL_KEYS: [&str; 14] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations", "noslip_iterations", "faults", "drive_loss", "drive_gains", "team_hz"];
 /// Keys inside a table with a default that `--set` may give although the file leaves them
 /// out (`--set team.spacing=0.7` on a layout of one robot per face).
 pub const OPTIONAL_NESTED_KEYS: [&str; 6] = ["team.spacing", "team.standoff", "team.description", "walk.robots", "walk.frame", "walk.start"];
@@ -396,6 +405,16 @@ impl Scenario {
         protocol::RunClock::ticks_in(self.duration, self.control_hz)
     }
 
+    /// Robot ticks per team tick ([`Scenario::team_hz`]).
+    pub fn team_every(&self) -> Result<u64, String> {
+        let Some(hz) = self.team_hz else { return Ok(1) };
+        let n = self.control_hz / hz;
+        if !(hz.is_finite() && hz > 0.0) || (n - n.round()).abs() > 1e-9 || n.round() < 1.0 || n.round() > MAX_TEAM_EVERY as f64 {
+            return Err(format!("team_hz = {hz} must divide control_hz = {} a whole number of times, 1 to {MAX_TEAM_EVERY}", self.control_hz));
+        }
+        Ok(n.round() as u64)
+    }
+
     fn check(&self) -> Result<(), String> {
         let pos = |what: &str, x: f64| if x.is_finite() && x > 0.0 { Ok(()) } else { Err(format!("{what} = {x} must be positive")) };
         pos("duration", self.duration)?;
@@ -405,6 +424,7 @@ impl Scenario {
             return Err(format!("settle = {} must be non-negative", self.settle));
         }
         protocol::validate::substeps(self.control_hz, self.physics_hz).map_err(|e| format!("control_hz, physics_hz: {e}"))?;
+        self.team_every()?;
         coordinator::ControllerSpec::of_kind(&self.controller).map_err(|e| format!("controller: {e}"))?;
         for (what, f) in [("min_foot_force", self.min_foot_force), ("min_hand_force", self.min_hand_force)] {
             if !(f.is_finite() && f >= 0.0) {
@@ -608,5 +628,19 @@ mod tests {
         let e = Scenario::from_str_with(&s6.replacen("on = \"object\"", "on = \"r9\"", 1), p, &[]).unwrap_err();
         assert!(e.to_string().contains("r9"), "{e}");
         assert!(Scenario::load("/nonexistent.toml", &[]).is_err());
+    }
+
+    #[test]
+    fn the_team_rate_divides_the_robots_and_the_gains_are_named() {
+        let p = scenarios_dir().join("s4_object_circle.toml");
+        let load = |sets: &[&str]| Scenario::load(&p, &sets.iter().map(|s| s.to_string()).collect::<Vec<_>>());
+        assert_eq!(load(&[]).unwrap().team_every(), Ok(1), "the paper's single loop by default");
+        assert_eq!(load(&["team_hz=250"]).unwrap().team_every(), Ok(4));
+        for bad in ["team_hz=300", "team_hz=2000", "team_hz=0", "team_hz=10"] {
+            let e = load(&[bad]).unwrap_err().to_string();
+            assert!(e.contains("team_hz") && e.contains("whole number"), "{bad}: {e}");
+        }
+        assert_eq!(load(&["drive_gains=inertia"]).unwrap().drive_gains, robot_agent::drive_gains::DriveGainsMode::Inertia);
+        assert!(load(&["drive_gains=stiff"]).is_err());
     }
 }
