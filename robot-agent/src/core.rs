@@ -402,9 +402,28 @@ impl<S: DynamicsSource> AgentCore<S> {
             return Ok(Outputs { leave_team: fell.is_some(), ..out });
         }
         self.switch_contacts(tick, &state.foot_forces);
-        if !team_tick {
-            return Ok(self.servo_tick(tick, now, mode_before));
+        // Terms on team ticks only: the states between are the agent's own (`Apply::Servo`).
+        let terms = team_tick && self.compute_terms(state);
+        if let Some(apply) = self.early_command_due(tick, now) {
+            return Ok(self.outputs(now, mode_before, terms, apply, false));
         }
+        if self.watchdog.expired(tick, now) {
+            self.enter_safe_mode_at(tick, "no valid command in time");
+        }
+        let apply = if self.watchdog.safe_mode_since().is_some() {
+            Apply::Hold
+        } else if !team_tick && self.last_applied == Apply::Command {
+            Apply::Servo
+        } else {
+            Apply::Nothing
+        };
+        Ok(self.outputs(now, mode_before, terms && !repeat, apply, false))
+    }
+
+    /// The terms (and the gravity the hold carries) at `state` for the current contact set;
+    /// whether there are terms.
+    fn compute_terms(&mut self, state: &RobotState) -> bool {
+        let tick = state.header.tick;
         let terms = match self.source.compute(state, self.contacts.active(), &mut self.terms) {
             Ok(()) => {
                 self.terms.header.tick = tick;
@@ -419,31 +438,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             }
         };
         self.source.actuated_gravity(&mut self.gravity);
-        if let Some(apply) = self.early_command_due(tick, now) {
-            return Ok(self.outputs(now, mode_before, terms, apply, false));
-        }
-        if self.watchdog.expired(tick, now) {
-            self.enter_safe_mode_at(tick, "no valid command in time");
-        }
-        let apply = if self.watchdog.safe_mode_since().is_some() { Apply::Hold } else { Apply::Nothing };
-        Ok(self.outputs(now, mode_before, terms && !repeat, apply, false))
-    }
-
-    /// A state between team ticks: no terms; the watchdog; the agent answers it alone, with
-    /// the last command's torque and the reference at this state ([`Apply::Servo`]), or the
-    /// hold in safe mode.
-    fn servo_tick(&mut self, tick: u64, now: Instant, mode_before: AgentMode) -> Outputs<'_> {
-        if self.watchdog.expired(tick, now) {
-            self.enter_safe_mode_at(tick, "no valid command in time");
-        }
-        let apply = if self.watchdog.safe_mode_since().is_some() {
-            Apply::Hold
-        } else if self.last_applied == Apply::Command {
-            Apply::Servo
-        } else {
-            Apply::Nothing
-        };
-        self.outputs(now, mode_before, false, apply, false)
+        terms
     }
 
     /// Whether the latest state still waits for its answer: no command applied for it, and not

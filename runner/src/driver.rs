@@ -75,12 +75,18 @@ impl Records {
                 tap.send(sample.key_expr().as_str(), RecordedMessage::Torque(cmd.clone()));
             }
             if cmd.header.tick >= settle {
-                if cmd.has_gains() {
-                    *self.with_gains.entry(cmd.header.robot_id().to_string()).or_default() += 1;
-                }
-                self.torques.entry(cmd.header.robot_id().to_string()).or_default().push((cmd.header.tick, cmd.tau_ff));
+                self.keep_drive(&cmd);
             }
         }
+    }
+
+    /// Keep a drive command of a scenario tick: its torque, and whether it carried gains.
+    pub(crate) fn keep_drive(&mut self, cmd: &DriveCommand) {
+        let robot = cmd.header.robot_id();
+        if cmd.has_gains() {
+            *self.with_gains.entry(robot.to_string()).or_default() += 1;
+        }
+        self.torques.entry(robot.to_string()).or_default().push((cmd.header.tick, cmd.tau_ff.clone()));
     }
 
     /// Keep the safe-mode entries an agent's status reports.

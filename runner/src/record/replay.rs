@@ -84,10 +84,7 @@ impl Recording {
             ..Records::default()
         };
         for c in self.torques.iter().filter(|c| c.header.tick >= settle) {
-            if c.has_gains() {
-                *rec.with_gains.entry(c.header.robot_id().to_string()).or_default() += 1;
-            }
-            rec.torques.entry(c.header.robot_id().to_string()).or_default().push((c.header.tick, c.tau_ff.clone()));
+            rec.keep_drive(c);
         }
         rec
     }
