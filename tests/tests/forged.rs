@@ -162,6 +162,20 @@ async fn forge_as_coordinator(c: Session, team: String, sent: Arc<Sent>) {
     }
 }
 
+/// The first coordinator status on `statuses` that counts `refused` refusals, or the last one
+/// seen when none does within `limit`.
+async fn status_counting(statuses: &transport::SampleQueue, refused: u64, limit: Duration) -> CoordinatorStatus {
+    let until = tokio::time::Instant::now() + limit;
+    let mut last: Option<CoordinatorStatus> = None;
+    while let Ok(Ok(sample)) = tokio::time::timeout_at(until, statuses.recv_async()).await {
+        last = decode_sample(&sample).ok().or(last);
+        if last.as_ref().is_some_and(|s| s.refused == refused) {
+            break;
+        }
+    }
+    last.expect("a coordinator status")
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn forged_messages_are_refused_counted_and_named() {
     let (team, robots) = ("forged", vec!["r1".to_string(), "r2".to_string()]);
@@ -184,16 +198,12 @@ async fn forged_messages_are_refused_counted_and_named() {
 
     let report = tokio::time::timeout(Duration::from_secs(120), b.task).await.expect("the run ends in time").expect("bridge task").expect("every tick ran");
     forgers.iter().for_each(|f| f.abort());
-    // What was sent has arrived (reliable links): the last status counts it.
-    tokio::time::sleep(Duration::from_millis(500)).await;
+    // What was sent arrives (reliable links); the coordinator publishes its status at least every
+    // second, so within three seconds a status counts every refusal.
+    let status = status_counting(&statuses, sent.to_coordinator(), Duration::from_secs(3)).await;
     let [r1, r2] = agents;
     let (r1, r2) = (stop(r1).await, stop(r2).await);
     let counters = stop(c).await;
-    let mut last: Option<CoordinatorStatus> = None;
-    while let Ok(Some(s)) = statuses.try_recv() {
-        last = decode_sample(&s).ok().or(last);
-    }
-    let status = last.expect("a coordinator status");
     let mut r1_last_rejection = None;
     while let Ok(Some(s)) = r1_status.try_recv() {
         if let Ok(st) = decode_sample::<protocol::AgentStatus>(&s) {
