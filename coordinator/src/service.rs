@@ -29,7 +29,8 @@ pub struct CoordinatorConfig {
     /// How long a tick may wait for every member's terms before it is abandoned.
     pub tick_deadline: Duration,
     /// Real time: solve a tick with a late member's latest terms ([`Reuse`]) and leave out a
-    /// member silent for longer; `None` (lockstep) waits for every member's own terms.
+    /// member silent for longer, and solve the newest complete tick when several are queued;
+    /// `None` (lockstep) waits for every member's own terms and solves every tick in order.
     pub reuse: Option<Reuse>,
     /// The robots the team is made of: the first tick waits until all have joined (every
     /// member holding its posture meanwhile), at most [`FORMATION_TIMEOUT`] from the
@@ -110,6 +111,9 @@ struct Service<'a> {
     detail: String,
     /// Whether the last status published said the team had let go of the object.
     released_reported: bool,
+    /// Lockstep: terms of a tick newer than the one just completed, read while draining that
+    /// tick's copies; handled before the next wait (every tick is solved, in order).
+    deferred: Option<zenoh::sample::Sample>,
 }
 
 /// Run the coordinator with `controller` (see [`crate::ControllerSpec::build`]) until `stop`
@@ -161,11 +165,9 @@ pub async fn run(
             }
             d = dynamics.recv_async() => {
                 let Ok(sample) = d else { break };
-                let (newest, changed) = svc.gather(sample, &dynamics, &mut assembler, controller.as_mut()).await?;
+                let (changed, solved) = svc.on_dynamics(sample, &dynamics, &mut assembler, controller.as_mut(), &references).await?;
                 team_changed |= changed;
-                if let Some((tick, terms)) = newest {
-                    publish_status |= svc.solve(controller.as_mut(), tick, terms, &references, Vec::new()).await?;
-                }
+                publish_status |= solved;
             }
             _ = sleep_until(departure), if departure.is_some() => {
                 team_changed |= svc.depart_due();
@@ -181,6 +183,8 @@ pub async fn run(
                 publish_status = true;
             }
         }
+        let (changed, solved) = svc.on_deferred(&dynamics, &mut assembler, controller.as_mut(), &references).await?;
+        (team_changed, publish_status) = (team_changed | changed, publish_status | solved);
         if team_changed {
             svc.team_changed(&mut assembler, controller.as_mut(), &references).await?;
             publish_status = true;
@@ -241,6 +245,7 @@ impl<'a> Service<'a> {
             status_tick: 0,
             detail: String::from("waiting for members"),
             released_reported: false,
+            deferred: None,
             cfg,
         })
     }
@@ -290,6 +295,29 @@ impl<'a> Service<'a> {
     /// complete tick is returned for solving (a coordinator that fell behind in real time
     /// catches up instead of sending commands too old to apply). Terms of robots outside the
     /// team get a hold order for their tick. Also returns whether the team changed.
+    /// Terms arrived (`sample`, then whatever else is queued): the newest complete tick solved.
+    /// Whether the team changed, and whether the status is due.
+    async fn on_dynamics(&mut self, sample: zenoh::sample::Sample, queue: &transport::SampleQueue, assembler: &mut TickAssembler, controller: &mut dyn TeamController, references: &transport::SampleQueue) -> Result<(bool, bool), TransportError> {
+        let (newest, changed) = self.gather(sample, queue, assembler, controller).await?;
+        let mut solved = false;
+        if let Some((tick, terms)) = newest {
+            solved = self.solve(controller, tick, terms, references, Vec::new()).await?;
+        }
+        Ok((changed, solved))
+    }
+
+    /// Lockstep: the terms deferred while a tick was completed ([`Service::deferred`]), each
+    /// tick they complete solved in order. Whether the team changed, and whether the status is
+    /// due.
+    async fn on_deferred(&mut self, queue: &transport::SampleQueue, assembler: &mut TickAssembler, controller: &mut dyn TeamController, references: &transport::SampleQueue) -> Result<(bool, bool), TransportError> {
+        let (mut changed, mut solved) = (false, false);
+        while let Some(sample) = self.deferred.take() {
+            let (c, s) = self.on_dynamics(sample, queue, assembler, controller, references).await?;
+            (changed, solved) = (changed | c, solved | s);
+        }
+        Ok((changed, solved))
+    }
+
     async fn gather(
         &mut self,
         first: zenoh::sample::Sample,
@@ -301,6 +329,13 @@ impl<'a> Service<'a> {
         let mut team_changed = false;
         let mut next = Some(first);
         while let Some(sample) = next {
+            if let Some((done, _)) = &newest {
+                if self.cfg.reuse.is_none() && decode_sample::<DynamicsTerms>(&sample).is_ok_and(|t| t.header.tick > *done) {
+                    // Lockstep solves every tick: a newer one waits for this one's solve.
+                    self.deferred = Some(sample);
+                    break;
+                }
+            }
             if sample.kind() == SampleKind::Delete {
                 team_changed |= self.announced_leave(&sample);
             } else if let Some(terms) = decode_terms(&sample, &mut self.counters) {
@@ -340,6 +375,10 @@ impl<'a> Service<'a> {
                     AssemblyStatus::Pending => {}
                 }
             }
+            // Once a tick is complete, the queued terms are read too: copies of its terms (the
+            // lockstep bridge republishes states), or in real time a newer complete tick that
+            // overtakes it. In lockstep every tick is solved, in order (with a team delay the
+            // robots' states run ahead of the team's answers, and each answer is awaited).
             next = if newest.is_some() { queue.try_recv().ok().flatten() } else { None };
         }
         Ok((newest, team_changed))

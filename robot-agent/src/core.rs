@@ -28,6 +28,7 @@ use thiserror::Error;
 use crate::contact_switch::{ContactSwitch, SwitchConfig};
 use crate::drive_gains::{self, DriveGains, DriveGainsMode};
 use crate::dynamics_source::DynamicsSource;
+use crate::early::{EarlyCommands, Kept};
 use crate::fall::{Fall, FallDetector, FallLimits};
 use crate::gate::{CommandGate, CommandRejection};
 use crate::safe_mode::{CommandDeadline, HoldGains, PostureHold, Takeover, Watchdog, FIRST_COMMAND};
@@ -77,7 +78,16 @@ pub struct AgentConfig {
     /// and, with drive gains, the reference at that state. The tick deadline and the
     /// maximum command age in ticks count team ticks (this many state ticks each).
     pub team_every: u64,
+    /// The team's delay in state ticks (default 0, at most [`MAX_TEAM_DELAY`]): the command
+    /// for the state of tick k applies at the state of tick k + `team_delay`, so that the team
+    /// has that many robot periods to answer. The states before the first command can apply
+    /// are answered with the posture hold; between team commands the agent answers alone as
+    /// with [`AgentConfig::team_every`].
+    pub team_delay: u64,
 }
+
+/// The longest team delay, in state ticks ([`AgentConfig::team_delay`]).
+pub const MAX_TEAM_DELAY: u64 = 8;
 
 impl AgentConfig {
     /// Defaults: deadline 5 ticks or 25 ms, the first command within 2 s, maximum command age
@@ -102,6 +112,7 @@ impl AgentConfig {
             drive_gains: DriveGainsMode::None,
             drive_hz: None,
             team_every: 1,
+            team_delay: 0,
         }
     }
 
@@ -144,7 +155,8 @@ pub const COORDINATOR_GRACE: Duration = Duration::from_millis(100);
 /// How far ahead of the latest state a command may be and still wait for its state: in real
 /// time the coordinator answers a tick with a late member's latest terms, and that member's
 /// command can overtake the state of its tick on the way (or the agent is still busy with the
-/// previous one). Further ahead, it is refused as from the future.
+/// previous one). Further ahead (beyond the team's delay, [`AgentConfig::team_delay`]), it is
+/// refused as from the future.
 pub const EARLY_TICKS: u64 = 4;
 
 /// A configuration the core cannot run with.
@@ -219,6 +231,9 @@ enum Apply {
     Command,
     /// The posture hold at the latest state.
     Hold,
+    /// No command can apply yet ([`AgentConfig::team_delay`]): gravity compensation with
+    /// damping at the latest state, which the first command follows without a blend.
+    Start,
     /// Between team ticks: the last command's torque with the reference at the latest state
     /// ([`AgentConfig::team_every`]).
     Servo,
@@ -257,13 +272,14 @@ pub struct AgentCore<S: DynamicsSource> {
     /// Every how many state ticks the team answers (a team tick); the states between are
     /// answered by the agent alone ([`Apply::Servo`]).
     team_every: u64,
+    team_delay: u64,
     contacts: ContactSwitch,
     terms: DynamicsTerms,
     drive: DriveCommand,
-    /// A command that came before the state of its tick (see [`EARLY_TICKS`]); it is checked
-    /// when that state arrives. `early_pending` says whether it holds one.
-    early: TorqueCommand,
-    early_pending: bool,
+    /// Commands that came before the state they apply at (see [`EARLY_TICKS`] and
+    /// [`AgentConfig::team_delay`]); each is checked when that state arrives, from `due`.
+    early: EarlyCommands,
+    due: TorqueCommand,
     description: Option<RobotDescription>,
     q: Vec<f64>,
     qdot: Vec<f64>,
@@ -312,6 +328,9 @@ impl<S: DynamicsSource> AgentCore<S> {
         if cfg.team_every == 0 {
             return Err(CoreError::Config("the team must answer every 1 or more ticks, not 0".into()));
         }
+        if cfg.team_delay > MAX_TEAM_DELAY {
+            return Err(CoreError::Config(format!("a team delay of {} ticks: at most {MAX_TEAM_DELAY}", cfg.team_delay)));
+        }
         let feet: Vec<String> = source.foot_frames().to_vec();
         Ok(AgentCore {
             team: team.to_string(),
@@ -319,7 +338,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             description: source.description(team, robot),
             joints,
             // Tick deadlines count the team's ticks: a command comes every `team_every` states.
-            gate: CommandGate::new(robot, limits.clone(), cfg.max_command_age_ticks.saturating_mul(cfg.team_every), cfg.max_command_age),
+            gate: CommandGate::new(robot, limits.clone(), cfg.max_command_age_ticks.saturating_mul(cfg.team_every), cfg.max_command_age).with_delay(cfg.team_delay),
             watchdog: Watchdog::new(CommandDeadline { ticks: cfg.deadline.ticks.saturating_mul(cfg.team_every), ..cfg.deadline }, cfg.first_command),
             fall: FallDetector::new(cfg.fall),
             hold: PostureHold::new(gains, limits),
@@ -332,12 +351,13 @@ impl<S: DynamicsSource> AgentCore<S> {
             state_time: 0.0,
             reference: drive_gains::Reference::new(joints, cfg.drive_hz.map(|hz| 1.0 / hz)),
             team_every: cfg.team_every,
+            team_delay: cfg.team_delay,
             contacts: ContactSwitch::new(cfg.contacts.clone(), ActiveContacts { stance: vec![true; feet.len()], hand_in_grasp: true }),
             feet,
             terms: empty_terms(team, robot),
             drive: DriveCommand::torque(team, robot, 0, Vec::with_capacity(joints)),
-            early: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false },
-            early_pending: false,
+            early: EarlyCommands::new(team, robot, joints, (EARLY_TICKS + cfg.team_delay + 1) as usize),
+            due: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false },
             q: vec![0.0; joints],
             qdot: vec![0.0; joints],
             gravity: vec![0.0; joints],
@@ -393,7 +413,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         let fell = self.source.floating_base().then(|| self.fall.observe(tick, &state.base_pose)).flatten();
         if let Some(f) = fell {
             self.board.status.mode = AgentMode::Fallen;
-            self.early_pending = false;
+            self.early.clear();
             tracing::error!(robot = %self.robot, tick, tilt_deg = f.tilt.to_degrees(), height_m = f.height, "the robot fell: limp (joint damping only), commands refused, leaving the team");
         }
         if self.fall.fallen().is_some() {
@@ -412,12 +432,20 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         let apply = if self.watchdog.safe_mode_since().is_some() {
             Apply::Hold
-        } else if !team_tick && self.last_applied == Apply::Command {
+        } else if tick < self.team_delay {
+            Apply::Start
+        } else if !self.command_tick(tick) && self.last_applied == Apply::Command {
             Apply::Servo
         } else {
             Apply::Nothing
         };
         Ok(self.outputs(now, mode_before, terms && !repeat, apply, false))
+    }
+
+    /// Whether a team command applies at the state of `tick`: the state of a team tick,
+    /// [`AgentConfig::team_delay`] ticks later.
+    fn command_tick(&self, tick: u64) -> bool {
+        tick.checked_sub(self.team_delay).is_some_and(|k| k % self.team_every == 0)
     }
 
     /// The terms (and the gravity the hold carries) at `state` for the current contact set;
@@ -498,17 +526,16 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
     }
 
-    /// The early command, if it waited for the state of `tick` (or an older one): checked now.
+    /// The newest early command that applies at the state of `tick` (or an older one): checked
+    /// now. Older due ones are superseded by it.
     fn early_command_due(&mut self, tick: u64, now: Instant) -> Option<Apply> {
-        if !self.early_pending || self.early.header.tick > tick {
-            return None;
-        }
-        self.early_pending = false;
+        let gate = &self.gate;
+        self.early.take_due(|t| gate.applies_at(t) <= tick, &mut self.due)?;
         // Taken out and put back: the gate reads it while the core changes (no allocation).
         let empty = TorqueCommand { header: Header { version: 0, team: String::new(), robot: None, tick: 0, stamp_ns: 0 }, tau: Vec::new(), hold: false };
-        let early = std::mem::replace(&mut self.early, empty);
-        let admitted = self.admit_command(&early, now);
-        self.early = early;
+        let due = std::mem::replace(&mut self.due, empty);
+        let admitted = self.admit_command(&due, now);
+        self.due = due;
         match admitted {
             Ok(apply) => apply,
             Err(r) => {
@@ -518,19 +545,16 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
     }
 
-    /// Keep `cmd` until the state of its tick arrives (replacing an older early command); a
-    /// command of the wrong size is refused now (the buffer never grows).
+    /// Keep `cmd` until the state it applies at arrives; a command of the wrong size is
+    /// refused now (the buffers never grow).
     fn keep_early(&mut self, cmd: &TorqueCommand) -> Result<(), CommandRejection> {
         let expected = if cmd.hold { 0 } else { self.joints };
         if cmd.tau.len() != expected {
             return Err(CommandRejection::WrongSize { expected, got: cmd.tau.len() });
         }
-        self.early.header.tick = cmd.header.tick;
-        self.early.header.stamp_ns = cmd.header.stamp_ns;
-        self.early.hold = cmd.hold;
-        self.early.tau.clear();
-        self.early.tau.extend_from_slice(&cmd.tau);
-        self.early_pending = true;
+        if self.early.keep(cmd) == Kept::Dropped {
+            tracing::debug!(robot = %self.robot, tick = cmd.header.tick, "an early command older than every waiting one: dropped");
+        }
         self.counters.early += 1;
         Ok(())
     }
@@ -539,13 +563,13 @@ impl<S: DynamicsSource> AgentCore<S> {
     fn admit_command(&mut self, cmd: &TorqueCommand, now: Instant) -> Result<Option<Apply>, CommandRejection> {
         let clamped = match self.gate.check(cmd, &mut self.drive.tau_ff) {
             Ok(n) => n,
-            Err(CommandRejection::FromTheFuture { tick, latest }) if tick <= latest + EARLY_TICKS => {
+            Err(CommandRejection::FromTheFuture { tick, latest }) if tick <= latest + EARLY_TICKS + self.team_delay => {
                 self.keep_early(cmd)?;
                 return Ok(None);
             }
             Err(r) => return Err(r),
         };
-        let tick = cmd.header.tick;
+        let tick = self.gate.applies_at(cmd.header.tick);
         if let Err(entered) = self.watchdog.admits(tick) {
             return Err(CommandRejection::BeforeSafeMode { tick, entered });
         }
@@ -563,7 +587,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             }
         }
         if let Some((t, at)) = self.last_dynamics {
-            if t == tick {
+            if t == cmd.header.tick {
                 self.board.status.command_latency_us = now.saturating_duration_since(at).as_secs_f64() * 1e6;
             }
         }
@@ -795,6 +819,17 @@ impl<S: DynamicsSource> AgentCore<S> {
                     drive = Some(&mut self.drive);
                 }
             }
+            Apply::Start => {
+                if let Some(tick) = self.gate.latest_state_tick() {
+                    self.hold.hold(&self.q);
+                    self.hold_now();
+                    self.drive.tau_ff.clone_from(&self.hold_tau);
+                    self.torque_only();
+                    self.drive.header.tick = tick;
+                    self.counters.hold_torques += 1;
+                    drive = Some(&mut self.drive);
+                }
+            }
             Apply::Limp => {
                 if let Some(tick) = self.gate.latest_state_tick() {
                     self.hold.damping(&self.qdot, &mut self.drive.tau_ff);
@@ -870,7 +905,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         match self.last_applied {
             Apply::Command | Apply::Servo => self.hold.hold_carrying(&self.q, &self.last_command, &self.gravity),
             Apply::Hold => self.hold.move_to(&self.q),
-            Apply::Nothing | Apply::Limp => self.hold.hold(&self.q),
+            Apply::Nothing | Apply::Start | Apply::Limp => self.hold.hold(&self.q),
         }
     }
 

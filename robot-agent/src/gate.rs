@@ -50,6 +50,7 @@ pub struct CommandGate {
     latest: Option<SeenState>,
     last_applied_tick: Option<u64>,
     clamped: Vec<usize>,
+    delay: u64,
 }
 
 impl CommandGate {
@@ -65,7 +66,20 @@ impl CommandGate {
             latest: None,
             last_applied_tick: None,
             clamped: Vec::with_capacity(n),
+            delay: 0,
         }
+    }
+
+    /// Commands apply `ticks` state ticks after the state they answer (the team's delay): a
+    /// command of tick k is checked and applied as the command of tick k + `ticks`.
+    pub fn with_delay(mut self, ticks: u64) -> Self {
+        self.delay = ticks;
+        self
+    }
+
+    /// The state tick at which a command of `tick` applies ([`CommandGate::with_delay`]).
+    pub fn applies_at(&self, tick: u64) -> u64 {
+        tick.saturating_add(self.delay)
     }
 
     /// Number of actuated joints a command must have.
@@ -102,6 +116,7 @@ impl CommandGate {
     /// joints were clamped (their indices: [`CommandGate::clamped`]). The command does not
     /// become the last applied one until [`CommandGate::mark_applied`].
     ///
+    /// Every tick here is the one the command applies at ([`CommandGate::applies_at`]).
     /// Age: the command's tick must be at most `max_age_ticks` behind the latest state's. The
     /// robot's ticks are its clock: in real time they pass at the robot's rate, so that this
     /// bounds the command's age in time; in lockstep no state comes while the team solves, and
@@ -115,7 +130,7 @@ impl CommandGate {
             return Err(CommandRejection::WrongRobot { expected: self.robot.clone(), got: got.to_string() });
         }
         let latest = self.latest.ok_or(CommandRejection::NoState)?;
-        let tick = cmd.header.tick;
+        let tick = self.applies_at(cmd.header.tick);
         if tick > latest.tick {
             return Err(CommandRejection::FromTheFuture { tick, latest: latest.tick });
         }

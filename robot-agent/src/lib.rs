@@ -31,6 +31,7 @@ pub mod contact_switch;
 pub mod core;
 pub mod drive_gains;
 pub mod dynamics_source;
+pub mod early;
 pub mod fall;
 pub mod gate;
 pub mod hardware;

@@ -69,6 +69,10 @@ struct RunCmd {
     /// drive gains, the reference carried to each state.
     #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     team_every: u64,
+    /// The team's command for the state of tick k applies at tick k + N (the team has N robot
+    /// periods to answer); the states before the first command can apply get the posture hold.
+    #[arg(long, value_name = "N", default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=robot_agent::core::MAX_TEAM_DELAY))]
+    team_delay: u64,
     /// Smoke run only: placeholder dynamics (unit mass matrix, no frames, no limits) of this
     /// many joints instead of a robot model.
     #[arg(long, value_name = "N", conflicts_with = "robot", hide = true)]
@@ -102,6 +106,7 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
     cfg.drive_gains = cmd.drive_gains;
     cfg.drive_hz = cmd.drive_hz;
     cfg.team_every = cmd.team_every;
+    cfg.team_delay = cmd.team_delay;
     if let Some(f) = cmd.touchdown_force {
         cfg.contacts.touchdown_force = f;
     }

@@ -507,3 +507,47 @@ fn between_team_ticks_the_agent_answers_alone_with_the_last_torque() {
     cfg.team_every = 0;
     assert!(AgentCore::new(&cfg, stub()).is_err());
 }
+
+/// With a team delay of 2 ticks the command for the state of tick k applies at the state of
+/// tick k + 2: the states before the first one can apply get gravity compensation with the
+/// hold's damping at once (the lockstep plant waits for every tick's torques), the first
+/// command follows it without the hold's blend, and commands that came early wait for their
+/// state in order.
+#[test]
+fn a_delayed_command_applies_at_its_state_plus_the_delay() {
+    let t0 = Instant::now();
+    let mut cfg = AgentConfig::new("t", ID);
+    cfg.team_delay = 2;
+    cfg.hold_gains = Some(HoldGains { kp: vec![40.0; 3], kd: vec![2.0, 3.0, 0.5] });
+    cfg.deadline = CommandDeadline { ticks: 5, time: None };
+    cfg.max_command_age = Duration::from_secs(10);
+    let mut c = AgentCore::new(&cfg, stub()).unwrap();
+    let _ = c.start(t0);
+    let q = [0.1, -0.2, 0.3];
+    let v = [0.4, 0.0, -0.2];
+    for k in 0..2 {
+        let (terms, drive, _) = summary(c.on_state(&state(k, q, v), t0 + ms(5 * k)).unwrap());
+        assert_eq!(terms, Some(k), "tick {k}: terms for the team");
+        let (tick, tau) = drive.expect("answered at once");
+        let expected: Vec<f64> = (0..3).map(|j| (GRAVITY[j] - [2.0, 3.0, 0.5][j] * v[j]).clamp(-LIMITS[j], LIMITS[j])).collect();
+        assert_eq!(tick, k);
+        assert!(tau.iter().zip(&expected).all(|(a, b)| (a - b).abs() < 1e-12), "tick {k}: {tau:?} against {expected:?}");
+    }
+    // The commands of ticks 0 and 1 come before the state of tick 2: both wait.
+    assert!(c.on_command(&command(ID, 0, &[1.0, -0.5, 0.25]), t0 + ms(6)).unwrap().drive.is_none());
+    assert!(c.on_command(&command(ID, 1, &[2.0, -1.0, 0.5]), t0 + ms(7)).unwrap().drive.is_none());
+    // State 2 gets tick 0's command, unblended; state 3 tick 1's; state 4 waits for tick 2's.
+    for (k, tau) in [(2, [1.0, -0.5, 0.25]), (3, [2.0, -1.0, 0.5])] {
+        let (terms, drive, _) = summary(c.on_state(&state(k, q, v), t0 + ms(5 * k)).unwrap());
+        assert_eq!((terms, drive), (Some(k), Some((k, tau.to_vec()))), "tick {k}");
+    }
+    assert_eq!(summary(c.on_state(&state(4, q, v), t0 + ms(20)).unwrap()), (Some(4), None, false));
+    // Tick 2's command, arriving now, applies at once as the command of tick 4.
+    let (_, drive, _) = summary(c.on_command(&command(ID, 2, &[3.0, 0.0, 0.0]), t0 + ms(21)).unwrap());
+    assert_eq!(drive, Some((4, vec![3.0, 0.0, 0.0])));
+    // A command for a state already answered is stale.
+    assert!(matches!(c.on_command(&command(ID, 1, &[0.0; 3]), t0 + ms(22)), Err(CommandRejection::Stale { .. })));
+    assert_eq!(c.counters().applied, 3);
+    cfg.team_delay = robot_agent::core::MAX_TEAM_DELAY + 1;
+    assert!(AgentCore::new(&cfg, stub()).is_err(), "a delay over the most");
+}

@@ -66,6 +66,8 @@ pub struct Metrics {
     pub physics_hz: f64,
     /// The team loop's rate (the control rate unless `team_hz` set it lower).
     pub team_hz: f64,
+    /// The team's delay, robot ticks (`team_delay_ticks`).
+    pub team_delay_ticks: u64,
     /// The gains the agents sent with their drive commands (`none`, `inertia`).
     pub drive_gains: String,
     pub samples: usize,
@@ -139,6 +141,7 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
         control_hz: plan.scenario.control_hz,
         physics_hz: plan.scenario.physics_hz,
         team_hz: plan.scenario.control_hz / plan.scenario.team_every().unwrap_or(1) as f64,
+        team_delay_ticks: plan.scenario.team_delay_ticks,
         drive_gains: plan.scenario.drive_gains.to_string(),
         samples: truth.len(),
         object: tracking(&pass.obj_pos_err, &pass.obj_ang_err),
@@ -479,7 +482,10 @@ pub fn write_report(_plan: &Plan, eval: &Evaluation, dir: &Path) -> Result<(), R
 /// A short human summary of the metrics.
 pub fn summary(m: &Metrics, dir: &Path) -> String {
     let mut s = String::new();
-    let team = if m.team_hz < m.control_hz { format!(", team {} Hz", m.team_hz) } else { String::new() };
+    let mut team = if m.team_hz < m.control_hz { format!(", team {} Hz", m.team_hz) } else { String::new() };
+    if m.team_delay_ticks > 0 {
+        team.push_str(&format!(", team delay {} ticks", m.team_delay_ticks));
+    }
     let gains = if m.drive_gains == "none" { String::new() } else { format!(", drive gains {}", m.drive_gains) };
     s.push_str(&format!("{} ({} mode, {:.1} s at {} Hz control{team}, {} Hz physics{gains})\n", m.scenario, m.mode, m.duration_s, m.control_hz, m.physics_hz));
     s.push_str(&format!(

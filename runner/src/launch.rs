@@ -291,6 +291,8 @@ pub struct AgentArgs {
     pub drive_hz: Option<f64>,
     /// The team answers every this many state ticks.
     pub team_every: u64,
+    /// The team's command for a state applies this many state ticks later.
+    pub team_delay: u64,
 }
 
 impl AgentArgs {
@@ -305,6 +307,7 @@ impl AgentArgs {
         args.extend(["--command-deadline-ticks".into(), self.command_deadline_ticks.to_string()]);
         args.extend(["--drive-gains".into(), self.drive_gains.to_string()]);
         args.extend(["--team-every".into(), self.team_every.to_string()]);
+        args.extend(["--team-delay".into(), self.team_delay.to_string()]);
         if let Some(hz) = self.drive_hz {
             args.extend(["--drive-hz".into(), hz.to_string()]);
         }
@@ -317,6 +320,7 @@ impl AgentArgs {
         cfg.drive_gains = self.drive_gains;
         cfg.drive_hz = self.drive_hz;
         cfg.team_every = self.team_every;
+        cfg.team_delay = self.team_delay;
         let session = session.clone();
         Ok(match &self.model {
             AgentModel::Robot { robot, .. } => {
@@ -698,9 +702,9 @@ mod tests {
             assert!(args.windows(2).any(|w| w[0] == pair[0] && w[1] == pair[1]), "{pair:?} in {args:?}");
         }
         assert!(args.iter().any(|a| a.contains("7999")), "{args:?}");
-        let a = AgentArgs { team: "t1".into(), id: "r7".into(), model: AgentModel::Placeholder { joints: 5 }, command_deadline: Duration::from_secs(3), command_deadline_ticks: 7, drive_gains: DriveGainsMode::Inertia, drive_hz: Some(2000.0), team_every: 4 };
+        let a = AgentArgs { team: "t1".into(), id: "r7".into(), model: AgentModel::Placeholder { joints: 5 }, command_deadline: Duration::from_secs(3), command_deadline_ticks: 7, drive_gains: DriveGainsMode::Inertia, drive_hz: Some(2000.0), team_every: 4, team_delay: 2 };
         let args = a.to_cli(&zenoh);
-        for pair in [["--id", "r7"], ["--placeholder-joints", "5"], ["--command-deadline-ms", "3000"], ["--command-deadline-ticks", "7"], ["--drive-gains", "inertia"], ["--drive-hz", "2000"], ["--team-every", "4"]] {
+        for pair in [["--id", "r7"], ["--placeholder-joints", "5"], ["--command-deadline-ms", "3000"], ["--command-deadline-ticks", "7"], ["--drive-gains", "inertia"], ["--drive-hz", "2000"], ["--team-every", "4"], ["--team-delay", "2"]] {
             assert!(args.windows(2).any(|w| w[0] == pair[0] && w[1] == pair[1]), "{pair:?} in {args:?}");
         }
         let b = BridgeArgs::Smoke(SmokePlant { team: "t1".into(), robots: vec!["r1".into(), "r2".into()], joints: 4, ticks: 9, dt: 0.002, v0: 0.5 });

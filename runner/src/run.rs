@@ -139,6 +139,7 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
             drive_hz: Some(plan.scenario.physics_hz),
             // Checked when the scenario loaded.
             team_every: plan.scenario.team_every().unwrap_or(1),
+            team_delay: plan.scenario.team_delay_ticks,
         })
         .collect();
     let bridge = BridgeArgs::Scene { scene: Box::new(plan.scene.clone()), robots: plan.loaded_robots() };

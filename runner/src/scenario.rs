@@ -114,6 +114,12 @@ pub struct Scenario {
     /// Default: `control_hz`, the paper's single loop.
     #[serde(default)]
     pub team_hz: Option<f64>,
+    /// The team's delay, in robot ticks (0 to `robot_agent::core::MAX_TEAM_DELAY`): the team's
+    /// command for the state of tick k applies at tick k + `team_delay_ticks`
+    /// (`robot_agent::core::AgentConfig::team_delay`), so that the team has that many robot
+    /// periods to answer. Default 0: the command applies at its own state, the paper's loop.
+    #[serde(default)]
+    pub team_delay_ticks: u64,
 }
 
 /// The most robot ticks a team tick may span ([`Scenario::team_hz`]).
@@ -224,7 +230,7 @@ fn default_capacity_check() -> bool {
 }
 
 /// Top-level keys with a default that `--set` may give although the file leaves them out.
-pub const OPTIONAL_KEYS: [&str; 14] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations", "noslip_iterations", "faults", "drive_loss", "drive_gains", "team_hz"];
+pub const OPTIONAL_KEYS: [&str; 15] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations", "noslip_iterations", "faults", "drive_loss", "drive_gains", "team_hz", "team_delay_ticks"];
 /// Keys inside a table with a default that `--set` may give although the file leaves them
 /// out (`--set team.spacing=0.7` on a layout of one robot per face).
 pub const OPTIONAL_NESTED_KEYS: [&str; 6] = ["team.spacing", "team.standoff", "team.description", "walk.robots", "walk.frame", "walk.start"];
@@ -425,6 +431,9 @@ impl Scenario {
         }
         protocol::validate::substeps(self.control_hz, self.physics_hz).map_err(|e| format!("control_hz, physics_hz: {e}"))?;
         self.team_every()?;
+        if self.team_delay_ticks > robot_agent::core::MAX_TEAM_DELAY {
+            return Err(format!("team_delay_ticks = {} must be at most {}", self.team_delay_ticks, robot_agent::core::MAX_TEAM_DELAY));
+        }
         coordinator::ControllerSpec::of_kind(&self.controller).map_err(|e| format!("controller: {e}"))?;
         for (what, f) in [("min_foot_force", self.min_foot_force), ("min_hand_force", self.min_hand_force)] {
             if !(f.is_finite() && f >= 0.0) {
@@ -636,6 +645,10 @@ mod tests {
         let load = |sets: &[&str]| Scenario::load(&p, &sets.iter().map(|s| s.to_string()).collect::<Vec<_>>());
         assert_eq!(load(&[]).unwrap().team_every(), Ok(1), "the paper's single loop by default");
         assert_eq!(load(&["team_hz=250"]).unwrap().team_every(), Ok(4));
+        assert_eq!(load(&[]).unwrap().team_delay_ticks, 0, "no delay by default");
+        assert_eq!(load(&["team_delay_ticks=3"]).unwrap().team_delay_ticks, 3);
+        let e = load(&["team_delay_ticks=9"]).unwrap_err().to_string();
+        assert!(e.contains("team_delay_ticks = 9") && e.contains("at most 8"), "{e}");
         for bad in ["team_hz=300", "team_hz=2000", "team_hz=0", "team_hz=10"] {
             let e = load(&[bad]).unwrap_err().to_string();
             assert!(e.contains("team_hz") && e.contains("whole number"), "{bad}: {e}");
