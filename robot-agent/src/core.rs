@@ -234,8 +234,9 @@ enum Apply {
     /// No command can apply yet ([`AgentConfig::team_delay`]): gravity compensation with
     /// damping at the latest state, which the first command follows without a blend.
     Start,
-    /// Between team ticks: the last command's torque with the reference at the latest state
-    /// ([`AgentConfig::team_every`]).
+    /// Between team ticks, or for a state whose team command was skipped
+    /// ([`AgentCore::skipped`]): the last command's torque with the reference at the latest
+    /// state ([`AgentConfig::team_every`]).
     Servo,
     /// Joint damping only: the robot fell ([`crate::fall`]).
     Limp,
@@ -280,6 +281,8 @@ pub struct AgentCore<S: DynamicsSource> {
     /// [`AgentConfig::team_delay`]); each is checked when that state arrives, from `due`.
     early: EarlyCommands,
     due: TorqueCommand,
+    /// The state tick the agent last answered alone ([`Apply::Servo`]).
+    servo_tick: Option<u64>,
     description: Option<RobotDescription>,
     q: Vec<f64>,
     qdot: Vec<f64>,
@@ -358,6 +361,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             drive: DriveCommand::torque(team, robot, 0, Vec::with_capacity(joints)),
             early: EarlyCommands::new(team, robot, joints, (EARLY_TICKS + cfg.team_delay + 1) as usize),
             due: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false },
+            servo_tick: None,
             q: vec![0.0; joints],
             qdot: vec![0.0; joints],
             gravity: vec![0.0; joints],
@@ -434,7 +438,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             Apply::Hold
         } else if tick < self.team_delay {
             Apply::Start
-        } else if !self.command_tick(tick) && self.last_applied == Apply::Command {
+        } else if (!self.command_tick(tick) || self.skipped(tick)) && self.last_applied == Apply::Command {
             Apply::Servo
         } else {
             Apply::Nothing
@@ -446,6 +450,16 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// [`AgentConfig::team_delay`] ticks later.
     fn command_tick(&self, tick: u64) -> bool {
         tick.checked_sub(self.team_delay).is_some_and(|k| k % self.team_every == 0)
+    }
+
+    /// Whether the team's command for the state of `tick` will not come (with a team delay): a
+    /// newer one waits already, so the coordinator solved past it (real time catches up), and
+    /// the agent answers the state alone instead of waiting out its deadline. Lockstep solves
+    /// every tick and never gets here.
+    fn skipped(&self, tick: u64) -> bool {
+        let unanswered = self.gate.last_applied_tick() != Some(tick) && self.servo_tick != Some(tick);
+        let newer = self.early.newest_tick().is_some_and(|t| self.gate.applies_at(t) > tick);
+        self.team_delay > 0 && self.command_tick(tick) && self.last_applied == Apply::Command && unanswered && newer
     }
 
     /// The terms (and the gravity the hold carries) at `state` for the current contact set;
@@ -515,6 +529,8 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         match self.admit_command(cmd, now) {
             Ok(Some(apply)) => Ok(self.outputs(now, mode_before, false, apply, false)),
+            // Kept for a later state: the latest state's own command may be skipped.
+            Ok(None) if self.gate.latest_state_tick().is_some_and(|l| self.skipped(l)) => Ok(self.outputs(now, mode_before, false, Apply::Servo, false)),
             Ok(None) => Ok(Outputs::default()),
             Err(r) => {
                 // The very command applied last, again: the coordinator sent it again for
@@ -792,6 +808,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             }
             Apply::Servo => {
                 if let Some(tick) = self.gate.latest_state_tick() {
+                    self.servo_tick = Some(tick);
                     self.drive.tau_ff.clone_from(&self.last_command);
                     self.drive_targets();
                     self.drive.header.tick = tick;

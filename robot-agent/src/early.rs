@@ -43,6 +43,11 @@ impl EarlyCommands {
         self.pending == 0
     }
 
+    /// The tick of the newest command waiting.
+    pub fn newest_tick(&self) -> Option<u64> {
+        self.slots[..self.pending].iter().map(|c| c.header.tick).max()
+    }
+
     /// Forget every waiting command (the robot fell, or left safe mode for a newer one).
     pub fn clear(&mut self) {
         self.pending = 0;
@@ -120,7 +125,7 @@ mod tests {
         assert_eq!(q.take_due(|t| t + 2 <= 4, &mut o), None, "tick 3 applies at 5, not 4");
         assert_eq!(q.take_due(|t| t + 2 <= 6, &mut o), Some(1), "ticks 3 and 4 due at 6: 4 taken, 3 dropped");
         assert_eq!((o.header.tick, o.header.stamp_ns, o.tau.clone()), (4, 40, vec![4.0; 3]));
-        assert_eq!(q.len(), 1, "tick 5 still waits");
+        assert_eq!((q.len(), q.newest_tick()), (1, Some(5)), "tick 5 still waits");
         assert_eq!(q.take_due(|t| t + 2 <= 7, &mut o), Some(0));
         assert_eq!(o.header.tick, 5);
         assert!(q.is_empty());

@@ -551,3 +551,38 @@ fn a_delayed_command_applies_at_its_state_plus_the_delay() {
     cfg.team_delay = robot_agent::core::MAX_TEAM_DELAY + 1;
     assert!(AgentCore::new(&cfg, stub()).is_err(), "a delay over the most");
 }
+
+/// With a team delay, a coordinator that catches up (real time) may skip a tick: its command
+/// never comes. A newer command waiting already says so, and the agent answers that state
+/// alone with the last command's torque instead of waiting out its deadline in safe mode,
+/// whether the newer command came before the state or after it.
+#[test]
+fn a_skipped_command_is_answered_alone_when_a_newer_one_waits() {
+    let t0 = Instant::now();
+    let mut cfg = AgentConfig::new("t", ID);
+    cfg.team_delay = 1;
+    cfg.takeover = Duration::ZERO;
+    cfg.deadline = CommandDeadline { ticks: 5, time: Some(ms(25)) };
+    cfg.max_command_age = Duration::from_secs(10);
+    let mut c = AgentCore::new(&cfg, stub()).unwrap();
+    let _ = c.start(t0);
+    let (q, v) = ([0.1, -0.2, 0.3], [0.0; 3]);
+    let _ = c.on_state(&state(0, q, v), t0).unwrap();
+    let first = [1.0, -0.5, 0.25];
+    assert!(c.on_command(&command(ID, 0, &first), t0 + ms(1)).unwrap().drive.is_none(), "waits for state 1");
+    assert_eq!(summary(c.on_state(&state(1, q, v), t0 + ms(2)).unwrap()).1, Some((1, first.to_vec())));
+    // Tick 1's command is skipped: state 2 waits for it until tick 2's comes, which answers
+    // state 2 with the last torque and then waits for state 3.
+    assert_eq!(summary(c.on_state(&state(2, q, v), t0 + ms(3)).unwrap()).1, None, "its command may still come");
+    let second = [2.0, 0.0, -0.5];
+    let (_, drive, _) = summary(c.on_command(&command(ID, 2, &second), t0 + ms(4)).unwrap());
+    assert_eq!(drive, Some((2, first.to_vec())), "state 2 answered alone at once");
+    assert!(c.on_command(&command(ID, 2, &second), t0 + ms(4)).unwrap().drive.is_none(), "state 2 is not answered twice");
+    assert_eq!(summary(c.on_state(&state(3, q, v), t0 + ms(5)).unwrap()).1, Some((3, second.to_vec())));
+    // Tick 3's skipped, tick 4's came first: state 4 is answered alone when it arrives.
+    let third = [0.5, 0.5, 0.5];
+    assert!(c.on_command(&command(ID, 4, &third), t0 + ms(6)).unwrap().drive.is_none(), "state 3 was answered; state 5 not come");
+    assert_eq!(summary(c.on_state(&state(4, q, v), t0 + ms(7)).unwrap()).1, Some((4, second.to_vec())));
+    assert_eq!(summary(c.on_state(&state(5, q, v), t0 + ms(8)).unwrap()).1, Some((5, third.to_vec())));
+    assert_eq!((c.mode(), c.counters().safe_mode_entries), (AgentMode::Commanded, 0), "never in safe mode");
+}

@@ -218,6 +218,23 @@ fn s4_at_its_full_length_holds_in_real_time_distributed() {
     assert_held_from_start_to_end(&plan, &records, &m);
 }
 
+/// S4 embedded at its own length and its own 1 kHz, with the team's command applied two ticks
+/// after its state (`team_delay_ticks = 2`): the team has two robot periods to answer, and the
+/// object is held from start to end. Across processes the same run holds where the single
+/// 1 kHz loop drops the object (docs/results.md).
+#[test]
+fn s4_at_its_full_length_holds_in_real_time_at_1khz_with_the_team_two_ticks_behind() {
+    let _one = serial();
+    let repo = common::scenario::repo();
+    let s = Scenario::load(repo.join("scenarios/s4_object_circle.toml"), &["team_delay_ticks=2".to_string()]).expect("scenario");
+    assert_eq!((s.control_hz, s.duration), (1000.0, 10.0), "the scenario's own rate and length");
+    let mut plan = plan::plan(&s, &repo).expect("plan");
+    plan.scene.realtime = true;
+    let (records, m) = run_here(&plan, false, "embedded, real time", "realtime_s4_1khz_delay");
+    assert_eq!(m.team_delay_ticks, 2, "the report names the delay");
+    assert_held_from_start_to_end(&plan, &records, &m);
+}
+
 /// Every component on its own test host, 5 % of robot r1's packets dropped (nftables), 125 Hz:
 /// the object is still held and the loss shows in r1's loop. Where test hosts cannot be made,
 /// it fails, or skips with `TEAM_TESTS_SKIP_HOSTS=1` (`common::hosts`). 125 Hz, not 250: five processes
