@@ -291,11 +291,7 @@ impl<'a> Service<'a> {
         Ok(())
     }
 
-    /// Take `first` and, once a tick is complete, the terms already queued: only the newest
-    /// complete tick is returned for solving (a coordinator that fell behind in real time
-    /// catches up instead of sending commands too old to apply). Terms of robots outside the
-    /// team get a hold order for their tick. Also returns whether the team changed.
-    /// Terms arrived (`sample`, then whatever else is queued): the newest complete tick solved.
+    /// Terms arrived (`sample`, then whatever else is queued): the complete tick solved.
     /// Whether the team changed, and whether the status is due.
     async fn on_dynamics(&mut self, sample: zenoh::sample::Sample, queue: &transport::SampleQueue, assembler: &mut TickAssembler, controller: &mut dyn TeamController, references: &transport::SampleQueue) -> Result<(bool, bool), TransportError> {
         let (newest, changed) = self.gather(sample, queue, assembler, controller).await?;
@@ -318,6 +314,11 @@ impl<'a> Service<'a> {
         Ok((changed, solved))
     }
 
+    /// Take `first` and, once a tick is complete, the terms already queued. In real time only
+    /// the newest complete tick is returned for solving (a coordinator that fell behind catches
+    /// up instead of sending commands too old to apply); in lockstep the first, and terms of a
+    /// newer tick wait in [`Service::deferred`]. Terms of robots outside the team get a hold
+    /// order for their tick. Also returns whether the team changed.
     async fn gather(
         &mut self,
         first: zenoh::sample::Sample,
@@ -329,17 +330,15 @@ impl<'a> Service<'a> {
         let mut team_changed = false;
         let mut next = Some(first);
         while let Some(sample) = next {
-            if let Some((done, _)) = &newest {
-                if self.cfg.reuse.is_none() && decode_sample::<DynamicsTerms>(&sample).is_ok_and(|t| t.header.tick > *done) {
-                    // Lockstep solves every tick: a newer one waits for this one's solve.
-                    self.deferred = Some(sample);
-                    break;
-                }
-            }
             if sample.kind() == SampleKind::Delete {
                 team_changed |= self.announced_leave(&sample);
             } else if let Some(terms) = decode_terms(&sample, &mut self.counters) {
                 let (robot, tick) = (terms.header.robot_id().to_string(), terms.header.tick);
+                if self.cfg.reuse.is_none() && newest.as_ref().is_some_and(|(done, _)| tick > *done) {
+                    // Lockstep solves every tick: a newer one waits for this one's solve.
+                    self.deferred = Some(sample);
+                    break;
+                }
                 let waiting = self.roster.forming(Instant::now());
                 if !waiting.is_empty() {
                     self.counters.not_ready += 1;

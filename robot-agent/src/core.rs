@@ -81,8 +81,9 @@ pub struct AgentConfig {
     /// The team's delay in state ticks (default 0, at most [`MAX_TEAM_DELAY`]): the command
     /// for the state of tick k applies at the state of tick k + `team_delay`, so that the team
     /// has that many robot periods to answer. The states before the first command can apply
-    /// are answered with the posture hold; between team commands the agent answers alone as
-    /// with [`AgentConfig::team_every`].
+    /// are answered with gravity compensation and the hold's damping; between team commands,
+    /// and for a state whose command the team skipped, the agent answers alone as with
+    /// [`AgentConfig::team_every`].
     pub team_delay: u64,
 }
 
@@ -438,7 +439,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             Apply::Hold
         } else if tick < self.team_delay {
             Apply::Start
-        } else if (!self.command_tick(tick) || self.skipped(tick)) && self.last_applied == Apply::Command {
+        } else if (!self.command_tick(tick) || self.skipped()) && self.last_applied == Apply::Command {
             Apply::Servo
         } else {
             Apply::Nothing
@@ -452,14 +453,15 @@ impl<S: DynamicsSource> AgentCore<S> {
         tick.checked_sub(self.team_delay).is_some_and(|k| k % self.team_every == 0)
     }
 
-    /// Whether the team's command for the state of `tick` will not come (with a team delay): a
+    /// Whether the team's command for the latest state will not come (with a team delay): a
     /// newer one waits already, so the coordinator solved past it (real time catches up), and
     /// the agent answers the state alone instead of waiting out its deadline. Lockstep solves
     /// every tick and never gets here.
-    fn skipped(&self, tick: u64) -> bool {
-        let unanswered = self.gate.last_applied_tick() != Some(tick) && self.servo_tick != Some(tick);
+    fn skipped(&self) -> bool {
+        let Some(tick) = self.gate.latest_state_tick() else { return false };
         let newer = self.early.newest_tick().is_some_and(|t| self.gate.applies_at(t) > tick);
-        self.team_delay > 0 && self.command_tick(tick) && self.last_applied == Apply::Command && unanswered && newer
+        let answered_alone = self.servo_tick == Some(tick);
+        self.team_delay > 0 && self.command_tick(tick) && self.last_applied == Apply::Command && self.unanswered() && !answered_alone && newer
     }
 
     /// The terms (and the gravity the hold carries) at `state` for the current contact set;
@@ -530,7 +532,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         match self.admit_command(cmd, now) {
             Ok(Some(apply)) => Ok(self.outputs(now, mode_before, false, apply, false)),
             // Kept for a later state: the latest state's own command may be skipped.
-            Ok(None) if self.gate.latest_state_tick().is_some_and(|l| self.skipped(l)) => Ok(self.outputs(now, mode_before, false, Apply::Servo, false)),
+            Ok(None) if self.skipped() => Ok(self.outputs(now, mode_before, false, Apply::Servo, false)),
             Ok(None) => Ok(Outputs::default()),
             Err(r) => {
                 // The very command applied last, again: the coordinator sent it again for
@@ -827,11 +829,7 @@ impl<S: DynamicsSource> AgentCore<S> {
                         self.entry.start(self.state_time);
                     }
                     self.takeover.cancel();
-                    self.hold_now();
-                    self.drive.tau_ff.clone_from(&self.hold_tau);
-                    self.torque_only();
-                    self.drive.header.tick = tick;
-                    self.counters.hold_torques += 1;
+                    self.hold_drive(tick);
                     self.last_applied = Apply::Hold;
                     drive = Some(&mut self.drive);
                 }
@@ -839,11 +837,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             Apply::Start => {
                 if let Some(tick) = self.gate.latest_state_tick() {
                     self.hold.hold(&self.q);
-                    self.hold_now();
-                    self.drive.tau_ff.clone_from(&self.hold_tau);
-                    self.torque_only();
-                    self.drive.header.tick = tick;
-                    self.counters.hold_torques += 1;
+                    self.hold_drive(tick);
                     drive = Some(&mut self.drive);
                 }
             }
@@ -900,6 +894,15 @@ impl<S: DynamicsSource> AgentCore<S> {
         self.reference.fill(&mut self.drive.q_des, &mut self.drive.qd_des);
         self.drive.kp.clone_from(&g.kp);
         self.drive.kd.clone_from(&g.kd);
+    }
+
+    /// The drive command of `tick` is the hold's torques at the latest state, without gains.
+    fn hold_drive(&mut self, tick: u64) {
+        self.hold_now();
+        self.drive.tau_ff.clone_from(&self.hold_tau);
+        self.torque_only();
+        self.drive.header.tick = tick;
+        self.counters.hold_torques += 1;
     }
 
     /// The drive command is its torque: no gains, no reference (the hold and the limp robot,
