@@ -174,7 +174,7 @@ fn run_one(s: Scenario, scale: f64, root: &Path, dir: &Path, progress: bool) -> 
         Ok(p) => p,
         Err(e) => return failed(format!("plan: {e}")),
     };
-    let records = match run::run(&plan, &RunOptions { distributed: false, hosts: false, progress }, dir) {
+    let records = match run::run(&plan, &RunOptions { distributed: false, hosts: false, progress, loss: Vec::new() }, dir) {
         Ok(r) => r,
         Err(e) => return failed(format!("run: {e}")),
     };

@@ -175,6 +175,10 @@ struct RunArgs {
     /// namespace, made for the run by scripts/testhosts.sh and removed after it; root).
     #[arg(long)]
     hosts: bool,
+    /// With --hosts, drop this share of a robot's packets, both ways, on its host's link for
+    /// the whole run (nftables): --loss r1=5. Repeat for more robots.
+    #[arg(long, value_name = "ROBOT=PERCENT", requires = "hosts")]
+    loss: Vec<team_runner::run::LinkLoss>,
     /// Run the scenario against the wall clock: the sim-bridge paces physics at the
     /// control period, a robot whose torques are late keeps its last ones, agents keep
     /// their real deadlines (25 ms or 5 ticks), and the report adds the loop's timing.
@@ -303,12 +307,15 @@ fn verbosity(command: &Command) -> Verbosity {
 
 /// `team run`: plan, run (recorded), evaluate, report; an error if a check failed.
 fn run_scenario(a: RunArgs) -> Result<()> {
-    let opts = RunOptions { distributed: a.distributed, hosts: a.hosts, progress: !a.quiet };
-    let mode_name = match a.router {
+    let opts = RunOptions { distributed: a.distributed, hosts: a.hosts, progress: !a.quiet, loss: a.loss };
+    let mut mode_name = match a.router {
         Some(_) if a.realtime => "site, real time".to_string(),
         Some(_) => "site".to_string(),
         None => opts.mode_label(a.tls.is_some(), a.realtime),
     };
+    for l in &opts.loss {
+        mode_name.push_str(&format!(", {} % loss on {}", l.percent, l.robot));
+    }
     let s = Scenario::load(&a.scenario, &a.set)?;
     let dir = a.out.unwrap_or_else(|| scenario_run::default_report_dir(&a.scenario));
     create_dir(&dir)?;

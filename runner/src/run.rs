@@ -82,6 +82,30 @@ pub struct RunOptions {
     pub hosts: bool,
     /// A progress bar (terminal) or progress lines, on stdout.
     pub progress: bool,
+    /// Packet loss on robots' links for the whole run (test hosts only, [`LinkLoss`]).
+    pub loss: Vec<LinkLoss>,
+}
+
+/// A share of a robot's packets dropped, both ways, on its test host's link (nftables,
+/// [`TestHosts::set_loss`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LinkLoss {
+    pub robot: String,
+    pub percent: u8,
+}
+
+impl std::str::FromStr for LinkLoss {
+    type Err = String;
+
+    /// `ROBOT=PERCENT`, the percentage a whole number from 0 to 100.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (robot, percent) = s.split_once('=').ok_or_else(|| format!("{s:?}: expected ROBOT=PERCENT, e.g. r1=5"))?;
+        let percent: u8 = percent.trim().parse().map_err(|_| format!("{s:?}: the loss is a whole percentage from 0 to 100"))?;
+        if robot.trim().is_empty() || percent > 100 {
+            return Err(format!("{s:?}: expected ROBOT=PERCENT with a robot and 0 to 100 %"));
+        }
+        Ok(LinkLoss { robot: robot.trim().to_string(), percent })
+    }
 }
 
 impl RunOptions {
@@ -179,9 +203,18 @@ pub fn run_recorded_secure(
         // Before any host is made: the run's certificates need the test CA's key.
         TestHosts::check_ca(ca).map_err(|e| RunError::Task { what: "the run's certificates".into(), reason: e.to_string() })?;
     }
+    let ids: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
+    if let Some(l) = opts.loss.iter().find(|l| !ids.contains(&l.robot)) {
+        return Err(RunError::Task { what: "packet loss".into(), reason: format!("no robot {} in the team ({})", l.robot, ids.join(", ")) });
+    }
+    if !opts.loss.is_empty() && !opts.hosts {
+        return Err(RunError::Task { what: "packet loss".into(), reason: "needs test hosts (--hosts): a robot's own link is what loses packets".into() });
+    }
     let mode = if opts.hosts {
-        let ids: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
         let hosts = TestHosts::up(&crate::launch::host_names(&ids)).map_err(|e| RunError::Task { what: "making the test hosts".into(), reason: e.to_string() })?;
+        for l in &opts.loss {
+            hosts.set_loss(&l.robot, l.percent).map_err(|e| RunError::Task { what: format!("packet loss on {}'s link", l.robot), reason: e.to_string() })?;
+        }
         // Over TLS, certificates for this set's addresses, signed by the test CA in `tls`.
         let certs = match tls {
             Some(ca) => {
@@ -195,7 +228,16 @@ pub fn run_recorded_secure(
     } else {
         loopback_mode(opts, tls, out)
     };
-    run_recorded_in(plan, opts, &mode, record)
+    let outcome = run_recorded_in(plan, opts, &mode, record);
+    if let RunMode::Hosts { hosts, .. } = &mode {
+        for l in &opts.loss {
+            match hosts.dropped(&l.robot) {
+                Ok(n) => tracing::info!(robot = %l.robot, percent = l.percent, dropped = n, "packets dropped on the robot's link"),
+                Err(e) => tracing::warn!(robot = %l.robot, "packets dropped on the robot's link: {e}"),
+            }
+        }
+    }
+    outcome
 }
 
 /// [`run_recorded`] in a given mode (e.g. [`RunMode::Site`], a client of a site's router).
@@ -294,16 +336,39 @@ mod tests {
     fn the_reported_mode_is_the_mode_that_runs() {
         let (out, certs) = (Path::new("out"), Path::new("certs"));
         for distributed in [false, true] {
-            let opts = RunOptions { distributed, hosts: false, progress: false };
+            let opts = RunOptions { distributed, hosts: false, progress: false, loss: Vec::new() };
             for tls in [None, Some(certs)] {
                 assert_eq!(opts.mode_name(tls.is_some()), loopback_mode(&opts, tls, out).name(), "distributed {distributed}, tls {tls:?}");
             }
         }
-        assert_eq!(loopback_mode(&RunOptions { distributed: false, hosts: false, progress: false }, Some(certs), out).name(), "distributed-tls", "TLS runs distributed");
-        let hosts = RunOptions { distributed: false, hosts: true, progress: false };
+        assert_eq!(loopback_mode(&RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() }, Some(certs), out).name(), "distributed-tls", "TLS runs distributed");
+        let hosts = RunOptions { distributed: false, hosts: true, progress: false, loss: Vec::new() };
         assert_eq!((hosts.mode_name(false), hosts.mode_name(true)), ("hosts", "hosts-tls"));
         assert_eq!(hosts.mode_label(true, true), "hosts-tls, real time");
         assert_eq!(hosts.mode_label(false, false), "hosts");
+    }
+
+    #[test]
+    fn a_link_loss_reads_as_robot_and_whole_percent() {
+        assert_eq!("r1=5".parse::<LinkLoss>(), Ok(LinkLoss { robot: "r1".into(), percent: 5 }));
+        assert_eq!(" r2 = 100".parse::<LinkLoss>().map(|l| l.percent), Ok(100));
+        for bad in ["r1", "r1=", "=5", "r1=101", "r1=-1", "r1=2.5", "r1=NaN"] {
+            assert!(bad.parse::<LinkLoss>().is_err(), "{bad} refused");
+        }
+    }
+
+    /// Loss is refused before anything starts: on an unknown robot, and without test hosts.
+    #[test]
+    fn a_link_loss_names_a_robot_of_the_team_and_needs_test_hosts() {
+        let repo = crate::plan::repo_root();
+        let s = crate::scenario::Scenario::load(repo.join("scenarios/s4_object_circle.toml"), &[]).expect("scenario");
+        let plan = crate::plan::plan(&s, &repo).expect("plan");
+        let out = std::env::temp_dir().join("team-runner-link-loss");
+        let loss = |robot: &str, hosts| RunOptions { distributed: true, hosts, progress: false, loss: vec![LinkLoss { robot: robot.into(), percent: 5 }] };
+        let e = run_recorded_secure(&plan, &loss("r9", true), None, &out, None).expect_err("unknown robot").to_string();
+        assert!(e.contains("no robot r9") && e.contains("r1, r2"), "{e}");
+        let e = run_recorded_secure(&plan, &loss("r1", false), None, &out, None).expect_err("no hosts").to_string();
+        assert!(e.contains("needs test hosts"), "{e}");
     }
 
     #[test]

@@ -37,7 +37,7 @@ fn a_recorded_run_reads_back_and_replays_to_the_same_metrics() {
     let dir = repo().join("target/test-reports/recording");
     std::fs::create_dir_all(&dir).unwrap();
     let rec = RecordOptions { path: dir.join("run.mcap"), scenario: ScenarioSource::read(&file, &sets).unwrap(), live: None };
-    let (records, summary) = run::run_recorded(&plan, &RunOptions { distributed: false, hosts: false, progress: false }, &dir, Some(&rec)).expect("the run completes");
+    let (records, summary) = run::run_recorded(&plan, &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() }, &dir, Some(&rec)).expect("the run completes");
     let summary = summary.expect("recorded");
     assert_eq!((summary.dropped, summary.failed), (0, 0), "{summary:?}");
     let live = evaluate::evaluate(&plan, &records, "embedded");

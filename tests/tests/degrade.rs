@@ -24,7 +24,7 @@ fn repo() -> PathBuf {
 fn run_plan(plan: &Plan, name: &str) -> Metrics {
     let dir = repo().join("target/test-reports").join(name);
     std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(plan, &RunOptions { distributed: false, hosts: false, progress: false }, &dir).expect("the run completes");
+    let records = run::run(plan, &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() }, &dir).expect("the run completes");
     let eval = evaluate::evaluate(plan, &records, "embedded");
     evaluate::write_report(plan, &eval, &dir).expect("report written");
     println!("{}", evaluate::summary(&eval.metrics, &dir));

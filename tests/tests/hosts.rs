@@ -51,7 +51,7 @@ fn run_on(plan: &Plan, hosts: &Arc<TestHosts>, name: &str) -> Result<team_runner
     let dir = report_dir(name);
     let rt = tokio::runtime::Runtime::new().expect("runtime");
     let mode = RunMode::Hosts { dir, hosts: hosts.clone(), certs: None };
-    rt.block_on(run::run_in(plan, &RunOptions { distributed: true, hosts: true, progress: false }, &mode, None))
+    rt.block_on(run::run_in(plan, &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() }, &mode, None))
 }
 
 /// S4 with every component on its own host passes its checks, and `team run --hosts`'s hosts
@@ -65,7 +65,7 @@ fn s4_holds_with_every_component_on_its_own_host() {
         return;
     }
     let dir = report_dir("hosts_s4");
-    let records = run::run(&plan, &RunOptions { distributed: true, hosts: true, progress: false }, &dir).expect("the run completes");
+    let records = run::run(&plan, &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() }, &dir).expect("the run completes");
     let eval = evaluate::evaluate(&plan, &records, "hosts");
     println!("{}", evaluate::summary(&eval.metrics, &dir));
     for c in &eval.metrics.checks {
@@ -197,7 +197,7 @@ fn s4_holds_across_hosts_over_mutual_tls() {
     let dir = report_dir("hosts_tls");
     // No configuration of an earlier run may stand in for this one's.
     std::fs::remove_dir_all(&dir).and_then(|_| std::fs::create_dir_all(&dir)).expect("a fresh report folder");
-    let (records, _) = run::run_recorded_secure(&plan, &RunOptions { distributed: true, hosts: true, progress: false }, Some(&ca), &dir, None).expect("the run completes");
+    let (records, _) = run::run_recorded_secure(&plan, &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() }, Some(&ca), &dir, None).expect("the run completes");
     let eval = evaluate::evaluate(&plan, &records, "hosts-tls");
     println!("{}", evaluate::summary(&eval.metrics, &dir));
     for c in &eval.metrics.checks {
@@ -233,7 +233,7 @@ fn hosts_over_tls_without_the_ca_key_are_refused_by_name() {
     let plan = s4(0.5);
     let ca = test_ca("nokey", false);
     let before = namespaces();
-    let err = run::run_recorded_secure(&plan, &RunOptions { distributed: true, hosts: true, progress: false }, Some(&ca), &report_dir("hosts_tls_nokey"), None).expect_err("refused");
+    let err = run::run_recorded_secure(&plan, &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() }, Some(&ca), &report_dir("hosts_tls_nokey"), None).expect_err("refused");
     let text = err.to_string();
     assert!(text.contains("ca.key") && text.contains("certificates"), "names the missing key: {text}");
     assert_eq!(namespaces(), before, "no host left behind");

@@ -25,7 +25,7 @@ fn mqp_holds_the_constant_pose_in_mujoco() {
     assert_eq!(plan.controller.kind(), "mqp");
     let dir = repo().join("target/test-reports/s3-hold-mqp");
     std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(&plan, &RunOptions { distributed: false, hosts: false, progress: false }, &dir).expect("the run completes");
+    let records = run::run(&plan, &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() }, &dir).expect("the run completes");
     let eval = evaluate::evaluate(&plan, &records, "embedded");
     evaluate::write_report(&plan, &eval, &dir).expect("report written");
     let m = &eval.metrics;

@@ -50,7 +50,7 @@ fn team3_realtime(sets: &[&str]) -> Plan {
 fn run_here(plan: &Plan, distributed: bool, mode: &str, name: &str) -> (Records, Metrics) {
     let dir = common::scenario::repo().join("target/test-reports").join(name);
     std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(plan, &RunOptions { distributed, hosts: false, progress: false }, &dir).expect("the run completes");
+    let records = run::run(plan, &RunOptions { distributed, hosts: false, progress: false, loss: Vec::new() }, &dir).expect("the run completes");
     let m = evaluated(plan, &records, mode, name);
     (records, m)
 }
@@ -201,7 +201,7 @@ fn s4_at_its_full_length_holds_in_real_time_recorded() {
     let path = common::scenario::repo().join("scenarios/s4_object_circle.toml");
     let sets = ["control_hz=250".to_string()];
     let rec = RecordOptions { path: dir.join("run.mcap"), scenario: ScenarioSource::read(&path, &sets).expect("scenario file"), live: None };
-    let (records, summary) = run::run_recorded(&plan, &RunOptions { distributed: false, hosts: false, progress: false }, &dir, Some(&rec)).expect("the run completes");
+    let (records, summary) = run::run_recorded(&plan, &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() }, &dir, Some(&rec)).expect("the run completes");
     let summary = summary.expect("recorded");
     assert_eq!((summary.dropped, summary.error.as_deref()), (0, None), "the recording is complete: {summary:?}");
     let m = evaluated(&plan, &records, "embedded, real time", "realtime_s4_full");
@@ -252,7 +252,7 @@ fn s4_holds_in_real_time_across_hosts_with_five_percent_loss_on_one_link() {
     hosts.set_loss("r1", 5).expect("loss rule");
     let mode = RunMode::Hosts { dir: dir.clone(), hosts: hosts.clone(), certs: None };
     let rt = tokio::runtime::Runtime::new().expect("runtime");
-    let records = rt.block_on(run::run_in(&plan, &RunOptions { distributed: true, hosts: true, progress: false }, &mode, None)).expect("the run completes");
+    let records = rt.block_on(run::run_in(&plan, &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() }, &mode, None)).expect("the run completes");
     let m = evaluated(&plan, &records, "hosts, real time", "realtime_hosts_loss");
     // Held, not tracked to the millimetre: the drives hold their last torques through the
     // gaps, so the tracking bounds of a clean run are not asked.

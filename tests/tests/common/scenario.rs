@@ -45,7 +45,7 @@ fn run_with(file: &str, sets: &[&str], distributed: bool, name: &str, mcap: bool
     let plan = plan::plan(&scenario, &repo()).expect("plan");
     let dir = report_dir(name);
     std::fs::create_dir_all(&dir).expect("report dir");
-    let opts = RunOptions { distributed, hosts: false, progress: false };
+    let opts = RunOptions { distributed, hosts: false, progress: false, loss: Vec::new() };
     let rec = mcap.then(|| RecordOptions { path: dir.join("run.mcap"), scenario: ScenarioSource::read(&path, &sets).expect("scenario file"), live: None });
     let (records, summary) = run::run_recorded(&plan, &opts, &dir, rec.as_ref()).expect("the run completes");
     if let Some(s) = summary {
