@@ -723,6 +723,10 @@ pub struct AgentStatus {
     pub command_latency_us: f64,
     /// Reason of the last rejection, if any.
     pub last_rejection: Option<String>,
+    /// The team's delay in use, state ticks: the team's command for the state of tick k
+    /// applies at tick k + this (fixed, or raised from the measured latency).
+    #[serde(default)]
+    pub team_delay_ticks: u64,
 }
 
 impl Validate for AgentStatus {

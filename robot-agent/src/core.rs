@@ -26,6 +26,7 @@ use protocol::{AgentMode, AgentStatus, DriveCommand, DynamicsTerms, Header, Robo
 use thiserror::Error;
 
 use crate::contact_switch::{ContactSwitch, SwitchConfig};
+use crate::delay::{AdaptiveDelay, TeamDelay};
 use crate::drive_gains::{self, DriveGains, DriveGainsMode};
 use crate::dynamics_source::DynamicsSource;
 use crate::early::{EarlyCommands, Kept};
@@ -78,13 +79,14 @@ pub struct AgentConfig {
     /// and, with drive gains, the reference at that state. The tick deadline and the
     /// maximum command age in ticks count team ticks (this many state ticks each).
     pub team_every: u64,
-    /// The team's delay in state ticks (default 0, at most [`MAX_TEAM_DELAY`]): the command
-    /// for the state of tick k applies at the state of tick k + `team_delay`, so that the team
-    /// has that many robot periods to answer. The states before the first command can apply
-    /// are answered with gravity compensation and the hold's damping; between team commands,
-    /// and for a state whose command the team skipped, the agent answers alone as with
+    /// The team's delay in state ticks (default 0, at most [`MAX_TEAM_DELAY`]), or `auto`:
+    /// from 0, raised from the latency the agent measures ([`crate::delay`]). The command for
+    /// the state of tick k applies at the state of tick k + the delay, so that the team has
+    /// that many robot periods to answer. The states before the first command can apply are
+    /// answered with gravity compensation and the hold's damping; between team commands, and
+    /// for a state whose command the team skipped, the agent answers alone as with
     /// [`AgentConfig::team_every`].
-    pub team_delay: u64,
+    pub team_delay: TeamDelay,
 }
 
 /// The longest team delay, in state ticks ([`AgentConfig::team_delay`]).
@@ -113,7 +115,7 @@ impl AgentConfig {
             drive_gains: DriveGainsMode::None,
             drive_hz: None,
             team_every: 1,
-            team_delay: 0,
+            team_delay: TeamDelay::default(),
         }
     }
 
@@ -274,7 +276,8 @@ pub struct AgentCore<S: DynamicsSource> {
     /// Every how many state ticks the team answers (a team tick); the states between are
     /// answered by the agent alone ([`Apply::Servo`]).
     team_every: u64,
-    team_delay: u64,
+    /// The team's delay in use ([`AgentConfig::team_delay`]).
+    delay: AdaptiveDelay,
     contacts: ContactSwitch,
     terms: DynamicsTerms,
     drive: DriveCommand,
@@ -332,9 +335,11 @@ impl<S: DynamicsSource> AgentCore<S> {
         if cfg.team_every == 0 {
             return Err(CoreError::Config("the team must answer every 1 or more ticks, not 0".into()));
         }
-        if cfg.team_delay > MAX_TEAM_DELAY {
+        if cfg.team_delay.initial() > MAX_TEAM_DELAY {
             return Err(CoreError::Config(format!("a team delay of {} ticks: at most {MAX_TEAM_DELAY}", cfg.team_delay)));
         }
+        // Room for the longest delay the agent may come to.
+        let early_room = EARLY_TICKS + if cfg.team_delay.adapts() { MAX_TEAM_DELAY } else { cfg.team_delay.initial() } + 1;
         let feet: Vec<String> = source.foot_frames().to_vec();
         Ok(AgentCore {
             team: team.to_string(),
@@ -342,7 +347,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             description: source.description(team, robot),
             joints,
             // Tick deadlines count the team's ticks: a command comes every `team_every` states.
-            gate: CommandGate::new(robot, limits.clone(), cfg.max_command_age_ticks.saturating_mul(cfg.team_every), cfg.max_command_age).with_delay(cfg.team_delay),
+            gate: CommandGate::new(robot, limits.clone(), cfg.max_command_age_ticks.saturating_mul(cfg.team_every), cfg.max_command_age).with_delay(cfg.team_delay.initial()),
             watchdog: Watchdog::new(CommandDeadline { ticks: cfg.deadline.ticks.saturating_mul(cfg.team_every), ..cfg.deadline }, cfg.first_command),
             fall: FallDetector::new(cfg.fall),
             hold: PostureHold::new(gains, limits),
@@ -355,19 +360,19 @@ impl<S: DynamicsSource> AgentCore<S> {
             state_time: 0.0,
             reference: drive_gains::Reference::new(joints, cfg.drive_hz.map(|hz| 1.0 / hz)),
             team_every: cfg.team_every,
-            team_delay: cfg.team_delay,
+            delay: AdaptiveDelay::new(cfg.team_delay),
             contacts: ContactSwitch::new(cfg.contacts.clone(), ActiveContacts { stance: vec![true; feet.len()], hand_in_grasp: true }),
             feet,
             terms: empty_terms(team, robot),
             drive: DriveCommand::torque(team, robot, 0, Vec::with_capacity(joints)),
-            early: EarlyCommands::new(team, robot, joints, (EARLY_TICKS + cfg.team_delay + 1) as usize),
+            early: EarlyCommands::new(team, robot, joints, early_room as usize),
             due: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false },
             servo_tick: None,
             q: vec![0.0; joints],
             qdot: vec![0.0; joints],
             gravity: vec![0.0; joints],
             counters: AgentCounters::default(),
-            board: StatusBoard::new(team, robot),
+            board: StatusBoard::new(team, robot).with_team_delay(cfg.team_delay.initial()),
             state_at: None,
             last_dynamics: None,
             status_period: cfg.status_period,
@@ -437,7 +442,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         let apply = if self.watchdog.safe_mode_since().is_some() {
             Apply::Hold
-        } else if tick < self.team_delay {
+        } else if tick < self.delay.ticks() {
             Apply::Start
         } else if (!self.command_tick(tick) || self.skipped()) && self.last_applied == Apply::Command {
             Apply::Servo
@@ -450,7 +455,7 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// Whether a team command applies at the state of `tick`: the state of a team tick,
     /// [`AgentConfig::team_delay`] ticks later.
     fn command_tick(&self, tick: u64) -> bool {
-        tick.checked_sub(self.team_delay).is_some_and(|k| k % self.team_every == 0)
+        tick.checked_sub(self.delay.ticks()).is_some_and(|k| k % self.team_every == 0)
     }
 
     /// Whether the team's command for the latest state will not come (with a team delay): a
@@ -461,7 +466,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         let Some(tick) = self.gate.latest_state_tick() else { return false };
         let newer = self.early.newest_tick().is_some_and(|t| self.gate.applies_at(t) > tick);
         let answered_alone = self.servo_tick == Some(tick);
-        self.team_delay > 0 && self.command_tick(tick) && self.last_applied == Apply::Command && self.unanswered() && !answered_alone && newer
+        self.delay.ticks() > 0 && self.command_tick(tick) && self.last_applied == Apply::Command && self.unanswered() && !answered_alone && newer
     }
 
     /// The terms (and the gravity the hold carries) at `state` for the current contact set;
@@ -529,6 +534,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             let r = CommandRejection::Fallen { tick: cmd.header.tick, fell: f.tick };
             return Err(self.reject(r));
         }
+        self.measure_delay(cmd.header.tick);
         match self.admit_command(cmd, now) {
             Ok(Some(apply)) => Ok(self.outputs(now, mode_before, false, apply, false)),
             // Kept for a later state: the latest state's own command may be skipped.
@@ -541,6 +547,17 @@ impl<S: DynamicsSource> AgentCore<S> {
                 let copy = matches!(r, CommandRejection::Stale { tick, last } if tick == last) && self.applied == (cmd.header.stamp_ns, cmd.hold);
                 Err(self.refuse(r, copy))
             }
+        }
+    }
+
+    /// With `auto` ([`crate::delay`]): a command of `tick` arrived now; a delay it raises
+    /// applies to every command from now on, the waiting ones too.
+    fn measure_delay(&mut self, tick: u64) {
+        let Some(latest) = self.gate.latest_state_tick() else { return };
+        if let Some(d) = self.delay.on_command(tick, latest) {
+            self.gate.set_delay(d);
+            self.board.status.team_delay_ticks = d;
+            tracing::info!(robot = %self.robot, tick, latest, delay = d, "team delay changed: commands came after the states they apply at, or none would have for a while");
         }
     }
 
@@ -581,7 +598,7 @@ impl<S: DynamicsSource> AgentCore<S> {
     fn admit_command(&mut self, cmd: &TorqueCommand, now: Instant) -> Result<Option<Apply>, CommandRejection> {
         let clamped = match self.gate.check(cmd, &mut self.drive.tau_ff) {
             Ok(n) => n,
-            Err(CommandRejection::FromTheFuture { tick, latest }) if tick <= latest + EARLY_TICKS + self.team_delay => {
+            Err(CommandRejection::FromTheFuture { tick, latest }) if tick <= latest + EARLY_TICKS + self.delay.ticks() => {
                 self.keep_early(cmd)?;
                 return Ok(None);
             }

@@ -77,6 +77,12 @@ impl CommandGate {
         self
     }
 
+    /// From now on, commands apply `ticks` state ticks after their state (a delay raised by
+    /// `crate::delay::AdaptiveDelay`); commands already waiting apply by it too.
+    pub fn set_delay(&mut self, ticks: u64) {
+        self.delay = ticks;
+    }
+
     /// The state tick at which a command of `tick` applies ([`CommandGate::with_delay`]).
     pub fn applies_at(&self, tick: u64) -> u64 {
         tick.saturating_add(self.delay)

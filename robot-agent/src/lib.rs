@@ -19,6 +19,7 @@
 //!   robot's model; [`dynamics_source::PlaceholderDynamics`] for the smoke run and the mock),
 //!   and the robot's protocol description ([`dynamics_source::robot_description`]).
 //! * [`contact_switch`]: the contact sets' schedule, lift-offs and force-confirmed touchdowns.
+//! * [`delay`]: the team's delay, fixed or raised from the latency the agent measures.
 //! * [`drive_gains`]: the gains sent with each drive command (none: the paper's torque loop;
 //!   or from each joint's inertia).
 //! * [`gate`]: the checks of incoming commands and clamping to the torque limits.
@@ -29,6 +30,7 @@
 pub mod agent;
 pub mod contact_switch;
 pub mod core;
+pub mod delay;
 pub mod drive_gains;
 pub mod dynamics_source;
 pub mod early;

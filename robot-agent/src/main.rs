@@ -70,9 +70,11 @@ struct RunCmd {
     #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     team_every: u64,
     /// The team's command for the state of tick k applies at tick k + N (the team has N robot
-    /// periods to answer); the states before the first command can apply get the posture hold.
-    #[arg(long, value_name = "N", default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=robot_agent::core::MAX_TEAM_DELAY))]
-    team_delay: u64,
+    /// periods to answer, 0 to 8); the states before the first command can apply get gravity
+    /// compensation. `auto`: from 0, raised a tick at a time while commands come after the
+    /// states they apply at (robot_agent::delay).
+    #[arg(long, value_name = "N|auto", default_value = "0")]
+    team_delay: robot_agent::delay::TeamDelay,
     /// Smoke run only: placeholder dynamics (unit mass matrix, no frames, no limits) of this
     /// many joints instead of a robot model.
     #[arg(long, value_name = "N", conflicts_with = "robot", hide = true)]

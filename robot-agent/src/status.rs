@@ -58,8 +58,15 @@ impl StatusBoard {
                 dynamics_latency_us: 0.0,
                 command_latency_us: 0.0,
                 last_rejection: None,
+                team_delay_ticks: 0,
             },
         }
+    }
+
+    /// The team's delay the agent starts with (`crate::delay`).
+    pub fn with_team_delay(mut self, ticks: u64) -> Self {
+        self.status.team_delay_ticks = ticks;
+        self
     }
 
     /// Copy the counters and the latest tick into the message (the sender stamps it).

@@ -5,6 +5,7 @@ use std::time::{Duration, Instant};
 
 use protocol::{AgentMode, ContactSet as ContactMsg, DynamicsTerms, Header, Matrix, Pose, RobotDescription, RobotState, TorqueCommand};
 use robot_agent::drive_gains::DriveGainsMode;
+use robot_agent::delay::TeamDelay;
 use robot_agent::core::{AgentConfig, AgentCore, ContactRejection, Outputs, Sent, StateRejection, COORDINATOR_GRACE};
 use robot_agent::dynamics_source::{DynamicsSource, SourceError};
 use robot_agent::gate::CommandRejection;
@@ -517,7 +518,7 @@ fn between_team_ticks_the_agent_answers_alone_with_the_last_torque() {
 fn a_delayed_command_applies_at_its_state_plus_the_delay() {
     let t0 = Instant::now();
     let mut cfg = AgentConfig::new("t", ID);
-    cfg.team_delay = 2;
+    cfg.team_delay = TeamDelay::Ticks(2);
     cfg.hold_gains = Some(HoldGains { kp: vec![40.0; 3], kd: vec![2.0, 3.0, 0.5] });
     cfg.deadline = CommandDeadline { ticks: 5, time: None };
     cfg.max_command_age = Duration::from_secs(10);
@@ -548,7 +549,7 @@ fn a_delayed_command_applies_at_its_state_plus_the_delay() {
     // A command for a state already answered is stale.
     assert!(matches!(c.on_command(&command(ID, 1, &[0.0; 3]), t0 + ms(22)), Err(CommandRejection::Stale { .. })));
     assert_eq!(c.counters().applied, 3);
-    cfg.team_delay = robot_agent::core::MAX_TEAM_DELAY + 1;
+    cfg.team_delay = TeamDelay::Ticks(robot_agent::core::MAX_TEAM_DELAY + 1);
     assert!(AgentCore::new(&cfg, stub()).is_err(), "a delay over the most");
 }
 
@@ -560,7 +561,7 @@ fn a_delayed_command_applies_at_its_state_plus_the_delay() {
 fn a_skipped_command_is_answered_alone_when_a_newer_one_waits() {
     let t0 = Instant::now();
     let mut cfg = AgentConfig::new("t", ID);
-    cfg.team_delay = 1;
+    cfg.team_delay = TeamDelay::Ticks(1);
     cfg.takeover = Duration::ZERO;
     cfg.deadline = CommandDeadline { ticks: 5, time: Some(ms(25)) };
     cfg.max_command_age = Duration::from_secs(10);
@@ -584,5 +585,48 @@ fn a_skipped_command_is_answered_alone_when_a_newer_one_waits() {
     assert!(c.on_command(&command(ID, 4, &third), t0 + ms(6)).unwrap().drive.is_none(), "state 3 was answered; state 5 not come");
     assert_eq!(summary(c.on_state(&state(4, q, v), t0 + ms(7)).unwrap()).1, Some((4, second.to_vec())));
     assert_eq!(summary(c.on_state(&state(5, q, v), t0 + ms(8)).unwrap()).1, Some((5, third.to_vec())));
+    assert_eq!((c.mode(), c.counters().safe_mode_entries), (AgentMode::Commanded, 0), "never in safe mode");
+}
+
+/// `auto` ([`robot_agent::delay`]): commands that come two states after their own (the team
+/// takes between two and three robot periods to answer) raise the delay a tick at a time to 3,
+/// where every command waits for its state, which is then answered at once with the command
+/// of three ticks before; the status says the delay, and the agent never enters safe mode.
+/// Commands that come before the next state (lockstep, or a fast team) keep it at 0.
+#[test]
+fn auto_raises_the_delay_until_commands_come_before_their_states() {
+    let t0 = Instant::now();
+    let mut cfg = AgentConfig::new("t", ID);
+    cfg.team_delay = TeamDelay::Auto;
+    cfg.takeover = Duration::ZERO;
+    cfg.deadline = CommandDeadline { ticks: 25, time: None };
+    cfg.max_command_age = Duration::from_secs(10);
+    let (q, v) = ([0.1, -0.2, 0.3], [0.0; 3]);
+    let tau = |k: u64| [0.001 * k as f64, 0.0, 0.0];
+    let mut fast = AgentCore::new(&cfg, stub()).unwrap();
+    let _ = fast.start(t0);
+    for k in 0..1000 {
+        let _ = fast.on_state(&state(k, q, v), t0 + ms(k)).unwrap();
+        let (_, drive, _) = summary(fast.on_command(&command(ID, k, &tau(k)), t0 + ms(k)).unwrap());
+        assert_eq!(drive, Some((k, tau(k).to_vec())), "tick {k}: applied at its own state");
+    }
+    assert_eq!(fast.status().team_delay_ticks, 0, "commands on time keep the delay at 0");
+
+    let mut c = AgentCore::new(&cfg, stub()).unwrap();
+    let _ = c.start(t0);
+    let mut answered_at_arrival = Vec::new();
+    for k in 0..400 {
+        let (_, drive, _) = summary(c.on_state(&state(k, q, v), t0 + ms(k)).unwrap());
+        answered_at_arrival.push(drive);
+        if k >= 2 {
+            let _ = c.on_command(&command(ID, k - 2, &tau(k - 2)), t0 + ms(k));
+        }
+    }
+    assert_eq!(c.status().team_delay_ticks, 3, "raised to the first delay the commands meet");
+    let settled = answered_at_arrival.len() - 100;
+    for (k, drive) in answered_at_arrival.iter().enumerate().skip(settled) {
+        let k = k as u64;
+        assert_eq!(drive.clone(), Some((k, tau(k - 3).to_vec())), "tick {k}: the command of tick {} waited for it", k - 3);
+    }
     assert_eq!((c.mode(), c.counters().safe_mode_entries), (AgentMode::Commanded, 0), "never in safe mode");
 }

@@ -97,7 +97,7 @@ fn ticks_allocations(source: impl DynamicsSource, mut state: RobotState, n: usiz
     let mut cfg = AgentConfig::new("t", "r1");
     cfg.drive_gains = gains;
     cfg.team_every = team_every;
-    cfg.team_delay = team_delay;
+    cfg.team_delay = robot_agent::delay::TeamDelay::Ticks(team_delay);
     cfg.deadline = CommandDeadline { ticks: 5, time: None };
     cfg.max_command_age = Duration::from_secs(10);
     let mut core = AgentCore::new(&cfg, source).unwrap();

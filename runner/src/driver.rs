@@ -64,6 +64,9 @@ pub struct Records {
     /// Per robot, the most safe-mode entries its agent's statuses reported (robots whose agent
     /// was not heard are absent).
     pub agent_safe_mode: BTreeMap<String, u64>,
+    /// Per robot, the longest team delay its agent's statuses reported, state ticks (with
+    /// `team_delay_ticks = "auto"` the delay each agent came to).
+    pub agent_delay: BTreeMap<String, u64>,
 }
 
 impl Records {
@@ -89,11 +92,13 @@ impl Records {
         self.torques.entry(robot.to_string()).or_default().push((cmd.header.tick, cmd.tau_ff.clone()));
     }
 
-    /// Keep the safe-mode entries an agent's status reports.
+    /// Keep the safe-mode entries and the team delay an agent's status reports.
     fn take_agent_status(&mut self, sample: &zenoh::sample::Sample) {
         if let Ok(st) = decode_sample::<AgentStatus>(sample) {
             let n = self.agent_safe_mode.entry(st.header.robot_id().to_string()).or_default();
             *n = (*n).max(st.safe_mode_entries);
+            let d = self.agent_delay.entry(st.header.robot_id().to_string()).or_default();
+            *d = (*d).max(st.team_delay_ticks);
         }
     }
 

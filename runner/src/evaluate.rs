@@ -7,6 +7,7 @@ use std::path::Path;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use protocol::{GroundTruth, Pose, PoseReference};
+use robot_agent::delay::TeamDelay;
 use serde::Serialize;
 
 use crate::driver::Records;
@@ -66,8 +67,11 @@ pub struct Metrics {
     pub physics_hz: f64,
     /// The team loop's rate (the control rate unless `team_hz` set it lower).
     pub team_hz: f64,
-    /// The team's delay, robot ticks (`team_delay_ticks`).
+    /// The team's delay, robot ticks (`team_delay_ticks`); with `auto`, the longest any
+    /// agent came to.
     pub team_delay_ticks: u64,
+    /// Whether the agents set the delay from the latency they measured (`auto`).
+    pub team_delay_auto: bool,
     /// The gains the agents sent with their drive commands (`none`, `inertia`).
     pub drive_gains: String,
     pub samples: usize,
@@ -141,7 +145,11 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
         control_hz: plan.scenario.control_hz,
         physics_hz: plan.scenario.physics_hz,
         team_hz: plan.scenario.control_hz / plan.scenario.team_every().unwrap_or(1) as f64,
-        team_delay_ticks: plan.scenario.team_delay_ticks,
+        team_delay_ticks: match plan.scenario.team_delay_ticks {
+            TeamDelay::Ticks(d) => d,
+            TeamDelay::Auto => records.agent_delay.values().copied().max().unwrap_or(0),
+        },
+        team_delay_auto: plan.scenario.team_delay_ticks.adapts(),
         drive_gains: plan.scenario.drive_gains.to_string(),
         samples: truth.len(),
         object: tracking(&pass.obj_pos_err, &pass.obj_ang_err),
@@ -483,7 +491,9 @@ pub fn write_report(_plan: &Plan, eval: &Evaluation, dir: &Path) -> Result<(), R
 pub fn summary(m: &Metrics, dir: &Path) -> String {
     let mut s = String::new();
     let mut team = if m.team_hz < m.control_hz { format!(", team {} Hz", m.team_hz) } else { String::new() };
-    if m.team_delay_ticks > 0 {
+    if m.team_delay_auto {
+        team.push_str(&format!(", team delay auto (came to {} ticks)", m.team_delay_ticks));
+    } else if m.team_delay_ticks > 0 {
         team.push_str(&format!(", team delay {} ticks", m.team_delay_ticks));
     }
     let gains = if m.drive_gains == "none" { String::new() } else { format!(", drive gains {}", m.drive_gains) };

@@ -292,7 +292,7 @@ pub struct AgentArgs {
     /// The team answers every this many state ticks.
     pub team_every: u64,
     /// The team's command for a state applies this many state ticks later.
-    pub team_delay: u64,
+    pub team_delay: robot_agent::delay::TeamDelay,
 }
 
 impl AgentArgs {
@@ -702,7 +702,7 @@ mod tests {
             assert!(args.windows(2).any(|w| w[0] == pair[0] && w[1] == pair[1]), "{pair:?} in {args:?}");
         }
         assert!(args.iter().any(|a| a.contains("7999")), "{args:?}");
-        let a = AgentArgs { team: "t1".into(), id: "r7".into(), model: AgentModel::Placeholder { joints: 5 }, command_deadline: Duration::from_secs(3), command_deadline_ticks: 7, drive_gains: DriveGainsMode::Inertia, drive_hz: Some(2000.0), team_every: 4, team_delay: 2 };
+        let a = AgentArgs { team: "t1".into(), id: "r7".into(), model: AgentModel::Placeholder { joints: 5 }, command_deadline: Duration::from_secs(3), command_deadline_ticks: 7, drive_gains: DriveGainsMode::Inertia, drive_hz: Some(2000.0), team_every: 4, team_delay: robot_agent::delay::TeamDelay::Ticks(2) };
         let args = a.to_cli(&zenoh);
         for pair in [["--id", "r7"], ["--placeholder-joints", "5"], ["--command-deadline-ms", "3000"], ["--command-deadline-ticks", "7"], ["--drive-gains", "inertia"], ["--drive-hz", "2000"], ["--team-every", "4"], ["--team-delay", "2"]] {
             assert!(args.windows(2).any(|w| w[0] == pair[0] && w[1] == pair[1]), "{pair:?} in {args:?}");

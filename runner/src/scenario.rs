@@ -16,6 +16,7 @@ use thiserror::Error;
 
 use planner::reference::PoseMotion;
 use planner::walk::WalkSpec;
+use robot_agent::delay::TeamDelay;
 
 /// What can be wrong with a scenario.
 #[derive(Debug, Error)]
@@ -114,12 +115,15 @@ pub struct Scenario {
     /// Default: `control_hz`, the paper's single loop.
     #[serde(default)]
     pub team_hz: Option<f64>,
-    /// The team's delay, in robot ticks (0 to `robot_agent::core::MAX_TEAM_DELAY`): the team's
-    /// command for the state of tick k applies at tick k + `team_delay_ticks`
-    /// (`robot_agent::core::AgentConfig::team_delay`), so that the team has that many robot
-    /// periods to answer. Default 0: the command applies at its own state, the paper's loop.
+    /// The team's delay, in robot ticks (0 to `robot_agent::core::MAX_TEAM_DELAY`), or
+    /// `"auto"`: the team's command for the state of tick k applies at tick k +
+    /// `team_delay_ticks` (`robot_agent::core::AgentConfig::team_delay`), so that the team has
+    /// that many robot periods to answer. `auto` starts at 0 and each agent raises it while
+    /// commands come after the states they apply at (`robot_agent::delay`; in lockstep, which
+    /// waits for every answer, it stays 0). Default 0: the command applies at its own state,
+    /// the paper's loop.
     #[serde(default)]
-    pub team_delay_ticks: u64,
+    pub team_delay_ticks: TeamDelay,
 }
 
 /// The most robot ticks a team tick may span ([`Scenario::team_hz`]).
@@ -431,9 +435,6 @@ impl Scenario {
         }
         protocol::validate::substeps(self.control_hz, self.physics_hz).map_err(|e| format!("control_hz, physics_hz: {e}"))?;
         self.team_every()?;
-        if self.team_delay_ticks > robot_agent::core::MAX_TEAM_DELAY {
-            return Err(format!("team_delay_ticks = {} must be at most {}", self.team_delay_ticks, robot_agent::core::MAX_TEAM_DELAY));
-        }
         coordinator::ControllerSpec::of_kind(&self.controller).map_err(|e| format!("controller: {e}"))?;
         for (what, f) in [("min_foot_force", self.min_foot_force), ("min_hand_force", self.min_hand_force)] {
             if !(f.is_finite() && f >= 0.0) {
@@ -645,10 +646,14 @@ mod tests {
         let load = |sets: &[&str]| Scenario::load(&p, &sets.iter().map(|s| s.to_string()).collect::<Vec<_>>());
         assert_eq!(load(&[]).unwrap().team_every(), Ok(1), "the paper's single loop by default");
         assert_eq!(load(&["team_hz=250"]).unwrap().team_every(), Ok(4));
-        assert_eq!(load(&[]).unwrap().team_delay_ticks, 0, "no delay by default");
-        assert_eq!(load(&["team_delay_ticks=3"]).unwrap().team_delay_ticks, 3);
-        let e = load(&["team_delay_ticks=9"]).unwrap_err().to_string();
-        assert!(e.contains("team_delay_ticks = 9") && e.contains("at most 8"), "{e}");
+        assert_eq!(load(&[]).unwrap().team_delay_ticks, TeamDelay::Ticks(0), "no delay by default");
+        assert_eq!(load(&["team_delay_ticks=3"]).unwrap().team_delay_ticks, TeamDelay::Ticks(3));
+        assert_eq!(load(&["team_delay_ticks=auto"]).unwrap().team_delay_ticks, TeamDelay::Auto);
+        assert_eq!(load(&["team_delay_ticks=\"auto\""]).unwrap().team_delay_ticks, TeamDelay::Auto);
+        for bad in ["team_delay_ticks=9", "team_delay_ticks=-1", "team_delay_ticks=soon", "team_delay_ticks=1.5"] {
+            let e = load(&[bad]).unwrap_err().to_string();
+            assert!(e.contains("team_delay_ticks") && e.contains("\"auto\" or a whole number of ticks from 0 to 8"), "{bad}: {e}");
+        }
         for bad in ["team_hz=300", "team_hz=2000", "team_hz=0", "team_hz=10"] {
             let e = load(&[bad]).unwrap_err().to_string();
             assert!(e.contains("team_hz") && e.contains("whole number"), "{bad}: {e}");

@@ -64,7 +64,7 @@ impl SmokeConfig {
         let agents = self
             .robots
             .iter()
-            .map(|r| AgentArgs { team: self.team.clone(), id: r.clone(), model: AgentModel::Placeholder { joints: self.joints }, command_deadline: SMOKE_COMMAND_DEADLINE, command_deadline_ticks: LOCKSTEP_DEADLINE_TICKS, drive_gains: DriveGainsMode::None, drive_hz: None, team_every: 1, team_delay: 0 })
+            .map(|r| AgentArgs { team: self.team.clone(), id: r.clone(), model: AgentModel::Placeholder { joints: self.joints }, command_deadline: SMOKE_COMMAND_DEADLINE, command_deadline_ticks: LOCKSTEP_DEADLINE_TICKS, drive_gains: DriveGainsMode::None, drive_hz: None, team_every: 1, team_delay: robot_agent::delay::TeamDelay::Ticks(0) })
             .collect();
         let plant = SmokePlant { team: self.team.clone(), robots: self.robots.clone(), joints: self.joints, ticks: self.ticks, dt: self.dt, v0: self.v0 };
         (Launch { coordinator, agents }, BridgeArgs::Smoke(plant))

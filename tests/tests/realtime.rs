@@ -172,11 +172,11 @@ fn s4_full_length(hz: f64) -> Plan {
 }
 
 /// A full-length real-time run held the object from its start to its end: every check, never
-/// released, the loop consistent and at most 5 % of the ticks missed, the hand-over without a
-/// gap. A run's length used to decide its start: the first window of references grew with it
+/// released, the loop consistent and at most `missed` of the ticks missed, the hand-over
+/// without a gap. A run's length used to decide its start: the first window of references grew with it
 /// (2 750 at 250 Hz for 10 s), its decoding landed in the first tick, and past the agents' 25 ms
 /// deadline they went to safe mode holding no load: the object fell in the settle.
-fn assert_held_from_start_to_end(plan: &Plan, records: &Records, m: &Metrics) {
+fn assert_held_from_start_to_end(plan: &Plan, records: &Records, m: &Metrics, missed: f64) {
     for c in &m.checks {
         assert!(c.passed, "{} = {} not below {}", c.name, c.value, c.bound);
     }
@@ -185,7 +185,7 @@ fn assert_held_from_start_to_end(plan: &Plan, records: &Records, m: &Metrics) {
     let report = m.loop_timing.as_ref().expect("a real-time run reports its loop");
     assert_loop_consistent(plan, records, report);
     for (r, l) in &report.robots {
-        assert!(l.deadline_misses * 20 <= l.ticks, "{r}: {} of {} ticks missed", l.deadline_misses, l.ticks);
+        assert!(l.deadline_misses as f64 <= missed * l.ticks as f64, "{r}: {} of {} ticks missed", l.deadline_misses, l.ticks);
     }
     assert!(records.run_wall.as_secs_f64() > 9.5, "paced by the wall clock: {:?}", records.run_wall);
     assert_handover_without_gap(plan, records);
@@ -205,7 +205,7 @@ fn s4_at_its_full_length_holds_in_real_time_recorded() {
     let summary = summary.expect("recorded");
     assert_eq!((summary.dropped, summary.error.as_deref()), (0, None), "the recording is complete: {summary:?}");
     let m = evaluated(&plan, &records, "embedded, real time", "realtime_s4_full");
-    assert_held_from_start_to_end(&plan, &records, &m);
+    assert_held_from_start_to_end(&plan, &records, &m, 0.05);
 }
 
 /// S4 as separate processes on loopback at its own length, at 125 Hz (four processes on this
@@ -215,7 +215,7 @@ fn s4_at_its_full_length_holds_in_real_time_distributed() {
     let _one = serial();
     let plan = s4_full_length(125.0);
     let (records, m) = run_here(&plan, true, "distributed, real time", "realtime_s4_full_distributed");
-    assert_held_from_start_to_end(&plan, &records, &m);
+    assert_held_from_start_to_end(&plan, &records, &m, 0.05);
 }
 
 /// S4 embedded at its own length and its own 1 kHz, with the team's command applied two ticks
@@ -232,7 +232,30 @@ fn s4_at_its_full_length_holds_in_real_time_at_1khz_with_the_team_two_ticks_behi
     plan.scene.realtime = true;
     let (records, m) = run_here(&plan, false, "embedded, real time", "realtime_s4_1khz_delay");
     assert_eq!(m.team_delay_ticks, 2, "the report names the delay");
-    assert_held_from_start_to_end(&plan, &records, &m);
+    assert_held_from_start_to_end(&plan, &records, &m, 0.05);
+}
+
+/// S4 as separate processes on loopback at its own length, robots at its own 1 kHz and the
+/// team at 500 Hz, with the team's delay set by the agents from the latency they measure
+/// (`team_delay_ticks = "auto"`): held from start to end, where the single 1 kHz loop drops the
+/// object. The robot ticks themselves still cross the network to the agents (the sim-bridge is
+/// the robots' drives), so up to half of them may miss (a third beside two busy loops); the
+/// team's commands are what the delay keeps on time. (With the team at 1 kHz, beside two busy
+/// loops, a torso tracked to 8 mm RMS of its 10 mm bound.)
+#[test]
+fn s4_at_its_full_length_holds_in_real_time_at_1khz_distributed_with_the_team_at_500hz_and_the_delay_from_the_latency() {
+    let _one = serial();
+    let repo = common::scenario::repo();
+    let s = Scenario::load(repo.join("scenarios/s4_object_circle.toml"), &["team_delay_ticks=auto".to_string(), "team_hz=500".to_string()]).expect("scenario");
+    assert_eq!((s.control_hz, s.duration), (1000.0, 10.0), "the scenario's own rate and length");
+    let mut plan = plan::plan(&s, &repo).expect("plan");
+    plan.scene.realtime = true;
+    let (records, m) = run_here(&plan, true, "distributed, real time", "realtime_s4_1khz_auto_delay");
+    println!("team delay came to {:?}; safe-mode entries {:?}", records.agent_delay, records.agent_safe_mode);
+    assert!(m.team_delay_auto, "the report says the delay was measured");
+    assert_eq!(records.agent_delay.len(), 2, "both agents reported their delay: {:?}", records.agent_delay);
+    assert!((1..=robot_agent::core::MAX_TEAM_DELAY).contains(&m.team_delay_ticks), "across processes 1 kHz needs a delay: {}", m.team_delay_ticks);
+    assert_held_from_start_to_end(&plan, &records, &m, 0.5);
 }
 
 /// Every component on its own test host, 5 % of robot r1's packets dropped (nftables), 125 Hz:

@@ -22,7 +22,7 @@ fn assert_delayed_run(plan: &Plan, m: &Metrics, records: &Records, delay: u64) {
     for c in &m.checks {
         assert!(c.passed, "delay {delay}: {} = {} not below {}", c.name, c.value, c.bound);
     }
-    assert_eq!(m.team_delay_ticks, delay, "the report names the delay");
+    assert_eq!((m.team_delay_ticks, m.team_delay_auto), (delay, false), "the report names the delay");
     let ticks = plan.scene.ticks;
     for r in &plan.robots {
         let got: Vec<u64> = records.torques.get(&r.id).map(|v| v.iter().map(|(t, _)| *t).collect()).unwrap_or_default();
@@ -53,4 +53,17 @@ fn s4_holds_with_the_teams_command_delayed_up_to_three_ticks() {
         rms.push((d, r));
     }
     println!("S4 object RMS by team delay (ticks, mm): {:?}", rms.iter().map(|(d, r)| (*d, r * 1e3)).collect::<Vec<_>>());
+}
+
+/// `team_delay_ticks = "auto"` in lockstep: the simulator waits for every answer, so no command
+/// comes after its state and the delay stays 0; the run is the undelayed one, torque for
+/// torque.
+#[test]
+fn auto_in_lockstep_keeps_no_delay_and_the_same_run() {
+    let (_, base, base_records) = run(&["duration=2"], "team_delay_auto_base");
+    let (_, m, records) = run(&["duration=2", "team_delay_ticks=auto"], "team_delay_auto");
+    assert_eq!((m.team_delay_ticks, m.team_delay_auto), (0, true), "auto, and it came to 0");
+    assert!(records.agent_delay.len() == 2 && records.agent_delay.values().all(|d| *d == 0), "{:?}", records.agent_delay);
+    assert_eq!(records.torques, base_records.torques, "the same torques on every tick");
+    assert_eq!(m.object.position_rms_m, base.object.position_rms_m);
 }
