@@ -17,7 +17,8 @@
 #       DURATION=10 MODE=--hosts ./scripts/realtime-sweep.sh            # x loss on r1's link (root)
 #
 # TEAM_RATES: the team loop's rates (`team_hz`, a whole divisor of the robot rate; "-" runs
-# the team at the robot rate). DELAYS: `team_delay_ticks`. LOSS: percent of robot r1's packets
+# the team at the robot rate). DELAYS: `team_delay_ticks` (`auto` prints as autoN, N the
+# longest delay an agent came to). LOSS: percent of robot r1's packets
 # dropped on its link (`team run --hosts --loss r1=P`; needs MODE=--hosts). RECORD=1 records
 # each run (run.mcap; the default runs without, `--no-record`). Needs the release
 # binaries (cargo build --release --bins). Reports go to reports/sweep/.
@@ -39,7 +40,7 @@ done
 
 echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs), load $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "mode: realtime ${mode:-embedded}, ${duration} s per run"
-printf '%-18s %5s %5s %2s %4s %6s %13s %15s %15s %5s %17s %5s %7s\n' \
+printf '%-18s %5s %5s %6s %4s %6s %13s %15s %15s %5s %17s %5s %7s\n' \
     scenario Hz team d loss robots "worst misses" "latency p50/99" "tick p50/99" rtf "object rms/max" held checks
 for s in $scenarios; do
   for hz in $rates; do
@@ -60,12 +61,15 @@ for s in $scenarios; do
             python3 - "$out/metrics.json" "$s" "$hz" "${th/-/$hz}" "$d" "$loss" <<'PY'
 import json, sys
 path, scenario, hz, th, d, loss = sys.argv[1:7]
-head = f"{scenario:<18} {hz:>5} {th:>5} {d:>2} {loss:>3}%"
+head = f"{scenario:<18} {hz:>5} {th:>5} {d:>6} {loss:>3}%"
 try:
     m = json.load(open(path))
 except (OSError, ValueError) as e:
     print(f"{head} no report: {e} (see {path.rsplit('/', 1)[0]}/log.txt)")
     sys.exit(0)
+if m.get("team_delay_auto"):
+    d = f"auto{m.get('team_delay_ticks', '?')}"
+    head = f"{scenario:<18} {hz:>5} {th:>5} {d:>6} {loss:>3}%"
 loop = (m.get("loop_timing") or {}).get("robots", {})
 worst = max(loop.items(), key=lambda kv: kv[1]["deadline_misses"], default=(None, None))
 misses = f"{worst[1]['deadline_misses']}/{worst[1]['ticks']}" if worst[0] else "-"

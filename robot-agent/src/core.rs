@@ -335,11 +335,11 @@ impl<S: DynamicsSource> AgentCore<S> {
         if cfg.team_every == 0 {
             return Err(CoreError::Config("the team must answer every 1 or more ticks, not 0".into()));
         }
-        if cfg.team_delay.initial() > MAX_TEAM_DELAY {
+        if cfg.team_delay.max() > MAX_TEAM_DELAY {
             return Err(CoreError::Config(format!("a team delay of {} ticks: at most {MAX_TEAM_DELAY}", cfg.team_delay)));
         }
         // Room for the longest delay the agent may come to.
-        let early_room = EARLY_TICKS + if cfg.team_delay.adapts() { MAX_TEAM_DELAY } else { cfg.team_delay.initial() } + 1;
+        let early_room = EARLY_TICKS + cfg.team_delay.max() + 1;
         let feet: Vec<String> = source.foot_frames().to_vec();
         Ok(AgentCore {
             team: team.to_string(),

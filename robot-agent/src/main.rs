@@ -71,9 +71,10 @@ struct RunCmd {
     team_every: u64,
     /// The team's command for the state of tick k applies at tick k + N (the team has N robot
     /// periods to answer, 0 to 8); the states before the first command can apply get gravity
-    /// compensation. `auto`: from 0, raised a tick at a time while commands come after the
-    /// states they apply at (robot_agent::delay).
-    #[arg(long, value_name = "N|auto", default_value = "0")]
+    /// compensation. `auto`: from 0, raised a tick at a time (up to 4, or N with `auto:N`)
+    /// while commands come after the states they apply at, lowered when they have long come in
+    /// time a tick sooner (robot_agent::delay).
+    #[arg(long, value_name = "N|auto|auto:N", default_value = "0")]
     team_delay: robot_agent::delay::TeamDelay,
     /// Smoke run only: placeholder dynamics (unit mass matrix, no frames, no limits) of this
     /// many joints instead of a robot model.

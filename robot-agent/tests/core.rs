@@ -597,7 +597,7 @@ fn a_skipped_command_is_answered_alone_when_a_newer_one_waits() {
 fn auto_raises_the_delay_until_commands_come_before_their_states() {
     let t0 = Instant::now();
     let mut cfg = AgentConfig::new("t", ID);
-    cfg.team_delay = TeamDelay::Auto;
+    cfg.team_delay = TeamDelay::AUTO;
     cfg.takeover = Duration::ZERO;
     cfg.deadline = CommandDeadline { ticks: 25, time: None };
     cfg.max_command_age = Duration::from_secs(10);

@@ -147,7 +147,7 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
         team_hz: plan.scenario.control_hz / plan.scenario.team_every().unwrap_or(1) as f64,
         team_delay_ticks: match plan.scenario.team_delay_ticks {
             TeamDelay::Ticks(d) => d,
-            TeamDelay::Auto => records.agent_delay.values().copied().max().unwrap_or(0),
+            TeamDelay::Auto { .. } => records.agent_delay.values().copied().max().unwrap_or(0),
         },
         team_delay_auto: plan.scenario.team_delay_ticks.adapts(),
         drive_gains: plan.scenario.drive_gains.to_string(),

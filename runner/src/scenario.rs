@@ -648,11 +648,11 @@ mod tests {
         assert_eq!(load(&["team_hz=250"]).unwrap().team_every(), Ok(4));
         assert_eq!(load(&[]).unwrap().team_delay_ticks, TeamDelay::Ticks(0), "no delay by default");
         assert_eq!(load(&["team_delay_ticks=3"]).unwrap().team_delay_ticks, TeamDelay::Ticks(3));
-        assert_eq!(load(&["team_delay_ticks=auto"]).unwrap().team_delay_ticks, TeamDelay::Auto);
-        assert_eq!(load(&["team_delay_ticks=\"auto\""]).unwrap().team_delay_ticks, TeamDelay::Auto);
-        for bad in ["team_delay_ticks=9", "team_delay_ticks=-1", "team_delay_ticks=soon", "team_delay_ticks=1.5"] {
+        assert_eq!(load(&["team_delay_ticks=auto"]).unwrap().team_delay_ticks, TeamDelay::AUTO);
+        assert_eq!(load(&["team_delay_ticks=\"auto:6\""]).unwrap().team_delay_ticks, TeamDelay::Auto { max: 6 });
+        for bad in ["team_delay_ticks=9", "team_delay_ticks=-1", "team_delay_ticks=soon", "team_delay_ticks=1.5", "team_delay_ticks=auto:9"] {
             let e = load(&[bad]).unwrap_err().to_string();
-            assert!(e.contains("team_delay_ticks") && e.contains("\"auto\" or a whole number of ticks from 0 to 8"), "{bad}: {e}");
+            assert!(e.contains("team_delay_ticks") && e.contains("\"auto:N\" or a whole number of ticks from 0 to 8"), "{bad}: {e}");
         }
         for bad in ["team_hz=300", "team_hz=2000", "team_hz=0", "team_hz=10"] {
             let e = load(&[bad]).unwrap_err().to_string();
