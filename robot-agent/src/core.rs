@@ -80,7 +80,7 @@ pub struct AgentConfig {
     /// maximum command age in ticks count team ticks (this many state ticks each).
     pub team_every: u64,
     /// The team's delay in state ticks (default 0, at most [`MAX_TEAM_DELAY`]), or `auto`:
-    /// from 0, raised from the latency the agent measures ([`crate::delay`]). The command for
+    /// from 0, changed from the latency the agent measures ([`crate::delay`]). The command for
     /// the state of tick k applies at the state of tick k + the delay, so that the team has
     /// that many robot periods to answer. The states before the first command can apply are
     /// answered with gravity compensation and the hold's damping; between team commands, and
