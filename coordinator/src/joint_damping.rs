@@ -50,6 +50,7 @@ impl TeamController for JointDamping {
                 header: protocol::Header::new(&terms.header.team, terms.header.robot.as_deref(), terms.header.tick, 0),
                 tau: v.iter().map(|qd| -self.damping * qd).collect(),
                 hold: false,
+                delay_ticks: 0,
             });
         }
         Ok(())

@@ -475,7 +475,9 @@ impl<'a> Service<'a> {
         self.counters.held += 1;
         tracing::debug!(robot, tick, "{why}: it holds its posture this tick");
         // Not into `commands`: they stay the last solved tick's, for `answer_again`.
-        let order = TorqueCommand::hold(&self.cfg.team, robot, tick);
+        // At the team's delay of the last solved tick.
+        let delay_ticks = self.commands.first().map_or(0, |c| c.delay_ticks);
+        let order = TorqueCommand { delay_ticks, ..TorqueCommand::hold(&self.cfg.team, robot, tick) };
         publish_commands(self.session, &self.cfg, std::slice::from_ref(&order), &mut self.command_pubs, &mut self.counters).await
     }
 
@@ -707,10 +709,21 @@ async fn solve_and_publish(
             }
         }
     }
+    let delay = team_delay(terms);
+    for c in commands.iter_mut() {
+        c.delay_ticks = delay;
+    }
     publish_commands(session, cfg, commands, command_pubs, counters).await?;
     counters.ticks += 1;
     tracing::trace!(tick, us = started.elapsed().as_micros() as u64, "tick solved");
     Ok(solved)
+}
+
+/// The team's delay for a tick: the longest its robots ask for, so that every robot applies
+/// the tick's commands at the same state (each robot's own delay would have two robots apply
+/// the team's answers of different ticks at once).
+fn team_delay(terms: &[DynamicsTerms]) -> u64 {
+    terms.iter().map(|t| t.team_delay_ticks).max().unwrap_or(0)
 }
 
 /// Each command on its robot's command key (publishers declared on first use).
@@ -744,7 +757,8 @@ async fn put_checked(publisher: &mut TypedPublisher<TorqueCommand>, team: &str, 
     match cmd.validate() {
         Ok(()) => publisher.put(cmd).await.map(Ok),
         Err(e) => {
-            publisher.put(&TorqueCommand::hold(team, cmd.header.robot_id(), cmd.header.tick)).await?;
+            let hold = TorqueCommand { delay_ticks: cmd.delay_ticks.min(protocol::MAX_TEAM_DELAY_TICKS), ..TorqueCommand::hold(team, cmd.header.robot_id(), cmd.header.tick) };
+            publisher.put(&hold).await?;
             Ok(Err(e))
         }
     }

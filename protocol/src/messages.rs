@@ -181,7 +181,15 @@ pub struct DynamicsTerms {
     pub hand_in_grasp: bool,
     /// Tick of the state the terms were computed from.
     pub state_tick: u64,
+    /// The team's delay this robot asks for, state ticks (at most [`MAX_TEAM_DELAY_TICKS`]):
+    /// its configured delay, or the one its measured latency needs. The coordinator sends the
+    /// largest its tick's robots ask for with every command ([`TorqueCommand::delay_ticks`]).
+    pub team_delay_ticks: u64,
 }
+
+/// The longest team delay, state ticks ([`DynamicsTerms::team_delay_ticks`],
+/// [`TorqueCommand::delay_ticks`]).
+pub const MAX_TEAM_DELAY_TICKS: u64 = 8;
 
 impl DynamicsTerms {
     pub fn nv(&self) -> usize {
@@ -235,7 +243,7 @@ impl Validate for DynamicsTerms {
         if self.hand_in_grasp && hands == 0 {
             return Err(ProtocolError::invalid("hand_in_grasp", "hand in grasp but no hand frame sent"));
         }
-        Ok(())
+        check_delay(self.team_delay_ticks)
     }
 }
 
@@ -254,18 +262,29 @@ pub struct TorqueCommand {
     /// tick): the robot applies its own posture-hold torque for the tick. A robot is never
     /// left without a command for a tick whose terms the coordinator has.
     pub hold: bool,
+    /// The team's delay: the command applies at the state of tick `header.tick` +
+    /// `delay_ticks` (at most [`MAX_TEAM_DELAY_TICKS`]). The same for every robot of a tick.
+    pub delay_ticks: u64,
 }
 
 impl TorqueCommand {
     /// The order to hold posture at `tick`.
     pub fn hold(team: &str, robot: &str, tick: u64) -> Self {
-        TorqueCommand { header: Header::new(team, Some(robot), tick, 0), tau: Vec::new(), hold: true }
+        TorqueCommand { header: Header::new(team, Some(robot), tick, 0), tau: Vec::new(), hold: true, delay_ticks: 0 }
     }
+}
+
+fn check_delay(ticks: u64) -> Result<(), ProtocolError> {
+    if ticks > MAX_TEAM_DELAY_TICKS {
+        return Err(ProtocolError::invalid("team delay", format!("{ticks} ticks: at most {MAX_TEAM_DELAY_TICKS}")));
+    }
+    Ok(())
 }
 
 impl Validate for TorqueCommand {
     fn validate(&self) -> Result<(), ProtocolError> {
         self.header.check(true)?;
+        check_delay(self.delay_ticks)?;
         if self.hold {
             if !self.tau.is_empty() {
                 return Err(ProtocolError::invalid("tau", "a hold command carries no torques"));

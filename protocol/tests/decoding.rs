@@ -54,11 +54,12 @@ fn dynamics(nv: usize) -> DynamicsTerms {
         ],
         hand_in_grasp: true,
         state_tick: 42,
+        team_delay_ticks: 0,
     }
 }
 
 fn command(n: usize) -> TorqueCommand {
-    TorqueCommand { header: header(true), tau: vec![1.5; n], hold: false }
+    TorqueCommand { header: header(true), tau: vec![1.5; n], hold: false, delay_ticks: 0 }
 }
 
 fn raw<M: Message>(m: &M) -> Vec<u8> {
@@ -198,7 +199,7 @@ fn foot_loads_must_bound_a_pushing_force() {
         assert!(from_json::<TaskReferences>(&text).is_err(), "bound {bad} accepted");
     }
     // An older sender without the field: no foot is being unloaded.
-    let old = r#"{"header":{"version":2,"team":"t","robot":null,"tick":3,"stamp_ns":0},"object":null,"torsos":[],"swing_feet":[]}"#;
+    let old = r#"{"header":{"version":3,"team":"t","robot":null,"tick":3,"stamp_ns":0},"object":null,"torsos":[],"swing_feet":[]}"#;
     assert!(from_json::<TaskReferences>(old).unwrap().foot_loads.is_empty());
 }
 

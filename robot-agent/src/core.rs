@@ -90,7 +90,7 @@ pub struct AgentConfig {
 }
 
 /// The longest team delay, in state ticks ([`AgentConfig::team_delay`]).
-pub const MAX_TEAM_DELAY: u64 = 8;
+pub const MAX_TEAM_DELAY: u64 = protocol::MAX_TEAM_DELAY_TICKS;
 
 impl AgentConfig {
     /// Defaults: deadline 5 ticks or 25 ms, the first command within 2 s, maximum command age
@@ -276,8 +276,13 @@ pub struct AgentCore<S: DynamicsSource> {
     /// Every how many state ticks the team answers (a team tick); the states between are
     /// answered by the agent alone ([`Apply::Servo`]).
     team_every: u64,
-    /// The team's delay in use ([`AgentConfig::team_delay`]).
+    /// The team's delay this robot asks for ([`AgentConfig::team_delay`]), sent with its terms.
     delay: AdaptiveDelay,
+    /// The team's delay in use: the one the newest command came with (the longest any robot
+    /// of its tick asked for); before the first command, the configured one.
+    in_use: u64,
+    /// The tick of the newest command that came (the delay follows no older one).
+    newest_command: Option<u64>,
     contacts: ContactSwitch,
     terms: DynamicsTerms,
     drive: DriveCommand,
@@ -338,8 +343,8 @@ impl<S: DynamicsSource> AgentCore<S> {
         if cfg.team_delay.max() > MAX_TEAM_DELAY {
             return Err(CoreError::Config(format!("a team delay of {} ticks: at most {MAX_TEAM_DELAY}", cfg.team_delay)));
         }
-        // Room for the longest delay the agent may come to.
-        let early_room = EARLY_TICKS + cfg.team_delay.max() + 1;
+        // Room for the longest delay the team may come to (another robot may ask for more).
+        let early_room = EARLY_TICKS + MAX_TEAM_DELAY + 1;
         let feet: Vec<String> = source.foot_frames().to_vec();
         Ok(AgentCore {
             team: team.to_string(),
@@ -361,12 +366,14 @@ impl<S: DynamicsSource> AgentCore<S> {
             reference: drive_gains::Reference::new(joints, cfg.drive_hz.map(|hz| 1.0 / hz)),
             team_every: cfg.team_every,
             delay: AdaptiveDelay::new(cfg.team_delay),
+            in_use: cfg.team_delay.initial(),
+            newest_command: None,
             contacts: ContactSwitch::new(cfg.contacts.clone(), ActiveContacts { stance: vec![true; feet.len()], hand_in_grasp: true }),
             feet,
             terms: empty_terms(team, robot),
             drive: DriveCommand::torque(team, robot, 0, Vec::with_capacity(joints)),
             early: EarlyCommands::new(team, robot, joints, early_room as usize),
-            due: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false },
+            due: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false, delay_ticks: 0 },
             servo_tick: None,
             q: vec![0.0; joints],
             qdot: vec![0.0; joints],
@@ -442,7 +449,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         let apply = if self.watchdog.safe_mode_since().is_some() {
             Apply::Hold
-        } else if tick < self.delay.ticks() {
+        } else if tick < self.in_use {
             Apply::Start
         } else if (!self.command_tick(tick) || self.skipped()) && self.last_applied == Apply::Command {
             Apply::Servo
@@ -455,7 +462,7 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// Whether a team command applies at the state of `tick`: the state of a team tick,
     /// [`AgentConfig::team_delay`] ticks later.
     fn command_tick(&self, tick: u64) -> bool {
-        tick.checked_sub(self.delay.ticks()).is_some_and(|k| k % self.team_every == 0)
+        tick.checked_sub(self.in_use).is_some_and(|k| k % self.team_every == 0)
     }
 
     /// Whether the team's command for the latest state will not come (with a team delay): a
@@ -466,7 +473,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         let Some(tick) = self.gate.latest_state_tick() else { return false };
         let newer = self.early.newest_tick().is_some_and(|t| self.gate.applies_at(t) > tick);
         let answered_alone = self.servo_tick == Some(tick);
-        self.delay.ticks() > 0 && self.command_tick(tick) && self.last_applied == Apply::Command && self.unanswered() && !answered_alone && newer
+        self.in_use > 0 && self.command_tick(tick) && self.last_applied == Apply::Command && self.unanswered() && !answered_alone && newer
     }
 
     /// The terms (and the gravity the hold carries) at `state` for the current contact set;
@@ -477,6 +484,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             Ok(()) => {
                 self.terms.header.tick = tick;
                 self.terms.state_tick = tick;
+                self.terms.team_delay_ticks = self.delay.ticks();
                 self.counters.dynamics += 1;
                 self.make_gains(tick);
                 true
@@ -534,7 +542,10 @@ impl<S: DynamicsSource> AgentCore<S> {
             let r = CommandRejection::Fallen { tick: cmd.header.tick, fell: f.tick };
             return Err(self.reject(r));
         }
-        self.measure_delay(cmd.header.tick);
+        if cmd.header.robot_id() == self.robot {
+            self.measure_delay(cmd.header.tick);
+            self.follow_delay(cmd);
+        }
         match self.admit_command(cmd, now) {
             Ok(Some(apply)) => Ok(self.outputs(now, mode_before, false, apply, false)),
             // Kept for a later state: the latest state's own command may be skipped.
@@ -550,14 +561,29 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
     }
 
-    /// With `auto` ([`crate::delay`]): a command of `tick` arrived now; a delay it raises
-    /// applies to every command from now on, the waiting ones too.
+    /// With `auto` ([`crate::delay`]): a command of `tick` arrived now; the delay this robot
+    /// asks the team for, from the next terms on.
     fn measure_delay(&mut self, tick: u64) {
         let Some(latest) = self.gate.latest_state_tick() else { return };
         if let Some(d) = self.delay.on_command(tick, latest) {
-            self.gate.set_delay(d);
-            self.board.status.team_delay_ticks = d;
-            tracing::info!(robot = %self.robot, tick, latest, delay = d, "team delay changed: commands came after the states they apply at, or none would have for a while");
+            tracing::info!(robot = %self.robot, tick, latest, delay = d, "asking the team for a delay of {d} ticks: commands came after the states they apply at, or none would have for a while");
+        }
+    }
+
+    /// The team's delay is the newest command's: it applies to every command from now on, the
+    /// waiting ones too (a longer one leaves a state without a team command, answered alone; a
+    /// shorter one has two apply at one state, the newer winning).
+    fn follow_delay(&mut self, cmd: &TorqueCommand) {
+        let tick = cmd.header.tick;
+        if self.newest_command.is_some_and(|n| tick < n) || cmd.delay_ticks > MAX_TEAM_DELAY {
+            return;
+        }
+        self.newest_command = Some(tick);
+        if cmd.delay_ticks != self.in_use {
+            tracing::info!(robot = %self.robot, tick, from = self.in_use, to = cmd.delay_ticks, "the team's delay changed");
+            self.in_use = cmd.delay_ticks;
+            self.gate.set_delay(cmd.delay_ticks);
+            self.board.status.team_delay_ticks = cmd.delay_ticks;
         }
     }
 
@@ -567,7 +593,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         let gate = &self.gate;
         self.early.take_due(|t| gate.applies_at(t) <= tick, &mut self.due)?;
         // Taken out and put back: the gate reads it while the core changes (no allocation).
-        let empty = TorqueCommand { header: Header { version: 0, team: String::new(), robot: None, tick: 0, stamp_ns: 0 }, tau: Vec::new(), hold: false };
+        let empty = TorqueCommand { header: Header { version: 0, team: String::new(), robot: None, tick: 0, stamp_ns: 0 }, tau: Vec::new(), hold: false, delay_ticks: 0 };
         let due = std::mem::replace(&mut self.due, empty);
         let admitted = self.admit_command(&due, now);
         self.due = due;
@@ -598,7 +624,7 @@ impl<S: DynamicsSource> AgentCore<S> {
     fn admit_command(&mut self, cmd: &TorqueCommand, now: Instant) -> Result<Option<Apply>, CommandRejection> {
         let clamped = match self.gate.check(cmd, &mut self.drive.tau_ff) {
             Ok(n) => n,
-            Err(CommandRejection::FromTheFuture { tick, latest }) if tick <= latest + EARLY_TICKS + self.delay.ticks() => {
+            Err(CommandRejection::FromTheFuture { tick, latest }) if tick <= latest + EARLY_TICKS + self.in_use => {
                 self.keep_early(cmd)?;
                 return Ok(None);
             }
@@ -1030,6 +1056,16 @@ impl<S: DynamicsSource> AgentCore<S> {
 
     pub fn latest_state_tick(&self) -> Option<u64> {
         self.gate.latest_state_tick()
+    }
+
+    /// The team's delay in use, state ticks (the newest command's).
+    pub fn team_delay(&self) -> u64 {
+        self.in_use
+    }
+
+    /// The team's delay this robot asks for in its terms, state ticks.
+    pub fn wanted_delay(&self) -> u64 {
+        self.delay.ticks()
     }
 
     pub fn last_applied_tick(&self) -> Option<u64> {

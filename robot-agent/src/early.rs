@@ -30,7 +30,7 @@ pub enum Kept {
 impl EarlyCommands {
     /// Room for `capacity` commands of `joints` torques each.
     pub fn new(team: &str, robot: &str, joints: usize, capacity: usize) -> Self {
-        let empty = || TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false };
+        let empty = || TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false, delay_ticks: 0 };
         EarlyCommands { slots: (0..capacity.max(1)).map(|_| empty()).collect(), pending: 0 }
     }
 
@@ -108,7 +108,7 @@ mod tests {
     use super::*;
 
     fn cmd(tick: u64, tau: f64) -> TorqueCommand {
-        TorqueCommand { header: Header::new("t", Some("r1"), tick, tick * 10), tau: vec![tau; 3], hold: false }
+        TorqueCommand { header: Header::new("t", Some("r1"), tick, tick * 10), tau: vec![tau; 3], hold: false, delay_ticks: 0 }
     }
 
     fn out() -> TorqueCommand {

@@ -203,7 +203,7 @@ mod tests {
     use protocol::Header;
 
     fn cmd(robot: &str, tick: u64, tau: Vec<f64>) -> TorqueCommand {
-        TorqueCommand { header: Header::new("t", Some(robot), tick, 0), tau, hold: false }
+        TorqueCommand { header: Header::new("t", Some(robot), tick, 0), tau, hold: false, delay_ticks: 0 }
     }
 
     #[test]

@@ -219,5 +219,6 @@ pub fn empty_terms(team: &str, id: &str) -> DynamicsTerms {
         frames: Vec::new(),
         hand_in_grasp: false,
         state_tick: 0,
+        team_delay_ticks: 0,
     }
 }

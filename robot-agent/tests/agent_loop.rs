@@ -40,7 +40,7 @@ fn standing_state(robot: &Robot, team: &str, tick: u64, dq0: f64, qd: f64) -> Ro
 }
 
 fn command(team: &str, robot: &str, tick: u64, tau: Vec<f64>) -> TorqueCommand {
-    TorqueCommand { header: Header::new(team, Some(robot), tick, 0), tau, hold: false }
+    TorqueCommand { header: Header::new(team, Some(robot), tick, 0), tau, hold: false, delay_ticks: 0 }
 }
 
 struct Harness {

@@ -82,7 +82,12 @@ fn state(tick: u64, q: [f64; 3], v: [f64; 3]) -> RobotState {
 }
 
 fn command(robot: &str, tick: u64, tau: &[f64]) -> TorqueCommand {
-    TorqueCommand { header: Header::new("t", Some(robot), tick, 0), tau: tau.to_vec(), hold: false }
+    TorqueCommand { header: Header::new("t", Some(robot), tick, 0), tau: tau.to_vec(), hold: false, delay_ticks: 0 }
+}
+
+/// A command at the team's delay `d` (the coordinator sends the longest its robots ask for).
+fn delayed(d: u64, robot: &str, tick: u64, tau: &[f64]) -> TorqueCommand {
+    TorqueCommand { delay_ticks: d, ..command(robot, tick, tau) }
 }
 
 fn ms(k: u64) -> Duration {
@@ -535,8 +540,8 @@ fn a_delayed_command_applies_at_its_state_plus_the_delay() {
         assert!(tau.iter().zip(&expected).all(|(a, b)| (a - b).abs() < 1e-12), "tick {k}: {tau:?} against {expected:?}");
     }
     // The commands of ticks 0 and 1 come before the state of tick 2: both wait.
-    assert!(c.on_command(&command(ID, 0, &[1.0, -0.5, 0.25]), t0 + ms(6)).unwrap().drive.is_none());
-    assert!(c.on_command(&command(ID, 1, &[2.0, -1.0, 0.5]), t0 + ms(7)).unwrap().drive.is_none());
+    assert!(c.on_command(&delayed(2, ID, 0, &[1.0, -0.5, 0.25]), t0 + ms(6)).unwrap().drive.is_none());
+    assert!(c.on_command(&delayed(2, ID, 1, &[2.0, -1.0, 0.5]), t0 + ms(7)).unwrap().drive.is_none());
     // State 2 gets tick 0's command, unblended; state 3 tick 1's; state 4 waits for tick 2's.
     for (k, tau) in [(2, [1.0, -0.5, 0.25]), (3, [2.0, -1.0, 0.5])] {
         let (terms, drive, _) = summary(c.on_state(&state(k, q, v), t0 + ms(5 * k)).unwrap());
@@ -544,10 +549,10 @@ fn a_delayed_command_applies_at_its_state_plus_the_delay() {
     }
     assert_eq!(summary(c.on_state(&state(4, q, v), t0 + ms(20)).unwrap()), (Some(4), None, false));
     // Tick 2's command, arriving now, applies at once as the command of tick 4.
-    let (_, drive, _) = summary(c.on_command(&command(ID, 2, &[3.0, 0.0, 0.0]), t0 + ms(21)).unwrap());
+    let (_, drive, _) = summary(c.on_command(&delayed(2, ID, 2, &[3.0, 0.0, 0.0]), t0 + ms(21)).unwrap());
     assert_eq!(drive, Some((4, vec![3.0, 0.0, 0.0])));
     // A command for a state already answered is stale.
-    assert!(matches!(c.on_command(&command(ID, 1, &[0.0; 3]), t0 + ms(22)), Err(CommandRejection::Stale { .. })));
+    assert!(matches!(c.on_command(&delayed(2, ID, 1, &[0.0; 3]), t0 + ms(22)), Err(CommandRejection::Stale { .. })));
     assert_eq!(c.counters().applied, 3);
     cfg.team_delay = TeamDelay::Ticks(robot_agent::core::MAX_TEAM_DELAY + 1);
     assert!(AgentCore::new(&cfg, stub()).is_err(), "a delay over the most");
@@ -570,19 +575,19 @@ fn a_skipped_command_is_answered_alone_when_a_newer_one_waits() {
     let (q, v) = ([0.1, -0.2, 0.3], [0.0; 3]);
     let _ = c.on_state(&state(0, q, v), t0).unwrap();
     let first = [1.0, -0.5, 0.25];
-    assert!(c.on_command(&command(ID, 0, &first), t0 + ms(1)).unwrap().drive.is_none(), "waits for state 1");
+    assert!(c.on_command(&delayed(1, ID, 0, &first), t0 + ms(1)).unwrap().drive.is_none(), "waits for state 1");
     assert_eq!(summary(c.on_state(&state(1, q, v), t0 + ms(2)).unwrap()).1, Some((1, first.to_vec())));
     // Tick 1's command is skipped: state 2 waits for it until tick 2's comes, which answers
     // state 2 with the last torque and then waits for state 3.
     assert_eq!(summary(c.on_state(&state(2, q, v), t0 + ms(3)).unwrap()).1, None, "its command may still come");
     let second = [2.0, 0.0, -0.5];
-    let (_, drive, _) = summary(c.on_command(&command(ID, 2, &second), t0 + ms(4)).unwrap());
+    let (_, drive, _) = summary(c.on_command(&delayed(1, ID, 2, &second), t0 + ms(4)).unwrap());
     assert_eq!(drive, Some((2, first.to_vec())), "state 2 answered alone at once");
-    assert!(c.on_command(&command(ID, 2, &second), t0 + ms(4)).unwrap().drive.is_none(), "state 2 is not answered twice");
+    assert!(c.on_command(&delayed(1, ID, 2, &second), t0 + ms(4)).unwrap().drive.is_none(), "state 2 is not answered twice");
     assert_eq!(summary(c.on_state(&state(3, q, v), t0 + ms(5)).unwrap()).1, Some((3, second.to_vec())));
     // Tick 3's skipped, tick 4's came first: state 4 is answered alone when it arrives.
     let third = [0.5, 0.5, 0.5];
-    assert!(c.on_command(&command(ID, 4, &third), t0 + ms(6)).unwrap().drive.is_none(), "state 3 was answered; state 5 not come");
+    assert!(c.on_command(&delayed(1, ID, 4, &third), t0 + ms(6)).unwrap().drive.is_none(), "state 3 was answered; state 5 not come");
     assert_eq!(summary(c.on_state(&state(4, q, v), t0 + ms(7)).unwrap()).1, Some((4, second.to_vec())));
     assert_eq!(summary(c.on_state(&state(5, q, v), t0 + ms(8)).unwrap()).1, Some((5, third.to_vec())));
     assert_eq!((c.mode(), c.counters().safe_mode_entries), (AgentMode::Commanded, 0), "never in safe mode");
@@ -607,7 +612,7 @@ fn auto_raises_the_delay_until_commands_come_before_their_states() {
     let _ = fast.start(t0);
     for k in 0..1000 {
         let _ = fast.on_state(&state(k, q, v), t0 + ms(k)).unwrap();
-        let (_, drive, _) = summary(fast.on_command(&command(ID, k, &tau(k)), t0 + ms(k)).unwrap());
+        let (_, drive, _) = summary(fast.on_command(&delayed(fast.wanted_delay(), ID, k, &tau(k)), t0 + ms(k)).unwrap());
         assert_eq!(drive, Some((k, tau(k).to_vec())), "tick {k}: applied at its own state");
     }
     assert_eq!(fast.status().team_delay_ticks, 0, "commands on time keep the delay at 0");
@@ -619,14 +624,45 @@ fn auto_raises_the_delay_until_commands_come_before_their_states() {
         let (_, drive, _) = summary(c.on_state(&state(k, q, v), t0 + ms(k)).unwrap());
         answered_at_arrival.push(drive);
         if k >= 2 {
-            let _ = c.on_command(&command(ID, k - 2, &tau(k - 2)), t0 + ms(k));
+            let _ = c.on_command(&delayed(c.wanted_delay(), ID, k - 2, &tau(k - 2)), t0 + ms(k));
         }
     }
-    assert_eq!(c.status().team_delay_ticks, 3, "raised to the first delay the commands meet");
+    assert_eq!((c.wanted_delay(), c.team_delay(), c.status().team_delay_ticks), (3, 3, 3), "raised to the first delay the commands meet, and followed");
     let settled = answered_at_arrival.len() - 100;
     for (k, drive) in answered_at_arrival.iter().enumerate().skip(settled) {
         let k = k as u64;
         assert_eq!(drive.clone(), Some((k, tau(k - 3).to_vec())), "tick {k}: the command of tick {} waited for it", k - 3);
     }
     assert_eq!((c.mode(), c.counters().safe_mode_entries), (AgentMode::Commanded, 0), "never in safe mode");
+}
+
+/// The team's delay is the newest command's: an agent configured for none follows a team delay
+/// of 2 (another robot asked for it) from the command that brings it, the command applying two
+/// states after its own; an older command with another delay changes nothing.
+#[test]
+fn the_agent_follows_the_delay_its_newest_command_brings() {
+    let t0 = Instant::now();
+    let mut cfg = AgentConfig::new("t", ID);
+    cfg.takeover = Duration::ZERO;
+    cfg.deadline = CommandDeadline { ticks: 5, time: None };
+    cfg.max_command_age = Duration::from_secs(10);
+    let mut c = AgentCore::new(&cfg, stub()).unwrap();
+    let _ = c.start(t0);
+    let (q, v) = ([0.1, -0.2, 0.3], [0.0; 3]);
+    let (one, two, three) = ([1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [3.0, 0.0, 0.0]);
+    let (terms, _, _) = summary(c.on_state(&state(0, q, v), t0).unwrap());
+    assert_eq!(terms, Some(0));
+    assert_eq!(summary(c.on_command(&delayed(0, ID, 0, &one), t0).unwrap()).1, Some((0, one.to_vec())), "no delay yet");
+    let _ = c.on_state(&state(1, q, v), t0 + ms(1)).unwrap();
+    assert!(c.on_command(&delayed(2, ID, 1, &two), t0 + ms(1)).unwrap().drive.is_none(), "waits for state 3");
+    assert_eq!((c.team_delay(), c.wanted_delay(), c.status().team_delay_ticks), (2, 0, 2));
+    // State 2 has no team command (the delay grew by two): answered alone with the last torque.
+    assert_eq!(summary(c.on_state(&state(2, q, v), t0 + ms(2)).unwrap()).1, Some((2, one.to_vec())));
+    assert_eq!(summary(c.on_state(&state(3, q, v), t0 + ms(3)).unwrap()).1, Some((3, two.to_vec())));
+    // A late copy of tick 0's command at delay 0 is stale and leaves the delay at 2.
+    assert!(c.on_command(&delayed(0, ID, 0, &three), t0 + ms(3)).is_err());
+    assert_eq!(c.team_delay(), 2);
+    let _ = c.on_command(&delayed(2, ID, 2, &three), t0 + ms(3));
+    assert_eq!(summary(c.on_state(&state(4, q, v), t0 + ms(4)).unwrap()).1, Some((4, three.to_vec())));
+    assert_eq!((c.mode(), c.counters().safe_mode_entries), (AgentMode::Commanded, 0));
 }

@@ -101,7 +101,7 @@ fn ticks_allocations(source: impl DynamicsSource, mut state: RobotState, n: usiz
     cfg.deadline = CommandDeadline { ticks: 5, time: None };
     cfg.max_command_age = Duration::from_secs(10);
     let mut core = AgentCore::new(&cfg, source).unwrap();
-    let mut cmd = TorqueCommand { header: Header::new("t", Some("r1"), 0, 0), tau: vec![1.0; n], hold: false };
+    let mut cmd = TorqueCommand { header: Header::new("t", Some("r1"), 0, 0), tau: vec![1.0; n], hold: false, delay_ticks: team_delay };
     let t0 = Instant::now();
     let _ = core.start(t0);
     let mut applied = 0;

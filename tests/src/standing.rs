@@ -187,7 +187,7 @@ pub async fn serve(
     let mut latest: Vec<Option<RobotState>> = vec![None; robots.len()];
     let mut sent: Vec<Option<u64>> = vec![None; robots.len()];
     let mut seen: Vec<Option<u64>> = vec![None; robots.len()];
-    let mut cmd = TorqueCommand { header: Header::new(team, Some(&robots[0].0), 0, 0), tau: Vec::new(), hold: false };
+    let mut cmd = TorqueCommand { header: Header::new(team, Some(&robots[0].0), 0, 0), tau: Vec::new(), hold: false, delay_ticks: 0 };
     let mut count = 0u64;
     loop {
         let ready: Option<(usize, u64)> = tokio::select! {

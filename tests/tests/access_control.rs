@@ -137,7 +137,7 @@ fn state(team: &str, robot: &str, tick: u64) -> RobotState {
 const TAU: [f64; JOINTS] = [0.25, -0.5, 0.75];
 
 fn command(team: &str, robot: &str, tick: u64) -> TorqueCommand {
-    TorqueCommand { header: Header::new(team, Some(robot), tick, 0), tau: TAU.to_vec(), hold: false }
+    TorqueCommand { header: Header::new(team, Some(robot), tick, 0), tau: TAU.to_vec(), hold: false, delay_ticks: 0 }
 }
 
 /// Publish r1's state for `tick` until r1's agent answers with its dynamics for that tick.

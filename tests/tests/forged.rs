@@ -156,7 +156,7 @@ async fn forge_as_coordinator(c: Session, team: String, sent: Arc<Sent>) {
         if !forge_on(k, &mut last) {
             continue;
         }
-        let cmd = TorqueCommand { header: Header::new(&team, Some("r2"), k, 0), tau: vec![50.0; JOINTS], hold: false };
+        let cmd = TorqueCommand { header: Header::new(&team, Some("r2"), k, 0), tau: vec![50.0; JOINTS], hold: false, delay_ticks: 0 };
         c.put(&command, protocol::encode(&cmd).unwrap()).await.expect("put");
         sent.impersonated_commands.fetch_add(1, Ordering::Relaxed);
     }

@@ -39,7 +39,7 @@ impl TeamController for FailsEvery {
         out.clear();
         for terms in tick {
             let v = &terms.velocity[terms.nv() - terms.actuated()..];
-            out.push(TorqueCommand { header: protocol::Header::new(&terms.header.team, terms.header.robot.as_deref(), t, 0), tau: v.iter().map(|qd| -2.0 * qd).collect(), hold: false });
+            out.push(TorqueCommand { header: protocol::Header::new(&terms.header.team, terms.header.robot.as_deref(), t, 0), tau: v.iter().map(|qd| -2.0 * qd).collect(), hold: false, delay_ticks: 0 });
         }
         Ok(())
     }
@@ -178,6 +178,7 @@ fn terms(team: &str, robot: &str, tick: u64) -> DynamicsTerms {
         frames: Vec::new(),
         hand_in_grasp: false,
         state_tick: tick,
+        team_delay_ticks: 0,
     }
 }
 
@@ -428,4 +429,28 @@ async fn robot_keys(s: &zenoh::Session, team: &str, robot: &str) -> (transport::
     let commands = transport::subscribe(s, keys::robot(team, robot, keys::RobotTopic::Command).unwrap()).await.unwrap();
     let dynamics = transport::TypedPublisher::declare(s, keys::robot(team, robot, keys::RobotTopic::Dynamics).unwrap(), transport::Qos::HotPath).await.unwrap();
     (commands, dynamics)
+}
+
+/// The team's delay is the team's: r1 asks for 1 tick and r2 for 3, and both robots' commands
+/// of the tick come with 3 (each robot's own would have them apply the team's answers of
+/// different ticks at once); when r2 asks for none, the next tick's come with r1's 1.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_command_of_a_tick_carries_the_longest_delay_its_robots_asked_for() {
+    let team = "hang9";
+    let s = session().await;
+    let statuses = transport::subscribe(&s, keys::coordinator_status(team).unwrap()).await.unwrap();
+    let c = coordinator(&s, team, Box::new(FailsEvery { every: u64::MAX }));
+    let _tokens = [transport::declare_member(&s, team, "r1").await.unwrap(), transport::declare_member(&s, team, "r2").await.unwrap()];
+    let (queues, mut pubs) = both_members(&s, team, &statuses).await;
+    for (tick, asked, team_delay) in [(1, [1, 3], 3), (2, [1, 0], 1)] {
+        for ((p, r), d) in pubs.iter_mut().zip(["r1", "r2"]).zip(asked) {
+            p.put(&DynamicsTerms { team_delay_ticks: d, ..terms(team, r, tick) }).await.unwrap();
+        }
+        for (q, r) in queues.iter().zip(["r1", "r2"]) {
+            let cmd = next_command(q).await.unwrap_or_else(|| panic!("{r}: no command for tick {tick}"));
+            assert_eq!((cmd.header.tick, cmd.delay_ticks), (tick, team_delay), "{r}, asked {asked:?}: {cmd:?}");
+        }
+    }
+    let _ = stop(c).await;
+    s.close().await.unwrap();
 }

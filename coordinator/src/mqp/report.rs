@@ -85,7 +85,7 @@ impl MqpReport {
         let mut k = 0;
         for (i, (r, t)) in self.team.robots.iter().zip(tick).enumerate() {
             if i == out.len() {
-                out.push(TorqueCommand { header: Header::new(&t.header.team, Some(&r.id), 0, 0), tau: Vec::new(), hold: false });
+                out.push(TorqueCommand { header: Header::new(&t.header.team, Some(&r.id), 0, 0), tau: Vec::new(), hold: false, delay_ticks: 0 });
             }
             let cmd = &mut out[i];
             // The message may be last tick's hold order (the service reuses the buffer).

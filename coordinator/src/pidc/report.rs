@@ -122,7 +122,7 @@ impl TickReport {
         out.truncate(self.team.robots.len());
         for (k, (r, t)) in self.team.robots.iter().zip(tick).enumerate() {
             if k == out.len() {
-                out.push(TorqueCommand { header: Header::new(&t.header.team, Some(&r.id), 0, 0), tau: Vec::new(), hold: false });
+                out.push(TorqueCommand { header: Header::new(&t.header.team, Some(&r.id), 0, 0), tau: Vec::new(), hold: false, delay_ticks: 0 });
             }
             let cmd = &mut out[k];
             set_header(&mut cmd.header, &t.header.team, Some(&r.id), t.header.tick, 0);

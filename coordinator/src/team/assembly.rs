@@ -212,6 +212,7 @@ mod tests {
             frames: Vec::new(),
             hand_in_grasp: false,
             state_tick: tick,
+            team_delay_ticks: 0,
         }
     }
 
