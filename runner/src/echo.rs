@@ -106,7 +106,7 @@ mod tests {
             time: 0.005,
             foot_forces: Vec::new(),
         };
-        let v = line("team/t/robot/r1/state", "zenoh/bytes;team.RobotState/v2", &protocol::encode(&s).unwrap());
+        let v = line("team/t/robot/r1/state", &format!("zenoh/bytes;team.RobotState/v{}", protocol::PROTOCOL_VERSION), &protocol::encode(&s).unwrap());
         assert_eq!(v["message"]["joint_positions"][0], 0.5);
         assert_eq!(v["message"]["header"]["tick"], 5);
         let st = CoordinatorStatus { header: Header::new("t", None, 9, 0), mode: CoordinatorMode::Running, members: vec![], ticks: 9, commands_sent: 0, deadline_misses: 0, fallbacks: 0, detail: String::new(), stale: vec![], silent: vec![], late: vec![], reused_terms: 0, refused: 0, last_refusal: None };

@@ -42,7 +42,7 @@ async fn echo_prints_messages_and_liveliness_tokens() {
     assert_eq!(got.len(), 2);
     assert_eq!(got[0]["key"], key.as_str());
     assert_eq!(got[0]["message"]["mode"], "Running");
-    assert!(got[0]["encoding"].as_str().unwrap().contains("team.CoordinatorStatus/v2"), "{}", got[0]);
+    assert!(got[0]["encoding"].as_str().unwrap().contains(&format!("team.CoordinatorStatus/v{}", protocol::PROTOCOL_VERSION)), "{}", got[0]);
 
     // The coordinator's liveliness token: present (history), then gone.
     let token = transport::declare_coordinator(&hub, TEAM).await.unwrap();
