@@ -278,9 +278,6 @@ pub struct AgentCore<S: DynamicsSource> {
     team_every: u64,
     /// The team's delay this robot asks for ([`AgentConfig::team_delay`]), sent with its terms.
     delay: AdaptiveDelay,
-    /// The team's delay in use: the one the newest command came with (the longest any robot
-    /// of its tick asked for); before the first command, the configured one.
-    in_use: u64,
     /// The tick of the newest command that came (the delay follows no older one).
     newest_command: Option<u64>,
     contacts: ContactSwitch,
@@ -366,7 +363,6 @@ impl<S: DynamicsSource> AgentCore<S> {
             reference: drive_gains::Reference::new(joints, cfg.drive_hz.map(|hz| 1.0 / hz)),
             team_every: cfg.team_every,
             delay: AdaptiveDelay::new(cfg.team_delay),
-            in_use: cfg.team_delay.initial(),
             newest_command: None,
             contacts: ContactSwitch::new(cfg.contacts.clone(), ActiveContacts { stance: vec![true; feet.len()], hand_in_grasp: true }),
             feet,
@@ -449,7 +445,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         let apply = if self.watchdog.safe_mode_since().is_some() {
             Apply::Hold
-        } else if tick < self.in_use {
+        } else if tick < self.gate.delay() {
             Apply::Start
         } else if (!self.command_tick(tick) || self.skipped()) && self.last_applied == Apply::Command {
             Apply::Servo
@@ -462,7 +458,7 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// Whether a team command applies at the state of `tick`: the state of a team tick,
     /// [`AgentConfig::team_delay`] ticks later.
     fn command_tick(&self, tick: u64) -> bool {
-        tick.checked_sub(self.in_use).is_some_and(|k| k % self.team_every == 0)
+        tick.checked_sub(self.gate.delay()).is_some_and(|k| k % self.team_every == 0)
     }
 
     /// Whether the team's command for the latest state will not come (with a team delay): a
@@ -473,7 +469,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         let Some(tick) = self.gate.latest_state_tick() else { return false };
         let newer = self.early.newest_tick().is_some_and(|t| self.gate.applies_at(t) > tick);
         let answered_alone = self.servo_tick == Some(tick);
-        self.in_use > 0 && self.command_tick(tick) && self.last_applied == Apply::Command && self.unanswered() && !answered_alone && newer
+        self.gate.delay() > 0 && self.command_tick(tick) && self.last_applied == Apply::Command && self.unanswered() && !answered_alone && newer
     }
 
     /// The terms (and the gravity the hold carries) at `state` for the current contact set;
@@ -579,9 +575,8 @@ impl<S: DynamicsSource> AgentCore<S> {
             return;
         }
         self.newest_command = Some(tick);
-        if cmd.delay_ticks != self.in_use {
-            tracing::info!(robot = %self.robot, tick, from = self.in_use, to = cmd.delay_ticks, "the team's delay changed");
-            self.in_use = cmd.delay_ticks;
+        if cmd.delay_ticks != self.gate.delay() {
+            tracing::info!(robot = %self.robot, tick, from = self.gate.delay(), to = cmd.delay_ticks, "the team's delay changed");
             self.gate.set_delay(cmd.delay_ticks);
             self.board.status.team_delay_ticks = cmd.delay_ticks;
         }
@@ -624,7 +619,7 @@ impl<S: DynamicsSource> AgentCore<S> {
     fn admit_command(&mut self, cmd: &TorqueCommand, now: Instant) -> Result<Option<Apply>, CommandRejection> {
         let clamped = match self.gate.check(cmd, &mut self.drive.tau_ff) {
             Ok(n) => n,
-            Err(CommandRejection::FromTheFuture { tick, latest }) if tick <= latest + EARLY_TICKS + self.in_use => {
+            Err(CommandRejection::FromTheFuture { tick, latest }) if tick <= latest + EARLY_TICKS + self.gate.delay() => {
                 self.keep_early(cmd)?;
                 return Ok(None);
             }
@@ -1060,7 +1055,7 @@ impl<S: DynamicsSource> AgentCore<S> {
 
     /// The team's delay in use, state ticks (the newest command's).
     pub fn team_delay(&self) -> u64 {
-        self.in_use
+        self.gate.delay()
     }
 
     /// The team's delay this robot asks for in its terms, state ticks.

@@ -77,6 +77,12 @@ impl CommandGate {
         self
     }
 
+    /// The team's delay in use, state ticks: the newest command's (before the first, the
+    /// configured one).
+    pub fn delay(&self) -> u64 {
+        self.delay
+    }
+
     /// From now on, commands apply `ticks` state ticks after their state (a delay raised by
     /// `crate::delay::AdaptiveDelay`); commands already waiting apply by it too.
     pub fn set_delay(&mut self, ticks: u64) {
