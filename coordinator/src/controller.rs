@@ -48,6 +48,14 @@ pub trait TeamController: Send {
     fn check_terms(&self, _terms: &protocol::DynamicsTerms) -> Result<(), ControllerError> {
         Ok(())
     }
+
+    /// The generalized accelerations (in the order of its terms' velocity) that the last
+    /// solved tick's torques command for `robot`: what carries a robot's state over the team's
+    /// delay ([`crate::team::prediction`]). `None` when the controller does not model them or
+    /// the robot was not in the tick.
+    fn accelerations(&self, _robot: &str) -> Option<&[f64]> {
+        None
+    }
 }
 
 /// Why a controller could not produce torques for a tick, or could not be configured.

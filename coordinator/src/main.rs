@@ -54,6 +54,11 @@ enum Command {
         /// most 3 s (a restarted coordinator meets its agents one by one).
         #[arg(long, value_delimiter = ',')]
         expect: Vec<String>,
+        /// The robots' control rate, Hz: with a team delay, each robot's state is carried over
+        /// the commands still in flight before its tick is solved. Without it, each command
+        /// answers the state as measured.
+        #[arg(long)]
+        robot_hz: Option<f64>,
         #[command(flatten)]
         zenoh: ZenohArgs,
     },
@@ -91,14 +96,15 @@ fn controller_spec(kind: Option<ControllerSpec>, file: Option<&Path>, damping: O
 async fn main() -> Result<()> {
     protocol::logging::init(protocol::logging::Verbosity::Info);
     match Cli::parse().command {
-        Command::Run { team, tick_deadline_ms, controller, controller_config, damping, reuse_after_us, reuse_max_age, expect, zenoh } => {
+        Command::Run { team, tick_deadline_ms, controller, controller_config, damping, reuse_after_us, reuse_max_age, expect, robot_hz, zenoh } => {
+            anyhow::ensure!(robot_hz.is_none_or(|hz| hz.is_finite() && hz > 0.0), "--robot-hz must be a positive rate in Hz, not {robot_hz:?}");
             let controller = controller_spec(controller, controller_config.as_deref(), damping)?.build()?;
             let session = transport::open(&zenoh, Role::Hub).await?;
             let reuse = reuse_after_us.zip(reuse_max_age).map(|(us, max_age)| Reuse { after: Duration::from_micros(us), max_age });
             for r in &expect {
                 protocol::validate_id("robot", r).map_err(|e| anyhow::anyhow!("--expect: {e}"))?;
             }
-            let cfg = CoordinatorConfig { team, tick_deadline: Duration::from_millis(tick_deadline_ms), reuse, expected: expect };
+            let cfg = CoordinatorConfig { team, tick_deadline: Duration::from_millis(tick_deadline_ms), reuse, expected: expect, robot_hz };
             let (tx, rx) = tokio::sync::watch::channel(false);
             tokio::spawn(async move {
                 let _ = tokio::signal::ctrl_c().await;

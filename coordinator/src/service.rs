@@ -17,6 +17,7 @@ use zenoh::Session;
 
 use crate::team::assembly::{AssemblyStatus, Reuse, Reused, TickAssembler};
 use crate::team::membership::{Admission, Roster};
+use crate::team::prediction::DelayPredictor;
 use crate::TeamController;
 
 /// Capacity of the references queue, samples.
@@ -36,6 +37,10 @@ pub struct CoordinatorConfig {
     /// member holding its posture meanwhile), at most [`FORMATION_TIMEOUT`] from the
     /// coordinator's start ([`Roster::expect`]). Empty: whoever is there.
     pub expected: Vec<String>,
+    /// The robots' control rate, Hz. With it, a tick solved for a team delay carries each
+    /// robot's state over the commands still in flight ([`crate::team::prediction`]);
+    /// without it, each command answers the state as measured.
+    pub robot_hz: Option<f64>,
 }
 
 /// How long a coordinator waits at its start for the robots it expects.
@@ -44,7 +49,7 @@ pub const FORMATION_TIMEOUT: Duration = Duration::from_secs(3);
 impl CoordinatorConfig {
     /// A lockstep coordinator: no reuse, no expected team.
     pub fn lockstep(team: &str, tick_deadline: Duration) -> Self {
-        CoordinatorConfig { team: team.to_string(), tick_deadline, reuse: None, expected: Vec::new() }
+        CoordinatorConfig { team: team.to_string(), tick_deadline, reuse: None, expected: Vec::new(), robot_hz: None }
     }
 }
 
@@ -114,6 +119,8 @@ struct Service<'a> {
     /// Lockstep: terms of a tick newer than the one just completed, read while draining that
     /// tick's copies; handled before the next wait (every tick is solved, in order).
     deferred: Option<zenoh::sample::Sample>,
+    /// The states carried over the team's delay ([`CoordinatorConfig::robot_hz`]).
+    predictor: Option<DelayPredictor>,
 }
 
 /// Run the coordinator with `controller` (see [`crate::ControllerSpec::build`]) until `stop`
@@ -246,6 +253,7 @@ impl<'a> Service<'a> {
             detail: String::from("waiting for members"),
             released_reported: false,
             deferred: None,
+            predictor: cfg.robot_hz.filter(|hz| hz.is_finite() && *hz > 0.0).map(DelayPredictor::new),
             cfg,
         })
     }
@@ -540,7 +548,14 @@ impl<'a> Service<'a> {
         }
         self.refs.drain(references, &mut self.counters);
         self.refs.apply(tick, controller);
+        let delay = team_delay(&terms);
+        if let Some(p) = &self.predictor {
+            p.predict(tick, delay, &mut terms);
+        }
         let solved = solve_and_publish(self.session, &self.cfg, controller, tick, &terms, &mut self.commands, &mut self.command_pubs, &mut self.diag_pub, &mut self.counters).await?;
+        if let Some(p) = self.predictor.as_mut().filter(|_| solved) {
+            p.record(tick, delay, &terms, controller);
+        }
         self.solved_tick = Some(tick);
         if solved && !self.roster.started() {
             tracing::info!(tick, team = ?self.roster.team(), "the team's first tick is solved");

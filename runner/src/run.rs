@@ -149,7 +149,8 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
         (COORDINATOR_TICK_DEADLINE, AGENT_COMMAND_DEADLINE, LOCKSTEP_DEADLINE_TICKS, None)
     };
     let expected = plan.robots.iter().map(|r| r.id.clone()).collect();
-    let coordinator = CoordinatorArgs { team: plan.team().into(), tick_deadline, reuse, expected, controller: plan.controller.clone() };
+    let robot_hz = plan.scenario.predict_delay.then_some(plan.scenario.control_hz);
+    let coordinator = CoordinatorArgs { team: plan.team().into(), tick_deadline, reuse, expected, controller: plan.controller.clone(), robot_hz };
     let agents = plan
         .robots
         .iter()

@@ -124,6 +124,12 @@ pub struct Scenario {
     /// the paper's loop.
     #[serde(default)]
     pub team_delay_ticks: TeamDelay,
+    /// With a team delay, whether the coordinator carries each robot's state over the
+    /// commands still in flight before it solves a tick (`coordinator::team::prediction`, a
+    /// Smith predictor; PIDC only). Default `true`; `false` answers each state as measured,
+    /// which shows what the delay alone costs.
+    #[serde(default = "default_predict_delay")]
+    pub predict_delay: bool,
 }
 
 /// The most robot ticks a team tick may span ([`Scenario::team_hz`]).
@@ -229,12 +235,16 @@ fn default_friction_margin() -> f64 {
 fn default_patch_margin() -> f64 {
     coordinator::PidcConfig::default().patch_margin
 }
+fn default_predict_delay() -> bool {
+    true
+}
+
 fn default_capacity_check() -> bool {
     true
 }
 
 /// Top-level keys with a default that `--set` may give although the file leaves them out.
-pub const OPTIONAL_KEYS: [&str; 15] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations", "noslip_iterations", "faults", "drive_loss", "drive_gains", "team_hz", "team_delay_ticks"];
+pub const OPTIONAL_KEYS: [&str; 16] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "perturbations", "noslip_iterations", "faults", "drive_loss", "drive_gains", "team_hz", "team_delay_ticks", "predict_delay"];
 /// Keys inside a table with a default that `--set` may give although the file leaves them
 /// out (`--set team.spacing=0.7` on a layout of one robot per face).
 pub const OPTIONAL_NESTED_KEYS: [&str; 6] = ["team.spacing", "team.standoff", "team.description", "walk.robots", "walk.frame", "walk.start"];

@@ -60,6 +60,7 @@ impl SmokeConfig {
             reuse: None,
             expected: Vec::new(),
             controller: ControllerSpec::JointDamping(JointDampingConfig { damping: self.damping }),
+            robot_hz: None,
         };
         let agents = self
             .robots

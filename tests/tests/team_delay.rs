@@ -67,3 +67,24 @@ fn auto_in_lockstep_keeps_no_delay_and_the_same_run() {
     assert_eq!(records.torques, base_records.torques, "the same torques on every tick");
     assert_eq!(m.object.position_rms_m, base.object.position_rms_m);
 }
+
+/// S1 (2 kHz) damps the object at the sampled loop's limit already (D dt / I = 1.0, see the
+/// scenario file): with the team's command delayed and each state answered as measured, the
+/// loop is unstable at any delay (stable only for D dt / I < 2 sin(pi / (2 (2d + 1)))) and the
+/// grasp breaks within the settle. Carried over the commands in flight
+/// (`coordinator::team::prediction`), the state the command meets is the one it answers, and
+/// S1 holds with 1, 2 and 3 ticks.
+#[test]
+fn s1_holds_with_the_delay_only_with_the_state_carried_over_the_commands_in_flight() {
+    let s1 = |sets: &[&str], name: &str| common::scenario::run_scenario_records("s1_torso_and_object.toml", sets, false, name);
+    let (_, m, _) = s1(&["duration=2", "team_delay_ticks=1", "predict_delay=false"], "s1_delay_1_unpredicted");
+    assert!(m.drop.dropped, "S1 with one tick of delay, unpredicted: object RMS {:.1} mm, not dropped", m.object.position_rms_m * 1e3);
+    let mut rms = Vec::new();
+    for d in 1..=3u64 {
+        let (plan, m, records) = s1(&["duration=4", &format!("team_delay_ticks={d}")], &format!("s1_delay_{d}"));
+        assert_delayed_run(&plan, &m, &records, d);
+        assert!(m.object.position_rms_m <= 1e-3, "delay {d}: object RMS {:.3} mm", m.object.position_rms_m * 1e3);
+        rms.push((d, m.object.position_rms_m * 1e3));
+    }
+    println!("S1 object RMS by team delay, carried over the commands in flight (ticks, mm): {rms:?}");
+}

@@ -35,6 +35,7 @@ use crate::units::messages::set_note;
 use crate::units::projection::{ProjectionPath, ProjectionWorkspace};
 use crate::units::release::{GraspWatch, GraspObservation};
 use crate::{ControllerError, TeamController};
+use stages::acceleration::{commanded_accelerations, AccelerationScratch, ObjectBody};
 use stages::by_robot::{decoupled, ByRobot, ByRobotScratch};
 use stages::tasks::{task_torque, MotionSpaceTerms, TaskTorqueInput, Targets};
 use stages::torque::{compose, fallback, motion_torque, saturate, Clamp, MotionTorqueScratch};
@@ -53,6 +54,7 @@ struct Workspace {
     qp: QpWorkspace,
     blocks: qp::BlockHotStart,
     by_robot: ByRobotScratch,
+    acceleration: AccelerationScratch,
 }
 
 /// The PIDC team controller (paper §III).
@@ -203,6 +205,10 @@ impl Pidc {
         let t_imp = us();
         let loads = references.as_ref().map_or(&[][..], |refs| &refs.foot_loads[..]);
         let (build_us, qp_us) = contact_forces(r, ws, descriptions, cfg, loads)?;
+        // What the torque sent accelerates, the object a rigid body on the hands (eq.
+        // aghili_25): the team's delay carries each state over it (crate::team::prediction).
+        let body = ObjectBody { mass: cfg.object_mass, inertia: cfg.object_inertia };
+        commanded_accelerations(&r.team, &r.proj, &r.tau, &ws.motion.mcinv_bias, r.grasp.as_ref().map(|g| (g, &body)), &mut r.qdd, &mut ws.acceleration);
         // Degrade, never collapse: let go of an object the team cannot hold.
         let outcome = GraspObservation::of(tick[0].header.tick, &r.team, r.grasp.as_ref(), r.fallback.is_some());
         set_note(&mut r.release, watch.after_tick(&cfg.release, outcome, &r.team, r.grasp.as_ref(), targets, grasp));
@@ -408,6 +414,11 @@ impl TeamController for Pidc {
 
     fn check_terms(&self, terms: &protocol::DynamicsTerms) -> Result<(), ControllerError> {
         crate::team::terms_fit(terms, self.descriptions.get(terms.header.robot_id()))
+    }
+
+    fn accelerations(&self, robot: &str) -> Option<&[f64]> {
+        let b = self.report.team.robots.iter().find(|b| b.id == robot).filter(|_| self.valid)?;
+        self.report.qdd.as_slice().get(b.offset..b.offset + b.nv)
     }
 
     fn set_references(&mut self, r: &TaskReferences) {

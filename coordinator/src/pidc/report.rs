@@ -48,6 +48,9 @@ pub struct TickReport {
     pub lambda_real: DVector<f64>,
     /// Full team torque (n) and the QP pieces.
     pub tau: DVector<f64>,
+    /// The team's generalized accelerations under `tau`, the held object a rigid body on the
+    /// hands (n, eq. aghili_25; `crate::pidc::stages::acceleration`).
+    pub qdd: DVector<f64>,
     pub contacts: Vec<(usize, ContactKind)>,
     pub limits: Vec<f64>,
     pub actuated: Vec<usize>,

@@ -12,6 +12,7 @@
 
 pub mod assembly;
 pub mod membership;
+pub mod prediction;
 
 use nalgebra::{DMatrix, DVector, Rotation3, Vector3, Vector6};
 use protocol::{DynamicsTerms, FrameRole, FrameTerms, RobotDescription};

@@ -6,6 +6,7 @@
 //! | [`tasks`] | each task's target, the object's load `F_x`, `M_c^{-1} P` terms, `tau_M` | eqs. control_law, joint_space_tau_M, js_dynamics |
 //! | [`wrench`] | the contact map `lambda = rho F_c + eta`, and `lambda` for the torque sent | eqs. relation_between_lambda_and_Fc, constraint_force |
 //! | [`torque`] | `tau_0 = [P S]^+ P tau_M`, the fallback `F_c`, `tau = tau_0 + Y F_c` | eq. ua_solution |
+//! | [`acceleration`] | the team's accelerations under the torque sent (for the team's delay) | eq. aghili_25 |
 //! | [`by_robot`] | a team's QP that failed, solved robot by robot when no grasp couples them | eq. wrench_optim2 by blocks |
 //!
 //! Before them run the team's assembly ([`crate::team::Team::assemble_into`]), the torque
@@ -14,6 +15,7 @@
 //! projections ([`crate::units::projection::Projections`]), the contact list
 //! ([`crate::units::contacts`]) and the contact-force QP ([`crate::qp::solve`]).
 
+pub mod acceleration;
 pub mod by_robot;
 pub mod tasks;
 pub mod torque;

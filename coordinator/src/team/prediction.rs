@@ -1,0 +1,233 @@
+//! The state a delayed command meets (a Smith predictor).
+//!
+//! With the team's delay `d` the command answering the state of tick k applies at tick k + d
+//! (`protocol::TorqueCommand::delay_ticks`). The commands of the ticks before it are still in
+//! flight, and they act first: a loop that damps the state of tick k with a torque applied at
+//! k + d is stable only for `D dt / I < 2 sin(pi / (2 (2d + 1)))` (1.0, 0.62, 0.45 for d = 1,
+//! 2, 3), and S1's object damping sits at 1.0 already. The coordinator sent those commands and
+//! knows what they accelerate (the controller's model, with the held object as a rigid body:
+//! `crate::pidc::stages::acceleration`), so before a tick is solved each robot's measured
+//! velocity is carried over the robot periods `k .. k + d - 1`:
+//!
+//! ```text
+//! v(k + d) = v(k) + dt * sum_{t = k}^{k + d - 1} qdd(the command applying at t)
+//! ```
+//!
+//! The command applying at robot tick t is the newest solved at a tick s with
+//! `s + delay(s) <= t`; between team ticks (`team_hz` below the robots' rate) a robot keeps it.
+//! Positions stay the measured ones: over a few robot periods the velocity is what a damping
+//! loop acts on, and what a delay destabilises.
+//!
+//! Each robot keeps the accelerations of its last [`SOLVES_KEPT`] solved ticks in slots
+//! allocated when it is first seen; predicting and recording allocate nothing after that.
+
+use std::collections::BTreeMap;
+
+use protocol::{DynamicsTerms, MAX_TEAM_DELAY_TICKS};
+
+use crate::TeamController;
+
+/// Solved ticks kept per robot: enough to find the command applying at every tick of the
+/// longest delay, whatever the team's rate.
+pub const SOLVES_KEPT: usize = MAX_TEAM_DELAY_TICKS as usize + 2;
+
+/// A command older than this many robot ticks is not carried: a robot that waited that long
+/// for its next one was holding its posture, not following it.
+pub const OLDEST_CARRIED: u64 = 64;
+
+/// The delay of a slot that holds no solved tick yet.
+const NEVER: u64 = u64::MAX;
+
+/// One solved tick's accelerations of a robot (`delay` [`NEVER`] for a slot not yet used).
+#[derive(Debug, Clone)]
+struct Slot {
+    tick: u64,
+    delay: u64,
+    qdd: Vec<f64>,
+}
+
+/// A robot's last solved ticks, a ring in solving order.
+#[derive(Debug, Clone)]
+struct Solves {
+    slots: Vec<Slot>,
+    next: usize,
+}
+
+/// The accelerations of each robot's last solved ticks, and the prediction from them.
+#[derive(Debug, Clone)]
+pub struct DelayPredictor {
+    period: f64,
+    robots: BTreeMap<String, Solves>,
+}
+
+impl DelayPredictor {
+    /// For robots ticking at `robot_hz` (finite and positive, checked by the caller).
+    pub fn new(robot_hz: f64) -> Self {
+        DelayPredictor { period: 1.0 / robot_hz, robots: BTreeMap::new() }
+    }
+
+    /// Before `tick` is solved with the delay `delay`: each robot's velocity in `terms`
+    /// carried over the commands in flight (module docs). A robot without them (the team's
+    /// first ticks, a robot just joined) keeps its measured velocity for those periods.
+    pub fn predict(&self, tick: u64, delay: u64, terms: &mut [DynamicsTerms]) {
+        for t in terms.iter_mut() {
+            let Some(solves) = self.robots.get(t.header.robot_id()) else { continue };
+            for at in tick..tick + delay {
+                if let Some(s) = solves.applying_at(at).filter(|s| s.qdd.len() == t.velocity.len()) {
+                    t.velocity.iter_mut().zip(&s.qdd).for_each(|(v, a)| *v += self.period * a);
+                }
+            }
+        }
+    }
+
+    /// After `tick` was solved from `terms` and sent with the delay `delay`: each robot's
+    /// commanded accelerations kept (none, for a robot whose accelerations the controller does
+    /// not give: its command still applies, and nothing is carried over it).
+    pub fn record(&mut self, tick: u64, delay: u64, terms: &[DynamicsTerms], controller: &dyn TeamController) {
+        for t in terms {
+            let id = t.header.robot_id();
+            if !self.robots.contains_key(id) {
+                let slot = || Slot { tick: 0, delay: NEVER, qdd: Vec::with_capacity(t.velocity.len()) };
+                self.robots.insert(id.to_string(), Solves { slots: (0..SOLVES_KEPT).map(|_| slot()).collect(), next: 0 });
+            }
+            let Some(solves) = self.robots.get_mut(id) else { continue };
+            let slot = &mut solves.slots[solves.next];
+            solves.next = (solves.next + 1) % SOLVES_KEPT;
+            slot.qdd.clear();
+            (slot.tick, slot.delay) = (tick, delay);
+            if let Some(qdd) = controller.accelerations(id).filter(|a| a.len() == t.velocity.len() && a.iter().all(|x| x.is_finite())) {
+                slot.qdd.extend_from_slice(qdd);
+            }
+        }
+    }
+}
+
+impl Solves {
+    /// The newest command that applies at robot tick `at` (solved at `s`, applying from
+    /// `s + delay`), if it is not older than [`OLDEST_CARRIED`]. Its accelerations are empty
+    /// when the controller gave none: nothing is carried then.
+    fn applying_at(&self, at: u64) -> Option<&Slot> {
+        self.slots
+            .iter()
+            .filter(|s| s.delay != NEVER && s.tick.saturating_add(s.delay) <= at && at - s.tick <= OLDEST_CARRIED)
+            .max_by_key(|s| s.tick)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ControllerError;
+    use protocol::{Header, Matrix, TorqueCommand};
+
+    /// A controller whose every tick commands the accelerations it is told (a test double of
+    /// the team's model: what is tested here is which command's accelerations are carried).
+    struct Told(BTreeMap<String, Vec<f64>>);
+
+    impl TeamController for Told {
+        fn name(&self) -> &'static str {
+            "told"
+        }
+        fn solve(&mut self, _tick: &[DynamicsTerms], _out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError> {
+            Ok(())
+        }
+        fn accelerations(&self, robot: &str) -> Option<&[f64]> {
+            self.0.get(robot).map(Vec::as_slice)
+        }
+    }
+
+    fn terms(robot: &str, tick: u64, v: &[f64]) -> DynamicsTerms {
+        let nv = v.len();
+        DynamicsTerms {
+            header: Header::new("t", Some(robot), tick, 0),
+            floating_base: false,
+            nv: nv as u32,
+            mass_matrix: Matrix { rows: nv as u32, cols: nv as u32, data: vec![0.0; nv * nv] },
+            bias: vec![0.0; nv],
+            velocity: v.to_vec(),
+            frames: Vec::new(),
+            hand_in_grasp: false,
+            state_tick: tick,
+            team_delay_ticks: 0,
+        }
+    }
+
+    fn told(robot: &str, qdd: &[f64]) -> Told {
+        Told(BTreeMap::from([(robot.to_string(), qdd.to_vec())]))
+    }
+
+    /// Solve `ticks` in order, tick k commanding `qdd(k)` with the delay `delay`.
+    fn solved(p: &mut DelayPredictor, ticks: impl Iterator<Item = u64>, delay: u64, qdd: impl Fn(u64) -> f64) {
+        for k in ticks {
+            p.record(k, delay, &[terms("r1", k, &[0.0, 0.0])], &told("r1", &[qdd(k), -2.0 * qdd(k)]));
+        }
+    }
+
+    #[test]
+    fn the_velocity_is_carried_over_the_commands_that_apply_before_the_new_one() {
+        // 1 kHz, delay 3, tick k commanding qdd = k: solving tick 10, the commands of 7, 8, 9
+        // apply at 10, 11, 12, so v(13) = v(10) + dt (7 + 8 + 9).
+        let mut p = DelayPredictor::new(1000.0);
+        solved(&mut p, 0..10, 3, |k| k as f64);
+        let mut t = [terms("r1", 10, &[1.0, 1.0])];
+        p.predict(10, 3, &mut t);
+        let carried = 0.001 * 24.0;
+        assert!((t[0].velocity[0] - (1.0 + carried)).abs() < 1e-12 && (t[0].velocity[1] - (1.0 - 2.0 * carried)).abs() < 1e-12, "{:?}", t[0].velocity);
+        // Without a delay nothing is in flight.
+        let mut t = [terms("r1", 10, &[1.0, 1.0])];
+        p.predict(10, 0, &mut t);
+        assert_eq!(t[0].velocity, vec![1.0, 1.0]);
+    }
+
+    #[test]
+    fn between_team_ticks_a_robot_keeps_the_newest_command_that_applies() {
+        // The team solves every 4th tick (0, 4, 8) with delay 2; solving tick 12, the command of
+        // 8 applies from 10: at 12 and 13 it does, so v(14) = v(12) + 2 dt qdd(8).
+        let mut p = DelayPredictor::new(500.0);
+        solved(&mut p, (0..12).step_by(4), 2, |k| 10.0 + k as f64);
+        let mut t = [terms("r1", 12, &[0.0, 0.0])];
+        p.predict(12, 2, &mut t);
+        assert!((t[0].velocity[0] - 2.0 * 0.002 * 18.0).abs() < 1e-12, "{:?}", t[0].velocity);
+        // Solving tick 9 instead (as if a robot's terms came off the team's grid): the command
+        // of 8 applies only from 10, so 9 and 10 get those of 4 (from 6) and 8.
+        let mut t = [terms("r1", 9, &[0.0, 0.0])];
+        p.predict(9, 2, &mut t);
+        assert!((t[0].velocity[0] - 0.002 * (14.0 + 18.0)).abs() < 1e-12, "{:?}", t[0].velocity);
+    }
+
+    #[test]
+    fn a_change_of_delay_carries_each_command_from_where_it_applies() {
+        // Ticks 0-9 sent with delay 1 (qdd 1), 10-11 with delay 3 (qdd 5): solving 12 with delay
+        // 3, ticks 12, 13, 14 get the newest command applying there: 9's (from 10) at 12,
+        // 10's (from 13) at 13, 11's (from 14) at 14.
+        let mut p = DelayPredictor::new(1000.0);
+        solved(&mut p, 0..10, 1, |_| 1.0);
+        solved(&mut p, 10..12, 3, |_| 5.0);
+        let mut t = [terms("r1", 12, &[0.0, 0.0])];
+        p.predict(12, 3, &mut t);
+        assert!((t[0].velocity[0] - 0.001 * (1.0 + 5.0 + 5.0)).abs() < 1e-12, "{:?}", t[0].velocity);
+    }
+
+    #[test]
+    fn nothing_is_carried_for_robots_without_accelerations_old_commands_or_other_sizes() {
+        let mut p = DelayPredictor::new(1000.0);
+        solved(&mut p, 0..5, 2, |_| 1.0);
+        // A robot never recorded, one of another size, and commands too old to apply.
+        let mut t = [terms("r2", 5, &[1.0]), terms("r1", 5, &[1.0, 1.0, 1.0])];
+        p.predict(5, 2, &mut t);
+        assert_eq!((t[0].velocity.clone(), t[1].velocity.clone()), (vec![1.0], vec![1.0, 1.0, 1.0]));
+        let mut t = [terms("r1", 5 + OLDEST_CARRIED + 10, &[0.0, 0.0])];
+        p.predict(5 + OLDEST_CARRIED + 10, 2, &mut t);
+        assert_eq!(t[0].velocity, vec![0.0, 0.0], "a command older than {OLDEST_CARRIED} ticks");
+        // A tick whose controller gave no accelerations (or non-finite ones) still applies: the
+        // periods it covers carry nothing, not the older command's.
+        p.record(5, 2, &[terms("r1", 5, &[0.0, 0.0])], &Told(BTreeMap::new()));
+        p.record(6, 2, &[terms("r1", 6, &[0.0, 0.0])], &told("r1", &[f64::NAN, 0.0]));
+        let mut t = [terms("r1", 9, &[0.0, 0.0])];
+        p.predict(9, 2, &mut t);
+        assert_eq!(t[0].velocity, vec![0.0, 0.0], "ticks 9 and 10 get the commands of 7 and 8: none recorded");
+        let mut t = [terms("r1", 7, &[0.0, 0.0])];
+        p.predict(7, 2, &mut t);
+        assert_eq!(t[0].velocity, vec![0.0, 0.0], "7 and 8 get 5's and 6's: no accelerations");
+    }
+}
