@@ -51,8 +51,12 @@ pub trait TeamController: Send {
 
     /// The generalized accelerations (in the order of its terms' velocity) that the last
     /// solved tick's torques command for `robot`: what carries a robot's state over the team's
-    /// delay ([`crate::team::prediction`]). `None` when the controller does not model them or
-    /// the robot was not in the tick.
+    /// delay ([`crate::team::prediction`]). `None` when the controller does not model them, was
+    /// not asked to keep them, or the robot was not in the tick.
+    /// Whether the ticks from now on should also compute what their torques accelerate
+    /// ([`TeamController::accelerations`]); off by default, and off costs nothing.
+    fn keep_accelerations(&mut self, _keep: bool) {}
+
     fn accelerations(&self, _robot: &str) -> Option<&[f64]> {
         None
     }

@@ -547,10 +547,12 @@ impl<'a> Service<'a> {
             controller.set_late(&self.roster.late());
         }
         self.refs.drain(references, &mut self.counters);
-        self.refs.apply(tick, controller);
         let delay = team_delay(&terms);
+        // The state carried to where the command applies is solved with that tick's references.
+        self.refs.apply(if self.predictor.is_some() { tick + delay } else { tick }, controller);
         if let Some(p) = &self.predictor {
             p.predict(tick, delay, &mut terms);
+            controller.keep_accelerations(delay > 0);
         }
         let solved = solve_and_publish(self.session, &self.cfg, controller, tick, &terms, &mut self.commands, &mut self.command_pubs, &mut self.diag_pub, &mut self.counters).await?;
         if let Some(p) = self.predictor.as_mut().filter(|_| solved) {

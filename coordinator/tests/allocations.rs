@@ -110,7 +110,14 @@ fn the_tick_allocates_nothing_once_the_team_shape_is_known() {
     assert_eq!(steady, vec![0; 20], "steady ticks allocate nothing");
     assert!(l.c.diagnostics().is_some_and(|d| d.contacts.len() == 10));
     assert_eq!(l.out.len(), 2);
-
+    // With a team delay the tick also computes what its torque accelerates (the object on the
+    // hands): sized on its first tick, nothing after.
+    l.c.keep_accelerations(true);
+    let first = l.run(&mut terms, 1)[0];
+    let steady = l.run(&mut terms, 20);
+    println!("keeping the accelerations: first tick {first} allocations, then {steady:?}");
+    assert!(l.c.accelerations(&robot_id(0)).is_some_and(|a| a.len() == nv && a.iter().any(|x| *x != 0.0)));
+    assert_eq!(steady, vec![0; 20], "steady ticks keeping the accelerations allocate nothing");
 }
 
 #[test]

@@ -22,7 +22,7 @@ use coordinator::qp::ContactKind;
 use coordinator::team::Team;
 use coordinator::units::grasp::{GraspTerms, GraspTracker, PlannedHand};
 use coordinator::units::impedance::TaskStack;
-use coordinator::{ControllerError, Pidc, PidcConfig};
+use coordinator::{ControllerError, Pidc, PidcConfig, TeamController};
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 use protocol::{DynamicsTerms, FrameRole, PoseReference, RobotDescription, TaskReferences, TorsoReference};
 use robot_agent::terms::ActiveContacts;
@@ -523,7 +523,9 @@ fn contact_wrenches_follow_the_map_or_eq_constraint_force() {
 #[test]
 fn torque_is_tau0_plus_y_f_c_clamped_after_a_fallback() {
     let mut fx = Fixture::new();
-    let (_, _, mut c) = moving_team(&mut fx, 17);
+    let (terms, _, mut c) = moving_team(&mut fx, 17);
+    c.keep_accelerations(true);
+    c.compute(&terms).expect("tick");
     let r = c.materialized().expect("tick");
     let proj = &r.proj;
     // tau_0 = [P S]^+ P tau_M (eq. ua_solution).
@@ -751,7 +753,9 @@ fn grasp_jdot_v_is_the_time_derivative_of_j_cee_v_and_j_o_v() {
 #[test]
 fn commanded_accelerations_are_the_constrained_dynamics_with_the_object_on_the_hands() {
     let mut fx = Fixture::new();
-    let (_, _, mut c) = moving_team(&mut fx, 17);
+    let (terms, _, mut c) = moving_team(&mut fx, 17);
+    c.keep_accelerations(true);
+    c.compute(&terms).expect("tick");
     let r = c.materialized().expect("tick");
     let cfg = PidcConfig::default();
     let (team, proj, g) = (&r.team, &r.proj, r.grasp.as_ref().expect("grasp"));

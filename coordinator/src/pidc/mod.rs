@@ -70,6 +70,9 @@ pub struct Pidc {
     report: TickReport,
     /// Whether `report` holds a completed tick.
     valid: bool,
+    /// Whether a tick computes what its torque accelerates (`report.qdd`,
+    /// [`TeamController::keep_accelerations`]).
+    accelerations: bool,
     ws: Workspace,
     diagnostics: Option<TickDiagnostics>,
 }
@@ -86,6 +89,7 @@ impl Pidc {
             watch: GraspWatch::default(),
             report: TickReport::default(),
             valid: false,
+            accelerations: false,
             ws: Workspace::default(),
             diagnostics: None,
         }
@@ -172,7 +176,7 @@ impl Pidc {
         self.valid = false;
         let start = Instant::now();
         let us = || start.elapsed().as_secs_f64() * 1e6;
-        let Pidc { config: cfg, descriptions, expected, references, targets, grasp, watch, report: r, ws, valid, .. } = self;
+        let Pidc { config: cfg, descriptions, expected, references, targets, grasp, watch, report: r, ws, valid, accelerations, .. } = self;
         // Degrade, never collapse: once the team has let go of the object, every hand is free.
         watch.rearm(tick.iter().any(|t| t.hand_in_grasp));
         r.team.hands_released = watch.released().is_some();
@@ -207,8 +211,10 @@ impl Pidc {
         let (build_us, qp_us) = contact_forces(r, ws, descriptions, cfg, loads)?;
         // What the torque sent accelerates, the object a rigid body on the hands (eq.
         // aghili_25): the team's delay carries each state over it (crate::team::prediction).
-        let body = ObjectBody { mass: cfg.object_mass, inertia: cfg.object_inertia };
-        commanded_accelerations(&r.team, &r.proj, &r.tau, &ws.motion.mcinv_bias, r.grasp.as_ref().map(|g| (g, &body)), &mut r.qdd, &mut ws.acceleration);
+        if *accelerations {
+            let body = ObjectBody { mass: cfg.object_mass, inertia: cfg.object_inertia };
+            commanded_accelerations(&r.team, &r.proj, &r.tau, &ws.motion.mcinv_bias, r.grasp.as_ref().map(|g| (g, &body)), &mut r.qdd, &mut ws.acceleration);
+        }
         // Degrade, never collapse: let go of an object the team cannot hold.
         let outcome = GraspObservation::of(tick[0].header.tick, &r.team, r.grasp.as_ref(), r.fallback.is_some());
         set_note(&mut r.release, watch.after_tick(&cfg.release, outcome, &r.team, r.grasp.as_ref(), targets, grasp));
@@ -416,8 +422,12 @@ impl TeamController for Pidc {
         crate::team::terms_fit(terms, self.descriptions.get(terms.header.robot_id()))
     }
 
+    fn keep_accelerations(&mut self, keep: bool) {
+        self.accelerations = keep;
+    }
+
     fn accelerations(&self, robot: &str) -> Option<&[f64]> {
-        let b = self.report.team.robots.iter().find(|b| b.id == robot).filter(|_| self.valid)?;
+        let b = self.report.team.robots.iter().find(|b| b.id == robot).filter(|_| self.valid && self.accelerations)?;
         self.report.qdd.as_slice().get(b.offset..b.offset + b.nv)
     }
 

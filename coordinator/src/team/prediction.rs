@@ -15,14 +15,24 @@
 //!
 //! The command applying at robot tick t is the newest solved at a tick s with
 //! `s + delay(s) <= t`; between team ticks (`team_hz` below the robots' rate) a robot keeps it.
-//! Positions stay the measured ones: over a few robot periods the velocity is what a damping
-//! loop acts on, and what a delay destabilises.
+//! Each frame's pose follows, as the simulator integrates (semi-implicit Euler: the velocity
+//! first, then the pose with the new velocity), by its Jacobian at the measured state:
+//!
+//! ```text
+//! p += dt J_lin v,   R = exp(dt J_ang v) R        (world-aligned rows [linear; angular])
+//! ```
+//!
+//! The velocity is what a damping loop acts on, and what a delay destabilises; the poses take
+//! out the lag, with the task references of tick k + d (the coordinator solves the tick with
+//! them, `crate::service`). `M`, `h`, the Jacobians and `Jdot v` stay the measured ones: over a
+//! few robot periods they change far less than the state.
 //!
 //! Each robot keeps the accelerations of its last [`SOLVES_KEPT`] solved ticks in slots
 //! allocated when it is first seen; predicting and recording allocate nothing after that.
 
 use std::collections::BTreeMap;
 
+use nalgebra::{Matrix3, Rotation3, Vector3};
 use protocol::{DynamicsTerms, MAX_TEAM_DELAY_TICKS};
 
 use crate::TeamController;
@@ -66,16 +76,18 @@ impl DelayPredictor {
         DelayPredictor { period: 1.0 / robot_hz, robots: BTreeMap::new() }
     }
 
-    /// Before `tick` is solved with the delay `delay`: each robot's velocity in `terms`
-    /// carried over the commands in flight (module docs). A robot without them (the team's
-    /// first ticks, a robot just joined) keeps its measured velocity for those periods.
+    /// Before `tick` is solved with the delay `delay`: each robot's velocity and frame poses
+    /// in `terms` carried over the commands in flight (module docs). A robot without them (the
+    /// team's first ticks, a robot just joined) keeps its measured velocity for those periods,
+    /// and its frames move with it.
     pub fn predict(&self, tick: u64, delay: u64, terms: &mut [DynamicsTerms]) {
         for t in terms.iter_mut() {
-            let Some(solves) = self.robots.get(t.header.robot_id()) else { continue };
+            let solves = self.robots.get(t.header.robot_id());
             for at in tick..tick + delay {
-                if let Some(s) = solves.applying_at(at).filter(|s| s.qdd.len() == t.velocity.len()) {
+                if let Some(s) = solves.and_then(|r| r.applying_at(at)).filter(|s| s.qdd.len() == t.velocity.len()) {
                     t.velocity.iter_mut().zip(&s.qdd).for_each(|(v, a)| *v += self.period * a);
                 }
+                move_frames(t, self.period);
             }
         }
     }
@@ -97,6 +109,31 @@ impl DelayPredictor {
             (slot.tick, slot.delay) = (tick, delay);
             if let Some(qdd) = controller.accelerations(id).filter(|a| a.len() == t.velocity.len() && a.iter().all(|x| x.is_finite())) {
                 slot.qdd.extend_from_slice(qdd);
+            }
+        }
+    }
+}
+
+/// Each frame of `t` moved over `dt` with the velocity of `t` (module docs); a frame whose
+/// Jacobian does not fit the velocity stays.
+fn move_frames(t: &mut DynamicsTerms, dt: f64) {
+    let v = &t.velocity;
+    for f in &mut t.frames {
+        let (rows, nv) = (f.jacobian.rows(), f.jacobian.cols());
+        if nv != v.len() || f.jacobian.data.len() != rows * nv || rows < 3 {
+            continue;
+        }
+        let rate = |i: usize| dt * f.jacobian.data[i * nv..(i + 1) * nv].iter().zip(v).map(|(j, x)| j * x).sum::<f64>();
+        for i in 0..3 {
+            f.position[i] += rate(i);
+        }
+        if rows >= 6 {
+            let turn = Rotation3::new(Vector3::new(rate(3), rate(4), rate(5)));
+            let r = turn.matrix() * Matrix3::from_row_slice(&f.rotation);
+            for i in 0..3 {
+                for j in 0..3 {
+                    f.rotation[3 * i + j] = r[(i, j)];
+                }
             }
         }
     }
@@ -229,5 +266,42 @@ mod tests {
         let mut t = [terms("r1", 7, &[0.0, 0.0])];
         p.predict(7, 2, &mut t);
         assert_eq!(t[0].velocity, vec![0.0, 0.0], "7 and 8 get 5's and 6's: no accelerations");
+    }
+
+    #[test]
+    fn frames_move_with_the_carried_velocity_as_the_simulator_integrates() {
+        use protocol::{FrameRole, FrameTerms};
+        // A robot of three velocities: a hand frame whose linear rows read v0, v1, 0 and whose
+        // angular rows read (0, 0, v2) (a planar body); a foot frame that reads v0 only. Delay
+        // 2, the commands in flight accelerating (1, 0, 2): semi-implicit Euler gives
+        // v1 = v + dt a, v2 = v + 2 dt a and x += dt (v1 + v2).
+        let dt = 0.001;
+        let mut p = DelayPredictor::new(1.0 / dt);
+        p.record(0, 2, &[terms("r1", 0, &[0.0; 3])], &told("r1", &[1.0, 0.0, 2.0]));
+        p.record(1, 2, &[terms("r1", 1, &[0.0; 3])], &told("r1", &[1.0, 0.0, 2.0]));
+        let jacobian = |rows: &[[f64; 3]]| Matrix { rows: rows.len() as u32, cols: 3, data: rows.iter().flatten().copied().collect() };
+        let (v, a) = ([0.5, -0.2, 3.0], [1.0, 0.0, 2.0]);
+        let mut t = terms("r1", 2, &v);
+        let hand = FrameTerms {
+            name: "hand".into(),
+            role: FrameRole::Hand,
+            position: [1.0, 2.0, 3.0],
+            rotation: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            jacobian: jacobian(&[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
+            jdot_v: vec![0.0; 6],
+        };
+        let foot = FrameTerms { name: "foot".into(), role: FrameRole::StanceFoot, position: [0.0; 3], rotation: hand.rotation, jacobian: jacobian(&[[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]), jdot_v: vec![0.0; 3] };
+        t.frames = vec![hand, foot];
+        let mut ts = [t];
+        p.predict(2, 2, &mut ts);
+        let moved = |j: usize| dt * ((v[j] + dt * a[j]) + (v[j] + 2.0 * dt * a[j]));
+        let f = &ts[0].frames;
+        let close = |x: f64, y: f64| (x - y).abs() < 1e-12;
+        assert!(close(f[0].position[0], 1.0 + moved(0)) && close(f[0].position[1], 2.0 + moved(1)) && close(f[0].position[2], 3.0), "{:?}", f[0].position);
+        let yaw = moved(2);
+        let r = &f[0].rotation;
+        assert!(close(r[0], yaw.cos()) && close(r[1], -yaw.sin()) && close(r[3], yaw.sin()) && close(r[4], yaw.cos()) && close(r[8], 1.0), "a turn of {yaw} rad about z: {r:?}");
+        assert!(close(f[1].position[0], moved(0)) && f[1].position[1] == 0.0, "the foot: {:?}", f[1].position);
+        assert!(close(ts[0].velocity[2], v[2] + 2.0 * dt * a[2]));
     }
 }
