@@ -49,14 +49,18 @@ pub trait TeamController: Send {
         Ok(())
     }
 
+    /// Whether the ticks from now on should also compute what their torques accelerate
+    /// ([`TeamController::accelerations`]; off by default, and off costs nothing). Returns
+    /// whether the controller models them at all: only then does the coordinator carry the
+    /// state over the team's delay ([`crate::team::prediction`]).
+    fn keep_accelerations(&mut self, _keep: bool) -> bool {
+        false
+    }
+
     /// The generalized accelerations (in the order of its terms' velocity) that the last
     /// solved tick's torques command for `robot`: what carries a robot's state over the team's
-    /// delay ([`crate::team::prediction`]). `None` when the controller does not model them, was
-    /// not asked to keep them, or the robot was not in the tick.
-    /// Whether the ticks from now on should also compute what their torques accelerate
-    /// ([`TeamController::accelerations`]); off by default, and off costs nothing.
-    fn keep_accelerations(&mut self, _keep: bool) {}
-
+    /// delay. `None` when the controller does not model them, was not asked to keep them, or
+    /// the robot was not in the tick.
     fn accelerations(&self, _robot: &str) -> Option<&[f64]> {
         None
     }

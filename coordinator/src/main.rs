@@ -54,9 +54,10 @@ enum Command {
         /// most 3 s (a restarted coordinator meets its agents one by one).
         #[arg(long, value_delimiter = ',')]
         expect: Vec<String>,
-        /// The robots' control rate, Hz: with a team delay, each robot's state is carried over
-        /// the commands still in flight before its tick is solved. Without it, each command
-        /// answers the state as measured.
+        /// The robots' control rate, Hz (the agents' own: a wrong rate scales every
+        /// prediction): with a team delay, each robot's state is carried over the commands
+        /// still in flight before its tick is solved. Without it, each command answers the
+        /// state as measured.
         #[arg(long)]
         robot_hz: Option<f64>,
         #[command(flatten)]

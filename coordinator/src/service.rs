@@ -485,6 +485,9 @@ impl<'a> Service<'a> {
         // Not into `commands`: they stay the last solved tick's, for `answer_again`.
         // At the team's delay of the last solved tick.
         let delay_ticks = self.commands.first().map_or(0, |c| c.delay_ticks);
+        if let Some(p) = &mut self.predictor {
+            p.record_hold(robot, tick, delay_ticks);
+        }
         let order = TorqueCommand { delay_ticks, ..TorqueCommand::hold(&self.cfg.team, robot, tick) };
         publish_commands(self.session, &self.cfg, std::slice::from_ref(&order), &mut self.command_pubs, &mut self.counters).await
     }
@@ -549,14 +552,14 @@ impl<'a> Service<'a> {
         self.refs.drain(references, &mut self.counters);
         let delay = team_delay(&terms);
         // The state carried to where the command applies is solved with that tick's references.
-        self.refs.apply(if self.predictor.is_some() { tick + delay } else { tick }, controller);
-        if let Some(p) = &self.predictor {
+        let predicting = self.predictor.is_some() && controller.keep_accelerations(delay > 0);
+        self.refs.apply(if predicting { tick.saturating_add(delay) } else { tick }, controller);
+        if let Some(p) = self.predictor.as_ref().filter(|_| predicting) {
             p.predict(tick, delay, &mut terms);
-            controller.keep_accelerations(delay > 0);
         }
         let solved = solve_and_publish(self.session, &self.cfg, controller, tick, &terms, &mut self.commands, &mut self.command_pubs, &mut self.diag_pub, &mut self.counters).await?;
-        if let Some(p) = self.predictor.as_mut().filter(|_| solved) {
-            p.record(tick, delay, &terms, controller);
+        if let Some(p) = self.predictor.as_mut().filter(|_| predicting) {
+            p.record(tick, delay, &terms, solved.then_some(&*controller));
         }
         self.solved_tick = Some(tick);
         if solved && !self.roster.started() {

@@ -523,9 +523,7 @@ fn contact_wrenches_follow_the_map_or_eq_constraint_force() {
 #[test]
 fn torque_is_tau0_plus_y_f_c_clamped_after_a_fallback() {
     let mut fx = Fixture::new();
-    let (terms, _, mut c) = moving_team(&mut fx, 17);
-    c.keep_accelerations(true);
-    c.compute(&terms).expect("tick");
+    let (_, _, mut c) = moving_team(&mut fx, 17);
     let r = c.materialized().expect("tick");
     let proj = &r.proj;
     // tau_0 = [P S]^+ P tau_M (eq. ua_solution).
@@ -759,6 +757,7 @@ fn commanded_accelerations_are_the_constrained_dynamics_with_the_object_on_the_h
     let r = c.materialized().expect("tick");
     let cfg = PidcConfig::default();
     let (team, proj, g) = (&r.team, &r.proj, r.grasp.as_ref().expect("grasp"));
+    assert!(proj.by_blocks, "the tick's accelerations by the team's blocks (the default)");
     let n = team.n;
     // The object as a rigid body on the hands, written out: w_o = [m (a - g); I alpha + w x I w]
     // (world), a_o = J_o qdd + Jdot_o v; the robots M qdd + h = S tau + J_c^T lambda - J_o^T w_o,

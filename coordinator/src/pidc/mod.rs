@@ -422,8 +422,9 @@ impl TeamController for Pidc {
         crate::team::terms_fit(terms, self.descriptions.get(terms.header.robot_id()))
     }
 
-    fn keep_accelerations(&mut self, keep: bool) {
+    fn keep_accelerations(&mut self, keep: bool) -> bool {
         self.accelerations = keep;
+        true
     }
 
     fn accelerations(&self, robot: &str) -> Option<&[f64]> {

@@ -49,7 +49,8 @@ pub struct TickReport {
     /// Full team torque (n) and the QP pieces.
     pub tau: DVector<f64>,
     /// The team's generalized accelerations under `tau`, the held object a rigid body on the
-    /// hands (n, eq. aghili_25; `crate::pidc::stages::acceleration`).
+    /// hands (n, eq. aghili_25; `crate::pidc::stages::acceleration`): written only by ticks
+    /// that keep them (`TeamController::keep_accelerations`), stale otherwise.
     pub qdd: DVector<f64>,
     pub contacts: Vec<(usize, ContactKind)>,
     pub limits: Vec<f64>,

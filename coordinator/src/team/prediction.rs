@@ -27,6 +27,12 @@
 //! them, `crate::service`). `M`, `h`, the Jacobians and `Jdot v` stay the measured ones: over a
 //! few robot periods they change far less than the state.
 //!
+//! Hold orders and ticks not solved apply too, and carry nothing. A late member's reused
+//! terms are carried from the state they came from (`state_tick`). The accelerations are
+//! computed only while a delay is in use, so the first d ticks after a delay is first raised
+//! (`auto`) carry nothing; and a command an agent already holds when the delay rises applies
+//! later than its own delay says (the agent follows the newest command's delay).
+//!
 //! Each robot keeps the accelerations of its last [`SOLVES_KEPT`] solved ticks in slots
 //! allocated when it is first seen; predicting and recording allocate nothing after that.
 
@@ -83,7 +89,9 @@ impl DelayPredictor {
     pub fn predict(&self, tick: u64, delay: u64, terms: &mut [DynamicsTerms]) {
         for t in terms.iter_mut() {
             let solves = self.robots.get(t.header.robot_id());
-            for at in tick..tick + delay {
+            // A late member's reused terms are of an older state: carried from there.
+            let from = t.state_tick.clamp(tick.saturating_sub(OLDEST_CARRIED), tick);
+            for at in from..tick.saturating_add(delay) {
                 if let Some(s) = solves.and_then(|r| r.applying_at(at)).filter(|s| s.qdd.len() == t.velocity.len()) {
                     t.velocity.iter_mut().zip(&s.qdd).for_each(|(v, a)| *v += self.period * a);
                 }
@@ -92,25 +100,42 @@ impl DelayPredictor {
         }
     }
 
-    /// After `tick` was solved from `terms` and sent with the delay `delay`: each robot's
-    /// commanded accelerations kept (none, for a robot whose accelerations the controller does
-    /// not give: its command still applies, and nothing is carried over it).
-    pub fn record(&mut self, tick: u64, delay: u64, terms: &[DynamicsTerms], controller: &dyn TeamController) {
+    /// After the commands of `tick` were sent with the delay `delay`: each robot's commanded
+    /// accelerations kept, from `controller` when the tick was solved. Without them (hold
+    /// orders, a controller that gives none, non-finite values) the command still applies, and
+    /// nothing is carried over it.
+    pub fn record(&mut self, tick: u64, delay: u64, terms: &[DynamicsTerms], controller: Option<&dyn TeamController>) {
         for t in terms {
             let id = t.header.robot_id();
-            if !self.robots.contains_key(id) {
-                let slot = || Slot { tick: 0, delay: NEVER, qdd: Vec::with_capacity(t.velocity.len()) };
-                self.robots.insert(id.to_string(), Solves { slots: (0..SOLVES_KEPT).map(|_| slot()).collect(), next: 0 });
-            }
-            let Some(solves) = self.robots.get_mut(id) else { continue };
-            let slot = &mut solves.slots[solves.next];
-            solves.next = (solves.next + 1) % SOLVES_KEPT;
-            slot.qdd.clear();
+            let slot = self.next_slot(id, t.velocity.len());
             (slot.tick, slot.delay) = (tick, delay);
-            if let Some(qdd) = controller.accelerations(id).filter(|a| a.len() == t.velocity.len() && a.iter().all(|x| x.is_finite())) {
+            if let Some(qdd) = controller.and_then(|c| c.accelerations(id)).filter(|a| a.len() == t.velocity.len() && a.iter().all(|x| x.is_finite())) {
                 slot.qdd.extend_from_slice(qdd);
             }
         }
+    }
+
+    /// A hold order sent to `robot` for `tick` with the delay `delay` (a robot outside the
+    /// team's tick): nothing is carried over the periods it applies in.
+    pub fn record_hold(&mut self, robot: &str, tick: u64, delay: u64) {
+        if self.robots.contains_key(robot) {
+            let slot = self.next_slot(robot, 0);
+            (slot.tick, slot.delay) = (tick, delay);
+        }
+    }
+
+    /// `robot`'s oldest slot, emptied (its ring made on first sight, slots sized for `nv`).
+    fn next_slot(&mut self, robot: &str, nv: usize) -> &mut Slot {
+        if !self.robots.contains_key(robot) {
+            let slot = || Slot { tick: 0, delay: NEVER, qdd: Vec::with_capacity(nv) };
+            self.robots.insert(robot.to_string(), Solves { slots: (0..SOLVES_KEPT).map(|_| slot()).collect(), next: 0 });
+        }
+        let solves = self.robots.get_mut(robot).expect("inserted above");
+        let k = solves.next;
+        solves.next = (k + 1) % SOLVES_KEPT;
+        let slot = &mut solves.slots[k];
+        slot.qdd.clear();
+        slot
     }
 }
 
@@ -196,7 +221,7 @@ mod tests {
     /// Solve `ticks` in order, tick k commanding `qdd(k)` with the delay `delay`.
     fn solved(p: &mut DelayPredictor, ticks: impl Iterator<Item = u64>, delay: u64, qdd: impl Fn(u64) -> f64) {
         for k in ticks {
-            p.record(k, delay, &[terms("r1", k, &[0.0, 0.0])], &told("r1", &[qdd(k), -2.0 * qdd(k)]));
+            p.record(k, delay, &[terms("r1", k, &[0.0, 0.0])], Some(&told("r1", &[qdd(k), -2.0 * qdd(k)])));
         }
     }
 
@@ -258,14 +283,37 @@ mod tests {
         assert_eq!(t[0].velocity, vec![0.0, 0.0], "a command older than {OLDEST_CARRIED} ticks");
         // A tick whose controller gave no accelerations (or non-finite ones) still applies: the
         // periods it covers carry nothing, not the older command's.
-        p.record(5, 2, &[terms("r1", 5, &[0.0, 0.0])], &Told(BTreeMap::new()));
-        p.record(6, 2, &[terms("r1", 6, &[0.0, 0.0])], &told("r1", &[f64::NAN, 0.0]));
-        let mut t = [terms("r1", 9, &[0.0, 0.0])];
-        p.predict(9, 2, &mut t);
-        assert_eq!(t[0].velocity, vec![0.0, 0.0], "ticks 9 and 10 get the commands of 7 and 8: none recorded");
+        p.record(5, 2, &[terms("r1", 5, &[0.0, 0.0])], Some(&Told(BTreeMap::new())));
+        p.record(6, 2, &[terms("r1", 6, &[0.0, 0.0])], Some(&told("r1", &[f64::NAN, 0.0])));
         let mut t = [terms("r1", 7, &[0.0, 0.0])];
         p.predict(7, 2, &mut t);
         assert_eq!(t[0].velocity, vec![0.0, 0.0], "7 and 8 get 5's and 6's: no accelerations");
+        let mut t = [terms("r1", 9, &[0.0, 0.0])];
+        p.predict(9, 2, &mut t);
+        assert_eq!(t[0].velocity, vec![0.0, 0.0], "9 and 10 still get 6's: no accelerations");
+        // A tick not solved, and a hold order: their commands apply, and carry nothing.
+        solved(&mut p, 7..9, 2, |_| 1.0);
+        p.record(9, 2, &[terms("r1", 9, &[0.0, 0.0])], None);
+        p.record_hold("r1", 10, 2);
+        p.record_hold("r9", 10, 2);
+        let mut t = [terms("r1", 11, &[0.0, 0.0])];
+        p.predict(11, 2, &mut t);
+        assert_eq!(t[0].velocity, vec![0.0, 0.0], "11 and 12 get 9's and 10's: a tick not solved, a hold");
+        let mut t = [terms("r1", 10, &[0.0, 0.0])];
+        p.predict(10, 2, &mut t);
+        assert!((t[0].velocity[0] - 0.001).abs() < 1e-12, "10 gets 8's, 11 gets 9's: {:?}", t[0].velocity);
+    }
+
+    #[test]
+    fn reused_terms_are_carried_from_the_state_they_came_from() {
+        // Terms of the state of tick 8 reused for tick 10 (a late member), delay 2: carried over
+        // 8 .. 11, with the commands of 6 .. 9 (qdd = k).
+        let mut p = DelayPredictor::new(1000.0);
+        solved(&mut p, 0..10, 2, |k| k as f64);
+        let mut t = [terms("r1", 10, &[0.0, 0.0])];
+        t[0].state_tick = 8;
+        p.predict(10, 2, &mut t);
+        assert!((t[0].velocity[0] - 0.001 * (6.0 + 7.0 + 8.0 + 9.0)).abs() < 1e-12, "{:?}", t[0].velocity);
     }
 
     #[test]
@@ -277,8 +325,8 @@ mod tests {
         // v1 = v + dt a, v2 = v + 2 dt a and x += dt (v1 + v2).
         let dt = 0.001;
         let mut p = DelayPredictor::new(1.0 / dt);
-        p.record(0, 2, &[terms("r1", 0, &[0.0; 3])], &told("r1", &[1.0, 0.0, 2.0]));
-        p.record(1, 2, &[terms("r1", 1, &[0.0; 3])], &told("r1", &[1.0, 0.0, 2.0]));
+        p.record(0, 2, &[terms("r1", 0, &[0.0; 3])], Some(&told("r1", &[1.0, 0.0, 2.0])));
+        p.record(1, 2, &[terms("r1", 1, &[0.0; 3])], Some(&told("r1", &[1.0, 0.0, 2.0])));
         let jacobian = |rows: &[[f64; 3]]| Matrix { rows: rows.len() as u32, cols: 3, data: rows.iter().flatten().copied().collect() };
         let (v, a) = ([0.5, -0.2, 3.0], [1.0, 0.0, 2.0]);
         let mut t = terms("r1", 2, &v);

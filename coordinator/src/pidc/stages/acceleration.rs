@@ -58,7 +58,8 @@ fn phi_times(proj: &Projections, x: &DVector<f64>, y: &mut DVector<f64>, ops: &m
 }
 
 /// `qdd` (n) for the team torque `tau` (n) with the motion-space bias `mcinv_bias` (`mu_c`, n)
-/// and, when the team holds an object, that object as a rigid body on the hands (module docs).
+/// and, when the team holds an object, that object as a rigid body on the hands (module docs);
+/// NaN where it cannot be computed (non-finite inputs).
 pub fn commanded_accelerations(team: &Team, proj: &Projections, tau: &DVector<f64>, mcinv_bias: &DVector<f64>, held: Option<(&GraspTerms, &ObjectBody)>, qdd: &mut DVector<f64>, s: &mut AccelerationScratch) {
     let n = team.n;
     zeros_v(&mut s.x, n);
@@ -104,7 +105,12 @@ pub fn commanded_accelerations(team: &Team, proj: &Projections, tau: &DVector<f6
         a1[rr] = g.j_o.row(rr).iter().zip(qdd.iter()).map(|(x, y)| x * y).sum::<f64>() + g.jdv_o[rr];
     }
     let k: Matrix6<f64> = Matrix6::identity() + a * lambda_o;
-    let Some(a_o) = k.lu().solve(&a1) else { return };
+    // I + A Lambda_o has eigenvalues of at least 1 (A and Lambda_o are positive semi-definite):
+    // only non-finite inputs fail here, and then no acceleration is given.
+    let Some(a_o) = k.lu().solve(&a1) else {
+        qdd.fill(f64::NAN);
+        return;
+    };
     let f = lambda_o * a_o;
     qdd.gemv(-1.0, &s.phi_jot, &f, 1.0);
 }
