@@ -19,7 +19,8 @@
 # TEAM_RATES: the team loop's rates (`team_hz`, a whole divisor of the robot rate; "-" runs
 # the team at the robot rate). DELAYS: `team_delay_ticks` (`auto` prints as autoN, N the
 # longest delay an agent came to). LOSS: percent of robot r1's packets
-# dropped on its link (`team run --hosts --loss r1=P`; needs MODE=--hosts). RECORD=1 records
+# dropped on its link (`team run --hosts --loss r1=P`; needs MODE=--hosts). SETS: more
+# scenario keys for every run (`SETS="predict_delay=false"`). RECORD=1 records
 # each run (run.mcap; the default runs without, `--no-record`). Needs the release
 # binaries (cargo build --release --bins). Reports go to reports/sweep/.
 set -euo pipefail
@@ -50,6 +51,7 @@ for s in $scenarios; do
             args=(--realtime --set "control_hz=$hz" --set "duration=$duration" --set "team_delay_ticks=$d")
             [[ "$th" == - ]] || args+=(--set "team_hz=$th")
             [[ "$loss" == 0 ]] || args+=(--loss "r1=$loss")
+            for kv in ${SETS:-}; do args+=(--set "$kv"); done
             [[ "${RECORD:-0}" == 1 ]] || args+=(--no-record)
             # shellcheck disable=SC2206
             [[ -z "$mode" ]] || args+=($mode)
