@@ -38,9 +38,10 @@
 
 use std::collections::BTreeMap;
 
-use nalgebra::{Matrix3, Rotation3, Vector3};
+use nalgebra::{Rotation3, Vector3};
 use protocol::{DynamicsTerms, MAX_TEAM_DELAY_TICKS};
 
+use crate::linalg::{dot, rotation_from_row_major};
 use crate::TeamController;
 
 /// Solved ticks kept per robot: enough to find the command applying at every tick of the
@@ -148,13 +149,12 @@ fn move_frames(t: &mut DynamicsTerms, dt: f64) {
         if nv != v.len() || f.jacobian.data.len() != rows * nv || rows < 3 {
             continue;
         }
-        let rate = |i: usize| dt * f.jacobian.data[i * nv..(i + 1) * nv].iter().zip(v).map(|(j, x)| j * x).sum::<f64>();
+        let rate = |i: usize| dt * dot(&f.jacobian.data[i * nv..(i + 1) * nv], v);
         for i in 0..3 {
             f.position[i] += rate(i);
         }
         if rows >= 6 {
-            let turn = Rotation3::new(Vector3::new(rate(3), rate(4), rate(5)));
-            let r = turn.matrix() * Matrix3::from_row_slice(&f.rotation);
+            let r = Rotation3::new(Vector3::new(rate(3), rate(4), rate(5))) * rotation_from_row_major(&f.rotation);
             for i in 0..3 {
                 for j in 0..3 {
                     f.rotation[3 * i + j] = r[(i, j)];

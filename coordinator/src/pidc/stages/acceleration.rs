@@ -19,13 +19,13 @@
 //! object's inertia matters most where the hands' own is small: the roll of the object about
 //! the axis through two palms, which the wrists alone would turn tens of times faster.
 
-use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector3, Vector6};
-use protocol::conventions::GRAVITY_VECTOR;
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector6};
 
 use crate::linalg::{mat, mat_mut, shape, transpose_into, zeros_v};
 use crate::team::Team;
 use crate::units::block_projection::{vmat, vmat_mut, BlockOp, OpScratch};
 use crate::units::grasp::GraspTerms;
+use crate::units::object_load::object_load;
 use crate::units::projection::Projections;
 
 /// The carried object as a rigid body: mass, kg, and inertia about its centre in its frame.
@@ -71,14 +71,10 @@ pub fn commanded_accelerations(team: &Team, proj: &Projections, tau: &DVector<f6
         *qdd -= mcinv_bias;
         return;
     };
+    // b_o: the object's wrench at zero acceleration, its load feed-forward at a_d = 0.
+    let b_o = object_load(&g.object, &g.object_twist, &[0.0; 6], body.mass, &body.inertia);
     let r = g.object.rotation.to_rotation_matrix();
     let i_w = r.matrix() * body.inertia * r.matrix().transpose();
-    let w: Vector3<f64> = g.object_twist.fixed_rows::<3>(3).into();
-    let m_g = body.mass * Vector3::from(GRAVITY_VECTOR);
-    let b_o = Vector6::new(-m_g.x, -m_g.y, -m_g.z, 0.0, 0.0, 0.0) + {
-        let gyro = w.cross(&(i_w * w));
-        Vector6::new(0.0, 0.0, 0.0, gyro.x, gyro.y, gyro.z)
-    };
     s.x.gemv_tr(-1.0, &g.j_o, &b_o, 1.0); // S tau - J_o^T b_o
     phi_times(proj, &s.x, qdd, &mut s.ops);
     *qdd -= mcinv_bias; // q1
