@@ -557,7 +557,7 @@ impl<'a> Service<'a> {
         if let Some(p) = self.predictor.as_ref().filter(|_| predicting) {
             p.predict(tick, delay, &mut terms);
         }
-        let solved = solve_and_publish(self.session, &self.cfg, controller, tick, &terms, &mut self.commands, &mut self.command_pubs, &mut self.diag_pub, &mut self.counters).await?;
+        let solved = solve_and_publish(self.session, &self.cfg, controller, tick, delay, &terms, &mut self.commands, &mut self.command_pubs, &mut self.diag_pub, &mut self.counters).await?;
         if let Some(p) = self.predictor.as_mut().filter(|_| predicting) {
             p.record(tick, delay, &terms, solved.then_some(&*controller));
         }
@@ -683,12 +683,15 @@ impl ReferenceBuffer {
     }
 }
 
+/// Solve `tick` from `terms` (or hold every robot) and publish its commands, each with the
+/// team's delay `delay` ([`team_delay`]). Returns whether the tick was solved.
 #[allow(clippy::too_many_arguments)]
 async fn solve_and_publish(
     session: &Session,
     cfg: &CoordinatorConfig,
     controller: &mut dyn TeamController,
     tick: u64,
+    delay: u64,
     terms: &[DynamicsTerms],
     commands: &mut Vec<TorqueCommand>,
     command_pubs: &mut BTreeMap<String, TypedPublisher<TorqueCommand>>,
@@ -729,7 +732,6 @@ async fn solve_and_publish(
             }
         }
     }
-    let delay = team_delay(terms);
     for c in commands.iter_mut() {
         c.delay_ticks = delay;
     }
