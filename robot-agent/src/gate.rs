@@ -83,8 +83,8 @@ impl CommandGate {
         self.delay
     }
 
-    /// From now on, commands apply `ticks` state ticks after their state (a delay raised by
-    /// `crate::delay::AdaptiveDelay`); commands already waiting apply by it too.
+    /// From now on, commands apply `ticks` state ticks after their state (the team's delay
+    /// of the newest command, `crate::core`); commands already waiting apply by it too.
     pub fn set_delay(&mut self, ticks: u64) {
         self.delay = ticks;
     }
