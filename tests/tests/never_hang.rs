@@ -275,7 +275,7 @@ async fn a_vanished_token_is_waited_for_and_an_announced_leave_is_not() {
     let s = session().await;
     let statuses = transport::subscribe(&s, keys::coordinator_status(team).unwrap()).await.unwrap();
     let c = coordinator(&s, team, Box::new(FailsEvery { every: u64::MAX }));
-    let mut tokens = [Some(transport::declare_member(&s, team, "r1").await.unwrap()), Some(transport::declare_member(&s, team, "r2").await.unwrap())];
+    let mut tokens = member_tokens(&s, team).await.map(Some);
     let (queues, mut pubs) = both_members(&s, team, &statuses).await;
     // Tick 1, the team's first: both commanded.
     put_terms(&mut pubs, team, 1).await;
@@ -328,7 +328,7 @@ async fn terms_sent_again_for_the_tick_last_solved_get_its_command_again() {
     let s = session().await;
     let statuses = transport::subscribe(&s, keys::coordinator_status(team).unwrap()).await.unwrap();
     let c = coordinator(&s, team, Box::new(FailsEvery { every: u64::MAX }));
-    let _tokens = [transport::declare_member(&s, team, "r1").await.unwrap(), transport::declare_member(&s, team, "r2").await.unwrap()];
+    let _tokens = member_tokens(&s, team).await;
     let (queues, mut pubs) = both_members(&s, team, &statuses).await;
     for tick in [1, 2] {
         put_terms(&mut pubs, team, tick).await;
@@ -373,7 +373,7 @@ async fn terms_sent_again_before_their_tick_is_solved_get_only_its_command() {
     let statuses = transport::subscribe(&s, keys::coordinator_status(team).unwrap()).await.unwrap();
     let paused = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let c = coordinator(&s, team, Box::new(PausesAt { tick: 1, pause: Duration::from_secs(1), paused: paused.clone() }));
-    let _tokens = [transport::declare_member(&s, team, "r1").await.unwrap(), transport::declare_member(&s, team, "r2").await.unwrap()];
+    let _tokens = member_tokens(&s, team).await;
     let (queues, mut pubs) = both_members(&s, team, &statuses).await;
     put_terms(&mut pubs, team, 1).await;
     // Once the coordinator is inside tick 1's solve (for 1 s), tick 2's terms and their copies
@@ -402,6 +402,11 @@ async fn terms_sent_again_before_their_tick_is_solved_get_only_its_command() {
 async fn next_command(queue: &transport::SampleQueue) -> Option<TorqueCommand> {
     let sample = tokio::time::timeout(Duration::from_secs(2), queue.recv_async()).await.ok()?;
     Some(decode_sample(&sample.expect("the queue is open")).expect("a command"))
+}
+
+/// The membership tokens of stand-in robots r1 and r2 in `team` (members while kept).
+async fn member_tokens(s: &zenoh::Session, team: &str) -> [zenoh::liveliness::LivelinessToken; 2] {
+    [transport::declare_member(s, team, "r1").await.unwrap(), transport::declare_member(s, team, "r2").await.unwrap()]
 }
 
 /// Stand-in robots r1 and r2, members of `team` (their tokens declared): their command queues
@@ -440,7 +445,7 @@ async fn every_command_of_a_tick_carries_the_longest_delay_its_robots_asked_for(
     let s = session().await;
     let statuses = transport::subscribe(&s, keys::coordinator_status(team).unwrap()).await.unwrap();
     let c = coordinator(&s, team, Box::new(FailsEvery { every: u64::MAX }));
-    let _tokens = [transport::declare_member(&s, team, "r1").await.unwrap(), transport::declare_member(&s, team, "r2").await.unwrap()];
+    let _tokens = member_tokens(&s, team).await;
     let (queues, mut pubs) = both_members(&s, team, &statuses).await;
     for (tick, asked, team_delay) in [(1, [1, 3], 3), (2, [1, 0], 1)] {
         for ((p, r), d) in pubs.iter_mut().zip(["r1", "r2"]).zip(asked) {
