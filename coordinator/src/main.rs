@@ -60,6 +60,11 @@ enum Command {
         /// state as measured.
         #[arg(long)]
         robot_hz: Option<f64>,
+        /// A planner sends the task references: every robot holds its posture until the first
+        /// came, at most this many milliseconds from the start (0: solve at once, each task held
+        /// where it is until references name it).
+        #[arg(long, default_value_t = 0)]
+        wait_for_references_ms: u64,
         #[command(flatten)]
         zenoh: ZenohArgs,
     },
@@ -97,7 +102,7 @@ fn controller_spec(kind: Option<ControllerSpec>, file: Option<&Path>, damping: O
 async fn main() -> Result<()> {
     protocol::logging::init(protocol::logging::Verbosity::Info);
     match Cli::parse().command {
-        Command::Run { team, tick_deadline_ms, controller, controller_config, damping, reuse_after_us, reuse_max_age, expect, robot_hz, zenoh } => {
+        Command::Run { team, tick_deadline_ms, controller, controller_config, damping, reuse_after_us, reuse_max_age, expect, robot_hz, wait_for_references_ms, zenoh } => {
             anyhow::ensure!(robot_hz.is_none_or(|hz| hz.is_finite() && hz > 0.0), "--robot-hz must be a positive rate in Hz, not {robot_hz:?}");
             let controller = controller_spec(controller, controller_config.as_deref(), damping)?.build()?;
             let session = transport::open(&zenoh, Role::Hub).await?;
@@ -105,7 +110,7 @@ async fn main() -> Result<()> {
             for r in &expect {
                 protocol::validate_id("robot", r).map_err(|e| anyhow::anyhow!("--expect: {e}"))?;
             }
-            let cfg = CoordinatorConfig { team, tick_deadline: Duration::from_millis(tick_deadline_ms), reuse, expected: expect, robot_hz };
+            let cfg = CoordinatorConfig { team, tick_deadline: Duration::from_millis(tick_deadline_ms), reuse, expected: expect, robot_hz, wait_for_references: (wait_for_references_ms > 0).then(|| Duration::from_millis(wait_for_references_ms)) };
             let (tx, rx) = tokio::sync::watch::channel(false);
             tokio::spawn(async move {
                 let _ = tokio::signal::ctrl_c().await;

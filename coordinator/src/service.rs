@@ -41,7 +41,18 @@ pub struct CoordinatorConfig {
     /// robot's state over the commands still in flight ([`crate::team::prediction`]);
     /// without it, each command answers the state as measured.
     pub robot_hz: Option<f64>,
+    /// A planner sends the task references (the scenario driver does): every robot holds its
+    /// posture until the first references came, at most this long from the coordinator's
+    /// start, so that a coordinator that starts (or restarts) inside a run never commands the
+    /// tasks toward the poses they happened to have. `None`: solve at once, each task held
+    /// where it was first seen until references name it.
+    pub wait_for_references: Option<Duration>,
 }
+
+/// How long a coordinator of a run waits for its first references
+/// ([`CoordinatorConfig::wait_for_references`]; the driver sends them as soon as it sees the
+/// coordinator's token).
+pub const REFERENCE_WAIT: Duration = Duration::from_secs(2);
 
 /// How long a coordinator waits at its start for the robots it expects.
 pub const FORMATION_TIMEOUT: Duration = Duration::from_secs(3);
@@ -49,7 +60,7 @@ pub const FORMATION_TIMEOUT: Duration = Duration::from_secs(3);
 impl CoordinatorConfig {
     /// A lockstep coordinator: no reuse, no expected team.
     pub fn lockstep(team: &str, tick_deadline: Duration) -> Self {
-        CoordinatorConfig { team: team.to_string(), tick_deadline, reuse: None, expected: Vec::new(), robot_hz: None }
+        CoordinatorConfig { team: team.to_string(), tick_deadline, reuse: None, expected: Vec::new(), robot_hz: None, wait_for_references: None }
     }
 }
 
@@ -121,6 +132,8 @@ struct Service<'a> {
     deferred: Option<zenoh::sample::Sample>,
     /// The states carried over the team's delay ([`CoordinatorConfig::robot_hz`]).
     predictor: Option<DelayPredictor>,
+    /// When the service started: the wait for the first references counts from it.
+    started: Instant,
 }
 
 /// Run the coordinator with `controller` (see [`crate::ControllerSpec::build`]) until `stop`
@@ -254,8 +267,25 @@ impl<'a> Service<'a> {
             released_reported: false,
             deferred: None,
             predictor: cfg.robot_hz.filter(|hz| hz.is_finite() && *hz > 0.0).map(DelayPredictor::new),
+            started: Instant::now(),
             cfg,
         })
+    }
+
+    /// Why the tasks cannot be commanded yet, while the first references are awaited
+    /// ([`CoordinatorConfig::wait_for_references`]); warns once when the wait ran out.
+    fn awaiting_references(&mut self) -> Option<String> {
+        let limit = self.cfg.wait_for_references?;
+        if self.refs.seen {
+            return None;
+        }
+        if self.started.elapsed() < limit {
+            return Some(format!("waiting for the task references (at most {:.1} s)", limit.as_secs_f64()));
+        }
+        if !std::mem::replace(&mut self.refs.gave_up, true) {
+            tracing::warn!(waited_s = limit.as_secs_f64(), "no task references came: every task holds where it is until references name it");
+        }
+        None
     }
 
     /// A member joined or its token vanished: the roster and the status's detail follow;
@@ -550,6 +580,7 @@ impl<'a> Service<'a> {
             controller.set_late(&self.roster.late());
         }
         self.refs.drain(references, &mut self.counters);
+        let waiting = self.awaiting_references();
         let delay = team_delay(&terms);
         // The state carried to where the command applies is solved with that tick's references.
         let predicting = self.predictor.is_some() && controller.keep_accelerations(delay > 0);
@@ -557,7 +588,7 @@ impl<'a> Service<'a> {
         if let Some(p) = self.predictor.as_ref().filter(|_| predicting) {
             p.predict(tick, delay, &mut terms);
         }
-        let solved = solve_and_publish(self.session, &self.cfg, controller, tick, delay, &terms, &mut self.commands, &mut self.command_pubs, &mut self.diag_pub, &mut self.counters).await?;
+        let solved = solve_and_publish(self.session, &self.cfg, controller, waiting, tick, delay, &terms, &mut self.commands, &mut self.command_pubs, &mut self.diag_pub, &mut self.counters).await?;
         if let Some(p) = self.predictor.as_mut().filter(|_| predicting) {
             p.record(tick, delay, &terms, solved.then_some(&*controller));
         }
@@ -573,11 +604,14 @@ impl<'a> Service<'a> {
     }
 
     async fn publish_status(&mut self, controller: &mut dyn TeamController) -> Result<(), TransportError> {
+        let waiting = self.awaiting_references();
         let members = self.roster.members().to_vec();
         let team = self.roster.team();
         let forming = !self.roster.forming(Instant::now()).is_empty();
         let status = CoordinatorStatus {
             header: Header::new(&self.cfg.team, None, self.status_tick, protocol::wall_clock_ns()),
+            // Waiting for the references is not waiting for members: the team is formed, and a
+            // bridge may start its ticks (they are answered with hold orders meanwhile).
             mode: if forming || team.is_empty() || controller.not_ready(team).is_some() {
                 CoordinatorMode::WaitingForMembers
             } else if controller.released_at().is_some() {
@@ -591,7 +625,7 @@ impl<'a> Service<'a> {
             commands_sent: self.counters.commands_sent,
             deadline_misses: self.counters.deadline_misses,
             fallbacks: self.counters.fallbacks,
-            detail: controller.not_ready(&members).unwrap_or_else(|| self.detail.clone()),
+            detail: controller.not_ready(&members).or(waiting).unwrap_or_else(|| self.detail.clone()),
             members,
             stale: self.stale.clone(),
             silent: self.roster.silent(),
@@ -644,12 +678,17 @@ fn hold_orders(team: &str, tick: u64, robots: &[String], why: &str, commands: &m
 #[derive(Default)]
 struct ReferenceBuffer {
     by_tick: BTreeMap<u64, TaskReferences>,
+    /// Whether any reference has come.
+    seen: bool,
+    /// Whether the wait for the first references ran out.
+    gave_up: bool,
 }
 
 impl ReferenceBuffer {
     fn take(&mut self, sample: &zenoh::sample::Sample, counters: &mut CoordinatorCounters) {
         match decode_sample::<TaskReferences>(sample) {
             Ok(r) => {
+                self.seen = true;
                 self.by_tick.insert(r.header.tick, r);
             }
             Err(e) => counters.refuse("references", sample.key_expr().as_str(), &e),
@@ -683,13 +722,15 @@ impl ReferenceBuffer {
     }
 }
 
-/// Solve `tick` from `terms` (or hold every robot) and publish its commands, each with the
-/// team's delay `delay` ([`team_delay`]). Returns whether the tick was solved.
+/// Solve `tick` from `terms` (or hold every robot: the controller is not ready, or `waiting`
+/// says why the tasks cannot be commanded yet) and publish its commands, each with the team's
+/// delay `delay` ([`team_delay`]). Returns whether the tick was solved.
 #[allow(clippy::too_many_arguments)]
 async fn solve_and_publish(
     session: &Session,
     cfg: &CoordinatorConfig,
     controller: &mut dyn TeamController,
+    waiting: Option<String>,
     tick: u64,
     delay: u64,
     terms: &[DynamicsTerms],
@@ -700,7 +741,7 @@ async fn solve_and_publish(
 ) -> Result<bool, TransportError> {
     let started = Instant::now();
     let ids: Vec<String> = terms.iter().map(|t| t.header.robot_id().to_string()).collect();
-    let outcome = match controller.not_ready(&ids) {
+    let outcome = match controller.not_ready(&ids).or(waiting) {
         Some(why) => {
             counters.not_ready += 1;
             tracing::debug!(tick, "controller not ready: {why}; every robot holds its posture this tick");

@@ -239,6 +239,9 @@ pub struct CoordinatorArgs {
     /// The robots' control rate: with a team delay, states are carried over the commands in
     /// flight (`coordinator::team::prediction`); `None` answers each state as measured.
     pub robot_hz: Option<f64>,
+    /// A driver sends the references: the robots hold until the first came, at most this
+    /// long (`coordinator::service::CoordinatorConfig::wait_for_references`).
+    pub wait_for_references: Option<Duration>,
 }
 
 impl CoordinatorArgs {
@@ -259,13 +262,16 @@ impl CoordinatorArgs {
         if let Some(hz) = self.robot_hz {
             args.extend(["--robot-hz".into(), hz.to_string()]);
         }
+        if let Some(w) = self.wait_for_references {
+            args.extend(["--wait-for-references-ms".into(), w.as_millis().max(1).to_string()]);
+        }
         args.extend(zenoh.to_cli());
         Ok(args)
     }
 
     fn start_task(&self, session: &Session, stop: watch::Receiver<bool>, _stall: watch::Receiver<bool>) -> Result<JoinHandle<Result<(), String>>, LaunchError> {
         let controller = self.controller.build()?;
-        let cfg = CoordinatorConfig { team: self.team.clone(), tick_deadline: self.tick_deadline, reuse: self.reuse, expected: self.expected.clone(), robot_hz: self.robot_hz };
+        let cfg = CoordinatorConfig { team: self.team.clone(), tick_deadline: self.tick_deadline, reuse: self.reuse, expected: self.expected.clone(), robot_hz: self.robot_hz, wait_for_references: self.wait_for_references };
         let session = session.clone();
         Ok(tokio::spawn(async move { coordinator_service::run(&session, cfg, controller, stop).await.map(|_| ()).map_err(|e| e.to_string()) }))
     }
@@ -700,11 +706,11 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("launch-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let zenoh = ZenohArgs::connecting("tcp/127.0.0.1:7999");
-        let c = CoordinatorArgs { team: "t1".into(), tick_deadline: Duration::from_millis(1500), reuse: Some(Reuse { after: Duration::from_micros(250), max_age: 25 }), expected: vec!["r1".into(), "r2".into()], controller: ControllerSpec::of_kind("pidc").unwrap(), robot_hz: Some(500.0) };
+        let c = CoordinatorArgs { team: "t1".into(), tick_deadline: Duration::from_millis(1500), reuse: Some(Reuse { after: Duration::from_micros(250), max_age: 25 }), expected: vec!["r1".into(), "r2".into()], controller: ControllerSpec::of_kind("pidc").unwrap(), robot_hz: Some(500.0), wait_for_references: Some(Duration::from_secs(2)) };
         let args = c.to_cli(&dir, &zenoh).unwrap();
         let written = std::fs::read_to_string(dir.join("controller.toml")).unwrap();
         assert_eq!(ControllerSpec::from_toml(&written).unwrap(), c.controller, "the file holds the spec");
-        for pair in [["--team", "t1"], ["--tick-deadline-ms", "1500"], ["--reuse-after-us", "250"], ["--reuse-max-age", "25"], ["--expect", "r1,r2"], ["--robot-hz", "500"], ["--controller-config", &dir.join("controller.toml").display().to_string()]] {
+        for pair in [["--team", "t1"], ["--tick-deadline-ms", "1500"], ["--reuse-after-us", "250"], ["--reuse-max-age", "25"], ["--expect", "r1,r2"], ["--robot-hz", "500"], ["--wait-for-references-ms", "2000"], ["--controller-config", &dir.join("controller.toml").display().to_string()]] {
             assert!(args.windows(2).any(|w| w[0] == pair[0] && w[1] == pair[1]), "{pair:?} in {args:?}");
         }
         assert!(args.iter().any(|a| a.contains("7999")), "{args:?}");

@@ -150,7 +150,10 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
     };
     let expected = plan.robots.iter().map(|r| r.id.clone()).collect();
     let robot_hz = plan.scenario.predict_delay.then_some(plan.scenario.control_hz);
-    let coordinator = CoordinatorArgs { team: plan.team().into(), tick_deadline, reuse, expected, controller: plan.controller.clone(), robot_hz };
+    // The driver sends references for every tick: a coordinator that starts inside the run (a
+    // restart) holds the team until they come.
+    let wait_for_references = Some(coordinator::service::REFERENCE_WAIT);
+    let coordinator = CoordinatorArgs { team: plan.team().into(), tick_deadline, reuse, expected, controller: plan.controller.clone(), robot_hz, wait_for_references };
     let agents = plan
         .robots
         .iter()

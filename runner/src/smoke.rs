@@ -61,6 +61,7 @@ impl SmokeConfig {
             expected: Vec::new(),
             controller: ControllerSpec::JointDamping(JointDampingConfig { damping: self.damping }),
             robot_hz: None,
+            wait_for_references: None,
         };
         let agents = self
             .robots

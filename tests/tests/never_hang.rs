@@ -459,3 +459,83 @@ async fn every_command_of_a_tick_carries_the_longest_delay_its_robots_asked_for(
     let _ = stop(c).await;
     s.close().await.unwrap();
 }
+
+/// A lockstep coordinator configured to wait for the first task references (what `team run`
+/// gives it, so that a coordinator started inside a run never commands the tasks toward the
+/// poses they happened to have), with joint damping as its controller.
+fn coordinator_waiting_for_references(s: &zenoh::Session, team: &str, wait: Duration) -> common::team::Component<coordinator::service::CoordinatorCounters> {
+    let (stop, rx) = tokio::sync::watch::channel(false);
+    let mut cfg = coordinator::service::CoordinatorConfig::lockstep(team, Duration::from_secs(5));
+    cfg.wait_for_references = Some(wait);
+    let s = s.clone();
+    common::team::Component { stop, task: tokio::spawn(async move { coordinator::service::run(&s, cfg, Box::new(FailsEvery { every: u64::MAX }), rx).await.expect("coordinator runs") }) }
+}
+
+/// The ticks robot r1 was told to hold and those it was commanded (its command key; joint
+/// damping has no diagnostics), read until `done` says they are enough (at most 20 s); every
+/// held tick's diagnostics must say it waited for the references.
+async fn held_for_references(commands: &transport::SampleQueue, diags: &transport::SampleQueue, done: impl Fn(&[u64], &[u64]) -> bool) -> (Vec<u64>, Vec<u64>) {
+    let (mut held, mut solved) = (Vec::new(), Vec::new());
+    let until = Instant::now() + Duration::from_secs(20);
+    while !done(&held, &solved) && Instant::now() < until {
+        let Ok(Ok(sample)) = tokio::time::timeout(Duration::from_secs(1), commands.recv_async()).await else { continue };
+        let c: TorqueCommand = decode_sample(&sample).unwrap();
+        if c.hold { held.push(c.header.tick) } else { solved.push(c.header.tick) }
+    }
+    while let Ok(Some(sample)) = diags.try_recv() {
+        let d: TickDiagnostics = decode_sample(&sample).unwrap();
+        let f = d.fallback.unwrap_or_default();
+        assert!(f.contains("waiting for the task references") && f.contains("holds its posture"), "tick {}: only the references were waited for: {f}", d.header.tick);
+    }
+    (held, solved)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_coordinator_waiting_for_references_holds_the_team_until_they_come() {
+    let team = "hang-refs";
+    let s = session().await;
+    let diags = transport::subscribe(&s, keys::diagnostics(team).unwrap()).await.unwrap();
+    let commands = transport::subscribe(&s, keys::robot(team, "r1", keys::RobotTopic::Command).unwrap()).await.unwrap();
+    let mut refs = transport::TypedPublisher::declare(&s, keys::references(team).unwrap(), transport::Qos::Telemetry).await.unwrap();
+    let c = coordinator_waiting_for_references(&s, team, Duration::from_secs(60));
+    let agents = [agent(&s, team, "r1"), agent(&s, team, "r2")];
+    let b = bridge(&s, team, &["r1", "r2"], 1_000_000, 500);
+    // Without references every tick is answered with hold orders, saying why.
+    let (held, solved) = held_for_references(&commands, &diags, |h, s| h.len() >= 50 || !s.is_empty()).await;
+    assert!(held.len() >= 50 && solved.is_empty(), "held {} ticks for the references, solved {solved:?}", held.len());
+    // The first references end the wait: every tick from then on is solved.
+    let r = protocol::TaskReferences { header: protocol::Header::new(team, None, 0, 0), object: None, torsos: Vec::new(), swing_feet: Vec::new(), foot_loads: Vec::new() };
+    refs.put(&r).await.unwrap();
+    let (held_after, solved) = held_for_references(&commands, &diags, |_, s| s.len() >= 50).await;
+    assert!(solved.len() >= 50, "solved {} ticks after the references came", solved.len());
+    let first = solved[0];
+    assert!(held_after.iter().all(|t| *t < first), "no tick is held for the references once one is solved: held {held_after:?} from {first}");
+    stop(b).await.ok();
+    for a in agents {
+        let counters = stop(a).await;
+        assert_eq!(counters.safe_mode_entries, 0, "every robot was commanded every tick, holds included");
+    }
+    stop(c).await;
+    s.close().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn references_that_never_come_are_waited_for_no_longer_than_the_limit() {
+    let team = "hang-norefs";
+    let s = session().await;
+    let diags = transport::subscribe(&s, keys::diagnostics(team).unwrap()).await.unwrap();
+    let commands = transport::subscribe(&s, keys::robot(team, "r1", keys::RobotTopic::Command).unwrap()).await.unwrap();
+    let c = coordinator_waiting_for_references(&s, team, Duration::from_millis(1500));
+    let agents = [agent(&s, team, "r1"), agent(&s, team, "r2")];
+    let b = bridge(&s, team, &["r1", "r2"], 1_000_000, 500);
+    let (held, solved) = held_for_references(&commands, &diags, |_, s| s.len() >= 50).await;
+    assert!(!held.is_empty(), "the ticks before the limit were held for the references");
+    assert!(solved.len() >= 50, "after the limit the ticks are solved without references: {} solved", solved.len());
+    assert!(held.iter().all(|t| *t < solved[0]), "held {held:?}, solved from {}", solved[0]);
+    stop(b).await.ok();
+    for a in agents {
+        stop(a).await;
+    }
+    stop(c).await;
+    s.close().await.unwrap();
+}
