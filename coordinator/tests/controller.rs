@@ -276,6 +276,54 @@ fn static_team_holds_the_object() {
     assert!(d_tau < 1e-4);
 }
 
+/// A motion the contacts cannot carry (the object's reference far above it, accelerating up at
+/// 5 g) yields before anything else gives: the tick is solved with the object's motion cut to
+/// the share the contact forces carry and the torsos tracked whole, every friction, moment and
+/// torque row kept (written out again by `worst_violation`), no fallback, and the diagnostics
+/// say how much of the motion was kept. The same team asked to hold still keeps its whole motion.
+#[test]
+fn a_motion_the_contacts_cannot_carry_yields_the_object_first_and_keeps_every_row() {
+    let mut fx = Fixture::new();
+    let (terms, descs) = fx.static_team(2);
+    let mut c = controller(&descs, PidcConfig::default());
+    c.compute(&terms).expect("tick");
+    assert_eq!(c.last().expect("tick").motion, coordinator::units::impedance::MotionScale::FULL, "holding still needs no yield");
+    let obj = c.last().and_then(|r| r.grasp.as_ref()).expect("grasp").object;
+    let mut above = obj.translation.vector;
+    above.z += 0.5;
+    let refs = protocol::TaskReferences {
+        header: protocol::Header::new(common::TEAM, None, 1, 0),
+        object: Some(protocol::PoseReference {
+            pose: protocol::Pose { position: above.into(), orientation: coordinator::linalg::quat_wxyz(&obj.rotation.to_rotation_matrix()) },
+            twist: [0.0; 6],
+            acceleration: [0.0, 0.0, 50.0, 0.0, 0.0, 0.0],
+        }),
+        torsos: vec![],
+        swing_feet: vec![],
+        foot_loads: vec![],
+    };
+    c.set_references(&refs);
+    let mut cmds = Vec::new();
+    c.solve(&terms, &mut cmds).expect("tick");
+    let d = c.diagnostics().expect("diagnostics").clone();
+    let r = c.materialized().expect("tick");
+    println!("motion kept: object {:.3}, torsos {:.3}; QP {:?}, fallback {:?}", r.motion.object, r.motion.torso, r.qp.status, r.fallback);
+    assert!(r.motion.object < 1.0 && r.motion.object >= 0.0, "the object's motion yielded: {:?}", r.motion);
+    assert_eq!(r.motion.torso, 1.0, "the torsos yield only after the object is held still");
+    assert!(matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved) && r.fallback.is_none(), "{:?} {:?}", r.qp.status, r.fallback);
+    let (wc, wt) = worst_violation(&r);
+    println!("worst constraint violation {wc:.2e} N, worst torque excess {wt:.2e} Nm");
+    assert!(wc < 1e-5 && wt < 1e-5);
+    assert_eq!(d.motion_yield, Some(protocol::MotionYield { object: r.motion.object, torso: 1.0 }));
+    assert!(d.fallback.is_none() && d.qp_status == QpStatus::Solved, "{d:?}");
+    // What the yield kept still lifts the object: its predicted vertical force exceeds its weight.
+    let g = r.grasp.as_ref().expect("grasp");
+    let nf = r.team.feet.len();
+    let net = -(&g.g * r.lambda_real.rows(3 * nf, 12).into_owned());
+    println!("net hand force on the object, z: {:.2} N (weight 9.81 N)", net[2]);
+    assert!(r.motion.object == 0.0 || net[2] > 9.81, "{}", net[2]);
+}
+
 #[test]
 fn bad_input_is_an_error_or_fallback_never_a_panic() {
     let mut fx = Fixture::new();

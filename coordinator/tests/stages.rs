@@ -376,7 +376,7 @@ fn task_torque_is_the_stacked_impedance_law_written_out() {
     assert!(relv(&motion.mcinv_bias, &(&proj.mc_inv * &p_bias)) < 1e-12);
     let inp = TaskTorqueInput { team, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view(proj) };
     let (mut tau_m, mut load, mut f_x) = (DVector::zeros(0), DVector::zeros(0), Vector6::zeros());
-    task_torque(&inp, &mut Targets::default(), &mut TaskStack::default(), &mut tau_m, &mut load, &mut f_x).expect("tau_M");
+    task_torque(&inp, &mut Targets::default(), &mut TaskStack::default(), &mut tau_m, &mut load, &mut f_x, &mut nalgebra::Vector6::zeros()).expect("tau_M");
     // The same by the dense projections (formed by `materialized`), in a stack whose buffers
     // were first used by the torsos in the other order (the same shape, each task's rows on
     // other columns): nothing of that tick may be left behind.
@@ -388,7 +388,7 @@ fn task_torque_is_the_stacked_impedance_law_written_out() {
     let (mut tau_m_dense, mut load_dense, mut f_x_dense) = (DVector::zeros(0), DVector::zeros(0), Vector6::zeros());
     for t in [&swapped, team] {
         let inp = TaskTorqueInput { team: t, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view(&dense) };
-        task_torque(&inp, &mut Targets::default(), &mut stack, &mut tau_m_dense, &mut load_dense, &mut f_x_dense).expect("tau_M, dense");
+        task_torque(&inp, &mut Targets::default(), &mut stack, &mut tau_m_dense, &mut load_dense, &mut f_x_dense, &mut nalgebra::Vector6::zeros()).expect("tau_M, dense");
     }
 
     // eq. control_law for the stacked task x = [x_o; x_t1; x_t2] (J_x = [J_o; J_t1; J_t2]):
@@ -430,6 +430,39 @@ fn task_torque_is_the_stacked_impedance_law_written_out() {
     // The object's load: F_x = -w_ff, J_x^T F_x with J_x = J_o.
     assert_eq!(f_x, -w_ff);
     assert!(relv(&load, &(g.j_o.transpose() * (-w_ff))) < 1e-13);
+
+    // The motion yielding (stages::yielding): a task keeping share s of its motion commands
+    // s (a_d - K_d edot - K_p e) - (1 - s) K_d v, its feed-forward s w_ff + (1 - s) w_ff(a = 0),
+    // mu_c whole; the object's rows at s_o, the torsos' at s_t.
+    let w_hold = object_load(&g.object, &g.object_twist, &[0.0; 6], cfg.object_mass, &cfg.object_inertia);
+    let mut f_x_hold = Vector6::zeros();
+    let inp = TaskTorqueInput { team, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view(&dense) };
+    task_torque(&inp, &mut Targets::default(), &mut stack, &mut tau_m_dense, &mut load_dense, &mut f_x_dense, &mut f_x_hold).expect("tau_M, dense");
+    assert_eq!(f_x_hold, -w_hold, "the object's load held still is its weight (and gyroscopic moment) alone");
+    let velocity: Vec<DVector<f64>> = tasks.iter().map(|(jx, ..)| *jx * &team.velocity).collect();
+    for (s_o, s_t) in [(1.0, 1.0), (0.0, 1.0), (0.37, 1.0), (0.0, 0.0), (0.0, 0.62)] {
+        let mut yielded = DVector::zeros(0);
+        stack.joint_torque_yielding(&motion.view(&dense), coordinator::units::impedance::MotionScale { object: s_o, torso: s_t }, &mut yielded);
+        let (mut acc_s, mut e_s, mut edot_s, mut ff_s) = (acc.clone(), e.clone(), edot.clone(), DVector::zeros(k));
+        for i in 0..tasks.len() {
+            let share = if i == 0 { s_o } else { s_t };
+            let rows = 6 * i..6 * i + 6;
+            for (r, row) in rows.enumerate() {
+                acc_s[row] = share * acc[row];
+                e_s[row] = share * e[row];
+                edot_s[row] = share * edot[row] + (1.0 - share) * velocity[i][r];
+                if i == 0 {
+                    ff_s[row] = share * w_ff[r] + (1.0 - share) * w_hold[r];
+                }
+            }
+        }
+        let u = &j * &proj.mc_inv * &p_bias - &jdv + &acc_s;
+        let f = &lambda * u - kd.component_mul(&edot_s) - kp.component_mul(&e_s) + ff_s;
+        let expect = j.transpose() * f;
+        let err = relv(&yielded, &expect);
+        println!("tau_M with the object at {s_o}, the torsos at {s_t} of their motion vs the law written out: {err:.1e}");
+        assert!(err < 1e-8, "object {s_o}, torsos {s_t}: {err:.1e}");
+    }
 }
 
 #[test]

@@ -667,6 +667,19 @@ pub struct TickDiagnostics {
     /// Why this tick's command did not come from the controller's normal path (QP failed,
     /// controller error: what was sent instead); `None` on a normal tick.
     pub fallback: Option<String>,
+    /// How much of their motion the object's and the torsos' tasks kept this tick when it had
+    /// to yield (the contact forces could not carry the full motion, so the object's motion
+    /// gave way first, then the torsos'); `None` when every task was tracked as commanded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion_yield: Option<MotionYield>,
+}
+
+/// The share of its commanded motion a task kept, from 0 (held still where it is) to 1.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
+pub struct MotionYield {
+    pub object: f64,
+    pub torso: f64,
 }
 
 impl TickDiagnostics {
@@ -685,6 +698,7 @@ impl TickDiagnostics {
             object_estimate: None,
             grasp_slip: 0.0,
             fallback: None,
+            motion_yield: None,
         }
     }
 }
@@ -693,6 +707,11 @@ impl Validate for TickDiagnostics {
     fn validate(&self) -> Result<(), ProtocolError> {
         self.header.check(false)?;
         check_finite("timings", &[self.qp_solve_us, self.assembly_us, self.total_us, self.constraint_residual, self.grasp_slip])?;
+        if let Some(y) = self.motion_yield {
+            if ![y.object, y.torso].iter().all(|s| (0.0..=1.0).contains(s)) {
+                return Err(ProtocolError::Invalid { field: "motion_yield".into(), reason: format!("shares must lie in [0, 1], not {y:?}") });
+            }
+        }
         for (i, c) in self.contacts.iter().enumerate() {
             validate_id("robot", &c.robot)?;
             if c.wrench.len() != 3 && c.wrench.len() != 6 {

@@ -57,6 +57,49 @@ pub struct Check {
     pub passed: bool,
 }
 
+/// The ticks on which the controller's motion yielded (`TickDiagnostics::motion_yield`): the
+/// contact forces could not carry the tasks' full motion, so the object's, then the torsos',
+/// gave way before the grasp.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct YieldReport {
+    pub ticks: u64,
+    pub first_tick: u64,
+    pub last_tick: u64,
+    /// The least share of its motion the object kept, and on how many ticks it was held still.
+    pub least_object_share: f64,
+    pub object_still_ticks: u64,
+    /// Ticks on which the torsos' motion yielded too (the object held still).
+    pub torso_ticks: u64,
+}
+
+impl YieldReport {
+    fn of(records: &Records) -> Option<YieldReport> {
+        let yields: Vec<(u64, protocol::MotionYield)> = records.diagnostics.iter().filter_map(|d| d.motion_yield.map(|y| (d.header.tick, y))).collect();
+        let (first, last) = (yields.first()?.0, yields.last()?.0);
+        Some(YieldReport {
+            ticks: yields.len() as u64,
+            first_tick: first,
+            last_tick: last,
+            least_object_share: yields.iter().map(|(_, y)| y.object).fold(1.0, f64::min),
+            object_still_ticks: yields.iter().filter(|(_, y)| y.object == 0.0).count() as u64,
+            torso_ticks: yields.iter().filter(|(_, y)| y.torso < 1.0).count() as u64,
+        })
+    }
+
+    /// One line of the summary.
+    pub fn summary(&self) -> String {
+        format!(
+            "  motion yielded on {} ticks ({}..{}): the object kept at least {:.0} % of its motion, held still on {} ticks; the torsos yielded on {}\n",
+            self.ticks,
+            self.first_tick,
+            self.last_tick,
+            100.0 * self.least_object_share,
+            self.object_still_ticks,
+            self.torso_ticks
+        )
+    }
+}
+
 /// Everything `metrics.json` holds.
 #[derive(Debug, Clone, Serialize)]
 pub struct Metrics {
@@ -89,6 +132,8 @@ pub struct Metrics {
     /// least-violation fallback, hold orders after a controller error, or free hands after
     /// the controller let go of the object), by what was done.
     pub fallback_ticks: BTreeMap<String, u64>,
+    /// The ticks whose motion yielded because the contacts could not carry it (`None`: none).
+    pub motion_yield: Option<YieldReport>,
     /// Largest residual of the controller's object-pose fit (its own slip signal), m.
     pub grasp_fit_residual_max_m: f64,
     pub qp_iterations: Percentiles,
@@ -160,6 +205,7 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
         torque_rms,
         qp_status: qp_status_counts(records),
         fallback_ticks: fallback_counts(records),
+        motion_yield: YieldReport::of(records),
         grasp_fit_residual_max_m: records.diagnostics.iter().map(|d| d.grasp_slip).fold(0.0, f64::max),
         qp_iterations: metrics::percentiles(&records.diagnostics.iter().map(|d| d.qp_iterations as f64).collect::<Vec<_>>()),
         qp_solve_us: metrics::percentiles(&records.diagnostics.iter().map(|d| d.qp_solve_us).collect::<Vec<_>>()),
@@ -524,6 +570,9 @@ pub fn summary(m: &Metrics, dir: &Path) -> String {
     ));
     if !m.fallback_ticks.is_empty() {
         s.push_str(&format!("  fallback ticks: {:?}\n", m.fallback_ticks));
+    }
+    if let Some(y) = &m.motion_yield {
+        s.push_str(&y.summary());
     }
     s.push_str(&format!("  controller's grasp-fit residual: max {:.3} mm\n", m.grasp_fit_residual_max_m * 1e3));
     for r in &m.recoveries {

@@ -55,7 +55,7 @@ async fn a_python_client_decodes_status_and_diagnostics() {
         let header = Header::new(TEAM, None, tick, protocol::wall_clock_ns());
         let st = CoordinatorStatus { header: header.clone(), mode: CoordinatorMode::Running, members: vec!["r1".into(), "r2".into()], ticks: tick, commands_sent: 2 * tick, deadline_misses: 0, fallbacks: 0, detail: String::new(), stale: vec![], silent: vec![], late: vec![], reused_terms: 0, refused: 0, last_refusal: None };
         let contacts = vec![ContactWrench { robot: "r1".into(), frame: "hand".into(), wrench: vec![1.0, 2.0, 30.5, 0.0, 0.0, 0.0] }];
-        let d = TickDiagnostics { header, qp_status: QpStatus::Solved, qp_iterations: 9, qp_solve_us: 123.5, assembly_us: 40.0, total_us: 210.0, contacts, constraint_residual: 1e-9, object_estimate: None, grasp_slip: 0.002, fallback: None };
+        let d = TickDiagnostics { header, qp_status: QpStatus::Solved, qp_iterations: 9, qp_solve_us: 123.5, assembly_us: 40.0, total_us: 210.0, contacts, constraint_residual: 1e-9, object_estimate: None, grasp_slip: 0.002, fallback: None, motion_yield: None };
         status_pub.put(&st).await.unwrap();
         diag_pub.put(&d).await.unwrap();
         tick += 1;

@@ -29,7 +29,7 @@ use crate::qp::{self, QpInput, QpWorkspace};
 use crate::units::contact_jacobian::{contact_drift, contact_jacobian, contact_velocity};
 use crate::units::contacts::{contact_list, unload_feet};
 use crate::units::grasp::GraspTracker;
-use crate::units::impedance::TaskStack;
+use crate::units::impedance::{MotionScale, TaskStack};
 use crate::units::limits::torque_limits;
 use crate::units::messages::set_note;
 use crate::units::projection::{ProjectionPath, ProjectionWorkspace};
@@ -40,6 +40,7 @@ use stages::by_robot::{decoupled, ByRobot, ByRobotScratch};
 use stages::tasks::{task_torque, MotionSpaceTerms, TaskTorqueInput, Targets};
 use stages::torque::{compose, fallback, motion_torque, saturate, Clamp, MotionTorqueScratch};
 use stages::wrench::{contact_map, contact_offset, contact_wrenches, Actuation, ContactMapScratch, MapInput, WrenchInput};
+use stages::yielding::{yield_motion, YieldScratch};
 
 /// Scratch of a tick that the report does not keep: each stage's workspace and the contact
 /// map's matrices.
@@ -55,6 +56,9 @@ struct Workspace {
     blocks: qp::BlockHotStart,
     by_robot: ByRobotScratch,
     acceleration: AccelerationScratch,
+    /// The object's load `F_x` with the object held still (the motion yielding).
+    f_x_hold: nalgebra::Vector6<f64>,
+    yielding: YieldScratch,
 }
 
 /// The PIDC team controller (paper §III).
@@ -204,7 +208,7 @@ impl Pidc {
         // tau_M of the object, torso and swing-foot impedances (eqs. control_law,
         // joint_space_tau_M) with the object's load J_x^T F_x; tau_0 = [P S]^+ P tau_M.
         let tasks = TaskTorqueInput { team: &r.team, grasp: r.grasp.as_ref(), references: references.as_ref(), config: cfg, motion: ws.motion.view(&r.proj) };
-        task_torque(&tasks, targets, &mut ws.tasks, &mut r.tau_m, &mut r.load, &mut r.f_x)?;
+        task_torque(&tasks, targets, &mut ws.tasks, &mut r.tau_m, &mut r.load, &mut r.f_x, &mut ws.f_x_hold)?;
         motion_torque(&r.proj, &r.team.s_diag, &r.tau_m, &mut r.tau0, &mut ws.torque);
         let t_imp = us();
         let loads = references.as_ref().map_or(&[][..], |refs| &refs.foot_loads[..]);
@@ -246,7 +250,9 @@ impl Pidc {
 /// relation_between_lambda_and_Fc), the QP of eq. wrench_optim2 under the friction, moment and
 /// torque rows (eqs. unilateral_and_friction_cone_constraint, moment_constraint,
 /// real_torque_limit) on the real wrenches, `tau = tau_0 + Y F_c` (eq. ua_solution) and the
-/// wrenches for the torque sent. When the QP fails and `tau_0` asks more of a joint than its
+/// wrenches for the torque sent. When the QP fails on a team that holds an object, the motion
+/// yields first ([`stages::yielding`]: the tick is solved at the largest share of the object's,
+/// then the torsos', motion the contacts carry). When even holding still fails and `tau_0` asks more of a joint than its
 /// limit ([`saturate`]: a push, a task far from its target), the QP is solved again with `tau_0`
 /// saturated, so that the contact forces are chosen for a torque the joints can give; then
 /// the least-violation fallback ([`fallback`]), robot by robot when no grasp couples the
@@ -255,6 +261,7 @@ impl Pidc {
 fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMap<String, RobotDescription>, cfg: &PidcConfig, loads: &[FootLoad]) -> Result<(f64, f64), ControllerError> {
     let (mut build_us, mut qp_us) = (0.0, 0.0);
     let mut saturated = false;
+    r.motion = MotionScale::FULL;
     let t_list = Instant::now();
     contact_list(&r.team, descriptions, &cfg.contact_margins(), &mut r.contacts)?;
     unload_feet(&r.team, loads, &mut r.contacts);
@@ -273,25 +280,29 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
         }
     }
     form_j_c(r, &mut ws.contact);
-    loop {
-        // The contact map depends on tau_0: built again after a saturation.
-        let t0 = Instant::now();
-        let c = &mut ws.contact;
-        let map = MapInput { team: &r.team, proj: &r.proj, j_c: &c.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
-        contact_map(&map, &mut ws.map, &mut c.y, &mut c.rho, &mut r.eta, &mut r.lambda_real);
-        let t1 = Instant::now();
-        // F_c is kept out of the report while the QP reads it (no allocation: an empty vector).
-        let mut f_c = std::mem::replace(&mut r.f_c, DVector::zeros(0));
-        r.qp = qp::solve_with(&mut ws.qp, &qp_input(r, &ws.contact, cfg), &qp_settings(cfg), &mut f_c);
-        r.f_c = f_c;
-        build_us += (t1 - t0).as_secs_f64() * 1e6;
-        qp_us += t1.elapsed().as_secs_f64() * 1e6;
-        let solved = matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved);
-        // No grasp couples the robots: they take the next steps one by one (below).
-        if solved || saturated || decoupled(&r.team) || !saturate(&mut r.tau0, &r.actuated, &r.limits) {
-            break;
+    // A team holding an object yields when the QP is infeasible: the active set's proof of
+    // infeasibility is enough to start the yield (Clarabel's certificate costs milliseconds).
+    let yields = r.grasp.is_some() && !decoupled(&r.team);
+    let mut solved = dense_qp(r, ws, cfg, (true, yields), &mut build_us, &mut qp_us);
+    // The motion yields before anything else gives (stages::yielding).
+    if !solved && yields {
+        let (t, first) = (Instant::now(), r.qp);
+        match yield_tick(r, ws, cfg) {
+            Some(scale) => (solved, r.motion) = (true, scale),
+            None => {
+                // Back to the tick's own motion and the QP's answer to it.
+                ws.yielding.full.restore(&mut r.tau_m, &mut r.tau0, &mut r.load, &mut r.f_x);
+                let map = MapInput { team: &r.team, proj: &r.proj, j_c: &ws.contact.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
+                contact_offset(&map, &mut ws.map, &mut r.eta, &mut r.lambda_real);
+                r.qp = first;
+            }
         }
+        qp_us += t.elapsed().as_secs_f64() * 1e6;
+    }
+    // No grasp couples the robots: they take the next steps one by one (below).
+    if !solved && !decoupled(&r.team) && saturate(&mut r.tau0, &r.actuated, &r.limits) {
         saturated = true;
+        dense_qp(r, ws, cfg, (true, false), &mut build_us, &mut qp_us);
     }
     let mut f_c = std::mem::replace(&mut r.f_c, DVector::zeros(0));
     let solved = matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved);
@@ -314,6 +325,53 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
     let wrench = WrenchInput { team: &r.team, proj: &r.proj, load: &r.load, rho: &ws.contact.rho, eta: &r.eta };
     contact_wrenches(&wrench, sent, &mut ws.map, &mut r.lambda, &mut r.lambda_real);
     Ok((build_us, qp_us))
+}
+
+/// The team's QP on the dense path at the tick's `tau_0`: the contact map (with `full`, `Y`
+/// and `rho` too; they do not depend on `tau_0`), then the QP of eq. wrench_optim2; whether
+/// it was solved. With `refuses`, the active set's proof of infeasibility is final
+/// (`QpSettings::active_set_refuses`). Adds its times to the build and QP times.
+fn dense_qp(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig, (full, refuses): (bool, bool), build_us: &mut f64, qp_us: &mut f64) -> bool {
+    let t0 = Instant::now();
+    let c = &mut ws.contact;
+    let map = MapInput { team: &r.team, proj: &r.proj, j_c: &c.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
+    if full {
+        contact_map(&map, &mut ws.map, &mut c.y, &mut c.rho, &mut r.eta, &mut r.lambda_real);
+    } else {
+        contact_offset(&map, &mut ws.map, &mut r.eta, &mut r.lambda_real);
+    }
+    let t1 = Instant::now();
+    // F_c is kept out of the report while the QP reads it (no allocation: an empty vector).
+    let mut f_c = std::mem::replace(&mut r.f_c, DVector::zeros(0));
+    let settings = qp::QpSettings { active_set_refuses: refuses, ..qp_settings(cfg) };
+    r.qp = qp::solve_with(&mut ws.qp, &qp_input(r, &ws.contact, cfg), &settings, &mut f_c);
+    r.f_c = f_c;
+    *build_us += (t1 - t0).as_secs_f64() * 1e6;
+    *qp_us += t1.elapsed().as_secs_f64() * 1e6;
+    matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved)
+}
+
+/// A tick whose QP failed at its full motion, solved with the motion yielding
+/// ([`stages::yielding`]): the object held still and everything held still are formed from
+/// the tick's tasks, and the QP is solved at the largest share it accepts, which the tick is
+/// left at. `None` when even everything held still is infeasible.
+fn yield_tick(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> Option<MotionScale> {
+    let y = &mut ws.yielding;
+    y.full.copy_from(&r.tau_m, &r.tau0, &r.load, &r.f_x);
+    for (scale, m) in [(MotionScale { object: 0.0, torso: 1.0 }, &mut y.object_still), (MotionScale { object: 0.0, torso: 0.0 }, &mut y.all_still)] {
+        ws.tasks.joint_torque_yielding(&ws.motion.view(&r.proj), scale, &mut m.tau_m);
+        motion_torque(&r.proj, &r.team.s_diag, &m.tau_m, &mut m.tau0, &mut ws.torque);
+        m.f_x = ws.f_x_hold;
+        zeros_v(&mut m.load, r.team.n);
+        if let Some(g) = &r.grasp {
+            m.load.gemv_tr(1.0, &g.j_o, &m.f_x, 0.0);
+        }
+    }
+    let (mut build_us, mut qp_us) = (0.0, 0.0);
+    yield_motion(|scale| {
+        ws.yielding.blend_into(scale, &mut r.tau_m, &mut r.tau0, &mut r.load, &mut r.f_x);
+        dense_qp(r, ws, cfg, (false, true), &mut build_us, &mut qp_us)
+    })
 }
 
 /// `J_c = [J_cf; J_c,ee]` (eq. jacobian_c) into the workspace, once per tick (with the same

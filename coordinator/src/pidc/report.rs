@@ -13,6 +13,7 @@ use crate::units::messages::{set_header, set_note, set_string};
 use crate::qp::{self, ContactKind};
 use crate::team::Team;
 use crate::units::grasp::GraspTerms;
+use crate::units::impedance::MotionScale;
 use crate::units::projection::Projections;
 
 /// What the last tick computed (kept for tests and reports): every field is written on every
@@ -63,6 +64,10 @@ pub struct TickReport {
     /// `tau0` was saturated at the torque limits after the QP failed on it (it is then no
     /// longer `[P S]^+ P tau_M`; see [`super::stages::torque`]).
     pub saturated: bool,
+    /// How much of their motion the object's and the torsos' tasks kept: less than whole when
+    /// the QP was infeasible at the tick's motion and the motion yielded
+    /// ([`super::stages::yielding`]).
+    pub motion: MotionScale,
     /// Why the hands are free while the contact sets hold the object
     /// ([`crate::units::release`]); `None` while the grasp holds.
     pub release: Option<String>,
@@ -174,5 +179,6 @@ impl TickReport {
         });
         d.grasp_slip = self.grasp.as_ref().map_or(0.0, |g| g.fit_residual);
         set_note(&mut d.fallback, self.fallback.as_deref().or(self.release.as_deref()));
+        d.motion_yield = (self.motion != MotionScale::FULL).then_some(protocol::MotionYield { object: self.motion.object, torso: self.motion.torso });
     }
 }

@@ -130,7 +130,7 @@ pub fn solve_with(ws: &mut QpWorkspace, inp: &QpInput, settings: &QpSettings, f:
     }
     if settings.path.tries_active_set() {
         let out = ws.active_set.solve_problem(&ws.problem, settings, f);
-        if out.status == QpStatus::Solved {
+        if out.status == QpStatus::Solved || (settings.active_set_refuses && out.status == QpStatus::Infeasible) {
             return QpOutcome { solve_us: t0.elapsed().as_secs_f64() * 1e6, ..out };
         }
     }

@@ -123,6 +123,12 @@ pub struct QpSettings {
     pub hard_row_factor: f64,
     /// [`LEAST_VIOLATION_MIN_ITER`].
     pub least_violation_min_iter: u32,
+    /// Whether the dual active-set method's own proof of infeasibility ends the solve (no
+    /// step can satisfy a violated row: Goldfarb and Idnani's test) instead of handing the QP
+    /// down the chain for Clarabel to certify. Off for a tick's QP; on for the many QPs of a
+    /// yield's bisection ([`crate::pidc::stages::yielding`]), where each infeasible try would
+    /// otherwise cost Clarabel's milliseconds.
+    pub active_set_refuses: bool,
 }
 
 impl QpSettings {
@@ -145,6 +151,7 @@ impl Default for QpSettings {
             violation_weight: VIOLATION_WEIGHT,
             hard_row_factor: HARD_ROW_FACTOR,
             least_violation_min_iter: LEAST_VIOLATION_MIN_ITER,
+            active_set_refuses: false,
         }
     }
 }

@@ -78,6 +78,55 @@ pub fn point_error(p: &Vector3<f64>, vel: &Vector3<f64>, p_d: &Vector3<f64>, v_d
     TaskError { dim: 3, e: pad(p - p_d), edot: pad(vel - Vector3::from_row_slice(v_d)), acc_d: pad(Vector3::from_row_slice(a_d)) }
 }
 
+/// Which tasks give way when the team's motion yields ([`TaskStack::joint_torque_yielding`],
+/// [`crate::pidc::stages::yielding`]): the object's first, then the torsos'; swing feet and
+/// free hands are always tracked (a foot in the air must land, a free hand must keep clear).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Yields {
+    #[default]
+    Never,
+    Object,
+    Torso,
+}
+
+/// How much of their motion the yielding tasks keep, each from 0 (held still: no acceleration
+/// commanded, the task's damping bringing it to rest where it is) to 1 (tracked as
+/// commanded).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotionScale {
+    pub object: f64,
+    pub torso: f64,
+}
+
+impl Default for MotionScale {
+    fn default() -> Self {
+        MotionScale::FULL
+    }
+}
+
+impl MotionScale {
+    /// Every task tracked.
+    pub const FULL: MotionScale = MotionScale { object: 1.0, torso: 1.0 };
+
+    /// The share of the motion a task of group `g` keeps.
+    pub fn of(&self, g: Yields) -> f64 {
+        match g {
+            Yields::Never => 1.0,
+            Yields::Object => self.object,
+            Yields::Torso => self.torso,
+        }
+    }
+}
+
+/// A task held still: its velocity error with no target velocity (the measured task velocity)
+/// and its feed-forward at no acceleration (the object's weight alone).
+#[derive(Debug, Clone, Copy)]
+pub struct HoldStill<'a> {
+    pub yields: Yields,
+    pub velocity: &'a Vector6<f64>,
+    pub feed_forward: Option<&'a Vector6<f64>>,
+}
+
 /// Every task of a tick, stacked (see the module docs), in buffers kept between ticks.
 ///
 /// [`TaskStack::begin`] sizes the stack for the tick's `k` task rows, [`TaskStack::push`]
@@ -95,6 +144,11 @@ pub struct TaskStack {
     kp: DVector<f64>,
     kd: DVector<f64>,
     ff: DVector<f64>,
+    /// Each row's task held still ([`HoldStill`]): the velocity error and feed-forward, and
+    /// which tasks yield.
+    edot_hold: DVector<f64>,
+    ff_hold: DVector<f64>,
+    yields: Vec<Yields>,
     // Scratch of `joint_torque`.
     j_mcinv_p: DMatrix<f64>,
     gram: GramScratch,
@@ -127,9 +181,11 @@ impl TaskStack {
             zeros(&mut self.j, k, n);
             self.spans.clear();
         }
-        for v in [&mut self.jdv, &mut self.e, &mut self.edot, &mut self.acc_d, &mut self.kp, &mut self.kd, &mut self.ff] {
+        for v in [&mut self.jdv, &mut self.e, &mut self.edot, &mut self.acc_d, &mut self.kp, &mut self.kd, &mut self.ff, &mut self.edot_hold, &mut self.ff_hold] {
             zeros_v(v, k);
         }
+        self.yields.clear();
+        self.yields.resize(k, Yields::Never);
     }
 
     /// Add a task: Jacobian `j_x` (d x n, `d <= 6`), zero outside the columns `cols` (first, count: a
@@ -137,6 +193,31 @@ impl TaskStack {
     /// grasping robots'), `Jdot_x v`, its errors and gains, and an optional feed-forward
     /// wrench added to its `F` (the object's load).
     pub fn push(&mut self, j_x: &DMatrix<f64>, cols: (usize, usize), jdv_x: &DVector<f64>, err: &TaskError, gains: &Gains, feed_forward: Option<&Vector6<f64>>) -> Result<(), ControllerError> {
+        let at = self.at;
+        self.push_task(j_x, cols, jdv_x, err, gains, feed_forward)?;
+        let d = j_x.nrows();
+        self.edot_hold.rows_mut(at, d).copy_from(&err.edot.rows(0, d));
+        if let Some(f) = feed_forward {
+            self.ff_hold.rows_mut(at, d).copy_from(&f.rows(0, d));
+        }
+        Ok(())
+    }
+
+    /// [`TaskStack::push`] for a task that yields ([`Yields`]) when the motion does, held still
+    /// as `hold` says.
+    pub fn push_yielding(&mut self, j_x: &DMatrix<f64>, cols: (usize, usize), jdv_x: &DVector<f64>, err: &TaskError, gains: &Gains, feed_forward: Option<&Vector6<f64>>, hold: HoldStill) -> Result<(), ControllerError> {
+        let at = self.at;
+        self.push_task(j_x, cols, jdv_x, err, gains, feed_forward)?;
+        let d = j_x.nrows();
+        self.edot_hold.rows_mut(at, d).copy_from(&hold.velocity.rows(0, d));
+        if let Some(f) = hold.feed_forward {
+            self.ff_hold.rows_mut(at, d).copy_from(&f.rows(0, d));
+        }
+        self.yields[at..at + d].fill(hold.yields);
+        Ok(())
+    }
+
+    fn push_task(&mut self, j_x: &DMatrix<f64>, cols: (usize, usize), jdv_x: &DVector<f64>, err: &TaskError, gains: &Gains, feed_forward: Option<&Vector6<f64>>) -> Result<(), ControllerError> {
         let d = j_x.nrows();
         let (c0, nc) = cols;
         if d > 6 || j_x.ncols() != self.n || c0 + nc > self.n || jdv_x.len() != d || err.dim != d || gains.kp.len() != d || gains.kd.len() != d || self.at + d > self.j.nrows() {
@@ -182,10 +263,30 @@ impl TaskStack {
             return Ok(());
         }
         self.lambda_c(ms.proj)?;
-        // u = J M_c^{-1} (P h - Pdot v) - Jdot v + a_d; F = Lambda u - K_d edot - K_p e + ff.
+        self.torque_at(ms, MotionScale::FULL, tau_m);
+        Ok(())
+    }
+
+    /// `tau_M` of the same tasks with the yielding ones keeping `scale` of their motion: a
+    /// task at share `s` commands `s (a_d - K_d edot - K_p e) - (1 - s) K_d v` (with `v` its
+    /// velocity, [`HoldStill`]) and its feed-forward blended likewise; `mu_c` stays whole.
+    /// Linear in each share. Call after [`TaskStack::joint_torque`] of the same tick (it
+    /// reuses that call's `Lambda_c`).
+    pub fn joint_torque_yielding(&mut self, ms: &MotionSpace, scale: MotionScale, tau_m: &mut DVector<f64>) {
+        zeros_v(tau_m, self.n);
+        if self.j.nrows() > 0 && self.at == self.j.nrows() {
+            self.torque_at(ms, scale, tau_m);
+        }
+    }
+
+    /// `tau_M` into the zeroed `tau_m`, `Lambda_c` computed.
+    fn torque_at(&mut self, ms: &MotionSpace, scale: MotionScale, tau_m: &mut DVector<f64>) {
+        let k = self.j.nrows();
+        // u = J M_c^{-1} (P h - Pdot v) - Jdot v + s a_d; F = Lambda u - K_d edot - K_p e + ff.
         zeros_v(&mut self.u, k);
-        self.u.copy_from(&self.acc_d);
-        self.u -= &self.jdv;
+        for i in 0..k {
+            self.u[i] = scale.of(self.yields[i]) * self.acc_d[i] - self.jdv[i];
+        }
         for &(r0, d, c0, nc) in &self.spans[..self.tasks] {
             self.u.rows_mut(r0, d).gemv(1.0, &self.j.view((r0, c0), (d, nc)), &ms.mcinv_bias.rows(c0, nc), 1.0);
         }
@@ -197,12 +298,13 @@ impl TaskStack {
             self.f.gemv(1.0, &self.lambda, &self.u, 0.0);
         }
         for i in 0..k {
-            self.f[i] += self.ff[i] - self.kd[i] * self.edot[i] - self.kp[i] * self.e[i];
+            let s = scale.of(self.yields[i]);
+            let (edot, ff) = (s * self.edot[i] + (1.0 - s) * self.edot_hold[i], s * self.ff[i] + (1.0 - s) * self.ff_hold[i]);
+            self.f[i] += ff - self.kd[i] * edot - s * self.kp[i] * self.e[i];
         }
         for &(r0, d, c0, nc) in &self.spans[..self.tasks] {
             tau_m.rows_mut(c0, nc).gemv_tr(1.0, &self.j.view((r0, c0), (d, nc)), &self.f.rows(r0, d), 1.0);
         }
-        Ok(())
     }
 
     /// `Lambda_c = (J M_c^{-1} P J^T)^+` (eq. control_law): into `lambda`, or factored. Dense

@@ -12,7 +12,7 @@ use crate::pidc::PidcConfig;
 use crate::team::Team;
 use crate::units::grasp::GraspTerms;
 use crate::units::block_projection::{vmat, vmat_mut, BlockOp, OpScratch};
-use crate::units::impedance::{point_error, pose_error, MotionSpace, TaskStack};
+use crate::units::impedance::{point_error, pose_error, HoldStill, MotionSpace, TaskStack, Yields};
 use crate::units::object_load::object_load;
 use crate::units::projection::{mass_times, Projections};
 pub use crate::units::targets::{frame_pose, PointTarget, PoseTarget, Targets};
@@ -68,7 +68,10 @@ pub struct TaskTorqueInput<'a> {
 /// object (when grasped), every torso, every swing foot and every free hand, with the operational-space
 /// inertia and non-linear terms of eq. control_law computed for the team's task space as a
 /// whole (every task's rows stacked; see [`crate::units::impedance`]). Also the object's load
-/// `F_x` (zero without a grasp) and `J_x^T F_x` (`load`, n).
+/// `F_x` (zero without a grasp) and `J_x^T F_x` (`load`, n). The object's and the torsos'
+/// tasks are pushed with what they command held still, for when the motion yields
+/// ([`crate::pidc::stages::yielding`]); the object's load held still is `F_x` at no
+/// acceleration, into `f_x_hold`.
 pub fn task_torque(
     inp: &TaskTorqueInput,
     targets: &mut Targets,
@@ -76,6 +79,7 @@ pub fn task_torque(
     tau_m: &mut DVector<f64>,
     load: &mut DVector<f64>,
     f_x: &mut Vector6<f64>,
+    f_x_hold: &mut Vector6<f64>,
 ) -> Result<(), ControllerError> {
     let TaskTorqueInput { team, grasp, references: refs, config: cfg, motion } = inp;
     let n = team.n;
@@ -84,13 +88,16 @@ pub fn task_torque(
     stack.begin(k_rows, n);
     zeros_v(load, n);
     *f_x = Vector6::zeros();
+    *f_x_hold = Vector6::zeros();
     if let Some(g) = grasp {
         let (x_d, tw_d, acc_d) = targets.object(*refs, &g.object);
         let err = pose_error(&g.object, &g.object_twist, &x_d, &tw_d, &acc_d);
         // Object load feed-forward w_ff and the load F_x = -w_ff on the robots.
         let w_ff = object_load(&g.object, &g.object_twist, &acc_d, cfg.object_mass, &cfg.object_inertia);
-        *f_x = -w_ff;
-        stack.push(&g.j_o, hands_columns(team), &g.jdv_o, &err, &cfg.object_gains, Some(&w_ff))?;
+        let w_hold = object_load(&g.object, &g.object_twist, &[0.0; 6], cfg.object_mass, &cfg.object_inertia);
+        (*f_x, *f_x_hold) = (-w_ff, -w_hold);
+        let hold = HoldStill { yields: Yields::Object, velocity: &g.object_twist, feed_forward: Some(&w_hold) };
+        stack.push_yielding(&g.j_o, hands_columns(team), &g.jdv_o, &err, &cfg.object_gains, Some(&w_ff), hold)?;
         load.gemv_tr(1.0, &g.j_o, f_x, 0.0);
     }
     for tf in &team.torsos {
@@ -98,7 +105,8 @@ pub fn task_torque(
         let (x, twist) = frame_pose(tf, &team.velocity);
         let (x_d, tw_d, acc_d) = targets.torso(*refs, id, &x);
         let err = pose_error(&x, &twist, &x_d, &tw_d, &acc_d);
-        stack.push(&tf.jacobian, tf.cols, &tf.jdot_v, &err, &cfg.torso_gains, None)?;
+        let hold = HoldStill { yields: Yields::Torso, velocity: &twist, feed_forward: None };
+        stack.push_yielding(&tf.jacobian, tf.cols, &tf.jdot_v, &err, &cfg.torso_gains, None, hold)?;
     }
     for tf in &team.swing_feet {
         let id = &team.robots[tf.robot].id;
