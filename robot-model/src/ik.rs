@@ -81,6 +81,25 @@ pub fn solve(
     options: &IkOptions,
     joint_can_move: impl Fn(usize) -> bool,
 ) -> Result<IkSolution, IkError> {
+    solve_rows(model, frame, q0, p_t, Some(r_t), options, joint_can_move)
+}
+
+/// [`solve`] on the frame's position alone (a point foot: its orientation is free), the
+/// solution's target rotation the frame's as solved.
+pub fn solve_position(model: &Model, frame: FrameId, q0: &[f64], p_t: &Vector3<f64>, options: &IkOptions, joint_can_move: impl Fn(usize) -> bool) -> Result<IkSolution, IkError> {
+    solve_rows(model, frame, q0, p_t, None, options, joint_can_move)
+}
+
+/// Damped least squares on the frame's position and, with `r_t`, its orientation.
+fn solve_rows(
+    model: &Model,
+    frame: FrameId,
+    q0: &[f64],
+    p_t: &Vector3<f64>,
+    r_t: Option<&Matrix3<f64>>,
+    options: &IkOptions,
+    joint_can_move: impl Fn(usize) -> bool,
+) -> Result<IkSolution, IkError> {
     let f = model.frames.get(frame).ok_or(DynamicsError::FrameOutOfRange { index: frame, count: model.frames.len() })?;
     let nb = if model.floating_base { 6 } else { 0 };
     let cols: Vec<usize> = model.bodies[f.body].support.iter().copied().filter(|&k| k >= nb && joint_can_move(k)).collect();
@@ -99,18 +118,20 @@ pub fn solve(
         forward_kinematics(model, &mut data, &q, &zero)?;
         let m = data.o_m_f[frame];
         let dp = p_t - m.trans;
-        let r_err = Rotation3::from_matrix_unchecked(r_t * m.rot.transpose());
         // Through the quaternion: Rotation3::scaled_axis is NaN when rounding puts the trace
         // above 3 (see coordinator::linalg::rotation_error).
-        let dw = UnitQuaternion::from_rotation_matrix(&r_err).scaled_axis();
+        let dw = r_t.map_or(Vector3::zeros(), |r_t| UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r_t * m.rot.transpose())).scaled_axis());
         pe = dp.norm();
         ae = dw.norm();
         if pe < options.epsilon_linear && ae < options.epsilon_angular {
-            return Ok(finish(model, q, &cols, qoff, pe, ae, it, p_t, r_t));
+            return Ok(finish(model, q, &cols, qoff, pe, ae, it, p_t, &r_t.copied().unwrap_or(m.rot)));
         }
         frame_jacobian(model, &data, frame, &mut jac)?;
         let e = Vector6::new(dp.x, dp.y, dp.z, dw.x, dw.y, dw.z);
-        let ja = nalgebra::DMatrix::from_fn(6, cols.len(), |r, c| jac[(r, cols[c])]);
+        // Position alone: the rotation rows are left out (zero rows, their damping keeps the
+        // system regular).
+        let rows = if r_t.is_some() { 6 } else { 3 };
+        let ja = nalgebra::DMatrix::from_fn(6, cols.len(), |r, c| if r < rows { jac[(r, cols[c])] } else { 0.0 });
         // Damped least squares: dq = J^T (J J^T + lambda^2 I)^-1 e
         let jjt: Matrix6<f64> = Matrix6::from_fn(|r, c| (0..cols.len()).map(|k| ja[(r, k)] * ja[(c, k)]).sum::<f64>()) + Matrix6::identity() * lambda2;
         let Some(inv) = jjt.try_inverse() else { return Err(IkError::Singular) };

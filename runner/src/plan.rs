@@ -40,7 +40,7 @@ pub enum PlanError {
     #[error("controller: {0}")]
     Controller(#[from] coordinator::ControllerError),
     /// Not `#[from]`: the message holds the check's whole error, no source chain repeats it.
-    #[error("payload check at the start pose: {0} (`capacity_check = false` runs anyway)")]
+    #[error("payload check: {0} (`capacity_check = false` runs anyway)")]
     Capacity(crate::capacity::CheckError),
     #[error(transparent)]
     Walk(#[from] planner::walk::WalkError),
@@ -123,6 +123,9 @@ pub fn plan(s: &Scenario, root: &Path) -> Result<Plan, PlanError> {
     let hand_loads = start_hand_loads(s, &scene, &loaded, &pidc, &controller)?;
     let walk = plan_walk(s, &robots, &scene, &object, &hand_loads)?;
     let references = reference_plan(s, &scene, walk);
+    if s.capacity_check && matches!(controller, ControllerSpec::Pidc(_)) {
+        check_along_motion(s, &scene, &loaded, &pidc, &references)?;
+    }
     Ok(Plan { scenario: s.clone(), scene, controller, robots, references })
 }
 
@@ -258,6 +261,17 @@ fn start_hand_loads(s: &Scenario, scene: &Scene, loaded: &[Arc<Robot>], pidc: &P
         tracing::info!(ms = 1e3 * t0.elapsed().as_secs_f64(), mass = s.object.mass, checked = check, "static team problem at the start pose solved");
     }
     Ok(hand_loads)
+}
+
+/// The payload check along the whole motion (crate::capacity::motion): the scenario's object
+/// held at every pose sampled along the references, or the plan refused naming the time, the
+/// object's position and the binding limits.
+fn check_along_motion(s: &Scenario, scene: &Scene, loaded: &[Arc<Robot>], pidc: &PidcConfig, refs: &ReferencePlan) -> Result<(), PlanError> {
+    let t0 = std::time::Instant::now();
+    let Some(samples) = crate::capacity::samples_of(&scene.world, loaded, refs, pidc).map_err(PlanError::Capacity)? else { return Ok(()) };
+    crate::capacity::motion::check_along(&samples, s.object.mass).map_err(PlanError::Capacity)?;
+    tracing::info!(ms = 1e3 * t0.elapsed().as_secs_f64(), samples = samples.len(), mass = s.object.mass, "the team problem along the motion solved");
+    Ok(())
 }
 
 /// The scenario's walk, planned from the robots' start poses (`None` without a `[walk]`).

@@ -34,7 +34,8 @@ fn one_kilogram_passes_and_fifty_is_refused_with_the_binding_limits() {
 #[test]
 fn capacity_is_a_bracket_the_plan_agrees_with() {
     let p = plan(&s4(&["capacity_check=false"]), &repo()).expect("plan");
-    let cap = capacity::capacity(&p, 1e-3).expect("capacity");
+    let report = capacity::capacity(&p, 1e-3).expect("capacity");
+    let cap = report.whole().clone();
     assert!(cap.mass > 1.0 && cap.infeasible_at - cap.mass <= 1e-3 && !cap.binding.is_empty(), "{cap:?}");
     let refused = |m: f64| match plan(&s4(&[&format!("object.mass={m}")]), &repo()) {
         Ok(_) => false,
@@ -43,6 +44,6 @@ fn capacity_is_a_bracket_the_plan_agrees_with() {
     };
     assert!(!refused(cap.mass), "at the capacity: held");
     assert!(refused(cap.infeasible_at + 1e-3), "just above the capacity: refused");
-    let text = capacity::summary(&p, &cap, 1e-3, 0.0);
+    let text = capacity::summary(&p, &report, 1e-3, 0.0);
     assert!(text.contains("capacity:") && text.contains("binding limits"), "{text}");
 }

@@ -45,7 +45,7 @@ fn assert_team_standing(m: &Metrics, robots: usize) {
 fn beyond_the_capacity(controller: &str) -> Metrics {
     let file = repo().join("scenarios/s4_object_circle.toml");
     let base = Scenario::load(&file, &[]).expect("scenario");
-    let cap = team_runner::capacity::capacity(&plan::plan(&base, &repo()).expect("plan"), 0.01).expect("capacity");
+    let cap = team_runner::capacity::capacity(&plan::plan(&base, &repo()).expect("plan"), 0.01).expect("capacity").whole().clone();
     let mass = 1.5 * cap.mass;
     let mut sets: Vec<String> = vec![format!("object.mass={mass}"), "duration=1.5".into(), "settle=0".into(), format!("controller={controller}")];
     // Refused by the payload check, with the binding limits named...

@@ -138,6 +138,24 @@ impl StaticProblem {
         Ok(StaticProblem { team, object_centre: centre, e, e0, e1, a, b, rows, p, q, j_c, actuated, limits })
     }
 
+    /// The object moving through the pose: its six rows of `E lambda = e0 + m e1` become the
+    /// Newton-Euler equations of the object, `G lambda_hands = m [g - a; -(I alpha + omega x I
+    /// omega)]`, with `acceleration = [a; alpha]` (world), `omega` its angular velocity and
+    /// `unit_inertia` its inertia per kilogram about its centre (world-aligned; a uniform body's
+    /// inertia scales with its mass, so the rows stay linear in `m`). At rest these are the
+    /// static rows.
+    pub fn with_object_motion(mut self, acceleration: &Vector6<f64>, omega: &Vector3<f64>, unit_inertia: &nalgebra::Matrix3<f64>) -> Self {
+        let first = self.e.nrows() - 6;
+        let a = acceleration.fixed_rows::<3>(0);
+        let alpha = acceleration.fixed_rows::<3>(3);
+        let moment = unit_inertia * alpha + omega.cross(&(unit_inertia * omega));
+        for k in 0..3 {
+            self.e1[first + k] = GRAVITY_VECTOR[k] - a[k];
+            self.e1[first + 3 + k] = -moment[k];
+        }
+        self
+    }
+
     /// Number of unknowns (`lambda`'s rows).
     pub fn unknowns(&self) -> usize {
         self.j_c.nrows()

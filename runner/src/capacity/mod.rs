@@ -12,7 +12,13 @@
 //!   it unless the scenario says `capacity_check = false`) and what each hand carries at the
 //!   start (a walk is planned with it);
 //! * [`capacity`]: the heaviest object the team holds in that configuration, by bisection
-//!   (`team capacity`).
+//!   (`team capacity`);
+//! * [`motion`]: the same along the whole motion (poses sampled along the references, with
+//!   the object's reference acceleration): the plan's check at the scenario's mass
+//!   ([`motion::check_along`]) and the heaviest object held everywhere
+//!   ([`motion::capacity_along`]).
+
+pub mod motion;
 
 use std::sync::Arc;
 
@@ -42,7 +48,13 @@ pub enum CheckError {
     RobotCount(usize, usize),
     #[error("the payload check needs the pidc controller (this scenario runs {0})")]
     NotPidc(String),
-    #[error(transparent)]
+    #[error("robot {robot}: {reason}")]
+    Kinematics { robot: String, reason: String },
+    #[error("robot {robot} cannot follow the references at t = {t:.2} s of the motion: {source}")]
+    Reach { robot: String, t: f64, source: robot_model::ik::IkError },
+    #[error("at t = {t:.2} s of the motion (object at [{:.3}, {:.3}, {:.3}] m): {source}", object[0], object[1], object[2])]
+    AlongMotion { t: f64, object: [f64; 3], source: CapacityError },
+    #[error("at the start pose: {0}")]
     Capacity(#[from] CapacityError),
 }
 
@@ -118,14 +130,47 @@ pub fn pidc_config(controller: &ControllerSpec) -> Result<&PidcConfig, CheckErro
     }
 }
 
-/// The heaviest object the plan's team holds in its start configuration, within `tolerance` kg.
-pub fn capacity(plan: &Plan, tolerance: f64) -> Result<Capacity, CheckError> {
-    let problem = static_problem(&plan.scene.world, &plan.loaded_robots(), pidc_config(&plan.controller)?)?;
-    Ok(problem.capacity(tolerance)?)
+/// The team problem along a plan's motion ([`motion::motion_samples`]); `None` for a walk,
+/// whose contact sets the gait planner checks (see [`motion`]).
+pub fn samples_of(world: &WorldSpec, robots: &[Arc<Robot>], refs: &crate::plan::ReferencePlan, cfg: &PidcConfig) -> Result<Option<Vec<motion::MotionSample>>, CheckError> {
+    if refs.walk.is_some() {
+        return Ok(None);
+    }
+    let object = world.object.ok_or(CheckError::NoObject)?;
+    let inertia = object.principal_inertia().map(|i| if object.mass > 0.0 { i / object.mass } else { 0.0 });
+    Ok(Some(motion::motion_samples(world, robots, refs, cfg, inertia)?))
+}
+
+/// The heaviest object of a scenario: at its start pose, and along its whole motion.
+#[derive(Debug, Clone)]
+pub struct ScenarioCapacity {
+    pub start: Capacity,
+    /// `None` for a walk (checked at the start pose only).
+    pub motion: Option<motion::MotionCapacity>,
+}
+
+impl ScenarioCapacity {
+    /// The heaviest object held throughout: along the motion where it was checked.
+    pub fn whole(&self) -> &Capacity {
+        self.motion.as_ref().map_or(&self.start, |m| &m.capacity)
+    }
+}
+
+/// The heaviest object the plan's team holds at its start pose and along its whole motion,
+/// within `tolerance` kg ([`ScenarioCapacity::whole`] is what the plan's check agrees with).
+pub fn capacity(plan: &Plan, tolerance: f64) -> Result<ScenarioCapacity, CheckError> {
+    let cfg = pidc_config(&plan.controller)?;
+    let (world, robots) = (&plan.scene.world, plan.loaded_robots());
+    let start = static_problem(world, &robots, cfg)?.capacity(tolerance)?;
+    let motion = match samples_of(world, &robots, &plan.references, cfg)? {
+        Some(samples) => Some(motion::capacity_along(&samples, tolerance)?),
+        None => None,
+    };
+    Ok(ScenarioCapacity { start, motion })
 }
 
 /// The capacity as `team capacity` prints it.
-pub fn summary(plan: &Plan, cap: &Capacity, tolerance: f64, seconds: f64) -> String {
+pub fn summary(plan: &Plan, cap: &ScenarioCapacity, tolerance: f64, seconds: f64) -> String {
     let s = &plan.scenario;
     let mut out = format!(
         "{}: {} robots, object {:?} m at {:?}, friction_margin {:.3}, patch_margin {:.3}, min_hand_force {} N, min_foot_force {} N\n",
@@ -138,19 +183,26 @@ pub fn summary(plan: &Plan, cap: &Capacity, tolerance: f64, seconds: f64) -> Str
         s.min_hand_force,
         s.min_foot_force
     );
-    out += &format!(
-        "capacity: {:.3} kg (held; {:.3} kg is not; bisection to {tolerance} kg, {} static problems, {:.0} ms)\n",
-        cap.mass,
-        cap.infeasible_at,
-        cap.solves,
-        1e3 * seconds
-    );
-    out += &format!("limits the forces holding {:.3} kg reach (within {REACHED_TOL} N or Nm):\n", cap.mass);
-    for b in &cap.reached {
+    let whole = cap.whole();
+    out += &format!("capacity: {:.3} kg (held throughout; {:.3} kg is not; bisection to {tolerance} kg, {:.0} ms)\n", whole.mass, whole.infeasible_at, 1e3 * seconds);
+    out += &format!("  at the start pose: {:.3} kg ({} static problems)\n", cap.start.mass, cap.start.solves);
+    match &cap.motion {
+        Some(m) => {
+            let p = m.object;
+            out += &format!(
+                "  along the motion: {:.3} kg, {} poses sampled; the smallest margin at t = {:.2} s (object at [{:.3}, {:.3}, {:.3}] m; {} problems)\n",
+                m.capacity.mass, m.samples, m.at_s, p.x, p.y, p.z, m.capacity.solves
+            );
+        }
+        None => out += "  along the motion: not checked (a walk: the gait planner checks its support)\n",
+    }
+    let where_ = cap.motion.as_ref().map_or("the start pose".to_string(), |m| format!("t = {:.2} s", m.at_s));
+    out += &format!("limits the forces holding {:.3} kg reach at {where_} (within {REACHED_TOL} N or Nm):\n", whole.mass);
+    for b in &whole.reached {
         out += &format!("  {b}\n");
     }
-    out += &format!("binding limits at {:.3} kg (the relaxed problem's excess), largest first:\n", cap.infeasible_at);
-    for b in &cap.binding {
+    out += &format!("binding limits at {:.3} kg (the relaxed problem's excess), largest first:\n", whole.infeasible_at);
+    for b in &whole.binding {
         out += &format!("  {b}\n");
     }
     out

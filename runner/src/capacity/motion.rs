@@ -1,0 +1,271 @@
+//! The payload check along the whole motion: the team problem of [`coordinator::capacity`] at
+//! poses sampled along the references, with the object's reference acceleration.
+//!
+//! The start pose alone says little: a beam carried around a circle takes the arms to poses
+//! where their lever arms, and the palms' centres of pressure, are worse than at the start
+//! (three robots at unequal spacing on a 1.8 m beam hold 2.32 kg at the start pose, and only
+//! about 1.7 kg everywhere on a 4 cm circle). At each sample:
+//!
+//! * every robot's base is at its torso's reference; its feet stay where they stand
+//!   (each leg solved for its foot's start position when the base moved,
+//!   [`robot_model::ik::solve_position`]); its hand holds the object where the plan put it,
+//!   at the object's reference pose (the arm solved by [`robot_model::ik::solve_hand`] from the
+//!   last sample's configuration);
+//! * the team's terms come from the agents' own code ([`robot_agent::terms::TermsBuilder`])
+//!   at rest, the robots' own inertia left out (the references accelerate by centimetres per
+//!   second squared: their inertial torques are about a hundredth of gravity's);
+//! * the object's rows are its Newton-Euler equations at the reference's acceleration and
+//!   angular velocity ([`StaticProblem::with_object_motion`]).
+//!
+//! A walk moves the feet: its contact sets are checked by the gait planner (support margins),
+//! not here, and a scenario with a walk is checked at its start pose only.
+
+use std::sync::Arc;
+
+use coordinator::capacity::{BindingLimit, Capacity, CapacityError, StaticProblem, REACHED_TOL};
+use coordinator::PidcConfig;
+use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3, Vector6};
+use protocol::{DynamicsTerms, Header, Pose, PoseReference, RobotDescription, RobotState};
+use robot_agent::dynamics_source::robot_description;
+use robot_agent::terms::{empty_terms, ActiveContacts, TermsBuilder};
+use robot_model::ik::{self, IkOptions};
+use robot_model::{Data, Robot};
+use sim_bridge::world::WorldSpec;
+
+use super::CheckError;
+use crate::plan::{ReferencePlan, TEAM};
+
+/// Samples per second of scenario (a circle at 0.25 Hz is sampled 40 times a turn).
+pub const SAMPLE_HZ: f64 = 10.0;
+/// The most samples of one scenario (a longer one is sampled more sparsely).
+pub const MAX_SAMPLES: usize = 300;
+
+/// The team problem at one time of the motion.
+#[derive(Debug, Clone)]
+pub struct MotionSample {
+    /// Scenario time, s.
+    pub t: f64,
+    /// The object's reference position then.
+    pub object: Vector3<f64>,
+    pub problem: StaticProblem,
+}
+
+impl MotionSample {
+    /// `source` at this sample.
+    fn error(&self, source: CapacityError) -> CheckError {
+        CheckError::AlongMotion { t: self.t, object: self.object.into(), source }
+    }
+}
+
+/// The scenario times sampled: 0, then every `1 / SAMPLE_HZ` (at most [`MAX_SAMPLES`]), and
+/// the end.
+pub fn sample_times(duration: f64) -> Vec<f64> {
+    if !(duration.is_finite() && duration > 0.0) {
+        return vec![0.0];
+    }
+    let n = ((duration * SAMPLE_HZ).ceil() as usize).clamp(1, MAX_SAMPLES);
+    (0..=n).map(|k| duration * k as f64 / n as f64).collect()
+}
+
+/// A robot's configuration (the model's `q`: base pose, then joints) at its placement, with
+/// the joints the plan solved.
+fn start_q(world: &WorldSpec, i: usize, robot: &Robot) -> Result<Vec<f64>, CheckError> {
+    let placement = &world.robots[i];
+    let mut q: Vec<f64> = robot.standing_q.iter().copied().collect();
+    let off = robot.model.nq - robot.model.joint_names.len();
+    for (j, v) in &placement.joint_overrides {
+        let k = robot.model.joint_names.iter().position(|n| n == j).ok_or_else(|| CheckError::UnknownJoint { robot: placement.id.clone(), joint: j.clone() })?;
+        q[off + k] = *v;
+    }
+    q[0..3].copy_from_slice(&placement.base_position);
+    let yaw = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), placement.base_yaw);
+    q[3..7].copy_from_slice(&[yaw.w, yaw.i, yaw.j, yaw.k]);
+    Ok(q)
+}
+
+fn iso(p: &Pose) -> Isometry3<f64> {
+    Isometry3::from_parts(Translation3::from(Vector3::from(p.position)), protocol::conventions::quat_from_wxyz(p.orientation))
+}
+
+/// One robot followed along the motion: its feet's world positions and its hand's grasp on
+/// the object (both from the start configuration), and its configuration at the last sample.
+struct Follower {
+    id: String,
+    robot: Arc<Robot>,
+    q: Vec<f64>,
+    feet: Vec<(usize, Vector3<f64>)>,
+    /// The hand's pose in the object's reference frame at the start.
+    grasp: Isometry3<f64>,
+    base: [f64; 7],
+}
+
+impl Follower {
+    fn new(world: &WorldSpec, i: usize, robot: &Arc<Robot>, object0: &Isometry3<f64>) -> Result<Follower, CheckError> {
+        let id = world.robots[i].id.clone();
+        let kin = |e: &dyn std::fmt::Display| CheckError::Kinematics { robot: id.clone(), reason: e.to_string() };
+        let q = start_q(world, i, robot)?;
+        let mut data = Data::new(&robot.model);
+        robot_model::forward_kinematics(&robot.model, &mut data, &q, &vec![0.0; robot.model.nv]).map_err(|e| kin(&e))?;
+        let mut feet = Vec::new();
+        for f in &robot.foot_frames {
+            let k = robot.model.frame_id(f).map_err(|e| kin(&e))?;
+            feet.push((k, Vector3::from(data.o_m_f[k].trans)));
+        }
+        let hand = robot.model.frame_id(&robot.hand_frame).map_err(|e| kin(&e))?;
+        let m = data.o_m_f[hand];
+        let hand0 = Isometry3::from_parts(m.trans.into(), UnitQuaternion::from_matrix(&m.rot));
+        let base = [q[0], q[1], q[2], q[3], q[4], q[5], q[6]];
+        Ok(Follower { id, robot: robot.clone(), q, feet, grasp: object0.inverse() * hand0, base })
+    }
+
+    /// The configuration at scenario time `t`: base at `torso`, feet where they stood, hand on
+    /// the object at `object`.
+    fn follow(&mut self, t: f64, torso: &Pose, object: &Isometry3<f64>) -> Result<&[f64], CheckError> {
+        let reach = |source| CheckError::Reach { robot: self.id.clone(), t, source };
+        let base = [torso.position[0], torso.position[1], torso.position[2], torso.orientation[0], torso.orientation[1], torso.orientation[2], torso.orientation[3]];
+        let model = &self.robot.model;
+        let opts = IkOptions::default();
+        if base.iter().zip(&self.base).any(|(a, b)| (a - b).abs() > 1e-12) {
+            self.q[0..7].copy_from_slice(&base);
+            self.base = base;
+            for (frame, p) in &self.feet {
+                self.q = ik::solve_position(model, *frame, &self.q, p, &opts, |_| true).map_err(reach)?.q;
+            }
+        }
+        let target = object * self.grasp;
+        let r = target.rotation.to_rotation_matrix().into_inner();
+        self.q = ik::solve_hand(&self.robot, &self.q, &target.translation.vector, &r, &opts).map_err(reach)?.q;
+        Ok(&self.q)
+    }
+
+    /// The agents' terms at the configuration, at rest, every foot in stance and the hand in grasp.
+    fn terms(&self) -> Result<DynamicsTerms, CheckError> {
+        let terms_err = |source| CheckError::Terms { robot: self.id.clone(), source };
+        let off = self.robot.model.nq - self.robot.model.joint_names.len();
+        let joints = self.q[off..].to_vec();
+        let state = RobotState {
+            header: Header::new(TEAM, Some(&self.id), 0, 0),
+            base_pose: Pose { position: [self.q[0], self.q[1], self.q[2]], orientation: [self.q[3], self.q[4], self.q[5], self.q[6]] },
+            base_twist: [0.0; 6],
+            joint_velocities: vec![0.0; joints.len()],
+            joint_positions: joints,
+            time: 0.0,
+            foot_forces: Vec::new(),
+        };
+        let mut builder = TermsBuilder::new(&self.robot).map_err(terms_err)?;
+        builder.load_state(&self.robot, &state).map_err(terms_err)?;
+        let mut out = empty_terms(TEAM, &self.id);
+        builder.compute(&self.robot, &ActiveContacts::all_stance(&self.robot), &mut out).map_err(terms_err)?;
+        Ok(out)
+    }
+}
+
+/// The team problem at every sample of the motion (see the module docs), with the
+/// controller's margins `cfg`; `unit_inertia` is the object's principal inertia per kilogram.
+pub fn motion_samples(world: &WorldSpec, robots: &[Arc<Robot>], refs: &ReferencePlan, cfg: &PidcConfig, unit_inertia: [f64; 3]) -> Result<Vec<MotionSample>, CheckError> {
+    if robots.len() != world.robots.len() {
+        return Err(CheckError::RobotCount(robots.len(), world.robots.len()));
+    }
+    let object0 = iso(&refs.object_at(Some(0.0)).pose);
+    let mut team = world.robots.iter().enumerate().map(|(i, _)| Follower::new(world, i, &robots[i], &object0)).collect::<Result<Vec<_>, _>>()?;
+    let descs: Vec<RobotDescription> = team.iter().map(|f| robot_description(&f.robot, TEAM, &f.id)).collect();
+    let inertia = Matrix3::from_diagonal(&Vector3::from(unit_inertia));
+    let mut out = Vec::new();
+    for t in sample_times(refs.clock.scenario_duration()) {
+        let object: PoseReference = refs.object_at(Some(t));
+        let x_o = iso(&object.pose);
+        let mut terms = Vec::with_capacity(team.len());
+        for (i, f) in team.iter_mut().enumerate() {
+            f.follow(t, &refs.torso_at(i, Some(t)).pose, &x_o)?;
+            terms.push(f.terms()?);
+        }
+        let centre = x_o.translation.vector;
+        let r = x_o.rotation.to_rotation_matrix();
+        let unit = r.matrix() * inertia * r.matrix().transpose();
+        let omega = Vector3::new(object.twist[3], object.twist[4], object.twist[5]);
+        let problem = StaticProblem::build(&terms, &descs, &cfg.contact_margins(), centre)
+            .map_err(|source| CheckError::AlongMotion { t, object: centre.into(), source })?
+            .with_object_motion(&Vector6::from_row_slice(&object.acceleration), &omega, &unit);
+        out.push(MotionSample { t, object: centre, problem });
+    }
+    Ok(out)
+}
+
+/// Whether `mass` is held at every sample: the first sample where it is not, named with its
+/// binding limits ([`CheckError::AlongMotion`]).
+pub fn check_along(samples: &[MotionSample], mass: f64) -> Result<(), CheckError> {
+    for s in samples {
+        s.problem.solve(mass).map_err(|e| s.error(e))?;
+    }
+    Ok(())
+}
+
+/// The heaviest object held at every sample, within `tolerance` kg, and where along the motion
+/// the limit is.
+#[derive(Debug, Clone)]
+pub struct MotionCapacity {
+    pub capacity: Capacity,
+    /// The sample that limits it: its time (s) and the object's position.
+    pub at_s: f64,
+    pub object: Vector3<f64>,
+    /// Samples checked.
+    pub samples: usize,
+}
+
+/// [`MotionCapacity`] by bisection on the mass; a mass is held when every sample holds it
+/// (the sample that refused the last mass is tried first, so a refusal costs one solve).
+pub fn capacity_along(samples: &[MotionSample], tolerance: f64) -> Result<MotionCapacity, CheckError> {
+    let first = samples.first().ok_or(CheckError::NoObject)?;
+    // The start pose's capacity bounds the motion's from above.
+    let start = first.problem.capacity(tolerance)?;
+    let mut order: Vec<usize> = (0..samples.len()).collect();
+    let mut solves = start.solves;
+    let holds = |mass: f64, order: &mut Vec<usize>, solves: &mut usize| -> Result<Option<usize>, CheckError> {
+        for k in 0..order.len() {
+            *solves += 1;
+            let s = &samples[order[k]];
+            if !s.problem.relaxed(mass).map_err(|e| s.error(e))?.feasible() {
+                let i = order.remove(k);
+                order.insert(0, i);
+                return Ok(Some(i));
+            }
+        }
+        Ok(None)
+    };
+    let (mut lo, mut hi, mut limiting) = (0.0, start.infeasible_at, 0);
+    if let Some(i) = holds(0.0, &mut order, &mut solves)? {
+        let s = &samples[i];
+        let binding = s.problem.relaxed(0.0).map_err(|e| s.error(e))?.binding(&s.problem);
+        return Err(CheckError::AlongMotion { t: s.t, object: s.object.into(), source: CapacityError::Infeasible { mass: 0.0, binding } });
+    }
+    if holds(start.mass, &mut order, &mut solves)?.is_none() {
+        (lo, limiting) = (start.mass, 0);
+    }
+    while hi - lo > tolerance {
+        let mid = 0.5 * (lo + hi);
+        match holds(mid, &mut order, &mut solves)? {
+            None => lo = mid,
+            Some(i) => (hi, limiting) = (mid, i),
+        }
+    }
+    let s = &samples[limiting];
+    let binding: Vec<BindingLimit> = s.problem.relaxed(hi).map_err(|e| s.error(e))?.binding(&s.problem);
+    let reached = s.problem.reached(&s.problem.solve(lo).map_err(|e| s.error(e))?.lambda, REACHED_TOL);
+    Ok(MotionCapacity { capacity: Capacity { mass: lo, infeasible_at: hi, binding, reached, solves }, at_s: s.t, object: s.object, samples: samples.len() })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn samples_cover_the_run_from_start_to_end() {
+        let t = sample_times(10.0);
+        assert_eq!((t.first(), t.last(), t.len()), (Some(&0.0), Some(&10.0), 101));
+        let long = sample_times(1000.0);
+        assert_eq!(long.len(), MAX_SAMPLES + 1);
+        assert!(long.windows(2).all(|w| w[1] > w[0]));
+        assert_eq!(sample_times(0.0), vec![0.0]);
+        assert_eq!(sample_times(f64::NAN), vec![0.0]);
+    }
+}
