@@ -314,7 +314,7 @@ fn a_motion_the_contacts_cannot_carry_yields_the_object_first_and_keeps_every_ro
     let (wc, wt) = worst_violation(&r);
     println!("worst constraint violation {wc:.2e} N, worst torque excess {wt:.2e} Nm");
     assert!(wc < 1e-5 && wt < 1e-5);
-    assert_eq!(d.motion_yield, Some(protocol::MotionYield { object: r.motion.object, torso: 1.0 }));
+    assert_eq!(d.motion_yield, Some(protocol::MotionYield { object: r.motion.object, torso: 1.0, reserve: false }));
     assert!(d.fallback.is_none() && d.qp_status == QpStatus::Solved, "{d:?}");
     // What the yield kept still lifts the object: its predicted vertical force exceeds its weight.
     let g = r.grasp.as_ref().expect("grasp");

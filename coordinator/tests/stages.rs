@@ -442,7 +442,7 @@ fn task_torque_is_the_stacked_impedance_law_written_out() {
     let velocity: Vec<DVector<f64>> = tasks.iter().map(|(jx, ..)| *jx * &team.velocity).collect();
     for (s_o, s_t) in [(1.0, 1.0), (0.0, 1.0), (0.37, 1.0), (0.0, 0.0), (0.0, 0.62)] {
         let mut yielded = DVector::zeros(0);
-        stack.joint_torque_yielding(&motion.view(&dense), coordinator::units::impedance::MotionScale { object: s_o, torso: s_t }, &mut yielded);
+        stack.joint_torque_yielding(&motion.view(&dense), coordinator::units::impedance::MotionScale { object: s_o, torso: s_t, reserve: false }, &mut yielded);
         let (mut acc_s, mut e_s, mut edot_s, mut ff_s) = (acc.clone(), e.clone(), edot.clone(), DVector::zeros(k));
         for i in 0..tasks.len() {
             let share = if i == 0 { s_o } else { s_t };

@@ -680,6 +680,9 @@ pub struct TickDiagnostics {
 pub struct MotionYield {
     pub object: f64,
     pub torso: f64,
+    /// Held still on the contact margins' reserve: nothing was feasible within the margins.
+    #[serde(default)]
+    pub reserve: bool,
 }
 
 impl TickDiagnostics {

@@ -287,10 +287,12 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
     // The motion yields before anything else gives (stages::yielding).
     if !solved && yields {
         let (t, first) = (Instant::now(), r.qp);
-        match yield_tick(r, ws, cfg) {
+        match yield_tick(r, ws, cfg).or_else(|| hold_on_reserve(r, ws, descriptions, cfg, loads)) {
             Some(scale) => (solved, r.motion) = (true, scale),
             None => {
-                // Back to the tick's own motion and the QP's answer to it.
+                // Back to the tick's own motion and rows, and the QP's answer to them.
+                contact_list(&r.team, descriptions, &cfg.contact_margins(), &mut r.contacts)?;
+                unload_feet(&r.team, loads, &mut r.contacts);
                 ws.yielding.full.restore(&mut r.tau_m, &mut r.tau0, &mut r.load, &mut r.f_x);
                 let map = MapInput { team: &r.team, proj: &r.proj, j_c: &ws.contact.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
                 contact_offset(&map, &mut ws.map, &mut r.eta, &mut r.lambda_real);
@@ -358,7 +360,7 @@ fn dense_qp(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig, (full, ref
 fn yield_tick(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> Option<MotionScale> {
     let y = &mut ws.yielding;
     y.full.copy_from(&r.tau_m, &r.tau0, &r.load, &r.f_x);
-    for (scale, m) in [(MotionScale { object: 0.0, torso: 1.0 }, &mut y.object_still), (MotionScale { object: 0.0, torso: 0.0 }, &mut y.all_still)] {
+    for (scale, m) in [(MotionScale { object: 0.0, torso: 1.0, reserve: false }, &mut y.object_still), (MotionScale { object: 0.0, torso: 0.0, reserve: false }, &mut y.all_still)] {
         ws.tasks.joint_torque_yielding(&ws.motion.view(&r.proj), scale, &mut m.tau_m);
         motion_torque(&r.proj, &r.team.s_diag, &m.tau_m, &mut m.tau0, &mut ws.torque);
         m.f_x = ws.f_x_hold;
@@ -372,6 +374,25 @@ fn yield_tick(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> Optio
         ws.yielding.blend_into(scale, &mut r.tau_m, &mut r.tau0, &mut r.load, &mut r.f_x);
         dense_qp(r, ws, cfg, (false, true), &mut build_us, &mut qp_us)
     })
+}
+
+/// A tick on which not even everything held still is feasible within the controller's
+/// margins, held still on the margins' reserve ([`ContactMargins::reserve`]): the rows are
+/// built again with it and the object (then everything) held still is tried; the scale held
+/// at, its `reserve` set. `None` when that fails too (the rows are left on the reserve).
+///
+/// [`ContactMargins::reserve`]: crate::units::contact_margins::ContactMargins::reserve
+fn hold_on_reserve(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMap<String, RobotDescription>, cfg: &PidcConfig, loads: &[FootLoad]) -> Option<MotionScale> {
+    contact_list(&r.team, descriptions, &cfg.contact_margins().reserve(), &mut r.contacts).ok()?;
+    unload_feet(&r.team, loads, &mut r.contacts);
+    let (mut build_us, mut qp_us) = (0.0, 0.0);
+    for still in [MotionScale { object: 0.0, torso: 1.0, reserve: true }, MotionScale { object: 0.0, torso: 0.0, reserve: true }] {
+        ws.yielding.blend_into(still, &mut r.tau_m, &mut r.tau0, &mut r.load, &mut r.f_x);
+        if dense_qp(r, ws, cfg, (false, true), &mut build_us, &mut qp_us) {
+            return Some(still);
+        }
+    }
+    None
 }
 
 /// `J_c = [J_cf; J_c,ee]` (eq. jacobian_c) into the workspace, once per tick (with the same

@@ -179,6 +179,6 @@ impl TickReport {
         });
         d.grasp_slip = self.grasp.as_ref().map_or(0.0, |g| g.fit_residual);
         set_note(&mut d.fallback, self.fallback.as_deref().or(self.release.as_deref()));
-        d.motion_yield = (self.motion != MotionScale::FULL).then_some(protocol::MotionYield { object: self.motion.object, torso: self.motion.torso });
+        d.motion_yield = (self.motion != MotionScale::FULL).then_some(protocol::MotionYield { object: self.motion.object, torso: self.motion.torso, reserve: self.motion.reserve });
     }
 }

@@ -28,6 +28,15 @@ impl Default for ContactMargins {
 }
 
 impl ContactMargins {
+    /// The margins' reserve, which a team holding an object uses only to hold it still when
+    /// nothing is feasible within the margins (`crate::pidc::stages::yielding`): the centre of
+    /// pressure may use the whole palm and the squeeze may drop to half its minimum; the
+    /// friction share and the feet's minimum stay (they are what keeps the contacts from
+    /// sliding and the feet on the ground).
+    pub fn reserve(&self) -> ContactMargins {
+        ContactMargins { f_min_hand: 0.5 * self.f_min_hand, patch_margin: 0.75, ..*self }
+    }
+
     /// Minimum forces finite and non-negative, margins in `(0, 1]` (the error names the field).
     pub fn check(&self) -> Result<(), ControllerError> {
         self.check_forces()?;

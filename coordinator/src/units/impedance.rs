@@ -96,6 +96,9 @@ pub enum Yields {
 pub struct MotionScale {
     pub object: f64,
     pub torso: f64,
+    /// Held still on the contact margins' reserve (the rows with
+    /// `ContactMargins::reserve`): nothing else was feasible.
+    pub reserve: bool,
 }
 
 impl Default for MotionScale {
@@ -106,7 +109,7 @@ impl Default for MotionScale {
 
 impl MotionScale {
     /// Every task tracked.
-    pub const FULL: MotionScale = MotionScale { object: 1.0, torso: 1.0 };
+    pub const FULL: MotionScale = MotionScale { object: 1.0, torso: 1.0, reserve: false };
 
     /// The share of the motion a task of group `g` keeps.
     pub fn of(&self, g: Yields) -> f64 {

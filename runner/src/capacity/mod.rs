@@ -156,12 +156,17 @@ impl ScenarioCapacity {
     }
 }
 
+/// The heaviest object the plan's team holds at its start pose, within `tolerance` kg.
+pub fn start_capacity(plan: &Plan, tolerance: f64) -> Result<Capacity, CheckError> {
+    Ok(static_problem(&plan.scene.world, &plan.loaded_robots(), pidc_config(&plan.controller)?)?.capacity(tolerance)?)
+}
+
 /// The heaviest object the plan's team holds at its start pose and along its whole motion,
 /// within `tolerance` kg ([`ScenarioCapacity::whole`] is what the plan's check agrees with).
 pub fn capacity(plan: &Plan, tolerance: f64) -> Result<ScenarioCapacity, CheckError> {
     let cfg = pidc_config(&plan.controller)?;
     let (world, robots) = (&plan.scene.world, plan.loaded_robots());
-    let start = static_problem(world, &robots, cfg)?.capacity(tolerance)?;
+    let start = start_capacity(plan, tolerance)?;
     let motion = match samples_of(world, &robots, &plan.references, cfg)? {
         Some(samples) => Some(motion::capacity_along(&samples, tolerance)?),
         None => None,

@@ -7,8 +7,14 @@
 //! acceleration asked, its damping bringing it to rest where it is; see
 //! [`TaskStack::joint_torque_yielding`]). The object's motion yields first, with the torsos
 //! tracked whole; only when even the object held still is infeasible do the torsos yield too.
-//! The tick is solved at the largest share that is feasible, and the grasp is let go
-//! ([`crate::units::release`]) only when holding everything still is infeasible too.
+//! The tick is solved at the largest share that is feasible. A pose the team reached on the
+//! way may be past what even holding still allows within the controller's margins (the
+//! margins are a reserve, not the physics): then the object, and if need be everything, is
+//! held still on the margins' reserve ([`ContactMargins::reserve`]: the whole palm, half the
+//! least squeeze). The grasp is let go ([`crate::units::release`]) only when that is
+//! infeasible too.
+//!
+//! [`ContactMargins::reserve`]: crate::units::contact_margins::ContactMargins::reserve
 //!
 //! **Why a share of the tick's task accelerations**, and not a time-scaling of the reference
 //! or a strict hierarchy of QPs: `tau_M`, hence `tau_0 = [P S]^+ P tau_M`, the object's load
@@ -36,13 +42,13 @@ pub const YIELD_STEPS: u32 = 5;
 /// is left at the returned scale (the last call is at it), or, on `None` (even everything held
 /// still is infeasible), at everything held still.
 pub fn yield_motion(mut feasible: impl FnMut(MotionScale) -> bool) -> Option<MotionScale> {
-    if feasible(MotionScale { object: 0.0, torso: 1.0 }) {
-        let s = largest_share(|s| feasible(MotionScale { object: s, torso: 1.0 }));
-        return Some(MotionScale { object: s, torso: 1.0 });
+    if feasible(MotionScale { object: 0.0, torso: 1.0, reserve: false }) {
+        let s = largest_share(|s| feasible(MotionScale { object: s, torso: 1.0, reserve: false }));
+        return Some(MotionScale { object: s, torso: 1.0, reserve: false });
     }
-    if feasible(MotionScale { object: 0.0, torso: 0.0 }) {
-        let s = largest_share(|s| feasible(MotionScale { object: 0.0, torso: s }));
-        return Some(MotionScale { object: 0.0, torso: s });
+    if feasible(MotionScale { object: 0.0, torso: 0.0, reserve: false }) {
+        let s = largest_share(|s| feasible(MotionScale { object: 0.0, torso: s, reserve: false }));
+        return Some(MotionScale { object: 0.0, torso: s, reserve: false });
     }
     None
 }
@@ -167,6 +173,6 @@ mod tests {
             false
         })
         .is_none());
-        assert_eq!(last, Some(MotionScale { object: 0.0, torso: 0.0 }));
+        assert_eq!(last, Some(MotionScale { object: 0.0, torso: 0.0, reserve: false }));
     }
 }
