@@ -8,28 +8,14 @@
 //! ticks and the release. Before the release existed, both cases below threw the two robots
 //! over (torsos 0.4-1.3 m off, up to 180 deg).
 
-use std::path::{Path, PathBuf};
-
-use team_runner::evaluate::{self, Metrics};
-use team_runner::plan::{self, Plan};
-use team_runner::run::{self, RunOptions};
+use team_runner::evaluate::Metrics;
+use team_runner::plan;
 use team_runner::scenario::Scenario;
 
+mod common;
+use common::scenario::{repo, run_plan};
+
 const RELEASED: &str = "grasp released (hands free, feet only)";
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("repo root").to_path_buf()
-}
-
-fn run_plan(plan: &Plan, name: &str) -> Metrics {
-    let dir = repo().join("target/test-reports").join(name);
-    std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(plan, &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() }, &dir).expect("the run completes");
-    let eval = evaluate::evaluate(plan, &records, "embedded");
-    evaluate::write_report(plan, &eval, &dir).expect("report written");
-    println!("{}", evaluate::summary(&eval.metrics, &dir));
-    eval.metrics
-}
 
 /// The bound of the issue, on the ground truth: every torso within 5 cm and 10 deg of its hold.
 fn assert_team_standing(m: &Metrics, robots: usize) {

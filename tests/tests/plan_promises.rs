@@ -13,26 +13,11 @@
 //!   `TEAM_RANDOM_CASES=300 cargo test --release -p team-tests --test plan_promises -- --nocapture`
 //!   runs more.
 
-use std::path::{Path, PathBuf};
-
-use team_runner::evaluate::{self, Metrics};
-use team_runner::plan::{self, Plan, PlanError};
-use team_runner::run::{self, RunOptions};
+use team_runner::plan::{self, PlanError};
 use team_runner::scenario::Scenario;
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("repo root").to_path_buf()
-}
-
-fn run_plan(plan: &Plan, name: &str) -> Metrics {
-    let dir = repo().join("target/test-reports").join(name);
-    std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(plan, &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() }, &dir).expect("the run completes");
-    let eval = evaluate::evaluate(plan, &records, "embedded");
-    evaluate::write_report(plan, &eval, &dir).expect("report written");
-    println!("{}", evaluate::summary(&eval.metrics, &dir));
-    eval.metrics
-}
+mod common;
+use common::scenario::{repo, run_plan};
 
 fn beam(sets: &[String]) -> Scenario {
     Scenario::load(repo().join("scenarios/beam3_unequal.toml"), sets).expect("scenario")

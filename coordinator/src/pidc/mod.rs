@@ -286,19 +286,8 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
     let mut solved = dense_qp(r, ws, cfg, (true, yields), &mut build_us, &mut qp_us);
     // The motion yields before anything else gives (stages::yielding).
     if !solved && yields {
-        let (t, first) = (Instant::now(), r.qp);
-        match yield_tick(r, ws, cfg).or_else(|| hold_on_reserve(r, ws, descriptions, cfg, loads)) {
-            Some(scale) => (solved, r.motion) = (true, scale),
-            None => {
-                // Back to the tick's own motion and rows, and the QP's answer to them.
-                contact_list(&r.team, descriptions, &cfg.contact_margins(), &mut r.contacts)?;
-                unload_feet(&r.team, loads, &mut r.contacts);
-                ws.yielding.full.restore(&mut r.tau_m, &mut r.tau0, &mut r.load, &mut r.f_x);
-                let map = MapInput { team: &r.team, proj: &r.proj, j_c: &ws.contact.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
-                contact_offset(&map, &mut ws.map, &mut r.eta, &mut r.lambda_real);
-                r.qp = first;
-            }
-        }
+        let t = Instant::now();
+        solved = yield_or_restore(r, ws, descriptions, cfg, loads)?;
         qp_us += t.elapsed().as_secs_f64() * 1e6;
     }
     // No grasp couples the robots: they take the next steps one by one (below).
@@ -374,6 +363,24 @@ fn yield_tick(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> Optio
         ws.yielding.blend_into(scale, &mut r.tau_m, &mut r.tau0, &mut r.load, &mut r.f_x);
         dense_qp(r, ws, cfg, (false, true), &mut build_us, &mut qp_us)
     })
+}
+
+/// A tick whose QP failed at its motion: solved with the motion yielding, or held still on
+/// the margins' reserve (`r.motion` says which); else everything is put back (the tick's
+/// motion, its rows and the QP's first answer) for the steps after, and `false`.
+fn yield_or_restore(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMap<String, RobotDescription>, cfg: &PidcConfig, loads: &[FootLoad]) -> Result<bool, ControllerError> {
+    let first = r.qp;
+    if let Some(scale) = yield_tick(r, ws, cfg).or_else(|| hold_on_reserve(r, ws, descriptions, cfg, loads)) {
+        r.motion = scale;
+        return Ok(true);
+    }
+    contact_list(&r.team, descriptions, &cfg.contact_margins(), &mut r.contacts)?;
+    unload_feet(&r.team, loads, &mut r.contacts);
+    ws.yielding.full.restore(&mut r.tau_m, &mut r.tau0, &mut r.load, &mut r.f_x);
+    let map = MapInput { team: &r.team, proj: &r.proj, j_c: &ws.contact.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
+    contact_offset(&map, &mut ws.map, &mut r.eta, &mut r.lambda_real);
+    r.qp = first;
+    Ok(false)
 }
 
 /// A tick on which not even everything held still is feasible within the controller's

@@ -21,6 +21,17 @@ pub fn report_dir(name: &str) -> PathBuf {
     repo().join("target/test-reports").join(name)
 }
 
+/// Run a plan embedded, evaluate it and write its report as `name`; its summary is printed.
+pub fn run_plan(plan: &Plan, name: &str) -> Metrics {
+    let dir = report_dir(name);
+    std::fs::create_dir_all(&dir).expect("report dir");
+    let records = run::run(plan, &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() }, &dir).expect("the run completes");
+    let eval = evaluate::evaluate(plan, &records, "embedded");
+    evaluate::write_report(plan, &eval, &dir).expect("report written");
+    println!("{}", evaluate::summary(&eval.metrics, &dir));
+    eval.metrics
+}
+
 /// Run `scenarios/{file}` with `sets`, embedded or `distributed`; the plan and the metrics.
 pub fn run_scenario(file: &str, sets: &[&str], distributed: bool, name: &str) -> (Plan, Metrics) {
     let (plan, metrics, _) = run_scenario_records(file, sets, distributed, name);

@@ -77,14 +77,14 @@ pub fn largest_share(mut feasible: impl FnMut(f64) -> bool) -> f64 {
 /// What a motion scale changes in a tick: `tau_M`, `tau_0`, the object's load `J_x^T F_x` and
 /// `F_x`.
 #[derive(Debug, Clone, Default)]
-pub struct Motion {
+pub struct TickMotion {
     pub tau_m: DVector<f64>,
     pub tau0: DVector<f64>,
     pub load: DVector<f64>,
     pub f_x: Vector6<f64>,
 }
 
-impl Motion {
+impl TickMotion {
     /// A copy of these quantities, reusing the buffers.
     pub fn copy_from(&mut self, tau_m: &DVector<f64>, tau0: &DVector<f64>, load: &DVector<f64>, f_x: &Vector6<f64>) {
         for (dst, src) in [(&mut self.tau_m, tau_m), (&mut self.tau0, tau0), (&mut self.load, load)] {
@@ -109,9 +109,9 @@ impl Motion {
 /// everything held still.
 #[derive(Debug, Clone, Default)]
 pub struct YieldScratch {
-    pub full: Motion,
-    pub object_still: Motion,
-    pub all_still: Motion,
+    pub full: TickMotion,
+    pub object_still: TickMotion,
+    pub all_still: TickMotion,
 }
 
 impl YieldScratch {
@@ -128,7 +128,7 @@ impl YieldScratch {
 
 /// `out = still + s (moving - still)`, entry by entry (exact for the affine quantities of a
 /// motion scale, see the module docs).
-pub fn blend(still: &Motion, moving: &Motion, s: f64, tau_m: &mut DVector<f64>, tau0: &mut DVector<f64>, load: &mut DVector<f64>, f_x: &mut Vector6<f64>) {
+pub fn blend(still: &TickMotion, moving: &TickMotion, s: f64, tau_m: &mut DVector<f64>, tau0: &mut DVector<f64>, load: &mut DVector<f64>, f_x: &mut Vector6<f64>) {
     for (out, a, b) in [(tau_m, &still.tau_m, &moving.tau_m), (tau0, &still.tau0, &moving.tau0), (load, &still.load, &moving.load)] {
         zeros_v(out, a.len());
         for i in 0..a.len() {
