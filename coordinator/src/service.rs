@@ -276,7 +276,7 @@ impl<'a> Service<'a> {
     /// ([`CoordinatorConfig::wait_for_references`]); warns once when the wait ran out.
     fn awaiting_references(&mut self) -> Option<String> {
         let limit = self.cfg.wait_for_references?;
-        if self.refs.seen {
+        if self.refs.applied {
             return None;
         }
         if self.started.elapsed() < limit {
@@ -580,11 +580,11 @@ impl<'a> Service<'a> {
             controller.set_late(&self.roster.late());
         }
         self.refs.drain(references, &mut self.counters);
-        let waiting = self.awaiting_references();
         let delay = team_delay(&terms);
         // The state carried to where the command applies is solved with that tick's references.
         let predicting = self.predictor.is_some() && controller.keep_accelerations(delay > 0);
         self.refs.apply(if predicting { tick.saturating_add(delay) } else { tick }, controller);
+        let waiting = self.awaiting_references();
         if let Some(p) = self.predictor.as_ref().filter(|_| predicting) {
             p.predict(tick, delay, &mut terms);
         }
@@ -678,8 +678,10 @@ fn hold_orders(team: &str, tick: u64, robots: &[String], why: &str, commands: &m
 #[derive(Default)]
 struct ReferenceBuffer {
     by_tick: BTreeMap<u64, TaskReferences>,
-    /// Whether any reference has come.
-    seen: bool,
+    /// Whether a reference has been handed to the controller: one for a tick at most the one
+    /// solved (a planner's references far ahead of the team, which a restarted coordinator
+    /// can hear first, do not end the wait).
+    applied: bool,
     /// Whether the wait for the first references ran out.
     gave_up: bool,
 }
@@ -688,7 +690,6 @@ impl ReferenceBuffer {
     fn take(&mut self, sample: &zenoh::sample::Sample, counters: &mut CoordinatorCounters) {
         match decode_sample::<TaskReferences>(sample) {
             Ok(r) => {
-                self.seen = true;
                 self.by_tick.insert(r.header.tick, r);
             }
             Err(e) => counters.refuse("references", sample.key_expr().as_str(), &e),
@@ -718,6 +719,7 @@ impl ReferenceBuffer {
         }
         if let Some(r) = self.by_tick.remove(&t) {
             controller.set_references(&r);
+            self.applied = true;
         }
     }
 }

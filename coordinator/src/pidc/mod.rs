@@ -281,7 +281,8 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
     }
     form_j_c(r, &mut ws.contact);
     // A team holding an object yields when the QP is infeasible: the active set's proof of
-    // infeasibility is enough to start the yield (Clarabel's certificate costs milliseconds).
+    // infeasibility is enough to start the yield (Clarabel's certificate costs milliseconds);
+    // a QP nothing held still makes feasible is certified again before the steps after.
     let yields = r.grasp.is_some() && !decoupled(&r.team);
     let mut solved = dense_qp(r, ws, cfg, (true, yields), &mut build_us, &mut qp_us);
     // The motion yields before anything else gives (stages::yielding).
@@ -366,10 +367,9 @@ fn yield_tick(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> Optio
 }
 
 /// A tick whose QP failed at its motion: solved with the motion yielding, or held still on
-/// the margins' reserve (`r.motion` says which); else everything is put back (the tick's
-/// motion, its rows and the QP's first answer) for the steps after, and `false`.
+/// the margins' reserve (`r.motion` says which); else the tick's motion and rows are put back
+/// and its QP solved again down the whole chain: whether that solved it.
 fn yield_or_restore(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMap<String, RobotDescription>, cfg: &PidcConfig, loads: &[FootLoad]) -> Result<bool, ControllerError> {
-    let first = r.qp;
     if let Some(scale) = yield_tick(r, ws, cfg).or_else(|| hold_on_reserve(r, ws, descriptions, cfg, loads)) {
         r.motion = scale;
         return Ok(true);
@@ -377,10 +377,11 @@ fn yield_or_restore(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTree
     contact_list(&r.team, descriptions, &cfg.contact_margins(), &mut r.contacts)?;
     unload_feet(&r.team, loads, &mut r.contacts);
     ws.yielding.full.restore(&mut r.tau_m, &mut r.tau0, &mut r.load, &mut r.f_x);
-    let map = MapInput { team: &r.team, proj: &r.proj, j_c: &ws.contact.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
-    contact_offset(&map, &mut ws.map, &mut r.eta, &mut r.lambda_real);
-    r.qp = first;
-    Ok(false)
+    // The tick's own QP again, its infeasibility certified down the whole chain this time (the
+    // active set's proof that started the yield rests on thresholds): the steps after see the
+    // status they always saw.
+    let (mut build_us, mut qp_us) = (0.0, 0.0);
+    Ok(dense_qp(r, ws, cfg, (false, false), &mut build_us, &mut qp_us))
 }
 
 /// A tick on which not even everything held still is feasible within the controller's

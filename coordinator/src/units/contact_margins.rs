@@ -27,14 +27,19 @@ impl Default for ContactMargins {
     }
 }
 
+/// The share of the palm's half-sizes the centre of pressure may use on the reserve (the
+/// whole palm let a beam held still at its limit slide out within 0.7 s in MuJoCo; three
+/// quarters held it).
+pub const RESERVE_PATCH: f64 = 0.75;
+
 impl ContactMargins {
     /// The margins' reserve, which a team holding an object uses only to hold it still when
     /// nothing is feasible within the margins (`crate::pidc::stages::yielding`): the centre of
-    /// pressure may use the whole palm and the squeeze may drop to half its minimum; the
+    /// pressure may use [`RESERVE_PATCH`] of the palm and the squeeze may drop to half its minimum; the
     /// friction share and the feet's minimum stay (they are what keeps the contacts from
     /// sliding and the feet on the ground).
     pub fn reserve(&self) -> ContactMargins {
-        ContactMargins { f_min_hand: 0.5 * self.f_min_hand, patch_margin: 0.75, ..*self }
+        ContactMargins { f_min_hand: 0.5 * self.f_min_hand, patch_margin: self.patch_margin.max(RESERVE_PATCH), ..*self }
     }
 
     /// Minimum forces finite and non-negative, margins in `(0, 1]` (the error names the field).

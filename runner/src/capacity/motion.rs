@@ -238,8 +238,9 @@ pub fn capacity_along(samples: &[MotionSample], tolerance: f64) -> Result<Motion
         let binding = s.problem.relaxed(0.0).map_err(|e| s.error(e))?.binding(&s.problem);
         return Err(CheckError::AlongMotion { t: s.t, object: s.object.into(), source: CapacityError::Infeasible { mass: 0.0, binding } });
     }
-    if holds(start.mass, &mut order, &mut solves)?.is_none() {
-        (lo, limiting) = (start.mass, 0);
+    match holds(start.mass, &mut order, &mut solves)? {
+        None => lo = start.mass,
+        Some(i) => (hi, limiting) = (start.mass, i),
     }
     while hi - lo > tolerance {
         let mid = 0.5 * (lo + hi);

@@ -10,8 +10,8 @@
 //! The tick is solved at the largest share that is feasible. A pose the team reached on the
 //! way may be past what even holding still allows within the controller's margins (the
 //! margins are a reserve, not the physics): then the object, and if need be everything, is
-//! held still on the margins' reserve ([`ContactMargins::reserve`]: the whole palm, half the
-//! least squeeze). The grasp is let go ([`crate::units::release`]) only when that is
+//! held still on the margins' reserve ([`ContactMargins::reserve`]: three quarters of the
+//! palm, half the least squeeze). The grasp is let go ([`crate::units::release`]) only when that is
 //! infeasible too.
 //!
 //! [`ContactMargins::reserve`]: crate::units::contact_margins::ContactMargins::reserve
@@ -43,11 +43,12 @@ pub const YIELD_STEPS: u32 = 5;
 /// still is infeasible), at everything held still.
 pub fn yield_motion(mut feasible: impl FnMut(MotionScale) -> bool) -> Option<MotionScale> {
     if feasible(MotionScale { object: 0.0, torso: 1.0, reserve: false }) {
-        let s = largest_share(|s| feasible(MotionScale { object: s, torso: 1.0, reserve: false }));
-        return Some(MotionScale { object: s, torso: 1.0, reserve: false });
+        if let Some(s) = largest_share(|s| feasible(MotionScale { object: s, torso: 1.0, reserve: false })) {
+            return Some(MotionScale { object: s, torso: 1.0, reserve: false });
+        }
     }
     if feasible(MotionScale { object: 0.0, torso: 0.0, reserve: false }) {
-        let s = largest_share(|s| feasible(MotionScale { object: 0.0, torso: s, reserve: false }));
+        let s = largest_share(|s| feasible(MotionScale { object: 0.0, torso: s, reserve: false }))?;
         return Some(MotionScale { object: 0.0, torso: s, reserve: false });
     }
     None
@@ -55,8 +56,8 @@ pub fn yield_motion(mut feasible: impl FnMut(MotionScale) -> bool) -> Option<Mot
 
 /// The largest share in `[0, 1)` that `feasible` accepts, to `2^-YIELD_STEPS`, given that it
 /// accepts 0 and refuses 1 (the interval of feasible shares, see the module docs); the last
-/// call is at the share returned.
-pub fn largest_share(mut feasible: impl FnMut(f64) -> bool) -> f64 {
+/// call is at the share returned. `None` when the tick, solved again at that share, fails.
+pub fn largest_share(mut feasible: impl FnMut(f64) -> bool) -> Option<f64> {
     let (mut lo, mut hi) = (0.0, 1.0);
     let mut at_lo = true;
     for _ in 0..YIELD_STEPS {
@@ -68,10 +69,7 @@ pub fn largest_share(mut feasible: impl FnMut(f64) -> bool) -> f64 {
             hi = mid;
         }
     }
-    if !at_lo {
-        feasible(lo);
-    }
-    lo
+    (at_lo || feasible(lo)).then_some(lo)
 }
 
 /// What a motion scale changes in a tick: `tau_M`, `tau_0`, the object's load `J_x^T F_x` and
@@ -149,7 +147,8 @@ mod tests {
             let s = largest_share(|s| {
                 last = s;
                 s <= limit
-            });
+            })
+            .expect("the share found solves again");
             assert!(s <= limit && limit - s < 1.0 / f64::from(1u32 << YIELD_STEPS), "limit {limit}: share {s}");
             assert_eq!(last, s, "the tick is left at the share found");
         }
