@@ -24,10 +24,10 @@ use std::sync::Arc;
 
 use coordinator::capacity::{Capacity, CapacityError, StaticProblem, REACHED_TOL};
 use coordinator::{ControllerSpec, PidcConfig};
-use nalgebra::{UnitQuaternion, Vector3};
-use protocol::{DynamicsTerms, Header, Pose, RobotDescription, RobotState};
+use nalgebra::Vector3;
+use protocol::{DynamicsTerms, RobotDescription};
 use robot_agent::dynamics_source::robot_description;
-use robot_agent::terms::{empty_terms, ActiveContacts, TermsBuilder, TermsError};
+use robot_agent::terms::TermsError;
 use robot_model::Robot;
 use sim_bridge::world::WorldSpec;
 use thiserror::Error;
@@ -66,30 +66,10 @@ pub fn start_terms(world: &WorldSpec, robots: &[Arc<Robot>]) -> Result<(Vec<Dyna
     }
     let mut terms = Vec::new();
     let mut descs = Vec::new();
-    for (placement, robot) in world.robots.iter().zip(robots) {
-        let id = placement.id.as_str();
-        let terms_err = |source| CheckError::Terms { robot: id.to_string(), source };
-        let mut joints: Vec<f64> = robot.standing_q.iter().skip(robot.model.nq - robot.model.joint_names.len()).copied().collect();
-        for (j, v) in &placement.joint_overrides {
-            let k = robot.model.joint_names.iter().position(|n| n == j).ok_or_else(|| CheckError::UnknownJoint { robot: id.to_string(), joint: j.clone() })?;
-            joints[k] = *v;
-        }
-        let yaw = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), placement.base_yaw);
-        let state = RobotState {
-            header: Header::new(TEAM, Some(id), 0, 0),
-            base_pose: Pose { position: placement.base_position, orientation: [yaw.w, yaw.i, yaw.j, yaw.k] },
-            base_twist: [0.0; 6],
-            joint_velocities: vec![0.0; joints.len()],
-            joint_positions: joints,
-            time: 0.0,
-            foot_forces: Vec::new(),
-        };
-        let mut builder = TermsBuilder::new(robot).map_err(terms_err)?;
-        builder.load_state(robot, &state).map_err(terms_err)?;
-        let mut out = empty_terms(TEAM, id);
-        builder.compute(robot, &ActiveContacts::all_stance(robot), &mut out).map_err(terms_err)?;
-        terms.push(out);
-        descs.push(robot_description(robot, TEAM, id));
+    for (i, (placement, robot)) in world.robots.iter().zip(robots).enumerate() {
+        let q = motion::start_q(world, i, robot)?;
+        terms.push(motion::rest_terms(robot, &placement.id, &q)?);
+        descs.push(robot_description(robot, TEAM, &placement.id));
     }
     Ok((terms, descs))
 }

@@ -69,7 +69,7 @@ pub fn sample_times(duration: f64) -> Vec<f64> {
 
 /// A robot's configuration (the model's `q`: base pose, then joints) at its placement, with
 /// the joints the plan solved.
-fn start_q(world: &WorldSpec, i: usize, robot: &Robot) -> Result<Vec<f64>, CheckError> {
+pub(super) fn start_q(world: &WorldSpec, i: usize, robot: &Robot) -> Result<Vec<f64>, CheckError> {
     let placement = &world.robots[i];
     let mut q: Vec<f64> = robot.standing_q.iter().copied().collect();
     let off = robot.model.nq - robot.model.joint_names.len();
@@ -138,26 +138,27 @@ impl Follower {
         Ok(&self.q)
     }
 
-    /// The agents' terms at the configuration, at rest, every foot in stance and the hand in grasp.
-    fn terms(&self) -> Result<DynamicsTerms, CheckError> {
-        let terms_err = |source| CheckError::Terms { robot: self.id.clone(), source };
-        let off = self.robot.model.nq - self.robot.model.joint_names.len();
-        let joints = self.q[off..].to_vec();
-        let state = RobotState {
-            header: Header::new(TEAM, Some(&self.id), 0, 0),
-            base_pose: Pose { position: [self.q[0], self.q[1], self.q[2]], orientation: [self.q[3], self.q[4], self.q[5], self.q[6]] },
-            base_twist: [0.0; 6],
-            joint_velocities: vec![0.0; joints.len()],
-            joint_positions: joints,
-            time: 0.0,
-            foot_forces: Vec::new(),
-        };
-        let mut builder = TermsBuilder::new(&self.robot).map_err(terms_err)?;
-        builder.load_state(&self.robot, &state).map_err(terms_err)?;
-        let mut out = empty_terms(TEAM, &self.id);
-        builder.compute(&self.robot, &ActiveContacts::all_stance(&self.robot), &mut out).map_err(terms_err)?;
-        Ok(out)
-    }
+}
+
+/// The agents' terms of robot `id` at configuration `q` (the model's: base pose, then joints),
+/// at rest, every foot in stance and the hand in grasp: what the coordinator gets in a run.
+pub(super) fn rest_terms(robot: &Robot, id: &str, q: &[f64]) -> Result<DynamicsTerms, CheckError> {
+    let terms_err = |source| CheckError::Terms { robot: id.to_string(), source };
+    let joints = q[robot.model.nq - robot.model.joint_names.len()..].to_vec();
+    let state = RobotState {
+        header: Header::new(TEAM, Some(id), 0, 0),
+        base_pose: Pose { position: [q[0], q[1], q[2]], orientation: [q[3], q[4], q[5], q[6]] },
+        base_twist: [0.0; 6],
+        joint_velocities: vec![0.0; joints.len()],
+        joint_positions: joints,
+        time: 0.0,
+        foot_forces: Vec::new(),
+    };
+    let mut builder = TermsBuilder::new(robot).map_err(terms_err)?;
+    builder.load_state(robot, &state).map_err(terms_err)?;
+    let mut out = empty_terms(TEAM, id);
+    builder.compute(robot, &ActiveContacts::all_stance(robot), &mut out).map_err(terms_err)?;
+    Ok(out)
 }
 
 /// The team problem at every sample of the motion (see the module docs), with the
@@ -177,7 +178,7 @@ pub fn motion_samples(world: &WorldSpec, robots: &[Arc<Robot>], refs: &Reference
         let mut terms = Vec::with_capacity(team.len());
         for (i, f) in team.iter_mut().enumerate() {
             f.follow(t, &refs.torso_at(i, Some(t)).pose, &x_o)?;
-            terms.push(f.terms()?);
+            terms.push(rest_terms(&f.robot, &f.id, &f.q)?);
         }
         let centre = x_o.translation.vector;
         let r = x_o.rotation.to_rotation_matrix();
