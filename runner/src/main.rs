@@ -155,6 +155,16 @@ enum Command {
         /// Width of the bisection's final bracket, kg.
         #[arg(long, default_value_t = coordinator::capacity::CAPACITY_TOLERANCE)]
         tolerance: f64,
+        /// Also find the heaviest object held in MuJoCo (every acceptance check passed), by
+        /// bisection on the mass in lockstep runs, and its ratio to the computed capacity.
+        #[arg(long)]
+        simulate: bool,
+        /// Width of the simulated bisection's final bracket, kg (default: 2 % of the capacity).
+        #[arg(long)]
+        simulate_tolerance: Option<f64>,
+        /// The simulated search's reports (default: reports/<scenario>-capacity).
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
     /// Smoke run of the whole stack: sim-bridge, agents and coordinator exchange real
     /// messages over Zenoh for N ticks (placeholder physics and controller).
@@ -258,13 +268,23 @@ fn main() -> Result<()> {
             print!("{}", compare::limits_summary(&limits, what, &scales));
             println!("report: {}", dir.display());
         }
-        Command::Capacity { scenario, mut set, tolerance } => {
+        Command::Capacity { scenario, mut set, tolerance, simulate, simulate_tolerance, out } => {
             // The scenario's own mass may be beyond the capacity: plan without the check.
             set.push("capacity_check=false".into());
             let plan = plan::plan(&Scenario::load(&scenario, &set)?, &repo_root())?;
             let t0 = std::time::Instant::now();
             let cap = capacity::capacity(&plan, tolerance)?;
             print!("{}", capacity::summary(&plan, &cap, tolerance, t0.elapsed().as_secs_f64()));
+            if simulate {
+                let computed = cap.mass();
+                let dir = out.unwrap_or_else(|| PathBuf::from(format!("{}-capacity", team_runner::run::default_report_dir(&scenario).display())));
+                let sim = capacity::simulated::bisect(computed, simulate_tolerance.unwrap_or(0.02 * computed), 16, |mass| {
+                    let trial = capacity::simulated::run_trial(&plan.scenario, &repo_root(), mass, &dir.join(format!("{mass:.3}kg")))?;
+                    println!("  {mass:.3} kg: {}", if trial.held { "held" } else { "not held" });
+                    Ok::<_, anyhow::Error>(trial)
+                })?;
+                print!("{}", capacity::simulated::summary(&sim, computed));
+            }
         }
         Command::Report { recording, out } => {
             let dir = out.unwrap_or_else(|| recording.parent().map(Path::to_path_buf).unwrap_or_default());

@@ -40,10 +40,17 @@ pub enum PlanError {
     #[error("controller: {0}")]
     Controller(#[from] coordinator::ControllerError),
     /// Not `#[from]`: the message holds the check's whole error, no source chain repeats it.
-    #[error("payload check: {0} (`capacity_check = false` runs anyway)")]
-    Capacity(crate::capacity::CheckError),
+    #[error("payload check (the object's mass and {:.0} % more, `payload_margin`): {source} (`capacity_check = false` runs anyway)", 100.0 * margin)]
+    Capacity { source: crate::capacity::CheckError, margin: f64 },
     #[error(transparent)]
     Walk(#[from] planner::walk::WalkError),
+}
+
+impl PlanError {
+    /// The payload check's refusal of scenario `s`.
+    fn capacity(s: &Scenario, source: crate::capacity::CheckError) -> Self {
+        PlanError::Capacity { source, margin: s.payload_margin }
+    }
 }
 
 /// Everything a scenario run needs, for either mode.
@@ -257,7 +264,8 @@ fn start_hand_loads(s: &Scenario, scene: &Scene, loaded: &[Arc<Robot>], pidc: &P
     let mut hand_loads = Vec::new();
     if check || s.walk.is_some() {
         let t0 = std::time::Instant::now();
-        hand_loads = crate::capacity::start_hand_loads(&scene.world, loaded, pidc, check).map_err(PlanError::Capacity)?;
+        let check = check.then_some(s.payload_margin);
+        hand_loads = crate::capacity::start_hand_loads(&scene.world, loaded, pidc, check).map_err(|e| PlanError::capacity(s, e))?;
         tracing::info!(ms = 1e3 * t0.elapsed().as_secs_f64(), mass = s.object.mass, checked = check, "static team problem at the start pose solved");
     }
     Ok(hand_loads)
@@ -268,14 +276,14 @@ fn start_hand_loads(s: &Scenario, scene: &Scene, loaded: &[Arc<Robot>], pidc: &P
 /// object's position and the binding limits.
 fn check_along_motion(s: &Scenario, scene: &Scene, loaded: &[Arc<Robot>], pidc: &PidcConfig, refs: &ReferencePlan) -> Result<(), PlanError> {
     let t0 = std::time::Instant::now();
-    let Some(samples) = crate::capacity::samples_of(&scene.world, loaded, refs, pidc).map_err(PlanError::Capacity)? else { return Ok(()) };
-    crate::capacity::motion::check_along(&samples, s.object.mass).map_err(PlanError::Capacity)?;
+    let samples = crate::capacity::samples_of(&scene.world, loaded, refs, pidc).map_err(|e| PlanError::capacity(s, e))?;
+    crate::capacity::motion::check_along(&samples, s.object.mass * (1.0 + s.payload_margin)).map_err(|e| PlanError::capacity(s, e))?;
     tracing::info!(ms = 1e3 * t0.elapsed().as_secs_f64(), samples = samples.len(), mass = s.object.mass, "the team problem along the motion solved");
     Ok(())
 }
 
 /// The scenario's walk, planned from the robots' start poses (`None` without a `[walk]`).
-fn plan_walk(s: &Scenario, robots: &[PlannedRobot], scene: &Scene, object: &ObjectSpec, hand_loads: &[(String, HandLoad)]) -> Result<Option<Arc<planner::walk::Walk>>, PlanError> {
+pub(crate) fn plan_walk(s: &Scenario, robots: &[PlannedRobot], scene: &Scene, object: &ObjectSpec, hand_loads: &[(String, HandLoad)]) -> Result<Option<Arc<planner::walk::Walk>>, PlanError> {
     let Some(w) = &s.walk else { return Ok(None) };
     let ids: Vec<(String, Arc<Robot>)> = robots.iter().map(|r| (r.id.clone(), r.robot.clone())).collect();
     let object_start = Isometry3::from_parts(Translation3::from(Vector3::from(object.position)), quat_from_wxyz(object.orientation));

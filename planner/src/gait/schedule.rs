@@ -435,6 +435,17 @@ impl GaitPlan {
         Some((p, v.into(), a.into()))
     }
 
+    /// Where robot `i`'s foot `k` is planned at `t`: on its swing while it swings, where it
+    /// landed once down (the contact point's frame, not pressed); `None` before its first
+    /// lift-off (it stands where it started) and for a foot that never steps.
+    pub fn foot_position(&self, i: usize, k: usize, t: f64) -> Option<Vector3<f64>> {
+        let s = self.last_step(i, k, t)?;
+        if t >= s.touchdown {
+            return Some(s.to);
+        }
+        Some(swing(&s.from, &s.to, self.params.lift_height, s.touchdown - s.liftoff, t - s.liftoff).0)
+    }
+
     /// The bound on robot `i`'s foot `k` normal force at `t`: a ramp from `unload_force` to 0
     /// over `t_unload` before each lift-off, and back up over `t_load` after each touchdown.
     pub fn max_normal_force(&self, i: usize, k: usize, t: f64) -> Option<f64> {

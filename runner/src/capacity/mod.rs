@@ -16,9 +16,12 @@
 //! * [`motion`]: the same along the whole motion (poses sampled along the references, with
 //!   the object's reference acceleration): the plan's check at the scenario's mass
 //!   ([`motion::check_along`]) and the heaviest object held everywhere
-//!   ([`motion::capacity_along`]).
+//!   ([`motion::capacity_along`]);
+//! * [`simulated`]: the heaviest object held in MuJoCo, by bisection over closed-loop runs, to
+//!   measure the computed capacity against (`team capacity --simulate`).
 
 pub mod motion;
+pub mod simulated;
 
 use std::sync::Arc;
 
@@ -68,7 +71,7 @@ pub fn start_terms(world: &WorldSpec, robots: &[Arc<Robot>]) -> Result<(Vec<Dyna
     let mut descs = Vec::new();
     for (i, (placement, robot)) in world.robots.iter().zip(robots).enumerate() {
         let q = motion::start_q(world, i, robot)?;
-        terms.push(motion::rest_terms(robot, &placement.id, &q)?);
+        terms.push(motion::rest_terms(robot, &placement.id, &q, &robot_agent::terms::ActiveContacts::all_stance(robot))?);
         descs.push(robot_description(robot, TEAM, &placement.id));
     }
     Ok((terms, descs))
@@ -82,17 +85,21 @@ pub fn static_problem(world: &WorldSpec, robots: &[Arc<Robot>], cfg: &PidcConfig
     Ok(StaticProblem::build(&terms, &descs, &cfg.contact_margins(), Vector3::from(object.position))?)
 }
 
-/// The statics of a plan's start pose from one solve of the static team problem: with
-/// `check`, a load that no forces within the controller's limits hold is refused
-/// ([`CapacityError::Infeasible`] names the binding limits); the answer is what the object applies to each robot's hand (the forces
-/// that hold it, or without `check` and where none do, the least-violation ones), which a
-/// walk's planner keeps inside the support triangle with each robot's weight.
-pub fn start_hand_loads(world: &WorldSpec, robots: &[Arc<Robot>], cfg: &PidcConfig, check: bool) -> Result<Vec<(String, HandLoad)>, CheckError> {
+/// The statics of a plan's start pose from the static team problem: with `check` (the
+/// payload margin, a share of the mass), a load that no forces within the controller's limits
+/// hold with that margin is refused ([`CapacityError::Infeasible`] names the binding limits);
+/// the answer is what the object applies to each robot's hand (the forces that hold it, or
+/// where none do, the least-violation ones), which a walk's planner keeps inside the support
+/// triangle with each robot's weight.
+pub fn start_hand_loads(world: &WorldSpec, robots: &[Arc<Robot>], cfg: &PidcConfig, check: Option<f64>) -> Result<Vec<(String, HandLoad)>, CheckError> {
     let mass = world.object.ok_or(CheckError::NoObject)?.mass;
     let problem = static_problem(world, robots, cfg)?;
+    if let Some(margin) = check {
+        problem.solve(mass * (1.0 + margin))?;
+    }
     let lambda = match problem.solve(mass) {
         Ok(sol) => sol.lambda,
-        Err(CapacityError::Infeasible { .. }) if !check => problem.relaxed(mass)?.lambda,
+        Err(CapacityError::Infeasible { .. }) => problem.relaxed(mass)?.lambda,
         Err(e) => return Err(e.into()),
     };
     Ok(problem
@@ -110,30 +117,76 @@ pub fn pidc_config(controller: &ControllerSpec) -> Result<&PidcConfig, CheckErro
     }
 }
 
-/// The team problem along a plan's motion ([`motion::motion_samples`]); `None` for a walk,
-/// whose contact sets the gait planner checks (see [`motion`]).
-pub fn samples_of(world: &WorldSpec, robots: &[Arc<Robot>], refs: &crate::plan::ReferencePlan, cfg: &PidcConfig) -> Result<Option<Vec<motion::MotionSample>>, CheckError> {
-    if refs.walk.is_some() {
-        return Ok(None);
-    }
+/// The team problem along a plan's motion, walks included ([`motion::motion_samples`]).
+pub fn samples_of(world: &WorldSpec, robots: &[Arc<Robot>], refs: &crate::plan::ReferencePlan, cfg: &PidcConfig) -> Result<Vec<motion::MotionSample>, CheckError> {
     let object = world.object.ok_or(CheckError::NoObject)?;
     let inertia = object.principal_inertia().map(|i| if object.mass > 0.0 { i / object.mass } else { 0.0 });
-    Ok(Some(motion::motion_samples(world, robots, refs, cfg, inertia)?))
+    motion::motion_samples(world, robots, refs, cfg, inertia)
 }
 
-/// The heaviest object of a scenario: at its start pose, and along its whole motion.
+/// The heaviest object of a scenario: at its start pose, along its whole motion, and what its
+/// walk's planner accepts.
 #[derive(Debug, Clone)]
 pub struct ScenarioCapacity {
     pub start: Capacity,
-    /// `None` for a walk (checked at the start pose only).
-    pub motion: Option<motion::MotionCapacity>,
+    pub motion: motion::MotionCapacity,
+    /// A walk's planner refusing a lighter object than the team problem along the motion
+    /// holds (its arm-torque and support checks with the torsos shifted for the steps).
+    pub walk: Option<WalkLimit>,
+    /// The scenario's payload margin: the plan checks the object's mass and this share more.
+    pub margin: f64,
+}
+
+/// The heaviest object a walk's planner accepts, within the bisection's tolerance.
+#[derive(Debug, Clone)]
+pub struct WalkLimit {
+    pub mass: f64,
+    /// The lightest mass refused, and why.
+    pub refused_at: f64,
+    pub reason: String,
 }
 
 impl ScenarioCapacity {
-    /// The heaviest object held throughout: along the motion where it was checked.
+    /// The team problem's capacity along the whole motion.
     pub fn whole(&self) -> &Capacity {
-        self.motion.as_ref().map_or(&self.start, |m| &m.capacity)
+        &self.motion.capacity
     }
+
+    /// The heaviest object the plan accepts: held along the motion with the payload margin
+    /// and, for a walk, accepted by the walk's planner.
+    pub fn mass(&self) -> f64 {
+        let held = self.whole().mass / (1.0 + self.margin);
+        self.walk.as_ref().map_or(held, |w| w.mass.min(held))
+    }
+}
+
+/// The walk of `plan` planned again for an object of `mass` kg (its steps are planned with the
+/// hands' loads at the start pose): the planner's refusal, if it refuses.
+fn walk_refuses(plan: &Plan, robots: &[Arc<Robot>], cfg: &PidcConfig, mass: f64) -> Result<Option<String>, CheckError> {
+    let mut world = plan.scene.world.clone();
+    let object = world.object.as_mut().ok_or(CheckError::NoObject)?;
+    object.mass = mass;
+    let object = *object;
+    let loads = start_hand_loads(&world, robots, cfg, None)?;
+    Ok(crate::plan::plan_walk(&plan.scenario, &plan.robots, &plan.scene, &object, &loads).err().map(|e| e.to_string()))
+}
+
+/// The heaviest object a plan's walk accepts, by bisection below `upper` kg (`None`: it
+/// accepts `upper`, or the plan has no walk).
+fn walk_limit(plan: &Plan, robots: &[Arc<Robot>], cfg: &PidcConfig, upper: f64, tolerance: f64) -> Result<Option<WalkLimit>, CheckError> {
+    if plan.references.walk.is_none() {
+        return Ok(None);
+    }
+    let Some(mut reason) = walk_refuses(plan, robots, cfg, upper)? else { return Ok(None) };
+    let (mut lo, mut hi) = (0.0, upper);
+    while hi - lo > tolerance {
+        let mid = 0.5 * (lo + hi);
+        match walk_refuses(plan, robots, cfg, mid)? {
+            None => lo = mid,
+            Some(r) => (hi, reason) = (mid, r),
+        }
+    }
+    Ok(Some(WalkLimit { mass: lo, refused_at: hi, reason }))
 }
 
 /// The heaviest object the plan's team holds at its start pose, within `tolerance` kg.
@@ -147,11 +200,10 @@ pub fn capacity(plan: &Plan, tolerance: f64) -> Result<ScenarioCapacity, CheckEr
     let cfg = pidc_config(&plan.controller)?;
     let (world, robots) = (&plan.scene.world, plan.loaded_robots());
     let start = start_capacity(plan, tolerance)?;
-    let motion = match samples_of(world, &robots, &plan.references, cfg)? {
-        Some(samples) => Some(motion::capacity_along(&samples, tolerance)?),
-        None => None,
-    };
-    Ok(ScenarioCapacity { start, motion })
+    let motion = motion::capacity_along(&samples_of(world, &robots, &plan.references, cfg)?, tolerance)?;
+    let margin = plan.scenario.payload_margin;
+    let walk = walk_limit(plan, &robots, cfg, motion.capacity.mass / (1.0 + margin), tolerance)?;
+    Ok(ScenarioCapacity { start, motion, walk, margin })
 }
 
 /// The capacity as `team capacity` prints it.
@@ -169,20 +221,23 @@ pub fn summary(plan: &Plan, cap: &ScenarioCapacity, tolerance: f64, seconds: f64
         s.min_foot_force
     );
     let whole = cap.whole();
-    out += &format!("capacity: {:.3} kg (held throughout; {:.3} kg is not; bisection to {tolerance} kg, {:.0} ms)\n", whole.mass, whole.infeasible_at, 1e3 * seconds);
+    out += &format!(
+        "capacity: {:.3} kg (the heaviest object the plan accepts: held along the motion with {:.0} % more, payload_margin; bisection to {tolerance} kg, {:.0} ms)\n",
+        cap.mass(),
+        100.0 * cap.margin,
+        1e3 * seconds
+    );
     out += &format!("  at the start pose: {:.3} kg ({} static problems)\n", cap.start.mass, cap.start.solves);
-    match &cap.motion {
-        Some(m) => {
-            let p = m.object;
-            out += &format!(
-                "  along the motion: {:.3} kg, {} poses sampled; the smallest margin at t = {:.2} s (object at [{:.3}, {:.3}, {:.3}] m; {} problems)\n",
-                m.capacity.mass, m.samples, m.at_s, p.x, p.y, p.z, m.capacity.solves
-            );
-        }
-        None => out += "  along the motion: not checked (a walk: the gait planner checks its support)\n",
+    let m = &cap.motion;
+    let p = m.object;
+    out += &format!(
+        "  along the motion: {:.3} kg, {} poses sampled; the smallest margin at t = {:.2} s (object at [{:.3}, {:.3}, {:.3}] m; {} problems)\n",
+        m.capacity.mass, m.samples, m.at_s, p.x, p.y, p.z, m.capacity.solves
+    );
+    if let Some(w) = &cap.walk {
+        out += &format!("  the walk's planner: {:.3} kg; at {:.4} kg it refuses: {}\n", w.mass, w.refused_at, w.reason);
     }
-    let where_ = cap.motion.as_ref().map_or("the start pose".to_string(), |m| format!("t = {:.2} s", m.at_s));
-    out += &format!("limits the forces holding {:.3} kg reach at {where_} (within {REACHED_TOL} N or Nm):\n", whole.mass);
+    out += &format!("limits the forces holding {:.3} kg reach at t = {:.2} s (within {REACHED_TOL} N or Nm):\n", whole.mass, m.at_s);
     for b in &whole.reached {
         out += &format!("  {b}\n");
     }

@@ -17,13 +17,17 @@
 //! * the object's rows are its Newton-Euler equations at the reference's acceleration and
 //!   angular velocity ([`StaticProblem::with_object_motion`]).
 //!
-//! A walk moves the feet: its contact sets are checked by the gait planner (support margins),
-//! not here, and a scenario with a walk is checked at its start pose only.
+//! A walk moves the feet and changes the contact sets: along a walk each walking robot's feet
+//! are where the gait plans them ([`planner::gait::GaitPlan::foot_position`]), only its stance
+//! feet carry ([`planner::gait::GaitPlan::stance`]), and besides the regular samples every step
+//! is sampled in the middle of its swing, on three feet (the unloading and loading ramps lie
+//! between four feet and three).
 
 use std::sync::Arc;
 
 use coordinator::capacity::{BindingLimit, Capacity, CapacityError, StaticProblem, REACHED_TOL};
 use coordinator::PidcConfig;
+use planner::walk::Walk;
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3, Vector6};
 use protocol::{DynamicsTerms, Header, Pose, PoseReference, RobotDescription, RobotState};
 use robot_agent::dynamics_source::robot_description;
@@ -47,6 +51,8 @@ pub struct MotionSample {
     pub t: f64,
     /// The object's reference position then.
     pub object: Vector3<f64>,
+    /// Each robot's configuration (the model's `q`) and which of its feet are in stance.
+    pub robots: Vec<(Vec<f64>, Vec<bool>)>,
     pub problem: StaticProblem,
 }
 
@@ -65,6 +71,29 @@ pub fn sample_times(duration: f64) -> Vec<f64> {
     }
     let n = ((duration * SAMPLE_HZ).ceil() as usize).clamp(1, MAX_SAMPLES);
     (0..=n).map(|k| duration * k as f64 / n as f64).collect()
+}
+
+/// [`sample_times`], and with a walk the middle of every step's swing within the scenario.
+pub fn walk_sample_times(duration: f64, walk: Option<&Walk>) -> Vec<f64> {
+    let mut times = sample_times(duration);
+    if let Some(w) = walk {
+        times.extend(w.gait.steps().iter().map(|s| 0.5 * (s.liftoff + s.touchdown)).filter(|t| *t <= duration));
+        times.sort_by(f64::total_cmp);
+        times.dedup();
+    }
+    times
+}
+
+/// Robot `i`'s feet at scenario time `t` of a walk (`None`: where it started) and its
+/// contacts: every foot in stance without a walk or when the robot does not walk.
+fn planned_feet(walk: Option<&Walk>, i: usize, t: f64, robot: &Robot) -> (Vec<Option<Vector3<f64>>>, ActiveContacts) {
+    match walk.filter(|w| w.walking.get(i).copied().unwrap_or(false)) {
+        Some(w) => {
+            let feet = (0..robot.foot_frames.len()).map(|k| w.gait.foot_position(i, k, t)).collect();
+            (feet, ActiveContacts { stance: w.gait.stance(i, t).to_vec(), hand_in_grasp: true })
+        }
+        None => (Vec::new(), ActiveContacts::all_stance(robot)),
+    }
 }
 
 /// A robot's configuration (the model's `q`: base pose, then joints) at its placement, with
@@ -97,6 +126,8 @@ struct Follower {
     /// The hand's pose in the object's reference frame at the start.
     grasp: Isometry3<f64>,
     base: [f64; 7],
+    /// The feet's positions the legs were last solved for.
+    targets: Vec<Vector3<f64>>,
 }
 
 impl Follower {
@@ -115,22 +146,26 @@ impl Follower {
         let m = data.o_m_f[hand];
         let hand0 = Isometry3::from_parts(m.trans.into(), UnitQuaternion::from_matrix(&m.rot));
         let base = [q[0], q[1], q[2], q[3], q[4], q[5], q[6]];
-        Ok(Follower { id, robot: robot.clone(), q, feet, grasp: object0.inverse() * hand0, base })
+        let targets = feet.iter().map(|(_, p)| *p).collect();
+        Ok(Follower { id, robot: robot.clone(), q, feet, grasp: object0.inverse() * hand0, base, targets })
     }
 
-    /// The configuration at scenario time `t`: base at `torso`, feet where they stood, hand on
-    /// the object at `object`.
-    fn follow(&mut self, t: f64, torso: &Pose, object: &Isometry3<f64>) -> Result<&[f64], CheckError> {
+    /// The configuration at scenario time `t`: base at `torso`, each foot at its target in
+    /// `feet` (where it started when `None`), hand on the object at `object`.
+    fn follow(&mut self, t: f64, torso: &Pose, object: &Isometry3<f64>, feet: &[Option<Vector3<f64>>]) -> Result<&[f64], CheckError> {
         let reach = |source| CheckError::Reach { robot: self.id.clone(), t, source };
         let base = [torso.position[0], torso.position[1], torso.position[2], torso.orientation[0], torso.orientation[1], torso.orientation[2], torso.orientation[3]];
         let model = &self.robot.model;
         let opts = IkOptions::default();
-        if base.iter().zip(&self.base).any(|(a, b)| (a - b).abs() > 1e-12) {
+        let targets: Vec<Vector3<f64>> = self.feet.iter().zip(feet.iter().chain(std::iter::repeat(&None))).map(|((_, p0), p)| p.unwrap_or(*p0)).collect();
+        let moved = base.iter().zip(&self.base).any(|(a, b)| (a - b).abs() > 1e-12);
+        if moved || targets.iter().zip(&self.targets).any(|(a, b)| (a - b).norm() > 1e-12) {
             self.q[0..7].copy_from_slice(&base);
             self.base = base;
-            for (frame, p) in &self.feet {
+            for ((frame, _), p) in self.feet.iter().zip(&targets) {
                 self.q = ik::solve_position(model, *frame, &self.q, p, &opts, |_| true).map_err(reach)?.q;
             }
+            self.targets = targets;
         }
         let target = object * self.grasp;
         let r = target.rotation.to_rotation_matrix().into_inner();
@@ -141,8 +176,9 @@ impl Follower {
 }
 
 /// The agents' terms of robot `id` at configuration `q` (the model's: base pose, then joints),
-/// at rest, every foot in stance and the hand in grasp: what the coordinator gets in a run.
-pub(super) fn rest_terms(robot: &Robot, id: &str, q: &[f64]) -> Result<DynamicsTerms, CheckError> {
+/// at rest, with `contacts` (the feet in stance, the hand in grasp): what the coordinator gets
+/// in a run.
+pub(super) fn rest_terms(robot: &Robot, id: &str, q: &[f64], contacts: &ActiveContacts) -> Result<DynamicsTerms, CheckError> {
     let terms_err = |source| CheckError::Terms { robot: id.to_string(), source };
     let joints = q[robot.model.nq - robot.model.joint_names.len()..].to_vec();
     let state = RobotState {
@@ -157,7 +193,7 @@ pub(super) fn rest_terms(robot: &Robot, id: &str, q: &[f64]) -> Result<DynamicsT
     let mut builder = TermsBuilder::new(robot).map_err(terms_err)?;
     builder.load_state(robot, &state).map_err(terms_err)?;
     let mut out = empty_terms(TEAM, id);
-    builder.compute(robot, &ActiveContacts::all_stance(robot), &mut out).map_err(terms_err)?;
+    builder.compute(robot, contacts, &mut out).map_err(terms_err)?;
     Ok(out)
 }
 
@@ -171,14 +207,18 @@ pub fn motion_samples(world: &WorldSpec, robots: &[Arc<Robot>], refs: &Reference
     let mut team = world.robots.iter().enumerate().map(|(i, _)| Follower::new(world, i, &robots[i], &object0)).collect::<Result<Vec<_>, _>>()?;
     let descs: Vec<RobotDescription> = team.iter().map(|f| robot_description(&f.robot, TEAM, &f.id)).collect();
     let inertia = Matrix3::from_diagonal(&Vector3::from(unit_inertia));
+    let walk = refs.walk.as_deref();
     let mut out = Vec::new();
-    for t in sample_times(refs.clock.scenario_duration()) {
+    for t in walk_sample_times(refs.clock.scenario_duration(), walk) {
         let object: PoseReference = refs.object_at(Some(t));
         let x_o = iso(&object.pose);
         let mut terms = Vec::with_capacity(team.len());
+        let mut configs = Vec::with_capacity(team.len());
         for (i, f) in team.iter_mut().enumerate() {
-            f.follow(t, &refs.torso_at(i, Some(t)).pose, &x_o)?;
-            terms.push(rest_terms(&f.robot, &f.id, &f.q)?);
+            let (feet, contacts) = planned_feet(walk, i, t, &f.robot);
+            f.follow(t, &refs.torso_at(i, Some(t)).pose, &x_o, &feet)?;
+            terms.push(rest_terms(&f.robot, &f.id, &f.q, &contacts)?);
+            configs.push((f.q.clone(), contacts.stance));
         }
         let centre = x_o.translation.vector;
         let r = x_o.rotation.to_rotation_matrix();
@@ -187,7 +227,7 @@ pub fn motion_samples(world: &WorldSpec, robots: &[Arc<Robot>], refs: &Reference
         let problem = StaticProblem::build(&terms, &descs, &cfg.contact_margins(), centre)
             .map_err(|source| CheckError::AlongMotion { t, object: centre.into(), source })?
             .with_object_motion(&Vector6::from_row_slice(&object.acceleration), &omega, &unit);
-        out.push(MotionSample { t, object: centre, problem });
+        out.push(MotionSample { t, object: centre, robots: configs, problem });
     }
     Ok(out)
 }

@@ -1,0 +1,151 @@
+//! The capacity found in MuJoCo: the heaviest object a run holds with every acceptance check
+//! passed, by bisection on the mass in closed-loop simulation, to set against the team
+//! problem's capacity (`team capacity SCENARIO --simulate`).
+//!
+//! Each trial is the scenario at one mass, planned without the payload check and run embedded
+//! in lockstep; it holds when every acceptance check passes. The search starts at the computed
+//! capacity, steps by a tenth of it up (while held) or down (while not) until one trial of each
+//! kind brackets the answer, then halves the bracket to `tolerance` kg. It assumes what the
+//! trials show in practice: a run that holds a mass holds every lighter one.
+
+use std::path::Path;
+
+use crate::evaluate;
+use crate::plan::{self, PlanError};
+use crate::run::{self, RunError, RunOptions};
+use crate::scenario::Scenario;
+
+/// One run at one mass.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Trial {
+    pub mass: f64,
+    /// Every acceptance check passed.
+    pub held: bool,
+    /// The object was dropped (the other failures are tracking bounds, a yield held still).
+    pub dropped: bool,
+    /// The checks that failed.
+    pub failed: Vec<String>,
+}
+
+/// The result of the search.
+#[derive(Debug, Clone)]
+pub struct SimulatedCapacity {
+    /// The heaviest mass held (`None`: not even the lightest tried).
+    pub held: Option<f64>,
+    /// The lightest mass not held (`None`: every mass tried up to twice the computed one).
+    pub failed_at: Option<f64>,
+    /// Every trial, in the order run.
+    pub trials: Vec<Trial>,
+}
+
+/// Why the search could not run a trial.
+#[derive(Debug, thiserror::Error)]
+pub enum SimulateError {
+    #[error("the computed capacity {0} kg must be positive and finite")]
+    Capacity(f64),
+    #[error("planning at {mass:.3} kg: {source}")]
+    Plan { mass: f64, source: Box<PlanError> },
+    #[error("running at {mass:.3} kg: {source}")]
+    Run { mass: f64, source: Box<RunError> },
+}
+
+/// The search of the module docs over `trial`, from the computed capacity `computed` (kg),
+/// to `tolerance` kg, with at most `max_trials` trials.
+pub fn bisect<E: From<SimulateError>>(computed: f64, tolerance: f64, max_trials: usize, mut trial: impl FnMut(f64) -> Result<Trial, E>) -> Result<SimulatedCapacity, E> {
+    if !(computed.is_finite() && computed > 0.0) {
+        return Err(SimulateError::Capacity(computed).into());
+    }
+    let step = 0.1 * computed;
+    let mut trials: Vec<Trial> = Vec::new();
+    let (mut held, mut failed_at): (Option<f64>, Option<f64>) = (None, None);
+    let mut mass = computed;
+    // Bracket: up while held (to twice the computed), down while not (to a tenth).
+    while trials.len() < max_trials {
+        let t = trial(mass)?;
+        let ok = t.held;
+        trials.push(t);
+        if ok {
+            held = Some(mass);
+        } else {
+            failed_at = Some(mass);
+        }
+        match (held, failed_at) {
+            (Some(_), Some(_)) => break,
+            (Some(_), None) if mass + step <= 2.0 * computed + 1e-12 => mass += step,
+            (None, Some(_)) if mass - step >= 0.1 * computed - 1e-12 => mass -= step,
+            _ => return Ok(SimulatedCapacity { held, failed_at, trials }),
+        }
+    }
+    while let (Some(lo), Some(hi)) = (held, failed_at) {
+        if hi - lo <= tolerance || trials.len() >= max_trials {
+            break;
+        }
+        let mid = 0.5 * (lo + hi);
+        let t = trial(mid)?;
+        if t.held {
+            held = Some(mid);
+        } else {
+            failed_at = Some(mid);
+        }
+        trials.push(t);
+    }
+    Ok(SimulatedCapacity { held, failed_at, trials })
+}
+
+/// One trial: `scenario` at `mass` kg, planned without the payload check and run embedded in
+/// lockstep; its report goes to `out`.
+pub fn run_trial(scenario: &Scenario, root: &Path, mass: f64, out: &Path) -> Result<Trial, SimulateError> {
+    let mut s = scenario.clone();
+    s.object.mass = mass;
+    s.capacity_check = false;
+    let p = plan::plan(&s, root).map_err(|e| SimulateError::Plan { mass, source: Box::new(e) })?;
+    let opts = RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() };
+    let records = run::run(&p, &opts, out).map_err(|e| SimulateError::Run { mass, source: Box::new(e) })?;
+    let eval = evaluate::evaluate(&p, &records, "embedded");
+    let m = &eval.metrics;
+    Ok(Trial { mass, held: m.passed, dropped: m.drop.dropped, failed: m.checks.iter().filter(|c| !c.passed).map(|c| c.name.clone()).collect() })
+}
+
+/// The search's result as `team capacity --simulate` prints it.
+pub fn summary(sim: &SimulatedCapacity, computed: f64) -> String {
+    let mut out = String::from("in MuJoCo (every acceptance check passed), by trial:\n");
+    for t in &sim.trials {
+        let what = if t.held { "held".to_string() } else if t.dropped { "dropped".to_string() } else { format!("failed {}", t.failed.join(", ")) };
+        out += &format!("  {:.3} kg ({:.0} %): {what}\n", t.mass, 100.0 * t.mass / computed);
+    }
+    let kg = |m: Option<f64>| m.map_or("-".to_string(), |m| format!("{m:.3} kg"));
+    out += &format!("held in MuJoCo: {} (not at {}); held / computed = {}\n", kg(sim.held), kg(sim.failed_at), sim.held.map_or("-".to_string(), |h| format!("{:.3}", h / computed)));
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn threshold(limit: f64) -> impl FnMut(f64) -> Result<Trial, SimulateError> {
+        move |mass| Ok(Trial { mass, held: mass <= limit, dropped: mass > limit, failed: Vec::new() })
+    }
+
+    #[test]
+    fn the_search_brackets_the_threshold_from_either_side() {
+        for limit in [0.37, 0.93, 1.0, 1.234, 1.61] {
+            let s = bisect(1.0, 0.005, 40, threshold(limit)).expect("search");
+            let (lo, hi) = (s.held.expect("held"), s.failed_at.expect("failed"));
+            assert!(lo <= limit && hi > limit && hi - lo <= 0.005, "limit {limit}: [{lo}, {hi}]");
+            assert!(s.trials.iter().all(|t| t.held == (t.mass <= limit)));
+        }
+    }
+
+    #[test]
+    fn the_search_stops_at_its_ends_and_its_trial_budget() {
+        let all = bisect(1.0, 0.005, 40, threshold(f64::INFINITY)).expect("search");
+        assert_eq!(all.failed_at, None);
+        assert!((all.held.expect("held") - 2.0).abs() < 1e-9, "{:?}", all.held);
+        let none = bisect(1.0, 0.005, 40, threshold(0.0)).expect("search");
+        assert_eq!(none.held, None);
+        assert!(none.failed_at.expect("failed") < 0.11);
+        let short = bisect(1.0, 1e-9, 5, threshold(0.5)).expect("search");
+        assert_eq!(short.trials.len(), 5);
+        assert!(matches!(bisect(0.0, 0.01, 5, threshold(1.0)), Err(SimulateError::Capacity(_))));
+    }
+}
