@@ -40,16 +40,19 @@ pub enum PlanError {
     #[error("controller: {0}")]
     Controller(#[from] coordinator::ControllerError),
     /// Not `#[from]`: the message holds the check's whole error, no source chain repeats it.
-    #[error("payload check (the object's mass and {:.0} % more, `payload_margin`): {source} (`capacity_check = false` runs anyway)", 100.0 * margin)]
-    Capacity { source: crate::capacity::CheckError, margin: f64 },
+    #[error("payload check (the object's mass and {} % more, `payload_margin`): {check} (`capacity_check = false` runs anyway)", 100.0 * margin)]
+    Capacity { check: crate::capacity::CheckError, margin: f64 },
+    /// The start pose's statics a walk is planned with could not be solved (no check asked).
+    #[error("the start pose's statics for the walk: {0}")]
+    Statics(crate::capacity::CheckError),
     #[error(transparent)]
     Walk(#[from] planner::walk::WalkError),
 }
 
 impl PlanError {
     /// The payload check's refusal of scenario `s`.
-    fn capacity(s: &Scenario, source: crate::capacity::CheckError) -> Self {
-        PlanError::Capacity { source, margin: s.payload_margin }
+    fn capacity(s: &Scenario, check: crate::capacity::CheckError) -> Self {
+        PlanError::Capacity { check, margin: s.payload_margin }
     }
 }
 
@@ -264,8 +267,8 @@ fn start_hand_loads(s: &Scenario, scene: &Scene, loaded: &[Arc<Robot>], pidc: &P
     let mut hand_loads = Vec::new();
     if check || s.walk.is_some() {
         let t0 = std::time::Instant::now();
-        let check = check.then_some(s.payload_margin);
-        hand_loads = crate::capacity::start_hand_loads(&scene.world, loaded, pidc, check).map_err(|e| PlanError::capacity(s, e))?;
+        let margin = check.then_some(s.payload_margin);
+        hand_loads = crate::capacity::start_hand_loads(&scene.world, loaded, pidc, margin).map_err(|e| if check { PlanError::capacity(s, e) } else { PlanError::Statics(e) })?;
         tracing::info!(ms = 1e3 * t0.elapsed().as_secs_f64(), mass = s.object.mass, checked = check, "static team problem at the start pose solved");
     }
     Ok(hand_loads)

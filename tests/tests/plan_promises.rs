@@ -33,7 +33,7 @@ fn the_unequally_spaced_beam_is_refused_where_it_would_fall_and_held_below_its_c
     let err = plan::plan(&beam(&["object.mass=2.0".into()]), &repo()).expect_err("refused before the simulation");
     let msg = err.to_string();
     println!("{msg}");
-    assert!(matches!(err, PlanError::Capacity { source: team_runner::capacity::CheckError::AlongMotion { .. }, .. }), "{msg}");
+    assert!(matches!(err, PlanError::Capacity { check: team_runner::capacity::CheckError::AlongMotion { .. }, .. }), "{msg}");
     assert!(msg.contains("of the motion") && msg.contains("hold 2.0") && msg.contains("2 % more") && msg.contains("robot r"), "names the time, the mass and the binding limits: {msg}");
     let p = plan::plan(&beam(&["capacity_check=false".into()]), &repo()).expect("plan");
     let cap = team_runner::capacity::capacity(&p, 0.01).expect("capacity");
@@ -211,7 +211,7 @@ fn random_teams_hold_their_object_or_are_refused_by_the_plan_none_dropped() {
         let share = format!("{mass:.2} kg ({:.0} % of its capacity {limit:.2} kg; {:.2} at the start pose)", 100.0 * mass / limit, cap.start.mass);
         let s = Scenario::from_str_with(&text, &file, &[format!("object.mass={mass}")]).expect("scenario");
         match plan::plan(&s, &repo()) {
-            Err(PlanError::Capacity { source: e, .. }) => {
+            Err(PlanError::Capacity { check: e, .. }) => {
                 println!("case {case}: {what}, {share}: refused: {e}");
                 assert!(mass > limit, "case {case}: {what}: {share} is within the capacity and refused: {e}");
                 refused += 1;
@@ -244,7 +244,10 @@ fn the_capacity_is_what_the_team_holds_in_mujoco() {
     let mut rng = Rng(0x2545_f491_4f6c_dd1d);
     let file = repo().join("scenarios/random.toml");
     let mut ratios = Vec::new();
-    while ratios.len() < cases {
+    for _ in 0..4 * cases {
+        if ratios.len() == cases {
+            break;
+        }
         let (text, what) = random_case(&mut rng);
         let Ok((_, cap)) = planned_case(&text, &what) else { continue };
         let computed = cap.mass();
@@ -254,10 +257,12 @@ fn the_capacity_is_what_the_team_holds_in_mujoco() {
         print!("{what}: computed {computed:.3} kg\n{}", simulated::summary(&sim, computed));
         assert!(sim.trials.iter().all(|t| !t.dropped || t.mass > computed), "{what}: a mass within the capacity was dropped: {:?}", sim.trials);
         let held = sim.held.unwrap_or_else(|| panic!("{what}: not even {:.3} kg held", 0.1 * computed));
-        ratios.push((what, held / computed));
+        // Against the team problem's capacity along the motion (the plan accepts 2 % less).
+        ratios.push((what, held / cap.whole().mass));
     }
-    println!("held in MuJoCo / computed: {:?}", ratios.iter().map(|(_, r)| format!("{r:.3}")).collect::<Vec<_>>());
+    println!("held in MuJoCo / the team problem's capacity: {:?}", ratios.iter().map(|(_, r)| format!("{r:.3}")).collect::<Vec<_>>());
     for (what, r) in &ratios {
-        assert!((0.95..=1.35).contains(r), "{what}: held in MuJoCo / computed = {r:.3}");
+        assert!((0.95..=1.35).contains(r), "{what}: held in MuJoCo / the team problem's capacity = {r:.3}");
     }
+    assert_eq!(ratios.len(), cases, "enough random layouts hold something");
 }

@@ -94,14 +94,14 @@ pub fn static_problem(world: &WorldSpec, robots: &[Arc<Robot>], cfg: &PidcConfig
 pub fn start_hand_loads(world: &WorldSpec, robots: &[Arc<Robot>], cfg: &PidcConfig, check: Option<f64>) -> Result<Vec<(String, HandLoad)>, CheckError> {
     let mass = world.object.ok_or(CheckError::NoObject)?.mass;
     let problem = static_problem(world, robots, cfg)?;
-    if let Some(margin) = check {
-        problem.solve(mass * (1.0 + margin))?;
-    }
     let lambda = match problem.solve(mass) {
         Ok(sol) => sol.lambda,
-        Err(CapacityError::Infeasible { .. }) => problem.relaxed(mass)?.lambda,
+        Err(CapacityError::Infeasible { .. }) if check.is_none() => problem.relaxed(mass)?.lambda,
         Err(e) => return Err(e.into()),
     };
+    if let Some(margin) = check.filter(|m| *m > 0.0) {
+        problem.solve(mass * (1.0 + margin))?;
+    }
     Ok(problem
         .hand_wrenches(&lambda)
         .into_iter()
@@ -155,7 +155,7 @@ impl ScenarioCapacity {
     /// The heaviest object the plan accepts: held along the motion with the payload margin
     /// and, for a walk, accepted by the walk's planner.
     pub fn mass(&self) -> f64 {
-        let held = self.whole().mass / (1.0 + self.margin);
+        let held = self.whole().mass.min(self.start.mass) / (1.0 + self.margin);
         self.walk.as_ref().map_or(held, |w| w.mass.min(held))
     }
 }
@@ -222,7 +222,7 @@ pub fn summary(plan: &Plan, cap: &ScenarioCapacity, tolerance: f64, seconds: f64
     );
     let whole = cap.whole();
     out += &format!(
-        "capacity: {:.3} kg (the heaviest object the plan accepts: held along the motion with {:.0} % more, payload_margin; bisection to {tolerance} kg, {:.0} ms)\n",
+        "capacity: {:.3} kg (the heaviest object the plan accepts: held along the motion with {} % more, payload_margin; bisection to {tolerance} kg, {:.0} ms)\n",
         cap.mass(),
         100.0 * cap.margin,
         1e3 * seconds

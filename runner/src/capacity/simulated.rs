@@ -98,7 +98,12 @@ pub fn run_trial(scenario: &Scenario, root: &Path, mass: f64, out: &Path) -> Res
     let mut s = scenario.clone();
     s.object.mass = mass;
     s.capacity_check = false;
-    let p = plan::plan(&s, root).map_err(|e| SimulateError::Plan { mass, source: Box::new(e) })?;
+    let p = match plan::plan(&s, root) {
+        Ok(p) => p,
+        // A mass the walk's planner refuses is not held (it would not be run).
+        Err(e @ PlanError::Walk(_)) => return Ok(Trial { mass, held: false, dropped: false, failed: vec![format!("plan: {e}")] }),
+        Err(e) => return Err(SimulateError::Plan { mass, source: Box::new(e) }),
+    };
     let opts = RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() };
     let records = run::run(&p, &opts, out).map_err(|e| SimulateError::Run { mass, source: Box::new(e) })?;
     let eval = evaluate::evaluate(&p, &records, "embedded");
