@@ -84,15 +84,16 @@ pub fn walk_sample_times(duration: f64, walk: Option<&Walk>) -> Vec<f64> {
     times
 }
 
-/// Robot `i`'s feet at scenario time `t` of a walk (`None`: where it started) and its
-/// contacts: every foot in stance without a walk or when the robot does not walk.
+/// Robot `i`'s feet at scenario time `t` of a walk (`None`: where it started; every foot
+/// without a walk or when the robot does not walk) and its contacts (then every foot in
+/// stance).
 fn planned_feet(walk: Option<&Walk>, i: usize, t: f64, robot: &Robot) -> (Vec<Option<Vector3<f64>>>, ActiveContacts) {
     match walk.filter(|w| w.walking.get(i).copied().unwrap_or(false)) {
         Some(w) => {
             let feet = (0..robot.foot_frames.len()).map(|k| w.gait.foot_position(i, k, t)).collect();
             (feet, ActiveContacts { stance: w.gait.stance(i, t).to_vec(), hand_in_grasp: true })
         }
-        None => (Vec::new(), ActiveContacts::all_stance(robot)),
+        None => (vec![None; robot.foot_frames.len()], ActiveContacts::all_stance(robot)),
     }
 }
 
@@ -151,13 +152,13 @@ impl Follower {
     }
 
     /// The configuration at scenario time `t`: base at `torso`, each foot at its target in
-    /// `feet` (where it started when `None`), hand on the object at `object`.
+    /// `feet` (one per foot; where it started when `None`), hand on the object at `object`.
     fn follow(&mut self, t: f64, torso: &Pose, object: &Isometry3<f64>, feet: &[Option<Vector3<f64>>]) -> Result<&[f64], CheckError> {
         let reach = |source| CheckError::Reach { robot: self.id.clone(), t, source };
         let base = [torso.position[0], torso.position[1], torso.position[2], torso.orientation[0], torso.orientation[1], torso.orientation[2], torso.orientation[3]];
         let model = &self.robot.model;
         let opts = IkOptions::default();
-        let targets: Vec<Vector3<f64>> = self.feet.iter().zip(feet.iter().chain(std::iter::repeat(&None))).map(|((_, p0), p)| p.unwrap_or(*p0)).collect();
+        let targets: Vec<Vector3<f64>> = self.feet.iter().zip(feet).map(|((_, p0), p)| p.unwrap_or(*p0)).collect();
         let moved = base.iter().zip(&self.base).any(|(a, b)| (a - b).abs() > 1e-12);
         if moved || targets.iter().zip(&self.targets).any(|(a, b)| (a - b).norm() > 1e-12) {
             self.q[0..7].copy_from_slice(&base);
