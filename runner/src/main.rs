@@ -278,12 +278,14 @@ fn main() -> Result<()> {
             if simulate {
                 let computed = cap.mass();
                 let dir = out.unwrap_or_else(|| PathBuf::from(format!("{}-capacity", team_runner::run::default_report_dir(&scenario).display())));
-                let sim = capacity::simulated::bisect(computed, simulate_tolerance.unwrap_or(0.02 * computed), 16, |mass| {
+                let searches = capacity::simulated::held_and_tracked(computed, simulate_tolerance.unwrap_or(0.02 * computed), 16, |mass| {
                     let trial = capacity::simulated::run_trial(&plan.scenario, &repo_root(), mass, &dir.join(format!("{mass:.3}kg")))?;
-                    println!("  {mass:.3} kg: {}", if trial.held { "held" } else { "not held" });
+                    println!("  {mass:.3} kg: {}, the motion yielding on {} ticks", if trial.held { "held" } else { "not held" }, trial.yielded);
                     Ok::<_, anyhow::Error>(trial)
                 })?;
-                print!("{}", capacity::simulated::summary(&sim, computed));
+                for sim in &searches {
+                    print!("{}", capacity::simulated::summary(sim, computed));
+                }
             }
         }
         Command::Report { recording, out } => {

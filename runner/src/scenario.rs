@@ -70,9 +70,9 @@ pub struct Scenario {
     /// `false` runs anyway (to watch a refused load).
     #[serde(default = "default_capacity_check")]
     pub capacity_check: bool,
-    /// The share of the object's mass the payload check adds: the check is the team problem at
-    /// rest along the references, without the robots' own inertia or the tracking errors, and
-    /// MuJoCo holds down to 1.2 % less than it in the runs measured (default 0.02, in [0, 1)).
+    /// The share of the object's mass the payload check adds: the check is the team problem
+    /// along the references, without the tracking errors, and MuJoCo tracks without yielding
+    /// down to 0.7 % less than it in the runs measured (default 0.02, in [0, 1)).
     #[serde(default = "default_payload_margin")]
     pub payload_margin: f64,
     /// When the controller (PIDC or MQP) lets go of an object it cannot hold (`release.after_failed_ticks`: control
