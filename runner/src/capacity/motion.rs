@@ -10,12 +10,12 @@
 //!   (each leg solved for its foot's start position when the base moved,
 //!   [`robot_model::ik::solve_position`]); its hand holds the object where the plan put it,
 //!   at the object's reference pose (the arm solved by [`robot_model::ik::solve_hand`] from the
-//!   last sample's configuration);
+//!   configuration solved last);
 //! * the team's terms come from the agents' own code ([`robot_agent::terms::TermsBuilder`]),
 //!   with each robot's own inertia: its bias is the inverse dynamics `M qdd + C qd + g` at
 //!   the velocity and acceleration that the configurations a step either side give
-//!   ([`moving_terms`]). For a small object this matters: on a 28 mm circle at 0.48 Hz an arm's
-//!   links weigh more than the beam they accelerate;
+//!   ([`moving_terms`]). For a light object this matters: on a 28 mm circle at 0.48 Hz an arm's
+//!   links weigh as much as the beam they accelerate;
 //! * the object's rows are its Newton-Euler equations at the reference's acceleration and
 //!   angular velocity ([`StaticProblem::with_object_motion`]).
 //!
@@ -223,7 +223,7 @@ fn velocity_between(robot: &Robot, q0: &[f64], q1: &[f64], dt: f64) -> Vec<f64> 
 /// ([`rest_terms`]) whose bias is what the contacts and joints must supply to move the robot
 /// so, `M(q) qdd + C(q, qd) qd + g(q)` (eq. js_dynamics) with `qd`, `qdd` the central
 /// differences.
-pub(super) fn moving_terms(robot: &Robot, id: &str, around: &[Vec<f64>; 3], contacts: &ActiveContacts) -> Result<DynamicsTerms, CheckError> {
+pub fn moving_terms(robot: &Robot, id: &str, around: &[Vec<f64>; 3], contacts: &ActiveContacts) -> Result<DynamicsTerms, CheckError> {
     let h = DIFFERENCE_STEP;
     let [before, now, after] = around;
     let mut out = rest_terms(robot, id, now, contacts)?;
@@ -381,7 +381,10 @@ mod tests {
     fn a_constant_body_twist_is_the_velocity_between_its_ends() {
         // Oracle: the model's own integration along a known twist.
         let r = robot();
-        let q0: Vec<f64> = r.standing_q.iter().copied().collect();
+        let mut q0: Vec<f64> = r.standing_q.iter().copied().collect();
+        // A turned base, so that a world-frame twist would not pass for the body twist.
+        let turned = UnitQuaternion::from_euler_angles(0.2, 0.3, 0.7);
+        q0[3..7].copy_from_slice(&[turned.w, turned.i, turned.j, turned.k]);
         let v: Vec<f64> = (0..r.model.nv).map(|k| 0.3 * ((k as f64) * 0.7).sin()).collect();
         let h = DIFFERENCE_STEP;
         let q1 = r.model.integrate(&q0, &v, h);
@@ -397,10 +400,14 @@ mod tests {
 
     #[test]
     fn a_moving_robots_bias_is_its_inverse_dynamics_along_the_motion() {
-        // Joints on a parabola: the central differences are exact, and the bias must be RNEA at
-        // the parabola's velocity and acceleration (written out again here), not gravity alone.
+        // Joints on a parabola, the base turned and still: the central differences are exact,
+        // and the bias must be `M a + h` at the parabola's velocity and acceleration (the
+        // composite-rigid-body mass matrix and the bias of `compute_all_terms`, not the RNEA the
+        // code calls), not gravity alone.
         let r = robot();
-        let q: Vec<f64> = r.standing_q.iter().copied().collect();
+        let mut q: Vec<f64> = r.standing_q.iter().copied().collect();
+        let turned = UnitQuaternion::from_euler_angles(0.2, 0.3, 0.7);
+        q[3..7].copy_from_slice(&[turned.w, turned.i, turned.j, turned.k]);
         let (nq, nv, nj) = (r.model.nq, r.model.nv, r.model.joint_names.len());
         let vd: Vec<f64> = (0..nv).map(|k| if k < nv - nj { 0.0 } else { 0.4 * ((k as f64) * 1.3).cos() }).collect();
         let ad: Vec<f64> = (0..nv).map(|k| if k < nv - nj { 0.0 } else { 2.0 * ((k as f64) * 0.9).sin() }).collect();
@@ -414,8 +421,9 @@ mod tests {
         let h = DIFFERENCE_STEP;
         let terms = moving_terms(&r, "r1", &[at(-h), at(0.0), at(h)], &ActiveContacts::all_stance(&r)).expect("terms");
         let mut data = Data::new(&r.model);
-        let want = robot_model::rnea(&r.model, &mut data, &q, &vd, &ad).expect("rnea").clone();
-        let g = robot_model::gravity(&r.model, &mut data, &q).expect("gravity").clone();
+        robot_model::compute_all_terms(&r.model, &mut data, &q, &vd).expect("terms");
+        let want = &data.m * nalgebra::DVector::from_column_slice(&ad) + &data.h;
+        let g = robot_model::gravity(&r.model, &mut Data::new(&r.model), &q).expect("gravity").clone();
         assert!(terms.velocity.iter().all(|v| *v == 0.0), "the terms stay at rest for the static problem");
         let mut moved = 0.0_f64;
         for k in 0..nv {

@@ -55,9 +55,9 @@ impl Trial {
 #[derive(Debug, Clone)]
 pub struct SimulatedCapacity {
     pub criterion: Criterion,
-    /// The heaviest mass held (`None`: not even the lightest tried).
+    /// The heaviest mass that meets `criterion` (`None`: not even the lightest tried).
     pub held: Option<f64>,
-    /// The lightest mass not held (`None`: every mass tried up to twice the computed one).
+    /// The lightest mass that does not (`None`: every mass tried up to twice the computed one).
     pub failed_at: Option<f64>,
     /// Every trial, in the order run.
     pub trials: Vec<Trial>,
