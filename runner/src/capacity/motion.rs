@@ -377,14 +377,20 @@ mod tests {
         Robot::load(robot_model::default_robot_path()).expect("default robot")
     }
 
+    /// The robot's standing configuration with its base turned about every axis, so that a
+    /// world-frame quantity would not pass for a body-frame one.
+    fn turned_standing_q(r: &Robot) -> Vec<f64> {
+        let mut q: Vec<f64> = r.standing_q.iter().copied().collect();
+        let turned = UnitQuaternion::from_euler_angles(0.2, 0.3, 0.7);
+        q[3..7].copy_from_slice(&[turned.w, turned.i, turned.j, turned.k]);
+        q
+    }
+
     #[test]
     fn a_constant_body_twist_is_the_velocity_between_its_ends() {
         // Oracle: the model's own integration along a known twist.
         let r = robot();
-        let mut q0: Vec<f64> = r.standing_q.iter().copied().collect();
-        // A turned base, so that a world-frame twist would not pass for the body twist.
-        let turned = UnitQuaternion::from_euler_angles(0.2, 0.3, 0.7);
-        q0[3..7].copy_from_slice(&[turned.w, turned.i, turned.j, turned.k]);
+        let q0 = turned_standing_q(&r);
         let v: Vec<f64> = (0..r.model.nv).map(|k| 0.3 * ((k as f64) * 0.7).sin()).collect();
         let h = DIFFERENCE_STEP;
         let q1 = r.model.integrate(&q0, &v, h);
@@ -405,9 +411,7 @@ mod tests {
         // composite-rigid-body mass matrix and the bias of `compute_all_terms`, not the RNEA the
         // code calls), not gravity alone.
         let r = robot();
-        let mut q: Vec<f64> = r.standing_q.iter().copied().collect();
-        let turned = UnitQuaternion::from_euler_angles(0.2, 0.3, 0.7);
-        q[3..7].copy_from_slice(&[turned.w, turned.i, turned.j, turned.k]);
+        let q = turned_standing_q(&r);
         let (nq, nv, nj) = (r.model.nq, r.model.nv, r.model.joint_names.len());
         let vd: Vec<f64> = (0..nv).map(|k| if k < nv - nj { 0.0 } else { 0.4 * ((k as f64) * 1.3).cos() }).collect();
         let ad: Vec<f64> = (0..nv).map(|k| if k < nv - nj { 0.0 } else { 2.0 * ((k as f64) * 0.9).sin() }).collect();
