@@ -13,9 +13,9 @@
 
 use std::sync::Arc;
 
+use nalgebra::Isometry3;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use protocol::conventions::quat_from_wxyz;
-use nalgebra::Isometry3;
 use robot_model::ik::{self, IkError, IkOptions, IkSolution};
 use robot_model::{Data, Robot};
 use thiserror::Error;
@@ -29,7 +29,9 @@ pub enum GraspPlanError {
     Ik { robot: String, source: IkError },
     #[error("the world has no object to put the hands on")]
     NoObject,
-    #[error("robot {robot}: only a floating-base robot can be placed (its base pose is part of q)")]
+    #[error(
+        "robot {robot}: only a floating-base robot can be placed (its base pose is part of q)"
+    )]
     FixedBase { robot: String },
     #[error("{robots} robots loaded for {placements} placements")]
     RobotCount { robots: usize, placements: usize },
@@ -38,7 +40,11 @@ pub enum GraspPlanError {
 }
 
 /// Target pose of the hand frame on the face of `object` that faces a base at `base`.
-pub fn face_target(object: &ObjectBox, base: &Vector3<f64>, hand_height: Option<f64>) -> (Vector3<f64>, Matrix3<f64>) {
+pub fn face_target(
+    object: &ObjectBox,
+    base: &Vector3<f64>,
+    hand_height: Option<f64>,
+) -> (Vector3<f64>, Matrix3<f64>) {
     let ro = quat_from_wxyz(object.orientation);
     let po = Vector3::from(object.position);
     let to_base = ro.inverse_transform_vector(&(base - po));
@@ -85,9 +91,16 @@ pub fn face_target(object: &ObjectBox, base: &Vector3<f64>, hand_height: Option<
 /// Put every robot's hand flat on its face of `object`: solves each arm on the robot's own
 /// model (`robots`: loaded, in the placements' order) from its placement and writes the arm
 /// joints into the placement's overrides. Returns the solutions in robot order.
-pub fn place_hands(object: &ObjectBox, placements: &mut [BasePlacement], robots: &[Arc<Robot>]) -> Result<Vec<IkSolution>, GraspPlanError> {
+pub fn place_hands(
+    object: &ObjectBox,
+    placements: &mut [BasePlacement],
+    robots: &[Arc<Robot>],
+) -> Result<Vec<IkSolution>, GraspPlanError> {
     if robots.len() != placements.len() {
-        return Err(GraspPlanError::RobotCount { robots: robots.len(), placements: placements.len() });
+        return Err(GraspPlanError::RobotCount {
+            robots: robots.len(),
+            placements: placements.len(),
+        });
     }
     let mut out = Vec::new();
     for (r, robot) in placements.iter_mut().zip(robots) {
@@ -106,7 +119,8 @@ pub fn place_hands(object: &ObjectBox, placements: &mut [BasePlacement], robots:
         q[3..7].copy_from_slice(&[yaw.w, yaw.i, yaw.j, yaw.k]);
         let base = Vector3::from(r.base_position);
         let (p, rot) = face_target(object, &base, None);
-        let sol = ik::solve_hand(robot, &q, &p, &rot, &IkOptions::default()).map_err(|source| GraspPlanError::Ik { robot: r.id.clone(), source })?;
+        let sol = ik::solve_hand(robot, &q, &p, &rot, &IkOptions::default())
+            .map_err(|source| GraspPlanError::Ik { robot: r.id.clone(), source })?;
         for (name, v) in &sol.joints {
             r.joint_overrides.insert(name.clone(), *v);
         }
@@ -120,13 +134,26 @@ pub fn place_hands(object: &ObjectBox, placements: &mut [BasePlacement], robots:
 /// (`solutions`, from [`place_hands`], robot order). With the object's pose at the grasp it
 /// is the hand's grasp on the object, which the controller fits the object from whenever it
 /// starts (the runner hands it over as `coordinator::units::grasp::PlannedHand`).
-pub fn hand_poses(placements: &[BasePlacement], robots: &[Arc<Robot>], solutions: &[IkSolution]) -> Result<Vec<Isometry3<f64>>, GraspPlanError> {
+pub fn hand_poses(
+    placements: &[BasePlacement],
+    robots: &[Arc<Robot>],
+    solutions: &[IkSolution],
+) -> Result<Vec<Isometry3<f64>>, GraspPlanError> {
     let mut out = Vec::with_capacity(robots.len());
     for ((r, robot), sol) in placements.iter().zip(robots).zip(solutions) {
-        let fail = |e: &dyn std::fmt::Display| GraspPlanError::Kinematics { robot: r.id.clone(), reason: e.to_string() };
+        let fail = |e: &dyn std::fmt::Display| GraspPlanError::Kinematics {
+            robot: r.id.clone(),
+            reason: e.to_string(),
+        };
         let frame = robot.model.frame_id(&robot.hand_frame).map_err(|e| fail(&e))?;
         let mut data = Data::new(&robot.model);
-        robot_model::forward_kinematics(&robot.model, &mut data, &sol.q, &vec![0.0; robot.model.nv]).map_err(|e| fail(&e))?;
+        robot_model::forward_kinematics(
+            &robot.model,
+            &mut data,
+            &sol.q,
+            &vec![0.0; robot.model.nv],
+        )
+        .map_err(|e| fail(&e))?;
         let m = robot_model::frame_placement(&robot.model, &data, frame).map_err(|e| fail(&e))?;
         out.push(Isometry3::from_parts(m.trans.into(), UnitQuaternion::from_matrix(&m.rot)));
     }

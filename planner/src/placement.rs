@@ -29,7 +29,11 @@ pub enum PlacementError {
     Layout(String),
     #[error("{robot}: footprint: {reason}")]
     Footprint { robot: String, reason: String },
-    #[error("robots {first} and {second} would stand in each other (their footprints, feet plus {margin} m, overlap): space them further apart", margin = FOOTPRINT_MARGIN)]
+    #[error(
+        "robots {first} and {second} would stand in each other (their footprints, feet plus \
+         {margin} m, overlap): space them further apart",
+        margin = FOOTPRINT_MARGIN
+    )]
     Clearance { first: String, second: String },
 }
 
@@ -141,13 +145,23 @@ pub const FACE_END_MARGIN: f64 = 0.06;
 /// vertical z axis; its yaw may be any). Robots come face by face, along each face in the
 /// direction of `z x n`. An error when the layout is empty, repeats a face, does not fit on a
 /// face (the hands would leave it) or is not finite.
-pub fn around_object(object: &ObjectBox, layout: &FaceLayout) -> Result<Vec<([f64; 2], f64)>, PlacementError> {
+pub fn around_object(
+    object: &ObjectBox,
+    layout: &FaceLayout,
+) -> Result<Vec<([f64; 2], f64)>, PlacementError> {
     let bad = |why: String| Err(PlacementError::Layout(why));
     if layout.faces.is_empty() || layout.per_face == 0 {
         return bad("needs at least one face and one robot per face".into());
     }
-    if !(layout.spacing.is_finite() && layout.spacing >= 0.0 && layout.standoff.is_finite() && layout.standoff > 0.0) {
-        return bad(format!("spacing {} must be >= 0 and standoff {} > 0, both finite", layout.spacing, layout.standoff));
+    if !(layout.spacing.is_finite()
+        && layout.spacing >= 0.0
+        && layout.standoff.is_finite()
+        && layout.standoff > 0.0)
+    {
+        return bad(format!(
+            "spacing {} must be >= 0 and standoff {} > 0, both finite",
+            layout.spacing, layout.standoff
+        ));
     }
     if layout.per_face > 1 && layout.spacing == 0.0 {
         return bad(format!("{} robots per face need a spacing", layout.per_face));
@@ -171,7 +185,8 @@ pub fn around_object(object: &ObjectBox, layout: &FaceLayout) -> Result<Vec<([f6
         let span = layout.spacing * (layout.per_face - 1) as f64 / 2.0;
         if span > half_length - FACE_END_MARGIN {
             return bad(format!(
-                "{} robots {} m apart span {:.3} m, face {face} is {:.3} m long (hands need {FACE_END_MARGIN} m from each end)",
+                "{} robots {} m apart span {:.3} m, face {face} is {:.3} m long (hands need \
+                 {FACE_END_MARGIN} m from each end)",
                 layout.per_face,
                 layout.spacing,
                 2.0 * span,
@@ -202,11 +217,13 @@ pub const FOOTPRINT_MARGIN: f64 = 0.04;
 impl Footprint {
     /// The footprint of `robot` standing (feet from forward kinematics at its standing pose).
     pub fn of(robot: &Robot) -> Result<Self, PlacementError> {
-        let invalid = |reason: String| PlacementError::Footprint { robot: robot.name.clone(), reason };
+        let invalid =
+            |reason: String| PlacementError::Footprint { robot: robot.name.clone(), reason };
         let model = &robot.model;
         let mut data = robot_model::Data::new(model);
         let q: Vec<f64> = robot.standing_q.iter().copied().collect();
-        robot_model::forward_kinematics(model, &mut data, &q, &vec![0.0; model.nv]).map_err(|e| invalid(e.to_string()))?;
+        robot_model::forward_kinematics(model, &mut data, &q, &vec![0.0; model.nv])
+            .map_err(|e| invalid(e.to_string()))?;
         let torso = model.frame_id(&robot.torso_frame).map_err(|e| invalid(e.to_string()))?;
         let base = data.o_m_f[torso];
         let (mut min, mut max) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
@@ -228,7 +245,12 @@ impl Footprint {
     fn corners(&self, xy: [f64; 2], yaw: f64) -> [[f64; 2]; 4] {
         let (c, s) = (yaw.cos(), yaw.sin());
         let at = |x: f64, y: f64| [xy[0] + c * x - s * y, xy[1] + s * x + c * y];
-        [at(self.min[0], self.min[1]), at(self.max[0], self.min[1]), at(self.max[0], self.max[1]), at(self.min[0], self.max[1])]
+        [
+            at(self.min[0], self.min[1]),
+            at(self.max[0], self.min[1]),
+            at(self.max[0], self.max[1]),
+            at(self.min[0], self.max[1]),
+        ]
     }
 }
 
@@ -238,7 +260,11 @@ fn overlap(a: &[[f64; 2]; 4], b: &[[f64; 2]; 4]) -> bool {
         for i in 0..4 {
             let (p, q) = (poly[i], poly[(i + 1) % 4]);
             let axis = [q[1] - p[1], p[0] - q[0]];
-            let project = |r: &[[f64; 2]; 4]| r.iter().map(|v| v[0] * axis[0] + v[1] * axis[1]).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| (lo.min(x), hi.max(x)));
+            let project = |r: &[[f64; 2]; 4]| {
+                r.iter()
+                    .map(|v| v[0] * axis[0] + v[1] * axis[1])
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| (lo.min(x), hi.max(x)))
+            };
             let ((alo, ahi), (blo, bhi)) = (project(a), project(b));
             if ahi < blo || bhi < alo {
                 return false;
@@ -250,12 +276,22 @@ fn overlap(a: &[[f64; 2]; 4], b: &[[f64; 2]; 4]) -> bool {
 
 /// Refuse placements whose robots would stand in each other: the footprints of every pair
 /// (robot `i` at `placements[i]` with `footprints[i]`) must not overlap. The error names both.
-pub fn check_clearance(placements: &[BasePlacement], footprints: &[Footprint]) -> Result<(), PlacementError> {
-    let corners: Vec<[[f64; 2]; 4]> = placements.iter().zip(footprints).map(|(p, f)| f.corners([p.base_position[0], p.base_position[1]], p.base_yaw)).collect();
+pub fn check_clearance(
+    placements: &[BasePlacement],
+    footprints: &[Footprint],
+) -> Result<(), PlacementError> {
+    let corners: Vec<[[f64; 2]; 4]> = placements
+        .iter()
+        .zip(footprints)
+        .map(|(p, f)| f.corners([p.base_position[0], p.base_position[1]], p.base_yaw))
+        .collect();
     for i in 0..corners.len() {
         for j in i + 1..corners.len() {
             if overlap(&corners[i], &corners[j]) {
-                return Err(PlacementError::Clearance { first: placements[i].id.clone(), second: placements[j].id.clone() });
+                return Err(PlacementError::Clearance {
+                    first: placements[i].id.clone(),
+                    second: placements[j].id.clone(),
+                });
             }
         }
     }
@@ -274,10 +310,16 @@ mod tests {
             assert_eq!(poses.len(), n);
             for (i, ([x, y], yaw)) in poses.iter().enumerate() {
                 let (dx, dy) = (x - c[0], y - c[1]);
-                assert!(((dx * dx + dy * dy).sqrt() - 1.15).abs() < 1e-12, "robot {i} of {n} at the radius");
+                assert!(
+                    ((dx * dx + dy * dy).sqrt() - 1.15).abs() < 1e-12,
+                    "robot {i} of {n} at the radius"
+                );
                 // Facing the centre: the heading points from the base to the centre.
                 let (hx, hy) = (yaw.cos(), yaw.sin());
-                assert!((hx * -dx + hy * -dy) / 1.15 > 1.0 - 1e-12, "robot {i} of {n} faces the centre");
+                assert!(
+                    (hx * -dx + hy * -dy) / 1.15 > 1.0 - 1e-12,
+                    "robot {i} of {n} faces the centre"
+                );
                 assert!(*yaw > -PI && *yaw <= PI + 1e-12);
             }
         }
@@ -289,20 +331,32 @@ mod tests {
     }
 
     fn beam() -> ObjectBox {
-        ObjectBox { size: [2.4, 0.4, 0.4], position: [1.0, 2.0, 0.6], orientation: [1.0, 0.0, 0.0, 0.0] }
+        ObjectBox {
+            size: [2.4, 0.4, 0.4],
+            position: [1.0, 2.0, 0.6],
+            orientation: [1.0, 0.0, 0.0, 0.0],
+        }
     }
 
     /// Each base at the standoff from its face plane, facing it, spaced along the face and
     /// centred on it; written out in world coordinates for a beam and a yawed cube.
     #[test]
     fn robots_stand_at_their_faces_facing_them() {
-        let layout = FaceLayout { faces: vec![Face::MinusY, Face::PlusY], per_face: 4, spacing: 0.6, standoff: 0.85 };
+        let layout = FaceLayout {
+            faces: vec![Face::MinusY, Face::PlusY],
+            per_face: 4,
+            spacing: 0.6,
+            standoff: 0.85,
+        };
         let poses = around_object(&beam(), &layout).unwrap();
         assert_eq!(poses.len(), 8);
         for (i, ([x, y], yaw)) in poses.iter().enumerate() {
             let side = if i < 4 { -1.0 } else { 1.0 };
             assert!((y - (2.0 + side * (0.2 + 0.85))).abs() < 1e-12, "robot {i} y {y}");
-            assert!((yaw.sin() + side).abs() < 1e-12 && yaw.cos().abs() < 1e-12, "robot {i} faces the beam: yaw {yaw}");
+            assert!(
+                (yaw.sin() + side).abs() < 1e-12 && yaw.cos().abs() < 1e-12,
+                "robot {i} faces the beam: yaw {yaw}"
+            );
             assert!(x - 1.0 >= -0.9 - 1e-12 && x - 1.0 <= 0.9 + 1e-12);
         }
         let xs: Vec<f64> = poses[..4].iter().map(|p| p.0[0]).collect();
@@ -315,8 +369,16 @@ mod tests {
         }
         // A cube yawed by 30 deg: the base of the +x face lies on the rotated x axis.
         let yaw = 30f64.to_radians();
-        let cube = ObjectBox { size: [0.6; 3], position: [0.0, 0.0, 0.6], orientation: [(yaw / 2.0).cos(), 0.0, 0.0, (yaw / 2.0).sin()] };
-        let one = around_object(&cube, &FaceLayout { faces: vec![Face::PlusX], per_face: 1, spacing: 0.0, standoff: 0.85 }).unwrap();
+        let cube = ObjectBox {
+            size: [0.6; 3],
+            position: [0.0, 0.0, 0.6],
+            orientation: [(yaw / 2.0).cos(), 0.0, 0.0, (yaw / 2.0).sin()],
+        };
+        let one = around_object(
+            &cube,
+            &FaceLayout { faces: vec![Face::PlusX], per_face: 1, spacing: 0.0, standoff: 0.85 },
+        )
+        .unwrap();
         let ([x, y], heading) = one[0];
         assert!((x - 1.15 * yaw.cos()).abs() < 1e-12 && (y - 1.15 * yaw.sin()).abs() < 1e-12);
         assert!((heading - (yaw - PI)).abs() < 1e-12 || (heading - (yaw + PI)).abs() < 1e-12);
@@ -324,16 +386,22 @@ mod tests {
 
     #[test]
     fn layouts_that_cannot_be_stood_are_refused() {
-        let ok = FaceLayout { faces: vec![Face::MinusY, Face::PlusY], per_face: 3, spacing: 0.8, standoff: 0.85 };
+        let ok = FaceLayout {
+            faces: vec![Face::MinusY, Face::PlusY],
+            per_face: 3,
+            spacing: 0.8,
+            standoff: 0.85,
+        };
         assert!(around_object(&beam(), &ok).is_ok());
         for bad in [
-            FaceLayout { per_face: 5, ..ok.clone() },                         // 3.2 m on a 2.4 m face
+            FaceLayout { per_face: 5, ..ok.clone() }, // 3.2 m on a 2.4 m face
             FaceLayout { faces: vec![], ..ok.clone() },
             FaceLayout { per_face: 0, ..ok.clone() },
             FaceLayout { spacing: 0.0, ..ok.clone() },
             FaceLayout { standoff: f64::NAN, ..ok.clone() },
             FaceLayout { faces: vec![Face::PlusX, Face::PlusX], per_face: 1, ..ok.clone() },
-            FaceLayout { faces: vec![Face::PlusX], per_face: 2, ..ok.clone() }, // 0.8 m on a 0.4 m end
+            // 0.8 m on a 0.4 m end
+            FaceLayout { faces: vec![Face::PlusX], per_face: 2, ..ok.clone() },
         ] {
             let e = around_object(&beam(), &bad).expect_err(&format!("{bad:?}")).to_string();
             assert!(e.contains("team layout"), "{e}");
@@ -349,8 +417,16 @@ mod tests {
         let f = Footprint::of(&robot).unwrap();
         assert!(f.max[0] > 0.3 && f.min[0] < -0.3, "feet fore and aft of the base: {f:?}");
         let width = f.max[1] - f.min[1];
-        assert!(width > 0.6 && width < 0.7, "side by side the robots need between 0.6 and 0.7 m: width {width}");
-        let at = |id: &str, x: f64, yaw: f64| BasePlacement { id: id.into(), base_position: [x, 0.0, 0.54882015], base_yaw: yaw, joint_overrides: BTreeMap::new() };
+        assert!(
+            width > 0.6 && width < 0.7,
+            "side by side the robots need between 0.6 and 0.7 m: width {width}"
+        );
+        let at = |id: &str, x: f64, yaw: f64| BasePlacement {
+            id: id.into(),
+            base_position: [x, 0.0, 0.54882015],
+            base_yaw: yaw,
+            joint_overrides: BTreeMap::new(),
+        };
         let pair = |d: f64, yaw_b: f64| vec![at("a", 0.0, PI / 2.0), at("b", d, yaw_b)];
         assert!(check_clearance(&pair(0.7, PI / 2.0), &[f, f]).is_ok());
         let e = check_clearance(&pair(0.6, PI / 2.0), &[f, f]).unwrap_err().to_string();

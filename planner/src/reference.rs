@@ -53,7 +53,11 @@ fn smoothstep(u: f64) -> (f64, f64, f64) {
         (1.0, 0.0, 0.0)
     } else {
         let (u2, u3) = (u * u, u * u * u);
-        (10.0 * u3 - 15.0 * u2 * u2 + 6.0 * u3 * u2, 30.0 * u2 - 60.0 * u3 + 30.0 * u2 * u2, 60.0 * u - 180.0 * u2 + 120.0 * u3)
+        (
+            10.0 * u3 - 15.0 * u2 * u2 + 6.0 * u3 * u2,
+            30.0 * u2 - 60.0 * u3 + 30.0 * u2 * u2,
+            60.0 * u - 180.0 * u2 + 120.0 * u3,
+        )
     }
 }
 
@@ -74,7 +78,11 @@ fn window(t: f64, ramp: f64, end: Option<f64>) -> (f64, f64, f64) {
 impl Sample {
     /// `w(t) x(t)` with its derivatives, for a window `(w, w', w'')`.
     fn windowed(self, (w, wd, wdd): (f64, f64, f64)) -> Sample {
-        Sample { x: w * self.x, xd: wd * self.x + w * self.xd, xdd: wdd * self.x + 2.0 * wd * self.xd + w * self.xdd }
+        Sample {
+            x: w * self.x,
+            xd: wd * self.x + w * self.xd,
+            xdd: wdd * self.x + 2.0 * wd * self.xd + w * self.xdd,
+        }
     }
 }
 
@@ -116,7 +124,11 @@ pub struct Sample {
 }
 
 impl Sample {
-    const ZERO: Sample = Sample { x: Vector3::new(0.0, 0.0, 0.0), xd: Vector3::new(0.0, 0.0, 0.0), xdd: Vector3::new(0.0, 0.0, 0.0) };
+    const ZERO: Sample = Sample {
+        x: Vector3::new(0.0, 0.0, 0.0),
+        xd: Vector3::new(0.0, 0.0, 0.0),
+        xdd: Vector3::new(0.0, 0.0, 0.0),
+    };
 }
 
 /// What is wrong with a motion's parameters.
@@ -140,8 +152,11 @@ impl OffsetMotion {
                 Ok(())
             }
             OffsetMotion::Circle { radius, frequency, phase, .. } => {
-                if ![*radius, *frequency, *phase].iter().all(|x| x.is_finite()) || *frequency < 0.0 {
-                    return bad("circle radius, frequency and phase must be finite, frequency >= 0".into());
+                if ![*radius, *frequency, *phase].iter().all(|x| x.is_finite()) || *frequency < 0.0
+                {
+                    return bad(
+                        "circle radius, frequency and phase must be finite, frequency >= 0".into(),
+                    );
                 }
                 Ok(())
             }
@@ -194,11 +209,19 @@ impl OffsetMotion {
                 for seg in segments {
                     let end = start + seg.duration;
                     if t < end {
-                        let mut s = seg.motion.sample(t - start).windowed(window(t - start, seg.ramp, Some(seg.duration)));
+                        let mut s = seg.motion.sample(t - start).windowed(window(
+                            t - start,
+                            seg.ramp,
+                            Some(seg.duration),
+                        ));
                         s.x += base;
                         return s;
                     }
-                    base += seg.motion.sample(seg.duration).windowed(window(seg.duration, seg.ramp, Some(seg.duration))).x;
+                    base += seg
+                        .motion
+                        .sample(seg.duration)
+                        .windowed(window(seg.duration, seg.ramp, Some(seg.duration)))
+                        .x;
                     start = end;
                 }
                 Sample { x: base, ..Sample::ZERO }
@@ -227,9 +250,16 @@ impl PoseMotion {
     /// The reference at time `t` about the initial pose `(p0, r0)`, both motions faded in over
     /// the first `ramp` seconds (a smooth window; 0: none): a motion that starts with a
     /// velocity (a sinusoid) would otherwise step the reference velocity at `t = 0`.
-    pub fn reference(&self, p0: &Vector3<f64>, r0: &UnitQuaternion<f64>, t: f64, ramp: f64) -> PoseReference {
+    pub fn reference(
+        &self,
+        p0: &Vector3<f64>,
+        r0: &UnitQuaternion<f64>,
+        t: f64,
+        ramp: f64,
+    ) -> PoseReference {
         let p = self.position.sample(t).windowed(window(t, ramp, None));
-        let (rot, w, wd) = orientation(|t| self.orientation.sample(t).windowed(window(t, ramp, None)), t);
+        let (rot, w, wd) =
+            orientation(|t| self.orientation.sample(t).windowed(window(t, ramp, None)), t);
         let q = UnitQuaternion::from_rotation_matrix(&rot) * r0;
         let pos = p0 + p.x;
         PoseReference {
@@ -259,7 +289,10 @@ pub fn left_jacobian(x: &Vector3<f64>) -> Matrix3<f64> {
 /// Rotation, angular velocity and angular acceleration (world frame) of `exp([x(t)])`. The
 /// acceleration is the central difference of the exact angular velocity (step 1e-5 s; error
 /// of order 1e-10 for the scenario's frequencies).
-fn orientation(sample: impl Fn(f64) -> Sample, t: f64) -> (Rotation3<f64>, Vector3<f64>, Vector3<f64>) {
+fn orientation(
+    sample: impl Fn(f64) -> Sample,
+    t: f64,
+) -> (Rotation3<f64>, Vector3<f64>, Vector3<f64>) {
     let omega = |t: f64| {
         let s = sample(t);
         left_jacobian(&s.x) * s.xd
@@ -283,12 +316,33 @@ mod tests {
 
     fn motions() -> Vec<OffsetMotion> {
         vec![
-            OffsetMotion::Sinusoid { amplitude: [0.03, 0.0, 0.02], frequency: [0.25, 0.5, 0.4], phase: [0.0, 1.0, 1.5] },
+            OffsetMotion::Sinusoid {
+                amplitude: [0.03, 0.0, 0.02],
+                frequency: [0.25, 0.5, 0.4],
+                phase: [0.0, 1.0, 1.5],
+            },
             OffsetMotion::Circle { radius: 0.05, frequency: 0.2, plane: Plane::Xz, phase: 0.3 },
             OffsetMotion::Sequence {
                 segments: vec![
-                    Segment { duration: 2.0, motion: OffsetMotion::Sinusoid { amplitude: [0.1, 0.0, 0.0], frequency: [0.5, 0.0, 0.0], phase: [0.0; 3] }, ramp: 0.0 },
-                    Segment { duration: 1.5, motion: OffsetMotion::Circle { radius: 0.02, frequency: 1.0, plane: Plane::Xy, phase: 0.0 }, ramp: 0.4 },
+                    Segment {
+                        duration: 2.0,
+                        motion: OffsetMotion::Sinusoid {
+                            amplitude: [0.1, 0.0, 0.0],
+                            frequency: [0.5, 0.0, 0.0],
+                            phase: [0.0; 3],
+                        },
+                        ramp: 0.0,
+                    },
+                    Segment {
+                        duration: 1.5,
+                        motion: OffsetMotion::Circle {
+                            radius: 0.02,
+                            frequency: 1.0,
+                            plane: Plane::Xy,
+                            phase: 0.0,
+                        },
+                        ramp: 0.4,
+                    },
                 ],
             },
         ]
@@ -321,13 +375,21 @@ mod tests {
     fn orientation_reference_has_the_right_angular_velocity() {
         let pm = PoseMotion {
             position: OffsetMotion::Hold,
-            orientation: OffsetMotion::Sinusoid { amplitude: [0.17, 0.1, 0.15], frequency: [0.3, 0.2, 0.25], phase: [0.0, 0.5, 1.0] },
+            orientation: OffsetMotion::Sinusoid {
+                amplitude: [0.17, 0.1, 0.15],
+                frequency: [0.3, 0.2, 0.25],
+                phase: [0.0, 0.5, 1.0],
+            },
         };
         let r0 = UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3);
         let p0 = Vector3::new(1.0, 0.0, 0.6);
         for t in [0.0, 0.7, 2.3] {
             let h = 1e-6;
-            let q = |t: f64| protocol::conventions::quat_from_wxyz(pm.reference(&p0, &r0, t, 0.5).pose.orientation);
+            let q = |t: f64| {
+                protocol::conventions::quat_from_wxyz(
+                    pm.reference(&p0, &r0, t, 0.5).pose.orientation,
+                )
+            };
             // World angular velocity: log(R(t+h) R(t-h)^T) / 2h.
             let dq = q(t + h) * q(t - h).inverse();
             let w_fd = dq.scaled_axis() / (2.0 * h);
@@ -352,7 +414,14 @@ mod tests {
     fn ramps_start_and_end_segments_at_rest_with_exact_derivatives() {
         // A faded-in sinusoid starts with zero velocity and acceleration, reaches the plain
         // sinusoid after the ramp, and its derivatives match finite differences inside the ramp.
-        let pm = PoseMotion { position: OffsetMotion::Sinusoid { amplitude: [0.03, 0.0, 0.02], frequency: [0.2, 0.0, 0.25], phase: [0.0; 3] }, orientation: OffsetMotion::Hold };
+        let pm = PoseMotion {
+            position: OffsetMotion::Sinusoid {
+                amplitude: [0.03, 0.0, 0.02],
+                frequency: [0.2, 0.0, 0.25],
+                phase: [0.0; 3],
+            },
+            orientation: OffsetMotion::Hold,
+        };
         let (p0, r0) = (Vector3::new(1.0, 0.0, 0.6), UnitQuaternion::identity());
         let r = pm.reference(&p0, &r0, 0.0, 1.0);
         assert!(r.twist.iter().chain(&r.acceleration).all(|x| x.abs() < 1e-15), "{r:?}");
@@ -375,9 +444,15 @@ mod tests {
 
     #[test]
     fn bad_parameters_are_named() {
-        let m = OffsetMotion::Sinusoid { amplitude: [f64::NAN, 0.0, 0.0], frequency: [1.0; 3], phase: [0.0; 3] };
+        let m = OffsetMotion::Sinusoid {
+            amplitude: [f64::NAN, 0.0, 0.0],
+            frequency: [1.0; 3],
+            phase: [0.0; 3],
+        };
         assert!(m.check("object.position").unwrap_err().0.contains("object.position"));
-        let m = OffsetMotion::Sequence { segments: vec![Segment { duration: -1.0, motion: OffsetMotion::Hold, ramp: 0.0 }] };
+        let m = OffsetMotion::Sequence {
+            segments: vec![Segment { duration: -1.0, motion: OffsetMotion::Hold, ramp: 0.0 }],
+        };
         assert!(m.check("x").is_err());
     }
 }

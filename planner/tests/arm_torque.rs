@@ -3,9 +3,9 @@
 //! motion, both by central differences of forward kinematics.
 
 use nalgebra::Vector3;
-use robot_model::{default_robot_path, forward_kinematics, potential_energy, Data, Robot};
 use planner::gait::HandLoad;
 use planner::walk::reach::arm_torques;
+use robot_model::{default_robot_path, forward_kinematics, potential_energy, Data, Robot};
 
 #[test]
 fn arm_torques_are_the_virtual_work_of_gravity_and_the_hand_load() {
@@ -20,7 +20,11 @@ fn arm_torques_are_the_virtual_work_of_gravity_and_the_hand_load() {
     }
     let tilt = nalgebra::UnitQuaternion::from_euler_angles(0.05, -0.03, 0.7);
     q[3..7].copy_from_slice(&[tilt.w, tilt.i, tilt.j, tilt.k]);
-    let load = HandLoad { point: Vector3::zeros(), force: Vector3::new(-30.0, 4.0, -9.0), moment: Vector3::new(0.6, -1.1, 0.3) };
+    let load = HandLoad {
+        point: Vector3::zeros(),
+        force: Vector3::new(-30.0, 4.0, -9.0),
+        moment: Vector3::new(0.6, -1.1, 0.3),
+    };
     let torques = arm_torques(&robot, &q, &load).unwrap();
     assert_eq!(torques.len(), 6, "the six arm joints move the hand: {torques:?}");
     let hand = model.frame_id(&robot.hand_frame).unwrap();
@@ -39,9 +43,16 @@ fn arm_torques_are_the_virtual_work_of_gravity_and_the_hand_load() {
         let ((ep, pp, rp), (em, pm, rm)) = (at(&qp), at(&qm));
         // The small rotation from the skew part of R+ R-^T (acos loses its digits there).
         let d = rp * rm.transpose();
-        let omega = Vector3::new(d[(2, 1)] - d[(1, 2)], d[(0, 2)] - d[(2, 0)], d[(1, 0)] - d[(0, 1)]) / (4.0 * h);
-        let virtual_work = (ep - em) / (2.0 * h) - load.force.dot(&((pp - pm) / (2.0 * h))) - load.moment.dot(&omega);
-        assert!((tau - virtual_work).abs() < 1e-5 * (1.0 + tau.abs()), "{joint}: {tau} vs virtual work {virtual_work}");
+        let omega =
+            Vector3::new(d[(2, 1)] - d[(1, 2)], d[(0, 2)] - d[(2, 0)], d[(1, 0)] - d[(0, 1)])
+                / (4.0 * h);
+        let virtual_work = (ep - em) / (2.0 * h)
+            - load.force.dot(&((pp - pm) / (2.0 * h)))
+            - load.moment.dot(&omega);
+        assert!(
+            (tau - virtual_work).abs() < 1e-5 * (1.0 + tau.abs()),
+            "{joint}: {tau} vs virtual work {virtual_work}"
+        );
         let a = robot.actuated_joints.iter().position(|n| n == joint).unwrap();
         assert_eq!(*limit, robot.torque_limits[a]);
     }

@@ -6,13 +6,19 @@
 //! scenario driver: references, contact sets, perturbations, evaluation) and `tool` (read-only:
 //! status and diagnostics). [`grants`] lists, from [`crate::keys`], what each may do:
 //!
-//! | identity | publishes (put) | subscribes to | liveliness |
-//! | --- | --- | --- | --- |
-//! | `coordinator` | `robot/*/command`, `coordinator/{status,diagnostics}` | `robot/*/{dynamics,description}`, `references` | declares `coordinator/alive`, watches `member/*` |
-//! | robot `rN` | `robot/rN/{dynamics,torque,status,description}` | `robot/rN/{state,command,contacts}` | declares `member/rN`, watches `coordinator/alive` |
-//! | `sim-bridge` | `robot/*/state`, `ground-truth` | `robot/*/torque`, `perturbation`, `coordinator/status` | watches `member/*`, `coordinator/alive` |
-//! | `runner` | `references`, `robot/*/contacts`, `perturbation` | every robot key, `coordinator/{status,diagnostics}`, `ground-truth` | watches `member/*`, `coordinator/alive` |
-//! | `tool` | nothing | `robot/*/status`, `coordinator/{status,diagnostics}` | none |
+//! - `coordinator`: publishes (puts) `robot/*/command`, `coordinator/{status,diagnostics}`;
+//!   subscribes to `robot/*/{dynamics,description}`, `references`; liveliness: declares
+//!   `coordinator/alive`, watches `member/*`.
+//! - robot `rN`: publishes `robot/rN/{dynamics,torque,status,description}`; subscribes to
+//!   `robot/rN/{state,command,contacts}`; liveliness: declares `member/rN`, watches
+//!   `coordinator/alive`.
+//! - `sim-bridge`: publishes `robot/*/state`, `ground-truth`; subscribes to `robot/*/torque`,
+//!   `perturbation`, `coordinator/status`; liveliness: watches `member/*`, `coordinator/alive`.
+//! - `runner`: publishes `references`, `robot/*/contacts`, `perturbation`; subscribes to every
+//!   robot key, `coordinator/{status,diagnostics}`, `ground-truth`; liveliness: watches
+//!   `member/*`, `coordinator/alive`.
+//! - `tool`: publishes nothing; subscribes to `robot/*/status`,
+//!   `coordinator/{status,diagnostics}`; liveliness: none.
 //!
 //! (keys under `team/{team}/`). [`access_control`] turns the grants into Zenoh's
 //! `access_control` section, default deny. Zenoh enforces it on every node, per link, against
@@ -30,10 +36,10 @@
 //! that carry the team ([`crate::site`]).
 //!
 //! [`SecureConfig`] writes one component's whole Zenoh configuration: peer mode, multicast
-//! scouting off, QUIC endpoints ([`SECURE_LINK`]), the certificate files ([`TlsFiles`]: CA, certificate, key;
-//! `enable_mtls`, so that a node without a certificate from the CA cannot open a link) and the
-//! ACL. `scripts/make-test-certs.sh` makes test certificates with these names. Several teams on
-//! one network go through a router instead ([`crate::site`]).
+//! scouting off, QUIC endpoints ([`SECURE_LINK`]), the certificate files ([`TlsFiles`]: CA,
+//! certificate, key; `enable_mtls`, so that a node without a certificate from the CA cannot open
+//! a link) and the ACL. `scripts/make-test-certs.sh` makes test certificates with these names.
+//! Several teams on one network go through a router instead ([`crate::site`]).
 
 use std::path::{Path, PathBuf};
 
@@ -48,15 +54,24 @@ use crate::ProtocolError;
 pub enum AccessError {
     #[error(transparent)]
     Key(#[from] ProtocolError),
-    #[error("robot id {0:?} is the name of another identity (coordinator, sim-bridge, runner, tool)")]
+    #[error(
+        "robot id {0:?} is the name of another identity (coordinator, sim-bridge, runner, tool)"
+    )]
     ReservedRobotId(String),
-    #[error("{what} {path} is missing (make test certificates with scripts/make-test-certs.sh DIR ROBOT..., or --router DIR for a site's router)")]
+    #[error(
+        "{what} {path} is missing (make test certificates with scripts/make-test-certs.sh \
+         DIR ROBOT..., or --router DIR for a site's router)"
+    )]
     MissingFile { what: &'static str, path: PathBuf },
     #[error("cannot write {path}: {reason}")]
     Write { path: PathBuf, reason: String },
     #[error("site: {0}")]
     Site(String),
-    #[error("endpoint {0:?} is not a secure link: mutual TLS runs on QUIC endpoints, quic/HOST:PORT (Zenoh's tls/ link reads and writes one TLS session from two tasks at once, which can corrupt it under load)")]
+    #[error(
+        "endpoint {0:?} is not a secure link: mutual TLS runs on QUIC endpoints, \
+         quic/HOST:PORT (Zenoh's tls/ link reads and writes one TLS session from two tasks at \
+         once, which can corrupt it under load)"
+    )]
     NotSecure(String),
     #[error("the configuration for {identity} is not a valid Zenoh configuration: {reason}")]
     Invalid { identity: String, reason: String },
@@ -106,7 +121,8 @@ impl Identity {
 
     /// Every identity of a team with these robots.
     pub fn all(robots: &[String]) -> Vec<Identity> {
-        let mut out = vec![Identity::Coordinator, Identity::SimBridge, Identity::Runner, Identity::Tool];
+        let mut out =
+            vec![Identity::Coordinator, Identity::SimBridge, Identity::Runner, Identity::Tool];
         out.extend(robots.iter().cloned().map(Identity::Agent));
         out
     }
@@ -144,7 +160,12 @@ pub fn grants(team: &str, who: &Identity) -> Result<Grants, AccessError> {
             }
             let own = |t| keys::robot(team, robot, t);
             Grants {
-                puts: vec![own(T::Dynamics)?, own(T::Torque)?, own(T::Status)?, own(T::Description)?],
+                puts: vec![
+                    own(T::Dynamics)?,
+                    own(T::Torque)?,
+                    own(T::Status)?,
+                    own(T::Description)?,
+                ],
                 gets: vec![own(T::State)?, own(T::Command)?, own(T::Contacts)?],
                 tokens: vec![keys::member(team, robot)?],
                 watches: vec![alive],
@@ -175,16 +196,27 @@ pub fn grants(team: &str, who: &Identity) -> Result<Grants, AccessError> {
 fn runner_gets(team: &str) -> Result<Vec<String>, AccessError> {
     use RobotTopic as T;
     let mut gets = Vec::new();
-    for t in [T::State, T::Dynamics, T::Command, T::Torque, T::Status, T::Description, T::Contacts] {
+    for t in [T::State, T::Dynamics, T::Command, T::Torque, T::Status, T::Description, T::Contacts]
+    {
         gets.push(keys::all_robots(team, t)?);
     }
-    gets.extend([keys::coordinator_status(team)?, keys::diagnostics(team)?, keys::ground_truth(team)?]);
+    gets.extend([
+        keys::coordinator_status(team)?,
+        keys::diagnostics(team)?,
+        keys::ground_truth(team)?,
+    ]);
     Ok(gets)
 }
 
 /// One ACL rule: messages, flows and keys, allowed.
 fn rule(id: String, messages: &[&str], flow: &str, keys: &[String]) -> Value {
-    json!({ "id": id, "messages": messages, "flows": [flow], "permission": "allow", "key_exprs": keys })
+    json!({
+        "id": id,
+        "messages": messages,
+        "flows": [flow],
+        "permission": "allow",
+        "key_exprs": keys,
+    })
 }
 
 /// The rules of one identity of `team`, whose certificate is named `cert`, as seen by the node
@@ -210,7 +242,12 @@ fn identity_rules(team: &str, who: &Identity, cert: &str) -> Result<Vec<Value>, 
 /// `cert` (the identity's name on a team's own links, `{name}.{team}` on a site's router).
 /// Our own declarations (subscribers, liveliness subscribers) go out to every member: a
 /// declaration carries no data, and the remote checks it against its own rules.
-pub(crate) fn team_section(team: &str, robots: &[String], cert: &dyn Fn(&Identity) -> String, acl: &mut Acl) -> Result<(), AccessError> {
+pub(crate) fn team_section(
+    team: &str,
+    robots: &[String],
+    cert: &dyn Fn(&Identity) -> String,
+    acl: &mut Acl,
+) -> Result<(), AccessError> {
     let identities = Identity::all(robots);
     let mut names = Vec::new();
     for who in &identities {
@@ -225,7 +262,12 @@ pub(crate) fn team_section(team: &str, robots: &[String], cert: &dyn Fn(&Identit
         names.push(name);
     }
     let id = format!("{team}/declarations");
-    acl.rules.push(rule(id.clone(), &["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"], "egress", &[keys::everything(team)?]));
+    acl.rules.push(rule(
+        id.clone(),
+        &["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
+        "egress",
+        &[keys::everything(team)?],
+    ));
     acl.policies.push(json!({ "id": id, "rules": [id], "subjects": names }));
     Ok(())
 }
@@ -239,8 +281,15 @@ pub(crate) struct Acl {
 }
 
 impl Acl {
-    pub fn to_json(self) -> Value {
-        json!({ "enabled": true, "default_permission": "deny", "rules": self.rules, "subjects": self.subjects, "policies": self.policies })
+    /// The finished section, as Zenoh reads it.
+    pub fn into_json(self) -> Value {
+        json!({
+            "enabled": true,
+            "default_permission": "deny",
+            "rules": self.rules,
+            "subjects": self.subjects,
+            "policies": self.policies,
+        })
     }
 }
 
@@ -249,7 +298,7 @@ impl Acl {
 pub fn access_control(team: &str, robots: &[String]) -> Result<Value, AccessError> {
     let mut acl = Acl::default();
     team_section(team, robots, &|who| who.name().to_string(), &mut acl)?;
-    Ok(acl.to_json())
+    Ok(acl.into_json())
 }
 
 /// The Zenoh link that carries mutual TLS: QUIC (TLS 1.3 inside, the same certificates and
@@ -290,12 +339,20 @@ impl TlsFiles {
 
     /// `DIR/ca.pem`, `DIR/{name}.pem`, `DIR/{name}.key`.
     pub fn named(dir: &Path, name: &str) -> Self {
-        TlsFiles { root_ca: dir.join("ca.pem"), certificate: dir.join(format!("{name}.pem")), private_key: dir.join(format!("{name}.key")) }
+        TlsFiles {
+            root_ca: dir.join("ca.pem"),
+            certificate: dir.join(format!("{name}.pem")),
+            private_key: dir.join(format!("{name}.key")),
+        }
     }
 
     /// An error naming the first file that is missing.
     pub fn check(&self) -> Result<(), AccessError> {
-        for (what, path) in [("CA certificate", &self.root_ca), ("certificate", &self.certificate), ("private key", &self.private_key)] {
+        for (what, path) in [
+            ("CA certificate", &self.root_ca),
+            ("certificate", &self.certificate),
+            ("private key", &self.private_key),
+        ] {
             if !path.is_file() {
                 return Err(AccessError::MissingFile { what, path: path.clone() });
             }
@@ -381,7 +438,12 @@ pub(crate) fn to_zenoh(who: &str, config: &Value) -> Result<zenoh::Config, Acces
 
 /// Check `who`'s certificate files and that Zenoh accepts `config`, then write it to `path`
 /// (pretty JSON, which `--zenoh-config` reads as JSON5).
-pub(crate) fn write_checked(path: &Path, who: &str, tls: &TlsFiles, config: &Value) -> Result<(), AccessError> {
+pub(crate) fn write_checked(
+    path: &Path,
+    who: &str,
+    tls: &TlsFiles,
+    config: &Value,
+) -> Result<(), AccessError> {
     tls.check()?;
     to_zenoh(who, config)?;
     let failed = |e: String| AccessError::Write { path: path.to_path_buf(), reason: e };
@@ -413,8 +475,15 @@ pub fn file_name(who: &Identity) -> String {
 }
 
 /// Write [`team_configs`] into `out` ([`file_name`]); returns the files written.
-pub fn write_team(certs: &Path, team: &str, robots: &[String], hub: &str, out: &Path) -> Result<Vec<PathBuf>, AccessError> {
-    std::fs::create_dir_all(out).map_err(|e| AccessError::Write { path: out.to_path_buf(), reason: e.to_string() })?;
+pub fn write_team(
+    certs: &Path,
+    team: &str,
+    robots: &[String],
+    hub: &str,
+    out: &Path,
+) -> Result<Vec<PathBuf>, AccessError> {
+    std::fs::create_dir_all(out)
+        .map_err(|e| AccessError::Write { path: out.to_path_buf(), reason: e.to_string() })?;
     let mut written = Vec::new();
     for cfg in team_configs(certs, team, robots, hub) {
         let path = out.join(file_name(&cfg.identity));
@@ -455,7 +524,10 @@ mod tests {
 
     #[test]
     fn reserved_and_bad_names_are_refused() {
-        assert!(matches!(grants("t", &Identity::Agent("tool".into())), Err(AccessError::ReservedRobotId(_))));
+        assert!(matches!(
+            grants("t", &Identity::Agent("tool".into())),
+            Err(AccessError::ReservedRobotId(_))
+        ));
         assert!(access_control("t", &["coordinator".to_string()]).is_err());
         assert!(Identity::from_name("a/b").is_err());
         assert_eq!(Identity::from_name("sim-bridge").unwrap(), Identity::SimBridge);
@@ -465,23 +537,31 @@ mod tests {
 
     #[test]
     fn zenoh_accepts_the_configuration() {
-        let cfg = SecureConfig::in_dir(Path::new("/certs"), "t", &robots(), Identity::Agent("r1".into()));
+        let cfg =
+            SecureConfig::in_dir(Path::new("/certs"), "t", &robots(), Identity::Agent("r1".into()));
         let z = cfg.to_zenoh().unwrap();
         assert_eq!(z.get_json("access_control/default_permission").unwrap(), "\"deny\"");
         assert_eq!(z.get_json("transport/link/tls/enable_mtls").unwrap(), "true");
-        assert!(z.get_json("transport/link/tls/connect_certificate").unwrap().contains("/certs/r1.pem"));
+        assert!(z
+            .get_json("transport/link/tls/connect_certificate")
+            .unwrap()
+            .contains("/certs/r1.pem"));
         let missing = cfg.write(Path::new("/nonexistent/zenoh.json5"));
         assert!(matches!(missing, Err(AccessError::MissingFile { .. })), "{missing:?}");
     }
 
     #[test]
     fn only_quic_endpoints_carry_mutual_tls() {
-        let mut cfg = SecureConfig::in_dir(Path::new("/certs"), "t", &robots(), Identity::Coordinator);
+        let mut cfg =
+            SecureConfig::in_dir(Path::new("/certs"), "t", &robots(), Identity::Coordinator);
         assert!(cfg.listen.iter().all(|e| e.starts_with("quic/127.0.0.1:")), "{:?}", cfg.listen);
         for bad in ["tls/127.0.0.1:7447", "tcp/127.0.0.1:7447", "quic127.0.0.1:7447"] {
             cfg.connect = vec![bad.to_string()];
             let refused = cfg.to_json();
-            assert!(matches!(&refused, Err(AccessError::NotSecure(e)) if e == bad), "{bad}: {refused:?}");
+            assert!(
+                matches!(&refused, Err(AccessError::NotSecure(e)) if e == bad),
+                "{bad}: {refused:?}"
+            );
         }
         cfg.connect = vec![secure_endpoint("10.0.0.2", 7447)];
         assert_eq!(cfg.to_json().unwrap()["connect"]["endpoints"][0], "quic/10.0.0.2:7447");

@@ -36,7 +36,11 @@ impl RunClock {
     /// The clock of a run that settles for `settle` s and then runs `duration` s of scenario
     /// at `control_hz`, each length rounded to the nearest tick ([`RunClock::ticks_in`]).
     pub fn from_seconds(control_hz: f64, settle: f64, duration: f64) -> RunClock {
-        RunClock { control_hz, settle_ticks: Self::ticks_in(settle, control_hz), ticks: Self::ticks_in(duration, control_hz) }
+        RunClock {
+            control_hz,
+            settle_ticks: Self::ticks_in(settle, control_hz),
+            ticks: Self::ticks_in(duration, control_hz),
+        }
     }
 
     /// The number of ticks nearest to `seconds` at `control_hz`: `round(seconds * control_hz)`

@@ -107,7 +107,8 @@ pub fn encode<M: Message>(msg: &M) -> Result<Vec<u8>, ProtocolError> {
 pub fn encode_into<M: Message>(msg: &M, out: &mut Vec<u8>) -> Result<(), ProtocolError> {
     out.clear();
     if M::WIRE == Wire::Json {
-        serde_json::to_writer(&mut *out, msg).map_err(|e| ProtocolError::Malformed { kind: M::NAME, reason: e.to_string() })?;
+        serde_json::to_writer(&mut *out, msg)
+            .map_err(|e| ProtocolError::Malformed { kind: M::NAME, reason: e.to_string() })?;
         if out.len() > MAX_MESSAGE_BYTES {
             return Err(ProtocolError::Oversized { len: out.len(), max: MAX_MESSAGE_BYTES });
         }
@@ -156,7 +157,8 @@ pub fn decode<M: Message>(bytes: &[u8]) -> Result<M, ProtocolError> {
 
 /// A JSON wire message: the version in its header must be ours.
 fn decode_json<M: Message>(bytes: &[u8]) -> Result<M, ProtocolError> {
-    let msg: M = serde_json::from_slice(bytes).map_err(|e| ProtocolError::Malformed { kind: M::NAME, reason: e.to_string() })?;
+    let msg: M = serde_json::from_slice(bytes)
+        .map_err(|e| ProtocolError::Malformed { kind: M::NAME, reason: e.to_string() })?;
     let version = msg.header().version;
     if version != PROTOCOL_VERSION {
         return Err(ProtocolError::VersionMismatch { found: version, expected: PROTOCOL_VERSION });

@@ -57,7 +57,11 @@ pub fn base_twist_to_mujoco(orientation_wxyz: [f64; 4], twist: [f64; 6]) -> [f64
 /// frame) at base twist `twist`: `[R (a_v + omega x v); a_omega]`, because the world-frame
 /// linear velocity `R v` also turns with the base. Needed to compare `h` with MuJoCo's
 /// `qfrc_bias`: `h = T^T (qfrc_bias + M_mj c)` with `c` this function at zero acceleration.
-pub fn base_acceleration_to_mujoco(orientation_wxyz: [f64; 4], twist: [f64; 6], accel: [f64; 6]) -> [f64; 6] {
+pub fn base_acceleration_to_mujoco(
+    orientation_wxyz: [f64; 4],
+    twist: [f64; 6],
+    accel: [f64; 6],
+) -> [f64; 6] {
     let r = quat_from_wxyz(orientation_wxyz);
     let v = Vector3::new(twist[0], twist[1], twist[2]);
     let w = Vector3::new(twist[3], twist[4], twist[5]);
@@ -77,7 +81,8 @@ mod tests {
     #[test]
     fn mujoco_twist_round_trip_and_rotation() {
         // 90 degrees about z: world x is base -y.
-        let q = quat_to_wxyz(&UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::FRAC_PI_2));
+        let q =
+            quat_to_wxyz(&UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::FRAC_PI_2));
         let mj = [1.0, 0.0, 0.0, 0.1, 0.2, 0.3];
         let ours = base_twist_from_mujoco(q, mj);
         assert!((ours[0] - 0.0).abs() < 1e-12 && (ours[1] + 1.0).abs() < 1e-12);

@@ -34,8 +34,16 @@ pub enum ProtocolError {
 }
 
 impl ProtocolError {
-    pub(crate) fn dim(field: impl Into<String>, expected: impl ToString, got: impl ToString) -> Self {
-        ProtocolError::Dimension { field: field.into(), expected: expected.to_string(), got: got.to_string() }
+    pub(crate) fn dim(
+        field: impl Into<String>,
+        expected: impl ToString,
+        got: impl ToString,
+    ) -> Self {
+        ProtocolError::Dimension {
+            field: field.into(),
+            expected: expected.to_string(),
+            got: got.to_string(),
+        }
     }
     pub(crate) fn invalid(field: impl Into<String>, reason: impl Into<String>) -> Self {
         ProtocolError::Invalid { field: field.into(), reason: reason.into() }

@@ -151,7 +151,11 @@ pub fn check_sender(key: &str, header: &crate::Header) -> Result<(), ProtocolErr
         Some(r) => format!("robot {r} of team {}", team.unwrap_or("?")),
         None => format!("team {}", team.unwrap_or("?")),
     };
-    Err(ProtocolError::WrongSender { key: key.to_string(), key_sender: name(key_team, key_robot), header_sender: name(Some(&header.team), header.robot.as_deref()) })
+    Err(ProtocolError::WrongSender {
+        key: key.to_string(),
+        key_sender: name(key_team, key_robot),
+        header_sender: name(Some(&header.team), header.robot.as_deref()),
+    })
 }
 
 /// `team/{team}/robot/{robot}/contacts`: the robot's contact set ([`crate::ContactSet`]).
@@ -194,7 +198,9 @@ pub fn kind_of(key: &str) -> Option<crate::MessageKind> {
 /// `team/{team}/member/{robot}` and `team/{team}/coordinator/alive`.
 pub fn is_liveliness(key: &str) -> bool {
     let parts: Vec<&str> = key.split('/').collect();
-    parts.len() == 4 && parts[0] == ROOT && (parts[2] == "member" || (parts[2] == "coordinator" && parts[3] == "alive"))
+    parts.len() == 4
+        && parts[0] == ROOT
+        && (parts[2] == "member" || (parts[2] == "coordinator" && parts[3] == "alive"))
 }
 
 #[cfg(test)]
@@ -209,16 +215,32 @@ mod tests {
         let h = |team: &str, robot: Option<&str>| Header::new(team, robot, 7, 0);
         let terms = robot("t1", "r1", RobotTopic::Dynamics).unwrap();
         assert!(check_sender(&terms, &h("t1", Some("r1"))).is_ok());
-        for (header, says) in [(h("t1", Some("r2")), "robot r2 of team t1"), (h("t2", Some("r1")), "robot r1 of team t2"), (h("t1", None), "team t1")] {
+        for (header, says) in [
+            (h("t1", Some("r2")), "robot r2 of team t1"),
+            (h("t2", Some("r1")), "robot r1 of team t2"),
+            (h("t1", None), "team t1"),
+        ] {
             let e = check_sender(&terms, &header).expect_err("refused");
             let text = e.to_string();
-            assert!(text.contains("robot r1 of team t1") && text.contains(says), "both names: {text}");
+            assert!(
+                text.contains("robot r1 of team t1") && text.contains(says),
+                "both names: {text}"
+            );
         }
         let status = coordinator_status("t1").unwrap();
         assert!(check_sender(&status, &h("t1", None)).is_ok());
-        assert!(check_sender(&status, &h("t2", None)).is_err(), "another team's status on this team's key");
-        assert!(check_sender(&member("t1", "r1").unwrap(), &h("t1", None)).is_ok(), "a member token is not a robot's message key");
-        assert!(check_sender("elsewhere/t1", &h("t1", None)).is_err(), "a key outside the tree names no sender");
+        assert!(
+            check_sender(&status, &h("t2", None)).is_err(),
+            "another team's status on this team's key"
+        );
+        assert!(
+            check_sender(&member("t1", "r1").unwrap(), &h("t1", None)).is_ok(),
+            "a member token is not a robot's message key"
+        );
+        assert!(
+            check_sender("elsewhere/t1", &h("t1", None)).is_err(),
+            "a key outside the tree names no sender"
+        );
     }
 
     #[test]
@@ -240,7 +262,10 @@ mod tests {
         assert_eq!(kind_of(&coordinator_alive("t1").unwrap()), None);
         assert!(is_liveliness("team/t1/member/r2") && is_liveliness("team/t1/member/*"));
         assert!(is_liveliness(&coordinator_alive("t1").unwrap()));
-        assert!(!is_liveliness(&coordinator_status("t1").unwrap()) && !is_liveliness("team/t1/robot/r2/state"));
+        assert!(
+            !is_liveliness(&coordinator_status("t1").unwrap())
+                && !is_liveliness("team/t1/robot/r2/state")
+        );
         assert_eq!(kind_of("team/t1/robot/r2/state/extra"), None);
     }
 

@@ -17,22 +17,24 @@
 //! Built only by the functions of [`keys`]; `{team}` and `{robot}` are validated identifiers
 //! (`[A-Za-z0-9_-]{1,64}`).
 //!
+//! Every key is under `team/{team}/` (left out of the table).
+//!
 //! | key | message | publisher → subscriber |
 //! | --- | --- | --- |
-//! | `team/{team}/robot/{robot}/state` | [`RobotState`] | state source (sim-bridge) → agent |
-//! | `team/{team}/robot/{robot}/dynamics` | [`DynamicsTerms`] | agent → coordinator |
-//! | `team/{team}/robot/{robot}/command` | [`TorqueCommand`] (torques, or a hold order) | coordinator → agent |
-//! | `team/{team}/robot/{robot}/torque` | [`DriveCommand`] (checked) | agent → the robot's drives (sim-bridge) |
-//! | `team/{team}/robot/{robot}/status` | [`AgentStatus`] | agent → tools |
-//! | `team/{team}/robot/{robot}/description` | [`RobotDescription`] | agent → coordinator, tools (queryable) |
-//! | `team/{team}/member/{robot}` | liveliness token | agent → coordinator |
-//! | `team/{team}/coordinator/status` | [`CoordinatorStatus`] | coordinator → tools |
-//! | `team/{team}/coordinator/diagnostics` | [`TickDiagnostics`] | coordinator → reports |
-//! | `team/{team}/coordinator/alive` | liveliness token | coordinator → agents, sim-bridge |
-//! | `team/{team}/references` | [`TaskReferences`] | scenario runner → coordinator |
-//! | `team/{team}/perturbation` | [`PerturbationRequest`] | tools → sim-bridge |
-//! | `team/{team}/robot/{robot}/contacts` | [`ContactSet`] | runner, gait planner → agent |
-//! | `team/{team}/ground-truth` | [`GroundTruth`] | sim-bridge → evaluation (never the controller) |
+//! | `robot/{robot}/state` | [`RobotState`] | state source (sim-bridge) → agent |
+//! | `robot/{robot}/dynamics` | [`DynamicsTerms`] | agent → coordinator |
+//! | `robot/{robot}/command` | [`TorqueCommand`] (torques, or a hold order) | coordinator → agent |
+//! | `robot/{robot}/torque` | [`DriveCommand`] (checked) | agent → its drives (sim-bridge) |
+//! | `robot/{robot}/status` | [`AgentStatus`] | agent → tools |
+//! | `robot/{robot}/description` | [`RobotDescription`] | agent → coordinator, tools (queryable) |
+//! | `member/{robot}` | liveliness token | agent → coordinator |
+//! | `coordinator/status` | [`CoordinatorStatus`] | coordinator → tools |
+//! | `coordinator/diagnostics` | [`TickDiagnostics`] | coordinator → reports |
+//! | `coordinator/alive` | liveliness token | coordinator → agents, sim-bridge |
+//! | `references` | [`TaskReferences`] | scenario runner → coordinator |
+//! | `perturbation` | [`PerturbationRequest`] | tools → sim-bridge |
+//! | `robot/{robot}/contacts` | [`ContactSet`] | runner, gait planner → agent |
+//! | `ground-truth` | [`GroundTruth`] | sim-bridge → evaluation (never the controller) |
 //!
 //! Wildcards for subscribers (`team/{team}/robot/*/dynamics`, `team/{team}/member/*`) come
 //! from the same module.
@@ -66,25 +68,27 @@
 //! the others and every number's finiteness are checked ([`Validate`]); failures are typed
 //! [`ProtocolError`]s.
 
+#[cfg(feature = "transport")]
+pub mod access;
+pub mod clock;
 pub mod codec;
 pub mod conventions;
 pub mod error;
 pub mod keys;
+#[cfg(feature = "transport")]
+pub mod logging;
 pub mod matrix;
 pub mod messages;
-pub mod validate;
-pub mod clock;
-#[cfg(feature = "transport")]
-pub mod transport;
-#[cfg(feature = "transport")]
-pub mod access;
 #[cfg(feature = "transport")]
 pub mod site;
 #[cfg(feature = "transport")]
-pub mod logging;
+pub mod transport;
+pub mod validate;
 
-pub use codec::{decode, encode, from_json, schema_id, to_json, Message, MessageKind, Wire, MAX_MESSAGE_BYTES};
 pub use clock::RunClock;
+pub use codec::{
+    decode, encode, from_json, schema_id, to_json, Message, MessageKind, Wire, MAX_MESSAGE_BYTES,
+};
 pub use error::ProtocolError;
 pub use matrix::Matrix;
 pub use messages::*;

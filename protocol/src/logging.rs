@@ -5,9 +5,9 @@
 //! [`Verbosity::Debug`] on. [`directives`] gives what is in effect, so that a process started
 //! by another (a distributed run's components) logs as its parent does.
 //!
-//! Colours only on a terminal. Two ERROR lines of Zenoh's router are dropped whatever the level ([`ZenohNoise`]): they
-//! report an answer that arrives after the question was withdrawn, which the router then
-//! ignores, and nothing is lost by it.
+//! Colours only on a terminal. Two ERROR lines of Zenoh's router are dropped whatever the level
+//! ([`ZenohNoise`]): they report an answer that arrives after the question was withdrawn, which
+//! the router then ignores, and nothing is lost by it.
 
 use std::fmt;
 use std::io::IsTerminal;
@@ -74,7 +74,11 @@ pub fn init(default: Verbosity) {
     let _ = tracing_subscriber::registry()
         .with(EnvFilter::new(&directives))
         .with(ZenohNoise)
-        .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr).with_ansi(std::io::stderr().is_terminal()))
+        .with(
+            tracing_subscriber::fmt::layer()
+                .with_writer(std::io::stderr)
+                .with_ansi(std::io::stderr().is_terminal()),
+        )
         .try_init();
 }
 
@@ -146,7 +150,13 @@ mod tests {
         assert_eq!(Verbosity::from_flags(false, 1), Verbosity::Info);
         assert_eq!(Verbosity::from_flags(false, 2), Verbosity::Debug);
         assert_eq!(Verbosity::from_flags(false, 9), Verbosity::Trace);
-        for v in [Verbosity::Errors, Verbosity::Warnings, Verbosity::Info, Verbosity::Debug, Verbosity::Trace] {
+        for v in [
+            Verbosity::Errors,
+            Verbosity::Warnings,
+            Verbosity::Info,
+            Verbosity::Debug,
+            Verbosity::Trace,
+        ] {
             assert!(EnvFilter::try_new(v.directives()).is_ok(), "{v:?}");
         }
     }

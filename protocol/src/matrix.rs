@@ -60,7 +60,12 @@ impl Matrix {
     }
 
     /// Consistent dimensions, finite entries, and the expected shape where one is given.
-    pub fn check(&self, field: &str, rows: Option<usize>, cols: Option<usize>) -> Result<(), ProtocolError> {
+    pub fn check(
+        &self,
+        field: &str,
+        rows: Option<usize>,
+        cols: Option<usize>,
+    ) -> Result<(), ProtocolError> {
         let n = (self.rows as u64) * (self.cols as u64);
         if n != self.data.len() as u64 {
             return Err(ProtocolError::dim(

@@ -6,7 +6,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::validate::{check_finite, check_len, check_rotation, check_unit_quaternion, validate_id, Validate};
+use crate::validate::{
+    check_finite, check_len, check_rotation, check_unit_quaternion, validate_id, Validate,
+};
 use crate::{Matrix, ProtocolError, PROTOCOL_VERSION};
 
 /// Carried by every message.
@@ -39,7 +41,10 @@ impl Header {
 
     fn check(&self, needs_robot: bool) -> Result<(), ProtocolError> {
         if self.version != PROTOCOL_VERSION {
-            return Err(ProtocolError::VersionMismatch { found: self.version, expected: PROTOCOL_VERSION });
+            return Err(ProtocolError::VersionMismatch {
+                found: self.version,
+                expected: PROTOCOL_VERSION,
+            });
         }
         validate_id("team", &self.team)?;
         match (&self.robot, needs_robot) {
@@ -106,11 +111,17 @@ impl Validate for RobotState {
         check_finite("joint_velocities", &self.joint_velocities)?;
         check_finite("time", &[self.time])?;
         if self.foot_forces.len() > MAX_CONTACT_FEET {
-            return Err(ProtocolError::invalid("foot_forces", format!("{} feet, at most {MAX_CONTACT_FEET} are accepted", self.foot_forces.len())));
+            return Err(ProtocolError::invalid(
+                "foot_forces",
+                format!("{} feet, at most {MAX_CONTACT_FEET} are accepted", self.foot_forces.len()),
+            ));
         }
         check_finite("foot_forces", &self.foot_forces)?;
         if let Some(f) = self.foot_forces.iter().find(|f| **f < 0.0) {
-            return Err(ProtocolError::invalid("foot_forces", format!("a normal force of {f} N (it pushes, >= 0)")));
+            return Err(ProtocolError::invalid(
+                "foot_forces",
+                format!("a normal force of {f} N (it pushes, >= 0)"),
+            ));
         }
         Ok(())
     }
@@ -212,7 +223,10 @@ impl Validate for DynamicsTerms {
         self.header.check(true)?;
         let nv = self.nv();
         if nv == 0 || (self.floating_base && nv <= 6) {
-            return Err(ProtocolError::invalid("nv", format!("{nv} degrees of freedom leave no actuated joint")));
+            return Err(ProtocolError::invalid(
+                "nv",
+                format!("{nv} degrees of freedom leave no actuated joint"),
+            ));
         }
         self.mass_matrix.check("mass_matrix", Some(nv), Some(nv))?;
         check_len("bias", &self.bias, nv)?;
@@ -238,10 +252,16 @@ impl Validate for DynamicsTerms {
             torsos += (f.role == FrameRole::Torso) as usize;
         }
         if hands > 1 || torsos > 1 {
-            return Err(ProtocolError::invalid("frames", "at most one hand and one torso per robot"));
+            return Err(ProtocolError::invalid(
+                "frames",
+                "at most one hand and one torso per robot",
+            ));
         }
         if self.hand_in_grasp && hands == 0 {
-            return Err(ProtocolError::invalid("hand_in_grasp", "hand in grasp but no hand frame sent"));
+            return Err(ProtocolError::invalid(
+                "hand_in_grasp",
+                "hand in grasp but no hand frame sent",
+            ));
         }
         check_delay(self.team_delay_ticks)
     }
@@ -250,8 +270,8 @@ impl Validate for DynamicsTerms {
 // ---------------------------------------------------------------------------------------------
 // Coordinator -> agent -> torque sink
 
-/// Joint torques for one robot's actuated joints, velocity order (docs/architecture.md, one tick, step 3); or,
-/// from the coordinator, the order to hold posture this tick.
+/// Joint torques for one robot's actuated joints, velocity order (docs/architecture.md, one
+/// tick, step 3); or, from the coordinator, the order to hold posture this tick.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct TorqueCommand {
@@ -270,13 +290,21 @@ pub struct TorqueCommand {
 impl TorqueCommand {
     /// The order to hold posture at `tick`.
     pub fn hold(team: &str, robot: &str, tick: u64) -> Self {
-        TorqueCommand { header: Header::new(team, Some(robot), tick, 0), tau: Vec::new(), hold: true, delay_ticks: 0 }
+        TorqueCommand {
+            header: Header::new(team, Some(robot), tick, 0),
+            tau: Vec::new(),
+            hold: true,
+            delay_ticks: 0,
+        }
     }
 }
 
 fn check_delay(ticks: u64) -> Result<(), ProtocolError> {
     if ticks > MAX_TEAM_DELAY_TICKS {
-        return Err(ProtocolError::invalid("team delay", format!("{ticks} ticks: at most {MAX_TEAM_DELAY_TICKS}")));
+        return Err(ProtocolError::invalid(
+            "team delay",
+            format!("{ticks} ticks: at most {MAX_TEAM_DELAY_TICKS}"),
+        ));
     }
     Ok(())
 }
@@ -353,7 +381,14 @@ impl Clone for DriveCommand {
 impl DriveCommand {
     /// The torque `tau_ff` at `tick`, with no gains.
     pub fn torque(team: &str, robot: &str, tick: u64, tau: Vec<f64>) -> Self {
-        DriveCommand { header: Header::new(team, Some(robot), tick, 0), tau_ff: tau, q_des: Vec::new(), qd_des: Vec::new(), kp: Vec::new(), kd: Vec::new() }
+        DriveCommand {
+            header: Header::new(team, Some(robot), tick, 0),
+            tau_ff: tau,
+            q_des: Vec::new(),
+            qd_des: Vec::new(),
+            kp: Vec::new(),
+            kd: Vec::new(),
+        }
     }
 
     /// Whether it has gains (else the drives apply `tau_ff` as it is).
@@ -387,17 +422,28 @@ impl Validate for DriveCommand {
             return Err(ProtocolError::invalid("tau_ff", "empty torque vector"));
         }
         check_finite("tau_ff", &self.tau_ff)?;
-        for (gain, target, gname, tname) in [(&self.kp, &self.q_des, "kp", "q_des"), (&self.kd, &self.qd_des, "kd", "qd_des")] {
+        for (gain, target, gname, tname) in
+            [(&self.kp, &self.q_des, "kp", "q_des"), (&self.kd, &self.qd_des, "kd", "qd_des")]
+        {
             if !gain.is_empty() && gain.len() != n {
-                return Err(ProtocolError::invalid(gname, format!("{} gains for {n} joints", gain.len())));
+                return Err(ProtocolError::invalid(
+                    gname,
+                    format!("{} gains for {n} joints", gain.len()),
+                ));
             }
             if target.len() != gain.len() {
-                return Err(ProtocolError::invalid(tname, format!("{} targets for {} gains", target.len(), gain.len())));
+                return Err(ProtocolError::invalid(
+                    tname,
+                    format!("{} targets for {} gains", target.len(), gain.len()),
+                ));
             }
             check_finite(gname, gain)?;
             check_finite(tname, target)?;
             if let Some(j) = gain.iter().position(|g| *g < 0.0) {
-                return Err(ProtocolError::invalid(gname, format!("joint {j}: {} is negative", gain[j])));
+                return Err(ProtocolError::invalid(
+                    gname,
+                    format!("joint {j}: {} is negative", gain[j]),
+                ));
             }
         }
         Ok(())
@@ -500,7 +546,10 @@ impl Validate for TaskReferences {
             let f = format!("foot_loads[{i}].max_normal_force");
             check_finite(&f, &[l.max_normal_force])?;
             if l.max_normal_force < 0.0 {
-                return Err(ProtocolError::invalid(f, format!("{} N: a bound on a pushing force is >= 0", l.max_normal_force)));
+                return Err(ProtocolError::invalid(
+                    f,
+                    format!("{} N: a bound on a pushing force is >= 0", l.max_normal_force),
+                ));
             }
         }
         Ok(())
@@ -547,7 +596,10 @@ impl Validate for PerturbationRequest {
             check_finite("start", &[s])?;
         }
         if !(self.duration.is_finite() && self.duration > 0.0) {
-            return Err(ProtocolError::invalid("duration", format!("{} is not a positive duration", self.duration)));
+            return Err(ProtocolError::invalid(
+                "duration",
+                format!("{} is not a positive duration", self.duration),
+            ));
         }
         Ok(())
     }
@@ -709,16 +761,32 @@ impl TickDiagnostics {
 impl Validate for TickDiagnostics {
     fn validate(&self) -> Result<(), ProtocolError> {
         self.header.check(false)?;
-        check_finite("timings", &[self.qp_solve_us, self.assembly_us, self.total_us, self.constraint_residual, self.grasp_slip])?;
+        check_finite(
+            "timings",
+            &[
+                self.qp_solve_us,
+                self.assembly_us,
+                self.total_us,
+                self.constraint_residual,
+                self.grasp_slip,
+            ],
+        )?;
         if let Some(y) = self.motion_yield {
             if ![y.object, y.torso].iter().all(|s| (0.0..=1.0).contains(s)) {
-                return Err(ProtocolError::Invalid { field: "motion_yield".into(), reason: format!("shares must lie in [0, 1], not {y:?}") });
+                return Err(ProtocolError::Invalid {
+                    field: "motion_yield".into(),
+                    reason: format!("shares must lie in [0, 1], not {y:?}"),
+                });
             }
         }
         for (i, c) in self.contacts.iter().enumerate() {
             validate_id("robot", &c.robot)?;
             if c.wrench.len() != 3 && c.wrench.len() != 6 {
-                return Err(ProtocolError::dim(format!("contacts[{i}].wrench"), "3 or 6", c.wrench.len()));
+                return Err(ProtocolError::dim(
+                    format!("contacts[{i}].wrench"),
+                    "3 or 6",
+                    c.wrench.len(),
+                ));
             }
             check_finite(&format!("contacts[{i}].wrench"), &c.wrench)?;
         }
@@ -818,11 +886,25 @@ impl Validate for RobotDescription {
         }
         check_finite(
             "contact parameters",
-            &[self.foot_mu, self.hand_mu, self.hand_xi, self.hand_half_size[0], self.hand_half_size[1], self.total_mass],
+            &[
+                self.foot_mu,
+                self.hand_mu,
+                self.hand_xi,
+                self.hand_half_size[0],
+                self.hand_half_size[1],
+                self.total_mass,
+            ],
         )?;
         // xi > 0 too: a hand's friction rows divide by it (sliding and torsion share one cone).
-        if self.foot_mu <= 0.0 || self.hand_mu <= 0.0 || self.hand_xi <= 0.0 || self.hand_half_size.iter().any(|d| *d <= 0.0) {
-            return Err(ProtocolError::invalid("contact parameters", "friction and patch sizes must be positive"));
+        if self.foot_mu <= 0.0
+            || self.hand_mu <= 0.0
+            || self.hand_xi <= 0.0
+            || self.hand_half_size.iter().any(|d| *d <= 0.0)
+        {
+            return Err(ProtocolError::invalid(
+                "contact parameters",
+                "friction and patch sizes must be positive",
+            ));
         }
         Ok(())
     }
@@ -868,10 +950,16 @@ impl Validate for ContactSet {
         for (i, f) in self.stance_feet.iter().enumerate() {
             let field = format!("stance_feet[{i}]");
             if f.is_empty() || f.len() > MAX_FRAME_NAME_LEN {
-                return Err(ProtocolError::invalid(field, format!("frame name must have 1 to {MAX_FRAME_NAME_LEN} bytes")));
+                return Err(ProtocolError::invalid(
+                    field,
+                    format!("frame name must have 1 to {MAX_FRAME_NAME_LEN} bytes"),
+                ));
             }
             if !f.bytes().all(|b| b.is_ascii_graphic()) {
-                return Err(ProtocolError::invalid(field, "frame name must be printable ASCII without spaces"));
+                return Err(ProtocolError::invalid(
+                    field,
+                    "frame name must be printable ASCII without spaces",
+                ));
             }
         }
         crate::validate::check_unique("stance_feet", self.stance_feet.iter().map(String::as_str))
@@ -941,7 +1029,8 @@ pub struct GroundTruth {
 pub struct LoopTiming {
     pub robot: String,
     /// From this tick's state leaving to this tick's torques arriving, µs; `None` if they did
-    /// not arrive by the tick's deadline (a deadline miss: the drive held `applied_tick`'s torques).
+    /// not arrive by the tick's deadline (a deadline miss: the drive held `applied_tick`'s
+    /// torques).
     pub latency_us: Option<f64>,
     /// Tick of the torques applied during this tick's step (the tick itself unless missed;
     /// `None` before any torques arrived).
@@ -954,7 +1043,13 @@ impl Validate for GroundTruth {
     fn validate(&self) -> Result<(), ProtocolError> {
         self.header.check(false)?;
         check_finite("time", &[self.time])?;
-        let bodies = self.object.iter().map(|b| ("object", b)).chain(self.torsos.iter().map(|b| ("torsos", b))).chain(self.hands.iter().map(|b| ("hands", b))).chain(self.feet.iter().map(|b| ("feet", b)));
+        let bodies = self
+            .object
+            .iter()
+            .map(|b| ("object", b))
+            .chain(self.torsos.iter().map(|b| ("torsos", b)))
+            .chain(self.hands.iter().map(|b| ("hands", b)))
+            .chain(self.feet.iter().map(|b| ("feet", b)));
         for (field, b) in bodies {
             if b.name.is_empty() {
                 return Err(ProtocolError::invalid(field, "empty body name"));
@@ -969,14 +1064,22 @@ impl Validate for GroundTruth {
             validate_id("robot", &t.robot)?;
             if let Some(l) = t.latency_us {
                 if !(l.is_finite() && l >= 0.0) {
-                    return Err(ProtocolError::invalid(format!("loop_timing({}).latency_us", t.robot), "must be finite and non-negative"));
+                    return Err(ProtocolError::invalid(
+                        format!("loop_timing({}).latency_us", t.robot),
+                        "must be finite and non-negative",
+                    ));
                 }
             }
             if t.applied_tick.is_some_and(|a| a > self.header.tick) {
-                return Err(ProtocolError::invalid(format!("loop_timing({}).applied_tick", t.robot), "is after the tick"));
+                return Err(ProtocolError::invalid(
+                    format!("loop_timing({}).applied_tick", t.robot),
+                    "is after the tick",
+                ));
             }
         }
-        for (field, list) in [("hand_contacts", &self.hand_contacts), ("foot_contacts", &self.foot_contacts)] {
+        for (field, list) in
+            [("hand_contacts", &self.hand_contacts), ("foot_contacts", &self.foot_contacts)]
+        {
             for (i, c) in list.iter().enumerate() {
                 validate_id("robot", &c.robot)?;
                 check_finite(&format!("{field}[{i}].position"), &c.position)?;

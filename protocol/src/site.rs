@@ -28,7 +28,9 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{json, Value};
 
-use crate::access::{check_secure, team_section, to_zenoh, write_checked, Acl, AccessError, Identity, TlsFiles};
+use crate::access::{
+    check_secure, team_section, to_zenoh, write_checked, AccessError, Acl, Identity, TlsFiles,
+};
 use crate::keys;
 
 /// The common name of a site router's certificate.
@@ -49,9 +51,12 @@ pub struct SiteTeam {
 impl SiteTeam {
     /// `NAME=ROBOT,ROBOT,...` (as `team router-config --team` takes it).
     pub fn parse(text: &str) -> Result<Self, AccessError> {
-        let bad = |reason: &str| AccessError::Site(format!("team {text:?}: {reason} (expected NAME=ROBOT,ROBOT,...)"));
+        let bad = |reason: &str| {
+            AccessError::Site(format!("team {text:?}: {reason} (expected NAME=ROBOT,ROBOT,...)"))
+        };
         let (team, robots) = text.split_once('=').ok_or_else(|| bad("no '='"))?;
-        let robots: Vec<String> = robots.split(',').map(str::trim).filter(|r| !r.is_empty()).map(String::from).collect();
+        let robots: Vec<String> =
+            robots.split(',').map(str::trim).filter(|r| !r.is_empty()).map(String::from).collect();
         if robots.is_empty() {
             return Err(bad("no robots"));
         }
@@ -79,21 +84,36 @@ pub fn router_access_control(teams: &[SiteTeam]) -> Result<Value, AccessError> {
     if teams.is_empty() {
         return Err(AccessError::Site("a router needs at least one team".into()));
     }
-    Ok(acl.to_json())
+    Ok(acl.into_json())
 }
 
 /// A client's `access_control` section: the router (by its certificate name) may carry the
 /// team's keys both ways, every kind of message; nothing else.
 pub fn client_access_control(team: &str) -> Result<Value, AccessError> {
-    let messages = ["put", "delete", "declare_subscriber", "declare_liveliness_subscriber", "liveliness_token", "liveliness_query"];
+    let messages = [
+        "put",
+        "delete",
+        "declare_subscriber",
+        "declare_liveliness_subscriber",
+        "liveliness_token",
+        "liveliness_query",
+    ];
     let team_keys = [keys::everything(team)?];
     let mut acl = Acl::default();
     for flow in ["ingress", "egress"] {
-        acl.rules.push(json!({ "id": format!("router/{flow}"), "messages": messages, "flows": [flow], "permission": "allow", "key_exprs": team_keys }));
+        acl.rules.push(json!({
+            "id": format!("router/{flow}"),
+            "messages": messages,
+            "flows": [flow],
+            "permission": "allow",
+            "key_exprs": team_keys,
+        }));
     }
     acl.subjects.push(json!({ "id": ROUTER, "cert_common_names": [ROUTER] }));
-    acl.policies.push(json!({ "id": ROUTER, "rules": ["router/ingress", "router/egress"], "subjects": [ROUTER] }));
-    Ok(acl.to_json())
+    acl.policies.push(
+        json!({ "id": ROUTER, "rules": ["router/ingress", "router/egress"], "subjects": [ROUTER] }),
+    );
+    Ok(acl.into_json())
 }
 
 /// A site router's configuration.
@@ -152,7 +172,12 @@ pub struct ClientConfig {
 impl ClientConfig {
     /// `who`'s files from `dir` (the team's folder: `ca.pem`, `{identity}.pem`, `.key`).
     pub fn in_dir(dir: &Path, team: &str, who: Identity, router: &str) -> Self {
-        ClientConfig { team: team.to_string(), tls: TlsFiles::in_dir(dir, &who), identity: who, router: router.to_string() }
+        ClientConfig {
+            team: team.to_string(),
+            tls: TlsFiles::in_dir(dir, &who),
+            identity: who,
+            router: router.to_string(),
+        }
     }
 
     /// The configuration as JSON (which is JSON5).
@@ -181,8 +206,14 @@ impl ClientConfig {
 
 /// Write every identity's client configuration of one team into `out`
 /// ([`crate::access::file_name`]); returns the files written.
-pub fn write_clients(certs: &Path, team: &SiteTeam, router: &str, out: &Path) -> Result<Vec<PathBuf>, AccessError> {
-    std::fs::create_dir_all(out).map_err(|e| AccessError::Write { path: out.to_path_buf(), reason: e.to_string() })?;
+pub fn write_clients(
+    certs: &Path,
+    team: &SiteTeam,
+    router: &str,
+    out: &Path,
+) -> Result<Vec<PathBuf>, AccessError> {
+    std::fs::create_dir_all(out)
+        .map_err(|e| AccessError::Write { path: out.to_path_buf(), reason: e.to_string() })?;
     let mut written = Vec::new();
     for who in Identity::all(&team.robots) {
         let path = out.join(crate::access::file_name(&who));
@@ -204,12 +235,24 @@ mod tests {
     fn allowed(acl: &Value, subject: &str) -> Vec<(String, String, String)> {
         let rules = acl["rules"].as_array().unwrap();
         let mut out = Vec::new();
-        for p in acl["policies"].as_array().unwrap().iter().filter(|p| p["subjects"].as_array().unwrap().iter().any(|s| s == subject)) {
+        for p in acl["policies"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|p| p["subjects"].as_array().unwrap().iter().any(|s| s == subject))
+        {
             for id in p["rules"].as_array().unwrap() {
-                let r = rules.iter().find(|r| &r["id"] == id).expect("a policy names a rule that exists");
+                let r = rules
+                    .iter()
+                    .find(|r| &r["id"] == id)
+                    .expect("a policy names a rule that exists");
                 for m in r["messages"].as_array().unwrap() {
                     for k in r["key_exprs"].as_array().unwrap() {
-                        out.push((m.as_str().unwrap().into(), r["flows"][0].as_str().unwrap().into(), k.as_str().unwrap().into()));
+                        out.push((
+                            m.as_str().unwrap().into(),
+                            r["flows"][0].as_str().unwrap().into(),
+                            k.as_str().unwrap().into(),
+                        ));
                     }
                 }
             }
@@ -221,13 +264,19 @@ mod tests {
     fn a_team_is_granted_only_its_own_keys() {
         let acl = router_access_control(&site()).unwrap();
         for (team, robots) in [("alpha", vec!["r1", "r2"]), ("beta", vec!["r1", "r2", "r3"])] {
-            let mut names: Vec<String> = ["coordinator", "sim-bridge", "runner", "tool"].iter().map(|n| format!("{n}.{team}")).collect();
+            let mut names: Vec<String> = ["coordinator", "sim-bridge", "runner", "tool"]
+                .iter()
+                .map(|n| format!("{n}.{team}"))
+                .collect();
             names.extend(robots.iter().map(|r| format!("{r}.{team}")));
             for name in names {
                 let grants = allowed(&acl, &name);
                 assert!(!grants.is_empty(), "{name} is granted something");
                 let prefix = format!("team/{team}/");
-                assert!(grants.iter().all(|(_, _, k)| k.starts_with(&prefix)), "{name}: {grants:?}");
+                assert!(
+                    grants.iter().all(|(_, _, k)| k.starts_with(&prefix)),
+                    "{name}: {grants:?}"
+                );
             }
         }
         // A team-less name (a team's own peer certificate) is granted nothing on the router.
@@ -240,7 +289,10 @@ mod tests {
         assert!(SiteTeam::parse("alpha").is_err());
         assert!(SiteTeam::parse("alpha=").is_err());
         assert!(SiteTeam::parse("al.pha=r1").is_err());
-        assert!(SiteTeam::parse("alpha=r1,tool").is_err(), "a robot may not take another identity's name");
+        assert!(
+            SiteTeam::parse("alpha=r1,tool").is_err(),
+            "a robot may not take another identity's name"
+        );
         let twice = vec![SiteTeam::parse("a=r1").unwrap(), SiteTeam::parse("a=r2").unwrap()];
         assert!(matches!(router_access_control(&twice), Err(AccessError::Site(_))));
         assert!(router_access_control(&[]).is_err());
@@ -249,10 +301,23 @@ mod tests {
 
     #[test]
     fn zenoh_accepts_router_and_client_configurations() {
-        let router = RouterConfig::in_dir(Path::new("/site"), site(), vec!["quic/0.0.0.0:7447".into()]).to_zenoh().unwrap();
+        let router =
+            RouterConfig::in_dir(Path::new("/site"), site(), vec!["quic/0.0.0.0:7447".into()])
+                .to_zenoh()
+                .unwrap();
         assert_eq!(router.get_json("mode").unwrap(), "\"router\"");
-        assert!(router.get_json("transport/link/tls/listen_certificate").unwrap().contains("/site/router.pem"));
-        let client = ClientConfig::in_dir(Path::new("/alpha"), "alpha", Identity::Agent("r1".into()), "quic/10.0.0.1:7447").to_zenoh().unwrap();
+        assert!(router
+            .get_json("transport/link/tls/listen_certificate")
+            .unwrap()
+            .contains("/site/router.pem"));
+        let client = ClientConfig::in_dir(
+            Path::new("/alpha"),
+            "alpha",
+            Identity::Agent("r1".into()),
+            "quic/10.0.0.1:7447",
+        )
+        .to_zenoh()
+        .unwrap();
         assert_eq!(client.get_json("mode").unwrap(), "\"client\"");
         assert!(client.get_json("connect/endpoints").unwrap().contains("quic/10.0.0.1:7447"));
         assert!(client.get_json("access_control/subjects").unwrap().contains("\"router\""));

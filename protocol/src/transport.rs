@@ -100,7 +100,10 @@ impl ZenohArgs {
             out.extend(["--zenoh-config".to_string(), c.display().to_string()]);
         }
         if let Some(m) = self.mode {
-            out.extend(["--mode".to_string(), if m == Mode::Peer { "peer" } else { "client" }.to_string()]);
+            out.extend([
+                "--mode".to_string(),
+                if m == Mode::Peer { "peer" } else { "client" }.to_string(),
+            ]);
         }
         for l in &self.listen {
             out.extend(["--listen".to_string(), l.clone()]);
@@ -114,8 +117,9 @@ impl ZenohArgs {
     /// The Zenoh configuration these arguments describe.
     pub fn to_config(&self, role: Role) -> Result<zenoh::Config, TransportError> {
         let mut config = match &self.config {
-            Some(path) => zenoh::Config::from_file(path)
-                .map_err(|e| TransportError::ConfigFile { path: path.clone(), reason: e.to_string() })?,
+            Some(path) => zenoh::Config::from_file(path).map_err(|e| {
+                TransportError::ConfigFile { path: path.clone(), reason: e.to_string() }
+            })?,
             None => {
                 let mut c = zenoh::Config::default();
                 set(&mut c, "mode", "\"peer\"")?;
@@ -135,7 +139,11 @@ impl ZenohArgs {
             }
         };
         // Retry quickly: components of a team start within moments of each other.
-        set(&mut config, "connect/retry", "{period_init_ms: 50, period_max_ms: 500, period_increase_factor: 2}")?;
+        set(
+            &mut config,
+            "connect/retry",
+            "{period_init_ms: 50, period_max_ms: 500, period_increase_factor: 2}",
+        )?;
         if let Some(m) = self.mode {
             set(&mut config, "mode", if m == Mode::Peer { "\"peer\"" } else { "\"client\"" })?;
         }
@@ -180,7 +188,11 @@ pub const CLOSE_LINGER: Duration = Duration::from_millis(500);
 /// components end their session.
 pub async fn close(session: Session) -> Result<(), TransportError> {
     tokio::time::sleep(CLOSE_LINGER).await;
-    session.close().await.map_err(|e| TransportError::Zenoh { op: "close", key: session.zid().to_string(), reason: e.to_string() })
+    session.close().await.map_err(|e| TransportError::Zenoh {
+        op: "close",
+        key: session.zid().to_string(),
+        reason: e.to_string(),
+    })
 }
 
 /// Quality of service of a publisher.
@@ -206,13 +218,17 @@ impl<M: Message> TypedPublisher<M> {
             crate::codec::Wire::Json => zenoh::bytes::Encoding::APPLICATION_JSON,
             crate::codec::Wire::Binary => zenoh::bytes::Encoding::ZENOH_BYTES,
         };
-        let builder = session.declare_publisher(key.clone()).encoding(encoding.with_schema(crate::codec::schema_id::<M>()));
+        let builder = session
+            .declare_publisher(key.clone())
+            .encoding(encoding.with_schema(crate::codec::schema_id::<M>()));
         let builder = match qos {
             Qos::HotPath => builder
                 .express(true)
                 .priority(Priority::RealTime)
                 .congestion_control(CongestionControl::Block),
-            Qos::Telemetry => builder.priority(Priority::Data).congestion_control(CongestionControl::Drop),
+            Qos::Telemetry => {
+                builder.priority(Priority::Data).congestion_control(CongestionControl::Drop)
+            }
         };
         let publisher = builder.await.map_err(|e| zenoh_err("declare_publisher", &key, e))?;
         Ok(TypedPublisher { publisher, buffer: Vec::with_capacity(1024), _message: PhantomData })
@@ -220,14 +236,10 @@ impl<M: Message> TypedPublisher<M> {
 
     /// Validate, encode and publish.
     pub async fn put(&mut self, msg: &M) -> Result<(), TransportError> {
-
         msg.validate()?;
         crate::codec::encode_into(msg, &mut self.buffer)?;
         let key = self.publisher.key_expr().to_string();
-        self.publisher
-            .put(self.buffer.as_slice())
-            .await
-            .map_err(|e| zenoh_err("put", &key, e))
+        self.publisher.put(self.buffer.as_slice()).await.map_err(|e| zenoh_err("put", &key, e))
     }
 
     /// Delete the key: its subscribers see that its publisher is gone for good (an agent that
@@ -266,7 +278,11 @@ pub async fn subscribe(session: &Session, key: String) -> Result<SampleQueue, Tr
 
 /// Subscribe to `key` with a queue of `capacity` samples: a publisher that sends a burst, such as
 /// a whole run's references, or a reader that must not lose any (the run's recorder), needs more.
-pub async fn subscribe_with_capacity(session: &Session, key: String, capacity: usize) -> Result<SampleQueue, TransportError> {
+pub async fn subscribe_with_capacity(
+    session: &Session,
+    key: String,
+    capacity: usize,
+) -> Result<SampleQueue, TransportError> {
     session
         .declare_subscriber(key.clone())
         .with(zenoh::handlers::RingChannel::new(capacity))
@@ -317,24 +333,40 @@ pub async fn watch_members(session: &Session, team: &str) -> Result<EventQueue, 
 }
 
 /// Declare the coordinator's liveliness token; it is alive as long as the token lives.
-pub async fn declare_coordinator(session: &Session, team: &str) -> Result<zenoh::liveliness::LivelinessToken, TransportError> {
+pub async fn declare_coordinator(
+    session: &Session,
+    team: &str,
+) -> Result<zenoh::liveliness::LivelinessToken, TransportError> {
     declare_token(session, keys::coordinator_alive(team)?).await
 }
 
 /// Watch the coordinator's liveliness: a `Put` sample when it is (or comes) alive, a `Delete`
 /// when it goes ([`coordinator_alive`]).
-pub async fn watch_coordinator(session: &Session, team: &str) -> Result<EventQueue, TransportError> {
+pub async fn watch_coordinator(
+    session: &Session,
+    team: &str,
+) -> Result<EventQueue, TransportError> {
     watch_liveliness(session, keys::coordinator_alive(team)?).await
 }
 
 /// A liveliness token on `key`.
-async fn declare_token(session: &Session, key: String) -> Result<zenoh::liveliness::LivelinessToken, TransportError> {
-    session.liveliness().declare_token(key.clone()).await.map_err(|e| zenoh_err("declare_token", &key, e))
+async fn declare_token(
+    session: &Session,
+    key: String,
+) -> Result<zenoh::liveliness::LivelinessToken, TransportError> {
+    session
+        .liveliness()
+        .declare_token(key.clone())
+        .await
+        .map_err(|e| zenoh_err("declare_token", &key, e))
 }
 
 /// The liveliness tokens on `key` (wildcards allowed): those present first (history), then
 /// their comings and goings (a `Put` sample when one comes, a `Delete` when it goes).
-pub async fn watch_liveliness(session: &Session, key: String) -> Result<EventQueue, TransportError> {
+pub async fn watch_liveliness(
+    session: &Session,
+    key: String,
+) -> Result<EventQueue, TransportError> {
     session
         .liveliness()
         .declare_subscriber(key.clone())
@@ -374,13 +406,18 @@ mod tests {
 
     #[test]
     fn flags_override_and_bad_values_are_errors() {
-        let a = ZenohArgs { mode: Some(Mode::Client), connect: vec!["tcp/10.0.0.2:7447".into()], ..Default::default() };
+        let a = ZenohArgs {
+            mode: Some(Mode::Client),
+            connect: vec!["tcp/10.0.0.2:7447".into()],
+            ..Default::default()
+        };
         let c = a.to_config(Role::Hub).unwrap();
         assert_eq!(c.get_json("mode").unwrap(), "\"client\"");
         assert!(c.get_json("connect/endpoints").unwrap().contains("10.0.0.2"));
         let bad = ZenohArgs { listen: vec!["not an endpoint".into()], ..Default::default() };
         assert!(bad.to_config(Role::Hub).is_err());
-        let missing = ZenohArgs { config: Some("/nonexistent/zenoh.json5".into()), ..Default::default() };
+        let missing =
+            ZenohArgs { config: Some("/nonexistent/zenoh.json5".into()), ..Default::default() };
         assert!(matches!(missing.to_config(Role::Hub), Err(TransportError::ConfigFile { .. })));
         let round = ZenohArgs::from_cli_for_test(&a.to_cli());
         assert_eq!(round.connect, a.connect);

@@ -13,7 +13,8 @@ pub const MAX_ID_LEN: usize = 64;
 
 /// Identifiers are `[A-Za-z0-9_-]{1,64}` so that they are single, wildcard-free key chunks.
 pub fn validate_id(what: &'static str, id: &str) -> Result<(), ProtocolError> {
-    let bad = |reason| Err(ProtocolError::BadId { what, value: id.chars().take(80).collect(), reason });
+    let bad =
+        |reason| Err(ProtocolError::BadId { what, value: id.chars().take(80).collect(), reason });
     if id.is_empty() {
         return bad("empty");
     }
@@ -29,7 +30,9 @@ pub fn validate_id(what: &'static str, id: &str) -> Result<(), ProtocolError> {
 /// Every entry finite.
 pub fn check_finite(field: &str, xs: &[f64]) -> Result<(), ProtocolError> {
     match xs.iter().position(|x| !x.is_finite()) {
-        Some(index) => Err(ProtocolError::NonFinite { field: field.to_string(), index, value: xs[index] }),
+        Some(index) => {
+            Err(ProtocolError::NonFinite { field: field.to_string(), index, value: xs[index] })
+        }
         None => Ok(()),
     }
 }
@@ -54,22 +57,35 @@ pub fn check_unit_quaternion(field: &str, q: &[f64; 4]) -> Result<(), ProtocolEr
 }
 
 /// A finite quaternion whose norm is 1 within `tolerance`.
-pub fn check_unit_quaternion_within(field: &str, q: &[f64; 4], tolerance: f64) -> Result<(), ProtocolError> {
+pub fn check_unit_quaternion_within(
+    field: &str,
+    q: &[f64; 4],
+    tolerance: f64,
+) -> Result<(), ProtocolError> {
     check_finite(field, q)?;
     let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
     if (n - 1.0).abs() > tolerance {
-        return Err(ProtocolError::invalid(field, format!("quaternion norm {n} is not 1 (a unit quaternion w, x, y, z)")));
+        return Err(ProtocolError::invalid(
+            field,
+            format!("quaternion norm {n} is not 1 (a unit quaternion w, x, y, z)"),
+        ));
     }
     Ok(())
 }
 
 /// No name is listed twice (robots of a team, frames of a robot); the error names the first
 /// repeated one and where it stands.
-pub fn check_unique<'a>(field: &str, names: impl IntoIterator<Item = &'a str>) -> Result<(), ProtocolError> {
+pub fn check_unique<'a>(
+    field: &str,
+    names: impl IntoIterator<Item = &'a str>,
+) -> Result<(), ProtocolError> {
     let mut seen: Vec<&str> = Vec::new();
     for (i, name) in names.into_iter().enumerate() {
         if seen.contains(&name) {
-            return Err(ProtocolError::invalid(format!("{field}[{i}]"), format!("{name:?} is listed twice")));
+            return Err(ProtocolError::invalid(
+                format!("{field}[{i}]"),
+                format!("{name:?} is listed twice"),
+            ));
         }
         seen.push(name);
     }
@@ -84,13 +100,19 @@ pub const MAX_SUBSTEPS: u32 = 1000;
 /// files, scene files and the world builder.
 pub fn substeps(control_hz: f64, physics_hz: f64) -> Result<u32, ProtocolError> {
     if !(control_hz.is_finite() && control_hz > 0.0 && physics_hz.is_finite() && physics_hz > 0.0) {
-        return Err(ProtocolError::invalid("rates", format!("rates must be positive: control {control_hz} Hz, physics {physics_hz} Hz")));
+        return Err(ProtocolError::invalid(
+            "rates",
+            format!("rates must be positive: control {control_hz} Hz, physics {physics_hz} Hz"),
+        ));
     }
     let n = physics_hz / control_hz;
     if (n - n.round()).abs() > 1e-9 || n.round() < 1.0 || n.round() > MAX_SUBSTEPS as f64 {
         return Err(ProtocolError::invalid(
             "rates",
-            format!("physics rate {physics_hz} Hz must be a whole multiple (1 to {MAX_SUBSTEPS}) of the control rate {control_hz} Hz"),
+            format!(
+                "physics rate {physics_hz} Hz must be a whole multiple (1 to {MAX_SUBSTEPS}) of \
+                 the control rate {control_hz} Hz"
+            ),
         ));
     }
     Ok(n.round() as u32)
@@ -115,7 +137,14 @@ mod tests {
     fn rates_must_be_a_whole_multiple() {
         assert_eq!(substeps(1000.0, 2000.0), Ok(2));
         assert_eq!(substeps(500.0, 500.0), Ok(1));
-        for (c, p) in [(1000.0, 1500.0), (1000.0, 500.0), (0.0, 1000.0), (f64::NAN, 1000.0), (1.0, 2000.0), (1000.0, f64::INFINITY)] {
+        for (c, p) in [
+            (1000.0, 1500.0),
+            (1000.0, 500.0),
+            (0.0, 1000.0),
+            (f64::NAN, 1000.0),
+            (1.0, 2000.0),
+            (1000.0, f64::INFINITY),
+        ] {
             let e = substeps(c, p).unwrap_err().to_string();
             assert!(e.contains("rate"), "{c} {p}: {e}");
         }

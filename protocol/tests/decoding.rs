@@ -28,7 +28,11 @@ fn frame(name: &str, role: FrameRole, nv: usize) -> FrameTerms {
         role,
         position: [0.3, 0.0, 0.0],
         rotation: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-        jacobian: Matrix { rows: d as u32, cols: nv as u32, data: (0..d * nv).map(|i| (i as f64 * 0.7).sin()).collect() },
+        jacobian: Matrix {
+            rows: d as u32,
+            cols: nv as u32,
+            data: (0..d * nv).map(|i| (i as f64 * 0.7).sin()).collect(),
+        },
         jdot_v: vec![0.5; d],
     }
 }
@@ -37,7 +41,8 @@ fn dynamics(nv: usize) -> DynamicsTerms {
     let mut m = Matrix::zeros(nv, nv);
     for i in 0..nv {
         for j in 0..nv {
-            m.data[i * nv + j] = if i == j { 1.0 + i as f64 / 3.0 } else { 0.01 * ((i * nv + j) as f64).cos() };
+            m.data[i * nv + j] =
+                if i == j { 1.0 + i as f64 / 3.0 } else { 0.01 * ((i * nv + j) as f64).cos() };
         }
     }
     DynamicsTerms {
@@ -95,7 +100,10 @@ fn binary_is_compact() {
 fn wrong_version_kind_and_magic_are_named() {
     let mut b = encode(&state(3)).unwrap();
     b[2] = 99;
-    assert!(matches!(decode::<RobotState>(&b), Err(ProtocolError::VersionMismatch { found: 99, .. })));
+    assert!(matches!(
+        decode::<RobotState>(&b),
+        Err(ProtocolError::VersionMismatch { found: 99, .. })
+    ));
     let b = encode(&state(3)).unwrap();
     assert!(matches!(decode::<TorqueCommand>(&b), Err(ProtocolError::WrongKind { .. })));
     let mut b = encode(&state(3)).unwrap();
@@ -104,7 +112,10 @@ fn wrong_version_kind_and_magic_are_named() {
     let mut s = state(3);
     s.header.version = 7;
     let json = serde_json::to_string(&s).unwrap();
-    assert!(matches!(from_json::<RobotState>(&json), Err(ProtocolError::VersionMismatch { found: 7, .. })));
+    assert!(matches!(
+        from_json::<RobotState>(&json),
+        Err(ProtocolError::VersionMismatch { found: 7, .. })
+    ));
 }
 
 #[test]
@@ -138,7 +149,9 @@ fn non_finite_numbers_are_named() {
         c.tau[3] = bad;
         assert!(encode(&c).is_err(), "encode validates");
         match decode::<TorqueCommand>(&raw(&c)) {
-            Err(ProtocolError::NonFinite { field, index, .. }) => assert_eq!((field.as_str(), index), ("tau", 3)),
+            Err(ProtocolError::NonFinite { field, index, .. }) => {
+                assert_eq!((field.as_str(), index), ("tau", 3))
+            }
             other => panic!("expected NonFinite, got {other:?}"),
         }
         let mut d = dynamics(8);
@@ -156,7 +169,9 @@ fn mismatched_dimensions_are_named() {
     assert!(matches!(decode::<DynamicsTerms>(&raw(&d)), Err(ProtocolError::Dimension { .. })));
     let mut d = dynamics(8);
     d.bias.push(0.0);
-    assert!(matches!(decode::<DynamicsTerms>(&raw(&d)), Err(ProtocolError::Dimension { field, .. }) if field == "bias"));
+    assert!(
+        matches!(decode::<DynamicsTerms>(&raw(&d)), Err(ProtocolError::Dimension { field, .. }) if field == "bias")
+    );
     let mut d = dynamics(8);
     d.frames[0] = frame("LF_FOOT", FrameRole::StanceFoot, 9);
     assert!(matches!(decode::<DynamicsTerms>(&raw(&d)), Err(ProtocolError::Dimension { .. })));
@@ -176,7 +191,11 @@ fn mismatched_dimensions_are_named() {
     for bad in [vec![-1.0, 0.0, 0.0, 0.0], vec![f64::NAN], vec![0.0; 17]] {
         let mut s = state(4);
         s.foot_forces = bad;
-        assert!(decode::<RobotState>(&raw(&s)).is_err(), "foot forces {:?} accepted", s.foot_forces);
+        assert!(
+            decode::<RobotState>(&raw(&s)).is_err(),
+            "foot forces {:?} accepted",
+            s.foot_forces
+        );
     }
     let mut s = state(4);
     s.foot_forces = vec![0.0, 120.0, 95.5, 3.0];
@@ -190,7 +209,11 @@ fn foot_loads_must_bound_a_pushing_force() {
         object: None,
         torsos: vec![],
         swing_feet: vec![],
-        foot_loads: vec![FootLoad { robot: "r1".into(), frame: "LF_FOOT".into(), max_normal_force: f }],
+        foot_loads: vec![FootLoad {
+            robot: "r1".into(),
+            frame: "LF_FOOT".into(),
+            max_normal_force: f,
+        }],
     };
     assert!(from_json::<TaskReferences>(&to_json(&refs(40.0)).unwrap()).is_ok());
     for bad in [-1.0, f64::INFINITY] {
@@ -259,7 +282,11 @@ proptest! {
 }
 
 fn contact_set(feet: &[&str]) -> ContactSet {
-    ContactSet { header: header(true), stance_feet: feet.iter().map(|f| f.to_string()).collect(), hand_in_grasp: true }
+    ContactSet {
+        header: header(true),
+        stance_feet: feet.iter().map(|f| f.to_string()).collect(),
+        hand_in_grasp: true,
+    }
 }
 
 #[test]
@@ -269,16 +296,23 @@ fn contact_set_round_trips_and_refuses_duplicates_and_bad_names() {
     assert_eq!(from_json::<ContactSet>(&to_json(&c).unwrap()).unwrap(), c);
     assert_eq!(MessageKind::ContactSet as u8, 10);
     assert_eq!(keys::contacts("team1", "r1").unwrap(), "team/team1/robot/r1/contacts");
-    for bad in [contact_set(&["LF_FOOT", "LF_FOOT"]), contact_set(&[""]), contact_set(&["a foot"])] {
+    for bad in [contact_set(&["LF_FOOT", "LF_FOOT"]), contact_set(&[""]), contact_set(&["a foot"])]
+    {
         let mut bytes = Vec::new();
         encode_into(&bad, &mut bytes).unwrap();
-        assert!(matches!(decode::<ContactSet>(&bytes), Err(ProtocolError::Invalid { .. })), "{bad:?} accepted");
+        assert!(
+            matches!(decode::<ContactSet>(&bytes), Err(ProtocolError::Invalid { .. })),
+            "{bad:?} accepted"
+        );
     }
     let mut no_robot = contact_set(&[]);
     no_robot.header.robot = None;
     assert!(encode(&no_robot).is_err());
     // Another kind's bytes are not a contact set.
-    assert!(matches!(decode::<ContactSet>(&encode(&command(3)).unwrap()), Err(ProtocolError::WrongKind { .. })));
+    assert!(matches!(
+        decode::<ContactSet>(&encode(&command(3)).unwrap()),
+        Err(ProtocolError::WrongKind { .. })
+    ));
 }
 
 fn description() -> RobotDescription {
@@ -304,7 +338,12 @@ fn description() -> RobotDescription {
 fn contact_parameters_must_be_positive() {
     decode::<RobotDescription>(&raw(&description())).expect("a valid description");
     // xi = 0 too: a hand's friction rows divide by it (coordinator/src/qp/rows.rs).
-    let bad: [fn(&mut RobotDescription); 4] = [|d| d.foot_mu = 0.0, |d| d.hand_mu = -0.1, |d| d.hand_xi = 0.0, |d| d.hand_half_size[1] = 0.0];
+    let bad: [fn(&mut RobotDescription); 4] = [
+        |d| d.foot_mu = 0.0,
+        |d| d.hand_mu = -0.1,
+        |d| d.hand_xi = 0.0,
+        |d| d.hand_half_size[1] = 0.0,
+    ];
     for (k, edit) in bad.iter().enumerate() {
         let mut d = description();
         edit(&mut d);
@@ -345,7 +384,9 @@ fn a_drive_command_round_trips_and_its_law_is_the_pd_law_written_out() {
 #[test]
 fn a_broken_drive_command_is_refused_naming_the_field() {
     let field = |d: &DriveCommand| match d.validate() {
-        Err(ProtocolError::Invalid { field, .. }) | Err(ProtocolError::NonFinite { field, .. }) => field,
+        Err(ProtocolError::Invalid { field, .. }) | Err(ProtocolError::NonFinite { field, .. }) => {
+            field
+        }
         other => panic!("refused expected, got {other:?}"),
     };
     let mut d = drive(4, true);
@@ -376,5 +417,12 @@ fn a_broken_drive_command_is_refused_naming_the_field() {
 fn a_drive_command_of_the_first_protocol_version_is_refused() {
     let mut bytes = encode(&drive(3, false)).unwrap();
     bytes[2] = 1; // version 1, little endian
-    assert!(matches!(decode::<DriveCommand>(&bytes), Err(ProtocolError::VersionMismatch { found: 1, .. })), "{:?}", decode::<DriveCommand>(&bytes));
+    assert!(
+        matches!(
+            decode::<DriveCommand>(&bytes),
+            Err(ProtocolError::VersionMismatch { found: 1, .. })
+        ),
+        "{:?}",
+        decode::<DriveCommand>(&bytes)
+    );
 }

@@ -1,20 +1,54 @@
 //! The GroundTruth message: round trip in both encodings (its wire form is JSON), kind 11, non-finite numbers and bad
 //! ids refused.
 
-use protocol::{decode, encode, from_json, to_json, BodyTruth, ContactTruth, GroundTruth, Header, LoopTiming, MessageKind, Pose};
+use protocol::{
+    decode, encode, from_json, to_json, BodyTruth, ContactTruth, GroundTruth, Header, LoopTiming,
+    MessageKind, Pose,
+};
 
 fn sample() -> GroundTruth {
     GroundTruth {
         header: Header::new("t1", None, 42, 7),
         time: 0.042,
-        object: Some(BodyTruth { name: "object".into(), pose: Pose::IDENTITY, twist: [0.1, 0.0, 0.0, 0.0, 0.0, 0.2] }),
-        torsos: vec![BodyTruth { name: "r1".into(), pose: Pose { position: [-1.15, 0.0, 0.55], orientation: [1.0, 0.0, 0.0, 0.0] }, twist: [0.0; 6] }],
-        hand_contacts: vec![ContactTruth { robot: "r1".into(), body: "hand".into(), position: [-0.3, 0.0, 0.6], wrench: [40.0, 0.0, 4.9, 0.0, 0.0, 0.0] }],
-        foot_contacts: vec![ContactTruth { robot: "r1".into(), body: "LF_SHANK".into(), position: [0.0; 3], wrench: [0.0, 0.0, 150.0, 0.0, 0.0, 0.0] }],
-        hands: vec![BodyTruth { name: "r1".into(), pose: Pose { position: [-0.3, 0.0, 0.6], orientation: [1.0, 0.0, 0.0, 0.0] }, twist: [0.0; 6] }],
-        feet: vec![BodyTruth { name: "r1/LF_FOOT".into(), pose: Pose { position: [-0.8, 0.3, 0.03], orientation: [1.0, 0.0, 0.0, 0.0] }, twist: [0.0; 6] }],
+        object: Some(BodyTruth {
+            name: "object".into(),
+            pose: Pose::IDENTITY,
+            twist: [0.1, 0.0, 0.0, 0.0, 0.0, 0.2],
+        }),
+        torsos: vec![BodyTruth {
+            name: "r1".into(),
+            pose: Pose { position: [-1.15, 0.0, 0.55], orientation: [1.0, 0.0, 0.0, 0.0] },
+            twist: [0.0; 6],
+        }],
+        hand_contacts: vec![ContactTruth {
+            robot: "r1".into(),
+            body: "hand".into(),
+            position: [-0.3, 0.0, 0.6],
+            wrench: [40.0, 0.0, 4.9, 0.0, 0.0, 0.0],
+        }],
+        foot_contacts: vec![ContactTruth {
+            robot: "r1".into(),
+            body: "LF_SHANK".into(),
+            position: [0.0; 3],
+            wrench: [0.0, 0.0, 150.0, 0.0, 0.0, 0.0],
+        }],
+        hands: vec![BodyTruth {
+            name: "r1".into(),
+            pose: Pose { position: [-0.3, 0.0, 0.6], orientation: [1.0, 0.0, 0.0, 0.0] },
+            twist: [0.0; 6],
+        }],
+        feet: vec![BodyTruth {
+            name: "r1/LF_FOOT".into(),
+            pose: Pose { position: [-0.8, 0.3, 0.03], orientation: [1.0, 0.0, 0.0, 0.0] },
+            twist: [0.0; 6],
+        }],
         loop_timing: vec![
-            LoopTiming { robot: "r1".into(), latency_us: Some(412.5), applied_tick: Some(42), late: 0 },
+            LoopTiming {
+                robot: "r1".into(),
+                latency_us: Some(412.5),
+                applied_tick: Some(42),
+                late: 0,
+            },
             LoopTiming { robot: "r2".into(), latency_us: None, applied_tick: Some(40), late: 1 },
         ],
     }

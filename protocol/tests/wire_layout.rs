@@ -2,7 +2,9 @@
 //! worked example, built byte by byte from the document, equals what `encode` produces; and
 //! the tool-facing types travel as plain JSON.
 
-use protocol::{decode, encode, CoordinatorMode, CoordinatorStatus, Header, Pose, RobotState, Wire, Message};
+use protocol::{
+    decode, encode, CoordinatorMode, CoordinatorStatus, Header, Message, Pose, RobotState, Wire,
+};
 
 fn f(x: f64) -> [u8; 8] {
     x.to_le_bytes()
@@ -11,7 +13,13 @@ fn f(x: f64) -> [u8; 8] {
 #[test]
 fn robot_state_bytes_are_the_documented_ones() {
     let s = RobotState {
-        header: Header { version: 3, team: "t".into(), robot: Some("r1".into()), tick: 300, stamp_ns: 0 },
+        header: Header {
+            version: 3,
+            team: "t".into(),
+            robot: Some("r1".into()),
+            tick: 300,
+            stamp_ns: 0,
+        },
         base_pose: Pose { position: [1.0, 2.0, 3.0], orientation: [1.0, 0.0, 0.0, 0.0] },
         base_twist: [0.0; 6],
         joint_positions: vec![0.5],
@@ -61,7 +69,10 @@ fn tool_facing_messages_are_json_with_the_version_checked() {
     assert_eq!(CoordinatorStatus::WIRE, Wire::Json);
     let bytes = encode(&st).unwrap();
     let v: serde_json::Value = serde_json::from_slice(&bytes).expect("plain JSON on the wire");
-    assert_eq!((v["mode"].as_str(), v["ticks"].as_u64(), v["header"]["version"].as_u64()), (Some("Running"), Some(7), Some(3)));
+    assert_eq!(
+        (v["mode"].as_str(), v["ticks"].as_u64(), v["header"]["version"].as_u64()),
+        (Some("Running"), Some(7), Some(3))
+    );
     assert_eq!(decode::<CoordinatorStatus>(&bytes).unwrap(), st);
     assert_eq!(protocol::schema_id::<CoordinatorStatus>(), "team.CoordinatorStatus/v3");
     // A status from before the silent, stale and late lists (an old recording) still decodes.
@@ -75,7 +86,10 @@ fn tool_facing_messages_are_json_with_the_version_checked() {
     let mut other = st.clone();
     other.header.version = 9;
     let bytes = serde_json::to_vec(&other).unwrap();
-    assert!(matches!(decode::<CoordinatorStatus>(&bytes), Err(protocol::ProtocolError::VersionMismatch { found: 9, .. })));
+    assert!(matches!(
+        decode::<CoordinatorStatus>(&bytes),
+        Err(protocol::ProtocolError::VersionMismatch { found: 9, .. })
+    ));
     // Garbage is an error, not a panic.
     assert!(decode::<CoordinatorStatus>(b"{\"header\": 3}").is_err());
     assert!(decode::<CoordinatorStatus>(b"\xff\xfe not json").is_err());
@@ -92,7 +106,8 @@ fn torque_command_bytes_are_the_documented_ones() {
     want.extend([0x00, 0x01, 0x00]);
     assert_eq!(encode(&hold).unwrap(), want);
     assert_eq!(decode::<protocol::TorqueCommand>(&want).unwrap(), hold);
-    let torques = protocol::TorqueCommand { tau: vec![1.5], hold: false, delay_ticks: 2, ..hold.clone() };
+    let torques =
+        protocol::TorqueCommand { tau: vec![1.5], hold: false, delay_ticks: 2, ..hold.clone() };
     let mut want: Vec<u8> = vec![0x54, 0x51, 0x03, 0x00, 0x03, 0x00];
     want.extend(head);
     want.push(0x01);
@@ -101,7 +116,11 @@ fn torque_command_bytes_are_the_documented_ones() {
     want.extend([0x00, 0x02]);
     assert_eq!(encode(&torques).unwrap(), want);
     // A delay over the longest is refused.
-    assert!(encode(&protocol::TorqueCommand { delay_ticks: protocol::MAX_TEAM_DELAY_TICKS + 1, ..torques.clone() }).is_err());
+    assert!(encode(&protocol::TorqueCommand {
+        delay_ticks: protocol::MAX_TEAM_DELAY_TICKS + 1,
+        ..torques.clone()
+    })
+    .is_err());
     // A hold order that carries torques is refused.
     assert!(encode(&protocol::TorqueCommand { hold: true, ..torques }).is_err());
 }

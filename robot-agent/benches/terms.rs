@@ -14,7 +14,10 @@ fn bench(c: &mut Criterion) {
     let sq = robot.standing_q.as_slice();
     let state = protocol::RobotState {
         header: protocol::Header::new("bench", Some("r1"), 0, 0),
-        base_pose: protocol::Pose { position: [sq[0], sq[1], sq[2]], orientation: [sq[3], sq[4], sq[5], sq[6]] },
+        base_pose: protocol::Pose {
+            position: [sq[0], sq[1], sq[2]],
+            orientation: [sq[3], sq[4], sq[5], sq[6]],
+        },
         base_twist: [0.1, -0.05, 0.02, 0.1, 0.2, -0.1],
         joint_positions: sq[7..].to_vec(),
         joint_velocities: (0..18).map(|i| 0.1 * (i as f64).sin()).collect(),
@@ -36,7 +39,9 @@ fn bench(c: &mut Criterion) {
 
 criterion_group! {
     name = benches;
-    config = Criterion::default().warm_up_time(std::time::Duration::from_secs(1)).measurement_time(std::time::Duration::from_secs(3));
+    config = Criterion::default()
+        .warm_up_time(std::time::Duration::from_secs(1))
+        .measurement_time(std::time::Duration::from_secs(3));
     targets = bench
 }
 criterion_main!(benches);

@@ -2,8 +2,8 @@
 //! 1 kHz) against a coordinator, as a lab's robot would run:
 //!
 //! ```sh
-//! coordinator run --controller joint-damping --damping 5                  # listens on tcp/127.0.0.1:7447
-//! cargo run --release -p robot-agent --example mock_robot         # Ctrl-C stops it
+//! coordinator run --controller joint-damping --damping 5   # listens on tcp/127.0.0.1:7447
+//! cargo run --release -p robot-agent --example mock_robot  # Ctrl-C stops it
 //! ```
 //!
 //! It takes the agent's `--team`, `--id` and Zenoh flags (`--connect tcp/HOST:PORT`, ...).

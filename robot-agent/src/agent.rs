@@ -21,7 +21,9 @@ use zenoh::Session;
 pub use crate::core::{AgentConfig, AgentCore, CoreError, Outputs, Sent};
 pub use crate::dynamics_source::{DynamicsSource, ModelDynamics, PlaceholderDynamics, SourceError};
 pub use crate::gate::{CommandGate, CommandRejection};
-pub use crate::hardware::zenoh_sim::{StateEvent, StateSource, TorqueSink, ZenohStateSource, ZenohTorqueSink};
+pub use crate::hardware::zenoh_sim::{
+    StateEvent, StateSource, TorqueSink, ZenohStateSource, ZenohTorqueSink,
+};
 pub use crate::safe_mode::{CommandDeadline, HoldGains, PostureHold, Watchdog};
 pub use crate::status::AgentCounters;
 
@@ -49,7 +51,7 @@ pub async fn run(
 }
 
 /// [`run`], stalled while `stall` is true: alive (its liveliness token held) but handling
-/// nothing, as a hung process would be. A fault injector's hook (`team_runner::faults`); a
+/// nothing, as a hung process would be. A fault injector's hook (`launch::faults`); a
 /// separate process is stalled with SIGSTOP instead.
 pub async fn run_stallable(
     session: &Session,
@@ -77,22 +79,16 @@ pub async fn run_with<S: DynamicsSource>(
 ) -> Result<AgentCounters, AgentError> {
     let mut core = AgentCore::new(&cfg, source)?;
     let (team, robot) = (cfg.team.as_str(), cfg.robot.as_str());
-    let commands = transport::subscribe(session, keys::robot(team, robot, RobotTopic::Command)?).await?;
+    let commands =
+        transport::subscribe(session, keys::robot(team, robot, RobotTopic::Command)?).await?;
     let contacts = transport::subscribe(session, keys::contacts(team, robot)?).await?;
     let mut io = Io::declare(session, team, robot, core.description().is_some(), sink).await?;
 
     let coordinator = transport::watch_coordinator(session, team).await?;
     // Withdrawn when the robot falls ([`crate::fall`]): the coordinator then solves the team
     // without it.
-    let mut token = Some(transport::declare_member(session, team, robot).await?);
-    tracing::info!(%robot, %team, joints = core.joints(), deadline = ?cfg.deadline, max_command_age = ?cfg.max_command_age, "agent joined the team");
-    let out = core.start(Instant::now());
-    let done = io.send(out).await?;
-    io.done(&mut core, done).await;
-
-    // Housekeeping (watchdog by time, periodic status and description).
-    let mut housekeeping = tokio::time::interval(cfg.housekeeping_period());
-    housekeeping.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let mut token = Some(join_team(session, &cfg, &mut core, &mut io).await?);
+    let mut housekeeping = housekeeping_timer(&cfg);
 
     loop {
         wait_out_stall(robot, &mut stop, &mut stall).await;
@@ -100,15 +96,7 @@ pub async fn run_with<S: DynamicsSource>(
             r = stop.changed() => { if r.is_err() || *stop.borrow() { break; } }
             r = stall.changed() => { if r.is_err() { break; } }
             ev = states.next() => {
-                let state = match ev {
-                    StateEvent::State(s) => s,
-                    StateEvent::Invalid(reason) => { core.on_undecodable_state(&reason); continue; }
-                    StateEvent::Closed => break,
-                };
-                let leave = on_state(&mut core, &mut io, &state).await?;
-                if let Some(t) = token.take_if(|_| leave) {
-                    leave_after_fall(&io, robot, t).await;
-                }
+                if !on_state_event(&mut core, &mut io, ev, robot, &mut token).await? { break; }
             }
             c = commands.recv_async() => {
                 let Ok(sample) = c else { break };
@@ -137,8 +125,68 @@ pub async fn run_with<S: DynamicsSource>(
     Ok(core.counters().clone())
 }
 
+/// Declare the robot's membership, then send the core's first outputs. Returns the membership
+/// token.
+async fn join_team<S: DynamicsSource, K: TorqueSink>(
+    session: &Session,
+    cfg: &AgentConfig,
+    core: &mut AgentCore<S>,
+    io: &mut Io<K>,
+) -> Result<LivelinessToken, AgentError> {
+    let (team, robot) = (cfg.team.as_str(), cfg.robot.as_str());
+    let token = transport::declare_member(session, team, robot).await?;
+    tracing::info!(
+        %robot,
+        %team,
+        joints = core.joints(),
+        deadline = ?cfg.deadline,
+        max_command_age = ?cfg.max_command_age,
+        "agent joined the team"
+    );
+    let out = core.start(Instant::now());
+    let done = io.send(out).await?;
+    io.done(core, done).await;
+    Ok(token)
+}
+
+/// The housekeeping timer (watchdog by time, periodic status and description): it skips the
+/// ticks it missed rather than bursting to catch up.
+fn housekeeping_timer(cfg: &AgentConfig) -> tokio::time::Interval {
+    let mut housekeeping = tokio::time::interval(cfg.housekeeping_period());
+    housekeeping.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    housekeeping
+}
+
+/// A state event in: a state goes to the core (and the robot leaves the team if it fell), an
+/// undecodable one is counted. Whether the loop goes on (false once the source closed).
+async fn on_state_event<S: DynamicsSource, K: TorqueSink>(
+    core: &mut AgentCore<S>,
+    io: &mut Io<K>,
+    ev: StateEvent,
+    robot: &str,
+    token: &mut Option<LivelinessToken>,
+) -> Result<bool, AgentError> {
+    let state = match ev {
+        StateEvent::State(s) => s,
+        StateEvent::Invalid(reason) => {
+            core.on_undecodable_state(&reason);
+            return Ok(true);
+        }
+        StateEvent::Closed => return Ok(false),
+    };
+    let leave = on_state(core, io, &state).await?;
+    if let Some(t) = token.take_if(|_| leave) {
+        leave_after_fall(io, robot, t).await;
+    }
+    Ok(true)
+}
+
 /// While `stall` is true: handle nothing (until `stop`), still a member.
-async fn wait_out_stall(robot: &str, stop: &mut watch::Receiver<bool>, stall: &mut watch::Receiver<bool>) {
+async fn wait_out_stall(
+    robot: &str,
+    stop: &mut watch::Receiver<bool>,
+    stall: &mut watch::Receiver<bool>,
+) {
     if *stall.borrow_and_update() {
         tracing::warn!(%robot, "stalled: handling nothing, still a member");
         while *stall.borrow_and_update() && !*stop.borrow() {
@@ -152,7 +200,11 @@ async fn wait_out_stall(robot: &str, stop: &mut watch::Receiver<bool>, stall: &m
 }
 
 /// A state in: the core's answer out. Whether the core says the robot leaves the team (it fell).
-async fn on_state<S: DynamicsSource, K: TorqueSink>(core: &mut AgentCore<S>, io: &mut Io<K>, state: &RobotState) -> Result<bool, AgentError> {
+async fn on_state<S: DynamicsSource, K: TorqueSink>(
+    core: &mut AgentCore<S>,
+    io: &mut Io<K>,
+    state: &RobotState,
+) -> Result<bool, AgentError> {
     let Ok(out) = core.on_state(state, Instant::now()) else { return Ok(false) };
     let leave = out.leave_team;
     let done = io.send(out).await?;
@@ -171,7 +223,11 @@ async fn leave_after_fall<K: TorqueSink>(io: &Io<K>, robot: &str, token: Livelin
 }
 
 /// A torque command in: the core's answer out.
-async fn on_command<S: DynamicsSource, K: TorqueSink>(core: &mut AgentCore<S>, io: &mut Io<K>, sample: &Sample) -> Result<(), AgentError> {
+async fn on_command<S: DynamicsSource, K: TorqueSink>(
+    core: &mut AgentCore<S>,
+    io: &mut Io<K>,
+    sample: &Sample,
+) -> Result<(), AgentError> {
     let now = Instant::now();
     let out = match decode_sample::<TorqueCommand>(sample) {
         Ok(cmd) => core.on_command(&cmd, now),
@@ -192,7 +248,11 @@ fn on_contacts<S: DynamicsSource>(core: &mut AgentCore<S>, sample: &Sample) {
 }
 
 /// The coordinator's liveliness changed: the core's answer out.
-async fn on_coordinator<S: DynamicsSource, K: TorqueSink>(core: &mut AgentCore<S>, io: &mut Io<K>, sample: &Sample) -> Result<(), AgentError> {
+async fn on_coordinator<S: DynamicsSource, K: TorqueSink>(
+    core: &mut AgentCore<S>,
+    io: &mut Io<K>,
+    sample: &Sample,
+) -> Result<(), AgentError> {
     let out = if transport::coordinator_alive(sample) {
         // A coordinator that (re)started needs the description to command us.
         core.on_coordinator(Instant::now())
@@ -221,12 +281,23 @@ struct Io<K: TorqueSink> {
 }
 
 impl<K: TorqueSink> Io<K> {
-    async fn declare(session: &Session, team: &str, robot: &str, description: bool, sink: K) -> Result<Self, AgentError> {
+    async fn declare(
+        session: &Session,
+        team: &str,
+        robot: &str,
+        description: bool,
+        sink: K,
+    ) -> Result<Self, AgentError> {
         let key = |t| keys::robot(team, robot, t);
-        let dynamics = TypedPublisher::declare(session, key(RobotTopic::Dynamics)?, Qos::HotPath).await?;
-        let status = TypedPublisher::declare(session, key(RobotTopic::Status)?, Qos::Telemetry).await?;
+        let dynamics =
+            TypedPublisher::declare(session, key(RobotTopic::Dynamics)?, Qos::HotPath).await?;
+        let status =
+            TypedPublisher::declare(session, key(RobotTopic::Status)?, Qos::Telemetry).await?;
         let description = match description {
-            true => Some(TypedPublisher::declare(session, key(RobotTopic::Description)?, Qos::Telemetry).await?),
+            true => Some(
+                TypedPublisher::declare(session, key(RobotTopic::Description)?, Qos::Telemetry)
+                    .await?,
+            ),
             false => None,
         };
         Ok(Io { dynamics, status, description, sink })

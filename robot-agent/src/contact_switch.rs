@@ -39,7 +39,12 @@ impl Default for SwitchConfig {
     /// 20 N to confirm a touchdown, at most 20 N to lift off, three feet always down, 64 sets
     /// scheduled.
     fn default() -> Self {
-        SwitchConfig { touchdown_force: 20.0, liftoff_force: 20.0, min_stance: 3, max_scheduled: 64 }
+        SwitchConfig {
+            touchdown_force: 20.0,
+            liftoff_force: 20.0,
+            min_stance: 3,
+            max_scheduled: 64,
+        }
     }
 }
 

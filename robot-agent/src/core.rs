@@ -4,15 +4,19 @@
 //! the contact set and the status. Each input is a method call with the time it arrived
 //! (`now`; the core never reads a clock):
 //!
-//! | call | when | what it may return |
-//! | --- | --- | --- |
-//! | [`AgentCore::start`] | once, after the caller can send | the description, the status |
-//! | [`AgentCore::on_state`] | a measured state | terms to publish; hold torques in safe mode; limp torques once fallen ([`crate::fall`]) |
-//! | [`AgentCore::on_command`] | a torque command | checked, clamped torques to apply |
-//! | [`AgentCore::on_contacts`] | a contact set | nothing (scheduled for its tick, see [`crate::contact_switch`]) |
-//! | [`AgentCore::on_timer`] | housekeeping, a few times per deadline | hold torques on entering safe mode, status, description |
-//! | [`AgentCore::on_coordinator`] | the coordinator appeared (liveliness) | the description; the latest terms again |
-//! | [`AgentCore::on_coordinator_lost`] | the coordinator's token went (liveliness) | nothing: safe mode follows from [`AgentCore::on_timer`] if it is not back within [`AgentConfig::coordinator_grace`] |
+//! - [`AgentCore::start`], once, after the caller can send: the description, the status.
+//! - [`AgentCore::on_state`], a measured state: terms to publish; hold torques in safe mode;
+//!   limp torques once fallen ([`crate::fall`]).
+//! - [`AgentCore::on_command`], a torque command: checked, clamped torques to apply.
+//! - [`AgentCore::on_contacts`], a contact set: nothing (scheduled for its tick, see
+//!   [`crate::contact_switch`]).
+//! - [`AgentCore::on_timer`], housekeeping, a few times per deadline: hold torques on entering
+//!   safe mode, status, description.
+//! - [`AgentCore::on_coordinator`], the coordinator appeared (liveliness): the description; the
+//!   latest terms again.
+//! - [`AgentCore::on_coordinator_lost`], the coordinator's token went (liveliness): nothing;
+//!   safe mode follows from [`AgentCore::on_timer`] if it is not back within
+//!   [`AgentConfig::coordinator_grace`].
 //!
 //! Each returns [`Outputs`]: references into the core's preallocated buffers that the caller
 //! stamps (`header.stamp_ns`) and sends or applies, in the field order, then reports back with
@@ -22,7 +26,10 @@
 
 use std::time::{Duration, Instant};
 
-use protocol::{AgentMode, AgentStatus, DriveCommand, DynamicsTerms, Header, RobotDescription, RobotState, TorqueCommand};
+use protocol::{
+    AgentMode, AgentStatus, DriveCommand, DynamicsTerms, Header, RobotDescription, RobotState,
+    TorqueCommand,
+};
 use thiserror::Error;
 
 use crate::contact_switch::{ContactSwitch, SwitchConfig};
@@ -32,7 +39,9 @@ use crate::dynamics_source::DynamicsSource;
 use crate::early::{EarlyCommands, Kept};
 use crate::fall::{Fall, FallDetector, FallLimits};
 use crate::gate::{CommandGate, CommandRejection};
-use crate::safe_mode::{CommandDeadline, HoldGains, PostureHold, Takeover, Watchdog, FIRST_COMMAND};
+use crate::safe_mode::{
+    CommandDeadline, HoldGains, PostureHold, Takeover, Watchdog, FIRST_COMMAND,
+};
 use crate::status::{AgentCounters, StatusBoard};
 use crate::terms::{empty_terms, ActiveContacts};
 
@@ -138,7 +147,10 @@ impl AgentConfig {
     /// How often the caller should call [`AgentCore::on_timer`]: a fifth of the time deadline,
     /// between 1 and 20 ms (20 ms without a time deadline).
     pub fn housekeeping_period(&self) -> Duration {
-        self.deadline.time.map_or(Duration::from_millis(20), |d| d / 5).clamp(Duration::from_millis(1), Duration::from_millis(20))
+        self.deadline
+            .time
+            .map_or(Duration::from_millis(20), |d| d / 5)
+            .clamp(Duration::from_millis(1), Duration::from_millis(20))
     }
 }
 
@@ -176,11 +188,17 @@ pub enum StateRejection {
     Undecodable(String),
     #[error("dropped state of another robot ({got:?})")]
     OtherRobot { got: String },
-    #[error("dropped state of tick {tick} with {got} joint positions or velocities, the robot has {expected} joints")]
+    #[error(
+        "dropped state of tick {tick} with {got} joint positions or velocities, the robot has \
+         {expected} joints"
+    )]
     WrongSize { tick: u64, expected: usize, got: usize },
     #[error("dropped out-of-order state of tick {tick} (latest {latest:?})")]
     OutOfOrder { tick: u64, latest: Option<u64> },
-    #[error("dropped state of tick {tick} with {got} foot forces, the robot has {expected} feet (or none measured)")]
+    #[error(
+        "dropped state of tick {tick} with {got} foot forces, the robot has {expected} feet \
+         (or none measured)"
+    )]
     WrongFootForces { tick: u64, expected: usize, got: usize },
 }
 
@@ -314,43 +332,119 @@ pub struct AgentCore<S: DynamicsSource> {
     gains: Option<DriveGains>,
 }
 
+/// Room for early commands: for the longest delay the team may come to (another robot may ask
+/// for more).
+const EARLY_ROOM: u64 = EARLY_TICKS + MAX_TEAM_DELAY + 1;
+
+/// The posture-hold gains (`cfg.hold_gains`, or from the torque limits), checked against the
+/// number of joints as the torque limits are.
+fn checked_hold_gains(
+    cfg: &AgentConfig,
+    joints: usize,
+    limits: &[f64],
+) -> Result<HoldGains, CoreError> {
+    if limits.len() != joints {
+        return Err(CoreError::Config(format!(
+            "{} torque limits for {joints} joints",
+            limits.len()
+        )));
+    }
+    let gains = cfg.hold_gains.clone().unwrap_or_else(|| HoldGains::from_torque_limits(limits));
+    if gains.kp.len() != joints || gains.kd.len() != joints {
+        return Err(CoreError::Config(format!(
+            "posture-hold gains have {} kp and {} kd for {joints} joints",
+            gains.kp.len(),
+            gains.kd.len()
+        )));
+    }
+    Ok(gains)
+}
+
+/// Checks the drive rate, the team's rate and the team's delay.
+fn check_timing(cfg: &AgentConfig) -> Result<(), CoreError> {
+    if let Some(hz) = cfg.drive_hz.filter(|hz| !(hz.is_finite() && *hz > 0.0)) {
+        return Err(CoreError::Config(format!("drive rate {hz} Hz: must be positive and finite")));
+    }
+    if cfg.team_every == 0 {
+        return Err(CoreError::Config("the team must answer every 1 or more ticks, not 0".into()));
+    }
+    if cfg.team_delay.max() > MAX_TEAM_DELAY {
+        return Err(CoreError::Config(format!(
+            "a team delay of {} ticks: at most {MAX_TEAM_DELAY}",
+            cfg.team_delay
+        )));
+    }
+    Ok(())
+}
+
+/// The command gate of `cfg.robot`, at the team's initial delay.
+fn command_gate(cfg: &AgentConfig, limits: Vec<f64>) -> CommandGate {
+    // Tick deadlines count the team's ticks: a command comes every `team_every` states.
+    CommandGate::new(
+        &cfg.robot,
+        limits,
+        cfg.max_command_age_ticks.saturating_mul(cfg.team_every),
+        cfg.max_command_age,
+    )
+    .with_delay(cfg.team_delay.initial())
+}
+
+/// The watchdog, its tick deadline counted in state ticks (`team_every` per team tick).
+fn watchdog(cfg: &AgentConfig) -> Watchdog {
+    Watchdog::new(
+        CommandDeadline {
+            ticks: cfg.deadline.ticks.saturating_mul(cfg.team_every),
+            ..cfg.deadline
+        },
+        cfg.first_command,
+    )
+}
+
+/// The contact switch, every one of the `feet` in stance and the hand in its grasp.
+fn contact_switch(cfg: &AgentConfig, feet: usize) -> ContactSwitch {
+    ContactSwitch::new(
+        cfg.contacts.clone(),
+        ActiveContacts { stance: vec![true; feet], hand_in_grasp: true },
+    )
+}
+
+/// An empty torque command of `robot`, with room for `joints` torques.
+fn empty_command(team: &str, robot: &str, joints: usize) -> TorqueCommand {
+    TorqueCommand {
+        header: Header::new(team, Some(robot), 0, 0),
+        tau: Vec::with_capacity(joints),
+        hold: false,
+        delay_ticks: 0,
+    }
+}
+
 impl<S: DynamicsSource> AgentCore<S> {
     /// A core for `cfg.robot` over `source`. Every per-tick buffer is allocated here.
     pub fn new(cfg: &AgentConfig, source: S) -> Result<Self, CoreError> {
-        let (team, robot) = (cfg.team.as_str(), cfg.robot.as_str());
         let joints = source.joints();
         let limits = source.torque_limits();
-        if limits.len() != joints {
-            return Err(CoreError::Config(format!("{} torque limits for {joints} joints", limits.len())));
-        }
-        let gains = cfg.hold_gains.clone().unwrap_or_else(|| HoldGains::from_torque_limits(&limits));
-        if gains.kp.len() != joints || gains.kd.len() != joints {
-            return Err(CoreError::Config(format!(
-                "posture-hold gains have {} kp and {} kd for {joints} joints",
-                gains.kp.len(),
-                gains.kd.len()
-            )));
-        }
-        if let Some(hz) = cfg.drive_hz.filter(|hz| !(hz.is_finite() && *hz > 0.0)) {
-            return Err(CoreError::Config(format!("drive rate {hz} Hz: must be positive and finite")));
-        }
-        if cfg.team_every == 0 {
-            return Err(CoreError::Config("the team must answer every 1 or more ticks, not 0".into()));
-        }
-        if cfg.team_delay.max() > MAX_TEAM_DELAY {
-            return Err(CoreError::Config(format!("a team delay of {} ticks: at most {MAX_TEAM_DELAY}", cfg.team_delay)));
-        }
-        // Room for the longest delay the team may come to (another robot may ask for more).
-        let early_room = EARLY_TICKS + MAX_TEAM_DELAY + 1;
+        let gains = checked_hold_gains(cfg, joints, &limits)?;
+        check_timing(cfg)?;
+        Ok(Self::assemble(cfg, source, joints, limits, gains))
+    }
+
+    /// The core before any input, its buffers sized for `joints` (a checked configuration).
+    fn assemble(
+        cfg: &AgentConfig,
+        source: S,
+        joints: usize,
+        limits: Vec<f64>,
+        gains: HoldGains,
+    ) -> Self {
+        let (team, robot) = (cfg.team.as_str(), cfg.robot.as_str());
         let feet: Vec<String> = source.foot_frames().to_vec();
-        Ok(AgentCore {
+        AgentCore {
             team: team.to_string(),
             robot: robot.to_string(),
             description: source.description(team, robot),
             joints,
-            // Tick deadlines count the team's ticks: a command comes every `team_every` states.
-            gate: CommandGate::new(robot, limits.clone(), cfg.max_command_age_ticks.saturating_mul(cfg.team_every), cfg.max_command_age).with_delay(cfg.team_delay.initial()),
-            watchdog: Watchdog::new(CommandDeadline { ticks: cfg.deadline.ticks.saturating_mul(cfg.team_every), ..cfg.deadline }, cfg.first_command),
+            gate: command_gate(cfg, limits.clone()),
+            watchdog: watchdog(cfg),
             fall: FallDetector::new(cfg.fall),
             hold: PostureHold::new(gains, limits),
             takeover: Takeover::new(cfg.takeover),
@@ -364,12 +458,12 @@ impl<S: DynamicsSource> AgentCore<S> {
             team_every: cfg.team_every,
             delay: AdaptiveDelay::new(cfg.team_delay),
             newest_command: None,
-            contacts: ContactSwitch::new(cfg.contacts.clone(), ActiveContacts { stance: vec![true; feet.len()], hand_in_grasp: true }),
+            contacts: contact_switch(cfg, feet.len()),
             feet,
             terms: empty_terms(team, robot),
             drive: DriveCommand::torque(team, robot, 0, Vec::with_capacity(joints)),
-            early: EarlyCommands::new(team, robot, joints, early_room as usize),
-            due: TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false, delay_ticks: 0 },
+            early: EarlyCommands::new(team, robot, joints, EARLY_ROOM as usize),
+            due: empty_command(team, robot, joints),
             servo_tick: None,
             q: vec![0.0; joints],
             qdot: vec![0.0; joints],
@@ -388,7 +482,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             drive_gains: cfg.drive_gains,
             gains: None,
             source,
-        })
+        }
     }
 
     /// The agent has joined its team: publish the description (if the source has one) and the
@@ -401,7 +495,11 @@ impl<S: DynamicsSource> AgentCore<S> {
 
     /// A measured state arrived at `now`: checks (robot id, size, order), the terms for the
     /// current contact set, the watchdog by ticks, and the posture hold while in safe mode.
-    pub fn on_state(&mut self, state: &RobotState, now: Instant) -> Result<Outputs<'_>, StateRejection> {
+    pub fn on_state(
+        &mut self,
+        state: &RobotState,
+        now: Instant,
+    ) -> Result<Outputs<'_>, StateRejection> {
         let mode_before = self.board.status.mode;
         let tick = state.header.tick;
         // The same state again (the lockstep bridge republishes while it waits for some robot's
@@ -419,20 +517,15 @@ impl<S: DynamicsSource> AgentCore<S> {
         self.watchdog.on_state(tick, now);
         self.q.copy_from_slice(&state.joint_positions);
         self.qdot.copy_from_slice(&state.joint_velocities);
-        let team_tick = tick % self.team_every == 0;
+        let team_tick = tick.is_multiple_of(self.team_every);
         if !same_tick {
             self.reference.on_state(state.time, &self.q, &self.qdot);
         }
-        let fell = self.source.floating_base().then(|| self.fall.observe(tick, &state.base_pose)).flatten();
-        if let Some(f) = fell {
-            self.board.status.mode = AgentMode::Fallen;
-            self.early.clear();
-            tracing::error!(robot = %self.robot, tick, tilt_deg = f.tilt.to_degrees(), height_m = f.height, "the robot fell: limp (joint damping only), commands refused, leaving the team");
-        }
+        let fell = self.observe_fall(tick, state);
         if self.fall.fallen().is_some() {
             // No terms: the robot is out of the team.
             let out = self.outputs(now, mode_before, false, Apply::Limp, false);
-            return Ok(Outputs { leave_team: fell.is_some(), ..out });
+            return Ok(Outputs { leave_team: fell, ..out });
         }
         self.switch_contacts(tick, &state.foot_forces);
         // Terms on team ticks only: the states between are the agent's own (`Apply::Servo`).
@@ -443,22 +536,53 @@ impl<S: DynamicsSource> AgentCore<S> {
         if self.watchdog.expired(tick, now) {
             self.enter_safe_mode_at(tick, "no valid command in time");
         }
-        let apply = if self.watchdog.safe_mode_since().is_some() {
+        let apply = self.own_answer(tick);
+        Ok(self.outputs(now, mode_before, terms && !repeat, apply, false))
+    }
+
+    /// Whether the robot fell at the state of `tick` (a floating base only): then it goes limp
+    /// and its waiting commands are dropped.
+    fn observe_fall(&mut self, tick: u64, state: &RobotState) -> bool {
+        let fell = self
+            .source
+            .floating_base()
+            .then(|| self.fall.observe(tick, &state.base_pose))
+            .flatten();
+        if let Some(f) = fell {
+            self.board.status.mode = AgentMode::Fallen;
+            self.early.clear();
+            tracing::error!(
+                robot = %self.robot,
+                tick,
+                tilt_deg = f.tilt.to_degrees(),
+                height_m = f.height,
+                "the robot fell: limp (joint damping only), commands refused, leaving the team"
+            );
+        }
+        fell.is_some()
+    }
+
+    /// What the agent applies alone at the state of `tick` when no command is due: the hold in
+    /// safe mode, the start torques before a command can apply, the last command's torque
+    /// between team commands (or for a skipped one), else nothing.
+    fn own_answer(&self, tick: u64) -> Apply {
+        if self.watchdog.safe_mode_since().is_some() {
             Apply::Hold
         } else if tick < self.gate.delay() {
             Apply::Start
-        } else if (!self.command_tick(tick) || self.skipped()) && self.last_applied == Apply::Command {
+        } else if (!self.command_tick(tick) || self.skipped())
+            && self.last_applied == Apply::Command
+        {
             Apply::Servo
         } else {
             Apply::Nothing
-        };
-        Ok(self.outputs(now, mode_before, terms && !repeat, apply, false))
+        }
     }
 
     /// Whether a team command applies at the state of `tick`: the state of a team tick,
     /// [`AgentConfig::team_delay`] ticks later.
     fn command_tick(&self, tick: u64) -> bool {
-        tick.checked_sub(self.gate.delay()).is_some_and(|k| k % self.team_every == 0)
+        tick.checked_sub(self.gate.delay()).is_some_and(|k| k.is_multiple_of(self.team_every))
     }
 
     /// Whether the team's command for the latest state will not come (with a team delay): a
@@ -469,7 +593,12 @@ impl<S: DynamicsSource> AgentCore<S> {
         let Some(tick) = self.gate.latest_state_tick() else { return false };
         let newer = self.early.newest_tick().is_some_and(|t| self.gate.applies_at(t) > tick);
         let answered_alone = self.servo_tick == Some(tick);
-        self.gate.delay() > 0 && self.command_tick(tick) && self.last_applied == Apply::Command && self.unanswered() && !answered_alone && newer
+        self.gate.delay() > 0
+            && self.command_tick(tick)
+            && self.last_applied == Apply::Command
+            && self.unanswered()
+            && !answered_alone
+            && newer
     }
 
     /// The terms (and the gravity the hold carries) at `state` for the current contact set;
@@ -497,7 +626,8 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// Whether the latest state still waits for its answer: no command applied for it, and not
     /// in safe mode (whose hold answers every state).
     fn unanswered(&self) -> bool {
-        self.watchdog.safe_mode_since().is_none() && self.gate.last_applied_tick() != self.gate.latest_state_tick()
+        self.watchdog.safe_mode_since().is_none()
+            && self.gate.last_applied_tick() != self.gate.latest_state_tick()
     }
 
     fn admit_state(&mut self, state: &RobotState) -> Result<(), StateRejection> {
@@ -532,7 +662,11 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// A command up to [`EARLY_TICKS`] ahead of the latest state waits for the state of its
     /// tick (nothing is applied now): the coordinator answered its tick with this robot's
     /// latest terms before this robot had that tick's state.
-    pub fn on_command(&mut self, cmd: &TorqueCommand, now: Instant) -> Result<Outputs<'_>, CommandRejection> {
+    pub fn on_command(
+        &mut self,
+        cmd: &TorqueCommand,
+        now: Instant,
+    ) -> Result<Outputs<'_>, CommandRejection> {
         let mode_before = self.board.status.mode;
         if let Some(f) = self.fall.fallen() {
             let r = CommandRejection::Fallen { tick: cmd.header.tick, fell: f.tick };
@@ -545,13 +679,16 @@ impl<S: DynamicsSource> AgentCore<S> {
         match self.admit_command(cmd, now) {
             Ok(Some(apply)) => Ok(self.outputs(now, mode_before, false, apply, false)),
             // Kept for a later state: the latest state's own command may be skipped.
-            Ok(None) if self.skipped() => Ok(self.outputs(now, mode_before, false, Apply::Servo, false)),
+            Ok(None) if self.skipped() => {
+                Ok(self.outputs(now, mode_before, false, Apply::Servo, false))
+            }
             Ok(None) => Ok(Outputs::default()),
             Err(r) => {
                 // The very command applied last, again: the coordinator sent it again for
                 // terms of the tick that crossed it (the lockstep bridge republishes states
                 // while it waits). Refused and counted, but not worth a warning.
-                let copy = matches!(r, CommandRejection::Stale { tick, last } if tick == last) && self.applied == (cmd.header.stamp_ns, cmd.hold);
+                let copy = matches!(r, CommandRejection::Stale { tick, last } if tick == last)
+                    && self.applied == (cmd.header.stamp_ns, cmd.hold);
                 Err(self.refuse(r, copy))
             }
         }
@@ -562,7 +699,14 @@ impl<S: DynamicsSource> AgentCore<S> {
     fn measure_delay(&mut self, tick: u64) {
         let Some(latest) = self.gate.latest_state_tick() else { return };
         if let Some(d) = self.delay.on_command(tick, latest) {
-            tracing::info!(robot = %self.robot, tick, latest, delay = d, "asking the team for a delay of {d} ticks: commands came after the states they apply at, or none would have for a while");
+            tracing::info!(
+                robot = %self.robot,
+                tick,
+                latest,
+                delay = d,
+                "asking the team for a delay of {d} ticks: commands came after the states they \
+                 apply at, or none would have for a while"
+            );
         }
     }
 
@@ -576,7 +720,13 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         self.newest_command = Some(tick);
         if cmd.delay_ticks != self.gate.delay() {
-            tracing::info!(robot = %self.robot, tick, from = self.gate.delay(), to = cmd.delay_ticks, "the team's delay changed");
+            tracing::info!(
+                robot = %self.robot,
+                tick,
+                from = self.gate.delay(),
+                to = cmd.delay_ticks,
+                "the team's delay changed"
+            );
             self.gate.set_delay(cmd.delay_ticks);
             self.board.status.team_delay_ticks = cmd.delay_ticks;
         }
@@ -588,7 +738,12 @@ impl<S: DynamicsSource> AgentCore<S> {
         let gate = &self.gate;
         self.early.take_due(|t| gate.applies_at(t) <= tick, &mut self.due)?;
         // Taken out and put back: the gate reads it while the core changes (no allocation).
-        let empty = TorqueCommand { header: Header { version: 0, team: String::new(), robot: None, tick: 0, stamp_ns: 0 }, tau: Vec::new(), hold: false, delay_ticks: 0 };
+        let empty = TorqueCommand {
+            header: Header { version: 0, team: String::new(), robot: None, tick: 0, stamp_ns: 0 },
+            tau: Vec::new(),
+            hold: false,
+            delay_ticks: 0,
+        };
         let due = std::mem::replace(&mut self.due, empty);
         let admitted = self.admit_command(&due, now);
         self.due = due;
@@ -609,17 +764,27 @@ impl<S: DynamicsSource> AgentCore<S> {
             return Err(CommandRejection::WrongSize { expected, got: cmd.tau.len() });
         }
         if self.early.keep(cmd) == Kept::Dropped {
-            tracing::debug!(robot = %self.robot, tick = cmd.header.tick, "an early command older than every waiting one: dropped");
+            tracing::debug!(
+                robot = %self.robot,
+                tick = cmd.header.tick,
+                "an early command older than every waiting one: dropped"
+            );
         }
         self.counters.early += 1;
         Ok(())
     }
 
     /// The gate's checks and the bookkeeping of an applied command; `None`: kept as early.
-    fn admit_command(&mut self, cmd: &TorqueCommand, now: Instant) -> Result<Option<Apply>, CommandRejection> {
+    fn admit_command(
+        &mut self,
+        cmd: &TorqueCommand,
+        now: Instant,
+    ) -> Result<Option<Apply>, CommandRejection> {
         let clamped = match self.gate.check(cmd, &mut self.drive.tau_ff) {
             Ok(n) => n,
-            Err(CommandRejection::FromTheFuture { tick, latest }) if tick <= latest + EARLY_TICKS + self.gate.delay() => {
+            Err(CommandRejection::FromTheFuture { tick, latest })
+                if tick <= latest + EARLY_TICKS + self.gate.delay() =>
+            {
                 self.keep_early(cmd)?;
                 return Ok(None);
             }
@@ -637,18 +802,29 @@ impl<S: DynamicsSource> AgentCore<S> {
             self.counters.clamped += 1;
             let (robot, joints, times) = (&self.robot, self.gate.clamped(), self.counters.clamped);
             if times.is_power_of_two() {
-                tracing::warn!(%robot, tick, ?joints, times, "command clamped to the torque limits");
+                tracing::warn!(
+                    %robot,
+                    tick,
+                    ?joints,
+                    times,
+                    "command clamped to the torque limits"
+                );
             } else {
                 tracing::debug!(%robot, tick, ?joints, "command clamped to the torque limits");
             }
         }
         if let Some((t, at)) = self.last_dynamics {
             if t == cmd.header.tick {
-                self.board.status.command_latency_us = now.saturating_duration_since(at).as_secs_f64() * 1e6;
+                self.board.status.command_latency_us =
+                    now.saturating_duration_since(at).as_secs_f64() * 1e6;
             }
         }
         if self.watchdog.on_applied(tick, now) {
-            tracing::info!(robot = %self.robot, tick, "left safe mode: the coordinator commands again");
+            tracing::info!(
+                robot = %self.robot,
+                tick,
+                "left safe mode: the coordinator commands again"
+            );
         }
         self.board.status.mode = AgentMode::Commanded;
         // A hold order: this tick's torque is the agent's own posture hold.
@@ -669,7 +845,10 @@ impl<S: DynamicsSource> AgentCore<S> {
     fn refuse(&mut self, r: CommandRejection, copy: bool) -> CommandRejection {
         self.counters.rejected += 1;
         if copy {
-            tracing::debug!(robot = %self.robot, "rejected command: {r} (a copy of the command applied)");
+            tracing::debug!(
+                robot = %self.robot,
+                "rejected command: {r} (a copy of the command applied)"
+            );
         } else {
             tracing::warn!(robot = %self.robot, "rejected command: {r}");
         }
@@ -682,8 +861,16 @@ impl<S: DynamicsSource> AgentCore<S> {
     pub fn on_contacts(&mut self, msg: &protocol::ContactSet) -> Result<(), ContactRejection> {
         let tick = msg.header.tick;
         let scheduled = self.contact_set(msg).and_then(|set| {
-            tracing::debug!(robot = %self.robot, tick, stance = ?set.stance, hand_in_grasp = set.hand_in_grasp, "contact set scheduled");
-            self.contacts.schedule(tick, set).map_err(|f| ContactRejection::ScheduleFull { tick: f.tick, capacity: f.capacity })
+            tracing::debug!(
+                robot = %self.robot,
+                tick,
+                stance = ?set.stance,
+                hand_in_grasp = set.hand_in_grasp,
+                "contact set scheduled"
+            );
+            self.contacts
+                .schedule(tick, set)
+                .map_err(|f| ContactRejection::ScheduleFull { tick: f.tick, capacity: f.capacity })
         });
         match scheduled {
             Ok(()) => {
@@ -703,11 +890,21 @@ impl<S: DynamicsSource> AgentCore<S> {
         if ev.deferred > 0 {
             self.counters.liftoffs_deferred += 1;
             if self.counters.liftoffs_deferred.is_power_of_two() {
-                tracing::warn!(robot = %self.robot, tick, "lift-off deferred: the foot is still loaded, or too few feet would stay on the ground");
+                tracing::warn!(
+                    robot = %self.robot,
+                    tick,
+                    "lift-off deferred: the foot is still loaded, or too few feet would stay on \
+                     the ground"
+                );
             }
         }
         if ev.changed() {
-            tracing::info!(robot = %self.robot, tick, stance = ?self.contacts.active().stance, "contact set changed");
+            tracing::info!(
+                robot = %self.robot,
+                tick,
+                stance = ?self.contacts.active().stance,
+                "contact set changed"
+            );
         }
     }
 
@@ -725,9 +922,13 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// The contact set `msg` asks for, checked against this robot's id and feet.
     fn contact_set(&self, msg: &protocol::ContactSet) -> Result<ActiveContacts, ContactRejection> {
         if msg.header.robot_id() != self.robot {
-            return Err(ContactRejection::OtherRobot { robot: self.robot.clone(), got: msg.header.robot_id().to_string() });
+            return Err(ContactRejection::OtherRobot {
+                robot: self.robot.clone(),
+                got: msg.header.robot_id().to_string(),
+            });
         }
-        let unknown: Vec<String> = msg.stance_feet.iter().filter(|f| !self.feet.contains(f)).cloned().collect();
+        let unknown: Vec<String> =
+            msg.stance_feet.iter().filter(|f| !self.feet.contains(f)).cloned().collect();
         if !unknown.is_empty() {
             return Err(ContactRejection::UnknownFeet { unknown, feet: self.feet.clone() });
         }
@@ -746,17 +947,23 @@ impl<S: DynamicsSource> AgentCore<S> {
                 apply = Apply::Hold;
             }
         }
-        if self.coordinator_lost.take_if(|t| now.duration_since(*t) >= self.coordinator_grace).is_some() {
+        if self
+            .coordinator_lost
+            .take_if(|t| now.duration_since(*t) >= self.coordinator_grace)
+            .is_some()
+        {
             apply = match self.enter_hold("the coordinator left") {
                 Apply::Nothing => apply,
                 hold => hold,
             };
         }
-        let status_due = self.last_status.is_none_or(|t| now.duration_since(t) >= self.status_period);
+        let status_due =
+            self.last_status.is_none_or(|t| now.duration_since(t) >= self.status_period);
         if status_due {
             self.last_status = Some(now);
         }
-        let description_due = self.last_description.is_none_or(|t| now.duration_since(t) >= self.description_period);
+        let description_due =
+            self.last_description.is_none_or(|t| now.duration_since(t) >= self.description_period);
         if description_due {
             self.last_description = Some(now);
         }
@@ -777,8 +984,15 @@ impl<S: DynamicsSource> AgentCore<S> {
         // sends its command again: it may be the command that was lost). Once the state is
         // answered (its command applied, or the hold in safe mode) nobody waits for them, and
         // a restarted coordinator would solve a tick the robots have passed.
-        let again = self.unanswered() && self.fall.fallen().is_none() && self.counters.dynamics > 0 && self.gate.latest_state_tick() == Some(self.terms.header.tick);
-        Outputs { terms: again.then_some(&mut self.terms), description: self.description.as_mut(), ..Outputs::default() }
+        let again = self.unanswered()
+            && self.fall.fallen().is_none()
+            && self.counters.dynamics > 0
+            && self.gate.latest_state_tick() == Some(self.terms.header.tick);
+        Outputs {
+            terms: again.then_some(&mut self.terms),
+            description: self.description.as_mut(),
+            ..Outputs::default()
+        }
     }
 
     /// The coordinator's liveliness token went at `now`. Nothing changes yet: if it is not back
@@ -789,7 +1003,11 @@ impl<S: DynamicsSource> AgentCore<S> {
             return self.enter_safe_mode("the coordinator left", now);
         }
         self.coordinator_lost.get_or_insert(now);
-        tracing::warn!(robot = %self.robot, grace = ?self.coordinator_grace, "the coordinator's token went; holding posture unless it is back within the grace");
+        tracing::warn!(
+            robot = %self.robot,
+            grace = ?self.coordinator_grace,
+            "the coordinator's token went; holding posture unless it is back within the grace"
+        );
         Outputs::default()
     }
 
@@ -835,60 +1053,15 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// The outputs of a call: the terms if computed, the torques to apply (the checked command,
     /// or the hold torques of the latest state), the description if due, the status if the mode
     /// changed.
-    fn outputs(&mut self, now: Instant, mode_before: AgentMode, terms: bool, apply: Apply, description: bool) -> Outputs<'_> {
-        let mut drive = None;
-        match apply {
-            Apply::Nothing => {}
-            Apply::Command => {
-                self.take_over();
-                self.last_applied = Apply::Command;
-                self.last_command.clone_from(&self.drive.tau_ff);
-                self.drive_targets();
-                drive = Some(&mut self.drive);
-            }
-            Apply::Servo => {
-                if let Some(tick) = self.gate.latest_state_tick() {
-                    self.servo_tick = Some(tick);
-                    self.drive.tau_ff.clone_from(&self.last_command);
-                    self.drive_targets();
-                    self.drive.header.tick = tick;
-                    drive = Some(&mut self.drive);
-                }
-            }
-            Apply::Hold => {
-                if let Some(tick) = self.gate.latest_state_tick() {
-                    if self.last_applied != Apply::Hold {
-                        // A hold order after commands holds the posture of now.
-                        self.latch_hold();
-                    }
-                    if self.last_applied == Apply::Command {
-                        // Entering the hold without a jump: from the last command applied.
-                        self.entry_from.clone_from(&self.last_command);
-                        self.entry.start(self.state_time);
-                    }
-                    self.takeover.cancel();
-                    self.hold_drive(tick);
-                    self.last_applied = Apply::Hold;
-                    drive = Some(&mut self.drive);
-                }
-            }
-            Apply::Start => {
-                if let Some(tick) = self.gate.latest_state_tick() {
-                    self.hold.hold(&self.q);
-                    self.hold_drive(tick);
-                    drive = Some(&mut self.drive);
-                }
-            }
-            Apply::Limp => {
-                if let Some(tick) = self.gate.latest_state_tick() {
-                    self.hold.damping(&self.qdot, &mut self.drive.tau_ff);
-                    self.torque_only();
-                    self.drive.header.tick = tick;
-                    self.last_applied = Apply::Limp;
-                    drive = Some(&mut self.drive);
-                }
-            }
-        }
+    fn outputs(
+        &mut self,
+        now: Instant,
+        mode_before: AgentMode,
+        terms: bool,
+        apply: Apply,
+        description: bool,
+    ) -> Outputs<'_> {
+        let drive = self.fill_drive(apply);
         let status = self.board.status.mode != mode_before;
         if status {
             self.last_status = Some(now);
@@ -896,10 +1069,76 @@ impl<S: DynamicsSource> AgentCore<S> {
         Outputs {
             terms: if terms { Some(&mut self.terms) } else { None },
             description: if description { self.description.as_mut() } else { None },
-            drive,
+            drive: if drive { Some(&mut self.drive) } else { None },
             status,
             leave_team: false,
         }
+    }
+
+    /// Fill the drive command with the torques `apply` yields; whether there are any (none
+    /// before the first state).
+    fn fill_drive(&mut self, apply: Apply) -> bool {
+        match apply {
+            Apply::Nothing => false,
+            Apply::Command => {
+                self.take_over();
+                self.last_applied = Apply::Command;
+                self.last_command.clone_from(&self.drive.tau_ff);
+                self.drive_targets();
+                true
+            }
+            Apply::Servo => self.servo_drive(),
+            Apply::Hold => self.enter_hold_drive(),
+            Apply::Start => self.start_drive(),
+            Apply::Limp => self.limp_drive(),
+        }
+    }
+
+    /// Between team commands: the last command's torque with the reference at the latest state.
+    fn servo_drive(&mut self) -> bool {
+        let Some(tick) = self.gate.latest_state_tick() else { return false };
+        self.servo_tick = Some(tick);
+        self.drive.tau_ff.clone_from(&self.last_command);
+        self.drive_targets();
+        self.drive.header.tick = tick;
+        true
+    }
+
+    /// The posture hold at the latest state, blending in from the last command if commands
+    /// came before it.
+    fn enter_hold_drive(&mut self) -> bool {
+        let Some(tick) = self.gate.latest_state_tick() else { return false };
+        if self.last_applied != Apply::Hold {
+            // A hold order after commands holds the posture of now.
+            self.latch_hold();
+        }
+        if self.last_applied == Apply::Command {
+            // Entering the hold without a jump: from the last command applied.
+            self.entry_from.clone_from(&self.last_command);
+            self.entry.start(self.state_time);
+        }
+        self.takeover.cancel();
+        self.hold_drive(tick);
+        self.last_applied = Apply::Hold;
+        true
+    }
+
+    /// Before a command can apply: gravity compensation with damping at the latest state.
+    fn start_drive(&mut self) -> bool {
+        let Some(tick) = self.gate.latest_state_tick() else { return false };
+        self.hold.hold(&self.q);
+        self.hold_drive(tick);
+        true
+    }
+
+    /// The fallen robot: joint damping only.
+    fn limp_drive(&mut self) -> bool {
+        let Some(tick) = self.gate.latest_state_tick() else { return false };
+        self.hold.damping(&self.qdot, &mut self.drive.tau_ff);
+        self.torque_only();
+        self.drive.header.tick = tick;
+        self.last_applied = Apply::Limp;
+        true
     }
 
     /// The drive gains from the first terms ([`DriveGainsMode::Inertia`]): each actuated
@@ -910,14 +1149,25 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         let m = &self.terms.mass_matrix;
         let offset = m.rows().saturating_sub(self.joints);
-        let inertia: Vec<f64> = (0..self.joints).map(|j| m.get(offset + j, offset + j).unwrap_or(f64::NAN)).collect();
+        let inertia: Vec<f64> =
+            (0..self.joints).map(|j| m.get(offset + j, offset + j).unwrap_or(f64::NAN)).collect();
         match DriveGains::from_inertia(&inertia, self.gate.limits()) {
             Ok(g) => {
-                tracing::info!(robot = %self.robot, tick, kp = ?g.kp, kd = ?g.kd, "drive gains from the joints' inertia");
+                tracing::info!(
+                    robot = %self.robot,
+                    tick,
+                    kp = ?g.kp,
+                    kd = ?g.kd,
+                    "drive gains from the joints' inertia"
+                );
                 self.gains = Some(g);
             }
             Err(e) => {
-                tracing::error!(robot = %self.robot, tick, "no drive gains, the drives get torques only: {e}");
+                tracing::error!(
+                    robot = %self.robot,
+                    tick,
+                    "no drive gains, the drives get torques only: {e}"
+                );
                 self.drive_gains = DriveGainsMode::None;
             }
         }
@@ -961,7 +1211,9 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// torque applied (after a hold, the load that hold carried).
     fn latch_hold(&mut self) {
         match self.last_applied {
-            Apply::Command | Apply::Servo => self.hold.hold_carrying(&self.q, &self.last_command, &self.gravity),
+            Apply::Command | Apply::Servo => {
+                self.hold.hold_carrying(&self.q, &self.last_command, &self.gravity)
+            }
             Apply::Hold => self.hold.move_to(&self.q),
             Apply::Nothing | Apply::Start | Apply::Limp => self.hold.hold(&self.q),
         }
@@ -980,7 +1232,12 @@ impl<S: DynamicsSource> AgentCore<S> {
     fn take_over(&mut self) {
         if self.last_applied == Apply::Hold {
             self.takeover.start(self.state_time);
-            tracing::info!(robot = %self.robot, tick = self.drive.header.tick, over_s = self.takeover.duration(), "commands take over from the posture hold");
+            tracing::info!(
+                robot = %self.robot,
+                tick = self.drive.header.tick,
+                over_s = self.takeover.duration(),
+                "commands take over from the posture hold"
+            );
         }
         if self.takeover.active() {
             self.hold_now();
@@ -1005,7 +1262,11 @@ impl<S: DynamicsSource> AgentCore<S> {
     /// The status, brought up to date (counters, latest state tick, last applied tick); the
     /// caller stamps and publishes it.
     pub fn status(&mut self) -> &mut AgentStatus {
-        self.board.refresh(&self.counters, self.gate.latest_state_tick(), self.gate.last_applied_tick())
+        self.board.refresh(
+            &self.counters,
+            self.gate.latest_state_tick(),
+            self.gate.last_applied_tick(),
+        )
     }
 
     pub fn team(&self) -> &str {

@@ -88,7 +88,12 @@ impl FromStr for TeamDelay {
     /// [`MAX_TEAM_DELAY`]).
     fn from_str(s: &str) -> Result<Self, String> {
         let s = s.trim();
-        let bad = || format!("team delay {s:?}: \"auto\", \"auto:N\" or a whole number of ticks from 0 to {MAX_TEAM_DELAY}");
+        let bad = || {
+            format!(
+                "team delay {s:?}: \"auto\", \"auto:N\" or a whole number of ticks from 0 to \
+                 {MAX_TEAM_DELAY}"
+            )
+        };
         if s == "auto" {
             return Ok(TeamDelay::AUTO);
         }
@@ -165,7 +170,16 @@ pub struct AdaptiveDelay {
 
 impl AdaptiveDelay {
     pub fn new(cfg: TeamDelay) -> Self {
-        AdaptiveDelay { delay: cfg.initial(), floor: cfg.initial(), max: cfg.max(), adapts: cfg.adapts(), seen: 0, late: 0, seen_long: 0, late_sooner: 0 }
+        AdaptiveDelay {
+            delay: cfg.initial(),
+            floor: cfg.initial(),
+            max: cfg.max(),
+            adapts: cfg.adapts(),
+            seen: 0,
+            late: 0,
+            seen_long: 0,
+            late_sooner: 0,
+        }
     }
 
     /// The delay in use, state ticks.
@@ -196,7 +210,10 @@ impl AdaptiveDelay {
         let before = self.delay;
         if self.late >= LATE_TO_RAISE && self.delay < self.max {
             self.delay += 1;
-        } else if self.seen_long >= LOWER_WINDOW && self.late_sooner <= LATE_TO_KEEP && self.delay > self.floor {
+        } else if self.seen_long >= LOWER_WINDOW
+            && self.late_sooner <= LATE_TO_KEEP
+            && self.delay > self.floor
+        {
             self.delay -= 1;
         }
         if self.delay != before || self.seen >= WINDOW {
@@ -235,7 +252,10 @@ mod tests {
             assert_eq!(serde_json::from_str::<TeamDelay>(&json).unwrap(), d, "{json}");
         }
         assert_eq!(serde_json::from_str::<TeamDelay>("2").unwrap(), TeamDelay::Ticks(2));
-        assert!(serde_json::from_str::<TeamDelay>("9").is_err() && serde_json::from_str::<TeamDelay>("\"soon\"").is_err());
+        assert!(
+            serde_json::from_str::<TeamDelay>("9").is_err()
+                && serde_json::from_str::<TeamDelay>("\"soon\"").is_err()
+        );
     }
 
     /// Written out again: a command is on time when its state's tick plus the delay is still
@@ -255,7 +275,8 @@ mod tests {
 
     #[test]
     fn auto_raises_by_a_tick_when_a_tenth_come_late_and_lowers_when_a_tick_less_would_do() {
-        let (raise, window, lower, keep) = (LATE_TO_RAISE as u64, WINDOW as u64, LOWER_WINDOW as u64, LATE_TO_KEEP as u64);
+        let (raise, window, lower, keep) =
+            (LATE_TO_RAISE as u64, WINDOW as u64, LOWER_WINDOW as u64, LATE_TO_KEEP as u64);
         let mut a = AdaptiveDelay::new(TeamDelay::Auto { max: MAX_TEAM_DELAY });
         assert_eq!(a.ticks(), 0);
         // One fewer late than a raise in a window, then the window ends: the count restarts.
@@ -265,7 +286,11 @@ mod tests {
         for k in 0..raise - 1 {
             assert_eq!(a.on_command(k, k + 1), None, "a new window: {k}");
         }
-        assert_eq!(a.on_command(0, 1), Some(1), "the LATE_TO_RAISE-th late command of a window raises");
+        assert_eq!(
+            a.on_command(0, 1),
+            Some(1),
+            "the LATE_TO_RAISE-th late command of a window raises"
+        );
         for k in 0..raise * 20 {
             a.on_command(k, k + 50);
         }
@@ -285,8 +310,14 @@ mod tests {
             }
         }
         // (The window running since the last raise, which saw late commands, ends first.)
-        assert_eq!(changes.iter().map(|c| c.1).collect::<Vec<_>>(), (3..MAX_TEAM_DELAY).rev().collect::<Vec<_>>());
-        assert!(changes[0].0 <= 2 * lower && changes.windows(2).all(|w| w[1].0 - w[0].0 == lower), "{changes:?}");
+        assert_eq!(
+            changes.iter().map(|c| c.1).collect::<Vec<_>>(),
+            (3..MAX_TEAM_DELAY).rev().collect::<Vec<_>>()
+        );
+        assert!(
+            changes[0].0 <= 2 * lower && changes.windows(2).all(|w| w[1].0 - w[0].0 == lower),
+            "{changes:?}"
+        );
         // A lossy link: one command in 100 comes 12 ticks late, too few to raise; the rest one
         // tick behind. LATE_TO_KEEP late for 2 in a LOWER_WINDOW still lower 3 to 2, one more
         // does not; 2 stays.
@@ -302,13 +333,22 @@ mod tests {
                 changes.push((k, d));
             }
         }
-        assert_eq!(changes, vec![(lower, 2)], "20 late for 2 in the first window lower it; 20 late for 1 keep 2");
+        assert_eq!(
+            changes,
+            vec![(lower, 2)],
+            "20 late for 2 in the first window lower it; 20 late for 1 keep 2"
+        );
         let mut c = AdaptiveDelay::new(TeamDelay::AUTO);
         for k in 0..raise * 3 {
             c.on_command(k, k + 5);
         }
         for k in 0..lower {
-            assert_eq!(c.on_command(k, k + if k <= keep { 2 } else { 1 }), None, "{} late for 2 keep 3", keep + 1);
+            assert_eq!(
+                c.on_command(k, k + if k <= keep { 2 } else { 1 }),
+                None,
+                "{} late for 2 keep 3",
+                keep + 1
+            );
         }
     }
 

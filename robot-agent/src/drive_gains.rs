@@ -99,7 +99,14 @@ pub fn lead(h: f64, drive_period: Option<f64>) -> f64 {
 
 /// `q + qd lead + a lead^2 / 2` into `q_des` and `qd + a lead` into `qd_des`: a state carried
 /// `lead` s at the acceleration `a`.
-pub fn carry(q: &[f64], qd: &[f64], a: &[f64], lead: f64, q_des: &mut Vec<f64>, qd_des: &mut Vec<f64>) {
+pub fn carry(
+    q: &[f64],
+    qd: &[f64],
+    a: &[f64],
+    lead: f64,
+    q_des: &mut Vec<f64>,
+    qd_des: &mut Vec<f64>,
+) {
     q_des.clear();
     qd_des.clear();
     for j in 0..q.len() {
@@ -135,8 +142,8 @@ impl Reference {
     /// A new state (not a repeat of the latest) at `time`.
     pub fn on_state(&mut self, time: f64, q: &[f64], qd: &[f64]) {
         let h = self.last.map(|t| time - t).filter(|h| *h > 0.0);
-        for j in 0..qd.len() {
-            self.a[j] = h.map_or(0.0, |h| (qd[j] - self.qd[j]) / h);
+        for ((a, qd), qd_last) in self.a.iter_mut().zip(qd).zip(&self.qd) {
+            *a = h.map_or(0.0, |h| (qd - qd_last) / h);
         }
         if let Some(h) = h {
             self.period = h;
@@ -176,7 +183,11 @@ impl DriveGains {
             return Err(DriveGainsError::Inertia { joint: j, value: inertia[j] });
         }
         let omega = 2.0 * std::f64::consts::PI * BANDWIDTH_HZ;
-        let kp = inertia.iter().zip(limits).map(|(m, l)| (omega * omega * m).min(l / FULL_TORQUE_ERROR)).collect();
+        let kp = inertia
+            .iter()
+            .zip(limits)
+            .map(|(m, l)| (omega * omega * m).min(l / FULL_TORQUE_ERROR))
+            .collect();
         let kd = inertia.iter().map(|m| 2.0 * DAMPING_RATIO * omega * m).collect();
         Ok(DriveGains { kp, kd })
     }
@@ -207,7 +218,12 @@ mod tests {
     fn a_strong_light_joint_is_capped_at_its_limit() {
         // 2 kg m^2 wants 1974 N m/rad at 5 Hz; with 80 N m the cap is 80 / 0.05 = 1600.
         let g = DriveGains::from_inertia(&[2.0, 1e-3], &[80.0, 80.0]).unwrap();
-        assert!((g.kp[0] * 0.05 - 80.0).abs() < 1e-9, "kp {} reaches {} N m at 0.05 rad", g.kp[0], g.kp[0] * 0.05);
+        assert!(
+            (g.kp[0] * 0.05 - 80.0).abs() < 1e-9,
+            "kp {} reaches {} N m at 0.05 rad",
+            g.kp[0],
+            g.kp[0] * 0.05
+        );
         // The light joint is under its cap: its loop is the bandwidth's.
         assert!((loop_of(1e-3, g.kp[1], g.kd[1]).0 - BANDWIDTH_HZ).abs() < 1e-9);
         // Capped stiffness, same damping: overdamped, never oscillating.
@@ -251,16 +267,28 @@ mod tests {
             }
             let (qt, vt) = trajectory(t + ahead);
             for j in 0..2 {
-                assert!((q_des[j] - qt[j]).abs() < 1e-12 && (qd_des[j] - vt[j]).abs() < 1e-9, "state {k}, joint {j}: {q_des:?} {qd_des:?} vs {qt:?} {vt:?}");
+                assert!(
+                    (q_des[j] - qt[j]).abs() < 1e-12 && (qd_des[j] - vt[j]).abs() < 1e-9,
+                    "state {k}, joint {j}: {q_des:?} {qd_des:?} vs {qt:?} {vt:?}"
+                );
             }
         }
     }
 
     #[test]
     fn bad_inertias_and_sizes_are_refused() {
-        assert_eq!(DriveGains::from_inertia(&[0.1], &[1.0, 2.0]), Err(DriveGainsError::Sizes { inertia: 1, limits: 2 }));
-        assert!(matches!(DriveGains::from_inertia(&[0.1, 0.0], &[1.0, 1.0]), Err(DriveGainsError::Inertia { joint: 1, .. })));
-        assert!(matches!(DriveGains::from_inertia(&[f64::NAN], &[1.0]), Err(DriveGainsError::Inertia { joint: 0, .. })));
+        assert_eq!(
+            DriveGains::from_inertia(&[0.1], &[1.0, 2.0]),
+            Err(DriveGainsError::Sizes { inertia: 1, limits: 2 })
+        );
+        assert!(matches!(
+            DriveGains::from_inertia(&[0.1, 0.0], &[1.0, 1.0]),
+            Err(DriveGainsError::Inertia { joint: 1, .. })
+        ));
+        assert!(matches!(
+            DriveGains::from_inertia(&[f64::NAN], &[1.0]),
+            Err(DriveGainsError::Inertia { joint: 0, .. })
+        ));
     }
 
     #[test]

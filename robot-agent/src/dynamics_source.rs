@@ -33,7 +33,12 @@ pub trait DynamicsSource: Send {
     /// The protocol description to publish for robot `id` of team `team`, if there is a model.
     fn description(&self, team: &str, id: &str) -> Option<RobotDescription>;
     /// Fill `out` (header excepted) with the terms at `state` for `contacts`.
-    fn compute(&mut self, state: &RobotState, contacts: &ActiveContacts, out: &mut protocol::DynamicsTerms) -> Result<(), SourceError>;
+    fn compute(
+        &mut self,
+        state: &RobotState,
+        contacts: &ActiveContacts,
+        out: &mut protocol::DynamicsTerms,
+    ) -> Result<(), SourceError>;
     /// The joint torques that balance gravity at rest, the stance feet carrying the floating
     /// base ([`crate::standing`]), at the state and contacts of the last successful
     /// [`DynamicsSource::compute`] (zeros before).
@@ -106,11 +111,22 @@ impl DynamicsSource for ModelDynamics {
         Some(robot_description(&self.robot, team, id))
     }
 
-    fn compute(&mut self, state: &RobotState, contacts: &ActiveContacts, out: &mut protocol::DynamicsTerms) -> Result<(), SourceError> {
+    fn compute(
+        &mut self,
+        state: &RobotState,
+        contacts: &ActiveContacts,
+        out: &mut protocol::DynamicsTerms,
+    ) -> Result<(), SourceError> {
         self.builder.load_state(&self.robot, state)?;
         self.builder.compute(&self.robot, contacts, out)?;
         let g = self.builder.data().g.as_slice();
-        crate::standing::standing_torques(g, self.robot.model.floating_base, &out.frames, &self.robot.actuated_indices, &mut self.gravity);
+        crate::standing::standing_torques(
+            g,
+            self.robot.model.floating_base,
+            &out.frames,
+            &self.robot.actuated_indices,
+            &mut self.gravity,
+        );
         Ok(())
     }
 
@@ -156,9 +172,17 @@ impl DynamicsSource for PlaceholderDynamics {
         None
     }
 
-    fn compute(&mut self, state: &RobotState, _contacts: &ActiveContacts, out: &mut protocol::DynamicsTerms) -> Result<(), SourceError> {
+    fn compute(
+        &mut self,
+        state: &RobotState,
+        _contacts: &ActiveContacts,
+        out: &mut protocol::DynamicsTerms,
+    ) -> Result<(), SourceError> {
         if state.joint_positions.len() != self.joints {
-            return Err(SourceError::StateSize { expected: self.joints, got: state.joint_positions.len() });
+            return Err(SourceError::StateSize {
+                expected: self.joints,
+                got: state.joint_positions.len(),
+            });
         }
         let nv = self.nv;
         out.floating_base = self.floating_base();

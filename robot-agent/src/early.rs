@@ -30,7 +30,12 @@ pub enum Kept {
 impl EarlyCommands {
     /// Room for `capacity` commands of `joints` torques each.
     pub fn new(team: &str, robot: &str, joints: usize, capacity: usize) -> Self {
-        let empty = || TorqueCommand { header: Header::new(team, Some(robot), 0, 0), tau: Vec::with_capacity(joints), hold: false, delay_ticks: 0 };
+        let empty = || TorqueCommand {
+            header: Header::new(team, Some(robot), 0, 0),
+            tau: Vec::with_capacity(joints),
+            hold: false,
+            delay_ticks: 0,
+        };
         EarlyCommands { slots: (0..capacity.max(1)).map(|_| empty()).collect(), pending: 0 }
     }
 
@@ -76,8 +81,14 @@ impl EarlyCommands {
     /// The newest waiting command whose tick `due` says applies now, copied into `out` (whose
     /// storage is reused); it and every older due one leave the queue. The number of older due
     /// ones dropped, or `None` when no command is due.
-    pub fn take_due(&mut self, due: impl Fn(u64) -> bool, out: &mut TorqueCommand) -> Option<usize> {
-        let newest = (0..self.pending).filter(|&i| due(self.slots[i].header.tick)).max_by_key(|&i| self.slots[i].header.tick)?;
+    pub fn take_due(
+        &mut self,
+        due: impl Fn(u64) -> bool,
+        out: &mut TorqueCommand,
+    ) -> Option<usize> {
+        let newest = (0..self.pending)
+            .filter(|&i| due(self.slots[i].header.tick))
+            .max_by_key(|&i| self.slots[i].header.tick)?;
         copy(&self.slots[newest], out);
         let mut dropped = 0;
         let mut i = 0;
@@ -108,7 +119,12 @@ mod tests {
     use super::*;
 
     fn cmd(tick: u64, tau: f64) -> TorqueCommand {
-        TorqueCommand { header: Header::new("t", Some("r1"), tick, tick * 10), tau: vec![tau; 3], hold: false, delay_ticks: 0 }
+        TorqueCommand {
+            header: Header::new("t", Some("r1"), tick, tick * 10),
+            tau: vec![tau; 3],
+            hold: false,
+            delay_ticks: 0,
+        }
     }
 
     fn out() -> TorqueCommand {
@@ -123,7 +139,11 @@ mod tests {
         }
         let mut o = out();
         assert_eq!(q.take_due(|t| t + 2 <= 4, &mut o), None, "tick 3 applies at 5, not 4");
-        assert_eq!(q.take_due(|t| t + 2 <= 6, &mut o), Some(1), "ticks 3 and 4 due at 6: 4 taken, 3 dropped");
+        assert_eq!(
+            q.take_due(|t| t + 2 <= 6, &mut o),
+            Some(1),
+            "ticks 3 and 4 due at 6: 4 taken, 3 dropped"
+        );
         assert_eq!((o.header.tick, o.header.stamp_ns, o.tau.clone()), (4, 40, vec![4.0; 3]));
         assert_eq!((q.len(), q.newest_tick()), (1, Some(5)), "tick 5 still waits");
         assert_eq!(q.take_due(|t| t + 2 <= 7, &mut o), Some(0));

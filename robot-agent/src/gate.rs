@@ -1,6 +1,7 @@
-//! Checks of an incoming torque command (docs/architecture.md, one tick, step 4): robot id, tick (not older than
-//! the last applied, not from the future), age against a deadline, size, finite numbers; then
-//! clamping to the torque limits with a report of which joints were clamped.
+//! Checks of an incoming torque command (docs/architecture.md, one tick, step 4): robot id,
+//! tick (not older than the last applied, not from the future), age against a deadline, size,
+//! finite numbers; then clamping to the torque limits with a report of which joints were
+//! clamped.
 
 use std::time::Duration;
 
@@ -20,15 +21,27 @@ pub enum CommandRejection {
     WrongSize { expected: usize, got: usize },
     #[error("command torque {index} is not finite ({value})")]
     NonFinite { index: usize, value: f64 },
-    #[error("command for tick {tick} is {age_us} us old by its stamp, the deadline is {max_us} us")]
+    #[error(
+        "command for tick {tick} is {age_us} us old by its stamp, the deadline is {max_us} us"
+    )]
     TooOld { tick: u64, age_us: u64, max_us: u64 },
-    #[error("command for tick {tick} came after the state of tick {latest}: {} ticks old, at most {max_ticks}", latest - tick)]
+    #[error(
+        "command for tick {tick} came after the state of tick {latest}: {} ticks old, at most \
+         {max_ticks}",
+        latest - tick
+    )]
     Behind { tick: u64, latest: u64, max_ticks: u64 },
     #[error("command arrived before any state")]
     NoState,
-    #[error("command for tick {tick} was made before safe mode was entered at tick {entered}; safe mode is left only on a fresh tick")]
+    #[error(
+        "command for tick {tick} was made before safe mode was entered at tick {entered}; safe \
+         mode is left only on a fresh tick"
+    )]
     BeforeSafeMode { tick: u64, entered: u64 },
-    #[error("command for tick {tick} refused: the robot fell at tick {fell} and is limp (restart the agent once it stands)")]
+    #[error(
+        "command for tick {tick} refused: the robot fell at tick {fell} and is limp (restart the \
+         agent once it stands)"
+    )]
     Fallen { tick: u64, fell: u64 },
     #[error("undecodable command: {0}")]
     Undecodable(String),
@@ -136,10 +149,26 @@ impl CommandGate {
     /// refuse a slow first solve that the simulation waited for). When the sender stamped it
     /// (`stamp_ns > 0`), its stamp must also not be more than `max_age` older than the latest
     /// state's stamp (the state source's clock, which the team shares).
-    pub fn check(&mut self, cmd: &TorqueCommand, out: &mut Vec<f64>) -> Result<usize, CommandRejection> {
+    pub fn check(
+        &mut self,
+        cmd: &TorqueCommand,
+        out: &mut Vec<f64>,
+    ) -> Result<usize, CommandRejection> {
+        let (tick, latest) = self.check_order(cmd)?;
+        self.check_torques(cmd)?;
+        self.check_age(cmd, tick, latest)?;
+        Ok(self.clamp_into(&cmd.tau, out))
+    }
+
+    /// Robot id, then the tick the command applies at: after a state, not from the future, not
+    /// stale. Returns that tick and the latest state.
+    fn check_order(&self, cmd: &TorqueCommand) -> Result<(u64, SeenState), CommandRejection> {
         let got = cmd.header.robot_id();
         if got != self.robot {
-            return Err(CommandRejection::WrongRobot { expected: self.robot.clone(), got: got.to_string() });
+            return Err(CommandRejection::WrongRobot {
+                expected: self.robot.clone(),
+                got: got.to_string(),
+            });
         }
         let latest = self.latest.ok_or(CommandRejection::NoState)?;
         let tick = self.applies_at(cmd.header.tick);
@@ -151,6 +180,11 @@ impl CommandGate {
                 return Err(CommandRejection::Stale { tick, last });
             }
         }
+        Ok((tick, latest))
+    }
+
+    /// One torque per actuated joint (none for a hold), every one finite.
+    fn check_torques(&self, cmd: &TorqueCommand) -> Result<(), CommandRejection> {
         // A hold command carries no torques (the agent's own hold is applied).
         let expected = if cmd.hold { 0 } else { self.limits.len() };
         if cmd.tau.len() != expected {
@@ -159,8 +193,23 @@ impl CommandGate {
         if let Some(index) = cmd.tau.iter().position(|t| !t.is_finite()) {
             return Err(CommandRejection::NonFinite { index, value: cmd.tau[index] });
         }
+        Ok(())
+    }
+
+    /// The age of the command applying at `tick`, in state ticks behind `latest` and, when
+    /// stamped, by its stamp.
+    fn check_age(
+        &self,
+        cmd: &TorqueCommand,
+        tick: u64,
+        latest: SeenState,
+    ) -> Result<(), CommandRejection> {
         if latest.tick - tick > self.max_age_ticks {
-            return Err(CommandRejection::Behind { tick, latest: latest.tick, max_ticks: self.max_age_ticks });
+            return Err(CommandRejection::Behind {
+                tick,
+                latest: latest.tick,
+                max_ticks: self.max_age_ticks,
+            });
         }
         if cmd.header.stamp_ns > 0 {
             let age_ns = latest.stamp_ns.saturating_sub(cmd.header.stamp_ns);
@@ -169,16 +218,22 @@ impl CommandGate {
                 return Err(CommandRejection::TooOld { tick, age_us, max_us });
             }
         }
+        Ok(())
+    }
+
+    /// `tau` clamped to the limits into `out`, the clamped joints' indices recorded; returns
+    /// how many were clamped.
+    fn clamp_into(&mut self, tau: &[f64], out: &mut Vec<f64>) -> usize {
         out.clear();
         self.clamped.clear();
-        for (i, (&t, &l)) in cmd.tau.iter().zip(&self.limits).enumerate() {
+        for (i, (&t, &l)) in tau.iter().zip(&self.limits).enumerate() {
             let c = t.clamp(-l, l);
             if c != t {
                 self.clamped.push(i);
             }
             out.push(c);
         }
-        Ok(self.clamped.len())
+        self.clamped.len()
     }
 
     /// Indices of the joints clamped by the last successful [`CommandGate::check`].
@@ -209,7 +264,12 @@ mod tests {
     use protocol::Header;
 
     fn cmd(robot: &str, tick: u64, tau: Vec<f64>) -> TorqueCommand {
-        TorqueCommand { header: Header::new("t", Some(robot), tick, 0), tau, hold: false, delay_ticks: 0 }
+        TorqueCommand {
+            header: Header::new("t", Some(robot), tick, 0),
+            tau,
+            hold: false,
+            delay_ticks: 0,
+        }
     }
 
     #[test]
@@ -218,19 +278,37 @@ mod tests {
         let mut out = Vec::new();
         assert_eq!(g.check(&cmd("r1", 0, vec![0.0; 3]), &mut out), Err(CommandRejection::NoState));
         assert!(g.on_state(5, 1_000_000_000));
-        assert!(matches!(g.check(&cmd("r2", 5, vec![0.0; 3]), &mut out), Err(CommandRejection::WrongRobot { .. })));
-        assert!(matches!(g.check(&cmd("r1", 6, vec![0.0; 3]), &mut out), Err(CommandRejection::FromTheFuture { .. })));
-        assert!(matches!(g.check(&cmd("r1", 5, vec![0.0; 4]), &mut out), Err(CommandRejection::WrongSize { .. })));
-        assert!(matches!(g.check(&cmd("r1", 5, vec![0.0, f64::NAN, 0.0]), &mut out), Err(CommandRejection::NonFinite { index: 1, .. })));
+        assert!(matches!(
+            g.check(&cmd("r2", 5, vec![0.0; 3]), &mut out),
+            Err(CommandRejection::WrongRobot { .. })
+        ));
+        assert!(matches!(
+            g.check(&cmd("r1", 6, vec![0.0; 3]), &mut out),
+            Err(CommandRejection::FromTheFuture { .. })
+        ));
+        assert!(matches!(
+            g.check(&cmd("r1", 5, vec![0.0; 4]), &mut out),
+            Err(CommandRejection::WrongSize { .. })
+        ));
+        assert!(matches!(
+            g.check(&cmd("r1", 5, vec![0.0, f64::NAN, 0.0]), &mut out),
+            Err(CommandRejection::NonFinite { index: 1, .. })
+        ));
         // Stamped 30 ms before the latest state: too old by the shared clock.
         let mut stamped = cmd("r1", 5, vec![0.0; 3]);
         stamped.header.stamp_ns = 1_000_000_000 - 30_000_000;
-        assert_eq!(g.check(&stamped, &mut out), Err(CommandRejection::TooOld { tick: 5, age_us: 30_000, max_us: 25_000 }));
+        assert_eq!(
+            g.check(&stamped, &mut out),
+            Err(CommandRejection::TooOld { tick: 5, age_us: 30_000, max_us: 25_000 })
+        );
         assert_eq!(g.check(&cmd("r1", 5, vec![12.0, -3.0, -2.5]), &mut out), Ok(2));
         assert_eq!(out, vec![10.0, -3.0, -2.0]);
         assert_eq!(g.clamped(), &[0, 2]);
         g.mark_applied(5);
-        assert!(matches!(g.check(&cmd("r1", 5, vec![0.0; 3]), &mut out), Err(CommandRejection::Stale { .. })));
+        assert!(matches!(
+            g.check(&cmd("r1", 5, vec![0.0; 3]), &mut out),
+            Err(CommandRejection::Stale { .. })
+        ));
         assert!(g.on_state(6, 1_005_000_000));
         assert!(!g.on_state(4, 0), "out-of-order state accepted");
         assert_eq!(g.check(&cmd("r1", 6, vec![1.0; 3]), &mut out), Ok(0));
@@ -244,7 +322,10 @@ mod tests {
         let mut g = CommandGate::new("r1", vec![10.0; 3], 3, Duration::from_millis(25));
         let mut out = Vec::new();
         assert!(g.on_state(14, 0));
-        assert_eq!(g.check(&cmd("r1", 10, vec![0.0; 3]), &mut out), Err(CommandRejection::Behind { tick: 10, latest: 14, max_ticks: 3 }));
+        assert_eq!(
+            g.check(&cmd("r1", 10, vec![0.0; 3]), &mut out),
+            Err(CommandRejection::Behind { tick: 10, latest: 14, max_ticks: 3 })
+        );
         assert_eq!(g.check(&cmd("r1", 11, vec![0.0; 3]), &mut out), Ok(0));
         let msg = CommandRejection::Behind { tick: 10, latest: 14, max_ticks: 3 }.to_string();
         assert!(msg.contains("4 ticks old, at most 3"), "{msg}");

@@ -9,7 +9,8 @@ use serde_json::{json, Value};
 use thiserror::Error;
 
 use robot_model::{
-    compute_all_terms, frame_jacobian, frame_jdot_v, DynamicsError, Data, FloatingBase, Model, ModelBuilder, ModelError, SE3,
+    compute_all_terms, frame_jacobian, frame_jdot_v, Data, DynamicsError, FloatingBase, Model,
+    ModelBuilder, ModelError, SE3,
 };
 
 /// A second URDF to attach to a frame of the first.
@@ -76,14 +77,19 @@ struct StateFile {
 
 fn read_state(path: &Path, model: &Model) -> Result<(DVector<f64>, DVector<f64>), InspectError> {
     let p = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| InspectError::StateFile { path: p.clone(), detail: e.to_string() })?;
-    let s: StateFile = serde_json::from_str(&text).map_err(|e| InspectError::StateFormat { path: p.clone(), detail: e.to_string() })?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| InspectError::StateFile { path: p.clone(), detail: e.to_string() })?;
+    let s: StateFile = serde_json::from_str(&text)
+        .map_err(|e| InspectError::StateFormat { path: p.clone(), detail: e.to_string() })?;
     let v = s.v.unwrap_or_else(|| vec![0.0; model.nv]);
     model.check_state(&s.q, Some(&v))?;
     if model.floating_base {
         let n = s.q[3..7].iter().map(|x| x * x).sum::<f64>().sqrt();
         if (n - 1.0).abs() > 1e-6 {
-            return Err(InspectError::StateFormat { path: p, detail: format!("base quaternion (q[3..7], w x y z) has norm {n}, expected 1") });
+            return Err(InspectError::StateFormat {
+                path: p,
+                detail: format!("base quaternion (q[3..7], w x y z) has norm {n}, expected 1"),
+            });
         }
     }
     Ok((DVector::from_vec(s.q), DVector::from_vec(v)))
@@ -95,13 +101,20 @@ pub fn load_model(args: &InspectArgs) -> Result<Model, InspectError> {
     let mut b = ModelBuilder::from_urdf_file(&args.urdf)?;
     if let Some(a) = &args.attach {
         let p = a.pose;
-        b = b.attach_urdf_file(&a.urdf, &a.at, SE3::from_xyz_rpy([p[0], p[1], p[2]], [p[3], p[4], p[5]]), &a.prefix)?;
+        b = b.attach_urdf_file(
+            &a.urdf,
+            &a.at,
+            SE3::from_xyz_rpy([p[0], p[1], p[2]], [p[3], p[4], p[5]]),
+            &a.prefix,
+        )?;
     }
     Ok(b.build(fb)?)
 }
 
 fn matrix_rows(m: &DMatrix<f64>) -> Value {
-    Value::Array((0..m.nrows()).map(|r| json!(m.row(r).iter().copied().collect::<Vec<f64>>())).collect())
+    Value::Array(
+        (0..m.nrows()).map(|r| json!(m.row(r).iter().copied().collect::<Vec<f64>>())).collect(),
+    )
 }
 
 /// Runs `inspect` and returns the report.
@@ -131,9 +144,10 @@ pub fn inspect(args: &InspectArgs) -> Result<Value, InspectError> {
         }));
     }
     let convention = if model.floating_base {
-        "floating base: q = [base position (world, 3); base quaternion (w, x, y, z); joint positions], \
-         v = [base linear velocity in the base frame (3); base angular velocity in the base frame (3); joint velocities] \
-         (Pinocchio's convention; MuJoCo's free joint differs: its linear velocity is in the world frame)"
+        "floating base: q = [base position (world, 3); base quaternion (w, x, y, z); joint \
+         positions], v = [base linear velocity in the base frame (3); base angular velocity in \
+         the base frame (3); joint velocities] (Pinocchio's convention; MuJoCo's free joint \
+         differs: its linear velocity is in the world frame)"
     } else {
         "fixed base: q = joint positions, v = joint velocities"
     };
@@ -147,7 +161,8 @@ pub fn inspect(args: &InspectArgs) -> Result<Value, InspectError> {
         "total_mass": model.total_mass,
         "floating_base": model.floating_base,
         "base_velocity_convention": convention,
-        "frame_convention": "at the frame origin, world-aligned axes, rows [linear; angular]; jdot_v is the classical acceleration at zero joint acceleration (includes omega x v)",
+        "frame_convention": "at the frame origin, world-aligned axes, rows [linear; angular]; \
+            jdot_v is the classical acceleration at zero joint acceleration (includes omega x v)",
         "gravity": model.gravity.as_slice(),
         "q": q.as_slice(),
         "v": v.as_slice(),
@@ -169,7 +184,10 @@ pub fn summary(report: &Value) -> String {
     }
     if let Some(frames) = report["frames"].as_array() {
         for f in frames {
-            s.push_str(&format!("frame {}: position {} jdot_v {}\n", f["name"], f["position"], f["jdot_v"]));
+            s.push_str(&format!(
+                "frame {}: position {} jdot_v {}\n",
+                f["name"], f["position"], f["jdot_v"]
+            ));
         }
     }
     s.push_str("(use --json for M, rotations and Jacobians)\n");

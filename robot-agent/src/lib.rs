@@ -1,9 +1,10 @@
 //! # robot-agent
 //!
 //! One robot of the team. It turns its measured state into the dynamics terms the coordinator
-//! needs (docs/architecture.md, one tick, step 2), checks the torque commands it receives and hands them to the
-//! robot (step 4). The robot itself (URDF model, rigid-body algorithms, the description
-//! TOML) is the `robot-model` crate; this crate turns it into protocol messages and runs it.
+//! needs (docs/architecture.md, one tick, step 2), checks the torque commands it receives and
+//! hands them to the robot (step 4). The robot itself (URDF model, rigid-body algorithms, the
+//! description TOML) is the `robot-model` crate; this crate turns it into protocol messages and
+//! runs it.
 //!
 //! * [`inspect`]: the `robot-agent inspect` report of a model at one state.
 //! * [`terms`]: the per-tick dynamics terms (M, h, frame Jacobians and Jdot*v) from the model.

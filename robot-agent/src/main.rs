@@ -8,11 +8,15 @@ use std::time::Duration;
 use clap::{Args, Parser, Subcommand};
 use protocol::transport::{self, Role, ZenohArgs};
 use robot_agent::agent::{self, AgentConfig, ModelDynamics, PlaceholderDynamics};
-use robot_model::{default_robot_path, Robot};
 use robot_agent::inspect::{self, Attach, InspectArgs};
+use robot_model::{default_robot_path, Robot};
 
 #[derive(Parser)]
-#[command(name = "robot-agent", version, about = "A robot's agent: model, dynamics terms, commands")]
+#[command(
+    name = "robot-agent",
+    version,
+    about = "A robot's agent: model, dynamics terms, commands"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -49,7 +53,11 @@ struct RunCmd {
     /// Hold posture when the coordinator's liveliness token has been gone this long (unless
     /// the command deadline comes first); a link that drops and comes back within it changes
     /// nothing. 0: hold at once.
-    #[arg(long, value_name = "MS", default_value_t = robot_agent::core::COORDINATOR_GRACE.as_millis() as u64)]
+    #[arg(
+        long,
+        value_name = "MS",
+        default_value_t = robot_agent::core::COORDINATOR_GRACE.as_millis() as u64
+    )]
     coordinator_grace_ms: u64,
     /// A swing foot counts as landed once its measured normal force reaches this, N (default:
     /// `contact_switch::SwitchConfig`'s, 20 N).
@@ -67,7 +75,12 @@ struct RunCmd {
     /// The team answers every N-th state tick (the team loop at the robot's rate divided by N);
     /// the agent answers the states between alone, with the last command's torque and, with
     /// drive gains, the reference carried to each state.
-    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = 1,
+        value_parser = clap::value_parser!(u64).range(1..)
+    )]
     team_every: u64,
     /// The team's command for the state of tick k applies at tick k + N (the team has N robot
     /// periods to answer, 0 to 8); the states before the first command can apply get gravity
@@ -89,8 +102,14 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
     protocol::validate_id("robot", &cmd.id)?;
     protocol::validate_id("team", &cmd.team)?;
     anyhow::ensure!(cmd.command_deadline_ms > 0, "--command-deadline-ms must be positive");
-    anyhow::ensure!(cmd.drive_hz.is_none_or(|hz| hz.is_finite() && hz > 0.0), "--drive-hz must be a positive rate (Hz)");
-    anyhow::ensure!(cmd.touchdown_force.is_none_or(|f| f.is_finite() && f > 0.0), "--touchdown-force must be a positive force (N)");
+    anyhow::ensure!(
+        cmd.drive_hz.is_none_or(|hz| hz.is_finite() && hz > 0.0),
+        "--drive-hz must be a positive rate (Hz)"
+    );
+    anyhow::ensure!(
+        cmd.touchdown_force.is_none_or(|f| f.is_finite() && f > 0.0),
+        "--touchdown-force must be a positive force (N)"
+    );
     enum Source {
         Model(Box<ModelDynamics>),
         Placeholder(PlaceholderDynamics),
@@ -104,7 +123,9 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
         }
     };
     protocol::logging::init(protocol::logging::Verbosity::Info);
-    let mut cfg = AgentConfig::new(&cmd.team, &cmd.id).with_deadline_time(Duration::from_millis(cmd.command_deadline_ms)).with_deadline_ticks(cmd.command_deadline_ticks);
+    let mut cfg = AgentConfig::new(&cmd.team, &cmd.id)
+        .with_deadline_time(Duration::from_millis(cmd.command_deadline_ms))
+        .with_deadline_ticks(cmd.command_deadline_ticks);
     cfg.coordinator_grace = Duration::from_millis(cmd.coordinator_grace_ms);
     cfg.drive_gains = cmd.drive_gains;
     cfg.drive_hz = cmd.drive_hz;
@@ -163,12 +184,24 @@ struct InspectCmd {
 
 fn run_inspect(cmd: InspectCmd) -> anyhow::Result<String> {
     let attach = match (cmd.attach, cmd.at) {
-        (Some(urdf), Some(at)) => Some(Attach { urdf, at, pose: inspect::parse_pose(&cmd.pose)?, prefix: cmd.prefix }),
+        (Some(urdf), Some(at)) => {
+            Some(Attach { urdf, at, pose: inspect::parse_pose(&cmd.pose)?, prefix: cmd.prefix })
+        }
         _ => None,
     };
-    let args = InspectArgs { urdf: cmd.urdf, floating_base: cmd.floating_base, attach, state: cmd.state, frames: cmd.frames };
+    let args = InspectArgs {
+        urdf: cmd.urdf,
+        floating_base: cmd.floating_base,
+        attach,
+        state: cmd.state,
+        frames: cmd.frames,
+    };
     let report = inspect::inspect(&args)?;
-    Ok(if cmd.json { serde_json::to_string_pretty(&report)? + "\n" } else { inspect::summary(&report) })
+    Ok(if cmd.json {
+        serde_json::to_string_pretty(&report)? + "\n"
+    } else {
+        inspect::summary(&report)
+    })
 }
 
 fn main() -> ExitCode {
@@ -181,7 +214,12 @@ fn main() -> ExitCode {
         Err(e) => {
             // one line: clap's message up to its usage section, which starts "error: ..."
             let msg = e.to_string();
-            let lines: Vec<&str> = msg.lines().take_while(|l| !l.starts_with("Usage:")).map(str::trim).filter(|l| !l.is_empty()).collect();
+            let lines: Vec<&str> = msg
+                .lines()
+                .take_while(|l| !l.starts_with("Usage:"))
+                .map(str::trim)
+                .filter(|l| !l.is_empty())
+                .collect();
             eprintln!("{}", lines.join(" "));
             return ExitCode::from(2);
         }

@@ -50,7 +50,8 @@ impl Default for CommandDeadline {
 /// team's start-up work (the coordinator's first solve, its first window of references, a
 /// recorder's buffers: 50-70 ms measured on a loaded two-core machine), short against a
 /// coordinator that never comes.
-pub const FIRST_COMMAND: CommandDeadline = CommandDeadline { ticks: 0, time: Some(Duration::from_secs(2)) };
+pub const FIRST_COMMAND: CommandDeadline =
+    CommandDeadline { ticks: 0, time: Some(Duration::from_secs(2)) };
 
 /// Watches for the deadline; knows the tick at which safe mode was entered.
 ///
@@ -143,7 +144,8 @@ impl HoldGains {
     /// 160 Nm/rad and 4 Nm s/rad, arm joints 1-3 78 and 1.95, joints 4-6 18 and 0.45. A joint
     /// without a finite limit gets 100 Nm/rad and 2.5 Nm s/rad.
     pub fn from_torque_limits(limits: &[f64]) -> Self {
-        let kp: Vec<f64> = limits.iter().map(|l| if l.is_finite() { l / 0.5 } else { 100.0 }).collect();
+        let kp: Vec<f64> =
+            limits.iter().map(|l| if l.is_finite() { l / 0.5 } else { 100.0 }).collect();
         let kd = kp.iter().map(|k| k * 0.025).collect();
         HoldGains { kp, kd }
     }
@@ -203,7 +205,14 @@ impl PostureHold {
     /// applies ([`crate::fall`]), no position gain, no gravity compensation.
     pub fn damping(&self, qdot: &[f64], out: &mut Vec<f64>) {
         out.clear();
-        out.extend(self.gains.kd.iter().zip(qdot).zip(&self.limits).map(|((k, v), &l)| (-k * v).clamp(-l, l)));
+        out.extend(
+            self.gains
+                .kd
+                .iter()
+                .zip(qdot)
+                .zip(&self.limits)
+                .map(|((k, v), &l)| (-k * v).clamp(-l, l)),
+        );
     }
 
     /// `tau = clamp(Kp (q_hold - q) - Kd qdot + g + tau_c, ±limit)` into `out`; returns how many
@@ -323,7 +332,10 @@ mod tests {
         let mut w = Watchdog::new(deadline, FIRST_COMMAND);
         w.on_state(0, t0);
         assert!(!w.expired(0, t0 + Duration::from_millis(70)), "a slow first solve is not a miss");
-        assert!(!w.expired(40, t0 + Duration::from_millis(1999)), "ticks do not count before the first command");
+        assert!(
+            !w.expired(40, t0 + Duration::from_millis(1999)),
+            "ticks do not count before the first command"
+        );
         assert!(w.expired(0, t0 + Duration::from_millis(2001)), "no first command in 2 s");
         assert!(!w.on_applied(1, t0 + Duration::from_millis(70)));
         assert!(!w.expired(5, t0 + Duration::from_millis(90)));
@@ -368,7 +380,10 @@ mod tests {
 
     #[test]
     fn the_hold_carries_the_last_commands_load_beyond_gravity() {
-        let mut h = PostureHold::new(HoldGains { kp: vec![100.0, 10.0], kd: vec![2.0, 1.0] }, vec![80.0, 9.0]);
+        let mut h = PostureHold::new(
+            HoldGains { kp: vec![100.0, 10.0], kd: vec![2.0, 1.0] },
+            vec![80.0, 9.0],
+        );
         // The last command applied [20, -3] at q where gravity was [3, 8.5]: it carried [17, -11.5].
         h.hold_carrying(&[0.5, -0.2], &[20.0, -3.0], &[3.0, 8.5]);
         assert_eq!(h.carried(), [17.0, -11.5]);
@@ -376,14 +391,20 @@ mod tests {
         h.torques(&[0.5, -0.2], &[0.0, 0.0], &[3.0, 8.5], &mut out);
         assert_eq!(out, vec![20.0, -3.0], "at the held posture: the last command itself");
         h.torques(&[0.4, -0.2], &[0.0, 0.0], &[4.0, 8.0], &mut out);
-        assert!((out[0] - (10.0 + 4.0 + 17.0)).abs() < 1e-12 && (out[1] - (8.0 - 11.5)).abs() < 1e-12, "{out:?}");
+        assert!(
+            (out[0] - (10.0 + 4.0 + 17.0)).abs() < 1e-12 && (out[1] - (8.0 - 11.5)).abs() < 1e-12,
+            "{out:?}"
+        );
         h.hold(&[0.5, -0.2]);
         assert_eq!(h.carried(), [0.0, 0.0], "a plain hold carries nothing");
     }
 
     #[test]
     fn hold_law_is_pd_plus_gravity_clamped() {
-        let mut h = PostureHold::new(HoldGains { kp: vec![100.0, 10.0], kd: vec![2.0, 1.0] }, vec![80.0, 9.0]);
+        let mut h = PostureHold::new(
+            HoldGains { kp: vec![100.0, 10.0], kd: vec![2.0, 1.0] },
+            vec![80.0, 9.0],
+        );
         h.hold(&[0.5, -0.2]);
         let mut out = Vec::new();
         assert_eq!(h.torques(&[0.4, -0.2], &[1.0, 0.0], &[3.0, 8.5], &mut out), 0);

@@ -26,12 +26,22 @@ const DAMPING: f64 = 1e-10;
 /// `out[k] = tau_k` of the module docs for the generalized gravity `g` (`nv` entries), the
 /// stance feet among `frames` (3 x `nv` Jacobians, row-major) and the velocity indices of the
 /// actuated joints `actuated` (`out.len()` of them). Allocates nothing.
-pub fn standing_torques(g: &[f64], floating_base: bool, frames: &[FrameTerms], actuated: &[usize], out: &mut [f64]) {
+pub fn standing_torques(
+    g: &[f64],
+    floating_base: bool,
+    frames: &[FrameTerms],
+    actuated: &[usize],
+    out: &mut [f64],
+) {
     for (o, &i) in out.iter_mut().zip(actuated) {
         *o = g.get(i).copied().unwrap_or(0.0);
     }
     let nv = g.len();
-    let feet = || frames.iter().filter(move |f| f.role == FrameRole::StanceFoot && f.jacobian.rows() == 3 && f.jacobian.cols() == nv);
+    let feet = || {
+        frames.iter().filter(move |f| {
+            f.role == FrameRole::StanceFoot && f.jacobian.rows() == 3 && f.jacobian.cols() == nv
+        })
+    };
     if !floating_base || nv < 6 || feet().next().is_none() {
         return;
     }
@@ -67,7 +77,14 @@ mod tests {
     use protocol::Matrix;
 
     fn foot(j: Matrix) -> FrameTerms {
-        FrameTerms { name: "foot".into(), role: FrameRole::StanceFoot, position: [0.0; 3], rotation: [0.0; 9], jacobian: j, jdot_v: vec![0.0; 3] }
+        FrameTerms {
+            name: "foot".into(),
+            role: FrameRole::StanceFoot,
+            position: [0.0; 3],
+            rotation: [0.0; 9],
+            jacobian: j,
+            jdot_v: vec![0.0; 3],
+        }
     }
 
     /// A planar check written out by hand: a base (3 translations, 3 rotations) on one joint,

@@ -70,7 +70,12 @@ impl StatusBoard {
     }
 
     /// Copy the counters and the latest tick into the message (the sender stamps it).
-    pub fn refresh(&mut self, c: &AgentCounters, latest_tick: Option<u64>, last_applied: Option<u64>) -> &mut AgentStatus {
+    pub fn refresh(
+        &mut self,
+        c: &AgentCounters,
+        latest_tick: Option<u64>,
+        last_applied: Option<u64>,
+    ) -> &mut AgentStatus {
         let s = &mut self.status;
         s.header.tick = latest_tick.unwrap_or(0);
         s.states_received = c.states;

@@ -1,12 +1,14 @@
-//! The dynamics terms a robot publishes each tick (docs/architecture.md, one tick, step 2), computed from its
-//! model: `M`, `h`, and for the frames of its current contact set (stance feet, swing feet,
-//! hand, torso) the pose, the world-aligned Jacobian and `Jdot*v`.
+//! The dynamics terms a robot publishes each tick (docs/architecture.md, one tick, step 2),
+//! computed from its model: `M`, `h`, and for the frames of its current contact set (stance
+//! feet, swing feet, hand, torso) the pose, the world-aligned Jacobian and `Jdot*v`.
 
-use nalgebra::{DVector, Matrix6xX};
+use nalgebra::{DVector, Matrix6xX, Vector6};
 use protocol::{DynamicsTerms, FrameRole, FrameTerms, Header, Matrix, RobotState};
 use thiserror::Error;
 
-use robot_model::{compute_all_terms, frame_jacobian, frame_jdot_v, Data, DynamicsError, FrameId, Robot};
+use robot_model::{
+    compute_all_terms, frame_jacobian, frame_jdot_v, Data, DynamicsError, FrameId, Robot,
+};
 
 /// Errors turning a state into terms.
 #[derive(Debug, Error)]
@@ -73,10 +75,18 @@ impl TermsBuilder {
         let m = &robot.model;
         let nj = m.joint_names.len();
         if state.joint_positions.len() != nj {
-            return Err(TermsError::StateSize { what: "positions", expected: nj, got: state.joint_positions.len() });
+            return Err(TermsError::StateSize {
+                what: "positions",
+                expected: nj,
+                got: state.joint_positions.len(),
+            });
         }
         if state.joint_velocities.len() != nj {
-            return Err(TermsError::StateSize { what: "velocities", expected: nj, got: state.joint_velocities.len() });
+            return Err(TermsError::StateSize {
+                what: "velocities",
+                expected: nj,
+                got: state.joint_velocities.len(),
+            });
         }
         if m.floating_base {
             self.q.as_mut_slice()[0..3].copy_from_slice(&state.base_pose.position);
@@ -97,7 +107,12 @@ impl TermsBuilder {
     }
 
     /// Compute the terms at the loaded state into `out` (reusing its allocations).
-    pub fn compute(&mut self, robot: &Robot, contacts: &ActiveContacts, out: &mut DynamicsTerms) -> Result<(), TermsError> {
+    pub fn compute(
+        &mut self,
+        robot: &Robot,
+        contacts: &ActiveContacts,
+        out: &mut DynamicsTerms,
+    ) -> Result<(), TermsError> {
         let m = &robot.model;
         compute_all_terms(m, &mut self.data, self.q.as_slice(), self.v.as_slice())?;
         let nv = m.nv;
@@ -160,27 +175,12 @@ fn fill_frame(
     frame_jacobian(m, data, id, jac)?;
     let mut jdv = frame_jdot_v(m, data, id)?;
     if below != 0.0 {
-        // e_z x w = (-w_y, w_x, 0) for the angular rows 3..6.
-        for j in 0..m.nv {
-            let (wx, wy) = (jac[(3, j)], jac[(4, j)]);
-            jac[(0, j)] -= below * wy;
-            jac[(1, j)] += below * wx;
-        }
-        let (ax, ay) = (jdv[3], jdv[4]);
-        jdv[0] -= below * ay;
-        jdv[1] += below * ax;
+        shift_to_contact_point(jac, &mut jdv, below, m.nv);
     }
     let pose = &data.o_m_f[id];
     let rows = role.dim();
     if out.frames.len() <= slot {
-        out.frames.push(FrameTerms {
-            name: String::new(),
-            role,
-            position: [0.0; 3],
-            rotation: [0.0; 9],
-            jacobian: Matrix::zeros(rows, m.nv),
-            jdot_v: vec![0.0; rows],
-        });
+        out.frames.push(empty_frame_terms(role, rows, m.nv));
     }
     let f = &mut out.frames[slot];
     if f.name != name {
@@ -194,17 +194,54 @@ fn fill_frame(
             f.rotation[3 * i + j] = pose.rot[(i, j)];
         }
     }
+    copy_jacobian_rows(f, jac, &jdv, rows, m.nv);
+    Ok(())
+}
+
+/// Move the frame's velocity terms from its origin to the point `below` metres under it along
+/// world z: `J_c = J_v + r [e_z]x J_omega`, `Jdot_c v = Jdot_v v + r e_z x (Jdot_omega v)`.
+fn shift_to_contact_point(jac: &mut Matrix6xX<f64>, jdv: &mut Vector6<f64>, below: f64, nv: usize) {
+    // e_z x w = (-w_y, w_x, 0) for the angular rows 3..6.
+    for j in 0..nv {
+        let (wx, wy) = (jac[(3, j)], jac[(4, j)]);
+        jac[(0, j)] -= below * wy;
+        jac[(1, j)] += below * wx;
+    }
+    let (ax, ay) = (jdv[3], jdv[4]);
+    jdv[0] -= below * ay;
+    jdv[1] += below * ax;
+}
+
+/// A frame's terms with room for `rows` rows of `nv` columns, zero.
+fn empty_frame_terms(role: FrameRole, rows: usize, nv: usize) -> FrameTerms {
+    FrameTerms {
+        name: String::new(),
+        role,
+        position: [0.0; 3],
+        rotation: [0.0; 9],
+        jacobian: Matrix::zeros(rows, nv),
+        jdot_v: vec![0.0; rows],
+    }
+}
+
+/// The first `rows` rows of the Jacobian `jac` and of `Jdot*v` into `f` (row-major).
+fn copy_jacobian_rows(
+    f: &mut FrameTerms,
+    jac: &Matrix6xX<f64>,
+    jdv: &Vector6<f64>,
+    rows: usize,
+    nv: usize,
+) {
     f.jacobian.rows = rows as u32;
-    f.jacobian.cols = m.nv as u32;
-    f.jacobian.data.resize(rows * m.nv, 0.0);
+    f.jacobian.cols = nv as u32;
+    f.jacobian.data.resize(rows * nv, 0.0);
     for i in 0..rows {
-        for j in 0..m.nv {
-            f.jacobian.data[i * m.nv + j] = jac[(i, j)];
+        for j in 0..nv {
+            f.jacobian.data[i * nv + j] = jac[(i, j)];
         }
     }
     f.jdot_v.resize(rows, 0.0);
     f.jdot_v.copy_from_slice(&jdv.as_slice()[..rows]);
-    Ok(())
 }
 
 /// An empty terms message for robot `id` of team `team`, to be filled by [`TermsBuilder`].

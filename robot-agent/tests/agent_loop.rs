@@ -9,8 +9,13 @@ use std::time::Duration;
 
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, Role, SampleQueue, TypedPublisher, ZenohArgs};
-use protocol::{AgentMode, AgentStatus, ContactSet, DriveCommand, DynamicsTerms, FrameRole, Header, Message, Pose, RobotDescription, RobotState, TorqueCommand, Validate};
-use robot_agent::agent::{self, AgentConfig, AgentCounters, CommandDeadline, HoldGains, ModelDynamics};
+use protocol::{
+    AgentMode, AgentStatus, ContactSet, DriveCommand, DynamicsTerms, FrameRole, Header, Message,
+    Pose, RobotDescription, RobotState, TorqueCommand, Validate,
+};
+use robot_agent::agent::{
+    self, AgentConfig, AgentCounters, CommandDeadline, HoldGains, ModelDynamics,
+};
 use robot_model::{default_robot_path, Robot};
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
@@ -40,7 +45,12 @@ fn standing_state(robot: &Robot, team: &str, tick: u64, dq0: f64, qd: f64) -> Ro
 }
 
 fn command(team: &str, robot: &str, tick: u64, tau: Vec<f64>) -> TorqueCommand {
-    TorqueCommand { header: Header::new(team, Some(robot), tick, 0), tau, hold: false, delay_ticks: 0 }
+    TorqueCommand {
+        header: Header::new(team, Some(robot), tick, 0),
+        tau,
+        hold: false,
+        delay_ticks: 0,
+    }
 }
 
 struct Harness {
@@ -64,10 +74,17 @@ impl Harness {
         let dynamics = transport::subscribe(&session, key(RobotTopic::Dynamics)).await.unwrap();
         let torques = transport::subscribe(&session, key(RobotTopic::Torque)).await.unwrap();
         let status = transport::subscribe(&session, key(RobotTopic::Status)).await.unwrap();
-        let description = transport::subscribe(&session, key(RobotTopic::Description)).await.unwrap();
-        let states = TypedPublisher::declare(&session, key(RobotTopic::State), Qos::HotPath).await.unwrap();
-        let commands = TypedPublisher::declare(&session, key(RobotTopic::Command), Qos::HotPath).await.unwrap();
-        let contacts = TypedPublisher::declare(&session, keys::contacts(team, ID).unwrap(), Qos::HotPath).await.unwrap();
+        let description =
+            transport::subscribe(&session, key(RobotTopic::Description)).await.unwrap();
+        let states =
+            TypedPublisher::declare(&session, key(RobotTopic::State), Qos::HotPath).await.unwrap();
+        let commands = TypedPublisher::declare(&session, key(RobotTopic::Command), Qos::HotPath)
+            .await
+            .unwrap();
+        let contacts =
+            TypedPublisher::declare(&session, keys::contacts(team, ID).unwrap(), Qos::HotPath)
+                .await
+                .unwrap();
         let mut c = AgentConfig::new(team, ID);
         c.status_period = Duration::from_millis(20);
         let c = cfg(c);
@@ -75,7 +92,19 @@ impl Harness {
         let source = ModelDynamics::new(robot()).unwrap();
         let s = session.clone();
         let agent = tokio::spawn(async move { agent::run(&s, c, source, rx).await });
-        let mut h = Harness { team: team.into(), session, states, commands, contacts, dynamics, torques, status, description, stop, agent };
+        let mut h = Harness {
+            team: team.into(),
+            session,
+            states,
+            commands,
+            contacts,
+            dynamics,
+            torques,
+            status,
+            description,
+            stop,
+            agent,
+        };
         // The first status comes after every subscription of the agent is declared.
         h.status_where(|_| true).await;
         h
@@ -111,7 +140,10 @@ impl Harness {
         let deadline = tokio::time::Instant::now() + WAIT;
         loop {
             let left = deadline.saturating_duration_since(tokio::time::Instant::now());
-            let sample = tokio::time::timeout(left, self.status.recv_async()).await.expect("status never matched").unwrap();
+            let sample = tokio::time::timeout(left, self.status.recv_async())
+                .await
+                .expect("status never matched")
+                .unwrap();
             let s: AgentStatus = decode_sample(&sample).unwrap();
             if pred(&s) {
                 return s;
@@ -160,7 +192,8 @@ async fn publishes_dynamics_for_each_state_for_its_contact_set_and_its_descripti
         assert!((terms.mass_matrix.get(0, 0).unwrap() - robot.model.total_mass).abs() < 1e-9);
         // Default contact set: every foot in stance, the hand in the grasp.
         assert!(terms.hand_in_grasp);
-        let names: Vec<(&str, FrameRole)> = terms.frames.iter().map(|f| (f.name.as_str(), f.role)).collect();
+        let names: Vec<(&str, FrameRole)> =
+            terms.frames.iter().map(|f| (f.name.as_str(), f.role)).collect();
         assert_eq!(
             names,
             vec![
@@ -181,7 +214,10 @@ async fn publishes_dynamics_for_each_state_for_its_contact_set_and_its_descripti
         let hand = &terms.frames[4];
         let hp = robot.standing_hand_position;
         let base_z = robot.standing_q[2];
-        assert!((hand.position[0] - hp[0]).abs() < 1e-3 && (hand.position[2] - (base_z + hp[2])).abs() < 1e-3);
+        assert!(
+            (hand.position[0] - hp[0]).abs() < 1e-3
+                && (hand.position[2] - (base_z + hp[2])).abs() < 1e-3
+        );
         assert_eq!(hand.jacobian.rows(), 6);
     }
 
@@ -197,7 +233,8 @@ async fn publishes_dynamics_for_each_state_for_its_contact_set_and_its_descripti
     let terms = h.dynamics_of(5).await;
     assert!(!terms.hand_in_grasp);
     assert_eq!(terms.frames_with(FrameRole::StanceFoot).count(), 3);
-    let swing: Vec<&str> = terms.frames_with(FrameRole::SwingFoot).map(|f| f.name.as_str()).collect();
+    let swing: Vec<&str> =
+        terms.frames_with(FrameRole::SwingFoot).map(|f| f.name.as_str()).collect();
     assert_eq!(swing, vec!["LF_FOOT"]);
 
     // An unknown foot is refused: the contact set stays as it was.
@@ -273,7 +310,11 @@ async fn rejects_stale_wrong_robot_wrong_size_nan_future_and_old_commands_and_cl
     let s = h.status_where(|s| s.commands_rejected == 5).await;
     assert_eq!(s.commands_applied, 1);
     assert_eq!(s.last_applied_tick, Some(1));
-    assert!(s.last_rejection.as_deref().unwrap_or("").contains("non-finite"), "{:?}", s.last_rejection);
+    assert!(
+        s.last_rejection.as_deref().unwrap_or("").contains("non-finite"),
+        "{:?}",
+        s.last_rejection
+    );
     h.no_torque_for(Duration::from_millis(200)).await;
 
     // Too old: the state of tick 2, then six ticks later that of tick 8 (at most 5 ticks).
@@ -283,7 +324,11 @@ async fn rejects_stale_wrong_robot_wrong_size_nan_future_and_old_commands_and_cl
     h.dynamics_of(8).await;
     h.command(&command(&team, ID, 2, good.clone())).await;
     let s = h.status_where(|s| s.commands_rejected == 6).await;
-    assert!(s.last_rejection.as_deref().unwrap_or("").contains("6 ticks old, at most 5"), "{:?}", s.last_rejection);
+    assert!(
+        s.last_rejection.as_deref().unwrap_or("").contains("6 ticks old, at most 5"),
+        "{:?}",
+        s.last_rejection
+    );
     h.no_torque_for(Duration::from_millis(100)).await;
 
     // Over the limits: clamped, applied, counted.
@@ -320,8 +365,12 @@ fn gravity_oracle(robot: &Robot, state: &RobotState) -> Vec<f64> {
     let g = robot_model::rnea(&robot.model, &mut data, q.as_slice(), &zero, &zero).unwrap();
     // The four stance feet's contact-point Jacobians, as the agent publishes them.
     let mut terms = empty_terms("t", ID);
-    ModelDynamics::new(robot.clone()).unwrap().compute(state, &Contacts::all_stance(robot), &mut terms).unwrap();
-    let feet: Vec<nalgebra::DMatrix<f64>> = terms.frames_with(FrameRole::StanceFoot).map(|f| f.jacobian.to_dmatrix()).collect();
+    ModelDynamics::new(robot.clone())
+        .unwrap()
+        .compute(state, &Contacts::all_stance(robot), &mut terms)
+        .unwrap();
+    let feet: Vec<nalgebra::DMatrix<f64>> =
+        terms.frames_with(FrameRole::StanceFoot).map(|f| f.jacobian.to_dmatrix()).collect();
     assert_eq!(feet.len(), 4);
     let jc = nalgebra::DMatrix::from_fn(12, nv, |r, c| feet[r / 3][(r % 3, c)]);
     // Least-norm foot forces balancing the base rows: lambda = pinv(J_cb^T) g_b, by SVD.
@@ -372,7 +421,11 @@ async fn enters_safe_mode_after_the_deadline_holds_posture_and_leaves_on_a_fresh
     assert_eq!(t.header.tick, 5);
     let g = gravity_oracle(&robot, &standing);
     for i in 0..n {
-        assert!((t.tau_ff[i] - 1.0).abs() < 1e-9, "joint {i}: hold {} vs the last command 1.0", t.tau_ff[i]);
+        assert!(
+            (t.tau_ff[i] - 1.0).abs() < 1e-9,
+            "joint {i}: hold {} vs the last command 1.0",
+            t.tau_ff[i]
+        );
     }
     assert!(g.iter().any(|x| x.abs() > 1.0), "gravity torques are not trivially zero");
     let s = h.status_where(|s| s.mode == AgentMode::SafeMode).await;
@@ -388,7 +441,8 @@ async fn enters_safe_mode_after_the_deadline_holds_posture_and_leaves_on_a_fresh
     for i in 0..n {
         let dq = if i == 0 { -0.01 } else { 0.0 };
         let limit = robot.torque_limits[i];
-        let want = (hold_kp(limit) * dq - hold_kd(limit) * 0.1 + g6[i] + (1.0 - g5[i])).clamp(-robot.torque_limits[i], robot.torque_limits[i]);
+        let want = (hold_kp(limit) * dq - hold_kd(limit) * 0.1 + g6[i] + (1.0 - g5[i]))
+            .clamp(-robot.torque_limits[i], robot.torque_limits[i]);
         assert!((t.tau_ff[i] - want).abs() < 1e-6, "joint {i}: {} vs {want}", t.tau_ff[i]);
     }
 
@@ -396,7 +450,11 @@ async fn enters_safe_mode_after_the_deadline_holds_posture_and_leaves_on_a_fresh
     h.command(&command(&team, ID, 5, vec![2.0; n])).await;
     let s = h.status_where(|s| s.commands_rejected == 1).await;
     assert_eq!(s.mode, AgentMode::SafeMode);
-    assert!(s.last_rejection.as_deref().unwrap_or("").contains("safe mode"), "{:?}", s.last_rejection);
+    assert!(
+        s.last_rejection.as_deref().unwrap_or("").contains("safe mode"),
+        "{:?}",
+        s.last_rejection
+    );
     h.no_torque_for(Duration::from_millis(100)).await;
     // ... a command of the fresh tick 6 does.
     h.command(&command(&team, ID, 6, vec![2.0; n])).await;
@@ -483,7 +541,11 @@ async fn the_posture_hold_takes_over_from_the_last_command_without_a_jump() {
         let a = (k as f64 * 0.25).min(1.0);
         for i in 0..n {
             let want = cmd[i] - a * kd[i] * qd;
-            assert!((t.tau_ff[i] - want).abs() < 1e-6, "tick {tick} joint {i}: {} vs {want} (weight of the hold {a})", t.tau_ff[i]);
+            assert!(
+                (t.tau_ff[i] - want).abs() < 1e-6,
+                "tick {tick} joint {i}: {} vs {want} (weight of the hold {a})",
+                t.tau_ff[i]
+            );
         }
     }
     assert_eq!(h.stop().await.safe_mode_entries, 1);
@@ -521,7 +583,11 @@ async fn commands_take_over_from_the_posture_hold_without_a_jump() {
         let a = (k as f64 * 0.25).min(1.0);
         for i in 0..n {
             let want = (1.0 - a) * g[i] + a * cmd[i];
-            assert!((t.tau_ff[i] - want).abs() < 1e-6, "tick {tick} joint {i}: {} vs {want} (weight {a})", t.tau_ff[i]);
+            assert!(
+                (t.tau_ff[i] - want).abs() < 1e-6,
+                "tick {tick} joint {i}: {} vs {want} (weight {a})",
+                t.tau_ff[i]
+            );
         }
     }
     // A hold order, then a command: the blend starts again from the hold, which carries the
@@ -530,12 +596,20 @@ async fn commands_take_over_from_the_posture_hold_without_a_jump() {
     h.dynamics_of(9).await;
     h.command(&TorqueCommand::hold(&team, ID, 9)).await;
     let t = h.torque().await;
-    assert!(t.tau_ff.iter().zip(&cmd).all(|(a, b)| (a - b).abs() < 1e-9), "the hold order holds, carrying the load: {:?}", t.tau_ff);
+    assert!(
+        t.tau_ff.iter().zip(&cmd).all(|(a, b)| (a - b).abs() < 1e-9),
+        "the hold order holds, carrying the load: {:?}",
+        t.tau_ff
+    );
     h.state(&standing_state(&robot, &team, 10, 0.0, 0.0)).await;
     h.dynamics_of(10).await;
     h.command(&command(&team, ID, 10, vec![5.0; n])).await;
     let t = h.torque().await;
-    assert!(t.tau_ff.iter().zip(&cmd).all(|(a, b)| (a - b).abs() < 1e-9), "the blend restarts at the hold, not at the new command: {:?}", t.tau_ff);
+    assert!(
+        t.tau_ff.iter().zip(&cmd).all(|(a, b)| (a - b).abs() < 1e-9),
+        "the blend restarts at the hold, not at the new command: {:?}",
+        t.tau_ff
+    );
     let c = h.stop().await;
     assert_eq!(c.blended, 6, "ticks 3..6 and 10 blended, 7 and 8 were the command's alone");
 }
@@ -565,7 +639,11 @@ fn posture_hold_at_the_standing_pose_is_gravity_compensation() {
         assert!((tau[i] - oracle[i]).abs() < 1e-6, "joint {i}: {} vs {}", tau[i], oracle[i]);
     }
     // The arm's shoulder carries the arm: clearly non-zero, within its limit.
-    assert!(oracle[13].abs() > 5.0 && oracle[13].abs() < limits[13], "arm_joint_2 gravity {}", oracle[13]);
+    assert!(
+        oracle[13].abs() > 5.0 && oracle[13].abs() < limits[13],
+        "arm_joint_2 gravity {}",
+        oracle[13]
+    );
 }
 
 /// The gains the agent holds with by default are the law written out above: the default
@@ -575,7 +653,10 @@ fn the_default_hold_gains_follow_the_torque_limits() {
     let limits = [80.0, 9.0, f64::INFINITY];
     let gains = HoldGains::from_torque_limits(&limits);
     for (i, l) in limits.iter().enumerate() {
-        assert!((gains.kp[i] - hold_kp(*l)).abs() < 1e-12 && (gains.kd[i] - hold_kd(*l)).abs() < 1e-12, "joint {i}: {gains:?}");
+        assert!(
+            (gains.kp[i] - hold_kp(*l)).abs() < 1e-12 && (gains.kd[i] - hold_kd(*l)).abs() < 1e-12,
+            "joint {i}: {gains:?}"
+        );
     }
     assert!((gains.kp[0] - 160.0).abs() < 1e-12 && (gains.kd[0] - 4.0).abs() < 1e-12, "{gains:?}");
 }

@@ -47,7 +47,11 @@ fn sets_in_order_wait_and_a_set_for_an_earlier_tick_is_the_new_plan_from_there()
     for t in 31..200 {
         s.on_state(t, &[0.0, 100.0, 0.0, 100.0]);
     }
-    assert_eq!(s.active().stance, vec![true, true, false, true], "the cancelled lift-off of tick 50 never happens");
+    assert_eq!(
+        s.active().stance,
+        vec![true, true, false, true],
+        "the cancelled lift-off of tick 50 never happens"
+    );
     assert_eq!(s.scheduled(), 0);
 }
 
@@ -116,7 +120,10 @@ fn the_schedule_is_bounded() {
     }
     let full = s.schedule(200, set([true; 4])).unwrap_err();
     assert_eq!((full.tick, full.capacity), (200, 3));
-    assert!(s.schedule(101, set([false, true, true, true])).is_ok(), "replacing a scheduled tick needs no room");
+    assert!(
+        s.schedule(101, set([false, true, true, true])).is_ok(),
+        "replacing a scheduled tick needs no room"
+    );
     assert_eq!(s.scheduled(), 2, "and cancels the later one");
 }
 
@@ -125,7 +132,11 @@ fn a_foot_still_loaded_does_not_lift_off_until_its_force_is_down() {
     let mut s = all_down();
     s.schedule(1, set([false, true, true, true])).unwrap();
     let ev = s.on_state(1, &[60.0, 100.0, 100.0, 100.0]);
-    assert_eq!((ev.liftoffs, ev.deferred), (0, 1), "60 N on the foot: the ramp has not unloaded it");
+    assert_eq!(
+        (ev.liftoffs, ev.deferred),
+        (0, 1),
+        "60 N on the foot: the ramp has not unloaded it"
+    );
     assert!(s.active().stance[0]);
     let ev = s.on_state(2, &[4.0, 150.0, 150.0, 150.0]);
     assert_eq!(ev.liftoffs, 1);

@@ -50,7 +50,8 @@ fn per_tick_calls_do_not_allocate() {
         time: 0.0,
         foot_forces: Vec::new(),
     };
-    let (count, applied, held) = ticks_allocations(PlaceholderDynamics::floating(n), state, n, DriveGainsMode::None, (1, 0));
+    let (count, applied, held) =
+        ticks_allocations(PlaceholderDynamics::floating(n), state, n, DriveGainsMode::None, (1, 0));
     assert_eq!(count, 0, "the core's tick allocated {count} times");
     assert_eq!((applied, held), (180, 17), "commanded and safe-mode ticks were both exercised");
     // The counter works: an allocation while watching is seen.
@@ -75,25 +76,52 @@ fn the_agents_tick_on_the_robots_model_does_not_allocate() {
         time: 0.0,
         foot_forces: Vec::new(),
     };
-    let (count, applied, held) = ticks_allocations(ModelDynamics::new(robot.clone()).unwrap(), state.clone(), n, DriveGainsMode::Inertia, (1, 0));
+    let (count, applied, held) = ticks_allocations(
+        ModelDynamics::new(robot.clone()).unwrap(),
+        state.clone(),
+        n,
+        DriveGainsMode::Inertia,
+        (1, 0),
+    );
     assert_eq!(count, 0, "the agent's tick with the robot's model allocated {count} times");
     assert_eq!((applied, held), (180, 17), "commanded and safe-mode ticks were both exercised");
     // The team every 4th tick: the ticks between are answered by the agent alone.
     COUNT.with(|c| c.set(0));
-    let (count, applied, held) = ticks_allocations(ModelDynamics::new(robot.clone()).unwrap(), state.clone(), n, DriveGainsMode::Inertia, (4, 0));
+    let (count, applied, held) = ticks_allocations(
+        ModelDynamics::new(robot.clone()).unwrap(),
+        state.clone(),
+        n,
+        DriveGainsMode::Inertia,
+        (4, 0),
+    );
     assert_eq!(count, 0, "the agent's tick between team ticks allocated {count} times");
     assert!(applied >= 180 && held >= 17, "commanded, answered alone and held: {applied} {held}");
     // The team's delay of 3 ticks: every command waits for its state among the early ones.
     COUNT.with(|c| c.set(0));
-    let (count, _, answered) = ticks_allocations(ModelDynamics::new(robot).unwrap(), state, n, DriveGainsMode::Inertia, (1, 3));
+    let (count, _, answered) = ticks_allocations(
+        ModelDynamics::new(robot).unwrap(),
+        state,
+        n,
+        DriveGainsMode::Inertia,
+        (1, 3),
+    );
     assert_eq!(count, 0, "the agent's tick with a team delay allocated {count} times");
-    assert!(answered >= 195, "every state answered from the command of three ticks before, or held: {answered}");
+    assert!(
+        answered >= 195,
+        "every state answered from the command of three ticks before, or held: {answered}"
+    );
 }
 
 /// 200 ticks of the core over `source` (10 to warm up, 20 without commands: safe mode from the
 /// 5th); the allocations counted after warm-up, the ticks that applied a command and the ticks
 /// that held the posture.
-fn ticks_allocations(source: impl DynamicsSource, mut state: RobotState, n: usize, gains: DriveGainsMode, (team_every, team_delay): (u64, u64)) -> (usize, u32, u32) {
+fn ticks_allocations(
+    source: impl DynamicsSource,
+    mut state: RobotState,
+    n: usize,
+    gains: DriveGainsMode,
+    (team_every, team_delay): (u64, u64),
+) -> (usize, u32, u32) {
     let mut cfg = AgentConfig::new("t", "r1");
     cfg.drive_gains = gains;
     cfg.team_every = team_every;
@@ -101,7 +129,12 @@ fn ticks_allocations(source: impl DynamicsSource, mut state: RobotState, n: usiz
     cfg.deadline = CommandDeadline { ticks: 5, time: None };
     cfg.max_command_age = Duration::from_secs(10);
     let mut core = AgentCore::new(&cfg, source).unwrap();
-    let mut cmd = TorqueCommand { header: Header::new("t", Some("r1"), 0, 0), tau: vec![1.0; n], hold: false, delay_ticks: team_delay };
+    let mut cmd = TorqueCommand {
+        header: Header::new("t", Some("r1"), 0, 0),
+        tau: vec![1.0; n],
+        hold: false,
+        delay_ticks: team_delay,
+    };
     let t0 = Instant::now();
     let _ = core.start(t0);
     let mut applied = 0;

@@ -9,8 +9,8 @@ mod common;
 use common::*;
 use nalgebra::{DVector, Matrix3, Vector3};
 use protocol::{FrameRole, Header, Pose, RobotState};
-use robot_model::{default_robot_path, Robot};
 use robot_agent::terms::{empty_terms, ActiveContacts, TermsBuilder};
+use robot_model::{default_robot_path, Robot};
 
 fn state_of(robot: &Robot, q: &DVector<f64>, v: &DVector<f64>) -> RobotState {
     let n = robot.joints();
@@ -70,16 +70,23 @@ fn stance_rows_are_the_rolling_contact_point() {
             // in the foot frame, moves with the frame.
             let centre = p + Vector3::z() * r;
             let local = rot.transpose() * (p - centre);
-            let at = |f: &(Vector3<f64>, Matrix3<f64>, nalgebra::DMatrix<f64>, Vector3<f64>)| f.0 + Vector3::z() * r + f.1 * local;
+            let at = |f: &(Vector3<f64>, Matrix3<f64>, nalgebra::DMatrix<f64>, Vector3<f64>)| {
+                f.0 + Vector3::z() * r + f.1 * local
+            };
             let v_fd = (at(&plus[k]) - at(&minus[k])) / (2.0 * h);
             let v_j: Vector3<f64> = Vector3::from_column_slice((j * &v).as_slice());
             worst_v = worst_v.max((v_j - v_fd).norm() / v_fd.norm().max(1.0));
             // d/dt (J(q(t)) v) along v.
             let a_fd = (&plus[k].2 * &v - &minus[k].2 * &v) / (2.0 * h);
-            worst_a = worst_a.max((jdv - Vector3::from_column_slice(a_fd.as_slice())).norm() / a_fd.norm().max(1.0));
+            worst_a = worst_a.max(
+                (jdv - Vector3::from_column_slice(a_fd.as_slice())).norm() / a_fd.norm().max(1.0),
+            );
             // Not the centre's velocity: the rows differ by the rolling term.
             let c_fd = ((plus[k].0 - minus[k].0) / (2.0 * h)).norm();
-            assert!((v_j - (plus[k].0 - minus[k].0) / (2.0 * h)).norm() > 1e-6 * c_fd.max(1.0), "rolling term missing");
+            assert!(
+                (v_j - (plus[k].0 - minus[k].0) / (2.0 * h)).norm() > 1e-6 * c_fd.max(1.0),
+                "rolling term missing"
+            );
         }
     }
     println!("contact-point velocity vs finite differences: {worst_v:.2e}; Jdot v: {worst_a:.2e}");

@@ -14,12 +14,17 @@ use coordinator::service::{self, CoordinatorConfig};
 use coordinator::{JointDamping, TeamController};
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Role, SampleQueue, TransportError, ZenohArgs};
-use protocol::{AgentMode, AgentStatus, ContactSet, CoordinatorStatus, DynamicsTerms, RobotDescription, TorqueCommand};
+use protocol::{
+    AgentMode, AgentStatus, ContactSet, CoordinatorStatus, DynamicsTerms, RobotDescription,
+    TorqueCommand,
+};
 use robot_agent::core::{AgentConfig, AgentCore};
 use robot_agent::dynamics_source::PlaceholderDynamics;
 use robot_agent::hardware::driver::{self, DriverConfig, DriverError, DriverExit};
 use robot_agent::hardware::mock::Lifecycle;
-use robot_agent::hardware::{HwStatus, Inbound, MockConfig, MockFault, MockHardware, Presence, TeamLink, ZenohLink};
+use robot_agent::hardware::{
+    HwStatus, Inbound, MockConfig, MockFault, MockHardware, Presence, TeamLink, ZenohLink,
+};
 use robot_agent::safe_mode::CommandDeadline;
 
 const ID: &str = "r1";
@@ -126,7 +131,8 @@ impl TeamLink for TeamInMemory {
         Inbound::Empty
     }
     fn try_recv_coordinator(&mut self) -> Option<Presence> {
-        let due = self.presence.front().is_some_and(|(t, _)| self.last_terms.is_some_and(|l| l >= *t));
+        let due =
+            self.presence.front().is_some_and(|(t, _)| self.last_terms.is_some_and(|l| l >= *t));
         let p = due.then(|| self.presence.pop_front().map(|(_, p)| p)).flatten();
         if p == Some(Presence::Went) {
             self.went_at = Some(Instant::now());
@@ -172,13 +178,21 @@ fn in_memory_team_damps_the_mock_exactly_then_safe_mode_holds_when_it_goes_silen
     let entry = &h[54];
     let carried = h[49].tau.as_deref().unwrap()[0];
     for t in entry.tau.as_deref().unwrap() {
-        assert!((t - (-kd * entry.v[0] + carried)).abs() < 1e-12, "{t} vs {}", -kd * entry.v[0] + carried);
+        assert!(
+            (t - (-kd * entry.v[0] + carried)).abs() < 1e-12,
+            "{t} vs {}",
+            -kd * entry.v[0] + carried
+        );
     }
     assert!(h[55..].iter().all(|s| s.tau.is_some()), "the hold is written every cycle");
-    let safe: Vec<&AgentStatus> = link.statuses.iter().filter(|s| s.mode == AgentMode::SafeMode).collect();
+    let safe: Vec<&AgentStatus> =
+        link.statuses.iter().filter(|s| s.mode == AgentMode::SafeMode).collect();
     assert_eq!((safe[0].header.tick, safe[0].last_applied_tick), (54, Some(49)));
     let c = &report.counters;
-    assert_eq!((c.states, c.dynamics, c.applied, c.rejected, c.safe_mode_entries, c.hold_torques), (80, 80, 50, 0, 1, 26));
+    assert_eq!(
+        (c.states, c.dynamics, c.applied, c.rejected, c.safe_mode_entries, c.hold_torques),
+        (80, 80, 50, 0, 1, 26)
+    );
 }
 
 /// The coordinator's token, as the hardware loop sees it: with a zero grace, its going puts the
@@ -202,14 +216,32 @@ fn the_hardware_loop_watches_the_coordinators_token() {
     let h = hw.history();
     let carried = -DAMPING * h[30].v[0];
     for t in h[30].tau.as_deref().unwrap() {
-        assert!((t - (-kd * h[30].v[0] + carried)).abs() < 1e-12, "tick 30 writes the hold carrying tick 30's command: {t}");
+        assert!(
+            (t - (-kd * h[30].v[0] + carried)).abs() < 1e-12,
+            "tick 30 writes the hold carrying tick 30's command: {t}"
+        );
     }
     for step in h.iter().filter(|s| s.tick != 30) {
-        assert_eq!(step.tau.as_deref(), Some(&[-DAMPING * step.v[0]; JOINTS][..]), "tick {}: its command", step.tick);
+        assert_eq!(
+            step.tau.as_deref(),
+            Some(&[-DAMPING * step.v[0]; JOINTS][..]),
+            "tick {}: its command",
+            step.tick
+        );
     }
-    let safe: Vec<u64> = link.statuses.iter().filter(|s| s.mode == AgentMode::SafeMode).map(|s| s.header.tick).collect();
+    let safe: Vec<u64> = link
+        .statuses
+        .iter()
+        .filter(|s| s.mode == AgentMode::SafeMode)
+        .map(|s| s.header.tick)
+        .collect();
     assert_eq!(safe.first(), Some(&30), "safe mode said at tick 30: {safe:?}");
-    assert_eq!((report.counters.safe_mode_entries, report.counters.applied), (1, 60), "{:?}", report.counters);
+    assert_eq!(
+        (report.counters.safe_mode_entries, report.counters.applied),
+        (1, 60),
+        "{:?}",
+        report.counters
+    );
 
     // A grace of 200 ms, 400 cycles of at least 1 ms: the token gone from tick 30 on holds the
     // robot 200 ms later (by the wall clock: an overrun slips the loop's schedule); gone at
@@ -224,11 +256,24 @@ fn the_hardware_loop_watches_the_coordinators_token() {
         let mut hw = mock();
         let stop = link.stop.clone();
         let report = driver::run(&mut core, &mut hw, &mut link, &fast(), &stop).unwrap();
-        assert_eq!(report.counters.safe_mode_entries, entries, "back at {back:?}: {:?}", report.counters);
+        assert_eq!(
+            report.counters.safe_mode_entries, entries,
+            "back at {back:?}: {:?}",
+            report.counters
+        );
         if entries == 1 {
-            let (i, safe) = link.statuses.iter().enumerate().find(|(_, s)| s.mode == AgentMode::SafeMode).expect("safe mode said");
+            let (i, safe) = link
+                .statuses
+                .iter()
+                .enumerate()
+                .find(|(_, s)| s.mode == AgentMode::SafeMode)
+                .expect("safe mode said");
             let after = link.status_at[i].duration_since(link.went_at.expect("the token went"));
-            assert!(safe.header.tick > 30 && after >= cfg_grace(), "safe mode at tick {}, {after:?} after the token went at tick 30", safe.header.tick);
+            assert!(
+                safe.header.tick > 30 && after >= cfg_grace(),
+                "safe mode at tick {}, {after:?} after the token went at tick 30",
+                safe.header.tick
+            );
         }
     }
 }
@@ -243,17 +288,23 @@ fn the_loop_stops_on_deactivate_and_on_hardware_error_in_safe_mode() {
     // Deactivate asked by the write of tick 10: safe mode, deactivated, a normal exit.
     let mut core = AgentCore::new(&agent_config("mem2", deadline), unit_joints()).unwrap();
     let mut link = TeamInMemory::new(1000, |_| true);
-    let mut hw = mock().with_fault(MockFault { tick: 10, on_write: true, status: HwStatus::Deactivate });
-    let report = driver::run(&mut core, &mut hw, &mut link, &fast(), &AtomicBool::new(false)).unwrap();
+    let mut hw =
+        mock().with_fault(MockFault { tick: 10, on_write: true, status: HwStatus::Deactivate });
+    let report =
+        driver::run(&mut core, &mut hw, &mut link, &fast(), &AtomicBool::new(false)).unwrap();
     assert_eq!((report.exit, report.cycles), (DriverExit::Deactivated { tick: 10 }, 11));
-    assert_eq!((core.mode(), hw.lifecycle(), hw.writes()), (AgentMode::SafeMode, Lifecycle::Inactive, 10));
+    assert_eq!(
+        (core.mode(), hw.lifecycle(), hw.writes()),
+        (AgentMode::SafeMode, Lifecycle::Inactive, 10)
+    );
     assert_eq!(link.statuses.last().unwrap().mode, AgentMode::SafeMode);
 
     // A failed read at tick 3: safe mode, deactivated, a typed error.
     let mut core = AgentCore::new(&agent_config("mem3", deadline), unit_joints()).unwrap();
     let mut link = TeamInMemory::new(1000, |_| true);
     let mut hw = mock().with_fault(MockFault { tick: 3, on_write: false, status: HwStatus::Error });
-    let e = driver::run(&mut core, &mut hw, &mut link, &fast(), &AtomicBool::new(false)).unwrap_err();
+    let e =
+        driver::run(&mut core, &mut hw, &mut link, &fast(), &AtomicBool::new(false)).unwrap_err();
     assert!(matches!(e, DriverError::Hardware { op: "read", tick: 3 }), "{e}");
     assert_eq!((core.mode(), hw.lifecycle()), (AgentMode::SafeMode, Lifecycle::Inactive));
     assert_eq!(link.statuses.last().unwrap().mode, AgentMode::SafeMode);
@@ -261,7 +312,8 @@ fn the_loop_stops_on_deactivate_and_on_hardware_error_in_safe_mode() {
     // A robot of another size is refused before it is configured.
     let mut core = AgentCore::new(&agent_config("mem4", deadline), unit_joints()).unwrap();
     let mut hw = MockHardware::new(MockConfig::new(JOINTS + 1, 0.0, DT));
-    let e = driver::run(&mut core, &mut hw, &mut link, &fast(), &AtomicBool::new(false)).unwrap_err();
+    let e =
+        driver::run(&mut core, &mut hw, &mut link, &fast(), &AtomicBool::new(false)).unwrap_err();
     assert!(matches!(e, DriverError::JointCount { hardware: 4, model: 3 }), "{e}");
     assert_eq!(hw.lifecycle(), Lifecycle::Unconfigured);
 }
@@ -270,11 +322,18 @@ fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
-async fn next_where<M: protocol::Message>(q: &SampleQueue, within: Duration, pred: impl Fn(&M) -> bool) -> M {
+async fn next_where<M: protocol::Message>(
+    q: &SampleQueue,
+    within: Duration,
+    pred: impl Fn(&M) -> bool,
+) -> M {
     let deadline = tokio::time::Instant::now() + within;
     loop {
         let left = deadline.saturating_duration_since(tokio::time::Instant::now());
-        let sample = tokio::time::timeout(left, q.recv_async()).await.expect("no matching message in time").unwrap();
+        let sample = tokio::time::timeout(left, q.recv_async())
+            .await
+            .expect("no matching message in time")
+            .unwrap();
         if let Ok(m) = decode_sample::<M>(&sample) {
             if pred(&m) {
                 return m;
@@ -287,16 +346,22 @@ async fn next_where<M: protocol::Message>(q: &SampleQueue, within: Duration, pre
 async fn mock_robot_with_a_real_coordinator_over_zenoh() {
     let team = "hwloop1";
     let hub = format!("tcp/127.0.0.1:{}", free_port());
-    let coordinator_session = transport::open(&ZenohArgs::listening(&hub), Role::Hub).await.unwrap();
+    let coordinator_session =
+        transport::open(&ZenohArgs::listening(&hub), Role::Hub).await.unwrap();
     let (stop_coordinator, rx) = tokio::sync::watch::channel(false);
     let coordinator = {
         let s = coordinator_session.clone();
         let cfg = CoordinatorConfig::lockstep(team, Duration::from_millis(200));
-        tokio::spawn(async move { service::run(&s, cfg, Box::new(JointDamping { damping: DAMPING }), rx).await })
+        tokio::spawn(async move {
+            service::run(&s, cfg, Box::new(JointDamping { damping: DAMPING }), rx).await
+        })
     };
     let session = transport::open(&ZenohArgs::connecting(&hub), Role::Member).await.unwrap();
-    let status = transport::subscribe(&session, keys::robot(team, ID, RobotTopic::Status).unwrap()).await.unwrap();
-    let coordinator_status = transport::subscribe(&session, keys::coordinator_status(team).unwrap()).await.unwrap();
+    let status = transport::subscribe(&session, keys::robot(team, ID, RobotTopic::Status).unwrap())
+        .await
+        .unwrap();
+    let coordinator_status =
+        transport::subscribe(&session, keys::coordinator_status(team).unwrap()).await.unwrap();
 
     // The link joins the team on the loop's thread; the loop starts once the coordinator has
     // seen the robot join, so that it answers from tick 0.
@@ -314,27 +379,44 @@ async fn mock_robot_with_a_real_coordinator_over_zenoh() {
             let mut hw = mock();
             // Period 10 ms; each tick's command is waited for up to 200 ms (it comes back in
             // well under a millisecond on an idle machine).
-            let cfg = DriverConfig { period: Duration::from_millis(10), command_wait: Duration::from_millis(200) };
+            let cfg = DriverConfig {
+                period: Duration::from_millis(10),
+                command_wait: Duration::from_millis(200),
+            };
             let report = driver::run(&mut core, &mut hw, &mut link, &cfg, &stop);
             (report, hw)
         })
     };
     tokio::task::spawn_blocking(move || joined_rx.recv().unwrap()).await.unwrap();
-    next_where::<CoordinatorStatus>(&coordinator_status, Duration::from_secs(10), |s| s.members.iter().any(|m| m == ID)).await;
+    next_where::<CoordinatorStatus>(&coordinator_status, Duration::from_secs(10), |s| {
+        s.members.iter().any(|m| m == ID)
+    })
+    .await;
     go_tx.send(()).unwrap();
 
     // 150 ticks commanded, then the coordinator stops: safe mode at the tick deadline or when
     // its token has been gone for the agent's grace (100 ms), whichever is first (each cycle
     // here waits up to 200 ms for its command, so the grace usually is).
-    next_where::<AgentStatus>(&status, Duration::from_secs(30), |s| s.commands_applied >= 150).await;
+    next_where::<AgentStatus>(&status, Duration::from_secs(30), |s| s.commands_applied >= 150)
+        .await;
     stop_coordinator.send(true).unwrap();
     coordinator.await.unwrap().unwrap();
     coordinator_session.close().await.unwrap();
     let stopped = Instant::now();
-    let safe = next_where::<AgentStatus>(&status, Duration::from_secs(10), |s| s.mode == AgentMode::SafeMode).await;
+    let safe = next_where::<AgentStatus>(&status, Duration::from_secs(10), |s| {
+        s.mode == AgentMode::SafeMode
+    })
+    .await;
     let last = safe.last_applied_tick.unwrap();
-    assert!(safe.header.tick > last && safe.header.tick <= last + deadline.ticks, "safe mode by the deadline, 5 ticks after the last command: {safe:?}");
-    assert!(stopped.elapsed() < deadline.time.unwrap(), "safe mode {:?} after the coordinator stopped", stopped.elapsed());
+    assert!(
+        safe.header.tick > last && safe.header.tick <= last + deadline.ticks,
+        "safe mode by the deadline, 5 ticks after the last command: {safe:?}"
+    );
+    assert!(
+        stopped.elapsed() < deadline.time.unwrap(),
+        "safe mode {:?} after the coordinator stopped",
+        stopped.elapsed()
+    );
     assert_eq!(safe.safe_mode_entries, 1, "no safe mode while the coordinator answered");
 
     stop.store(true, Ordering::Release);
@@ -352,14 +434,22 @@ async fn mock_robot_with_a_real_coordinator_over_zenoh() {
     assert!(last + 1 >= 150, "150 ticks commanded, the last at tick {last}");
     for step in &h[..=last as usize] {
         assert_close(step.v[0], analytic(step.tick), &format!("v at tick {}", step.tick));
-        assert_eq!(step.tau.as_deref(), Some(&[-DAMPING * step.v[0]; JOINTS][..]), "tick {}", step.tick);
+        assert_eq!(
+            step.tau.as_deref(),
+            Some(&[-DAMPING * step.v[0]; JOINTS][..]),
+            "tick {}",
+            step.tick
+        );
     }
     let kd = hold_kd(f64::INFINITY);
     let entry = &h[safe.header.tick as usize];
     // The hold carries the last command applied (the damping torque of tick `last`).
     let carried = h[last as usize].tau.as_deref().unwrap()[0];
     for t in entry.tau.as_deref().unwrap() {
-        assert!((t - (-kd * entry.v[0] + carried)).abs() < 1e-12, "the posture hold after the coordinator stopped: {t}");
+        assert!(
+            (t - (-kd * entry.v[0] + carried)).abs() < 1e-12,
+            "the posture hold after the coordinator stopped: {t}"
+        );
     }
     session.close().await.unwrap();
 }
@@ -380,16 +470,34 @@ fn a_robot_that_tips_over_is_limp_and_leaves_the_team_in_the_hardware_loop() {
     let mut link = TeamInMemory::new(1000, |_| false);
     let h = std::f64::consts::FRAC_1_SQRT_2;
     let rolled = protocol::Pose { position: [0.0, 0.0, 0.0], orientation: [h, h, 0.0, 0.0] };
-    let mut hw = mock().tipped_at(20, rolled).with_fault(MockFault { tick: 40, on_write: true, status: HwStatus::Deactivate });
+    let mut hw = mock().tipped_at(20, rolled).with_fault(MockFault {
+        tick: 40,
+        on_write: true,
+        status: HwStatus::Deactivate,
+    });
     let stop = link.stop.clone();
     let report = driver::run(&mut core, &mut hw, &mut link, &fast(), &stop).unwrap();
     assert_eq!(report.exit, DriverExit::Deactivated { tick: 40 });
-    assert_eq!((core.mode(), core.fallen().map(|f| f.tick), link.left), (AgentMode::Fallen, Some(20), 1));
+    assert_eq!(
+        (core.mode(), core.fallen().map(|f| f.tick), link.left),
+        (AgentMode::Fallen, Some(20), 1)
+    );
     assert_eq!(report.counters.dynamics, 20, "terms for ticks 0..19 only");
-    let kd: Vec<f64> = robot_agent::dynamics_source::DynamicsSource::torque_limits(&PlaceholderDynamics::floating(JOINTS)).iter().map(|l| hold_kd(*l)).collect();
+    let kd: Vec<f64> = robot_agent::dynamics_source::DynamicsSource::torque_limits(
+        &PlaceholderDynamics::floating(JOINTS),
+    )
+    .iter()
+    .map(|l| hold_kd(*l))
+    .collect();
     for step in hw.history().iter().filter(|s| s.tick >= 20 && s.tick < 40) {
         let tau = step.tau.as_ref().expect("a torque written every cycle");
-        assert!((tau[0] - (-kd[0] * step.v[0])).abs() <= 1e-12, "tick {}: {} vs -K_d v {}", step.tick, tau[0], -kd[0] * step.v[0]);
+        assert!(
+            (tau[0] - (-kd[0] * step.v[0])).abs() <= 1e-12,
+            "tick {}: {} vs -K_d v {}",
+            step.tick,
+            tau[0],
+            -kd[0] * step.v[0]
+        );
     }
     assert!(link.statuses.iter().any(|s| s.mode == AgentMode::Fallen), "the status says so");
 }

@@ -69,12 +69,35 @@ fn arm_at_neutral_state() {
 fn composed_robot_at_a_given_state_matches_the_library() {
     let model = composed_model();
     let (q, v) = random_state(&model, &mut rng(42));
-    let state = temp_file("state.json", &serde_json::json!({"q": q.as_slice(), "v": v.as_slice()}).to_string());
+    let state = temp_file(
+        "state.json",
+        &serde_json::json!({"q": q.as_slice(), "v": v.as_slice()}).to_string(),
+    );
     let (quad, arm) = (data_path("quadruped.urdf"), data_path("arm.urdf"));
-    let pose = format!("{},{},{},{},{},{}", ATTACH_XYZ[0], ATTACH_XYZ[1], ATTACH_XYZ[2], ATTACH_RPY[0], ATTACH_RPY[1], ATTACH_RPY[2]);
+    let pose = format!(
+        "{},{},{},{},{},{}",
+        ATTACH_XYZ[0], ATTACH_XYZ[1], ATTACH_XYZ[2], ATTACH_RPY[0], ATTACH_RPY[1], ATTACH_RPY[2]
+    );
     let out = json_of(&run(&[
-        "inspect", "--urdf", &quad, "--floating-base", "--attach", &arm, "--at", ATTACH_AT, "--pose", &pose, "--prefix", PREFIX,
-        "--state", state.to_str().unwrap(), "--frame", "arm_hand", "--frame", "RH_foot", "--json",
+        "inspect",
+        "--urdf",
+        &quad,
+        "--floating-base",
+        "--attach",
+        &arm,
+        "--at",
+        ATTACH_AT,
+        "--pose",
+        &pose,
+        "--prefix",
+        PREFIX,
+        "--state",
+        state.to_str().unwrap(),
+        "--frame",
+        "arm_hand",
+        "--frame",
+        "RH_foot",
+        "--json",
     ]));
     assert_eq!(out["nv"], 24);
     assert_eq!(out["nq"], 25);
@@ -127,7 +150,10 @@ fn bad_input_gives_one_error_line_and_status_2() {
     assert_bad(&["inspect", "--urdf", "/nonexistent/robot.urdf"], "cannot read URDF");
     let garbage = temp_file("garbage.urdf", "<robot name=\"x\"><link name=\"a\"><inertial><mass value=\"heavy\"/></inertial></link></robot>");
     assert_bad(&["inspect", "--urdf", garbage.to_str().unwrap()], "malformed URDF");
-    let two_roots = temp_file("two_roots.urdf", "<robot name=\"x\"><link name=\"a\"/><link name=\"b\"/></robot>");
+    let two_roots = temp_file(
+        "two_roots.urdf",
+        "<robot name=\"x\"><link name=\"a\"/><link name=\"b\"/></robot>",
+    );
     assert_bad(&["inspect", "--urdf", two_roots.to_str().unwrap()], "several root links");
     assert_bad(&["inspect", "--urdf", &arm, "--frame", "no_such_frame"], "unknown frame");
     let short = temp_file("short.json", r#"{"q": [0, 0, 0], "v": [0, 0, 0, 0, 0, 0]}"#);
@@ -137,11 +163,23 @@ fn bad_input_gives_one_error_line_and_status_2() {
     let nan = temp_file("nan.json", r#"{"q": [0, 0, NaN, 0, 0, 0]}"#);
     assert_bad(&["inspect", "--urdf", &arm, "--state", nan.to_str().unwrap()], "state file");
     let not_json = temp_file("not.json", "q = 1");
-    assert_bad(&["inspect", "--urdf", &arm, "--state", not_json.to_str().unwrap()], "malformed state");
-    assert_bad(&["inspect", "--urdf", &arm, "--state", "/nonexistent/state.json"], "cannot read state");
+    assert_bad(
+        &["inspect", "--urdf", &arm, "--state", not_json.to_str().unwrap()],
+        "malformed state",
+    );
+    assert_bad(
+        &["inspect", "--urdf", &arm, "--state", "/nonexistent/state.json"],
+        "cannot read state",
+    );
     let quat = temp_file("quat.json", &serde_json::json!({"q": vec![0.0; 19]}).to_string());
-    assert_bad(&["inspect", "--urdf", &quad, "--floating-base", "--state", quat.to_str().unwrap()], "quaternion");
-    assert_bad(&["inspect", "--urdf", &quad, "--attach", &arm, "--at", "trunk", "--pose", "1,2,x,0,0,0"], "--pose");
+    assert_bad(
+        &["inspect", "--urdf", &quad, "--floating-base", "--state", quat.to_str().unwrap()],
+        "quaternion",
+    );
+    assert_bad(
+        &["inspect", "--urdf", &quad, "--attach", &arm, "--at", "trunk", "--pose", "1,2,x,0,0,0"],
+        "--pose",
+    );
     assert_bad(&["inspect", "--urdf", &quad, "--attach", &arm, "--at", "nope"], "unknown frame");
     assert_bad(&["inspect", "--urdf", &quad, "--at", "trunk"], "--attach");
     assert_bad(&["inspect"], "--urdf");

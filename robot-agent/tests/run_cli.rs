@@ -16,14 +16,23 @@ fn one_error_line(out: &Output, needle: &str) {
 
 #[test]
 fn bad_input_is_one_error_line_and_exit_status_2() {
-    one_error_line(&run(&["run", "--id", "r1", "--robot", "/nonexistent/robot.toml"]), "/nonexistent/robot.toml");
+    one_error_line(
+        &run(&["run", "--id", "r1", "--robot", "/nonexistent/robot.toml"]),
+        "/nonexistent/robot.toml",
+    );
     let dir = std::env::temp_dir().join(format!("robot-agent-run-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let bad = dir.join("bad.toml");
     std::fs::write(&bad, "[robot]\nname = \"x\"\nurdf = ").unwrap();
-    one_error_line(&run(&["run", "--id", "r1", "--robot", bad.to_str().unwrap()]), "malformed robot description");
+    one_error_line(
+        &run(&["run", "--id", "r1", "--robot", bad.to_str().unwrap()]),
+        "malformed robot description",
+    );
     one_error_line(&run(&["run", "--id", "a/b"]), "invalid identifier robot");
     one_error_line(&run(&["run", "--id", "r1", "--team", "t*"]), "invalid identifier team");
-    one_error_line(&run(&["run", "--id", "r1", "--placeholder-joints", "0"]), "--placeholder-joints");
+    one_error_line(
+        &run(&["run", "--id", "r1", "--placeholder-joints", "0"]),
+        "--placeholder-joints",
+    );
     one_error_line(&run(&["run"]), "--id");
 }

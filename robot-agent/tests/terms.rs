@@ -13,7 +13,10 @@ fn terms_of_the_standing_robot_are_consistent_with_the_model() {
     let q = robot.standing_q.as_slice();
     let state = protocol::RobotState {
         header: protocol::Header::new("t", Some("r1"), 3, 0),
-        base_pose: protocol::Pose { position: [q[0], q[1], q[2]], orientation: [q[3], q[4], q[5], q[6]] },
+        base_pose: protocol::Pose {
+            position: [q[0], q[1], q[2]],
+            orientation: [q[3], q[4], q[5], q[6]],
+        },
         base_twist: [0.1, 0.0, 0.0, 0.0, 0.0, 0.2],
         joint_positions: q[7..].to_vec(),
         joint_velocities: vec![0.05; 18],
@@ -50,9 +53,23 @@ fn the_published_description_is_the_models() {
     assert_eq!(d.header.robot_id(), "r1");
     assert_eq!(d.joint_names, robot.actuated_joints);
     assert_eq!(d.torque_limits, robot.torque_limits);
-    assert_eq!((d.nq as usize, d.nv as usize, d.floating_base), (robot.model.nq, robot.model.nv, robot.model.floating_base));
-    assert_eq!((d.foot_frames.clone(), d.hand_frame.clone(), d.torso_frame.clone()), (robot.foot_frames.clone(), robot.hand_frame.clone(), robot.torso_frame.clone()));
-    assert_eq!((d.foot_mu, d.hand_mu, d.hand_xi, d.hand_half_size), (robot.feet.mu, robot.hand.mu, robot.hand.xi, [robot.hand.half_size_x, robot.hand.half_size_y]));
+    assert_eq!(
+        (d.nq as usize, d.nv as usize, d.floating_base),
+        (robot.model.nq, robot.model.nv, robot.model.floating_base)
+    );
+    assert_eq!(
+        (d.foot_frames.clone(), d.hand_frame.clone(), d.torso_frame.clone()),
+        (robot.foot_frames.clone(), robot.hand_frame.clone(), robot.torso_frame.clone())
+    );
+    assert_eq!(
+        (d.foot_mu, d.hand_mu, d.hand_xi, d.hand_half_size),
+        (
+            robot.feet.mu,
+            robot.hand.mu,
+            robot.hand.xi,
+            [robot.hand.half_size_x, robot.hand.half_size_y]
+        )
+    );
     assert_eq!(d.total_mass, robot.model.total_mass);
 }
 

@@ -16,7 +16,12 @@ const FRAMES: [&str; 6] = ["LF_foot", "RF_foot", "LH_foot", "RH_foot", "arm_hand
 fn setup() -> (Model, DVector<f64>, DVector<f64>) {
     let model = ModelBuilder::from_urdf_str(QUADRUPED)
         .unwrap()
-        .attach_urdf_str(ARM, "arm_mount", SE3::from_xyz_rpy([0.05, 0.0, 0.02], [0.0, 0.0, 0.3]), "arm_")
+        .attach_urdf_str(
+            ARM,
+            "arm_mount",
+            SE3::from_xyz_rpy([0.05, 0.0, 0.02], [0.0, 0.0, 0.3]),
+            "arm_",
+        )
         .unwrap()
         .build(FloatingBase::Yes)
         .unwrap();
@@ -43,9 +48,17 @@ fn bench(c: &mut Criterion) {
     let mut jdvs = vec![nalgebra::Vector6::zeros(); frames.len()];
 
     let mut g = c.benchmark_group("legged_manipulator_24dof");
-    g.bench_function("forward_kinematics", |b| b.iter(|| forward_kinematics(&model, &mut data, black_box(q), black_box(v)).unwrap()));
-    g.bench_function("crba", |b| b.iter(|| crba(&model, &mut data, black_box(q)).map(|_| ()).unwrap()));
-    g.bench_function("rnea_h", |b| b.iter(|| nonlinear_effects(&model, &mut data, black_box(q), black_box(v)).map(|_| ()).unwrap()));
+    g.bench_function("forward_kinematics", |b| {
+        b.iter(|| forward_kinematics(&model, &mut data, black_box(q), black_box(v)).unwrap())
+    });
+    g.bench_function("crba", |b| {
+        b.iter(|| crba(&model, &mut data, black_box(q)).map(|_| ()).unwrap())
+    });
+    g.bench_function("rnea_h", |b| {
+        b.iter(|| {
+            nonlinear_effects(&model, &mut data, black_box(q), black_box(v)).map(|_| ()).unwrap()
+        })
+    });
     forward_kinematics(&model, &mut data, q, v).unwrap();
     g.bench_function("jacobians_and_jdot_v_6_frames", |b| {
         b.iter(|| {
@@ -70,7 +83,9 @@ fn bench(c: &mut Criterion) {
 
 criterion_group! {
     name = benches;
-    config = Criterion::default().warm_up_time(std::time::Duration::from_secs(1)).measurement_time(std::time::Duration::from_secs(3));
+    config = Criterion::default()
+        .warm_up_time(std::time::Duration::from_secs(1))
+        .measurement_time(std::time::Duration::from_secs(3));
     targets = bench
 }
 criterion_main!(benches);

@@ -34,9 +34,14 @@ pub enum DescriptionError {
     Toml { path: PathBuf, reason: String },
     #[error("robot description {path}: URDF {urdf}: {source}")]
     Model { path: PathBuf, urdf: PathBuf, source: ModelError },
-    #[error("robot description {path}: {what} names frame {frame:?}, which the URDF does not have")]
+    #[error(
+        "robot description {path}: {what} names frame {frame:?}, which the URDF does not have"
+    )]
     UnknownFrame { path: PathBuf, what: String, frame: String },
-    #[error("robot description {path}: {what} names joint {joint:?}, which is not an actuated joint of the URDF")]
+    #[error(
+        "robot description {path}: {what} names joint {joint:?}, which is not an actuated joint \
+         of the URDF"
+    )]
     UnknownJoint { path: PathBuf, what: String, joint: String },
     #[error("robot description {path}: {what} is missing joint(s) {missing:?}")]
     MissingJoints { path: PathBuf, what: String, missing: Vec<String> },
@@ -52,10 +57,10 @@ pub enum DescriptionError {
 /// [`DescriptionError::HandPose`]: it is the largest error).
 #[derive(Debug, Error)]
 #[error(
-    "robot description {path}: at standing the URDF puts {frame} at {actual_position:?} (base frame), \
-     quaternion {actual_orientation:?}, but standing.hand_position = {position:?} and \
-     standing.hand_orientation = {orientation:?}: {distance_mm:.3} mm and {angle_deg:.3} deg apart \
-     (tolerance 1 mm, 0.5 deg)"
+    "robot description {path}: at standing the URDF puts {frame} at {actual_position:?} (base \
+     frame), quaternion {actual_orientation:?}, but standing.hand_position = {position:?} and \
+     standing.hand_orientation = {orientation:?}: {distance_mm:.3} mm and {angle_deg:.3} deg \
+     apart (tolerance 1 mm, 0.5 deg)"
 )]
 pub struct HandPoseMismatch {
     pub path: PathBuf,
@@ -183,15 +188,19 @@ impl Robot {
 
     /// Parse a description whose relative URDF path is resolved against `path`'s folder.
     pub fn from_toml_str(text: &str, path: &Path) -> Result<Robot, DescriptionError> {
-        let file: File =
-            toml::from_str(text).map_err(|e| DescriptionError::Toml { path: path.to_path_buf(), reason: e.to_string() })?;
-        let dir = path.parent().unwrap_or(Path::new("."));
-        let urdf_path = if file.robot.urdf.is_absolute() { file.robot.urdf.clone() } else { dir.join(&file.robot.urdf) };
-        let floating = if file.robot.floating_base { FloatingBase::Yes } else { FloatingBase::No };
-        let model = Model::from_urdf_file(&urdf_path, floating).map_err(|source| DescriptionError::Model {
+        let file: File = toml::from_str(text).map_err(|e| DescriptionError::Toml {
             path: path.to_path_buf(),
-            urdf: urdf_path.clone(),
-            source,
+            reason: e.to_string(),
+        })?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let urdf_path = if file.robot.urdf.is_absolute() {
+            file.robot.urdf.clone()
+        } else {
+            dir.join(&file.robot.urdf)
+        };
+        let floating = if file.robot.floating_base { FloatingBase::Yes } else { FloatingBase::No };
+        let model = Model::from_urdf_file(&urdf_path, floating).map_err(|source| {
+            DescriptionError::Model { path: path.to_path_buf(), urdf: urdf_path.clone(), source }
         })?;
         check(file, model, path, urdf_path)
     }
@@ -236,11 +245,22 @@ impl RobotCache {
     }
 }
 
-fn check(file: File, model: Model, path: &Path, urdf_path: PathBuf) -> Result<Robot, DescriptionError> {
+fn check(
+    file: File,
+    model: Model,
+    path: &Path,
+    urdf_path: PathBuf,
+) -> Result<Robot, DescriptionError> {
     check_frames(&model, &file.frames, path)?;
     check_contact(&file.contact, path)?;
     let (actuated_joints, actuated_indices) = actuated_joints(&model);
-    let torque_limits = check_torque_limits(&model, &file.torque_limits, &actuated_joints, &actuated_indices, path)?;
+    let torque_limits = check_torque_limits(
+        &model,
+        &file.torque_limits,
+        &actuated_joints,
+        &actuated_indices,
+        path,
+    )?;
     let s = &file.standing;
     check_standing_numbers(&model, s, path)?;
     let standing_q = standing_configuration(&model, s, path)?;
@@ -271,13 +291,22 @@ fn positive(path: &Path, what: String, value: f64) -> Result<(), DescriptionErro
     if value.is_finite() && value > 0.0 {
         Ok(())
     } else {
-        Err(DescriptionError::BadValue { path: path.to_path_buf(), what, value, rule: "a positive finite number" })
+        Err(DescriptionError::BadValue {
+            path: path.to_path_buf(),
+            what,
+            value,
+            rule: "a positive finite number",
+        })
     }
 }
 
 /// Every frame the description names is a frame of the URDF; there are feet, and the swing
 /// feet are among them.
-fn check_frames(model: &Model, frames: &FramesSection, path: &Path) -> Result<(), DescriptionError> {
+fn check_frames(
+    model: &Model,
+    frames: &FramesSection,
+    path: &Path,
+) -> Result<(), DescriptionError> {
     let p = || path.to_path_buf();
     let frame = |what: &str, name: &str| -> Result<(), DescriptionError> {
         model.frame_id(name).map(|_| ()).map_err(|_| DescriptionError::UnknownFrame {
@@ -297,7 +326,10 @@ fn check_frames(model: &Model, frames: &FramesSection, path: &Path) -> Result<()
     for f in &frames.swing_feet {
         frame("frames.swing_feet", f)?;
         if !frames.feet.contains(f) {
-            return Err(DescriptionError::Invalid { path: p(), what: format!("swing foot {f:?} is not one of frames.feet") });
+            return Err(DescriptionError::Invalid {
+                path: p(),
+                what: format!("swing foot {f:?} is not one of frames.feet"),
+            });
         }
     }
     Ok(())
@@ -340,13 +372,22 @@ fn check_torque_limits(
     let p = || path.to_path_buf();
     for (name, limit) in limits {
         if !actuated_joints.contains(name) {
-            return Err(DescriptionError::UnknownJoint { path: p(), what: "torque_limits".into(), joint: name.clone() });
+            return Err(DescriptionError::UnknownJoint {
+                path: p(),
+                what: "torque_limits".into(),
+                joint: name.clone(),
+            });
         }
         positive(path, format!("torque_limits.{name}"), *limit)?;
     }
-    let missing: Vec<String> = actuated_joints.iter().filter(|j| !limits.contains_key(*j)).cloned().collect();
+    let missing: Vec<String> =
+        actuated_joints.iter().filter(|j| !limits.contains_key(*j)).cloned().collect();
     if !missing.is_empty() {
-        return Err(DescriptionError::MissingJoints { path: p(), what: "torque_limits".into(), missing });
+        return Err(DescriptionError::MissingJoints {
+            path: p(),
+            what: "torque_limits".into(),
+            missing,
+        });
     }
     let torque_limits: Vec<f64> = actuated_joints.iter().map(|j| limits[j]).collect();
     for (j, (&idx, &limit)) in actuated_indices.iter().zip(&torque_limits).enumerate() {
@@ -354,7 +395,10 @@ fn check_torque_limits(
         if urdf_effort.is_finite() && limit > urdf_effort * (1.0 + 1e-9) {
             return Err(DescriptionError::Invalid {
                 path: p(),
-                what: format!("torque_limits.{} = {limit} exceeds the URDF effort limit {urdf_effort}", actuated_joints[j]),
+                what: format!(
+                    "torque_limits.{} = {limit} exceeds the URDF effort limit {urdf_effort}",
+                    actuated_joints[j]
+                ),
             });
         }
     }
@@ -363,7 +407,17 @@ fn check_torque_limits(
 
 /// The standing section's numbers: finite poses, unit quaternions, and one finite position for
 /// every joint of the model and no other.
-fn check_standing_numbers(model: &Model, s: &StandingSection, path: &Path) -> Result<(), DescriptionError> {
+fn check_standing_numbers(
+    model: &Model,
+    s: &StandingSection,
+    path: &Path,
+) -> Result<(), DescriptionError> {
+    check_standing_poses(s, path)?;
+    check_standing_joints(model, s, path)
+}
+
+/// The standing base and hand poses: finite, their quaternions of unit norm.
+fn check_standing_poses(s: &StandingSection, path: &Path) -> Result<(), DescriptionError> {
     let p = || path.to_path_buf();
     for (what, xs) in [
         ("standing.base_position", &s.base_position[..]),
@@ -372,32 +426,73 @@ fn check_standing_numbers(model: &Model, s: &StandingSection, path: &Path) -> Re
         ("standing.hand_orientation", &s.hand_orientation[..]),
     ] {
         if let Some(x) = xs.iter().find(|x| !x.is_finite()) {
-            return Err(DescriptionError::BadValue { path: p(), what: what.into(), value: *x, rule: "finite" });
+            return Err(DescriptionError::BadValue {
+                path: p(),
+                what: what.into(),
+                value: *x,
+                rule: "finite",
+            });
         }
     }
-    for (what, q) in [("standing.base_orientation", &s.base_orientation), ("standing.hand_orientation", &s.hand_orientation)] {
+    for (what, q) in [
+        ("standing.base_orientation", &s.base_orientation),
+        ("standing.hand_orientation", &s.hand_orientation),
+    ] {
         let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
         if (n - 1.0).abs() > 1e-6 {
-            return Err(DescriptionError::BadValue { path: p(), what: format!("norm of {what}"), value: n, rule: "1 (a unit quaternion w, x, y, z)" });
+            return Err(DescriptionError::BadValue {
+                path: p(),
+                what: format!("norm of {what}"),
+                value: n,
+                rule: "1 (a unit quaternion w, x, y, z)",
+            });
         }
     }
+    Ok(())
+}
+
+/// The standing joint positions: one finite value for every joint of the model and no other.
+fn check_standing_joints(
+    model: &Model,
+    s: &StandingSection,
+    path: &Path,
+) -> Result<(), DescriptionError> {
+    let p = || path.to_path_buf();
     for (name, value) in &s.joints {
         if !model.joint_names.contains(name) {
-            return Err(DescriptionError::UnknownJoint { path: p(), what: "standing.joints".into(), joint: name.clone() });
+            return Err(DescriptionError::UnknownJoint {
+                path: p(),
+                what: "standing.joints".into(),
+                joint: name.clone(),
+            });
         }
         if !value.is_finite() {
-            return Err(DescriptionError::BadValue { path: p(), what: format!("standing.joints.{name}"), value: *value, rule: "finite" });
+            return Err(DescriptionError::BadValue {
+                path: p(),
+                what: format!("standing.joints.{name}"),
+                value: *value,
+                rule: "finite",
+            });
         }
     }
-    let missing: Vec<String> = model.joint_names.iter().filter(|j| !s.joints.contains_key(*j)).cloned().collect();
+    let missing: Vec<String> =
+        model.joint_names.iter().filter(|j| !s.joints.contains_key(*j)).cloned().collect();
     if !missing.is_empty() {
-        return Err(DescriptionError::MissingJoints { path: p(), what: "standing.joints".into(), missing });
+        return Err(DescriptionError::MissingJoints {
+            path: p(),
+            what: "standing.joints".into(),
+            missing,
+        });
     }
     Ok(())
 }
 
 /// The standing configuration `q` (the model's convention), each joint within its limits.
-fn standing_configuration(model: &Model, s: &StandingSection, path: &Path) -> Result<DVector<f64>, DescriptionError> {
+fn standing_configuration(
+    model: &Model,
+    s: &StandingSection,
+    path: &Path,
+) -> Result<DVector<f64>, DescriptionError> {
     let mut standing_q = model.neutral();
     let qbase = if model.floating_base {
         standing_q.as_mut_slice()[0..3].copy_from_slice(&s.base_position);
@@ -408,11 +503,14 @@ fn standing_configuration(model: &Model, s: &StandingSection, path: &Path) -> Re
     };
     for (k, name) in model.joint_names.iter().enumerate() {
         let value = s.joints[name];
-        let (lo, hi) = (model.lower_position_limit[qbase + k], model.upper_position_limit[qbase + k]);
+        let (lo, hi) =
+            (model.lower_position_limit[qbase + k], model.upper_position_limit[qbase + k]);
         if value < lo - 1e-9 || value > hi + 1e-9 {
             return Err(DescriptionError::Invalid {
                 path: path.to_path_buf(),
-                what: format!("standing.joints.{name} = {value} is outside the joint limits [{lo}, {hi}]"),
+                what: format!(
+                    "standing.joints.{name} = {value} is outside the joint limits [{lo}, {hi}]"
+                ),
             });
         }
         standing_q[qbase + k] = value;

@@ -60,11 +60,16 @@ pub mod parsers;
 pub mod spatial;
 
 pub use algorithm::{
-    center_of_mass, compute_all_terms, coriolis_matrix, crba, forward_kinematics, frame_jacobian, frame_jacobian_time_variation, frame_jdot_v, frame_placement,
-    frame_velocity, gravity, kinetic_energy, nonlinear_effects, point_jacobian, potential_energy, rnea, update_frame_placements,
+    center_of_mass, compute_all_terms, coriolis_matrix, crba, forward_kinematics, frame_jacobian,
+    frame_jacobian_time_variation, frame_jdot_v, frame_placement, frame_velocity, gravity,
+    kinetic_energy, nonlinear_effects, point_jacobian, potential_energy, rnea,
+    update_frame_placements,
 };
 pub use data::Data;
-pub use description::{default_robot_path, DescriptionError, FeetContact, HandContact, HandPoseMismatch, Robot, RobotCache};
+pub use description::{
+    default_robot_path, DescriptionError, FeetContact, HandContact, HandPoseMismatch, Robot,
+    RobotCache,
+};
 pub use error::{DynamicsError, ModelError};
 pub use ik::{IkError, IkOptions, IkSolution};
 pub use model::{Body, FloatingBase, Frame, FrameId, FrameKind, JointType, Model, GRAVITY};

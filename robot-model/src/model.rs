@@ -129,7 +129,10 @@ pub struct Model {
 impl Model {
     /// Frame id of a named frame.
     pub fn frame_id(&self, name: &str) -> Result<FrameId, ModelError> {
-        self.frame_index.get(name).copied().ok_or_else(|| ModelError::UnknownFrame { name: name.to_string() })
+        self.frame_index
+            .get(name)
+            .copied()
+            .ok_or_else(|| ModelError::UnknownFrame { name: name.to_string() })
     }
 
     /// Name of the link `frame` hangs from (see [`Frame::parent_frame`]); `None` for the root.
@@ -140,13 +143,24 @@ impl Model {
 
     /// Adds a frame `name` rigidly attached to the frame `parent` at `placement` (parent -> new).
     /// Create [`crate::Data`] after adding frames.
-    pub fn add_frame(&mut self, name: &str, parent: &str, placement: SE3) -> Result<FrameId, ModelError> {
+    pub fn add_frame(
+        &mut self,
+        name: &str,
+        parent: &str,
+        placement: SE3,
+    ) -> Result<FrameId, ModelError> {
         if self.frame_index.contains_key(name) {
             return Err(ModelError::DuplicateName { kind: "frame", name: name.to_string() });
         }
         let parent_id = self.frame_id(parent)?;
         let p = &self.frames[parent_id];
-        let frame = Frame { name: name.to_string(), body: p.body, placement: p.placement.compose(&placement), kind: FrameKind::Added, parent_frame: Some(parent_id) };
+        let frame = Frame {
+            name: name.to_string(),
+            body: p.body,
+            placement: p.placement.compose(&placement),
+            kind: FrameKind::Added,
+            parent_frame: Some(parent_id),
+        };
         self.frames.push(frame);
         let id = self.frames.len() - 1;
         self.frame_index.insert(name.to_string(), id);
@@ -185,7 +199,8 @@ impl Model {
             match b.joint {
                 JointType::Free => q[b.idx_q + 3] = 1.0,
                 JointType::Revolute { .. } | JointType::Prismatic { .. } => {
-                    let (lo, hi) = (self.lower_position_limit[b.idx_q], self.upper_position_limit[b.idx_q]);
+                    let (lo, hi) =
+                        (self.lower_position_limit[b.idx_q], self.upper_position_limit[b.idx_q]);
                     q[b.idx_q] = if lo <= hi { 0.0f64.clamp(lo, hi) } else { 0.0 };
                 }
                 JointType::Fixed => {}
@@ -217,11 +232,19 @@ impl Model {
             match b.joint {
                 JointType::Free => {
                     let (iq, iv) = (b.idx_q, b.idx_v);
-                    let m = SE3::from_translation_quaternion(Vector3::new(q[iq], q[iq + 1], q[iq + 2]), q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6]);
+                    let m = SE3::from_translation_quaternion(
+                        Vector3::new(q[iq], q[iq + 1], q[iq + 2]),
+                        q[iq + 3],
+                        q[iq + 4],
+                        q[iq + 5],
+                        q[iq + 6],
+                    );
                     let lin = Vector3::new(v[iv], v[iv + 1], v[iv + 2]) * dt;
                     let ang = Vector3::new(v[iv + 3], v[iv + 4], v[iv + 5]) * dt;
                     let m2 = m.compose(&SE3::exp6(&lin, &ang));
-                    let uq = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m2.rot));
+                    let uq = UnitQuaternion::from_rotation_matrix(
+                        &Rotation3::from_matrix_unchecked(m2.rot),
+                    );
                     out[iq] = m2.trans.x;
                     out[iq + 1] = m2.trans.y;
                     out[iq + 2] = m2.trans.z;
@@ -230,7 +253,9 @@ impl Model {
                     out[iq + 5] = uq.j;
                     out[iq + 6] = uq.k;
                 }
-                JointType::Revolute { .. } | JointType::Prismatic { .. } => out[b.idx_q] += v[b.idx_v] * dt,
+                JointType::Revolute { .. } | JointType::Prismatic { .. } => {
+                    out[b.idx_q] += v[b.idx_v] * dt
+                }
                 JointType::Fixed => {}
             }
         }
@@ -252,7 +277,12 @@ impl Model {
                     let (u1, u2, u3) = (uniform(), uniform(), uniform());
                     let tau = std::f64::consts::TAU;
                     let (a, c) = ((1.0 - u1).sqrt(), u1.sqrt());
-                    let (x, y, z, w) = (a * (tau * u2).sin(), a * (tau * u2).cos(), c * (tau * u3).sin(), c * (tau * u3).cos());
+                    let (x, y, z, w) = (
+                        a * (tau * u2).sin(),
+                        a * (tau * u2).cos(),
+                        c * (tau * u3).sin(),
+                        c * (tau * u3).cos(),
+                    );
                     q[b.idx_q + 3] = w;
                     q[b.idx_q + 4] = x;
                     q[b.idx_q + 5] = y;
@@ -261,7 +291,11 @@ impl Model {
                 JointType::Revolute { .. } | JointType::Prismatic { .. } => {
                     let lo = self.lower_position_limit[b.idx_q];
                     let hi = self.upper_position_limit[b.idx_q];
-                    let (lo, hi) = if lo.is_finite() && hi.is_finite() && lo <= hi { (lo, hi) } else { (-std::f64::consts::PI, std::f64::consts::PI) };
+                    let (lo, hi) = if lo.is_finite() && hi.is_finite() && lo <= hi {
+                        (lo, hi)
+                    } else {
+                        (-std::f64::consts::PI, std::f64::consts::PI)
+                    };
                     q[b.idx_q] = lo + (hi - lo) * uniform();
                 }
                 JointType::Fixed => {}
@@ -294,5 +328,7 @@ pub(crate) fn check_vec(x: &[f64], n: usize, what: &'static str) -> Result<(), D
 
 /// Rotation matrix of a base quaternion `(w, x, y, z)` (normalised here).
 pub fn quaternion_to_matrix(w: f64, x: f64, y: f64, z: f64) -> Matrix3<f64> {
-    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z)).to_rotation_matrix().into_inner()
+    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z))
+        .to_rotation_matrix()
+        .into_inner()
 }

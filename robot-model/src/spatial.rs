@@ -50,7 +50,13 @@ impl SE3 {
     }
 
     /// From a translation and a (not necessarily normalised) quaternion `(w, x, y, z)`.
-    pub fn from_translation_quaternion(trans: Vector3<f64>, w: f64, x: f64, y: f64, z: f64) -> Self {
+    pub fn from_translation_quaternion(
+        trans: Vector3<f64>,
+        w: f64,
+        x: f64,
+        y: f64,
+        z: f64,
+    ) -> Self {
         let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
         Self { rot: q.to_rotation_matrix().into_inner(), trans }
     }
@@ -275,7 +281,11 @@ impl Inertia {
     pub fn add(&self, o: &Inertia) -> Inertia {
         let mass = self.mass + o.mass;
         if mass <= 0.0 {
-            return Inertia { mass: 0.0, com: Vector3::zeros(), rot_inertia: self.rot_inertia + o.rot_inertia };
+            return Inertia {
+                mass: 0.0,
+                com: Vector3::zeros(),
+                rot_inertia: self.rot_inertia + o.rot_inertia,
+            };
         }
         let com = (self.com * self.mass + o.com * o.mass) / mass;
         let d1 = self.com - com;
@@ -283,7 +293,8 @@ impl Inertia {
         // -m skew(d)^2 = m (|d|^2 I - d d^T)
         let s1 = skew(&d1);
         let s2 = skew(&d2);
-        let rot_inertia = self.rot_inertia + o.rot_inertia - (s1 * s1) * self.mass - (s2 * s2) * o.mass;
+        let rot_inertia =
+            self.rot_inertia + o.rot_inertia - (s1 * s1) * self.mass - (s2 * s2) * o.mass;
         Inertia { mass, com, rot_inertia }
     }
 

@@ -1,7 +1,9 @@
 //! The default robot's description loads and agrees with its URDF; broken descriptions say
 //! what is wrong.
 
-use robot_model::{default_robot_path, forward_kinematics, frame_placement, Data, DescriptionError, Robot};
+use robot_model::{
+    default_robot_path, forward_kinematics, frame_placement, Data, DescriptionError, Robot,
+};
 
 #[test]
 fn default_robot_loads_and_stands_on_its_feet() {
@@ -28,15 +30,25 @@ fn load_modified(edit: impl Fn(String) -> String) -> Result<Robot, DescriptionEr
 
 #[test]
 fn broken_descriptions_name_the_problem() {
-    let e = load_modified(|s| s.replace("hand = \"hand_contact\"", "hand = \"no_such_frame\"")).unwrap_err();
-    assert!(matches!(&e, DescriptionError::UnknownFrame { frame, .. } if frame == "no_such_frame"), "{e}");
+    let e = load_modified(|s| s.replace("hand = \"hand_contact\"", "hand = \"no_such_frame\""))
+        .unwrap_err();
+    assert!(
+        matches!(&e, DescriptionError::UnknownFrame { frame, .. } if frame == "no_such_frame"),
+        "{e}"
+    );
     let e = load_modified(|s| s.replace("arm_joint_4 = 9.0", "arm_joint_4 = -9.0")).unwrap_err();
     assert!(matches!(&e, DescriptionError::BadValue { .. }), "{e}");
     let e = load_modified(|s| s.replace("LF_HAA = 0.0\n", "")).unwrap_err();
-    assert!(matches!(&e, DescriptionError::MissingJoints { missing, .. } if missing == &vec!["LF_HAA".to_string()]), "{e}");
+    assert!(
+        matches!(&e, DescriptionError::MissingJoints { missing, .. } if missing == &vec!["LF_HAA".to_string()]),
+        "{e}"
+    );
     let e = load_modified(|s| s.replace("mu = 0.8\nradius", "mu = nan\nradius")).unwrap_err();
     assert!(matches!(&e, DescriptionError::BadValue { .. }), "{e}");
-    let e = load_modified(|s| s.replace("urdf = \"legged_manipulator.urdf\"", "urdf = \"missing.urdf\"")).unwrap_err();
+    let e = load_modified(|s| {
+        s.replace("urdf = \"legged_manipulator.urdf\"", "urdf = \"missing.urdf\"")
+    })
+    .unwrap_err();
     assert!(matches!(&e, DescriptionError::Model { .. }), "{e}");
     let e = load_modified(|s| s.replace("[robot]", "[robot]\nunknown_key = 1")).unwrap_err();
     assert!(matches!(&e, DescriptionError::Toml { .. }), "{e}");
@@ -53,9 +65,19 @@ fn the_hand_frame_is_where_the_description_says() {
     assert_eq!(robot.standing_hand_orientation, [0.5, 0.5, 0.5, 0.5]);
     // Independent of the load check: forward kinematics at standing, hand relative to the base.
     let mut data = Data::new(&robot.model);
-    forward_kinematics(&robot.model, &mut data, robot.standing_q.as_slice(), &vec![0.0; robot.model.nv]).unwrap();
-    let base = *frame_placement(&robot.model, &data, robot.model.frame_id(&robot.torso_frame).unwrap()).unwrap();
-    let hand = *frame_placement(&robot.model, &data, robot.model.frame_id(&robot.hand_frame).unwrap()).unwrap();
+    forward_kinematics(
+        &robot.model,
+        &mut data,
+        robot.standing_q.as_slice(),
+        &vec![0.0; robot.model.nv],
+    )
+    .unwrap();
+    let base =
+        *frame_placement(&robot.model, &data, robot.model.frame_id(&robot.torso_frame).unwrap())
+            .unwrap();
+    let hand =
+        *frame_placement(&robot.model, &data, robot.model.frame_id(&robot.hand_frame).unwrap())
+            .unwrap();
     let p = base.rot.transpose() * (hand.trans - base.trans);
     assert!((p - Vector3::from(robot.standing_hand_position)).norm() < 1e-3, "hand at {p:?}");
     // The palm normal (hand z) points along the base's +x, the hand's x along the base's +y.
@@ -69,7 +91,10 @@ fn the_hand_frame_is_where_the_description_says() {
 #[test]
 fn a_wrong_standing_hand_pose_is_named_with_both_poses() {
     // 2 mm off in x: beyond the 1 mm tolerance.
-    let e = load_modified(|s| s.replace("hand_position = [0.85, 0.0, 0.05118]", "hand_position = [0.852, 0.0, 0.05118]")).unwrap_err();
+    let e = load_modified(|s| {
+        s.replace("hand_position = [0.85, 0.0, 0.05118]", "hand_position = [0.852, 0.0, 0.05118]")
+    })
+    .unwrap_err();
     match &e {
         DescriptionError::HandPose(m) => {
             assert_eq!(m.frame, "hand_contact");
@@ -80,27 +105,52 @@ fn a_wrong_standing_hand_pose_is_named_with_both_poses() {
         other => panic!("expected HandPose, got {other}"),
     }
     let msg = e.to_string();
-    assert!(msg.contains("hand_contact") && msg.contains("standing.hand_position") && msg.contains("mm"), "{msg}");
+    assert!(
+        msg.contains("hand_contact")
+            && msg.contains("standing.hand_position")
+            && msg.contains("mm"),
+        "{msg}"
+    );
     // 0.5 mm off is within tolerance.
-    load_modified(|s| s.replace("hand_position = [0.85, 0.0, 0.05118]", "hand_position = [0.8505, 0.0, 0.05118]")).unwrap();
+    load_modified(|s| {
+        s.replace("hand_position = [0.85, 0.0, 0.05118]", "hand_position = [0.8505, 0.0, 0.05118]")
+    })
+    .unwrap();
     // A rotation of 1 degree about the palm normal: beyond 0.5 deg.
     let (c, s1) = ((0.5f64.to_radians()).cos(), (0.5f64.to_radians()).sin());
     // q = q_said * (cos(a/2), 0, 0, sin(a/2)) with q_said = (0.5, 0.5, 0.5, 0.5), a = 1 deg.
     let q = [0.5 * c - 0.5 * s1, 0.5 * c + 0.5 * s1, 0.5 * c - 0.5 * s1, 0.5 * c + 0.5 * s1];
     let line = format!("hand_orientation = [{}, {}, {}, {}]", q[0], q[1], q[2], q[3]);
-    let e = load_modified(|s| s.replace("hand_orientation = [0.5, 0.5, 0.5, 0.5]", &line)).unwrap_err();
+    let e =
+        load_modified(|s| s.replace("hand_orientation = [0.5, 0.5, 0.5, 0.5]", &line)).unwrap_err();
     assert!(matches!(&e, DescriptionError::HandPose(m) if (m.angle_deg - 1.0).abs() < 0.01), "{e}");
     // Not a unit quaternion.
-    let e = load_modified(|s| s.replace("hand_orientation = [0.5, 0.5, 0.5, 0.5]", "hand_orientation = [1.0, 0.5, 0.5, 0.5]")).unwrap_err();
-    assert!(matches!(&e, DescriptionError::BadValue { what, .. } if what.contains("hand_orientation")), "{e}");
+    let e = load_modified(|s| {
+        s.replace(
+            "hand_orientation = [0.5, 0.5, 0.5, 0.5]",
+            "hand_orientation = [1.0, 0.5, 0.5, 0.5]",
+        )
+    })
+    .unwrap_err();
+    assert!(
+        matches!(&e, DescriptionError::BadValue { what, .. } if what.contains("hand_orientation")),
+        "{e}"
+    );
     // Missing: the description must say where the hand is.
     let e = load_modified(|s| s.replace("hand_position = [0.85, 0.0, 0.05118]\n", "")).unwrap_err();
-    assert!(matches!(&e, DescriptionError::Toml { reason, .. } if reason.contains("hand_position")), "{e}");
+    assert!(
+        matches!(&e, DescriptionError::Toml { reason, .. } if reason.contains("hand_position")),
+        "{e}"
+    );
 }
 
 #[test]
 fn non_positive_limits_and_wrong_standing_length_are_named() {
-    for (from, to) in [("LF_KFE = 80.0", "LF_KFE = 0.0"), ("arm_joint_6 = 9.0", "arm_joint_6 = -1.0"), ("LF_HAA = 80.0", "LF_HAA = inf")] {
+    for (from, to) in [
+        ("LF_KFE = 80.0", "LF_KFE = 0.0"),
+        ("arm_joint_6 = 9.0", "arm_joint_6 = -1.0"),
+        ("LF_HAA = 80.0", "LF_HAA = inf"),
+    ] {
         let e = load_modified(|s| s.replacen(from, to, 1)).unwrap_err();
         let joint = from.split(' ').next().unwrap();
         assert!(
@@ -110,22 +160,49 @@ fn non_positive_limits_and_wrong_standing_length_are_named() {
     }
     // Contact parameters too.
     let e = load_modified(|s| s.replace("half_size_y = 0.05", "half_size_y = 0.0")).unwrap_err();
-    assert!(matches!(&e, DescriptionError::BadValue { what, .. } if what == "contact.hand.half_size_y"), "{e}");
+    assert!(
+        matches!(&e, DescriptionError::BadValue { what, .. } if what == "contact.hand.half_size_y"),
+        "{e}"
+    );
     // Standing configuration of the wrong length: a joint too few, or a joint the URDF does not have.
     let e = load_modified(|s| s.replace("arm_joint_6 = 1.570296\n", "")).unwrap_err();
-    assert!(matches!(&e, DescriptionError::MissingJoints { what, missing, .. } if what == "standing.joints" && missing == &vec!["arm_joint_6".to_string()]), "{e}");
-    let e = load_modified(|s| s.replace("arm_joint_6 = 1.570296\n", "arm_joint_6 = 1.570296\narm_joint_7 = 0.0\n")).unwrap_err();
-    assert!(matches!(&e, DescriptionError::UnknownJoint { joint, .. } if joint == "arm_joint_7"), "{e}");
+    assert!(
+        matches!(&e, DescriptionError::MissingJoints { what, missing, .. } if what == "standing.joints" && missing == &vec!["arm_joint_6".to_string()]),
+        "{e}"
+    );
+    let e = load_modified(|s| {
+        s.replace("arm_joint_6 = 1.570296\n", "arm_joint_6 = 1.570296\narm_joint_7 = 0.0\n")
+    })
+    .unwrap_err();
+    assert!(
+        matches!(&e, DescriptionError::UnknownJoint { joint, .. } if joint == "arm_joint_7"),
+        "{e}"
+    );
     // Base position of the wrong length is a format error that names the field.
-    let e = load_modified(|s| s.replace("base_position = [0.0, 0.0, 0.54882015]", "base_position = [0.0, 0.54882015]")).unwrap_err();
-    assert!(matches!(&e, DescriptionError::Toml { reason, .. } if reason.contains("base_position")), "{e}");
+    let e = load_modified(|s| {
+        s.replace("base_position = [0.0, 0.0, 0.54882015]", "base_position = [0.0, 0.54882015]")
+    })
+    .unwrap_err();
+    assert!(
+        matches!(&e, DescriptionError::Toml { reason, .. } if reason.contains("base_position")),
+        "{e}"
+    );
     // A torque limit for a joint that is not actuated, and the messages name file and joint.
-    let e = load_modified(|s| s.replace("[torque_limits]\n", "[torque_limits]\nLF_FOOT_fixed = 1.0\n")).unwrap_err();
-    assert!(matches!(&e, DescriptionError::UnknownJoint { joint, .. } if joint == "LF_FOOT_fixed"), "{e}");
+    let e =
+        load_modified(|s| s.replace("[torque_limits]\n", "[torque_limits]\nLF_FOOT_fixed = 1.0\n"))
+            .unwrap_err();
+    assert!(
+        matches!(&e, DescriptionError::UnknownJoint { joint, .. } if joint == "LF_FOOT_fixed"),
+        "{e}"
+    );
     assert!(e.to_string().contains("legged_manipulator.toml"), "{e}");
     // The standing configuration outside the joint limits.
-    let e = load_modified(|s| s.replace("arm_joint_2 = 1.628906", "arm_joint_2 = 3.0")).unwrap_err();
-    assert!(matches!(&e, DescriptionError::Invalid { what, .. } if what.contains("arm_joint_2")), "{e}");
+    let e =
+        load_modified(|s| s.replace("arm_joint_2 = 1.628906", "arm_joint_2 = 3.0")).unwrap_err();
+    assert!(
+        matches!(&e, DescriptionError::Invalid { what, .. } if what.contains("arm_joint_2")),
+        "{e}"
+    );
 }
 
 #[test]
@@ -136,7 +213,11 @@ fn frames_know_the_link_they_hang_from() {
     let m = &robot.model;
     let id = |n: &str| m.frame_id(n).unwrap();
     assert_eq!(m.parent_link(id(&robot.hand_frame)), Some("hand"));
-    assert_ne!(m.bodies[m.frames[id("hand")].body].name, "hand", "hand is a fixed link, merged into its body");
+    assert_ne!(
+        m.bodies[m.frames[id("hand")].body].name,
+        "hand",
+        "hand is a fixed link, merged into its body"
+    );
     for foot in &robot.foot_frames {
         assert_eq!(m.parent_link(id(foot)), Some(format!("{}_SHANK", &foot[..2]).as_str()));
     }

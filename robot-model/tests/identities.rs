@@ -11,7 +11,11 @@ use robot_model::*;
 const SAMPLES: usize = 50;
 
 fn models() -> Vec<(&'static str, Model)> {
-    vec![("arm", arm_model()), ("quadruped", quadruped_model()), ("legged manipulator", composed_model())]
+    vec![
+        ("arm", arm_model()),
+        ("quadruped", quadruped_model()),
+        ("legged manipulator", composed_model()),
+    ]
 }
 
 fn mass_matrix(model: &Model, q: &DVector<f64>) -> DMatrix<f64> {
@@ -115,10 +119,15 @@ fn rnea_equals_m_a_plus_h_and_all_terms_agree_with_single_algorithms() {
             let (q, v) = random_state(&model, &mut r);
             let (_, a) = random_state(&model, &mut r);
             compute_all_terms(&model, &mut data, q.as_slice(), v.as_slice()).unwrap();
-            let tau = rnea(&model, &mut other, q.as_slice(), v.as_slice(), a.as_slice()).unwrap().clone();
+            let tau =
+                rnea(&model, &mut other, q.as_slice(), v.as_slice(), a.as_slice()).unwrap().clone();
             let expect = &data.m * &a + &data.h;
-            assert!(rel_err_v(tau.as_slice(), expect.as_slice()) < 1e-12, "{name}: rnea != M a + h");
-            let h = nonlinear_effects(&model, &mut other, q.as_slice(), v.as_slice()).unwrap().clone();
+            assert!(
+                rel_err_v(tau.as_slice(), expect.as_slice()) < 1e-12,
+                "{name}: rnea != M a + h"
+            );
+            let h =
+                nonlinear_effects(&model, &mut other, q.as_slice(), v.as_slice()).unwrap().clone();
             let g = gravity(&model, &mut other, q.as_slice()).unwrap().clone();
             let m = crba(&model, &mut other, q.as_slice()).unwrap().clone();
             assert!(rel_err_v(h.as_slice(), data.h.as_slice()) < 1e-14);
@@ -163,7 +172,10 @@ fn jacobians_and_jdot_match_differentiated_kinematics() {
                 let ang = vee_log(&(xp.rot * xm.rot.transpose())) / (2.0 * dt);
                 let fd = Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z);
                 let jv = &j * &v;
-                assert!((jv - fd).norm() < 1e-7 * fd.norm().max(1.0), "{name} frame {f}: J v vs FD {jv:?} {fd:?}");
+                assert!(
+                    (jv - fd).norm() < 1e-7 * fd.norm().max(1.0),
+                    "{name} frame {f}: J v vs FD {jv:?} {fd:?}"
+                );
                 let vel = frame_velocity(&model, &data, f).unwrap().to_vector6();
                 assert!((jv - vel).norm() < 1e-13 * vel.norm().max(1.0));
                 // Jdot (analytic) vs FD of J along v; Jdot v vs Jdot * v
@@ -171,9 +183,15 @@ fn jacobians_and_jdot_match_differentiated_kinematics() {
                 frame_jacobian(&model, &dp, f, &mut jp).unwrap();
                 frame_jacobian(&model, &dm, f, &mut jm).unwrap();
                 let jdot_fd = (&jp - &jm) / (2.0 * dt);
-                assert!((&jdot - &jdot_fd).norm() < 1e-7 * jdot_fd.norm().max(1.0), "{name} frame {f}: Jdot vs FD");
+                assert!(
+                    (&jdot - &jdot_fd).norm() < 1e-7 * jdot_fd.norm().max(1.0),
+                    "{name} frame {f}: Jdot vs FD"
+                );
                 let jdv = frame_jdot_v(&model, &data, f).unwrap();
-                assert!((&jdot * &v - jdv).norm() < 1e-12 * jdv.norm().max(1.0), "{name} frame {f}: Jdot v vs Jdot * v");
+                assert!(
+                    (&jdot * &v - jdv).norm() < 1e-12 * jdv.norm().max(1.0),
+                    "{name} frame {f}: Jdot v vs Jdot * v"
+                );
                 // point Jacobian at an offset point = linear rows of the J of that point
                 let off = Vector3::new(0.03, -0.02, 0.05);
                 point_jacobian(&model, &data, f, &off, &mut pj).unwrap();
@@ -215,7 +233,12 @@ fn center_of_mass_gives_the_gravity_wrench_on_the_floating_base() {
         let ang = -mass * base.rot.transpose() * (c - base.trans).cross(&g0);
         let want = [lin.x, lin.y, lin.z, ang.x, ang.y, ang.z];
         for k in 0..6 {
-            assert!((g[k] - want[k]).abs() < 1e-8 * (1.0 + want[k].abs()), "row {k}: rnea {} vs centre of mass {}", g[k], want[k]);
+            assert!(
+                (g[k] - want[k]).abs() < 1e-8 * (1.0 + want[k].abs()),
+                "row {k}: rnea {} vs centre of mass {}",
+                g[k],
+                want[k]
+            );
         }
         assert!(mass > 1.0, "total mass {mass}");
     }

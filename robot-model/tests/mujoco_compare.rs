@@ -7,7 +7,10 @@ mod common;
 
 use common::*;
 use nalgebra::Matrix6xX;
-use protocol::conventions::{base_twist_from_mujoco as base_velocity_from_mujoco, base_twist_to_mujoco as base_velocity_to_mujoco};
+use protocol::conventions::{
+    base_twist_from_mujoco as base_velocity_from_mujoco,
+    base_twist_to_mujoco as base_velocity_to_mujoco,
+};
 use robot_model::*;
 
 const SAMPLES: usize = 60;
@@ -17,8 +20,16 @@ fn compare(name: &str, model: &Model, mj: &MjRobot, seed: u64) {
     let frames: Vec<&str> = model.frames.iter().map(|f| f.name.as_str()).collect();
     // same robot: every URDF link is a MuJoCo body (fusestatic off), same total mass
     let (mj_mass, mj_bodies) = mj.mass_and_bodies();
-    assert_eq!(mj_bodies, frames.len() + 1, "{name}: MuJoCo bodies (with world) vs our link frames");
-    assert!((mj_mass - model.total_mass).abs() < 1e-12 * model.total_mass, "{name}: mass {mj_mass} vs {}", model.total_mass);
+    assert_eq!(
+        mj_bodies,
+        frames.len() + 1,
+        "{name}: MuJoCo bodies (with world) vs our link frames"
+    );
+    assert!(
+        (mj_mass - model.total_mass).abs() < 1e-12 * model.total_mass,
+        "{name}: mass {mj_mass} vs {}",
+        model.total_mass
+    );
     let mut data = Data::new(model);
     let mut rng = rng(seed);
     let mut worst = [0.0f64; 7];
@@ -44,7 +55,10 @@ fn compare(name: &str, model: &Model, mj: &MjRobot, seed: u64) {
         for (w, e) in worst.iter_mut().zip(errs) {
             *w = w.max(e);
         }
-        assert!(errs.iter().all(|e| *e < TOL), "{name} sample {s}: errors M, h, g, pose, J, Jdot*v (jacDot), Jdot*v (cacc) = {errs:?}");
+        assert!(
+            errs.iter().all(|e| *e < TOL),
+            "{name} sample {s}: errors M, h, g, pose, J, Jdot*v (jacDot), Jdot*v (cacc) = {errs:?}"
+        );
     }
     println!("{name}: {SAMPLES} samples, {} frames; worst relative errors M {:.1e}, h {:.1e}, g {:.1e}, pose {:.1e}, J {:.1e}, Jdot*v vs mj_jacDot {:.1e}, vs cacc {:.1e}", frames.len(), worst[0], worst[1], worst[2], worst[3], worst[4], worst[5], worst[6]);
 }

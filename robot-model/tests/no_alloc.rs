@@ -37,7 +37,10 @@ static GLOBAL: Counting = Counting;
 #[test]
 fn per_tick_update_does_not_allocate() {
     let model = composed_model();
-    let frames: Vec<FrameId> = ["LF_foot", "RF_foot", "LH_foot", "RH_foot", "arm_hand", "trunk"].iter().map(|f| model.frame_id(f).unwrap()).collect();
+    let frames: Vec<FrameId> = ["LF_foot", "RF_foot", "LH_foot", "RH_foot", "arm_hand", "trunk"]
+        .iter()
+        .map(|f| model.frame_id(f).unwrap())
+        .collect();
     let mut data = Data::new(&model);
     let mut jac = vec![Matrix6xX::zeros(model.nv); frames.len()];
     let mut r = rng(7);

@@ -14,7 +14,9 @@ fn link(name: &str) -> String {
 }
 
 fn joint(name: &str, kind: &str, parent: &str, child: &str) -> String {
-    format!(r#"<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/><axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="10" velocity="1"/></joint>"#)
+    format!(
+        r#"<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/><axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="10" velocity="1"/></joint>"#
+    )
 }
 
 fn robot(parts: &[String]) -> String {
@@ -28,39 +30,69 @@ fn err(urdf: &str) -> ModelError {
 #[test]
 fn malformed_urdfs_give_typed_errors() {
     // no root: every link is a child
-    let e = err(&robot(&[link("a"), link("b"), joint("j1", "revolute", "a", "b"), joint("j2", "revolute", "b", "a")]));
+    let e = err(&robot(&[
+        link("a"),
+        link("b"),
+        joint("j1", "revolute", "a", "b"),
+        joint("j2", "revolute", "b", "a"),
+    ]));
     assert!(matches!(e, ModelError::NoRoot), "{e}");
     // two roots
     let e = err(&robot(&[link("a"), link("b"), link("c"), joint("j1", "revolute", "a", "b")]));
     match e {
-        ModelError::MultipleRoots { roots } => assert_eq!(roots, vec!["a".to_string(), "c".to_string()]),
+        ModelError::MultipleRoots { roots } => {
+            assert_eq!(roots, vec!["a".to_string(), "c".to_string()])
+        }
         e => panic!("{e}"),
     }
     // a cycle below a proper root
-    let e = err(&robot(&[link("r"), link("a"), link("b"), joint("j1", "revolute", "a", "b"), joint("j2", "revolute", "b", "a")]));
+    let e = err(&robot(&[
+        link("r"),
+        link("a"),
+        link("b"),
+        joint("j1", "revolute", "a", "b"),
+        joint("j2", "revolute", "b", "a"),
+    ]));
     assert!(matches!(e, ModelError::Cycle { .. }), "{e}");
     // unknown parent / child
     let e = err(&robot(&[link("a"), link("b"), joint("j1", "revolute", "x", "b")]));
-    assert!(matches!(e, ModelError::UnknownParent { ref link, role: "parent", .. } if link == "x"), "{e}");
+    assert!(
+        matches!(e, ModelError::UnknownParent { ref link, role: "parent", .. } if link == "x"),
+        "{e}"
+    );
     let e = err(&robot(&[link("a"), joint("j1", "revolute", "a", "y")]));
     assert!(matches!(e, ModelError::UnknownParent { role: "child", .. }), "{e}");
     // a link with two parents
-    let e = err(&robot(&[link("a"), link("b"), link("c"), joint("j1", "revolute", "a", "c"), joint("j2", "revolute", "b", "c")]));
+    let e = err(&robot(&[
+        link("a"),
+        link("b"),
+        link("c"),
+        joint("j1", "revolute", "a", "c"),
+        joint("j2", "revolute", "b", "c"),
+    ]));
     assert!(matches!(e, ModelError::SeveralParentJoints { .. }), "{e}");
     // bad numbers: NaN mass, infinite origin, negative mass, unparsable, zero axis
     let nan_mass = r#"<robot name="t"><link name="a"><inertial><mass value="nan"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link></robot>"#;
     assert!(matches!(err(nan_mass), ModelError::BadNumber { .. }));
     let neg_mass = nan_mass.replace("nan", "-1");
     assert!(matches!(err(&neg_mass), ModelError::BadNumber { .. }));
-    let inf_origin = robot(&[link("a"), link("b"), joint("j1", "revolute", "a", "b").replace("<parent", r#"<origin xyz="0 inf 0"/><parent"#)]);
+    let inf_origin = robot(&[
+        link("a"),
+        link("b"),
+        joint("j1", "revolute", "a", "b").replace("<parent", r#"<origin xyz="0 inf 0"/><parent"#),
+    ]);
     assert!(matches!(err(&inf_origin), ModelError::BadNumber { .. }), "{}", err(&inf_origin));
     let garbage = nan_mass.replace("nan", "1.2.3");
     assert!(matches!(err(&garbage), ModelError::Urdf(_)), "{}", err(&garbage));
-    let zero_axis = robot(&[link("a"), link("b"), joint("j1", "revolute", "a", "b").replace("0 0 1", "0 0 0")]);
+    let zero_axis =
+        robot(&[link("a"), link("b"), joint("j1", "revolute", "a", "b").replace("0 0 1", "0 0 0")]);
     assert!(matches!(err(&zero_axis), ModelError::BadNumber { .. }));
     // not XML, unsupported joint type, duplicate names
     assert!(matches!(err("this is not xml"), ModelError::Urdf(_)));
-    assert!(matches!(err(&robot(&[link("a"), link("b"), joint("j1", "planar", "a", "b")])), ModelError::UnsupportedJoint { .. }));
+    assert!(matches!(
+        err(&robot(&[link("a"), link("b"), joint("j1", "planar", "a", "b")])),
+        ModelError::UnsupportedJoint { .. }
+    ));
     assert!(matches!(err(&robot(&[link("a"), link("a")])), ModelError::DuplicateName { .. }));
     // a missing file is an I/O error, not a panic
     let e = Model::from_urdf_file("/nonexistent/robot.urdf", FloatingBase::No).unwrap_err();
@@ -112,9 +144,15 @@ fn joint_order_is_depth_first_in_file_order() {
     assert_eq!(m.joint_names, vec!["ja1", "ja2", "jb1"]);
     assert!(matches!(m.bodies[2].joint, JointType::Prismatic { .. }));
     let q = quadruped_model();
-    let expect: Vec<String> = ["LF", "RF", "LH", "RH"].iter().flat_map(|l| ["HAA", "HFE", "KFE"].map(|j| format!("{l}_{j}"))).collect();
+    let expect: Vec<String> = ["LF", "RF", "LH", "RH"]
+        .iter()
+        .flat_map(|l| ["HAA", "HFE", "KFE"].map(|j| format!("{l}_{j}")))
+        .collect();
     assert_eq!(q.joint_names, expect);
-    assert_eq!(q.velocity_names()[..6], ["base_vx", "base_vy", "base_vz", "base_wx", "base_wy", "base_wz"]);
+    assert_eq!(
+        q.velocity_names()[..6],
+        ["base_vx", "base_vy", "base_vz", "base_wx", "base_wy", "base_wz"]
+    );
 }
 
 #[test]
@@ -135,7 +173,8 @@ fn limits_actuation_and_neutral_configuration() {
     let n = q.neutral();
     assert_eq!(&n.as_slice()[..7], &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]);
     // front knees are limited to [-2.5, -0.2], hind knees to [0.2, 2.5]: zero is clamped
-    let kfe = |leg: &str| 7 + q.joint_names.iter().position(|j| *j == format!("{leg}_KFE")).unwrap();
+    let kfe =
+        |leg: &str| 7 + q.joint_names.iter().position(|j| *j == format!("{leg}_KFE")).unwrap();
     assert_eq!(n[kfe("LF")], -0.2);
     assert_eq!(n[kfe("RH")], 0.2);
     assert_eq!(n[kfe("LF") - 1], 0.0);
@@ -164,7 +203,12 @@ fn composition_prefixes_names_and_places_the_arm() {
     let b = ModelBuilder::from_urdf_str(QUADRUPED).unwrap();
     let e = b.clone().attach_urdf_str(ARM, "no_such_link", SE3::identity(), "arm_").unwrap_err();
     assert!(matches!(e, ModelError::UnknownFrame { .. }));
-    let twice = b.attach_urdf_str(ARM, "trunk", SE3::identity(), "x_").unwrap().attach_urdf_str(ARM, "trunk", SE3::identity(), "x_");
+    let twice = b.attach_urdf_str(ARM, "trunk", SE3::identity(), "x_").unwrap().attach_urdf_str(
+        ARM,
+        "trunk",
+        SE3::identity(),
+        "x_",
+    );
     assert!(matches!(twice, Err(ModelError::DuplicateName { .. })));
 }
 
@@ -199,11 +243,20 @@ fn bad_states_give_typed_errors() {
     assert_eq!(e, DynamicsError::NonFinite { what: "v", index: 4 });
     let mut q0 = q.clone();
     q0[3] = 0.0;
-    assert_eq!(compute_all_terms(&m, &mut d, q0.as_slice(), v.as_slice()).unwrap_err(), DynamicsError::ZeroQuaternion);
+    assert_eq!(
+        compute_all_terms(&m, &mut d, q0.as_slice(), v.as_slice()).unwrap_err(),
+        DynamicsError::ZeroQuaternion
+    );
     let mut small = nalgebra::Matrix6xX::zeros(m.nv - 1);
-    assert!(matches!(frame_jacobian(&m, &d, 0, &mut small), Err(DynamicsError::OutputShape { .. })));
+    assert!(matches!(
+        frame_jacobian(&m, &d, 0, &mut small),
+        Err(DynamicsError::OutputShape { .. })
+    ));
     let mut ok = nalgebra::Matrix6xX::zeros(m.nv);
-    assert!(matches!(frame_jacobian(&m, &d, 999, &mut ok), Err(DynamicsError::FrameOutOfRange { .. })));
+    assert!(matches!(
+        frame_jacobian(&m, &d, 999, &mut ok),
+        Err(DynamicsError::FrameOutOfRange { .. })
+    ));
 }
 
 #[test]
@@ -226,12 +279,15 @@ fn mutated_urdf_text_never_panics() {
             }
             text.replace_range(at..end, replacements[r.random_range(0..replacements.len())]);
         }
-        let result = std::panic::catch_unwind(|| Model::from_urdf_str(&text, FloatingBase::Yes).map(|m| {
-            // a model that loads must also evaluate
-            let mut d = Data::new(&m);
-            let q = m.neutral();
-            compute_all_terms(&m, &mut d, q.as_slice(), DVector::zeros(m.nv).as_slice()).map(|_| d.m.iter().all(|x| x.is_finite()))
-        }));
+        let result = std::panic::catch_unwind(|| {
+            Model::from_urdf_str(&text, FloatingBase::Yes).map(|m| {
+                // a model that loads must also evaluate
+                let mut d = Data::new(&m);
+                let q = m.neutral();
+                compute_all_terms(&m, &mut d, q.as_slice(), DVector::zeros(m.nv).as_slice())
+                    .map(|_| d.m.iter().all(|x| x.is_finite()))
+            })
+        });
         match result {
             Ok(Ok(Ok(finite))) => {
                 assert!(finite, "a loaded model gave non-finite M");

@@ -6,17 +6,18 @@ use std::path::{Path, PathBuf};
 
 use protocol::logging::{self, Verbosity};
 
-use team_runner::compare;
-use team_runner::capacity;
-use team_runner::echo;
-use team_runner::evaluate;
-use team_runner::plan::{self, repo_root};
-use team_runner::plots;
-use team_runner::record::{self, RecordOptions, ScenarioSource};
-use team_runner::run::{self as scenario_run, RunOptions};
-use team_runner::scenario::Scenario;
-use team_runner::launch::RunMode;
-use team_runner::smoke::{self, SmokeConfig};
+use evaluation::evaluate;
+use evaluation::plots;
+use experiments::compare;
+use experiments::simulated_capacity;
+use launch::echo;
+use launch::launcher::RunMode;
+use launch::record::{self, RecordOptions, ScenarioSource};
+use launch::run::{self as scenario_run, RunOptions};
+use launch::smoke::{self, SmokeConfig};
+use scenario::file::Scenario;
+use scenario::plan::{self, repo_root};
+use scenario::team_capacity as capacity;
 
 #[derive(Parser)]
 #[command(version, about = "Run the team of legged manipulators in simulation")]
@@ -188,7 +189,7 @@ struct RunArgs {
     /// With --hosts, drop this share of a robot's packets, both ways, on its host's link for
     /// the whole run (nftables): --loss r1=5. Repeat for more robots.
     #[arg(long, value_name = "ROBOT=PERCENT", requires = "hosts")]
-    loss: Vec<team_runner::run::LinkLoss>,
+    loss: Vec<launch::run::LinkLoss>,
     /// Run the scenario against the wall clock: the sim-bridge paces physics at the
     /// control period, a robot whose torques are late keeps its last ones, agents keep
     /// their real deadlines (25 ms or 5 ticks), and the report adds the loop's timing.
@@ -207,7 +208,7 @@ struct RunArgs {
     #[arg(long, value_name = "ENDPOINT", requires = "tls", conflicts_with = "hosts")]
     router: Option<String>,
     /// The team's name on the bus (team/NAME/...): teams that share a router differ by it.
-    #[arg(long, default_value = team_runner::plan::TEAM)]
+    #[arg(long, default_value = scenario::TEAM)]
     team: String,
     /// Report folder (default: reports/<scenario file name>).
     #[arg(long)]
@@ -251,70 +252,152 @@ fn main() -> Result<()> {
     let cli = Cli::parse();
     logging::init(verbosity(&cli.command));
     match cli.command {
-        Command::Run(a) => run_scenario(a)?,
+        Command::Run(a) => run_scenario(a),
         Command::Compare { scenarios, controllers, set, out, quiet } => {
-            let dir = out.unwrap_or_else(|| PathBuf::from("reports/compare"));
-            create_dir(&dir)?;
-            let rows = compare::compare(&scenarios, &controllers, &set, &dir, &repo_root(), !quiet)?;
-            print!("{}", compare::markdown(&rows));
-            println!("report: {}", dir.display());
+            compare_controllers(&scenarios, &controllers, &set, out, quiet)
         }
         Command::Sweep { scenario, controllers, scales, speed, set, out, quiet } => {
-            let dir = out.unwrap_or_else(|| compare::default_sweep_dir(&scenario));
-            create_dir(&dir)?;
             let what = if speed { compare::Scaling::Speed } else { compare::Scaling::Amplitude };
-            let (rows, limits) = compare::sweep(&scenario, &controllers, (&scales, what), &set, &dir, &repo_root(), !quiet)?;
-            print!("{}", compare::markdown(&rows));
-            print!("{}", compare::limits_summary(&limits, what, &scales));
-            println!("report: {}", dir.display());
+            sweep(&scenario, &controllers, (&scales, what), &set, out, quiet)
         }
-        Command::Capacity { scenario, mut set, tolerance, simulate, simulate_tolerance, out } => {
-            // The scenario's own mass may be beyond the capacity: plan without the check.
-            set.push("capacity_check=false".into());
-            let plan = plan::plan(&Scenario::load(&scenario, &set)?, &repo_root())?;
-            let t0 = std::time::Instant::now();
-            let cap = capacity::capacity(&plan, tolerance)?;
-            print!("{}", capacity::summary(&plan, &cap, tolerance, t0.elapsed().as_secs_f64()));
-            if simulate {
-                let computed = cap.mass();
-                let dir = out.unwrap_or_else(|| PathBuf::from(format!("{}-capacity", team_runner::run::default_report_dir(&scenario).display())));
-                let searches = capacity::simulated::held_and_tracked(computed, simulate_tolerance.unwrap_or(0.02 * computed), 16, |mass| {
-                    let trial = capacity::simulated::run_trial(&plan.scenario, &repo_root(), mass, &dir.join(format!("{mass:.3}kg")))?;
-                    println!("  {mass:.3} kg: {}, the motion yielding on {} ticks", if trial.held { "held" } else { "not held" }, trial.yielded);
-                    Ok::<_, anyhow::Error>(trial)
-                })?;
-                for sim in &searches {
-                    print!("{}", capacity::simulated::summary(sim, computed));
-                }
-            }
+        Command::Capacity { scenario, set, tolerance, simulate, simulate_tolerance, out } => {
+            let simulate = simulate.then_some((simulate_tolerance, out));
+            team_capacity(&scenario, set, tolerance, simulate)
         }
-        Command::Report { recording, out } => {
-            let dir = out.unwrap_or_else(|| recording.parent().map(Path::to_path_buf).unwrap_or_default());
-            create_dir(&dir)?;
-            let (plan, records, eval) = record::replay::evaluate_recording(&recording, &repo_root())?;
-            write_report(&plan, &eval, &records, &dir)?;
-        }
-        Command::Echo { key, count, wait, zenoh } => echo_key(key, count, wait, &zenoh)?,
+        Command::Report { recording, out } => report_from_recording(&recording, out),
+        Command::Echo { key, count, wait, zenoh } => echo_key(key, count, wait, &zenoh),
         Command::ZenohConfig { certs, robots, team, hub, router, out } => {
-            let written = match router {
-                Some(router) => protocol::site::write_clients(&certs, &protocol::site::SiteTeam { team, robots }, &router, &out)?,
-                None => protocol::access::write_team(&certs, &team, &robots, &hub, &out)?,
-            };
-            for path in written {
-                println!("{}", path.display());
-            }
+            write_zenoh_configs(&certs, robots, team, &hub, router, &out)
         }
         Command::RouterConfig { certs, teams, listen, out } => {
-            let teams = teams.iter().map(|t| protocol::site::SiteTeam::parse(t)).collect::<Result<Vec<_>, _>>()?;
-            if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
-                create_dir(dir)?;
-            }
-            protocol::site::RouterConfig::in_dir(&certs, teams, listen).write(&out)?;
-            println!("{}", out.display());
+            write_router_config(&certs, &teams, listen, &out)
         }
-        Command::Router { config } => run_router(&config)?,
-        Command::Smoke(a) => smoke_run(a)?,
+        Command::Router { config } => run_router(&config),
+        Command::Smoke(a) => smoke_run(a),
     }
+}
+
+/// `team compare`: controllers side by side on the same scenarios.
+fn compare_controllers(
+    scenarios: &[PathBuf],
+    controllers: &[String],
+    set: &[String],
+    out: Option<PathBuf>,
+    quiet: bool,
+) -> Result<()> {
+    let dir = out.unwrap_or_else(|| PathBuf::from("reports/compare"));
+    create_dir(&dir)?;
+    let rows = compare::compare(scenarios, controllers, set, &dir, &repo_root(), !quiet)?;
+    print!("{}", compare::markdown(&rows));
+    println!("report: {}", dir.display());
+    Ok(())
+}
+
+/// `team sweep`: one scenario's motion scaled, with each controller.
+fn sweep(
+    scenario: &Path,
+    controllers: &[String],
+    scales: (&[f64], compare::Scaling),
+    set: &[String],
+    out: Option<PathBuf>,
+    quiet: bool,
+) -> Result<()> {
+    let dir = out.unwrap_or_else(|| compare::default_sweep_dir(scenario));
+    create_dir(&dir)?;
+    let (rows, limits) =
+        compare::sweep(scenario, controllers, scales, set, &dir, &repo_root(), !quiet)?;
+    print!("{}", compare::markdown(&rows));
+    print!("{}", compare::limits_summary(&limits, scales.1, scales.0));
+    println!("report: {}", dir.display());
+    Ok(())
+}
+
+/// `team capacity`: the heaviest object the plan accepts and, with `simulate` (its bisection's
+/// tolerance and report folder), the heaviest held in MuJoCo.
+fn team_capacity(
+    scenario: &Path,
+    mut set: Vec<String>,
+    tolerance: f64,
+    simulate: Option<(Option<f64>, Option<PathBuf>)>,
+) -> Result<()> {
+    // The scenario's own mass may be beyond the capacity: plan without the check.
+    set.push("capacity_check=false".into());
+    let plan = plan::plan(&Scenario::load(scenario, &set)?, &repo_root())?;
+    let t0 = std::time::Instant::now();
+    let cap = capacity::capacity(&plan, tolerance)?;
+    print!("{}", capacity::summary(&plan, &cap, tolerance, t0.elapsed().as_secs_f64()));
+    let Some((simulate_tolerance, out)) = simulate else { return Ok(()) };
+    let dir = out.unwrap_or_else(|| {
+        PathBuf::from(format!("{}-capacity", scenario_run::default_report_dir(scenario).display()))
+    });
+    simulated(&plan, cap.mass(), simulate_tolerance, &dir)
+}
+
+/// `team capacity --simulate`: the searches over closed-loop runs, each trial printed.
+fn simulated(plan: &plan::Plan, computed: f64, tolerance: Option<f64>, dir: &Path) -> Result<()> {
+    let trial = |mass: f64| {
+        let root = repo_root();
+        let out = dir.join(format!("{mass:.3}kg"));
+        let trial = simulated_capacity::run_trial(&plan.scenario, &root, mass, &out)?;
+        let held = if trial.held { "held" } else { "not held" };
+        println!("  {mass:.3} kg: {held}, the motion yielding on {} ticks", trial.yielded);
+        Ok::<_, anyhow::Error>(trial)
+    };
+    let tolerance = tolerance.unwrap_or(0.02 * computed);
+    let searches = simulated_capacity::held_and_tracked(computed, tolerance, 16, trial)?;
+    for sim in &searches {
+        print!("{}", simulated_capacity::summary(sim, computed));
+    }
+    Ok(())
+}
+
+/// `team report`: a run's report rebuilt from its recording.
+fn report_from_recording(recording: &Path, out: Option<PathBuf>) -> Result<()> {
+    let dir = out.unwrap_or_else(|| recording.parent().map(Path::to_path_buf).unwrap_or_default());
+    create_dir(&dir)?;
+    let (plan, records, eval) = record::replay::evaluate_recording(recording, &repo_root())?;
+    write_report(&plan, &eval, &records, &dir)
+}
+
+/// `team zenoh-config`: each component's Zenoh configuration for mutual TLS, for a team's hub
+/// or a site's router.
+fn write_zenoh_configs(
+    certs: &Path,
+    robots: Vec<String>,
+    team: String,
+    hub: &str,
+    router: Option<String>,
+    out: &Path,
+) -> Result<()> {
+    let written = match router {
+        Some(router) => protocol::site::write_clients(
+            certs,
+            &protocol::site::SiteTeam { team, robots },
+            &router,
+            out,
+        )?,
+        None => protocol::access::write_team(certs, &team, &robots, hub, out)?,
+    };
+    for path in written {
+        println!("{}", path.display());
+    }
+    Ok(())
+}
+
+/// `team router-config`: a site router's configuration for the teams it serves.
+fn write_router_config(
+    certs: &Path,
+    teams: &[String],
+    listen: Vec<String>,
+    out: &Path,
+) -> Result<()> {
+    let teams =
+        teams.iter().map(|t| protocol::site::SiteTeam::parse(t)).collect::<Result<Vec<_>, _>>()?;
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        create_dir(dir)?;
+    }
+    protocol::site::RouterConfig::in_dir(certs, teams, listen).write(out)?;
+    println!("{}", out.display());
     Ok(())
 }
 
@@ -329,15 +412,9 @@ fn verbosity(command: &Command) -> Verbosity {
 
 /// `team run`: plan, run (recorded), evaluate, report; an error if a check failed.
 fn run_scenario(a: RunArgs) -> Result<()> {
-    let opts = RunOptions { distributed: a.distributed, hosts: a.hosts, progress: !a.quiet, loss: a.loss };
-    let mut mode_name = match a.router {
-        Some(_) if a.realtime => "site, real time".to_string(),
-        Some(_) => "site".to_string(),
-        None => opts.mode_label(a.tls.is_some(), a.realtime),
-    };
-    for l in &opts.loss {
-        mode_name.push_str(&format!(", {} % loss on {}", l.percent, l.robot));
-    }
+    let opts =
+        RunOptions { distributed: a.distributed, hosts: a.hosts, progress: !a.quiet, loss: a.loss };
+    let mode_name = mode_name(&opts, a.router.is_some(), a.tls.is_some(), a.realtime);
     let s = Scenario::load(&a.scenario, &a.set)?;
     let dir = a.out.unwrap_or_else(|| scenario_run::default_report_dir(&a.scenario));
     create_dir(&dir)?;
@@ -348,14 +425,22 @@ fn run_scenario(a: RunArgs) -> Result<()> {
     plan.scene.realtime = a.realtime;
     plan.set_team(&a.team)?;
     if !a.quiet {
-        println!("{}: settling {:.1} s, then {:.1} s of scenario at {} Hz ({} mode)", s.name, s.settle, s.duration, s.control_hz, mode_name);
+        println!(
+            "{}: settling {:.1} s, then {:.1} s of scenario at {} Hz ({} mode)",
+            s.name, s.settle, s.duration, s.control_hz, mode_name
+        );
     }
-    let source = ScenarioSource::read(&a.scenario, &a.set).map_err(|e| anyhow::anyhow!("reading {}: {e}", a.scenario.display()))?;
+    let source = ScenarioSource::read(&a.scenario, &a.set)
+        .map_err(|e| anyhow::anyhow!("reading {}: {e}", a.scenario.display()))?;
     let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live: a.live };
     let rec = (!a.no_record).then_some(&rec);
     let (records, recording) = match (&a.router, &a.tls) {
         (Some(router), Some(certs)) => {
-            let mode = RunMode::Site { dir: dir.clone(), certs: std::path::absolute(certs)?, router: router.clone() };
+            let mode = RunMode::Site {
+                dir: dir.clone(),
+                certs: std::path::absolute(certs)?,
+                router: router.clone(),
+            };
             scenario_run::run_recorded_in(&plan, &opts, &mode, rec)?
         }
         _ => scenario_run::run_recorded_secure(&plan, &opts, a.tls.as_deref(), &dir, rec)?,
@@ -370,20 +455,51 @@ fn run_scenario(a: RunArgs) -> Result<()> {
         println!("  recording: none (--no-record)");
     }
     if let Some(r) = recording {
-        match &r.error {
-            Some(e) => errors.push(format!("the recording {} is incomplete: {e}", r.path.display())),
-            None => println!("  recording: {} ({:.1} MB, {} messages, {} dropped)", r.path.display(), r.bytes as f64 / 1e6, r.messages, r.dropped),
-        }
+        errors.extend(recording_summary(&r));
     }
     if !eval.metrics.passed {
-        errors.push(format!("acceptance checks failed (see {})", dir.join("metrics.json").display()));
+        errors
+            .push(format!("acceptance checks failed (see {})", dir.join("metrics.json").display()));
     }
     anyhow::ensure!(errors.is_empty(), "{}", errors.join("; "));
     Ok(())
 }
 
+/// The run's mode as the summary names it.
+fn mode_name(opts: &RunOptions, site: bool, tls: bool, realtime: bool) -> String {
+    let mut name = match site {
+        true if realtime => "site, real time".to_string(),
+        true => "site".to_string(),
+        false => opts.mode_label(tls, realtime),
+    };
+    for l in &opts.loss {
+        name.push_str(&format!(", {} % loss on {}", l.percent, l.robot));
+    }
+    name
+}
+
+/// The recording's line on stdout, or why it is incomplete.
+fn recording_summary(r: &record::RecordingSummary) -> Option<String> {
+    if let Some(e) = &r.error {
+        return Some(format!("the recording {} is incomplete: {e}", r.path.display()));
+    }
+    println!(
+        "  recording: {} ({:.1} MB, {} messages, {} dropped)",
+        r.path.display(),
+        r.bytes as f64 / 1e6,
+        r.messages,
+        r.dropped
+    );
+    None
+}
+
 /// The summary on stdout, then the report folder (data, figures, report.html).
-fn write_report(plan: &plan::Plan, eval: &evaluate::Evaluation, records: &team_runner::driver::Records, dir: &Path) -> Result<()> {
+fn write_report(
+    plan: &plan::Plan,
+    eval: &evaluate::Evaluation,
+    records: &evaluation::records::Records,
+    dir: &Path,
+) -> Result<()> {
     print!("{}", evaluate::summary(&eval.metrics, dir));
     evaluate::write_report(plan, eval, dir)?;
     plots::write_all(plan, eval, records, dir)?;
@@ -394,7 +510,7 @@ fn write_report(plan: &plan::Plan, eval: &evaluate::Evaluation, records: &team_r
 fn run_router(config: &Path) -> Result<()> {
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {
-        let router = team_runner::site::open_router(config).await?;
+        let router = launch::router::open_router(config).await?;
         println!("router {} listening on {:?}", router.session.zid(), router.listen);
         tokio::signal::ctrl_c().await?;
         router.session.close().await.map_err(|e| anyhow::anyhow!("closing the router: {e}"))?;
@@ -403,7 +519,12 @@ fn run_router(config: &Path) -> Result<()> {
 }
 
 /// `team echo`: the messages on `key` as JSON lines.
-fn echo_key(key: String, count: Option<u64>, wait: f64, zenoh: &protocol::transport::ZenohArgs) -> Result<()> {
+fn echo_key(
+    key: String,
+    count: Option<u64>,
+    wait: f64,
+    zenoh: &protocol::transport::ZenohArgs,
+) -> Result<()> {
     anyhow::ensure!(wait.is_finite() && wait > 0.0, "--wait must be a positive number of seconds");
     let rt = tokio::runtime::Runtime::new()?;
     let opts = echo::EchoOptions { key, count, wait: std::time::Duration::from_secs_f64(wait) };

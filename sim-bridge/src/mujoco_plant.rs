@@ -60,7 +60,18 @@ impl MujocoPlant {
         let drives = vec![DriveTargets::new(); world.robots.len()];
         let most = world.robots.iter().map(|r| r.actuator.len()).max().unwrap_or(0);
         let (drive_q, drive_qd, drive_tau) = (vec![0.0; most], vec![0.0; most], vec![0.0; most]);
-        let mut p = MujocoPlant { world, data, ids, ticks: 0, perturbations: Perturbations::default(), lost, drives, drive_q, drive_qd, drive_tau };
+        let mut p = MujocoPlant {
+            world,
+            data,
+            ids,
+            ticks: 0,
+            perturbations: Perturbations::default(),
+            lost,
+            drives,
+            drive_q,
+            drive_qd,
+            drive_tau,
+        };
         for i in 0..p.world.robots.len() {
             let q = p.world.robots[i].initial_q.clone();
             p.set_configuration(i, &q, None);
@@ -153,11 +164,21 @@ impl MujocoPlant {
         // The dense mass matrix (once, at the loss), for each joint's own inertia.
         let mut full = vec![0.0; nv * nv];
         unsafe { mujoco_c::mj_fullM(m, d, full.as_mut_ptr()) };
-        let mut out = LostDrives { loss, q_hold: Vec::with_capacity(r.joint_qpos.len()), kp: Vec::new(), kd: Vec::new() };
+        let mut out = LostDrives {
+            loss,
+            q_hold: Vec::with_capacity(r.joint_qpos.len()),
+            kp: Vec::new(),
+            kd: Vec::new(),
+        };
         for ((&qa, &va), &a) in r.joint_qpos.iter().zip(&r.joint_dof).zip(&r.actuator) {
-            let limit = unsafe { (*m.actuator_ctrlrange.add(2 * a + 1)).abs().max((*m.actuator_ctrlrange.add(2 * a)).abs()) };
+            let limit = unsafe {
+                (*m.actuator_ctrlrange.add(2 * a + 1))
+                    .abs()
+                    .max((*m.actuator_ctrlrange.add(2 * a)).abs())
+            };
             let inertia = full[va * nv + va];
-            let kp = if limit.is_finite() && limit > 0.0 { limit / FREEZE_ERROR_AT_LIMIT } else { 0.0 };
+            let kp =
+                if limit.is_finite() && limit > 0.0 { limit / FREEZE_ERROR_AT_LIMIT } else { 0.0 };
             out.q_hold.push(unsafe { *d.qpos.add(qa) });
             out.kp.push(kp);
             out.kd.push(2.0 * (kp * inertia.max(0.0)).sqrt());
@@ -171,8 +192,13 @@ impl MujocoPlant {
             let Some(l) = lost.as_ref().filter(|l| l.loss == DriveLoss::Freeze) else { continue };
             let r = &self.world.robots[i];
             let d = unsafe { self.data.ffi_mut() };
-            for (k, ((&qa, &va), &a)) in r.joint_qpos.iter().zip(&r.joint_dof).zip(&r.actuator).enumerate() {
-                unsafe { *d.ctrl.add(a) = l.kp[k] * (l.q_hold[k] - *d.qpos.add(qa)) - l.kd[k] * *d.qvel.add(va) };
+            for (k, ((&qa, &va), &a)) in
+                r.joint_qpos.iter().zip(&r.joint_dof).zip(&r.actuator).enumerate()
+            {
+                unsafe {
+                    *d.ctrl.add(a) =
+                        l.kp[k] * (l.q_hold[k] - *d.qpos.add(qa)) - l.kd[k] * *d.qvel.add(va)
+                };
             }
         }
     }
@@ -223,7 +249,8 @@ impl Plant for MujocoPlant {
         unsafe {
             let a = r.free_qpos;
             let position = [*d.qpos.add(a), *d.qpos.add(a + 1), *d.qpos.add(a + 2)];
-            let mut quat = [*d.qpos.add(a + 3), *d.qpos.add(a + 4), *d.qpos.add(a + 5), *d.qpos.add(a + 6)];
+            let mut quat =
+                [*d.qpos.add(a + 3), *d.qpos.add(a + 4), *d.qpos.add(a + 5), *d.qpos.add(a + 6)];
             let n = quat.iter().map(|x| x * x).sum::<f64>().sqrt();
             quat.iter_mut().for_each(|x| *x /= n);
             out.base_pose = Pose { position, orientation: quat };
@@ -319,7 +346,9 @@ fn foot_forces(m: &mjModel, d: &mjData, r: &crate::world::RobotIndex, out: &mut 
     for i in 0..d.ncon as usize {
         let c = unsafe { &*d.contact.add(i) };
         for (g, other) in [(c.geom[0], c.geom[1]), (c.geom[1], c.geom[0])] {
-            if !r.foot_geoms.iter().any(|&f| f as i32 == g) || r.hand_geoms.iter().any(|&h| h as i32 == other) {
+            if !r.foot_geoms.iter().any(|&f| f as i32 == g)
+                || r.hand_geoms.iter().any(|&h| h as i32 == other)
+            {
                 continue;
             }
             let body = unsafe { *m.geom_bodyid.add(g as usize) } as usize;

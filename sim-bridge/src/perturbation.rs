@@ -31,8 +31,14 @@ pub struct Perturbations {
 impl Perturbations {
     /// Add a perturbation; its body is resolved against the world (typed error if unknown).
     pub fn add(&mut self, world: &World, p: Perturbation) -> Result<(), WorldError> {
-        if !(p.wrench.iter().all(|x| x.is_finite()) && p.start.is_finite() && p.duration.is_finite() && p.duration > 0.0) {
-            return Err(WorldError::Invalid("perturbation: wrench, start and duration must be finite, duration > 0".into()));
+        if !(p.wrench.iter().all(|x| x.is_finite())
+            && p.start.is_finite()
+            && p.duration.is_finite()
+            && p.duration > 0.0)
+        {
+            return Err(WorldError::Invalid(
+                "perturbation: wrench, start and duration must be finite, duration > 0".into(),
+            ));
         }
         let body = resolve(world, &p.target)?;
         self.list.push((p, Some(body)));
@@ -40,8 +46,21 @@ impl Perturbations {
     }
 
     /// Add a request received on the perturbation key; `now` is the current simulated time.
-    pub fn add_request(&mut self, world: &World, req: &PerturbationRequest, now: f64) -> Result<(), WorldError> {
-        self.add(world, Perturbation { target: req.target.clone(), wrench: req.wrench, start: req.start.unwrap_or(now), duration: req.duration })
+    pub fn add_request(
+        &mut self,
+        world: &World,
+        req: &PerturbationRequest,
+        now: f64,
+    ) -> Result<(), WorldError> {
+        self.add(
+            world,
+            Perturbation {
+                target: req.target.clone(),
+                wrench: req.wrench,
+                start: req.start.unwrap_or(now),
+                duration: req.duration,
+            },
+        )
     }
 
     pub fn len(&self) -> usize {
@@ -82,7 +101,9 @@ impl Perturbations {
 fn resolve(world: &World, target: &PerturbationTarget) -> Result<usize, WorldError> {
     let raw = world.model.ffi();
     match target {
-        PerturbationTarget::Object => world.object.map(|o| o.0).ok_or_else(|| WorldError::Invalid("perturbation on the object, but the world has none".into())),
+        PerturbationTarget::Object => world.object.map(|o| o.0).ok_or_else(|| {
+            WorldError::Invalid("perturbation on the object, but the world has none".into())
+        }),
         PerturbationTarget::RobotBody { robot, body } => {
             if !world.robots.iter().any(|r| &r.id == robot) {
                 return Err(WorldError::Invalid(format!("perturbation on unknown robot {robot}")));

@@ -131,7 +131,8 @@ impl Plant for PlaceholderPlant {
     }
 
     fn state(&self, robot: usize, out: &mut RobotState) {
-        out.base_pose = Pose { position: [2.0 * robot as f64, 0.0, 0.55], orientation: [1.0, 0.0, 0.0, 0.0] };
+        out.base_pose =
+            Pose { position: [2.0 * robot as f64, 0.0, 0.55], orientation: [1.0, 0.0, 0.0, 0.0] };
         out.base_twist = [0.0; 6];
         out.joint_positions.clear();
         out.joint_positions.extend_from_slice(&self.q[robot]);

@@ -93,7 +93,8 @@ pub async fn run_on(
 ) -> Result<RealtimeReport, BridgeError> {
     let BridgeIo { torques, states, side } = io;
     // The drive timeout in ticks.
-    let timeout_ticks = (cfg.drive_timeout.as_secs_f64() / period.as_secs_f64()).ceil().max(1.0) as u64;
+    let timeout_ticks =
+        (cfg.drive_timeout.as_secs_f64() / period.as_secs_f64()).ceil().max(1.0) as u64;
     let mut arrivals = Arrivals::new(plant.robots().to_vec(), extras.first_tick);
     let mut overruns = 0u64;
     let started = Instant::now();
@@ -103,7 +104,11 @@ pub async fn run_on(
         if *stop.borrow() {
             return Err(BridgeError::Stopped);
         }
-        let deadline = if waiting_first { Instant::now() + cfg.command_timeout.max(cfg.start_timeout) } else { schedule.start_tick(Instant::now()) };
+        let deadline = if waiting_first {
+            Instant::now() + cfg.command_timeout.max(cfg.start_timeout)
+        } else {
+            schedule.start_tick(Instant::now())
+        };
         states.publish(plant, tick).await?;
         let sent = Instant::now();
         arrivals.begin_tick(side);
@@ -122,19 +127,10 @@ pub async fn run_on(
         }
         wait_until(schedule.due).await;
         if cfg.progress_every > 0 && (tick + 1 - extras.first_tick) % cfg.progress_every == 0 {
-            tracing::info!(tick = tick + 1, of = cfg.ticks, sim_time = plant.time(), missed = ?arrivals.missed, "progress (real time)");
+            arrivals.log_progress(tick + 1, cfg.ticks, plant.time());
         }
     }
-    Ok(RealtimeReport {
-        ticks: cfg.ticks,
-        sim_time: plant.time(),
-        wall_time: started.elapsed(),
-        drive_losses: arrivals.robots.iter().cloned().zip(arrivals.drive_losses).collect(),
-        missed: arrivals.robots.into_iter().zip(arrivals.missed).collect(),
-        overruns,
-        slipped: schedule.slipped,
-        rejected_torques: arrivals.rejected,
-    })
+    Ok(arrivals.into_report(cfg.ticks, plant.time(), started.elapsed(), overruns, schedule.slipped))
 }
 
 /// Wait until `due`: sleeping while more than 2 ms are left, then yielding (Tokio's timers have
@@ -151,16 +147,22 @@ async fn wait_until(due: Instant) {
 
 /// The next torque sample before `left` runs out, if one came (`None`: look at the deadline
 /// again).
-async fn poll_torques(torques: &transport::SampleQueue, left: Duration) -> Result<Option<Sample>, BridgeError> {
+async fn poll_torques(
+    torques: &transport::SampleQueue,
+    left: Duration,
+) -> Result<Option<Sample>, BridgeError> {
     // Tokio's timers have 1 ms resolution, as long as a 1 kHz period: wait on the queue
     // only while more than 2 ms are left, then poll and yield until the deadline.
     match torques.try_recv() {
         Ok(Some(s)) => Ok(Some(s)),
-        Ok(None) if left > Duration::from_millis(2) => match tokio::time::timeout(left - Duration::from_millis(1), torques.recv_async()).await {
-            Ok(Ok(s)) => Ok(Some(s)),
-            Ok(Err(_)) => Err(BridgeError::Stopped),
-            Err(_) => Ok(None),
-        },
+        Ok(None) if left > Duration::from_millis(2) => {
+            match tokio::time::timeout(left - Duration::from_millis(1), torques.recv_async()).await
+            {
+                Ok(Ok(s)) => Ok(Some(s)),
+                Ok(Err(_)) => Err(BridgeError::Stopped),
+                Err(_) => Ok(None),
+            }
+        }
         Ok(None) => {
             tokio::task::yield_now().await;
             Ok(None)
@@ -188,7 +190,47 @@ struct Arrivals {
 impl Arrivals {
     fn new(robots: Vec<String>, first_tick: u64) -> Self {
         let n = robots.len();
-        Arrivals { robots, missed: vec![0; n], got: vec![false; n], last_tick: vec![None; n], last_fresh: vec![first_tick; n], drive_losses: vec![0; n], rejected: 0 }
+        Arrivals {
+            robots,
+            missed: vec![0; n],
+            got: vec![false; n],
+            last_tick: vec![None; n],
+            last_fresh: vec![first_tick; n],
+            drive_losses: vec![0; n],
+            rejected: 0,
+        }
+    }
+
+    /// The progress line of the real-time loop, after `ticks` of `of`.
+    fn log_progress(&self, ticks: u64, of: u64, sim_time: f64) {
+        tracing::info!(
+            tick = ticks,
+            of,
+            sim_time,
+            missed = ?self.missed,
+            "progress (real time)"
+        );
+    }
+
+    /// The report of a run of `ticks` ticks that ended at `sim_time` after `wall_time`.
+    fn into_report(
+        self,
+        ticks: u64,
+        sim_time: f64,
+        wall_time: Duration,
+        overruns: u64,
+        slipped: Duration,
+    ) -> RealtimeReport {
+        RealtimeReport {
+            ticks,
+            sim_time,
+            wall_time,
+            drive_losses: self.robots.iter().cloned().zip(self.drive_losses).collect(),
+            missed: self.robots.into_iter().zip(self.missed).collect(),
+            overruns,
+            slipped,
+            rejected_torques: self.rejected,
+        }
     }
 
     /// A tick starts: no torques yet, and its loop timing cleared.
@@ -202,7 +244,15 @@ impl Arrivals {
 
     /// Take torques until every robot's for `tick` came or the `deadline` passed; the states
     /// left at `sent`.
-    async fn collect(&mut self, torques: &transport::SampleQueue, deadline: Instant, tick: u64, sent: Instant, plant: &mut impl Plant, side: &mut TickSide) -> Result<(), BridgeError> {
+    async fn collect(
+        &mut self,
+        torques: &transport::SampleQueue,
+        deadline: Instant,
+        tick: u64,
+        sent: Instant,
+        plant: &mut impl Plant,
+        side: &mut TickSide,
+    ) -> Result<(), BridgeError> {
         while !self.got.iter().all(|g| *g) {
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
@@ -216,7 +266,14 @@ impl Arrivals {
 
     /// One torque sample during `tick`: the newest torques of a robot drive it (waking its
     /// lost drives if they are this tick's); older ones are counted late.
-    fn take(&mut self, sample: &Sample, tick: u64, sent: Instant, plant: &mut impl Plant, side: &mut TickSide) {
+    fn take(
+        &mut self,
+        sample: &Sample,
+        tick: u64,
+        sent: Instant,
+        plant: &mut impl Plant,
+        side: &mut TickSide,
+    ) {
         let cmd = match decode_sample::<DriveCommand>(sample) {
             Ok(c) => c,
             Err(e) => {
@@ -270,10 +327,26 @@ impl Arrivals {
 
     /// A robot whose torques have not come in time for `timeout_ticks` loses its drives
     /// ([`LockstepConfig::agent_loss`]).
-    fn lose_silent_drives(&mut self, cfg: &LockstepConfig, plant: &mut impl Plant, tick: u64, timeout_ticks: u64) {
+    fn lose_silent_drives(
+        &mut self,
+        cfg: &LockstepConfig,
+        plant: &mut impl Plant,
+        tick: u64,
+        timeout_ticks: u64,
+    ) {
         for (i, r) in self.robots.iter().enumerate() {
-            if let Some(loss) = cfg.agent_loss.drive_loss().filter(|_| tick - self.last_fresh[i] >= timeout_ticks && !plant.drives_lost(i)) {
-                tracing::warn!(robot = %r, tick, since = self.last_fresh[i], ?loss, "no torques for the drive timeout: the robot's drives lose their commands");
+            if let Some(loss) = cfg
+                .agent_loss
+                .drive_loss()
+                .filter(|_| tick - self.last_fresh[i] >= timeout_ticks && !plant.drives_lost(i))
+            {
+                tracing::warn!(
+                    robot = %r,
+                    tick,
+                    since = self.last_fresh[i],
+                    ?loss,
+                    "no torques for the drive timeout: the robot's drives lose their commands"
+                );
                 plant.lose_drives(i, loss);
                 self.drive_losses[i] += 1;
             }

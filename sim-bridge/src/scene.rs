@@ -49,8 +49,9 @@ pub struct Scene {
     pub command_timeout: f64,
     /// Seconds to wait for every robot to join.
     pub start_timeout: f64,
-    /// Run the scenario phase against the wall clock, one control period per tick ([`Pace::RealTime`]:
-    /// a robot whose torques are late keeps its last ones); settling stays lockstep.
+    /// Run the scenario phase against the wall clock, one control period per tick
+    /// ([`Pace::RealTime`]: a robot whose torques are late keeps its last ones); settling stays
+    /// lockstep.
     #[serde(default)]
     pub realtime: bool,
     /// What a robot's drives do when its agent leaves, or (real time) when its torques stop
@@ -70,8 +71,10 @@ pub struct SceneReport {
 impl Scene {
     /// Read a scene file (TOML).
     pub fn load(path: &Path) -> Result<Scene, WorldError> {
-        let text = std::fs::read_to_string(path).map_err(|e| WorldError::Invalid(format!("reading scene {}: {e}", path.display())))?;
-        let s: Scene = toml::from_str(&text).map_err(|e| WorldError::Invalid(format!("scene {}: {e}", path.display())))?;
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| WorldError::Invalid(format!("reading scene {}: {e}", path.display())))?;
+        let s: Scene = toml::from_str(&text)
+            .map_err(|e| WorldError::Invalid(format!("scene {}: {e}", path.display())))?;
         s.check()?;
         Ok(s)
     }
@@ -79,14 +82,20 @@ impl Scene {
     /// Write it as TOML.
     pub fn save(&self, path: &Path) -> Result<(), WorldError> {
         let text = toml::to_string(self).map_err(|e| WorldError::Invalid(format!("scene: {e}")))?;
-        std::fs::write(path, text).map_err(|e| WorldError::Invalid(format!("writing scene {}: {e}", path.display())))
+        std::fs::write(path, text)
+            .map_err(|e| WorldError::Invalid(format!("writing scene {}: {e}", path.display())))
     }
 
     fn check(&self) -> Result<(), WorldError> {
-        protocol::validate_id("team", &self.team).map_err(|e| WorldError::Invalid(format!("scene team: {e}")))?;
-        for (what, x) in [("command_timeout", self.command_timeout), ("start_timeout", self.start_timeout)] {
+        protocol::validate_id("team", &self.team)
+            .map_err(|e| WorldError::Invalid(format!("scene team: {e}")))?;
+        for (what, x) in
+            [("command_timeout", self.command_timeout), ("start_timeout", self.start_timeout)]
+        {
             if !(x.is_finite() && x > 0.0 && x <= MAX_TIMEOUT_S) {
-                return Err(WorldError::Invalid(format!("scene {what} = {x} must be positive and at most {MAX_TIMEOUT_S} s")));
+                return Err(WorldError::Invalid(format!(
+                    "scene {what} = {x} must be positive and at most {MAX_TIMEOUT_S} s"
+                )));
             }
         }
         if self.ticks == 0 {
@@ -99,7 +108,11 @@ impl Scene {
     /// The run's ticks: settling, then the scenario, at the world's control rate
     /// (`protocol::clock`: tick numbers continue, the scenario clock starts after settling).
     pub fn clock(&self) -> protocol::RunClock {
-        protocol::RunClock { control_hz: self.world.control_hz, settle_ticks: self.settle_ticks, ticks: self.ticks }
+        protocol::RunClock {
+            control_hz: self.world.control_hz,
+            settle_ticks: self.settle_ticks,
+            ticks: self.ticks,
+        }
     }
 
     /// How the scenario phase is paced: [`Pace::RealTime`] at the control period if
@@ -139,13 +152,29 @@ pub enum SceneError {
 
 /// Build the world from `robots` (the scene's, in its order) and run the scene in lockstep
 /// (see the module docs).
-pub async fn run(session: &Session, scene: &Scene, robots: &[Arc<Robot>], stop: watch::Receiver<bool>) -> Result<SceneReport, SceneError> {
+pub async fn run(
+    session: &Session,
+    scene: &Scene,
+    robots: &[Arc<Robot>],
+    stop: watch::Receiver<bool>,
+) -> Result<SceneReport, SceneError> {
     scene.check()?;
     let world = World::build(&scene.world, robots)?;
     let mut plant = MujocoPlant::new(world)?;
-    let mut extras = Extras { publish_ground_truth: true, perturbation_key: true, ..Default::default() };
+    let mut extras =
+        Extras { publish_ground_truth: true, perturbation_key: true, ..Default::default() };
     let cfg = scene.lockstep(scene.ticks);
-    let (settle, run) = settle_then_run(session, &mut plant, &cfg, scene.settle_ticks, scene.pace(), &scene.perturbations, &mut extras, stop).await?;
+    let (settle, run) = settle_then_run(
+        session,
+        &mut plant,
+        &cfg,
+        scene.settle_ticks,
+        scene.pace(),
+        &scene.perturbations,
+        &mut extras,
+        stop,
+    )
+    .await?;
     Ok(SceneReport { settle, run, perturbations_applied_steps: plant.perturbations.applied_steps })
 }
 
@@ -219,7 +248,13 @@ pub async fn settle_then_run(
         plant.restart_clock();
         r?
     } else {
-        lockstep::LockstepReport { ticks: 0, sim_time: 0.0, wall_time: Duration::ZERO, resends: 0, rejected_torques: 0 }
+        lockstep::LockstepReport {
+            ticks: 0,
+            sim_time: 0.0,
+            wall_time: Duration::ZERO,
+            resends: 0,
+            rejected_torques: 0,
+        }
     };
     for p in pushes {
         plant.perturbations.add(&plant.world, p.clone())?;
@@ -227,10 +262,14 @@ pub async fn settle_then_run(
     extras.first_tick += settle_ticks;
     io.drain_torques();
     let run = match pace {
-        Pace::Lockstep => PhaseReport::Lockstep(lockstep::run_on(session, &mut io, cfg, plant, extras, stop).await?),
+        Pace::Lockstep => PhaseReport::Lockstep(
+            lockstep::run_on(session, &mut io, cfg, plant, extras, stop).await?,
+        ),
         Pace::RealTime { period } => {
             let start = if settle_ticks > 0 { Start::Driven } else { Start::WaitForFirstTorques };
-            PhaseReport::RealTime(crate::realtime::run_on(&mut io, cfg, period, plant, extras, start, stop).await?)
+            PhaseReport::RealTime(
+                crate::realtime::run_on(&mut io, cfg, period, plant, extras, start, stop).await?,
+            )
         }
     };
     Ok((settle, run))
@@ -242,7 +281,17 @@ mod tests {
     use crate::world::WorldSpec;
 
     fn scene() -> Scene {
-        Scene { team: "team".into(), world: WorldSpec::paper_pair(), perturbations: Vec::new(), settle_ticks: 10, ticks: 20, command_timeout: 1.0, start_timeout: 1.0, realtime: false, drive_loss: DriveLoss::Freeze }
+        Scene {
+            team: "team".into(),
+            world: WorldSpec::paper_pair(),
+            perturbations: Vec::new(),
+            settle_ticks: 10,
+            ticks: 20,
+            command_timeout: 1.0,
+            start_timeout: 1.0,
+            realtime: false,
+            drive_loss: DriveLoss::Freeze,
+        }
     }
 
     #[test]
@@ -251,7 +300,12 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("scene.toml");
         let mut s = scene();
-        s.perturbations.push(Perturbation { target: protocol::PerturbationTarget::Object, wrench: [0.0, 0.0, 10.0, 0.0, 0.0, 0.0], start: 1.0, duration: 0.3 });
+        s.perturbations.push(Perturbation {
+            target: protocol::PerturbationTarget::Object,
+            wrench: [0.0, 0.0, 10.0, 0.0, 0.0, 0.0],
+            start: 1.0,
+            duration: 0.3,
+        });
         s.save(&path).unwrap();
         let back = Scene::load(&path).unwrap();
         assert_eq!(back.perturbations, s.perturbations);
@@ -273,7 +327,10 @@ mod tests {
             let e = Scene::load(&path).unwrap_err().to_string();
             assert!(e.contains(says), "{says}: {e}");
         }
-        assert!(Scene::load(&dir.join("missing.toml")).unwrap_err().to_string().contains("missing.toml"));
+        assert!(Scene::load(&dir.join("missing.toml"))
+            .unwrap_err()
+            .to_string()
+            .contains("missing.toml"));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

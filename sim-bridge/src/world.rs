@@ -81,15 +81,30 @@ impl RobotPlacement {
     /// `robot` (loaded from `description`) at `(x, y)` facing `yaw`, its base at the height of
     /// its own description's standing pose (so its feet touch the floor). A fixed-base robot
     /// has no base to place on the floor: an error.
-    pub fn standing(id: &str, description: PathBuf, robot: &Robot, xy: [f64; 2], yaw: f64) -> Result<Self, WorldError> {
+    pub fn standing(
+        id: &str,
+        description: PathBuf,
+        robot: &Robot,
+        xy: [f64; 2],
+        yaw: f64,
+    ) -> Result<Self, WorldError> {
         if !robot.model.floating_base {
-            return Err(WorldError::Invalid(format!("robot {id}: {} has a fixed base; only a floating-base robot stands on the floor", description.display())));
+            return Err(WorldError::Invalid(format!(
+                "robot {id}: {} has a fixed base; only a floating-base robot stands on the floor",
+                description.display()
+            )));
         }
         Ok(Self::at_height(id, description, [xy[0], xy[1], robot.standing_q[2]], yaw))
     }
 
     fn at_height(id: &str, description: PathBuf, base_position: [f64; 3], base_yaw: f64) -> Self {
-        RobotPlacement { id: id.to_string(), description, base_position, base_yaw, joint_overrides: BTreeMap::new() }
+        RobotPlacement {
+            id: id.to_string(),
+            description,
+            base_position,
+            base_yaw,
+            joint_overrides: BTreeMap::new(),
+        }
     }
 }
 
@@ -113,7 +128,14 @@ pub struct ObjectSpec {
 impl ObjectSpec {
     /// The paper's object: a 0.6 m cube of 1 kg, centre at `position`.
     pub fn paper_cube(position: [f64; 3]) -> Self {
-        ObjectSpec { size: [0.6; 3], mass: 1.0, inertia: None, friction: [0.8, 0.005, 0.0001], position, orientation: [1.0, 0.0, 0.0, 0.0] }
+        ObjectSpec {
+            size: [0.6; 3],
+            mass: 1.0,
+            inertia: None,
+            friction: [0.8, 0.005, 0.0001],
+            position,
+            orientation: [1.0, 0.0, 0.0, 0.0],
+        }
     }
 
     pub fn principal_inertia(&self) -> [f64; 3] {
@@ -174,7 +196,14 @@ pub struct SolverParams {
 
 impl Default for SolverParams {
     fn default() -> Self {
-        SolverParams { integrator: "implicitfast".into(), cone: "elliptic".into(), impratio: 10.0, iterations: 100, tolerance: 1e-10, noslip_iterations: 0 }
+        SolverParams {
+            integrator: "implicitfast".into(),
+            cone: "elliptic".into(),
+            impratio: 10.0,
+            iterations: 100,
+            tolerance: 1e-10,
+            noslip_iterations: 0,
+        }
     }
 }
 
@@ -201,7 +230,10 @@ impl WorldSpec {
     /// cube at 0.60 m height, control and physics at 1 kHz.
     pub fn paper_pair() -> Self {
         WorldSpec {
-            robots: vec![RobotPlacement::default_robot("r1", -1.15, 0.0, 0.0), RobotPlacement::default_robot("r2", 1.15, 0.0, std::f64::consts::PI)],
+            robots: vec![
+                RobotPlacement::default_robot("r1", -1.15, 0.0, 0.0),
+                RobotPlacement::default_robot("r2", 1.15, 0.0, std::f64::consts::PI),
+            ],
             object: Some(ObjectSpec::paper_cube([0.0, 0.0, 0.60])),
             ..Self::single("r1")
         }
@@ -223,7 +255,8 @@ impl WorldSpec {
 
     /// Physics substeps per control tick, checked.
     pub fn substeps(&self) -> Result<u32, WorldError> {
-        protocol::validate::substeps(self.control_hz, self.physics_hz).map_err(|e| WorldError::Invalid(e.to_string()))
+        protocol::validate::substeps(self.control_hz, self.physics_hz)
+            .map_err(|e| WorldError::Invalid(e.to_string()))
     }
 
     fn validate(&self) -> Result<(), WorldError> {
@@ -231,44 +264,97 @@ impl WorldSpec {
         if self.robots.is_empty() {
             return Err(WorldError::Invalid("no robots".into()));
         }
-        protocol::validate::check_unique("robots", self.robots.iter().map(|r| r.id.as_str())).map_err(|e| WorldError::Invalid(e.to_string()))?;
+        protocol::validate::check_unique("robots", self.robots.iter().map(|r| r.id.as_str()))
+            .map_err(|e| WorldError::Invalid(e.to_string()))?;
         for r in &self.robots {
-            protocol::validate_id("robot", &r.id).map_err(|e| WorldError::Invalid(e.to_string()))?;
-            finite(&format!("robot {} base position", r.id), &r.base_position)?;
-            finite(&format!("robot {} base yaw", r.id), &[r.base_yaw])?;
-            for (j, v) in &r.joint_overrides {
-                finite(&format!("robot {} joint {j}", r.id), &[*v])?;
-            }
+            r.validate()?;
         }
         if let Some(o) = &self.object {
-            finite("object size", &o.size)?;
-            finite("object position", &o.position)?;
-            finite("object orientation", &o.orientation)?;
-            finite("object friction", &o.friction)?;
-            if o.size.iter().any(|s| *s <= 0.0) || !(o.mass.is_finite() && o.mass > 0.0) {
-                return Err(WorldError::Invalid("object size and mass must be positive".into()));
-            }
-            let i = o.principal_inertia();
-            finite("object inertia", &i)?;
-            if i.iter().any(|x| *x <= 0.0) || i[0] + i[1] < i[2] || i[1] + i[2] < i[0] || i[0] + i[2] < i[1] {
-                return Err(WorldError::Invalid(format!("object inertia {i:?} is not physical")));
-            }
-            protocol::validate::check_unit_quaternion_within("object orientation", &o.orientation, protocol::validate::FILE_QUATERNION_TOLERANCE)
-                .map_err(|e| WorldError::Invalid(e.to_string()))?;
+            o.validate()?;
         }
-        let c = &self.contact;
-        finite("contact parameters", &[c.foot_friction, c.floor_friction])?;
-        finite("contact parameters", &c.hand_friction)?;
-        finite("contact parameters", &[c.foot_solref[0], c.foot_solref[1], c.hand_solref[0], c.hand_solref[1]])?;
-        finite("contact parameters", &[c.foot_solimp[0], c.foot_solimp[1], c.foot_solimp[2], c.hand_solimp[0], c.hand_solimp[1], c.hand_solimp[2]])?;
+        self.contact.validate()?;
         if !(self.initial_joint_noise.is_finite() && self.initial_joint_noise >= 0.0) {
             return Err(WorldError::Invalid("initial joint noise must be >= 0".into()));
         }
-        if !["implicitfast", "implicit", "RK4", "Euler"].contains(&self.solver.integrator.as_str()) || !["elliptic", "pyramidal"].contains(&self.solver.cone.as_str()) {
+        self.solver.validate()
+    }
+}
+
+impl RobotPlacement {
+    /// A valid id and finite base pose and joint overrides.
+    fn validate(&self) -> Result<(), WorldError> {
+        protocol::validate_id("robot", &self.id).map_err(|e| WorldError::Invalid(e.to_string()))?;
+        finite(&format!("robot {} base position", self.id), &self.base_position)?;
+        finite(&format!("robot {} base yaw", self.id), &[self.base_yaw])?;
+        for (j, v) in &self.joint_overrides {
+            finite(&format!("robot {} joint {j}", self.id), &[*v])?;
+        }
+        Ok(())
+    }
+}
+
+impl ObjectSpec {
+    /// Finite numbers, positive size and mass, a physical inertia and a unit orientation.
+    fn validate(&self) -> Result<(), WorldError> {
+        let o = self;
+        finite("object size", &o.size)?;
+        finite("object position", &o.position)?;
+        finite("object orientation", &o.orientation)?;
+        finite("object friction", &o.friction)?;
+        if o.size.iter().any(|s| *s <= 0.0) || !(o.mass.is_finite() && o.mass > 0.0) {
+            return Err(WorldError::Invalid("object size and mass must be positive".into()));
+        }
+        let i = o.principal_inertia();
+        finite("object inertia", &i)?;
+        if i.iter().any(|x| *x <= 0.0)
+            || i[0] + i[1] < i[2]
+            || i[1] + i[2] < i[0]
+            || i[0] + i[2] < i[1]
+        {
+            return Err(WorldError::Invalid(format!("object inertia {i:?} is not physical")));
+        }
+        protocol::validate::check_unit_quaternion_within(
+            "object orientation",
+            &o.orientation,
+            protocol::validate::FILE_QUATERNION_TOLERANCE,
+        )
+        .map_err(|e| WorldError::Invalid(e.to_string()))
+    }
+}
+
+impl ContactParams {
+    /// Finite frictions and solver parameters.
+    fn validate(&self) -> Result<(), WorldError> {
+        let c = self;
+        finite("contact parameters", &[c.foot_friction, c.floor_friction])?;
+        finite("contact parameters", &c.hand_friction)?;
+        finite(
+            "contact parameters",
+            &[c.foot_solref[0], c.foot_solref[1], c.hand_solref[0], c.hand_solref[1]],
+        )?;
+        finite(
+            "contact parameters",
+            &[
+                c.foot_solimp[0],
+                c.foot_solimp[1],
+                c.foot_solimp[2],
+                c.hand_solimp[0],
+                c.hand_solimp[1],
+                c.hand_solimp[2],
+            ],
+        )
+    }
+}
+
+impl SolverParams {
+    /// A known integrator and cone, finite impedance ratio and tolerance.
+    fn validate(&self) -> Result<(), WorldError> {
+        if !["implicitfast", "implicit", "RK4", "Euler"].contains(&self.integrator.as_str())
+            || !["elliptic", "pyramidal"].contains(&self.cone.as_str())
+        {
             return Err(WorldError::Invalid("unknown integrator or cone".into()));
         }
-        finite("solver", &[self.solver.impratio, self.solver.tolerance])?;
-        Ok(())
+        finite("solver", &[self.impratio, self.tolerance])
     }
 }
 
@@ -326,7 +412,8 @@ pub fn mujoco_urdf_text(urdf: &str) -> Result<String, String> {
     let a = urdf.find("<robot").ok_or("no <robot> element")?;
     let a = a + urdf[a..].find('>').ok_or("unterminated <robot> element")? + 1;
     Ok(format!(
-        "{}\n<mujoco><compiler fusestatic=\"false\" discardvisual=\"true\" balanceinertia=\"false\" inertiafromgeom=\"false\" angle=\"radian\"/></mujoco>\n{}",
+        "{}\n<mujoco><compiler fusestatic=\"false\" discardvisual=\"true\" \
+         balanceinertia=\"false\" inertiafromgeom=\"false\" angle=\"radian\"/></mujoco>\n{}",
         &urdf[..a],
         &urdf[a..]
     ))
@@ -335,13 +422,19 @@ pub fn mujoco_urdf_text(urdf: &str) -> Result<String, String> {
 fn world_xml(spec: &WorldSpec, dt: f64) -> String {
     let s = &spec.solver;
     let mut xml = format!(
-        r#"<mujoco model="team">
-  <compiler angle="radian" fusestatic="false" balanceinertia="false" inertiafromgeom="false" autolimits="true"/>
-  <option timestep="{dt:e}" gravity="0 0 {g:e}" integrator="{integ}" cone="{cone}" impratio="{imp:e}" iterations="{it}" tolerance="{tol:e}" noslip_iterations="{noslip}" solver="Newton"/>
+        concat!(
+            r#"<mujoco model="team">
+  <compiler angle="radian" fusestatic="false" balanceinertia="false" inertiafromgeom="false""#,
+            r#" autolimits="true"/>
+  <option timestep="{dt:e}" gravity="0 0 {g:e}" integrator="{integ}" cone="{cone}""#,
+            r#" impratio="{imp:e}" iterations="{it}" tolerance="{tol:e}""#,
+            r#" noslip_iterations="{noslip}" solver="Newton"/>
   <size memory="64M"/>
   <worldbody>
     <geom name="floor" type="plane" size="0 0 0.05" friction="{ff:e} 0.005 0.0001" condim="3"/>
 "#,
+        ),
+        dt = dt,
         g = -protocol::conventions::GRAVITY,
         integ = s.integrator,
         cone = s.cone,
@@ -354,14 +447,32 @@ fn world_xml(spec: &WorldSpec, dt: f64) -> String {
     if let Some(o) = &spec.object {
         let i = o.principal_inertia();
         xml += &format!(
-            r#"    <body name="object" pos="{:e} {:e} {:e}" quat="{:e} {:e} {:e} {:e}">
+            concat!(
+                r#"    <body name="object" pos="{:e} {:e} {:e}" quat="{:e} {:e} {:e} {:e}">
       <freejoint name="object"/>
       <inertial pos="0 0 0" mass="{:e}" diaginertia="{:e} {:e} {:e}"/>
-      <geom name="object" type="box" size="{:e} {:e} {:e}" friction="{:e} {:e} {:e}" condim="3" mass="0"/>
+      <geom name="object" type="box" size="{:e} {:e} {:e}" friction="{:e} {:e} {:e}""#,
+                r#" condim="3" mass="0"/>
     </body>
 "#,
-            o.position[0], o.position[1], o.position[2], o.orientation[0], o.orientation[1], o.orientation[2], o.orientation[3],
-            o.mass, i[0], i[1], i[2], o.size[0] / 2.0, o.size[1] / 2.0, o.size[2] / 2.0, o.friction[0], o.friction[1], o.friction[2]
+            ),
+            o.position[0],
+            o.position[1],
+            o.position[2],
+            o.orientation[0],
+            o.orientation[1],
+            o.orientation[2],
+            o.orientation[3],
+            o.mass,
+            i[0],
+            i[1],
+            i[2],
+            o.size[0] / 2.0,
+            o.size[1] / 2.0,
+            o.size[2] / 2.0,
+            o.friction[0],
+            o.friction[1],
+            o.friction[2]
         );
     }
     xml += "  </worldbody>\n</mujoco>\n";
@@ -369,8 +480,14 @@ fn world_xml(spec: &WorldSpec, dt: f64) -> String {
 }
 
 /// Id of a named MuJoCo object.
-pub fn name2id(model: &mjModel, kind: mjtObj, what: &'static str, name: &str) -> Result<usize, WorldError> {
-    let c = CString::new(name).map_err(|_| WorldError::MissingName { kind: what, name: name.to_string() })?;
+pub fn name2id(
+    model: &mjModel,
+    kind: mjtObj,
+    what: &'static str,
+    name: &str,
+) -> Result<usize, WorldError> {
+    let c = CString::new(name)
+        .map_err(|_| WorldError::MissingName { kind: what, name: name.to_string() })?;
     let id = unsafe { mujoco_c::mj_name2id(model, kind as i32, c.as_ptr()) };
     if id < 0 {
         return Err(WorldError::MissingName { kind: what, name: name.to_string() });
@@ -398,7 +515,11 @@ pub fn load_robots(spec: &WorldSpec) -> Result<Vec<Arc<Robot>>, WorldError> {
     spec.robots
         .iter()
         .map(|p| {
-            cache.load(&p.description).map_err(|e| WorldError::Description { id: p.id.clone(), path: p.description.clone(), reason: e.to_string() })
+            cache.load(&p.description).map_err(|e| WorldError::Description {
+                id: p.id.clone(),
+                path: p.description.clone(),
+                reason: e.to_string(),
+            })
         })
         .collect()
 }
@@ -406,7 +527,11 @@ pub fn load_robots(spec: &WorldSpec) -> Result<Vec<Arc<Robot>>, WorldError> {
 /// `robots` are those of `spec`, in its order, each loaded from its placement's description.
 fn check_robots(spec: &WorldSpec, robots: &[Arc<Robot>]) -> Result<(), WorldError> {
     if robots.len() != spec.robots.len() {
-        return Err(WorldError::Invalid(format!("{} robots loaded for {} placements", robots.len(), spec.robots.len())));
+        return Err(WorldError::Invalid(format!(
+            "{} robots loaded for {} placements",
+            robots.len(),
+            spec.robots.len()
+        )));
     }
     for (placement, robot) in spec.robots.iter().zip(robots) {
         if robot.path != placement.description {
@@ -431,7 +556,8 @@ impl World {
         let dt = 1.0 / spec.physics_hz;
         let contact = stable_contact(spec.contact, dt);
 
-        let mut world = MjSpec::from_xml_string(&world_xml(spec, dt)).map_err(|e| WorldError::Build(e.to_string()))?;
+        let mut world = MjSpec::from_xml_string(&world_xml(spec, dt))
+            .map_err(|e| WorldError::Build(e.to_string()))?;
         let mut hand_bodies = Vec::new();
         for (placement, robot) in spec.robots.iter().zip(robots) {
             hand_bodies.push(attach_robot(&mut world, placement, robot, &contact)?);
@@ -450,7 +576,15 @@ impl World {
             indexed.push(index_robot(raw, spec, placement, robot.clone(), &hand_body, &mut rng)?);
         }
         let (object, object_geom) = index_object(raw, spec)?;
-        let world = World { model, robots: indexed, object, object_geom, substeps, control_dt: 1.0 / spec.control_hz, spec: spec.clone() };
+        let world = World {
+            model,
+            robots: indexed,
+            object,
+            object_geom,
+            substeps,
+            control_dt: 1.0 / spec.control_hz,
+            spec: spec.clone(),
+        };
         for r in &world.robots {
             check_against_model(&world.model, r)?;
         }
@@ -469,34 +603,46 @@ fn stable_contact(mut contact: ContactParams, dt: f64) -> ContactParams {
 /// Import the robot's URDF into its own mjSpec, give its root body a free joint named `base`,
 /// set its palm and foot contacts, and attach a copy under the prefix `{id}/` to a frame of
 /// `world` at its base pose. Returns the name of its hand body.
-fn attach_robot(world: &mut MjSpec, placement: &RobotPlacement, robot: &Robot, contact: &ContactParams) -> Result<String, WorldError> {
+fn attach_robot(
+    world: &mut MjSpec,
+    placement: &RobotPlacement,
+    robot: &Robot,
+    contact: &ContactParams,
+) -> Result<String, WorldError> {
     let id = &placement.id;
     let urdf = std::fs::read_to_string(&robot.urdf_path).map_err(|e| WorldError::Urdf {
         id: id.clone(),
         path: robot.urdf_path.clone(),
         reason: e.to_string(),
     })?;
-    let text = mujoco_urdf_text(&urdf).map_err(|reason| WorldError::Import { id: id.clone(), reason })?;
-    let mut child = MjSpec::from_xml_string(&text).map_err(|e| WorldError::Import { id: id.clone(), reason: e.to_string() })?;
+    let text =
+        mujoco_urdf_text(&urdf).map_err(|reason| WorldError::Import { id: id.clone(), reason })?;
+    let mut child = MjSpec::from_xml_string(&text)
+        .map_err(|e| WorldError::Import { id: id.clone(), reason: e.to_string() })?;
     let root = robot.model.bodies[0].name.clone();
     let hand_body = hand_body_name(robot)?;
     let foot_bodies = foot_body_names(robot);
     {
-        let root_body = child
-            .world_body_mut()
-            .child_mut(&root)
-            .ok_or_else(|| WorldError::Import { id: id.clone(), reason: format!("no root body {root}") })?;
-        root_body.add_free_joint().set_name("base").map_err(|e| WorldError::Build(e.to_string()))?;
+        let root_body = child.world_body_mut().child_mut(&root).ok_or_else(|| {
+            WorldError::Import { id: id.clone(), reason: format!("no root body {root}") }
+        })?;
+        root_body
+            .add_free_joint()
+            .set_name("base")
+            .map_err(|e| WorldError::Build(e.to_string()))?;
     }
     configure_geoms(&mut child, robot, contact, &hand_body, &foot_bodies, id)?;
     let q = yaw_quat(placement.base_yaw);
     let frame = world.world_body_mut().add_frame();
     *frame.pos_mut() = placement.base_position;
     *frame.quat_mut() = q;
-    let body = child
-        .body_mut(&root)
-        .ok_or_else(|| WorldError::Import { id: id.clone(), reason: format!("no root body {root}") })?;
-    frame.attach_by_deep_copy(body, &format!("{id}/"), "").map_err(|e| WorldError::Build(format!("attaching {id}: {e}")))?;
+    let body = child.body_mut(&root).ok_or_else(|| WorldError::Import {
+        id: id.clone(),
+        reason: format!("no root body {root}"),
+    })?;
+    frame
+        .attach_by_deep_copy(body, &format!("{id}/"), "")
+        .map_err(|e| WorldError::Build(format!("attaching {id}: {e}")))?;
     Ok(hand_body)
 }
 
@@ -528,7 +674,14 @@ fn remove_joint_losses(model: &mut MjModel) {
 
 /// Where the robot of `placement` lives in the compiled model, and its initial configuration
 /// (noise drawn from `rng`).
-fn index_robot(raw: &mjModel, spec: &WorldSpec, placement: &RobotPlacement, robot: Arc<Robot>, hand_body: &str, rng: &mut SplitMix) -> Result<RobotIndex, WorldError> {
+fn index_robot(
+    raw: &mjModel,
+    spec: &WorldSpec,
+    placement: &RobotPlacement,
+    robot: Arc<Robot>,
+    hand_body: &str,
+    rng: &mut SplitMix,
+) -> Result<RobotIndex, WorldError> {
     let id = placement.id.clone();
     let p = |n: &str| format!("{id}/{n}");
     let free = name2id(raw, mjtObj::mjOBJ_JOINT, "joint", &p("base"))?;
@@ -545,13 +698,16 @@ fn index_robot(raw: &mjModel, spec: &WorldSpec, placement: &RobotPlacement, robo
     }
     let root = &robot.model.bodies[0].name;
     let base_body = name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(root))?;
-    let bodies: Vec<usize> = (0..raw.nbody as usize).filter(|&b| id2name(raw, mjtObj::mjOBJ_BODY, b).starts_with(&format!("{id}/"))).collect();
-    let hb = name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(hand_body))?;
-    let hand_geoms: Vec<usize> = (0..raw.ngeom as usize).filter(|&g| unsafe { *raw.geom_bodyid.add(g) } as usize == hb).collect();
-    let foot_geoms: Vec<usize> = (0..raw.ngeom as usize)
-        .filter(|&g| bodies.contains(&(unsafe { *raw.geom_bodyid.add(g) } as usize)) && unsafe { *raw.geom_condim.add(g) } == 3 && is_foot_geom(raw, g, robot.feet.radius))
+    let bodies: Vec<usize> = (0..raw.nbody as usize)
+        .filter(|&b| id2name(raw, mjtObj::mjOBJ_BODY, b).starts_with(&format!("{id}/")))
         .collect();
-    let foot_bodies = foot_body_names(&robot).iter().map(|b| name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(b))).collect::<Result<Vec<_>, _>>()?;
+    let hb = name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(hand_body))?;
+    let hand_geoms = body_geoms(raw, hb);
+    let foot_geoms = foot_geoms(raw, &bodies, robot.feet.radius);
+    let foot_bodies = foot_body_names(&robot)
+        .iter()
+        .map(|b| name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(b)))
+        .collect::<Result<Vec<_>, _>>()?;
     let hand_contact_body = name2id(raw, mjtObj::mjOBJ_BODY, "body", &p(&robot.hand_frame))?;
     let initial_q = initial_configuration(spec, placement, &robot, rng)?;
     Ok(RobotIndex {
@@ -574,11 +730,18 @@ fn index_robot(raw: &mjModel, spec: &WorldSpec, placement: &RobotPlacement, robo
 
 /// The robot's initial `q`: standing, with the placement's joint overrides, the spec's joint
 /// noise (drawn from `rng`) and the placement's base pose.
-fn initial_configuration(spec: &WorldSpec, placement: &RobotPlacement, robot: &Robot, rng: &mut SplitMix) -> Result<Vec<f64>, WorldError> {
+fn initial_configuration(
+    spec: &WorldSpec,
+    placement: &RobotPlacement,
+    robot: &Robot,
+    rng: &mut SplitMix,
+) -> Result<Vec<f64>, WorldError> {
     let mut initial_q: Vec<f64> = robot.standing_q.iter().copied().collect();
     let off = robot.model.nq - robot.model.joint_names.len();
     for (j, v) in &placement.joint_overrides {
-        let k = robot.model.joint_names.iter().position(|n| n == j).ok_or_else(|| WorldError::UnknownJoint { id: placement.id.clone(), joint: j.clone() })?;
+        let k = robot.model.joint_names.iter().position(|n| n == j).ok_or_else(|| {
+            WorldError::UnknownJoint { id: placement.id.clone(), joint: j.clone() }
+        })?;
         initial_q[off + k] = *v;
     }
     if spec.initial_joint_noise > 0.0 {
@@ -591,15 +754,44 @@ fn initial_configuration(spec: &WorldSpec, placement: &RobotPlacement, robot: &R
     Ok(initial_q)
 }
 
-/// The object's body id, free-joint qpos and dof addresses, and geom id (none without an object).
-fn index_object(raw: &mjModel, spec: &WorldSpec) -> Result<(Option<(usize, usize, usize)>, Option<usize>), WorldError> {
+/// Body id, free-joint qpos address and dof address of the object ([`World::object`]).
+type ObjectAddresses = (usize, usize, usize);
+
+/// The object's body id, free-joint qpos and dof addresses, and geom id (none without an
+/// object).
+fn index_object(
+    raw: &mjModel,
+    spec: &WorldSpec,
+) -> Result<(Option<ObjectAddresses>, Option<usize>), WorldError> {
     if spec.object.is_none() {
         return Ok((None, None));
     }
     let b = name2id(raw, mjtObj::mjOBJ_BODY, "body", "object")?;
     let j = name2id(raw, mjtObj::mjOBJ_JOINT, "joint", "object")?;
     let g = name2id(raw, mjtObj::mjOBJ_GEOM, "geom", "object")?;
-    Ok((Some((b, unsafe { *raw.jnt_qposadr.add(j) } as usize, unsafe { *raw.jnt_dofadr.add(j) } as usize)), Some(g)))
+    Ok((
+        Some((b, unsafe { *raw.jnt_qposadr.add(j) } as usize, unsafe { *raw.jnt_dofadr.add(j) }
+            as usize)),
+        Some(g),
+    ))
+}
+
+/// Geom ids of body `body`.
+fn body_geoms(raw: &mjModel, body: usize) -> Vec<usize> {
+    (0..raw.ngeom as usize)
+        .filter(|&g| unsafe { *raw.geom_bodyid.add(g) } as usize == body)
+        .collect()
+}
+
+/// Geom ids of the foot spheres (condim 3, the feet's radius) among the geoms of `bodies`.
+fn foot_geoms(raw: &mjModel, bodies: &[usize], radius: f64) -> Vec<usize> {
+    (0..raw.ngeom as usize)
+        .filter(|&g| {
+            bodies.contains(&(unsafe { *raw.geom_bodyid.add(g) } as usize))
+                && unsafe { *raw.geom_condim.add(g) } == 3
+                && is_foot_geom(raw, g, radius)
+        })
+        .collect()
 }
 
 fn is_foot_geom(raw: &mjModel, g: usize, radius: f64) -> bool {
@@ -618,7 +810,9 @@ fn parent_link(robot: &Robot, frame: &str) -> Option<String> {
 /// The URDF link (a MuJoCo body, since fusestatic is off) that carries the palm: the parent
 /// link of the hand contact frame.
 fn hand_body_name(robot: &Robot) -> Result<String, WorldError> {
-    parent_link(robot, &robot.hand_frame).ok_or_else(|| WorldError::Invalid(format!("no joint leads to the hand frame {}", robot.hand_frame)))
+    parent_link(robot, &robot.hand_frame).ok_or_else(|| {
+        WorldError::Invalid(format!("no joint leads to the hand frame {}", robot.hand_frame))
+    })
 }
 
 /// Links carrying the foot spheres: the parents of the foot frames.
@@ -626,8 +820,18 @@ fn foot_body_names(robot: &Robot) -> Vec<String> {
     robot.foot_frames.iter().filter_map(|f| parent_link(robot, f)).collect()
 }
 
-fn configure_geoms(child: &mut MjSpec, robot: &Robot, c: &ContactParams, hand_body: &str, foot_bodies: &[String], id: &str) -> Result<(), WorldError> {
-    let hand = child.body_mut(hand_body).ok_or_else(|| WorldError::Import { id: id.to_string(), reason: format!("no hand body {hand_body}") })?;
+fn configure_geoms(
+    child: &mut MjSpec,
+    robot: &Robot,
+    c: &ContactParams,
+    hand_body: &str,
+    foot_bodies: &[String],
+    id: &str,
+) -> Result<(), WorldError> {
+    let hand = child.body_mut(hand_body).ok_or_else(|| WorldError::Import {
+        id: id.to_string(),
+        reason: format!("no hand body {hand_body}"),
+    })?;
     let mut n = 0;
     for g in hand.geom_iter_mut(false) {
         g.set_condim(6);
@@ -638,10 +842,16 @@ fn configure_geoms(child: &mut MjSpec, robot: &Robot, c: &ContactParams, hand_bo
         n += 1;
     }
     if n == 0 {
-        return Err(WorldError::Import { id: id.to_string(), reason: format!("the hand body {hand_body} has no collision geom") });
+        return Err(WorldError::Import {
+            id: id.to_string(),
+            reason: format!("the hand body {hand_body} has no collision geom"),
+        });
     }
     for fb in foot_bodies {
-        let body = child.body_mut(fb).ok_or_else(|| WorldError::Import { id: id.to_string(), reason: format!("no foot body {fb}") })?;
+        let body = child.body_mut(fb).ok_or_else(|| WorldError::Import {
+            id: id.to_string(),
+            reason: format!("no foot body {fb}"),
+        })?;
         for g in body.geom_iter_mut(false) {
             let is_sphere = g.type_() as i32 == mujoco_c::mjtGeom::mjGEOM_SPHERE as i32;
             if is_sphere && (g.size()[0] - robot.feet.radius).abs() < 1e-9 {
@@ -661,18 +871,32 @@ pub fn check_against_model(model: &MjModel, r: &RobotIndex) -> Result<(), WorldE
     let raw = model.ffi();
     let mass: f64 = r.bodies.iter().map(|&b| unsafe { *raw.body_mass.add(b) }).sum();
     if (mass - r.robot.model.total_mass).abs() > 1e-9 * r.robot.model.total_mass.max(1.0) {
-        return Err(WorldError::MassMismatch { id: r.id.clone(), mujoco: mass, model: r.robot.model.total_mass });
+        return Err(WorldError::MassMismatch {
+            id: r.id.clone(),
+            mujoco: mass,
+            model: r.robot.model.total_mass,
+        });
     }
     let prefix = format!("{}/", r.id);
     let mujoco: Vec<String> = (0..raw.njnt as usize)
-        .filter(|&j| unsafe { *raw.jnt_type.add(j) } == mujoco_c::mjtJoint::mjJNT_HINGE as i32 || unsafe { *raw.jnt_type.add(j) } == mujoco_c::mjtJoint::mjJNT_SLIDE as i32)
+        .filter(|&j| is_hinge_or_slide(raw, j))
         .map(|j| id2name(raw, mjtObj::mjOBJ_JOINT, j))
         .filter_map(|n| n.strip_prefix(&prefix).map(str::to_string))
         .collect();
     if mujoco != r.robot.actuated_joints {
-        return Err(WorldError::JointOrderMismatch { id: r.id.clone(), mujoco, model: r.robot.actuated_joints.clone() });
+        return Err(WorldError::JointOrderMismatch {
+            id: r.id.clone(),
+            mujoco,
+            model: r.robot.actuated_joints.clone(),
+        });
     }
     Ok(())
+}
+
+/// Joint `j` is a hinge or a slide (a robot's actuated joint, not a free joint).
+fn is_hinge_or_slide(raw: &mjModel, j: usize) -> bool {
+    let t = unsafe { *raw.jnt_type.add(j) };
+    t == mujoco_c::mjtJoint::mjJNT_HINGE as i32 || t == mujoco_c::mjtJoint::mjJNT_SLIDE as i32
 }
 
 /// A small deterministic generator for initial-condition noise.

@@ -37,6 +37,8 @@ fn mjcf_scene_loads_and_falls_as_semi_implicit_euler_says() {
 
 #[test]
 fn malformed_scene_is_an_error_not_a_crash() {
-    let err = MjModel::from_xml_string("<mujoco><worldbody><body><geom type=\"nonsense\"/></body></worldbody></mujoco>");
+    let err = MjModel::from_xml_string(
+        "<mujoco><worldbody><body><geom type=\"nonsense\"/></body></worldbody></mujoco>",
+    );
     assert!(err.is_err());
 }

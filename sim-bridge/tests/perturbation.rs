@@ -7,7 +7,13 @@ use sim_bridge::plant::{empty_state, Plant};
 use sim_bridge::world::{load_robots, World, WorldSpec};
 
 fn req(target: PerturbationTarget, fx: f64, start: f64, duration: f64) -> PerturbationRequest {
-    PerturbationRequest { header: Header::new("t", None, 0, 0), target, wrench: [fx, 0.0, 0.0, 0.0, 0.0, 0.0], start: Some(start), duration }
+    PerturbationRequest {
+        header: Header::new("t", None, 0, 0),
+        target,
+        wrench: [fx, 0.0, 0.0, 0.0, 0.0, 0.0],
+        start: Some(start),
+        duration,
+    }
 }
 
 #[test]
@@ -39,7 +45,10 @@ fn a_push_on_the_object_moves_it_only_while_it_lasts() {
     for _ in 0..200 {
         plant.step();
     }
-    assert!((x(&plant) - x_end).abs() < 1e-4, "still moving after the push ended and friction stopped it");
+    assert!(
+        (x(&plant) - x_end).abs() < 1e-4,
+        "still moving after the push ended and friction stopped it"
+    );
 }
 
 #[test]
@@ -49,8 +58,18 @@ fn a_push_on_a_robot_body_and_bad_targets() {
     let mut plant = MujocoPlant::new(world).unwrap();
     let target = |b: &str| PerturbationTarget::RobotBody { robot: "r1".into(), body: b.into() };
     assert!(plant.perturb(&req(target("nonexistent_link"), 1.0, 0.0, 0.1)).is_err());
-    assert!(plant.perturb(&req(PerturbationTarget::RobotBody { robot: "r9".into(), body: "base".into() }, 1.0, 0.0, 0.1)).is_err());
-    assert!(plant.perturb(&req(PerturbationTarget::Object, 1.0, 0.0, 0.1)).is_err(), "no object in this world");
+    assert!(plant
+        .perturb(&req(
+            PerturbationTarget::RobotBody { robot: "r9".into(), body: "base".into() },
+            1.0,
+            0.0,
+            0.1
+        ))
+        .is_err());
+    assert!(
+        plant.perturb(&req(PerturbationTarget::Object, 1.0, 0.0, 0.1)).is_err(),
+        "no object in this world"
+    );
     // A strong sideways push on the trunk of an uncontrolled robot moves its base along y.
     let mut r = req(target("base"), 0.0, 0.0, 0.05);
     r.wrench = [0.0, 600.0, 0.0, 0.0, 0.0, 0.0];

@@ -20,7 +20,7 @@ use protocol::access::{secure_endpoint, Identity, SecureConfig};
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, Role, SampleQueue, TypedPublisher, ZenohArgs};
 use protocol::{DriveCommand, Header, Pose, RobotState};
-use team_runner::processes::free_port;
+use launch::processes::free_port;
 use zenoh::Session;
 
 const TEAM: &str = "rtt";
@@ -45,7 +45,13 @@ enum Link {
     TlsAcl,
 }
 
-fn secure(certs: &Path, who: Identity, listen: &str, connect: Option<&str>, acl: bool) -> ZenohArgs {
+fn secure(
+    certs: &Path,
+    who: Identity,
+    listen: &str,
+    connect: Option<&str>,
+    acl: bool,
+) -> ZenohArgs {
     let mut cfg = SecureConfig::in_dir(certs, TEAM, &["r1".to_string()], who);
     cfg.listen = vec![listen.to_string()];
     cfg.connect = connect.map(|c| vec![c.to_string()]).unwrap_or_default();
@@ -64,7 +70,10 @@ async fn pair(name: &'static str, link: Link, certs: &Path, floats: usize) -> Pa
         Link::Tls | Link::TlsAcl => {
             let (hub, acl) = (secure_endpoint("127.0.0.1", port), matches!(link, Link::TlsAcl));
             let any = secure_endpoint("127.0.0.1", 0);
-            (secure(certs, Identity::SimBridge, &hub, None, acl), secure(certs, Identity::Agent("r1".into()), &any, Some(&hub), acl))
+            (
+                secure(certs, Identity::SimBridge, &hub, None, acl),
+                secure(certs, Identity::Agent("r1".into()), &any, Some(&hub), acl),
+            )
         }
         Link::Tcp => {
             let hub = format!("tcp/127.0.0.1:{port}");
@@ -73,10 +82,27 @@ async fn pair(name: &'static str, link: Link, certs: &Path, floats: usize) -> Pa
     };
     let bridge = transport::open(&bridge_args, Role::Member).await.expect("bridge session");
     let r1 = transport::open(&r1_args, Role::Member).await.expect("r1 session");
-    let torques = transport::subscribe(&bridge, keys::robot(TEAM, "r1", RobotTopic::Torque).unwrap()).await.unwrap();
-    let states = TypedPublisher::declare(&bridge, keys::robot(TEAM, "r1", RobotTopic::State).unwrap(), Qos::HotPath).await.unwrap();
-    let incoming = transport::subscribe(&r1, keys::robot(TEAM, "r1", RobotTopic::State).unwrap()).await.unwrap();
-    let mut out = TypedPublisher::<DriveCommand>::declare(&r1, keys::robot(TEAM, "r1", RobotTopic::Torque).unwrap(), Qos::HotPath).await.unwrap();
+    let torques =
+        transport::subscribe(&bridge, keys::robot(TEAM, "r1", RobotTopic::Torque).unwrap())
+            .await
+            .unwrap();
+    let states = TypedPublisher::declare(
+        &bridge,
+        keys::robot(TEAM, "r1", RobotTopic::State).unwrap(),
+        Qos::HotPath,
+    )
+    .await
+    .unwrap();
+    let incoming = transport::subscribe(&r1, keys::robot(TEAM, "r1", RobotTopic::State).unwrap())
+        .await
+        .unwrap();
+    let mut out = TypedPublisher::<DriveCommand>::declare(
+        &r1,
+        keys::robot(TEAM, "r1", RobotTopic::Torque).unwrap(),
+        Qos::HotPath,
+    )
+    .await
+    .unwrap();
     tokio::spawn(async move {
         while let Ok(sample) = incoming.recv_async().await {
             let Ok(state) = decode_sample::<RobotState>(&sample) else { continue };
@@ -104,7 +130,10 @@ async fn round_trip(p: &mut Pair, tick: u64, floats: usize) -> Option<f64> {
     let t0 = Instant::now();
     p.states.put(&state(tick, floats)).await.ok()?;
     loop {
-        let s = tokio::time::timeout(Duration::from_secs(2), p.torques.recv_async()).await.ok()?.ok()?;
+        let s = tokio::time::timeout(Duration::from_secs(2), p.torques.recv_async())
+            .await
+            .ok()?
+            .ok()?;
         let cmd: DriveCommand = decode_sample(&s).ok()?;
         if cmd.header.tick == tick {
             return Some(t0.elapsed().as_secs_f64());
@@ -119,10 +148,15 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
 #[tokio::main(flavor = "multi_thread", worker_threads = 2)]
 async fn main() {
     let args: Vec<u64> = std::env::args().skip(1).filter_map(|a| a.parse().ok()).collect();
-    let (rounds, blocks) = (args.first().copied().unwrap_or(500), args.get(1).copied().unwrap_or(6));
+    let (rounds, blocks) =
+        (args.first().copied().unwrap_or(500), args.get(1).copied().unwrap_or(6));
     let floats = args.get(2).map_or(JOINTS, |&f| f as usize);
     let certs = certs::make("tls-rtt", &["r1"]);
-    let mut pairs = [pair("tcp", Link::Tcp, &certs, floats).await, pair("mtls", Link::Tls, &certs, floats).await, pair("mtls+acl", Link::TlsAcl, &certs, floats).await];
+    let mut pairs = [
+        pair("tcp", Link::Tcp, &certs, floats).await,
+        pair("mtls", Link::Tls, &certs, floats).await,
+        pair("mtls+acl", Link::TlsAcl, &certs, floats).await,
+    ];
     let mut tick = 0;
     // Links and declarations first: the first answered state on each pair.
     for p in pairs.iter_mut() {

@@ -19,6 +19,7 @@ use protocol::transport::{self, decode_sample, Qos, TransportError, TypedPublish
 use protocol::{DriveCommand, DynamicsTerms, Header, RobotState, TorqueCommand};
 use robot_model::{forward_kinematics, frame_jacobian, gravity, Data, FrameId, Robot};
 use tokio::sync::watch;
+use zenoh::sample::Sample;
 use zenoh::Session;
 
 /// Gains of the standing controller.
@@ -34,7 +35,14 @@ pub struct StandingGains {
 
 impl Default for StandingGains {
     fn default() -> Self {
-        StandingGains { leg_kp: 400.0, leg_kd: 8.0, arm_kp: 200.0, arm_kd: 4.0, wrist_kp: 40.0, wrist_kd: 0.5 }
+        StandingGains {
+            leg_kp: 400.0,
+            leg_kd: 8.0,
+            arm_kp: 200.0,
+            arm_kd: 4.0,
+            wrist_kp: 40.0,
+            wrist_kd: 0.5,
+        }
     }
 }
 
@@ -61,7 +69,11 @@ pub struct StandingController {
 
 impl StandingController {
     /// Around `q_ref` (joint positions, the robot's actuated order), or the standing pose.
-    pub fn new(robot: Arc<Robot>, q_ref: Option<Vec<f64>>, gains: StandingGains) -> Result<Self, String> {
+    pub fn new(
+        robot: Arc<Robot>,
+        q_ref: Option<Vec<f64>>,
+        gains: StandingGains,
+    ) -> Result<Self, String> {
         let nj = robot.joints();
         let off = robot.model.nq - nj;
         let q_ref = q_ref.unwrap_or_else(|| robot.standing_q.as_slice()[off..].to_vec());
@@ -71,7 +83,10 @@ impl StandingController {
         let mut kp = Vec::new();
         let mut kd = Vec::new();
         for name in &robot.actuated_joints {
-            let (p, d) = if name.starts_with("arm_joint_4") || name.starts_with("arm_joint_5") || name.starts_with("arm_joint_6") {
+            let (p, d) = if name.starts_with("arm_joint_4")
+                || name.starts_with("arm_joint_5")
+                || name.starts_with("arm_joint_6")
+            {
                 (gains.wrist_kp, gains.wrist_kd)
             } else if name.starts_with("arm") {
                 (gains.arm_kp, gains.arm_kd)
@@ -81,11 +96,25 @@ impl StandingController {
             kp.push(p);
             kd.push(d);
         }
-        let feet = robot.foot_frames.iter().map(|f| robot.model.frame_id(f).map_err(|e| e.to_string())).collect::<Result<Vec<_>, _>>()?;
+        let feet = robot
+            .foot_frames
+            .iter()
+            .map(|f| robot.model.frame_id(f).map_err(|e| e.to_string()))
+            .collect::<Result<Vec<_>, _>>()?;
         let data = Data::new(&robot.model);
         let nq = robot.model.nq;
         let nv = robot.model.nv;
-        Ok(StandingController { hand: None, robot, data, feet, q_ref, kp, kd, q: vec![0.0; nq], jac: Matrix6xX::zeros(nv) })
+        Ok(StandingController {
+            hand: None,
+            robot,
+            data,
+            feet,
+            q_ref,
+            kp,
+            kd,
+            q: vec![0.0; nq],
+            jac: Matrix6xX::zeros(nv),
+        })
     }
 
     /// Also push on a held object with the hand (feed-forward through the hand Jacobian, its
@@ -105,7 +134,10 @@ impl StandingController {
         let model = &self.robot.model;
         let nj = self.q_ref.len();
         if state.joint_positions.len() != nj {
-            return Err(format!("state has {} joints, the robot {nj}", state.joint_positions.len()));
+            return Err(format!(
+                "state has {} joints, the robot {nj}",
+                state.joint_positions.len()
+            ));
         }
         let off = model.nq - nj;
         if model.floating_base {
@@ -114,7 +146,8 @@ impl StandingController {
             self.q[3..7].copy_from_slice(&[u.w, u.i, u.j, u.k]);
         }
         self.q[off..].copy_from_slice(&state.joint_positions);
-        let g: DVector<f64> = gravity(model, &mut self.data, &self.q).map_err(|e| e.to_string())?.clone();
+        let g: DVector<f64> =
+            gravity(model, &mut self.data, &self.q).map_err(|e| e.to_string())?.clone();
         let nb = model.nv - nj;
         let mut tau_g: Vec<f64> = g.as_slice()[nb..].to_vec();
         if model.floating_base && !self.feet.is_empty() {
@@ -145,7 +178,8 @@ impl StandingController {
         }
         tau.clear();
         for k in 0..nj {
-            let t = tau_g[k] + self.kp[k] * (self.q_ref[k] - state.joint_positions[k]) - self.kd[k] * state.joint_velocities[k];
+            let t = tau_g[k] + self.kp[k] * (self.q_ref[k] - state.joint_positions[k])
+                - self.kd[k] * state.joint_velocities[k];
             let lim = self.robot.torque_limits[k];
             tau.push(t.clamp(-lim, lim));
         }
@@ -158,6 +192,105 @@ impl StandingController {
 enum Out {
     Command(TypedPublisher<TorqueCommand>),
     Drive(TypedPublisher<DriveCommand>),
+}
+
+/// Each robot's torque output for [`serve`]: with `direct`, its drives' torque key (and its
+/// membership declared, as its agent would); otherwise its agent's command key.
+async fn declare_outputs(
+    session: &Session,
+    team: &str,
+    robots: &[(String, StandingController)],
+    direct: bool,
+) -> Result<(Vec<Out>, Vec<zenoh::liveliness::LivelinessToken>), TransportError> {
+    let mut pubs = Vec::new();
+    let mut tokens = Vec::new();
+    for (id, _) in robots {
+        pubs.push(if direct {
+            tokens.push(transport::declare_member(session, team, id).await?);
+            Out::Drive(
+                TypedPublisher::declare(
+                    session,
+                    keys::robot(team, id, RobotTopic::Torque)?,
+                    Qos::HotPath,
+                )
+                .await?,
+            )
+        } else {
+            Out::Command(
+                TypedPublisher::declare(
+                    session,
+                    keys::robot(team, id, RobotTopic::Command)?,
+                    Qos::HotPath,
+                )
+                .await?,
+            )
+        });
+    }
+    Ok((pubs, tokens))
+}
+
+/// A state sample for [`serve`]: kept as its robot's latest; the robot and tick to answer when
+/// its agent has shown it has the state too (or at once, `direct`).
+fn take_state(
+    sample: &Sample,
+    robots: &[(String, StandingController)],
+    latest: &mut [Option<RobotState>],
+    seen: &[Option<u64>],
+    direct: bool,
+) -> Option<(usize, u64)> {
+    match decode_sample::<RobotState>(sample) {
+        Ok(st) => {
+            let i = robots.iter().position(|(id, _)| id == st.header.robot_id());
+            let tick = st.header.tick;
+            // Ready when the agent has shown it has the state too (its dynamics of
+            // this tick may arrive before or after the state reaches us).
+            let i = i?;
+            latest[i] = Some(st);
+            (direct || seen[i] == Some(tick)).then_some((i, tick))
+        }
+        Err(e) => {
+            tracing::warn!("standing controller dropped a state: {e}");
+            None
+        }
+    }
+}
+
+/// A dynamics sample for [`serve`] (not `direct`): the agent has seen its robot's state of
+/// that tick; the robot and tick to answer.
+fn take_dynamics(
+    sample: &Sample,
+    robots: &[(String, StandingController)],
+    seen: &mut [Option<u64>],
+    direct: bool,
+) -> Option<(usize, u64)> {
+    match decode_sample::<DynamicsTerms>(sample) {
+        Ok(t) if !direct => robots.iter().position(|(id, _)| id == t.header.robot_id()).map(|i| {
+            seen[i] = Some(t.state_tick);
+            (i, t.state_tick)
+        }),
+        _ => None,
+    }
+}
+
+/// Publish robot `id`'s torques `cmd` of `tick` on its output.
+async fn send_torques(
+    out: &mut Out,
+    cmd: &TorqueCommand,
+    team: &str,
+    id: &str,
+    tick: u64,
+) -> Result<(), TransportError> {
+    match out {
+        Out::Command(p) => p.put(cmd).await?,
+        Out::Drive(p) => {
+            p.put(&DriveCommand {
+                header: cmd.header.clone(),
+                ..DriveCommand::torque(team, id, tick, cmd.tau.clone())
+            })
+            .await?
+        }
+    }
+    Ok(())
 }
 
 /// Run standing controllers for `robots` over Zenoh as a stand-in coordinator: for each robot,
@@ -173,44 +306,29 @@ pub async fn serve(
     mut stop: watch::Receiver<bool>,
 ) -> Result<u64, TransportError> {
     let states = transport::subscribe(session, keys::all_robots(team, RobotTopic::State)?).await?;
-    let dynamics = transport::subscribe(session, keys::all_robots(team, RobotTopic::Dynamics)?).await?;
-    let mut pubs = Vec::new();
-    let mut tokens = Vec::new();
-    for (id, _) in &robots {
-        pubs.push(if direct {
-            tokens.push(transport::declare_member(session, team, id).await?);
-            Out::Drive(TypedPublisher::declare(session, keys::robot(team, id, RobotTopic::Torque)?, Qos::HotPath).await?)
-        } else {
-            Out::Command(TypedPublisher::declare(session, keys::robot(team, id, RobotTopic::Command)?, Qos::HotPath).await?)
-        });
-    }
+    let dynamics =
+        transport::subscribe(session, keys::all_robots(team, RobotTopic::Dynamics)?).await?;
+    let (mut pubs, tokens) = declare_outputs(session, team, &robots, direct).await?;
     let mut latest: Vec<Option<RobotState>> = vec![None; robots.len()];
     let mut sent: Vec<Option<u64>> = vec![None; robots.len()];
     let mut seen: Vec<Option<u64>> = vec![None; robots.len()];
-    let mut cmd = TorqueCommand { header: Header::new(team, Some(&robots[0].0), 0, 0), tau: Vec::new(), hold: false, delay_ticks: 0 };
+    let mut cmd = TorqueCommand {
+        header: Header::new(team, Some(&robots[0].0), 0, 0),
+        tau: Vec::new(),
+        hold: false,
+        delay_ticks: 0,
+    };
     let mut count = 0u64;
     loop {
         let ready: Option<(usize, u64)> = tokio::select! {
             _ = stop.changed() => { if *stop.borrow() { break; } None }
             s = states.recv_async() => {
                 let Ok(sample) = s else { break };
-                match decode_sample::<RobotState>(&sample) {
-                    Ok(st) => {
-                        let i = robots.iter().position(|(id, _)| id == st.header.robot_id());
-                        let tick = st.header.tick;
-                        // Ready when the agent has shown it has the state too (its dynamics of
-                        // this tick may arrive before or after the state reaches us).
-                        if let Some(i) = i { latest[i] = Some(st); if direct || seen[i] == Some(tick) { Some((i, tick)) } else { None } } else { None }
-                    }
-                    Err(e) => { tracing::warn!("standing controller dropped a state: {e}"); None }
-                }
+                take_state(&sample, &robots, &mut latest, &seen, direct)
             }
             d = dynamics.recv_async() => {
                 let Ok(sample) = d else { break };
-                match decode_sample::<DynamicsTerms>(&sample) {
-                    Ok(t) if !direct => robots.iter().position(|(id, _)| id == t.header.robot_id()).map(|i| { seen[i] = Some(t.state_tick); (i, t.state_tick) }),
-                    _ => None,
-                }
+                take_dynamics(&sample, &robots, &mut seen, direct)
             }
         };
         let Some((i, tick)) = ready else { continue };
@@ -221,10 +339,7 @@ pub async fn serve(
         match robots[i].1.torques(st, &mut cmd.tau) {
             Ok(()) => {
                 cmd.header = Header::new(team, Some(&robots[i].0), tick, protocol::wall_clock_ns());
-                match &mut pubs[i] {
-                    Out::Command(p) => p.put(&cmd).await?,
-                    Out::Drive(p) => p.put(&DriveCommand { header: cmd.header.clone(), ..DriveCommand::torque(team, &robots[i].0, tick, cmd.tau.clone()) }).await?,
-                }
+                send_torques(&mut pubs[i], &cmd, team, &robots[i].0, tick).await?;
                 sent[i] = Some(tick);
                 count += 1;
             }

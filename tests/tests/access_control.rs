@@ -28,7 +28,7 @@ use protocol::access::Identity;
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, SampleQueue, TypedPublisher, ZenohArgs};
 use protocol::{AgentStatus, DriveCommand, Header, Pose, RobotState, TorqueCommand};
-use team_runner::processes::spawn;
+use launch::processes::spawn;
 use zenoh::Session;
 
 /// How long a put that must not arrive is given to arrive anyway.
@@ -46,7 +46,13 @@ fn robots(list: &[&str]) -> Vec<String> {
 }
 
 /// Put `payload` on `key` from `session` every 50 ms until `until` says stop or `wait` ends.
-async fn put_until(session: &Session, key: &str, payload: &[u8], wait: Duration, mut until: impl FnMut() -> bool) {
+async fn put_until(
+    session: &Session,
+    key: &str,
+    payload: &[u8],
+    wait: Duration,
+    mut until: impl FnMut() -> bool,
+) {
     let deadline = Instant::now() + wait;
     while Instant::now() < deadline && !until() {
         let _ = session.put(key, payload.to_vec()).await;
@@ -71,7 +77,8 @@ async fn a_component_without_a_certificate_cannot_connect() {
     let hub = hub_endpoint();
     let plain_hub = hub.replacen("quic/", "tcp/", 1);
     let coordinator = open(&config(&dir, team, &rs, Identity::Coordinator, &hub, None, true)).await;
-    let references = transport::subscribe(&coordinator, keys::references(team).unwrap()).await.unwrap();
+    let references =
+        transport::subscribe(&coordinator, keys::references(team).unwrap()).await.unwrap();
     let key = keys::references(team).unwrap();
 
     // Plain TCP to the hub's port (it takes QUIC only); TLS with the CA but no certificate of its own; a runner
@@ -85,9 +92,22 @@ async fn a_component_without_a_certificate_cannot_connect() {
     });
     std::fs::write(&anonymous_cfg, anonymous_json.to_string()).unwrap();
     let anonymous = open(&ZenohArgs { config: Some(anonymous_cfg), ..Default::default() }).await;
-    let foreign = open(&config(&other_ca, team, &rs, Identity::Runner, &protocol::access::secure_endpoint("127.0.0.1", 0), Some(&hub), false)).await;
+    let foreign = open(&config(
+        &other_ca,
+        team,
+        &rs,
+        Identity::Runner,
+        &protocol::access::secure_endpoint("127.0.0.1", 0),
+        Some(&hub),
+        false,
+    ))
+    .await;
 
-    let intruders = [("plain tcp", &plain), ("tls without a certificate", &anonymous), ("a certificate from another CA", &foreign)];
+    let intruders = [
+        ("plain tcp", &plain),
+        ("tls without a certificate", &anonymous),
+        ("a certificate from another CA", &foreign),
+    ];
     let started = Instant::now();
     while started.elapsed() < NEVER_WAIT {
         for (_, s) in &intruders {
@@ -103,14 +123,26 @@ async fn a_component_without_a_certificate_cannot_connect() {
     assert!(got.is_empty(), "puts without a team certificate arrived: {got:?}");
 
     // The control: the runner's certificate from the team's CA, allowed to put references.
-    let runner = open(&config(&dir, team, &rs, Identity::Runner, &protocol::access::secure_endpoint("127.0.0.1", 0), Some(&hub), true)).await;
+    let runner = open(&config(
+        &dir,
+        team,
+        &rs,
+        Identity::Runner,
+        &protocol::access::secure_endpoint("127.0.0.1", 0),
+        Some(&hub),
+        true,
+    ))
+    .await;
     let mut arrived = Vec::new();
     put_until(&runner, &key, b"runner", ARRIVE_WAIT, || {
         arrived.extend(drain(&references));
         !arrived.is_empty()
     })
     .await;
-    assert!(arrived.iter().any(|(_, p)| p == b"runner"), "the certified runner's put never arrived: the test proves nothing");
+    assert!(
+        arrived.iter().any(|(_, p)| p == b"runner"),
+        "the certified runner's put never arrived: the test proves nothing"
+    );
     assert!(arrived.iter().all(|(_, p)| p == b"runner"), "{arrived:?}");
     for s in [plain, anonymous, foreign, runner, coordinator] {
         s.close().await.unwrap();
@@ -137,16 +169,30 @@ fn state(team: &str, robot: &str, tick: u64) -> RobotState {
 const TAU: [f64; JOINTS] = [0.25, -0.5, 0.75];
 
 fn command(team: &str, robot: &str, tick: u64) -> TorqueCommand {
-    TorqueCommand { header: Header::new(team, Some(robot), tick, 0), tau: TAU.to_vec(), hold: false, delay_ticks: 0 }
+    TorqueCommand {
+        header: Header::new(team, Some(robot), tick, 0),
+        tau: TAU.to_vec(),
+        hold: false,
+        delay_ticks: 0,
+    }
 }
 
 /// Publish r1's state for `tick` until r1's agent answers with its dynamics for that tick.
-async fn state_answered(sim: &mut TypedPublisher<RobotState>, dynamics: &SampleQueue, team: &str, tick: u64) {
+async fn state_answered(
+    sim: &mut TypedPublisher<RobotState>,
+    dynamics: &SampleQueue,
+    team: &str,
+    tick: u64,
+) {
     let deadline = Instant::now() + ARRIVE_WAIT;
     loop {
         assert!(Instant::now() < deadline, "r1's agent never answered the state of tick {tick}");
         sim.put(&state(team, "r1", tick)).await.unwrap();
-        let Ok(Ok(s)) = tokio::time::timeout(Duration::from_millis(200), dynamics.recv_async()).await else { continue };
+        let Ok(Ok(s)) =
+            tokio::time::timeout(Duration::from_millis(200), dynamics.recv_async()).await
+        else {
+            continue;
+        };
         let terms: protocol::DynamicsTerms = decode_sample(&s).unwrap();
         if terms.header.tick == tick {
             return;
@@ -167,7 +213,11 @@ fn commanded_torques(torques: &SampleQueue) -> Vec<u64> {
 }
 
 /// r1's latest status within `wait` that satisfies `ok` (or the last one seen).
-async fn status_where(status: &SampleQueue, wait: Duration, ok: impl Fn(&AgentStatus) -> bool) -> Option<AgentStatus> {
+async fn status_where(
+    status: &SampleQueue,
+    wait: Duration,
+    ok: impl Fn(&AgentStatus) -> bool,
+) -> Option<AgentStatus> {
     let deadline = Instant::now() + wait;
     let mut last = None;
     while let Some(left) = deadline.checked_duration_since(Instant::now()) {
@@ -190,16 +240,41 @@ async fn only_the_coordinator_commands_a_robot() {
     let any = &protocol::access::secure_endpoint("127.0.0.1", 0);
     let coordinator = open(&config(&dir, team, &rs, Identity::Coordinator, &hub, None, true)).await;
     let members = transport::watch_members(&coordinator, team).await.unwrap();
-    let dynamics = transport::subscribe(&coordinator, keys::robot(team, "r1", RobotTopic::Dynamics).unwrap()).await.unwrap();
+    let dynamics =
+        transport::subscribe(&coordinator, keys::robot(team, "r1", RobotTopic::Dynamics).unwrap())
+            .await
+            .unwrap();
     let sim = open(&config(&dir, team, &rs, Identity::SimBridge, any, Some(&hub), true)).await;
-    let torques = transport::subscribe(&sim, keys::robot(team, "r1", RobotTopic::Torque).unwrap()).await.unwrap();
-    let mut states = TypedPublisher::<RobotState>::declare(&sim, keys::robot(team, "r1", RobotTopic::State).unwrap(), Qos::HotPath).await.unwrap();
+    let torques = transport::subscribe(&sim, keys::robot(team, "r1", RobotTopic::Torque).unwrap())
+        .await
+        .unwrap();
+    let mut states = TypedPublisher::<RobotState>::declare(
+        &sim,
+        keys::robot(team, "r1", RobotTopic::State).unwrap(),
+        Qos::HotPath,
+    )
+    .await
+    .unwrap();
     // The forger: a valid certificate (tool), and no ACL of its own.
     let tool = open(&config(&dir, team, &rs, Identity::Tool, any, Some(&hub), false)).await;
-    let status = transport::subscribe(&tool, keys::robot(team, "r1", RobotTopic::Status).unwrap()).await.unwrap();
+    let status = transport::subscribe(&tool, keys::robot(team, "r1", RobotTopic::Status).unwrap())
+        .await
+        .unwrap();
 
     let agent_cfg = config(&dir, team, &rs, Identity::Agent("r1".into()), any, Some(&hub), true);
-    let mut args: Vec<String> = ["run", "--id", "r1", "--team", team, "--placeholder-joints", "3", "--command-deadline-ms", "5000"].map(String::from).to_vec();
+    let mut args: Vec<String> = [
+        "run",
+        "--id",
+        "r1",
+        "--team",
+        team,
+        "--placeholder-joints",
+        "3",
+        "--command-deadline-ms",
+        "5000",
+    ]
+    .map(String::from)
+    .to_vec();
     args.extend(["--command-deadline-ticks".into(), "0".into()]);
     args.extend(agent_cfg.to_cli());
     let _agent = spawn("robot-agent", &args, "robot-agent r1").unwrap();
@@ -211,13 +286,26 @@ async fn only_the_coordinator_commands_a_robot() {
     let command_key = keys::robot(team, "r1", RobotTopic::Command).unwrap();
     let forged = protocol::encode(&command(team, "r1", 1)).unwrap();
     put_until(&tool, &command_key, &forged, NEVER_WAIT, || false).await;
-    assert_eq!(commanded_torques(&torques), Vec::<u64>::new(), "a command from the tool's identity was applied");
-    let st = status_where(&status, ARRIVE_WAIT, |s| s.states_received >= 1).await.expect("the tool reads r1's status");
-    assert_eq!((st.commands_applied, st.commands_rejected), (0, 0), "the forged commands reached the agent: {st:?}");
+    assert_eq!(
+        commanded_torques(&torques),
+        Vec::<u64>::new(),
+        "a command from the tool's identity was applied"
+    );
+    let st = status_where(&status, ARRIVE_WAIT, |s| s.states_received >= 1)
+        .await
+        .expect("the tool reads r1's status");
+    assert_eq!(
+        (st.commands_applied, st.commands_rejected),
+        (0, 0),
+        "the forged commands reached the agent: {st:?}"
+    );
 
     // The same command from the coordinator's identity, for tick 2: applied.
     state_answered(&mut states, &dynamics, team, 2).await;
-    let mut publisher = TypedPublisher::<TorqueCommand>::declare(&coordinator, command_key, Qos::HotPath).await.unwrap();
+    let mut publisher =
+        TypedPublisher::<TorqueCommand>::declare(&coordinator, command_key, Qos::HotPath)
+            .await
+            .unwrap();
     publisher.put(&command(team, "r1", 2)).await.unwrap();
     let deadline = Instant::now() + ARRIVE_WAIT;
     let mut applied = Vec::new();
@@ -225,7 +313,11 @@ async fn only_the_coordinator_commands_a_robot() {
         tokio::time::sleep(Duration::from_millis(20)).await;
         applied = commanded_torques(&torques);
     }
-    assert_eq!(applied, vec![2], "the coordinator's command was not applied: the test proves nothing");
+    assert_eq!(
+        applied,
+        vec![2],
+        "the coordinator's command was not applied: the test proves nothing"
+    );
     let st = status_where(&status, ARRIVE_WAIT, |s| s.commands_applied >= 1).await.unwrap();
     assert_eq!(st.commands_applied, 1, "{st:?}");
     for s in [tool, sim, coordinator] {
@@ -241,23 +333,37 @@ async fn an_agent_cannot_publish_another_robots_keys() {
     let hub = hub_endpoint();
     let any = &protocol::access::secure_endpoint("127.0.0.1", 0);
     let coordinator = open(&config(&dir, team, &rs, Identity::Coordinator, &hub, None, true)).await;
-    let dynamics = transport::subscribe(&coordinator, keys::all_robots(team, RobotTopic::Dynamics).unwrap()).await.unwrap();
+    let dynamics =
+        transport::subscribe(&coordinator, keys::all_robots(team, RobotTopic::Dynamics).unwrap())
+            .await
+            .unwrap();
     let sim = open(&config(&dir, team, &rs, Identity::SimBridge, any, Some(&hub), true)).await;
-    let torques = transport::subscribe(&sim, keys::all_robots(team, RobotTopic::Torque).unwrap()).await.unwrap();
-    let r1 = open(&config(&dir, team, &rs, Identity::Agent("r1".into()), any, Some(&hub), true)).await;
-    let r1_states = transport::subscribe(&r1, keys::robot(team, "r1", RobotTopic::State).unwrap()).await.unwrap();
+    let torques = transport::subscribe(&sim, keys::all_robots(team, RobotTopic::Torque).unwrap())
+        .await
+        .unwrap();
+    let r1 =
+        open(&config(&dir, team, &rs, Identity::Agent("r1".into()), any, Some(&hub), true)).await;
+    let r1_states = transport::subscribe(&r1, keys::robot(team, "r1", RobotTopic::State).unwrap())
+        .await
+        .unwrap();
     // r2 runs without the ACL: only the others' rules stand between it and r1's keys.
-    let r2 = open(&config(&dir, team, &rs, Identity::Agent("r2".into()), any, Some(&hub), false)).await;
+    let r2 =
+        open(&config(&dir, team, &rs, Identity::Agent("r2".into()), any, Some(&hub), false)).await;
 
     let key = |robot, topic| keys::robot(team, robot, topic).unwrap();
-    let forged = [key("r1", RobotTopic::State), key("r1", RobotTopic::Torque), key("r1", RobotTopic::Dynamics)];
+    let forged = [
+        key("r1", RobotTopic::State),
+        key("r1", RobotTopic::Torque),
+        key("r1", RobotTopic::Dynamics),
+    ];
     let own = [key("r2", RobotTopic::Torque), key("r2", RobotTopic::Dynamics)];
     let mut seen: Vec<(String, Vec<u8>)> = Vec::new();
     let deadline = Instant::now() + ARRIVE_WAIT;
     let mut controls_at = None;
     // Until the controls (r2's own keys at the bridge and the coordinator, the bridge's state
     // at r1) have arrived, and NEVER_WAIT longer.
-    while Instant::now() < deadline && controls_at.is_none_or(|t: Instant| t.elapsed() < NEVER_WAIT) {
+    while Instant::now() < deadline && controls_at.is_none_or(|t: Instant| t.elapsed() < NEVER_WAIT)
+    {
         for k in forged.iter().chain(&own) {
             r2.put(k, b"from r2".to_vec()).await.unwrap();
         }
@@ -267,12 +373,19 @@ async fn an_agent_cannot_publish_another_robots_keys() {
             seen.extend(drain(q));
         }
         let arrived = |k: &String, p: &[u8]| seen.iter().any(|(sk, sp)| sk == k && sp == p);
-        if controls_at.is_none() && own.iter().all(|k| arrived(k, b"from r2")) && arrived(&forged[0], b"from sim-bridge") {
+        if controls_at.is_none()
+            && own.iter().all(|k| arrived(k, b"from r2"))
+            && arrived(&forged[0], b"from sim-bridge")
+        {
             controls_at = Some(Instant::now());
         }
     }
     assert!(controls_at.is_some(), "the controls never arrived (r2's own keys, the bridge's state): the test proves nothing; seen {seen:?}");
-    let mut leaked: Vec<&String> = seen.iter().filter(|(k, p)| forged.contains(k) && p == b"from r2").map(|(k, _)| k).collect();
+    let mut leaked: Vec<&String> = seen
+        .iter()
+        .filter(|(k, p)| forged.contains(k) && p == b"from r2")
+        .map(|(k, _)| k)
+        .collect();
     leaked.sort();
     leaked.dedup();
     assert!(leaked.is_empty(), "r2 published r1's keys: {leaked:?}");
@@ -287,13 +400,24 @@ async fn an_agent_cannot_publish_another_robots_keys() {
 #[test]
 fn the_shipped_configurations_are_the_generated_ones() {
     let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/zenoh");
-    let configs = protocol::access::team_configs(Path::new("certs"), "team", &robots(&["r1", "r2"]), "quic/127.0.0.1:7447");
+    let configs = protocol::access::team_configs(
+        Path::new("certs"),
+        "team",
+        &robots(&["r1", "r2"]),
+        "quic/127.0.0.1:7447",
+    );
     assert_eq!(configs.len(), 6);
     for cfg in configs {
         let path = shipped.join(protocol::access::file_name(&cfg.identity));
-        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let text =
+            std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         let file: serde_json::Value = serde_json::from_str(&text).unwrap();
-        assert_eq!(file, cfg.to_json().unwrap(), "{} differs from the generator (team zenoh-config certs)", path.display());
+        assert_eq!(
+            file,
+            cfg.to_json().unwrap(),
+            "{} differs from the generator (team zenoh-config certs)",
+            path.display()
+        );
     }
 }
 
@@ -301,15 +425,29 @@ fn the_shipped_configurations_are_the_generated_ones() {
 /// TLS with the ACL: the lockstep runs every tick (a missing grant would leave a robot out).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_whole_team_runs_over_tls_with_the_acl() {
-    use team_runner::launch::{BridgeOutcome, RunMode};
-    use team_runner::smoke::{self, SmokeConfig};
+    use launch::launcher::{BridgeOutcome, RunMode};
+    use launch::smoke::{self, SmokeConfig};
     let dir = certificates("smoke", &["r1", "r2"]);
     let run_dir = dir.join("run");
     std::fs::create_dir_all(&run_dir).unwrap();
-    let cfg = SmokeConfig { team: "team".into(), robots: robots(&["r1", "r2"]), joints: 6, ticks: 300, dt: 0.001, damping: 2.0, v0: 0.5 };
+    let cfg = SmokeConfig {
+        team: "team".into(),
+        robots: robots(&["r1", "r2"]),
+        joints: 6,
+        ticks: 300,
+        dt: 0.001,
+        damping: 2.0,
+        v0: 0.5,
+    };
     let mode = RunMode::Tls { dir: run_dir.clone(), certs: dir.clone() };
-    let outcome = tokio::time::timeout(Duration::from_secs(60), smoke::run(&cfg, &mode)).await.expect("the run ends in time");
-    assert!(matches!(outcome, Ok(BridgeOutcome::Process)), "the TLS smoke run failed: {:?}", outcome.err());
+    let outcome = tokio::time::timeout(Duration::from_secs(60), smoke::run(&cfg, &mode))
+        .await
+        .expect("the run ends in time");
+    assert!(
+        matches!(outcome, Ok(BridgeOutcome::Process)),
+        "the TLS smoke run failed: {:?}",
+        outcome.err()
+    );
     for who in ["coordinator", "r1", "r2", "sim-bridge", "runner"] {
         assert!(run_dir.join(format!("zenoh-{who}.json5")).is_file(), "no configuration for {who}");
     }

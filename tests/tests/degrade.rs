@@ -8,9 +8,9 @@
 //! ticks and the release. Before the release existed, both cases below threw the two robots
 //! over (torsos 0.4-1.3 m off, up to 180 deg).
 
-use team_runner::evaluate::Metrics;
-use team_runner::plan;
-use team_runner::scenario::Scenario;
+use evaluation::evaluate::Metrics;
+use scenario::plan;
+use scenario::file::Scenario;
 
 mod common;
 use common::scenario::{repo, run_plan};
@@ -31,9 +31,17 @@ fn assert_team_standing(m: &Metrics, robots: usize) {
 fn beyond_the_capacity(controller: &str) -> Metrics {
     let file = repo().join("scenarios/s4_object_circle.toml");
     let base = Scenario::load(&file, &[]).expect("scenario");
-    let cap = team_runner::capacity::capacity(&plan::plan(&base, &repo()).expect("plan"), 0.01).expect("capacity").whole().clone();
+    let cap = scenario::team_capacity::capacity(&plan::plan(&base, &repo()).expect("plan"), 0.01)
+        .expect("capacity")
+        .whole()
+        .clone();
     let mass = 1.5 * cap.mass;
-    let mut sets: Vec<String> = vec![format!("object.mass={mass}"), "duration=1.5".into(), "settle=0".into(), format!("controller={controller}")];
+    let mut sets: Vec<String> = vec![
+        format!("object.mass={mass}"),
+        "duration=1.5".into(),
+        "settle=0".into(),
+        format!("controller={controller}"),
+    ];
     // Refused by the payload check, with the binding limits named...
     let heavy = Scenario::load(&file, &sets).expect("scenario");
     if controller == "pidc" {
@@ -57,10 +65,18 @@ fn an_object_beyond_the_capacity_is_let_go_and_the_team_stays_standing() {
     assert!(released > 0, "the team let go of the object: {:?}", m.fallback_ticks);
     // Let go soon: every tick after the release is reported as such.
     let ticks: u64 = m.qp_status.values().sum();
-    assert!(released as f64 > 0.7 * ticks as f64, "released after {} of {ticks} ticks", ticks - released);
+    assert!(
+        released as f64 > 0.7 * ticks as f64,
+        "released after {} of {ticks} ticks",
+        ticks - released
+    );
     let infeasible = m.qp_status.get("Infeasible").copied().unwrap_or(0);
     assert!(infeasible > 0, "the QP was infeasible on some ticks: {:?}", m.qp_status);
-    assert!(m.fallback_ticks.get("QP fallback").copied().unwrap_or(0) > 0, "the run says so: {:?}", m.fallback_ticks);
+    assert!(
+        m.fallback_ticks.get("QP fallback").copied().unwrap_or(0) > 0,
+        "the run says so: {:?}",
+        m.fallback_ticks
+    );
 }
 
 /// MQP's QP stays feasible: it lets the object's task yield, and the object comes down. With
@@ -73,7 +89,11 @@ fn an_object_beyond_the_capacity_is_let_go_and_the_team_stays_standing() {
 fn the_mqp_baseline_lets_the_object_yield_too() {
     let m = beyond_the_capacity("mqp");
     let released = m.fallback_ticks.get(RELEASED).copied().unwrap_or(0);
-    assert!(released > 0 || m.object.position_max_m > 0.1, "the object yielded: let go ({released} ticks) or came down {:.3} m", m.object.position_max_m);
+    assert!(
+        released > 0 || m.object.position_max_m > 0.1,
+        "the object yielded: let go ({released} ticks) or came down {:.3} m",
+        m.object.position_max_m
+    );
 }
 
 #[test]
@@ -87,7 +107,15 @@ fn a_push_the_controller_did_not_plan_for_mid_run_leaves_the_team_standing() {
     let pushed = Scenario::from_str_with(&text, &file, &sets).expect("scenario");
     let plan = plan::plan(&pushed, &repo()).expect("plan");
     let m = run_plan(&plan, "degrade-push");
-    assert!(m.fallback_ticks.get("QP fallback").copied().unwrap_or(0) > 0, "the push made the QP fail: {:?}", m.fallback_ticks);
-    assert!(m.fallback_ticks.get(RELEASED).copied().unwrap_or(0) > 0, "and the team let go: {:?}", m.fallback_ticks);
+    assert!(
+        m.fallback_ticks.get("QP fallback").copied().unwrap_or(0) > 0,
+        "the push made the QP fail: {:?}",
+        m.fallback_ticks
+    );
+    assert!(
+        m.fallback_ticks.get(RELEASED).copied().unwrap_or(0) > 0,
+        "and the team let go: {:?}",
+        m.fallback_ticks
+    );
     assert_team_standing(&m, 2);
 }

@@ -23,7 +23,15 @@ fn pair(substeps: u32) -> MujocoPlant {
 }
 
 fn empty_state() -> RobotState {
-    RobotState { header: Header::new("t", Some("r"), 0, 0), base_pose: protocol::Pose { position: [0.0; 3], orientation: [1.0, 0.0, 0.0, 0.0] }, base_twist: [0.0; 6], joint_positions: Vec::new(), joint_velocities: Vec::new(), time: 0.0, foot_forces: Vec::new() }
+    RobotState {
+        header: Header::new("t", Some("r"), 0, 0),
+        base_pose: protocol::Pose { position: [0.0; 3], orientation: [1.0, 0.0, 0.0, 0.0] },
+        base_twist: [0.0; 6],
+        joint_positions: Vec::new(),
+        joint_velocities: Vec::new(),
+        time: 0.0,
+        foot_forces: Vec::new(),
+    }
 }
 
 /// A PD command about each robot's start, 0.05 rad away, with a feed-forward torque.
@@ -33,7 +41,12 @@ fn commands(p: &MujocoPlant) -> Vec<DriveCommand> {
         .map(|i| {
             p.state(i, &mut s);
             let n = s.joint_positions.len();
-            let mut d = DriveCommand::torque("t", &p.robots()[i], 0, (0..n).map(|j| 0.5 * (j as f64).sin()).collect());
+            let mut d = DriveCommand::torque(
+                "t",
+                &p.robots()[i],
+                0,
+                (0..n).map(|j| 0.5 * (j as f64).sin()).collect(),
+            );
             d.q_des = s.joint_positions.iter().map(|q| q + 0.05).collect();
             d.qd_des = vec![0.1; n];
             d.kp = (0..n).map(|j| 40.0 + 5.0 * j as f64).collect();
@@ -62,17 +75,26 @@ fn the_mujoco_drives_run_the_law_at_every_physics_step() {
                 written.state(i, &mut s);
                 tau.clear();
                 for j in 0..c.tau_ff.len() {
-                    tau.push(c.tau_ff[j] + c.kp[j] * (c.q_des[j] - s.joint_positions[j]) + c.kd[j] * (c.qd_des[j] - s.joint_velocities[j]));
+                    tau.push(
+                        c.tau_ff[j]
+                            + c.kp[j] * (c.q_des[j] - s.joint_positions[j])
+                            + c.kd[j] * (c.qd_des[j] - s.joint_velocities[j]),
+                    );
                 }
                 written.set_torques(i, &tau);
             }
             written.step();
         }
     }
-    assert_eq!(driven.full_state(), written.full_state(), "the law at every physics step, bit for bit");
+    assert_eq!(
+        driven.full_state(),
+        written.full_state(),
+        "the law at every physics step, bit for bit"
+    );
     // The robots moved (a law that did nothing would agree too).
     let start = pair(10).full_state();
-    let moved = driven.full_state().iter().zip(&start).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    let moved =
+        driven.full_state().iter().zip(&start).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
     assert!(moved > 1e-3, "moved {moved}");
     // The same torques held for the whole period (a command without gains, the old drives)
     // move the robots otherwise: the law ran inside the period.
@@ -80,7 +102,13 @@ fn the_mujoco_drives_run_the_law_at_every_physics_step() {
     for _ in 0..20 {
         for (i, c) in cmds.iter().enumerate() {
             held.state(i, &mut s);
-            let tau: Vec<f64> = (0..c.tau_ff.len()).map(|j| c.tau_ff[j] + c.kp[j] * (c.q_des[j] - s.joint_positions[j]) + c.kd[j] * (c.qd_des[j] - s.joint_velocities[j])).collect();
+            let tau: Vec<f64> = (0..c.tau_ff.len())
+                .map(|j| {
+                    c.tau_ff[j]
+                        + c.kp[j] * (c.q_des[j] - s.joint_positions[j])
+                        + c.kd[j] * (c.qd_des[j] - s.joint_velocities[j])
+                })
+                .collect();
             held.set_drive(i, &DriveCommand::torque("t", "r", 0, tau));
         }
         held.step();
@@ -118,7 +146,11 @@ fn a_drive_command_without_gains_is_its_torque_bit_for_bit() {
         drive.step();
         torque.step();
     }
-    assert_eq!(drive.full_state(), torque.full_state(), "no gains after gains: the law no longer runs");
+    assert_eq!(
+        drive.full_state(),
+        torque.full_state(),
+        "no gains after gains: the law no longer runs"
+    );
 }
 
 #[test]
@@ -136,14 +168,20 @@ fn the_placeholder_drives_run_the_law_as_written() {
     for _ in 0..2000 {
         p.step();
         for j in 0..2 {
-            v[j] += dt * (d.tau_ff[j] + d.kp[j] * (d.q_des[j] - q[j]) + d.kd[j] * (d.qd_des[j] - v[j]));
+            v[j] +=
+                dt * (d.tau_ff[j] + d.kp[j] * (d.q_des[j] - q[j]) + d.kd[j] * (d.qd_des[j] - v[j]));
             q[j] += dt * v[j];
         }
     }
     let mut s = empty_state();
     p.state(0, &mut s);
     for j in 0..2 {
-        assert!((s.joint_positions[j] - q[j]).abs() < 1e-12 && (s.joint_velocities[j] - v[j]).abs() < 1e-12, "joint {j}: {:?} against {q:?} {v:?}", s.joint_positions);
+        assert!(
+            (s.joint_positions[j] - q[j]).abs() < 1e-12
+                && (s.joint_velocities[j] - v[j]).abs() < 1e-12,
+            "joint {j}: {:?} against {q:?} {v:?}",
+            s.joint_positions
+        );
     }
     // The PD pulls each joint to where the feed-forward balances it: q_des + tau_ff / kp.
     assert!((q[0] - (1.0 + 0.5 / 4.0)).abs() < 1e-3, "{q:?}");
@@ -156,20 +194,35 @@ fn the_placeholder_drives_run_the_law_as_written() {
 #[test]
 fn s4_with_the_drive_gains_holds_as_the_torque_loop_does() {
     let sets = ["duration=2", "settle=0.5"];
-    let (_, torque) = common::scenario::run_scenario("s4_object_circle.toml", &sets, false, "drive_s4_torque");
-    let (plan, gains, records) = common::scenario::run_scenario_records("s4_object_circle.toml", &[sets[0], sets[1], "drive_gains=\"inertia\""], false, "drive_s4_inertia");
+    let (_, torque) =
+        common::scenario::run_scenario("s4_object_circle.toml", &sets, false, "drive_s4_torque");
+    let (plan, gains, records) = common::scenario::run_scenario_records(
+        "s4_object_circle.toml",
+        &[sets[0], sets[1], "drive_gains=\"inertia\""],
+        false,
+        "drive_s4_inertia",
+    );
     for c in &gains.checks {
         assert!(c.passed, "with drive gains: {} = {} not below {}", c.name, c.value, c.bound);
     }
     for r in &plan.robots {
         let commands = records.torques.get(&r.id).map_or(0, Vec::len) as u64;
         assert_eq!(commands, plan.scene.ticks, "{}: a command every tick", r.id);
-        assert_eq!(records.with_gains.get(&r.id).copied(), Some(commands), "{}: every command with its gains", r.id);
+        assert_eq!(
+            records.with_gains.get(&r.id).copied(),
+            Some(commands),
+            "{}: every command with its gains",
+            r.id
+        );
     }
     let (a, b) = (torque.object.position_rms_m, gains.object.position_rms_m);
     println!("object RMS: torque loop {:.4} mm, with drive gains {:.4} mm", a * 1e3, b * 1e3);
     assert!(b < 1e-3, "object RMS with drive gains {b} m");
-    assert!((a - b).abs() < DIFFERENCE_M, "the gains change the object's RMS by {} mm", (a - b) * 1e3);
+    assert!(
+        (a - b).abs() < DIFFERENCE_M,
+        "the gains change the object's RMS by {} mm",
+        (a - b) * 1e3
+    );
 }
 
 /// How much the drive gains may change S4's object RMS in lockstep.

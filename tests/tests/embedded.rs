@@ -1,7 +1,7 @@
 //! The embedded mode: every component in one process on one Zenoh session, closed loop.
 
-use team_runner::launch::{BridgeOutcome, RunMode};
-use team_runner::smoke::{self, SmokeConfig};
+use launch::launcher::{BridgeOutcome, RunMode};
+use launch::smoke::{self, SmokeConfig};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn embedded_team_closes_the_loop_exactly() {
@@ -14,7 +14,9 @@ async fn embedded_team_closes_the_loop_exactly() {
         damping: 5.0,
         v0: 0.5,
     };
-    let BridgeOutcome::Smoke { report, final_velocities } = smoke::run(&cfg, &RunMode::Embedded).await.unwrap() else {
+    let BridgeOutcome::Smoke { report, final_velocities } =
+        smoke::run(&cfg, &RunMode::Embedded).await.unwrap()
+    else {
         panic!("an embedded smoke run reports the plant's figures")
     };
     assert_eq!(report.ticks, 400);

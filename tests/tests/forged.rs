@@ -45,13 +45,20 @@ impl TeamController for SizeChecked {
         "joint damping, sizes checked"
     }
 
-    fn solve(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError> {
+    fn solve(
+        &mut self,
+        tick: &[DynamicsTerms],
+        out: &mut Vec<TorqueCommand>,
+    ) -> Result<(), ControllerError> {
         self.0.solve(tick, out)
     }
 
     fn check_terms(&self, t: &DynamicsTerms) -> Result<(), ControllerError> {
         if t.nv() != 6 + JOINTS || t.velocity.len() != 6 + JOINTS {
-            return Err(ControllerError::Dimension { what: format!("{}: terms", t.header.robot_id()), detail: format!("nv {} for a robot of {JOINTS} joints", t.nv()) });
+            return Err(ControllerError::Dimension {
+                what: format!("{}: terms", t.header.robot_id()),
+                detail: format!("nv {} for a robot of {JOINTS} joints", t.nv()),
+            });
         }
         Ok(())
     }
@@ -85,7 +92,10 @@ impl Sent {
 
     /// The forged messages the coordinator must refuse (old ticks are stale, not refused).
     fn to_coordinator(&self) -> u64 {
-        [&self.impersonated_terms, &self.future_terms, &self.wrong_size_terms, &self.huge_length].iter().map(|n| Self::count(n)).sum()
+        [&self.impersonated_terms, &self.future_terms, &self.wrong_size_terms, &self.huge_length]
+            .iter()
+            .map(|n| Self::count(n))
+            .sum()
     }
 }
 
@@ -96,7 +106,9 @@ fn terms(state: &RobotState, robot: &str, tick: u64, joints: usize) -> DynamicsT
     s.joint_positions.resize(joints, 0.0);
     s.joint_velocities.resize(joints, 0.0);
     let mut out = empty_terms(&state.header.team, robot);
-    source.compute(&s, &ActiveContacts { stance: vec![], hand_in_grasp: false }, &mut out).expect("placeholder terms");
+    source
+        .compute(&s, &ActiveContacts { stance: vec![], hand_in_grasp: false }, &mut out)
+        .expect("placeholder terms");
     out.header = Header::new(&state.header.team, Some(robot), tick, protocol::wall_clock_ns());
     out.state_tick = tick;
     out
@@ -115,7 +127,9 @@ fn with_huge_length(msg: &DynamicsTerms) -> Vec<u8> {
 
 /// As r2 (`r2`'s session): every 20th state of r2, the forged dynamics and torques.
 async fn forge_as_r2(r2: Session, team: String, sent: Arc<Sent>) {
-    let states = transport::subscribe(&r2, keys::robot(&team, "r2", RobotTopic::State).unwrap()).await.unwrap();
+    let states = transport::subscribe(&r2, keys::robot(&team, "r2", RobotTopic::State).unwrap())
+        .await
+        .unwrap();
     let dynamics = keys::robot(&team, "r2", RobotTopic::Dynamics).unwrap();
     let torque = keys::robot(&team, "r2", RobotTopic::Torque).unwrap();
     let mut last = 0;
@@ -131,7 +145,8 @@ async fn forge_as_r2(r2: Session, team: String, sent: Arc<Sent>) {
         };
         put(&dynamics, protocol::encode(&terms(&state, "r1", k, JOINTS)).unwrap()).await;
         sent.impersonated_terms.fetch_add(1, Ordering::Relaxed);
-        put(&dynamics, protocol::encode(&terms(&state, "r2", k + 1_000_000, JOINTS)).unwrap()).await;
+        put(&dynamics, protocol::encode(&terms(&state, "r2", k + 1_000_000, JOINTS)).unwrap())
+            .await;
         sent.future_terms.fetch_add(1, Ordering::Relaxed);
         put(&dynamics, protocol::encode(&terms(&state, "r2", k, JOINTS + 2)).unwrap()).await;
         sent.wrong_size_terms.fetch_add(1, Ordering::Relaxed);
@@ -147,7 +162,9 @@ async fn forge_as_r2(r2: Session, team: String, sent: Arc<Sent>) {
 
 /// As a second coordinator (`c`'s session): every 20th state of r1, a command for r2 on r1's key.
 async fn forge_as_coordinator(c: Session, team: String, sent: Arc<Sent>) {
-    let states = transport::subscribe(&c, keys::robot(&team, "r1", RobotTopic::Dynamics).unwrap()).await.unwrap();
+    let states = transport::subscribe(&c, keys::robot(&team, "r1", RobotTopic::Dynamics).unwrap())
+        .await
+        .unwrap();
     let command = keys::robot(&team, "r1", RobotTopic::Command).unwrap();
     let mut last = 0;
     while let Ok(sample) = states.recv_async().await {
@@ -156,7 +173,12 @@ async fn forge_as_coordinator(c: Session, team: String, sent: Arc<Sent>) {
         if !forge_on(k, &mut last) {
             continue;
         }
-        let cmd = TorqueCommand { header: Header::new(&team, Some("r2"), k, 0), tau: vec![50.0; JOINTS], hold: false, delay_ticks: 0 };
+        let cmd = TorqueCommand {
+            header: Header::new(&team, Some("r2"), k, 0),
+            tau: vec![50.0; JOINTS],
+            hold: false,
+            delay_ticks: 0,
+        };
         c.put(&command, protocol::encode(&cmd).unwrap()).await.expect("put");
         sent.impersonated_commands.fetch_add(1, Ordering::Relaxed);
     }
@@ -164,7 +186,11 @@ async fn forge_as_coordinator(c: Session, team: String, sent: Arc<Sent>) {
 
 /// The first coordinator status on `statuses` that counts `refused` refusals, or the last one
 /// seen when none does within `limit`.
-async fn status_counting(statuses: &transport::SampleQueue, refused: u64, limit: Duration) -> CoordinatorStatus {
+async fn status_counting(
+    statuses: &transport::SampleQueue,
+    refused: u64,
+    limit: Duration,
+) -> CoordinatorStatus {
     let until = tokio::time::Instant::now() + limit;
     let mut last: Option<CoordinatorStatus> = None;
     while let Ok(Ok(sample)) = tokio::time::timeout_at(until, statuses.recv_async()).await {
@@ -182,21 +208,45 @@ async fn forged_messages_are_refused_counted_and_named() {
     let dir = common::certs::make("forged", &["r1", "r2"]);
     let hub = hub_endpoint();
     let any = &protocol::access::secure_endpoint("127.0.0.1", 0);
-    let session = |who: Identity, listen: &str, connect: Option<&str>| config(&dir, team, &robots, who, listen, connect, true);
+    let session = |who: Identity, listen: &str, connect: Option<&str>| {
+        config(&dir, team, &robots, who, listen, connect, true)
+    };
     let cs = open(&session(Identity::Coordinator, &hub, None)).await;
-    let statuses = transport::subscribe(&cs, keys::coordinator_status(team).unwrap()).await.unwrap();
-    let (a1, a2) = (open(&session(Identity::Agent("r1".into()), any, Some(&hub))).await, open(&session(Identity::Agent("r2".into()), any, Some(&hub))).await);
-    let r1_status = transport::subscribe(&a1, keys::robot(team, "r1", RobotTopic::Status).unwrap()).await.unwrap();
+    let statuses =
+        transport::subscribe(&cs, keys::coordinator_status(team).unwrap()).await.unwrap();
+    let (a1, a2) = (
+        open(&session(Identity::Agent("r1".into()), any, Some(&hub))).await,
+        open(&session(Identity::Agent("r2".into()), any, Some(&hub))).await,
+    );
+    let r1_status = transport::subscribe(&a1, keys::robot(team, "r1", RobotTopic::Status).unwrap())
+        .await
+        .unwrap();
     let sim = open(&session(Identity::SimBridge, any, Some(&hub))).await;
-    let (forger_r2, forger_c) = (open(&session(Identity::Agent("r2".into()), any, Some(&hub))).await, open(&session(Identity::Coordinator, any, Some(&hub))).await);
+    let (forger_r2, forger_c) = (
+        open(&session(Identity::Agent("r2".into()), any, Some(&hub))).await,
+        open(&session(Identity::Coordinator, any, Some(&hub))).await,
+    );
 
     let c = coordinator(&cs, team, Box::new(SizeChecked(JointDamping { damping: 2.0 })));
     let agents = [agent(&a1, team, "r1"), agent(&a2, team, "r2")];
-    let b = bridge(&sim, team, &["r1", "r2"], TICKS, sim_bridge::lockstep::DEFAULT_COORDINATOR_GRACE_TICKS);
+    let b = bridge(
+        &sim,
+        team,
+        &["r1", "r2"],
+        TICKS,
+        sim_bridge::lockstep::DEFAULT_COORDINATOR_GRACE_TICKS,
+    );
     let sent = Arc::new(Sent::default());
-    let forgers = [tokio::spawn(forge_as_r2(forger_r2.clone(), team.into(), sent.clone())), tokio::spawn(forge_as_coordinator(forger_c.clone(), team.into(), sent.clone()))];
+    let forgers = [
+        tokio::spawn(forge_as_r2(forger_r2.clone(), team.into(), sent.clone())),
+        tokio::spawn(forge_as_coordinator(forger_c.clone(), team.into(), sent.clone())),
+    ];
 
-    let report = tokio::time::timeout(Duration::from_secs(120), b.task).await.expect("the run ends in time").expect("bridge task").expect("every tick ran");
+    let report = tokio::time::timeout(Duration::from_secs(120), b.task)
+        .await
+        .expect("the run ends in time")
+        .expect("bridge task")
+        .expect("every tick ran");
     forgers.iter().for_each(|f| f.abort());
     // What was sent arrives (reliable links); the coordinator publishes its status at least every
     // second, so within three seconds a status counts every refusal.
@@ -211,17 +261,44 @@ async fn forged_messages_are_refused_counted_and_named() {
         }
     }
     println!("sent: {} terms as r1, {} ahead, {} of the wrong size, {} with a huge length, {} old; {} torques as r1; {} commands as r2", Sent::count(&sent.impersonated_terms), Sent::count(&sent.future_terms), Sent::count(&sent.wrong_size_terms), Sent::count(&sent.huge_length), Sent::count(&sent.old_terms), Sent::count(&sent.impersonated_torques), Sent::count(&sent.impersonated_commands));
-    println!("coordinator: {counters:?}\nlast status: refused {}, {:?}\nbridge: {report:?}\nr1: {r1:?}", status.refused, status.last_refusal);
+    println!(
+        "coordinator: {counters:?}\nlast status: refused {}, {:?}\nbridge: {report:?}\nr1: {r1:?}",
+        status.refused, status.last_refusal
+    );
 
     assert_eq!(report.ticks, TICKS, "the team ran every tick");
-    assert!(Sent::count(&sent.impersonated_terms) >= 10 && Sent::count(&sent.impersonated_commands) >= 10, "the forgers ran through the run");
-    assert_eq!(counters.refused, sent.to_coordinator(), "the coordinator refused every forged dynamics message and nothing else");
+    assert!(
+        Sent::count(&sent.impersonated_terms) >= 10
+            && Sent::count(&sent.impersonated_commands) >= 10,
+        "the forgers ran through the run"
+    );
+    assert_eq!(
+        counters.refused,
+        sent.to_coordinator(),
+        "the coordinator refused every forged dynamics message and nothing else"
+    );
     assert_eq!(status.refused, counters.refused, "the status carries the count");
     let named = status.last_refusal.as_deref().unwrap_or("");
-    assert!(named.contains("team/forged/robot/r2/dynamics"), "the last refusal names the key: {named}");
-    assert_eq!(report.rejected_torques, Sent::count(&sent.impersonated_torques), "the bridge refused every torque forged for r1");
-    assert_eq!(r1.rejected, Sent::count(&sent.impersonated_commands), "r1's agent refused every command forged for r2 on its key");
-    assert!(r1_last_rejection.as_deref().is_some_and(|w| w.contains("robot r1 of team forged") && w.contains("robot r2 of team forged")), "r1's status names both senders: {r1_last_rejection:?}");
+    assert!(
+        named.contains("team/forged/robot/r2/dynamics"),
+        "the last refusal names the key: {named}"
+    );
+    assert_eq!(
+        report.rejected_torques,
+        Sent::count(&sent.impersonated_torques),
+        "the bridge refused every torque forged for r1"
+    );
+    assert_eq!(
+        r1.rejected,
+        Sent::count(&sent.impersonated_commands),
+        "r1's agent refused every command forged for r2 on its key"
+    );
+    assert!(
+        r1_last_rejection.as_deref().is_some_and(
+            |w| w.contains("robot r1 of team forged") && w.contains("robot r2 of team forged")
+        ),
+        "r1's status names both senders: {r1_last_rejection:?}"
+    );
     println!("r2: {r2:?}");
     for s in [a1, a2, sim, forger_r2, forger_c, cs] {
         s.close().await.unwrap();

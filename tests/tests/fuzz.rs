@@ -66,7 +66,11 @@ async fn a_fuzzer_on_every_key_is_refused_and_the_team_keeps_working() {
     let fuzzer = s.clone();
     // A ring, never a FIFO: local delivery runs in the publisher's thread, and a full FIFO
     // would block every component's put behind the fuzzer (seen: the run stood still).
-    let traffic = fuzzer.declare_subscriber(format!("team/{team}/**")).with(RingChannel::new(256)).await.unwrap();
+    let traffic = fuzzer
+        .declare_subscriber(format!("team/{team}/**"))
+        .with(RingChannel::new(256))
+        .await
+        .unwrap();
     let c = coordinator(&s, team, Box::new(coordinator::JointDamping { damping: 2.0 }));
     let agents = [agent(&s, team, "r1"), agent(&s, team, "r2")];
     let b = bridge(&s, team, &["r1", "r2"], TICKS, 500);
@@ -86,7 +90,11 @@ async fn a_fuzzer_on_every_key_is_refused_and_the_team_keeps_working() {
                 continue;
             }
             budget += PER_SAMPLE;
-            let entry = (sample.key_expr().to_string(), sample.encoding().clone(), sample.payload().to_bytes().to_vec());
+            let entry = (
+                sample.key_expr().to_string(),
+                sample.encoding().clone(),
+                sample.payload().to_bytes().to_vec(),
+            );
             if seen.len() < KEEP {
                 seen.push(entry);
             } else {
@@ -101,16 +109,28 @@ async fn a_fuzzer_on_every_key_is_refused_and_the_team_keeps_working() {
         budget -= 1;
         let mode = rng.below(5);
         // Mode 1 (duplicate) takes the newest sample; the others any recorded one.
-        let pick = if mode == 1 { (at + seen.len() - 1) % seen.len().max(1) } else { rng.below(seen.len()) };
+        let pick = if mode == 1 {
+            (at + seen.len() - 1) % seen.len().max(1)
+        } else {
+            rng.below(seen.len())
+        };
         let (key, encoding, bytes) = &seen[pick.min(seen.len() - 1)];
         let payload = mutate(&mut rng, mode, bytes);
         fuzzer.put(key.as_str(), payload).encoding(encoding.clone()).await.unwrap();
         sent += 1;
         tokio::task::yield_now().await;
     }
-    let report = tokio::time::timeout(Duration::from_secs(120), b.task).await.expect("bounded").unwrap().expect("the run completes under the fuzzer");
+    let report = tokio::time::timeout(Duration::from_secs(120), b.task)
+        .await
+        .expect("bounded")
+        .unwrap()
+        .expect("the run completes under the fuzzer");
     assert_eq!(report.ticks, TICKS, "every tick was run");
-    println!("fuzzer: {sent} payloads from {} recorded samples; lockstep refused {} torques", seen.len(), report.rejected_torques);
+    println!(
+        "fuzzer: {sent} payloads from {} recorded samples; lockstep refused {} torques",
+        seen.len(),
+        report.rejected_torques
+    );
     assert!(sent >= 1000, "the fuzzer sent {sent} payloads");
     let mut agent_refusals = 0;
     for (robot, a) in ["r1", "r2"].iter().zip(agents) {
@@ -122,8 +142,14 @@ async fn a_fuzzer_on_every_key_is_refused_and_the_team_keeps_working() {
     }
     let coordinator = stop(c).await;
     println!("coordinator: {coordinator:?}");
-    assert!(agent_refusals > 0, "the agents refused and counted fuzzed states, commands or contacts");
-    assert!(coordinator.rejected_terms > 0, "the coordinator refused and counted fuzzed dynamics terms");
+    assert!(
+        agent_refusals > 0,
+        "the agents refused and counted fuzzed states, commands or contacts"
+    );
+    assert!(
+        coordinator.rejected_terms > 0,
+        "the coordinator refused and counted fuzzed dynamics terms"
+    );
     assert!(report.rejected_torques > 0, "the bridge refused and counted fuzzed torques");
     s.close().await.unwrap();
 }

@@ -6,7 +6,7 @@ use sim_bridge::ground_truth::{self, GroundTruthLog};
 use sim_bridge::mujoco_plant::MujocoPlant;
 use sim_bridge::plant::{empty_state, Plant};
 use sim_bridge::world::{load_robots, World, WorldSpec};
-use team_runner::placing::place_hands;
+use scenario::layout::place_hands;
 use team_tests::standing::{HandPush, StandingController, StandingGains};
 
 fn hold(squeeze: f64, seconds: f64) -> (f64, f64, usize, GroundTruthLog) {
@@ -19,10 +19,14 @@ fn hold(squeeze: f64, seconds: f64) -> (f64, f64, usize, GroundTruthLog) {
         .iter()
         .map(|r| {
             let off = r.robot.model.nq - r.robot.joints();
-            StandingController::new(r.robot.clone(), Some(r.initial_q[off..].to_vec()), StandingGains::default())
-                .unwrap()
-                .with_hand_push(HandPush { squeeze, carry: 9.81 / 2.0 })
-                .unwrap()
+            StandingController::new(
+                r.robot.clone(),
+                Some(r.initial_q[off..].to_vec()),
+                StandingGains::default(),
+            )
+            .unwrap()
+            .with_hand_push(HandPush { squeeze, carry: 9.81 / 2.0 })
+            .unwrap()
         })
         .collect();
     let mut plant = MujocoPlant::new(world).unwrap();
@@ -46,7 +50,8 @@ fn hold(squeeze: f64, seconds: f64) -> (f64, f64, usize, GroundTruthLog) {
         ang_max = ang_max.max(2.0 * o.pose.orientation[0].abs().min(1.0).acos());
         if k > 50 {
             for id in ["r1", "r2"] {
-                min_contacts = min_contacts.min(gt.hand_contacts.iter().filter(|c| c.robot == id).count());
+                min_contacts =
+                    min_contacts.min(gt.hand_contacts.iter().filter(|c| c.robot == id).count());
             }
         }
     }

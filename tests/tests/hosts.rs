@@ -1,4 +1,4 @@
-//! The team across test hosts (`scripts/testhosts.sh`, `team_runner::hosts`): the coordinator,
+//! The team across test hosts (`scripts/testhosts.sh`, `launch::hosts`): the coordinator,
 //! each agent and the sim-bridge each in its own Linux network namespace, joined by veth pairs
 //! to one bridge, this process (the scenario driver) on the bridge. Where namespaces cannot be
 //! made here (not root, no nftables), each test fails naming the reason, unless
@@ -9,12 +9,12 @@ mod common;
 
 use std::sync::{Arc, Mutex};
 
-use team_runner::evaluate;
-use team_runner::hosts::TestHosts;
-use team_runner::launch::RunMode;
-use team_runner::plan::{self, Plan};
-use team_runner::run::{self, RunOptions};
-use team_runner::scenario::Scenario;
+use evaluation::evaluate;
+use launch::hosts::TestHosts;
+use launch::launcher::RunMode;
+use scenario::plan::{self, Plan};
+use launch::run::{self, RunOptions};
+use scenario::file::Scenario;
 
 /// The tests run one at a time: each counts the machine's namespaces.
 static SERIAL: Mutex<()> = Mutex::new(());
@@ -25,7 +25,8 @@ fn serial() -> std::sync::MutexGuard<'static, ()> {
 
 fn s4(duration: f64) -> Plan {
     let sets = [format!("duration={duration}"), "settle=0.5".into()];
-    let s = Scenario::load(common::scenario::repo().join("scenarios/s4_object_circle.toml"), &sets).expect("scenario");
+    let s = Scenario::load(common::scenario::repo().join("scenarios/s4_object_circle.toml"), &sets)
+        .expect("scenario");
     plan::plan(&s, &common::scenario::repo()).expect("plan")
 }
 
@@ -43,15 +44,28 @@ fn hosts_for(plan: &Plan, test: &str) -> Option<Arc<TestHosts>> {
 }
 
 fn namespaces() -> Vec<String> {
-    let out = std::process::Command::new("ip").args(["netns", "list"]).output().map(|o| String::from_utf8_lossy(&o.stdout).to_string()).unwrap_or_default();
+    let out = std::process::Command::new("ip")
+        .args(["netns", "list"])
+        .output()
+        .map(|o| String::from_utf8_lossy(&o.stdout).to_string())
+        .unwrap_or_default();
     out.lines().filter_map(|l| l.split_whitespace().next()).map(str::to_string).collect()
 }
 
-fn run_on(plan: &Plan, hosts: &Arc<TestHosts>, name: &str) -> Result<team_runner::driver::Records, run::RunError> {
+fn run_on(
+    plan: &Plan,
+    hosts: &Arc<TestHosts>,
+    name: &str,
+) -> Result<evaluation::records::Records, run::RunError> {
     let dir = report_dir(name);
     let rt = tokio::runtime::Runtime::new().expect("runtime");
     let mode = RunMode::Hosts { dir, hosts: hosts.clone(), certs: None };
-    rt.block_on(run::run_in(plan, &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() }, &mode, None))
+    rt.block_on(run::run_in(
+        plan,
+        &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() },
+        &mode,
+        None,
+    ))
 }
 
 /// S4 with every component on its own host passes its checks, and `team run --hosts`'s hosts
@@ -65,7 +79,12 @@ fn s4_holds_with_every_component_on_its_own_host() {
         return;
     }
     let dir = report_dir("hosts_s4");
-    let records = run::run(&plan, &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() }, &dir).expect("the run completes");
+    let records = run::run(
+        &plan,
+        &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() },
+        &dir,
+    )
+    .expect("the run completes");
     let eval = evaluate::evaluate(&plan, &records, "hosts");
     println!("{}", evaluate::summary(&eval.metrics, &dir));
     for c in &eval.metrics.checks {
@@ -80,7 +99,11 @@ fn s4_holds_with_every_component_on_its_own_host() {
 fn the_team_holds_with_five_percent_of_one_agents_packets_dropped() {
     let _one = serial();
     let plan = s4(2.0);
-    let Some(hosts) = hosts_for(&plan, "hosts::the_team_holds_with_five_percent_of_one_agents_packets_dropped") else { return };
+    let Some(hosts) =
+        hosts_for(&plan, "hosts::the_team_holds_with_five_percent_of_one_agents_packets_dropped")
+    else {
+        return;
+    };
     hosts.set_loss("r1", 5).expect("loss rule");
     let records = run_on(&plan, &hosts, "hosts_loss").expect("the run completes");
     let eval = evaluate::evaluate(&plan, &records, "hosts");
@@ -98,7 +121,9 @@ fn the_team_holds_with_five_percent_of_one_agents_packets_dropped() {
 fn a_robot_whose_link_is_down_is_named() {
     let _one = serial();
     let plan = s4(1.0);
-    let Some(hosts) = hosts_for(&plan, "hosts::a_robot_whose_link_is_down_is_named") else { return };
+    let Some(hosts) = hosts_for(&plan, "hosts::a_robot_whose_link_is_down_is_named") else {
+        return;
+    };
     hosts.set_link("r2", false).expect("link down");
     let started = std::time::Instant::now();
     let err = run_on(&plan, &hosts, "hosts_link_down").expect_err("the run fails");
@@ -120,7 +145,11 @@ fn a_robot_whose_link_is_down_is_named() {
 fn the_team_holds_through_a_robots_link_to_the_coordinator_reset() {
     let _one = serial();
     let plan = s4(3.0);
-    let Some(hosts) = hosts_for(&plan, "hosts::the_team_holds_through_a_robots_link_to_the_coordinator_reset") else { return };
+    let Some(hosts) =
+        hosts_for(&plan, "hosts::the_team_holds_through_a_robots_link_to_the_coordinator_reset")
+    else {
+        return;
+    };
     let done = Arc::new(std::sync::atomic::AtomicBool::new(false));
     let cutter = {
         let (hosts, done) = (hosts.clone(), done.clone());
@@ -130,7 +159,12 @@ fn the_team_holds_through_a_robots_link_to_the_coordinator_reset() {
             let mut cuts = Vec::new();
             std::thread::sleep(std::time::Duration::from_millis(1500));
             while !done.load(std::sync::atomic::Ordering::Relaxed) && cuts.len() < 8 {
-                cuts.push((protocol::wall_clock_ns(), hosts.cut("r1", team_runner::launch::COORDINATOR_HOST).expect("reset r1's connections")));
+                cuts.push((
+                    protocol::wall_clock_ns(),
+                    hosts
+                        .cut("r1", launch::launcher::COORDINATOR_HOST)
+                        .expect("reset r1's connections"),
+                ));
                 std::thread::sleep(std::time::Duration::from_millis(800));
             }
             cuts
@@ -141,9 +175,15 @@ fn the_team_holds_through_a_robots_link_to_the_coordinator_reset() {
     let cuts = cutter.join().expect("the cutter");
     let records = records.expect("the run completes");
     // Resets that struck the running team: after its first status as running, before its last.
-    let running = records.statuses.iter().find(|s| s.mode == protocol::CoordinatorMode::Running).map(|s| s.header.stamp_ns).expect("the team ran");
+    let running = records
+        .statuses
+        .iter()
+        .find(|s| s.mode == protocol::CoordinatorMode::Running)
+        .map(|s| s.header.stamp_ns)
+        .expect("the team ran");
     let end = records.statuses.last().map(|s| s.header.stamp_ns).unwrap_or(0);
-    let struck: Vec<_> = cuts.iter().filter(|(at, n)| *n > 0 && *at > running && *at < end).collect();
+    let struck: Vec<_> =
+        cuts.iter().filter(|(at, n)| *n > 0 && *at > running && *at < end).collect();
     println!("connections of r1 to the coordinator reset (wall ns, count): {cuts:?}; {} while the team ran", struck.len());
     assert!(struck.len() >= 2, "r1's connections to the coordinator were reset at least twice while the team ran: {cuts:?}");
     let eval = evaluate::evaluate(&plan, &records, "hosts");
@@ -158,13 +198,32 @@ fn the_team_holds_through_a_robots_link_to_the_coordinator_reset() {
     // come again (before, the run waited out the agents' 20 s deadline).
     // A deadline waited out stops the lockstep for the agents' 20 s: judged by the largest
     // wall-clock gap between the ground truths of consecutive ticks, not by the run's length.
-    let gap_ns = records.truth.windows(2).map(|w| w[1].header.stamp_ns.saturating_sub(w[0].header.stamp_ns)).max().unwrap_or(0);
-    assert!(gap_ns < 5_000_000_000, "no deadline waited out: the longest wait between two ticks was {:.3} s", gap_ns as f64 * 1e-9);
-    assert!(eval.metrics.object.position_max_m < 0.001, "the object within 1 mm of its reference through the resets: {} m", eval.metrics.object.position_max_m);
-    let first = records.statuses.iter().position(|s| s.mode == protocol::CoordinatorMode::Running).expect("the team ran");
+    let gap_ns = records
+        .truth
+        .windows(2)
+        .map(|w| w[1].header.stamp_ns.saturating_sub(w[0].header.stamp_ns))
+        .max()
+        .unwrap_or(0);
+    assert!(
+        gap_ns < 5_000_000_000,
+        "no deadline waited out: the longest wait between two ticks was {:.3} s",
+        gap_ns as f64 * 1e-9
+    );
+    assert!(
+        eval.metrics.object.position_max_m < 0.001,
+        "the object within 1 mm of its reference through the resets: {} m",
+        eval.metrics.object.position_max_m
+    );
+    let first = records
+        .statuses
+        .iter()
+        .position(|s| s.mode == protocol::CoordinatorMode::Running)
+        .expect("the team ran");
     // (As the run ends, the agents stop and leave.)
     for s in records.statuses[first..].iter().filter(|s| s.header.tick + 5 < plan.total_ticks()) {
-        let out = !s.members.iter().any(|m| m == "r1") || s.silent.iter().any(|m| m == "r1") || s.late.iter().any(|m| m == "r1");
+        let out = !s.members.iter().any(|m| m == "r1")
+            || s.silent.iter().any(|m| m == "r1")
+            || s.late.iter().any(|m| m == "r1");
         assert!(!out, "tick {}: r1 left out of the team ({:?})", s.header.tick, s.detail);
     }
 }
@@ -196,17 +255,35 @@ fn s4_holds_across_hosts_over_mutual_tls() {
     let before = namespaces();
     let dir = report_dir("hosts_tls");
     // No configuration of an earlier run may stand in for this one's.
-    std::fs::remove_dir_all(&dir).and_then(|_| std::fs::create_dir_all(&dir)).expect("a fresh report folder");
-    let (records, _) = run::run_recorded_secure(&plan, &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() }, Some(&ca), &dir, None).expect("the run completes");
+    std::fs::remove_dir_all(&dir)
+        .and_then(|_| std::fs::create_dir_all(&dir))
+        .expect("a fresh report folder");
+    let (records, _) = run::run_recorded_secure(
+        &plan,
+        &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() },
+        Some(&ca),
+        &dir,
+        None,
+    )
+    .expect("the run completes");
     let eval = evaluate::evaluate(&plan, &records, "hosts-tls");
     println!("{}", evaluate::summary(&eval.metrics, &dir));
     for c in &eval.metrics.checks {
         assert!(c.passed, "{} = {} not below {}", c.name, c.value, c.bound);
     }
     assert_eq!(namespaces(), before, "the run's hosts were removed");
-    let config = |who: &str| std::fs::read_to_string(dir.join(format!("zenoh-{who}.json5"))).unwrap_or_else(|e| panic!("zenoh-{who}.json5: {e}"));
+    let config = |who: &str| {
+        std::fs::read_to_string(dir.join(format!("zenoh-{who}.json5")))
+            .unwrap_or_else(|e| panic!("zenoh-{who}.json5: {e}"))
+    };
     let coordinator = config("coordinator");
-    let hub = coordinator.split('"').find(|t| t.starts_with("quic/") && t.ends_with(":7447") || t.starts_with("quic/127.0.0.1:")).expect("the coordinator listens on quic/").to_string();
+    let hub = coordinator
+        .split('"')
+        .find(|t| {
+            t.starts_with("quic/") && t.ends_with(":7447") || t.starts_with("quic/127.0.0.1:")
+        })
+        .expect("the coordinator listens on quic/")
+        .to_string();
     for who in ["coordinator", "r1", "r2", "sim-bridge", "runner"] {
         let text = config(who);
         assert!(text.contains(&hub), "{who} reaches the coordinator at {hub}");
@@ -215,11 +292,21 @@ fn s4_holds_across_hosts_over_mutual_tls() {
     {
         assert!(!hub.starts_with("quic/127."), "across hosts, not on loopback: {hub}");
         let certs = dir.join("hosts-certs");
-        assert!(certs.join("coordinator.pem").is_file() && certs.join("r2.key").is_file(), "the run's certificates");
+        assert!(
+            certs.join("coordinator.pem").is_file() && certs.join("r2.key").is_file(),
+            "the run's certificates"
+        );
         assert!(!certs.join("ca.key").exists(), "the CA's key is not left in the report folder");
-        let text = std::process::Command::new("openssl").args(["x509", "-noout", "-ext", "subjectAltName", "-in"]).arg(certs.join("coordinator.pem")).output().expect("openssl");
+        let text = std::process::Command::new("openssl")
+            .args(["x509", "-noout", "-ext", "subjectAltName", "-in"])
+            .arg(certs.join("coordinator.pem"))
+            .output()
+            .expect("openssl");
         let addr = hub.trim_start_matches("quic/").trim_end_matches(":7447");
-        assert!(String::from_utf8_lossy(&text.stdout).contains(&format!("IP Address:{addr}")), "the coordinator's certificate names its host's address {addr}");
+        assert!(
+            String::from_utf8_lossy(&text.stdout).contains(&format!("IP Address:{addr}")),
+            "the coordinator's certificate names its host's address {addr}"
+        );
     }
     let _ = std::fs::remove_dir_all(&ca);
 }
@@ -233,9 +320,19 @@ fn hosts_over_tls_without_the_ca_key_are_refused_by_name() {
     let plan = s4(0.5);
     let ca = test_ca("nokey", false);
     let before = namespaces();
-    let err = run::run_recorded_secure(&plan, &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() }, Some(&ca), &report_dir("hosts_tls_nokey"), None).expect_err("refused");
+    let err = run::run_recorded_secure(
+        &plan,
+        &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() },
+        Some(&ca),
+        &report_dir("hosts_tls_nokey"),
+        None,
+    )
+    .expect_err("refused");
     let text = err.to_string();
-    assert!(text.contains("ca.key") && text.contains("certificates"), "names the missing key: {text}");
+    assert!(
+        text.contains("ca.key") && text.contains("certificates"),
+        "names the missing key: {text}"
+    );
     assert_eq!(namespaces(), before, "no host left behind");
     let _ = std::fs::remove_dir_all(&ca);
 }

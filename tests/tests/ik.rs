@@ -6,7 +6,7 @@ use mujoco_rs::mujoco_c::mjtObj;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use sim_bridge::mujoco_plant::MujocoPlant;
 use sim_bridge::world::{load_robots, name2id, World, WorldSpec};
-use team_runner::placing::place_hands;
+use scenario::layout::place_hands;
 
 #[test]
 fn hands_lie_flat_on_the_object_faces_in_our_model_and_in_mujoco() {
@@ -20,7 +20,12 @@ fn hands_lie_flat_on_the_object_faces_in_our_model_and_in_mujoco() {
     let robots = load_robots(&spec).unwrap();
     let sols = place_hands(&mut spec, &robots).expect("IK converges");
     assert_eq!(sols.len(), 2);
-    let ro = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(object.orientation[0], object.orientation[1], object.orientation[2], object.orientation[3]));
+    let ro = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+        object.orientation[0],
+        object.orientation[1],
+        object.orientation[2],
+        object.orientation[3],
+    ));
     // Outward normals of the faces toward r1 (-x) and r2 (+x) in the object frame.
     let normals = [ro * Vector3::new(-1.0, 0.0, 0.0), ro * Vector3::new(1.0, 0.0, 0.0)];
     let po = Vector3::from(object.position);
@@ -37,8 +42,11 @@ fn hands_lie_flat_on_the_object_faces_in_our_model_and_in_mujoco() {
     let (m, d) = plant.raw();
     for (i, id) in ["r1", "r2"].iter().enumerate() {
         let b = name2id(m, mjtObj::mjOBJ_BODY, "body", &format!("{id}/hand_contact")).unwrap();
-        let p = unsafe { Vector3::new(*d.xpos.add(3 * b), *d.xpos.add(3 * b + 1), *d.xpos.add(3 * b + 2)) };
-        let r = unsafe { Matrix3::from_row_slice(std::slice::from_raw_parts(d.xmat.add(9 * b), 9)) };
+        let p = unsafe {
+            Vector3::new(*d.xpos.add(3 * b), *d.xpos.add(3 * b + 1), *d.xpos.add(3 * b + 2))
+        };
+        let r =
+            unsafe { Matrix3::from_row_slice(std::slice::from_raw_parts(d.xmat.add(9 * b), 9)) };
         let n = normals[i];
         let dist = (p - po).dot(&n) - 0.3;
         assert!(dist.abs() < 1e-3, "{id}: hand frame {dist} m off the face plane");
@@ -48,7 +56,10 @@ fn hands_lie_flat_on_the_object_faces_in_our_model_and_in_mujoco() {
         let e = ro * Vector3::y();
         let base = Vector3::from(spec.robots[i].base_position);
         let expected = e * e.dot(&(base - po)).clamp(-0.24, 0.24);
-        assert!((along - expected).norm() < 1e-3, "{id}: hand at {along:?} on the face, expected in front of the base at {expected:?}");
+        assert!(
+            (along - expected).norm() < 1e-3,
+            "{id}: hand at {along:?} on the face, expected in front of the base at {expected:?}"
+        );
         let angle = (-r.column(2).dot(&n)).clamp(-1.0, 1.0).acos();
         assert!(angle < 0.5f64.to_radians(), "{id}: palm normal {} deg off", angle.to_degrees());
         let err = (p - sols[i].target_position).norm();

@@ -22,7 +22,20 @@ const MAX_FN_LINES: usize = 80;
 /// The longest the README may be.
 const MAX_README_LINES: usize = 300;
 /// The crates whose `src/` the rules read.
-const CRATES: [&str; 8] = ["protocol", "robot-model", "robot-agent", "coordinator", "sim-bridge", "planner", "runner", "tests"];
+const CRATES: [&str; 12] = [
+    "protocol",
+    "robot-model",
+    "robot-agent",
+    "coordinator",
+    "sim-bridge",
+    "planner",
+    "scenario",
+    "evaluation",
+    "launch",
+    "experiments",
+    "runner",
+    "tests",
+];
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("the workspace root").to_path_buf()

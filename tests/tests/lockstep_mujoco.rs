@@ -35,7 +35,12 @@ fn controllers(world: &World, ids: &[&str]) -> Vec<(String, StandingController)>
         .robots
         .iter()
         .filter(|r| ids.contains(&r.id.as_str()))
-        .map(|r| (r.id.clone(), StandingController::new(r.robot.clone(), None, StandingGains::default()).unwrap()))
+        .map(|r| {
+            (
+                r.id.clone(),
+                StandingController::new(r.robot.clone(), None, StandingGains::default()).unwrap(),
+            )
+        })
         .collect()
 }
 
@@ -44,7 +49,11 @@ fn tilt_deg(q: [f64; 4]) -> f64 {
 }
 
 /// The real agent loop with the default robot's model, on its own task until `stop`.
-fn spawn_agent(session: &zenoh::Session, cfg: AgentConfig, stop: watch::Receiver<bool>) -> JoinHandle<Result<AgentCounters, AgentError>> {
+fn spawn_agent(
+    session: &zenoh::Session,
+    cfg: AgentConfig,
+    stop: watch::Receiver<bool>,
+) -> JoinHandle<Result<AgentCounters, AgentError>> {
     let session = session.clone();
     tokio::spawn(async move {
         let robot = robot_model::Robot::load(robot_model::default_robot_path()).unwrap();
@@ -68,15 +77,27 @@ async fn default_robot_stands_5_s_under_its_agent() {
     // commands, which the agent checks and forwards to the bridge.
     // A generous command deadline: lockstep ticks can be slow on a loaded machine, and safe
     // mode is not what this test is about.
-    let agent = spawn_agent(&session, AgentConfig::new(team, "r1").with_deadline_time(Duration::from_secs(2)), stop_rx.clone());
+    let agent = spawn_agent(
+        &session,
+        AgentConfig::new(team, "r1").with_deadline_time(Duration::from_secs(2)),
+        stop_rx.clone(),
+    );
     let s3 = session.clone();
     let rx = stop_rx.clone();
     let coord = tokio::spawn(async move { standing::serve(&s3, team, ctl, false, rx).await });
     // Settle 200 ticks, restart the scenario clock, then 5 s with tick numbers continuing.
     lockstep::run(&session, &cfg(team, 200), &mut plant, stop_rx.clone()).await.unwrap();
     plant.restart_clock();
-    let mut extras = Extras { truth_log: Some(GroundTruthLog::new(10)), publish_ground_truth: true, first_tick: 200, ..Default::default() };
-    let report = lockstep::run_with(&session, &cfg(team, 5000), &mut plant, &mut extras, stop_rx.clone()).await.unwrap();
+    let mut extras = Extras {
+        truth_log: Some(GroundTruthLog::new(10)),
+        publish_ground_truth: true,
+        first_tick: 200,
+        ..Default::default()
+    };
+    let report =
+        lockstep::run_with(&session, &cfg(team, 5000), &mut plant, &mut extras, stop_rx.clone())
+            .await
+            .unwrap();
     stop_tx.send(true).unwrap();
     let counters = agent.await.unwrap().unwrap();
     let sent = coord.await.unwrap().unwrap();
@@ -99,7 +120,11 @@ async fn default_robot_stands_5_s_under_its_agent() {
     let last = rec.records.last().unwrap();
     let fz: f64 = last.foot_contacts.iter().map(|c| c.wrench[2]).sum();
     assert!(last.foot_contacts.len() >= 4, "{:?}", last.foot_contacts);
-    assert!((fz - mass * 9.81).abs() < 0.02 * mass * 9.81, "foot forces {fz} N vs weight {} N", mass * 9.81);
+    assert!(
+        (fz - mass * 9.81).abs() < 0.02 * mass * 9.81,
+        "foot forces {fz} N vs weight {} N",
+        mass * 9.81
+    );
 }
 
 /// An agent that never hears from a coordinator holds its robot up by itself: after its
@@ -118,7 +143,9 @@ async fn an_agent_alone_holds_its_robot_standing() {
     let agent = spawn_agent(&session, AgentConfig::new(team, "r1"), stop_rx.clone());
     // The first tick waits for the agent's deadline (25 ms); the hold answers every tick after.
     let mut extras = Extras { truth_log: Some(GroundTruthLog::new(10)), ..Default::default() };
-    lockstep::run_with(&session, &cfg(team, 2000), &mut plant, &mut extras, stop_rx.clone()).await.unwrap();
+    lockstep::run_with(&session, &cfg(team, 2000), &mut plant, &mut extras, stop_rx.clone())
+        .await
+        .unwrap();
     stop_tx.send(true).unwrap();
     let counters = agent.await.unwrap().unwrap();
     assert_eq!((counters.applied, counters.safe_mode_entries), (0, 1), "{counters:?}");
@@ -137,7 +164,11 @@ async fn an_agent_alone_holds_its_robot_standing() {
     assert!(tilt < 1.0, "trunk tilted {tilt} deg");
     let last = rec.records.last().unwrap();
     let fz: f64 = last.foot_contacts.iter().map(|c| c.wrench[2]).sum();
-    assert!((fz - mass * 9.81).abs() < 0.02 * mass * 9.81, "foot forces {fz} N vs weight {} N", mass * 9.81);
+    assert!(
+        (fz - mass * 9.81).abs() < 0.02 * mass * 9.81,
+        "foot forces {fz} N vs weight {} N",
+        mass * 9.81
+    );
 }
 
 /// One lockstep run of the pair with the object and the direct-mode test controller;
@@ -156,7 +187,9 @@ async fn pair_run(team: &str, seed: u64, ticks: u64) -> (Vec<f64>, Vec<f64>) {
     let t = team.to_string();
     let coord = tokio::spawn(async move { standing::serve(&s, &t, ctl, true, rx).await });
     let mut extras = Extras { truth_log: Some(GroundTruthLog::new(1)), ..Default::default() };
-    lockstep::run_with(&session, &cfg(team, ticks), &mut plant, &mut extras, stop_rx).await.unwrap();
+    lockstep::run_with(&session, &cfg(team, ticks), &mut plant, &mut extras, stop_rx)
+        .await
+        .unwrap();
     stop_tx.send(true).unwrap();
     coord.await.unwrap().unwrap();
     session.close().await.unwrap();
@@ -178,8 +211,14 @@ async fn lockstep_is_deterministic_for_a_seed() {
     let (c, _) = pair_run("det-c", 8, 600).await;
     assert_eq!(ta.len(), 600 * 3 * 13);
     // Bit-identical, not merely close.
-    assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()), "same seed, different final state");
-    assert!(ta.iter().zip(&tb).all(|(x, y)| x.to_bits() == y.to_bits()), "same seed, different trajectory");
+    assert!(
+        a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()),
+        "same seed, different final state"
+    );
+    assert!(
+        ta.iter().zip(&tb).all(|(x, y)| x.to_bits() == y.to_bits()),
+        "same seed, different trajectory"
+    );
     assert!(a.iter().zip(&c).any(|(x, y)| x != y), "a different seed changed nothing");
 }
 
@@ -233,9 +272,16 @@ async fn realtime_holds_and_counts_missing_torques() {
     let rx = stop_rx.clone();
     let coord = tokio::spawn(async move { standing::serve(&s, team, ctl, true, rx).await });
     let started = std::time::Instant::now();
-    let report = sim_bridge::realtime::run(&session, &cfg(team, 100), Duration::from_millis(10), &mut plant, &mut Extras::default(), stop_rx)
-        .await
-        .unwrap();
+    let report = sim_bridge::realtime::run(
+        &session,
+        &cfg(team, 100),
+        Duration::from_millis(10),
+        &mut plant,
+        &mut Extras::default(),
+        stop_rx,
+    )
+    .await
+    .unwrap();
     let wall = started.elapsed();
     stop_tx.send(true).unwrap();
     coord.await.unwrap().unwrap();
@@ -265,14 +311,36 @@ async fn a_perturbation_from_the_key_pushes_the_object() {
     let s = session.clone();
     let rx = stop_rx.clone();
     let run = tokio::spawn(async move {
-        let mut extras = Extras { perturbation_key: true, truth_log: Some(GroundTruthLog::new(1)), ..Default::default() };
+        let mut extras = Extras {
+            perturbation_key: true,
+            truth_log: Some(GroundTruthLog::new(1)),
+            ..Default::default()
+        };
         lockstep::run_with(&s, &cfg(team, 500), &mut plant, &mut extras, rx).await.map(|_| extras)
     });
     tokio::time::sleep(Duration::from_millis(300)).await;
-    let mut p = TypedPublisher::<PerturbationRequest>::declare(&session, keys::perturbation(team).unwrap(), Qos::HotPath).await.unwrap();
-    let bad = PerturbationRequest { header: Header::new(team, None, 0, 0), target: PerturbationTarget::RobotBody { robot: "r1".into(), body: "no_such_link".into() }, wrench: [1.0; 6], start: None, duration: 0.1 };
+    let mut p = TypedPublisher::<PerturbationRequest>::declare(
+        &session,
+        keys::perturbation(team).unwrap(),
+        Qos::HotPath,
+    )
+    .await
+    .unwrap();
+    let bad = PerturbationRequest {
+        header: Header::new(team, None, 0, 0),
+        target: PerturbationTarget::RobotBody { robot: "r1".into(), body: "no_such_link".into() },
+        wrench: [1.0; 6],
+        start: None,
+        duration: 0.1,
+    };
     p.put(&bad).await.unwrap();
-    let r = PerturbationRequest { header: Header::new(team, None, 0, 0), target: PerturbationTarget::Object, wrench: [30.0, 0.0, 0.0, 0.0, 0.0, 0.0], start: Some(0.0), duration: 0.2 };
+    let r = PerturbationRequest {
+        header: Header::new(team, None, 0, 0),
+        target: PerturbationTarget::Object,
+        wrench: [30.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        start: Some(0.0),
+        duration: 0.2,
+    };
     p.put(&r).await.unwrap();
     tokio::time::sleep(Duration::from_millis(100)).await;
     let s = session.clone();
@@ -301,15 +369,25 @@ async fn an_agent_that_left_alive_drives_its_robot_until_its_torques_stop() {
     use protocol::keys::{self, RobotTopic};
     use protocol::transport::{decode_sample, Qos, TypedPublisher};
     use protocol::{DriveCommand, RobotState};
-    use sim_bridge::plant::{DriveLoss, Plant, PlaceholderPlant};
+    use sim_bridge::plant::{DriveLoss, PlaceholderPlant, Plant};
     let team = "left-alive";
     let session = transport::open(&ZenohArgs::default(), Role::Alone).await.unwrap();
     let (dt, v0, ticks) = (0.001, 0.5, 80u64);
     let mut plant = PlaceholderPlant::new(vec!["r1".into(), "r2".into()], 2, v0, dt);
-    let states = transport::subscribe(&session, keys::all_robots(team, RobotTopic::State).unwrap()).await.unwrap();
+    let states = transport::subscribe(&session, keys::all_robots(team, RobotTopic::State).unwrap())
+        .await
+        .unwrap();
     let mut pubs = Vec::new();
     for id in ["r1", "r2"] {
-        pubs.push(TypedPublisher::<DriveCommand>::declare(&session, keys::robot(team, id, RobotTopic::Torque).unwrap(), Qos::HotPath).await.unwrap());
+        pubs.push(
+            TypedPublisher::<DriveCommand>::declare(
+                &session,
+                keys::robot(team, id, RobotTopic::Torque).unwrap(),
+                Qos::HotPath,
+            )
+            .await
+            .unwrap(),
+        );
     }
     let r1_token = transport::declare_member(&session, team, "r1").await.unwrap();
     let mut r2_token = Some(transport::declare_member(&session, team, "r2").await.unwrap());
@@ -338,7 +416,8 @@ async fn an_agent_that_left_alive_drives_its_robot_until_its_torques_stop() {
                     continue;
                 }
             }
-            let cmd = DriveCommand::torque(team, if i == 0 { "r1" } else { "r2" }, tick, vec![1.0; 2]);
+            let cmd =
+                DriveCommand::torque(team, if i == 0 { "r1" } else { "r2" }, tick, vec![1.0; 2]);
             pubs[i].put(&cmd).await.unwrap();
         }
     });
@@ -353,6 +432,10 @@ async fn an_agent_that_left_alive_drives_its_robot_until_its_torques_stop() {
     println!("r1 driven for {:.1} ticks, r2 for {:.1}", gained(0), gained(1));
     assert!((gained(0) - ticks as f64).abs() < 1e-6, "r1 is driven every tick: {}", gained(0));
     let steps = gained(1).round();
-    assert!((gained(1) - steps).abs() < 1e-6 && (42.0..=45.0).contains(&steps), "r2 driven for {} steps, expected 42-45", gained(1));
+    assert!(
+        (gained(1) - steps).abs() < 1e-6 && (42.0..=45.0).contains(&steps),
+        "r2 driven for {} steps, expected 42-45",
+        gained(1)
+    );
     assert!(plant.drives_lost(1) && !plant.drives_lost(0), "r2's drives lost at the end, r1's not");
 }

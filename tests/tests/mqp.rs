@@ -8,10 +8,10 @@
 
 use std::path::{Path, PathBuf};
 
-use team_runner::evaluate;
-use team_runner::plan;
-use team_runner::run::{self, RunOptions};
-use team_runner::scenario::Scenario;
+use evaluation::evaluate;
+use scenario::plan;
+use launch::run::{self, RunOptions};
+use scenario::file::Scenario;
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("repo root").to_path_buf()
@@ -19,13 +19,20 @@ fn repo() -> PathBuf {
 
 #[test]
 fn mqp_holds_the_constant_pose_in_mujoco() {
-    let sets: Vec<String> = ["controller=mqp", "duration=2.0", "settle=0.5"].iter().map(|s| s.to_string()).collect();
-    let scenario = Scenario::load(repo().join("scenarios/s3_hold.toml"), &sets).expect("scenario loads");
+    let sets: Vec<String> =
+        ["controller=mqp", "duration=2.0", "settle=0.5"].iter().map(|s| s.to_string()).collect();
+    let scenario =
+        Scenario::load(repo().join("scenarios/s3_hold.toml"), &sets).expect("scenario loads");
     let plan = plan::plan(&scenario, &repo()).expect("plan");
     assert_eq!(plan.controller.kind(), "mqp");
     let dir = repo().join("target/test-reports/s3-hold-mqp");
     std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(&plan, &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() }, &dir).expect("the run completes");
+    let records = run::run(
+        &plan,
+        &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() },
+        &dir,
+    )
+    .expect("the run completes");
     let eval = evaluate::evaluate(&plan, &records, "embedded");
     evaluate::write_report(&plan, &eval, &dir).expect("report written");
     let m = &eval.metrics;
@@ -35,7 +42,8 @@ fn mqp_holds_the_constant_pose_in_mujoco() {
     }
     assert!(m.passed && !m.drop.dropped);
     assert_eq!(m.samples as u64, plan.scene.ticks, "a ground-truth sample for every scenario tick");
-    let solved = m.qp_status.get("Solved").copied().unwrap_or(0) + m.qp_status.get("AlmostSolved").copied().unwrap_or(0);
+    let solved = m.qp_status.get("Solved").copied().unwrap_or(0)
+        + m.qp_status.get("AlmostSolved").copied().unwrap_or(0);
     let total: u64 = m.qp_status.values().sum();
     assert!(total as f64 >= 0.9 * plan.scene.ticks as f64, "diagnostics of {total} ticks");
     assert!(solved as f64 >= 0.99 * total as f64, "QP statuses {:?}", m.qp_status);

@@ -31,15 +31,32 @@ impl TeamController for FailsEvery {
         "fails every n-th tick"
     }
 
-    fn solve(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError> {
+    fn solve(
+        &mut self,
+        tick: &[DynamicsTerms],
+        out: &mut Vec<TorqueCommand>,
+    ) -> Result<(), ControllerError> {
         let t = tick[0].header.tick;
         if t % self.every == self.every - 1 {
-            return Err(ControllerError::NonFinite { robot: "team".into(), what: format!("torque (made to fail at tick {t})") });
+            return Err(ControllerError::NonFinite {
+                robot: "team".into(),
+                what: format!("torque (made to fail at tick {t})"),
+            });
         }
         out.clear();
         for terms in tick {
             let v = &terms.velocity[terms.nv() - terms.actuated()..];
-            out.push(TorqueCommand { header: protocol::Header::new(&terms.header.team, terms.header.robot.as_deref(), t, 0), tau: v.iter().map(|qd| -2.0 * qd).collect(), hold: false, delay_ticks: 0 });
+            out.push(TorqueCommand {
+                header: protocol::Header::new(
+                    &terms.header.team,
+                    terms.header.robot.as_deref(),
+                    t,
+                    0,
+                ),
+                tau: v.iter().map(|qd| -2.0 * qd).collect(),
+                hold: false,
+                delay_ticks: 0,
+            });
         }
         Ok(())
     }
@@ -58,7 +75,11 @@ impl TeamController for PausesAt {
         "pauses at one tick"
     }
 
-    fn solve(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError> {
+    fn solve(
+        &mut self,
+        tick: &[DynamicsTerms],
+        out: &mut Vec<TorqueCommand>,
+    ) -> Result<(), ControllerError> {
         if tick[0].header.tick == self.tick {
             self.paused.store(true, std::sync::atomic::Ordering::Release);
             std::thread::sleep(self.pause);
@@ -76,9 +97,17 @@ async fn a_failing_controller_still_commands_every_robot() {
     let agents = [agent(&s, team, "r1"), agent(&s, team, "r2")];
     let started = Instant::now();
     let b = bridge(&s, team, &["r1", "r2"], 200, 500);
-    let report = tokio::time::timeout(Duration::from_secs(60), b.task).await.expect("bounded").unwrap().expect("the run completes");
+    let report = tokio::time::timeout(Duration::from_secs(60), b.task)
+        .await
+        .expect("bounded")
+        .unwrap()
+        .expect("the run completes");
     assert_eq!(report.ticks, 200);
-    assert!(started.elapsed() < Duration::from_secs(30), "no deadline was waited out: {:?}", started.elapsed());
+    assert!(
+        started.elapsed() < Duration::from_secs(30),
+        "no deadline was waited out: {:?}",
+        started.elapsed()
+    );
     // Agents first: the coordinator's leaving would put them in safe mode.
     for a in agents {
         let counters = stop(a).await;
@@ -87,7 +116,10 @@ async fn a_failing_controller_still_commands_every_robot() {
     }
     let coordinator = stop(c).await;
     assert_eq!(coordinator.controller_errors, 20, "ticks 9, 19, ... failed");
-    assert_eq!(coordinator.commands_sent, 400, "every robot commanded on every tick, failed ticks included");
+    assert_eq!(
+        coordinator.commands_sent, 400,
+        "every robot commanded on every tick, failed ticks included"
+    );
     let mut holds = 0;
     while let Ok(Some(sample)) = diags.try_recv() {
         let d: TickDiagnostics = decode_sample(&sample).unwrap();
@@ -113,7 +145,11 @@ async fn an_agent_that_leaves_ends_the_run_at_once_naming_it() {
     assert!(!b.task.is_finished(), "the run is going");
     let left = Instant::now();
     stop(r2).await;
-    let err = tokio::time::timeout(Duration::from_secs(10), b.task).await.expect("bounded").unwrap().expect_err("the run ends");
+    let err = tokio::time::timeout(Duration::from_secs(10), b.task)
+        .await
+        .expect("bounded")
+        .unwrap()
+        .expect_err("the run ends");
     let waited = left.elapsed();
     match err {
         BridgeError::RobotLeft { robot, tick } => {
@@ -140,7 +176,11 @@ async fn when_the_coordinator_leaves_the_robots_hold_and_the_run_ends_after_the_
     tokio::time::sleep(Duration::from_millis(1500)).await;
     let gone = Instant::now();
     stop(c).await;
-    let err = tokio::time::timeout(Duration::from_secs(30), b.task).await.expect("bounded").unwrap().expect_err("the run ends");
+    let err = tokio::time::timeout(Duration::from_secs(30), b.task)
+        .await
+        .expect("bounded")
+        .unwrap()
+        .expect_err("the run ends");
     match err {
         BridgeError::CoordinatorLost { since, ticks } => {
             assert!(since > 0);
@@ -151,13 +191,24 @@ async fn when_the_coordinator_leaves_the_robots_hold_and_the_run_ends_after_the_
     assert!(gone.elapsed() < Duration::from_secs(20), "took {:?}", gone.elapsed());
     // The outage runs at the wall clock's pace: the grace's 300 ticks of 1 ms took at least
     // about 0.3 s (the last is not paced; the holds alone ran at several thousand a second).
-    assert!(gone.elapsed() >= Duration::from_millis(grace * 9 / 10), "the outage's ticks were paced: {:?}", gone.elapsed());
+    assert!(
+        gone.elapsed() >= Duration::from_millis(grace * 9 / 10),
+        "the outage's ticks were paced: {:?}",
+        gone.elapsed()
+    );
     for a in agents {
         let counters = stop(a).await;
-        assert_eq!(counters.safe_mode_entries, 1, "safe mode once, the coordinator's grace after its token went");
+        assert_eq!(
+            counters.safe_mode_entries, 1,
+            "safe mode once, the coordinator's grace after its token went"
+        );
         // Every tick of the grace but possibly the one on which the bridge saw the token go
         // (the agent may have applied the coordinator's last command for it).
-        assert!(counters.hold_torques >= grace - 1, "the robots held their posture through the grace: {}", counters.hold_torques);
+        assert!(
+            counters.hold_torques >= grace - 1,
+            "the robots held their posture through the grace: {}",
+            counters.hold_torques
+        );
     }
     s.close().await.unwrap();
 }
@@ -184,7 +235,11 @@ fn terms(team: &str, robot: &str, tick: u64) -> DynamicsTerms {
 
 /// The first command on `queue` within 10 s (resending `terms` every 50 ms meanwhile: the
 /// coordinator's subscriber may not be matched yet).
-async fn first_command(queue: &transport::SampleQueue, publisher: &mut transport::TypedPublisher<DynamicsTerms>, terms: &DynamicsTerms) -> TorqueCommand {
+async fn first_command(
+    queue: &transport::SampleQueue,
+    publisher: &mut transport::TypedPublisher<DynamicsTerms>,
+    terms: &DynamicsTerms,
+) -> TorqueCommand {
     let until = Instant::now() + Duration::from_secs(10);
     while Instant::now() < until {
         publisher.put(terms).await.unwrap();
@@ -202,8 +257,17 @@ async fn terms_that_beat_their_robots_token_are_answered_with_a_hold() {
     let team = "hang4";
     let s = session().await;
     let c = coordinator(&s, team, Box::new(FailsEvery { every: u64::MAX }));
-    let commands = transport::subscribe(&s, keys::robot(team, "r7", keys::RobotTopic::Command).unwrap()).await.unwrap();
-    let mut publisher = transport::TypedPublisher::declare(&s, keys::robot(team, "r7", keys::RobotTopic::Dynamics).unwrap(), transport::Qos::HotPath).await.unwrap();
+    let commands =
+        transport::subscribe(&s, keys::robot(team, "r7", keys::RobotTopic::Command).unwrap())
+            .await
+            .unwrap();
+    let mut publisher = transport::TypedPublisher::declare(
+        &s,
+        keys::robot(team, "r7", keys::RobotTopic::Dynamics).unwrap(),
+        transport::Qos::HotPath,
+    )
+    .await
+    .unwrap();
     let cmd = first_command(&commands, &mut publisher, &terms(team, "r7", 7)).await;
     assert!(cmd.hold, "a hold order: {cmd:?}");
     assert_eq!((cmd.header.robot_id(), cmd.header.tick), ("r7", 7));
@@ -219,10 +283,20 @@ async fn a_controller_that_is_not_ready_still_commands_the_tick() {
     let team = "hang5";
     let s = session().await;
     let diags = transport::subscribe(&s, keys::diagnostics(team).unwrap()).await.unwrap();
-    let c = coordinator(&s, team, Box::new(coordinator::Pidc::new(coordinator::PidcConfig::default())));
+    let c =
+        coordinator(&s, team, Box::new(coordinator::Pidc::new(coordinator::PidcConfig::default())));
     let _token = transport::declare_member(&s, team, "r8").await.unwrap();
-    let commands = transport::subscribe(&s, keys::robot(team, "r8", keys::RobotTopic::Command).unwrap()).await.unwrap();
-    let mut publisher = transport::TypedPublisher::declare(&s, keys::robot(team, "r8", keys::RobotTopic::Dynamics).unwrap(), transport::Qos::HotPath).await.unwrap();
+    let commands =
+        transport::subscribe(&s, keys::robot(team, "r8", keys::RobotTopic::Command).unwrap())
+            .await
+            .unwrap();
+    let mut publisher = transport::TypedPublisher::declare(
+        &s,
+        keys::robot(team, "r8", keys::RobotTopic::Dynamics).unwrap(),
+        transport::Qos::HotPath,
+    )
+    .await
+    .unwrap();
     // Until the token is seen the terms are answered as a non-member's; then as a member's.
     let mut tick = 0;
     let cmd = loop {
@@ -238,8 +312,9 @@ async fn a_controller_that_is_not_ready_still_commands_the_tick() {
             }
         })
         .await
-        .is_ok_and(|d| d.fallback.as_deref().is_some_and(|f| f.contains("not ready") && f.contains("r8")))
-        {
+        .is_ok_and(|d| {
+            d.fallback.as_deref().is_some_and(|f| f.contains("not ready") && f.contains("r8"))
+        }) {
             break cmd;
         }
         assert!(tick < 50, "the coordinator never took r8's terms as a member's");
@@ -251,7 +326,11 @@ async fn a_controller_that_is_not_ready_still_commands_the_tick() {
 }
 
 /// The latest coordinator status on `queue` within 5 s that `pred` accepts.
-async fn status_where(queue: &transport::SampleQueue, pred: impl Fn(&protocol::CoordinatorStatus) -> bool, what: &str) -> protocol::CoordinatorStatus {
+async fn status_where(
+    queue: &transport::SampleQueue,
+    pred: impl Fn(&protocol::CoordinatorStatus) -> bool,
+    what: &str,
+) -> protocol::CoordinatorStatus {
     let until = Instant::now() + Duration::from_secs(5);
     while Instant::now() < until {
         match tokio::time::timeout(Duration::from_millis(50), queue.recv_async()).await {
@@ -280,7 +359,13 @@ async fn a_vanished_token_is_waited_for_and_an_announced_leave_is_not() {
     // Tick 1, the team's first: both commanded.
     put_terms(&mut pubs, team, 1).await;
     for q in &queues {
-        let cmd: TorqueCommand = decode_sample(&tokio::time::timeout(Duration::from_secs(5), q.recv_async()).await.expect("a command").unwrap()).unwrap();
+        let cmd: TorqueCommand = decode_sample(
+            &tokio::time::timeout(Duration::from_secs(5), q.recv_async())
+                .await
+                .expect("a command")
+                .unwrap(),
+        )
+        .unwrap();
         assert_eq!((cmd.header.tick, cmd.hold), (1, false), "{cmd:?}");
     }
     // r2's token vanishes and comes back (a link that dropped): tick 2 waits for r2's terms and
@@ -290,28 +375,59 @@ async fn a_vanished_token_is_waited_for_and_an_announced_leave_is_not() {
     tokens[1] = Some(transport::declare_member(&s, team, "r2").await.unwrap());
     pubs[1].put(&terms(team, "r2", 2)).await.unwrap();
     for q in &queues {
-        let cmd: TorqueCommand = decode_sample(&tokio::time::timeout(Duration::from_secs(5), q.recv_async()).await.expect("a command").unwrap()).unwrap();
+        let cmd: TorqueCommand = decode_sample(
+            &tokio::time::timeout(Duration::from_secs(5), q.recv_async())
+                .await
+                .expect("a command")
+                .unwrap(),
+        )
+        .unwrap();
         assert_eq!((cmd.header.tick, cmd.hold), (2, false), "tick 2 solved with both: {cmd:?}");
     }
     // The statuses said the token vanished, then came back, and never left r2 out.
-    let vanished = status_where(&statuses, |st| st.detail.starts_with("robot r2's token vanished"), "r2's token vanished").await;
-    let back = status_where(&statuses, |st| st.detail == "robot r2 joined", "r2's token back").await;
+    let vanished = status_where(
+        &statuses,
+        |st| st.detail.starts_with("robot r2's token vanished"),
+        "r2's token vanished",
+    )
+    .await;
+    let back =
+        status_where(&statuses, |st| st.detail == "robot r2 joined", "r2's token back").await;
     for st in [&vanished, &back] {
-        assert!(st.late.is_empty() && st.silent.is_empty() && st.members.len() == 2, "r2 never left: {st:?}");
+        assert!(
+            st.late.is_empty() && st.silent.is_empty() && st.members.len() == 2,
+            "r2 never left: {st:?}"
+        );
     }
     // r2 says it leaves (its dynamics key deleted) with its token still held: out at once.
     pubs[1].delete().await.unwrap();
     let st = status_where(&statuses, |st| st.detail == "robot r2 left", "r2 leaves").await;
     assert_eq!(st.silent, vec!["r2".to_string()], "left out until its token goes: {st:?}");
     pubs[0].put(&terms(team, "r1", 3)).await.unwrap();
-    let cmd: TorqueCommand = decode_sample(&tokio::time::timeout(Duration::from_secs(5), queues[0].recv_async()).await.expect("a command").unwrap()).unwrap();
+    let cmd: TorqueCommand = decode_sample(
+        &tokio::time::timeout(Duration::from_secs(5), queues[0].recv_async())
+            .await
+            .expect("a command")
+            .unwrap(),
+    )
+    .unwrap();
     assert_eq!((cmd.header.tick, cmd.hold), (3, false), "tick 3 solved without r2: {cmd:?}");
     // r1's token vanishes for good: it has left once the grace has passed, not before.
     let gone = Instant::now();
     tokens[0].take().unwrap().undeclare().await.unwrap();
-    let st = status_where(&statuses, |st| st.detail == "robot r1 left", "r1 leaves after the grace").await;
-    assert!(gone.elapsed() >= DEPARTURE_GRACE, "r1 left {:?} after its token vanished, before the grace {DEPARTURE_GRACE:?}", gone.elapsed());
-    assert_eq!(st.members, vec!["r2".to_string()], "r1 gone, r2 (its token held) still listed: {st:?}");
+    let st =
+        status_where(&statuses, |st| st.detail == "robot r1 left", "r1 leaves after the grace")
+            .await;
+    assert!(
+        gone.elapsed() >= DEPARTURE_GRACE,
+        "r1 left {:?} after its token vanished, before the grace {DEPARTURE_GRACE:?}",
+        gone.elapsed()
+    );
+    assert_eq!(
+        st.members,
+        vec!["r2".to_string()],
+        "r1 gone, r2 (its token held) still listed: {st:?}"
+    );
     stop(c).await;
     s.close().await.unwrap();
 }
@@ -344,7 +460,10 @@ async fn terms_sent_again_for_the_tick_last_solved_get_its_command_again() {
     assert!(next_command(&queues[1]).await.is_none(), "r2 asked nothing");
     // Terms of tick 1, older than the last solved: dropped, nothing sent.
     pubs[0].put(&terms(team, "r1", 1)).await.unwrap();
-    assert!(next_command(&queues[0]).await.is_none(), "no command for a tick older than the last solved");
+    assert!(
+        next_command(&queues[0]).await.is_none(),
+        "no command for a tick older than the last solved"
+    );
     // r3 joins after tick 2 was solved without it and sends its terms of tick 2 (a restarted
     // agent's first state; the lockstep bridge waits for its torques of that tick): a hold order
     // for tick 2, not silence (before: lockstep waited out the 20 s deadline,
@@ -354,7 +473,11 @@ async fn terms_sent_again_for_the_tick_last_solved_get_its_command_again() {
     status_where(&statuses, |st| st.members.len() == 3, "r3 a member").await;
     p3.put(&terms(team, "r3", 2)).await.unwrap();
     let held = next_command(&q3).await.expect("r3 answered for tick 2");
-    assert_eq!((held.header.tick, held.hold), (2, true), "a hold order for the tick solved without it: {held:?}");
+    assert_eq!(
+        (held.header.tick, held.hold),
+        (2, true),
+        "a hold order for the tick solved without it: {held:?}"
+    );
     let counters = stop(c).await;
     assert_eq!(counters.repeated_commands, 1, "{counters:?}");
     s.close().await.unwrap();
@@ -372,7 +495,11 @@ async fn terms_sent_again_before_their_tick_is_solved_get_only_its_command() {
     let s = session().await;
     let statuses = transport::subscribe(&s, keys::coordinator_status(team).unwrap()).await.unwrap();
     let paused = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let c = coordinator(&s, team, Box::new(PausesAt { tick: 1, pause: Duration::from_secs(1), paused: paused.clone() }));
+    let c = coordinator(
+        &s,
+        team,
+        Box::new(PausesAt { tick: 1, pause: Duration::from_secs(1), paused: paused.clone() }),
+    );
     let _tokens = member_tokens(&s, team).await;
     let (queues, mut pubs) = both_members(&s, team, &statuses).await;
     put_terms(&mut pubs, team, 1).await;
@@ -388,13 +515,22 @@ async fn terms_sent_again_before_their_tick_is_solved_get_only_its_command() {
     }
     for (q, r) in queues.iter().zip(["r1", "r2"]) {
         for tick in [1, 2] {
-            let cmd = next_command(q).await.unwrap_or_else(|| panic!("{r}: no command for tick {tick}"));
-            assert_eq!((cmd.header.tick, cmd.hold), (tick, false), "{r}: the solved command of tick {tick}, nothing before it: {cmd:?}");
+            let cmd =
+                next_command(q).await.unwrap_or_else(|| panic!("{r}: no command for tick {tick}"));
+            assert_eq!(
+                (cmd.header.tick, cmd.hold),
+                (tick, false),
+                "{r}: the solved command of tick {tick}, nothing before it: {cmd:?}"
+            );
         }
         assert!(next_command(q).await.is_none(), "{r}: one command per tick");
     }
     let counters = stop(c).await;
-    assert_eq!((counters.held, counters.repeated_commands, counters.ticks), (0, 0, 2), "{counters:?}");
+    assert_eq!(
+        (counters.held, counters.repeated_commands, counters.ticks),
+        (0, 0, 2),
+        "{counters:?}"
+    );
     s.close().await.unwrap();
 }
 
@@ -406,12 +542,19 @@ async fn next_command(queue: &transport::SampleQueue) -> Option<TorqueCommand> {
 
 /// The membership tokens of stand-in robots r1 and r2 in `team` (members while kept).
 async fn member_tokens(s: &zenoh::Session, team: &str) -> [zenoh::liveliness::LivelinessToken; 2] {
-    [transport::declare_member(s, team, "r1").await.unwrap(), transport::declare_member(s, team, "r2").await.unwrap()]
+    [
+        transport::declare_member(s, team, "r1").await.unwrap(),
+        transport::declare_member(s, team, "r2").await.unwrap(),
+    ]
 }
 
 /// Stand-in robots r1 and r2, members of `team` (their tokens declared): their command queues
 /// and terms publishers ([`robot_keys`]), once the coordinator's status lists both.
-async fn both_members(s: &zenoh::Session, team: &str, statuses: &transport::SampleQueue) -> (Vec<transport::SampleQueue>, Vec<transport::TypedPublisher<DynamicsTerms>>) {
+async fn both_members(
+    s: &zenoh::Session,
+    team: &str,
+    statuses: &transport::SampleQueue,
+) -> (Vec<transport::SampleQueue>, Vec<transport::TypedPublisher<DynamicsTerms>>) {
     let (mut queues, mut pubs) = (Vec::new(), Vec::new());
     for r in ["r1", "r2"] {
         let (q, p) = robot_keys(s, team, r).await;
@@ -430,9 +573,22 @@ async fn put_terms(pubs: &mut [transport::TypedPublisher<DynamicsTerms>], team: 
 }
 
 /// A stand-in robot's two keys: the queue of its commands and the publisher of its terms.
-async fn robot_keys(s: &zenoh::Session, team: &str, robot: &str) -> (transport::SampleQueue, transport::TypedPublisher<DynamicsTerms>) {
-    let commands = transport::subscribe(s, keys::robot(team, robot, keys::RobotTopic::Command).unwrap()).await.unwrap();
-    let dynamics = transport::TypedPublisher::declare(s, keys::robot(team, robot, keys::RobotTopic::Dynamics).unwrap(), transport::Qos::HotPath).await.unwrap();
+async fn robot_keys(
+    s: &zenoh::Session,
+    team: &str,
+    robot: &str,
+) -> (transport::SampleQueue, transport::TypedPublisher<DynamicsTerms>) {
+    let commands =
+        transport::subscribe(s, keys::robot(team, robot, keys::RobotTopic::Command).unwrap())
+            .await
+            .unwrap();
+    let dynamics = transport::TypedPublisher::declare(
+        s,
+        keys::robot(team, robot, keys::RobotTopic::Dynamics).unwrap(),
+        transport::Qos::HotPath,
+    )
+    .await
+    .unwrap();
     (commands, dynamics)
 }
 
@@ -452,8 +608,13 @@ async fn every_command_of_a_tick_carries_the_longest_delay_its_robots_asked_for(
             p.put(&DynamicsTerms { team_delay_ticks: d, ..terms(team, r, tick) }).await.unwrap();
         }
         for (q, r) in queues.iter().zip(["r1", "r2"]) {
-            let cmd = next_command(q).await.unwrap_or_else(|| panic!("{r}: no command for tick {tick}"));
-            assert_eq!((cmd.header.tick, cmd.delay_ticks), (tick, team_delay), "{r}, asked {asked:?}: {cmd:?}");
+            let cmd =
+                next_command(q).await.unwrap_or_else(|| panic!("{r}: no command for tick {tick}"));
+            assert_eq!(
+                (cmd.header.tick, cmd.delay_ticks),
+                (tick, team_delay),
+                "{r}, asked {asked:?}: {cmd:?}"
+            );
         }
     }
     let _ = stop(c).await;
@@ -463,29 +624,56 @@ async fn every_command_of_a_tick_carries_the_longest_delay_its_robots_asked_for(
 /// A lockstep coordinator configured to wait for the first task references (what `team run`
 /// gives it, so that a coordinator started inside a run never commands the tasks toward the
 /// poses they happened to have), with joint damping as its controller.
-fn coordinator_waiting_for_references(s: &zenoh::Session, team: &str, wait: Duration) -> common::team::Component<coordinator::service::CoordinatorCounters> {
+fn coordinator_waiting_for_references(
+    s: &zenoh::Session,
+    team: &str,
+    wait: Duration,
+) -> common::team::Component<coordinator::service::CoordinatorCounters> {
     let (stop, rx) = tokio::sync::watch::channel(false);
     let mut cfg = coordinator::service::CoordinatorConfig::lockstep(team, Duration::from_secs(5));
     cfg.wait_for_references = Some(wait);
     let s = s.clone();
-    common::team::Component { stop, task: tokio::spawn(async move { coordinator::service::run(&s, cfg, Box::new(FailsEvery { every: u64::MAX }), rx).await.expect("coordinator runs") }) }
+    common::team::Component {
+        stop,
+        task: tokio::spawn(async move {
+            coordinator::service::run(&s, cfg, Box::new(FailsEvery { every: u64::MAX }), rx)
+                .await
+                .expect("coordinator runs")
+        }),
+    }
 }
 
 /// The ticks robot r1 was told to hold and those it was commanded (its command key; joint
 /// damping has no diagnostics), read until `done` says they are enough (at most 20 s); every
 /// held tick's diagnostics must say it waited for the references.
-async fn held_for_references(commands: &transport::SampleQueue, diags: &transport::SampleQueue, done: impl Fn(&[u64], &[u64]) -> bool) -> (Vec<u64>, Vec<u64>) {
+async fn held_for_references(
+    commands: &transport::SampleQueue,
+    diags: &transport::SampleQueue,
+    done: impl Fn(&[u64], &[u64]) -> bool,
+) -> (Vec<u64>, Vec<u64>) {
     let (mut held, mut solved) = (Vec::new(), Vec::new());
     let until = Instant::now() + Duration::from_secs(20);
     while !done(&held, &solved) && Instant::now() < until {
-        let Ok(Ok(sample)) = tokio::time::timeout(Duration::from_secs(1), commands.recv_async()).await else { continue };
+        let Ok(Ok(sample)) =
+            tokio::time::timeout(Duration::from_secs(1), commands.recv_async()).await
+        else {
+            continue;
+        };
         let c: TorqueCommand = decode_sample(&sample).unwrap();
-        if c.hold { held.push(c.header.tick) } else { solved.push(c.header.tick) }
+        if c.hold {
+            held.push(c.header.tick)
+        } else {
+            solved.push(c.header.tick)
+        }
     }
     while let Ok(Some(sample)) = diags.try_recv() {
         let d: TickDiagnostics = decode_sample(&sample).unwrap();
         let f = d.fallback.unwrap_or_default();
-        assert!(f.contains("waiting for the task references") && f.contains("holds its posture"), "tick {}: only the references were waited for: {f}", d.header.tick);
+        assert!(
+            f.contains("waiting for the task references") && f.contains("holds its posture"),
+            "tick {}: only the references were waited for: {f}",
+            d.header.tick
+        );
     }
     (held, solved)
 }
@@ -495,25 +683,51 @@ async fn a_coordinator_waiting_for_references_holds_the_team_until_they_come() {
     let team = "hang-refs";
     let s = session().await;
     let diags = transport::subscribe(&s, keys::diagnostics(team).unwrap()).await.unwrap();
-    let commands = transport::subscribe(&s, keys::robot(team, "r1", keys::RobotTopic::Command).unwrap()).await.unwrap();
-    let mut refs = transport::TypedPublisher::declare(&s, keys::references(team).unwrap(), transport::Qos::Telemetry).await.unwrap();
+    let commands =
+        transport::subscribe(&s, keys::robot(team, "r1", keys::RobotTopic::Command).unwrap())
+            .await
+            .unwrap();
+    let mut refs = transport::TypedPublisher::declare(
+        &s,
+        keys::references(team).unwrap(),
+        transport::Qos::Telemetry,
+    )
+    .await
+    .unwrap();
     let c = coordinator_waiting_for_references(&s, team, Duration::from_secs(60));
     let agents = [agent(&s, team, "r1"), agent(&s, team, "r2")];
     let b = bridge(&s, team, &["r1", "r2"], 1_000_000, 500);
     // Without references every tick is answered with hold orders, saying why.
-    let (held, solved) = held_for_references(&commands, &diags, |h, s| h.len() >= 50 || !s.is_empty()).await;
-    assert!(held.len() >= 50 && solved.is_empty(), "held {} ticks for the references, solved {solved:?}", held.len());
+    let (held, solved) =
+        held_for_references(&commands, &diags, |h, s| h.len() >= 50 || !s.is_empty()).await;
+    assert!(
+        held.len() >= 50 && solved.is_empty(),
+        "held {} ticks for the references, solved {solved:?}",
+        held.len()
+    );
     // The first references end the wait: every tick from then on is solved.
-    let r = protocol::TaskReferences { header: protocol::Header::new(team, None, 0, 0), object: None, torsos: Vec::new(), swing_feet: Vec::new(), foot_loads: Vec::new() };
+    let r = protocol::TaskReferences {
+        header: protocol::Header::new(team, None, 0, 0),
+        object: None,
+        torsos: Vec::new(),
+        swing_feet: Vec::new(),
+        foot_loads: Vec::new(),
+    };
     refs.put(&r).await.unwrap();
     let (held_after, solved) = held_for_references(&commands, &diags, |_, s| s.len() >= 50).await;
     assert!(solved.len() >= 50, "solved {} ticks after the references came", solved.len());
     let first = solved[0];
-    assert!(held_after.iter().all(|t| *t < first), "no tick is held for the references once one is solved: held {held_after:?} from {first}");
+    assert!(
+        held_after.iter().all(|t| *t < first),
+        "no tick is held for the references once one is solved: held {held_after:?} from {first}"
+    );
     stop(b).await.ok();
     for a in agents {
         let counters = stop(a).await;
-        assert_eq!(counters.safe_mode_entries, 0, "every robot was commanded every tick, holds included");
+        assert_eq!(
+            counters.safe_mode_entries, 0,
+            "every robot was commanded every tick, holds included"
+        );
     }
     stop(c).await;
     s.close().await.unwrap();
@@ -524,13 +738,20 @@ async fn references_that_never_come_are_waited_for_no_longer_than_the_limit() {
     let team = "hang-norefs";
     let s = session().await;
     let diags = transport::subscribe(&s, keys::diagnostics(team).unwrap()).await.unwrap();
-    let commands = transport::subscribe(&s, keys::robot(team, "r1", keys::RobotTopic::Command).unwrap()).await.unwrap();
+    let commands =
+        transport::subscribe(&s, keys::robot(team, "r1", keys::RobotTopic::Command).unwrap())
+            .await
+            .unwrap();
     let c = coordinator_waiting_for_references(&s, team, Duration::from_millis(1500));
     let agents = [agent(&s, team, "r1"), agent(&s, team, "r2")];
     let b = bridge(&s, team, &["r1", "r2"], 1_000_000, 500);
     let (held, solved) = held_for_references(&commands, &diags, |_, s| s.len() >= 50).await;
     assert!(!held.is_empty(), "the ticks before the limit were held for the references");
-    assert!(solved.len() >= 50, "after the limit the ticks are solved without references: {} solved", solved.len());
+    assert!(
+        solved.len() >= 50,
+        "after the limit the ticks are solved without references: {} solved",
+        solved.len()
+    );
     assert!(held.iter().all(|t| *t < solved[0]), "held {held:?}, solved from {}", solved[0]);
     stop(b).await.ok();
     for a in agents {

@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use team_runner::processes::sibling_binary;
+use launch::processes::sibling_binary;
 
 /// The most times one line (its time stamp left out) may appear on stderr.
 const MAX_REPEATS: usize = 3;
@@ -23,7 +23,15 @@ fn team_run(name: &str, extra: &[&str]) -> Output {
     let out = std::env::temp_dir().join(format!("team-quiet-{name}-{}", std::process::id()));
     let output = Command::new(sibling_binary("team"))
         .current_dir(repo())
-        .args(["run", "scenarios/s1_torso_and_object.toml", "--set", "duration=0.5", "--set", "settle=0.2", "--out"])
+        .args([
+            "run",
+            "scenarios/s1_torso_and_object.toml",
+            "--set",
+            "duration=0.5",
+            "--set",
+            "settle=0.2",
+            "--out",
+        ])
         .arg(&out)
         .args(extra)
         .env_remove("RUST_LOG")

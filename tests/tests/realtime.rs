@@ -2,7 +2,7 @@
 //! paces physics at the control period, a robot whose torques miss a tick's deadline keeps its
 //! last ones, and every tick's ground truth carries the loop as the bridge measured it
 //! (`protocol::LoopTiming`), which the report turns into latency percentiles, misses, late and
-//! lost commands (`team_runner::loop_timing`).
+//! lost commands (`evaluation::loop_timing`).
 //!
 //! CI runs these at 250 Hz, which this 2-core machine keeps with other tests running beside;
 //! the README's "Real time" section has the rates measured at 1 kHz and above, with commands.
@@ -11,14 +11,14 @@ mod common;
 
 use std::collections::BTreeSet;
 
-use team_runner::driver::Records;
-use team_runner::evaluate::{self, Metrics};
-use team_runner::launch::RunMode;
-use team_runner::loop_timing::LoopReport;
-use team_runner::plan::{self, Plan};
-use team_runner::record::{RecordOptions, ScenarioSource};
-use team_runner::run::{self, RunOptions};
-use team_runner::scenario::Scenario;
+use evaluation::records::Records;
+use evaluation::evaluate::{self, Metrics};
+use launch::launcher::RunMode;
+use evaluation::loop_timing::LoopReport;
+use scenario::plan::{self, Plan};
+use launch::record::{RecordOptions, ScenarioSource};
+use launch::run::{self, RunOptions};
+use scenario::file::Scenario;
 
 /// The tests run one at a time: two real-time runs at once on two cores miss their deadlines.
 static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
@@ -30,7 +30,8 @@ fn serial() -> std::sync::MutexGuard<'static, ()> {
 /// S4 at `hz` for `duration` s, paced by the wall clock.
 fn s4_realtime(hz: f64, duration: f64) -> Plan {
     let sets = [format!("duration={duration}"), "settle=0.5".into(), format!("control_hz={hz}")];
-    let s = Scenario::load(common::scenario::repo().join("scenarios/s4_object_circle.toml"), &sets).expect("scenario");
+    let s = Scenario::load(common::scenario::repo().join("scenarios/s4_object_circle.toml"), &sets)
+        .expect("scenario");
     let mut plan = plan::plan(&s, &common::scenario::repo()).expect("plan");
     plan.scene.realtime = true;
     plan
@@ -39,7 +40,8 @@ fn s4_realtime(hz: f64, duration: f64) -> Plan {
 /// `team3_cube.toml` with `sets`, paced by the wall clock.
 fn team3_realtime(sets: &[&str]) -> Plan {
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-    let s = Scenario::load(common::scenario::repo().join("scenarios/team3_cube.toml"), &sets).expect("scenario");
+    let s = Scenario::load(common::scenario::repo().join("scenarios/team3_cube.toml"), &sets)
+        .expect("scenario");
     let mut plan = plan::plan(&s, &common::scenario::repo()).expect("plan");
     plan.scene.realtime = true;
     plan
@@ -50,7 +52,12 @@ fn team3_realtime(sets: &[&str]) -> Plan {
 fn run_here(plan: &Plan, distributed: bool, mode: &str, name: &str) -> (Records, Metrics) {
     let dir = common::scenario::repo().join("target/test-reports").join(name);
     std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(plan, &RunOptions { distributed, hosts: false, progress: false, loss: Vec::new() }, &dir).expect("the run completes");
+    let records = run::run(
+        plan,
+        &RunOptions { distributed, hosts: false, progress: false, loss: Vec::new() },
+        &dir,
+    )
+    .expect("the run completes");
     let m = evaluated(plan, &records, mode, name);
     (records, m)
 }
@@ -60,7 +67,7 @@ fn evaluated(plan: &Plan, records: &Records, mode: &str, name: &str) -> Metrics 
     std::fs::create_dir_all(&dir).expect("report dir");
     let eval = evaluate::evaluate(plan, records, mode);
     evaluate::write_report(plan, &eval, &dir).expect("report");
-    team_runner::plots::write_all(plan, &eval, records, &dir).expect("figures");
+    evaluation::plots::write_all(plan, &eval, records, &dir).expect("figures");
     println!("{}", evaluate::summary(&eval.metrics, &dir));
     assert!(dir.join("loop_timing.png").exists(), "a real-time run draws its loop");
     eval.metrics
@@ -74,26 +81,56 @@ fn assert_loop_consistent(plan: &Plan, records: &Records, report: &LoopReport) {
     for r in &plan.robots {
         let l = &report.robots[&r.id];
         assert_eq!(l.ticks, ticks, "{}: a measurement on every scenario tick", r.id);
-        let recorded: BTreeSet<u64> = records.torques.get(&r.id).map(|v| v.iter().map(|(t, _)| *t).collect()).unwrap_or_default();
+        let recorded: BTreeSet<u64> = records
+            .torques
+            .get(&r.id)
+            .map(|v| v.iter().map(|(t, _)| *t).collect())
+            .unwrap_or_default();
         let (mut in_time, mut slow) = (0, Vec::new());
         for g in records.truth.iter() {
             for t in g.loop_timing.iter().filter(|t| t.robot == r.id) {
-                assert!(t.applied_tick.is_none_or(|a| a <= g.header.tick), "tick {} applied {:?}", g.header.tick, t.applied_tick);
+                assert!(
+                    t.applied_tick.is_none_or(|a| a <= g.header.tick),
+                    "tick {} applied {:?}",
+                    g.header.tick,
+                    t.applied_tick
+                );
                 if let Some(us) = t.latency_us {
                     in_time += 1;
-                    assert_eq!(t.applied_tick, Some(g.header.tick), "{}: tick {} came in time but applied {:?}", r.id, g.header.tick, t.applied_tick);
+                    assert_eq!(
+                        t.applied_tick,
+                        Some(g.header.tick),
+                        "{}: tick {} came in time but applied {:?}",
+                        r.id,
+                        g.header.tick,
+                        t.applied_tick
+                    );
                     if us >= 1.5e6 / plan.scenario.control_hz {
                         slow.push((g.header.tick, us));
                     }
-                    assert!(recorded.contains(&g.header.tick), "{}: the driver saw no torques of tick {} that the bridge applied", r.id, g.header.tick);
+                    assert!(
+                        recorded.contains(&g.header.tick),
+                        "{}: the driver saw no torques of tick {} that the bridge applied",
+                        r.id,
+                        g.header.tick
+                    );
                 }
             }
         }
-        assert_eq!(in_time + l.deadline_misses, ticks, "{}: every tick either in time or missed", r.id);
+        assert_eq!(
+            in_time + l.deadline_misses,
+            ticks,
+            "{}: every tick either in time or missed",
+            r.id
+        );
         // In time means taken before the tick's physics step; the latency runs to when the
         // bridge took the torques. A loaded machine can wake the bridge well after its deadline
         // (once: 17.9 ms at 250 Hz), and it then steps late too: such ticks stay rare.
-        assert!(slow.len() as u64 <= ticks / 100, "{}: in time after more than 1.5 periods: {slow:?}", r.id);
+        assert!(
+            slow.len() as u64 <= ticks / 100,
+            "{}: in time after more than 1.5 periods: {slow:?}",
+            r.id
+        );
     }
 }
 
@@ -113,10 +150,19 @@ fn s4_holds_in_real_time_and_reports_its_loop() {
         assert!(l.latency_us.p50 > 0.0, "{r}: latency measured");
         // Misses come in bursts when the shared machine stalls: 3 of 500 idle, 11 of 500 in a
         // fresh clone's run (one burst of 10 ticks: 40 ms during which neither robot answered).
-        assert!(l.deadline_misses * 20 <= l.ticks, "{r}: {} of {} ticks missed", l.deadline_misses, l.ticks);
+        assert!(
+            l.deadline_misses * 20 <= l.ticks,
+            "{r}: {} of {} ticks missed",
+            l.deadline_misses,
+            l.ticks
+        );
     }
     // The wall clock paced it: 2 s of scenario took about 2 s.
-    assert!(records.run_wall.as_secs_f64() > 1.9, "paced by the wall clock: {:?}", records.run_wall);
+    assert!(
+        records.run_wall.as_secs_f64() > 1.9,
+        "paced by the wall clock: {:?}",
+        records.run_wall
+    );
     assert_handover_without_gap(&plan, &records);
 }
 
@@ -128,11 +174,16 @@ fn s4_holds_in_real_time_and_reports_its_loop() {
 /// deadlines ran out in it.
 fn assert_handover_without_gap(plan: &Plan, records: &Records) {
     let ms = |a: u64, b: u64| b.saturating_sub(a) as f64 / 1e6;
-    let settle_end = records.settle_end_stamp_ns.expect("the last settling tick's ground truth was heard");
+    let settle_end =
+        records.settle_end_stamp_ns.expect("the last settling tick's ground truth was heard");
     let first = records.truth.first().expect("scenario ticks");
     assert_eq!(first.header.tick, plan.references.clock.settle_ticks, "the first scenario tick");
     let handover = ms(settle_end, first.header.stamp_ns);
-    let slowest = records.truth.windows(2).map(|w| ms(w[0].header.stamp_ns, w[1].header.stamp_ns)).fold(0.0, f64::max);
+    let slowest = records
+        .truth
+        .windows(2)
+        .map(|w| ms(w[0].header.stamp_ns, w[1].header.stamp_ns))
+        .fold(0.0, f64::max);
     let period_ms = 1e3 / plan.scenario.control_hz;
     println!("hand-over {handover:.2} ms; slowest scenario tick {slowest:.2} ms; period {period_ms:.2} ms; safe-mode entries {:?}", records.agent_safe_mode);
     assert!(handover <= slowest.max(2.0 * period_ms), "the hand-over took {handover:.2} ms (period {period_ms:.2} ms, slowest tick {slowest:.2} ms)");
@@ -146,15 +197,28 @@ fn assert_handover_without_gap(plan: &Plan, records: &Records) {
 #[test]
 fn a_real_time_run_without_a_settle_waits_for_its_first_torques() {
     let _one = serial();
-    let s = Scenario::load(common::scenario::repo().join("scenarios/s4_object_circle.toml"), &["duration=1.0".into(), "settle=0".into(), "control_hz=1000".into()]).expect("scenario");
+    let s = Scenario::load(
+        common::scenario::repo().join("scenarios/s4_object_circle.toml"),
+        &["duration=1.0".into(), "settle=0".into(), "control_hz=1000".into()],
+    )
+    .expect("scenario");
     let mut plan = plan::plan(&s, &common::scenario::repo()).expect("plan");
     plan.scene.realtime = true;
     let (records, m) = run_here(&plan, false, "embedded, real time", "realtime_no_settle");
     let first = records.truth.first().expect("ticks");
     assert_eq!(first.header.tick, 0);
     for t in &first.loop_timing {
-        assert!(t.latency_us.is_some(), "{}: the first tick's torques came in its window: {t:?}", t.robot);
-        assert_eq!(t.applied_tick, Some(0), "{}: the first tick stepped with its own torques", t.robot);
+        assert!(
+            t.latency_us.is_some(),
+            "{}: the first tick's torques came in its window: {t:?}",
+            t.robot
+        );
+        assert_eq!(
+            t.applied_tick,
+            Some(0),
+            "{}: the first tick stepped with its own torques",
+            t.robot
+        );
     }
     assert_eq!(first.loop_timing.len(), plan.robots.len(), "every robot's loop measured");
     assert!(!m.drop.dropped, "the object is held");
@@ -164,7 +228,11 @@ fn a_real_time_run_without_a_settle_waits_for_its_first_torques() {
 
 /// S4 at its own length (10 s after a 1 s settle) at `hz`, paced by the wall clock.
 fn s4_full_length(hz: f64) -> Plan {
-    let s = Scenario::load(common::scenario::repo().join("scenarios/s4_object_circle.toml"), &[format!("control_hz={hz}")]).expect("scenario");
+    let s = Scenario::load(
+        common::scenario::repo().join("scenarios/s4_object_circle.toml"),
+        &[format!("control_hz={hz}")],
+    )
+    .expect("scenario");
     assert_eq!((s.duration, s.settle), (10.0, 1.0), "the scenario's own length");
     let mut plan = plan::plan(&s, &common::scenario::repo()).expect("plan");
     plan.scene.realtime = true;
@@ -185,9 +253,18 @@ fn assert_held_from_start_to_end(plan: &Plan, records: &Records, m: &Metrics, mi
     let report = m.loop_timing.as_ref().expect("a real-time run reports its loop");
     assert_loop_consistent(plan, records, report);
     for (r, l) in &report.robots {
-        assert!(l.deadline_misses as f64 <= missed * l.ticks as f64, "{r}: {} of {} ticks missed", l.deadline_misses, l.ticks);
+        assert!(
+            l.deadline_misses as f64 <= missed * l.ticks as f64,
+            "{r}: {} of {} ticks missed",
+            l.deadline_misses,
+            l.ticks
+        );
     }
-    assert!(records.run_wall.as_secs_f64() > 9.5, "paced by the wall clock: {:?}", records.run_wall);
+    assert!(
+        records.run_wall.as_secs_f64() > 9.5,
+        "paced by the wall clock: {:?}",
+        records.run_wall
+    );
     assert_handover_without_gap(plan, records);
 }
 
@@ -200,10 +277,24 @@ fn s4_at_its_full_length_holds_in_real_time_recorded() {
     std::fs::create_dir_all(&dir).expect("report dir");
     let path = common::scenario::repo().join("scenarios/s4_object_circle.toml");
     let sets = ["control_hz=250".to_string()];
-    let rec = RecordOptions { path: dir.join("run.mcap"), scenario: ScenarioSource::read(&path, &sets).expect("scenario file"), live: None };
-    let (records, summary) = run::run_recorded(&plan, &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() }, &dir, Some(&rec)).expect("the run completes");
+    let rec = RecordOptions {
+        path: dir.join("run.mcap"),
+        scenario: ScenarioSource::read(&path, &sets).expect("scenario file"),
+        live: None,
+    };
+    let (records, summary) = run::run_recorded(
+        &plan,
+        &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() },
+        &dir,
+        Some(&rec),
+    )
+    .expect("the run completes");
     let summary = summary.expect("recorded");
-    assert_eq!((summary.dropped, summary.error.as_deref()), (0, None), "the recording is complete: {summary:?}");
+    assert_eq!(
+        (summary.dropped, summary.error.as_deref()),
+        (0, None),
+        "the recording is complete: {summary:?}"
+    );
     let m = evaluated(&plan, &records, "embedded, real time", "realtime_s4_full");
     assert_held_from_start_to_end(&plan, &records, &m, 0.05);
 }
@@ -214,7 +305,8 @@ fn s4_at_its_full_length_holds_in_real_time_recorded() {
 fn s4_at_its_full_length_holds_in_real_time_distributed() {
     let _one = serial();
     let plan = s4_full_length(125.0);
-    let (records, m) = run_here(&plan, true, "distributed, real time", "realtime_s4_full_distributed");
+    let (records, m) =
+        run_here(&plan, true, "distributed, real time", "realtime_s4_full_distributed");
     assert_held_from_start_to_end(&plan, &records, &m, 0.05);
 }
 
@@ -226,7 +318,11 @@ fn s4_at_its_full_length_holds_in_real_time_distributed() {
 fn s4_at_its_full_length_holds_in_real_time_at_1khz_with_the_team_two_ticks_behind() {
     let _one = serial();
     let repo = common::scenario::repo();
-    let s = Scenario::load(repo.join("scenarios/s4_object_circle.toml"), &["team_delay_ticks=2".to_string()]).expect("scenario");
+    let s = Scenario::load(
+        repo.join("scenarios/s4_object_circle.toml"),
+        &["team_delay_ticks=2".to_string()],
+    )
+    .expect("scenario");
     assert_eq!((s.control_hz, s.duration), (1000.0, 10.0), "the scenario's own rate and length");
     let mut plan = plan::plan(&s, &repo).expect("plan");
     plan.scene.realtime = true;
@@ -244,18 +340,36 @@ fn s4_at_its_full_length_holds_in_real_time_at_1khz_with_the_team_two_ticks_behi
 /// 60 % is allowed; the team's commands are what the delay keeps on time. (With the team at
 /// 1 kHz, beside two busy loops, a torso tracked to 8 mm RMS of its 10 mm bound.)
 #[test]
-fn s4_at_its_full_length_holds_in_real_time_at_1khz_distributed_with_the_team_at_500hz_and_the_delay_from_the_latency() {
+fn s4_at_its_full_length_holds_in_real_time_at_1khz_distributed_with_the_team_at_500hz_and_the_delay_from_the_latency(
+) {
     let _one = serial();
     let repo = common::scenario::repo();
-    let s = Scenario::load(repo.join("scenarios/s4_object_circle.toml"), &["team_delay_ticks=auto".to_string(), "team_hz=500".to_string()]).expect("scenario");
+    let s = Scenario::load(
+        repo.join("scenarios/s4_object_circle.toml"),
+        &["team_delay_ticks=auto".to_string(), "team_hz=500".to_string()],
+    )
+    .expect("scenario");
     assert_eq!((s.control_hz, s.duration), (1000.0, 10.0), "the scenario's own rate and length");
     let mut plan = plan::plan(&s, &repo).expect("plan");
     plan.scene.realtime = true;
-    let (records, m) = run_here(&plan, true, "distributed, real time", "realtime_s4_1khz_auto_delay");
-    println!("team delay came to {:?}; safe-mode entries {:?}", records.agent_delay, records.agent_safe_mode);
+    let (records, m) =
+        run_here(&plan, true, "distributed, real time", "realtime_s4_1khz_auto_delay");
+    println!(
+        "team delay came to {:?}; safe-mode entries {:?}",
+        records.agent_delay, records.agent_safe_mode
+    );
     assert!(m.team_delay_auto, "the report says the delay was measured");
-    assert_eq!(records.agent_delay.len(), 2, "both agents reported their delay: {:?}", records.agent_delay);
-    assert!((1..=robot_agent::core::MAX_TEAM_DELAY).contains(&m.team_delay_ticks), "across processes 1 kHz needs a delay: {}", m.team_delay_ticks);
+    assert_eq!(
+        records.agent_delay.len(),
+        2,
+        "both agents reported their delay: {:?}",
+        records.agent_delay
+    );
+    assert!(
+        (1..=robot_agent::core::MAX_TEAM_DELAY).contains(&m.team_delay_ticks),
+        "across processes 1 kHz needs a delay: {}",
+        m.team_delay_ticks
+    );
     assert_held_from_start_to_end(&plan, &records, &m, 0.6);
 }
 
@@ -272,11 +386,23 @@ fn s4_holds_in_real_time_across_hosts_with_five_percent_loss_on_one_link() {
     let dir = common::scenario::repo().join("target/test-reports/realtime_hosts_loss");
     std::fs::create_dir_all(&dir).expect("report dir");
     let ids: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
-    let Some(hosts) = common::hosts::hosts_or_skip(&ids, "realtime::s4_holds_in_real_time_across_hosts_with_five_percent_loss_on_one_link") else { return };
+    let Some(hosts) = common::hosts::hosts_or_skip(
+        &ids,
+        "realtime::s4_holds_in_real_time_across_hosts_with_five_percent_loss_on_one_link",
+    ) else {
+        return;
+    };
     hosts.set_loss("r1", 5).expect("loss rule");
     let mode = RunMode::Hosts { dir: dir.clone(), hosts: hosts.clone(), certs: None };
     let rt = tokio::runtime::Runtime::new().expect("runtime");
-    let records = rt.block_on(run::run_in(&plan, &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() }, &mode, None)).expect("the run completes");
+    let records = rt
+        .block_on(run::run_in(
+            &plan,
+            &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() },
+            &mode,
+            None,
+        ))
+        .expect("the run completes");
     let m = evaluated(&plan, &records, "hosts, real time", "realtime_hosts_loss");
     // Held, not tracked to the millimetre: the drives hold their last torques through the
     // gaps, so the tracking bounds of a clean run are not asked.
@@ -284,7 +410,11 @@ fn s4_holds_in_real_time_across_hosts_with_five_percent_loss_on_one_link() {
     for (r, slip) in &m.slip_m {
         assert!(*slip < evaluate::MAX_SLIP, "palm {r} slipped {slip} m");
     }
-    assert!(m.object.position_max_m < HELD_OBJECT_MAX_M, "object error up to {} m", m.object.position_max_m);
+    assert!(
+        m.object.position_max_m < HELD_OBJECT_MAX_M,
+        "object error up to {} m",
+        m.object.position_max_m
+    );
     for (r, t) in &m.torsos {
         assert!(t.position_max_m < STANDING_TORSO_MAX_M, "torso {r} moved {} m", t.position_max_m);
     }
@@ -315,42 +445,92 @@ const STANDING_TORSO_MAX_M: f64 = 0.08;
 #[test]
 fn a_stalled_agent_is_noticed_at_once_and_the_team_rides_it_through() {
     let _one = serial();
-    let plan = team3_realtime(&["duration=2.0", "settle=0.5", "control_hz=125", "drive_loss=\"freeze\"", "faults=[{kind=\"agent-stalls\",robot=\"r3\",at=0.5,duration=0.12}]"]);
+    let plan = team3_realtime(&[
+        "duration=2.0",
+        "settle=0.5",
+        "control_hz=125",
+        "drive_loss=\"freeze\"",
+        "faults=[{kind=\"agent-stalls\",robot=\"r3\",at=0.5,duration=0.12}]",
+    ]);
     let (records, m) = run_here(&plan, false, "embedded, real time", "realtime_stall");
     let clock = &plan.references.clock;
     let (struck, over) = (clock.first_tick_at(0.5), clock.first_tick_at(0.62));
     let r3 = "r3".to_string();
-    let stale: Vec<u64> = records.statuses.iter().filter(|st| st.stale.contains(&r3)).map(|st| st.header.tick).collect();
+    let stale: Vec<u64> = records
+        .statuses
+        .iter()
+        .filter(|st| st.stale.contains(&r3))
+        .map(|st| st.header.tick)
+        .collect();
     // A loaded machine can make r3 late for a tick before the stall too (stale at tick 119 of a
     // stall at 125): the stall is noticed by the first stale status from its tick on.
     let before: Vec<&u64> = stale.iter().filter(|t| **t < struck).collect();
     if !before.is_empty() {
         println!("r3 stale before its stall (a late tick) at {before:?}");
     }
-    let first = *stale.iter().find(|t| **t >= struck).expect("a status naming r3 stale after the stall began");
-    let cleared = records.statuses.iter().find(|st| st.header.tick > first && !st.stale.contains(&r3)).map(|st| st.header.tick).expect("r3 fresh again");
+    let first = *stale
+        .iter()
+        .find(|t| **t >= struck)
+        .expect("a status naming r3 stale after the stall began");
+    let cleared = records
+        .statuses
+        .iter()
+        .find(|st| st.header.tick > first && !st.stale.contains(&r3))
+        .map(|st| st.header.tick)
+        .expect("r3 fresh again");
     println!("r3 stalled at tick {struck} for 0.12 s (to {over}): stale from {first}, fresh again from {cleared}");
     assert!(first >= struck && first <= struck + 3, "noticed within 3 ticks: {first}");
-    assert!(cleared >= over && cleared <= over + 10, "fresh terms once the stall was over: {cleared}");
-    assert!(records.statuses.iter().all(|st| st.silent.is_empty()), "never left out: the stall is shorter than the silence");
+    assert!(
+        cleared >= over && cleared <= over + 10,
+        "fresh terms once the stall was over: {cleared}"
+    );
+    assert!(
+        records.statuses.iter().all(|st| st.silent.is_empty()),
+        "never left out: the stall is shorter than the silence"
+    );
     // The others keep their loop: the bridge waits the whole period for r3's torques and steps
     // late, and the next tick still gives them three quarters of a period (MIN_WINDOW).
     // Catching up at once made r1 and r2 miss 9-12 of the stall's 15 ticks; now 0-1 (0-3 with
     // two busy loops beside the test).
     for r in ["r1", "r2"] {
-        let missed = records.truth.iter().filter(|g| (struck..over).contains(&g.header.tick)).flat_map(|g| &g.loop_timing).filter(|t| t.robot == r && t.latency_us.is_none()).count();
-        assert!(missed as u64 * 3 <= over - struck, "{r} missed {missed} of the stall's {} ticks", over - struck);
+        let missed = records
+            .truth
+            .iter()
+            .filter(|g| (struck..over).contains(&g.header.tick))
+            .flat_map(|g| &g.loop_timing)
+            .filter(|t| t.robot == r && t.latency_us.is_none())
+            .count();
+        assert!(
+            missed as u64 * 3 <= over - struck,
+            "{r} missed {missed} of the stall's {} ticks",
+            over - struck
+        );
     }
     let last = records.last_status.as_ref().expect("status");
-    assert!(last.reused_terms >= (over - struck) / 2, "its terms were reused while it stalled: {last:?}");
-    let solved_with_r3 = records.diagnostics.iter().filter(|d| d.header.tick > over + 10).all(|d| d.contacts.iter().any(|c| c.robot == r3 && c.wrench.len() == 6));
+    assert!(
+        last.reused_terms >= (over - struck) / 2,
+        "its terms were reused while it stalled: {last:?}"
+    );
+    let solved_with_r3 = records
+        .diagnostics
+        .iter()
+        .filter(|d| d.header.tick > over + 10)
+        .all(|d| d.contacts.iter().any(|c| c.robot == r3 && c.wrench.len() == 6));
     assert!(solved_with_r3, "r3's hand stays in the grasp");
     assert!(!m.drop.dropped, "the object is held");
     for r in ["r1", "r2", "r3"] {
         assert!(m.slip_m[r] < HELD_SLIP_M, "palm {r} slipped {} m", m.slip_m[r]);
-        assert!(m.torsos[r].position_max_m < 0.02, "torso {r} moved {} m", m.torsos[r].position_max_m);
+        assert!(
+            m.torsos[r].position_max_m < 0.02,
+            "torso {r} moved {} m",
+            m.torsos[r].position_max_m
+        );
     }
-    assert!(m.object.position_max_m < HELD_OBJECT_MAX_M, "object error up to {} m", m.object.position_max_m);
+    assert!(
+        m.object.position_max_m < HELD_OBJECT_MAX_M,
+        "object error up to {} m",
+        m.object.position_max_m
+    );
 }
 
 /// Real time, separate processes: r3's agent killed (SIGKILL, so its token vanishes with no word
@@ -362,18 +542,44 @@ fn a_stalled_agent_is_noticed_at_once_and_the_team_rides_it_through() {
 fn an_agent_killed_in_real_time_is_noticed_within_three_ticks_and_the_others_hold() {
     use coordinator::team::membership::DEPARTURE_TICKS;
     let _one = serial();
-    let plan = team3_realtime(&["duration=1.5", "settle=0.5", "control_hz=125", "drive_loss=\"freeze\"", "faults=[{kind=\"agent-stops\",robot=\"r3\",at=0.5}]"]);
+    let plan = team3_realtime(&[
+        "duration=1.5",
+        "settle=0.5",
+        "control_hz=125",
+        "drive_loss=\"freeze\"",
+        "faults=[{kind=\"agent-stops\",robot=\"r3\",at=0.5}]",
+    ]);
     let (records, m) = run_here(&plan, true, "distributed, real time", "realtime_kill");
     let struck = plan.references.clock.first_tick_at(0.5);
     let r3 = "r3".to_string();
-    let out = records.statuses.iter().filter(|st| st.header.tick + 1 >= struck).find(|st| !st.members.contains(&r3)).map(|st| st.header.tick).expect("a status without r3");
+    let out = records
+        .statuses
+        .iter()
+        .filter(|st| st.header.tick + 1 >= struck)
+        .find(|st| !st.members.contains(&r3))
+        .map(|st| st.header.tick)
+        .expect("a status without r3");
     println!("r3's agent killed at tick {struck}: no member from the status of tick {out}");
-    assert!(out <= struck + DEPARTURE_TICKS, "noticed within {DEPARTURE_TICKS} ticks: at {out}, killed at {struck}");
-    assert!(records.statuses.iter().filter(|st| st.header.tick > out).all(|st| !st.members.contains(&r3)), "r3 stays out");
+    assert!(
+        out <= struck + DEPARTURE_TICKS,
+        "noticed within {DEPARTURE_TICKS} ticks: at {out}, killed at {struck}"
+    );
+    assert!(
+        records
+            .statuses
+            .iter()
+            .filter(|st| st.header.tick > out)
+            .all(|st| !st.members.contains(&r3)),
+        "r3 stays out"
+    );
     assert_eq!(records.released_at, None, "r1 and r2 keep the object");
     assert!(!m.drop.dropped, "the object is held");
     for r in ["r1", "r2"] {
         assert!(m.slip_m[r] < HELD_SLIP_M, "palm {r} slipped {} m", m.slip_m[r]);
     }
-    assert!(m.object.position_max_m < HELD_OBJECT_MAX_M, "object error up to {} m", m.object.position_max_m);
+    assert!(
+        m.object.position_max_m < HELD_OBJECT_MAX_M,
+        "object error up to {} m",
+        m.object.position_max_m
+    );
 }

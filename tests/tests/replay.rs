@@ -10,7 +10,7 @@
 
 mod common;
 
-use team_runner::driver::Records;
+use evaluation::records::Records;
 
 use common::scenario::{report_dir, run_scenario_records};
 
@@ -29,7 +29,14 @@ fn bits(r: &Records) -> Vec<u64> {
     for gt in &r.truth {
         out.push(gt.header.tick);
         for body in gt.object.iter().chain(&gt.torsos).chain(&gt.hands).chain(&gt.feet) {
-            out.extend(body.pose.position.iter().chain(&body.pose.orientation).chain(&body.twist).map(|x| x.to_bits()));
+            out.extend(
+                body.pose
+                    .position
+                    .iter()
+                    .chain(&body.pose.orientation)
+                    .chain(&body.twist)
+                    .map(|x| x.to_bits()),
+            );
         }
     }
     out
@@ -46,10 +53,17 @@ fn lockstep_runs_replay_bit_for_bit() {
     let (_, _, second) = run_scenario_records(SCENARIO, &SETS, false, "replay_second");
     let (_, _, distributed) = run_scenario_records(SCENARIO, &SETS, true, "replay_distributed");
     let reference = bits(&first);
-    assert!(reference.len() > 10_000, "the run recorded its torques and ground truth: {} values", reference.len());
+    assert!(
+        reference.len() > 10_000,
+        "the run recorded its torques and ground truth: {} values",
+        reference.len()
+    );
     for (name, run) in [("replay_second", &second), ("replay_distributed", &distributed)] {
         for f in ["timeseries.csv", "torques.csv"] {
-            assert!(file("replay_first", f) == file(name, f), "{name}/{f} differs from replay_first/{f}");
+            assert!(
+                file("replay_first", f) == file(name, f),
+                "{name}/{f} differs from replay_first/{f}"
+            );
         }
         let other = bits(run);
         let first_diff = reference.iter().zip(&other).position(|(a, b)| a != b);

@@ -11,8 +11,8 @@
 mod common;
 
 use common::scenario::run_scenario;
-use team_runner::evaluate::Metrics;
-use team_runner::plan::Plan;
+use evaluation::evaluate::Metrics;
+use scenario::plan::Plan;
 
 /// Every acceptance check passed, and the run was the real thing: every tick evaluated, the
 /// QP solved (almost) every tick, the hands squeezing.
@@ -22,7 +22,8 @@ fn assert_accepted(plan: &Plan, m: &Metrics) {
     }
     assert!(m.passed);
     assert_eq!(m.samples as u64, plan.scene.ticks, "a ground-truth sample for every scenario tick");
-    let solved = m.qp_status.get("Solved").copied().unwrap_or(0) + m.qp_status.get("AlmostSolved").copied().unwrap_or(0);
+    let solved = m.qp_status.get("Solved").copied().unwrap_or(0)
+        + m.qp_status.get("AlmostSolved").copied().unwrap_or(0);
     let total: u64 = m.qp_status.values().sum();
     assert!(total as f64 >= 0.9 * plan.scene.ticks as f64, "diagnostics of {total} ticks");
     assert!(solved as f64 >= 0.99 * total as f64, "QP statuses {:?}", m.qp_status);
@@ -48,7 +49,11 @@ fn reference_excursion(plan: &Plan) -> (f64, f64) {
 fn s1_torso_and_object_motion() {
     let (plan, m) = run_scenario("s1_torso_and_object.toml", &["duration=4.0"], false, "s1");
     let (dp, da) = reference_excursion(&plan);
-    assert!(dp > 0.02 && da.to_degrees() > 5.0, "the S1 object reference moves {dp} m, {} deg", da.to_degrees());
+    assert!(
+        dp > 0.02 && da.to_degrees() > 5.0,
+        "the S1 object reference moves {dp} m, {} deg",
+        da.to_degrees()
+    );
     assert_accepted(&plan, &m);
 }
 
@@ -73,13 +78,22 @@ fn s6_impedance_recovers_after_every_push() {
     assert_eq!(m.recoveries.len(), 6, "five pushes on the object, one on torso 1");
     assert!(m.recoveries.iter().all(|r| r.object_error_after_m.is_some()), "{:?}", m.recoveries);
     // The pushes did move the object: the largest error is well above the recovered one.
-    assert!(m.object.position_max_m > 0.01, "the pushes moved the object {} m at most", m.object.position_max_m);
+    assert!(
+        m.object.position_max_m > 0.01,
+        "the pushes moved the object {} m at most",
+        m.object.position_max_m
+    );
     assert_accepted(&plan, &m);
 }
 
 #[test]
 fn s4_distributed_over_separate_processes() {
-    let (plan, m) = run_scenario("s4_object_circle.toml", &["duration=2.0", "settle=0.5"], true, "s4-distributed");
+    let (plan, m) = run_scenario(
+        "s4_object_circle.toml",
+        &["duration=2.0", "settle=0.5"],
+        true,
+        "s4-distributed",
+    );
     assert_eq!(m.mode, "distributed");
     assert_accepted(&plan, &m);
 }

@@ -30,10 +30,20 @@ fn default_robot_stands_5_s_offline() {
         let cz = 1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]);
         tilt_max = tilt_max.max(cz.clamp(-1.0, 1.0).acos());
         if k % 1000 == 0 {
-            eprintln!("t={:.3} z={z:.4} tilt={:.4} deg xy=({:.4},{:.4}) tau0..3={:?}", plant.time(), cz.acos().to_degrees(), s.base_pose.position[0], s.base_pose.position[1], &tau[..3]);
+            eprintln!(
+                "t={:.3} z={z:.4} tilt={:.4} deg xy=({:.4},{:.4}) tau0..3={:?}",
+                plant.time(),
+                cz.acos().to_degrees(),
+                s.base_pose.position[0],
+                s.base_pose.position[1],
+                &tau[..3]
+            );
         }
     }
-    eprintln!("z in [{zmin:.4}, {zmax:.4}] (start {z0:.4}), tilt max {:.3} deg", tilt_max.to_degrees());
+    eprintln!(
+        "z in [{zmin:.4}, {zmax:.4}] (start {z0:.4}), tilt max {:.3} deg",
+        tilt_max.to_degrees()
+    );
     assert!((zmin - z0).abs() < 0.03 && (zmax - z0).abs() < 0.03);
     assert!(tilt_max.to_degrees() < 2.0);
 }

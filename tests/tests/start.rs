@@ -34,7 +34,11 @@ impl TeamController for SlowFirstSolve {
         "joint damping, slow first solve"
     }
 
-    fn solve(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError> {
+    fn solve(
+        &mut self,
+        tick: &[DynamicsTerms],
+        out: &mut Vec<TorqueCommand>,
+    ) -> Result<(), ControllerError> {
         if !self.solved {
             self.solved = true;
             std::thread::sleep(self.pause);
@@ -45,21 +49,40 @@ impl TeamController for SlowFirstSolve {
 
 /// An agent with the real-time defaults: deadline 5 ticks or 25 ms, commands at most 5 ticks
 /// behind the latest state.
-fn realtime_agent(session: &zenoh::Session, team: &str, robot: &str) -> Component<robot_agent::status::AgentCounters> {
+fn realtime_agent(
+    session: &zenoh::Session,
+    team: &str,
+    robot: &str,
+) -> Component<robot_agent::status::AgentCounters> {
     let (stop, rx) = watch::channel(false);
     let cfg = AgentConfig::new(team, robot);
     let s = session.clone();
-    Component { stop, task: tokio::spawn(async move { robot_agent::agent::run(&s, cfg, PlaceholderDynamics::floating(JOINTS), rx).await.expect("agent runs") }) }
+    Component {
+        stop,
+        task: tokio::spawn(async move {
+            robot_agent::agent::run(&s, cfg, PlaceholderDynamics::floating(JOINTS), rx)
+                .await
+                .expect("agent runs")
+        }),
+    }
 }
 
 /// Runs a lockstep team of two whose coordinator's first solve takes `pause`; returns each
 /// agent's counters after `ticks` ticks.
-async fn start_with_first_solve(team: &str, pause: Duration, ticks: u64) -> Vec<robot_agent::status::AgentCounters> {
+async fn start_with_first_solve(
+    team: &str,
+    pause: Duration,
+    ticks: u64,
+) -> Vec<robot_agent::status::AgentCounters> {
     let s = session().await;
     let c = coordinator(&s, team, Box::new(SlowFirstSolve { pause, solved: false }));
     let agents = [realtime_agent(&s, team, "r1"), realtime_agent(&s, team, "r2")];
     let b = bridge(&s, team, &["r1", "r2"], ticks, 500);
-    let report = tokio::time::timeout(Duration::from_secs(60), b.task).await.expect("bounded").unwrap().expect("the run completes");
+    let report = tokio::time::timeout(Duration::from_secs(60), b.task)
+        .await
+        .expect("bounded")
+        .unwrap()
+        .expect("the run completes");
     assert_eq!(report.ticks, ticks);
     let mut counters = Vec::new();
     for a in agents {
@@ -83,16 +106,27 @@ async fn a_first_solve_slower_than_a_tick_deadline_is_no_fault() {
         // (`rejected` may count a copy of tick 0's command: the lockstep bridge sends a state
         // again while it waits, and the coordinator answers the copy too.)
         assert_eq!(c.hold_torques, 0, "robot {i}: no posture hold stood in for a command");
-        assert_eq!(c.applied, ticks, "robot {i}: every tick's command applied, tick 0's included: it was not too old");
+        assert_eq!(
+            c.applied, ticks,
+            "robot {i}: every tick's command applied, tick 0's included: it was not too old"
+        );
     }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_team_that_does_not_answer_within_the_first_command_deadline_sends_its_robots_to_safe_mode() {
+async fn a_team_that_does_not_answer_within_the_first_command_deadline_sends_its_robots_to_safe_mode(
+) {
     let first = FIRST_COMMAND.time.expect("the first command has a time deadline");
     let ticks = 50;
-    for (i, c) in start_with_first_solve("start2", first + Duration::from_millis(500), ticks).await.iter().enumerate() {
-        assert_eq!(c.safe_mode_entries, 1, "robot {i}: safe mode once, at the first command's deadline");
+    for (i, c) in start_with_first_solve("start2", first + Duration::from_millis(500), ticks)
+        .await
+        .iter()
+        .enumerate()
+    {
+        assert_eq!(
+            c.safe_mode_entries, 1,
+            "robot {i}: safe mode once, at the first command's deadline"
+        );
         assert!(c.hold_torques >= 1, "robot {i}: the hold answered while the team was silent");
     }
 }

@@ -7,9 +7,9 @@
 
 mod common;
 
-use team_runner::driver::Records;
-use team_runner::evaluate::Metrics;
-use team_runner::plan::Plan;
+use evaluation::records::Records;
+use evaluation::evaluate::Metrics;
+use scenario::plan::Plan;
 
 fn run(sets: &[&str], name: &str) -> (Plan, Metrics, Records) {
     common::scenario::run_scenario_records("s4_object_circle.toml", sets, false, name)
@@ -22,11 +22,24 @@ fn assert_delayed_run(plan: &Plan, m: &Metrics, records: &Records, delay: u64) {
     for c in &m.checks {
         assert!(c.passed, "delay {delay}: {} = {} not below {}", c.name, c.value, c.bound);
     }
-    assert_eq!((m.team_delay_ticks, m.team_delay_auto), (delay, false), "the report names the delay");
+    assert_eq!(
+        (m.team_delay_ticks, m.team_delay_auto),
+        (delay, false),
+        "the report names the delay"
+    );
     let ticks = plan.scene.ticks;
     for r in &plan.robots {
-        let got: Vec<u64> = records.torques.get(&r.id).map(|v| v.iter().map(|(t, _)| *t).collect()).unwrap_or_default();
-        assert_eq!(got.len() as u64, ticks, "delay {delay}, {}: a drive command on every tick", r.id);
+        let got: Vec<u64> = records
+            .torques
+            .get(&r.id)
+            .map(|v| v.iter().map(|(t, _)| *t).collect())
+            .unwrap_or_default();
+        assert_eq!(
+            got.len() as u64,
+            ticks,
+            "delay {delay}, {}: a drive command on every tick",
+            r.id
+        );
     }
     // The commands of the last `delay` ticks would apply after the run: their solves may end
     // after it.
@@ -35,7 +48,11 @@ fn assert_delayed_run(plan: &Plan, m: &Metrics, records: &Records, delay: u64) {
     let gap = solved.windows(2).find(|w| w[1] != w[0] + 1);
     assert!(gap.is_none(), "delay {delay}: ticks solved out of order or skipped: {gap:?}");
     let (first, last) = (solved.first().copied(), solved.last().copied());
-    assert!(first == Some(settle) && last.is_some_and(|l| l + 1 + delay >= settle + ticks), "delay {delay}: solved {first:?} to {last:?} of {settle} to {}", settle + ticks - 1);
+    assert!(
+        first == Some(settle) && last.is_some_and(|l| l + 1 + delay >= settle + ticks),
+        "delay {delay}: solved {first:?} to {last:?} of {settle} to {}",
+        settle + ticks - 1
+    );
 }
 
 /// S4 at its full 10 s (1 kHz) with the team's command delayed by 1, 2 and 3 ticks: held
@@ -45,14 +62,21 @@ fn s4_holds_with_the_teams_command_delayed_up_to_three_ticks() {
     let (_, base, _) = run(&[], "team_delay_0");
     let mut rms = vec![(0, base.object.position_rms_m)];
     for d in 1..=3u64 {
-        let (plan, m, records) = run(&[&format!("team_delay_ticks={d}")], &format!("team_delay_{d}"));
+        let (plan, m, records) =
+            run(&[&format!("team_delay_ticks={d}")], &format!("team_delay_{d}"));
         assert_delayed_run(&plan, &m, &records, d);
         let r = m.object.position_rms_m;
         assert!(r <= 1e-3, "delay {d}: object RMS {:.3} mm", r * 1e3);
-        assert!((r - base.object.position_rms_m).abs() > 1e-9, "delay {d}: the same object RMS as without the delay");
+        assert!(
+            (r - base.object.position_rms_m).abs() > 1e-9,
+            "delay {d}: the same object RMS as without the delay"
+        );
         rms.push((d, r));
     }
-    println!("S4 object RMS by team delay (ticks, mm): {:?}", rms.iter().map(|(d, r)| (*d, r * 1e3)).collect::<Vec<_>>());
+    println!(
+        "S4 object RMS by team delay (ticks, mm): {:?}",
+        rms.iter().map(|(d, r)| (*d, r * 1e3)).collect::<Vec<_>>()
+    );
 }
 
 /// `team_delay_ticks = "auto"` in lockstep: the simulator waits for every answer, so no command
@@ -63,7 +87,11 @@ fn auto_in_lockstep_keeps_no_delay_and_the_same_run() {
     let (_, base, base_records) = run(&["duration=2"], "team_delay_auto_base");
     let (_, m, records) = run(&["duration=2", "team_delay_ticks=auto"], "team_delay_auto");
     assert_eq!((m.team_delay_ticks, m.team_delay_auto), (0, true), "auto, and it came to 0");
-    assert!(records.agent_delay.len() == 2 && records.agent_delay.values().all(|d| *d == 0), "{:?}", records.agent_delay);
+    assert!(
+        records.agent_delay.len() == 2 && records.agent_delay.values().all(|d| *d == 0),
+        "{:?}",
+        records.agent_delay
+    );
     assert_eq!(records.torques, base_records.torques, "the same torques on every tick");
     assert_eq!(m.object.position_rms_m, base.object.position_rms_m);
 }
@@ -76,15 +104,29 @@ fn auto_in_lockstep_keeps_no_delay_and_the_same_run() {
 /// S1 holds with 1, 2 and 3 ticks.
 #[test]
 fn s1_holds_with_the_delay_only_with_the_state_carried_over_the_commands_in_flight() {
-    let s1 = |sets: &[&str], name: &str| common::scenario::run_scenario_records("s1_torso_and_object.toml", sets, false, name);
-    let (_, m, _) = s1(&["duration=2", "team_delay_ticks=1", "predict_delay=false"], "s1_delay_1_unpredicted");
-    assert!(m.drop.dropped, "S1 with one tick of delay, unpredicted: object RMS {:.1} mm, not dropped", m.object.position_rms_m * 1e3);
+    let s1 = |sets: &[&str], name: &str| {
+        common::scenario::run_scenario_records("s1_torso_and_object.toml", sets, false, name)
+    };
+    let (_, m, _) =
+        s1(&["duration=2", "team_delay_ticks=1", "predict_delay=false"], "s1_delay_1_unpredicted");
+    assert!(
+        m.drop.dropped,
+        "S1 with one tick of delay, unpredicted: object RMS {:.1} mm, not dropped",
+        m.object.position_rms_m * 1e3
+    );
     let mut rms = Vec::new();
     for d in 1..=3u64 {
-        let (plan, m, records) = s1(&["duration=4", &format!("team_delay_ticks={d}")], &format!("s1_delay_{d}"));
+        let (plan, m, records) =
+            s1(&["duration=4", &format!("team_delay_ticks={d}")], &format!("s1_delay_{d}"));
         assert_delayed_run(&plan, &m, &records, d);
-        assert!(m.object.position_rms_m <= 1e-3, "delay {d}: object RMS {:.3} mm", m.object.position_rms_m * 1e3);
+        assert!(
+            m.object.position_rms_m <= 1e-3,
+            "delay {d}: object RMS {:.3} mm",
+            m.object.position_rms_m * 1e3
+        );
         rms.push((d, m.object.position_rms_m * 1e3));
     }
-    println!("S1 object RMS by team delay, carried over the commands in flight (ticks, mm): {rms:?}");
+    println!(
+        "S1 object RMS by team delay, carried over the commands in flight (ticks, mm): {rms:?}"
+    );
 }

@@ -7,12 +7,11 @@
 
 mod common;
 
-use team_runner::driver::Records;
-use team_runner::evaluate::Metrics;
-use team_runner::plan::Plan;
+use evaluation::records::Records;
+use evaluation::evaluate::Metrics;
+use scenario::plan::Plan;
 
 const SETS: [&str; 2] = ["duration=2", "settle=0.5"];
-
 
 fn run(sets: &[&str], name: &str) -> (Plan, Metrics, Records) {
     let all: Vec<&str> = SETS.iter().chain(sets).copied().collect();
@@ -32,7 +31,11 @@ fn assert_two_rates(plan: &Plan, m: &Metrics, records: &Records, every: u64) {
     }
     let settle = plan.scene.settle_ticks;
     let solved: Vec<u64> = records.diagnostics.iter().map(|d| d.header.tick).collect();
-    assert!(solved.iter().all(|t| t % every == 0), "the coordinator solved ticks between team ticks: {:?}", solved.iter().find(|t| *t % every != 0));
+    assert!(
+        solved.iter().all(|t| t % every == 0),
+        "the coordinator solved ticks between team ticks: {:?}",
+        solved.iter().find(|t| *t % every != 0)
+    );
     let team_ticks = (settle..settle + ticks).filter(|t| t % every == 0).count();
     assert_eq!(solved.len(), team_ticks, "every team tick solved once");
 }
@@ -46,11 +49,16 @@ fn s4_holds_with_the_team_at_a_quarter_and_a_tenth_of_the_robots_rate() {
     for (hz, every) in [(250.0, 4), (100.0, 10)] {
         for gains in ["none", "inertia"] {
             let name = format!("team_rate_{hz}_{gains}");
-            let (plan, m, records) = run(&[&format!("team_hz={hz}"), &format!("drive_gains={gains}")], &name);
+            let (plan, m, records) =
+                run(&[&format!("team_hz={hz}"), &format!("drive_gains={gains}")], &name);
             assert_eq!(plan.scenario.team_every(), Ok(every));
             assert_two_rates(&plan, &m, &records, every);
             let rms = m.object.position_rms_m;
-            println!("team {hz} Hz, drive gains {gains}: object RMS {:.3} mm (single loop {:.3} mm)", rms * 1e3, base * 1e3);
+            println!(
+                "team {hz} Hz, drive gains {gains}: object RMS {:.3} mm (single loop {:.3} mm)",
+                rms * 1e3,
+                base * 1e3
+            );
             assert!(rms < 1e-3, "team {hz} Hz, gains {gains}: object RMS {rms} m");
         }
     }

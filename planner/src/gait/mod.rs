@@ -106,23 +106,42 @@ impl Default for GaitParams {
 
 impl GaitParams {
     fn check(&self) -> Result<(), GaitError> {
-        let positive = [("stride", self.stride), ("max_turn_deg", self.max_turn_deg), ("t_shift", self.t_shift), ("t_unload", self.t_unload), ("t_swing", self.t_swing), ("t_load", self.t_load), ("unload_force", self.unload_force)];
+        let positive = [
+            ("stride", self.stride),
+            ("max_turn_deg", self.max_turn_deg),
+            ("t_shift", self.t_shift),
+            ("t_unload", self.t_unload),
+            ("t_swing", self.t_swing),
+            ("t_load", self.t_load),
+            ("unload_force", self.unload_force),
+        ];
         for (what, x) in positive {
             if !(x.is_finite() && x > 0.0) {
                 return Err(GaitError::Params(format!("{what} = {x} must be positive")));
             }
         }
-        let non_negative = [("lift_height", self.lift_height), ("margin", self.margin), ("touchdown_depth", self.touchdown_depth), ("touchdown_window", self.touchdown_window)];
+        let non_negative = [
+            ("lift_height", self.lift_height),
+            ("margin", self.margin),
+            ("touchdown_depth", self.touchdown_depth),
+            ("touchdown_window", self.touchdown_window),
+        ];
         for (what, x) in non_negative {
             if !(x.is_finite() && x >= 0.0) {
                 return Err(GaitError::Params(format!("{what} = {x} must be non-negative")));
             }
         }
         if !(self.min_share.is_finite() && (0.0..1.0 / 3.0).contains(&self.min_share)) {
-            return Err(GaitError::Params(format!("min_share = {} must be at least 0 and less than 1/3 (the centroid's share)", self.min_share)));
+            return Err(GaitError::Params(format!(
+                "min_share = {} must be at least 0 and less than 1/3 (the centroid's share)",
+                self.min_share
+            )));
         }
         if self.touchdown_window >= self.t_swing {
-            return Err(GaitError::Params(format!("touchdown_window = {} must be shorter than t_swing = {}", self.touchdown_window, self.t_swing)));
+            return Err(GaitError::Params(format!(
+                "touchdown_window = {} must be shorter than t_swing = {}",
+                self.touchdown_window, self.t_swing
+            )));
         }
         Ok(())
     }
@@ -161,6 +180,11 @@ pub enum GaitError {
     Robot { robot: String, reason: String },
     #[error("the object has {got} waypoints, the robots {expected}")]
     ObjectWaypoints { expected: usize, got: usize },
-    #[error("robot {robot}, step {step} (foot {foot}): the centre of pressure cannot be {margin} m inside the support triangle with every foot carrying {min_share} of the weight (its inradius is {inradius:.3} m); lower walk.gait.margin or walk.gait.min_share, or step shorter")]
+    #[error(
+        "robot {robot}, step {step} (foot {foot}): the centre of pressure cannot be {margin} m \
+         inside the support triangle with every foot carrying {min_share} of the weight (its \
+         inradius is {inradius:.3} m); lower walk.gait.margin or walk.gait.min_share, or step \
+         shorter"
+    )]
     Margin { robot: String, step: usize, foot: String, margin: f64, min_share: f64, inradius: f64 },
 }

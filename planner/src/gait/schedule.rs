@@ -71,12 +71,17 @@ impl Track {
 
     fn at(&self, t: f64) -> PlannedPose {
         let k = self.moves.partition_point(|m| m.t0 <= t);
-        let Some(m) = k.checked_sub(1).map(|k| &self.moves[k]) else { return (self.start, [0.0; 6], [0.0; 6]) };
+        let Some(m) = k.checked_sub(1).map(|k| &self.moves[k]) else {
+            return (self.start, [0.0; 6], [0.0; 6]);
+        };
         let dur = m.t1 - m.t0;
         let (s, ds, dds) = quintic((t - m.t0) / dur);
         let dp = m.to.translation.vector - m.from.translation.vector;
         let w = (m.to.rotation * m.from.rotation.inverse()).scaled_axis();
-        let pose = Isometry3::from_parts(Translation3::from(m.from.translation.vector + dp * s), nalgebra::UnitQuaternion::from_scaled_axis(w * s) * m.from.rotation);
+        let pose = Isometry3::from_parts(
+            Translation3::from(m.from.translation.vector + dp * s),
+            nalgebra::UnitQuaternion::from_scaled_axis(w * s) * m.from.rotation,
+        );
         let (v, om) = (dp * (ds / dur), w * (ds / dur));
         let (a, al) = (dp * (dds / (dur * dur)), w * (dds / (dur * dur)));
         (pose, [v.x, v.y, v.z, om.x, om.y, om.z], [a.x, a.y, a.z, al.x, al.y, al.z])
@@ -85,7 +90,10 @@ impl Track {
 
 /// Waypoint interpolation: translation linear, rotation slerp.
 fn interp(a: &Isometry3<f64>, b: &Isometry3<f64>, p: f64) -> Isometry3<f64> {
-    Isometry3::from_parts(Translation3::from(a.translation.vector.lerp(&b.translation.vector, p)), a.rotation.slerp(&b.rotation, p))
+    Isometry3::from_parts(
+        Translation3::from(a.translation.vector.lerp(&b.translation.vector, p)),
+        a.rotation.slerp(&b.rotation, p),
+    )
 }
 
 /// The plan (see the module docs).
@@ -109,10 +117,15 @@ fn crawl_order(r: &WalkingRobot, offsets: &[Vector3<f64>]) -> Result<[usize; 4],
         return Err(bad(format!("a crawl needs 4 feet, the robot has {}", offsets.len())));
     }
     let find = |front: bool, left: bool| {
-        let mut it = offsets.iter().enumerate().filter(|(_, o)| (o.x > 0.0) == front && (o.y > 0.0) == left);
+        let mut it =
+            offsets.iter().enumerate().filter(|(_, o)| (o.x > 0.0) == front && (o.y > 0.0) == left);
         match (it.next(), it.next()) {
             (Some((k, _)), None) => Ok(k),
-            _ => Err(bad(format!("no single {} {} foot in the torso frame", if front { "front" } else { "hind" }, if left { "left" } else { "right" }))),
+            _ => Err(bad(format!(
+                "no single {} {} foot in the torso frame",
+                if front { "front" } else { "hind" },
+                if left { "left" } else { "right" }
+            ))),
         }
     };
     Ok([find(false, true)?, find(true, true)?, find(false, false)?, find(true, false)?])
@@ -120,11 +133,21 @@ fn crawl_order(r: &WalkingRobot, offsets: &[Vector3<f64>]) -> Result<[usize; 4],
 
 /// Cycles of segment `k`: the fewest keeping every foot's step within `stride` and the turn
 /// within `max_turn_deg` per cycle, over all robots (0 when nobody moves).
-fn cycles(robots: &[WalkingRobot], offsets: &[Vec<Vector3<f64>>], k: usize, p: &GaitParams) -> usize {
+fn cycles(
+    robots: &[WalkingRobot],
+    offsets: &[Vec<Vector3<f64>>],
+    k: usize,
+    p: &GaitParams,
+) -> usize {
     let mut n: f64 = 0.0;
     for (r, off) in robots.iter().zip(offsets) {
         let (a, b) = (&r.waypoints[k], &r.waypoints[k + 1]);
-        let foot = off.iter().map(|o| ((b * nalgebra::Point3::from(*o)) - (a * nalgebra::Point3::from(*o))).xy().norm()).fold(0.0, f64::max);
+        let foot = off
+            .iter()
+            .map(|o| {
+                ((b * nalgebra::Point3::from(*o)) - (a * nalgebra::Point3::from(*o))).xy().norm()
+            })
+            .fold(0.0, f64::max);
         let turn = a.rotation.angle_to(&b.rotation).to_degrees();
         if foot > 1e-9 || turn > 1e-9 {
             // A step of exactly `stride` is one step, whatever the rounding.
@@ -139,27 +162,48 @@ fn check(robots: &[WalkingRobot], object: Option<&[Isometry3<f64>]>) -> Result<u
     for r in robots {
         let bad = |reason: String| GaitError::Robot { robot: r.robot.clone(), reason };
         if r.waypoints.is_empty() || r.waypoints.len() != count {
-            return Err(bad(format!("{} waypoints, the first robot has {count} (at least the start)", r.waypoints.len())));
+            return Err(bad(format!(
+                "{} waypoints, the first robot has {count} (at least the start)",
+                r.waypoints.len()
+            )));
         }
-        let finite = r.waypoints.iter().all(|w| w.translation.vector.iter().chain(r.com_offset.iter()).all(|x| x.is_finite()) && w.rotation.coords.iter().all(|x| x.is_finite()));
-        if !finite || r.feet.iter().any(|(_, p)| p.iter().any(|x| !x.is_finite())) || !r.ground_z.is_finite() || r.hand.is_some_and(|h| !h.is_finite()) {
-            return Err(bad("a non-finite waypoint, foot, centre of mass, ground height or hand load".into()));
+        let finite = r.waypoints.iter().all(|w| {
+            w.translation.vector.iter().chain(r.com_offset.iter()).all(|x| x.is_finite())
+                && w.rotation.coords.iter().all(|x| x.is_finite())
+        });
+        if !finite
+            || r.feet.iter().any(|(_, p)| p.iter().any(|x| !x.is_finite()))
+            || !r.ground_z.is_finite()
+            || r.hand.is_some_and(|h| !h.is_finite())
+        {
+            return Err(bad(
+                "a non-finite waypoint, foot, centre of mass, ground height or hand load".into(),
+            ));
         }
         if !(r.mass.is_finite() && r.mass > 0.0) {
             return Err(bad(format!("mass {} kg must be positive", r.mass)));
         }
         // The feet must carry some weight wherever the object takes the hand's load.
-        let object_at = |k: usize| object.map_or(Isometry3::identity(), |o| o[k.min(o.len().saturating_sub(1))] * o[0].inverse());
+        let object_at = |k: usize| {
+            object.map_or(Isometry3::identity(), |o| {
+                o[k.min(o.len().saturating_sub(1))] * o[0].inverse()
+            })
+        };
         for k in 0..count {
             let load = r.hand.map(|h| h.moved(&object_at(k)));
             let com = r.waypoints[k] * nalgebra::Point3::from(r.com_offset);
             if centre_of_pressure(r.mass, &com.coords, load.as_ref(), r.ground_z).is_none() {
-                return Err(bad(format!("its hand's load {:?} N lifts it off its feet at waypoint {k}", load.map(|l| l.force))));
+                return Err(bad(format!(
+                    "its hand's load {:?} N lifts it off its feet at waypoint {k}",
+                    load.map(|l| l.force)
+                )));
             }
         }
     }
     match object {
-        Some(o) if o.len() != count => Err(GaitError::ObjectWaypoints { expected: count, got: o.len() }),
+        Some(o) if o.len() != count => {
+            Err(GaitError::ObjectWaypoints { expected: count, got: o.len() })
+        }
         _ => Ok(count),
     }
 }
@@ -215,7 +259,15 @@ fn hand_load(r: &WalkingRobot, object: Option<&[Isometry3<f64>]>, at: PathAt) ->
 /// of pressure (its weight and the hand's load, which stays on the object) are `margin` inside
 /// with every foot carrying `min_share`: the CoM so that the robot stands if the team lets go
 /// mid-step, the centre of pressure while it holds. The reported margin is the lesser.
-fn place(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], foot: usize, at: PathAt, object: Option<&[Isometry3<f64>]>, p: &GaitParams) -> Option<Placement> {
+fn place(
+    r: &WalkingRobot,
+    offsets: &[Vector3<f64>],
+    feet: &[Vector3<f64>],
+    foot: usize,
+    at: PathAt,
+    object: Option<&[Isometry3<f64>]>,
+    p: &GaitParams,
+) -> Option<Placement> {
     let (a, b) = (&r.waypoints[at.k], &r.waypoints[at.k + 1]);
     let nominal = interp(a, b, at.progress);
     let mut to = interp(a, b, at.cycle_end) * nalgebra::Point3::from(offsets[foot]);
@@ -238,25 +290,45 @@ fn place(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], foot
             }
             alpha * dir
         }
-        ShiftRule::Least => least_shift(&[(com.xy(), 1.0), (cop, gain)], &tri, p.margin, p.min_share)?,
+        ShiftRule::Least => {
+            least_shift(&[(com.xy(), 1.0), (cop, gain)], &tri, p.margin, p.min_share)?
+        }
     };
     let least = margin(&(com.xy() + d), &tri).min(margin(&(cop + gain * d), &tri));
     let shifted = com + Vector3::new(d.x, d.y, 0.0);
-    let cop_margin = real.and_then(|l| centre_of_pressure(r.mass, &shifted, Some(&l), r.ground_z)).map(|(c, _)| margin(&c, &tri));
-    Some(Placement { target: Translation3::new(d.x, d.y, 0.0) * nominal, to: to.coords, shift: d.norm(), margin: least, cop_margin })
+    let cop_margin = real
+        .and_then(|l| centre_of_pressure(r.mass, &shifted, Some(&l), r.ground_z))
+        .map(|(c, _)| margin(&c, &tri));
+    Some(Placement {
+        target: Translation3::new(d.x, d.y, 0.0) * nominal,
+        to: to.coords,
+        shift: d.norm(),
+        margin: least,
+        cop_margin,
+    })
 }
 
 /// The foot order of robot `i` in segment `k` (`n` cycles): of the 24, the one whose first
 /// cycle needs the least total torso shift (walking backwards, the front feet lead; sideways,
 /// the feet away from the motion), the crawl order on a tie; `None` when none reaches the margin.
 #[allow(clippy::too_many_arguments)]
-fn best_order(r: &WalkingRobot, offsets: &[Vector3<f64>], feet: &[Vector3<f64>], crawl: [usize; 4], k: usize, n: usize, object: Option<&[Isometry3<f64>]>, p: &GaitParams) -> Option<[usize; 4]> {
+fn best_order(
+    r: &WalkingRobot,
+    offsets: &[Vector3<f64>],
+    feet: &[Vector3<f64>],
+    crawl: [usize; 4],
+    k: usize,
+    n: usize,
+    object: Option<&[Isometry3<f64>]>,
+    p: &GaitParams,
+) -> Option<[usize; 4]> {
     let mut best: Option<([usize; 4], f64)> = None;
     for perm in permutations(crawl) {
         let mut now = feet.to_vec();
         let mut total = 0.0;
         for (j, &foot) in perm.iter().enumerate() {
-            let at = PathAt { k, progress: (j + 1) as f64 / 4.0 / n as f64, cycle_end: 1.0 / n as f64 };
+            let at =
+                PathAt { k, progress: (j + 1) as f64 / 4.0 / n as f64, cycle_end: 1.0 / n as f64 };
             let Some(pl) = place(r, offsets, &now, foot, at, object, p) else {
                 total = f64::INFINITY;
                 break;
@@ -292,30 +364,78 @@ impl Builder<'_> {
             if r.waypoints[k] == r.waypoints[k + 1] {
                 continue;
             }
-            match best_order(r, &self.offsets[i], &self.feet[i], self.crawl[i], k, n, self.object, self.p) {
+            match best_order(
+                r,
+                &self.offsets[i],
+                &self.feet[i],
+                self.crawl[i],
+                k,
+                n,
+                self.object,
+                self.p,
+            ) {
                 Some(o) => self.order[i] = o,
                 None => self.order[i] = self.crawl[i],
             }
         }
     }
 
+    /// The crawl's cycles along each of the `count - 1` segments between the waypoints.
+    fn walk_segments(&mut self, count: usize) -> Result<(), GaitError> {
+        for k in 0..count.saturating_sub(1) {
+            let n = cycles(self.robots, &self.offsets, k, self.p);
+            if n > 0 {
+                self.choose_orders(k, n);
+            }
+            for c in 0..n {
+                for j in 0..4 {
+                    self.step(k, c, j, n)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// Step `j` of cycle `c` of `n` in segment `k`: shift, unload, swing, load.
     fn step(&mut self, k: usize, c: usize, j: usize, n: usize) -> Result<(), GaitError> {
-        let at = PathAt { k, progress: (c as f64 + (j + 1) as f64 / 4.0) / n as f64, cycle_end: (c + 1) as f64 / n as f64 };
-        let (t_shift_end, liftoff) = (self.t + self.p.t_shift, self.t + self.p.t_shift + self.p.t_unload);
+        let at = PathAt {
+            k,
+            progress: (c as f64 + (j + 1) as f64 / 4.0) / n as f64,
+            cycle_end: (c + 1) as f64 / n as f64,
+        };
+        let (t_shift_end, liftoff) =
+            (self.t + self.p.t_shift, self.t + self.p.t_shift + self.p.t_unload);
         let touchdown = liftoff + self.p.t_swing;
         for (i, r) in self.robots.iter().enumerate() {
             if r.waypoints[k] == r.waypoints[k + 1] {
                 continue;
             }
             let foot = self.order[i][j];
-            let Some(pl) = place(r, &self.offsets[i], &self.feet[i], foot, at, self.object, self.p) else {
-                let others: Vec<Vector2<f64>> = (0..4).filter(|f| *f != foot).map(|f| self.feet[i][f].xy()).collect();
+            let Some(pl) = place(r, &self.offsets[i], &self.feet[i], foot, at, self.object, self.p)
+            else {
+                let others: Vec<Vector2<f64>> =
+                    (0..4).filter(|f| *f != foot).map(|f| self.feet[i][f].xy()).collect();
                 let inradius = super::support::incentre(&[others[0], others[1], others[2]]).1;
-                return Err(GaitError::Margin { robot: r.robot.clone(), step: self.steps.len(), foot: r.feet[foot].0.clone(), margin: self.p.margin, min_share: self.p.min_share, inradius });
+                return Err(GaitError::Margin {
+                    robot: r.robot.clone(),
+                    step: self.steps.len(),
+                    foot: r.feet[foot].0.clone(),
+                    margin: self.p.margin,
+                    min_share: self.p.min_share,
+                    inradius,
+                });
             };
             self.torsos[i].push(self.t, t_shift_end, pl.target);
-            self.steps.push(Step { robot: i, foot, liftoff, touchdown, from: self.feet[i][foot], to: pl.to, margin: pl.margin, cop_margin: pl.cop_margin });
+            self.steps.push(Step {
+                robot: i,
+                foot,
+                liftoff,
+                touchdown,
+                from: self.feet[i][foot],
+                to: pl.to,
+                margin: pl.margin,
+                cop_margin: pl.cop_margin,
+            });
             self.feet[i][foot] = pl.to;
         }
         if let (Some(track), Some(o)) = (self.object_track.as_mut(), self.object) {
@@ -341,6 +461,28 @@ impl Builder<'_> {
     }
 }
 
+/// Each robot's foot positions in the frame of its torso's first waypoint.
+fn foot_offsets(robots: &[WalkingRobot]) -> Vec<Vec<Vector3<f64>>> {
+    robots
+        .iter()
+        .map(|r| {
+            r.feet
+                .iter()
+                .map(|(_, p)| r.waypoints[0].inverse_transform_point(&(*p).into()).coords)
+                .collect()
+        })
+        .collect()
+}
+
+/// The indices into `steps` of each robot's (of `n`) four feet's swings, in time order.
+fn swings_by_foot(steps: &[Step], n: usize) -> Vec<Vec<Vec<usize>>> {
+    let mut swings = vec![vec![Vec::new(); 4]; n];
+    for (s, step) in steps.iter().enumerate() {
+        swings[step.robot][step.foot].push(s);
+    }
+    swings
+}
+
 /// How long before a lift-off a release still halts a walk at once, s
 /// ([`GaitPlan::halt_point`]): the release's way from the coordinator through the scenario
 /// driver to the agents, with room for a loaded machine (a few ticks in the runs measured).
@@ -349,11 +491,20 @@ pub const HALT_GUARD: f64 = 0.05;
 impl GaitPlan {
     /// The crawl of `robots` along their waypoints (and the object's, moved with the same
     /// progress), starting at `t0` (scenario time, s).
-    pub fn new(robots: &[WalkingRobot], object: Option<&[Isometry3<f64>]>, params: &GaitParams, t0: f64) -> Result<GaitPlan, GaitError> {
+    pub fn new(
+        robots: &[WalkingRobot],
+        object: Option<&[Isometry3<f64>]>,
+        params: &GaitParams,
+        t0: f64,
+    ) -> Result<GaitPlan, GaitError> {
         params.check()?;
         let count = check(robots, object)?;
-        let offsets: Vec<Vec<Vector3<f64>>> = robots.iter().map(|r| r.feet.iter().map(|(_, p)| r.waypoints[0].inverse_transform_point(&(*p).into()).coords).collect()).collect();
-        let order = robots.iter().zip(&offsets).map(|(r, o)| crawl_order(r, o)).collect::<Result<Vec<_>, _>>()?;
+        let offsets = foot_offsets(robots);
+        let order = robots
+            .iter()
+            .zip(&offsets)
+            .map(|(r, o)| crawl_order(r, o))
+            .collect::<Result<Vec<_>, _>>()?;
         let mut b = Builder {
             robots,
             object,
@@ -363,28 +514,26 @@ impl GaitPlan {
             crawl: order.clone(),
             order,
             t: t0,
-            torsos: robots.iter().map(|r| Track { start: r.waypoints[0], moves: Vec::new() }).collect(),
+            torsos: robots
+                .iter()
+                .map(|r| Track { start: r.waypoints[0], moves: Vec::new() })
+                .collect(),
             object_track: object.map(|o| Track { start: o[0], moves: Vec::new() }),
             steps: Vec::new(),
         };
-        for k in 0..count.saturating_sub(1) {
-            let n = cycles(robots, &b.offsets, k, params);
-            if n > 0 {
-                b.choose_orders(k, n);
-            }
-            for c in 0..n {
-                for j in 0..4 {
-                    b.step(k, c, j, n)?;
-                }
-            }
-        }
+        b.walk_segments(count)?;
         let end = b.finish();
-        let mut swings = vec![vec![Vec::new(); 4]; robots.len()];
-        for (s, step) in b.steps.iter().enumerate() {
-            swings[step.robot][step.foot].push(s);
-        }
+        let swings = swings_by_foot(&b.steps, robots.len());
         let finals = robots.iter().map(|r| *r.waypoints.last().expect("checked")).collect();
-        Ok(GaitPlan { params: params.clone(), torsos: b.torsos, object: b.object_track, steps: b.steps, swings, finals, end })
+        Ok(GaitPlan {
+            params: params.clone(),
+            torsos: b.torsos,
+            object: b.object_track,
+            steps: b.steps,
+            swings,
+            finals,
+            end,
+        })
     }
 
     pub fn params(&self) -> &GaitParams {
@@ -431,7 +580,13 @@ impl GaitPlan {
         if t >= s.touchdown {
             return Some((pressed, [0.0; 3], [0.0; 3]));
         }
-        let (p, v, a) = swing(&s.from, &pressed, self.params.lift_height, s.touchdown - s.liftoff, t - s.liftoff);
+        let (p, v, a) = swing(
+            &s.from,
+            &pressed,
+            self.params.lift_height,
+            s.touchdown - s.liftoff,
+            t - s.liftoff,
+        );
         Some((p, v.into(), a.into()))
     }
 
@@ -443,7 +598,10 @@ impl GaitPlan {
         if t >= s.touchdown {
             return Some(s.to);
         }
-        Some(swing(&s.from, &s.to, self.params.lift_height, s.touchdown - s.liftoff, t - s.liftoff).0)
+        Some(
+            swing(&s.from, &s.to, self.params.lift_height, s.touchdown - s.liftoff, t - s.liftoff)
+                .0,
+        )
     }
 
     /// The bound on robot `i`'s foot `k` normal force at `t`: a ramp from `unload_force` to 0
@@ -466,7 +624,9 @@ impl GaitPlan {
     pub fn stance(&self, i: usize, t: f64) -> [bool; 4] {
         let mut out = [true; 4];
         for (k, o) in out.iter_mut().enumerate() {
-            *o = !self.last_step(i, k, t).is_some_and(|s| t < s.touchdown - self.params.touchdown_window);
+            *o = !self
+                .last_step(i, k, t)
+                .is_some_and(|s| t < s.touchdown - self.params.touchdown_window);
         }
         out
     }
@@ -499,7 +659,11 @@ impl GaitPlan {
     /// a lift-off due before the halt arrives would still happen.
     pub fn halt_point(&self, t: f64) -> f64 {
         let p = &self.params;
-        if self.steps.iter().any(|s| t > s.liftoff - p.t_unload - p.t_shift && t + HALT_GUARD < s.liftoff) {
+        if self
+            .steps
+            .iter()
+            .any(|s| t > s.liftoff - p.t_unload - p.t_shift && t + HALT_GUARD < s.liftoff)
+        {
             t
         } else {
             self.quiet_point(t)

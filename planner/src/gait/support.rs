@@ -22,7 +22,11 @@ pub struct HandLoad {
 impl HandLoad {
     /// The same load carried along by a rigid motion of the object (the grasp moves with it).
     pub fn moved(&self, by: &Isometry3<f64>) -> HandLoad {
-        HandLoad { point: (by * nalgebra::Point3::from(self.point)).coords, force: by.rotation * self.force, moment: by.rotation * self.moment }
+        HandLoad {
+            point: (by * nalgebra::Point3::from(self.point)).coords,
+            force: by.rotation * self.force,
+            moment: by.rotation * self.moment,
+        }
     }
 
     pub fn is_finite(&self) -> bool {
@@ -37,7 +41,12 @@ impl HandLoad {
 /// Also how far that point moves per metre the centre of mass moves horizontally (`m g / F_z`:
 /// a hand pressed down moves it less than the CoM). `None` when the feet carry no weight
 /// (`F_z <= 0`: the hand lifts the robot).
-pub fn centre_of_pressure(mass: f64, com: &Vector3<f64>, load: Option<&HandLoad>, ground_z: f64) -> Option<(Vector2<f64>, f64)> {
+pub fn centre_of_pressure(
+    mass: f64,
+    com: &Vector3<f64>,
+    load: Option<&HandLoad>,
+    ground_z: f64,
+) -> Option<(Vector2<f64>, f64)> {
     let weight = Vector3::new(0.0, 0.0, -mass * GRAVITY);
     let (mut force, mut moment) = (-weight, -com.cross(&weight));
     if let Some(h) = load {
@@ -102,7 +111,11 @@ pub fn shares(p: &Vector2<f64>, tri: &[Vector2<f64>; 3]) -> [f64; 3] {
 /// The conditions of [`along`] and [`least_shift`], edge by edge: a point `q` meets them when
 /// `n . (q - a) >= r` for each edge's point `a` and inward normal `n`, with `r` the larger of
 /// `required` and `min_share` of the edge's height (a share is an edge's distance over it).
-fn conditions(tri: &[Vector2<f64>; 3], required: f64, min_share: f64) -> [(Vector2<f64>, Vector2<f64>, f64); 3] {
+fn conditions(
+    tri: &[Vector2<f64>; 3],
+    required: f64,
+    min_share: f64,
+) -> [(Vector2<f64>, Vector2<f64>, f64); 3] {
     let (e, h) = (edges(tri), heights(tri));
     std::array::from_fn(|k| (e[k].0, e[k].1, required.max(min_share * h[k])))
 }
@@ -111,7 +124,13 @@ fn conditions(tri: &[Vector2<f64>; 3], required: f64, min_share: f64) -> [(Vecto
 /// every vertex at least `min_share` of the load ([`shares`]; `0`: no share asked), and the
 /// largest for which that still holds (`None` when no `alpha` does): each edge's distance is
 /// affine in `alpha`, and a share is an edge's distance over its height.
-pub fn along(p: &Vector2<f64>, dir: &Vector2<f64>, tri: &[Vector2<f64>; 3], required: f64, min_share: f64) -> Option<(f64, f64)> {
+pub fn along(
+    p: &Vector2<f64>,
+    dir: &Vector2<f64>,
+    tri: &[Vector2<f64>; 3],
+    required: f64,
+    min_share: f64,
+) -> Option<(f64, f64)> {
     let (mut lo, mut hi): (f64, f64) = (0.0, f64::INFINITY);
     for (a, n, required) in conditions(tri, required, min_share) {
         let (d0, rate) = (n.dot(&(p - a)), n.dot(dir));
@@ -134,7 +153,12 @@ pub fn along(p: &Vector2<f64>, dir: &Vector2<f64>, tri: &[Vector2<f64>; 3], requ
 /// half-planes `n_k . (p + gain d - a_k) >= r_k`. In the plane that point is `0`, the
 /// projection onto one boundary line, or the corner of two; the shortest feasible candidate
 /// is it. `None` when no shift satisfies them all.
-pub fn least_shift(points: &[(Vector2<f64>, f64)], tri: &[Vector2<f64>; 3], required: f64, min_share: f64) -> Option<Vector2<f64>> {
+pub fn least_shift(
+    points: &[(Vector2<f64>, f64)],
+    tri: &[Vector2<f64>; 3],
+    required: f64,
+    min_share: f64,
+) -> Option<Vector2<f64>> {
     // Each condition as `w . d >= b`.
     let mut rows: Vec<(Vector2<f64>, f64)> = Vec::with_capacity(3 * points.len());
     let edges = conditions(tri, required, min_share);
@@ -160,5 +184,8 @@ pub fn least_shift(points: &[(Vector2<f64>, f64)], tri: &[Vector2<f64>; 3], requ
             }
         }
     }
-    candidates.into_iter().filter(feasible).min_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))
+    candidates
+        .into_iter()
+        .filter(feasible)
+        .min_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))
 }

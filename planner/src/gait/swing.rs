@@ -13,7 +13,11 @@ pub fn quintic(u: f64) -> (f64, f64, f64) {
         return (1.0, 0.0, 0.0);
     }
     let (u2, u3) = (u * u, u * u * u);
-    (u3 * (10.0 - 15.0 * u + 6.0 * u2), 30.0 * u2 * (1.0 - u) * (1.0 - u), 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u))
+    (
+        u3 * (10.0 - 15.0 * u + 6.0 * u2),
+        30.0 * u2 * (1.0 - u) * (1.0 - u),
+        60.0 * u * (1.0 - u) * (1.0 - 2.0 * u),
+    )
 }
 
 /// The lift bump `b(u) = 64 u^3 (1 - u)^3` (1 at mid-swing; zero value and velocity at both
@@ -30,7 +34,13 @@ fn bump(u: f64) -> (f64, f64, f64) {
 /// mid-swing: position, velocity and acceleration `t` s after lift-off. Horizontal and
 /// vertical progress follow [`quintic`]; the lift follows a bump, so the foot leaves and lands
 /// with zero velocity.
-pub fn swing(from: &Vector3<f64>, to: &Vector3<f64>, lift: f64, duration: f64, t: f64) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
+pub fn swing(
+    from: &Vector3<f64>,
+    to: &Vector3<f64>,
+    lift: f64,
+    duration: f64,
+    t: f64,
+) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
     let u = t / duration;
     let (s, ds, dds) = quintic(u);
     let (b, db, ddb) = bump(u);

@@ -4,13 +4,23 @@
 
 use nalgebra::Isometry3;
 use protocol::conventions::quat_to_wxyz;
-use protocol::{ContactSet, FootLoad, Header, PointReference, Pose, PoseReference, RunClock, SwingFootReference, TaskReferences};
+use protocol::{
+    ContactSet, FootLoad, Header, PointReference, Pose, PoseReference, RunClock,
+    SwingFootReference, TaskReferences,
+};
 
 use super::Walk;
 
 /// A pose target as a reference message.
 fn pose_reference((x, twist, acc): (Isometry3<f64>, [f64; 6], [f64; 6])) -> PoseReference {
-    PoseReference { pose: Pose { position: x.translation.vector.into(), orientation: quat_to_wxyz(&x.rotation) }, twist, acceleration: acc }
+    PoseReference {
+        pose: Pose {
+            position: x.translation.vector.into(),
+            orientation: quat_to_wxyz(&x.rotation),
+        },
+        twist,
+        acceleration: acc,
+    }
 }
 
 impl Walk {
@@ -29,11 +39,20 @@ impl Walk {
         for (i, id) in self.robots.iter().enumerate().filter(|(i, _)| self.walking[*i]) {
             for (k, frame) in self.feet[i].iter().enumerate() {
                 if let Some((p, v, a)) = self.gait.swing_foot(i, k, t) {
-                    let reference = PointReference { position: p.into(), velocity: v, acceleration: a };
-                    refs.swing_feet.push(SwingFootReference { robot: id.clone(), frame: frame.clone(), reference });
+                    let reference =
+                        PointReference { position: p.into(), velocity: v, acceleration: a };
+                    refs.swing_feet.push(SwingFootReference {
+                        robot: id.clone(),
+                        frame: frame.clone(),
+                        reference,
+                    });
                 }
                 if let Some(f) = self.gait.max_normal_force(i, k, t) {
-                    refs.foot_loads.push(FootLoad { robot: id.clone(), frame: frame.clone(), max_normal_force: f });
+                    refs.foot_loads.push(FootLoad {
+                        robot: id.clone(),
+                        frame: frame.clone(),
+                        max_normal_force: f,
+                    });
                 }
             }
         }
@@ -48,11 +67,20 @@ impl Walk {
         for (i, id) in self.robots.iter().enumerate().filter(|(i, _)| self.walking[*i]) {
             for (k, frame) in self.feet[i].iter().enumerate() {
                 if let Some((p, v, a)) = self.gait.foot_after_halt(i, k, t_h) {
-                    let reference = PointReference { position: p.into(), velocity: v, acceleration: a };
-                    refs.swing_feet.push(SwingFootReference { robot: id.clone(), frame: frame.clone(), reference });
+                    let reference =
+                        PointReference { position: p.into(), velocity: v, acceleration: a };
+                    refs.swing_feet.push(SwingFootReference {
+                        robot: id.clone(),
+                        frame: frame.clone(),
+                        reference,
+                    });
                 }
                 if let Some(f) = self.gait.max_normal_force_after_halt(i, k, t_h, t) {
-                    refs.foot_loads.push(FootLoad { robot: id.clone(), frame: frame.clone(), max_normal_force: f });
+                    refs.foot_loads.push(FootLoad {
+                        robot: id.clone(),
+                        frame: frame.clone(),
+                        max_normal_force: f,
+                    });
                 }
             }
         }
@@ -62,7 +90,12 @@ impl Walk {
     /// the first tick at or after its time (the agent lifts the foot off then, and lands a
     /// foot once its force confirms the touchdown).
     pub fn contact_sets(&self, team: &str, clock: &RunClock) -> Vec<ContactSet> {
-        let mut sets: Vec<ContactSet> = self.gait.contact_changes().into_iter().map(|(t, i, stance)| self.contact_set(team, clock, t, i, stance)).collect();
+        let mut sets: Vec<ContactSet> = self
+            .gait
+            .contact_changes()
+            .into_iter()
+            .map(|(t, i, stance)| self.contact_set(team, clock, t, i, stance))
+            .collect();
         sets.sort_by_key(|c| c.header.tick);
         sets
     }
@@ -73,13 +106,28 @@ impl Walk {
     /// and drops the later ones (`robot_agent::contact_switch`), so the walk's remaining
     /// lift-offs never happen.
     pub fn halt_sets(&self, team: &str, clock: &RunClock, t: f64) -> Vec<ContactSet> {
-        (0..self.robots.len()).filter(|i| self.walking[*i]).map(|i| self.contact_set(team, clock, t, i, [true; 4])).collect()
+        (0..self.robots.len())
+            .filter(|i| self.walking[*i])
+            .map(|i| self.contact_set(team, clock, t, i, [true; 4]))
+            .collect()
     }
 
     /// Robot `i`'s set with `stance` from the first tick at or after scenario time `t`.
-    fn contact_set(&self, team: &str, clock: &RunClock, t: f64, i: usize, stance: [bool; 4]) -> ContactSet {
+    fn contact_set(
+        &self,
+        team: &str,
+        clock: &RunClock,
+        t: f64,
+        i: usize,
+        stance: [bool; 4],
+    ) -> ContactSet {
         let tick = clock.first_tick_at(t);
-        let feet = self.feet[i].iter().zip(stance).filter(|(_, s)| *s).map(|(f, _)| f.clone()).collect();
-        ContactSet { header: Header::new(team, Some(&self.robots[i]), tick, 0), stance_feet: feet, hand_in_grasp: true }
+        let feet =
+            self.feet[i].iter().zip(stance).filter(|(_, s)| *s).map(|(f, _)| f.clone()).collect();
+        ContactSet {
+            header: Header::new(team, Some(&self.robots[i]), tick, 0),
+            stance_feet: feet,
+            hand_in_grasp: true,
+        }
     }
 }

@@ -51,14 +51,21 @@ impl WalkSpec {
         if self.path.is_empty() {
             return bad("walk.path needs at least one waypoint".into());
         }
-        if self.path.iter().flatten().chain([&self.start]).any(|x| !x.is_finite()) || self.start < 0.0 {
+        if self.path.iter().flatten().chain([&self.start]).any(|x| !x.is_finite())
+            || self.start < 0.0
+        {
             return bad("walk.path and walk.start must be finite, start >= 0".into());
         }
-        if let Some(r) = self.robots.iter().find(|r| !robots.iter().any(|x| *x == r.as_str())) {
+        if let Some(r) = self.robots.iter().find(|r| !robots.contains(&r.as_str())) {
             return bad(format!("walk.robots names unknown robot {r:?}"));
         }
-        if self.frame == WalkFrame::Team && !self.robots.is_empty() && self.robots.len() != robots.len() {
-            return bad("walk.frame = \"team\" moves the whole team: leave walk.robots empty".into());
+        if self.frame == WalkFrame::Team
+            && !self.robots.is_empty()
+            && self.robots.len() != robots.len()
+        {
+            return bad(
+                "walk.frame = \"team\" moves the whole team: leave walk.robots empty".into()
+            );
         }
         Ok(())
     }

@@ -109,7 +109,13 @@ pub fn run<S: DynamicsSource, H: RobotHardware, L: TeamLink>(
         tracing::warn!(robot = %d.core.robot(), "hardware deactivate failed: {e}");
     }
     d.publish_status();
-    let report = DriverReport { exit: result?, cycles: d.tick, overruns: d.overruns, link_errors: d.out.link_errors, counters: d.core.counters().clone() };
+    let report = DriverReport {
+        exit: result?,
+        cycles: d.tick,
+        overruns: d.overruns,
+        link_errors: d.out.link_errors,
+        counters: d.core.counters().clone(),
+    };
     tracing::info!(robot = %d.core.robot(), ?report, "hardware loop stopped");
     Ok(report)
 }
@@ -135,7 +141,12 @@ struct Written {
 }
 
 impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
-    fn new(core: &'a mut AgentCore<S>, hardware: &'a mut H, link: &'a mut L, cfg: &DriverConfig) -> Self {
+    fn new(
+        core: &'a mut AgentCore<S>,
+        hardware: &'a mut H,
+        link: &'a mut L,
+        cfg: &DriverConfig,
+    ) -> Self {
         let joints = core.joints();
         let state = RobotState {
             header: Header::new(core.team(), Some(core.robot()), 0, 0),
@@ -146,7 +157,11 @@ impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
             time: 0.0,
             foot_forces: Vec::new(),
         };
-        let out = Written { drive: DriveCommand::torque(core.team(), core.robot(), 0, vec![0.0; joints]), have: false, link_errors: 0 };
+        let out = Written {
+            drive: DriveCommand::torque(core.team(), core.robot(), 0, vec![0.0; joints]),
+            have: false,
+            link_errors: 0,
+        };
         Driver { core, hardware, link, cfg: *cfg, state, out, tick: 0, overruns: 0 }
     }
 
@@ -194,7 +209,10 @@ impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
                     // The robot fell: limp, and out of the team (crate::fall).
                     if leave {
                         if let Err(e) = self.link.leave_team() {
-                            tracing::warn!(robot = %self.core.robot(), "leaving the team after the fall: {e}");
+                            tracing::warn!(
+                                robot = %self.core.robot(),
+                                "leaving the team after the fall: {e}"
+                            );
                         }
                     }
                 }
@@ -202,7 +220,8 @@ impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
             Err(e) => self.core.on_undecodable_state(&e.to_string()),
         }
         // A fallen robot takes no commands: nothing to wait for.
-        let wait = if self.core.fallen().is_some() { Duration::ZERO } else { self.cfg.command_wait };
+        let wait =
+            if self.core.fallen().is_some() { Duration::ZERO } else { self.cfg.command_wait };
         self.commands(tick, now + wait);
         self.contacts();
         self.coordinator();
@@ -273,8 +292,17 @@ impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
 
     /// The hardware failed or asked to deactivate: safe mode (announced; the hold is not
     /// written to a hardware that refuses torques), then stop.
-    fn halt(&mut self, status: HwStatus, op: &'static str, tick: u64) -> Result<Option<DriverExit>, DriverError> {
-        let why = if status == HwStatus::Deactivate { "the hardware asked to deactivate" } else { "hardware failure" };
+    fn halt(
+        &mut self,
+        status: HwStatus,
+        op: &'static str,
+        tick: u64,
+    ) -> Result<Option<DriverExit>, DriverError> {
+        let why = if status == HwStatus::Deactivate {
+            "the hardware asked to deactivate"
+        } else {
+            "hardware failure"
+        };
         tracing::warn!(robot = %self.core.robot(), tick, op, ?status, "{why}");
         let out = self.core.enter_safe_mode(why, Instant::now());
         let status_due = send(self.link, &mut self.out, out);

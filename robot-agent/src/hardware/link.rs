@@ -65,7 +65,11 @@ pub struct SyncPublisher<M> {
 }
 
 impl<M: Message> SyncPublisher<M> {
-    pub fn declare(session: &Session, key: String, priority: Priority) -> Result<Self, TransportError> {
+    pub fn declare(
+        session: &Session,
+        key: String,
+        priority: Priority,
+    ) -> Result<Self, TransportError> {
         let publisher = session
             .declare_publisher(key.clone())
             .express(true)
@@ -79,12 +83,18 @@ impl<M: Message> SyncPublisher<M> {
     pub fn put(&mut self, msg: &M) -> Result<(), TransportError> {
         msg.validate()?;
         protocol::codec::encode_into(msg, &mut self.buffer)?;
-        self.publisher.put(self.buffer.as_slice()).wait().map_err(|e| zenoh_err("put", self.publisher.key_expr().as_str(), e))
+        self.publisher
+            .put(self.buffer.as_slice())
+            .wait()
+            .map_err(|e| zenoh_err("put", self.publisher.key_expr().as_str(), e))
     }
 
     /// Delete the key: its publisher is gone for good.
     pub fn delete(&mut self) -> Result<(), TransportError> {
-        self.publisher.delete().wait().map_err(|e| zenoh_err("delete", self.publisher.key_expr().as_str(), e))
+        self.publisher
+            .delete()
+            .wait()
+            .map_err(|e| zenoh_err("delete", self.publisher.key_expr().as_str(), e))
     }
 }
 
@@ -109,7 +119,11 @@ impl ZenohLink {
     pub fn declare(session: &Session, team: &str, robot: &str) -> Result<Self, TransportError> {
         let key = |t| keys::robot(team, robot, t);
         let subscribe = |key: String| {
-            session.declare_subscriber(key.clone()).with(RingChannel::new(INBOX)).wait().map_err(|e| zenoh_err("declare_subscriber", &key, e))
+            session
+                .declare_subscriber(key.clone())
+                .with(RingChannel::new(INBOX))
+                .wait()
+                .map_err(|e| zenoh_err("declare_subscriber", &key, e))
         };
         let commands = subscribe(key(RobotTopic::Command)?)?;
         let contacts = subscribe(keys::contacts(team, robot)?)?;
@@ -123,12 +137,26 @@ impl ZenohLink {
             .with(RingChannel::new(INBOX))
             .wait()
             .map_err(|e| zenoh_err("declare_liveliness_subscriber", &alive, e))?;
-        let dynamics = SyncPublisher::declare(session, key(RobotTopic::Dynamics)?, Priority::RealTime)?;
+        let dynamics =
+            SyncPublisher::declare(session, key(RobotTopic::Dynamics)?, Priority::RealTime)?;
         let status = SyncPublisher::declare(session, key(RobotTopic::Status)?, Priority::Data)?;
-        let description = SyncPublisher::declare(session, key(RobotTopic::Description)?, Priority::Data)?;
+        let description =
+            SyncPublisher::declare(session, key(RobotTopic::Description)?, Priority::Data)?;
         let member = keys::member(team, robot)?;
-        let token = session.liveliness().declare_token(member.clone()).wait().map_err(|e| zenoh_err("declare_token", &member, e))?;
-        Ok(ZenohLink { commands, contacts, coordinator, dynamics, status, description, token: Some(token) })
+        let token = session
+            .liveliness()
+            .declare_token(member.clone())
+            .wait()
+            .map_err(|e| zenoh_err("declare_token", &member, e))?;
+        Ok(ZenohLink {
+            commands,
+            contacts,
+            coordinator,
+            dynamics,
+            status,
+            description,
+            token: Some(token),
+        })
     }
 }
 

@@ -164,7 +164,12 @@ impl RobotHardware for MockHardware {
 
     fn configure(&mut self) -> Result<(), HardwareError> {
         if !(self.dt.is_finite() && self.dt > 0.0) || self.v.len() != self.q.len() {
-            return Err(HardwareError::new(format!("mock: step {} s, {} positions, {} velocities", self.dt, self.q.len(), self.v.len())));
+            return Err(HardwareError::new(format!(
+                "mock: step {} s, {} positions, {} velocities",
+                self.dt,
+                self.q.len(),
+                self.v.len()
+            )));
         }
         self.lifecycle = Lifecycle::Inactive;
         Ok(())
@@ -218,13 +223,21 @@ impl RobotHardware for MockHardware {
         state.joint_velocities.clear();
         state.joint_velocities.extend_from_slice(&self.v);
         if let Some(h) = self.history.as_mut() {
-            h.push(MockStep { tick: self.reads - 1, q: self.q.clone(), v: self.v.clone(), tau: None });
+            h.push(MockStep {
+                tick: self.reads - 1,
+                q: self.q.clone(),
+                v: self.v.clone(),
+                tau: None,
+            });
         }
         HwStatus::Ok
     }
 
     fn write(&mut self, cmd: &DriveCommand) -> HwStatus {
-        if self.lifecycle != Lifecycle::Active || cmd.tau_ff.len() != self.tau.len() || cmd.validate().is_err() {
+        if self.lifecycle != Lifecycle::Active
+            || cmd.tau_ff.len() != self.tau.len()
+            || cmd.validate().is_err()
+        {
             return HwStatus::Error;
         }
         if let Some(status) = self.fault(true) {
@@ -262,8 +275,9 @@ mod tests {
 
     #[test]
     fn lifecycle_integration_and_faults() {
-        let mut hw = MockHardware::new(MockConfig { record: true, ..MockConfig::new(2, 1.0, 0.01) })
-            .with_fault(MockFault { tick: 3, on_write: true, status: HwStatus::Deactivate });
+        let mut hw =
+            MockHardware::new(MockConfig { record: true, ..MockConfig::new(2, 1.0, 0.01) })
+                .with_fault(MockFault { tick: 3, on_write: true, status: HwStatus::Deactivate });
         let mut s = state();
         let t = Instant::now();
         assert_eq!(hw.read(t, &mut s), HwStatus::Error, "read before configure");
@@ -273,7 +287,10 @@ mod tests {
         hw.activate().unwrap();
         // First read: the initial state, no step.
         assert_eq!(hw.read(t, &mut s), HwStatus::Ok);
-        assert_eq!((s.joint_positions.clone(), s.joint_velocities.clone()), (vec![0.0, 0.0], vec![1.0, 1.0]));
+        assert_eq!(
+            (s.joint_positions.clone(), s.joint_velocities.clone()),
+            (vec![0.0, 0.0], vec![1.0, 1.0])
+        );
         assert_eq!(hw.write(&torque(&[-10.0, 0.0])), HwStatus::Ok);
         assert_eq!(hw.write(&torque(&[0.0])), HwStatus::Error, "wrong size");
         assert_eq!(hw.write(&torque(&[f64::NAN, 0.0])), HwStatus::Error, "not finite");
@@ -303,13 +320,17 @@ mod tests {
         let t = Instant::now();
         hw.read(t, &mut s);
         let mut d = torque(&[1.0, 0.0]);
-        (d.q_des, d.qd_des, d.kp, d.kd) = (vec![0.2, -0.3], vec![0.0, 0.0], vec![400.0, 100.0], vec![40.0, 20.0]);
+        (d.q_des, d.qd_des, d.kp, d.kd) =
+            (vec![0.2, -0.3], vec![0.0, 0.0], vec![400.0, 100.0], vec![40.0, 20.0]);
         assert_eq!(hw.write(&d), HwStatus::Ok);
         let (mut q, mut v) = ([0.0f64; 2], [v0; 2]);
         for _ in 0..2000 {
             hw.read(t, &mut s);
             for j in 0..2 {
-                v[j] += dt * (d.tau_ff[j] + d.kp[j] * (d.q_des[j] - q[j]) + d.kd[j] * (d.qd_des[j] - v[j]));
+                v[j] += dt
+                    * (d.tau_ff[j]
+                        + d.kp[j] * (d.q_des[j] - q[j])
+                        + d.kd[j] * (d.qd_des[j] - v[j]));
                 q[j] += dt * v[j];
             }
         }

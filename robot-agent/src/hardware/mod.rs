@@ -1,15 +1,21 @@
 //! Where the robot is: a [`RobotHardware`] driven by the synchronous loop of [`driver`], in
 //! the shape of ros2_control's hardware interface (`hardware_interface::SystemInterface`).
 //!
-//! | ros2_control | here | the robot |
-//! | --- | --- | --- |
-//! | `on_init(params)` | the implementer's constructor | parse its settings; nothing is opened |
-//! | `on_configure` | [`RobotHardware::configure`] | connect; states are readable, no torques yet (INACTIVE) |
-//! | `on_activate` | [`RobotHardware::activate`] | accept torques (ACTIVE) |
-//! | `read(time, period)` | [`RobotHardware::read`] | measured joint positions and velocities, base pose and twist |
-//! | `write(time, period)` | [`RobotHardware::write`] | the drive command to execute until the next write: `tau = tau_ff + kp (q_des - q) + kd (qd_des - qd)` per joint ([`DriveCommand::effort`]) |
-//! | `on_deactivate` | [`RobotHardware::deactivate`] | stop taking torques; leave the robot safe (brakes, damping) |
-//! | `return_type {OK, ERROR, DEACTIVATE}` | [`HwStatus`] | `Error` stops the loop with [`driver::DriverError`]; `Deactivate` stops it after safe mode |
+//! ros2_control's calls, what they are here, and what the robot does in each:
+//!
+//! - `on_init(params)`, the implementer's constructor: parse its settings; nothing is opened.
+//! - `on_configure`, [`RobotHardware::configure`]: connect; states are readable, no torques yet
+//!   (INACTIVE).
+//! - `on_activate`, [`RobotHardware::activate`]: accept torques (ACTIVE).
+//! - `read(time, period)`, [`RobotHardware::read`]: measured joint positions and velocities,
+//!   base pose and twist.
+//! - `write(time, period)`, [`RobotHardware::write`]: the drive command to execute until the
+//!   next write: `tau = tau_ff + kp (q_des - q) + kd (qd_des - qd)` per joint
+//!   ([`DriveCommand::effort`]).
+//! - `on_deactivate`, [`RobotHardware::deactivate`]: stop taking torques; leave the robot safe
+//!   (brakes, damping).
+//! - `return_type {OK, ERROR, DEACTIVATE}`, [`HwStatus`]: `Error` stops the loop with
+//!   [`driver::DriverError`]; `Deactivate` stops it after safe mode.
 //!
 //! * [`driver`]: the synchronous loop at the robot's rate: read, core, publish terms, command,
 //!   housekeeping, write.
@@ -35,7 +41,9 @@
 //! use robot_agent::core::{AgentConfig, AgentCore};
 //! use robot_model::Robot;
 //! use robot_agent::dynamics_source::ModelDynamics;
-//! use robot_agent::hardware::{driver, DriverConfig, HardwareError, HwStatus, RobotHardware, ZenohLink};
+//! use robot_agent::hardware::{
+//!     driver, DriverConfig, HardwareError, HwStatus, RobotHardware, ZenohLink,
+//! };
 //!
 //! /// The lab's robot: its SDK handle (here only the last encoder readings).
 //! struct MyRobot {
@@ -110,7 +118,8 @@ pub enum HwStatus {
     /// and stops with [`driver::DriverError::Hardware`].
     Error,
     /// The hardware asks to leave the active state (an e-stop, a fault it can recover from):
-    /// the loop enters safe mode, deactivates it and stops with [`driver::DriverExit::Deactivated`].
+    /// the loop enters safe mode, deactivates it and stops with
+    /// [`driver::DriverExit::Deactivated`].
     Deactivate,
 }
 

@@ -34,7 +34,10 @@ pub trait StateSource: Send {
 
 /// Takes drive commands of checked, clamped torques (commanded or safe mode) and applies them.
 pub trait TorqueSink: Send {
-    fn apply(&mut self, drive: &DriveCommand) -> impl Future<Output = Result<(), TransportError>> + Send;
+    fn apply(
+        &mut self,
+        drive: &DriveCommand,
+    ) -> impl Future<Output = Result<(), TransportError>> + Send;
 }
 
 /// States published by the sim-bridge (or any state source) on `team/{team}/robot/{id}/state`.
@@ -43,8 +46,13 @@ pub struct ZenohStateSource {
 }
 
 impl ZenohStateSource {
-    pub async fn subscribe(session: &Session, team: &str, robot: &str) -> Result<Self, TransportError> {
-        let queue = transport::subscribe(session, keys::robot(team, robot, RobotTopic::State)?).await?;
+    pub async fn subscribe(
+        session: &Session,
+        team: &str,
+        robot: &str,
+    ) -> Result<Self, TransportError> {
+        let queue =
+            transport::subscribe(session, keys::robot(team, robot, RobotTopic::State)?).await?;
         Ok(ZenohStateSource { queue })
     }
 }
@@ -69,9 +77,15 @@ pub struct ZenohTorqueSink {
 }
 
 impl ZenohTorqueSink {
-    pub async fn declare(session: &Session, team: &str, robot: &str) -> Result<Self, TransportError> {
+    pub async fn declare(
+        session: &Session,
+        team: &str,
+        robot: &str,
+    ) -> Result<Self, TransportError> {
         let key = keys::robot(team, robot, RobotTopic::Torque)?;
-        Ok(ZenohTorqueSink { publisher: TypedPublisher::declare(session, key, Qos::HotPath).await? })
+        Ok(ZenohTorqueSink {
+            publisher: TypedPublisher::declare(session, key, Qos::HotPath).await?,
+        })
     }
 }
 

@@ -4,21 +4,36 @@
 
 use nalgebra::{Matrix3xX, Matrix6xX, Vector3};
 
+use super::kinematics::check_frame;
 use crate::data::Data;
 use crate::error::DynamicsError;
-use super::kinematics::check_frame;
 use crate::model::{FrameId, Model};
 
-pub(crate) fn check_shape(rows: usize, cols: usize, er: usize, ec: usize) -> Result<(), DynamicsError> {
+pub(crate) fn check_shape(
+    rows: usize,
+    cols: usize,
+    er: usize,
+    ec: usize,
+) -> Result<(), DynamicsError> {
     if rows != er || cols != ec {
-        return Err(DynamicsError::OutputShape { rows, cols, expected_rows: er, expected_cols: ec });
+        return Err(DynamicsError::OutputShape {
+            rows,
+            cols,
+            expected_rows: er,
+            expected_cols: ec,
+        });
     }
     Ok(())
 }
 
 /// 6 x nv Jacobian of `frame` into `out`: column k is `[S_k.lin + S_k.ang x p; S_k.ang]`
 /// for the joints supporting the frame's body (p = frame origin in the world), 0 elsewhere.
-pub fn frame_jacobian(model: &Model, data: &Data, frame: FrameId, out: &mut Matrix6xX<f64>) -> Result<(), DynamicsError> {
+pub fn frame_jacobian(
+    model: &Model,
+    data: &Data,
+    frame: FrameId,
+    out: &mut Matrix6xX<f64>,
+) -> Result<(), DynamicsError> {
     check_frame(model, frame)?;
     check_shape(out.nrows(), out.ncols(), 6, model.nv)?;
     out.fill(0.0);
@@ -34,7 +49,13 @@ pub fn frame_jacobian(model: &Model, data: &Data, frame: FrameId, out: &mut Matr
 
 /// 3 x nv Jacobian of the point `point` (given in `frame`'s coordinates) rigidly attached to
 /// the frame: world velocity of the point = J v.
-pub fn point_jacobian(model: &Model, data: &Data, frame: FrameId, point: &Vector3<f64>, out: &mut Matrix3xX<f64>) -> Result<(), DynamicsError> {
+pub fn point_jacobian(
+    model: &Model,
+    data: &Data,
+    frame: FrameId,
+    point: &Vector3<f64>,
+    out: &mut Matrix3xX<f64>,
+) -> Result<(), DynamicsError> {
     check_frame(model, frame)?;
     check_shape(out.nrows(), out.ncols(), 3, model.nv)?;
     out.fill(0.0);

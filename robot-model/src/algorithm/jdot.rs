@@ -10,14 +10,18 @@
 
 use nalgebra::{Matrix6xX, Vector3, Vector6};
 
-use crate::data::Data;
-use crate::error::DynamicsError;
 use super::jacobian::check_shape;
 use super::kinematics::check_frame;
+use crate::data::Data;
+use crate::error::DynamicsError;
 use crate::model::{FrameId, Model};
 
 /// Classical `Jdot v` of `frame` (see the module docs).
-pub fn frame_jdot_v(model: &Model, data: &Data, frame: FrameId) -> Result<Vector6<f64>, DynamicsError> {
+pub fn frame_jdot_v(
+    model: &Model,
+    data: &Data,
+    frame: FrameId,
+) -> Result<Vector6<f64>, DynamicsError> {
     check_frame(model, frame)?;
     let body = model.frames[frame].body;
     let (vb, ab) = (data.ov[body], data.oa[body]);
@@ -29,7 +33,12 @@ pub fn frame_jdot_v(model: &Model, data: &Data, frame: FrameId) -> Result<Vector
 
 /// `d/dt J(q)` of `frame` along the current velocity into `out`. Column k:
 /// `[dS.lin + dS.ang x p + S.ang x v_p; dS.ang]` with `dS = V_body(k) x S_k`.
-pub fn frame_jacobian_time_variation(model: &Model, data: &Data, frame: FrameId, out: &mut Matrix6xX<f64>) -> Result<(), DynamicsError> {
+pub fn frame_jacobian_time_variation(
+    model: &Model,
+    data: &Data,
+    frame: FrameId,
+    out: &mut Matrix6xX<f64>,
+) -> Result<(), DynamicsError> {
     check_frame(model, frame)?;
     check_shape(out.nrows(), out.ncols(), 6, model.nv)?;
     out.fill(0.0);

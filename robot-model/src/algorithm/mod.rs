@@ -14,5 +14,8 @@ pub use compute_all_terms::compute_all_terms;
 pub use crba::crba;
 pub use jacobian::{frame_jacobian, point_jacobian};
 pub use jdot::{frame_jacobian_time_variation, frame_jdot_v};
-pub use kinematics::{forward_kinematics, frame_placement, frame_velocity, kinetic_energy, potential_energy, update_frame_placements};
+pub use kinematics::{
+    forward_kinematics, frame_placement, frame_velocity, kinetic_energy, potential_energy,
+    update_frame_placements,
+};
 pub use rnea::{coriolis_matrix, gravity, nonlinear_effects, rnea};

@@ -6,9 +6,9 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::kinematics::kinematics_pass;
 use crate::data::Data;
 use crate::error::DynamicsError;
-use super::kinematics::kinematics_pass;
 use crate::model::{check_vec, Model};
 use crate::spatial::{Force, Motion};
 
@@ -23,7 +23,13 @@ fn gravity_acc(model: &Model) -> Motion {
 }
 
 /// Inverse dynamics: `tau = M(q) a + C(q, v) v + g(q)` into `data.tau`.
-pub fn rnea<'a>(model: &Model, data: &'a mut Data, q: &[f64], v: &[f64], a: &[f64]) -> Result<&'a DVector<f64>, DynamicsError> {
+pub fn rnea<'a>(
+    model: &Model,
+    data: &'a mut Data,
+    q: &[f64],
+    v: &[f64],
+    a: &[f64],
+) -> Result<&'a DVector<f64>, DynamicsError> {
     model.check_state(q, Some(v))?;
     check_vec(a, model.nv, "a")?;
     kinematics_pass(model, data, q, Some(v), Some(a));
@@ -53,7 +59,12 @@ fn backward(model: &Model, j: &nalgebra::Matrix6xX<f64>, f: &mut [Force], tau: &
 }
 
 /// Bias `h = C(q, v) v + g(q)` (RNEA with zero acceleration) into `data.h`.
-pub fn nonlinear_effects<'a>(model: &Model, data: &'a mut Data, q: &[f64], v: &[f64]) -> Result<&'a DVector<f64>, DynamicsError> {
+pub fn nonlinear_effects<'a>(
+    model: &Model,
+    data: &'a mut Data,
+    q: &[f64],
+    v: &[f64],
+) -> Result<&'a DVector<f64>, DynamicsError> {
     model.check_state(q, Some(v))?;
     kinematics_pass(model, data, q, Some(v), None);
     bias_from_kinematics(model, data);
@@ -61,7 +72,11 @@ pub fn nonlinear_effects<'a>(model: &Model, data: &'a mut Data, q: &[f64], v: &[
 }
 
 /// Generalized gravity `g(q)` (RNEA with zero velocity and acceleration) into `data.g`.
-pub fn gravity<'a>(model: &Model, data: &'a mut Data, q: &[f64]) -> Result<&'a DVector<f64>, DynamicsError> {
+pub fn gravity<'a>(
+    model: &Model,
+    data: &'a mut Data,
+    q: &[f64],
+) -> Result<&'a DVector<f64>, DynamicsError> {
     model.check_state(q, None)?;
     kinematics_pass(model, data, q, None, None);
     gravity_from_kinematics(model, data);
@@ -94,7 +109,12 @@ pub(crate) fn gravity_from_kinematics(model: &Model, data: &mut Data) {
 /// `C = sum_i J_i^T (I_i Jdot_i + (V_i x*) I_i J_i)` with world-frame body Jacobians `J_i`
 /// (columns `S_k^0`, k in support(i)); skew-symmetry follows from
 /// `d/dt I_i = V_i x* I_i - I_i V_i x`. O(bodies * depth^2); for tests and analysis.
-pub fn coriolis_matrix<'a>(model: &Model, data: &'a mut Data, q: &[f64], v: &[f64]) -> Result<&'a DMatrix<f64>, DynamicsError> {
+pub fn coriolis_matrix<'a>(
+    model: &Model,
+    data: &'a mut Data,
+    q: &[f64],
+    v: &[f64],
+) -> Result<&'a DMatrix<f64>, DynamicsError> {
     model.check_state(q, Some(v))?;
     kinematics_pass(model, data, q, Some(v), None);
     data.c.fill(0.0);
@@ -102,7 +122,8 @@ pub fn coriolis_matrix<'a>(model: &Model, data: &'a mut Data, q: &[f64], v: &[f6
         let ii = data.o_inertia[i];
         let vi = data.ov[i];
         for &k in &b.support {
-            let f = ii.mul_motion(&col(&data.dj, k)) + vi.cross_force(&ii.mul_motion(&col(&data.j, k)));
+            let f =
+                ii.mul_motion(&col(&data.dj, k)) + vi.cross_force(&ii.mul_motion(&col(&data.j, k)));
             for &l in &b.support {
                 data.c[(l, k)] += col(&data.j, l).dot(&f);
             }

@@ -58,7 +58,10 @@ impl Model {
     }
 
     /// Reads a URDF file into a model. Mesh files referenced by the URDF are not opened.
-    pub fn from_urdf_file(path: impl AsRef<Path>, floating: FloatingBase) -> Result<Model, ModelError> {
+    pub fn from_urdf_file(
+        path: impl AsRef<Path>,
+        floating: FloatingBase,
+    ) -> Result<Model, ModelError> {
         ModelBuilder::from_urdf_file(path)?.build(floating)
     }
 }
@@ -78,10 +81,131 @@ fn pose_to_se3(p: &urdf_rs::Pose, what: &str) -> Result<SE3, ModelError> {
     Ok(SE3::from_xyz_rpy(p.xyz.0, p.rpy.0))
 }
 
+/// The URDF's links with their inertias, and each link's index by name (names unique).
+fn link_descs(
+    robot: &urdf_rs::Robot,
+) -> Result<(Vec<LinkDesc>, HashMap<String, usize>), ModelError> {
+    let mut link_index = HashMap::new();
+    let mut links = Vec::with_capacity(robot.links.len());
+    for (i, l) in robot.links.iter().enumerate() {
+        if link_index.insert(l.name.clone(), i).is_some() {
+            return Err(ModelError::DuplicateName { kind: "link", name: l.name.clone() });
+        }
+        links.push(LinkDesc { name: l.name.clone(), inertia: link_inertia(l)? });
+    }
+    Ok((links, link_index))
+}
+
+/// One URDF joint, checked: its links known, its type supported, its origin, axis and limits
+/// valid numbers.
+fn joint_desc(
+    j: &urdf_rs::Joint,
+    link_index: &HashMap<String, usize>,
+) -> Result<JointDesc, ModelError> {
+    let find = |name: &str, role: &'static str| {
+        link_index.get(name).copied().ok_or_else(|| ModelError::UnknownParent {
+            joint: j.name.clone(),
+            role,
+            link: name.to_string(),
+        })
+    };
+    let parent = find(&j.parent.link, "parent")?;
+    let child = find(&j.child.link, "child")?;
+    let kind = joint_kind(j)?;
+    let origin = pose_to_se3(&j.origin, &format!("joint {:?}", j.name))?;
+    let axis = joint_axis(j, kind)?;
+    let (lower, upper, velocity) = joint_limits(j, kind)?;
+    Ok(JointDesc {
+        name: j.name.clone(),
+        kind,
+        parent,
+        child,
+        origin,
+        axis,
+        lower,
+        upper,
+        effort: j.limit.effort,
+        velocity,
+    })
+}
+
+/// The kind of a URDF joint; floating and planar joints are not supported.
+fn joint_kind(j: &urdf_rs::Joint) -> Result<JointKind, ModelError> {
+    Ok(match j.joint_type {
+        urdf_rs::JointType::Fixed => JointKind::Fixed,
+        urdf_rs::JointType::Revolute => JointKind::Revolute,
+        urdf_rs::JointType::Continuous => JointKind::Continuous,
+        urdf_rs::JointType::Prismatic => JointKind::Prismatic,
+        ref other => {
+            return Err(ModelError::UnsupportedJoint {
+                joint: j.name.clone(),
+                kind: format!("{other:?}").to_lowercase(),
+            })
+        }
+    })
+}
+
+/// The joint's axis, finite, and normalized unless the joint is fixed.
+fn joint_axis(j: &urdf_rs::Joint, kind: JointKind) -> Result<Vector3<f64>, ModelError> {
+    let mut axis = Vector3::from(j.axis.xyz.0);
+    for (i, x) in axis.iter().enumerate() {
+        finite(*x, || format!("joint {:?} axis (component {i})", j.name))?;
+    }
+    if kind != JointKind::Fixed {
+        let n = axis.norm();
+        if n < 1e-12 {
+            return Err(ModelError::BadNumber {
+                what: format!("joint {:?} axis", j.name),
+                detail: "zero vector".into(),
+            });
+        }
+        axis /= n;
+    }
+    Ok(axis)
+}
+
+/// The joint's position limits (none for a continuous joint) and velocity limit, checked.
+fn joint_limits(j: &urdf_rs::Joint, kind: JointKind) -> Result<(f64, f64, f64), ModelError> {
+    let lim = &j.limit;
+    for (name, x) in [
+        ("lower", lim.lower),
+        ("upper", lim.upper),
+        ("effort", lim.effort),
+        ("velocity", lim.velocity),
+    ] {
+        if x.is_nan() {
+            return Err(ModelError::BadNumber {
+                what: format!("joint {:?} limit {name}", j.name),
+                detail: "NaN".into(),
+            });
+        }
+    }
+    if lim.effort < 0.0 || lim.velocity < 0.0 {
+        return Err(ModelError::BadNumber {
+            what: format!("joint {:?} limit", j.name),
+            detail: "negative effort or velocity limit".into(),
+        });
+    }
+    let (lower, upper) = match kind {
+        JointKind::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
+        _ => (lim.lower, lim.upper),
+    };
+    if lower > upper {
+        return Err(ModelError::BadNumber {
+            what: format!("joint {:?} limit", j.name),
+            detail: format!("lower {lower} > upper {upper}"),
+        });
+    }
+    // URDF 1.0 leaves the velocity limit at 0 when <limit> is absent: treat as unlimited
+    let velocity = if lim.velocity > 0.0 { lim.velocity } else { f64::INFINITY };
+    Ok((lower, upper, velocity))
+}
+
 impl ModelBuilder {
     pub fn from_urdf_file(path: impl AsRef<Path>) -> Result<Self, ModelError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| ModelError::Io { path: path.display().to_string(), source })?;
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ModelError::Io { path: path.display().to_string(), source })?;
         Self::from_urdf_str(&text)
     }
 
@@ -94,63 +218,14 @@ impl ModelBuilder {
         if robot.links.is_empty() {
             return Err(ModelError::Empty);
         }
-        let mut link_index = HashMap::new();
-        let mut links = Vec::with_capacity(robot.links.len());
-        for (i, l) in robot.links.iter().enumerate() {
-            if link_index.insert(l.name.clone(), i).is_some() {
-                return Err(ModelError::DuplicateName { kind: "link", name: l.name.clone() });
-            }
-            links.push(LinkDesc { name: l.name.clone(), inertia: link_inertia(l)? });
-        }
+        let (links, link_index) = link_descs(robot)?;
         let mut joints = Vec::with_capacity(robot.joints.len());
         let mut joint_names = HashMap::new();
         for j in &robot.joints {
             if joint_names.insert(j.name.clone(), ()).is_some() {
                 return Err(ModelError::DuplicateName { kind: "joint", name: j.name.clone() });
             }
-            let find = |name: &str, role: &'static str| {
-                link_index.get(name).copied().ok_or_else(|| ModelError::UnknownParent { joint: j.name.clone(), role, link: name.to_string() })
-            };
-            let parent = find(&j.parent.link, "parent")?;
-            let child = find(&j.child.link, "child")?;
-            let kind = match j.joint_type {
-                urdf_rs::JointType::Fixed => JointKind::Fixed,
-                urdf_rs::JointType::Revolute => JointKind::Revolute,
-                urdf_rs::JointType::Continuous => JointKind::Continuous,
-                urdf_rs::JointType::Prismatic => JointKind::Prismatic,
-                ref other => return Err(ModelError::UnsupportedJoint { joint: j.name.clone(), kind: format!("{other:?}").to_lowercase() }),
-            };
-            let origin = pose_to_se3(&j.origin, &format!("joint {:?}", j.name))?;
-            let mut axis = Vector3::from(j.axis.xyz.0);
-            for (i, x) in axis.iter().enumerate() {
-                finite(*x, || format!("joint {:?} axis (component {i})", j.name))?;
-            }
-            if kind != JointKind::Fixed {
-                let n = axis.norm();
-                if n < 1e-12 {
-                    return Err(ModelError::BadNumber { what: format!("joint {:?} axis", j.name), detail: "zero vector".into() });
-                }
-                axis /= n;
-            }
-            let lim = &j.limit;
-            for (name, x) in [("lower", lim.lower), ("upper", lim.upper), ("effort", lim.effort), ("velocity", lim.velocity)] {
-                if x.is_nan() {
-                    return Err(ModelError::BadNumber { what: format!("joint {:?} limit {name}", j.name), detail: "NaN".into() });
-                }
-            }
-            if lim.effort < 0.0 || lim.velocity < 0.0 {
-                return Err(ModelError::BadNumber { what: format!("joint {:?} limit", j.name), detail: "negative effort or velocity limit".into() });
-            }
-            let (lower, upper) = match kind {
-                JointKind::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
-                _ => (lim.lower, lim.upper),
-            };
-            if lower > upper {
-                return Err(ModelError::BadNumber { what: format!("joint {:?} limit", j.name), detail: format!("lower {lower} > upper {upper}") });
-            }
-            // URDF 1.0 leaves the velocity limit at 0 when <limit> is absent: treat as unlimited
-            let velocity = if lim.velocity > 0.0 { lim.velocity } else { f64::INFINITY };
-            joints.push(JointDesc { name: j.name.clone(), kind, parent, child, origin, axis, lower, upper, effort: lim.effort, velocity });
+            joints.push(joint_desc(j, &link_index)?);
         }
         let root = check_tree(&links, &joints)?;
         Ok(Self { name: robot.name.clone(), links, joints, root })
@@ -159,8 +234,18 @@ impl ModelBuilder {
     /// Attaches another URDF (e.g. an arm) rigidly to the link `at` of this tree, at `pose`
     /// (`at` frame -> attached root link), prefixing every link and joint name of the attached
     /// tree with `prefix`. The attaching fixed joint is named `{prefix}attach_joint`.
-    pub fn attach(mut self, other: ModelBuilder, at: &str, pose: SE3, prefix: &str) -> Result<Self, ModelError> {
-        let at_idx = self.links.iter().position(|l| l.name == at).ok_or_else(|| ModelError::UnknownFrame { name: at.to_string() })?;
+    pub fn attach(
+        mut self,
+        other: ModelBuilder,
+        at: &str,
+        pose: SE3,
+        prefix: &str,
+    ) -> Result<Self, ModelError> {
+        let at_idx = self
+            .links
+            .iter()
+            .position(|l| l.name == at)
+            .ok_or_else(|| ModelError::UnknownFrame { name: at.to_string() })?;
         let offset = self.links.len();
         for l in &other.links {
             let name = format!("{prefix}{}", l.name);
@@ -201,12 +286,24 @@ impl ModelBuilder {
     }
 
     /// Reads `urdf` and attaches it (see [`ModelBuilder::attach`]).
-    pub fn attach_urdf_str(self, urdf: &str, at: &str, pose: SE3, prefix: &str) -> Result<Self, ModelError> {
+    pub fn attach_urdf_str(
+        self,
+        urdf: &str,
+        at: &str,
+        pose: SE3,
+        prefix: &str,
+    ) -> Result<Self, ModelError> {
         let other = ModelBuilder::from_urdf_str(urdf)?;
         self.attach(other, at, pose, prefix)
     }
 
-    pub fn attach_urdf_file(self, path: impl AsRef<Path>, at: &str, pose: SE3, prefix: &str) -> Result<Self, ModelError> {
+    pub fn attach_urdf_file(
+        self,
+        path: impl AsRef<Path>,
+        at: &str,
+        pose: SE3,
+        prefix: &str,
+    ) -> Result<Self, ModelError> {
         let other = ModelBuilder::from_urdf_file(path)?;
         self.attach(other, at, pose, prefix)
     }
@@ -224,7 +321,8 @@ impl ModelBuilder {
         // iterative depth-first traversal (no recursion on outside input): entries are
         // (joint, parent body, parent body -> joint's parent link, parent link's frame);
         // children are pushed in reverse so that they are visited in file order
-        let mut stack: Vec<(usize, usize, SE3, FrameId)> = children[self.root].iter().rev().map(|&ji| (ji, 0, SE3::identity(), 0)).collect();
+        let mut stack: Vec<(usize, usize, SE3, FrameId)> =
+            children[self.root].iter().rev().map(|&ji| (ji, 0, SE3::identity(), 0)).collect();
         while let Some((ji, body, b_m_l, parent_frame)) = stack.pop() {
             let j = &self.joints[ji];
             let child = &self.links[j.child];
@@ -241,7 +339,15 @@ impl ModelBuilder {
 
         let frame_index = frame_index(&t.frames)?;
         let total_mass = self.links.iter().map(|l| l.inertia.mass).sum();
-        tracing::debug!(robot = %self.name, nq = t.nq, nv = t.nv, bodies = t.bodies.len(), frames = t.frames.len(), total_mass, "dynamics model built");
+        tracing::debug!(
+            robot = %self.name,
+            nq = t.nq,
+            nv = t.nv,
+            bodies = t.bodies.len(),
+            frames = t.frames.len(),
+            total_mass,
+            "dynamics model built"
+        );
         Ok(Model {
             name: self.name.clone(),
             bodies: t.bodies,
@@ -314,23 +420,49 @@ impl Tables {
             t.eff.extend([f64::INFINITY; 6]);
             t.actuated.extend([false; 6]);
         }
-        t.frames.push(Frame { name: root.name.clone(), body: 0, placement: SE3::identity(), kind: FrameKind::Body, parent_frame: None });
+        t.frames.push(Frame {
+            name: root.name.clone(),
+            body: 0,
+            placement: SE3::identity(),
+            kind: FrameKind::Body,
+            parent_frame: None,
+        });
         t
     }
 
     /// A fixed joint: the child link's inertia is lumped into `body` and the link becomes a
     /// frame of it at `b_m_c`. Returns the body and placement the link's children hang from.
-    fn merge_fixed(&mut self, body: usize, b_m_c: SE3, child: &LinkDesc, parent_frame: FrameId) -> (usize, SE3) {
+    fn merge_fixed(
+        &mut self,
+        body: usize,
+        b_m_c: SE3,
+        child: &LinkDesc,
+        parent_frame: FrameId,
+    ) -> (usize, SE3) {
         // lump the child's inertia into the body (Featherstone eq. 2.71: I = sum X* I X)
         let lumped = b_m_c.act_inertia(&child.inertia);
         self.bodies[body].inertia = self.bodies[body].inertia.add(&lumped);
-        self.frames.push(Frame { name: child.name.clone(), body, placement: b_m_c, kind: FrameKind::FixedLink, parent_frame: Some(parent_frame) });
+        self.frames.push(Frame {
+            name: child.name.clone(),
+            body,
+            placement: b_m_c,
+            kind: FrameKind::FixedLink,
+            parent_frame: Some(parent_frame),
+        });
         (body, b_m_c)
     }
 
     /// A moving joint `j` (of `kind`): a new body, child of `body` at `b_m_c`, with one
     /// configuration and one velocity coordinate. Returns the new body and the identity.
-    fn add_moving(&mut self, kind: JointKind, j: &JointDesc, body: usize, b_m_c: SE3, child: &LinkDesc, parent_frame: FrameId) -> (usize, SE3) {
+    fn add_moving(
+        &mut self,
+        kind: JointKind,
+        j: &JointDesc,
+        body: usize,
+        b_m_c: SE3,
+        child: &LinkDesc,
+        parent_frame: FrameId,
+    ) -> (usize, SE3) {
         let joint = match kind {
             JointKind::Prismatic => JointType::Prismatic { axis: j.axis },
             _ => JointType::Revolute { axis: j.axis },
@@ -357,7 +489,13 @@ impl Tables {
         self.eff.push(j.effort);
         self.actuated.push(j.effort > 0.0);
         let nb = self.bodies.len() - 1;
-        self.frames.push(Frame { name: child.name.clone(), body: nb, placement: SE3::identity(), kind: FrameKind::Body, parent_frame: Some(parent_frame) });
+        self.frames.push(Frame {
+            name: child.name.clone(),
+            body: nb,
+            placement: SE3::identity(),
+            kind: FrameKind::Body,
+            parent_frame: Some(parent_frame),
+        });
         (nb, SE3::identity())
     }
 }
@@ -386,7 +524,10 @@ fn link_inertia(l: &urdf_rs::Link) -> Result<Inertia, ModelError> {
         finite(x, what)?;
     }
     if i.ixx < 0.0 || i.iyy < 0.0 || i.izz < 0.0 {
-        return Err(ModelError::BadNumber { what: what(), detail: "negative moment of inertia".into() });
+        return Err(ModelError::BadNumber {
+            what: what(),
+            detail: "negative moment of inertia".into(),
+        });
     }
     let origin = pose_to_se3(&inl.origin, &what())?;
     // inertia tensor about the COM, in the inertial frame; rotate into the link frame
@@ -401,13 +542,20 @@ fn check_tree(links: &[LinkDesc], joints: &[JointDesc]) -> Result<usize, ModelEr
         parent_joint[j.child].push(ji);
     }
     if let Some((li, js)) = parent_joint.iter().enumerate().find(|(_, js)| js.len() > 1) {
-        return Err(ModelError::SeveralParentJoints { link: links[li].name.clone(), joints: js.iter().map(|&j| joints[j].name.clone()).collect() });
+        return Err(ModelError::SeveralParentJoints {
+            link: links[li].name.clone(),
+            joints: js.iter().map(|&j| joints[j].name.clone()).collect(),
+        });
     }
     let roots: Vec<usize> = (0..links.len()).filter(|&l| parent_joint[l].is_empty()).collect();
     let root = match roots.len() {
         0 => return Err(ModelError::NoRoot),
         1 => roots[0],
-        _ => return Err(ModelError::MultipleRoots { roots: roots.iter().map(|&l| links[l].name.clone()).collect() }),
+        _ => {
+            return Err(ModelError::MultipleRoots {
+                roots: roots.iter().map(|&l| links[l].name.clone()).collect(),
+            })
+        }
     };
     // every link must be reachable from the root; with one parent per link, an unreachable
     // link lies on (or hangs from) a cycle
@@ -427,7 +575,8 @@ fn check_tree(links: &[LinkDesc], joints: &[JointDesc]) -> Result<usize, ModelEr
         }
     }
     if let Some(l) = seen.iter().position(|s| !s) {
-        // walk up the parents from the unreachable link until a link repeats: that one is on the cycle
+        // walk up the parents from the unreachable link until a link repeats: that one is on the
+        // cycle
         let mut visited = vec![false; links.len()];
         let mut cur = l;
         while !visited[cur] {

@@ -4,8 +4,10 @@
 use std::ffi::CString;
 
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix6xX, Vector3, Vector6};
+use protocol::conventions::{
+    base_acceleration_to_mujoco, base_twist_to_mujoco as base_velocity_to_mujoco,
+};
 use rand::{rngs::StdRng, Rng, SeedableRng};
-use protocol::conventions::{base_acceleration_to_mujoco, base_twist_to_mujoco as base_velocity_to_mujoco};
 use robot_model::{FloatingBase, Model, ModelBuilder, SE3};
 
 pub const ARM: &str = include_str!("../data/arm.urdf");
@@ -67,7 +69,9 @@ fn robot_body(urdf: &str) -> &str {
 pub fn composed_urdf_text() -> String {
     let quad = strip_visuals(QUADRUPED);
     let arm = strip_visuals(ARM);
-    let arm_body = robot_body(&arm).replace("name=\"", &format!("name=\"{PREFIX}")).replace("link=\"", &format!("link=\"{PREFIX}"));
+    let arm_body = robot_body(&arm)
+        .replace("name=\"", &format!("name=\"{PREFIX}"))
+        .replace("link=\"", &format!("link=\"{PREFIX}"));
     let attach = format!(
         "<joint name=\"{PREFIX}attach_joint\" type=\"fixed\"><origin xyz=\"{} {} {}\" rpy=\"{} {} {}\"/><parent link=\"{ATTACH_AT}\"/><child link=\"{PREFIX}base_link\"/></joint>\n",
         ATTACH_XYZ[0], ATTACH_XYZ[1], ATTACH_XYZ[2], ATTACH_RPY[0], ATTACH_RPY[1], ATTACH_RPY[2]
@@ -189,7 +193,8 @@ impl MjRobot {
 
     fn id(&self, kind: mujoco_rs::mujoco_c::mjtObj, name: &str) -> usize {
         let c = CString::new(name).unwrap();
-        let id = unsafe { mujoco_rs::mujoco_c::mj_name2id(self.model.ffi(), kind as i32, c.as_ptr()) };
+        let id =
+            unsafe { mujoco_rs::mujoco_c::mj_name2id(self.model.ffi(), kind as i32, c.as_ptr()) };
         assert!(id >= 0, "MuJoCo has no {kind:?} named {name}");
         id as usize
     }
@@ -203,7 +208,9 @@ impl MjRobot {
         let mut t = DMatrix::zeros(nv, nv);
         if ours.floating_base {
             let quat = [q[3], q[4], q[5], q[6]];
-            let free = (0..raw.njnt as usize).find(|&j| unsafe { *raw.jnt_type.add(j) } == 0).expect("free joint");
+            let free = (0..raw.njnt as usize)
+                .find(|&j| unsafe { *raw.jnt_type.add(j) } == 0)
+                .expect("free joint");
             let fd = unsafe { *raw.jnt_dofadr.add(free) } as usize;
             for c in 0..6 {
                 let mut e = [0.0; 6];
@@ -227,7 +234,8 @@ impl MjRobot {
         let raw = self.model.ffi();
         let mut qpos = vec![0.0; raw.nq as usize];
         if ours.floating_base {
-            let free = (0..raw.njnt as usize).find(|&j| unsafe { *raw.jnt_type.add(j) } == 0).unwrap();
+            let free =
+                (0..raw.njnt as usize).find(|&j| unsafe { *raw.jnt_type.add(j) } == 0).unwrap();
             let a = unsafe { *raw.jnt_qposadr.add(free) } as usize;
             qpos[a..a + 7].copy_from_slice(&q.as_slice()[0..7]);
         }
@@ -239,13 +247,24 @@ impl MjRobot {
         qpos
     }
 
-    pub fn eval(&self, ours: &Model, q: &DVector<f64>, v: &DVector<f64>, frames: &[&str]) -> MjTerms {
+    pub fn eval(
+        &self,
+        ours: &Model,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        frames: &[&str],
+    ) -> MjTerms {
         use mujoco_rs::mujoco_c::*;
         let nv = self.nv();
         let t = self.velocity_map(ours, q);
         let qpos = self.qpos(ours, q);
         let qvel = &t * v;
-        let mut terms = MjTerms { m: DMatrix::zeros(nv, nv), h: DVector::zeros(nv), g: DVector::zeros(nv), frames: Vec::new() };
+        let mut terms = MjTerms {
+            m: DMatrix::zeros(nv, nv),
+            h: DVector::zeros(nv),
+            g: DVector::zeros(nv),
+            frames: Vec::new(),
+        };
         let set = |d: *mut mjData, vel: &[f64]| unsafe {
             std::ptr::copy_nonoverlapping(qpos.as_ptr(), (*d).qpos, qpos.len());
             std::ptr::copy_nonoverlapping(vel.as_ptr(), (*d).qvel, nv);
@@ -260,12 +279,17 @@ impl MjRobot {
         unsafe { mj_fullM(m, d, full.as_mut_ptr()) };
         let m_mj = DMatrix::from_row_slice(nv, nv, &full);
         terms.m = t.transpose() * &m_mj * &t;
-        let bias = DVector::from_column_slice(unsafe { std::slice::from_raw_parts((*d).qfrc_bias, nv) });
+        let bias =
+            DVector::from_column_slice(unsafe { std::slice::from_raw_parts((*d).qfrc_bias, nv) });
         // qacc in MuJoCo's coordinates for our zero acceleration (the base's world-frame linear
         // velocity turns with the base): tau_ours = T^T (M_mj c + qfrc_bias)
         let mut c = DVector::zeros(nv);
         if ours.floating_base {
-            let ca = base_acceleration_to_mujoco([q[3], q[4], q[5], q[6]], std::array::from_fn(|i| v[i]), [0.0; 6]);
+            let ca = base_acceleration_to_mujoco(
+                [q[3], q[4], q[5], q[6]],
+                std::array::from_fn(|i| v[i]),
+                [0.0; 6],
+            );
             let tb = t.view((0, 0), (nv, 6));
             // the free joint's dofs are the rows where the base columns of T are non-zero
             let fd = (0..nv).find(|&r| tb.row(r).iter().any(|x| *x != 0.0)).unwrap();
@@ -299,13 +323,20 @@ impl MjRobot {
             jd.view_mut((0, 0), (3, nv)).copy_from(&DMatrix::from_row_slice(3, nv, &dp));
             jd.view_mut((3, 0), (3, nv)).copy_from(&DMatrix::from_row_slice(3, nv, &dr));
             let a = &jac_mj * &c + jd * &qvel;
-            terms.frames.push(FrameTerms { pos, rot, jac: jac6, jdot_v: Vector6::from_column_slice(a.as_slice()), acc: Vector6::zeros() });
+            terms.frames.push(FrameTerms {
+                pos,
+                rot,
+                jac: jac6,
+                jdot_v: Vector6::from_column_slice(a.as_slice()),
+                acc: Vector6::zeros(),
+            });
         }
         // g: zero velocity
         let zero = vec![0.0; nv];
         set(d, &zero);
         unsafe { mj_forward(m, d) };
-        let bias = DVector::from_column_slice(unsafe { std::slice::from_raw_parts((*d).qfrc_bias, nv) });
+        let bias =
+            DVector::from_column_slice(unsafe { std::slice::from_raw_parts((*d).qfrc_bias, nv) });
         terms.g = t.transpose() * bias;
         // body accelerations at qacc = c without gravity
         let mut data0 = self.model0.make_data();
@@ -320,7 +351,9 @@ impl MjRobot {
         for (k, name) in frames.iter().enumerate() {
             let b = self.id(mjtObj::mjOBJ_BODY, name);
             let mut res = [0.0; 6];
-            unsafe { mj_objectAcceleration(m0, d0, mjtObj::mjOBJ_XBODY as i32, b as i32, &mut res, 0) };
+            unsafe {
+                mj_objectAcceleration(m0, d0, mjtObj::mjOBJ_XBODY as i32, b as i32, &mut res, 0)
+            };
             // MuJoCo: [angular; linear] -> ours [linear; angular]
             terms.frames[k].acc = Vector6::new(res[3], res[4], res[5], res[0], res[1], res[2]);
         }

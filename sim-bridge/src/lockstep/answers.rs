@@ -28,7 +28,14 @@ pub(super) struct Answers {
 impl Answers {
     pub(super) fn new(robots: Vec<String>) -> Self {
         let n = robots.len();
-        Answers { robots, got: vec![false; n], lost: vec![false; n], answered: vec![None; n], resends: 0, rejected: 0 }
+        Answers {
+            robots,
+            got: vec![false; n],
+            lost: vec![false; n],
+            answered: vec![None; n],
+            resends: 0,
+            rejected: 0,
+        }
     }
 
     /// Wait for every robot's torques of `tick` (but those not waited for), taking agents that
@@ -50,7 +57,13 @@ impl Answers {
         while !self.got.iter().all(|g| *g) {
             let waited = tick_started.elapsed();
             if waited >= timeout {
-                let missing = self.robots.iter().zip(&self.got).filter(|(_, g)| !**g).map(|(r, _)| r.clone()).collect();
+                let missing = self
+                    .robots
+                    .iter()
+                    .zip(&self.got)
+                    .filter(|(_, g)| !**g)
+                    .map(|(r, _)| r.clone())
+                    .collect();
                 return Err(BridgeError::TorqueTimeout { tick, missing, waited });
             }
             let wait = cfg.resend_every.saturating_sub(last_send.elapsed()).min(timeout - waited);
@@ -89,13 +102,21 @@ impl Answers {
         let Some(i) = self.robots.iter().position(|r| r == cmd.header.robot_id()) else { return };
         // A robot whose agent left is not waited for: its torques of a recent tick
         // that came after that tick's step drive it now (the latest only).
-        let recent = self.lost[i] && cmd.header.tick < tick && tick - cmd.header.tick < LOST_DRIVE_TICKS && self.answered[i].is_none_or(|t| cmd.header.tick > t);
+        let recent = self.lost[i]
+            && cmd.header.tick < tick
+            && tick - cmd.header.tick < LOST_DRIVE_TICKS
+            && self.answered[i].is_none_or(|t| cmd.header.tick > t);
         if cmd.header.tick != tick && !recent {
             return; // a repeat of an earlier tick
         }
         if cmd.tau_ff.len() != plant.joints(i) {
             self.rejected += 1;
-            tracing::warn!(robot = %self.robots[i], "torques of the wrong size: {} for {} joints", cmd.tau_ff.len(), plant.joints(i));
+            tracing::warn!(
+                robot = %self.robots[i],
+                "torques of the wrong size: {} for {} joints",
+                cmd.tau_ff.len(),
+                plant.joints(i)
+            );
             return;
         }
         if !self.got[i] || self.lost[i] {
@@ -103,7 +124,11 @@ impl Answers {
             // fallen robot's damping, robot_agent::fall) is driven by what it
             // sends; no tick waits for it.
             if plant.drives_lost(i) {
-                tracing::info!(robot = %self.robots[i], tick, "the robot's drives take torques again");
+                tracing::info!(
+                    robot = %self.robots[i],
+                    tick,
+                    "the robot's drives take torques again"
+                );
                 plant.restore_drives(i);
             }
             plant.set_drive(i, &cmd);
@@ -113,15 +138,34 @@ impl Answers {
     }
 
     /// A robot's agent left or joined during `tick`.
-    fn agent_change(&mut self, change: Option<AgentChange>, cfg: &LockstepConfig, plant: &mut impl Plant, tick: u64) -> Result<(), BridgeError> {
+    fn agent_change(
+        &mut self,
+        change: Option<AgentChange>,
+        cfg: &LockstepConfig,
+        plant: &mut impl Plant,
+        tick: u64,
+    ) -> Result<(), BridgeError> {
         match change {
             Some(AgentChange::Left(i)) => {
-                lose_agent(cfg, plant, &self.robots, i, tick, self.answered[i] == Some(tick), &mut self.lost)?;
+                lose_agent(
+                    cfg,
+                    plant,
+                    &self.robots,
+                    i,
+                    tick,
+                    self.answered[i] == Some(tick),
+                    &mut self.lost,
+                )?;
                 self.got[i] = true;
             }
             Some(AgentChange::Joined(i)) if self.lost[i] => {
                 // A restarted agent: its torques are waited for from the next tick.
-                tracing::info!(robot = %self.robots[i], tick, "the robot's agent joined again: its torques drive it from the next tick its agent answers");
+                tracing::info!(
+                    robot = %self.robots[i],
+                    tick,
+                    "the robot's agent joined again: its torques drive it from the next tick its \
+                     agent answers"
+                );
                 self.lost[i] = false;
             }
             _ => {}
@@ -130,19 +174,36 @@ impl Answers {
     }
 }
 
-/// Robot `i`'s agent left during `tick`: end the run, or its drives are lost ([`super::AgentLoss`]),
-/// at once unless it has `answered` this tick (an agent that left alive, a fallen robot's: its
-/// torques keep driving it while they come, [`silence_lost_drives`]).
-fn lose_agent(cfg: &LockstepConfig, plant: &mut impl Plant, robots: &[String], i: usize, tick: u64, answered: bool, lost: &mut [bool]) -> Result<(), BridgeError> {
+/// Robot `i`'s agent left during `tick`: end the run, or its drives are lost
+/// ([`super::AgentLoss`]), at once unless it has `answered` this tick (an agent that left alive,
+/// a fallen robot's: its torques keep driving it while they come, [`silence_lost_drives`]).
+fn lose_agent(
+    cfg: &LockstepConfig,
+    plant: &mut impl Plant,
+    robots: &[String],
+    i: usize,
+    tick: u64,
+    answered: bool,
+    lost: &mut [bool],
+) -> Result<(), BridgeError> {
     let robot = robots[i].clone();
     let Some(loss) = cfg.agent_loss.drive_loss() else {
         return Err(BridgeError::RobotLeft { robot, tick });
     };
     if !lost[i] {
         if answered {
-            tracing::warn!(robot = %robot, tick, "the robot's agent left the team; its torques drive it while they come");
+            tracing::warn!(
+                robot = %robot,
+                tick,
+                "the robot's agent left the team; its torques drive it while they come"
+            );
         } else {
-            tracing::warn!(robot = %robot, tick, ?loss, "the robot's agent left: its drives lose their commands from this tick on");
+            tracing::warn!(
+                robot = %robot,
+                tick,
+                ?loss,
+                "the robot's agent left: its drives lose their commands from this tick on"
+            );
             plant.lose_drives(i, loss);
         }
         lost[i] = true;
@@ -162,11 +223,27 @@ pub const LOST_DRIVE_TICKS: u64 = 5;
 /// Before stepping `tick`: a robot whose agent left and whose drives its torques still drive
 /// (a fallen robot's damping) loses them once no torques came for [`LOST_DRIVE_TICKS`] (its
 /// agent died after leaving).
-pub(super) fn silence_lost_drives(cfg: &LockstepConfig, plant: &mut impl Plant, robots: &[String], tick: u64, lost: &[bool], answered: &[Option<u64>]) {
+pub(super) fn silence_lost_drives(
+    cfg: &LockstepConfig,
+    plant: &mut impl Plant,
+    robots: &[String],
+    tick: u64,
+    lost: &[bool],
+    answered: &[Option<u64>],
+) {
     let Some(loss) = cfg.agent_loss.drive_loss() else { return };
     for (i, robot) in robots.iter().enumerate() {
-        if lost[i] && !plant.drives_lost(i) && answered[i].is_none_or(|t| tick.saturating_sub(t) >= LOST_DRIVE_TICKS) {
-            tracing::warn!(%robot, tick, since = ?answered[i], ?loss, "no torques from the robot whose agent left: its drives lose their commands");
+        if lost[i]
+            && !plant.drives_lost(i)
+            && answered[i].is_none_or(|t| tick.saturating_sub(t) >= LOST_DRIVE_TICKS)
+        {
+            tracing::warn!(
+                %robot,
+                tick,
+                since = ?answered[i],
+                ?loss,
+                "no torques from the robot whose agent left: its drives lose their commands"
+            );
             plant.lose_drives(i, loss);
         }
     }

@@ -24,7 +24,10 @@ pub enum BridgeError {
     TorqueTimeout { tick: u64, missing: Vec<String>, waited: Duration },
     #[error("robot {robot}'s agent left the team at tick {tick}")]
     RobotLeft { robot: String, tick: u64 },
-    #[error("the coordinator left at tick {since}; the robots held their posture for {ticks} ticks and it did not come back")]
+    #[error(
+        "the coordinator left at tick {since}; the robots held their posture for {ticks} ticks \
+         and it did not come back"
+    )]
     CoordinatorLost { since: u64, ticks: u64 },
     #[error("stopped")]
     Stopped,
@@ -73,8 +76,8 @@ pub enum AgentLoss {
     /// they are) and no tick waits for it. An agent that left the team alive (a fallen robot's,
     /// `robot_agent::fall`) and still answers its states drives it with those torques as they
     /// come (a tick late when they come after the tick's step), holding the last ones for up
-    /// to [`super::LOST_DRIVE_TICKS`] (then the drives are lost as above). When its agent joins again
-    /// (restarted), the loop waits for its torques from the next tick on, and the first
+    /// to [`super::LOST_DRIVE_TICKS`] (then the drives are lost as above). When its agent joins
+    /// again (restarted), the loop waits for its torques from the next tick on, and the first
     /// torques it sends drive the robot again. The run ends with [`BridgeError::RobotLeft`]
     /// when every agent has left.
     Drives(DriveLoss),
@@ -95,11 +98,11 @@ impl AgentLoss {
 pub const DEFAULT_DRIVE_TIMEOUT: Duration = Duration::from_millis(50);
 
 impl LockstepConfig {
-    /// The smoke run's lockstep (placeholder plant): 20 s for every robot to join, `command_timeout`
-    /// per tick, resends every 50 ms, progress every tenth of the run, and the coordinator's
-    /// readiness awaited (under load its members' liveliness reached it after their first
-    /// terms: it ordered a hold at tick 0, and the closed loop's analytic answer was off). The
-    /// embedded launcher and `sim-bridge smoke` both use it.
+    /// The smoke run's lockstep (placeholder plant): 20 s for every robot to join,
+    /// `command_timeout` per tick, resends every 50 ms, progress every tenth of the run, and the
+    /// coordinator's readiness awaited (under load its members' liveliness reached it after their
+    /// first terms: it ordered a hold at tick 0, and the closed loop's analytic answer was off).
+    /// The embedded launcher and `sim-bridge smoke` both use it.
     pub fn smoke(team: &str, ticks: u64, command_timeout: Duration) -> Self {
         LockstepConfig {
             team: team.to_string(),

@@ -45,7 +45,13 @@ pub(super) enum LivenessEvent {
 
 impl Liveness {
     pub(super) async fn open(session: &Session, team: &str) -> Result<Self, BridgeError> {
-        Ok(Liveness { members: transport::watch_members(session, team).await?, coordinator: transport::watch_coordinator(session, team).await?, coordinator_lost: None, returned: false, outage_clock: None })
+        Ok(Liveness {
+            members: transport::watch_members(session, team).await?,
+            coordinator: transport::watch_coordinator(session, team).await?,
+            coordinator_lost: None,
+            returned: false,
+            outage_clock: None,
+        })
     }
 
     /// Whether the coordinator came back since the last call.
@@ -68,12 +74,19 @@ impl Liveness {
     pub(super) async fn next(&self) -> LivenessEvent {
         tokio::select! {
             m = self.members.recv_async() => m.map_or(LivenessEvent::Closed, LivenessEvent::Member),
-            c = self.coordinator.recv_async() => c.map_or(LivenessEvent::Closed, LivenessEvent::Coordinator),
+            c = self.coordinator.recv_async() => {
+                c.map_or(LivenessEvent::Closed, LivenessEvent::Coordinator)
+            }
         }
     }
 
     /// Take one event during `tick`: a robot of `robots` whose agent left or joined.
-    pub(super) fn take(&mut self, ev: LivenessEvent, tick: u64, robots: &[String]) -> Result<Option<AgentChange>, BridgeError> {
+    pub(super) fn take(
+        &mut self,
+        ev: LivenessEvent,
+        tick: u64,
+        robots: &[String],
+    ) -> Result<Option<AgentChange>, BridgeError> {
         match ev {
             LivenessEvent::Member(s) => {
                 let index = |r: &str| robots.iter().position(|x| x == r);
@@ -105,7 +118,9 @@ impl Liveness {
             self.take(LivenessEvent::Coordinator(s), tick, &[])?;
         }
         match self.coordinator_lost {
-            Some(since) if tick.saturating_sub(since) >= grace => Err(BridgeError::CoordinatorLost { since, ticks: tick - since }),
+            Some(since) if tick.saturating_sub(since) >= grace => {
+                Err(BridgeError::CoordinatorLost { since, ticks: tick - since })
+            }
             _ => Ok(()),
         }
     }

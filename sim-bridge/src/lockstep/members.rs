@@ -19,7 +19,11 @@ pub(crate) async fn wait_for_members(
     stop: &watch::Receiver<bool>,
 ) -> Result<(), BridgeError> {
     let members_q = transport::watch_members(session, &cfg.team).await?;
-    let status_q = if cfg.wait_for_coordinator { Some(transport::subscribe(session, keys::coordinator_status(&cfg.team)?).await?) } else { None };
+    let status_q = if cfg.wait_for_coordinator {
+        Some(transport::subscribe(session, keys::coordinator_status(&cfg.team)?).await?)
+    } else {
+        None
+    };
     let started = Instant::now();
     let mut present = BTreeSet::new();
     while !robots.iter().all(|r| present.contains(r)) {
@@ -51,7 +55,13 @@ pub(crate) async fn wait_for_members(
 
 /// Wait, until `timeout` after `started`, for a coordinator status on `q` that lists every robot
 /// of `robots` as a member and is ready to command them; or fail with the last status heard.
-pub(super) async fn coordinator_ready(q: &transport::SampleQueue, robots: &[String], started: Instant, timeout: Duration, stop: &watch::Receiver<bool>) -> Result<(), BridgeError> {
+pub(super) async fn coordinator_ready(
+    q: &transport::SampleQueue,
+    robots: &[String],
+    started: Instant,
+    timeout: Duration,
+    stop: &watch::Receiver<bool>,
+) -> Result<(), BridgeError> {
     let mut last = String::from("no status heard");
     loop {
         if *stop.borrow() {
@@ -60,7 +70,9 @@ pub(super) async fn coordinator_ready(q: &transport::SampleQueue, robots: &[Stri
         let left = timeout.saturating_sub(started.elapsed());
         match tokio::time::timeout(left, q.recv_async()).await {
             Ok(Ok(sample)) => {
-                let Ok(st) = decode_sample::<protocol::CoordinatorStatus>(&sample) else { continue };
+                let Ok(st) = decode_sample::<protocol::CoordinatorStatus>(&sample) else {
+                    continue;
+                };
                 let all = robots.iter().all(|r| st.members.contains(r));
                 if all && st.mode != protocol::CoordinatorMode::WaitingForMembers {
                     return Ok(());

@@ -27,7 +27,10 @@ use liveness::Liveness;
 use members::coordinator_ready;
 
 pub use answers::LOST_DRIVE_TICKS;
-pub use config::{AgentLoss, BridgeError, Extras, LockstepConfig, LockstepReport, DEFAULT_COORDINATOR_GRACE_TICKS, DEFAULT_DRIVE_TIMEOUT};
+pub use config::{
+    AgentLoss, BridgeError, Extras, LockstepConfig, LockstepReport,
+    DEFAULT_COORDINATOR_GRACE_TICKS, DEFAULT_DRIVE_TIMEOUT,
+};
 pub use tick_io::BridgeIo;
 pub(crate) use tick_io::TickSide;
 
@@ -79,7 +82,11 @@ pub async fn run_on(
         watch.pace_outage(plant.time()).await;
         states.publish(plant, tick).await?;
         answers.got.copy_from_slice(&answers.lost);
-        let timeout = if tick == extras.first_tick { cfg.command_timeout.max(cfg.start_timeout) } else { cfg.command_timeout };
+        let timeout = if tick == extras.first_tick {
+            cfg.command_timeout.max(cfg.start_timeout)
+        } else {
+            cfg.command_timeout
+        };
         answers.wait(cfg, tick, timeout, torques, &mut watch, states, plant).await?;
         silence_lost_drives(cfg, plant, &answers.robots, tick, &answers.lost, &answers.answered);
         side.step(plant, &cfg.team, tick, extras).await?;
@@ -99,8 +106,20 @@ pub async fn run_on(
 /// The coordinator came back during `tick`: wait, as at the start, until it is ready for the
 /// robots still present. A tick the coordinator answers before its team has formed is one it
 /// holds, and in lockstep its start-up is not the robots' time.
-async fn coordinator_back(session: &Session, cfg: &LockstepConfig, answers: &Answers, tick: u64, stop: &watch::Receiver<bool>) -> Result<(), BridgeError> {
-    let present: Vec<String> = answers.robots.iter().zip(&answers.lost).filter(|(_, l)| !**l).map(|(r, _)| r.clone()).collect();
+async fn coordinator_back(
+    session: &Session,
+    cfg: &LockstepConfig,
+    answers: &Answers,
+    tick: u64,
+    stop: &watch::Receiver<bool>,
+) -> Result<(), BridgeError> {
+    let present: Vec<String> = answers
+        .robots
+        .iter()
+        .zip(&answers.lost)
+        .filter(|(_, l)| !**l)
+        .map(|(r, _)| r.clone())
+        .collect();
     let status_q = transport::subscribe(session, keys::coordinator_status(&cfg.team)?).await?;
     coordinator_ready(&status_q, &present, Instant::now(), cfg.start_timeout, stop).await?;
     tracing::info!(tick, "the coordinator that came back is ready for the team");

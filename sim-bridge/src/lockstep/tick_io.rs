@@ -24,9 +24,16 @@ pub struct BridgeIo {
 impl BridgeIo {
     /// Declare everything for the plant's `robots`, then wait (within `cfg.start_timeout`) for
     /// every robot to join the team and, if `cfg` asks, for the coordinator to be ready.
-    pub async fn open(session: &Session, cfg: &LockstepConfig, robots: &[String], extras: &Extras, stop: &tokio::sync::watch::Receiver<bool>) -> Result<Self, BridgeError> {
+    pub async fn open(
+        session: &Session,
+        cfg: &LockstepConfig,
+        robots: &[String],
+        extras: &Extras,
+        stop: &tokio::sync::watch::Receiver<bool>,
+    ) -> Result<Self, BridgeError> {
         let side = TickSide::open(session, &cfg.team, extras).await?;
-        let torques = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Torque)?).await?;
+        let torques =
+            transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Torque)?).await?;
         let states = StateOut::declare(session, &cfg.team, robots).await?;
         wait_for_members(session, cfg, robots, stop).await?;
         tracing::info!(robots = ?robots, "all robots present");
@@ -55,13 +62,28 @@ pub(crate) struct TickSide {
 }
 
 impl TickSide {
-    pub(crate) async fn open(session: &Session, team: &str, extras: &Extras) -> Result<Self, BridgeError> {
+    pub(crate) async fn open(
+        session: &Session,
+        team: &str,
+        extras: &Extras,
+    ) -> Result<Self, BridgeError> {
         let truth_pub = if extras.publish_ground_truth {
-            Some(TypedPublisher::<GroundTruth>::declare(session, keys::ground_truth(team)?, Qos::Telemetry).await?)
+            Some(
+                TypedPublisher::<GroundTruth>::declare(
+                    session,
+                    keys::ground_truth(team)?,
+                    Qos::Telemetry,
+                )
+                .await?,
+            )
         } else {
             None
         };
-        let perturbations = if extras.perturbation_key { Some(transport::subscribe(session, keys::perturbation(team)?).await?) } else { None };
+        let perturbations = if extras.perturbation_key {
+            Some(transport::subscribe(session, keys::perturbation(team)?).await?)
+        } else {
+            None
+        };
         Ok(TickSide { truth_pub, perturbations, truth: crate::ground_truth::empty(team) })
     }
 
@@ -70,16 +92,33 @@ impl TickSide {
     pub(crate) fn loop_timing(&mut self, robots: &[String]) -> &mut [protocol::LoopTiming] {
         let t = &mut self.truth.loop_timing;
         if t.len() != robots.len() || t.iter().zip(robots).any(|(a, r)| a.robot != *r) {
-            *t = robots.iter().map(|r| protocol::LoopTiming { robot: r.clone(), latency_us: None, applied_tick: None, late: 0 }).collect();
+            *t = robots
+                .iter()
+                .map(|r| protocol::LoopTiming {
+                    robot: r.clone(),
+                    latency_us: None,
+                    applied_tick: None,
+                    late: 0,
+                })
+                .collect();
         }
         t
     }
 
     /// Perturbations in, one plant step, ground truth out.
-    pub(crate) async fn step(&mut self, plant: &mut impl Plant, team: &str, tick: u64, extras: &mut Extras) -> Result<(), BridgeError> {
+    pub(crate) async fn step(
+        &mut self,
+        plant: &mut impl Plant,
+        team: &str,
+        tick: u64,
+        extras: &mut Extras,
+    ) -> Result<(), BridgeError> {
         if let Some(q) = &self.perturbations {
             while let Ok(Some(sample)) = q.try_recv() {
-                match decode_sample::<PerturbationRequest>(&sample).map_err(|e| e.to_string()).and_then(|r| plant.perturb(&r)) {
+                match decode_sample::<PerturbationRequest>(&sample)
+                    .map_err(|e| e.to_string())
+                    .and_then(|r| plant.perturb(&r))
+                {
                     Ok(()) => extras.perturbations_taken += 1,
                     Err(e) => {
                         extras.perturbations_refused += 1;
@@ -89,7 +128,9 @@ impl TickSide {
             }
         }
         plant.step();
-        if (self.truth_pub.is_some() || extras.truth_log.is_some()) && plant.ground_truth(team, tick, &mut self.truth) {
+        if (self.truth_pub.is_some() || extras.truth_log.is_some())
+            && plant.ground_truth(team, tick, &mut self.truth)
+        {
             // The bridge's wall clock when the step was done (time stays the simulated time).
             self.truth.header.stamp_ns = protocol::wall_clock_ns();
             if let Some(p) = self.truth_pub.as_mut() {
@@ -110,7 +151,11 @@ pub(crate) struct StateOut {
 }
 
 impl StateOut {
-    pub(crate) async fn declare(session: &Session, team: &str, robots: &[String]) -> Result<Self, BridgeError> {
+    pub(crate) async fn declare(
+        session: &Session,
+        team: &str,
+        robots: &[String],
+    ) -> Result<Self, BridgeError> {
         let mut out = StateOut { pubs: Vec::new(), states: Vec::new() };
         for r in robots {
             let key = keys::robot(team, r, RobotTopic::State)?;
@@ -121,7 +166,11 @@ impl StateOut {
     }
 
     /// Fill every robot's state of `tick` from the plant and publish it.
-    pub(crate) async fn publish(&mut self, plant: &impl Plant, tick: u64) -> Result<(), BridgeError> {
+    pub(crate) async fn publish(
+        &mut self,
+        plant: &impl Plant,
+        tick: u64,
+    ) -> Result<(), BridgeError> {
         let now = protocol::wall_clock_ns();
         for (i, s) in self.states.iter_mut().enumerate() {
             plant.state(i, s);

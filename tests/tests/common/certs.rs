@@ -12,7 +12,15 @@ pub fn make(tag: &str, robots: &[&str]) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/make-test-certs.sh");
-    let out = Command::new(&script).arg(&dir).args(robots).output().unwrap_or_else(|e| panic!("cannot run {}: {e}", script.display()));
-    assert!(out.status.success(), "make-test-certs.sh failed: {}", String::from_utf8_lossy(&out.stderr));
+    let out = Command::new(&script)
+        .arg(&dir)
+        .args(robots)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run {}: {e}", script.display()));
+    assert!(
+        out.status.success(),
+        "make-test-certs.sh failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     dir
 }

@@ -1,4 +1,4 @@
-//! Test hosts (Linux network namespaces joined by veth pairs, `team_runner::hosts`) for the
+//! Test hosts (Linux network namespaces joined by veth pairs, `launch::hosts`) for the
 //! tests that need them, or a failure that says what is missing.
 //!
 //! Such a test fails when the hosts cannot be made here (not root, no `ip`, no nftables),
@@ -10,8 +10,8 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use team_runner::hosts::TestHosts;
-use team_runner::launch::host_names;
+use launch::hosts::TestHosts;
+use launch::launcher::host_names;
 
 /// The variable that lets the tests needing test hosts skip where they cannot be made.
 pub const SKIP_VARIABLE: &str = "TEAM_TESTS_SKIP_HOSTS";
@@ -38,7 +38,8 @@ pub fn available_or_skip(test: &str) -> bool {
 /// Test hosts for robots `ids` (with the coordinator's and the sim-bridge's), up; `None` when
 /// [`available_or_skip`] says to skip `test`.
 pub fn hosts_or_skip(ids: &[String], test: &str) -> Option<Arc<TestHosts>> {
-    available_or_skip(test).then(|| Arc::new(TestHosts::up(&host_names(ids)).expect("test hosts up")))
+    available_or_skip(test)
+        .then(|| Arc::new(TestHosts::up(&host_names(ids)).expect("test hosts up")))
 }
 
 fn record_skip(test: &str, why: &str) {

@@ -4,12 +4,12 @@
 
 use std::path::{Path, PathBuf};
 
-use team_runner::driver::Records;
-use team_runner::evaluate::{self, Metrics};
-use team_runner::plan::{self, Plan};
-use team_runner::record::{RecordOptions, ScenarioSource};
-use team_runner::run::{self, RunOptions};
-use team_runner::scenario::Scenario;
+use evaluation::records::Records;
+use evaluation::evaluate::{self, Metrics};
+use scenario::plan::{self, Plan};
+use launch::record::{RecordOptions, ScenarioSource};
+use launch::run::{self, RunOptions};
+use scenario::file::Scenario;
 
 /// The repository's root.
 pub fn repo() -> PathBuf {
@@ -25,7 +25,12 @@ pub fn report_dir(name: &str) -> PathBuf {
 pub fn run_plan(plan: &Plan, name: &str) -> Metrics {
     let dir = report_dir(name);
     std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(plan, &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() }, &dir).expect("the run completes");
+    let records = run::run(
+        plan,
+        &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() },
+        &dir,
+    )
+    .expect("the run completes");
     let eval = evaluate::evaluate(plan, &records, "embedded");
     evaluate::write_report(plan, &eval, &dir).expect("report written");
     println!("{}", evaluate::summary(&eval.metrics, &dir));
@@ -39,7 +44,12 @@ pub fn run_scenario(file: &str, sets: &[&str], distributed: bool, name: &str) ->
 }
 
 /// [`run_scenario`], with what the run recorded (the ground truth among it).
-pub fn run_scenario_records(file: &str, sets: &[&str], distributed: bool, name: &str) -> (Plan, Metrics, Records) {
+pub fn run_scenario_records(
+    file: &str,
+    sets: &[&str],
+    distributed: bool,
+    name: &str,
+) -> (Plan, Metrics, Records) {
     run_with(file, sets, distributed, name, false)
 }
 
@@ -49,7 +59,13 @@ pub fn run_scenario_recorded(file: &str, sets: &[&str], name: &str) -> (Plan, Me
     run_with(file, sets, false, name, true)
 }
 
-fn run_with(file: &str, sets: &[&str], distributed: bool, name: &str, mcap: bool) -> (Plan, Metrics, Records) {
+fn run_with(
+    file: &str,
+    sets: &[&str],
+    distributed: bool,
+    name: &str,
+    mcap: bool,
+) -> (Plan, Metrics, Records) {
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
     let path = repo().join("scenarios").join(file);
     let scenario = Scenario::load(&path, &sets).expect("scenario loads");
@@ -57,14 +73,23 @@ fn run_with(file: &str, sets: &[&str], distributed: bool, name: &str, mcap: bool
     let dir = report_dir(name);
     std::fs::create_dir_all(&dir).expect("report dir");
     let opts = RunOptions { distributed, hosts: false, progress: false, loss: Vec::new() };
-    let rec = mcap.then(|| RecordOptions { path: dir.join("run.mcap"), scenario: ScenarioSource::read(&path, &sets).expect("scenario file"), live: None });
-    let (records, summary) = run::run_recorded(&plan, &opts, &dir, rec.as_ref()).expect("the run completes");
+    let rec = mcap.then(|| RecordOptions {
+        path: dir.join("run.mcap"),
+        scenario: ScenarioSource::read(&path, &sets).expect("scenario file"),
+        live: None,
+    });
+    let (records, summary) =
+        run::run_recorded(&plan, &opts, &dir, rec.as_ref()).expect("the run completes");
     if let Some(s) = summary {
-        assert_eq!((s.dropped, s.failed, s.error.as_deref()), (0, 0, None), "the recording is complete: {s:?}");
+        assert_eq!(
+            (s.dropped, s.failed, s.error.as_deref()),
+            (0, 0, None),
+            "the recording is complete: {s:?}"
+        );
     }
     let eval = evaluate::evaluate(&plan, &records, opts.mode_name(false));
     evaluate::write_report(&plan, &eval, &dir).expect("report written");
-    team_runner::plots::write_all(&plan, &eval, &records, &dir).expect("figures drawn");
+    evaluation::plots::write_all(&plan, &eval, &records, &dir).expect("figures drawn");
     println!("{}", evaluate::summary(&eval.metrics, &dir));
     (plan, eval.metrics, records)
 }

@@ -25,26 +25,56 @@ pub struct Component<T> {
     pub task: JoinHandle<T>,
 }
 
-pub fn coordinator(session: &Session, team: &str, controller: Box<dyn TeamController>) -> Component<service::CoordinatorCounters> {
+pub fn coordinator(
+    session: &Session,
+    team: &str,
+    controller: Box<dyn TeamController>,
+) -> Component<service::CoordinatorCounters> {
     let (stop, rx) = watch::channel(false);
     let (s, cfg) = (session.clone(), CoordinatorConfig::lockstep(team, Duration::from_secs(5)));
-    Component { stop, task: tokio::spawn(async move { service::run(&s, cfg, controller, rx).await.expect("coordinator runs") }) }
+    Component {
+        stop,
+        task: tokio::spawn(async move {
+            service::run(&s, cfg, controller, rx).await.expect("coordinator runs")
+        }),
+    }
 }
 
-pub fn agent(session: &Session, team: &str, robot: &str) -> Component<robot_agent::status::AgentCounters> {
+pub fn agent(
+    session: &Session,
+    team: &str,
+    robot: &str,
+) -> Component<robot_agent::status::AgentCounters> {
     // Lockstep: the agent's own time deadline must not be what ends a wait here.
-    agent_with_deadline(session, team, robot, CommandDeadline { ticks: 5, time: Some(Duration::from_secs(30)) })
+    agent_with_deadline(
+        session,
+        team,
+        robot,
+        CommandDeadline { ticks: 5, time: Some(Duration::from_secs(30)) },
+    )
 }
 
 /// An agent with its command deadline `deadline` (the real-time default is
 /// `CommandDeadline::default()`: 5 ticks or 25 ms).
-pub fn agent_with_deadline(session: &Session, team: &str, robot: &str, deadline: CommandDeadline) -> Component<robot_agent::status::AgentCounters> {
+pub fn agent_with_deadline(
+    session: &Session,
+    team: &str,
+    robot: &str,
+    deadline: CommandDeadline,
+) -> Component<robot_agent::status::AgentCounters> {
     let (stop, rx) = watch::channel(false);
     let mut cfg = AgentConfig::new(team, robot);
     cfg.deadline = deadline;
     cfg.max_command_age = Duration::from_secs(30);
     let s = session.clone();
-    Component { stop, task: tokio::spawn(async move { robot_agent::agent::run(&s, cfg, PlaceholderDynamics::floating(JOINTS), rx).await.expect("agent runs") }) }
+    Component {
+        stop,
+        task: tokio::spawn(async move {
+            robot_agent::agent::run(&s, cfg, PlaceholderDynamics::floating(JOINTS), rx)
+                .await
+                .expect("agent runs")
+        }),
+    }
 }
 
 pub fn lockstep_cfg(team: &str, ticks: u64, grace: u64) -> LockstepConfig {
@@ -66,12 +96,22 @@ pub fn lockstep_cfg(team: &str, ticks: u64, grace: u64) -> LockstepConfig {
     }
 }
 
-pub fn bridge(session: &Session, team: &str, robots: &[&str], ticks: u64, grace: u64) -> Component<Result<lockstep::LockstepReport, BridgeError>> {
+pub fn bridge(
+    session: &Session,
+    team: &str,
+    robots: &[&str],
+    ticks: u64,
+    grace: u64,
+) -> Component<Result<lockstep::LockstepReport, BridgeError>> {
     let (stop, rx) = watch::channel(false);
     let cfg = lockstep_cfg(team, ticks, grace);
-    let mut plant = PlaceholderPlant::new(robots.iter().map(|r| r.to_string()).collect(), JOINTS, 0.1, 0.001);
+    let mut plant =
+        PlaceholderPlant::new(robots.iter().map(|r| r.to_string()).collect(), JOINTS, 0.1, 0.001);
     let s = session.clone();
-    Component { stop, task: tokio::spawn(async move { lockstep::run(&s, &cfg, &mut plant, rx).await }) }
+    Component {
+        stop,
+        task: tokio::spawn(async move { lockstep::run(&s, &cfg, &mut plant, rx).await }),
+    }
 }
 
 pub async fn session() -> Session {
@@ -80,6 +120,8 @@ pub async fn session() -> Session {
 
 pub async fn stop<T>(c: Component<T>) -> T {
     let _ = c.stop.send(true);
-    tokio::time::timeout(Duration::from_secs(10), c.task).await.expect("stops in time").expect("task")
+    tokio::time::timeout(Duration::from_secs(10), c.task)
+        .await
+        .expect("stops in time")
+        .expect("task")
 }
-

@@ -6,12 +6,20 @@ use std::time::Duration;
 
 use protocol::access::{Identity, SecureConfig};
 use protocol::transport::{self, Role, ZenohArgs};
-use team_runner::processes::free_port;
+use launch::processes::free_port;
 use zenoh::Session;
 
 /// Write `who`'s configuration into `dir` and return the arguments that use it. `acl: false`
 /// drops the access-control section (what a component that ignores the rules would run).
-pub fn config(dir: &Path, team: &str, robots: &[String], who: Identity, listen: &str, connect: Option<&str>, acl: bool) -> ZenohArgs {
+pub fn config(
+    dir: &Path,
+    team: &str,
+    robots: &[String],
+    who: Identity,
+    listen: &str,
+    connect: Option<&str>,
+    acl: bool,
+) -> ZenohArgs {
     let name = who.name().to_string();
     let mut cfg = SecureConfig::in_dir(dir, team, robots, who);
     cfg.listen = vec![listen.to_string()];
@@ -28,11 +36,13 @@ pub fn config(dir: &Path, team: &str, robots: &[String], who: Identity, listen: 
 }
 
 pub async fn open(args: &ZenohArgs) -> Session {
-    tokio::time::timeout(Duration::from_secs(10), transport::open(args, Role::Member)).await.expect("session opened in time").expect("session")
+    tokio::time::timeout(Duration::from_secs(10), transport::open(args, Role::Member))
+        .await
+        .expect("session opened in time")
+        .expect("session")
 }
 
 /// A hub on a free port for mutual TLS: the endpoint others connect to.
 pub fn hub_endpoint() -> String {
     protocol::access::secure_endpoint("127.0.0.1", free_port().unwrap())
 }
-

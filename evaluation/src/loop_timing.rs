@@ -1,0 +1,162 @@
+//! The control loop of a real-time run, from the ground truth's [`protocol::LoopTiming`]
+//! (measured where the torques are applied, so on one clock): per robot, state-to-torque
+//! latency percentiles, deadline misses (ticks on which the drive held its last torques), the
+//! longest run of such ticks, late arrivals and lost commands. Lockstep runs carry no loop
+//! timing and get no report.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use protocol::GroundTruth;
+use serde::Serialize;
+
+use crate::metrics::{self, Percentiles};
+
+/// One robot's loop over a run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RobotLoop {
+    /// Ticks with a measurement.
+    pub ticks: u64,
+    /// State-to-torque latency of the ticks whose torques came in time, µs.
+    pub latency_us: Percentiles,
+    /// Ticks whose torques were not there by the tick's deadline: the drive held the last
+    /// torques it had (or none yet).
+    pub deadline_misses: u64,
+    /// Longest run of consecutive missed ticks (a robot's agent enters safe mode after
+    /// `robot_agent::safe_mode::CommandDeadline::ticks` of them).
+    pub longest_hold_ticks: u64,
+    /// Torques that arrived after their tick's deadline.
+    pub late: u64,
+    /// Ticks whose torques were never applied, on time or late.
+    pub lost: u64,
+}
+
+/// The loop of a real-time run, by robot.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LoopReport {
+    pub robots: BTreeMap<String, RobotLoop>,
+}
+
+impl LoopReport {
+    /// The report of the ticks in `truth` that carry loop timing (`None` if none does).
+    pub fn from_truth(truth: &[GroundTruth]) -> Option<LoopReport> {
+        #[derive(Default)]
+        struct Acc {
+            ticks: u64,
+            latencies: Vec<f64>,
+            misses: u64,
+            streak: u64,
+            longest: u64,
+            late: u64,
+            seen: BTreeSet<u64>,
+            applied: BTreeSet<u64>,
+        }
+        let mut acc: BTreeMap<String, Acc> = BTreeMap::new();
+        for g in truth {
+            for t in &g.loop_timing {
+                let a = acc.entry(t.robot.clone()).or_default();
+                a.ticks += 1;
+                a.late += u64::from(t.late);
+                a.seen.insert(g.header.tick);
+                if let Some(k) = t.applied_tick {
+                    a.applied.insert(k);
+                }
+                match t.latency_us {
+                    Some(l) => {
+                        a.latencies.push(l);
+                        a.streak = 0;
+                    }
+                    None => {
+                        a.misses += 1;
+                        a.streak += 1;
+                        a.longest = a.longest.max(a.streak);
+                    }
+                }
+            }
+        }
+        if acc.is_empty() {
+            return None;
+        }
+        let robots = acc
+            .into_iter()
+            .map(|(r, a)| {
+                let lost = a.seen.difference(&a.applied).count() as u64;
+                (
+                    r,
+                    RobotLoop {
+                        ticks: a.ticks,
+                        latency_us: metrics::percentiles(&a.latencies),
+                        deadline_misses: a.misses,
+                        longest_hold_ticks: a.longest,
+                        late: a.late,
+                        lost,
+                    },
+                )
+            })
+            .collect();
+        Some(LoopReport { robots })
+    }
+
+    /// One line per robot for the run's summary.
+    pub fn summary(&self) -> String {
+        let mut s = String::new();
+        for (r, l) in &self.robots {
+            s.push_str(&format!(
+                "  loop {r}: state-to-torque p50 {:.0} us, p99 {:.0} us, max {:.0} us; deadline misses {} of {} (longest hold {} ticks), late {}, lost {}\n",
+                l.latency_us.p50, l.latency_us.p99, l.latency_us.max, l.deadline_misses, l.ticks, l.longest_hold_ticks, l.late, l.lost
+            ));
+        }
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::{Header, LoopTiming};
+
+    fn tick(k: u64, r1: (Option<f64>, Option<u64>, u32)) -> GroundTruth {
+        let mut g = sim_bridge::ground_truth::empty("t");
+        g.header = Header::new("t", None, k, 0);
+        g.loop_timing = vec![
+            LoopTiming { robot: "r1".into(), latency_us: r1.0, applied_tick: r1.1, late: r1.2 },
+            LoopTiming {
+                robot: "r2".into(),
+                latency_us: Some(100.0 + k as f64),
+                applied_tick: Some(k),
+                late: 0,
+            },
+        ];
+        g
+    }
+
+    #[test]
+    fn misses_streaks_late_and_lost_are_counted_per_robot() {
+        // r1: tick 10 on time; 11 and 12 missed (11's torques arrive late during 12, 12's never);
+        // 13 on time; 14 missed with nothing newer; 15 on time.
+        let truth = vec![
+            tick(10, (Some(300.0), Some(10), 0)),
+            tick(11, (None, Some(10), 0)),
+            tick(12, (None, Some(11), 1)),
+            tick(13, (Some(500.0), Some(13), 0)),
+            tick(14, (None, Some(13), 0)),
+            tick(15, (Some(400.0), Some(15), 0)),
+        ];
+        let rep = LoopReport::from_truth(&truth).expect("timing present");
+        let r1 = &rep.robots["r1"];
+        assert_eq!((r1.ticks, r1.deadline_misses, r1.longest_hold_ticks, r1.late), (6, 3, 2, 1));
+        // Ticks 12 and 14 never applied.
+        assert_eq!(r1.lost, 2);
+        assert_eq!((r1.latency_us.count, r1.latency_us.p50, r1.latency_us.max), (3, 400.0, 500.0));
+        let r2 = &rep.robots["r2"];
+        assert_eq!((r2.deadline_misses, r2.longest_hold_ticks, r2.late, r2.lost), (0, 0, 0, 0));
+        assert_eq!(r2.latency_us.max, 115.0);
+        assert!(rep.summary().contains("loop r1: state-to-torque p50 400 us"), "{}", rep.summary());
+    }
+
+    #[test]
+    fn a_lockstep_run_has_no_loop_report() {
+        let mut g = sim_bridge::ground_truth::empty("t");
+        g.header = Header::new("t", None, 3, 0);
+        assert!(LoopReport::from_truth(&[g.clone(), g]).is_none());
+    }
+}

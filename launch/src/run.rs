@@ -1,0 +1,384 @@
+//! `team run SCENARIO`: the whole stack on one scenario, through the one launcher
+//! ([`crate::launcher`]): the coordinator with the scenario's controller, one robot-agent per
+//! robot (the robot's own model, loaded once by the plan), the sim-bridge with the scene, and
+//! this process's scenario driver (references out; ground truth, torques and diagnostics
+//! recorded). Embedded or distributed, the same [`scenario::plan::Plan`] is simulated and every
+//! message goes over Zenoh.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use thiserror::Error;
+
+use crate::driver::Driver;
+use evaluation::records::Records;
+use crate::hosts::TestHosts;
+use crate::launcher::{AgentArgs, AgentModel, BridgeArgs, CoordinatorArgs, Launch, LaunchError, RunMode};
+use scenario::plan::Plan;
+use crate::record::{self, RecordError, RecordOptions, Recorder, RecordingSummary, RunFacts};
+
+/// In lockstep, an agent waits this long for its command before it holds its posture: a tick
+/// that is merely slow (a loaded machine) must not see safe-mode torques.
+pub const AGENT_COMMAND_DEADLINE: Duration = Duration::from_secs(20);
+/// The coordinator abandons a tick whose terms are incomplete after this long.
+pub const COORDINATOR_TICK_DEADLINE: Duration = Duration::from_secs(20);
+
+/// In real time ([`sim_bridge::scene::Scene::realtime`]) an agent holds its posture after this
+/// long without a command, or as many state ticks (whichever comes first), and refuses a
+/// command so many ticks behind its latest state: the agent's own default, a robot's real
+/// deadline.
+pub const REALTIME_AGENT_COMMAND_DEADLINE: Duration = Duration::from_millis(25);
+/// In lockstep the tick deadline is the agent's default (5 ticks); no state comes while the
+/// simulation waits for a command, so that it bounds only a robot that answers no tick.
+pub const LOCKSTEP_DEADLINE_TICKS: u64 = 5;
+/// In real time the coordinator abandons a tick whose terms are incomplete after this long
+/// (its states are long gone by then; the tick only holds memory).
+pub const REALTIME_COORDINATOR_TICK_DEADLINE: Duration = Duration::from_millis(50);
+
+/// In real time the coordinator solves a tick a quarter of the control period after its first
+/// terms arrived (half a period left too little of it for the solve, the agents and the
+/// bridge: every robot missed its deadline while one stalled), with a late member's latest terms (`coordinator::team::assembly::Reuse`), as
+/// long as they are at most [`REALTIME_SILENCE`] old; a member silent for longer is left out.
+pub fn realtime_reuse(clock: &protocol::RunClock) -> coordinator::team::assembly::Reuse {
+    let period = clock.dt();
+    coordinator::team::assembly::Reuse { after: Duration::from_secs_f64(period / 4.0), max_age: clock.ticks_lasting(REALTIME_SILENCE.as_secs_f64()).max(1) }
+}
+
+/// How long a member may send no terms in real time before the coordinator leaves it out of
+/// the team (a team of two then lets go of the object). Long against a lossy link's gaps: with
+/// 5 % of one agent's packets dropped, TCP's retransmissions held its torques for up to 72 ms
+/// (18 ticks at 250 Hz), and leaving it out after 50 ms dropped the object a lossy link alone
+/// did not. Meanwhile its drives apply its last torques, then (after their 50 ms timeout) hold
+/// their joints, and the team is solved with its latest terms.
+pub const REALTIME_SILENCE: Duration = Duration::from_millis(200);
+
+/// After the bridge ended the run, how long the driver may take to record the last ticks.
+pub const DRIVER_DRAIN: Duration = Duration::from_secs(5);
+
+/// How long a run waits for its coordinator to come before the first tick (a process on a
+/// loaded machine starts in seconds); then the run fails, naming the coordinator.
+pub const COORDINATOR_WAIT: Duration = Duration::from_secs(60);
+
+/// Errors of a run.
+#[derive(Debug, Error)]
+pub enum RunError {
+    #[error(transparent)]
+    Launch(#[from] LaunchError),
+    #[error(transparent)]
+    Transport(#[from] protocol::transport::TransportError),
+    #[error("the run ended after {seen} of {expected} ticks")]
+    Incomplete { seen: u64, expected: u64 },
+    #[error("{what}: {reason}")]
+    Task { what: String, reason: String },
+    #[error(transparent)]
+    Record(#[from] RecordError),
+}
+
+/// How to run.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    pub distributed: bool,
+    /// Distributed across test hosts (`crate::hosts`), one per component, made for the run
+    /// and removed after it.
+    pub hosts: bool,
+    /// A progress bar (terminal) or progress lines, on stdout.
+    pub progress: bool,
+    /// Packet loss on robots' links for the whole run (test hosts only, [`LinkLoss`]).
+    pub loss: Vec<LinkLoss>,
+}
+
+/// A share of a robot's packets dropped, both ways, on its test host's link (nftables,
+/// [`TestHosts::set_loss`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LinkLoss {
+    pub robot: String,
+    pub percent: u8,
+}
+
+impl std::str::FromStr for LinkLoss {
+    type Err = String;
+
+    /// `ROBOT=PERCENT`, the percentage a whole number from 0 to 100.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (robot, percent) = s.split_once('=').ok_or_else(|| format!("{s:?}: expected ROBOT=PERCENT, e.g. r1=5"))?;
+        let percent: u8 = percent.trim().parse().map_err(|_| format!("{s:?}: the loss is a whole percentage from 0 to 100"))?;
+        if robot.trim().is_empty() || percent > 100 {
+            return Err(format!("{s:?}: expected ROBOT=PERCENT with a robot and 0 to 100 %"));
+        }
+        Ok(LinkLoss { robot: robot.trim().to_string(), percent })
+    }
+}
+
+impl RunOptions {
+    /// The name reports give the mode these options (and `tls`, [`run_recorded_secure`]'s)
+    /// run in: [`RunMode::name`] of the mode that function makes.
+    pub fn mode_name(&self, tls: bool) -> &'static str {
+        match (self.hosts, tls, self.distributed) {
+            (true, true, _) => "hosts-tls",
+            (true, false, _) => "hosts",
+            (false, true, _) => "distributed-tls",
+            (false, false, true) => "distributed",
+            (false, false, false) => "embedded",
+        }
+    }
+
+    /// The mode as the report names it: [`RunOptions::mode_name`], and `", real time"` after
+    /// it for a real-time run.
+    pub fn mode_label(&self, tls: bool, realtime: bool) -> String {
+        let name = self.mode_name(tls);
+        if realtime { format!("{name}, real time") } else { name.to_string() }
+    }
+}
+
+/// The report folder of a run of the scenario file `scenario` when none is given:
+/// `reports/<file name without extension>` (`reports/scenario` for a path without one).
+pub fn default_report_dir(scenario: &Path) -> PathBuf {
+    let stem = scenario.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scenario".into());
+    PathBuf::from("reports").join(stem)
+}
+
+/// The components of a scenario run.
+/// Lockstep runs wait long ([`AGENT_COMMAND_DEADLINE`], [`COORDINATOR_TICK_DEADLINE`]); real-time
+/// runs (`plan.scene.realtime`) keep a robot's deadlines ([`REALTIME_AGENT_COMMAND_DEADLINE`],
+/// [`REALTIME_COORDINATOR_TICK_DEADLINE`]).
+pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
+    let clock = &plan.references.clock;
+    let (tick_deadline, command_deadline, command_deadline_ticks, reuse) = if plan.scene.realtime {
+        let ticks = clock.ticks_lasting(REALTIME_AGENT_COMMAND_DEADLINE.as_secs_f64()).max(1);
+        (REALTIME_COORDINATOR_TICK_DEADLINE, REALTIME_AGENT_COMMAND_DEADLINE, ticks, Some(realtime_reuse(clock)))
+    } else {
+        (COORDINATOR_TICK_DEADLINE, AGENT_COMMAND_DEADLINE, LOCKSTEP_DEADLINE_TICKS, None)
+    };
+    let expected = plan.robots.iter().map(|r| r.id.clone()).collect();
+    let robot_hz = plan.scenario.predict_delay.then_some(plan.scenario.control_hz);
+    // The driver sends references for every tick: a coordinator that starts inside the run (a
+    // restart) holds the team until they come.
+    let wait_for_references = Some(coordinator::service::REFERENCE_WAIT);
+    let coordinator = CoordinatorArgs { team: plan.team().into(), tick_deadline, reuse, expected, controller: plan.controller.clone(), robot_hz, wait_for_references };
+    let agents = plan
+        .robots
+        .iter()
+        .map(|r| AgentArgs {
+            team: plan.team().into(),
+            id: r.id.clone(),
+            model: AgentModel::Robot { robot: r.robot.clone(), description: r.description.clone() },
+            command_deadline,
+            command_deadline_ticks,
+            drive_gains: plan.scenario.drive_gains,
+            drive_hz: Some(plan.scenario.physics_hz),
+            // Checked when the scenario loaded.
+            team_every: plan.scenario.team_every().unwrap_or(1),
+            team_delay: plan.scenario.team_delay_ticks,
+        })
+        .collect();
+    let bridge = BridgeArgs::Scene { scene: Box::new(plan.scene.clone()), robots: plan.loaded_robots() };
+    (Launch { coordinator, agents }, bridge)
+}
+
+/// Run the plan; `out` is the report folder (the distributed run writes its component files
+/// there).
+pub fn run(plan: &Plan, opts: &RunOptions, out: &Path) -> Result<Records, RunError> {
+    run_recorded(plan, opts, out, None).map(|(records, _)| records)
+}
+
+/// [`run`], recording the run as MCAP (and serving it live) when `record` is given.
+pub fn run_recorded(plan: &Plan, opts: &RunOptions, out: &Path, record: Option<&RecordOptions>) -> Result<(Records, Option<RecordingSummary>), RunError> {
+    run_recorded_secure(plan, opts, None, out, record)
+}
+
+/// The mode of a run on this computer's loopback (not on test hosts): over TLS when `tls`
+/// names the certificates (distributed or not), else distributed or embedded.
+fn loopback_mode(opts: &RunOptions, tls: Option<&Path>, out: &Path) -> RunMode {
+    RunMode::on_loopback(opts.distributed, tls, out)
+}
+
+/// [`run_recorded`]; with `tls`, distributed on loopback over mutual TLS with the team's
+/// access control ([`RunMode::Tls`]), the certificates in that folder
+/// (`scripts/make-test-certs.sh DIR ROBOT...`; README "Access control (mutual TLS and ACL)").
+/// With `tls` and test hosts, the test CA in that folder signs certificates for the hosts'
+/// addresses into `out/hosts-certs` ([`TestHosts::issue_certs`]).
+pub fn run_recorded_secure(
+    plan: &Plan,
+    opts: &RunOptions,
+    tls: Option<&Path>,
+    out: &Path,
+    record: Option<&RecordOptions>,
+) -> Result<(Records, Option<RecordingSummary>), RunError> {
+    if let (true, Some(ca)) = (opts.hosts, tls) {
+        // Before any host is made: the run's certificates need the test CA's key.
+        TestHosts::check_ca(ca).map_err(|e| RunError::Task { what: "the run's certificates".into(), reason: e.to_string() })?;
+    }
+    let ids: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
+    if let Some(l) = opts.loss.iter().find(|l| !ids.contains(&l.robot)) {
+        return Err(RunError::Task { what: "packet loss".into(), reason: format!("no robot {} in the team ({})", l.robot, ids.join(", ")) });
+    }
+    if !opts.loss.is_empty() && !opts.hosts {
+        return Err(RunError::Task { what: "packet loss".into(), reason: "needs test hosts (--hosts): a robot's own link is what loses packets".into() });
+    }
+    let mode = if opts.hosts {
+        let hosts = TestHosts::up(&crate::launcher::host_names(&ids)).map_err(|e| RunError::Task { what: "making the test hosts".into(), reason: e.to_string() })?;
+        for l in &opts.loss {
+            hosts.set_loss(&l.robot, l.percent).map_err(|e| RunError::Task { what: format!("packet loss on {}'s link", l.robot), reason: e.to_string() })?;
+        }
+        // Over TLS, certificates for this set's addresses, signed by the test CA in `tls`.
+        let certs = match tls {
+            Some(ca) => {
+                let dir = std::path::absolute(out.join("hosts-certs")).map_err(|e| RunError::Task { what: "the run's certificates".into(), reason: e.to_string() })?;
+                hosts.issue_certs(ca, &ids, &dir).map_err(|e| RunError::Task { what: "the run's certificates".into(), reason: e.to_string() })?;
+                Some(dir)
+            }
+            None => None,
+        };
+        RunMode::Hosts { dir: out.to_path_buf(), hosts: std::sync::Arc::new(hosts), certs }
+    } else {
+        loopback_mode(opts, tls, out)
+    };
+    let outcome = run_recorded_in(plan, opts, &mode, record);
+    if let RunMode::Hosts { hosts, .. } = &mode {
+        for l in &opts.loss {
+            match hosts.dropped(&l.robot) {
+                Ok(n) => tracing::info!(robot = %l.robot, percent = l.percent, dropped = n, "packets dropped on the robot's link"),
+                Err(e) => tracing::warn!(robot = %l.robot, "packets dropped on the robot's link: {e}"),
+            }
+        }
+    }
+    outcome
+}
+
+/// [`run_recorded`] in a given mode (e.g. [`RunMode::Site`], a client of a site's router).
+pub fn run_recorded_in(plan: &Plan, opts: &RunOptions, mode: &RunMode, record: Option<&RecordOptions>) -> Result<(Records, Option<RecordingSummary>), RunError> {
+    let rt = tokio::runtime::Runtime::new().map_err(|e| RunError::Task { what: "starting the async runtime".into(), reason: e.to_string() })?;
+    let recorder = match record {
+        Some(r) => Some(rt.block_on(Recorder::start(plan, r))?),
+        None => None,
+    };
+    if let Some(port) = recorder.as_ref().and_then(Recorder::live_port) {
+        println!("live: open Foxglove and connect to ws://127.0.0.1:{port}");
+    }
+    let result = rt.block_on(run_in(plan, opts, mode, recorder.as_ref()));
+    // The recording is closed whatever happened: a failed run's recording shows why.
+    let facts = |r: &Records| RunFacts { mode: mode.name().to_string(), settle_wall: r.settle_wall, run_wall: r.run_wall };
+    let summary = match recorder {
+        Some(rec) => Some(rec.finish(&result.as_ref().map(facts).unwrap_or_default())?),
+        None => None,
+    };
+    let records = result?;
+    if records.ticks_seen < plan.total_ticks() {
+        return Err(RunError::Incomplete { seen: records.ticks_seen, expected: plan.total_ticks() });
+    }
+    Ok((records, summary))
+}
+
+/// Launch the team in `mode`, drive the scenario until the bridge ends it, stop everything.
+/// With a `recorder`, the driver and the recorder's subscriptions feed it.
+pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &RunMode, recorder: Option<&Recorder>) -> Result<Records, RunError> {
+    if plan.scene.realtime {
+        crate::priority::raise_for_realtime();
+    }
+    let (launch, bridge) = launch_of(plan);
+    let started = Instant::now();
+    let mut running = launch.start(mode).await?;
+    let mut driver = Driver::start(running.session(), plan.team(), plan.references.clone(), plan.total_ticks(), opts.progress).await?;
+    if plan.scene.realtime {
+        driver = driver.paced(plan.scenario.control_hz);
+    }
+    let (record_stop, record_stopped) = tokio::sync::watch::channel(false);
+    let mut record_tasks = Vec::new();
+    if let Some(rec) = recorder {
+        driver = driver.with_tap(rec.tap());
+        record_tasks = record::subscribe(running.session(), plan.team(), &rec.tap(), &record_stopped).await?;
+    }
+    let mut fault_tasks = Vec::new();
+    for f in &plan.scenario.faults {
+        let who = f.robot().unwrap_or(crate::launcher::COORDINATOR);
+        let fault = |reason: &str| RunError::Task { what: format!("fault on {who}"), reason: reason.to_string() };
+        if f.kind == scenario::file::FaultKind::AgentStalls && !plan.scene.realtime {
+            return Err(fault("agent-stalls needs a real-time run (--realtime): in lockstep the team waits for the stalled agent"));
+        }
+        let component = running.component(who).ok_or_else(|| fault("no such component in the run"))?;
+        let armed = crate::faults::Armed::new(f, &plan.references.clock, component, &plan.robots[0].id);
+        fault_tasks.push(crate::faults::inject(running.session(), plan.team(), armed, running.stop_signal()).await?);
+    }
+    if !driver.send_first_window(COORDINATOR_WAIT).await? {
+        return Err(RunError::Task { what: "starting the run".into(), reason: format!("the coordinator did not come within {COORDINATOR_WAIT:?}") });
+    }
+    let mut driver_task = tokio::spawn(driver.run(running.stop_signal()));
+    let bridge_result = running.run_bridge(&bridge).await;
+    // The driver ends by itself at the ground truth of the last tick (which may still be
+    // crossing a process boundary); after a failed run, or if that sample never comes, it is
+    // stopped.
+    let drain = if bridge_result.is_ok() { DRIVER_DRAIN } else { Duration::ZERO };
+    let records = match tokio::time::timeout(drain, &mut driver_task).await {
+        Ok(records) => records,
+        Err(_) => {
+            running.stop();
+            driver_task.await
+        }
+    };
+    let records = records.map_err(|e| RunError::Task { what: "the scenario driver".into(), reason: e.to_string() })?;
+    let _ = record_stop.send(true);
+    for t in fault_tasks {
+        t.abort();
+    }
+    for t in record_tasks {
+        let _ = t.await;
+    }
+    let finished = running.finish().await;
+    tracing::debug!(wall = ?started.elapsed(), mode = mode.name(), "run ended");
+    bridge_result?;
+    finished?;
+    Ok(records?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The report's mode name, chosen before the run, is the name of the mode the run picks
+    /// ([`RunMode::name`], which the recording keeps) on loopback; the hosts' modes (a
+    /// `RunMode::Hosts` needs hosts made) by their names.
+    #[test]
+    fn the_reported_mode_is_the_mode_that_runs() {
+        let (out, certs) = (Path::new("out"), Path::new("certs"));
+        for distributed in [false, true] {
+            let opts = RunOptions { distributed, hosts: false, progress: false, loss: Vec::new() };
+            for tls in [None, Some(certs)] {
+                assert_eq!(opts.mode_name(tls.is_some()), loopback_mode(&opts, tls, out).name(), "distributed {distributed}, tls {tls:?}");
+            }
+        }
+        assert_eq!(loopback_mode(&RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() }, Some(certs), out).name(), "distributed-tls", "TLS runs distributed");
+        let hosts = RunOptions { distributed: false, hosts: true, progress: false, loss: Vec::new() };
+        assert_eq!((hosts.mode_name(false), hosts.mode_name(true)), ("hosts", "hosts-tls"));
+        assert_eq!(hosts.mode_label(true, true), "hosts-tls, real time");
+        assert_eq!(hosts.mode_label(false, false), "hosts");
+    }
+
+    #[test]
+    fn a_link_loss_reads_as_robot_and_whole_percent() {
+        assert_eq!("r1=5".parse::<LinkLoss>(), Ok(LinkLoss { robot: "r1".into(), percent: 5 }));
+        assert_eq!(" r2 = 100".parse::<LinkLoss>().map(|l| l.percent), Ok(100));
+        for bad in ["r1", "r1=", "=5", "r1=101", "r1=-1", "r1=2.5", "r1=NaN"] {
+            assert!(bad.parse::<LinkLoss>().is_err(), "{bad} refused");
+        }
+    }
+
+    /// Loss is refused before anything starts: on an unknown robot, and without test hosts.
+    #[test]
+    fn a_link_loss_names_a_robot_of_the_team_and_needs_test_hosts() {
+        let repo = scenario::plan::repo_root();
+        let s = scenario::file::Scenario::load(repo.join("scenarios/s4_object_circle.toml"), &[]).expect("scenario");
+        let plan = scenario::plan::plan(&s, &repo).expect("plan");
+        let out = std::env::temp_dir().join("team-runner-link-loss");
+        let loss = |robot: &str, hosts| RunOptions { distributed: true, hosts, progress: false, loss: vec![LinkLoss { robot: robot.into(), percent: 5 }] };
+        let e = run_recorded_secure(&plan, &loss("r9", true), None, &out, None).expect_err("unknown robot").to_string();
+        assert!(e.contains("no robot r9") && e.contains("r1, r2"), "{e}");
+        let e = run_recorded_secure(&plan, &loss("r1", false), None, &out, None).expect_err("no hosts").to_string();
+        assert!(e.contains("needs test hosts"), "{e}");
+    }
+
+    #[test]
+    fn a_run_reports_into_a_folder_named_after_its_scenario() {
+        assert_eq!(default_report_dir(Path::new("scenarios/s4_object_circle.toml")), Path::new("reports/s4_object_circle"));
+        assert_eq!(default_report_dir(Path::new("/")), Path::new("reports/scenario"));
+    }
+}
