@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Run every test of the workspace, on a fresh machine too: provisions MuJoCo, the Python
-# client's environment (eclipse-zenoh, pinned) and what the test hosts need (nftables), builds the
-# binaries the multi-process tests start, then runs all tests in release mode (numeric code
-# and simulations are slow unoptimised). Building bins and tests in one invocation gives
-# them the same feature set, so `cargo test` reuses the build.
+# client's environment (eclipse-zenoh, pinned) and what the test hosts need (nftables), checks
+# the formatting and clippy's lints, builds the binaries the multi-process tests start, then
+# runs all tests in release mode (numeric code and simulations are slow unoptimised). The
+# binaries alone (`scripts/demo.sh`) and the binaries with the tests resolve the same features
+# (the test crate's dependencies carry what the tests add), so neither build redoes the other's.
 #
 # Without arguments it then runs the fault, real-time and test-host tests once more with two
 # busy loops beside them (recovery must not depend on the machine's load). Extra arguments go
@@ -15,6 +16,9 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 ./scripts/setup-mujoco.sh
 ./scripts/setup-python-client.sh
 ./scripts/setup-testhosts.sh
+# The code's habits first: rustfmt's layout (rustfmt.toml) and clippy without a warning.
+cargo fmt --all --check
+cargo clippy --workspace --all-targets --locked -- -D warnings
 cargo build --release --workspace --bins --tests --locked
 
 skipped=target/test-reports/skipped.txt

@@ -1,9 +1,11 @@
 //! The controller interface: [`TeamController`] (what [`crate::service::run`] drives every
 //! tick) and [`ControllerError`]. Which controller runs is data: [`crate::ControllerSpec`].
 //!
-//! **A second controller plugs in** by implementing [`TeamController`] (in its own module,
-//! composing the units of [`crate::units`] and the QP of [`crate::qp`]) and adding a variant
-//! to [`crate::ControllerSpec`] ([`crate::spec`]).
+//! **A second controller plugs in** by writing its law ([`crate::controller_shell::ControlLaw`],
+//! in its own module, composing the building blocks of [`crate::building_blocks`] and the QP of
+//! [`crate::qp`]):
+//! [`crate::Shell`] of it is a [`TeamController`]; then a variant of [`crate::ControllerSpec`]
+//! ([`crate::spec`]).
 
 use protocol::{DynamicsTerms, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
 
@@ -11,7 +13,11 @@ use protocol::{DynamicsTerms, RobotDescription, TaskReferences, TickDiagnostics,
 /// robot id) to one torque command per member, in the same order.
 pub trait TeamController: Send {
     fn name(&self) -> &'static str;
-    fn solve(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError>;
+    fn solve(
+        &mut self,
+        tick: &[DynamicsTerms],
+        out: &mut Vec<TorqueCommand>,
+    ) -> Result<(), ControllerError>;
     /// Diagnostics of the last solved tick, if the controller makes any.
     fn diagnostics(&self) -> Option<&TickDiagnostics> {
         None
@@ -20,7 +26,8 @@ pub trait TeamController: Send {
     fn used_fallback(&self) -> bool {
         false
     }
-    /// The tick after which the team let go of the object (`crate::units::release`), while it
+    /// The tick after which the team let go of the object (`crate::building_blocks::release`),
+    /// while it
     /// stays released.
     fn released_at(&self) -> Option<u64> {
         None
@@ -32,7 +39,7 @@ pub trait TeamController: Send {
     /// The present members changed (sorted ids).
     fn set_members(&mut self, _members: &[String]) {}
     /// Robots that joined the running team with their hands out of the grasp (sorted ids):
-    /// their free hands keep clear of the object (`units::targets::Targets::keep_clear`).
+    /// their free hands keep clear of the object (`building_blocks::targets::Targets::keep_clear`).
     fn set_late(&mut self, _robots: &[String]) {}
     /// Why the controller cannot run yet (e.g. descriptions missing), if so.
     fn not_ready(&self, _members: &[String]) -> Option<String> {

@@ -31,7 +31,10 @@ impl JointDampingConfig {
         if self.damping.is_finite() && self.damping >= 0.0 {
             Ok(())
         } else {
-            Err(ControllerError::Config(format!("damping: {} must be finite and non-negative", self.damping)))
+            Err(ControllerError::Config(format!(
+                "damping: {} must be finite and non-negative",
+                self.damping
+            )))
         }
     }
 }
@@ -41,13 +44,22 @@ impl TeamController for JointDamping {
         "joint-damping (smoke)"
     }
 
-    fn solve(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError> {
+    fn solve(
+        &mut self,
+        tick: &[DynamicsTerms],
+        out: &mut Vec<TorqueCommand>,
+    ) -> Result<(), ControllerError> {
         out.clear();
         for terms in tick {
             // Actuated joints follow the 6 base coordinates of a floating-base robot.
             let v = &terms.velocity[terms.nv() - terms.actuated()..];
             out.push(TorqueCommand {
-                header: protocol::Header::new(&terms.header.team, terms.header.robot.as_deref(), terms.header.tick, 0),
+                header: protocol::Header::new(
+                    &terms.header.team,
+                    terms.header.robot.as_deref(),
+                    terms.header.tick,
+                    0,
+                ),
                 tau: v.iter().map(|qd| -self.damping * qd).collect(),
                 hold: false,
                 delay_ticks: 0,

@@ -19,9 +19,10 @@
 //! * [`team`]: the team of a tick ([`team::Team`]: block-diagonal `M`, stacked `h`, `v`, `S`,
 //!   contact and task frames), membership ([`team::membership`]) and the gathering of a tick's
 //!   terms ([`team::assembly`]).
-//! * [`units`]: pieces both controllers and the capacity check compose: the contact
-//!   parameters ([`units::contact_margins::ContactMargins`]), the contact list and Jacobian, the
-//!   torque limits, the object's load, impedance tasks and their targets, the rigid grasp, the
+//! * [`building_blocks`]: pieces both controllers and the capacity check compose: the contact
+//!   parameters ([`building_blocks::contact_margins::ContactMargins`]), the contact list and
+//!   Jacobian, the torque limits, the object's load, impedance tasks and their
+//!   targets, the rigid grasp, the
 //!   release, the PIDC projections and the tick's messages.
 //! * [`qp`]: the contact-force QP (constraint rows, problem, settings with the [`qp::QpPath`]
 //!   chain, solvers, the one Clarabel call).
@@ -30,8 +31,10 @@
 //!   the controller's limits hold the object, the binding limits when not, the payload capacity.
 //! * [`service`], [`diagnostics`]: the Zenoh loop and the diagnostics history.
 
+pub mod building_blocks;
 pub mod capacity;
 pub mod controller;
+pub mod controller_shell;
 pub mod diagnostics;
 pub mod joint_damping;
 pub mod linalg;
@@ -41,9 +44,9 @@ pub mod qp;
 pub mod service;
 pub mod spec;
 pub mod team;
-pub mod units;
 
 pub use controller::{ControllerError, TeamController};
+pub use controller_shell::{ControlLaw, Shell, ShellConfig, ShellState};
 pub use joint_damping::JointDamping;
 pub use mqp::{Mqp, MqpConfig};
 pub use pidc::{Pidc, PidcConfig};

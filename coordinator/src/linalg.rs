@@ -152,7 +152,16 @@ pub fn add_product(out: &mut DMatrix<f64>, alpha: f64, a: MatRef<'_, f64>, b: Ma
 /// Panics if the shapes disagree (a programming error: every caller sizes its operands).
 pub fn gemm(dst: MatMut<'_, f64>, beta: f64, alpha: f64, a: MatRef<'_, f64>, b: MatRef<'_, f64>) {
     let (m, n, k) = (a.nrows(), b.ncols(), a.ncols());
-    assert!(dst.nrows() == m && dst.ncols() == n && b.nrows() == k, "gemm: {}x{} = {}x{} * {}x{}", dst.nrows(), dst.ncols(), m, k, b.nrows(), n);
+    assert!(
+        dst.nrows() == m && dst.ncols() == n && b.nrows() == k,
+        "gemm: {}x{} = {}x{} * {}x{}",
+        dst.nrows(),
+        dst.ncols(),
+        m,
+        k,
+        b.nrows(),
+        n
+    );
     if m == 0 || n == 0 {
         return;
     }
@@ -216,7 +225,12 @@ pub struct Pinv {
 impl Pinv {
     /// `out = a^+` (shaped `cols x rows`); returns the rank. `None` when `a` is not finite or
     /// the SVD does not converge.
-    pub fn compute(&mut self, a: MatRef<'_, f64>, rel_tol: f64, out: &mut DMatrix<f64>) -> Option<usize> {
+    pub fn compute(
+        &mut self,
+        a: MatRef<'_, f64>,
+        rel_tol: f64,
+        out: &mut DMatrix<f64>,
+    ) -> Option<usize> {
         let (r, c) = (a.nrows(), a.ncols());
         zeros(out, c, r);
         let k = r.min(c);
@@ -228,14 +242,7 @@ impl Pinv {
                 return None;
             }
         }
-        if self.shape != (r, c) || self.buf.is_none() {
-            let req = svd_scratch::<f64>(r, c, ComputeSvdVectors::Thin, ComputeSvdVectors::Thin, Par::Seq, Default::default());
-            self.buf = Some(MemBuffer::new(req.or(StackReq::EMPTY)));
-            self.u = DMatrix::zeros(r, k);
-            self.v = DMatrix::zeros(c, k);
-            self.s = vec![0.0; k];
-            self.shape = (r, c);
-        }
+        self.size_for(r, c, k);
         let stack = MemStack::new(self.buf.as_mut().expect("allocated above"));
         let scope = Decomposition::start();
         let result = svd(
@@ -274,13 +281,34 @@ impl Pinv {
 }
 
 impl Pinv {
+    /// The SVD's workspace and thin factors for an `r x c` matrix (`k = min(r, c)`),
+    /// reallocated only when the shape changes.
+    fn size_for(&mut self, r: usize, c: usize, k: usize) {
+        if self.shape != (r, c) || self.buf.is_none() {
+            let req = svd_scratch::<f64>(
+                r,
+                c,
+                ComputeSvdVectors::Thin,
+                ComputeSvdVectors::Thin,
+                Par::Seq,
+                Default::default(),
+            );
+            self.buf = Some(MemBuffer::new(req.or(StackReq::EMPTY)));
+            self.u = DMatrix::zeros(r, k);
+            self.v = DMatrix::zeros(c, k);
+            self.s = vec![0.0; k];
+            self.shape = (r, c);
+        }
+    }
+
     /// `out = a^+` by nalgebra's SVD (allocates), with the same rank rule; `None` if it fails.
     fn fallback(a: MatRef<'_, f64>, rel_tol: f64, out: &mut DMatrix<f64>) -> Option<usize> {
         zeros(out, a.ncols(), a.nrows());
         let m = DMatrix::from_fn(a.nrows(), a.ncols(), |i, j| a[(i, j)]);
         let svd = m.try_svd(true, true, f64::EPSILON, 0)?;
         let smax = svd.singular_values.max();
-        let rank = svd.singular_values.iter().filter(|&&x| x > (rel_tol * smax).max(1e-300)).count();
+        let rank =
+            svd.singular_values.iter().filter(|&&x| x > (rel_tol * smax).max(1e-300)).count();
         let pinv = svd.pseudo_inverse((rel_tol * smax).max(1e-300)).ok()?;
         if !pinv.iter().all(|x| x.is_finite()) {
             return None;
@@ -320,12 +348,28 @@ impl Inverse {
         self.lu.copy_from(a);
         let buf = self.buf.as_mut().expect("allocated above");
         let _scope = Decomposition::start();
-        let (_, perm) = factor::lu_in_place(mat_mut(&mut self.lu), &mut self.perm, &mut self.perm_inv, Par::Seq, MemStack::new(buf), Default::default());
-        let (lo, hi) = (0..n).map(|i| self.lu[(i, i)].abs()).fold((f64::INFINITY, 0.0f64), |(lo, hi), p| (lo.min(p), hi.max(p)));
+        let (_, perm) = factor::lu_in_place(
+            mat_mut(&mut self.lu),
+            &mut self.perm,
+            &mut self.perm_inv,
+            Par::Seq,
+            MemStack::new(buf),
+            Default::default(),
+        );
+        let (lo, hi) = (0..n)
+            .map(|i| self.lu[(i, i)].abs())
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), p| (lo.min(p), hi.max(p)));
         if !(hi.is_finite() && lo > PIVOT_TOL * hi) {
             return None;
         }
-        inverse::inverse(mat_mut(out), mat(&self.lu), mat(&self.lu), perm, Par::Seq, MemStack::new(buf));
+        inverse::inverse(
+            mat_mut(out),
+            mat(&self.lu),
+            mat(&self.lu),
+            perm,
+            Par::Seq,
+            MemStack::new(buf),
+        );
         out.iter().all(|x| x.is_finite()).then_some(())
     }
 }
@@ -405,7 +449,13 @@ impl SpdInverse {
         let x = mat(&self.x);
         for j0 in (0..n).step_by(CHOLESKY_BLOCK) {
             let nj = CHOLESKY_BLOCK.min(n - j0);
-            gemm(mat_mut(out).submatrix_mut(j0, j0, n - j0, nj), 0.0, 1.0, x.submatrix(j0, j0, n - j0, n - j0).transpose(), x.submatrix(j0, j0, n - j0, nj));
+            gemm(
+                mat_mut(out).submatrix_mut(j0, j0, n - j0, nj),
+                0.0,
+                1.0,
+                x.submatrix(j0, j0, n - j0, n - j0).transpose(),
+                x.submatrix(j0, j0, n - j0, nj),
+            );
         }
         let o = out.as_mut_slice();
         for j in 0..n {
@@ -420,7 +470,8 @@ impl SpdInverse {
 /// Cholesky `A = L L^T` of the leading `dim x dim` block of the column-major `a` (leading
 /// dimension `ld`), in place: the lower triangle becomes `L`; the strict upper triangle is not
 /// read, and near the diagonal it is left with unspecified values (the block products write
-/// whole diagonal blocks). Nothing outside the leading block is touched. `None` on a pivot not above `rel` times the largest diagonal entry, or not finite.
+/// whole diagonal blocks). Nothing outside the leading block is touched. `None` on a pivot not
+/// above `rel` times the largest diagonal entry, or not finite.
 ///
 /// Blocked, right-looking: each block of [`CHOLESKY_BLOCK`] columns is factored left-looking
 /// (axpys on contiguous columns, its panel below included), then the trailing lower triangle
@@ -457,11 +508,18 @@ pub fn cholesky_in_place(a: &mut [f64], ld: usize, dim: usize, rel: f64) -> Opti
             // in the columns from t0 on (disjoint parts of the slice).
             let (left, right) = a.split_at_mut(t0 * ld);
             let panel = MatRef::from_column_major_slice_with_stride(&left[k0 * ld..], dim, kb, ld);
-            let mut trailing = MatMut::from_column_major_slice_with_stride_mut(right, dim, dim - t0, ld);
+            let mut trailing =
+                MatMut::from_column_major_slice_with_stride_mut(right, dim, dim - t0, ld);
             for j0 in (t0..dim).step_by(CHOLESKY_BLOCK) {
                 let nj = CHOLESKY_BLOCK.min(dim - j0);
                 let dst = trailing.as_mut().submatrix_mut(j0, j0 - t0, dim - j0, nj);
-                gemm(dst, 1.0, -1.0, panel.subrows(j0, dim - j0), panel.subrows(j0, nj).transpose());
+                gemm(
+                    dst,
+                    1.0,
+                    -1.0,
+                    panel.subrows(j0, dim - j0),
+                    panel.subrows(j0, nj).transpose(),
+                );
             }
         }
     }
@@ -473,7 +531,14 @@ pub fn cholesky_in_place(a: &mut [f64], ld: usize, dim: usize, rel: f64) -> Opti
 /// (leading dimension `ldl`, as [`cholesky_in_place`] leaves it; its strict upper triangle
 /// is not read). Blocked: each block of [`CHOLESKY_BLOCK`] rows is solved by axpys, then the
 /// rows below take `X_2 -= L_21 X_1` as one [`gemm`].
-pub fn lower_solve_in_place(l: &[f64], ldl: usize, n: usize, x: &mut [f64], ldx: usize, cols: usize) {
+pub fn lower_solve_in_place(
+    l: &[f64],
+    ldl: usize,
+    n: usize,
+    x: &mut [f64],
+    ldx: usize,
+    cols: usize,
+) {
     if n == 0 || cols == 0 {
         return;
     }
@@ -485,7 +550,9 @@ pub fn lower_solve_in_place(l: &[f64], ldl: usize, n: usize, x: &mut [f64], ldx:
                 let xi = col[i] / l[i * ldl + i];
                 col[i] = xi;
                 if xi != 0.0 {
-                    for (y, li) in col[i + 1..end].iter_mut().zip(&l[i * ldl + i + 1..i * ldl + end]) {
+                    for (y, li) in
+                        col[i + 1..end].iter_mut().zip(&l[i * ldl + i + 1..i * ldl + end])
+                    {
                         *y -= xi * li;
                     }
                 }
@@ -496,7 +563,13 @@ pub fn lower_solve_in_place(l: &[f64], ldl: usize, n: usize, x: &mut [f64], ldx:
             let lm = MatRef::from_column_major_slice_with_stride(l, n, n, ldl);
             let mut xm = MatMut::from_column_major_slice_with_stride_mut(x, n, cols, ldx);
             let (top, below) = xm.as_mut().split_at_row_mut(end);
-            gemm(below, 1.0, -1.0, lm.submatrix(end, k0, n - end, end - k0), top.as_ref().subrows(k0, end - k0));
+            gemm(
+                below,
+                1.0,
+                -1.0,
+                lm.submatrix(end, k0, n - end, end - k0),
+                top.as_ref().subrows(k0, end - k0),
+            );
         }
     }
 }
@@ -553,7 +626,8 @@ pub fn quat_wxyz(r: &Rotation3<f64>) -> [f64; 4] {
 
 /// Rotation of a quaternion `(w, x, y, z)` (normalised first).
 pub fn rotation_from_wxyz(q: &[f64; 4]) -> Rotation3<f64> {
-    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3])).to_rotation_matrix()
+    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]))
+        .to_rotation_matrix()
 }
 
 #[cfg(test)]
@@ -645,7 +719,10 @@ mod tests {
         let r = Rotation3::from_matrix_unchecked(m);
         assert!(r.scaled_axis().x.is_nan(), "the case no longer reproduces nalgebra's NaN");
         let e = rotation_error(&r, &Rotation3::identity());
-        assert!(e.iter().all(|x| x.is_finite()) && (e - Vector3::new(0.0, 0.0, 1e-12)).norm() < 1e-15, "error {e:?}");
+        assert!(
+            e.iter().all(|x| x.is_finite()) && (e - Vector3::new(0.0, 0.0, 1e-12)).norm() < 1e-15,
+            "error {e:?}"
+        );
     }
 
     /// Against nalgebra's own SVD and the Moore-Penrose conditions, on a rank-deficient matrix.
@@ -675,13 +752,16 @@ mod tests {
 
     #[test]
     fn spd_inverse_inverts_gram_matrices_and_declines_rank_deficient_ones() {
-        let j = DMatrix::<f64>::from_fn(5, 8, |i, k| ((i * 3 + k * 5) % 7) as f64 - 3.0 + if i == k { 4.0 } else { 0.0 });
+        let j = DMatrix::<f64>::from_fn(5, 8, |i, k| {
+            ((i * 3 + k * 5) % 7) as f64 - 3.0 + if i == k { 4.0 } else { 0.0 }
+        });
         let gram = &j * j.transpose();
         let mut ws = SpdInverse::default();
         let mut x = DMatrix::zeros(0, 0);
         ws.compute(mat(&gram), &mut x).expect("positive definite");
         assert!((&gram * &x - DMatrix::identity(5, 5)).amax() < 1e-12);
-        let six = Matrix6::from_fn(|i, k| gram[(i.min(4), k.min(4))] + if i == k { 1.0 } else { 0.0 });
+        let six =
+            Matrix6::from_fn(|i, k| gram[(i.min(4), k.min(4))] + if i == k { 1.0 } else { 0.0 });
         assert!((six * spd6_inverse(&six).expect("regular") - Matrix6::identity()).amax() < 1e-10);
         let mut low = j.clone();
         let r0 = low.row(0).into_owned();
@@ -692,7 +772,9 @@ mod tests {
         // Across the column blocks of the product X^T X, into a dirty buffer of that shape,
         // symmetric to the last bit (the upper triangle is mirrored).
         for n in [16, 17, 40, 54] {
-            let j = DMatrix::<f64>::from_fn(n, n + 3, |i, k| ((i * 7 + k * 3) % 13) as f64 - 6.0 + if i == k { 9.0 } else { 0.0 });
+            let j = DMatrix::<f64>::from_fn(n, n + 3, |i, k| {
+                ((i * 7 + k * 3) % 13) as f64 - 6.0 + if i == k { 9.0 } else { 0.0 }
+            });
             let gram = &j * j.transpose();
             let mut inv = DMatrix::from_element(n, n, f64::NAN);
             ws.compute(mat(&gram), &mut inv).expect("positive definite");
@@ -709,7 +791,9 @@ mod tests {
     fn spd_factor_solves_and_declines_as_the_inverse_does() {
         let mut l = DMatrix::from_element(3, 3, f64::NAN);
         for n in [1, 5, 16, 17, 54] {
-            let j = DMatrix::<f64>::from_fn(n, n + 3, |i, k| ((i * 7 + k * 3) % 13) as f64 - 6.0 + if i == k { 9.0 } else { 0.0 });
+            let j = DMatrix::<f64>::from_fn(n, n + 3, |i, k| {
+                ((i * 7 + k * 3) % 13) as f64 - 6.0 + if i == k { 9.0 } else { 0.0 }
+            });
             let gram = &j * j.transpose();
             spd_factor(mat(&gram), &mut l).expect("positive definite");
             let b = DVector::from_fn(n, |i, _| (i as f64 * 0.37).sin() + 0.5);
@@ -718,7 +802,9 @@ mod tests {
             let err = (&gram * &x - &b).amax() / b.amax();
             assert!(err < 1e-10, "n = {n}: |A x - b| = {err:e}");
         }
-        let j = DMatrix::<f64>::from_fn(5, 8, |i, k| ((i * 3 + k * 5) % 7) as f64 - 3.0 + if i == k { 4.0 } else { 0.0 });
+        let j = DMatrix::<f64>::from_fn(5, 8, |i, k| {
+            ((i * 3 + k * 5) % 7) as f64 - 3.0 + if i == k { 4.0 } else { 0.0 }
+        });
         let mut low = j.clone();
         let r0 = low.row(0).into_owned();
         low.row_mut(4).copy_from(&(r0 * 2.0));
@@ -730,7 +816,9 @@ mod tests {
     /// an indefinite matrix.
     #[test]
     fn cholesky_in_place_and_lower_inverse_are_a_factor_and_its_inverse() {
-        let j = DMatrix::<f64>::from_fn(7, 9, |i, k| ((i * 5 + k * 3) % 11) as f64 - 5.0 + if i == k { 6.0 } else { 0.0 });
+        let j = DMatrix::<f64>::from_fn(7, 9, |i, k| {
+            ((i * 5 + k * 3) % 11) as f64 - 5.0 + if i == k { 6.0 } else { 0.0 }
+        });
         let a = &j * j.transpose();
         let mut l = a.clone();
         cholesky_in_place(l.as_mut_slice(), 7, 7, 0.0).expect("positive definite");
@@ -755,7 +843,9 @@ mod tests {
     #[test]
     fn blocked_cholesky_of_a_leading_block_is_a_factor() {
         let (ld, dim) = (70, 2 * CHOLESKY_BLOCK + 13);
-        let j = DMatrix::<f64>::from_fn(dim, dim + 5, |i, k| (((i * 7 + k * 13) % 17) as f64 - 8.0) / 8.0 + if i == k { 3.0 } else { 0.0 });
+        let j = DMatrix::<f64>::from_fn(dim, dim + 5, |i, k| {
+            (((i * 7 + k * 13) % 17) as f64 - 8.0) / 8.0 + if i == k { 3.0 } else { 0.0 }
+        });
         let a = &j * j.transpose();
         let mut buf = DMatrix::from_element(ld, ld, 7.0);
         buf.view_mut((0, 0), (dim, dim)).copy_from(&a);
@@ -776,15 +866,27 @@ mod tests {
         assert!((0..dim).all(|c| (0..c).all(|r| x[(r, c)] == 0.0)), "X lower triangular");
         let mut indefinite = a.clone();
         indefinite[(dim - 2, dim - 2)] = -1.0;
-        assert!(cholesky_in_place(indefinite.as_mut_slice(), dim, dim, 0.0).is_none(), "a pivot in the last block fails");
+        assert!(
+            cholesky_in_place(indefinite.as_mut_slice(), dim, dim, 0.0).is_none(),
+            "a pivot in the last block fails"
+        );
     }
 
     /// The blocked forward substitution solves `L X = B` over several blocks, in buffers
     /// larger than the system (leading dimensions above `n`), and leaves the rest untouched.
     #[test]
     fn lower_solve_in_place_solves_the_triangular_system() {
-        let (n, cols, ldl, ldx) = (3 * CHOLESKY_BLOCK + 5, 7, 60 + 3 * CHOLESKY_BLOCK, 4 * CHOLESKY_BLOCK);
-        let low = DMatrix::<f64>::from_fn(n, n, |i, k| if i < k { 0.0 } else if i == k { 2.0 + (i % 3) as f64 } else { (((i * 5 + k * 3) % 11) as f64 - 5.0) / 20.0 });
+        let (n, cols, ldl, ldx) =
+            (3 * CHOLESKY_BLOCK + 5, 7, 60 + 3 * CHOLESKY_BLOCK, 4 * CHOLESKY_BLOCK);
+        let low = DMatrix::<f64>::from_fn(n, n, |i, k| {
+            if i < k {
+                0.0
+            } else if i == k {
+                2.0 + (i % 3) as f64
+            } else {
+                (((i * 5 + k * 3) % 11) as f64 - 5.0) / 20.0
+            }
+        });
         let b = DMatrix::<f64>::from_fn(n, cols, |i, k| ((i * 3 + k * 7) % 13) as f64 - 6.0);
         let mut l = DMatrix::from_element(ldl, n, f64::NAN);
         for c in 0..n {
@@ -797,7 +899,13 @@ mod tests {
         lower_solve_in_place(l.as_slice(), ldl, n, x.as_mut_slice(), ldx, cols);
         let sol = x.view((0, 0), (n, cols)).into_owned();
         assert!((&low * &sol - &b).amax() < 1e-12 * b.amax(), "L X = B");
-        assert!(x.view((n, 0), (ldx - n, cols + 1)).iter().chain(x.column(cols).iter()).all(|&v| v == 5.0), "outside X written");
+        assert!(
+            x.view((n, 0), (ldx - n, cols + 1))
+                .iter()
+                .chain(x.column(cols).iter())
+                .all(|&v| v == 5.0),
+            "outside X written"
+        );
     }
 
     /// `gemm` with an empty inner dimension: `dst = beta dst`, and `beta = 0` clears a buffer
@@ -821,7 +929,13 @@ mod tests {
 
     #[test]
     fn inverse_by_lu_and_singular_matrices() {
-        let a = DMatrix::<f64>::from_fn(6, 6, |i, j| if i == j { 4.0 } else { ((i + 2 * j) % 3) as f64 - 1.0 });
+        let a = DMatrix::<f64>::from_fn(6, 6, |i, j| {
+            if i == j {
+                4.0
+            } else {
+                ((i + 2 * j) % 3) as f64 - 1.0
+            }
+        });
         let mut ws = Inverse::default();
         let mut x = DMatrix::zeros(0, 0);
         ws.compute(&a, &mut x).expect("regular");

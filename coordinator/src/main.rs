@@ -6,7 +6,7 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use coordinator::service::{self, CoordinatorConfig};
-use coordinator::team::assembly::Reuse;
+use coordinator::team::assembly::TermsReuse;
 use coordinator::ControllerSpec;
 use protocol::transport::{self, Role, ZenohArgs};
 
@@ -34,9 +34,9 @@ enum Command {
         /// joint-damping.
         #[arg(long, value_parser = parse_kind)]
         controller: Option<ControllerSpec>,
-        /// Controller file (TOML): `kind = "pidc"`, `"mqp"` or `"joint-damping"` and the controller's
-        /// parameters (see `ControllerSpec`). Enough alone; with --controller the kinds must
-        /// agree.
+        /// Controller file (TOML): `kind = "pidc"`, `"mqp"` or `"joint-damping"` and the
+        /// controller's parameters (see `ControllerSpec`). Enough alone; with --controller the
+        /// kinds must agree.
         #[arg(long)]
         controller_config: Option<PathBuf>,
         /// Joint damping of the joint-damping controller, N·m·s/rad (default 2).
@@ -75,13 +75,25 @@ fn parse_kind(kind: &str) -> Result<ControllerSpec, String> {
 }
 
 /// The controller the flags choose (see `Command::Run`).
-fn controller_spec(kind: Option<ControllerSpec>, file: Option<&Path>, damping: Option<f64>) -> Result<ControllerSpec> {
+fn controller_spec(
+    kind: Option<ControllerSpec>,
+    file: Option<&Path>,
+    damping: Option<f64>,
+) -> Result<ControllerSpec> {
     let mut spec = match (kind, file) {
         (kind, Some(path)) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-            let spec = ControllerSpec::from_toml(&text).with_context(|| format!("controller file {}", path.display()))?;
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            let spec = ControllerSpec::from_toml(&text)
+                .with_context(|| format!("controller file {}", path.display()))?;
             if let Some(k) = kind {
-                anyhow::ensure!(k.kind() == spec.kind(), "--controller {} but {} has kind = \"{}\"", k.kind(), path.display(), spec.kind());
+                anyhow::ensure!(
+                    k.kind() == spec.kind(),
+                    "--controller {} but {} has kind = \"{}\"",
+                    k.kind(),
+                    path.display(),
+                    spec.kind()
+                );
             }
             spec
         }
@@ -91,7 +103,11 @@ fn controller_spec(kind: Option<ControllerSpec>, file: Option<&Path>, damping: O
     if let Some(d) = damping {
         match &mut spec {
             ControllerSpec::JointDamping(c) => c.damping = d,
-            other => anyhow::bail!("--damping is the joint-damping controller's; {} takes its parameters from --controller-config", other.kind()),
+            other => anyhow::bail!(
+                "--damping is the joint-damping controller's; {} takes its parameters from \
+                 --controller-config",
+                other.kind()
+            ),
         }
     }
     spec.check()?;
@@ -102,15 +118,41 @@ fn controller_spec(kind: Option<ControllerSpec>, file: Option<&Path>, damping: O
 async fn main() -> Result<()> {
     protocol::logging::init(protocol::logging::Verbosity::Info);
     match Cli::parse().command {
-        Command::Run { team, tick_deadline_ms, controller, controller_config, damping, reuse_after_us, reuse_max_age, expect, robot_hz, wait_for_references_ms, zenoh } => {
-            anyhow::ensure!(robot_hz.is_none_or(|hz| hz.is_finite() && hz > 0.0), "--robot-hz must be a positive rate in Hz, not {robot_hz:?}");
-            let controller = controller_spec(controller, controller_config.as_deref(), damping)?.build()?;
+        Command::Run {
+            team,
+            tick_deadline_ms,
+            controller,
+            controller_config,
+            damping,
+            reuse_after_us,
+            reuse_max_age,
+            expect,
+            robot_hz,
+            wait_for_references_ms,
+            zenoh,
+        } => {
+            anyhow::ensure!(
+                robot_hz.is_none_or(|hz| hz.is_finite() && hz > 0.0),
+                "--robot-hz must be a positive rate in Hz, not {robot_hz:?}"
+            );
+            let controller =
+                controller_spec(controller, controller_config.as_deref(), damping)?.build()?;
             let session = transport::open(&zenoh, Role::Hub).await?;
-            let reuse = reuse_after_us.zip(reuse_max_age).map(|(us, max_age)| Reuse { after: Duration::from_micros(us), max_age });
+            let reuse = reuse_after_us
+                .zip(reuse_max_age)
+                .map(|(us, max_age)| TermsReuse { after: Duration::from_micros(us), max_age });
             for r in &expect {
                 protocol::validate_id("robot", r).map_err(|e| anyhow::anyhow!("--expect: {e}"))?;
             }
-            let cfg = CoordinatorConfig { team, tick_deadline: Duration::from_millis(tick_deadline_ms), reuse, expected: expect, robot_hz, wait_for_references: (wait_for_references_ms > 0).then(|| Duration::from_millis(wait_for_references_ms)) };
+            let cfg = CoordinatorConfig {
+                team,
+                tick_deadline: Duration::from_millis(tick_deadline_ms),
+                reuse,
+                expected: expect,
+                robot_hz,
+                wait_for_references: (wait_for_references_ms > 0)
+                    .then(|| Duration::from_millis(wait_for_references_ms)),
+            };
             let (tx, rx) = tokio::sync::watch::channel(false);
             tokio::spawn(async move {
                 let _ = tokio::signal::ctrl_c().await;
@@ -129,7 +171,8 @@ mod tests {
     use coordinator::joint_damping::JointDampingConfig;
 
     fn file(name: &str, text: &str) -> PathBuf {
-        let path = std::env::temp_dir().join(format!("coordinator-{}-{name}.toml", std::process::id()));
+        let path =
+            std::env::temp_dir().join(format!("coordinator-{}-{name}.toml", std::process::id()));
         std::fs::write(&path, text).expect("temp file");
         path
     }
@@ -137,8 +180,14 @@ mod tests {
     #[test]
     fn one_way_to_choose_the_controller_and_clear_errors() {
         // Neither flag: joint damping (the smoke run); --damping sets it.
-        assert_eq!(controller_spec(None, None, None).unwrap(), ControllerSpec::JointDamping(JointDampingConfig { damping: 2.0 }));
-        assert_eq!(controller_spec(None, None, Some(0.5)).unwrap(), ControllerSpec::JointDamping(JointDampingConfig { damping: 0.5 }));
+        assert_eq!(
+            controller_spec(None, None, None).unwrap(),
+            ControllerSpec::JointDamping(JointDampingConfig { damping: 2.0 })
+        );
+        assert_eq!(
+            controller_spec(None, None, Some(0.5)).unwrap(),
+            ControllerSpec::JointDamping(JointDampingConfig { damping: 0.5 })
+        );
         // A kind alone: its defaults.
         let pidc = parse_kind("pidc").unwrap();
         assert_eq!(controller_spec(Some(pidc.clone()), None, None).unwrap(), pidc);
@@ -146,11 +195,18 @@ mod tests {
         assert!(e.contains("now `pidc`") && e.contains("pidc, joint-damping"), "{e}");
         // A file alone is enough; with --controller the kinds must agree.
         let path = file("pidc", "kind = \"pidc\"\nf_min_hand = 12.0\n");
-        let ControllerSpec::Pidc(c) = controller_spec(None, Some(&path), None).unwrap() else { panic!("pidc file") };
+        let ControllerSpec::Pidc(c) = controller_spec(None, Some(&path), None).unwrap() else {
+            panic!("pidc file")
+        };
         assert_eq!(c.f_min_hand, 12.0);
         assert!(controller_spec(Some(pidc.clone()), Some(&path), None).is_ok());
-        let e = controller_spec(Some(parse_kind("joint-damping").unwrap()), Some(&path), None).unwrap_err().to_string();
-        assert!(e.contains("--controller joint-damping but") && e.contains("kind = \"pidc\""), "{e}");
+        let e = controller_spec(Some(parse_kind("joint-damping").unwrap()), Some(&path), None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("--controller joint-damping but") && e.contains("kind = \"pidc\""),
+            "{e}"
+        );
         // --damping belongs to joint damping.
         let e = controller_spec(Some(pidc), None, Some(1.0)).unwrap_err().to_string();
         assert!(e.contains("--damping"), "{e}");
@@ -160,11 +216,21 @@ mod tests {
         let e = format!("{:#}", controller_spec(None, Some(&bad), None).unwrap_err());
         assert!(e.contains(&bad.display().to_string()) && e.contains("f_min_hnad"), "{e}");
         // The baseline: by kind, or by file with any of its fields.
-        assert_eq!(controller_spec(Some(parse_kind("mqp").unwrap()), None, None).unwrap(), ControllerSpec::Mqp(coordinator::MqpConfig::default()));
+        assert_eq!(
+            controller_spec(Some(parse_kind("mqp").unwrap()), None, None).unwrap(),
+            ControllerSpec::Mqp(coordinator::MqpConfig::default())
+        );
         let mqp = file("mqp", "kind = \"mqp\"\nobject_weight = 3.0\n");
-        let ControllerSpec::Mqp(m) = controller_spec(None, Some(&mqp), None).unwrap() else { panic!("mqp file") };
+        let ControllerSpec::Mqp(m) = controller_spec(None, Some(&mqp), None).unwrap() else {
+            panic!("mqp file")
+        };
         assert_eq!(m.object_weight, 3.0);
-        assert!(controller_spec(None, Some(&mqp), None).unwrap().build().unwrap().name().starts_with("mqp"));
+        assert!(controller_spec(None, Some(&mqp), None)
+            .unwrap()
+            .build()
+            .unwrap()
+            .name()
+            .starts_with("mqp"));
         let _ = std::fs::remove_file(path);
         let _ = std::fs::remove_file(bad);
         let _ = std::fs::remove_file(mqp);

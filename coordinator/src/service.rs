@@ -2,20 +2,23 @@
 //!
 //! Who is commanded is the [`Roster`]'s (members by liveliness, silent members left out, late
 //! ones admitted beside the team); a tick is gathered by the [`TickAssembler`], in real time
-//! with a late member's latest terms reused ([`Reuse`]) so that one late link delays nobody.
+//! with a late member's latest terms reused ([`TermsReuse`]) so that one late link delays nobody.
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, MemberEvent, Qos, TransportError, TypedPublisher};
-use protocol::{CoordinatorMode, CoordinatorStatus, DynamicsTerms, Header, ProtocolError, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
 use protocol::validate::Validate;
+use protocol::{
+    CoordinatorMode, CoordinatorStatus, DynamicsTerms, Header, ProtocolError, RobotDescription,
+    TaskReferences, TickDiagnostics, TorqueCommand,
+};
 use tokio::sync::watch;
 use zenoh::sample::SampleKind;
 use zenoh::Session;
 
-use crate::team::assembly::{AssemblyStatus, Reuse, Reused, TickAssembler};
+use crate::team::assembly::{AssemblyStatus, ReusedTerms, TermsReuse, TickAssembler};
 use crate::team::membership::{Admission, Roster};
 use crate::team::prediction::DelayPredictor;
 use crate::TeamController;
@@ -29,10 +32,10 @@ pub struct CoordinatorConfig {
     pub team: String,
     /// How long a tick may wait for every member's terms before it is abandoned.
     pub tick_deadline: Duration,
-    /// Real time: solve a tick with a late member's latest terms ([`Reuse`]) and leave out a
+    /// Real time: solve a tick with a late member's latest terms ([`TermsReuse`]) and leave out a
     /// member silent for longer, and solve the newest complete tick when several are queued;
     /// `None` (lockstep) waits for every member's own terms and solves every tick in order.
-    pub reuse: Option<Reuse>,
+    pub reuse: Option<TermsReuse>,
     /// The robots the team is made of: the first tick waits until all have joined (every
     /// member holding its posture meanwhile), at most [`FORMATION_TIMEOUT`] from the
     /// coordinator's start ([`Roster::expect`]). Empty: whoever is there.
@@ -60,7 +63,14 @@ pub const FORMATION_TIMEOUT: Duration = Duration::from_secs(3);
 impl CoordinatorConfig {
     /// A lockstep coordinator: no reuse, no expected team.
     pub fn lockstep(team: &str, tick_deadline: Duration) -> Self {
-        CoordinatorConfig { team: team.to_string(), tick_deadline, reuse: None, expected: Vec::new(), robot_hz: None, wait_for_references: None }
+        CoordinatorConfig {
+            team: team.to_string(),
+            tick_deadline,
+            reuse: None,
+            expected: Vec::new(),
+            robot_hz: None,
+            wait_for_references: None,
+        }
     }
 }
 
@@ -82,7 +92,7 @@ pub struct CoordinatorCounters {
     /// Hold orders sent to a single robot outside the team (not a member yet, being admitted,
     /// no description).
     pub held: u64,
-    /// Members' terms taken from an earlier tick (real time, [`Reuse`]).
+    /// Members' terms taken from an earlier tick (real time, [`TermsReuse`]).
     pub reused_terms: u64,
     /// Times a member went silent and was left out.
     pub silenced: u64,
@@ -142,71 +152,30 @@ pub async fn run(
     session: &Session,
     cfg: CoordinatorConfig,
     mut controller: Box<dyn TeamController>,
-    mut stop: watch::Receiver<bool>,
+    stop: watch::Receiver<bool>,
 ) -> Result<CoordinatorCounters, TransportError> {
-    let dynamics = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Dynamics)?).await?;
-    let members_q = transport::watch_members(session, &cfg.team).await?;
-    let descriptions = transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Description)?).await?;
-    // A planner may send many ticks' references at once (the scenario driver does).
-    let references = transport::subscribe_with_capacity(session, keys::references(&cfg.team)?, REFERENCE_QUEUE).await?;
+    let mut io = Inputs::open(session, &cfg, stop).await?;
     // Seen go by agents and bridge; declared last, so whoever sees it is heard (first references).
     let _alive = transport::declare_coordinator(session, &cfg.team).await?;
     let mut svc = Service::start(session, cfg).await?;
-    tracing::info!(team = %svc.cfg.team, controller = controller.name(), reuse = ?svc.cfg.reuse, "coordinator running");
+    tracing::info!(
+        team = %svc.cfg.team,
+        controller = controller.name(),
+        reuse = ?svc.cfg.reuse,
+        "coordinator running"
+    );
 
     let mut assembler = TickAssembler::new(svc.cfg.tick_deadline).with_reuse(svc.cfg.reuse);
     svc.roster.expect(&svc.cfg.expected, Instant::now() + FORMATION_TIMEOUT);
-    // Expired ticks are looked for, and the status published, at least every second.
-    let mut housekeeping = tokio::time::interval(svc.cfg.tick_deadline.clamp(Duration::from_millis(10), Duration::from_secs(1)));
-    let mut described = std::collections::BTreeSet::new();
-    loop {
-        let mut team_changed = false;
-        let mut publish_status = false;
-        // Late terms are reused only once the team has formed: before its first tick every
-        // member's own terms are waited for (one not heard of yet is not silent).
-        let reuse_at = if svc.roster.started() { assembler.reuse_at() } else { None };
-        let departure = svc.roster.next_departure();
-        tokio::select! {
-            _ = stop.changed() => { if *stop.borrow() { break; } }
-            m = members_q.recv_async() => {
-                let Ok(sample) = m else { break };
-                if let Some(ev) = MemberEvent::from_sample(&sample) {
-                    team_changed = svc.member_event(&ev);
-                    publish_status = true;
-                }
-            }
-            d = descriptions.recv_async() => {
-                let Ok(sample) = d else { break };
-                publish_status |= description(&sample, &mut described, controller.as_mut(), &mut svc.counters);
-            }
-            r = references.recv_async() => {
-                let Ok(sample) = r else { break };
-                svc.refs.take_all(&sample, &references, &mut svc.counters);
-            }
-            d = dynamics.recv_async() => {
-                let Ok(sample) = d else { break };
-                let (changed, solved) = svc.on_dynamics(sample, &dynamics, &mut assembler, controller.as_mut(), &references).await?;
-                team_changed |= changed;
-                publish_status |= solved;
-            }
-            _ = sleep_until(departure), if departure.is_some() => {
-                team_changed |= svc.depart_due();
-                publish_status = true;
-            }
-            _ = sleep_until(reuse_at), if reuse_at.is_some() => {
-                let (solved, changed) = svc.reuse_due(&mut assembler, controller.as_mut(), &references).await?;
-                team_changed |= changed;
-                publish_status |= solved;
-            }
-            _ = housekeeping.tick() => {
-                svc.expire(&mut assembler);
-                publish_status = true;
-            }
-        }
-        let (changed, solved) = svc.on_deferred(&dynamics, &mut assembler, controller.as_mut(), &references).await?;
+    while let Some((mut team_changed, mut publish_status)) =
+        svc.next_event(&mut io, &mut assembler, controller.as_mut()).await?
+    {
+        let (changed, solved) = svc
+            .on_deferred(&io.dynamics, &mut assembler, controller.as_mut(), &io.references)
+            .await?;
         (team_changed, publish_status) = (team_changed | changed, publish_status | solved);
         if team_changed {
-            svc.team_changed(&mut assembler, controller.as_mut(), &references).await?;
+            svc.team_changed(&mut assembler, controller.as_mut(), &io.references).await?;
             publish_status = true;
         }
         if publish_status {
@@ -217,10 +186,64 @@ pub async fn run(
     Ok(svc.counters)
 }
 
+/// What the service waits on: the team's keys, its stop signal and its housekeeping timer.
+struct Inputs {
+    dynamics: transport::SampleQueue,
+    members: transport::EventQueue,
+    descriptions: transport::SampleQueue,
+    references: transport::SampleQueue,
+    stop: watch::Receiver<bool>,
+    /// Expired ticks are looked for, and the status published, at least every second.
+    housekeeping: tokio::time::Interval,
+    /// The robots whose description came already (only the first is logged).
+    described: std::collections::BTreeSet<String>,
+}
+
+impl Inputs {
+    /// Subscribe to the team's dynamics, members, descriptions and references on `session`.
+    async fn open(
+        session: &Session,
+        cfg: &CoordinatorConfig,
+        stop: watch::Receiver<bool>,
+    ) -> Result<Inputs, TransportError> {
+        let dynamics =
+            transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Dynamics)?)
+                .await?;
+        let members = transport::watch_members(session, &cfg.team).await?;
+        let descriptions =
+            transport::subscribe(session, keys::all_robots(&cfg.team, RobotTopic::Description)?)
+                .await?;
+        // A planner may send many ticks' references at once (the scenario driver does).
+        let references = transport::subscribe_with_capacity(
+            session,
+            keys::references(&cfg.team)?,
+            REFERENCE_QUEUE,
+        )
+        .await?;
+        let housekeeping = tokio::time::interval(
+            cfg.tick_deadline.clamp(Duration::from_millis(10), Duration::from_secs(1)),
+        );
+        Ok(Inputs {
+            dynamics,
+            members,
+            descriptions,
+            references,
+            stop,
+            housekeeping,
+            described: std::collections::BTreeSet::new(),
+        })
+    }
+}
+
 /// A robot's description arrived in `sample`: handed to the controller; whether it is the
 /// robot's first (readiness may have changed: the status says so now, a lockstep bridge waits
 /// for it). Agents repeat their description every second: only the first is logged.
-fn description(sample: &zenoh::sample::Sample, described: &mut std::collections::BTreeSet<String>, controller: &mut dyn TeamController, counters: &mut CoordinatorCounters) -> bool {
+fn description(
+    sample: &zenoh::sample::Sample,
+    described: &mut std::collections::BTreeSet<String>,
+    controller: &mut dyn TeamController,
+    counters: &mut CoordinatorCounters,
+) -> bool {
     match decode_sample::<RobotDescription>(sample) {
         Ok(desc) => {
             let first = described.insert(desc.header.robot_id().to_string());
@@ -249,11 +272,24 @@ async fn sleep_until(at: Option<Instant>) {
 
 impl<'a> Service<'a> {
     /// The service's publishers on `session`, with nothing solved yet.
-    async fn start(session: &'a Session, cfg: CoordinatorConfig) -> Result<Service<'a>, TransportError> {
+    async fn start(
+        session: &'a Session,
+        cfg: CoordinatorConfig,
+    ) -> Result<Service<'a>, TransportError> {
         Ok(Service {
             session,
-            diag_pub: TypedPublisher::declare(session, keys::diagnostics(&cfg.team)?, Qos::Telemetry).await?,
-            status_pub: TypedPublisher::declare(session, keys::coordinator_status(&cfg.team)?, Qos::Telemetry).await?,
+            diag_pub: TypedPublisher::declare(
+                session,
+                keys::diagnostics(&cfg.team)?,
+                Qos::Telemetry,
+            )
+            .await?,
+            status_pub: TypedPublisher::declare(
+                session,
+                keys::coordinator_status(&cfg.team)?,
+                Qos::Telemetry,
+            )
+            .await?,
             command_pubs: BTreeMap::new(),
             commands: Vec::new(),
             solved_tick: None,
@@ -266,7 +302,10 @@ impl<'a> Service<'a> {
             detail: String::from("waiting for members"),
             released_reported: false,
             deferred: None,
-            predictor: cfg.robot_hz.filter(|hz| hz.is_finite() && *hz > 0.0).map(DelayPredictor::new),
+            predictor: cfg
+                .robot_hz
+                .filter(|hz| hz.is_finite() && *hz > 0.0)
+                .map(DelayPredictor::new),
             started: Instant::now(),
             cfg,
         })
@@ -280,12 +319,76 @@ impl<'a> Service<'a> {
             return None;
         }
         if self.started.elapsed() < limit {
-            return Some(format!("waiting for the task references (at most {:.1} s)", limit.as_secs_f64()));
+            return Some(format!(
+                "waiting for the task references (at most {:.1} s)",
+                limit.as_secs_f64()
+            ));
         }
         if !std::mem::replace(&mut self.refs.gave_up, true) {
-            tracing::warn!(waited_s = limit.as_secs_f64(), "no task references came: every task holds where it is until references name it");
+            tracing::warn!(
+                waited_s = limit.as_secs_f64(),
+                "no task references came: every task holds where it is until references name it"
+            );
         }
         None
+    }
+
+    /// Wait for the next event on `io` and handle it: whether the team changed and whether the
+    /// status is due, or `None` once the service is to stop.
+    async fn next_event(
+        &mut self,
+        io: &mut Inputs,
+        assembler: &mut TickAssembler,
+        controller: &mut dyn TeamController,
+    ) -> Result<Option<(bool, bool)>, TransportError> {
+        let mut team_changed = false;
+        let mut publish_status = false;
+        // Late terms are reused only once the team has formed: before its first tick every
+        // member's own terms are waited for (one not heard of yet is not silent).
+        let reuse_at = if self.roster.started() { assembler.reuse_at() } else { None };
+        let departure = self.roster.next_departure();
+        tokio::select! {
+            _ = io.stop.changed() => { if *io.stop.borrow() { return Ok(None); } }
+            m = io.members.recv_async() => {
+                let Ok(sample) = m else { return Ok(None) };
+                if let Some(ev) = MemberEvent::from_sample(&sample) {
+                    team_changed = self.member_event(&ev);
+                    publish_status = true;
+                }
+            }
+            d = io.descriptions.recv_async() => {
+                let Ok(sample) = d else { return Ok(None) };
+                publish_status |=
+                    description(&sample, &mut io.described, controller, &mut self.counters);
+            }
+            r = io.references.recv_async() => {
+                let Ok(sample) = r else { return Ok(None) };
+                self.refs.take_all(&sample, &io.references, &mut self.counters);
+            }
+            d = io.dynamics.recv_async() => {
+                let Ok(sample) = d else { return Ok(None) };
+                let (changed, solved) = self
+                    .on_dynamics(sample, &io.dynamics, assembler, controller, &io.references)
+                    .await?;
+                team_changed |= changed;
+                publish_status |= solved;
+            }
+            _ = sleep_until(departure), if departure.is_some() => {
+                team_changed |= self.depart_due();
+                publish_status = true;
+            }
+            _ = sleep_until(reuse_at), if reuse_at.is_some() => {
+                let (solved, changed) =
+                    self.reuse_due(assembler, controller, &io.references).await?;
+                team_changed |= changed;
+                publish_status |= solved;
+            }
+            _ = io.housekeeping.tick() => {
+                self.expire(assembler);
+                publish_status = true;
+            }
+        }
+        Ok(Some((team_changed, publish_status)))
     }
 
     /// A member joined or its token vanished: the roster and the status's detail follow;
@@ -294,7 +397,9 @@ impl<'a> Service<'a> {
         let changed = self.roster.apply(ev, Instant::now());
         self.detail = match ev {
             MemberEvent::Joined(r) => format!("robot {r} joined"),
-            MemberEvent::Left(r) if self.roster.is_departing(r) => format!("robot {r}'s token vanished: waiting for its link to come back"),
+            MemberEvent::Left(r) if self.roster.is_departing(r) => {
+                format!("robot {r}'s token vanished: waiting for its link to come back")
+            }
             MemberEvent::Left(r) => self.left(r),
         };
         changed
@@ -320,9 +425,16 @@ impl<'a> Service<'a> {
 
     /// The team changed: a robot that left (or went silent) no longer holds up the ticks it
     /// had not sent, so every pending tick complete without it is solved.
-    async fn team_changed(&mut self, assembler: &mut TickAssembler, controller: &mut dyn TeamController, references: &transport::SampleQueue) -> Result<(), TransportError> {
+    async fn team_changed(
+        &mut self,
+        assembler: &mut TickAssembler,
+        controller: &mut dyn TeamController,
+        references: &transport::SampleQueue,
+    ) -> Result<(), TransportError> {
         for tick in assembler.pending_ticks() {
-            if let AssemblyStatus::Complete(t, terms) = assembler.try_complete(tick, self.roster.team()) {
+            if let AssemblyStatus::Complete(t, terms) =
+                assembler.try_complete(tick, self.roster.team())
+            {
                 self.solve(controller, t, terms, references, Vec::new()).await?;
             }
         }
@@ -331,7 +443,14 @@ impl<'a> Service<'a> {
 
     /// Terms arrived (`sample`, then whatever else is queued): the complete tick solved.
     /// Whether the team changed, and whether the status is due.
-    async fn on_dynamics(&mut self, sample: zenoh::sample::Sample, queue: &transport::SampleQueue, assembler: &mut TickAssembler, controller: &mut dyn TeamController, references: &transport::SampleQueue) -> Result<(bool, bool), TransportError> {
+    async fn on_dynamics(
+        &mut self,
+        sample: zenoh::sample::Sample,
+        queue: &transport::SampleQueue,
+        assembler: &mut TickAssembler,
+        controller: &mut dyn TeamController,
+        references: &transport::SampleQueue,
+    ) -> Result<(bool, bool), TransportError> {
         let (newest, changed) = self.gather(sample, queue, assembler, controller).await?;
         let mut solved = false;
         if let Some((tick, terms)) = newest {
@@ -343,7 +462,13 @@ impl<'a> Service<'a> {
     /// Lockstep: the terms deferred while a tick was completed ([`Service::deferred`]), each
     /// tick they complete solved in order. Whether the team changed, and whether the status is
     /// due.
-    async fn on_deferred(&mut self, queue: &transport::SampleQueue, assembler: &mut TickAssembler, controller: &mut dyn TeamController, references: &transport::SampleQueue) -> Result<(bool, bool), TransportError> {
+    async fn on_deferred(
+        &mut self,
+        queue: &transport::SampleQueue,
+        assembler: &mut TickAssembler,
+        controller: &mut dyn TeamController,
+        references: &transport::SampleQueue,
+    ) -> Result<(bool, bool), TransportError> {
         let (mut changed, mut solved) = (false, false);
         while let Some(sample) = self.deferred.take() {
             let (c, s) = self.on_dynamics(sample, queue, assembler, controller, references).await?;
@@ -372,45 +497,25 @@ impl<'a> Service<'a> {
                 team_changed |= self.announced_leave(&sample);
             } else if let Some(terms) = decode_terms(&sample, &mut self.counters) {
                 let (robot, tick) = (terms.header.robot_id().to_string(), terms.header.tick);
-                if self.cfg.reuse.is_none() && newest.as_ref().is_some_and(|(done, _)| tick > *done) {
+                if self.cfg.reuse.is_none() && newest.as_ref().is_some_and(|(done, _)| tick > *done)
+                {
                     // Lockstep solves every tick: a newer one waits for this one's solve.
                     self.deferred = Some(sample);
                     break;
                 }
-                let waiting = self.roster.forming(Instant::now());
-                if !waiting.is_empty() {
-                    self.counters.not_ready += 1;
-                    let why = format!("forming the team: waiting for {waiting:?} to join");
-                    self.detail.clone_from(&why);
-                    self.hold_one(&robot, tick, &why).await?;
+                if self.hold_while_forming(&robot, tick).await? {
                     next = None;
                     continue;
                 }
-                let outcome = if let Some(newest) = assembler.ahead_of_team(&robot, tick, self.roster.team()) {
-                    self.counters.rejected_terms += 1;
-                    let why = format!("terms of tick {tick}, more than {} ticks ahead of the team's newest, {newest}", crate::team::assembly::MAX_LEAD_TICKS);
-                    self.counters.refuse("dynamics terms", sample.key_expr().as_str(), &why);
+                let outcome = if self.refuse_ahead(&sample, &robot, tick, assembler) {
                     AssemblyStatus::Pending
                 } else if let Err(e) = controller.check_terms(&terms) {
                     self.refuse_terms(&sample, &robot, tick, &e.to_string(), assembler).await?
                 } else {
-                    self.admit(&robot, tick, terms, assembler, controller, &mut team_changed).await?
+                    self.admit(&robot, tick, terms, assembler, controller, &mut team_changed)
+                        .await?
                 };
-                match outcome {
-                    AssemblyStatus::Complete(tick, terms) => {
-                        if let Some((old, _)) = newest.replace((tick, terms)) {
-                            self.counters.overtaken += 1;
-                            tracing::debug!(tick = old, newer = tick, "complete tick overtaken by a newer one: not solved");
-                        }
-                    }
-                    AssemblyStatus::Stale(t) => {
-                        tracing::debug!(tick = t, "dynamics terms of a tick solved already");
-                        if assembler.last_completed() == Some(t) {
-                            self.answer_again(&robot, t).await?;
-                        }
-                    }
-                    AssemblyStatus::Pending => {}
-                }
+                self.keep_newest(outcome, &robot, &mut newest, assembler).await?;
             }
             // Once a tick is complete, the queued terms are read too: copies of its terms (the
             // lockstep bridge republishes states), or in real time a newer complete tick that
@@ -421,9 +526,83 @@ impl<'a> Service<'a> {
         Ok((newest, team_changed))
     }
 
+    /// While the team forms, `robot`'s terms of `tick` are answered with a hold order (and the
+    /// tick counted as not ready); whether they were.
+    async fn hold_while_forming(&mut self, robot: &str, tick: u64) -> Result<bool, TransportError> {
+        let waiting = self.roster.forming(Instant::now());
+        if waiting.is_empty() {
+            return Ok(false);
+        }
+        self.counters.not_ready += 1;
+        let why = format!("forming the team: waiting for {waiting:?} to join");
+        self.detail.clone_from(&why);
+        self.hold_one(robot, tick, &why).await?;
+        Ok(true)
+    }
+
+    /// Terms of `tick` too far ahead of the team's newest tick are refused (and counted);
+    /// whether they were.
+    fn refuse_ahead(
+        &mut self,
+        sample: &zenoh::sample::Sample,
+        robot: &str,
+        tick: u64,
+        assembler: &TickAssembler,
+    ) -> bool {
+        let Some(newest) = assembler.ahead_of_team(robot, tick, self.roster.team()) else {
+            return false;
+        };
+        self.counters.rejected_terms += 1;
+        let why = format!(
+            "terms of tick {tick}, more than {} ticks ahead of the team's newest, {newest}",
+            crate::team::assembly::MAX_LEAD_TICKS
+        );
+        self.counters.refuse("dynamics terms", sample.key_expr().as_str(), &why);
+        true
+    }
+
+    /// What became of a tick `robot`'s terms went to: a complete tick replaces (overtakes)
+    /// `newest`; terms of the tick last completed are answered again.
+    async fn keep_newest(
+        &mut self,
+        outcome: AssemblyStatus,
+        robot: &str,
+        newest: &mut Option<(u64, Vec<DynamicsTerms>)>,
+        assembler: &TickAssembler,
+    ) -> Result<(), TransportError> {
+        match outcome {
+            AssemblyStatus::Complete(tick, terms) => {
+                if let Some((old, _)) = newest.replace((tick, terms)) {
+                    self.counters.overtaken += 1;
+                    tracing::debug!(
+                        tick = old,
+                        newer = tick,
+                        "complete tick overtaken by a newer one: not solved"
+                    );
+                }
+            }
+            AssemblyStatus::Stale(t) => {
+                tracing::debug!(tick = t, "dynamics terms of a tick solved already");
+                if assembler.last_completed() == Some(t) {
+                    self.answer_again(robot, t).await?;
+                }
+            }
+            AssemblyStatus::Pending => {}
+        }
+        Ok(())
+    }
+
     /// Admit `robot`'s fitting terms of `tick` to the team's tick (the roster decides:
     /// [`Admission`]); what became of the tick.
-    async fn admit(&mut self, robot: &str, tick: u64, terms: DynamicsTerms, assembler: &mut TickAssembler, controller: &mut dyn TeamController, team_changed: &mut bool) -> Result<AssemblyStatus, TransportError> {
+    async fn admit(
+        &mut self,
+        robot: &str,
+        tick: u64,
+        terms: DynamicsTerms,
+        assembler: &mut TickAssembler,
+        controller: &mut dyn TeamController,
+        team_changed: &mut bool,
+    ) -> Result<AssemblyStatus, TransportError> {
         let before = self.roster.team().len();
         let fresh = assembler.last_completed().is_none_or(|t| tick > t);
         Ok(match self.roster.admit(robot, controller.ready(robot), fresh) {
@@ -432,7 +611,12 @@ impl<'a> Service<'a> {
                 // Its terms can beat its liveliness token: it is told to hold its
                 // posture this tick rather than left waiting for a command.
                 self.counters.rejected_terms += 1;
-                tracing::warn!(robot, tick, "dynamics from a robot that is not a member (no liveliness token): it holds its posture this tick");
+                tracing::warn!(
+                    robot,
+                    tick,
+                    "dynamics from a robot that is not a member (no liveliness token): \
+                     it holds its posture this tick"
+                );
                 self.hold_one(robot, tick, "not a member").await?;
                 AssemblyStatus::Pending
             }
@@ -448,7 +632,14 @@ impl<'a> Service<'a> {
 
     /// `robot`'s terms of `tick` do not fit the controller (`why`): refused and counted, and the
     /// robot holds its posture this tick; a member's tick goes on without it.
-    async fn refuse_terms(&mut self, sample: &zenoh::sample::Sample, robot: &str, tick: u64, why: &str, assembler: &mut TickAssembler) -> Result<AssemblyStatus, TransportError> {
+    async fn refuse_terms(
+        &mut self,
+        sample: &zenoh::sample::Sample,
+        robot: &str,
+        tick: u64,
+        why: &str,
+        assembler: &mut TickAssembler,
+    ) -> Result<AssemblyStatus, TransportError> {
         self.counters.rejected_terms += 1;
         self.counters.refuse("dynamics terms", sample.key_expr().as_str(), &why);
         self.hold_one(robot, tick, &format!("its terms were refused: {why}")).await?;
@@ -477,8 +668,12 @@ impl<'a> Service<'a> {
         if self.solved_tick != Some(tick) || self.stale.iter().any(|r| r == robot) {
             return Ok(());
         }
-        let Some(cmd) = self.commands.iter().find(|c| c.header.tick == tick && c.header.robot_id() == robot) else {
-            return self.hold_one(robot, tick, "its terms came after its tick was solved without it").await;
+        let Some(cmd) =
+            self.commands.iter().find(|c| c.header.tick == tick && c.header.robot_id() == robot)
+        else {
+            return self
+                .hold_one(robot, tick, "its terms came after its tick was solved without it")
+                .await;
         };
         let Some(publisher) = self.command_pubs.get_mut(robot) else { return Ok(()) };
         // What was sent: the controller's command, or the hold order that replaced an invalid
@@ -487,7 +682,11 @@ impl<'a> Service<'a> {
         self.counters.repeated_commands += 1;
         // Counted (`repeated_commands`, in the coordinator's final counters): in lockstep the
         // bridge resends a tick's states while it waits, and the first tick waits long.
-        tracing::debug!(robot, tick, "terms of the tick last solved came again: its command sent again");
+        tracing::debug!(
+            robot,
+            tick,
+            "terms of the tick last solved came again: its command sent again"
+        );
         Ok(())
     }
 
@@ -518,18 +717,31 @@ impl<'a> Service<'a> {
         if let Some(p) = &mut self.predictor {
             p.record_hold(robot, tick, delay_ticks);
         }
-        let order = TorqueCommand { delay_ticks, ..TorqueCommand::hold(&self.cfg.team, robot, tick) };
-        publish_commands(self.session, &self.cfg, std::slice::from_ref(&order), &mut self.command_pubs, &mut self.counters).await
+        let order =
+            TorqueCommand { delay_ticks, ..TorqueCommand::hold(&self.cfg.team, robot, tick) };
+        publish_commands(
+            self.session,
+            &self.cfg,
+            std::slice::from_ref(&order),
+            &mut self.command_pubs,
+            &mut self.counters,
+        )
+        .await
     }
 
     /// Ticks due for reuse: solve the newest (with its late members' latest terms), leaving out
     /// the members too silent for it. Returns whether a tick was solved and whether the team
     /// changed.
-    async fn reuse_due(&mut self, assembler: &mut TickAssembler, controller: &mut dyn TeamController, references: &transport::SampleQueue) -> Result<(bool, bool), TransportError> {
+    async fn reuse_due(
+        &mut self,
+        assembler: &mut TickAssembler,
+        controller: &mut dyn TeamController,
+        references: &transport::SampleQueue,
+    ) -> Result<(bool, bool), TransportError> {
         let mut team_changed = false;
         loop {
             match assembler.reuse_due(Instant::now(), self.roster.team()) {
-                Some(Reused::Complete { tick, mut terms, reused }) => {
+                Some(ReusedTerms::Complete { tick, mut terms, reused }) => {
                     tracing::debug!(tick, ?reused, "late terms: solved with the latest of each");
                     let mut stale = Vec::with_capacity(reused.len());
                     for (r, from) in reused {
@@ -546,15 +758,19 @@ impl<'a> Service<'a> {
                     self.solve(controller, tick, terms, references, stale).await?;
                     return Ok((true, team_changed));
                 }
-                Some(Reused::Silent { tick, robots }) => {
+                Some(ReusedTerms::Silent { tick, robots }) => {
                     for r in &robots {
                         if self.roster.silence(r) {
                             self.counters.silenced += 1;
                             team_changed = true;
-                            self.detail = format!("robot {r} silent since before tick {tick}: solving without it");
+                            self.detail = format!(
+                                "robot {r} silent since before tick {tick}: solving without it"
+                            );
                         }
                     }
-                    if let AssemblyStatus::Complete(t, terms) = assembler.try_complete(tick, self.roster.team()) {
+                    if let AssemblyStatus::Complete(t, terms) =
+                        assembler.try_complete(tick, self.roster.team())
+                    {
                         self.solve(controller, t, terms, references, Vec::new()).await?;
                         return Ok((true, team_changed));
                     }
@@ -568,13 +784,22 @@ impl<'a> Service<'a> {
     /// reused. Late members' hands stay out of the grasp. Returns whether the status should go
     /// out now (letting go, or taking a grasp again, is said at once: a planner stops moving
     /// the team on it; so is a change of the stale members).
-    async fn solve(&mut self, controller: &mut dyn TeamController, tick: u64, mut terms: Vec<DynamicsTerms>, references: &transport::SampleQueue, stale: Vec<String>) -> Result<bool, TransportError> {
+    async fn solve(
+        &mut self,
+        controller: &mut dyn TeamController,
+        tick: u64,
+        mut terms: Vec<DynamicsTerms>,
+        references: &transport::SampleQueue,
+        stale: Vec<String>,
+    ) -> Result<bool, TransportError> {
         for t in terms.iter_mut().filter(|t| self.roster.is_late(t.header.robot_id())) {
             t.hand_in_grasp = false;
         }
         // The controller expects exactly the robots of the tick (members holding their posture
         // this tick are not in it).
-        if self.solved_members.len() != terms.len() || self.solved_members.iter().zip(&terms).any(|(m, t)| m != t.header.robot_id()) {
+        if self.solved_members.len() != terms.len()
+            || self.solved_members.iter().zip(&terms).any(|(m, t)| m != t.header.robot_id())
+        {
             self.solved_members = terms.iter().map(|t| t.header.robot_id().to_string()).collect();
             controller.set_members(&self.solved_members);
             controller.set_late(&self.roster.late());
@@ -588,7 +813,7 @@ impl<'a> Service<'a> {
         if let Some(p) = self.predictor.as_ref().filter(|_| predicting) {
             p.predict(tick, delay, &mut terms);
         }
-        let solved = solve_and_publish(self.session, &self.cfg, controller, waiting, tick, delay, &terms, &mut self.commands, &mut self.command_pubs, &mut self.diag_pub, &mut self.counters).await?;
+        let solved = self.solve_and_publish(controller, waiting, tick, delay, &terms).await?;
         if let Some(p) = self.predictor.as_mut().filter(|_| predicting) {
             p.record(tick, delay, &terms, solved.then_some(&*controller));
         }
@@ -603,7 +828,61 @@ impl<'a> Service<'a> {
         Ok(stale_changed || controller.released_at().is_some() != self.released_reported)
     }
 
-    async fn publish_status(&mut self, controller: &mut dyn TeamController) -> Result<(), TransportError> {
+    /// Solve `tick` from `terms` (or hold every robot: the controller is not ready, or
+    /// `waiting` says why the tasks cannot be commanded yet) and publish its commands, each with
+    /// the team's delay `delay` ([`team_delay`]). Returns whether the tick was solved.
+    async fn solve_and_publish(
+        &mut self,
+        controller: &mut dyn TeamController,
+        waiting: Option<String>,
+        tick: u64,
+        delay: u64,
+        terms: &[DynamicsTerms],
+    ) -> Result<bool, TransportError> {
+        let started = Instant::now();
+        let ids: Vec<String> = terms.iter().map(|t| t.header.robot_id().to_string()).collect();
+        let (commands, counters) = (&mut self.commands, &mut self.counters);
+        let outcome = attempt(controller, waiting, tick, terms, &ids, commands, counters);
+        let solved = outcome.is_ok();
+        match outcome {
+            Ok(()) => {
+                if controller.used_fallback() {
+                    self.counters.fallbacks += 1;
+                }
+                if let Some(d) = controller.diagnostics() {
+                    if let Err(e) = self.diag_pub.put(d).await {
+                        tracing::warn!(tick, "diagnostics not published: {e}");
+                    }
+                }
+            }
+            Err(why) => {
+                // Every robot of the tick is still commanded: it holds its posture this tick.
+                let d = hold_orders(&self.cfg.team, tick, &ids, &why, &mut self.commands);
+                if let Err(e) = self.diag_pub.put(&d).await {
+                    tracing::warn!(tick, "diagnostics not published: {e}");
+                }
+            }
+        }
+        for c in self.commands.iter_mut() {
+            c.delay_ticks = delay;
+        }
+        publish_commands(
+            self.session,
+            &self.cfg,
+            &self.commands,
+            &mut self.command_pubs,
+            &mut self.counters,
+        )
+        .await?;
+        self.counters.ticks += 1;
+        tracing::trace!(tick, us = started.elapsed().as_micros() as u64, "tick solved");
+        Ok(solved)
+    }
+
+    async fn publish_status(
+        &mut self,
+        controller: &mut dyn TeamController,
+    ) -> Result<(), TransportError> {
         let waiting = self.awaiting_references();
         let members = self.roster.members().to_vec();
         let team = self.roster.team();
@@ -625,7 +904,10 @@ impl<'a> Service<'a> {
             commands_sent: self.counters.commands_sent,
             deadline_misses: self.counters.deadline_misses,
             fallbacks: self.counters.fallbacks,
-            detail: controller.not_ready(&members).or(waiting).unwrap_or_else(|| self.detail.clone()),
+            detail: controller
+                .not_ready(&members)
+                .or(waiting)
+                .unwrap_or_else(|| self.detail.clone()),
             members,
             stale: self.stale.clone(),
             silent: self.roster.silent(),
@@ -641,7 +923,12 @@ impl<'a> Service<'a> {
 
 /// Member `robot`, told to hold its posture at `tick`, is counted in the tick as holding: what
 /// became of the tick. A tick solved already needs nothing more (the hold order answered it).
-fn held_in_tick(assembler: &mut TickAssembler, robot: &str, tick: u64, team: &[String]) -> AssemblyStatus {
+fn held_in_tick(
+    assembler: &mut TickAssembler,
+    robot: &str,
+    tick: u64,
+    team: &[String],
+) -> AssemblyStatus {
     match assembler.hold(robot, tick, team) {
         AssemblyStatus::Stale(_) => AssemblyStatus::Pending,
         outcome => outcome,
@@ -649,7 +936,10 @@ fn held_in_tick(assembler: &mut TickAssembler, robot: &str, tick: u64, team: &[S
 }
 
 /// One sample of the dynamics key decoded, or counted and logged as rejected.
-fn decode_terms(sample: &zenoh::sample::Sample, counters: &mut CoordinatorCounters) -> Option<DynamicsTerms> {
+fn decode_terms(
+    sample: &zenoh::sample::Sample,
+    counters: &mut CoordinatorCounters,
+) -> Option<DynamicsTerms> {
     match decode_sample::<DynamicsTerms>(sample) {
         Ok(t) => Some(t),
         Err(e) => {
@@ -662,7 +952,13 @@ fn decode_terms(sample: &zenoh::sample::Sample, counters: &mut CoordinatorCounte
 
 /// A hold order for each robot of a tick the controller failed or was not ready for (into
 /// `commands`), and the tick's diagnostics saying so (`why`).
-fn hold_orders(team: &str, tick: u64, robots: &[String], why: &str, commands: &mut Vec<TorqueCommand>) -> TickDiagnostics {
+fn hold_orders(
+    team: &str,
+    tick: u64,
+    robots: &[String],
+    why: &str,
+    commands: &mut Vec<TorqueCommand>,
+) -> TickDiagnostics {
     commands.clear();
     commands.extend(robots.iter().map(|r| TorqueCommand::hold(team, r, tick)));
     let mut d = TickDiagnostics::empty(team, tick);
@@ -699,7 +995,12 @@ impl ReferenceBuffer {
     /// `first` and every reference queued behind it, in one go: a window of references is
     /// decoded as it arrives, not one per event while ticks wait (and the rest inside a tick's
     /// solve).
-    fn take_all(&mut self, first: &zenoh::sample::Sample, q: &transport::SampleQueue, counters: &mut CoordinatorCounters) {
+    fn take_all(
+        &mut self,
+        first: &zenoh::sample::Sample,
+        q: &transport::SampleQueue,
+        counters: &mut CoordinatorCounters,
+    ) {
         self.take(first, counters);
         self.drain(q, counters);
     }
@@ -724,64 +1025,36 @@ impl ReferenceBuffer {
     }
 }
 
-/// Solve `tick` from `terms` (or hold every robot: the controller is not ready, or `waiting`
-/// says why the tasks cannot be commanded yet) and publish its commands, each with the team's
-/// delay `delay` ([`team_delay`]). Returns whether the tick was solved.
-#[allow(clippy::too_many_arguments)]
-async fn solve_and_publish(
-    session: &Session,
-    cfg: &CoordinatorConfig,
+/// The controller's commands for `tick` (robots `ids`) into `commands`, or why every robot
+/// holds its posture instead: the controller is not ready, `waiting` says why the tasks cannot
+/// be commanded yet, or the controller failed (each counted and logged).
+fn attempt(
     controller: &mut dyn TeamController,
     waiting: Option<String>,
     tick: u64,
-    delay: u64,
     terms: &[DynamicsTerms],
+    ids: &[String],
     commands: &mut Vec<TorqueCommand>,
-    command_pubs: &mut BTreeMap<String, TypedPublisher<TorqueCommand>>,
-    diag_pub: &mut TypedPublisher<TickDiagnostics>,
     counters: &mut CoordinatorCounters,
-) -> Result<bool, TransportError> {
-    let started = Instant::now();
-    let ids: Vec<String> = terms.iter().map(|t| t.header.robot_id().to_string()).collect();
-    let outcome = match controller.not_ready(&ids).or(waiting) {
+) -> Result<(), String> {
+    match controller.not_ready(ids).or(waiting) {
         Some(why) => {
             counters.not_ready += 1;
-            tracing::debug!(tick, "controller not ready: {why}; every robot holds its posture this tick");
+            tracing::debug!(
+                tick,
+                "controller not ready: {why}; every robot holds its posture this tick"
+            );
             Err(format!("controller not ready: {why}"))
         }
         None => controller.solve(terms, commands).map_err(|e| {
             counters.controller_errors += 1;
-            tracing::error!(tick, "controller failed: {e}; every robot holds its posture this tick");
+            tracing::error!(
+                tick,
+                "controller failed: {e}; every robot holds its posture this tick"
+            );
             format!("controller error: {e}")
         }),
-    };
-    let solved = outcome.is_ok();
-    match outcome {
-        Ok(()) => {
-            if controller.used_fallback() {
-                counters.fallbacks += 1;
-            }
-            if let Some(d) = controller.diagnostics() {
-                if let Err(e) = diag_pub.put(d).await {
-                    tracing::warn!(tick, "diagnostics not published: {e}");
-                }
-            }
-        }
-        Err(why) => {
-            // Every robot of the tick is still commanded: it holds its posture this tick.
-            let d = hold_orders(&cfg.team, tick, &ids, &why, commands);
-            if let Err(e) = diag_pub.put(&d).await {
-                tracing::warn!(tick, "diagnostics not published: {e}");
-            }
-        }
     }
-    for c in commands.iter_mut() {
-        c.delay_ticks = delay;
-    }
-    publish_commands(session, cfg, commands, command_pubs, counters).await?;
-    counters.ticks += 1;
-    tracing::trace!(tick, us = started.elapsed().as_micros() as u64, "tick solved");
-    Ok(solved)
 }
 
 /// The team's delay for a tick: the longest its robots ask for, so that every robot applies
@@ -803,13 +1076,20 @@ async fn publish_commands(
         let robot = cmd.header.robot_id();
         if !command_pubs.contains_key(robot) {
             let key = keys::robot(&cfg.team, robot, RobotTopic::Command)?;
-            command_pubs.insert(robot.to_string(), TypedPublisher::declare(session, key, Qos::HotPath).await?);
+            command_pubs.insert(
+                robot.to_string(),
+                TypedPublisher::declare(session, key, Qos::HotPath).await?,
+            );
         }
         let publisher = command_pubs.get_mut(robot).expect("declared above");
         if let Err(e) = put_checked(publisher, &cfg.team, cmd).await? {
             // A controller's bad message never ends the coordinator: that robot holds.
             counters.controller_errors += 1;
-            tracing::error!(robot, tick = cmd.header.tick, "invalid command from the controller ({e}); the robot holds its posture this tick");
+            tracing::error!(
+                robot,
+                tick = cmd.header.tick,
+                "invalid command from the controller ({e}); the robot holds its posture this tick"
+            );
         }
         counters.commands_sent += 1;
     }
@@ -818,17 +1098,23 @@ async fn publish_commands(
 
 /// Put `cmd` on its robot's `publisher`, or, if it is invalid, a hold order for its tick in its
 /// place (the robot holds its posture). Returns why it was invalid.
-async fn put_checked(publisher: &mut TypedPublisher<TorqueCommand>, team: &str, cmd: &TorqueCommand) -> Result<Result<(), ProtocolError>, TransportError> {
+async fn put_checked(
+    publisher: &mut TypedPublisher<TorqueCommand>,
+    team: &str,
+    cmd: &TorqueCommand,
+) -> Result<Result<(), ProtocolError>, TransportError> {
     match cmd.validate() {
         Ok(()) => publisher.put(cmd).await.map(Ok),
         Err(e) => {
-            let hold = TorqueCommand { delay_ticks: cmd.delay_ticks.min(protocol::MAX_TEAM_DELAY_TICKS), ..TorqueCommand::hold(team, cmd.header.robot_id(), cmd.header.tick) };
+            let hold = TorqueCommand {
+                delay_ticks: cmd.delay_ticks.min(protocol::MAX_TEAM_DELAY_TICKS),
+                ..TorqueCommand::hold(team, cmd.header.robot_id(), cmd.header.tick)
+            };
             publisher.put(&hold).await?;
             Ok(Err(e))
         }
     }
 }
-
 
 #[cfg(test)]
 mod tests {
@@ -843,7 +1129,11 @@ mod tests {
         fn name(&self) -> &'static str {
             "recorder"
         }
-        fn solve(&mut self, _tick: &[DynamicsTerms], _out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError> {
+        fn solve(
+            &mut self,
+            _tick: &[DynamicsTerms],
+            _out: &mut Vec<TorqueCommand>,
+        ) -> Result<(), ControllerError> {
             Ok(())
         }
         fn set_references(&mut self, r: &TaskReferences) {
@@ -852,7 +1142,13 @@ mod tests {
     }
 
     fn refs(tick: u64) -> TaskReferences {
-        TaskReferences { header: Header::new("t", None, tick, 0), object: None, torsos: Vec::new(), swing_feet: Vec::new(), foot_loads: Vec::new() }
+        TaskReferences {
+            header: Header::new("t", None, tick, 0),
+            object: None,
+            torsos: Vec::new(),
+            swing_feet: Vec::new(),
+            foot_loads: Vec::new(),
+        }
     }
 
     #[test]

@@ -13,7 +13,9 @@ mod common;
 
 use common::{moving_ticks, nonnegative_least_squares, robot_id, Case, Fixture};
 use coordinator::pidc::MaterializedTick;
-use coordinator::qp::{self, DualActiveSet, QpInput, QpPath, QpProblem, QpSettings, QpSolver, QpWorkspace};
+use coordinator::qp::{
+    self, DualActiveSet, QpInput, QpPath, QpProblem, QpSettings, QpSolver, QpWorkspace,
+};
 use coordinator::{Pidc, PidcConfig};
 use nalgebra::{DMatrix, DVector};
 use protocol::{DynamicsTerms, QpStatus};
@@ -31,12 +33,27 @@ impl Data {
     }
     fn input(&self) -> QpInput<'_> {
         let r = &self.r;
-        QpInput { y: &r.y, rho: &r.rho, eta: &self.eta, contacts: &r.contacts, actuated: &r.actuated, limits: &r.limits, tau0: &r.tau0, regularisation: 1e-6 }
+        QpInput {
+            y: &r.y,
+            rho: &r.rho,
+            eta: &self.eta,
+            contacts: &r.contacts,
+            actuated: &r.actuated,
+            limits: &r.limits,
+            tau0: &r.tau0,
+            regularisation: 1e-6,
+        }
     }
 }
 
 /// Two consecutive ticks (1 ms apart) of a randomly perturbed, moving team.
-fn ticks(fx: &mut Fixture, robots: usize, seed: u64, swing: bool, grasp: bool) -> Vec<Vec<DynamicsTerms>> {
+fn ticks(
+    fx: &mut Fixture,
+    robots: usize,
+    seed: u64,
+    swing: bool,
+    grasp: bool,
+) -> Vec<Vec<DynamicsTerms>> {
     moving_ticks(fx, Case { robots, seed, swing, grasp, fully_actuated: false }, 2, 0.3)
 }
 
@@ -79,7 +96,8 @@ fn check(p: &QpProblem, d: &Data, f: &DVector<f64>, fc: &DVector<f64>) -> Worst 
     let obj = |x: &DVector<f64>| x.dot(&(&p.h * x));
     let (o, oc) = (obj(f), obj(fc));
     let rel = |a: DVector<f64>, b: DVector<f64>| (&a - &b).amax() / (1.0 + b.amax());
-    let active: Vec<usize> = (0..p.rows()).filter(|&i| slack[i].abs() <= 1e-7 * (1.0 + p.b[i].abs())).collect();
+    let active: Vec<usize> =
+        (0..p.rows()).filter(|&i| slack[i].abs() <= 1e-7 * (1.0 + p.b[i].abs())).collect();
     let grad = 2.0 * (&p.h * f);
     let (mut multiplier, mut stationarity) = (0.0, grad.amax() / (1.0 + grad.amax()));
     if !active.is_empty() {
@@ -141,7 +159,12 @@ fn active_set_matches_clarabel_cold_and_hot_on_teams_of_2_3_4_and_8_robots() {
             c.compute(tick).expect("tick");
             let d = Data::new(&c.materialized().expect("tick"));
             let mut fc = DVector::zeros(0);
-            let oracle = qp::solve_with(&mut ws, &d.input(), &QpSettings::new(50, QpPath::Clarabel), &mut fc);
+            let oracle = qp::solve_with(
+                &mut ws,
+                &d.input(),
+                &QpSettings::new(50, QpPath::Clarabel),
+                &mut fc,
+            );
             let p = ws.problem();
             let mut f = DVector::zeros(0);
             let out = solver.solve_problem(p, &settings, &mut f);
@@ -163,7 +186,11 @@ fn active_set_matches_clarabel_cold_and_hot_on_teams_of_2_3_4_and_8_robots() {
         }
     }
     println!("worst cold {cold}\nworst hot {hot}\n{hot_fast} of {} hot starts needed no iteration; {skipped} infeasible ticks", cases.len());
-    assert!(skipped <= cases.len(), "too few feasible ticks: {skipped} of {} infeasible", 2 * cases.len());
+    assert!(
+        skipped <= cases.len(),
+        "too few feasible ticks: {skipped} of {} infeasible",
+        2 * cases.len()
+    );
     for w in [cold, hot] {
         assert!(w.rows <= 1e-9, "rows {:e}", w.rows);
         assert!(w.multiplier <= 1e-6 && w.stationarity <= 1e-6, "KKT {w:?}");
@@ -188,7 +215,8 @@ fn infeasible_and_non_finite_problems_keep_their_statuses() {
     d.r.limits.iter_mut().for_each(|l| *l = 1e-3);
     d.r.tau0.fill(0.0);
     let (mut ws, mut f) = (QpWorkspace::default(), DVector::zeros(0));
-    let oracle = qp::solve_with(&mut ws, &d.input(), &QpSettings::new(50, QpPath::Clarabel), &mut f);
+    let oracle =
+        qp::solve_with(&mut ws, &d.input(), &QpSettings::new(50, QpPath::Clarabel), &mut f);
     let ours = qp::solve_with(&mut ws, &d.input(), &QpSettings::default(), &mut f);
     let mut solver = DualActiveSet::default();
     let alone = solver.solve_problem(ws.problem(), &QpSettings::default(), &mut f);
@@ -222,9 +250,16 @@ fn the_controller_sends_the_same_torques_with_each_qp_path_over_moving_ticks() {
 fn moving_team(fx: &mut Fixture, robots: usize) {
     let mut rng = common::rng(11);
     let nv = fx.robot.model.nv;
-    let qs: Vec<DVector<f64>> = (0..robots).map(|k| fx.perturbed_q(k, robots, 0.05, &mut rng)).collect();
-    let vs: Vec<DVector<f64>> = (0..robots).map(|_| DVector::from_fn(nv, |i, _| if i < 6 { 0.0 } else { rng.random_range(-0.2..0.2) })).collect();
-    let configs = [PidcConfig { qp_path: QpPath::ActiveSet, ..PidcConfig::default() }, PidcConfig { qp_path: QpPath::DenseIpm, ..PidcConfig::default() }, PidcConfig { qp_path: QpPath::Clarabel, ..PidcConfig::default() }];
+    let qs: Vec<DVector<f64>> =
+        (0..robots).map(|k| fx.perturbed_q(k, robots, 0.05, &mut rng)).collect();
+    let vs: Vec<DVector<f64>> = (0..robots)
+        .map(|_| DVector::from_fn(nv, |i, _| if i < 6 { 0.0 } else { rng.random_range(-0.2..0.2) }))
+        .collect();
+    let configs = [
+        PidcConfig { qp_path: QpPath::ActiveSet, ..PidcConfig::default() },
+        PidcConfig { qp_path: QpPath::DenseIpm, ..PidcConfig::default() },
+        PidcConfig { qp_path: QpPath::Clarabel, ..PidcConfig::default() },
+    ];
     let mut cs: Vec<Pidc> = configs.into_iter().map(Pidc::new).collect();
     for c in &mut cs {
         for k in 0..robots {
@@ -235,15 +270,32 @@ fn moving_team(fx: &mut Fixture, robots: usize) {
     let mut times: [Vec<f64>; 3] = Default::default();
     let mut solvable_ticks = 0;
     for t in 0..20u64 {
-        let tick: Vec<DynamicsTerms> = (0..robots).map(|k| fx.terms(&robot_id(k), &fx.robot.model.integrate(qs[k].as_slice(), vs[k].as_slice(), 2e-3 * t as f64), &vs[k], 1 + t)).collect();
-        let taus: Vec<(DVector<f64>, &'static str)> = cs.iter_mut().map(|c| c.compute(&tick).map(|r| (r.tau.clone(), r.qp.solver)).expect("tick")).collect();
+        let tick: Vec<DynamicsTerms> = (0..robots)
+            .map(|k| {
+                fx.terms(
+                    &robot_id(k),
+                    &fx.robot.model.integrate(qs[k].as_slice(), vs[k].as_slice(), 2e-3 * t as f64),
+                    &vs[k],
+                    1 + t,
+                )
+            })
+            .collect();
+        let taus: Vec<(DVector<f64>, &'static str)> = cs
+            .iter_mut()
+            .map(|c| c.compute(&tick).map(|r| (r.tau.clone(), r.qp.solver)).expect("tick"))
+            .collect();
         for (k, c) in cs.iter().enumerate() {
             if t > 0 {
                 times[k].push(c.last().expect("tick").timing.qp_us);
             }
         }
         if t == 0 {
-            println!("tick 0: {:?}", cs.iter().map(|c| c.last().map(|r| (r.qp.status, r.qp.solver, r.fallback.clone()))).collect::<Vec<_>>());
+            println!(
+                "tick 0: {:?}",
+                cs.iter()
+                    .map(|c| c.last().map(|r| (r.qp.status, r.qp.solver, r.fallback.clone())))
+                    .collect::<Vec<_>>()
+            );
         }
         let solvable = cs[2].last().is_some_and(|r| r.qp.status == QpStatus::Solved);
         solvable_ticks += usize::from(solvable);

@@ -24,7 +24,8 @@ thread_local! {
     static IN_DECOMPOSITIONS: Cell<u64> = const { Cell::new(0) };
 }
 fn count() {
-    let counter = if coordinator::linalg::in_decomposition() { &IN_DECOMPOSITIONS } else { &ALLOCATIONS };
+    let counter =
+        if coordinator::linalg::in_decomposition() { &IN_DECOMPOSITIONS } else { &ALLOCATIONS };
     let _ = counter.try_with(|c| c.set(c.get() + 1));
 }
 unsafe impl GlobalAlloc for Counting {
@@ -78,7 +79,8 @@ impl Loop {
                 for t in terms.iter_mut() {
                     t.header.tick += 1;
                 }
-                let (outside, inside) = allocations(|| self.c.solve(terms, &mut self.out).expect("tick"));
+                let (outside, inside) =
+                    allocations(|| self.c.solve(terms, &mut self.out).expect("tick"));
                 self.inside.push(inside);
                 outside
             })
@@ -104,8 +106,15 @@ fn the_tick_allocates_nothing_once_the_team_shape_is_known() {
     let r = l.c.last().expect("tick");
     println!("2 robots: first tick {first} allocations, then {steady:?}; inside faer's decompositions {:?}; QP {:?} by {}", &l.inside[1..], r.qp.status, r.qp.solver);
     assert!(first > 0, "the first tick sizes the buffers (the counter counts)");
-    assert!(matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved) && r.qp.solver != "clarabel");
-    assert_eq!(r.qp.solver, coordinator::qp::by_blocks::SOLVER, "the steady ticks' QP by the robots' blocks (the default)");
+    assert!(
+        matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved)
+            && r.qp.solver != "clarabel"
+    );
+    assert_eq!(
+        r.qp.solver,
+        coordinator::qp::by_blocks::SOLVER,
+        "the steady ticks' QP by the robots' blocks (the default)"
+    );
     assert!(r.proj.by_blocks, "the projections by the team's blocks (the default)");
     assert_eq!(steady, vec![0; 20], "steady ticks allocate nothing");
     assert!(l.c.diagnostics().is_some_and(|d| d.contacts.len() == 10));
@@ -116,7 +125,10 @@ fn the_tick_allocates_nothing_once_the_team_shape_is_known() {
     let first = l.run(&mut terms, 1)[0];
     let steady = l.run(&mut terms, 20);
     println!("keeping the accelerations: first tick {first} allocations, then {steady:?}");
-    assert!(l.c.accelerations(&robot_id(0)).is_some_and(|a| a.len() == nv && a.iter().any(|x| *x != 0.0)));
+    assert!(l
+        .c
+        .accelerations(&robot_id(0))
+        .is_some_and(|a| a.len() == nv && a.iter().any(|x| *x != 0.0)));
     assert_eq!(steady, vec![0; 20], "steady ticks keeping the accelerations allocate nothing");
 }
 
@@ -131,12 +143,16 @@ fn a_new_contact_set_resizes_once_then_allocates_nothing() {
     let nv = fx.robot.model.nv;
     let cs = ActiveContacts { stance: vec![false, true, true, true], hand_in_grasp: true };
     let all_stance = terms[0].clone();
-    terms[0] = fx.terms_with("r1", &fx.standing_q(0, 2), &DVector::zeros(nv), terms[0].header.tick, &cs);
+    terms[0] =
+        fx.terms_with("r1", &fx.standing_q(0, 2), &DVector::zeros(nv), terms[0].header.tick, &cs);
     let changed = l.run(&mut terms, 6);
     let r = l.c.last().expect("tick");
     println!("a foot lifts: {changed:?}; QP {:?} by {}", r.qp.status, r.qp.solver);
     assert_eq!((r.team.feet.len(), r.team.swing_feet.len()), (7, 1));
-    assert_ne!(r.qp.solver, "clarabel", "Clarabel allocates; this test is about the active-set and dense paths");
+    assert_ne!(
+        r.qp.solver, "clarabel",
+        "Clarabel allocates; this test is about the active-set and dense paths"
+    );
     assert!(changed[0] > 0);
     assert_eq!(&changed[1..], &[0; 5]);
     terms[0] = all_stance;
@@ -163,14 +179,18 @@ fn the_active_set_path_allocates_nothing_either() {
     // a contact set that changes (cold again on the new shape).
     let mut fx = Fixture::new();
     let (mut terms, descs) = fx.static_team(2);
-    let mut l = Loop::with(&descs, PidcConfig { qp_path: coordinator::qp::QpPath::ActiveSet, ..PidcConfig::default() });
+    let mut l = Loop::with(
+        &descs,
+        PidcConfig { qp_path: coordinator::qp::QpPath::ActiveSet, ..PidcConfig::default() },
+    );
     l.run(&mut terms, 2);
     let steady = l.run(&mut terms, 10);
     assert_eq!(l.c.last().map(|r| r.qp.solver), Some("active-set"));
     assert_eq!(steady, vec![0; 10]);
     let nv = fx.robot.model.nv;
     let cs = ActiveContacts { stance: vec![false, true, true, true], hand_in_grasp: true };
-    terms[0] = fx.terms_with("r1", &fx.standing_q(0, 2), &DVector::zeros(nv), terms[0].header.tick, &cs);
+    terms[0] =
+        fx.terms_with("r1", &fx.standing_q(0, 2), &DVector::zeros(nv), terms[0].header.tick, &cs);
     let changed = l.run(&mut terms, 6);
     println!("active set: steady {steady:?}, a foot lifts {changed:?}");
     assert_eq!(l.c.last().map(|r| r.qp.solver), Some("active-set"));

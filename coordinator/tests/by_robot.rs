@@ -9,14 +9,22 @@ use coordinator::pidc::stages::by_robot::{decoupled, ByRobotScratch};
 use coordinator::qp::{self, QpInput, QpPath, QpSettings, QpWorkspace};
 use coordinator::{Pidc, PidcConfig, TeamController};
 use nalgebra::{DVector, UnitQuaternion, Vector3};
-use protocol::{DynamicsTerms, FootLoad, Header, Pose, PoseReference, QpStatus, RobotDescription, TaskReferences, TorqueCommand, TorsoReference};
+use protocol::{
+    DynamicsTerms, FootLoad, Header, Pose, PoseReference, QpStatus, RobotDescription,
+    TaskReferences, TorqueCommand, TorsoReference,
+};
 use robot_agent::terms::ActiveContacts;
 
 /// `count` robots standing, hands free, each perturbed a little (seeded), at rest.
-fn free_team(fx: &mut Fixture, count: usize, seed: u64) -> (Vec<DynamicsTerms>, Vec<RobotDescription>) {
+fn free_team(
+    fx: &mut Fixture,
+    count: usize,
+    seed: u64,
+) -> (Vec<DynamicsTerms>, Vec<RobotDescription>) {
     let mut rng = common::rng(seed);
     let nv = fx.robot.model.nv;
-    let free = ActiveContacts { stance: vec![true; fx.robot.foot_frames.len()], hand_in_grasp: false };
+    let free =
+        ActiveContacts { stance: vec![true; fx.robot.foot_frames.len()], hand_in_grasp: false };
     let mut terms = Vec::new();
     let mut descs = Vec::new();
     for k in 0..count {
@@ -29,7 +37,13 @@ fn free_team(fx: &mut Fixture, count: usize, seed: u64) -> (Vec<DynamicsTerms>, 
 
 /// References without targets (every task holds the pose it was first seen at).
 fn no_references() -> TaskReferences {
-    TaskReferences { header: Header::new(TEAM, None, 1, 0), object: None, torsos: Vec::new(), swing_feet: Vec::new(), foot_loads: Vec::new() }
+    TaskReferences {
+        header: Header::new(TEAM, None, 1, 0),
+        object: None,
+        torsos: Vec::new(),
+        swing_feet: Vec::new(),
+        foot_loads: Vec::new(),
+    }
 }
 
 /// References that unload every foot of `robots` to `max_normal_force` (a robot that cannot
@@ -68,23 +82,38 @@ fn rel_err(a: &[f64], b: &[f64]) -> f64 {
 
 /// Runs `refs` on the team and on each robot alone: each robot must be sent what it is sent
 /// alone, and the note names exactly the robots that fall back alone. Returns the note.
-fn check_against_alone(terms: &[DynamicsTerms], descs: &[RobotDescription], refs: &TaskReferences) -> String {
+fn check_against_alone(
+    terms: &[DynamicsTerms],
+    descs: &[RobotDescription],
+    refs: &TaskReferences,
+) -> String {
     let mut team = controller(descs, refs);
     let sent = torques(&mut team, terms);
     let report = team.last().expect("tick");
     assert!(decoupled(&report.team), "free hands: no grasp rows");
     let note = report.fallback.clone().expect("a robot cannot be held: a fallback");
     assert!(note.contains("robot by robot"), "{note}");
-    assert!(!matches!(report.qp.status, QpStatus::Solved | QpStatus::AlmostSolved), "the worst robot's status is the team's: {:?}", report.qp.status);
+    assert!(
+        !matches!(report.qp.status, QpStatus::Solved | QpStatus::AlmostSolved),
+        "the worst robot's status is the team's: {:?}",
+        report.qp.status
+    );
     for k in 0..terms.len() {
         // The oracle: robot k alone (a one-robot team takes the team's path), same references.
         let mut alone = controller(&descs[k..k + 1], refs);
         let own = torques(&mut alone, &terms[k..k + 1]);
         let alone_fell_back = alone.last().expect("tick").fallback.is_some();
         let id = robot_id(k);
-        assert_eq!(note.contains(&format!("{id}:")), alone_fell_back, "{id}: named in the note exactly when it falls back alone: {note}");
+        assert_eq!(
+            note.contains(&format!("{id}:")),
+            alone_fell_back,
+            "{id}: named in the note exactly when it falls back alone: {note}"
+        );
         let err = rel_err(&sent[k].tau, &own[0].tau);
-        assert!(err < 1e-6, "{id} in the team is sent what it would be sent alone: relative difference {err:.2e}");
+        assert!(
+            err < 1e-6,
+            "{id} in the team is sent what it would be sent alone: relative difference {err:.2e}"
+        );
     }
     note
 }
@@ -111,7 +140,10 @@ fn only_the_robots_that_fail_are_saturated() {
     let p = torso.position + Vector3::new(0.0, 0.4, 0.0);
     let q = UnitQuaternion::from_rotation_matrix(&torso.rotation);
     let pose = Pose { position: [p.x, p.y, p.z], orientation: [q.w, q.i, q.j, q.k] };
-    refs.torsos.push(TorsoReference { robot: robot_id(0), reference: PoseReference { pose, twist: [0.0; 6], acceleration: [0.0; 6] } });
+    refs.torsos.push(TorsoReference {
+        robot: robot_id(0),
+        reference: PoseReference { pose, twist: [0.0; 6], acceleration: [0.0; 6] },
+    });
     let mut alone = controller(&descs[..1], &refs);
     alone.compute(&terms[..1]).expect("tick");
     assert!(alone.last().expect("tick").saturated, "the probe: r1's tau_0 is over its limits");
@@ -131,7 +163,16 @@ fn blocks_solved_alone_give_the_team_qps_optimum() {
         let r = c.materialized().expect("tick");
         assert!(r.fallback.is_none(), "{count} robots standing: the team's QP is solved");
         // Without a grasp the real wrenches' offset is eta itself (no hand carries G^+ F_x).
-        let inp = QpInput { y: &r.y, rho: &r.rho, eta: &r.eta, contacts: &r.contacts, actuated: &r.actuated, limits: &r.limits, tau0: &r.tau0, regularisation: PidcConfig::default().regularisation };
+        let inp = QpInput {
+            y: &r.y,
+            rho: &r.rho,
+            eta: &r.eta,
+            contacts: &r.contacts,
+            actuated: &r.actuated,
+            limits: &r.limits,
+            tau0: &r.tau0,
+            regularisation: PidcConfig::default().regularisation,
+        };
         let settings = QpSettings::new(200, QpPath::ByBlocks);
         let (mut f_team, mut f_blocks) = (DVector::zeros(0), DVector::zeros(0));
         let team = qp::solve_with(&mut QpWorkspace::default(), &inp, &settings, &mut f_team);
@@ -142,7 +183,10 @@ fn blocks_solved_alone_give_the_team_qps_optimum() {
         assert_eq!(by.outcome.status, QpStatus::Solved, "{count} robots");
         assert!(by.fallback.is_none() && !by.saturated, "{count} robots: {:?}", by.fallback);
         let err = rel_err(f_blocks.as_slice(), f_team.as_slice());
-        assert!(err < 1e-6, "{count} robots: F_c by blocks against the team's QP, relative {err:.2e}");
+        assert!(
+            err < 1e-6,
+            "{count} robots: F_c by blocks against the team's QP, relative {err:.2e}"
+        );
     }
 }
 

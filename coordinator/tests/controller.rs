@@ -31,7 +31,8 @@ fn random_team(fx: &mut Fixture, seed: u64, amp: f64, vel: f64) -> RandomTeam {
     let nv = fx.robot.model.nv;
     let qs: Vec<DVector<f64>> = (0..2).map(|k| fx.perturbed_q(k, 2, amp, &mut rng)).collect();
     let descs: Vec<_> = (0..2).map(|k| fx.description(&robot_id(k))).collect();
-    let terms0: Vec<_> = (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &DVector::zeros(nv), 1)).collect();
+    let terms0: Vec<_> =
+        (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &DVector::zeros(nv), 1)).collect();
     let mut c = controller(&descs, PidcConfig::default());
     c.compute(&terms0).expect("tick");
     let p = c.materialized().expect("tick").proj.p.clone();
@@ -66,7 +67,14 @@ fn projection_identities_on_random_states() {
         assert!(max_abs(&(&g.n * g.g.transpose())) < 1e-10);
     }
     println!("worst |P-P^T| {:.2e}, |PP-P| {:.2e}, |P J_c^T| {:.2e}, |M_c M_c^-1 - I| {:.2e}, |Pv - v| {:.2e}", worst[0], worst[1], worst[2], worst[3], worst[4]);
-    assert!(worst[0] < 1e-12 && worst[1] < 1e-10 && worst[2] < 1e-9 && worst[3] < 1e-9 && worst[4] < 1e-9, "{worst:?}");
+    assert!(
+        worst[0] < 1e-12
+            && worst[1] < 1e-10
+            && worst[2] < 1e-9
+            && worst[3] < 1e-9
+            && worst[4] < 1e-9,
+        "{worst:?}"
+    );
 }
 
 #[test]
@@ -101,7 +109,12 @@ fn pdot_v_against_finite_difference_in_time() {
 }
 
 /// Independent constrained forward dynamics: the KKT system with min-norm lambda.
-fn kkt(m: &DMatrix<f64>, j_c: &DMatrix<f64>, rhs: &DVector<f64>, jdv: &DVector<f64>) -> (DVector<f64>, DVector<f64>) {
+fn kkt(
+    m: &DMatrix<f64>,
+    j_c: &DMatrix<f64>,
+    rhs: &DVector<f64>,
+    jdv: &DVector<f64>,
+) -> (DVector<f64>, DVector<f64>) {
     let (n, k) = (m.nrows(), j_c.nrows());
     let mut a = DMatrix::zeros(n + k, n + k);
     a.view_mut((0, 0), (n, n)).copy_from(m);
@@ -128,10 +141,17 @@ fn lambda_relation_matches_constrained_forward_dynamics() {
         let (qdd, lambda) = kkt(&r.team.mass, &r.j_c, &rhs, &r.jdv_c);
         // eq. aghili_25
         let p = &r.proj.p;
-        let qdd_25 = &r.proj.mc_inv * (p * &s_tau - p * &r.team.bias + &r.proj.pdot_v + p * &r.load);
+        let qdd_25 =
+            &r.proj.mc_inv * (p * &s_tau - p * &r.team.bias + &r.proj.pdot_v + p * &r.load);
         let e_q = (&qdd - &qdd_25).amax() / qdd.amax().max(1.0);
         let e_l = (&lambda - &r.lambda).amax() / lambda.amax().max(1.0);
-        println!("seed {seed}: |lambda| {:.1}, rel err lambda {:.2e}, qdd {:.2e} (QP {:?})", lambda.amax(), e_l, e_q, r.qp.status);
+        println!(
+            "seed {seed}: |lambda| {:.1}, rel err lambda {:.2e}, qdd {:.2e} (QP {:?})",
+            lambda.amax(),
+            e_l,
+            e_q,
+            r.qp.status
+        );
         worst = (worst.0.max(e_l), worst.1.max(e_q));
     }
     assert!(worst.0 < 1e-6 && worst.1 < 1e-6, "{worst:?}");
@@ -158,7 +178,11 @@ fn fully_actuated_reduces_to_lin2018() {
     // [Lin2018]'s contact wrench: lambda = (J_c^T)^+ [(I-P)(Mbar (P tau - P h + Pdot v) + h - tau)] with the load.
     let ip = &id - p;
     let lam_lin = &r.proj.jct_pinv
-        * (&ip * (&r.proj.mbar * (p * &r.tau - p * &r.team.bias + &r.proj.pdot_v + p * &r.load) + &r.team.bias - &r.tau - &r.load));
+        * (&ip
+            * (&r.proj.mbar * (p * &r.tau - p * &r.team.bias + &r.proj.pdot_v + p * &r.load)
+                + &r.team.bias
+                - &r.tau
+                - &r.load));
     let e_lam = (&lam_lin - &r.lambda).amax();
     // rho = -(J_c^T)^+ J_c^T when S = B = I.
     let e_rho = max_abs(&(&r.rho + &r.proj.jct_pinv * r.j_c.transpose()));
@@ -195,13 +219,23 @@ fn static_team_holds_the_object() {
     let (obj, torsos) = {
         let r = c.last().expect("last");
         let g = r.grasp.as_ref().expect("grasp");
-        (g.object, r.team.torsos.iter().map(|t| (r.team.robots[t.robot].id.clone(), t.position, t.rotation)).collect::<Vec<_>>())
+        (
+            g.object,
+            r.team
+                .torsos
+                .iter()
+                .map(|t| (r.team.robots[t.robot].id.clone(), t.position, t.rotation))
+                .collect::<Vec<_>>(),
+        )
     };
     let pose = |p: Vector3<f64>, q: [f64; 4]| protocol::Pose { position: p.into(), orientation: q };
     let refs = protocol::TaskReferences {
         header: protocol::Header::new(common::TEAM, None, 1, 0),
         object: Some(protocol::PoseReference {
-            pose: pose(obj.translation.vector, coordinator::linalg::quat_wxyz(&obj.rotation.to_rotation_matrix())),
+            pose: pose(
+                obj.translation.vector,
+                coordinator::linalg::quat_wxyz(&obj.rotation.to_rotation_matrix()),
+            ),
             twist: [0.0; 6],
             acceleration: [0.0; 6],
         }),
@@ -209,7 +243,11 @@ fn static_team_holds_the_object() {
             .iter()
             .map(|(id, p, r)| protocol::TorsoReference {
                 robot: id.clone(),
-                reference: protocol::PoseReference { pose: pose(*p, coordinator::linalg::quat_wxyz(r)), twist: [0.0; 6], acceleration: [0.0; 6] },
+                reference: protocol::PoseReference {
+                    pose: pose(*p, coordinator::linalg::quat_wxyz(r)),
+                    twist: [0.0; 6],
+                    acceleration: [0.0; 6],
+                },
             })
             .collect(),
         swing_feet: vec![],
@@ -244,9 +282,21 @@ fn static_team_holds_the_object() {
     let s_tau = r.tau.component_mul(&r.team.s_diag);
     let p = &r.proj.p;
     let qdd = &r.proj.mc_inv * (p * &s_tau - p * &r.team.bias + &r.proj.pdot_v + p * &r.load);
-    println!("sum f_z {fz:.6} N vs weight {total:.6} N (diff {:.2e}); |qdd| {:.2e}", fz - total, qdd.amax());
+    println!(
+        "sum f_z {fz:.6} N vs weight {total:.6} N (diff {:.2e}); |qdd| {:.2e}",
+        fz - total,
+        qdd.amax()
+    );
     for c in &r.contacts {
-        println!("  contact at {}: {:?}", c.0, r.lambda_real.rows(c.0, if c.0 < 3 * nf { 3 } else { 6 }).iter().map(|x| (x * 100.0).round() / 100.0).collect::<Vec<_>>());
+        println!(
+            "  contact at {}: {:?}",
+            c.0,
+            r.lambda_real
+                .rows(c.0, if c.0 < 3 * nf { 3 } else { 6 })
+                .iter()
+                .map(|x| (x * 100.0).round() / 100.0)
+                .collect::<Vec<_>>()
+        );
     }
     // The contact-force torque does not reach the motion space (P S B J_c^T F_c = 0: B does
     // its job, checked below), but the superposition of the object and torso impedances
@@ -267,11 +317,17 @@ fn static_team_holds_the_object() {
     // The dense interior-point method and Clarabel agree on the same QP.
     let solver = r.qp.solver;
     let tau_a = r.tau.clone();
-    let mut cc = controller(&descs, PidcConfig { qp_path: coordinator::qp::QpPath::Clarabel, ..PidcConfig::default() });
+    let mut cc = controller(
+        &descs,
+        PidcConfig { qp_path: coordinator::qp::QpPath::Clarabel, ..PidcConfig::default() },
+    );
     cc.set_references(&refs);
     let rc = cc.compute(&terms).expect("tick");
     let d_tau = (&rc.tau - &tau_a).amax();
-    println!("{solver} vs {} ({:?}, {} iterations): |tau difference| {d_tau:.2e} Nm", rc.qp.solver, rc.qp.status, rc.qp.iterations);
+    println!(
+        "{solver} vs {} ({:?}, {} iterations): |tau difference| {d_tau:.2e} Nm",
+        rc.qp.solver, rc.qp.status, rc.qp.iterations
+    );
     assert_ne!(solver, "clarabel");
     assert!(d_tau < 1e-4);
 }
@@ -287,14 +343,21 @@ fn a_motion_the_contacts_cannot_carry_yields_the_object_first_and_keeps_every_ro
     let (terms, descs) = fx.static_team(2);
     let mut c = controller(&descs, PidcConfig::default());
     c.compute(&terms).expect("tick");
-    assert_eq!(c.last().expect("tick").motion, coordinator::units::impedance::MotionScale::FULL, "holding still needs no yield");
+    assert_eq!(
+        c.last().expect("tick").motion,
+        coordinator::building_blocks::impedance::MotionScale::FULL,
+        "holding still needs no yield"
+    );
     let obj = c.last().and_then(|r| r.grasp.as_ref()).expect("grasp").object;
     let mut above = obj.translation.vector;
     above.z += 0.5;
     let refs = protocol::TaskReferences {
         header: protocol::Header::new(common::TEAM, None, 1, 0),
         object: Some(protocol::PoseReference {
-            pose: protocol::Pose { position: above.into(), orientation: coordinator::linalg::quat_wxyz(&obj.rotation.to_rotation_matrix()) },
+            pose: protocol::Pose {
+                position: above.into(),
+                orientation: coordinator::linalg::quat_wxyz(&obj.rotation.to_rotation_matrix()),
+            },
             twist: [0.0; 6],
             acceleration: [0.0, 0.0, 50.0, 0.0, 0.0, 0.0],
         }),
@@ -307,14 +370,29 @@ fn a_motion_the_contacts_cannot_carry_yields_the_object_first_and_keeps_every_ro
     c.solve(&terms, &mut cmds).expect("tick");
     let d = c.diagnostics().expect("diagnostics").clone();
     let r = c.materialized().expect("tick");
-    println!("motion kept: object {:.3}, torsos {:.3}; QP {:?}, fallback {:?}", r.motion.object, r.motion.torso, r.qp.status, r.fallback);
-    assert!(r.motion.object < 1.0 && r.motion.object >= 0.0, "the object's motion yielded: {:?}", r.motion);
+    println!(
+        "motion kept: object {:.3}, torsos {:.3}; QP {:?}, fallback {:?}",
+        r.motion.object, r.motion.torso, r.qp.status, r.fallback
+    );
+    assert!(
+        r.motion.object < 1.0 && r.motion.object >= 0.0,
+        "the object's motion yielded: {:?}",
+        r.motion
+    );
     assert_eq!(r.motion.torso, 1.0, "the torsos yield only after the object is held still");
-    assert!(matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved) && r.fallback.is_none(), "{:?} {:?}", r.qp.status, r.fallback);
+    assert!(
+        matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved) && r.fallback.is_none(),
+        "{:?} {:?}",
+        r.qp.status,
+        r.fallback
+    );
     let (wc, wt) = worst_violation(&r);
     println!("worst constraint violation {wc:.2e} N, worst torque excess {wt:.2e} Nm");
     assert!(wc < 1e-5 && wt < 1e-5);
-    assert_eq!(d.motion_yield, Some(protocol::MotionYield { object: r.motion.object, torso: 1.0, reserve: false }));
+    assert_eq!(
+        d.motion_yield,
+        Some(protocol::MotionYield { object: r.motion.object, torso: 1.0, reserve: false })
+    );
     assert!(d.fallback.is_none() && d.qp_status == QpStatus::Solved, "{d:?}");
     // What the yield kept still lifts the object: its predicted vertical force exceeds its weight.
     let g = r.grasp.as_ref().expect("grasp");
@@ -376,16 +454,33 @@ fn bad_input_is_an_error_or_fallback_never_a_panic() {
     assert_eq!(r.qp.status, QpStatus::Infeasible);
     let (wc, wt) = worst_violation(r);
     let f_min_hand = PidcConfig::default().f_min_hand;
-    assert!((wc - f_min_hand).abs() < 1e-3, "worst row violated by {wc} N, expected f_min_hand {f_min_hand} N");
+    assert!(
+        (wc - f_min_hand).abs() < 1e-3,
+        "worst row violated by {wc} N, expected f_min_hand {f_min_hand} N"
+    );
     assert!(wt <= -1.0, "torques at least 1 N m inside the limits: {wt}");
     assert_eq!(out.len(), 2, "one command per robot");
     for (o, d) in out.iter().zip(&descs) {
         assert_eq!(o.tau.len(), d.torque_limits.len());
-        assert!(o.tau.iter().zip(&d.torque_limits).all(|(t, lim)| t.is_finite() && t.abs() <= *lim), "{:?}", o.tau);
-        assert!(o.tau.iter().all(|t| t.abs() < 1e-9), "nothing to command without Jacobians: {:?}", o.tau);
+        assert!(
+            o.tau.iter().zip(&d.torque_limits).all(|(t, lim)| t.is_finite() && t.abs() <= *lim),
+            "{:?}",
+            o.tau
+        );
+        assert!(
+            o.tau.iter().all(|t| t.abs() < 1e-9),
+            "nothing to command without Jacobians: {:?}",
+            o.tau
+        );
     }
     // Infeasible QP (absurd minimum normal force): the fallback, within the torque limits.
-    let mut c3 = controller(&descs, PidcConfig { f_min_foot: 1e5, ..PidcConfig::default() });
+    let mut c3 = controller(
+        &descs,
+        PidcConfig {
+            shell: coordinator::ShellConfig { f_min_foot: 1e5, ..PidcConfig::default().shell },
+            ..PidcConfig::default()
+        },
+    );
     c3.solve(&terms, &mut out).expect("fallback, not an error");
     let r = c3.last().expect("last");
     println!("f_min_foot 1e5: QP {:?}, fallback: {:?}", r.qp.status, r.fallback);
@@ -411,7 +506,12 @@ fn contact_set_changes_and_more_robots() {
     assert_eq!(r.team.feet.len(), 7);
     assert_eq!(r.team.swing_feet.len(), 1);
     assert_eq!(r.j_c.nrows(), 21 + 12);
-    assert_eq!(r.qp.status, QpStatus::Solved, "a foot in swing and a hand released, standing still: {:?}", r.fallback);
+    assert_eq!(
+        r.qp.status,
+        QpStatus::Solved,
+        "a foot in swing and a hand released, standing still: {:?}",
+        r.fallback
+    );
     // Back to all stance: the next tick reassembles.
     let (terms, _) = fx.static_team(2);
     c.compute(&terms).expect("tick");
@@ -423,7 +523,12 @@ fn contact_set_changes_and_more_robots() {
     let mut out = Vec::new();
     c.solve(&terms, &mut out).expect("tick");
     let r = c.materialized().expect("last");
-    assert_eq!(r.qp.status, QpStatus::Solved, "four robots standing around the object: {:?}", r.fallback);
+    assert_eq!(
+        r.qp.status,
+        QpStatus::Solved,
+        "four robots standing around the object: {:?}",
+        r.fallback
+    );
     assert_eq!(r.team.n, 4 * nv, "four robots' velocities");
     assert_eq!(out.len(), 4);
 }
@@ -436,7 +541,8 @@ fn commands_after_a_hold_tick_are_torques_again() {
     let mut fx = Fixture::new();
     let (terms, descs) = fx.static_team(2);
     let mut c = controller(&descs, PidcConfig::default());
-    let mut out: Vec<protocol::TorqueCommand> = ["r1", "r2"].iter().map(|r| protocol::TorqueCommand::hold(common::TEAM, r, 0)).collect();
+    let mut out: Vec<protocol::TorqueCommand> =
+        ["r1", "r2"].iter().map(|r| protocol::TorqueCommand::hold(common::TEAM, r, 0)).collect();
     c.solve(&terms, &mut out).expect("tick");
     assert_eq!(out.len(), 2);
     for cmd in &out {
@@ -448,7 +554,10 @@ fn commands_after_a_hold_tick_are_torques_again() {
 
 #[test]
 fn controller_configuration_from_toml_keeps_defaults_and_refuses_bad_values() {
-    let c = PidcConfig::from_toml("f_min_hand = 20.0\n[object_gains]\nkp = [1, 2, 3, 4, 5, 6]\nkd = [6, 5, 4, 3, 2, 1]\n").expect("partial file");
+    let c = PidcConfig::from_toml(
+        "f_min_hand = 20.0\n[object_gains]\nkp = [1, 2, 3, 4, 5, 6]\nkd = [6, 5, 4, 3, 2, 1]\n",
+    )
+    .expect("partial file");
     assert_eq!(c.f_min_hand, 20.0);
     assert_eq!(c.object_gains.kp, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
     let d = PidcConfig::default();
@@ -478,8 +587,8 @@ fn controller_configuration_from_toml_keeps_defaults_and_refuses_bad_values() {
 /// back to its first lift-off point).
 #[test]
 fn a_swing_foot_without_a_reference_holds_where_it_lifted_off_this_time() {
+    use coordinator::building_blocks::targets::Targets;
     use coordinator::team::Team;
-    use coordinator::units::targets::Targets;
     let mut fx = Fixture::new();
     let nv = fx.robot.model.nv;
     let swing = ActiveContacts { stance: vec![false, true, true, true], hand_in_grasp: false };
@@ -528,7 +637,11 @@ fn the_constraint_residual_is_the_norm_of_the_constraints_velocity() {
     for moving in [false, true] {
         let tick: Vec<DynamicsTerms> = (0..2)
             .map(|k| {
-                let v = if moving { DVector::from_fn(nv, |_, _| rng.random_range(-0.3..0.3)) } else { DVector::zeros(nv) };
+                let v = if moving {
+                    DVector::from_fn(nv, |_, _| rng.random_range(-0.3..0.3))
+                } else {
+                    DVector::zeros(nv)
+                };
                 fx.terms(&robot_id(k), &qs[k], &v, 1 + moving as u64)
             })
             .collect();
@@ -538,9 +651,15 @@ fn the_constraint_residual_is_the_norm_of_the_constraints_velocity() {
         let r = c.materialized().expect("last");
         assert!(c.contact_matrices().j_c_formed);
         let (j, v) = (&r.j_c, &r.team.velocity);
-        let written_out = (0..j.nrows()).map(|i| (0..j.ncols()).map(|k| j[(i, k)] * v[k]).sum::<f64>().powi(2)).sum::<f64>().sqrt();
+        let written_out = (0..j.nrows())
+            .map(|i| (0..j.ncols()).map(|k| j[(i, k)] * v[k]).sum::<f64>().powi(2))
+            .sum::<f64>()
+            .sqrt();
         println!("moving {moving}: |J_c v| {written_out:.6e}, reported {reported:.6e}");
-        assert!((reported - written_out).abs() <= 1e-12 * (1.0 + written_out), "reported {reported}, written out {written_out}");
+        assert!(
+            (reported - written_out).abs() <= 1e-12 * (1.0 + written_out),
+            "reported {reported}, written out {written_out}"
+        );
         if moving {
             assert!(written_out > 1e-2, "random velocities leave the constraints: {written_out}");
         } else {
@@ -561,7 +680,10 @@ fn terms_that_do_not_fit_the_robots_description_are_refused() {
     let d = fx.description("r1");
     assert_eq!((terms.nv(), terms.floating_base, d.joint_names.len()), (24, true, 18));
     assert!(coordinator::team::terms_fit(&terms, Some(&d)).is_ok());
-    assert!(coordinator::team::terms_fit(&terms, None).is_ok(), "before the description, the terms' own consistency only");
+    assert!(
+        coordinator::team::terms_fit(&terms, None).is_ok(),
+        "before the description, the terms' own consistency only"
+    );
     let mut wrong = d.clone();
     wrong.nv = 26;
     let e = coordinator::team::terms_fit(&terms, Some(&wrong)).expect_err("another nv");
@@ -574,7 +696,10 @@ fn terms_that_do_not_fit_the_robots_description_are_refused() {
     assert!(coordinator::team::terms_fit(&terms, Some(&wrong)).is_err(), "a fixed base described");
     let mut c = controller(&[d.clone(), fx.description("r2")], PidcConfig::default());
     c.set_description(&wrong);
-    assert!(c.check_terms(&terms).is_err(), "the controller checks against the description it holds");
+    assert!(
+        c.check_terms(&terms).is_err(),
+        "the controller checks against the description it holds"
+    );
     c.set_description(&d);
     assert!(c.check_terms(&terms).is_ok());
 }

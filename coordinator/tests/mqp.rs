@@ -7,7 +7,7 @@
 mod common;
 
 use common::{robot_id, Fixture};
-use coordinator::units::contact_margins::ContactMargins;
+use coordinator::building_blocks::contact_margins::ContactMargins;
 use coordinator::{Mqp, MqpConfig, Pidc, PidcConfig};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3, Vector6};
 use protocol::conventions::GRAVITY_VECTOR;
@@ -16,18 +16,26 @@ use rand::Rng;
 
 /// A 2-robot team at a random perturbed configuration (`amp`) with a velocity that keeps the
 /// contacts (the PIDC projector applied to a random velocity of size `vel`).
-fn random_team(fx: &mut Fixture, seed: u64, amp: f64, vel: f64) -> (Vec<DynamicsTerms>, Vec<RobotDescription>) {
+fn random_team(
+    fx: &mut Fixture,
+    seed: u64,
+    amp: f64,
+    vel: f64,
+) -> (Vec<DynamicsTerms>, Vec<RobotDescription>) {
     let mut rng = common::rng(seed);
     let nv = fx.robot.model.nv;
     let qs: Vec<DVector<f64>> = (0..2).map(|k| fx.perturbed_q(k, 2, amp, &mut rng)).collect();
     let descs: Vec<_> = (0..2).map(|k| fx.description(&robot_id(k))).collect();
-    let terms0: Vec<_> = (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &DVector::zeros(nv), 1)).collect();
+    let terms0: Vec<_> =
+        (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &DVector::zeros(nv), 1)).collect();
     let mut pidc = Pidc::new(PidcConfig::default());
     descs.iter().for_each(|d| pidc.set_description(d));
     pidc.compute(&terms0).expect("tick");
     let p = pidc.materialized().expect("tick").proj.p.clone();
     let v = &p * DVector::from_fn(2 * nv, |_, _| rng.random_range(-vel..vel));
-    let terms = (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &v.rows(k * nv, nv).into_owned(), 2)).collect();
+    let terms = (0..2)
+        .map(|k| fx.terms(&robot_id(k), &qs[k], &v.rows(k * nv, nv).into_owned(), 2))
+        .collect();
     (terms, descs)
 }
 
@@ -45,7 +53,11 @@ fn frames(t: &DynamicsTerms, role: FrameRole) -> Vec<(DMatrix<f64>, DVector<f64>
         .filter(|f| f.role == role)
         .map(|f| {
             let d = role.dim();
-            (DMatrix::from_row_slice(d, nv, &f.jacobian.data), DVector::from_column_slice(&f.jdot_v), Vector3::from(f.position))
+            (
+                DMatrix::from_row_slice(d, nv, &f.jacobian.data),
+                DVector::from_column_slice(&f.jdot_v),
+                Vector3::from(f.position),
+            )
         })
         .collect()
 }
@@ -64,11 +76,16 @@ fn residuals(terms: &[DynamicsTerms], c: &Mqp, cfg: &MqpConfig) -> (f64, f64) {
     let nv: Vec<usize> = terms.iter().map(|t| t.nv()).collect();
     let n: usize = nv.iter().sum();
     let (mut m, mut h, mut v) = (DMatrix::zeros(n, n), DVector::zeros(n), DVector::zeros(n));
-    let (mut j_cf, mut jdv_cf, mut j_ee, mut hand_p) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut j_cf, mut jdv_cf, mut j_ee, mut hand_p) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut off = 0;
     for t in terms {
         let k = t.nv();
-        m.view_mut((off, off), (k, k)).copy_from(&DMatrix::from_row_slice(k, k, &t.mass_matrix.data));
+        m.view_mut((off, off), (k, k)).copy_from(&DMatrix::from_row_slice(
+            k,
+            k,
+            &t.mass_matrix.data,
+        ));
         h.rows_mut(off, k).copy_from(&DVector::from_column_slice(&t.bias));
         v.rows_mut(off, k).copy_from(&DVector::from_column_slice(&t.velocity));
         let widen = |j: &DMatrix<f64>| {
@@ -131,7 +148,8 @@ fn residuals(terms: &[DynamicsTerms], c: &Mqp, cfg: &MqpConfig) -> (f64, f64) {
         let rot = r.grasp.as_ref().expect("grasp").object.rotation.to_rotation_matrix();
         let i_w = rot.matrix() * cfg.object_inertia * rot.matrix().transpose();
         let w = Vector3::new(twist[3], twist[4], twist[5]);
-        let f = cfg.object_mass * (Vector3::new(a_o[0], a_o[1], a_o[2]) - Vector3::from(GRAVITY_VECTOR));
+        let f = cfg.object_mass
+            * (Vector3::new(a_o[0], a_o[1], a_o[2]) - Vector3::from(GRAVITY_VECTOR));
         let mo = i_w * Vector3::new(a_o[3], a_o[4], a_o[5]) + w.cross(&(i_w * w));
         let f_x = -Vector6::new(f.x, f.y, f.z, mo.x, mo.y, mo.z);
         lhs -= j_o.transpose() * f_x;
@@ -155,7 +173,10 @@ fn mqp_solution_satisfies_the_team_dynamics_to_1e_8() {
         assert!(r.fallback.is_none());
         let (dyn_res, kin_res) = residuals(terms, &c, &cfg);
         println!("state {k}: dynamics residual {dyn_res:.2e}, foot kinematics {kin_res:.2e}, clarabel {:.0} us", c.last().unwrap().outcome.solve_us);
-        assert!(dyn_res < 1e-8, "state {k}: |M qdd + h - J_o^T F_x - S tau - J_c^T lambda| = {dyn_res:e}");
+        assert!(
+            dyn_res < 1e-8,
+            "state {k}: |M qdd + h - J_o^T F_x - S tau - J_c^T lambda| = {dyn_res:e}"
+        );
         assert!(kin_res < 1e-8, "state {k}: |J_cf qdd + Jdot_cf v| = {kin_res:e}");
     }
 }
@@ -168,7 +189,13 @@ fn mqp_solution_satisfies_the_team_dynamics_to_1e_8() {
 /// `|t_x . m| <= delta_y f_n`, `|t_y . m| <= delta_x f_n`;
 /// `|tau_j| <= tau_max,j`. Friction and patch sizes scaled by the margins both controllers
 /// share. Returns the largest excess (<= 0 when every limit holds).
-fn limit_excess(terms: &[DynamicsTerms], descs: &[RobotDescription], cfg: &ContactMargins, w: &[f64], tau: &[f64]) -> f64 {
+fn limit_excess(
+    terms: &[DynamicsTerms],
+    descs: &[RobotDescription],
+    cfg: &ContactMargins,
+    w: &[f64],
+    tau: &[f64],
+) -> f64 {
     let mut excess = f64::NEG_INFINITY;
     let mut check = |value: f64, bound: f64| excess = excess.max(value - bound);
     let mut row = 0;
@@ -183,16 +210,24 @@ fn limit_excess(terms: &[DynamicsTerms], descs: &[RobotDescription], cfg: &Conta
         }
     }
     for (t, d) in terms.iter().zip(descs) {
-        let Some(hand) = t.frames.iter().find(|f| f.role == FrameRole::Hand && t.hand_in_grasp) else { continue };
+        let Some(hand) = t.frames.iter().find(|f| f.role == FrameRole::Hand && t.hand_in_grasp)
+        else {
+            continue;
+        };
         let r = Matrix3::from_row_slice(&hand.rotation);
-        let (tx, ty, n) = (r.column(0).into_owned(), r.column(1).into_owned(), r.column(2).into_owned());
+        let (tx, ty, n) =
+            (r.column(0).into_owned(), r.column(1).into_owned(), r.column(2).into_owned());
         let f = Vector3::new(w[row], w[row + 1], w[row + 2]);
         let m = Vector3::new(w[row + 3], w[row + 4], w[row + 5]);
         let f_n = -n.dot(&f);
         let (mu, xi) = (d.hand_mu * cfg.friction_margin, d.hand_xi * cfg.friction_margin);
-        let (dx, dy) = (d.hand_half_size[0] * cfg.patch_margin, d.hand_half_size[1] * cfg.patch_margin);
+        let (dx, dy) =
+            (d.hand_half_size[0] * cfg.patch_margin, d.hand_half_size[1] * cfg.patch_margin);
         check(cfg.f_min_hand, f_n);
-        check(mu * (tx.dot(&f).abs() / mu + ty.dot(&f).abs() / mu + n.dot(&m).abs() / xi), mu * f_n);
+        check(
+            mu * (tx.dot(&f).abs() / mu + ty.dot(&f).abs() / mu + n.dot(&m).abs() / xi),
+            mu * f_n,
+        );
         check(tx.dot(&m).abs(), dy * f_n);
         check(ty.dot(&m).abs(), dx * f_n);
         row += 6;
@@ -207,7 +242,8 @@ fn limit_excess(terms: &[DynamicsTerms], descs: &[RobotDescription], cfg: &Conta
 }
 
 #[test]
-fn with_the_same_state_both_controllers_keep_the_contact_wrenches_and_torques_inside_the_same_limits() {
+fn with_the_same_state_both_controllers_keep_the_contact_wrenches_and_torques_inside_the_same_limits(
+) {
     let mut fx = Fixture::new();
     let (terms, descs) = fx.static_team(2);
     let mut states = vec![(terms, descs)];
@@ -243,7 +279,10 @@ fn when_clarabel_fails_every_robot_is_still_commanded_and_the_status_says_why() 
     let (terms, descs) = fx.static_team(2);
     // A squeeze no arm can give: infeasible from the first tick, so no valid solution exists
     // yet and the fallback is the bias torque, clamped to the limits.
-    let mut c = Mqp::new(MqpConfig { f_min_hand: 1e5, ..MqpConfig::default() });
+    let mut c = Mqp::new(MqpConfig {
+        shell: coordinator::ShellConfig { f_min_hand: 1e5, ..MqpConfig::default().shell },
+        ..MqpConfig::default()
+    });
     descs.iter().for_each(|d| c.set_description(d));
     let mut out = Vec::new();
     TeamController::solve(&mut c, &terms, &mut out).expect("a command despite the failure");

@@ -35,7 +35,11 @@ const CASES: [Case; 7] = [
 ];
 
 fn controller(fx: &Fixture, case: Case, by_blocks: bool) -> Pidc {
-    let mut c = Pidc::new(PidcConfig { qp_path: if by_blocks { QpPath::ByBlocks } else { QpPath::ActiveSet }, fully_actuated: case.fully_actuated, ..PidcConfig::default() });
+    let mut c = Pidc::new(PidcConfig {
+        qp_path: if by_blocks { QpPath::ByBlocks } else { QpPath::ActiveSet },
+        fully_actuated: case.fully_actuated,
+        ..PidcConfig::default()
+    });
     for k in 0..case.robots {
         c.set_description(&fx.description(&robot_id(k)));
     }
@@ -49,7 +53,16 @@ fn rel(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
 /// The assembled QP in `F` of a report whose `Y` and `rho` are formed, without `eps |F|^2`.
 fn problem(r: &MaterializedTick) -> QpProblem {
     let eta_real = &r.lambda_real - &r.lambda + &r.eta;
-    let inp = QpInput { y: &r.y, rho: &r.rho, eta: &eta_real, contacts: &r.contacts, actuated: &r.actuated, limits: &r.limits, tau0: &r.tau0, regularisation: 0.0 };
+    let inp = QpInput {
+        y: &r.y,
+        rho: &r.rho,
+        eta: &eta_real,
+        contacts: &r.contacts,
+        actuated: &r.actuated,
+        limits: &r.limits,
+        tau0: &r.tau0,
+        regularisation: 0.0,
+    };
     let mut p = QpProblem::default();
     p.assemble(&inp);
     p
@@ -62,7 +75,8 @@ fn kkt(p: &QpProblem, f: &DVector<f64>) -> (f64, f64, f64) {
     let s = &p.a * f - &p.b;
     let rows = (0..p.rows()).map(|i| s[i] / (1.0 + p.b[i].abs())).fold(f64::NEG_INFINITY, f64::max);
     let grad = &p.p * f;
-    let w: Vec<usize> = (0..p.rows()).filter(|&i| s[i].abs() <= 1e-7 * (1.0 + p.b[i].abs())).collect();
+    let w: Vec<usize> =
+        (0..p.rows()).filter(|&i| s[i].abs() <= 1e-7 * (1.0 + p.b[i].abs())).collect();
     let a_w = DMatrix::from_fn(p.n(), w.len(), |c, k| p.a[(w[k], c)]);
     let u = nonnegative_least_squares(&a_w, &(-&grad));
     let residual = (&grad + &a_w * &u).amax() / grad.amax().max(1.0);
@@ -72,7 +86,8 @@ fn kkt(p: &QpProblem, f: &DVector<f64>) -> (f64, f64, f64) {
 #[test]
 fn the_blocks_answer_is_the_qps_optimum_and_the_team_sized_qps_torque() {
     let mut fx = Fixture::new();
-    let (mut worst_kkt, mut worst_tau, mut worst_lambda, mut worst_id): (f64, f64, f64, f64) = (0.0, 0.0, 0.0, 0.0);
+    let (mut worst_kkt, mut worst_tau, mut worst_lambda, mut worst_id): (f64, f64, f64, f64) =
+        (0.0, 0.0, 0.0, 0.0);
     let (mut answered, mut repaired) = (0, 0);
     let mut total = 0;
     for case in CASES {
@@ -82,7 +97,11 @@ fn the_blocks_answer_is_the_qps_optimum_and_the_team_sized_qps_torque() {
             blocks.compute(tick).expect("block tick");
             let d = dense.compute(tick).expect("dense tick").clone();
             let b = blocks.materialized().expect("block tick").clone();
-            assert!(matches!(d.qp.status, qp::QpStatus::Solved | qp::QpStatus::AlmostSolved), "{case:?} tick {t}: the oracle's QP {:?}", d.qp.status);
+            assert!(
+                matches!(d.qp.status, qp::QpStatus::Solved | qp::QpStatus::AlmostSolved),
+                "{case:?} tick {t}: the oracle's QP {:?}",
+                d.qp.status
+            );
             if let Some(why) = b.blocks_declined {
                 println!("{case:?} tick {t}: {why}");
             }
@@ -98,7 +117,10 @@ fn the_blocks_answer_is_the_qps_optimum_and_the_team_sized_qps_torque() {
             // F = Y^+ dtau makes the block answer: the torque and the wrenches.
             let dtau = &b.tau - &b.tau0;
             assert!(rel(&(&b.y * &b.f_c), &dtau) < 1e-9, "{case:?} tick {t}: Y F != dtau");
-            assert!(rel(&(&b.rho * &b.f_c + &b.eta), &b.lambda) < 1e-9, "{case:?} tick {t}: rho F + eta != lambda");
+            assert!(
+                rel(&(&b.rho * &b.f_c + &b.eta), &b.lambda) < 1e-9,
+                "{case:?} tick {t}: rho F + eta != lambda"
+            );
             let p = problem(&b);
             let (rows, stationarity, _) = kkt(&p, &b.f_c);
             worst_kkt = worst_kkt.max(rows.max(stationarity));
@@ -115,7 +137,10 @@ fn the_blocks_answer_is_the_qps_optimum_and_the_team_sized_qps_torque() {
     // after mending the last tick's active rows (each answer checked above all the same).
     assert!(answered >= total - CASES.len(), "only {answered} of {total} ticks by the blocks");
     assert!(repaired > 0, "no tick needed its active set mended: the repair path is not exercised");
-    assert!(worst_tau < 1e-4 && worst_lambda < 1e-4, "torque {worst_tau:.2e}, wrenches {worst_lambda:.2e}");
+    assert!(
+        worst_tau < 1e-4 && worst_lambda < 1e-4,
+        "torque {worst_tau:.2e}, wrenches {worst_lambda:.2e}"
+    );
 }
 
 #[test]
@@ -130,7 +155,12 @@ fn a_stale_active_set_or_a_new_shape_goes_to_the_team_sized_qp() {
         let b = blocks.compute(tick).expect("tick").clone();
         let d = dense.compute(tick).expect("tick").clone();
         declined += usize::from(b.qp.solver != qp::by_blocks::SOLVER);
-        assert!(rel(&b.tau, &d.tau) < 1e-4, "torque {:.2e} by {}", rel(&b.tau, &d.tau), b.qp.solver);
+        assert!(
+            rel(&b.tau, &d.tau) < 1e-4,
+            "torque {:.2e} by {}",
+            rel(&b.tau, &d.tau),
+            b.qp.solver
+        );
     }
     assert!(declined > 1, "the blocks answered every tick of a fast team ({declined} declined)");
     // A foot lifts: another shape of QP, which the blocks must not answer from the old rows.
@@ -138,7 +168,11 @@ fn a_stale_active_set_or_a_new_shape_goes_to_the_team_sized_qp() {
     let lifted = moving_ticks(&mut fx, swing, 2, 0.2);
     let b = blocks.compute(&lifted[0]).expect("tick").clone();
     let d = dense.compute(&lifted[0]).expect("tick").clone();
-    assert_eq!(b.blocks_declined, Some(qp::Decline::NoHotStart), "a new shape was answered from the old active set");
+    assert_eq!(
+        b.blocks_declined,
+        Some(qp::Decline::NoHotStart),
+        "a new shape was answered from the old active set"
+    );
     assert!(rel(&b.tau, &d.tau) < 1e-4);
 }
 
@@ -154,7 +188,9 @@ fn a_binding_torque_limit_is_an_active_row_of_the_block_answer() {
     let mut probe = controller(&fx, case, false);
     let r = probe.compute(&seq[0]).expect("tick").clone();
     let joints = fx.description(&robot_id(0)).torque_limits.len();
-    let p = (0..joints).max_by(|&a, &b| r.tau[r.actuated[a]].abs().total_cmp(&r.tau[r.actuated[b]].abs())).expect("joints");
+    let p = (0..joints)
+        .max_by(|&a, &b| r.tau[r.actuated[a]].abs().total_cmp(&r.tau[r.actuated[b]].abs()))
+        .expect("joints");
     let mut d0 = fx.description(&robot_id(0));
     d0.torque_limits[p] = 0.97 * r.tau[r.actuated[p]].abs();
     let (mut blocks, mut dense) = (controller(&fx, case, true), controller(&fx, case, false));
@@ -165,20 +201,35 @@ fn a_binding_torque_limit_is_an_active_row_of_the_block_answer() {
         blocks.compute(tick).expect("tick");
         let d = dense.compute(tick).expect("tick").clone();
         let b = blocks.materialized().expect("tick").clone();
-        assert!(matches!(d.qp.status, qp::QpStatus::Solved), "tick {t}: the oracle's QP {:?}", d.qp.status);
-        assert!(b.tau[b.actuated[p]].abs() <= d0.torque_limits[p] * (1.0 + 1e-9), "tick {t}: the limit holds");
+        assert!(
+            matches!(d.qp.status, qp::QpStatus::Solved),
+            "tick {t}: the oracle's QP {:?}",
+            d.qp.status
+        );
+        assert!(
+            b.tau[b.actuated[p]].abs() <= d0.torque_limits[p] * (1.0 + 1e-9),
+            "tick {t}: the limit holds"
+        );
         if b.qp.solver != qp::by_blocks::SOLVER {
             continue;
         }
         answered += 1;
         let prob = problem(&b);
         let (rows, stationarity, _) = kkt(&prob, &b.f_c);
-        assert!(rows < 1e-8 && stationarity < 1e-7, "tick {t}: rows {rows:.2e}, stationarity {stationarity:.2e}");
+        assert!(
+            rows < 1e-8 && stationarity < 1e-7,
+            "tick {t}: rows {rows:.2e}, stationarity {stationarity:.2e}"
+        );
         let slack = &prob.a * &b.f_c - &prob.b;
         let torque_rows = prob.pairs_from..prob.rows();
-        binding += usize::from(torque_rows.clone().any(|i| slack[i].abs() <= 1e-7 * (1.0 + prob.b[i].abs())));
+        binding += usize::from(
+            torque_rows.clone().any(|i| slack[i].abs() <= 1e-7 * (1.0 + prob.b[i].abs())),
+        );
         assert!(rel(&b.tau, &d.tau) < 1e-4, "tick {t}: torque {:.2e}", rel(&b.tau, &d.tau));
     }
     println!("limit {:.2} N m on joint {p}: {answered} ticks by the blocks, {binding} with a torque row binding", d0.torque_limits[p]);
-    assert!(answered >= seq.len() - 1 && binding == answered, "{answered} answered, {binding} binding");
+    assert!(
+        answered >= seq.len() - 1 && binding == answered,
+        "{answered} answered, {binding} binding"
+    );
 }

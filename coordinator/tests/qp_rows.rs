@@ -20,8 +20,13 @@
 
 mod common;
 
-use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SecondOrderConeT, SolverStatus, ZeroConeT};
-use coordinator::qp::{self, constraints_into, contact_rows, ContactKind, DenseIpm, QpInput, QpPath, QpSettings, QpSolver, QpWorkspace, DENSE_TOL};
+use clarabel::solver::{
+    DefaultSettings, DefaultSolver, IPSolver, SecondOrderConeT, SolverStatus, ZeroConeT,
+};
+use coordinator::qp::{
+    self, constraints_into, contact_rows, ContactKind, DenseIpm, QpInput, QpPath, QpSettings,
+    QpSolver, QpWorkspace, DENSE_TOL,
+};
 use coordinator::PidcConfig;
 use nalgebra::{DMatrix, DVector, Rotation3, UnitQuaternion, Vector3, Vector4};
 use rand::rngs::StdRng;
@@ -42,7 +47,8 @@ fn random_rotation(rng: &mut StdRng) -> Rotation3<f64> {
         let q = Vector4::from_fn(|_, _| rng.random_range(-1.0..1.0));
         let norm = q.norm();
         if norm > 0.1 && norm < 1.0 {
-            return UnitQuaternion::from_quaternion(nalgebra::Quaternion::from_vector(q / norm)).to_rotation_matrix();
+            return UnitQuaternion::from_quaternion(nalgebra::Quaternion::from_vector(q / norm))
+                .to_rotation_matrix();
         }
     }
 }
@@ -53,7 +59,13 @@ impl Contact {
         let f_min = rng.random_range(0.5..50.0);
         if hand {
             let half = [rng.random_range(0.02..0.15), rng.random_range(0.02..0.15)];
-            Contact::Hand { rot: random_rotation(rng), mu, xi: rng.random_range(0.005..0.1), half, f_min }
+            Contact::Hand {
+                rot: random_rotation(rng),
+                mu,
+                xi: rng.random_range(0.005..0.1),
+                half,
+                f_min,
+            }
         } else {
             Contact::Foot { mu, f_min }
         }
@@ -65,7 +77,15 @@ impl Contact {
             Contact::Foot { mu, f_min } => ContactKind::Foot { mu, f_min, f_max: f64::INFINITY },
             Contact::Hand { rot, mu, xi, half, f_min } => {
                 let r = rot.matrix();
-                ContactKind::Hand { tx: r.column(0).into(), ty: r.column(1).into(), n: r.column(2).into(), mu, xi, half, f_min }
+                ContactKind::Hand {
+                    tx: r.column(0).into(),
+                    ty: r.column(1).into(),
+                    n: r.column(2).into(),
+                    mu,
+                    xi,
+                    half,
+                    f_min,
+                }
             }
         }
     }
@@ -106,7 +126,14 @@ impl Contact {
                 // |t_x.f| / mu + |t_y.f| / mu + |n.m| / xi <= f_n, one face per sign.
                 let mut out: Vec<(&'static str, f64)> = HAND_FACES
                     .iter()
-                    .map(|&(name, [sx, sy, sz])| (name, f_n - (sx * tx.dot(&f_t) / mu + sy * ty.dot(&f_t) / mu + sz * n.dot(&m) / xi)))
+                    .map(|&(name, [sx, sy, sz])| {
+                        (
+                            name,
+                            f_n - (sx * tx.dot(&f_t) / mu
+                                + sy * ty.dot(&f_t) / mu
+                                + sz * n.dot(&m) / xi),
+                        )
+                    })
                     .collect();
                 out.extend([
                     ("f_n >= f_min", f_n - f_min),
@@ -147,15 +174,23 @@ impl Contact {
         let f_min = match *self {
             Contact::Foot { f_min, .. } | Contact::Hand { f_min, .. } => f_min,
         };
-        let f_n = if violate == Some(f_n_index) { f_min * rng.random_range(0.3..0.98) } else { f_min * rng.random_range(1.02..20.0) };
+        let f_n = if violate == Some(f_n_index) {
+            f_min * rng.random_range(0.3..0.98)
+        } else {
+            f_min * rng.random_range(1.02..20.0)
+        };
         match *self {
             Contact::Foot { mu, .. } => {
                 let (r0, r1) = (ratio(rng, 0, 1), ratio(rng, 2, 3));
                 vec![r0 * mu * f_n, r1 * mu * f_n, f_n]
             }
             Contact::Hand { rot, mu, xi, half, .. } => {
-                let [a, b, c] = cross_polytope_point(rng, violate.filter(|v| *v < HAND_FACES.len()));
-                let (p_x, p_y) = (ratio(rng, f_n_index + 1, f_n_index + 2), ratio(rng, f_n_index + 3, f_n_index + 4));
+                let [a, b, c] =
+                    cross_polytope_point(rng, violate.filter(|v| *v < HAND_FACES.len()));
+                let (p_x, p_y) = (
+                    ratio(rng, f_n_index + 1, f_n_index + 2),
+                    ratio(rng, f_n_index + 3, f_n_index + 4),
+                );
                 let (tx, ty, n) = (rot * Vector3::x(), rot * Vector3::y(), rot * Vector3::z());
                 let f = a * mu * f_n * tx + b * mu * f_n * ty - f_n * n;
                 let p = p_x * half[0] * tx + p_y * half[1] * ty;
@@ -184,7 +219,10 @@ const HAND_FACES: [(&str, [f64; 3]); 8] = [
 fn cross_polytope_point(rng: &mut StdRng, face: Option<usize>) -> [f64; 3] {
     let (signs, sum) = match face {
         Some(k) => (HAND_FACES[k].1, rng.random_range(1.02..1.5)),
-        None => ([0; 3].map(|_: i32| if rng.random_bool(0.5) { 1.0 } else { -1.0 }), rng.random_range(0.0..0.98)),
+        None => (
+            [0; 3].map(|_: i32| if rng.random_bool(0.5) { 1.0 } else { -1.0 }),
+            rng.random_range(0.0..0.98),
+        ),
     };
     loop {
         let w = [0; 3].map(|_: i32| rng.random_range(0.05..1.0));
@@ -211,19 +249,37 @@ impl RowMap {
 
     fn record(&mut self, constraint: usize, flagged: &[usize], context: &str) {
         let name = self.names[constraint];
-        assert_eq!(flagged.len(), 1, "{context}: breaking `{name}` alone must break exactly one row, broke {flagged:?}");
+        assert_eq!(
+            flagged.len(),
+            1,
+            "{context}: breaking `{name}` alone must break exactly one row, broke {flagged:?}"
+        );
         match self.row_of[constraint] {
             None => self.row_of[constraint] = Some(flagged[0]),
-            Some(r) => assert_eq!(r, flagged[0], "{context}: `{name}` maps to row {r} and now {}", flagged[0]),
+            Some(r) => assert_eq!(
+                r, flagged[0],
+                "{context}: `{name}` maps to row {r} and now {}",
+                flagged[0]
+            ),
         }
     }
 
     /// Every constraint seen, each on its own row, covering all `rows`.
     fn assert_bijection(&self, rows: usize) -> Vec<usize> {
-        let of: Vec<usize> = self.row_of.iter().zip(&self.names).map(|(r, n)| r.unwrap_or_else(|| panic!("`{n}` never sampled"))).collect();
+        let of: Vec<usize> = self
+            .row_of
+            .iter()
+            .zip(&self.names)
+            .map(|(r, n)| r.unwrap_or_else(|| panic!("`{n}` never sampled")))
+            .collect();
         let mut sorted = of.clone();
         sorted.sort_unstable();
-        assert_eq!(sorted, (0..rows).collect::<Vec<_>>(), "constraints -> rows {:?}", self.names.iter().zip(&of).collect::<Vec<_>>());
+        assert_eq!(
+            sorted,
+            (0..rows).collect::<Vec<_>>(),
+            "constraints -> rows {:?}",
+            self.names.iter().zip(&of).collect::<Vec<_>>()
+        );
         of
     }
 }
@@ -231,7 +287,11 @@ impl RowMap {
 /// The rows of `contact_rows` broken by the wrench `w`.
 fn broken_rows(kind: &ContactKind, w: &[f64]) -> Vec<usize> {
     let rows = contact_rows(kind);
-    rows.iter().enumerate().filter(|(_, (c, lo))| c.iter().zip(w).map(|(a, b)| a * b).sum::<f64>() < *lo).map(|(i, _)| i).collect()
+    rows.iter()
+        .enumerate()
+        .filter(|(_, (c, lo))| c.iter().zip(w).map(|(a, b)| a * b).sum::<f64>() < *lo)
+        .map(|(i, _)| i)
+        .collect()
 }
 
 /// The physical constraints a wrench breaks (to check the sampler itself).
@@ -248,7 +308,9 @@ fn check_contact_rows(hand: bool, seed: u64) {
         let rows = contact_rows(&kind);
         assert_eq!(rows.len(), contact.count(), "{kind_name}: one row per physical constraint");
         assert!(rows.iter().all(|(c, _)| c.len() == contact.dim()));
-        let mut map = RowMap::new(contact.physics(&[0.0; 6][..contact.dim()]).iter().map(|(n, _)| *n).collect());
+        let mut map = RowMap::new(
+            contact.physics(&[0.0; 6][..contact.dim()]).iter().map(|(n, _)| *n).collect(),
+        );
         for _ in 0..20 {
             let w = contact.sample(&mut rng, None);
             assert!(broken_physics(&contact, &w).is_empty(), "sampler");
@@ -257,7 +319,11 @@ fn check_contact_rows(hand: bool, seed: u64) {
             for v in 0..contact.count() {
                 let w = contact.sample(&mut rng, Some(v));
                 assert_eq!(broken_physics(&contact, &w), vec![v], "sampler");
-                map.record(v, &broken_rows(&kind, &w), &format!("{kind_name} case {case} {contact:?}"));
+                map.record(
+                    v,
+                    &broken_rows(&kind, &w),
+                    &format!("{kind_name} case {case} {contact:?}"),
+                );
             }
         }
         let row_of = map.assert_bijection(rows.len());
@@ -265,8 +331,15 @@ fn check_contact_rows(hand: bool, seed: u64) {
             // Each friction face is the row of its signs in FRICTION_SIGNS' order (the order
             // the capacity report names them in).
             for (k, (name, signs)) in HAND_FACES.iter().enumerate() {
-                let named = qp::FRICTION_SIGNS.iter().position(|&(x, y, z)| [x, y, z] == *signs).expect("a sign combination");
-                assert_eq!(row_of[k], named, "`{name}` is row {}, FRICTION_SIGNS says {named}", row_of[k]);
+                let named = qp::FRICTION_SIGNS
+                    .iter()
+                    .position(|&(x, y, z)| [x, y, z] == *signs)
+                    .expect("a sign combination");
+                assert_eq!(
+                    row_of[k], named,
+                    "`{name}` is row {}, FRICTION_SIGNS says {named}",
+                    row_of[k]
+                );
             }
         }
     }
@@ -320,7 +393,8 @@ fn tilt_rows_pair_each_moment_with_the_half_size_across_it_not_the_papers() {
 /// with a normal force of 1: a second-order cone program (Clarabel), feasible or not.
 /// Independent of `contact_rows`: the physics of the simulated palm, written out.
 fn corners_carry(mu: f64, xi: f64, half: [f64; 2], w: [f64; 5]) -> bool {
-    let corners = [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)].map(|(sx, sy)| (sx * half[0], sy * half[1]));
+    let corners = [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)]
+        .map(|(sx, sy)| (sx * half[0], sy * half[1]));
     // Variables per corner i: (f_n, u, v, t) with f_x = mu u, f_y = mu v, tau = xi t.
     let n = 16;
     let mut a = DMatrix::<f64>::zeros(6 + n, n);
@@ -329,8 +403,8 @@ fn corners_carry(mu: f64, xi: f64, half: [f64; 2], w: [f64; 5]) -> bool {
         a[(0, c)] = 1.0; // sum f_n = 1
         a[(1, c + 1)] = mu; // sum f_x
         a[(2, c + 2)] = mu; // sum f_y
-        // The force on the palm at (x, y, 0) is (f_x, f_y, -f_n): its moment about the centre
-        // is (-y f_n, x f_n, x f_y - y f_x), plus the point's torsion along the normal.
+                            // The force on the palm at (x, y, 0) is (f_x, f_y, -f_n): its moment about the centre
+                            // is (-y f_n, x f_n, x f_y - y f_x), plus the point's torsion along the normal.
         a[(3, c)] = -y;
         a[(4, c)] = x;
         a[(5, c + 1)] = -y * mu;
@@ -344,9 +418,17 @@ fn corners_carry(mu: f64, xi: f64, half: [f64; 2], w: [f64; 5]) -> bool {
     b[0] = 1.0;
     b[1..6].copy_from_slice(&w);
     let p = qp::to_csc(&DMatrix::zeros(n, n), true);
-    let cones = [ZeroConeT(6), SecondOrderConeT(4), SecondOrderConeT(4), SecondOrderConeT(4), SecondOrderConeT(4)];
+    let cones = [
+        ZeroConeT(6),
+        SecondOrderConeT(4),
+        SecondOrderConeT(4),
+        SecondOrderConeT(4),
+        SecondOrderConeT(4),
+    ];
     let settings = DefaultSettings::<f64> { verbose: false, ..DefaultSettings::default() };
-    let mut solver = DefaultSolver::new(&p, &vec![0.0; n], &qp::to_csc(&a, false), &b, &cones, settings).expect("the cone program");
+    let mut solver =
+        DefaultSolver::new(&p, &vec![0.0; n], &qp::to_csc(&a, false), &b, &cones, settings)
+            .expect("the cone program");
     solver.solve();
     match solver.solution.status {
         SolverStatus::Solved | SolverStatus::AlmostSolved => true,
@@ -362,7 +444,14 @@ fn hand_vertices(mu: f64, xi: f64, half: [f64; 2], fm: f64, pm: f64) -> Vec<[f64
     let (m, x) = (mu * fm, xi * fm);
     let (px, py) = (half[0] * pm, half[1] * pm);
     let mut out = Vec::new();
-    for [f_x, f_y, m_z] in [[m, 0.0, 0.0], [-m, 0.0, 0.0], [0.0, m, 0.0], [0.0, -m, 0.0], [0.0, 0.0, x], [0.0, 0.0, -x]] {
+    for [f_x, f_y, m_z] in [
+        [m, 0.0, 0.0],
+        [-m, 0.0, 0.0],
+        [0.0, m, 0.0],
+        [0.0, -m, 0.0],
+        [0.0, 0.0, x],
+        [0.0, 0.0, -x],
+    ] {
         for (sx, sy) in [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)] {
             // Normal force 1 along -n at (p_x, p_y): m_x = -p_y, m_y = p_x.
             out.push([f_x, f_y, -sy * py, sx * px, m_z]);
@@ -387,14 +476,30 @@ fn every_wrench_the_hand_rows_allow_is_one_the_palm_corners_carry() {
     let cfg = PidcConfig::default();
     let (mu, xi, half) = (d.hand_mu, d.hand_xi, d.hand_half_size);
     let (fm, pm) = (cfg.friction_margin, cfg.patch_margin);
-    let kind = ContactKind::Hand { tx: Vector3::x(), ty: Vector3::y(), n: Vector3::z(), mu: mu * fm, xi: xi * fm, half: [half[0] * pm, half[1] * pm], f_min: 0.0 };
+    let kind = ContactKind::Hand {
+        tx: Vector3::x(),
+        ty: Vector3::y(),
+        n: Vector3::z(),
+        mu: mu * fm,
+        xi: xi * fm,
+        half: [half[0] * pm, half[1] * pm],
+        f_min: 0.0,
+    };
     for w in hand_vertices(mu, xi, half, fm, pm) {
         let lambda = [w[0], w[1], -1.0, w[2], w[3], w[4]];
         let broken = broken_rows(&kind, &lambda);
-        assert!(broken.iter().all(|&r| on_its_bound(&kind, r, &lambda)), "vertex {w:?} breaks rows {broken:?}");
-        assert!(corners_carry(mu, xi, half, w), "the rows allow {w:?}, the palm's corners cannot carry it");
+        assert!(
+            broken.iter().all(|&r| on_its_bound(&kind, r, &lambda)),
+            "vertex {w:?} breaks rows {broken:?}"
+        );
+        assert!(
+            corners_carry(mu, xi, half, w),
+            "the rows allow {w:?}, the palm's corners cannot carry it"
+        );
     }
-    let carried = |fm: f64, pm: f64| hand_vertices(mu, xi, half, fm, pm).into_iter().all(|w| corners_carry(mu, xi, half, w));
+    let carried = |fm: f64, pm: f64| {
+        hand_vertices(mu, xi, half, fm, pm).into_iter().all(|w| corners_carry(mu, xi, half, w))
+    };
     for (fm, pm) in [(0.8, 0.6), (0.5, 0.9), (0.9, 0.25)] {
         assert!(carried(fm, pm), "margins {fm}, {pm}");
     }
@@ -441,7 +546,8 @@ impl Problem {
         }
         let m = start;
         let n = m + 6;
-        let rho = DMatrix::identity(m, m) * 2.0 + DMatrix::from_fn(m, m, |_, _| rng.random_range(-0.2..0.2));
+        let rho = DMatrix::identity(m, m) * 2.0
+            + DMatrix::from_fn(m, m, |_, _| rng.random_range(-0.2..0.2));
         let eta = DVector::from_fn(m, |_, _| rng.random_range(-20.0..20.0));
         let y = DMatrix::from_fn(n, m, |_, _| rng.random_range(-0.5..0.5));
         let actuated: Vec<usize> = (0..n).filter(|_| rng.random_bool(0.75)).collect();
@@ -465,7 +571,11 @@ impl Problem {
 
     /// Names of every physical constraint: the contacts', then two per actuated joint.
     fn names(&self) -> Vec<&'static str> {
-        let mut names: Vec<&'static str> = self.contacts.iter().flat_map(|c| c.physics(&[0.0; 6][..c.dim()]).into_iter().map(|(n, _)| n)).collect();
+        let mut names: Vec<&'static str> = self
+            .contacts
+            .iter()
+            .flat_map(|c| c.physics(&[0.0; 6][..c.dim()]).into_iter().map(|(n, _)| n))
+            .collect();
         for _ in &self.actuated {
             names.extend(["tau_j <= lim_j", "-tau_j <= lim_j"]);
         }
@@ -506,7 +616,9 @@ impl Problem {
         let tau = &self.tau0 + &self.y * f;
         let mut slacks = Vec::new();
         for (c, (start, _)) in self.contacts.iter().zip(&self.kinds) {
-            slacks.extend(c.physics(lambda.rows(*start, c.dim()).as_slice()).into_iter().map(|(_, s)| s));
+            slacks.extend(
+                c.physics(lambda.rows(*start, c.dim()).as_slice()).into_iter().map(|(_, s)| s),
+            );
         }
         for (&j, &lim) in self.actuated.iter().zip(&self.limits) {
             slacks.extend([lim - tau[j], lim + tau[j]]);
@@ -527,13 +639,25 @@ fn assembled_rows_are_the_physical_constraints_of_lambda_and_tau() {
         for _ in 0..5 {
             for violate in std::iter::once(None).chain((0..names.len()).map(Some)) {
                 let f = pb.place(&mut rng, violate);
-                assert_eq!(pb.broken_physics(&f), violate.into_iter().collect::<Vec<_>>(), "sampler");
+                assert_eq!(
+                    pb.broken_physics(&f),
+                    violate.into_iter().collect::<Vec<_>>(),
+                    "sampler"
+                );
                 constraints_into(&pb.input(), &mut a, &mut b);
-                assert_eq!((a.nrows(), a.ncols(), b.len()), (names.len(), f.len(), names.len()), "one row per physical constraint");
+                assert_eq!(
+                    (a.nrows(), a.ncols(), b.len()),
+                    (names.len(), f.len(), names.len()),
+                    "one row per physical constraint"
+                );
                 let r = &a * &f - &b;
-                let broken: Vec<usize> = r.iter().enumerate().filter(|(_, v)| **v > 0.0).map(|(i, _)| i).collect();
+                let broken: Vec<usize> =
+                    r.iter().enumerate().filter(|(_, v)| **v > 0.0).map(|(i, _)| i).collect();
                 match violate {
-                    None => assert!(broken.is_empty(), "case {case}: F inside every physical constraint breaks rows {broken:?}"),
+                    None => assert!(
+                        broken.is_empty(),
+                        "case {case}: F inside every physical constraint breaks rows {broken:?}"
+                    ),
                     Some(v) => map.record(v, &broken, &format!("case {case}")),
                 }
                 // The dense IPM folds rows (2k, 2k + 1) after the contacts' rows into one:
@@ -541,7 +665,10 @@ fn assembled_rows_are_the_physical_constraints_of_lambda_and_tau() {
                 let pairs_from = a.nrows() - 2 * l;
                 for k in 0..l {
                     let (i, j) = (pairs_from + 2 * k, pairs_from + 2 * k + 1);
-                    assert!((0..a.ncols()).all(|c| a[(j, c)] == -a[(i, c)]), "torque rows {i}, {j} are not (a, -a)");
+                    assert!(
+                        (0..a.ncols()).all(|c| a[(j, c)] == -a[(i, c)]),
+                        "torque rows {i}, {j} are not (a, -a)"
+                    );
                 }
             }
         }
@@ -550,7 +677,11 @@ fn assembled_rows_are_the_physical_constraints_of_lambda_and_tau() {
         let nc = names.len() - 2 * l;
         assert!(of[..nc].iter().all(|r| *r < nc));
         for k in 0..l {
-            assert_eq!((of[nc + 2 * k], of[nc + 2 * k + 1]), (nc + 2 * k, nc + 2 * k + 1), "joint {k}: tau <= lim, then -tau <= lim");
+            assert_eq!(
+                (of[nc + 2 * k], of[nc + 2 * k + 1]),
+                (nc + 2 * k, nc + 2 * k + 1),
+                "joint {k}: tau <= lim, then -tau <= lim"
+            );
         }
     }
 }
@@ -580,13 +711,21 @@ fn paired_torque_rows_in_the_dense_ipm_give_clarabels_solution() {
         pb.place(&mut rng, None);
         let mut f_clarabel = DVector::zeros(0);
         let out_c = qp::solve_with(&mut ws, &pb.input(), &clarabel_only, &mut f_clarabel);
-        assert_eq!((out_c.solver, out_c.status), ("clarabel", protocol::QpStatus::Solved), "case {case}: feasible by construction");
+        assert_eq!(
+            (out_c.solver, out_c.status),
+            ("clarabel", protocol::QpStatus::Solved),
+            "case {case}: feasible by construction"
+        );
         let problem = ws.problem();
         let mut paired = DenseIpm::default();
         let mut f_dense = DVector::zeros(0);
-        let out = paired.solve_problem(problem, &QpSettings::new(50, QpPath::ByBlocks), &mut f_dense);
+        let out =
+            paired.solve_problem(problem, &QpSettings::new(50, QpPath::ByBlocks), &mut f_dense);
         if out.status != protocol::QpStatus::Solved {
-            println!("case {case}: dense IPM {:?} after {} iterations (Clarabel finishes such ticks)", out.status, out.iterations);
+            println!(
+                "case {case}: dense IPM {:?} after {} iterations (Clarabel finishes such ticks)",
+                out.status, out.iterations
+            );
             continue;
         }
         solved += 1;
@@ -594,10 +733,16 @@ fn paired_torque_rows_in_the_dense_ipm_give_clarabels_solution() {
         worst_clarabel = worst_clarabel.max((&f_dense - &f_clarabel).amax() / scale);
         let mut unpaired = DenseIpm::default();
         let it = unpaired.solve(&problem.p, &problem.a, &problem.b, problem.rows(), 50, DENSE_TOL);
-        assert_eq!(it, Some((out.iterations, false)), "case {case}: unpaired takes the same iterations");
+        assert_eq!(
+            it,
+            Some((out.iterations, false)),
+            "case {case}: unpaired takes the same iterations"
+        );
         worst_unpaired = worst_unpaired.max((&f_dense - &unpaired.x).amax() / scale);
         let slack = &problem.b - &problem.a * &f_clarabel;
-        binding += (problem.pairs_from..problem.rows()).filter(|&i| slack[i].abs() < 1e-6 * (1.0 + problem.b[i].abs())).count();
+        binding += (problem.pairs_from..problem.rows())
+            .filter(|&i| slack[i].abs() < 1e-6 * (1.0 + problem.b[i].abs()))
+            .count();
     }
     println!("{solved} of {cases} solved by the dense IPM; relative |F| difference: vs Clarabel {worst_clarabel:.2e}, paired vs unpaired {worst_unpaired:.2e}; binding torque rows {binding}");
     assert!(solved >= MIN_SOLVED, "{solved} of {cases}");
@@ -620,16 +765,37 @@ fn least_violation_gives_up_the_grasp_before_the_joints() {
     y[(0, 3)] = 1.0;
     let contacts = vec![
         (0, ContactKind::Foot { mu: 0.8, f_min: 5.0, f_max: f64::INFINITY }),
-        (3, ContactKind::Hand { tx: Vector3::y(), ty: Vector3::z(), n: Vector3::x(), mu: 0.8, xi: 0.05, half: [0.05, 0.05], f_min: 30.0 }),
+        (
+            3,
+            ContactKind::Hand {
+                tx: Vector3::y(),
+                ty: Vector3::z(),
+                n: Vector3::x(),
+                mu: 0.8,
+                xi: 0.05,
+                half: [0.05, 0.05],
+                f_min: 30.0,
+            },
+        ),
     ];
     let tau0 = DVector::<f64>::zeros(1);
     let (actuated, limits) = (vec![0usize], vec![10.0]);
-    let input = QpInput { y: &y, rho: &rho, eta: &eta, contacts: &contacts, actuated: &actuated, limits: &limits, tau0: &tau0, regularisation: 1e-6 };
+    let input = QpInput {
+        y: &y,
+        rho: &rho,
+        eta: &eta,
+        contacts: &contacts,
+        actuated: &actuated,
+        limits: &limits,
+        tau0: &tau0,
+        regularisation: 1e-6,
+    };
     let solve = |hard: f64| {
         let mut ws = QpWorkspace::default();
         let mut f = DVector::zeros(m);
         let settings = QpSettings { hard_row_factor: hard, ..QpSettings::default() };
-        qp::solve_least_violation_with(&mut ws, &input, &settings, &mut f).expect("always solvable");
+        qp::solve_least_violation_with(&mut ws, &input, &settings, &mut f)
+            .expect("always solvable");
         let squeeze = -f[3];
         let torque = f[3];
         (squeeze, torque, f[2])
@@ -639,7 +805,10 @@ fn least_violation_gives_up_the_grasp_before_the_joints() {
     assert!(squeeze < 11.0, "the squeeze gives way: {squeeze} N");
     assert!(foot >= 5.0 - 0.05, "the foot keeps its least force: {foot}");
     let (squeeze, torque, _) = solve(1.0);
-    assert!((torque.abs() - 20.0).abs() < 0.5 && (squeeze - 20.0).abs() < 0.5, "equal prices split: tau {torque}, squeeze {squeeze}");
+    assert!(
+        (torque.abs() - 20.0).abs() < 0.5 && (squeeze - 20.0).abs() < 0.5,
+        "equal prices split: tau {torque}, squeeze {squeeze}"
+    );
 }
 
 /// A foot being unloaded before its lift-off: one more row, `f_z <= f_max`, written out again
@@ -652,17 +821,32 @@ fn an_unloading_foot_has_its_normal_force_bounded_above() {
         let f_max = rng.random_range(0.0..400.0);
         let kind = ContactKind::Foot { mu, f_min, f_max };
         assert_eq!(contact_rows(&kind).len(), 6);
-        let physics_ok = |w: &[f64]| w[2] <= f_max && w[2] >= f_min.min(f_max) && w[0].abs() <= mu * w[2] && w[1].abs() <= mu * w[2];
+        let physics_ok = |w: &[f64]| {
+            w[2] <= f_max
+                && w[2] >= f_min.min(f_max)
+                && w[0].abs() <= mu * w[2]
+                && w[1].abs() <= mu * w[2]
+        };
         for _ in 0..20 {
             let f_n = rng.random_range(0.0..500.0);
-            let w = [rng.random_range(-0.98..0.98) * mu * f_n, rng.random_range(-0.98..0.98) * mu * f_n, f_n];
-            assert_eq!(broken_rows(&kind, &w).is_empty(), physics_ok(&w), "mu {mu} f_min {f_min} f_max {f_max}: {w:?}");
+            let w = [
+                rng.random_range(-0.98..0.98) * mu * f_n,
+                rng.random_range(-0.98..0.98) * mu * f_n,
+                f_n,
+            ];
+            assert_eq!(
+                broken_rows(&kind, &w).is_empty(),
+                physics_ok(&w),
+                "mu {mu} f_min {f_min} f_max {f_max}: {w:?}"
+            );
         }
         // Over the bound alone: exactly the new row.
         let w = [0.0, 0.0, f_max * rng.random_range(1.02..1.5) + 1e-3];
         assert_eq!(broken_rows(&kind, &w), vec![5]);
     }
     // No ramp: the five rows of a foot.
-    assert_eq!(contact_rows(&ContactKind::Foot { mu: 0.5, f_min: 5.0, f_max: f64::INFINITY }).len(), 5);
+    assert_eq!(
+        contact_rows(&ContactKind::Foot { mu: 0.5, f_min: 5.0, f_max: f64::INFINITY }).len(),
+        5
+    );
 }
-

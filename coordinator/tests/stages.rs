@@ -9,22 +9,30 @@ mod common;
 use std::collections::BTreeMap;
 
 use common::{robot_id, Fixture};
-use coordinator::pidc::stages::acceleration::{commanded_accelerations, AccelerationScratch, ObjectBody};
-use coordinator::pidc::stages::tasks::{task_torque, MotionSpaceTerms, TaskTorqueInput, Targets};
+use coordinator::building_blocks::contact_jacobian::{contact_jacobian, contact_velocity};
+use coordinator::building_blocks::contacts::contact_list;
+use coordinator::building_blocks::grasp::{GraspTerms, GraspTracker, PlannedHand};
+use coordinator::building_blocks::impedance::TaskStack;
+use coordinator::building_blocks::limits::{torque_limits, UNBOUNDED_BASE_LIMIT};
+use coordinator::building_blocks::object_load::object_load;
+use coordinator::pidc::stages::acceleration::{
+    commanded_accelerations, AccelerationScratch, ObjectBody,
+};
+use coordinator::pidc::stages::tasks::{task_torque, MotionSpaceTerms, Targets, TaskTorqueInput};
 use coordinator::pidc::stages::torque::{compose, motion_torque, Clamp, MotionTorqueScratch};
-use coordinator::pidc::stages::wrench::{contact_map, contact_wrenches, Actuation, ContactMapScratch, MapInput, WrenchInput};
+use coordinator::pidc::stages::wrench::{
+    contact_map, contact_wrenches, Actuation, ContactMapScratch, MapInput, WrenchInput,
+};
 use coordinator::pidc::TickReport;
-use coordinator::units::contact_jacobian::{contact_jacobian, contact_velocity};
-use coordinator::units::contacts::contact_list;
-use coordinator::units::limits::{torque_limits, UNBOUNDED_BASE_LIMIT};
-use coordinator::units::object_load::object_load;
 use coordinator::qp::ContactKind;
 use coordinator::team::Team;
-use coordinator::units::grasp::{GraspTerms, GraspTracker, PlannedHand};
-use coordinator::units::impedance::TaskStack;
 use coordinator::{ControllerError, Pidc, PidcConfig, TeamController};
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
-use protocol::{DynamicsTerms, FrameRole, PoseReference, RobotDescription, TaskReferences, TorsoReference};
+use nalgebra::{
+    DMatrix, DVector, Isometry3, Matrix3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6,
+};
+use protocol::{
+    DynamicsTerms, FrameRole, PoseReference, RobotDescription, TaskReferences, TorsoReference,
+};
 use robot_agent::terms::ActiveContacts;
 
 fn max_abs(m: &DMatrix<f64>) -> f64 {
@@ -47,7 +55,8 @@ fn moving_team(fx: &mut Fixture, seed: u64) -> (Vec<DynamicsTerms>, Vec<RobotDes
     let nv = fx.robot.model.nv;
     let qs: Vec<DVector<f64>> = (0..2).map(|k| fx.perturbed_q(k, 2, 0.1, &mut rng)).collect();
     let descs: Vec<_> = (0..2).map(|k| fx.description(&robot_id(k))).collect();
-    let still: Vec<_> = (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &DVector::zeros(nv), 1)).collect();
+    let still: Vec<_> =
+        (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &DVector::zeros(nv), 1)).collect();
     let mut c = Pidc::new(PidcConfig::default());
     for d in &descs {
         c.set_description(d);
@@ -56,7 +65,9 @@ fn moving_team(fx: &mut Fixture, seed: u64) -> (Vec<DynamicsTerms>, Vec<RobotDes
     let p = c.materialized().expect("tick").proj.p.clone();
     use rand::Rng;
     let v = &p * DVector::from_fn(2 * nv, |_, _| rng.random_range(-0.5..0.5));
-    let terms: Vec<_> = (0..2).map(|k| fx.terms(&robot_id(k), &qs[k], &v.rows(k * nv, nv).into_owned(), 2)).collect();
+    let terms: Vec<_> = (0..2)
+        .map(|k| fx.terms(&robot_id(k), &qs[k], &v.rows(k * nv, nv).into_owned(), 2))
+        .collect();
     c.compute(&terms).expect("tick");
     (terms, descs, c)
 }
@@ -69,7 +80,11 @@ fn stacked(terms: &[DynamicsTerms], role: FrameRole) -> (DMatrix<f64>, DVector<f
     let mut jdv = Vec::new();
     let mut off = 0;
     for t in terms {
-        for f in t.frames.iter().filter(|f| f.role == role && (role != FrameRole::Hand || t.hand_in_grasp)) {
+        for f in t
+            .frames
+            .iter()
+            .filter(|f| f.role == role && (role != FrameRole::Hand || t.hand_in_grasp))
+        {
             for i in 0..f.jacobian.rows() {
                 let mut row = vec![0.0; n];
                 for j in 0..t.nv() {
@@ -99,7 +114,15 @@ fn grasp_matrix(hands: &[Vector3<f64>], centre: &Vector3<f64>) -> (DMatrix<f64>,
 }
 
 fn hand_positions(terms: &[DynamicsTerms]) -> Vec<Vector3<f64>> {
-    terms.iter().flat_map(|t| t.frames.iter().filter(|f| f.role == FrameRole::Hand && t.hand_in_grasp).map(|f| Vector3::from(f.position))).collect()
+    terms
+        .iter()
+        .flat_map(|t| {
+            t.frames
+                .iter()
+                .filter(|f| f.role == FrameRole::Hand && t.hand_in_grasp)
+                .map(|f| Vector3::from(f.position))
+        })
+        .collect()
 }
 
 fn diag(v: &DVector<f64>) -> DMatrix<f64> {
@@ -133,7 +156,9 @@ fn contact_jacobian_is_the_feet_rows_then_the_grasp_projected_hand_rows() {
     // No hand in grasp: the feet's rows alone.
     let nv = fx.robot.model.nv;
     let cs = ActiveContacts { stance: vec![true; 4], hand_in_grasp: false };
-    let free: Vec<_> = (0..2).map(|k| fx.terms_with(&robot_id(k), &fx.standing_q(k, 2), &DVector::zeros(nv), 1, &cs)).collect();
+    let free: Vec<_> = (0..2)
+        .map(|k| fx.terms_with(&robot_id(k), &fx.standing_q(k, 2), &DVector::zeros(nv), 1, &cs))
+        .collect();
     let mut team = Team::default();
     team.assemble_into(&free, None, false).expect("team");
     contact_jacobian(&team, None, &mut j_c, &mut jdv_c);
@@ -144,7 +169,8 @@ fn contact_jacobian_is_the_feet_rows_then_the_grasp_projected_hand_rows() {
 fn torque_limits_follow_the_descriptions() {
     let mut fx = Fixture::new();
     let (terms, descs) = fx.static_team(2);
-    let by_id: BTreeMap<String, RobotDescription> = descs.iter().map(|d| (d.header.robot_id().to_string(), d.clone())).collect();
+    let by_id: BTreeMap<String, RobotDescription> =
+        descs.iter().map(|d| (d.header.robot_id().to_string(), d.clone())).collect();
     let mut team = Team::default();
     team.assemble_into(&terms, None, false).expect("team");
     let (mut actuated, mut limits) = (Vec::new(), Vec::new());
@@ -161,20 +187,35 @@ fn torque_limits_follow_the_descriptions() {
     assert_eq!(limits[6..nv], descs[0].torque_limits[..]);
     // A missing or disagreeing description is an error.
     let one: BTreeMap<_, _> = by_id.iter().take(1).map(|(k, v)| (k.clone(), v.clone())).collect();
-    assert!(matches!(torque_limits(&team, &one, false, &mut actuated, &mut limits), Err(ControllerError::MissingDescription { robot }) if robot == "r2"));
+    assert!(
+        matches!(torque_limits(&team, &one, false, &mut actuated, &mut limits), Err(ControllerError::MissingDescription { robot }) if robot == "r2")
+    );
     let mut short = by_id.clone();
     short.get_mut("r1").expect("r1").torque_limits.pop();
-    assert!(matches!(torque_limits(&team, &short, false, &mut actuated, &mut limits), Err(ControllerError::Dimension { .. })));
+    assert!(matches!(
+        torque_limits(&team, &short, false, &mut actuated, &mut limits),
+        Err(ControllerError::Dimension { .. })
+    ));
 }
 
 #[test]
 fn contact_list_scales_each_robots_friction_and_patch_by_the_margins() {
     let mut fx = Fixture::new();
     let (terms, descs) = fx.static_team(2);
-    let by_id: BTreeMap<String, RobotDescription> = descs.iter().map(|d| (d.header.robot_id().to_string(), d.clone())).collect();
+    let by_id: BTreeMap<String, RobotDescription> =
+        descs.iter().map(|d| (d.header.robot_id().to_string(), d.clone())).collect();
     let mut team = Team::default();
     team.assemble_into(&terms, None, false).expect("team");
-    let cfg = PidcConfig { friction_margin: 0.5, patch_margin: 0.25, f_min_foot: 7.0, f_min_hand: 11.0, ..PidcConfig::default() };
+    let cfg = PidcConfig {
+        shell: coordinator::ShellConfig {
+            friction_margin: 0.5,
+            patch_margin: 0.25,
+            f_min_foot: 7.0,
+            f_min_hand: 11.0,
+            ..PidcConfig::default().shell
+        },
+        ..PidcConfig::default()
+    };
     let mut out = Vec::new();
     contact_list(&team, &by_id, &cfg.contact_margins(), &mut out).expect("contacts");
     assert_eq!(out.len(), 8 + 2);
@@ -190,7 +231,9 @@ fn contact_list_scales_each_robots_friction_and_patch_by_the_margins() {
         let rot = Matrix3::from_row_slice(&hand.rotation);
         let (row, kind) = &out[8 + k];
         assert_eq!(*row, 24 + 6 * k);
-        let ContactKind::Hand { tx, ty, n, mu, xi, half, f_min } = kind else { panic!("hand {k} is {kind:?}") };
+        let ContactKind::Hand { tx, ty, n, mu, xi, half, f_min } = kind else {
+            panic!("hand {k} is {kind:?}")
+        };
         for (axis, col) in [(tx, 0), (ty, 1), (n, 2)] {
             assert!((axis - rot.column(col)).amax() < 1e-15, "axis {col} of hand {k}");
         }
@@ -198,7 +241,10 @@ fn contact_list_scales_each_robots_friction_and_patch_by_the_margins() {
         assert_eq!(*half, [d.hand_half_size[0] * 0.25, d.hand_half_size[1] * 0.25]);
     }
     let one: BTreeMap<_, _> = by_id.into_iter().take(1).collect();
-    assert!(matches!(contact_list(&team, &one, &cfg.contact_margins(), &mut out), Err(ControllerError::MissingDescription { .. })));
+    assert!(matches!(
+        contact_list(&team, &one, &cfg.contact_margins(), &mut out),
+        Err(ControllerError::MissingDescription { .. })
+    ));
 }
 
 #[test]
@@ -216,7 +262,10 @@ fn grasp_tracker_captures_the_object_at_the_hands_centroid_or_where_told() {
     assert!((object.translation.vector - centroid).amax() < 1e-12);
     assert!(object.rotation.angle() < 1e-9, "world axes");
     // Told where the object is when the grasp closes.
-    let at = Isometry3::from_parts(Translation3::new(1.1, 0.05, 0.62), UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3));
+    let at = Isometry3::from_parts(
+        Translation3::new(1.1, 0.05, 0.62),
+        UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3),
+    );
     let mut told = None;
     GraspTracker::default().update(&team, Some(at), &[], &mut told).expect("grasp");
     let object = told.expect("grasp terms").object;
@@ -225,7 +274,9 @@ fn grasp_tracker_captures_the_object_at_the_hands_centroid_or_where_told() {
     // Hands released: no grasp terms.
     let nv = fx.robot.model.nv;
     let cs = ActiveContacts { stance: vec![true; 4], hand_in_grasp: false };
-    let free: Vec<_> = (0..2).map(|k| fx.terms_with(&robot_id(k), &fx.standing_q(k, 2), &DVector::zeros(nv), 1, &cs)).collect();
+    let free: Vec<_> = (0..2)
+        .map(|k| fx.terms_with(&robot_id(k), &fx.standing_q(k, 2), &DVector::zeros(nv), 1, &cs))
+        .collect();
     team.assemble_into(&free, None, false).expect("team");
     tracker.update(&team, None, &[], &mut terms_out).expect("no grasp");
     assert!(terms_out.is_none());
@@ -236,21 +287,39 @@ fn a_tracker_started_mid_carry_fits_the_object_from_the_planned_grasp() {
     // The plan: the object at `at` with the hands where the fixture stands them.
     let mut fx = Fixture::new();
     let (mut terms, _) = fx.static_team(3);
-    let at = Isometry3::from_parts(Translation3::new(1.1, 0.05, 0.62), UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3));
+    let at = Isometry3::from_parts(
+        Translation3::new(1.1, 0.05, 0.62),
+        UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3),
+    );
     let hand_pose = |t: &DynamicsTerms| {
         let h = t.frames.iter().find(|f| f.role == FrameRole::Hand).expect("hand");
         let rot = UnitQuaternion::from_matrix(&Matrix3::from_row_slice(&h.rotation));
-        (h.name.clone(), Isometry3::from_parts(Translation3::new(h.position[0], h.position[1], h.position[2]), rot))
+        (
+            h.name.clone(),
+            Isometry3::from_parts(
+                Translation3::new(h.position[0], h.position[1], h.position[2]),
+                rot,
+            ),
+        )
     };
-    let planned: Vec<PlannedHand> = terms.iter().map(|t| {
-        let (frame, pose) = hand_pose(t);
-        PlannedHand::new(t.header.robot_id(), &frame, &pose, &at)
-    }).collect();
+    let planned: Vec<PlannedHand> = terms
+        .iter()
+        .map(|t| {
+            let (frame, pose) = hand_pose(t);
+            PlannedHand::new(t.header.robot_id(), &frame, &pose, &at)
+        })
+        .collect();
     // Mid-carry the team has carried the object by a rigid motion `moved`: every hand moved with it.
-    let moved = Isometry3::from_parts(Translation3::new(0.03, -0.02, 0.04), UnitQuaternion::from_euler_angles(0.05, 0.02, -0.1));
+    let moved = Isometry3::from_parts(
+        Translation3::new(0.03, -0.02, 0.04),
+        UnitQuaternion::from_euler_angles(0.05, 0.02, -0.1),
+    );
     for t in terms.iter_mut() {
         let h = t.frames.iter_mut().find(|f| f.role == FrameRole::Hand).expect("hand");
-        let pose = Isometry3::from_parts(Translation3::new(h.position[0], h.position[1], h.position[2]), UnitQuaternion::from_matrix(&Matrix3::from_row_slice(&h.rotation)));
+        let pose = Isometry3::from_parts(
+            Translation3::new(h.position[0], h.position[1], h.position[2]),
+            UnitQuaternion::from_matrix(&Matrix3::from_row_slice(&h.rotation)),
+        );
         let p = moved * pose;
         h.position = [p.translation.x, p.translation.y, p.translation.z];
         let r = p.rotation.to_rotation_matrix();
@@ -263,20 +332,32 @@ fn a_tracker_started_mid_carry_fits_the_object_from_the_planned_grasp() {
     GraspTracker::default().update(&team, Some(at), &planned, &mut got).expect("grasp");
     let object = got.expect("grasp terms").object;
     let want = moved * at;
-    assert!((object.translation.vector - want.translation.vector).amax() < 1e-12, "{object} vs {want}");
+    assert!(
+        (object.translation.vector - want.translation.vector).amax() < 1e-12,
+        "{object} vs {want}"
+    );
     assert!(object.rotation.angle_to(&want.rotation) < 1e-12);
     // ... without it, it would take the object to be where the plan put it at the start.
     let mut blind = None;
     GraspTracker::default().update(&team, Some(at), &[], &mut blind).expect("grasp");
-    assert!((blind.expect("grasp terms").object.translation.vector - at.translation.vector).amax() < 1e-12);
+    assert!(
+        (blind.expect("grasp terms").object.translation.vector - at.translation.vector).amax()
+            < 1e-12
+    );
     // A plan missing one of the grasping hands is not used.
     let mut partial = None;
     GraspTracker::default().update(&team, Some(at), &planned[..2], &mut partial).expect("grasp");
-    assert!((partial.expect("grasp terms").object.translation.vector - at.translation.vector).amax() < 1e-12);
+    assert!(
+        (partial.expect("grasp terms").object.translation.vector - at.translation.vector).amax()
+            < 1e-12
+    );
     // Bad plans are refused by the configuration check.
     let mut bad = planned[0].clone();
     bad.hand_to_object = [1.0, 1.0, 0.0, 0.0];
-    let cfg = PidcConfig { planned_grasp: vec![bad], ..PidcConfig::default() };
+    let cfg = PidcConfig {
+        shell: coordinator::ShellConfig { planned_grasp: vec![bad], ..PidcConfig::default().shell },
+        ..PidcConfig::default()
+    };
     assert!(cfg.check().unwrap_err().to_string().contains("planned_grasp"));
 }
 
@@ -294,7 +375,8 @@ fn object_load_is_eulers_equations_in_the_body_frame_rotated_to_the_world() {
     let twist = Vector6::new(0.1, 0.2, 0.3, omega.x, omega.y, omega.z);
     let acc = [0.5, -0.4, 1.2, 2.0, -1.0, 0.5];
     let w = object_load(&pose, &twist, &acc, 2.0, &inertia);
-    let (om_b, al_b) = (rot.inverse() * omega, rot.inverse() * Vector3::new(acc[3], acc[4], acc[5]));
+    let (om_b, al_b) =
+        (rot.inverse() * omega, rot.inverse() * Vector3::new(acc[3], acc[4], acc[5]));
     let moment = rot * (inertia * al_b + om_b.cross(&(inertia * om_b)));
     let force = 2.0 * Vector3::new(acc[0], acc[1], acc[2] + 9.81);
     let expect = Vector6::new(force.x, force.y, force.z, moment.x, moment.y, moment.z);
@@ -310,7 +392,11 @@ fn targets_follow_references_and_otherwise_hold_the_first_pose_seen() {
     assert_eq!(t.torso(None, "r1", &a), (a, [0.0; 6], [0.0; 6]));
     assert_eq!(t.torso(None, "r1", &b).0, a, "held");
     assert_eq!(t.torso(None, "r2", &b).0, b, "each robot its own");
-    let reference = PoseReference { pose: protocol::Pose { position: [7.0, 8.0, 9.0], orientation: [1.0, 0.0, 0.0, 0.0] }, twist: [0.1; 6], acceleration: [0.2; 6] };
+    let reference = PoseReference {
+        pose: protocol::Pose { position: [7.0, 8.0, 9.0], orientation: [1.0, 0.0, 0.0, 0.0] },
+        twist: [0.1; 6],
+        acceleration: [0.2; 6],
+    };
     let refs = TaskReferences {
         header: protocol::Header::new("t", None, 1, 0),
         object: Some(reference.clone()),
@@ -336,9 +422,19 @@ fn targets_follow_references_and_otherwise_hold_the_first_pose_seen() {
 fn displaced_references(r: &TickReport) -> TaskReferences {
     let to_ref = |x: &Isometry3<f64>| {
         let q = x.rotation;
-        PoseReference { pose: protocol::Pose { position: x.translation.vector.into(), orientation: [q.w, q.i, q.j, q.k] }, twist: [0.02, -0.01, 0.03, 0.05, -0.04, 0.02], acceleration: [0.1, 0.2, -0.1, 0.3, -0.2, 0.1] }
+        PoseReference {
+            pose: protocol::Pose {
+                position: x.translation.vector.into(),
+                orientation: [q.w, q.i, q.j, q.k],
+            },
+            twist: [0.02, -0.01, 0.03, 0.05, -0.04, 0.02],
+            acceleration: [0.1, 0.2, -0.1, 0.3, -0.2, 0.1],
+        }
     };
-    let nudge = Isometry3::from_parts(Translation3::new(0.01, -0.02, 0.015), UnitQuaternion::from_euler_angles(0.03, -0.02, 0.04));
+    let nudge = Isometry3::from_parts(
+        Translation3::new(0.01, -0.02, 0.015),
+        UnitQuaternion::from_euler_angles(0.03, -0.02, 0.04),
+    );
     let object = r.grasp.as_ref().expect("grasp").object;
     TaskReferences {
         header: protocol::Header::new("t", None, 2, 0),
@@ -348,8 +444,14 @@ fn displaced_references(r: &TickReport) -> TaskReferences {
             .torsos
             .iter()
             .map(|tf| {
-                let x = Isometry3::from_parts(Translation3::from(tf.position), UnitQuaternion::from_rotation_matrix(&tf.rotation));
-                TorsoReference { robot: r.team.robots[tf.robot].id.clone(), reference: to_ref(&(nudge * x)) }
+                let x = Isometry3::from_parts(
+                    Translation3::from(tf.position),
+                    UnitQuaternion::from_rotation_matrix(&tf.rotation),
+                );
+                TorsoReference {
+                    robot: r.team.robots[tf.robot].id.clone(),
+                    reference: to_ref(&(nudge * x)),
+                }
             })
             .collect(),
         swing_feet: vec![],
@@ -374,9 +476,24 @@ fn task_torque_is_the_stacked_impedance_law_written_out() {
     motion.compute_into(proj, team);
     let p_bias = &proj.p * &team.bias - &proj.pdot_v;
     assert!(relv(&motion.mcinv_bias, &(&proj.mc_inv * &p_bias)) < 1e-12);
-    let inp = TaskTorqueInput { team, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view(proj) };
+    let inp = TaskTorqueInput {
+        team,
+        grasp: Some(g),
+        references: Some(&refs),
+        config: &cfg,
+        motion: motion.view(proj),
+    };
     let (mut tau_m, mut load, mut f_x) = (DVector::zeros(0), DVector::zeros(0), Vector6::zeros());
-    task_torque(&inp, &mut Targets::default(), &mut TaskStack::default(), &mut tau_m, &mut load, &mut f_x, &mut nalgebra::Vector6::zeros()).expect("tau_M");
+    task_torque(
+        &inp,
+        &mut Targets::default(),
+        &mut TaskStack::default(),
+        &mut tau_m,
+        &mut load,
+        &mut f_x,
+        &mut nalgebra::Vector6::zeros(),
+    )
+    .expect("tau_M");
     // The same by the dense projections (formed by `materialized`), in a stack whose buffers
     // were first used by the torsos in the other order (the same shape, each task's rows on
     // other columns): nothing of that tick may be left behind.
@@ -385,27 +502,65 @@ fn task_torque_is_the_stacked_impedance_law_written_out() {
     let mut stack = TaskStack::default();
     let mut swapped = team.clone();
     swapped.torsos.reverse();
-    let (mut tau_m_dense, mut load_dense, mut f_x_dense) = (DVector::zeros(0), DVector::zeros(0), Vector6::zeros());
+    let (mut tau_m_dense, mut load_dense, mut f_x_dense) =
+        (DVector::zeros(0), DVector::zeros(0), Vector6::zeros());
     for t in [&swapped, team] {
-        let inp = TaskTorqueInput { team: t, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view(&dense) };
-        task_torque(&inp, &mut Targets::default(), &mut stack, &mut tau_m_dense, &mut load_dense, &mut f_x_dense, &mut nalgebra::Vector6::zeros()).expect("tau_M, dense");
+        let inp = TaskTorqueInput {
+            team: t,
+            grasp: Some(g),
+            references: Some(&refs),
+            config: &cfg,
+            motion: motion.view(&dense),
+        };
+        task_torque(
+            &inp,
+            &mut Targets::default(),
+            &mut stack,
+            &mut tau_m_dense,
+            &mut load_dense,
+            &mut f_x_dense,
+            &mut nalgebra::Vector6::zeros(),
+        )
+        .expect("tau_M, dense");
     }
 
     // eq. control_law for the stacked task x = [x_o; x_t1; x_t2] (J_x = [J_o; J_t1; J_t2]):
     // F = Lambda_c (J M_c^{-1} (P h - Pdot v) - Jdot v + a_d) - K_d edot - K_p e (+ w_ff on the
     // object's rows), Lambda_c = (J M_c^{-1} P J^T)^{-1}; tau_M = J^T F (eqn. joint_space_tau_M).
-    let tasks: Vec<Task> = std::iter::once((&g.j_o, &g.jdv_o, g.object, refs.object.as_ref().expect("object")))
-        .chain(team.torsos.iter().zip(&refs.torsos).map(|(tf, t)| {
-            (&tf.jacobian, &tf.jdot_v, Isometry3::from_parts(Translation3::from(tf.position), UnitQuaternion::from_rotation_matrix(&tf.rotation)), &t.reference)
-        }))
-        .collect();
+    let tasks: Vec<Task> =
+        std::iter::once((&g.j_o, &g.jdv_o, g.object, refs.object.as_ref().expect("object")))
+            .chain(team.torsos.iter().zip(&refs.torsos).map(|(tf, t)| {
+                (
+                    &tf.jacobian,
+                    &tf.jdot_v,
+                    Isometry3::from_parts(
+                        Translation3::from(tf.position),
+                        UnitQuaternion::from_rotation_matrix(&tf.rotation),
+                    ),
+                    &t.reference,
+                )
+            }))
+            .collect();
     let k = 6 * tasks.len();
     let mut j = DMatrix::zeros(k, n);
-    let (mut jdv, mut e, mut edot, mut acc, mut kp, mut kd, mut ff) = (DVector::zeros(k), DVector::zeros(k), DVector::zeros(k), DVector::zeros(k), DVector::zeros(k), DVector::zeros(k), DVector::zeros(k));
+    let (mut jdv, mut e, mut edot, mut acc, mut kp, mut kd, mut ff) = (
+        DVector::zeros(k),
+        DVector::zeros(k),
+        DVector::zeros(k),
+        DVector::zeros(k),
+        DVector::zeros(k),
+        DVector::zeros(k),
+        DVector::zeros(k),
+    );
     for (i, (jx, jdvx, x, reference)) in tasks.iter().enumerate() {
         j.rows_mut(6 * i, 6).copy_from(*jx);
         jdv.rows_mut(6 * i, 6).copy_from(*jdvx);
-        let x_d_rot = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(reference.pose.orientation[0], reference.pose.orientation[1], reference.pose.orientation[2], reference.pose.orientation[3]));
+        let x_d_rot = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            reference.pose.orientation[0],
+            reference.pose.orientation[1],
+            reference.pose.orientation[2],
+            reference.pose.orientation[3],
+        ));
         let dp = x.translation.vector - Vector3::from(reference.pose.position);
         let dr = (x.rotation * x_d_rot.inverse()).scaled_axis();
         e.rows_mut(6 * i, 6).copy_from(&Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z));
@@ -419,7 +574,9 @@ fn task_torque_is_the_stacked_impedance_law_written_out() {
     let a_o = refs.object.as_ref().expect("object").acceleration;
     let w_ff = object_load(&g.object, &g.object_twist, &a_o, cfg.object_mass, &cfg.object_inertia);
     ff.rows_mut(0, 6).copy_from(&w_ff);
-    let lambda = (&j * &proj.mc_inv * &proj.p * j.transpose()).try_inverse().expect("task space spans the motion space");
+    let lambda = (&j * &proj.mc_inv * &proj.p * j.transpose())
+        .try_inverse()
+        .expect("task space spans the motion space");
     let u = &j * &proj.mc_inv * &p_bias - &jdv + &acc;
     let f = &lambda * u - kd.component_mul(&edot) - kp.component_mul(&e) + ff;
     let expect = j.transpose() * f;
@@ -434,23 +591,51 @@ fn task_torque_is_the_stacked_impedance_law_written_out() {
     // The motion yielding (stages::yielding): a task keeping share s of its motion commands
     // s (a_d - K_d edot - K_p e) - (1 - s) K_d v, its feed-forward s w_ff + (1 - s) w_ff(a = 0),
     // mu_c whole; the object's rows at s_o, the torsos' at s_t.
-    let w_hold = object_load(&g.object, &g.object_twist, &[0.0; 6], cfg.object_mass, &cfg.object_inertia);
+    let w_hold =
+        object_load(&g.object, &g.object_twist, &[0.0; 6], cfg.object_mass, &cfg.object_inertia);
     let mut f_x_hold = Vector6::zeros();
-    let inp = TaskTorqueInput { team, grasp: Some(g), references: Some(&refs), config: &cfg, motion: motion.view(&dense) };
-    task_torque(&inp, &mut Targets::default(), &mut stack, &mut tau_m_dense, &mut load_dense, &mut f_x_dense, &mut f_x_hold).expect("tau_M, dense");
-    assert_eq!(f_x_hold, -w_hold, "the object's load held still is its weight (and gyroscopic moment) alone");
+    let inp = TaskTorqueInput {
+        team,
+        grasp: Some(g),
+        references: Some(&refs),
+        config: &cfg,
+        motion: motion.view(&dense),
+    };
+    task_torque(
+        &inp,
+        &mut Targets::default(),
+        &mut stack,
+        &mut tau_m_dense,
+        &mut load_dense,
+        &mut f_x_dense,
+        &mut f_x_hold,
+    )
+    .expect("tau_M, dense");
+    assert_eq!(
+        f_x_hold, -w_hold,
+        "the object's load held still is its weight (and gyroscopic moment) alone"
+    );
     let velocity: Vec<DVector<f64>> = tasks.iter().map(|(jx, ..)| *jx * &team.velocity).collect();
     for (s_o, s_t) in [(1.0, 1.0), (0.0, 1.0), (0.37, 1.0), (0.0, 0.0), (0.0, 0.62)] {
         let mut yielded = DVector::zeros(0);
-        stack.joint_torque_yielding(&motion.view(&dense), coordinator::units::impedance::MotionScale { object: s_o, torso: s_t, reserve: false }, &mut yielded);
-        let (mut acc_s, mut e_s, mut edot_s, mut ff_s) = (acc.clone(), e.clone(), edot.clone(), DVector::zeros(k));
-        for i in 0..tasks.len() {
+        stack.joint_torque_yielding(
+            &motion.view(&dense),
+            coordinator::building_blocks::impedance::MotionScale {
+                object: s_o,
+                torso: s_t,
+                reserve: false,
+            },
+            &mut yielded,
+        );
+        let (mut acc_s, mut e_s, mut edot_s, mut ff_s) =
+            (acc.clone(), e.clone(), edot.clone(), DVector::zeros(k));
+        for (i, v_i) in velocity.iter().enumerate().take(tasks.len()) {
             let share = if i == 0 { s_o } else { s_t };
             let rows = 6 * i..6 * i + 6;
             for (r, row) in rows.enumerate() {
                 acc_s[row] = share * acc[row];
                 e_s[row] = share * e[row];
-                edot_s[row] = share * edot[row] + (1.0 - share) * velocity[i][r];
+                edot_s[row] = share * edot[row] + (1.0 - share) * v_i[r];
                 if i == 0 {
                     ff_s[row] = share * w_ff[r] + (1.0 - share) * w_hold[r];
                 }
@@ -472,9 +657,18 @@ fn contact_map_is_the_papers_rho_and_eta() {
     let r = c.materialized().expect("tick");
     let (team, proj) = (&r.team, &r.proj);
     let g = r.grasp.as_ref().expect("grasp");
-    let map = MapInput { team, proj, j_c: &r.j_c, tau0: &r.tau0, load: &r.load, grasp: Some(g), f_x: &r.f_x };
+    let map = MapInput {
+        team,
+        proj,
+        j_c: &r.j_c,
+        tau0: &r.tau0,
+        load: &r.load,
+        grasp: Some(g),
+        f_x: &r.f_x,
+    };
     let mut ws = ContactMapScratch::default();
-    let (mut y, mut rho, mut eta, mut eta_real) = (DMatrix::zeros(0, 0), DMatrix::zeros(0, 0), DVector::zeros(0), DVector::zeros(0));
+    let (mut y, mut rho, mut eta, mut eta_real) =
+        (DMatrix::zeros(0, 0), DMatrix::zeros(0, 0), DVector::zeros(0), DVector::zeros(0));
     contact_map(&map, &mut ws, &mut y, &mut rho, &mut eta, &mut eta_real);
 
     // eq. relation_between_lambda_and_Fc as printed: rho = (J_c^T)^+ (I - P)(Mbar P - I) S B J_c^T,
@@ -497,13 +691,21 @@ fn contact_map_is_the_papers_rho_and_eta() {
         }
     }
     println!("tau_0 saturated: {}", r.saturated);
-    let eta_paper = jct_pinv * &ip * (&k * &s * &tau0 + &mbar * (-(p * &team.bias) + &proj.pdot_v) + &team.bias + &k * &r.load);
+    let eta_paper = jct_pinv
+        * &ip
+        * (&k * &s * &tau0
+            + &mbar * (-(p * &team.bias) + &proj.pdot_v)
+            + &team.bias
+            + &k * &r.load);
     let (e_rho, e_eta) = (rel(&rho, &rho_paper), relv(&eta, &eta_paper));
     println!("rho vs the paper {e_rho:.1e}, eta {e_eta:.1e} (|eta| {:.1})", eta_paper.amax());
     assert!(e_rho < 1e-9 && e_eta < 1e-9);
     assert!(rel(&y, &(&proj.b * r.j_c.transpose())) < 1e-13, "Y = B J_c^T");
     // The real wrenches add the object's load share G^+ F_x on the hand rows.
-    let (_, g_pinv) = grasp_matrix(&team.hands.iter().map(|h| h.position).collect::<Vec<_>>(), &g.object.translation.vector);
+    let (_, g_pinv) = grasp_matrix(
+        &team.hands.iter().map(|h| h.position).collect::<Vec<_>>(),
+        &g.object.translation.vector,
+    );
     let mut expect = eta_paper.clone();
     let nf = team.feet.len();
     let share = &g_pinv * DVector::from_column_slice(r.f_x.as_slice());
@@ -544,7 +746,10 @@ fn contact_wrenches_follow_the_map_or_eq_constraint_force() {
     let ip = &id - p;
     let mbar = &team.mass * &proj.mc_inv;
     let s_tau = &s * &tau;
-    let expect = &proj.jct_pinv * (&ip * (&mbar * (p * &s_tau - p * &team.bias + &proj.pdot_v) + &team.bias) - &ip * &s_tau + &ip * (&mbar * p - &id) * &r.load);
+    let expect = &proj.jct_pinv
+        * (&ip * (&mbar * (p * &s_tau - p * &team.bias + &proj.pdot_v) + &team.bias)
+            - &ip * &s_tau
+            + &ip * (&mbar * p - &id) * &r.load);
     let mut real = eta_real.clone();
     contact_wrenches(&inp, Actuation::Torque(&tau), &mut ws, &mut lambda, &mut real);
     let e = relv(&lambda, &expect);
@@ -566,7 +771,8 @@ fn torque_is_tau0_plus_y_f_c_clamped_after_a_fallback() {
     // tau = tau_0 + Y F_c with Y = B J_c^T, for the tick's F_c and another one.
     let y = &proj.b * r.j_c.transpose();
     let mut tau = DVector::zeros(0);
-    for f_c in [r.f_c.clone(), DVector::from_fn(r.f_c.len(), |i, _| (i as f64 * 0.7).sin() * 20.0)] {
+    for f_c in [r.f_c.clone(), DVector::from_fn(r.f_c.len(), |i, _| (i as f64 * 0.7).sin() * 20.0)]
+    {
         compose(&r.tau0, &r.y, &f_c, None, &mut tau).expect("finite");
         let expect = &r.tau0 + &y * &f_c;
         assert!(relv(&tau, &expect) < 1e-12);
@@ -575,7 +781,8 @@ fn torque_is_tau0_plus_y_f_c_clamped_after_a_fallback() {
     let f_c = r.f_c.clone() * 50.0;
     let free = &r.tau0 + &y * &f_c;
     let limits: Vec<f64> = r.limits.iter().map(|l| l * 0.05).collect();
-    compose(&r.tau0, &r.y, &f_c, Some(Clamp { actuated: &r.actuated, limits: &limits }), &mut tau).expect("finite");
+    compose(&r.tau0, &r.y, &f_c, Some(Clamp { actuated: &r.actuated, limits: &limits }), &mut tau)
+        .expect("finite");
     let mut clamped = 0;
     for i in 0..tau.len() {
         match r.actuated.iter().position(|&j| j == i) {
@@ -589,14 +796,20 @@ fn torque_is_tau0_plus_y_f_c_clamped_after_a_fallback() {
                     assert!((tau[i] - free[i]).abs() < 1e-9 * free.amax());
                 }
             }
-            None => assert!((tau[i] - free[i]).abs() < 1e-9 * free.amax(), "base row {i} is not clamped"),
+            None => assert!(
+                (tau[i] - free[i]).abs() < 1e-9 * free.amax(),
+                "base row {i} is not clamped"
+            ),
         }
     }
     assert!(clamped > 0, "the test clamps something");
     // A non-finite torque is an error, not a command.
     let mut bad = r.f_c.clone();
     bad[0] = f64::NAN;
-    assert!(matches!(compose(&r.tau0, &r.y, &bad, None, &mut tau), Err(ControllerError::NonFinite { .. })));
+    assert!(matches!(
+        compose(&r.tau0, &r.y, &bad, None, &mut tau),
+        Err(ControllerError::NonFinite { .. })
+    ));
 }
 
 /// The object pose fitted to three and four hands: after a rigid motion of every hand the fit
@@ -604,28 +817,41 @@ fn torque_is_tau0_plus_y_f_c_clamped_after_a_fallback() {
 /// slipped by 3 mm shows in the residual and moves the fit by less than it.
 #[test]
 fn object_pose_fit_follows_any_number_of_hands_and_reports_slip() {
-    use coordinator::units::grasp::GraspOffsets;
+    use coordinator::building_blocks::grasp::GraspOffsets;
     let mut fx = Fixture::new();
     for count in [3, 4] {
         let (terms, _) = fx.static_team(count);
         let mut team = Team::default();
         team.assemble_into(&terms, None, false).expect("team");
         assert_eq!(team.hands.len(), count);
-        let object = Isometry3::from_parts(Translation3::new(0.02, -0.01, 0.6), UnitQuaternion::from_euler_angles(0.05, -0.02, 0.3));
+        let object = Isometry3::from_parts(
+            Translation3::new(0.02, -0.01, 0.6),
+            UnitQuaternion::from_euler_angles(0.05, -0.02, 0.3),
+        );
         let offsets = GraspOffsets::capture(&team, &object);
         let at_capture = offsets.fit(&team);
-        assert!((at_capture.pose.translation.vector - object.translation.vector).norm() < 1e-12, "{count} hands");
+        assert!(
+            (at_capture.pose.translation.vector - object.translation.vector).norm() < 1e-12,
+            "{count} hands"
+        );
         assert!(at_capture.pose.rotation.angle_to(&object.rotation) < 1e-12);
         assert!(at_capture.residual < 1e-12);
         // Move every hand rigidly by T: the object is at T * object.
-        let t = Isometry3::from_parts(Translation3::new(0.03, 0.04, -0.02), UnitQuaternion::from_euler_angles(0.1, 0.2, -0.15));
+        let t = Isometry3::from_parts(
+            Translation3::new(0.03, 0.04, -0.02),
+            UnitQuaternion::from_euler_angles(0.1, 0.2, -0.15),
+        );
         for h in &mut team.hands {
             h.position = t.transform_point(&h.position.into()).coords;
             h.rotation = t.rotation.to_rotation_matrix() * h.rotation;
         }
         let moved = offsets.fit(&team);
         let expected = t * object;
-        assert!((moved.pose.translation.vector - expected.translation.vector).norm() < 1e-12, "{count} hands: {:?}", moved.pose);
+        assert!(
+            (moved.pose.translation.vector - expected.translation.vector).norm() < 1e-12,
+            "{count} hands: {:?}",
+            moved.pose
+        );
         assert!(moved.pose.rotation.angle_to(&expected.rotation) < 1e-12);
         assert!(moved.residual < 1e-12);
         // One hand slips 3 mm along its face.
@@ -633,8 +859,15 @@ fn object_pose_fit_follows_any_number_of_hands_and_reports_slip() {
         let tangent = team.hands[0].rotation * nalgebra::Vector3::x();
         team.hands[0].position += tangent * slip;
         let slipped = offsets.fit(&team);
-        assert!(slipped.residual > 0.5 * slip && slipped.residual <= slip + 1e-12, "{count} hands: residual {}", slipped.residual);
-        assert!((slipped.pose.translation.vector - expected.translation.vector).norm() < slip, "the fit moves less than the slip");
+        assert!(
+            slipped.residual > 0.5 * slip && slipped.residual <= slip + 1e-12,
+            "{count} hands: residual {}",
+            slipped.residual
+        );
+        assert!(
+            (slipped.pose.translation.vector - expected.translation.vector).norm() < slip,
+            "the fit moves less than the slip"
+        );
     }
 }
 
@@ -644,7 +877,8 @@ fn object_pose_fit_follows_any_number_of_hands_and_reports_slip() {
 fn resized(t: &DynamicsTerms, k: usize, rng: &mut impl rand::Rng) -> DynamicsTerms {
     let mut out = t.clone();
     out.nv = k.try_into().expect("nv");
-    let mut random = |r: usize, c: usize| DMatrix::from_fn(r, c, |_, _| rng.random_range(-1.0..1.0));
+    let mut random =
+        |r: usize, c: usize| DMatrix::from_fn(r, c, |_, _| rng.random_range(-1.0..1.0));
     out.mass_matrix = protocol::Matrix::from_dmatrix(&random(k, k));
     out.bias = random(k, 1).as_slice().to_vec();
     out.velocity = random(k, 1).as_slice().to_vec();
@@ -685,8 +919,16 @@ fn a_team_assembled_into_used_buffers_is_the_team_assembled_afresh() {
     let lifted = ActiveContacts { stance: vec![false, true, true, true], hand_in_grasp: false };
     let mut moved = all.clone();
     moved[1] = fx.terms_with(&robot_id(1), &fx.standing_q(1, 3), &DVector::zeros(nv), 1, &lifted);
-    let other_sizes = vec![resized(&all[0], nv + 6, &mut rng), resized(&all[1], nv - 6, &mut rng), all[2].clone()];
-    let resized_again = vec![resized(&all[0], nv - 6, &mut rng), resized(&all[1], nv + 6, &mut rng), resized(&all[2], nv, &mut rng)];
+    let other_sizes = vec![
+        resized(&all[0], nv + 6, &mut rng),
+        resized(&all[1], nv - 6, &mut rng),
+        all[2].clone(),
+    ];
+    let resized_again = vec![
+        resized(&all[0], nv - 6, &mut rng),
+        resized(&all[1], nv + 6, &mut rng),
+        resized(&all[2], nv, &mut rng),
+    ];
     let fewer = vec![all[0].clone(), all[2].clone()];
     let ticks = [&all, &moved, &other_sizes, &resized_again, &fewer, &all, &moved, &all];
 
@@ -698,7 +940,13 @@ fn a_team_assembled_into_used_buffers_is_the_team_assembled_afresh() {
         assert_eq!(team.mass, mass_written_out(tick), "tick {i}: M");
         assert_eq!(team.j_cf, stacked(tick, FrameRole::StanceFoot).0, "tick {i}: J_cf");
         assert_eq!(team.j_ee, stacked(tick, FrameRole::Hand).0, "tick {i}: J_ee");
-        for (used, new, what) in [(&team.feet, &fresh.feet, "feet"), (&team.hands, &fresh.hands, "hands"), (&team.free_hands, &fresh.free_hands, "free hands"), (&team.torsos, &fresh.torsos, "torsos"), (&team.swing_feet, &fresh.swing_feet, "swing feet")] {
+        for (used, new, what) in [
+            (&team.feet, &fresh.feet, "feet"),
+            (&team.hands, &fresh.hands, "hands"),
+            (&team.free_hands, &fresh.free_hands, "free hands"),
+            (&team.torsos, &fresh.torsos, "torsos"),
+            (&team.swing_feet, &fresh.swing_feet, "swing feet"),
+        ] {
             assert_eq!(used.len(), new.len(), "tick {i}: {what}");
             for (a, b) in used.iter().zip(new) {
                 assert_eq!(a.jacobian, b.jacobian, "tick {i}: {what} {}", b.name);
@@ -716,7 +964,9 @@ fn a_team_assembled_into_used_buffers_is_the_team_assembled_afresh() {
         // [J_cf; N J_ee] written out (eqs. jacobian_c, jacobian_cee), and J_c v by the frames.
         let mut expect = DMatrix::zeros(team.contact_rows(), team.n);
         expect.rows_mut(0, team.j_cf.nrows()).copy_from(&stacked(tick, FrameRole::StanceFoot).0);
-        expect.rows_mut(team.j_cf.nrows(), grasp.n.nrows()).copy_from(&(&grasp.n * &stacked(tick, FrameRole::Hand).0));
+        expect
+            .rows_mut(team.j_cf.nrows(), grasp.n.nrows())
+            .copy_from(&(&grasp.n * &stacked(tick, FrameRole::Hand).0));
         assert!((&j_c - &expect).amax() <= 1e-12 * expect.amax(), "tick {i}: J_c = [J_cf; N J_ee]");
         let mut jc_v = DVector::zeros(0);
         contact_velocity(&team, Some(&grasp), &mut jc_v);
@@ -740,12 +990,14 @@ fn grasp_jdot_v_is_the_time_derivative_of_j_cee_v_and_j_o_v() {
     let mut fx = Fixture::new();
     let (robots, nv, h) = (3, fx.robot.model.nv, 1e-6);
     let mut rng = common::rng(17);
-    let qs: Vec<DVector<f64>> = (0..robots).map(|k| fx.perturbed_q(k, robots, 0.1, &mut rng)).collect();
+    let qs: Vec<DVector<f64>> =
+        (0..robots).map(|k| fx.perturbed_q(k, robots, 0.1, &mut rng)).collect();
     let mut c = Pidc::new(PidcConfig::default());
     for k in 0..robots {
         c.set_description(&fx.description(&robot_id(k)));
     }
-    let still: Vec<_> = (0..robots).map(|k| fx.terms(&robot_id(k), &qs[k], &DVector::zeros(nv), 1)).collect();
+    let still: Vec<_> =
+        (0..robots).map(|k| fx.terms(&robot_id(k), &qs[k], &DVector::zeros(nv), 1)).collect();
     c.compute(&still).expect("tick");
     let p = c.materialized().expect("tick").proj.p.clone();
     let v = &p * DVector::from_fn(robots * nv, |_, _| rng.random_range(-0.5..0.5));
@@ -775,7 +1027,10 @@ fn grasp_jdot_v_is_the_time_derivative_of_j_cee_v_and_j_o_v() {
     let fd_cee = (&j_cee_p * &v - &j_cee_m * &v) / (2.0 * h);
     let fd_o = (&gp.j_o * &v - &gm.j_o * &v) / (2.0 * h);
     let rel_to = |a: &DVector<f64>, b: &DVector<f64>| (a - b).amax() / b.amax();
-    let (e_cee, e_o) = (rel_to(&g0.jdv_cee, &fd_cee), rel_to(&DVector::from_column_slice(g0.jdv_o.as_slice()), &fd_o));
+    let (e_cee, e_o) = (
+        rel_to(&g0.jdv_cee, &fd_cee),
+        rel_to(&DVector::from_column_slice(g0.jdv_o.as_slice()), &fd_o),
+    );
     println!("d/dt(J_c,ee) v vs central differences: {e_cee:.1e} (|.| {:.2}); d/dt(J_o) v: {e_o:.1e} (|.| {:.2})", fd_cee.amax(), fd_o.amax());
     assert!(fd_cee.amax() > 1e-3 && fd_o.amax() > 1e-3, "a team that moves");
     assert!(e_cee < 1e-6 && e_o < 1e-6, "relative to the differences: {e_cee:.1e}, {e_o:.1e}");
@@ -800,10 +1055,13 @@ fn commanded_accelerations_are_the_constrained_dynamics_with_the_object_on_the_h
     let w = Vector3::new(g.object_twist[3], g.object_twist[4], g.object_twist[5]);
     let residuals = |qdd: &DVector<f64>| {
         let a_o = &g.j_o * qdd + &g.jdv_o;
-        let lin = cfg.object_mass * (Vector3::new(a_o[0], a_o[1], a_o[2]) - Vector3::from(protocol::conventions::GRAVITY_VECTOR));
+        let lin = cfg.object_mass
+            * (Vector3::new(a_o[0], a_o[1], a_o[2])
+                - Vector3::from(protocol::conventions::GRAVITY_VECTOR));
         let ang = i_w * Vector3::new(a_o[3], a_o[4], a_o[5]) + w.cross(&(i_w * w));
         let w_o = DVector::from_column_slice(&[lin.x, lin.y, lin.z, ang.x, ang.y, ang.z]);
-        let force = &team.mass * qdd + &team.bias - diag(&team.s_diag) * &r.tau + g.j_o.transpose() * w_o;
+        let force =
+            &team.mass * qdd + &team.bias - diag(&team.s_diag) * &r.tau + g.j_o.transpose() * w_o;
         let dynamics = (&proj.p * &force).amax() / (diag(&team.s_diag) * &r.tau).amax();
         let constraints = (&r.j_c * qdd + &r.jdv_c).amax() / (&r.j_c * qdd).amax().max(1.0);
         (dynamics, constraints)
@@ -818,9 +1076,20 @@ fn commanded_accelerations_are_the_constrained_dynamics_with_the_object_on_the_h
     let mut motion = MotionSpaceTerms::default();
     motion.compute_into(&dense, team);
     let (mut qdd, mut s) = (DVector::zeros(0), AccelerationScratch::default());
-    commanded_accelerations(team, &dense, &r.tau, &motion.mcinv_bias, Some((g, &body)), &mut qdd, &mut s);
+    commanded_accelerations(
+        team,
+        &dense,
+        &r.tau,
+        &motion.mcinv_bias,
+        Some((g, &body)),
+        &mut qdd,
+        &mut s,
+    );
     let (dynamics, constraints) = residuals(&qdd);
-    assert!(dynamics < 1e-8 && constraints < 1e-8, "by the dense projections: {dynamics:.1e} {constraints:.1e}");
+    assert!(
+        dynamics < 1e-8 && constraints < 1e-8,
+        "by the dense projections: {dynamics:.1e} {constraints:.1e}"
+    );
     assert!(relv(&qdd, &r.qdd) < 1e-8);
     // Without the object (a team that holds none) the same torque accelerates the team
     // otherwise: the written-out dynamics tell them apart.

@@ -1,4 +1,4 @@
-//! The projections by the team's blocks (`units::block_projection`, the default) against the
+//! The projections by the team's blocks (`building_blocks::block_projection`, the default) against the
 //! dense SVDs of the team's matrices (`PidcConfig::projections = ProjectionPath::Dense`, the oracle): the same
 //! `P`, `J_c^+`, `M_c^{-1}`, `[P S]^+`, `B` (the block path's operators applied to the
 //! identity), the same motion torque `tau_M` (the operational-space inertia by the operator
@@ -11,8 +11,8 @@
 mod common;
 
 use common::{robot_id, Case, Fixture};
+use coordinator::building_blocks::projection::{ProjectionPath, WrenchScratch};
 use coordinator::pidc::MaterializedTick;
-use coordinator::units::projection::{ProjectionPath, WrenchScratch};
 use coordinator::{Pidc, PidcConfig};
 use nalgebra::{DMatrix, DVector};
 use protocol::DynamicsTerms;
@@ -28,7 +28,11 @@ fn rel(a: &[f64], b: &[f64]) -> f64 {
 }
 
 fn controller(fx: &Fixture, case: Case, dense: bool) -> Pidc {
-    let mut c = Pidc::new(PidcConfig { projections: if dense { ProjectionPath::Dense } else { ProjectionPath::ByBlocks }, fully_actuated: case.fully_actuated, ..PidcConfig::default() });
+    let mut c = Pidc::new(PidcConfig {
+        projections: if dense { ProjectionPath::Dense } else { ProjectionPath::ByBlocks },
+        fully_actuated: case.fully_actuated,
+        ..PidcConfig::default()
+    });
     for k in 0..case.robots {
         c.set_description(&fx.description(&robot_id(k)));
     }
@@ -40,13 +44,26 @@ fn controller(fx: &Fixture, case: Case, dense: bool) -> Pidc {
 fn team_states(fx: &mut Fixture, case: Case) -> [Vec<DynamicsTerms>; 2] {
     let mut rng = common::rng(case.seed);
     let nv = fx.robot.model.nv;
-    let qs: Vec<DVector<f64>> = (0..case.robots).map(|k| fx.perturbed_q(k, case.robots, 0.1, &mut rng)).collect();
-    let still: Vec<_> = (0..case.robots).map(|k| fx.terms_with(&robot_id(k), &qs[k], &DVector::zeros(nv), 1, &case.contacts(fx, k))).collect();
+    let qs: Vec<DVector<f64>> =
+        (0..case.robots).map(|k| fx.perturbed_q(k, case.robots, 0.1, &mut rng)).collect();
+    let still: Vec<_> = (0..case.robots)
+        .map(|k| fx.terms_with(&robot_id(k), &qs[k], &DVector::zeros(nv), 1, &case.contacts(fx, k)))
+        .collect();
     let mut c = controller(fx, case, true);
     c.compute(&still).expect("tick");
     let p = c.materialized().expect("tick").proj.p.clone();
     let v = &p * DVector::from_fn(case.robots * nv, |_, _| rng.random_range(-0.5..0.5));
-    let moving = (0..case.robots).map(|k| fx.terms_with(&robot_id(k), &qs[k], &v.rows(k * nv, nv).into_owned(), 2, &case.contacts(fx, k))).collect();
+    let moving = (0..case.robots)
+        .map(|k| {
+            fx.terms_with(
+                &robot_id(k),
+                &qs[k],
+                &v.rows(k * nv, nv).into_owned(),
+                2,
+                &case.contacts(fx, k),
+            )
+        })
+        .collect();
     [still, moving]
 }
 
@@ -90,7 +107,13 @@ fn compare(blocks: &MaterializedTick, dense: &MaterializedTick) -> (f64, &'stati
             println!("    {name:10} {:.2e}", rel(x, y));
         }
     }
-    pairs.iter().map(|(name, x, y)| (rel(x, y), *name)).fold((0.0, "none"), |w, e| if e.0 > w.0 { e } else { w })
+    pairs.iter().map(|(name, x, y)| (rel(x, y), *name)).fold((0.0, "none"), |w, e| {
+        if e.0 > w.0 {
+            e
+        } else {
+            w
+        }
+    })
 }
 
 /// Both paths on both ticks of `case`: the worst relative difference of [`compare`], and of
@@ -101,7 +124,15 @@ fn agree(fx: &mut Fixture, case: Case) -> (f64, f64) {
     let (mut blocks, mut dense) = (controller(fx, case, false), controller(fx, case, true));
     let mut w = (0.0f64, 0.0f64);
     for (t, tick) in ticks.iter().enumerate() {
-        w = worst(w, agree_on_tick(&mut blocks, &mut dense, tick, &format!("{} robots (seed {}) tick {}", case.robots, case.seed, t + 1)));
+        w = worst(
+            w,
+            agree_on_tick(
+                &mut blocks,
+                &mut dense,
+                tick,
+                &format!("{} robots (seed {}) tick {}", case.robots, case.seed, t + 1),
+            ),
+        );
     }
     w
 }
@@ -109,13 +140,24 @@ fn agree(fx: &mut Fixture, case: Case) -> (f64, f64) {
 /// One tick on both paths: the block path forms no team-sized matrix, both QPs end the same
 /// way, [`compare`] is within [`TOL`] and the torques sent within the QP's tolerance. Returns
 /// both differences; `what` names the tick in the messages.
-fn agree_on_tick(blocks: &mut Pidc, dense: &mut Pidc, tick: &[DynamicsTerms], what: &str) -> (f64, f64) {
+fn agree_on_tick(
+    blocks: &mut Pidc,
+    dense: &mut Pidc,
+    tick: &[DynamicsTerms],
+    what: &str,
+) -> (f64, f64) {
     let on_tick = blocks.compute(tick).expect("block tick");
     // The block path forms no team-sized matrix on the tick (only its factors), nor J_c when
     // the QP's blocks answered.
-    assert!(on_tick.proj.p.is_empty() && on_tick.proj.mc_inv.is_empty() && on_tick.proj.mbar.is_empty(), "{what}: an n x n matrix on the block path's tick");
+    assert!(
+        on_tick.proj.p.is_empty() && on_tick.proj.mc_inv.is_empty() && on_tick.proj.mbar.is_empty(),
+        "{what}: an n x n matrix on the block path's tick"
+    );
     let solver = on_tick.qp.solver;
-    assert!(solver != coordinator::qp::by_blocks::SOLVER || !blocks.contact_matrices().j_c_formed, "{what}: J_c formed on a tick the blocks answered");
+    assert!(
+        solver != coordinator::qp::by_blocks::SOLVER || !blocks.contact_matrices().j_c_formed,
+        "{what}: J_c formed on a tick the blocks answered"
+    );
     let b = blocks.materialized().expect("block tick").clone();
     dense.compute(tick).expect("dense tick");
     let d = &dense.materialized().expect("dense tick");
@@ -124,7 +166,10 @@ fn agree_on_tick(blocks: &mut Pidc, dense: &mut Pidc, tick: &[DynamicsTerms], wh
     let sent = rel(b.tau.as_slice(), d.tau.as_slice());
     println!("{what}: worst {quantity} {err:.2e}; torques sent {sent:.2e}");
     assert!(err <= TOL, "{what}: {quantity} differs by {err:e} relative");
-    assert!(sent <= 10.0 * coordinator::qp::DENSE_TOL, "{what}: the torques sent differ by {sent:e} relative");
+    assert!(
+        sent <= 10.0 * coordinator::qp::DENSE_TOL,
+        "{what}: the torques sent differ by {sent:e} relative"
+    );
     (err, sent)
 }
 
@@ -169,7 +214,13 @@ fn blocks_match_the_dense_oracle_with_a_swing_foot_free_hands_or_full_actuation(
 fn blocks_match_the_dense_oracle_through_changes_of_contacts() {
     let mut fx = Fixture::new();
     let base = case(3, 31);
-    let layouts = [base, Case { swing: true, ..base }, Case { grasp: false, ..base }, Case { swing: true, grasp: false, ..base }, base];
+    let layouts = [
+        base,
+        Case { swing: true, ..base },
+        Case { grasp: false, ..base },
+        Case { swing: true, grasp: false, ..base },
+        base,
+    ];
     let (mut blocks, mut dense) = (controller(&fx, base, false), controller(&fx, base, true));
     let mut tick = 0;
     for (l, layout) in layouts.into_iter().enumerate() {
@@ -178,7 +229,12 @@ fn blocks_match_the_dense_oracle_through_changes_of_contacts() {
             for t in &mut terms {
                 t.header.tick = tick;
             }
-            agree_on_tick(&mut blocks, &mut dense, &terms, &format!("layout {l} (swing {}, grasp {}) tick {tick}", layout.swing, layout.grasp));
+            agree_on_tick(
+                &mut blocks,
+                &mut dense,
+                &terms,
+                &format!("layout {l} (swing {}, grasp {}) tick {tick}", layout.swing, layout.grasp),
+            );
         }
     }
 }

@@ -10,10 +10,10 @@ use protocol::{GroundTruth, Pose, PoseReference};
 use robot_agent::delay::TeamDelay;
 use serde::Serialize;
 
-use crate::records::Records;
 use crate::metrics::{self, DropReport, Percentiles};
-use scenario::{Plan, ReferencePlan};
+use crate::records::Records;
 use crate::report::{self, ReportError, TimeSeries};
+use scenario::{Plan, ReferencePlan};
 
 /// Bounds of the acceptance checks of the team demo.
 pub const MAX_SLIP: f64 = 0.005;
@@ -74,7 +74,11 @@ pub struct YieldReport {
 
 impl YieldReport {
     fn of(records: &Records) -> Option<YieldReport> {
-        let yields: Vec<(u64, protocol::MotionYield)> = records.diagnostics.iter().filter_map(|d| d.motion_yield.map(|y| (d.header.tick, y))).collect();
+        let yields: Vec<(u64, protocol::MotionYield)> = records
+            .diagnostics
+            .iter()
+            .filter_map(|d| d.motion_yield.map(|y| (d.header.tick, y)))
+            .collect();
         let (first, last) = (yields.first()?.0, yields.last()?.0);
         Some(YieldReport {
             ticks: yields.len() as u64,
@@ -89,7 +93,8 @@ impl YieldReport {
     /// One line of the summary.
     pub fn summary(&self) -> String {
         format!(
-            "  motion yielded on {} ticks ({}..{}): the object kept at least {:.0} % of its motion, held still on {} ticks; the torsos yielded on {}\n",
+            "  motion yielded on {} ticks ({}..{}): the object kept at least {:.0} % of its \
+             motion, held still on {} ticks; the torsos yielded on {}\n",
             self.ticks,
             self.first_tick,
             self.last_tick,
@@ -154,7 +159,10 @@ pub struct Metrics {
 }
 
 fn iso(p: &Pose) -> Isometry3<f64> {
-    Isometry3::from_parts(Translation3::from(Vector3::from(p.position)), protocol::conventions::quat_from_wxyz(p.orientation))
+    Isometry3::from_parts(
+        Translation3::from(Vector3::from(p.position)),
+        protocol::conventions::quat_from_wxyz(p.orientation),
+    )
 }
 
 fn ref_iso(r: &PoseReference) -> Isometry3<f64> {
@@ -176,7 +184,8 @@ pub struct Evaluation {
 /// Evaluate the records of a run of `plan`.
 pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
     let refs = references_sent(plan, records);
-    let run = RunView { plan, refs: &refs, robots: plan.robots.iter().map(|r| r.id.clone()).collect() };
+    let run =
+        RunView { plan, refs: &refs, robots: plan.robots.iter().map(|r| r.id.clone()).collect() };
     let truth: Vec<&GroundTruth> = records.truth.iter().filter(|g| g.object.is_some()).collect();
     let every = refs.clock.ticks_per_sample(SERIES_HZ) as usize;
     let pass = TruthPass::over(&run, &truth, every);
@@ -190,26 +199,32 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
         control_hz: plan.scenario.control_hz,
         physics_hz: plan.scenario.physics_hz,
         team_hz: plan.scenario.control_hz / plan.scenario.team_every().unwrap_or(1) as f64,
-        team_delay_ticks: match plan.scenario.team_delay_ticks {
-            TeamDelay::Ticks(d) => d,
-            TeamDelay::Auto { .. } => records.agent_delay.values().copied().max().unwrap_or(0),
-        },
+        team_delay_ticks: team_delay_ticks(plan, records),
         team_delay_auto: plan.scenario.team_delay_ticks.adapts(),
         drive_gains: plan.scenario.drive_gains.to_string(),
         samples: truth.len(),
         object: tracking(&pass.obj_pos_err, &pass.obj_ang_err),
-        torsos: run.robots.iter().enumerate().map(|(i, r)| (r.clone(), tracking(&pass.torso_pos_err[i], &pass.torso_ang_err[i]))).collect(),
-        drop: metrics::detect_drop(&pass.times, &pass.object_z, refs.object_start.0.z, &pass.hand_contact, 0.05, 0.10),
-        slip_m: run.robots.iter().enumerate().map(|(i, r)| (r.clone(), metrics::slip(&pass.palm_in_object[i]))).collect(),
-        mean_squeeze_n: run.robots.iter().enumerate().map(|(i, r)| (r.clone(), pass.squeeze_sum[i] / n)).collect(),
+        torsos: per_robot(&run.robots, |i| {
+            tracking(&pass.torso_pos_err[i], &pass.torso_ang_err[i])
+        }),
+        drop: metrics::detect_drop(
+            &pass.times,
+            &pass.object_z,
+            refs.object_start.0.z,
+            &pass.hand_contact,
+            0.05,
+            0.10,
+        ),
+        slip_m: per_robot(&run.robots, |i| metrics::slip(&pass.palm_in_object[i])),
+        mean_squeeze_n: per_robot(&run.robots, |i| pass.squeeze_sum[i] / n),
         torque_rms,
         qp_status: qp_status_counts(records),
         fallback_ticks: fallback_counts(records),
         motion_yield: YieldReport::of(records),
-        grasp_fit_residual_max_m: records.diagnostics.iter().map(|d| d.grasp_slip).fold(0.0, f64::max),
-        qp_iterations: metrics::percentiles(&records.diagnostics.iter().map(|d| d.qp_iterations as f64).collect::<Vec<_>>()),
-        qp_solve_us: metrics::percentiles(&records.diagnostics.iter().map(|d| d.qp_solve_us).collect::<Vec<_>>()),
-        controller_tick_us: metrics::percentiles(&records.diagnostics.iter().map(|d| d.total_us).collect::<Vec<_>>()),
+        grasp_fit_residual_max_m: grasp_fit_residual_max(records),
+        qp_iterations: diagnostics_percentiles(records, |d| d.qp_iterations as f64),
+        qp_solve_us: diagnostics_percentiles(records, |d| d.qp_solve_us),
+        controller_tick_us: diagnostics_percentiles(records, |d| d.total_us),
         coordinator_deadline_misses: records.last_status.as_ref().map(|s| s.deadline_misses),
         loop_timing: crate::loop_timing::LoopReport::from_truth(&records.truth),
         coordinator_fallbacks: records.last_status.as_ref().map(|s| s.fallbacks),
@@ -217,13 +232,48 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
         walk: refs.walk.as_ref().map(|w| crate::walking::evaluate(w, &truth, refs.walk_halted_at)),
         settle_wall_s: records.settle_wall.as_secs_f64(),
         run_wall_s: records.run_wall.as_secs_f64(),
-        real_time_factor: if records.run_wall.is_zero() { 0.0 } else { sim / records.run_wall.as_secs_f64() },
+        real_time_factor: real_time_factor(sim, records.run_wall),
         checks: Vec::new(),
         passed: false,
     };
     metrics.checks = acceptance(&run, &metrics);
     metrics.passed = metrics.checks.iter().all(|c| c.passed);
     Evaluation { metrics, series: pass.series, torques }
+}
+
+/// The team's delay, robot ticks: the scenario's, or with `auto` the longest any agent came to.
+fn team_delay_ticks(plan: &Plan, records: &Records) -> u64 {
+    match plan.scenario.team_delay_ticks {
+        TeamDelay::Ticks(d) => d,
+        TeamDelay::Auto { .. } => records.agent_delay.values().copied().max().unwrap_or(0),
+    }
+}
+
+/// One value per robot, by id: `f` of the robot's index.
+fn per_robot<T>(robots: &[String], mut f: impl FnMut(usize) -> T) -> BTreeMap<String, T> {
+    robots.iter().enumerate().map(|(i, r)| (r.clone(), f(i))).collect()
+}
+
+/// Percentiles of one quantity of the coordinator's tick diagnostics.
+fn diagnostics_percentiles(
+    records: &Records,
+    f: impl Fn(&protocol::TickDiagnostics) -> f64,
+) -> Percentiles {
+    metrics::percentiles(&records.diagnostics.iter().map(f).collect::<Vec<_>>())
+}
+
+/// Largest residual of the controller's object-pose fit over the run, m.
+fn grasp_fit_residual_max(records: &Records) -> f64 {
+    records.diagnostics.iter().map(|d| d.grasp_slip).fold(0.0, f64::max)
+}
+
+/// Simulated seconds per wall-clock second of the run (0 without a run).
+fn real_time_factor(sim: f64, run_wall: std::time::Duration) -> f64 {
+    if run_wall.is_zero() {
+        0.0
+    } else {
+        sim / run_wall.as_secs_f64()
+    }
 }
 
 /// The references the run sent: a walk halts when the team lets go (launch::driver).
@@ -329,7 +379,12 @@ impl TruthPass {
 
     /// The object's reference and measured pose (rotations as rotation vectors from the start
     /// orientation); its measured pose and position and orientation errors.
-    fn object_columns(&mut self, run: &RunView, g: &GroundTruth, row: &mut Vec<f64>) -> (Isometry3<f64>, f64, f64) {
+    fn object_columns(
+        &mut self,
+        run: &RunView,
+        g: &GroundTruth,
+        row: &mut Vec<f64>,
+    ) -> (Isometry3<f64>, f64, f64) {
         let t = g.time;
         let o_q0 = run.refs.object_start.1;
         let o = iso(&g.object.as_ref().expect("filtered").pose);
@@ -368,14 +423,25 @@ impl TruthPass {
 
     /// Each hand's normal force on the object (`o`), how far its palm slid and turned on the
     /// object since the start, and its contacts.
-    fn hand_columns(&mut self, run: &RunView, g: &GroundTruth, o: &Isometry3<f64>, row: &mut Vec<f64>) {
+    fn hand_columns(
+        &mut self,
+        run: &RunView,
+        g: &GroundTruth,
+        o: &Isometry3<f64>,
+        row: &mut Vec<f64>,
+    ) {
         let mut flags = Vec::with_capacity(run.robots.len());
         for (i, r) in run.robots.iter().enumerate() {
             // Normal force: along the palm's outward normal (hand frame z), what the hand
             // applies to the object.
             let palm = g.hands.iter().find(|b| &b.name == r).map(|b| iso(&b.pose));
             let n = palm.map(|p| p.rotation * Vector3::z()).unwrap_or_else(Vector3::zeros);
-            let f: f64 = g.hand_contacts.iter().filter(|c| &c.robot == r).map(|c| n.dot(&Vector3::new(c.wrench[0], c.wrench[1], c.wrench[2]))).sum();
+            let f: f64 = g
+                .hand_contacts
+                .iter()
+                .filter(|c| &c.robot == r)
+                .map(|c| n.dot(&Vector3::new(c.wrench[0], c.wrench[1], c.wrench[2])))
+                .sum();
             row.push(f);
             self.squeeze_sum[i] += f;
             if !run.faulted(r) {
@@ -388,7 +454,8 @@ impl TruthPass {
                 slip_now = self.palm_in_object[i].first().map_or(0.0, |p0| (local - p0).norm());
                 self.palm_in_object[i].push(local);
                 let rel = o.rotation.inverse() * p.rotation;
-                turn_now = metrics::geodesic_angle(self.palm_rot0[i].get_or_insert(rel), &rel).to_degrees();
+                turn_now = metrics::geodesic_angle(self.palm_rot0[i].get_or_insert(rel), &rel)
+                    .to_degrees();
             }
             row.push(slip_now);
             row.push(turn_now);
@@ -410,13 +477,22 @@ fn tracking(pe: &[f64], ae: &[f64]) -> Tracking {
 
 /// Torques: one sample per tick (the first applied for it), in joint order; each joint's RMS
 /// by robot, and the time series of every `every`-th tick all robots have.
-fn torque_series(plan: &Plan, records: &Records, refs: &ReferencePlan, every: usize) -> (BTreeMap<String, Vec<(String, f64)>>, TimeSeries) {
+fn torque_series(
+    plan: &Plan,
+    records: &Records,
+    refs: &ReferencePlan,
+    every: usize,
+) -> (BTreeMap<String, Vec<(String, f64)>>, TimeSeries) {
     let mut torque_rms = BTreeMap::new();
     let mut torque_names = Vec::new();
     let mut per_robot: Vec<BTreeMap<u64, &Vec<f64>>> = Vec::new();
     for r in &plan.robots {
         let (id, joints) = (&r.id, &r.joints);
-        let by_tick: BTreeMap<u64, &Vec<f64>> = records.torques.get(id).map(|v| v.iter().rev().map(|(t, tau)| (*t, tau)).collect()).unwrap_or_default();
+        let by_tick: BTreeMap<u64, &Vec<f64>> = records
+            .torques
+            .get(id)
+            .map(|v| v.iter().rev().map(|(t, tau)| (*t, tau)).collect())
+            .unwrap_or_default();
         let samples: Vec<Vec<f64>> = by_tick.values().map(|v| (*v).clone()).collect();
         let rms = metrics::torque_rms(&samples);
         torque_rms.insert(id.clone(), joints.iter().cloned().zip(rms).collect::<Vec<_>>());
@@ -476,19 +552,37 @@ fn recoveries(run: &RunView, pass: &TruthPass) -> Vec<Recovery> {
     let mut recoveries = Vec::new();
     for p in pushes {
         let end = p.start + p.duration;
-        let next = pushes.iter().map(|q| q.start).filter(|s| *s > p.start).fold(f64::INFINITY, f64::min);
+        let next =
+            pushes.iter().map(|q| q.start).filter(|s| *s > p.start).fold(f64::INFINITY, f64::min);
         let window = (next - end - RECOVERY_AFTER).max(0.0);
         let (on, torso_err) = match &p.target {
             protocol::PerturbationTarget::Object => ("object".to_string(), None),
             protocol::PerturbationTarget::RobotBody { robot, body } => {
                 let i = run.robots.iter().position(|r| r == robot);
-                (format!("{robot}/{body}"), i.and_then(|i| metrics::recovery_error(&pass.times, &pass.torso_pos_err[i], end, RECOVERY_AFTER, window)))
+                (
+                    format!("{robot}/{body}"),
+                    i.and_then(|i| {
+                        metrics::recovery_error(
+                            &pass.times,
+                            &pass.torso_pos_err[i],
+                            end,
+                            RECOVERY_AFTER,
+                            window,
+                        )
+                    }),
+                )
             }
         };
         recoveries.push(Recovery {
             on,
             push_end_s: end,
-            object_error_after_m: metrics::recovery_error(&pass.times, &pass.obj_pos_err, end, RECOVERY_AFTER, window),
+            object_error_after_m: metrics::recovery_error(
+                &pass.times,
+                &pass.obj_pos_err,
+                end,
+                RECOVERY_AFTER,
+                window,
+            ),
             torso_error_after_m: torso_err,
         });
     }
@@ -499,18 +593,28 @@ fn recoveries(run: &RunView, pass: &TruthPass) -> Vec<Recovery> {
 /// judged).
 fn acceptance(run: &RunView, m: &Metrics) -> Vec<Check> {
     let mut checks = Vec::new();
-    let mut check = |name: String, value: f64, bound: f64| checks.push(Check { passed: value < bound, name, value, bound });
+    let mut check = |name: String, value: f64, bound: f64| {
+        checks.push(Check { passed: value < bound, name, value, bound })
+    };
     check("object never dropped (1 = dropped)".into(), if m.drop.dropped { 1.0 } else { 0.0 }, 0.5);
     for (r, s) in m.slip_m.iter().filter(|(r, _)| !run.faulted(r)) {
         check(format!("{r} palm slip [m]"), *s, MAX_SLIP);
     }
     check("object position RMS [m]".into(), m.object.position_rms_m, MAX_OBJECT_POSITION_RMS);
-    check("object orientation RMS [deg]".into(), m.object.orientation_rms_deg, MAX_OBJECT_ORIENTATION_RMS_DEG);
+    check(
+        "object orientation RMS [deg]".into(),
+        m.object.orientation_rms_deg,
+        MAX_OBJECT_ORIENTATION_RMS_DEG,
+    );
     for (r, t) in m.torsos.iter().filter(|(r, _)| !run.faulted(r)) {
         // A walking torso follows a moving reference: its own bound.
         let i = run.robots.iter().position(|x| x == r);
         let walking = run.refs.walk.as_ref().zip(i).is_some_and(|(w, i)| w.walking[i]);
-        let (what, bound) = if walking { ("walking torso", crate::walking::MAX_WALKING_TORSO_POSITION_RMS) } else { ("torso", MAX_TORSO_POSITION_RMS) };
+        let (what, bound) = if walking {
+            ("walking torso", crate::walking::MAX_WALKING_TORSO_POSITION_RMS)
+        } else {
+            ("torso", MAX_TORSO_POSITION_RMS)
+        };
         check(format!("{r} {what} position RMS [m]"), t.position_rms_m, bound);
     }
     for (name, value, bound) in m.walk.iter().flat_map(crate::walking::checks) {
@@ -518,7 +622,14 @@ fn acceptance(run: &RunView, m: &Metrics) -> Vec<Check> {
     }
     for rec in &m.recoveries {
         if let Some(e) = rec.object_error_after_m {
-            check(format!("object error {RECOVERY_AFTER} s after the push on {} ending at {:.1} s [m]", rec.on, rec.push_end_s), e, MAX_RECOVERY_ERROR);
+            check(
+                format!(
+                    "object error {RECOVERY_AFTER} s after the push on {} ending at {:.1} s [m]",
+                    rec.on, rec.push_end_s
+                ),
+                e,
+                MAX_RECOVERY_ERROR,
+            );
         }
     }
     checks
@@ -535,17 +646,72 @@ pub fn write_report(_plan: &Plan, eval: &Evaluation, dir: &Path) -> Result<(), R
 
 /// A short human summary of the metrics.
 pub fn summary(m: &Metrics, dir: &Path) -> String {
-    let mut s = String::new();
-    let mut team = if m.team_hz < m.control_hz { format!(", team {} Hz", m.team_hz) } else { String::new() };
+    let mut s = summary_heading(m);
+    push_tracking_lines(&mut s, m);
+    s.push_str(&format!(
+        "  QP: {:?}, solve p50 {:.0} us p99 {:.0} us; controller tick p50 {:.0} us \
+         p99 {:.0} us; real-time factor {:.3}\n",
+        m.qp_status,
+        m.qp_solve_us.p50,
+        m.qp_solve_us.p99,
+        m.controller_tick_us.p50,
+        m.controller_tick_us.p99,
+        m.real_time_factor
+    ));
+    if !m.fallback_ticks.is_empty() {
+        s.push_str(&format!("  fallback ticks: {:?}\n", m.fallback_ticks));
+    }
+    if let Some(y) = &m.motion_yield {
+        s.push_str(&y.summary());
+    }
+    s.push_str(&format!(
+        "  controller's grasp-fit residual: max {:.3} mm\n",
+        m.grasp_fit_residual_max_m * 1e3
+    ));
+    for r in &m.recoveries {
+        if let Some(e) = r.object_error_after_m {
+            s.push_str(&format!(
+                "  push on {} ending at {:.1} s: object error {:.2} mm after {} s\n",
+                r.on,
+                r.push_end_s,
+                e * 1e3,
+                RECOVERY_AFTER
+            ));
+        }
+    }
+    if let Some(l) = &m.loop_timing {
+        s.push_str(&l.summary());
+    }
+    push_acceptance_lines(&mut s, m);
+    s.push_str(&format!("  report: {}\n", dir.display()));
+    s
+}
+
+/// The summary's first line: the scenario, mode, duration and rates.
+fn summary_heading(m: &Metrics) -> String {
+    let mut team =
+        if m.team_hz < m.control_hz { format!(", team {} Hz", m.team_hz) } else { String::new() };
     if m.team_delay_auto {
         team.push_str(&format!(", team delay auto (came to {} ticks)", m.team_delay_ticks));
     } else if m.team_delay_ticks > 0 {
         team.push_str(&format!(", team delay {} ticks", m.team_delay_ticks));
     }
-    let gains = if m.drive_gains == "none" { String::new() } else { format!(", drive gains {}", m.drive_gains) };
-    s.push_str(&format!("{} ({} mode, {:.1} s at {} Hz control{team}, {} Hz physics{gains})\n", m.scenario, m.mode, m.duration_s, m.control_hz, m.physics_hz));
+    let gains = if m.drive_gains == "none" {
+        String::new()
+    } else {
+        format!(", drive gains {}", m.drive_gains)
+    };
+    format!(
+        "{} ({} mode, {:.1} s at {} Hz control{team}, {} Hz physics{gains})\n",
+        m.scenario, m.mode, m.duration_s, m.control_hz, m.physics_hz
+    )
+}
+
+/// The summary's lines on the object's and torsos' tracking and the palms' slip.
+fn push_tracking_lines(s: &mut String, m: &Metrics) {
     s.push_str(&format!(
-        "  object: position RMS {:.2} mm (max {:.2} mm), orientation RMS {:.3} deg (max {:.3} deg), dropped: {}\n",
+        "  object: position RMS {:.2} mm (max {:.2} mm), orientation RMS {:.3} deg \
+         (max {:.3} deg), dropped: {}\n",
         m.object.position_rms_m * 1e3,
         m.object.position_max_m * 1e3,
         m.object.orientation_rms_deg,
@@ -554,7 +720,8 @@ pub fn summary(m: &Metrics, dir: &Path) -> String {
     ));
     for (r, t) in &m.torsos {
         s.push_str(&format!(
-            "  torso {r}: position RMS {:.2} mm (max {:.2} mm), orientation RMS {:.3} deg (max {:.2} deg)\n",
+            "  torso {r}: position RMS {:.2} mm (max {:.2} mm), orientation RMS {:.3} deg \
+             (max {:.2} deg)\n",
             t.position_rms_m * 1e3,
             t.position_max_m * 1e3,
             t.orientation_rms_deg,
@@ -562,54 +729,52 @@ pub fn summary(m: &Metrics, dir: &Path) -> String {
         ));
     }
     for (r, x) in &m.slip_m {
-        s.push_str(&format!("  palm {r}: slip {:.3} mm, mean squeeze {:.1} N\n", x * 1e3, m.mean_squeeze_n.get(r).copied().unwrap_or(0.0)));
+        s.push_str(&format!(
+            "  palm {r}: slip {:.3} mm, mean squeeze {:.1} N\n",
+            x * 1e3,
+            m.mean_squeeze_n.get(r).copied().unwrap_or(0.0)
+        ));
     }
-    s.push_str(&format!(
-        "  QP: {:?}, solve p50 {:.0} us p99 {:.0} us; controller tick p50 {:.0} us p99 {:.0} us; real-time factor {:.3}\n",
-        m.qp_status, m.qp_solve_us.p50, m.qp_solve_us.p99, m.controller_tick_us.p50, m.controller_tick_us.p99, m.real_time_factor
-    ));
-    if !m.fallback_ticks.is_empty() {
-        s.push_str(&format!("  fallback ticks: {:?}\n", m.fallback_ticks));
-    }
-    if let Some(y) = &m.motion_yield {
-        s.push_str(&y.summary());
-    }
-    s.push_str(&format!("  controller's grasp-fit residual: max {:.3} mm\n", m.grasp_fit_residual_max_m * 1e3));
-    for r in &m.recoveries {
-        if let Some(e) = r.object_error_after_m {
-            s.push_str(&format!("  push on {} ending at {:.1} s: object error {:.2} mm after {} s\n", r.on, r.push_end_s, e * 1e3, RECOVERY_AFTER));
-        }
-    }
-    if let Some(l) = &m.loop_timing {
-        s.push_str(&l.summary());
-    }
+}
+
+/// The summary's acceptance lines: all passed, or each failed check.
+fn push_acceptance_lines(s: &mut String, m: &Metrics) {
     let failed: Vec<&Check> = m.checks.iter().filter(|c| !c.passed).collect();
     if failed.is_empty() {
         s.push_str(&format!("  acceptance: all {} checks passed\n", m.checks.len()));
     } else {
         for c in failed {
-            s.push_str(&format!("  acceptance FAILED: {} = {:.4} (bound {})\n", c.name, c.value, c.bound));
+            s.push_str(&format!(
+                "  acceptance FAILED: {} = {:.4} (bound {})\n",
+                c.name, c.value, c.bound
+            ));
         }
     }
-    s.push_str(&format!("  report: {}\n", dir.display()));
-    s
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use scenario::plan;
-    use scenario::file::Scenario;
     use protocol::{BodyTruth, ContactTruth, Header};
+    use scenario::file::Scenario;
+    use scenario::plan;
 
     fn s4_plan() -> Plan {
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf();
-        let s = Scenario::load(root.join("scenarios/s4_object_circle.toml"), &["duration=1.0".into(), "settle=0.0".into()]).unwrap();
+        let s = Scenario::load(
+            root.join("scenarios/s4_object_circle.toml"),
+            &["duration=1.0".into(), "settle=0.0".into()],
+        )
+        .unwrap();
         plan::plan(&s, &root).unwrap()
     }
 
     fn body(name: &str, p: Vector3<f64>, q: UnitQuaternion<f64>) -> BodyTruth {
-        BodyTruth { name: name.into(), pose: Pose { position: p.into(), orientation: protocol::conventions::quat_to_wxyz(&q) }, twist: [0.0; 6] }
+        BodyTruth {
+            name: name.into(),
+            pose: Pose { position: p.into(), orientation: protocol::conventions::quat_to_wxyz(&q) },
+            twist: [0.0; 6],
+        }
     }
 
     /// Ground truth that follows the references exactly, palms fixed on the object; `fall(t)`
@@ -630,11 +795,20 @@ mod tests {
             g.object = Some(body("object", op, oq));
             for (i, (id, ..)) in refs.torsos.iter().enumerate() {
                 let r = refs.torso_at(i, Some(t));
-                g.torsos.push(body(id, Vector3::from(r.pose.position), protocol::conventions::quat_from_wxyz(r.pose.orientation)));
+                g.torsos.push(body(
+                    id,
+                    Vector3::from(r.pose.position),
+                    protocol::conventions::quat_from_wxyz(r.pose.orientation),
+                ));
                 let side = if i == 0 { -0.3 } else { 0.3 };
                 g.hands.push(body(id, op + oq * Vector3::new(side, 0.0, 0.0), oq));
                 if contact(t) {
-                    g.hand_contacts.push(ContactTruth { robot: id.clone(), body: "hand".into(), position: (op + Vector3::new(side, 0.0, 0.0)).into(), wrench: [-side * 100.0, 0.0, 4.9, 0.0, 0.0, 0.0] });
+                    g.hand_contacts.push(ContactTruth {
+                        robot: id.clone(),
+                        body: "hand".into(),
+                        position: (op + Vector3::new(side, 0.0, 0.0)).into(),
+                        wrench: [-side * 100.0, 0.0, 4.9, 0.0, 0.0, 0.0],
+                    });
                 }
             }
             rec.truth.push(g);
@@ -654,21 +828,45 @@ mod tests {
         assert!(!m.drop.dropped);
         // The object slides down 15 cm after 0.5 s and the hands lose it for 0.1 s: dropped,
         // slip and position checks fail.
-        let bad = evaluate(&plan, &records(&plan, |t| if t > 0.5 { (t - 0.5) * 0.5 } else { 0.0 }, |t| !(0.6..0.7).contains(&t)), "embedded");
+        let bad = evaluate(
+            &plan,
+            &records(
+                &plan,
+                |t| if t > 0.5 { (t - 0.5) * 0.5 } else { 0.0 },
+                |t| !(0.6..0.7).contains(&t),
+            ),
+            "embedded",
+        );
         let m = &bad.metrics;
         assert!(m.drop.dropped, "{:?}", m.drop);
         assert!(!m.passed);
-        let failed: Vec<&str> = m.checks.iter().filter(|c| !c.passed).map(|c| c.name.as_str()).collect();
-        assert!(failed.iter().any(|n| n.contains("dropped")) && failed.iter().any(|n| n.contains("object position RMS")), "{failed:?}");
+        let failed: Vec<&str> =
+            m.checks.iter().filter(|c| !c.passed).map(|c| c.name.as_str()).collect();
+        assert!(
+            failed.iter().any(|n| n.contains("dropped"))
+                && failed.iter().any(|n| n.contains("object position RMS")),
+            "{failed:?}"
+        );
         // Writing the report works and gives the plots.
         let dir = std::env::temp_dir().join(format!("evaluate-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         write_report(&plan, &bad, &dir).unwrap();
         crate::plots::write_all(&plan, &bad, &records(&plan, |_| 0.0, |_| true), &dir).unwrap();
-        for f in ["metrics.json", "timeseries.csv", "torques.csv", "report.html", "object_error.png", "object_error.svg", "contact_forces.png", "torque_rms.svg"] {
+        for f in [
+            "metrics.json",
+            "timeseries.csv",
+            "torques.csv",
+            "report.html",
+            "object_error.png",
+            "object_error.svg",
+            "contact_forces.png",
+            "torque_rms.svg",
+        ] {
             assert!(dir.join(f).exists(), "{f}");
         }
-        let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap())
+                .unwrap();
         assert_eq!(json["passed"], false);
         std::fs::remove_dir_all(&dir).unwrap();
     }

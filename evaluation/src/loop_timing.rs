@@ -101,8 +101,16 @@ impl LoopReport {
         let mut s = String::new();
         for (r, l) in &self.robots {
             s.push_str(&format!(
-                "  loop {r}: state-to-torque p50 {:.0} us, p99 {:.0} us, max {:.0} us; deadline misses {} of {} (longest hold {} ticks), late {}, lost {}\n",
-                l.latency_us.p50, l.latency_us.p99, l.latency_us.max, l.deadline_misses, l.ticks, l.longest_hold_ticks, l.late, l.lost
+                "  loop {r}: state-to-torque p50 {:.0} us, p99 {:.0} us, max {:.0} us; \
+                 deadline misses {} of {} (longest hold {} ticks), late {}, lost {}\n",
+                l.latency_us.p50,
+                l.latency_us.p99,
+                l.latency_us.max,
+                l.deadline_misses,
+                l.ticks,
+                l.longest_hold_ticks,
+                l.late,
+                l.lost
             ));
         }
         s

@@ -270,22 +270,34 @@ pub fn evaluate(walk: &Walk, truth: &[&GroundTruth], halted_at: Option<f64>) -> 
             }
         }
         rep.stance_slide_m.insert(id.clone(), slide);
-        let last = truth.last().and_then(|g| g.torsos.iter().find(|b| &b.name == id));
-        if let (true, Some(b)) = (walk.walking[i], last) {
-            let goal = halted_at.map_or(walk.gait.final_torso(i), |t| walk.gait.torso(i, t).0);
-            let at = Isometry3::from_parts(
-                Translation3::from(Vector3::from(b.pose.position)),
-                protocol::conventions::quat_from_wxyz(b.pose.orientation),
-            );
-            rep.final_torso_m
-                .insert(id.clone(), (at.translation.vector - goal.translation.vector).norm());
-            rep.final_torso_deg.insert(
-                id.clone(),
-                metrics::geodesic_angle(&at.rotation, &goal.rotation).to_degrees(),
-            );
+        if let Some((m, deg)) = final_torso_error(walk, truth, i, halted_at) {
+            rep.final_torso_m.insert(id.clone(), m);
+            rep.final_torso_deg.insert(id.clone(), deg);
         }
     }
     rep
+}
+
+/// Walking robot `i`'s torso at the end of the run against its goal (the gait's final pose,
+/// or its pose where the walk halted): position error, m, and angle error, deg.
+fn final_torso_error(
+    walk: &Walk,
+    truth: &[&GroundTruth],
+    i: usize,
+    halted_at: Option<f64>,
+) -> Option<(f64, f64)> {
+    let id = &walk.robots[i];
+    let last = truth.last().and_then(|g| g.torsos.iter().find(|b| &b.name == id));
+    let (true, Some(b)) = (walk.walking[i], last) else { return None };
+    let goal = halted_at.map_or(walk.gait.final_torso(i), |t| walk.gait.torso(i, t).0);
+    let at = Isometry3::from_parts(
+        Translation3::from(Vector3::from(b.pose.position)),
+        protocol::conventions::quat_from_wxyz(b.pose.orientation),
+    );
+    Some((
+        (at.translation.vector - goal.translation.vector).norm(),
+        metrics::geodesic_angle(&at.rotation, &goal.rotation).to_degrees(),
+    ))
 }
 
 /// The acceptance checks of a walk: every planned step taken (and no other), stance feet

@@ -5,8 +5,9 @@
 //! and each run's own report in a sub-folder.
 //!
 //! * [`compare`]: scenarios x controllers (`team compare`).
-//! * [`sweep`]: one scenario's motion amplitudes (or speeds) scaled by each factor x controllers, and where
-//!   each controller stops meeting the acceptance bounds (`team sweep`).
+//! * [`sweep`]: one scenario's motion amplitudes (or speeds) scaled by each factor x
+//!   controllers, and where each controller stops meeting the acceptance bounds
+//!   (`team sweep`).
 
 use std::path::{Path, PathBuf};
 
@@ -257,7 +258,8 @@ pub fn compare(
     Ok(rows)
 }
 
-/// Per controller, the largest motion factor at which it met every bound (`None`: not even the first).
+/// Per controller, the largest motion factor at which it met every bound (`None`: not even the
+/// first).
 pub type Limits = Vec<(String, Option<f64>)>;
 
 /// A sweep's report folder when none is given: `reports/sweep-<file name without extension>`.
@@ -284,9 +286,10 @@ pub fn limits_summary(limits: &Limits, what: Scaling, scales: &[f64]) -> String 
     s
 }
 
-/// `file` with its motion amplitudes (or speeds) scaled by each of `scales`, with every controller, into
-/// `out` (`sweep.md` / `sweep.json` and one sub-folder per run). Returns the rows and, per
-/// controller, the largest scale at which it met every bound before its first failure.
+/// `file` with its motion amplitudes (or speeds) scaled by each of `scales`, with every
+/// controller, into `out` (`sweep.md` / `sweep.json` and one sub-folder per run). Returns the
+/// rows and, per controller, the largest scale at which it met every bound before its first
+/// failure.
 pub fn sweep(
     file: &Path,
     controllers: &[String],
@@ -328,7 +331,11 @@ pub fn sweep(
 /// The table as Markdown (what the README quotes).
 pub fn markdown(rows: &[Row]) -> String {
     let mut s = String::from(
-        "| scenario | controller | motion x | object pos RMS [mm] | object ori RMS [deg] | worst torso pos RMS [mm] | dropped | worst slip [mm] | least squeeze [N] (limit) | friction use (mu) | QP solve p50 / p99 [us] | tick p50 / p99 [us] | QP failures | fallbacks | S4 bounds met |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| scenario | controller | motion x | object pos RMS [mm] | object ori RMS [deg] \
+         | worst torso pos RMS [mm] | dropped | worst slip [mm] | least squeeze [N] (limit) \
+         | friction use (mu) | QP solve p50 / p99 [us] | tick p50 / p99 [us] | QP failures \
+         | fallbacks | S4 bounds met |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         if let Some(e) = &r.error {
@@ -342,7 +349,8 @@ pub fn markdown(rows: &[Row]) -> String {
             continue;
         }
         s.push_str(&format!(
-            "| {} | {} | {} | {:.2} | {:.3} | {:.2} | {} | {:.2} | {:.1} ({:.0}) | {:.2} ({:.2}) | {:.0} / {:.0} | {:.0} / {:.0} | {} | {} | {} |\n",
+            "| {} | {} | {} | {:.2} | {:.3} | {:.2} | {} | {:.2} | {:.1} ({:.0}) | {:.2} ({:.2}) \
+             | {:.0} / {:.0} | {:.0} / {:.0} | {} | {} | {} |\n",
             r.scenario,
             r.controller,
             r.scale,
@@ -414,16 +422,19 @@ mod tests {
         );
         let mut m = circle;
         scale_motion(&mut m, 3.0, Scaling::Amplitude);
-        assert!(
-            matches!(m, OffsetMotion::Circle { radius, frequency, .. } if (radius - 0.12).abs() < 1e-15 && frequency == 0.2)
-        );
+        assert!(matches!(
+            m,
+            OffsetMotion::Circle { radius, frequency, .. }
+                if (radius - 0.12).abs() < 1e-15 && frequency == 0.2
+        ));
         let mut m = seq;
         scale_motion(&mut m, 2.0, Scaling::Speed);
         let OffsetMotion::Sequence { segments } = m else { panic!("a sequence") };
         assert_eq!((segments[0].duration, segments[0].ramp), (1.0, 0.25));
-        assert!(
-            matches!(segments[0].motion, OffsetMotion::Sinusoid { frequency, .. } if frequency == [0.4, 0.0, 0.5])
-        );
+        assert!(matches!(
+            segments[0].motion,
+            OffsetMotion::Sinusoid { frequency, .. } if frequency == [0.4, 0.0, 0.5]
+        ));
         let mut hold = OffsetMotion::Hold;
         scale_motion(&mut hold, 5.0, Scaling::Speed);
         assert_eq!(hold, OffsetMotion::Hold);
@@ -463,7 +474,13 @@ mod tests {
     fn a_sweep_says_up_to_which_scale_each_controller_met_the_bounds() {
         let limits: Limits = vec![("pidc".into(), Some(1.5)), ("mqp".into(), None)];
         let s = limits_summary(&limits, Scaling::Speed, &[0.5, 1.0, 1.5]);
-        assert_eq!(s, "pidc: meets every bound up to motion Speed x 1.5\nmqp: misses a bound already at motion Speed x 0.5\n");
+        assert_eq!(
+            s,
+            concat!(
+                "pidc: meets every bound up to motion Speed x 1.5\n",
+                "mqp: misses a bound already at motion Speed x 0.5\n"
+            )
+        );
         assert_eq!(
             default_sweep_dir(Path::new("scenarios/s1_torso_and_object.toml")),
             Path::new("reports/sweep-s1_torso_and_object")

@@ -5,14 +5,15 @@
 //! simulation (a lagging driver with a 50-tick window let the references freeze and then jump
 //! on a loaded machine). In real time the window is [`REALTIME_LOOKAHEAD`] of ticks instead:
 //! the simulation cannot run ahead of the wall clock, and a first window as long as the run
-//! made the team's start-up work grow with the run's length. It records what the evaluation needs (ground truth,
-//! the torques the agents applied, the coordinator's diagnostics and status) and shows the
-//! progress. It never talks to the controller other than by references: the ground truth it
-//! records is for evaluation only. A walking scenario's contact sets go out
+//! made the team's start-up work grow with the run's length. It records what the evaluation
+//! needs (ground truth, the torques the agents applied, the coordinator's diagnostics and
+//! status) and shows the progress. It never talks to the controller other than by
+//! references: the ground truth it records is for evaluation only. A walking scenario's
+//! contact sets go out
 //! [`CONTACT_LOOKAHEAD`] ticks ahead on each robot's `contacts` key (the agents keep a bounded
 //! schedule of them). When the coordinator reports that the team let go of the object
-//! ([`CoordinatorMode::Released`]), a walk halts (at once before a lift-off, else at its next quiet point)
-//! ([`ReferencePlan::halt_walk`]): robots without the object do not walk on.
+//! ([`CoordinatorMode::Released`]), a walk halts (at once before a lift-off, else at its next
+//! quiet point) ([`ReferencePlan::halt_walk`]): robots without the object do not walk on.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::IsTerminal;
@@ -118,6 +119,41 @@ pub struct Driver {
 /// doubled at each further loss, so that 1 s covers two losses of the same copy.
 pub const FINAL_GRACE: Duration = Duration::from_millis(1000);
 
+/// One publisher per robot that has contact sets, on its `contacts` key.
+async fn contact_publishers(
+    session: &Session,
+    team: &str,
+    contact_sets: &[ContactSet],
+) -> Result<BTreeMap<String, TypedPublisher<ContactSet>>, TransportError> {
+    let mut contact_pubs = BTreeMap::new();
+    for c in contact_sets {
+        let id = c.header.robot_id().to_string();
+        if let std::collections::btree_map::Entry::Vacant(slot) = contact_pubs.entry(id) {
+            let key = keys::contacts(team, slot.key())?;
+            slot.insert(TypedPublisher::declare(session, key, Qos::HotPath).await?);
+        }
+    }
+    Ok(contact_pubs)
+}
+
+/// A progress bar over `total_ticks` on stdout when `shown`, else a hidden one.
+fn progress_bar(shown: bool, total_ticks: u64) -> ProgressBar {
+    if shown {
+        let pb = ProgressBar::with_draw_target(Some(total_ticks), ProgressDrawTarget::stdout());
+        pb.set_style(
+            ProgressStyle::with_template(
+                "{prefix:>8} [{bar:40}] {pos}/{len} ticks  {msg}  eta {eta}",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        pb.set_prefix("settling");
+        pb
+    } else {
+        ProgressBar::hidden()
+    }
+}
+
 /// Samples each of the driver's recording queues holds.
 pub const RECORD_QUEUE: usize = 1 << 15;
 
@@ -153,30 +189,10 @@ impl Driver {
             TypedPublisher::declare(session, keys::references(team)?, Qos::HotPath).await?;
         let contact_sets =
             plan.walk.as_ref().map(|w| w.contact_sets(team, &plan.clock)).unwrap_or_default();
-        let mut contact_pubs = BTreeMap::new();
-        for c in &contact_sets {
-            let id = c.header.robot_id().to_string();
-            if let std::collections::btree_map::Entry::Vacant(slot) = contact_pubs.entry(id) {
-                let key = keys::contacts(team, slot.key())?;
-                slot.insert(TypedPublisher::declare(session, key, Qos::HotPath).await?);
-            }
-        }
+        let contact_pubs = contact_publishers(session, team, &contact_sets).await?;
         // Progress goes to stdout with the summary; stderr is the log's.
         let terminal = std::io::stdout().is_terminal();
-        let progress = if show_progress && terminal {
-            let pb = ProgressBar::with_draw_target(Some(total_ticks), ProgressDrawTarget::stdout());
-            pb.set_style(
-                ProgressStyle::with_template(
-                    "{prefix:>8} [{bar:40}] {pos}/{len} ticks  {msg}  eta {eta}",
-                )
-                .unwrap_or_else(|_| ProgressStyle::default_bar())
-                .progress_chars("=> "),
-            );
-            pb.set_prefix("settling");
-            pb
-        } else {
-            ProgressBar::hidden()
-        };
+        let progress = progress_bar(show_progress && terminal, total_ticks);
         Ok(Driver {
             team: team.to_string(),
             truth,
@@ -252,7 +268,13 @@ impl Driver {
             return Ok(());
         };
         let from = self.plan.clock.first_tick_at(t);
-        tracing::warn!(released_after = tick, halt_s = t, halt_tick = from, "the team let go of the object: the walk halts (at once before a lift-off, else when the lifted foot has landed)");
+        tracing::warn!(
+            released_after = tick,
+            halt_s = t,
+            halt_tick = from,
+            "the team let go of the object: the walk halts \
+             (at once before a lift-off, else when the lifted foot has landed)"
+        );
         self.tapped_refs = self.tapped_refs.min(from);
         self.publish_refs(from, published_to).await?;
         let halt = walk.halt_sets(&self.team, &self.plan.clock, t);
@@ -277,7 +299,7 @@ impl Driver {
                     rec.take_torques(&sample, settle, self.tap.as_ref());
                     // A command just taken is the last of its robot's records.
                     waiting.retain(|(r, tick)| {
-                        !rec.torques.get(r).and_then(|v| v.last()).is_some_and(|(t, _)| t == tick)
+                        rec.torques.get(r).and_then(|v| v.last()).is_none_or(|(t, _)| t != tick)
                     });
                 }
                 Ok(Err(_)) => return,
@@ -432,7 +454,7 @@ impl Driver {
     /// The progress bar at `tick`, or a log line every 10 %.
     fn show_progress(&self, st: &mut RunState, tick: u64) {
         self.progress.set_position(tick + 1);
-        if tick % 200 == 0 {
+        if tick.is_multiple_of(200) {
             self.progress
                 .set_message(format!("t = {:.2} s", self.plan.time_of_tick(tick).unwrap_or(0.0)));
         }

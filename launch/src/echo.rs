@@ -45,9 +45,12 @@ pub fn line(key: &str, encoding: &str, payload: &[u8]) -> serde_json::Value {
     };
     match decoded {
         Ok(m) => serde_json::json!({ "key": key, "encoding": encoding, "message": m }),
-        Err(e) => {
-            serde_json::json!({ "key": key, "encoding": encoding, "error": e, "bytes": payload.len() })
-        }
+        Err(e) => serde_json::json!({
+            "key": key,
+            "encoding": encoding,
+            "error": e,
+            "bytes": payload.len()
+        }),
     }
 }
 

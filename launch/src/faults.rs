@@ -63,7 +63,11 @@ impl Armed {
         };
         match outcome {
             Ok(()) => {
-                tracing::warn!(component = who, tick = ?self.back, "fault over: the component runs again")
+                tracing::warn!(
+                    component = who,
+                    tick = ?self.back,
+                    "fault over: the component runs again"
+                )
             }
             Err(e) => tracing::error!(component = who, "fault: could not recover: {e}"),
         }
@@ -88,7 +92,11 @@ pub async fn inject(
             tokio::select! {
                 s = states.recv_async() => {
                     let Ok(sample) = s else { return };
-                    let Ok(tick) = decode_sample::<RobotState>(&sample).map(|st| st.header.tick) else { continue };
+                    let Ok(tick) =
+                        decode_sample::<RobotState>(&sample).map(|st| st.header.tick)
+                    else {
+                        continue;
+                    };
                     if !struck && tick >= armed.tick {
                         armed.strike();
                         struck = true;

@@ -2,8 +2,8 @@
 //! namespaces joined by veth pairs to one bridge (`scripts/testhosts.sh` makes and removes
 //! them; root needed). [`TestHosts`] is one such set for one run: a host per component name,
 //! its address, packet loss (nftables), link failures and connection resets, and the command
-//! line that starts a program on a host. The set is removed when dropped. Where namespaces cannot be made
-//! ([`TestHosts::check`]), callers say so and run on loopback instead.
+//! line that starts a program on a host. The set is removed when dropped. Where namespaces
+//! cannot be made ([`TestHosts::check`]), callers say so and run on loopback instead.
 
 use std::collections::BTreeMap;
 use std::net::Ipv4Addr;
@@ -176,7 +176,11 @@ impl TestHosts {
             let (ca_abs, out_abs) = (ca.canonicalize(), out.canonicalize());
             if let (Ok(c), Ok(o)) = (&ca_abs, &out_abs) {
                 if c.starts_with(o) {
-                    return Err(certs(format!("{} is where the run's certificates go (it is made anew); keep the CA elsewhere", out.display())));
+                    return Err(certs(format!(
+                        "{} is where the run's certificates go (it is made anew); \
+                         keep the CA elsewhere",
+                        out.display()
+                    )));
                 }
             }
             std::fs::remove_dir_all(out)
@@ -198,7 +202,11 @@ impl TestHosts {
     pub fn check_ca(ca: &Path) -> Result<(), HostsError> {
         for f in ["ca.pem", "ca.key"] {
             if !ca.join(f).is_file() {
-                let reason = format!("no {f}: test hosts over TLS need the test CA's certificate and key to sign certificates for the hosts' addresses (scripts/make-test-certs.sh DIR makes them)");
+                let reason = format!(
+                    "no {f}: test hosts over TLS need the test CA's certificate and key to sign \
+                     certificates for the hosts' addresses (scripts/make-test-certs.sh DIR \
+                     makes them)"
+                );
                 return Err(HostsError::Certificates { dir: ca.display().to_string(), reason });
             }
         }

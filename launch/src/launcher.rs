@@ -32,7 +32,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use coordinator::service::{self as coordinator_service, CoordinatorConfig};
-use coordinator::team::assembly::Reuse;
+use coordinator::team::assembly::TermsReuse;
 use coordinator::ControllerSpec;
 use protocol::access::{secure_endpoint, Identity, SecureConfig};
 use protocol::transport::{self, Role, ZenohArgs};
@@ -282,8 +282,8 @@ pub struct CoordinatorArgs {
     pub team: String,
     /// How long a tick may wait for every member's dynamics terms.
     pub tick_deadline: Duration,
-    /// Real time: reuse a late member's latest terms (`coordinator::team::assembly::Reuse`).
-    pub reuse: Option<Reuse>,
+    /// Real time: reuse a late member's latest terms (`coordinator::team::assembly::TermsReuse`).
+    pub reuse: Option<TermsReuse>,
     /// The team's robots: the first tick waits for all of them (bounded), which a restarted
     /// coordinator needs (`coordinator::team::membership::Roster::expect`).
     pub expected: Vec<String>,
@@ -723,79 +723,88 @@ impl Launch {
     pub async fn start(&self, mode: &RunMode) -> Result<Running, LaunchError> {
         let (stop_tx, stop_rx) = watch::channel(false);
         match mode {
-            RunMode::Embedded => {
-                let session = transport::open(&ZenohArgs::default(), Role::Alone).await?;
-                let c = (self.coordinator.clone(), session.clone());
-                let mut components = vec![(
-                    COORDINATOR.to_string(),
-                    Component::new(
-                        COORDINATOR,
-                        &stop_rx,
-                        Starter::Task(Box::new(move |stop, stall| {
-                            c.0.start_task(&c.1, stop, stall)
-                        })),
-                    )?,
-                )];
-                for a in &self.agents {
-                    let s = (a.clone(), session.clone());
-                    let starter = Starter::Task(Box::new(move |stop, stall| {
-                        s.0.start_task(&s.1, stop, stall)
-                    }));
-                    components.push((
-                        a.id.clone(),
-                        Component::new(&format!("robot-agent {}", a.id), &stop_rx, starter)?,
-                    ));
-                }
-                Ok(Running {
-                    session,
-                    stop_tx,
-                    stop_rx,
-                    mode: mode.clone(),
-                    connect: ZenohArgs::default(),
-                    components,
-                })
-            }
+            RunMode::Embedded => self.start_embedded(mode, stop_tx, stop_rx).await,
             RunMode::Distributed { dir }
             | RunMode::Hosts { dir, .. }
             | RunMode::Tls { dir, .. }
-            | RunMode::Site { dir, .. } => {
-                let hub = mode.hub()?;
-                let ids = TeamIds {
-                    team: self.coordinator.team.clone(),
-                    robots: self.agents.iter().map(|a| a.id.clone()).collect(),
-                };
-                let process = |host: &str, bin: &str, args: Vec<String>| Starter::Process {
-                    mode: mode.clone(),
-                    host: host.to_string(),
-                    bin: bin.to_string(),
-                    args,
-                };
-                let coordinator = process(
-                    COORDINATOR_HOST,
-                    "coordinator",
-                    self.coordinator.to_cli(dir, &mode.hub_args(&hub, &ids)?)?,
-                );
-                let mut components = vec![(
-                    COORDINATOR.to_string(),
-                    Component::new(COORDINATOR, &stop_rx, coordinator)?,
-                )];
-                let session =
-                    transport::open(&mode.zenoh_args(None, &hub, &ids)?, Role::Member).await?;
-                for a in &self.agents {
-                    let starter = process(
-                        &a.id,
-                        "robot-agent",
-                        a.to_cli(&mode.zenoh_args(Some(&a.id), &hub, &ids)?),
-                    );
-                    components.push((
-                        a.id.clone(),
-                        Component::new(&format!("robot-agent {}", a.id), &stop_rx, starter)?,
-                    ));
-                }
-                let connect = mode.zenoh_args(Some(SIM_HOST), &hub, &ids)?;
-                Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect, components })
-            }
+            | RunMode::Site { dir, .. } => self.start_processes(mode, dir, stop_tx, stop_rx).await,
         }
+    }
+
+    /// Embedded: the coordinator and the agents as tasks of this process, on one session.
+    async fn start_embedded(
+        &self,
+        mode: &RunMode,
+        stop_tx: watch::Sender<bool>,
+        stop_rx: watch::Receiver<bool>,
+    ) -> Result<Running, LaunchError> {
+        let session = transport::open(&ZenohArgs::default(), Role::Alone).await?;
+        let c = (self.coordinator.clone(), session.clone());
+        let mut components = vec![(
+            COORDINATOR.to_string(),
+            Component::new(
+                COORDINATOR,
+                &stop_rx,
+                Starter::Task(Box::new(move |stop, stall| c.0.start_task(&c.1, stop, stall))),
+            )?,
+        )];
+        for a in &self.agents {
+            let s = (a.clone(), session.clone());
+            let starter =
+                Starter::Task(Box::new(move |stop, stall| s.0.start_task(&s.1, stop, stall)));
+            components.push((
+                a.id.clone(),
+                Component::new(&format!("robot-agent {}", a.id), &stop_rx, starter)?,
+            ));
+        }
+        Ok(Running {
+            session,
+            stop_tx,
+            stop_rx,
+            mode: mode.clone(),
+            connect: ZenohArgs::default(),
+            components,
+        })
+    }
+
+    /// The coordinator and the agents as processes (on their hosts in `mode`), their
+    /// configurations written to `dir`; this process joins as a member.
+    async fn start_processes(
+        &self,
+        mode: &RunMode,
+        dir: &Path,
+        stop_tx: watch::Sender<bool>,
+        stop_rx: watch::Receiver<bool>,
+    ) -> Result<Running, LaunchError> {
+        let hub = mode.hub()?;
+        let ids = TeamIds {
+            team: self.coordinator.team.clone(),
+            robots: self.agents.iter().map(|a| a.id.clone()).collect(),
+        };
+        let process = |host: &str, bin: &str, args: Vec<String>| Starter::Process {
+            mode: mode.clone(),
+            host: host.to_string(),
+            bin: bin.to_string(),
+            args,
+        };
+        let coordinator = process(
+            COORDINATOR_HOST,
+            "coordinator",
+            self.coordinator.to_cli(dir, &mode.hub_args(&hub, &ids)?)?,
+        );
+        let mut components =
+            vec![(COORDINATOR.to_string(), Component::new(COORDINATOR, &stop_rx, coordinator)?)];
+        let session = transport::open(&mode.zenoh_args(None, &hub, &ids)?, Role::Member).await?;
+        for a in &self.agents {
+            let starter =
+                process(&a.id, "robot-agent", a.to_cli(&mode.zenoh_args(Some(&a.id), &hub, &ids)?));
+            components.push((
+                a.id.clone(),
+                Component::new(&format!("robot-agent {}", a.id), &stop_rx, starter)?,
+            ));
+        }
+        let connect = mode.zenoh_args(Some(SIM_HOST), &hub, &ids)?;
+        Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect, components })
     }
 }
 
@@ -918,7 +927,7 @@ mod tests {
         let c = CoordinatorArgs {
             team: "t1".into(),
             tick_deadline: Duration::from_millis(1500),
-            reuse: Some(Reuse { after: Duration::from_micros(250), max_age: 25 }),
+            reuse: Some(TermsReuse { after: Duration::from_micros(250), max_age: 25 }),
             expected: vec!["r1".into(), "r2".into()],
             controller: ControllerSpec::of_kind("pidc").unwrap(),
             robot_hz: Some(500.0),

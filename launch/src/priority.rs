@@ -69,7 +69,10 @@ fn is_background(tid: i64) -> bool {
 
 #[derive(Debug, thiserror::Error)]
 pub enum PriorityError {
-    #[error("not permitted to raise the scheduling priority to nice {nice} (needs CAP_SYS_NICE, or an RLIMIT_NICE that allows it)")]
+    #[error(
+        "not permitted to raise the scheduling priority to nice {nice} \
+         (needs CAP_SYS_NICE, or an RLIMIT_NICE that allows it)"
+    )]
     NotPermitted { nice: i32 },
     #[error("cannot list or set this process's threads: {0}")]
     Io(#[from] io::Error),

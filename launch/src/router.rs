@@ -11,9 +11,15 @@ use zenoh::Session;
 pub enum SiteError {
     #[error("cannot read the router configuration {path}: {reason}")]
     Config { path: String, reason: String },
-    #[error("{path} is a configuration for mode {mode}, not a router (write one with team router-config)")]
+    #[error(
+        "{path} is a configuration for mode {mode}, not a router \
+         (write one with team router-config)"
+    )]
     NotARouter { path: String, mode: String },
-    #[error("{path}: a router without access control would let every team into every other (write one with team router-config)")]
+    #[error(
+        "{path}: a router without access control would let every team into every other \
+         (write one with team router-config)"
+    )]
     NoAccessControl { path: String },
     #[error("{path}: {reason}")]
     NotSecure { path: String, reason: String },

@@ -11,11 +11,14 @@ use std::time::{Duration, Instant};
 use thiserror::Error;
 
 use crate::driver::Driver;
-use evaluation::records::Records;
 use crate::hosts::TestHosts;
-use crate::launcher::{AgentArgs, AgentModel, BridgeArgs, CoordinatorArgs, Launch, LaunchError, RunMode};
-use scenario::plan::Plan;
+use crate::launcher::{
+    AgentArgs, AgentModel, BridgeArgs, CoordinatorArgs, Launch, LaunchError, RunMode, Running,
+};
 use crate::record::{self, RecordError, RecordOptions, Recorder, RecordingSummary, RunFacts};
+use evaluation::records::Records;
+use scenario::plan::Plan;
+use tokio::task::JoinHandle;
 
 /// In lockstep, an agent waits this long for its command before it holds its posture: a tick
 /// that is merely slow (a loaded machine) must not see safe-mode torques.
@@ -37,11 +40,15 @@ pub const REALTIME_COORDINATOR_TICK_DEADLINE: Duration = Duration::from_millis(5
 
 /// In real time the coordinator solves a tick a quarter of the control period after its first
 /// terms arrived (half a period left too little of it for the solve, the agents and the
-/// bridge: every robot missed its deadline while one stalled), with a late member's latest terms (`coordinator::team::assembly::Reuse`), as
-/// long as they are at most [`REALTIME_SILENCE`] old; a member silent for longer is left out.
-pub fn realtime_reuse(clock: &protocol::RunClock) -> coordinator::team::assembly::Reuse {
+/// bridge: every robot missed its deadline while one stalled), with a late member's latest
+/// terms (`coordinator::team::assembly::TermsReuse`), as long as they are at most
+/// [`REALTIME_SILENCE`] old; a member silent for longer is left out.
+pub fn realtime_reuse(clock: &protocol::RunClock) -> coordinator::team::assembly::TermsReuse {
     let period = clock.dt();
-    coordinator::team::assembly::Reuse { after: Duration::from_secs_f64(period / 4.0), max_age: clock.ticks_lasting(REALTIME_SILENCE.as_secs_f64()).max(1) }
+    coordinator::team::assembly::TermsReuse {
+        after: Duration::from_secs_f64(period / 4.0),
+        max_age: clock.ticks_lasting(REALTIME_SILENCE.as_secs_f64()).max(1),
+    }
 }
 
 /// How long a member may send no terms in real time before the coordinator leaves it out of
@@ -100,8 +107,12 @@ impl std::str::FromStr for LinkLoss {
 
     /// `ROBOT=PERCENT`, the percentage a whole number from 0 to 100.
     fn from_str(s: &str) -> Result<Self, String> {
-        let (robot, percent) = s.split_once('=').ok_or_else(|| format!("{s:?}: expected ROBOT=PERCENT, e.g. r1=5"))?;
-        let percent: u8 = percent.trim().parse().map_err(|_| format!("{s:?}: the loss is a whole percentage from 0 to 100"))?;
+        let (robot, percent) =
+            s.split_once('=').ok_or_else(|| format!("{s:?}: expected ROBOT=PERCENT, e.g. r1=5"))?;
+        let percent: u8 = percent
+            .trim()
+            .parse()
+            .map_err(|_| format!("{s:?}: the loss is a whole percentage from 0 to 100"))?;
         if robot.trim().is_empty() || percent > 100 {
             return Err(format!("{s:?}: expected ROBOT=PERCENT with a robot and 0 to 100 %"));
         }
@@ -126,14 +137,21 @@ impl RunOptions {
     /// it for a real-time run.
     pub fn mode_label(&self, tls: bool, realtime: bool) -> String {
         let name = self.mode_name(tls);
-        if realtime { format!("{name}, real time") } else { name.to_string() }
+        if realtime {
+            format!("{name}, real time")
+        } else {
+            name.to_string()
+        }
     }
 }
 
 /// The report folder of a run of the scenario file `scenario` when none is given:
 /// `reports/<file name without extension>` (`reports/scenario` for a path without one).
 pub fn default_report_dir(scenario: &Path) -> PathBuf {
-    let stem = scenario.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scenario".into());
+    let stem = scenario
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_else(|| "scenario".into());
     PathBuf::from("reports").join(stem)
 }
 
@@ -145,7 +163,12 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
     let clock = &plan.references.clock;
     let (tick_deadline, command_deadline, command_deadline_ticks, reuse) = if plan.scene.realtime {
         let ticks = clock.ticks_lasting(REALTIME_AGENT_COMMAND_DEADLINE.as_secs_f64()).max(1);
-        (REALTIME_COORDINATOR_TICK_DEADLINE, REALTIME_AGENT_COMMAND_DEADLINE, ticks, Some(realtime_reuse(clock)))
+        (
+            REALTIME_COORDINATOR_TICK_DEADLINE,
+            REALTIME_AGENT_COMMAND_DEADLINE,
+            ticks,
+            Some(realtime_reuse(clock)),
+        )
     } else {
         (COORDINATOR_TICK_DEADLINE, AGENT_COMMAND_DEADLINE, LOCKSTEP_DEADLINE_TICKS, None)
     };
@@ -154,7 +177,15 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
     // The driver sends references for every tick: a coordinator that starts inside the run (a
     // restart) holds the team until they come.
     let wait_for_references = Some(coordinator::service::REFERENCE_WAIT);
-    let coordinator = CoordinatorArgs { team: plan.team().into(), tick_deadline, reuse, expected, controller: plan.controller.clone(), robot_hz, wait_for_references };
+    let coordinator = CoordinatorArgs {
+        team: plan.team().into(),
+        tick_deadline,
+        reuse,
+        expected,
+        controller: plan.controller.clone(),
+        robot_hz,
+        wait_for_references,
+    };
     let agents = plan
         .robots
         .iter()
@@ -171,7 +202,8 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
             team_delay: plan.scenario.team_delay_ticks,
         })
         .collect();
-    let bridge = BridgeArgs::Scene { scene: Box::new(plan.scene.clone()), robots: plan.loaded_robots() };
+    let bridge =
+        BridgeArgs::Scene { scene: Box::new(plan.scene.clone()), robots: plan.loaded_robots() };
     (Launch { coordinator, agents }, bridge)
 }
 
@@ -182,7 +214,12 @@ pub fn run(plan: &Plan, opts: &RunOptions, out: &Path) -> Result<Records, RunErr
 }
 
 /// [`run`], recording the run as MCAP (and serving it live) when `record` is given.
-pub fn run_recorded(plan: &Plan, opts: &RunOptions, out: &Path, record: Option<&RecordOptions>) -> Result<(Records, Option<RecordingSummary>), RunError> {
+pub fn run_recorded(
+    plan: &Plan,
+    opts: &RunOptions,
+    out: &Path,
+    record: Option<&RecordOptions>,
+) -> Result<(Records, Option<RecordingSummary>), RunError> {
     run_recorded_secure(plan, opts, None, out, record)
 }
 
@@ -206,48 +243,105 @@ pub fn run_recorded_secure(
 ) -> Result<(Records, Option<RecordingSummary>), RunError> {
     if let (true, Some(ca)) = (opts.hosts, tls) {
         // Before any host is made: the run's certificates need the test CA's key.
-        TestHosts::check_ca(ca).map_err(|e| RunError::Task { what: "the run's certificates".into(), reason: e.to_string() })?;
+        TestHosts::check_ca(ca).map_err(|e| RunError::Task {
+            what: "the run's certificates".into(),
+            reason: e.to_string(),
+        })?;
     }
     let ids: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
-    if let Some(l) = opts.loss.iter().find(|l| !ids.contains(&l.robot)) {
-        return Err(RunError::Task { what: "packet loss".into(), reason: format!("no robot {} in the team ({})", l.robot, ids.join(", ")) });
-    }
-    if !opts.loss.is_empty() && !opts.hosts {
-        return Err(RunError::Task { what: "packet loss".into(), reason: "needs test hosts (--hosts): a robot's own link is what loses packets".into() });
-    }
-    let mode = if opts.hosts {
-        let hosts = TestHosts::up(&crate::launcher::host_names(&ids)).map_err(|e| RunError::Task { what: "making the test hosts".into(), reason: e.to_string() })?;
-        for l in &opts.loss {
-            hosts.set_loss(&l.robot, l.percent).map_err(|e| RunError::Task { what: format!("packet loss on {}'s link", l.robot), reason: e.to_string() })?;
-        }
-        // Over TLS, certificates for this set's addresses, signed by the test CA in `tls`.
-        let certs = match tls {
-            Some(ca) => {
-                let dir = std::path::absolute(out.join("hosts-certs")).map_err(|e| RunError::Task { what: "the run's certificates".into(), reason: e.to_string() })?;
-                hosts.issue_certs(ca, &ids, &dir).map_err(|e| RunError::Task { what: "the run's certificates".into(), reason: e.to_string() })?;
-                Some(dir)
-            }
-            None => None,
-        };
-        RunMode::Hosts { dir: out.to_path_buf(), hosts: std::sync::Arc::new(hosts), certs }
-    } else {
-        loopback_mode(opts, tls, out)
-    };
+    check_loss(opts, &ids)?;
+    let mode =
+        if opts.hosts { hosts_mode(opts, tls, out, &ids)? } else { loopback_mode(opts, tls, out) };
     let outcome = run_recorded_in(plan, opts, &mode, record);
     if let RunMode::Hosts { hosts, .. } = &mode {
-        for l in &opts.loss {
-            match hosts.dropped(&l.robot) {
-                Ok(n) => tracing::info!(robot = %l.robot, percent = l.percent, dropped = n, "packets dropped on the robot's link"),
-                Err(e) => tracing::warn!(robot = %l.robot, "packets dropped on the robot's link: {e}"),
-            }
-        }
+        log_dropped(opts, hosts);
     }
     outcome
 }
 
+/// Packet loss only on robots of the team, and only on test hosts (a robot's own link).
+fn check_loss(opts: &RunOptions, ids: &[String]) -> Result<(), RunError> {
+    if let Some(l) = opts.loss.iter().find(|l| !ids.contains(&l.robot)) {
+        return Err(RunError::Task {
+            what: "packet loss".into(),
+            reason: format!("no robot {} in the team ({})", l.robot, ids.join(", ")),
+        });
+    }
+    if !opts.loss.is_empty() && !opts.hosts {
+        return Err(RunError::Task {
+            what: "packet loss".into(),
+            reason: "needs test hosts (--hosts): a robot's own link is what loses packets".into(),
+        });
+    }
+    Ok(())
+}
+
+/// The run on a new set of test hosts, one per robot, with the packet loss asked for; over
+/// TLS, with certificates for the hosts' addresses.
+fn hosts_mode(
+    opts: &RunOptions,
+    tls: Option<&Path>,
+    out: &Path,
+    ids: &[String],
+) -> Result<RunMode, RunError> {
+    let hosts = TestHosts::up(&crate::launcher::host_names(ids)).map_err(|e| RunError::Task {
+        what: "making the test hosts".into(),
+        reason: e.to_string(),
+    })?;
+    for l in &opts.loss {
+        hosts.set_loss(&l.robot, l.percent).map_err(|e| RunError::Task {
+            what: format!("packet loss on {}'s link", l.robot),
+            reason: e.to_string(),
+        })?;
+    }
+    // Over TLS, certificates for this set's addresses, signed by the test CA in `tls`.
+    let certs = match tls {
+        Some(ca) => {
+            let dir = std::path::absolute(out.join("hosts-certs")).map_err(|e| RunError::Task {
+                what: "the run's certificates".into(),
+                reason: e.to_string(),
+            })?;
+            hosts.issue_certs(ca, ids, &dir).map_err(|e| RunError::Task {
+                what: "the run's certificates".into(),
+                reason: e.to_string(),
+            })?;
+            Some(dir)
+        }
+        None => None,
+    };
+    Ok(RunMode::Hosts { dir: out.to_path_buf(), hosts: std::sync::Arc::new(hosts), certs })
+}
+
+/// Log the packets each lossy robot link dropped during the run.
+fn log_dropped(opts: &RunOptions, hosts: &TestHosts) {
+    for l in &opts.loss {
+        match hosts.dropped(&l.robot) {
+            Ok(n) => {
+                tracing::info!(
+                    robot = %l.robot,
+                    percent = l.percent,
+                    dropped = n,
+                    "packets dropped on the robot's link"
+                )
+            }
+            Err(e) => {
+                tracing::warn!(robot = %l.robot, "packets dropped on the robot's link: {e}")
+            }
+        }
+    }
+}
+
 /// [`run_recorded`] in a given mode (e.g. [`RunMode::Site`], a client of a site's router).
-pub fn run_recorded_in(plan: &Plan, opts: &RunOptions, mode: &RunMode, record: Option<&RecordOptions>) -> Result<(Records, Option<RecordingSummary>), RunError> {
-    let rt = tokio::runtime::Runtime::new().map_err(|e| RunError::Task { what: "starting the async runtime".into(), reason: e.to_string() })?;
+pub fn run_recorded_in(
+    plan: &Plan,
+    opts: &RunOptions,
+    mode: &RunMode,
+    record: Option<&RecordOptions>,
+) -> Result<(Records, Option<RecordingSummary>), RunError> {
+    let rt = tokio::runtime::Runtime::new().map_err(|e| RunError::Task {
+        what: "starting the async runtime".into(),
+        reason: e.to_string(),
+    })?;
     let recorder = match record {
         Some(r) => Some(rt.block_on(Recorder::start(plan, r))?),
         None => None,
@@ -257,65 +351,61 @@ pub fn run_recorded_in(plan: &Plan, opts: &RunOptions, mode: &RunMode, record: O
     }
     let result = rt.block_on(run_in(plan, opts, mode, recorder.as_ref()));
     // The recording is closed whatever happened: a failed run's recording shows why.
-    let facts = |r: &Records| RunFacts { mode: mode.name().to_string(), settle_wall: r.settle_wall, run_wall: r.run_wall };
+    let facts = |r: &Records| RunFacts {
+        mode: mode.name().to_string(),
+        settle_wall: r.settle_wall,
+        run_wall: r.run_wall,
+    };
     let summary = match recorder {
         Some(rec) => Some(rec.finish(&result.as_ref().map(facts).unwrap_or_default())?),
         None => None,
     };
     let records = result?;
     if records.ticks_seen < plan.total_ticks() {
-        return Err(RunError::Incomplete { seen: records.ticks_seen, expected: plan.total_ticks() });
+        return Err(RunError::Incomplete {
+            seen: records.ticks_seen,
+            expected: plan.total_ticks(),
+        });
     }
     Ok((records, summary))
 }
 
 /// Launch the team in `mode`, drive the scenario until the bridge ends it, stop everything.
 /// With a `recorder`, the driver and the recorder's subscriptions feed it.
-pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &RunMode, recorder: Option<&Recorder>) -> Result<Records, RunError> {
+pub async fn run_in(
+    plan: &Plan,
+    opts: &RunOptions,
+    mode: &RunMode,
+    recorder: Option<&Recorder>,
+) -> Result<Records, RunError> {
     if plan.scene.realtime {
         crate::priority::raise_for_realtime();
     }
     let (launch, bridge) = launch_of(plan);
     let started = Instant::now();
     let mut running = launch.start(mode).await?;
-    let mut driver = Driver::start(running.session(), plan.team(), plan.references.clone(), plan.total_ticks(), opts.progress).await?;
-    if plan.scene.realtime {
-        driver = driver.paced(plan.scenario.control_hz);
-    }
+    let mut driver = start_driver(plan, opts, &running).await?;
     let (record_stop, record_stopped) = tokio::sync::watch::channel(false);
     let mut record_tasks = Vec::new();
     if let Some(rec) = recorder {
         driver = driver.with_tap(rec.tap());
-        record_tasks = record::subscribe(running.session(), plan.team(), &rec.tap(), &record_stopped).await?;
+        record_tasks =
+            record::subscribe(running.session(), plan.team(), &rec.tap(), &record_stopped).await?;
     }
-    let mut fault_tasks = Vec::new();
-    for f in &plan.scenario.faults {
-        let who = f.robot().unwrap_or(crate::launcher::COORDINATOR);
-        let fault = |reason: &str| RunError::Task { what: format!("fault on {who}"), reason: reason.to_string() };
-        if f.kind == scenario::file::FaultKind::AgentStalls && !plan.scene.realtime {
-            return Err(fault("agent-stalls needs a real-time run (--realtime): in lockstep the team waits for the stalled agent"));
-        }
-        let component = running.component(who).ok_or_else(|| fault("no such component in the run"))?;
-        let armed = crate::faults::Armed::new(f, &plan.references.clock, component, &plan.robots[0].id);
-        fault_tasks.push(crate::faults::inject(running.session(), plan.team(), armed, running.stop_signal()).await?);
-    }
+    let fault_tasks = arm_faults(plan, &running).await?;
     if !driver.send_first_window(COORDINATOR_WAIT).await? {
-        return Err(RunError::Task { what: "starting the run".into(), reason: format!("the coordinator did not come within {COORDINATOR_WAIT:?}") });
+        return Err(RunError::Task {
+            what: "starting the run".into(),
+            reason: format!("the coordinator did not come within {COORDINATOR_WAIT:?}"),
+        });
     }
-    let mut driver_task = tokio::spawn(driver.run(running.stop_signal()));
+    let driver_task = tokio::spawn(driver.run(running.stop_signal()));
     let bridge_result = running.run_bridge(&bridge).await;
     // The driver ends by itself at the ground truth of the last tick (which may still be
     // crossing a process boundary); after a failed run, or if that sample never comes, it is
     // stopped.
     let drain = if bridge_result.is_ok() { DRIVER_DRAIN } else { Duration::ZERO };
-    let records = match tokio::time::timeout(drain, &mut driver_task).await {
-        Ok(records) => records,
-        Err(_) => {
-            running.stop();
-            driver_task.await
-        }
-    };
-    let records = records.map_err(|e| RunError::Task { what: "the scenario driver".into(), reason: e.to_string() })?;
+    let records = join_driver(&running, driver_task, drain).await?;
     let _ = record_stop.send(true);
     for t in fault_tasks {
         t.abort();
@@ -328,6 +418,68 @@ pub async fn run_in(plan: &Plan, opts: &RunOptions, mode: &RunMode, recorder: Op
     bridge_result?;
     finished?;
     Ok(records?)
+}
+
+/// The scenario driver on the running team's session, paced in a real-time run.
+async fn start_driver(
+    plan: &Plan,
+    opts: &RunOptions,
+    running: &Running,
+) -> Result<Driver, RunError> {
+    let driver = Driver::start(
+        running.session(),
+        plan.team(),
+        plan.references.clone(),
+        plan.total_ticks(),
+        opts.progress,
+    )
+    .await?;
+    Ok(if plan.scene.realtime { driver.paced(plan.scenario.control_hz) } else { driver })
+}
+
+/// The scenario's faults armed on the running team: one task each, which injects its fault at
+/// its tick.
+async fn arm_faults(plan: &Plan, running: &Running) -> Result<Vec<JoinHandle<()>>, RunError> {
+    let mut fault_tasks = Vec::new();
+    for f in &plan.scenario.faults {
+        let who = f.robot().unwrap_or(crate::launcher::COORDINATOR);
+        let fault = |reason: &str| RunError::Task {
+            what: format!("fault on {who}"),
+            reason: reason.to_string(),
+        };
+        if f.kind == scenario::file::FaultKind::AgentStalls && !plan.scene.realtime {
+            return Err(fault(
+                "agent-stalls needs a real-time run (--realtime): \
+                 in lockstep the team waits for the stalled agent",
+            ));
+        }
+        let component =
+            running.component(who).ok_or_else(|| fault("no such component in the run"))?;
+        let armed =
+            crate::faults::Armed::new(f, &plan.references.clock, component, &plan.robots[0].id);
+        fault_tasks.push(
+            crate::faults::inject(running.session(), plan.team(), armed, running.stop_signal())
+                .await?,
+        );
+    }
+    Ok(fault_tasks)
+}
+
+/// The driver's outcome: within `drain` if it ends by itself, else after stopping the run.
+async fn join_driver<T>(
+    running: &Running,
+    mut driver_task: JoinHandle<T>,
+    drain: Duration,
+) -> Result<T, RunError> {
+    let records = match tokio::time::timeout(drain, &mut driver_task).await {
+        Ok(records) => records,
+        Err(_) => {
+            running.stop();
+            driver_task.await
+        }
+    };
+    records
+        .map_err(|e| RunError::Task { what: "the scenario driver".into(), reason: e.to_string() })
 }
 
 #[cfg(test)]
@@ -343,11 +495,25 @@ mod tests {
         for distributed in [false, true] {
             let opts = RunOptions { distributed, hosts: false, progress: false, loss: Vec::new() };
             for tls in [None, Some(certs)] {
-                assert_eq!(opts.mode_name(tls.is_some()), loopback_mode(&opts, tls, out).name(), "distributed {distributed}, tls {tls:?}");
+                assert_eq!(
+                    opts.mode_name(tls.is_some()),
+                    loopback_mode(&opts, tls, out).name(),
+                    "distributed {distributed}, tls {tls:?}"
+                );
             }
         }
-        assert_eq!(loopback_mode(&RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() }, Some(certs), out).name(), "distributed-tls", "TLS runs distributed");
-        let hosts = RunOptions { distributed: false, hosts: true, progress: false, loss: Vec::new() };
+        assert_eq!(
+            loopback_mode(
+                &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() },
+                Some(certs),
+                out
+            )
+            .name(),
+            "distributed-tls",
+            "TLS runs distributed"
+        );
+        let hosts =
+            RunOptions { distributed: false, hosts: true, progress: false, loss: Vec::new() };
         assert_eq!((hosts.mode_name(false), hosts.mode_name(true)), ("hosts", "hosts-tls"));
         assert_eq!(hosts.mode_label(true, true), "hosts-tls, real time");
         assert_eq!(hosts.mode_label(false, false), "hosts");
@@ -366,19 +532,32 @@ mod tests {
     #[test]
     fn a_link_loss_names_a_robot_of_the_team_and_needs_test_hosts() {
         let repo = scenario::plan::repo_root();
-        let s = scenario::file::Scenario::load(repo.join("scenarios/s4_object_circle.toml"), &[]).expect("scenario");
+        let s = scenario::file::Scenario::load(repo.join("scenarios/s4_object_circle.toml"), &[])
+            .expect("scenario");
         let plan = scenario::plan::plan(&s, &repo).expect("plan");
         let out = std::env::temp_dir().join("team-runner-link-loss");
-        let loss = |robot: &str, hosts| RunOptions { distributed: true, hosts, progress: false, loss: vec![LinkLoss { robot: robot.into(), percent: 5 }] };
-        let e = run_recorded_secure(&plan, &loss("r9", true), None, &out, None).expect_err("unknown robot").to_string();
+        let loss = |robot: &str, hosts| RunOptions {
+            distributed: true,
+            hosts,
+            progress: false,
+            loss: vec![LinkLoss { robot: robot.into(), percent: 5 }],
+        };
+        let e = run_recorded_secure(&plan, &loss("r9", true), None, &out, None)
+            .expect_err("unknown robot")
+            .to_string();
         assert!(e.contains("no robot r9") && e.contains("r1, r2"), "{e}");
-        let e = run_recorded_secure(&plan, &loss("r1", false), None, &out, None).expect_err("no hosts").to_string();
+        let e = run_recorded_secure(&plan, &loss("r1", false), None, &out, None)
+            .expect_err("no hosts")
+            .to_string();
         assert!(e.contains("needs test hosts"), "{e}");
     }
 
     #[test]
     fn a_run_reports_into_a_folder_named_after_its_scenario() {
-        assert_eq!(default_report_dir(Path::new("scenarios/s4_object_circle.toml")), Path::new("reports/s4_object_circle"));
+        assert_eq!(
+            default_report_dir(Path::new("scenarios/s4_object_circle.toml")),
+            Path::new("reports/s4_object_circle")
+        );
         assert_eq!(default_report_dir(Path::new("/")), Path::new("reports/scenario"));
     }
 }

@@ -106,7 +106,9 @@ impl SmokeConfig {
 pub fn summary(cfg: &SmokeConfig, mode: &RunMode, outcome: &BridgeOutcome) -> String {
     match outcome {
         BridgeOutcome::Smoke { report: r, final_velocities } => format!(
-            "embedded smoke run: {} robots, {} ticks, {:.3} s simulated in {:.3} s wall ({:.0} ticks/s, {:.0} us/tick)\nclosed loop: joint velocity {:.6} rad/s, analytic {:.6} rad/s",
+            "embedded smoke run: {} robots, {} ticks, {:.3} s simulated in {:.3} s wall \
+             ({:.0} ticks/s, {:.0} us/tick)\n\
+             closed loop: joint velocity {:.6} rad/s, analytic {:.6} rad/s",
             cfg.robots.len(),
             r.ticks,
             r.sim_time,
@@ -116,7 +118,12 @@ pub fn summary(cfg: &SmokeConfig, mode: &RunMode, outcome: &BridgeOutcome) -> St
             final_velocities[0],
             cfg.expected_final_velocity()
         ),
-        _ => format!("{} smoke run finished: {} robots, {} ticks", mode.name(), cfg.robots.len(), cfg.ticks),
+        _ => format!(
+            "{} smoke run finished: {} robots, {} ticks",
+            mode.name(),
+            cfg.robots.len(),
+            cfg.ticks
+        ),
     }
 }
 

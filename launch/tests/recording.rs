@@ -1,7 +1,8 @@
 //! A recorded run read back with an independent reader (the `mcap` crate's, not the foxglove
 //! SDK that wrote it): the channels are named after the Zenoh keys with JSON Schemas, the 3-D
 //! view has Foxglove's well-known schemas, every tick's messages are there, nothing was
-//! dropped, the chunks are zstd-compressed; and `team report run.mcap` (the replay) gives the live run's metrics exactly.
+//! dropped, the chunks are zstd-compressed; and `team report run.mcap` (the replay) gives the
+//! live run's metrics exactly.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -133,7 +133,7 @@ pub fn place_hands(
 /// Each hand's pose as planned: its frame's world pose at the solved configuration
 /// (`solutions`, from [`place_hands`], robot order). With the object's pose at the grasp it
 /// is the hand's grasp on the object, which the controller fits the object from whenever it
-/// starts (the runner hands it over as `coordinator::units::grasp::PlannedHand`).
+/// starts (the runner hands it over as `coordinator::building_blocks::grasp::PlannedHand`).
 pub fn hand_poses(
     placements: &[BasePlacement],
     robots: &[Arc<Robot>],

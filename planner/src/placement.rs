@@ -1,6 +1,7 @@
 //! Where robots stand around the object: pure floor geometry, no simulator.
 //!
-//! * [`facing_ring`]: `n` floor poses on a circle around a centre, each facing it (the first at
+//! * `robot_model::spatial::facing_ring`: `n` floor poses on a circle around a centre, each facing
+//!   it (the first at
 //!   the circle's `-x` point; two robots are the paper's facing pair);
 //! * [`around_object`]: a team around a box or beam, robots spaced along the object's vertical
 //!   faces ([`FaceLayout`]: which faces, how many per face, spacing, standoff), each facing its
@@ -15,7 +16,6 @@
 //! [`BasePlacement`]s for the planner.
 
 use std::collections::BTreeMap;
-use std::f64::consts::PI;
 
 use nalgebra::Vector3;
 use protocol::conventions::quat_from_wxyz;
@@ -60,21 +60,6 @@ pub struct BasePlacement {
     pub base_yaw: f64,
     /// Joint positions that replace the standing configuration's, by joint name.
     pub joint_overrides: BTreeMap<String, f64>,
-}
-
-/// `n` floor poses `((x, y), yaw)` on a circle of `radius` about `centre`, each facing the
-/// centre, the first at angle `pi` (the circle's `-x` point), the rest counter-clockwise at
-/// equal spacing. One robot stands on the centre facing `+x`. Yaw in `(-pi, pi]`.
-pub fn facing_ring(centre: [f64; 2], radius: f64, n: usize) -> Vec<([f64; 2], f64)> {
-    (0..n)
-        .map(|i| {
-            let th = PI + 2.0 * PI * i as f64 / n as f64;
-            let r = if n == 1 { 0.0 } else { radius };
-            let yaw = (th + PI).rem_euclid(2.0 * PI);
-            let yaw = if yaw > PI { yaw - 2.0 * PI } else { yaw };
-            ([centre[0] + r * th.cos(), centre[1] + r * th.sin()], yaw)
-        })
-        .collect()
 }
 
 /// A vertical face of a box, named by its outward normal in the object's frame.
@@ -301,6 +286,8 @@ pub fn check_clearance(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use robot_model::spatial::facing_ring;
+    use std::f64::consts::PI;
 
     #[test]
     fn ring_poses_face_the_centre_at_the_radius() {

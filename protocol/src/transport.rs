@@ -17,13 +17,14 @@
 
 use std::marker::PhantomData;
 use std::path::PathBuf;
+use std::sync::Mutex;
 use std::time::Duration;
 
 use thiserror::Error;
 use zenoh::pubsub::{Publisher, Subscriber};
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::sample::{Sample, SampleKind};
-use zenoh::Session;
+use zenoh::{Session, Wait};
 
 use crate::{decode, keys, Message, ProtocolError};
 
@@ -204,6 +205,22 @@ pub enum Qos {
     Telemetry,
 }
 
+/// Serialises this process's declarations (publishers, subscribers, liveliness tokens and
+/// subscribers). Zenoh declares a key expression's wire id, then sends its declaration to the
+/// routing tables after letting go of the session's lock: a second declaration on the same key
+/// from another thread in that window reuses the id and can reach the tables first, which then
+/// log "Declare keyexpr interest with unknown scope" and "Unknown wire expr" (the components of
+/// an embedded run declare on one session from several threads). Declarations happen at start
+/// and on changes of membership, never per tick, so the lock costs nothing on the hot path.
+static DECLARATIONS: Mutex<()> = Mutex::new(());
+
+/// Run one declaration (`f` resolves a Zenoh builder synchronously) while no other declaration
+/// of this process runs.
+fn declared<T>(f: impl FnOnce() -> zenoh::Result<T>) -> zenoh::Result<T> {
+    let _only = DECLARATIONS.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    f()
+}
+
 /// A publisher of one message type that encodes into a reused buffer.
 pub struct TypedPublisher<M> {
     publisher: Publisher<'static>,
@@ -230,7 +247,8 @@ impl<M: Message> TypedPublisher<M> {
                 builder.priority(Priority::Data).congestion_control(CongestionControl::Drop)
             }
         };
-        let publisher = builder.await.map_err(|e| zenoh_err("declare_publisher", &key, e))?;
+        let publisher =
+            declared(|| builder.wait()).map_err(|e| zenoh_err("declare_publisher", &key, e))?;
         Ok(TypedPublisher { publisher, buffer: Vec::with_capacity(1024), _message: PhantomData })
     }
 
@@ -283,11 +301,9 @@ pub async fn subscribe_with_capacity(
     key: String,
     capacity: usize,
 ) -> Result<SampleQueue, TransportError> {
-    session
-        .declare_subscriber(key.clone())
-        .with(zenoh::handlers::RingChannel::new(capacity))
-        .await
-        .map_err(|e| zenoh_err("declare_subscriber", &key, e))
+    let builder =
+        session.declare_subscriber(key.clone()).with(zenoh::handlers::RingChannel::new(capacity));
+    declared(|| builder.wait()).map_err(|e| zenoh_err("declare_subscriber", &key, e))
 }
 
 /// Decode a sample's payload as `M`, and refuse it when its header names another sender than
@@ -354,10 +370,8 @@ async fn declare_token(
     session: &Session,
     key: String,
 ) -> Result<zenoh::liveliness::LivelinessToken, TransportError> {
-    session
-        .liveliness()
-        .declare_token(key.clone())
-        .await
+    let liveliness = session.liveliness();
+    declared(|| liveliness.declare_token(key.clone()).wait())
         .map_err(|e| zenoh_err("declare_token", &key, e))
 }
 
@@ -367,11 +381,8 @@ pub async fn watch_liveliness(
     session: &Session,
     key: String,
 ) -> Result<EventQueue, TransportError> {
-    session
-        .liveliness()
-        .declare_subscriber(key.clone())
-        .history(true)
-        .await
+    let liveliness = session.liveliness();
+    declared(|| liveliness.declare_subscriber(key.clone()).history(true).wait())
         .map_err(|e| zenoh_err("liveliness subscriber", &key, e))
 }
 

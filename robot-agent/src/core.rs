@@ -36,7 +36,7 @@ use crate::contact_switch::{ContactSwitch, SwitchConfig};
 use crate::delay::{AdaptiveDelay, TeamDelay};
 use crate::drive_gains::{self, DriveGains, DriveGainsMode};
 use crate::dynamics_source::DynamicsSource;
-use crate::early::{EarlyCommands, Kept};
+use crate::early_commands::{EarlyCommands, KeepOutcome};
 use crate::fall::{Fall, FallDetector, FallLimits};
 use crate::gate::{CommandGate, CommandRejection};
 use crate::safe_mode::{
@@ -98,8 +98,7 @@ pub struct AgentConfig {
     pub team_delay: TeamDelay,
 }
 
-/// The longest team delay, in state ticks ([`AgentConfig::team_delay`]).
-pub const MAX_TEAM_DELAY: u64 = protocol::MAX_TEAM_DELAY_TICKS;
+pub use crate::delay::MAX_TEAM_DELAY;
 
 impl AgentConfig {
     /// Defaults: deadline 5 ticks or 25 ms, the first command within 2 s, maximum command age
@@ -678,7 +677,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         match self.admit_command(cmd, now) {
             Ok(Some(apply)) => Ok(self.outputs(now, mode_before, false, apply, false)),
-            // Kept for a later state: the latest state's own command may be skipped.
+            // KeepOutcome for a later state: the latest state's own command may be skipped.
             Ok(None) if self.skipped() => {
                 Ok(self.outputs(now, mode_before, false, Apply::Servo, false))
             }
@@ -763,7 +762,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         if cmd.tau.len() != expected {
             return Err(CommandRejection::WrongSize { expected, got: cmd.tau.len() });
         }
-        if self.early.keep(cmd) == Kept::Dropped {
+        if self.early.keep(cmd) == KeepOutcome::Dropped {
             tracing::debug!(
                 robot = %self.robot,
                 tick = cmd.header.tick,

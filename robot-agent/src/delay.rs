@@ -25,7 +25,8 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-use crate::core::MAX_TEAM_DELAY;
+/// The longest team delay, in state ticks (`crate::core::AgentConfig::team_delay`).
+pub const MAX_TEAM_DELAY: u64 = protocol::MAX_TEAM_DELAY_TICKS;
 
 /// Commands per window of late counts.
 pub const WINDOW: u32 = 200;
@@ -326,7 +327,7 @@ mod tests {
             b.on_command(k, k + 5);
         }
         assert_eq!(b.ticks(), 3);
-        let lag = |k: u64| if k % 100 == 0 { 12 } else { 1 };
+        let lag = |k: u64| if k.is_multiple_of(100) { 12 } else { 1 };
         let mut changes = Vec::new();
         for k in 1..=lower * 5 {
             if let Some(d) = b.on_command(k, k + lag(k)) {

@@ -34,7 +34,7 @@ pub mod core;
 pub mod delay;
 pub mod drive_gains;
 pub mod dynamics_source;
-pub mod early;
+pub mod early_commands;
 pub mod fall;
 pub mod gate;
 pub mod hardware;

@@ -8,6 +8,8 @@
 //! A motion or force "at frame A" is expressed in A's axes and refers to A's origin: the
 //! linear part of a motion is the velocity of the point coinciding with A's origin.
 
+use std::f64::consts::PI;
+
 use nalgebra::{Matrix3, Matrix6, Rotation3, UnitQuaternion, Vector3, Vector6};
 
 /// Skew-symmetric cross-product matrix: `skew(a) * b = a x b`.
@@ -308,6 +310,21 @@ impl Inertia {
         i.fixed_view_mut::<3, 3>(3, 3).copy_from(&(self.rot_inertia - c * c * self.mass));
         i
     }
+}
+
+/// `n` floor poses `((x, y), yaw)` on a circle of `radius` about `centre`, each facing the
+/// centre, the first at angle `pi` (the circle's `-x` point), the rest counter-clockwise at
+/// equal spacing. One robot stands on the centre facing `+x`. Yaw in `(-pi, pi]`.
+pub fn facing_ring(centre: [f64; 2], radius: f64, n: usize) -> Vec<([f64; 2], f64)> {
+    (0..n)
+        .map(|i| {
+            let th = PI + 2.0 * PI * i as f64 / n as f64;
+            let r = if n == 1 { 0.0 } else { radius };
+            let yaw = (th + PI).rem_euclid(2.0 * PI);
+            let yaw = if yaw > PI { yaw - 2.0 * PI } else { yaw };
+            ([centre[0] + r * th.cos(), centre[1] + r * th.sin()], yaw)
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -30,7 +30,8 @@ struct Cli {
 enum Command {
     /// Run a scenario (scenarios/*.toml) with the whole stack in the loop: MuJoCo, one agent
     /// per robot, the paper's coordinator. Writes a report folder (metrics.json, CSV time
-    /// series, plots, report.html, the recording run.mcap) and prints a summary; exits with an error if an acceptance check fails.
+    /// series, plots, report.html, the recording run.mcap) and prints a summary; exits with an
+    /// error if an acceptance check fails.
     Run(RunArgs),
     /// Rebuild a run's report (metrics, time series, plots, report.html) from its recording
     /// alone (the run.mcap that `team run` wrote).
@@ -124,8 +125,9 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
-    /// Scale a scenario's motion amplitudes (or, with --speed, frequencies) by each factor and run it with each controller
-    /// until it first misses an acceptance bound: where each controller stops meeting them.
+    /// Scale a scenario's motion amplitudes (or, with --speed, frequencies) by each factor and
+    /// run it with each controller until it first misses an acceptance bound: where each
+    /// controller stops meeting them.
     Sweep {
         scenario: PathBuf,
         #[arg(long, value_delimiter = ',', default_value = "pidc,mqp")]

@@ -75,10 +75,11 @@ pub struct Scenario {
     /// down to 0.7 % less than it in the runs measured (default 0.02, in [0, 1)).
     #[serde(default = "default_payload_margin")]
     pub payload_margin: f64,
-    /// When the controller (PIDC or MQP) lets go of an object it cannot hold (`release.after_failed_ticks`: control
-    /// ticks of failed QPs in a row; `release.max_fit_residual`: m; 0 turns a limit off).
+    /// When the controller (PIDC or MQP) lets go of an object it cannot hold
+    /// (`release.after_failed_ticks`: control ticks of failed QPs in a row;
+    /// `release.max_fit_residual`: m; 0 turns a limit off).
     #[serde(default)]
-    pub release: coordinator::units::release::ReleasePolicy,
+    pub release: coordinator::building_blocks::release::ReleasePolicy,
     pub object: ObjectSection,
     /// The robots, each with its floor pose; or, instead, `team`.
     #[serde(default)]
@@ -116,7 +117,8 @@ pub struct Scenario {
     pub drive_gains: robot_agent::drive_gains::DriveGainsMode,
     /// The team loop's rate, Hz: the coordinator solves every `control_hz / team_hz`-th tick
     /// (a whole number, 1 to [`MAX_TEAM_EVERY`]); the robots' own loop stays at `control_hz`
-    /// and each agent answers the ticks between alone (`robot_agent::core::AgentConfig::team_every`).
+    /// and each agent answers the ticks between alone
+    /// (`robot_agent::core::AgentConfig::team_every`).
     /// Default: `control_hz`, the paper's single loop.
     #[serde(default)]
     pub team_hz: Option<f64>,
@@ -191,23 +193,47 @@ impl Fault {
     /// `duration` exactly for a stall, a positive `restart_after` only where a component dies.
     /// `i` names it in the error.
     fn check(&self, i: usize, robots: &[RobotSpec], scenario: f64) -> Result<(), String> {
+        self.check_robot(i, robots)?;
+        if !(self.at.is_finite() && self.at >= 0.0 && self.at < scenario) {
+            return Err(format!(
+                "faults[{i}].at = {} must be within the scenario's [0, {scenario}) s",
+                self.at
+            ));
+        }
+        let is_positive = |x: f64| x.is_finite() && x > 0.0;
+        match (self.kind, self.duration, self.restart_after) {
+            (FaultKind::AgentStalls, Some(d), None) if is_positive(d) => Ok(()),
+            (FaultKind::AgentStalls, _, Some(_)) => Err(format!(
+                "faults[{i}]: a stalled agent resumes by itself (give duration, not restart_after)"
+            )),
+            (FaultKind::AgentStalls, _, None) => {
+                Err(format!("faults[{i}]: agent-stalls needs a positive duration, s"))
+            }
+            (_, Some(_), _) => Err(format!(
+                "faults[{i}]: duration is for agent-stalls only \
+                 (a component that stops comes back with restart_after)"
+            )),
+            (_, None, Some(r)) if !is_positive(r) => {
+                Err(format!("faults[{i}].restart_after = {r} must be positive"))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// A known robot exactly for the agent kinds, none for the coordinator.
+    fn check_robot(&self, i: usize, robots: &[RobotSpec]) -> Result<(), String> {
         let agent = matches!(self.kind, FaultKind::AgentStops | FaultKind::AgentStalls);
         match (&self.robot, agent) {
-            (Some(r), true) if !robots.iter().any(|x| x.id == *r) => return Err(format!("faults[{i}] names unknown robot {r:?}")),
-            (None, true) => return Err(format!("faults[{i}] ({:?}) needs the robot whose agent fails", self.kind)),
-            (Some(r), false) => return Err(format!("faults[{i}] (coordinator-stops) names robot {r:?}: the coordinator serves the whole team")),
-            _ => {}
-        }
-        if !(self.at.is_finite() && self.at >= 0.0 && self.at < scenario) {
-            return Err(format!("faults[{i}].at = {} must be within the scenario's [0, {scenario}) s", self.at));
-        }
-        let positive = |x: f64| x.is_finite() && x > 0.0;
-        match (self.kind, self.duration, self.restart_after) {
-            (FaultKind::AgentStalls, Some(d), None) if positive(d) => Ok(()),
-            (FaultKind::AgentStalls, _, Some(_)) => Err(format!("faults[{i}]: a stalled agent resumes by itself (give duration, not restart_after)")),
-            (FaultKind::AgentStalls, _, None) => Err(format!("faults[{i}]: agent-stalls needs a positive duration, s")),
-            (_, Some(_), _) => Err(format!("faults[{i}]: duration is for agent-stalls only (a component that stops comes back with restart_after)")),
-            (_, None, Some(r)) if !positive(r) => Err(format!("faults[{i}].restart_after = {r} must be positive")),
+            (Some(r), true) if !robots.iter().any(|x| x.id == *r) => {
+                Err(format!("faults[{i}] names unknown robot {r:?}"))
+            }
+            (None, true) => {
+                Err(format!("faults[{i}] ({:?}) needs the robot whose agent fails", self.kind))
+            }
+            (Some(r), false) => Err(format!(
+                "faults[{i}] (coordinator-stops) names robot {r:?}: \
+                 the coordinator serves the whole team"
+            )),
             _ => Ok(()),
         }
     }
@@ -253,10 +279,35 @@ fn default_payload_margin() -> f64 {
 }
 
 /// Top-level keys with a default that `--set` may give although the file leaves them out.
-pub const OPTIONAL_KEYS: [&str; 17] = ["description", "settle", "controller", "min_foot_force", "min_hand_force", "friction_margin", "patch_margin", "capacity_check", "payload_margin", "perturbations", "noslip_iterations", "faults", "drive_loss", "drive_gains", "team_hz", "team_delay_ticks", "predict_delay"];
+pub const OPTIONAL_KEYS: [&str; 17] = [
+    "description",
+    "settle",
+    "controller",
+    "min_foot_force",
+    "min_hand_force",
+    "friction_margin",
+    "patch_margin",
+    "capacity_check",
+    "payload_margin",
+    "perturbations",
+    "noslip_iterations",
+    "faults",
+    "drive_loss",
+    "drive_gains",
+    "team_hz",
+    "team_delay_ticks",
+    "predict_delay",
+];
 /// Keys inside a table with a default that `--set` may give although the file leaves them
 /// out (`--set team.spacing=0.7` on a layout of one robot per face).
-pub const OPTIONAL_NESTED_KEYS: [&str; 6] = ["team.spacing", "team.standoff", "team.description", "walk.robots", "walk.frame", "walk.start"];
+pub const OPTIONAL_NESTED_KEYS: [&str; 6] = [
+    "team.spacing",
+    "team.standoff",
+    "team.description",
+    "walk.robots",
+    "walk.frame",
+    "walk.start",
+];
 /// Top-level tables a scenario may leave out that `--set` may still reach into
 /// (`--set release.after_failed_ticks=50`, `--set references.ramp=0.5` on a walk); their own
 /// fields are checked when the file is read.
@@ -314,9 +365,25 @@ fn default_standoff() -> f64 {
 impl TeamSpec {
     /// The robots of this layout around `object`.
     pub fn robots(&self, object: &ObjectSection) -> Result<Vec<RobotSpec>, String> {
-        let layout = planner::placement::FaceLayout { faces: self.faces.clone(), per_face: self.per_face, spacing: self.spacing, standoff: self.standoff };
-        let poses = planner::placement::around_object(&crate::layout::object_box(&object.world()), &layout).map_err(|e| e.to_string())?;
-        Ok(poses.into_iter().enumerate().map(|(i, (base_xy, yaw))| RobotSpec { id: format!("r{}", i + 1), description: self.description.clone(), base_xy, yaw }).collect())
+        let layout = planner::placement::FaceLayout {
+            faces: self.faces.clone(),
+            per_face: self.per_face,
+            spacing: self.spacing,
+            standoff: self.standoff,
+        };
+        let poses =
+            planner::placement::around_object(&crate::layout::object_box(&object.world()), &layout)
+                .map_err(|e| e.to_string())?;
+        Ok(poses
+            .into_iter()
+            .enumerate()
+            .map(|(i, (base_xy, yaw))| RobotSpec {
+                id: format!("r{}", i + 1),
+                description: self.description.clone(),
+                base_xy,
+                yaw,
+            })
+            .collect())
     }
 }
 
@@ -407,17 +474,24 @@ impl Scenario {
     }
 
     /// Parse scenario text (named `path` in errors) and apply overrides.
-    pub fn from_str_with(text: &str, path: &Path, overrides: &[String]) -> Result<Scenario, ScenarioError> {
+    pub fn from_str_with(
+        text: &str,
+        path: &Path,
+        overrides: &[String],
+    ) -> Result<Scenario, ScenarioError> {
         let toml_err = |e: String| ScenarioError::Toml { path: path.to_path_buf(), reason: e };
         let mut value: toml::Value = toml::from_str(text).map_err(|e| toml_err(e.to_string()))?;
         for o in overrides {
             apply_override(&mut value, o)?;
         }
-        let mut s: Scenario = value.try_into().map_err(|e: toml::de::Error| toml_err(e.to_string()))?;
+        let mut s: Scenario =
+            value.try_into().map_err(|e: toml::de::Error| toml_err(e.to_string()))?;
         let invalid = |reason: String| ScenarioError::Invalid { path: path.to_path_buf(), reason };
         match (&s.team, s.robots.is_empty()) {
             (Some(t), true) => s.robots = t.robots(&s.object).map_err(invalid)?,
-            (Some(_), false) => return Err(invalid("give either [[robots]] or [team], not both".into())),
+            (Some(_), false) => {
+                return Err(invalid("give either [[robots]] or [team], not both".into()))
+            }
             (None, _) => {}
         }
         s.check().map_err(|reason| ScenarioError::Invalid { path: path.to_path_buf(), reason })?;
@@ -438,29 +512,60 @@ impl Scenario {
     pub fn team_every(&self) -> Result<u64, String> {
         let Some(hz) = self.team_hz else { return Ok(1) };
         let n = self.control_hz / hz;
-        if !(hz.is_finite() && hz > 0.0) || (n - n.round()).abs() > 1e-9 || n.round() < 1.0 || n.round() > MAX_TEAM_EVERY as f64 {
-            return Err(format!("team_hz = {hz} must divide control_hz = {} a whole number of times, 1 to {MAX_TEAM_EVERY}", self.control_hz));
+        if !(hz.is_finite() && hz > 0.0)
+            || (n - n.round()).abs() > 1e-9
+            || n.round() < 1.0
+            || n.round() > MAX_TEAM_EVERY as f64
+        {
+            return Err(format!(
+                "team_hz = {hz} must divide control_hz = {} a whole number of times, \
+                 1 to {MAX_TEAM_EVERY}",
+                self.control_hz
+            ));
         }
         Ok(n.round() as u64)
     }
 
     fn check(&self) -> Result<(), String> {
-        let pos = |what: &str, x: f64| if x.is_finite() && x > 0.0 { Ok(()) } else { Err(format!("{what} = {x} must be positive")) };
-        pos("duration", self.duration)?;
-        pos("control_hz", self.control_hz)?;
-        pos("physics_hz", self.physics_hz)?;
+        self.check_rates()?;
+        self.check_forces_and_margins()?;
+        self.check_object()?;
+        self.check_robots()?;
+        self.check_gains_and_references()?;
+        for (i, f) in self.faults.iter().enumerate() {
+            f.check(i, &self.robots, self.duration)?;
+        }
+        self.check_perturbations()
+    }
+
+    /// Duration, rates, settling time, team rate and controller kind.
+    fn check_rates(&self) -> Result<(), String> {
+        positive("duration", self.duration)?;
+        positive("control_hz", self.control_hz)?;
+        positive("physics_hz", self.physics_hz)?;
         if !(self.settle.is_finite() && self.settle >= 0.0) {
             return Err(format!("settle = {} must be non-negative", self.settle));
         }
-        protocol::validate::substeps(self.control_hz, self.physics_hz).map_err(|e| format!("control_hz, physics_hz: {e}"))?;
+        protocol::validate::substeps(self.control_hz, self.physics_hz)
+            .map_err(|e| format!("control_hz, physics_hz: {e}"))?;
         self.team_every()?;
-        coordinator::ControllerSpec::of_kind(&self.controller).map_err(|e| format!("controller: {e}"))?;
-        for (what, f) in [("min_foot_force", self.min_foot_force), ("min_hand_force", self.min_hand_force)] {
+        coordinator::ControllerSpec::of_kind(&self.controller)
+            .map_err(|e| format!("controller: {e}"))?;
+        Ok(())
+    }
+
+    /// Minimum contact forces, friction and patch margins, payload margin.
+    fn check_forces_and_margins(&self) -> Result<(), String> {
+        for (what, f) in
+            [("min_foot_force", self.min_foot_force), ("min_hand_force", self.min_hand_force)]
+        {
             if !(f.is_finite() && f >= 0.0) {
                 return Err(format!("{what} = {f} must be non-negative"));
             }
         }
-        for (what, x) in [("friction_margin", self.friction_margin), ("patch_margin", self.patch_margin)] {
+        for (what, x) in
+            [("friction_margin", self.friction_margin), ("patch_margin", self.patch_margin)]
+        {
             if !(x.is_finite() && x > 0.0 && x <= 1.0) {
                 return Err(format!("{what} = {x} must be in (0, 1]"));
             }
@@ -468,24 +573,40 @@ impl Scenario {
         if !(self.payload_margin.is_finite() && (0.0..1.0).contains(&self.payload_margin)) {
             return Err(format!("payload_margin = {} must be in [0, 1)", self.payload_margin));
         }
-        pos("object.mass", self.object.mass)?;
-        pos("object.friction", self.object.friction)?;
+        Ok(())
+    }
+
+    /// The object's mass, friction, size and position.
+    fn check_object(&self) -> Result<(), String> {
+        positive("object.mass", self.object.mass)?;
+        positive("object.friction", self.object.friction)?;
         for (i, s) in self.object.size.iter().enumerate() {
-            pos(&format!("object.size[{i}]"), *s)?;
+            positive(&format!("object.size[{i}]"), *s)?;
         }
         if self.object.position.iter().any(|x| !x.is_finite()) {
             return Err("object.position must be finite".into());
         }
+        Ok(())
+    }
+
+    /// At least two robots, with unique valid ids and finite poses.
+    fn check_robots(&self) -> Result<(), String> {
         if self.robots.len() < 2 {
             return Err("a team needs at least two robots to hold the object".into());
         }
-        protocol::validate::check_unique("robots", self.robots.iter().map(|r| r.id.as_str())).map_err(|e| e.to_string())?;
+        protocol::validate::check_unique("robots", self.robots.iter().map(|r| r.id.as_str()))
+            .map_err(|e| e.to_string())?;
         for (i, r) in self.robots.iter().enumerate() {
             protocol::validate_id("robot", &r.id).map_err(|e| format!("robots[{i}].id: {e}"))?;
             if r.base_xy.iter().chain([&r.yaw]).any(|x| !x.is_finite()) {
                 return Err(format!("robots[{i}] pose must be finite"));
             }
         }
+        Ok(())
+    }
+
+    /// Task gains, the reference motions (each torso's on a known robot) and the walk.
+    fn check_gains_and_references(&self) -> Result<(), String> {
         check_gains("gains.object", &self.gains.object, 6)?;
         check_gains("gains.torso", &self.gains.torso, 6)?;
         if let Some(f) = &self.gains.feet {
@@ -502,16 +623,27 @@ impl Scenario {
             t.motion.check(&format!("references.torsos[{i}]")).map_err(|e| e.0)?;
         }
         if let Some(w) = &self.walk {
-            w.check(&self.robots.iter().map(|r| r.id.as_str()).collect::<Vec<_>>()).map_err(|e| e.0)?;
+            w.check(&self.robots.iter().map(|r| r.id.as_str()).collect::<Vec<_>>())
+                .map_err(|e| e.0)?;
         }
-        for (i, f) in self.faults.iter().enumerate() {
-            f.check(i, &self.robots, self.duration)?;
-        }
+        Ok(())
+    }
+
+    /// Each perturbation acts on the object or a known robot, over a valid window, with a
+    /// finite wrench.
+    fn check_perturbations(&self) -> Result<(), String> {
         for (i, p) in self.perturbations.iter().enumerate() {
             if p.target.on != "object" && !self.robots.iter().any(|r| r.id == p.target.on) {
-                return Err(format!("perturbations[{i}] acts on unknown {:?} (object or a robot id)", p.target.on));
+                return Err(format!(
+                    "perturbations[{i}] acts on unknown {:?} (object or a robot id)",
+                    p.target.on
+                ));
             }
-            if !(p.start.is_finite() && p.start >= 0.0 && p.duration.is_finite() && p.duration > 0.0) {
+            if !(p.start.is_finite()
+                && p.start >= 0.0
+                && p.duration.is_finite()
+                && p.duration > 0.0)
+            {
                 return Err(format!("perturbations[{i}] needs start >= 0 and duration > 0"));
             }
             if p.wrench.iter().any(|x| !x.is_finite()) {
@@ -522,14 +654,23 @@ impl Scenario {
     }
 }
 
+/// `Ok` when `x` is finite and positive, else an error naming `what`.
+fn positive(what: &str, x: f64) -> Result<(), String> {
+    if x.is_finite() && x > 0.0 {
+        Ok(())
+    } else {
+        Err(format!("{what} = {x} must be positive"))
+    }
+}
+
 fn check_gains(what: &str, g: &TaskGains, n: usize) -> Result<(), String> {
     g.gains().check(n).map_err(|why| format!("{what}: {why}"))
 }
 
 impl TaskGains {
     /// The coordinator's gains of this task.
-    pub fn gains(&self) -> coordinator::units::impedance::Gains {
-        coordinator::units::impedance::Gains::new(&self.stiffness, &self.damping)
+    pub fn gains(&self) -> coordinator::building_blocks::impedance::Gains {
+        coordinator::building_blocks::impedance::Gains::new(&self.stiffness, &self.damping)
     }
 }
 
@@ -538,14 +679,12 @@ impl TaskGains {
 /// [`OPTIONAL_NESTED_KEYS`]), so a typo is an
 /// error rather than a silent no-op.
 pub fn apply_override(root: &mut toml::Value, assignment: &str) -> Result<(), ScenarioError> {
-    let (key, raw) = assignment.split_once('=').ok_or_else(|| ScenarioError::OverrideSyntax(assignment.to_string()))?;
+    let (key, raw) = assignment
+        .split_once('=')
+        .ok_or_else(|| ScenarioError::OverrideSyntax(assignment.to_string()))?;
     let key = key.trim();
     let err = |reason: String| ScenarioError::Override { key: key.to_string(), reason };
-    // Parse the value as TOML; a bare word that is not TOML is taken as a string.
-    let value: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {}", raw.trim())) {
-        Ok(mut t) => t.remove("v").ok_or_else(|| err("no value".into()))?,
-        Err(_) => toml::Value::String(raw.trim().to_string()),
-    };
+    let value = override_value(raw).map_err(err)?;
     let mut node = root;
     let parts: Vec<&str> = key.split('.').collect();
     if parts.iter().any(|p| p.is_empty()) {
@@ -555,13 +694,14 @@ pub fn apply_override(root: &mut toml::Value, assignment: &str) -> Result<(), Sc
         let last = i == parts.len() - 1;
         node = match node {
             toml::Value::Table(t) => {
-                let optional = last && if i == 0 { OPTIONAL_KEYS.contains(part) } else { OPTIONAL_NESTED_KEYS.contains(&parts[..=i].join(".").as_str()) };
                 if i == 0 && !last && OPTIONAL_TABLES.contains(part) && !t.contains_key(*part) {
                     t.insert(part.to_string(), toml::Value::Table(toml::Table::new()));
                 }
-                let optional = optional || (i == 1 && OPTIONAL_TABLES.contains(&parts[0]));
-                if !t.contains_key(*part) && !optional {
-                    return Err(err(format!("no such key {part:?} (known: {})", t.keys().cloned().collect::<Vec<_>>().join(", "))));
+                if !t.contains_key(*part) && !may_be_absent(&parts, i) {
+                    return Err(err(format!(
+                        "no such key {part:?} (known: {})",
+                        t.keys().cloned().collect::<Vec<_>>().join(", ")
+                    )));
                 }
                 if last {
                     t.insert(part.to_string(), value);
@@ -570,9 +710,13 @@ pub fn apply_override(root: &mut toml::Value, assignment: &str) -> Result<(), Sc
                 t.get_mut(*part).expect("checked")
             }
             toml::Value::Array(a) => {
-                let idx: usize = part.parse().map_err(|_| err(format!("{part:?} is not an index into an array")))?;
+                let idx: usize = part
+                    .parse()
+                    .map_err(|_| err(format!("{part:?} is not an index into an array")))?;
                 let len = a.len();
-                let slot = a.get_mut(idx).ok_or_else(|| err(format!("index {idx} out of range ({len} elements)")))?;
+                let slot = a
+                    .get_mut(idx)
+                    .ok_or_else(|| err(format!("index {idx} out of range ({len} elements)")))?;
                 if last {
                     *slot = value;
                     return Ok(());
@@ -585,6 +729,29 @@ pub fn apply_override(root: &mut toml::Value, assignment: &str) -> Result<(), Sc
     Ok(())
 }
 
+/// An override's value: `raw` parsed as TOML; a bare word that is not TOML is taken as a
+/// string.
+fn override_value(raw: &str) -> Result<toml::Value, String> {
+    match toml::from_str::<toml::Table>(&format!("v = {}", raw.trim())) {
+        Ok(mut t) => t.remove("v").ok_or_else(|| "no value".to_string()),
+        Err(_) => Ok(toml::Value::String(raw.trim().to_string())),
+    }
+}
+
+/// Whether the key segment `parts[i]` may be missing from its table: the last segment when it
+/// is one of [`OPTIONAL_KEYS`] or [`OPTIONAL_NESTED_KEYS`], or a key of one of
+/// [`OPTIONAL_TABLES`].
+fn may_be_absent(parts: &[&str], i: usize) -> bool {
+    let last = i == parts.len() - 1;
+    let optional = last
+        && if i == 0 {
+            OPTIONAL_KEYS.contains(&parts[0])
+        } else {
+            OPTIONAL_NESTED_KEYS.contains(&parts[..=i].join(".").as_str())
+        };
+    optional || (i == 1 && OPTIONAL_TABLES.contains(&parts[0]))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -595,8 +762,14 @@ mod tests {
 
     #[test]
     fn every_shipped_scenario_loads() {
-        for name in ["s1_torso_and_object.toml", "s4_object_circle.toml", "s5_object_orientation.toml", "s6_impedance.toml"] {
-            let s = Scenario::load(scenarios_dir().join(name), &[]).unwrap_or_else(|e| panic!("{name}: {e}"));
+        for name in [
+            "s1_torso_and_object.toml",
+            "s4_object_circle.toml",
+            "s5_object_orientation.toml",
+            "s6_impedance.toml",
+        ] {
+            let s = Scenario::load(scenarios_dir().join(name), &[])
+                .unwrap_or_else(|e| panic!("{name}: {e}"));
             assert_eq!(s.robots.len(), 2, "{name}");
             assert!(s.ticks() > 0);
         }
@@ -605,44 +778,88 @@ mod tests {
     #[test]
     fn overrides_change_any_number_and_refuse_typos() {
         let p = scenarios_dir().join("s1_torso_and_object.toml");
-        let s = Scenario::load(&p, &["duration=2.5".into(), "gains.object.stiffness=[1,2,3,4,5,6]".into(), "robots.1.yaw=0.5".into()]).unwrap();
+        let s = Scenario::load(
+            &p,
+            &[
+                "duration=2.5".into(),
+                "gains.object.stiffness=[1,2,3,4,5,6]".into(),
+                "robots.1.yaw=0.5".into(),
+            ],
+        )
+        .unwrap();
         assert_eq!(s.duration, 2.5);
         assert_eq!(s.gains.object.stiffness, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
         assert_eq!(s.robots[1].yaw, 0.5);
-        for bad in ["duraton=3", "robots.7.yaw=1", "duration", "gains.object.stiffness=[1,2]", "duration=-1", "controller=mpc", "controller=paper"] {
+        for bad in [
+            "duraton=3",
+            "robots.7.yaw=1",
+            "duration",
+            "gains.object.stiffness=[1,2]",
+            "duration=-1",
+            "controller=mpc",
+            "controller=paper",
+        ] {
             assert!(Scenario::load(&p, &[bad.to_string()]).is_err(), "{bad} accepted");
         }
         // Defaulted top-level keys may be set although the file leaves them out.
-        let s = Scenario::load(&p, &["capacity_check=false".into(), "friction_margin=1".into(), "patch_margin=1".into()]).unwrap();
+        let s = Scenario::load(
+            &p,
+            &["capacity_check=false".into(), "friction_margin=1".into(), "patch_margin=1".into()],
+        )
+        .unwrap();
         assert!(!s.capacity_check && s.friction_margin == 1.0 && s.patch_margin == 1.0);
         assert!(Scenario::load(&p, &[]).unwrap().capacity_check);
-        for bad in ["friction_margin=0", "patch_margin=1.5", "capacity_check=3", "object.capacity_check=false"] {
+        for bad in [
+            "friction_margin=0",
+            "patch_margin=1.5",
+            "capacity_check=3",
+            "object.capacity_check=false",
+        ] {
             assert!(Scenario::load(&p, &[bad.to_string()]).is_err(), "{bad} accepted");
         }
         // So may the fields of the optional `release` table; a typo there is still an error.
-        let s = Scenario::load(&p, &["release.after_failed_ticks=7".into(), "release.retreat=0.1".into()]).unwrap();
+        let s = Scenario::load(
+            &p,
+            &["release.after_failed_ticks=7".into(), "release.retreat=0.1".into()],
+        )
+        .unwrap();
         assert_eq!((s.release.after_failed_ticks, s.release.retreat), (7, 0.1));
-        assert_eq!(s.release.max_fit_residual, coordinator::units::release::ReleasePolicy::default().max_fit_residual);
+        assert_eq!(
+            s.release.max_fit_residual,
+            coordinator::building_blocks::release::ReleasePolicy::default().max_fit_residual
+        );
         for bad in ["release.after_failed=7", "release=3", "release.retreat=[1]"] {
             assert!(Scenario::load(&p, &[bad.to_string()]).is_err(), "{bad} accepted");
         }
         // So may a layout's defaulted keys: four robots two per face, 0.4 m apart.
         let cube = scenarios_dir().join("team4_cube.toml");
-        let sets: Vec<String> = ["team.faces=[\"-x\", \"+x\"]", "team.per_face=2", "team.spacing=0.4"].map(String::from).to_vec();
+        let sets: Vec<String> =
+            ["team.faces=[\"-x\", \"+x\"]", "team.per_face=2", "team.spacing=0.4"]
+                .map(String::from)
+                .to_vec();
         let s = Scenario::load(&cube, &sets).unwrap();
         let ys: Vec<f64> = s.robots.iter().map(|r| r.base_xy[1]).collect();
         assert_eq!(s.robots.len(), 4);
         assert!(ys.iter().all(|y| (y.abs() - 0.2).abs() < 1e-9), "two a face, 0.4 m apart: {ys:?}");
         let e = Scenario::load(&cube, &["team.spacng=0.7".into()]).unwrap_err().to_string();
         assert!(e.contains("no such key \"spacng\""), "{e}");
-        assert!(Scenario::load(&p, &["team.spacing=0.7".into()]).is_err(), "a file without a [team] layout");
+        assert!(
+            Scenario::load(&p, &["team.spacing=0.7".into()]).is_err(),
+            "a file without a [team] layout"
+        );
         // A file without [references] (a walk) takes its ramp from --set; a typo there is refused.
         let walk = scenarios_dir().join("s2_walk.toml");
-        assert_eq!(Scenario::load(&walk, &["references.ramp=0.5".into()]).unwrap().references.ramp, 0.5);
+        assert_eq!(
+            Scenario::load(&walk, &["references.ramp=0.5".into()]).unwrap().references.ramp,
+            0.5
+        );
         assert!(Scenario::load(&walk, &["references.rmap=0.5".into()]).is_err());
         // The controller is chosen by its kind; the old name says what it became.
         assert_eq!(Scenario::load(&p, &[]).unwrap().controller, "pidc");
-        assert_eq!(Scenario::load(&p, &["controller=joint-damping".into()]).unwrap().controller, "joint-damping");
+        assert_eq!(
+            Scenario::load(&p, &["controller=joint-damping".into()]).unwrap().controller,
+            "joint-damping"
+        );
         let e = Scenario::load(&p, &["controller=paper".into()]).unwrap_err().to_string();
         assert!(e.contains("now `pidc`"), "{e}");
         let e = Scenario::load(&p, &["controller=mpc".into()]).unwrap_err().to_string();
@@ -652,12 +869,21 @@ mod tests {
     #[test]
     fn broken_files_say_what_is_wrong() {
         let p = Path::new("x.toml");
-        assert!(matches!(Scenario::from_str_with("name = ", p, &[]), Err(ScenarioError::Toml { .. })));
+        assert!(matches!(
+            Scenario::from_str_with("name = ", p, &[]),
+            Err(ScenarioError::Toml { .. })
+        ));
         let good = std::fs::read_to_string(scenarios_dir().join("s4_object_circle.toml")).unwrap();
-        let e = Scenario::from_str_with(&good.replace("physics_hz = 2000.0", "physics_hz = 1500.0"), p, &[]).unwrap_err();
+        let e = Scenario::from_str_with(
+            &good.replace("physics_hz = 2000.0", "physics_hz = 1500.0"),
+            p,
+            &[],
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("whole multiple"), "{e}");
         let s6 = std::fs::read_to_string(scenarios_dir().join("s6_impedance.toml")).unwrap();
-        let e = Scenario::from_str_with(&s6.replacen("on = \"object\"", "on = \"r9\"", 1), p, &[]).unwrap_err();
+        let e = Scenario::from_str_with(&s6.replacen("on = \"object\"", "on = \"r9\"", 1), p, &[])
+            .unwrap_err();
         assert!(e.to_string().contains("r9"), "{e}");
         assert!(Scenario::load("/nonexistent.toml", &[]).is_err());
     }
@@ -665,22 +891,40 @@ mod tests {
     #[test]
     fn the_team_rate_divides_the_robots_and_the_gains_are_named() {
         let p = scenarios_dir().join("s4_object_circle.toml");
-        let load = |sets: &[&str]| Scenario::load(&p, &sets.iter().map(|s| s.to_string()).collect::<Vec<_>>());
+        let load = |sets: &[&str]| {
+            Scenario::load(&p, &sets.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+        };
         assert_eq!(load(&[]).unwrap().team_every(), Ok(1), "the paper's single loop by default");
         assert_eq!(load(&["team_hz=250"]).unwrap().team_every(), Ok(4));
         assert_eq!(load(&[]).unwrap().team_delay_ticks, TeamDelay::Ticks(0), "no delay by default");
         assert_eq!(load(&["team_delay_ticks=3"]).unwrap().team_delay_ticks, TeamDelay::Ticks(3));
         assert_eq!(load(&["team_delay_ticks=auto"]).unwrap().team_delay_ticks, TeamDelay::AUTO);
-        assert_eq!(load(&["team_delay_ticks=\"auto:6\""]).unwrap().team_delay_ticks, TeamDelay::Auto { max: 6 });
-        for bad in ["team_delay_ticks=9", "team_delay_ticks=-1", "team_delay_ticks=soon", "team_delay_ticks=1.5", "team_delay_ticks=auto:9"] {
+        assert_eq!(
+            load(&["team_delay_ticks=\"auto:6\""]).unwrap().team_delay_ticks,
+            TeamDelay::Auto { max: 6 }
+        );
+        for bad in [
+            "team_delay_ticks=9",
+            "team_delay_ticks=-1",
+            "team_delay_ticks=soon",
+            "team_delay_ticks=1.5",
+            "team_delay_ticks=auto:9",
+        ] {
             let e = load(&[bad]).unwrap_err().to_string();
-            assert!(e.contains("team_delay_ticks") && e.contains("\"auto:N\" or a whole number of ticks from 0 to 8"), "{bad}: {e}");
+            assert!(
+                e.contains("team_delay_ticks")
+                    && e.contains("\"auto:N\" or a whole number of ticks from 0 to 8"),
+                "{bad}: {e}"
+            );
         }
         for bad in ["team_hz=300", "team_hz=2000", "team_hz=0", "team_hz=10"] {
             let e = load(&[bad]).unwrap_err().to_string();
             assert!(e.contains("team_hz") && e.contains("whole number"), "{bad}: {e}");
         }
-        assert_eq!(load(&["drive_gains=inertia"]).unwrap().drive_gains, robot_agent::drive_gains::DriveGainsMode::Inertia);
+        assert_eq!(
+            load(&["drive_gains=inertia"]).unwrap().drive_gains,
+            robot_agent::drive_gains::DriveGainsMode::Inertia
+        );
         assert!(load(&["drive_gains=stiff"]).is_err());
     }
 }

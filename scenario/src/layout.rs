@@ -5,7 +5,7 @@
 
 use std::sync::Arc;
 
-use coordinator::units::grasp::PlannedHand;
+use coordinator::building_blocks::grasp::PlannedHand;
 use nalgebra::Isometry3;
 use planner::grasp::GraspPlanError;
 use planner::placement::{BasePlacement, ObjectBox};

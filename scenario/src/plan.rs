@@ -1,6 +1,7 @@
 //! From a [`Scenario`] to what every component runs: the bridge's [`Scene`] (world with the
 //! hands placed on the object by IK, pushes, settle and run lengths), the coordinator's
-//! [`ControllerSpec`] (PIDC or MQP with the scenario's gains, object and minimum forces), the agents'
+//! [`ControllerSpec`] (PIDC or MQP with the scenario's gains, object and minimum forces), the
+//! agents'
 //! description files, and the [`ReferencePlan`] that turns ticks into task references.
 //! Each description file is loaded here once ([`RobotCache`]); the loaded robots travel with
 //! the plan to the grasp planner, the world build and the agents.
@@ -8,7 +9,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use coordinator::units::grasp::PlannedHand;
+use coordinator::building_blocks::grasp::PlannedHand;
 use coordinator::{ControllerSpec, MqpConfig, PidcConfig};
 use nalgebra::{Isometry3, Matrix3, Translation3, Vector3};
 use protocol::conventions::quat_from_wxyz;
@@ -37,7 +38,11 @@ pub enum PlanError {
     #[error("controller: {0}")]
     Controller(#[from] coordinator::ControllerError),
     /// Not `#[from]`: the message holds the check's whole error, no source chain repeats it.
-    #[error("payload check (the object's mass and {} % more, `payload_margin`): {check} (`capacity_check = false` runs anyway)", 100.0 * margin)]
+    #[error(
+        "payload check (the object's mass and {} % more, `payload_margin`): {check} \
+         (`capacity_check = false` runs anyway)",
+        100.0 * margin
+    )]
     Capacity { check: crate::payload::CheckError, margin: f64 },
     /// The start pose's statics a walk is planned with could not be solved (no check asked).
     #[error("the start pose's statics for the walk: {0}")]
@@ -245,26 +250,30 @@ struct GraspAtStart {
 
 /// The PIDC configuration of the scenario: its gains, object, minimum forces and margins.
 fn pidc_config(s: &Scenario, grasp: &GraspAtStart) -> PidcConfig {
+    let defaults = PidcConfig::default();
     PidcConfig {
-        object_gains: s.gains.object.gains(),
-        torso_gains: s.gains.torso.gains(),
-        swing_gains: s
-            .gains
-            .feet
-            .as_ref()
-            .map(|f| f.gains())
-            .unwrap_or_else(|| PidcConfig::default().swing_gains),
-        object_mass: s.object.mass,
-        object_inertia: Matrix3::from_diagonal(&Vector3::from(grasp.principal)),
-        // Where the object is when the grasp closes, and where each hand holds it.
-        object_pose_at_grasp: Some(grasp.object_at_grasp),
-        planned_grasp: grasp.planned_grasp.clone(),
-        f_min_foot: s.min_foot_force,
-        f_min_hand: s.min_hand_force,
-        friction_margin: s.friction_margin,
-        patch_margin: s.patch_margin,
-        release: s.release,
-        ..PidcConfig::default()
+        shell: coordinator::ShellConfig {
+            object_gains: s.gains.object.gains(),
+            torso_gains: s.gains.torso.gains(),
+            swing_gains: s
+                .gains
+                .feet
+                .as_ref()
+                .map(|f| f.gains())
+                .unwrap_or_else(|| defaults.swing_gains.clone()),
+            object_mass: s.object.mass,
+            object_inertia: Matrix3::from_diagonal(&Vector3::from(grasp.principal)),
+            // Where the object is when the grasp closes, and where each hand holds it.
+            object_pose_at_grasp: Some(grasp.object_at_grasp),
+            planned_grasp: grasp.planned_grasp.clone(),
+            f_min_foot: s.min_foot_force,
+            f_min_hand: s.min_hand_force,
+            friction_margin: s.friction_margin,
+            patch_margin: s.patch_margin,
+            release: s.release,
+            ..defaults.shell.clone()
+        },
+        ..defaults
     }
 }
 
@@ -279,25 +288,31 @@ fn controller_spec(
         ControllerSpec::Pidc(_) => ControllerSpec::Pidc(pidc.clone()),
         // MQP: the same gains (as acceleration gains, see MqpConfig), object and minimum
         // forces; its velocity bound looks one control period ahead.
-        ControllerSpec::Mqp(_) => ControllerSpec::Mqp(MqpConfig {
-            object_gains: s.gains.object.gains(),
-            torso_gains: s.gains.torso.gains(),
-            swing_gains: s
-                .gains
-                .feet
-                .as_ref()
-                .map(|f| f.gains())
-                .unwrap_or_else(|| MqpConfig::default().swing_gains),
-            object_mass: s.object.mass,
-            object_inertia: Matrix3::from_diagonal(&Vector3::from(grasp.principal)),
-            f_min_foot: s.min_foot_force,
-            f_min_hand: s.min_hand_force,
-            dt: s.clock().dt(),
-            release: s.release,
-            object_pose_at_grasp: Some(grasp.object_at_grasp),
-            planned_grasp: grasp.planned_grasp,
-            ..MqpConfig::default()
-        }),
+        ControllerSpec::Mqp(_) => {
+            let defaults = MqpConfig::default();
+            ControllerSpec::Mqp(MqpConfig {
+                shell: coordinator::ShellConfig {
+                    object_gains: s.gains.object.gains(),
+                    torso_gains: s.gains.torso.gains(),
+                    swing_gains: s
+                        .gains
+                        .feet
+                        .as_ref()
+                        .map(|f| f.gains())
+                        .unwrap_or_else(|| defaults.swing_gains.clone()),
+                    object_mass: s.object.mass,
+                    object_inertia: Matrix3::from_diagonal(&Vector3::from(grasp.principal)),
+                    f_min_foot: s.min_foot_force,
+                    f_min_hand: s.min_hand_force,
+                    release: s.release,
+                    object_pose_at_grasp: Some(grasp.object_at_grasp),
+                    planned_grasp: grasp.planned_grasp,
+                    ..defaults.shell.clone()
+                },
+                dt: s.clock().dt(),
+                ..defaults
+            })
+        }
         other => other,
     })
 }
@@ -377,7 +392,14 @@ pub fn plan_walk(
         s.duration,
     )?;
     for st in walk.gait.steps() {
-        tracing::debug!(robot = %walk.robots[st.robot], foot = %walk.feet[st.robot][st.foot], liftoff = st.liftoff, margin = st.margin, cop_margin = ?st.cop_margin, "planned step");
+        tracing::debug!(
+            robot = %walk.robots[st.robot],
+            foot = %walk.feet[st.robot][st.foot],
+            liftoff = st.liftoff,
+            margin = st.margin,
+            cop_margin = ?st.cop_margin,
+            "planned step"
+        );
     }
     let least = walk.gait.steps().iter().map(|st| st.margin).fold(f64::INFINITY, f64::min);
     tracing::info!(

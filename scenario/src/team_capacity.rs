@@ -113,7 +113,8 @@ pub fn capacity(plan: &Plan, tolerance: f64) -> Result<ScenarioCapacity, CheckEr
 pub fn summary(plan: &Plan, cap: &ScenarioCapacity, tolerance: f64, seconds: f64) -> String {
     let s = &plan.scenario;
     let mut out = format!(
-        "{}: {} robots, object {:?} m at {:?}, friction_margin {:.3}, patch_margin {:.3}, min_hand_force {} N, min_foot_force {} N\n",
+        "{}: {} robots, object {:?} m at {:?}, friction_margin {:.3}, patch_margin {:.3}, \
+         min_hand_force {} N, min_foot_force {} N\n",
         s.name,
         s.robots.len(),
         s.object.size,
@@ -125,7 +126,8 @@ pub fn summary(plan: &Plan, cap: &ScenarioCapacity, tolerance: f64, seconds: f64
     );
     let whole = cap.whole();
     out += &format!(
-        "capacity: {:.3} kg (the heaviest object the plan accepts: held along the motion with {} % more, payload_margin; bisection to {tolerance} kg, {:.0} ms)\n",
+        "capacity: {:.3} kg (the heaviest object the plan accepts: held along the motion with \
+         {} % more, payload_margin; bisection to {tolerance} kg, {:.0} ms)\n",
         cap.mass(),
         100.0 * cap.margin,
         1e3 * seconds
@@ -137,7 +139,8 @@ pub fn summary(plan: &Plan, cap: &ScenarioCapacity, tolerance: f64, seconds: f64
     let m = &cap.motion;
     let p = m.object;
     out += &format!(
-        "  along the motion: {:.3} kg, {} poses sampled; the smallest margin at t = {:.2} s (object at [{:.3}, {:.3}, {:.3}] m; {} problems)\n",
+        "  along the motion: {:.3} kg, {} poses sampled; the smallest margin at t = {:.2} s \
+         (object at [{:.3}, {:.3}, {:.3}] m; {} problems)\n",
         m.capacity.mass, m.samples, m.at_s, p.x, p.y, p.z, m.capacity.solves
     );
     if let Some(w) = &cap.walk {

@@ -241,7 +241,7 @@ fn build_world(a: &RunArgs) -> Result<(sim_bridge::world::WorldSpec, sim_bridge:
             .map_err(|e| anyhow::anyhow!("{}: {e}", description.display()))?,
     );
     for (id, (xy, yaw)) in
-        a.robots.iter().zip(planner::placement::facing_ring([0.0, 0.0], a.spacing / 2.0, n))
+        a.robots.iter().zip(robot_model::spatial::facing_ring([0.0, 0.0], a.spacing / 2.0, n))
     {
         spec.robots.push(sim_bridge::world::RobotPlacement::standing(
             id,
@@ -331,7 +331,7 @@ async fn run_world(a: RunArgs, world: sim_bridge::world::World, n: usize) -> Res
     let session = transport::open(&a.zenoh, Role::Member).await?;
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     let cfg = lockstep_config(&a);
-    let mut extras = lockstep::Extras {
+    let mut extras = lockstep::LoopDuties {
         publish_ground_truth: true,
         perturbation_key: true,
         truth_log: a

@@ -30,7 +30,7 @@ use tokio::sync::watch;
 use zenoh::sample::Sample;
 use zenoh::Session;
 
-use crate::lockstep::{BridgeError, BridgeIo, Extras, LockstepConfig, TickSide};
+use crate::lockstep::{BridgeError, BridgeIo, LockstepConfig, LoopDuties, TickSide};
 use crate::plant::Plant;
 
 /// What a real-time run did.
@@ -58,7 +58,7 @@ pub async fn run(
     cfg: &LockstepConfig,
     period: Duration,
     plant: &mut impl Plant,
-    extras: &mut Extras,
+    extras: &mut LoopDuties,
     stop: watch::Receiver<bool>,
 ) -> Result<RealtimeReport, BridgeError> {
     let robots: Vec<String> = plant.robots().to_vec();
@@ -87,7 +87,7 @@ pub async fn run_on(
     cfg: &LockstepConfig,
     period: Duration,
     plant: &mut impl Plant,
-    extras: &mut Extras,
+    extras: &mut LoopDuties,
     start: Start,
     stop: watch::Receiver<bool>,
 ) -> Result<RealtimeReport, BridgeError> {

@@ -24,7 +24,7 @@ use serde::{Deserialize, Serialize};
 use tokio::sync::watch;
 use zenoh::Session;
 
-use crate::lockstep::{self, BridgeError, BridgeIo, Extras, LockstepConfig};
+use crate::lockstep::{self, BridgeError, BridgeIo, LockstepConfig, LoopDuties};
 use crate::mujoco_plant::MujocoPlant;
 use crate::perturbation::Perturbation;
 use crate::plant::DriveLoss;
@@ -162,7 +162,7 @@ pub async fn run(
     let world = World::build(&scene.world, robots)?;
     let mut plant = MujocoPlant::new(world)?;
     let mut extras =
-        Extras { publish_ground_truth: true, perturbation_key: true, ..Default::default() };
+        LoopDuties { publish_ground_truth: true, perturbation_key: true, ..Default::default() };
     let cfg = scene.lockstep(scene.ticks);
     let (settle, run) = settle_then_run(
         session,
@@ -235,7 +235,7 @@ pub async fn settle_then_run(
     settle_ticks: u64,
     pace: Pace,
     pushes: &[Perturbation],
-    extras: &mut Extras,
+    extras: &mut LoopDuties,
     stop: watch::Receiver<bool>,
 ) -> Result<(lockstep::LockstepReport, PhaseReport), SceneError> {
     let robots = crate::plant::Plant::robots(plant).to_vec();

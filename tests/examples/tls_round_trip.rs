@@ -16,11 +16,11 @@ mod certs;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
+use launch::processes::free_port;
 use protocol::access::{secure_endpoint, Identity, SecureConfig};
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, Role, SampleQueue, TypedPublisher, ZenohArgs};
 use protocol::{DriveCommand, Header, Pose, RobotState};
-use launch::processes::free_port;
 use zenoh::Session;
 
 const TEAM: &str = "rtt";

@@ -24,11 +24,11 @@ use common::tls::{config, hub_endpoint, open};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use launch::processes::spawn;
 use protocol::access::Identity;
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Qos, SampleQueue, TypedPublisher, ZenohArgs};
 use protocol::{AgentStatus, DriveCommand, Header, Pose, RobotState, TorqueCommand};
-use launch::processes::spawn;
 use zenoh::Session;
 
 /// How long a put that must not arrive is given to arrive anyway.

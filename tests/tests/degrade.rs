@@ -3,14 +3,14 @@
 //! When the contact-force QP turns infeasible (an object heavier than the team can hold, a
 //! push the controller did not plan for), the fallback keeps the stance feet's rows and the
 //! torque limits before the hands' (the object yields first), and the controller lets go of an
-//! object it cannot hold (`coordinator::units::release`): whatever happens to the object, no
+//! object it cannot hold (`coordinator::building_blocks::release`): whatever happens to the object, no
 //! torso falls by more than 5 cm or tilts by more than 10 deg, and the run reports the failed
 //! ticks and the release. Before the release existed, both cases below threw the two robots
 //! over (torsos 0.4-1.3 m off, up to 180 deg).
 
 use evaluation::evaluate::Metrics;
-use scenario::plan;
 use scenario::file::Scenario;
+use scenario::plan;
 
 mod common;
 use common::scenario::{repo, run_plan};

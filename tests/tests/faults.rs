@@ -3,15 +3,15 @@
 //! `sim_bridge::lockstep::AgentLoss::Unpowered`) and falls where it stands. The coordinator
 //! learns of it from the agent's liveliness token and completes the tick without it. What
 //! the team does is then the controller's: with two robots the remaining hand cannot hold the
-//! object and the team lets go at once (`coordinator::units::release`), the remaining robot
+//! object and the team lets go at once (`coordinator::building_blocks::release`), the remaining robot
 //! standing; with three robots, two of them on opposite faces, the grasp is captured again
 //! with the two remaining hands and the object stays held.
 //!
 //! Fault 4, the state source stops, is a message-flow test (placeholder dynamics and plant):
 //! the agents, whose real-time command deadline is 25 ms, hold their posture within it.
 
-use evaluation::records::Records;
 use evaluation::evaluate::Metrics;
+use evaluation::records::Records;
 use scenario::plan::Plan;
 
 use std::time::{Duration, Instant};

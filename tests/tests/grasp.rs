@@ -2,12 +2,12 @@
 //! the 1 kg cube with the test-side controller. Checks the contact parameters do what the
 //! README says (rigid frictional patch contact: the cube neither slides down nor turns).
 
+use scenario::layout::place_hands;
 use sim_bridge::ground_truth::{self, GroundTruthLog};
 use sim_bridge::mujoco_plant::MujocoPlant;
 use sim_bridge::plant::{empty_state, Plant};
 use sim_bridge::world::{load_robots, World, WorldSpec};
-use scenario::layout::place_hands;
-use team_tests::standing::{HandPush, StandingController, StandingGains};
+use team_tests::standing_controller::{HandPush, StandingController, StandingGains};
 
 fn hold(squeeze: f64, seconds: f64) -> (f64, f64, usize, GroundTruthLog) {
     let mut spec = WorldSpec::paper_pair();

@@ -12,9 +12,9 @@ use std::sync::{Arc, Mutex};
 use evaluation::evaluate;
 use launch::hosts::TestHosts;
 use launch::launcher::RunMode;
-use scenario::plan::{self, Plan};
 use launch::run::{self, RunOptions};
 use scenario::file::Scenario;
+use scenario::plan::{self, Plan};
 
 /// The tests run one at a time: each counts the machine's namespaces.
 static SERIAL: Mutex<()> = Mutex::new(());

@@ -4,9 +4,9 @@
 
 use mujoco_rs::mujoco_c::mjtObj;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use scenario::layout::place_hands;
 use sim_bridge::mujoco_plant::MujocoPlant;
 use sim_bridge::world::{load_robots, name2id, World, WorldSpec};
-use scenario::layout::place_hands;
 
 #[test]
 fn hands_lie_flat_on_the_object_faces_in_our_model_and_in_mujoco() {

@@ -1,11 +1,13 @@
 //! The repository's layout rules, checked on its own sources (see `docs/testing.md`):
 //!
-//! * no function outside tests is longer than [`MAX_FN_LINES`] lines;
+//! * no function outside tests is longer than [`MAX_FN_LINES`] lines, and no line outside tests
+//!   is wider than [`MAX_LINE_WIDTH`] characters;
 //! * every public type name (struct, enum, trait, type alias, union) means one thing: it is
 //!   defined in one place in the workspace;
 //! * the product speaks of the product: no issue numbers, development sessions or stops in the
 //!   README, the book or the sources, and no reference to files outside the repository;
-//! * the README stays short, and every relative link in it and in the book resolves.
+//! * the README and every crate's README stay short, and every relative link in them and in
+//!   the book resolves.
 //!
 //! Each rule reads the files as they are on disk, so a change that breaks one fails here with
 //! the places named.
@@ -17,10 +19,15 @@ use std::path::{Path, PathBuf};
 use syn::spanned::Spanned;
 use syn::visit::Visit;
 
-/// The longest a function outside tests may be, from its signature to its closing brace.
-const MAX_FN_LINES: usize = 80;
+/// The longest a function outside tests may be, from its first attribute or doc comment to
+/// its closing brace.
+const MAX_FN_LINES: usize = 60;
+/// The widest a line outside tests may be (rustfmt's width, `rustfmt.toml`).
+const MAX_LINE_WIDTH: usize = 100;
 /// The longest the README may be.
 const MAX_README_LINES: usize = 300;
+/// The longest a crate's README may be: what the crate is for and where things are.
+const MAX_CRATE_README_LINES: usize = 150;
 /// The crates whose `src/` the rules read.
 const CRATES: [&str; 12] = [
     "protocol",
@@ -96,7 +103,11 @@ impl LongFunctions {
     fn check(&mut self, name: &syn::Ident, span: proc_macro2::Span) {
         let lines = span.end().line - span.start().line + 1;
         if lines > MAX_FN_LINES {
-            self.found.push(format!("{}:{} fn {name}: {lines} lines", self.file.display(), span.start().line));
+            self.found.push(format!(
+                "{}:{} fn {name}: {lines} lines",
+                self.file.display(),
+                span.start().line
+            ));
         }
     }
 }
@@ -132,15 +143,78 @@ impl<'a> Visit<'a> for LongFunctions {
     }
 }
 
+/// The functions of `file` (read from `path`) longer than [`MAX_FN_LINES`].
+fn long_functions(path: PathBuf, file: &syn::File) -> Vec<String> {
+    let mut v = LongFunctions { file: path, found: Vec::new() };
+    v.visit_file(file);
+    v.found
+}
+
 #[test]
 fn no_function_outside_tests_is_longer_than_a_screen() {
-    let mut long = Vec::new();
-    for (path, file) in sources() {
-        let mut v = LongFunctions { file: path, found: Vec::new() };
-        v.visit_file(&file);
-        long.extend(v.found);
+    let long: Vec<String> =
+        sources().into_iter().flat_map(|(p, f)| long_functions(p, &f)).collect();
+    assert!(
+        long.is_empty(),
+        "{} functions over {MAX_FN_LINES} lines:\n{}",
+        long.len(),
+        long.join("\n")
+    );
+}
+
+/// A source file with one function of `lines` lines (a doc comment, the signature, a body of
+/// statements and the closing brace), and a test-only one twice as long.
+fn function_of(lines: usize) -> syn::File {
+    let body: String = (0..lines - 3).map(|i| format!("    let _x{i} = {i};\n")).collect();
+    let test_body: String = (0..2 * lines).map(|i| format!("    let _y{i} = {i};\n")).collect();
+    let text = format!(
+        "/// A function.\nfn f() {{\n{body}}}\n#[cfg(test)]\nmod tests {{\nfn g() {{\n{test_body}}}\n}}\n"
+    );
+    syn::parse_file(&text).expect("a function of the given length")
+}
+
+#[test]
+fn the_function_length_rule_can_fail() {
+    let at_limit = long_functions(PathBuf::from("a.rs"), &function_of(MAX_FN_LINES));
+    assert!(at_limit.is_empty(), "{at_limit:?}");
+    let over = long_functions(PathBuf::from("a.rs"), &function_of(MAX_FN_LINES + 1));
+    assert_eq!(over, vec![format!("a.rs:1 fn f: {} lines", MAX_FN_LINES + 1)]);
+}
+
+/// Lines of `text` wider than [`MAX_LINE_WIDTH`] characters before its `#[cfg(test)]` module
+/// (the tests come last in a file of this workspace), as `line: width`.
+fn wide_lines(text: &str) -> Vec<String> {
+    text.lines()
+        .take_while(|l| l.trim() != "#[cfg(test)]")
+        .enumerate()
+        .filter(|(_, l)| l.chars().count() > MAX_LINE_WIDTH)
+        .map(|(i, l)| format!("{}: {}", i + 1, l.chars().count()))
+        .collect()
+}
+
+#[test]
+fn no_line_outside_tests_is_wider_than_rustfmts_width() {
+    let root = root();
+    let mut wide = Vec::new();
+    for p in CRATES.iter().flat_map(|c| files(&root.join(c).join("src"), ".rs")) {
+        let text = fs::read_to_string(&p).unwrap_or_default();
+        let name = p.strip_prefix(&root).unwrap().display().to_string();
+        wide.extend(wide_lines(&text).into_iter().map(|w| format!("{name}:{w}")));
     }
-    assert!(long.is_empty(), "{} functions over {MAX_FN_LINES} lines:\n{}", long.len(), long.join("\n"));
+    assert!(
+        wide.is_empty(),
+        "{} lines over {MAX_LINE_WIDTH} characters:\n{}",
+        wide.len(),
+        wide.join("\n")
+    );
+}
+
+#[test]
+fn the_line_width_rule_can_fail() {
+    let wide = "x".repeat(MAX_LINE_WIDTH + 1);
+    let text = format!("fn f() {{}}\n{wide}\n#[cfg(test)]\nmod tests {{\n// {wide}\n}}\n");
+    assert_eq!(wide_lines(&text), vec![format!("2: {}", MAX_LINE_WIDTH + 1)]);
+    assert!(wide_lines(&"x".repeat(MAX_LINE_WIDTH)).is_empty());
 }
 
 /// Public type names and where each is defined.
@@ -188,7 +262,12 @@ fn every_public_type_name_means_one_thing() {
         v.file = path;
         v.visit_file(&file);
     }
-    let twice: Vec<String> = v.names.iter().filter(|(_, at)| at.len() > 1).map(|(n, at)| format!("{n}: {}", at.join(", "))).collect();
+    let twice: Vec<String> = v
+        .names
+        .iter()
+        .filter(|(_, at)| at.len() > 1)
+        .map(|(n, at)| format!("{n}: {}", at.join(", ")))
+        .collect();
     assert!(twice.is_empty(), "public type names defined more than once:\n{}", twice.join("\n"));
 }
 
@@ -198,7 +277,11 @@ fn documents() -> Vec<PathBuf> {
     let mut out = vec![root.join("README.md")];
     out.extend(files(&root.join("docs"), ".md"));
     for c in CRATES {
-        out.extend(files(&root.join(c), ".md").into_iter().filter(|p| !p.components().any(|c| c.as_os_str() == "target")));
+        out.extend(
+            files(&root.join(c), ".md")
+                .into_iter()
+                .filter(|p| !p.components().any(|c| c.as_os_str() == "target")),
+        );
     }
     out
 }
@@ -208,12 +291,16 @@ fn process_words(text: &str) -> Vec<(usize, String)> {
     let lower = text.to_lowercase();
     let mut found = Vec::new();
     for (i, line) in lower.lines().enumerate() {
-        let words: Vec<&str> = line.split(|c: char| !c.is_alphanumeric()).filter(|w| !w.is_empty()).collect();
-        let pair = |a: &str, b: &dyn Fn(&str) -> bool| words.windows(2).any(|w| w[0] == a && b(w[1]));
+        let words: Vec<&str> =
+            line.split(|c: char| !c.is_alphanumeric()).filter(|w| !w.is_empty()).collect();
+        let pair =
+            |a: &str, b: &dyn Fn(&str) -> bool| words.windows(2).any(|w| w[0] == a && b(w[1]));
         let numeric = |w: &str| w.chars().all(|c| c.is_ascii_digit());
         let ordinal = |w: &str| {
             let digits = w.trim_end_matches(|c: char| c.is_ascii_alphabetic());
-            !digits.is_empty() && numeric(digits) && ["st", "nd", "rd", "th"].contains(&&w[digits.len()..])
+            !digits.is_empty()
+                && numeric(digits)
+                && ["st", "nd", "rd", "th"].contains(&&w[digits.len()..])
         };
         let hit = pair("issue", &numeric)
             || pair("last", &|w| w == "session" || w == "stop")
@@ -245,7 +332,11 @@ fn the_product_speaks_of_the_product() {
             found.push(format!("{}:{line}: {what}", p.strip_prefix(&root).unwrap().display()));
         }
     }
-    assert!(found.is_empty(), "process words or references outside the repository:\n{}", found.join("\n"));
+    assert!(
+        found.is_empty(),
+        "process words or references outside the repository:\n{}",
+        found.join("\n")
+    );
 }
 
 #[test]
@@ -261,7 +352,29 @@ fn the_process_word_rule_can_fail() {
 fn the_readme_is_short() {
     let text = fs::read_to_string(root().join("README.md")).unwrap();
     let n = text.lines().count();
-    assert!(n <= MAX_README_LINES, "README.md has {n} lines (at most {MAX_README_LINES}); the rest belongs in docs/");
+    assert!(
+        n <= MAX_README_LINES,
+        "README.md has {n} lines (at most {MAX_README_LINES}); the rest belongs in docs/"
+    );
+}
+
+#[test]
+fn every_crates_readme_is_short() {
+    let root = root();
+    let long: Vec<String> = CRATES
+        .iter()
+        .map(|c| root.join(c).join("README.md"))
+        .filter_map(|p| {
+            let n = fs::read_to_string(&p).ok()?.lines().count();
+            let name = p.strip_prefix(&root).unwrap().display().to_string();
+            (n > MAX_CRATE_README_LINES).then(|| format!("{name}: {n} lines"))
+        })
+        .collect();
+    assert!(
+        long.is_empty(),
+        "crate READMEs over {MAX_CRATE_README_LINES} lines (the rest belongs in docs/):\n{}",
+        long.join("\n")
+    );
 }
 
 /// Relative link targets of a Markdown text (`[text](target)`), without anchors.
@@ -284,7 +397,10 @@ fn links(text: &str) -> Vec<String> {
 fn every_relative_link_of_the_documents_resolves() {
     let root = root();
     let docs = root.join("docs");
-    assert!(docs.join("SUMMARY.md").is_file(), "docs/SUMMARY.md (the book's table of contents) is missing");
+    assert!(
+        docs.join("SUMMARY.md").is_file(),
+        "docs/SUMMARY.md (the book's table of contents) is missing"
+    );
     let mut broken = Vec::new();
     for p in documents() {
         let text = fs::read_to_string(&p).unwrap_or_default();

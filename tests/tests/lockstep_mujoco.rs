@@ -8,10 +8,10 @@ use std::time::Duration;
 use protocol::transport::{self, Role, ZenohArgs};
 use robot_agent::agent::{self, AgentConfig, AgentCounters, AgentError, ModelDynamics};
 use sim_bridge::ground_truth::GroundTruthLog;
-use sim_bridge::lockstep::{self, BridgeError, Extras, LockstepConfig};
+use sim_bridge::lockstep::{self, BridgeError, LockstepConfig, LoopDuties};
 use sim_bridge::mujoco_plant::MujocoPlant;
 use sim_bridge::world::{load_robots, World, WorldSpec};
-use team_tests::standing::{self, StandingController, StandingGains};
+use team_tests::standing_controller::{self as standing, StandingController, StandingGains};
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
 
@@ -88,7 +88,7 @@ async fn default_robot_stands_5_s_under_its_agent() {
     // Settle 200 ticks, restart the scenario clock, then 5 s with tick numbers continuing.
     lockstep::run(&session, &cfg(team, 200), &mut plant, stop_rx.clone()).await.unwrap();
     plant.restart_clock();
-    let mut extras = Extras {
+    let mut extras = LoopDuties {
         truth_log: Some(GroundTruthLog::new(10)),
         publish_ground_truth: true,
         first_tick: 200,
@@ -142,7 +142,7 @@ async fn an_agent_alone_holds_its_robot_standing() {
     let (stop_tx, stop_rx) = watch::channel(false);
     let agent = spawn_agent(&session, AgentConfig::new(team, "r1"), stop_rx.clone());
     // The first tick waits for the agent's deadline (25 ms); the hold answers every tick after.
-    let mut extras = Extras { truth_log: Some(GroundTruthLog::new(10)), ..Default::default() };
+    let mut extras = LoopDuties { truth_log: Some(GroundTruthLog::new(10)), ..Default::default() };
     lockstep::run_with(&session, &cfg(team, 2000), &mut plant, &mut extras, stop_rx.clone())
         .await
         .unwrap();
@@ -186,7 +186,7 @@ async fn pair_run(team: &str, seed: u64, ticks: u64) -> (Vec<f64>, Vec<f64>) {
     let rx = stop_rx.clone();
     let t = team.to_string();
     let coord = tokio::spawn(async move { standing::serve(&s, &t, ctl, true, rx).await });
-    let mut extras = Extras { truth_log: Some(GroundTruthLog::new(1)), ..Default::default() };
+    let mut extras = LoopDuties { truth_log: Some(GroundTruthLog::new(1)), ..Default::default() };
     lockstep::run_with(&session, &cfg(team, ticks), &mut plant, &mut extras, stop_rx)
         .await
         .unwrap();
@@ -277,7 +277,7 @@ async fn realtime_holds_and_counts_missing_torques() {
         &cfg(team, 100),
         Duration::from_millis(10),
         &mut plant,
-        &mut Extras::default(),
+        &mut LoopDuties::default(),
         stop_rx,
     )
     .await
@@ -311,7 +311,7 @@ async fn a_perturbation_from_the_key_pushes_the_object() {
     let s = session.clone();
     let rx = stop_rx.clone();
     let run = tokio::spawn(async move {
-        let mut extras = Extras {
+        let mut extras = LoopDuties {
             perturbation_key: true,
             truth_log: Some(GroundTruthLog::new(1)),
             ..Default::default()

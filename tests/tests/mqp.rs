@@ -9,9 +9,9 @@
 use std::path::{Path, PathBuf};
 
 use evaluation::evaluate;
-use scenario::plan;
 use launch::run::{self, RunOptions};
 use scenario::file::Scenario;
+use scenario::plan;
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("repo root").to_path_buf()

@@ -18,8 +18,8 @@
 //!   object held with every check passed (bisection over runs) over the computed capacity.
 
 use experiments::simulated_capacity as simulated;
-use scenario::plan::{self, PlanError};
 use scenario::file::Scenario;
+use scenario::plan::{self, PlanError};
 
 mod common;
 use common::scenario::{repo, run_plan};
@@ -38,10 +38,7 @@ fn the_unequally_spaced_beam_is_refused_where_it_would_fall_and_held_below_its_c
     assert!(
         matches!(
             err,
-            PlanError::Capacity {
-                check: scenario::payload::CheckError::AlongMotion { .. },
-                ..
-            }
+            PlanError::Capacity { check: scenario::payload::CheckError::AlongMotion { .. }, .. }
         ),
         "{msg}"
     );

@@ -5,11 +5,11 @@
 
 use std::time::{Duration, Instant};
 
+use launch::processes::{free_port, spawn, ChildGuard};
+use launch::smoke::SMOKE_COMMAND_DEADLINE;
 use protocol::keys::{self, RobotTopic};
 use protocol::transport::{self, decode_sample, Role, ZenohArgs};
 use protocol::{CoordinatorStatus, TorqueCommand};
-use launch::processes::{free_port, spawn, ChildGuard};
-use launch::smoke::SMOKE_COMMAND_DEADLINE;
 
 fn team_args(team: &str) -> Vec<String> {
     vec!["--team".into(), team.into()]

@@ -11,14 +11,14 @@ mod common;
 
 use std::collections::BTreeSet;
 
-use evaluation::records::Records;
 use evaluation::evaluate::{self, Metrics};
-use launch::launcher::RunMode;
 use evaluation::loop_timing::LoopReport;
-use scenario::plan::{self, Plan};
+use evaluation::records::Records;
+use launch::launcher::RunMode;
 use launch::record::{RecordOptions, ScenarioSource};
 use launch::run::{self, RunOptions};
 use scenario::file::Scenario;
+use scenario::plan::{self, Plan};
 
 /// The tests run one at a time: two real-time runs at once on two cores miss their deadlines.
 static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());

@@ -21,10 +21,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use launch::processes::{free_port, sibling_binary, spawn, ChildGuard};
 use protocol::access::Identity;
 use protocol::site::ClientConfig;
 use protocol::transport::{self, Role, ZenohArgs};
-use launch::processes::{free_port, sibling_binary, spawn, ChildGuard};
 use zenoh::Session;
 
 /// A site's router running, with the certificates of the site and of both teams.

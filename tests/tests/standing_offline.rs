@@ -4,7 +4,7 @@
 use sim_bridge::mujoco_plant::MujocoPlant;
 use sim_bridge::plant::{empty_state, Plant};
 use sim_bridge::world::{load_robots, World, WorldSpec};
-use team_tests::standing::{StandingController, StandingGains};
+use team_tests::standing_controller::{StandingController, StandingGains};
 
 #[test]
 fn default_robot_stands_5_s_offline() {

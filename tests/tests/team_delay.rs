@@ -7,8 +7,8 @@
 
 mod common;
 
-use evaluation::records::Records;
 use evaluation::evaluate::Metrics;
+use evaluation::records::Records;
 use scenario::plan::Plan;
 
 fn run(sets: &[&str], name: &str) -> (Plan, Metrics, Records) {

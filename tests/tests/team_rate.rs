@@ -7,8 +7,8 @@
 
 mod common;
 
-use evaluation::records::Records;
 use evaluation::evaluate::Metrics;
+use evaluation::records::Records;
 use scenario::plan::Plan;
 
 const SETS: [&str; 2] = ["duration=2", "settle=0.5"];

@@ -14,8 +14,8 @@ use std::path::Path;
 
 use common::scenario::{repo, run_scenario};
 use evaluation::evaluate::Metrics;
-use scenario::plan::{self, Plan};
 use scenario::file::Scenario;
+use scenario::plan::{self, Plan};
 
 fn assert_team_accepted(plan: &Plan, m: &Metrics, robots: usize) {
     assert_eq!(plan.robots.len(), robots);

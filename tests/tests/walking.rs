@@ -489,8 +489,8 @@ fn a_walk_beyond_the_arms_torque_is_refused_before_the_run() {
         text.contains("arm_joint_") && text.contains("limit"),
         "names the joint and its limit: {text}"
     );
-    let light = scenario::file::Scenario::load(&file, &["object.mass=2.0".to_string()])
-        .expect("scenario");
+    let light =
+        scenario::file::Scenario::load(&file, &["object.mass=2.0".to_string()]).expect("scenario");
     scenario::plan::plan(&light, &common::scenario::repo())
         .unwrap_or_else(|e| panic!("2 kg plans: {e}"));
 }

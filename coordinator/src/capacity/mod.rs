@@ -14,8 +14,9 @@
 //!   object pushes each palm with `-lambda_k`);
 //! * every contact keeps the controller's rows (eqn. unilateral_and_friction_cone_constraint,
 //!   eqn. moment_constraint) with the controller's margins and minimum forces: the rows are
-//!   [`crate::qp::contact_rows`] of [`crate::units::contacts::contact_list`], the torque
-//!   limits [`crate::units::limits::torque_limits`], `G` [`crate::units::grasp::GraspTerms`].
+//!   [`crate::qp::contact_rows`] of [`crate::building_blocks::contacts::contact_list`], the torque
+//!   limits [`crate::building_blocks::limits::torque_limits`], `G`
+//!   [`crate::building_blocks::grasp::GraspTerms`].
 //!
 //! At rest the controller's QP has no task acceleration to produce, so any `lambda` it may
 //! choose must satisfy this problem: a scenario this problem refuses, the controller's QP
@@ -38,7 +39,9 @@ pub mod solve;
 
 pub use problem::{Limit, LimitRow, Place, StaticProblem};
 pub use report::{BindingLimit, CapacityError};
-pub use solve::{Capacity, Relaxed, StaticSolution, CAPACITY_TOLERANCE, FEASIBILITY_TOL, REACHED_TOL};
+pub use solve::{
+    Capacity, Relaxed, StaticSolution, CAPACITY_TOLERANCE, FEASIBILITY_TOL, REACHED_TOL,
+};
 
 #[cfg(doc)]
-use crate::units::contact_margins::ContactMargins;
+use crate::building_blocks::contact_margins::ContactMargins;

@@ -9,12 +9,12 @@ use protocol::conventions::GRAVITY_VECTOR;
 use protocol::{DynamicsTerms, RobotDescription};
 
 use super::report::CapacityError;
+use crate::building_blocks::contact_margins::ContactMargins;
+use crate::building_blocks::contacts::contact_list;
+use crate::building_blocks::grasp::GraspTerms;
+use crate::building_blocks::limits::torque_limits;
 use crate::qp::{contact_rows, ContactKind, FRICTION_SIGNS};
 use crate::team::Team;
-use crate::units::contact_margins::ContactMargins;
-use crate::units::contacts::contact_list;
-use crate::units::grasp::GraspTerms;
-use crate::units::limits::torque_limits;
 
 /// Largest joint speed taken as rest, rad/s or m/s: the terms' `h` is then `g(q)`.
 pub const REST_SPEED: f64 = 1e-9;
@@ -49,7 +49,9 @@ impl Limit {
     /// The unit of the row's excess.
     pub fn unit(&self) -> &'static str {
         match self {
-            Limit::Friction { .. } | Limit::FrictionAndTorsion { .. } | Limit::MinNormal { .. } => "N",
+            Limit::Friction { .. } | Limit::FrictionAndTorsion { .. } | Limit::MinNormal { .. } => {
+                "N"
+            }
             _ => "Nm",
         }
     }
@@ -67,14 +69,28 @@ pub struct LimitRow {
 fn contact_limits(kind: &ContactKind) -> Vec<Limit> {
     let fr = |axis, positive| Limit::Friction { axis, positive };
     match kind {
-        ContactKind::Foot { f_min, .. } => vec![fr('x', true), fr('x', false), fr('y', true), fr('y', false), Limit::MinNormal { f_min: *f_min }],
+        ContactKind::Foot { f_min, .. } => vec![
+            fr('x', true),
+            fr('x', false),
+            fr('y', true),
+            fr('y', false),
+            Limit::MinNormal { f_min: *f_min },
+        ],
         ContactKind::Hand { f_min, .. } => {
             let cop = |axis, positive| Limit::CentreOfPressure { axis, positive };
-            let mut names: Vec<Limit> = FRICTION_SIGNS.iter().map(|&(x, y, z)| Limit::FrictionAndTorsion { x: x > 0.0, y: y > 0.0, torsion: z > 0.0 }).collect();
+            let mut names: Vec<Limit> = FRICTION_SIGNS
+                .iter()
+                .map(|&(x, y, z)| Limit::FrictionAndTorsion {
+                    x: x > 0.0,
+                    y: y > 0.0,
+                    torsion: z > 0.0,
+                })
+                .collect();
             names.extend([
                 Limit::MinNormal { f_min: *f_min },
                 // The tilt moments (rows.rs): m_x = -p_y f_n, m_y = p_x f_n, so the row
-                // `t_x . m <= delta_y f_n` keeps p_y >= -delta_y, `t_y . m <= delta_x f_n` p_x <= delta_x.
+                // `t_x . m <= delta_y f_n` keeps p_y >= -delta_y, `t_y . m <= delta_x f_n`
+                // p_x <= delta_x.
                 cop('y', false),
                 cop('y', true),
                 cop('x', true),
@@ -110,9 +126,14 @@ pub struct StaticProblem {
 
 impl StaticProblem {
     /// Build from one tick's terms of the team at rest, the robots' descriptions and the
-    /// controller's contact parameters (margins, minimum forces, e.g. `PidcConfig::contact_margins`),
-    /// the object's centre at `centre`.
-    pub fn build(terms: &[DynamicsTerms], descriptions: &[RobotDescription], margins: &ContactMargins, centre: Vector3<f64>) -> Result<Self, CapacityError> {
+    /// controller's contact parameters (margins, minimum forces, e.g.
+    /// `PidcConfig::contact_margins`), the object's centre at `centre`.
+    pub fn build(
+        terms: &[DynamicsTerms],
+        descriptions: &[RobotDescription],
+        margins: &ContactMargins,
+        centre: Vector3<f64>,
+    ) -> Result<Self, CapacityError> {
         if centre.iter().any(|x| !x.is_finite()) {
             return Err(CapacityError::Input(format!("object centre {centre:?} must be finite")));
         }
@@ -125,7 +146,8 @@ impl StaticProblem {
         if team.hands.is_empty() {
             return Err(CapacityError::NoHands);
         }
-        let descs: BTreeMap<String, RobotDescription> = descriptions.iter().map(|d| (d.header.robot_id().to_string(), d.clone())).collect();
+        let descs: BTreeMap<String, RobotDescription> =
+            descriptions.iter().map(|d| (d.header.robot_id().to_string(), d.clone())).collect();
         let (mut actuated, mut limits, mut contacts) = (Vec::new(), Vec::new(), Vec::new());
         torque_limits(&team, &descs, false, &mut actuated, &mut limits)?;
         contact_list(&team, &descs, margins, &mut contacts)?;
@@ -135,7 +157,21 @@ impl StaticProblem {
         let (e, e0, e1) = equalities(&team, &j_c, &centre)?;
         let (a, b, rows) = limit_rows(&team, &j_c, &contacts, &actuated, &limits, &descs);
         let (p, q) = objective(&team, &j_c, &actuated, &limits);
-        Ok(StaticProblem { team, object_centre: centre, e, e0, e1, a, b, rows, p, q, j_c, actuated, limits })
+        Ok(StaticProblem {
+            team,
+            object_centre: centre,
+            e,
+            e0,
+            e1,
+            a,
+            b,
+            rows,
+            p,
+            q,
+            j_c,
+            actuated,
+            limits,
+        })
     }
 
     /// The object moving through the pose: its six rows of `E lambda = e0 + m e1` become the
@@ -144,7 +180,12 @@ impl StaticProblem {
     /// `unit_inertia` its inertia per kilogram about its centre (world-aligned; a uniform body's
     /// inertia scales with its mass, so the rows stay linear in `m`). At rest these are the
     /// static rows.
-    pub fn with_object_motion(mut self, acceleration: &Vector6<f64>, omega: &Vector3<f64>, unit_inertia: &nalgebra::Matrix3<f64>) -> Self {
+    pub fn with_object_motion(
+        mut self,
+        acceleration: &Vector6<f64>,
+        omega: &Vector3<f64>,
+        unit_inertia: &nalgebra::Matrix3<f64>,
+    ) -> Self {
         let first = self.e.nrows() - 6;
         let a = acceleration.fixed_rows::<3>(0);
         let alpha = acceleration.fixed_rows::<3>(3);
@@ -163,21 +204,33 @@ impl StaticProblem {
 
     /// Each hand's wrench in `lambda` (`[force; moment]`, world-aligned, acting on the robot,
     /// about the hand frame's origin): `(robot id, that origin, wrench)`, in team order.
-    pub fn hand_wrenches(&self, lambda: &DVector<f64>) -> Vec<(String, Vector3<f64>, Vector6<f64>)> {
+    pub fn hand_wrenches(
+        &self,
+        lambda: &DVector<f64>,
+    ) -> Vec<(String, Vector3<f64>, Vector6<f64>)> {
         let first = 3 * self.team.feet.len();
         self.team
             .hands
             .iter()
             .enumerate()
             .filter(|(h, _)| first + 6 * h + 6 <= lambda.len())
-            .map(|(h, f)| (self.team.robots[f.robot].id.clone(), f.position, lambda.fixed_rows::<6>(first + 6 * h).into_owned()))
+            .map(|(h, f)| {
+                (
+                    self.team.robots[f.robot].id.clone(),
+                    f.position,
+                    lambda.fixed_rows::<6>(first + 6 * h).into_owned(),
+                )
+            })
             .collect()
     }
 
     /// The actuated joints' torques `tau = g_a - J_c,a^T lambda`.
     pub fn torques(&self, lambda: &DVector<f64>) -> DVector<f64> {
         let jt = self.j_c.tr_mul(lambda);
-        DVector::from_iterator(self.actuated.len(), self.actuated.iter().map(|&j| self.team.bias[j] - jt[j]))
+        DVector::from_iterator(
+            self.actuated.len(),
+            self.actuated.iter().map(|&j| self.team.bias[j] - jt[j]),
+        )
     }
 }
 
@@ -186,17 +239,29 @@ type Equalities = (DMatrix<f64>, DVector<f64>, DVector<f64>);
 
 /// `E lambda = e0 + m e1`: each floating base's 6 rows `(J_c^T lambda)_u = g_u` (eq.
 /// js_dynamics at rest), then the object's `G lambda_hands = m [g_vec; 0]` (eq. graspmatrix).
-fn equalities(team: &Team, j_c: &DMatrix<f64>, centre: &Vector3<f64>) -> Result<Equalities, CapacityError> {
-    let bases: Vec<usize> = team.robots.iter().filter(|r| r.floating_base).flat_map(|r| r.offset..r.offset + 6).collect();
+fn equalities(
+    team: &Team,
+    j_c: &DMatrix<f64>,
+    centre: &Vector3<f64>,
+) -> Result<Equalities, CapacityError> {
+    let bases: Vec<usize> = team
+        .robots
+        .iter()
+        .filter(|r| r.floating_base)
+        .flat_map(|r| r.offset..r.offset + 6)
+        .collect();
     let m = j_c.nrows();
     let rows = bases.len() + 6;
-    let (mut e, mut e0, mut e1) = (DMatrix::zeros(rows, m), DVector::zeros(rows), DVector::zeros(rows));
+    let (mut e, mut e0, mut e1) =
+        (DMatrix::zeros(rows, m), DVector::zeros(rows), DVector::zeros(rows));
     for (i, &u) in bases.iter().enumerate() {
         e.row_mut(i).copy_from(&j_c.column(u).transpose());
         e0[i] = team.bias[u];
     }
     let mut grasp = GraspTerms::default();
-    grasp.compute_into(team, Isometry3::translation(centre.x, centre.y, centre.z)).ok_or(CapacityError::Input("singular grasp matrix".into()))?;
+    grasp
+        .compute_into(team, Isometry3::translation(centre.x, centre.y, centre.z))
+        .ok_or(CapacityError::Input("singular grasp matrix".into()))?;
     let first_hand = 3 * team.feet.len();
     e.view_mut((bases.len(), first_hand), (6, grasp.g.ncols())).copy_from(&grasp.g);
     for k in 0..3 {
@@ -223,7 +288,8 @@ fn limit_rows(
     };
     let nc: usize = contacts.iter().map(|(_, k)| contact_rows(k).len()).sum();
     let m = j_c.nrows();
-    let (mut a, mut b) = (DMatrix::zeros(nc + 2 * actuated.len(), m), DVector::zeros(nc + 2 * actuated.len()));
+    let (mut a, mut b) =
+        (DMatrix::zeros(nc + 2 * actuated.len(), m), DVector::zeros(nc + 2 * actuated.len()));
     let mut rows = Vec::with_capacity(a.nrows());
     for (start, kind) in contacts {
         let (robot, name) = frame(*start);
@@ -233,27 +299,59 @@ fn limit_rows(
                 a[(i, start + r)] = -cr;
             }
             b[i] = -lo;
-            rows.push(LimitRow { robot: robot.clone(), place: Place::Contact(name.clone()), limit });
+            rows.push(LimitRow {
+                robot: robot.clone(),
+                place: Place::Contact(name.clone()),
+                limit,
+            });
         }
     }
     for (&j, &max) in actuated.iter().zip(limits) {
-        let rb = team.robots.iter().find(|r| r.offset <= j && j < r.offset + r.nv).expect("an actuated joint belongs to a robot");
-        let joint = descs.get(&rb.id).and_then(|d| d.joint_names.get(rb.actuated.iter().position(|&x| x == j)?)).cloned().unwrap_or_else(|| format!("joint {j}"));
+        let (robot, joint) = actuated_joint(team, descs, j);
         for upper in [true, false] {
             // tau = g_j - a_j . lambda: tau <= max <=> -a_j . lambda <= max - g_j.
             let s = if upper { -1.0 } else { 1.0 };
             let i = rows.len();
             a.row_mut(i).copy_from(&(s * j_c.column(j).transpose()));
             b[i] = max + s * team.bias[j];
-            rows.push(LimitRow { robot: rb.id.clone(), place: Place::Joint(joint.clone()), limit: Limit::Torque { upper, max } });
+            rows.push(LimitRow {
+                robot: robot.to_string(),
+                place: Place::Joint(joint.clone()),
+                limit: Limit::Torque { upper, max },
+            });
         }
     }
     (a, b, rows)
 }
 
+/// The robot of the team's actuated joint `j` and the joint's name (from the robot's
+/// description, else `joint {j}`).
+fn actuated_joint<'a>(
+    team: &'a Team,
+    descs: &BTreeMap<String, RobotDescription>,
+    j: usize,
+) -> (&'a str, String) {
+    let rb = team
+        .robots
+        .iter()
+        .find(|r| r.offset <= j && j < r.offset + r.nv)
+        .expect("an actuated joint belongs to a robot");
+    let joint = descs
+        .get(&rb.id)
+        .and_then(|d| d.joint_names.get(rb.actuated.iter().position(|&x| x == j)?))
+        .cloned()
+        .unwrap_or_else(|| format!("joint {j}"));
+    (&rb.id, joint)
+}
+
 /// `min sum_j (tau_j / max_j)^2 + eps |lambda|^2` as `1/2 lambda^T P lambda + q^T lambda`:
 /// the torques the team needs, each relative to its limit, least squares.
-fn objective(team: &Team, j_c: &DMatrix<f64>, actuated: &[usize], limits: &[f64]) -> (DMatrix<f64>, DVector<f64>) {
+fn objective(
+    team: &Team,
+    j_c: &DMatrix<f64>,
+    actuated: &[usize],
+    limits: &[f64],
+) -> (DMatrix<f64>, DVector<f64>) {
     let m = j_c.nrows();
     let mut p = DMatrix::identity(m, m) * (2.0 * LAMBDA_REGULARISATION);
     let mut q = DVector::zeros(m);
@@ -274,7 +372,15 @@ mod tests {
     #[test]
     fn every_contact_row_has_a_name() {
         let foot = ContactKind::Foot { mu: 0.5, f_min: 5.0, f_max: f64::INFINITY };
-        let hand = ContactKind::Hand { tx: Vector3::x(), ty: Vector3::y(), n: Vector3::z(), mu: 0.5, xi: 0.03, half: [0.05, 0.04], f_min: 30.0 };
+        let hand = ContactKind::Hand {
+            tx: Vector3::x(),
+            ty: Vector3::y(),
+            n: Vector3::z(),
+            mu: 0.5,
+            xi: 0.03,
+            half: [0.05, 0.04],
+            f_min: 30.0,
+        };
         for k in [foot, hand] {
             assert_eq!(contact_rows(&k).len(), contact_limits(&k).len());
         }

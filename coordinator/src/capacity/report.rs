@@ -31,14 +31,28 @@ impl fmt::Display for BindingLimit {
             Place::Contact(c) => write!(f, "robot {} contact {c}: ", self.robot)?,
         }
         match (self.limit, self.torque) {
-            (Limit::Torque { max, .. }, Some(t)) => write!(f, "torque {t:.2} Nm, limit {max:.2} Nm")?,
-            (Limit::Torque { upper, max }, None) => write!(f, "torque limit {}{max:.2} Nm", sign(upper))?,
-            (Limit::Friction { axis, positive }, _) => write!(f, "friction along {}{axis}", sign(positive))?,
-            (Limit::MinNormal { f_min }, _) => write!(f, "normal force below its minimum {f_min:.2} N")?,
-            (Limit::FrictionAndTorsion { x, y, torsion }, _) => {
-                write!(f, "friction along {}x and {}y with torsion ({}) beyond the palm's cone", sign(x), sign(y), sign(torsion))?
+            (Limit::Torque { max, .. }, Some(t)) => {
+                write!(f, "torque {t:.2} Nm, limit {max:.2} Nm")?
             }
-            (Limit::CentreOfPressure { axis, positive }, _) => write!(f, "centre of pressure past the patch's {}{axis} edge", sign(positive))?,
+            (Limit::Torque { upper, max }, None) => {
+                write!(f, "torque limit {}{max:.2} Nm", sign(upper))?
+            }
+            (Limit::Friction { axis, positive }, _) => {
+                write!(f, "friction along {}{axis}", sign(positive))?
+            }
+            (Limit::MinNormal { f_min }, _) => {
+                write!(f, "normal force below its minimum {f_min:.2} N")?
+            }
+            (Limit::FrictionAndTorsion { x, y, torsion }, _) => write!(
+                f,
+                "friction along {}x and {}y with torsion ({}) beyond the palm's cone",
+                sign(x),
+                sign(y),
+                sign(torsion)
+            )?,
+            (Limit::CentreOfPressure { axis, positive }, _) => {
+                write!(f, "centre of pressure past the patch's {}{axis} edge", sign(positive))?
+            }
         }
         if self.over > 0.0 {
             write!(f, " ({:.3} {} over)", self.over, self.limit.unit())
@@ -61,7 +75,10 @@ pub enum CapacityError {
     NotAtRest { robot: String },
     #[error("assembling the team: {0}")]
     Team(#[from] ControllerError),
-    #[error("no contact wrenches balance the robots and a {mass} kg object, whatever the limits (the grasp or the stance cannot carry the load)")]
+    #[error(
+        "no contact wrenches balance the robots and a {mass} kg object, whatever the limits (the \
+         grasp or the stance cannot carry the load)"
+    )]
     NoEquilibrium { mass: f64 },
     #[error("Clarabel: {0}")]
     Solver(String),

@@ -3,7 +3,10 @@
 //! bisection.
 
 use clarabel::algebra::CscMatrix;
-use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus, SupportedConeT, ZeroConeT};
+use clarabel::solver::{
+    DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus, SupportedConeT,
+    ZeroConeT,
+};
 use nalgebra::{DMatrix, DVector};
 
 use super::problem::{Limit, StaticProblem};
@@ -45,7 +48,13 @@ impl Relaxed {
 
     /// The rows over by more than [`FEASIBILITY_TOL`], largest first.
     pub fn binding(&self, p: &StaticProblem) -> Vec<BindingLimit> {
-        let over: Vec<(usize, f64)> = self.slack.iter().enumerate().filter(|(_, s)| **s > FEASIBILITY_TOL).map(|(i, s)| (i, *s)).collect();
+        let over: Vec<(usize, f64)> = self
+            .slack
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| **s > FEASIBILITY_TOL)
+            .map(|(i, s)| (i, *s))
+            .collect();
         p.limits_at(&self.lambda, &over)
     }
 }
@@ -86,15 +95,33 @@ fn check_mass(mass: f64) -> Result<(), CapacityError> {
 
 /// Clarabel on `min 1/2 x^T P x + q^T x` s.t. `A_eq x = b_eq`, `A_in x <= b_in`: the point
 /// when (almost) solved, `Ok(None)` when infeasible.
-fn clarabel(p: &DMatrix<f64>, q: &DVector<f64>, a: &DMatrix<f64>, b: &DVector<f64>, eq: usize) -> Result<Option<DVector<f64>>, CapacityError> {
-    let settings = DefaultSettings::<f64> { verbose: false, max_iter: 200, tol_feas: 1e-10, tol_gap_abs: 1e-10, tol_gap_rel: 1e-10, ..DefaultSettings::default() };
+fn clarabel(
+    p: &DMatrix<f64>,
+    q: &DVector<f64>,
+    a: &DMatrix<f64>,
+    b: &DVector<f64>,
+    eq: usize,
+) -> Result<Option<DVector<f64>>, CapacityError> {
+    let settings = DefaultSettings::<f64> {
+        verbose: false,
+        max_iter: 200,
+        tol_feas: 1e-10,
+        tol_gap_abs: 1e-10,
+        tol_gap_rel: 1e-10,
+        ..DefaultSettings::default()
+    };
     let cones: [SupportedConeT<f64>; 2] = [ZeroConeT(eq), NonnegativeConeT(a.nrows() - eq)];
     let (pc, ac): (CscMatrix<f64>, CscMatrix<f64>) = (to_csc(p, true), to_csc(a, false));
-    let mut solver = DefaultSolver::new(&pc, q.as_slice(), &ac, b.as_slice(), &cones, settings).map_err(|e| CapacityError::Solver(format!("{e:?}")))?;
+    let mut solver = DefaultSolver::new(&pc, q.as_slice(), &ac, b.as_slice(), &cones, settings)
+        .map_err(|e| CapacityError::Solver(format!("{e:?}")))?;
     solver.solve();
     let sol = &solver.solution;
     match sol.status {
-        SolverStatus::Solved | SolverStatus::AlmostSolved if sol.x.iter().all(|x| x.is_finite()) => Ok(Some(DVector::from_column_slice(&sol.x))),
+        SolverStatus::Solved | SolverStatus::AlmostSolved
+            if sol.x.iter().all(|x| x.is_finite()) =>
+        {
+            Ok(Some(DVector::from_column_slice(&sol.x)))
+        }
         SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => Ok(None),
         s => Err(CapacityError::Solver(format!("status {s:?}"))),
     }
@@ -110,8 +137,15 @@ impl StaticProblem {
             .iter()
             .map(|&(i, over)| {
                 let row = &self.rows[i];
-                let torque = matches!(row.limit, Limit::Torque { .. }).then(|| tau[(i - first_torque) / 2]);
-                BindingLimit { robot: row.robot.clone(), place: row.place.clone(), limit: row.limit, over, torque }
+                let torque =
+                    matches!(row.limit, Limit::Torque { .. }).then(|| tau[(i - first_torque) / 2]);
+                BindingLimit {
+                    robot: row.robot.clone(),
+                    place: row.place.clone(),
+                    limit: row.limit,
+                    over,
+                    torque,
+                }
             })
             .collect();
         out.sort_by(|a, b| b.over.total_cmp(&a.over));
@@ -122,7 +156,8 @@ impl StaticProblem {
     /// closest to (or furthest over) first; `over` is `A lambda - b` (<= 0 when within).
     pub fn reached(&self, lambda: &DVector<f64>, tol: f64) -> Vec<BindingLimit> {
         let r = &self.a * lambda - &self.b;
-        let rows: Vec<(usize, f64)> = r.iter().enumerate().filter(|(_, x)| **x > -tol).map(|(i, x)| (i, *x)).collect();
+        let rows: Vec<(usize, f64)> =
+            r.iter().enumerate().filter(|(_, x)| **x > -tol).map(|(i, x)| (i, *x)).collect();
         self.limits_at(lambda, &rows)
     }
 
@@ -149,7 +184,11 @@ impl StaticProblem {
         b.rows_mut(0, ne).copy_from(&self.rhs(mass));
         b.rows_mut(ne, r).copy_from(&self.b);
         let x = clarabel(&p, &q, &a, &b, ne)?.ok_or(CapacityError::NoEquilibrium { mass })?;
-        Ok(Relaxed { mass, lambda: x.rows(0, m).into_owned(), slack: x.rows(m, r).map(|s| s.max(0.0)) })
+        Ok(Relaxed {
+            mass,
+            lambda: x.rows(0, m).into_owned(),
+            slack: x.rows(m, r).map(|s| s.max(0.0)),
+        })
     }
 
     /// Contact wrenches holding `mass`, or [`CapacityError::Infeasible`] with the binding limits.
@@ -166,11 +205,18 @@ impl StaticProblem {
         b.rows_mut(0, ne).copy_from(&self.rhs(mass));
         b.rows_mut(ne, r).copy_from(&self.b);
         // Right at the capacity the hard problem may fail to converge: the relaxed point holds.
-        let mut lambda = clarabel(&self.p, &self.q, &a, &b, ne).ok().flatten().unwrap_or(relaxed.lambda);
+        let mut lambda =
+            clarabel(&self.p, &self.q, &a, &b, ne).ok().flatten().unwrap_or(relaxed.lambda);
         self.polish(mass, &mut lambda)?;
         let worst_limit = (&self.a * &lambda - &self.b).max();
         let equality_residual = (&self.e * &lambda - self.rhs(mass)).amax();
-        Ok(StaticSolution { mass, torques: self.torques(&lambda), lambda, worst_limit, equality_residual })
+        Ok(StaticSolution {
+            mass,
+            torques: self.torques(&lambda),
+            lambda,
+            worst_limit,
+            equality_residual,
+        })
     }
 
     /// The least change of `lambda` that satisfies the equalities to rounding
@@ -178,7 +224,9 @@ impl StaticProblem {
     fn polish(&self, mass: f64, lambda: &mut DVector<f64>) -> Result<(), CapacityError> {
         let res = &self.e * &*lambda - self.rhs(mass);
         let svd = self.e.clone().svd(true, true);
-        let d = svd.solve(&res, 1e-12).map_err(|e| CapacityError::Solver(format!("equality polish: {e}")))?;
+        let d = svd
+            .solve(&res, 1e-12)
+            .map_err(|e| CapacityError::Solver(format!("equality polish: {e}")))?;
         *lambda -= d;
         Ok(())
     }
@@ -187,7 +235,9 @@ impl StaticProblem {
     /// bracket is narrower than `tolerance` kg. Errors when not even 0 kg is held.
     pub fn capacity(&self, tolerance: f64) -> Result<Capacity, CapacityError> {
         if !(tolerance.is_finite() && tolerance > 0.0) {
-            return Err(CapacityError::Input(format!("capacity tolerance {tolerance} kg must be positive")));
+            return Err(CapacityError::Input(format!(
+                "capacity tolerance {tolerance} kg must be positive"
+            )));
         }
         let mut solves = 2;
         let zero = self.relaxed(0.0)?;

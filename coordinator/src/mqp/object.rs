@@ -1,6 +1,6 @@
 //! The carried object in the MQP: a rigid body fixed to the hands (Bouyarmane et al. put it in
 //! the QP as one more robot). The object is not in the team's coordinates (see
-//! [`crate::units::grasp`]): its acceleration is `a_o = J_o qdd + Jdot_o v`, and its
+//! [`crate::building_blocks::grasp`]): its acceleration is `a_o = J_o qdd + Jdot_o v`, and its
 //! Newton-Euler equation `M_o a_o + b_o = -F_x` gives the load `J_o^T F_x` it puts on the
 //! robots (eq. js_dynamics' `J_x^T F_x`), now an affine function of the decision variable
 //! `qdd` instead of PIDC's feed-forward at the reference acceleration:
@@ -9,13 +9,14 @@
 //!
 //! with `M_o = diag(m I, R I_o R^T)` and `b_o = [-m g; omega x I omega]`. The real wrench on
 //! hand `i` is `lambda_ee,i + (G^+ F_x)_i = lambda_ee,i - (G^+ M_o J_o qdd)_i - (G^+ c_o)_i`,
-//! `c_o = M_o Jdot_o v + b_o` (see [`crate::units::object_load`] for the load's distribution).
+//! `c_o = M_o Jdot_o v + b_o` (see [`crate::building_blocks::object_load`] for the load's
+//! distribution).
 
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector6};
 
+use crate::building_blocks::grasp::GraspTerms;
+use crate::building_blocks::object_load::object_load;
 use crate::linalg::{mat, product, zeros, zeros_v};
-use crate::units::object_load::object_load;
-use crate::units::grasp::GraspTerms;
 
 /// The object's terms of one tick (all zero-sized without a grasp).
 #[derive(Debug, Clone, Default)]
@@ -36,7 +37,13 @@ pub struct ObjectTerms {
 
 impl ObjectTerms {
     /// For the tick's grasp (`None`: no object, the terms are zero of size n / 0).
-    pub fn compute_into(&mut self, grasp: Option<&GraspTerms>, n: usize, mass: f64, inertia: &Matrix3<f64>) {
+    pub fn compute_into(
+        &mut self,
+        grasp: Option<&GraspTerms>,
+        n: usize,
+        mass: f64,
+        inertia: &Matrix3<f64>,
+    ) {
         let Some(g) = grasp else {
             zeros(&mut self.mass, n, n);
             zeros_v(&mut self.bias, n);

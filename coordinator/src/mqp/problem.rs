@@ -28,13 +28,13 @@
 use clarabel::algebra::CscMatrix;
 use nalgebra::{DMatrix, DVector};
 
+use crate::building_blocks::grasp::GraspTerms;
 use crate::linalg::{zeros, zeros_v};
 use crate::mqp::object::ObjectTerms;
 use crate::mqp::tasks::TaskRows;
 use crate::mqp::MqpConfig;
 use crate::qp::{contact_rows, ContactKind};
 use crate::team::Team;
-use crate::units::grasp::GraspTerms;
 
 /// Where each block of `x` starts.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -93,7 +93,16 @@ pub struct MqpProblem {
 impl Default for MqpProblem {
     fn default() -> Self {
         let empty = || CscMatrix::new(0, 0, vec![0], Vec::new(), Vec::new());
-        MqpProblem { layout: Layout::default(), p: DMatrix::zeros(0, 0), q: DVector::zeros(0), a: DMatrix::zeros(0, 0), b: DVector::zeros(0), p_csc: empty(), a_csc: empty(), wj: DMatrix::zeros(0, 0) }
+        MqpProblem {
+            layout: Layout::default(),
+            p: DMatrix::zeros(0, 0),
+            q: DVector::zeros(0),
+            a: DMatrix::zeros(0, 0),
+            b: DVector::zeros(0),
+            p_csc: empty(),
+            a_csc: empty(),
+            wj: DMatrix::zeros(0, 0),
+        }
     }
 }
 
@@ -138,7 +147,11 @@ impl MqpProblem {
         let mut qq = self.q.rows_mut(0, n);
         qq.gemv_tr(-1.0, &self.wj, &t.rhs, 0.0);
         let c = inp.config;
-        for (range, eps) in [(0..n, c.regularisation_qdd), (n..n + m, c.regularisation_lambda), (n + m..n + m + na, c.regularisation_tau)] {
+        for (range, eps) in [
+            (0..n, c.regularisation_qdd),
+            (n..n + m, c.regularisation_lambda),
+            (n + m..n + m + na, c.regularisation_tau),
+        ] {
             for i in range {
                 self.p[(i, i)] += 2.0 * eps;
             }
@@ -213,7 +226,12 @@ impl MqpProblem {
             }
         }
         for &j in inp.actuated {
-            let (lo, hi) = acceleration_bounds(inp.team.velocity[j], c.joint_acceleration_limit, c.joint_velocity_limit, c.dt);
+            let (lo, hi) = acceleration_bounds(
+                inp.team.velocity[j],
+                c.joint_acceleration_limit,
+                c.joint_velocity_limit,
+                c.dt,
+            );
             self.a[(row, j)] = 1.0;
             self.b[row] = hi;
             self.a[(row + 1, j)] = -1.0;

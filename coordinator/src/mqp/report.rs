@@ -2,17 +2,17 @@
 //! outputs written from it: each robot's torque slice and the tick's diagnostics.
 
 use nalgebra::{DMatrix, DVector};
-use protocol::{ContactWrench, DynamicsTerms, Header, TickDiagnostics, TorqueCommand};
+use protocol::{DynamicsTerms, TickDiagnostics, TorqueCommand};
 
-use crate::linalg::{quat_wxyz, zeros_v};
+use crate::building_blocks::grasp::GraspTerms;
+use crate::controller_shell::report::{diagnostics_into, torque_commands_into, TickOutputs};
+use crate::linalg::zeros_v;
 use crate::mqp::object::ObjectTerms;
 use crate::mqp::problem::MqpProblem;
 use crate::mqp::solve::SolveOutcome;
 use crate::mqp::tasks::TaskRows;
 use crate::qp::ContactKind;
 use crate::team::Team;
-use crate::units::grasp::GraspTerms;
-use crate::units::messages::{set_header, set_string};
 
 /// Where the time of a tick went, µs.
 #[derive(Debug, Clone, Copy, Default)]
@@ -48,7 +48,7 @@ pub struct MqpReport {
     /// Why the torque came from the fallback, if it did.
     pub fallback: Option<String>,
     /// Why the hands are free while the contact sets hold the object
-    /// ([`crate::units::release`]); `None` while the grasp holds.
+    /// ([`crate::building_blocks::release`]); `None` while the grasp holds.
     pub release: Option<String>,
     pub timing: MqpTiming,
 }
@@ -81,55 +81,33 @@ impl MqpReport {
 
     /// Each robot's torque slice into `out` (messages reused when the team is the same).
     pub fn commands_into(&self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) {
-        out.truncate(self.team.robots.len());
         let mut k = 0;
-        for (i, (r, t)) in self.team.robots.iter().zip(tick).enumerate() {
-            if i == out.len() {
-                out.push(TorqueCommand { header: Header::new(&t.header.team, Some(&r.id), 0, 0), tau: Vec::new(), hold: false, delay_ticks: 0 });
-            }
-            let cmd = &mut out[i];
-            // The message may be last tick's hold order (the service reuses the buffer).
-            cmd.hold = false;
-            set_header(&mut cmd.header, &t.header.team, Some(&r.id), t.header.tick, 0);
-            cmd.tau.clear();
-            cmd.tau.extend(self.tau.rows(k, r.actuated.len()).iter());
+        torque_commands_into(&self.team, tick, out, |r, tau| {
+            tau.extend(self.tau.rows(k, r.actuated.len()).iter());
             k += r.actuated.len();
-        }
+        });
     }
 
     /// The tick's diagnostics into `d`: real contact wrenches, the QP's status and time,
     /// `|J_c v|`, the object estimate.
     pub fn diagnostics_into(&self, tick: &[DynamicsTerms], d: &mut TickDiagnostics) {
-        let (team_id, tick_no) = tick.first().map_or(("", 0), |t| (t.header.team.as_str(), t.header.tick));
-        set_header(&mut d.header, team_id, None, tick_no, protocol::wall_clock_ns());
-        let frames = self.team.feet.iter().map(|f| (f, 3)).chain(self.team.hands.iter().map(|h| (h, 6)));
-        d.contacts.truncate(self.team.feet.len() + self.team.hands.len());
-        let mut row = 0;
-        for (k, (f, dim)) in frames.enumerate() {
-            if k == d.contacts.len() {
-                d.contacts.push(ContactWrench { robot: String::new(), frame: String::new(), wrench: Vec::new() });
-            }
-            let c = &mut d.contacts[k];
-            set_string(&mut c.robot, &self.team.robots[f.robot].id);
-            set_string(&mut c.frame, &f.name);
-            c.wrench.clear();
-            if self.wrench.len() >= row + dim {
-                c.wrench.extend(self.wrench.rows(row, dim).iter());
-            } else {
-                c.wrench.extend(std::iter::repeat_n(0.0, dim));
-            }
-            row += dim;
-        }
         let v = &self.team.velocity;
-        let residual = (0..self.j_c.nrows()).map(|i| (0..v.len()).map(|j| self.j_c[(i, j)] * v[j]).sum::<f64>().powi(2)).sum::<f64>().sqrt();
-        d.qp_status = self.outcome.status;
-        d.qp_iterations = self.outcome.iterations;
-        d.qp_solve_us = self.timing.solve_us;
-        d.assembly_us = self.timing.build_us;
-        d.total_us = self.timing.total_us;
-        d.constraint_residual = if residual.is_finite() { residual } else { f64::MAX };
-        d.object_estimate = self.grasp.as_ref().map(|g| protocol::Pose { position: g.object.translation.vector.into(), orientation: quat_wxyz(&g.object.rotation.to_rotation_matrix()) });
-        d.grasp_slip = self.grasp.as_ref().map_or(0.0, |g| g.fit_residual);
-        d.fallback.clone_from(if self.fallback.is_some() { &self.fallback } else { &self.release });
+        let residual = (0..self.j_c.nrows())
+            .map(|i| (0..v.len()).map(|j| self.j_c[(i, j)] * v[j]).sum::<f64>().powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let outputs = TickOutputs {
+            team: &self.team,
+            grasp: self.grasp.as_ref(),
+            wrench: &self.wrench,
+            status: self.outcome.status,
+            iterations: self.outcome.iterations,
+            solve_us: self.timing.solve_us,
+            assembly_us: self.timing.build_us,
+            total_us: self.timing.total_us,
+            residual,
+            note: self.fallback.as_deref().or(self.release.as_deref()),
+        };
+        diagnostics_into(&outputs, tick, d);
     }
 }

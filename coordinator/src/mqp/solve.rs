@@ -36,12 +36,24 @@ pub fn solve(problem: &MqpProblem, max_iter: u32, x: &mut DVector<f64>) -> Solve
     let t0 = Instant::now();
     let l = problem.layout;
     let us = || t0.elapsed().as_secs_f64() * 1e6;
-    let finite = problem.p.iter().chain(problem.q.iter()).chain(problem.a.iter()).chain(problem.b.iter()).all(|v| v.is_finite());
+    let finite = problem
+        .p
+        .iter()
+        .chain(problem.q.iter())
+        .chain(problem.a.iter())
+        .chain(problem.b.iter())
+        .all(|v| v.is_finite());
     if !finite {
         return SolveOutcome { status: QpStatus::NumericalError, iterations: 0, solve_us: us() };
     }
     let cones = [ZeroConeT(l.eq), NonnegativeConeT(l.ineq)];
-    let conic = ConicProblem { p: &problem.p_csc, q: problem.q.as_slice(), a: &problem.a_csc, b: problem.b.as_slice(), cones: &cones };
+    let conic = ConicProblem {
+        p: &problem.p_csc,
+        q: problem.q.as_slice(),
+        a: &problem.a_csc,
+        b: problem.b.as_slice(),
+        cones: &cones,
+    };
     let Some(run) = clarabel::run(&conic, max_iter, Accept::Solved, x) else {
         return SolveOutcome { status: QpStatus::NumericalError, iterations: 0, solve_us: us() };
     };

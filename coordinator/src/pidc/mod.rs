@@ -19,27 +19,27 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use nalgebra::DVector;
-use protocol::{DynamicsTerms, FootLoad, QpStatus, RobotDescription, TaskReferences, TickDiagnostics, TorqueCommand};
+use protocol::{DynamicsTerms, FootLoad, QpStatus, RobotDescription, TorqueCommand};
 
 pub use config::PidcConfig;
 pub use report::{ContactMatrices, MaterializedTick, TickReport, Timing};
 
+use crate::building_blocks::contact_jacobian::{contact_drift, contact_jacobian, contact_velocity};
+use crate::building_blocks::contacts::{contact_list, unload_feet};
+use crate::building_blocks::impedance::{MotionScale, TaskStack};
+use crate::building_blocks::projection::{ProjectionPath, ProjectionWorkspace};
+use crate::controller_shell::{ControlLaw, Shell, ShellState, TickTeam};
 use crate::linalg::zeros_v;
 use crate::qp::{self, QpInput, QpWorkspace};
-use crate::units::contact_jacobian::{contact_drift, contact_jacobian, contact_velocity};
-use crate::units::contacts::{contact_list, unload_feet};
-use crate::units::grasp::GraspTracker;
-use crate::units::impedance::{MotionScale, TaskStack};
-use crate::units::limits::torque_limits;
-use crate::units::messages::set_note;
-use crate::units::projection::{ProjectionPath, ProjectionWorkspace};
-use crate::units::release::{GraspWatch, GraspObservation};
-use crate::{ControllerError, TeamController};
+use crate::ControllerError;
 use stages::acceleration::{commanded_accelerations, AccelerationScratch, ObjectBody};
 use stages::by_robot::{decoupled, ByRobot, ByRobotScratch};
-use stages::tasks::{task_torque, MotionSpaceTerms, TaskTorqueInput, Targets};
+use stages::tasks::{task_torque, MotionSpaceTerms, TaskTorqueInput};
 use stages::torque::{compose, fallback, motion_torque, saturate, Clamp, MotionTorqueScratch};
-use stages::wrench::{contact_map, contact_offset, contact_wrenches, Actuation, ContactMapScratch, MapInput, WrenchInput};
+use stages::wrench::{
+    contact_map, contact_offset, contact_wrenches, Actuation, ContactMapScratch, MapInput,
+    WrenchInput,
+};
 use stages::yielding::{yield_motion, YieldScratch};
 
 /// Scratch of a tick that the report does not keep: each stage's workspace and the contact
@@ -61,82 +61,49 @@ struct Workspace {
     yielding: YieldScratch,
 }
 
-/// The PIDC team controller (paper §III).
-pub struct Pidc {
+/// The PIDC team controller (paper §III): the shell with PIDC's law.
+pub type Pidc = Shell<PidcLaw>;
+
+/// PIDC's own law: its parameters, the last tick and its workspace.
+pub struct PidcLaw {
     pub config: PidcConfig,
-    descriptions: BTreeMap<String, RobotDescription>,
-    expected: Option<Vec<String>>,
-    references: Option<TaskReferences>,
-    targets: Targets,
-    grasp: GraspTracker,
-    /// When the team lets go of the object ([`crate::units::release`]).
-    watch: GraspWatch,
     report: TickReport,
     /// Whether `report` holds a completed tick.
     valid: bool,
     /// Whether a tick computes what its torque accelerates (`report.qdd`,
-    /// [`TeamController::keep_accelerations`]).
+    /// [`crate::TeamController::keep_accelerations`]).
     accelerations: bool,
     ws: Workspace,
-    diagnostics: Option<TickDiagnostics>,
 }
 
-impl Pidc {
+impl Shell<PidcLaw> {
+    /// The PIDC controller with parameters `config`.
     pub fn new(config: PidcConfig) -> Self {
-        Pidc {
+        Shell::with_law(PidcLaw {
             config,
-            descriptions: BTreeMap::new(),
-            expected: None,
-            references: None,
-            targets: Targets::default(),
-            grasp: GraspTracker::default(),
-            watch: GraspWatch::default(),
             report: TickReport::default(),
             valid: false,
             accelerations: false,
             ws: Workspace::default(),
-            diagnostics: None,
-        }
-    }
-
-    /// Limits and contact parameters of a robot (from its agent's description).
-    pub fn set_description(&mut self, d: &RobotDescription) {
-        self.descriptions.insert(d.header.robot_id().to_string(), d.clone());
-    }
-
-    pub fn has_description(&self, robot: &str) -> bool {
-        self.descriptions.contains_key(robot)
-    }
-
-    /// The robots every tick must contain (sorted ids); `None`: whoever is in the tick.
-    pub fn set_expected(&mut self, robots: Option<Vec<String>>) {
-        self.expected = robots;
-    }
-
-    /// Task references. Tasks without a reference hold the pose they had when first seen.
-    pub fn set_references(&mut self, r: &TaskReferences) {
-        match &mut self.references {
-            Some(old) => old.clone_from(r),
-            None => self.references = Some(r.clone()),
-        }
+        })
     }
 
     /// Forget the grasp (offsets are captured again when the hands next close). This does not
-    /// let go of the object: see [`crate::units::release`] for that.
+    /// let go of the object: see [`crate::building_blocks::release`] for that.
     pub fn release_grasp(&mut self) {
-        self.grasp.release();
-        self.targets.release_object();
+        self.state.grasp.release();
+        self.state.targets.release_object();
     }
 
     /// The last tick, if it completed (a tick that ended in an error leaves none).
     pub fn last(&self) -> Option<&TickReport> {
-        self.valid.then_some(&self.report)
+        self.law.last()
     }
 
     /// The contact map's matrices as the last tick left them ([`ContactMatrices`]: formed only
     /// on the ticks that read them).
     pub fn contact_matrices(&self) -> &ContactMatrices {
-        &self.ws.contact
+        &self.law.ws.contact
     }
 
     /// The last tick with `J_c`, `Y`, `rho` and its team-sized projection matrices formed
@@ -147,25 +114,50 @@ impl Pidc {
     /// reports; it allocates, and leaves the tick's report as it was. `None` without a
     /// completed tick, or when the SVD of `Y` fails.
     ///
-    /// [`Projections::materialize`]: crate::units::projection::Projections::materialize
+    /// [`Projections::materialize`]: crate::building_blocks::projection::Projections::materialize
     pub fn materialized(&mut self) -> Option<MaterializedTick> {
-        if !self.valid {
+        let PidcLaw { report, valid, ws, .. } = &mut self.law;
+        if !*valid {
             return None;
         }
-        let ws = &mut self.ws;
-        form_j_c(&mut self.report, &mut ws.contact);
+        form_j_c(report, &mut ws.contact);
         let c = &ws.contact;
-        let mut tick = MaterializedTick { report: self.report.clone(), j_c: c.j_c.clone(), y: c.y.clone(), rho: c.rho.clone() };
+        let mut tick = MaterializedTick {
+            report: report.clone(),
+            j_c: c.j_c.clone(),
+            y: c.y.clone(),
+            rho: c.rho.clone(),
+        };
         let MaterializedTick { report: r, j_c, y, rho } = &mut tick;
         r.proj.materialize(&r.team);
         if r.qp.solver == qp::by_blocks::SOLVER {
-            let map = MapInput { team: &r.team, proj: &r.proj, j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
+            let map = MapInput {
+                team: &r.team,
+                proj: &r.proj,
+                j_c,
+                tau0: &r.tau0,
+                load: &r.load,
+                grasp: r.grasp.as_ref(),
+                f_x: &r.f_x,
+            };
             let (mut eta, mut eta_real) = (DVector::zeros(0), DVector::zeros(0));
             contact_map(&map, &mut ws.map, y, rho, &mut eta, &mut eta_real);
             let (y_pinv, _) = crate::linalg::pinv(y, crate::linalg::RANK_TOL)?;
             r.f_c = y_pinv * (&r.tau - &r.tau0);
         }
         Some(tick)
+    }
+
+    /// Run one tick ([`PidcLaw::compute`]).
+    pub fn compute(&mut self, tick: &[DynamicsTerms]) -> Result<&TickReport, ControllerError> {
+        self.law.compute(&mut self.state, tick)
+    }
+}
+
+impl PidcLaw {
+    /// The last tick, if it completed (a tick that ended in an error leaves none).
+    pub fn last(&self) -> Option<&TickReport> {
+        self.valid.then_some(&self.report)
     }
 
     /// Run one tick: the full team torque and every intermediate, stage by stage (§III).
@@ -176,53 +168,34 @@ impl Pidc {
     /// What still allocates: a change of shape (buffers are resized), capturing a new grasp,
     /// errors and fallback messages, and Clarabel when it has to finish a tick the dense
     /// interior-point method did not.
-    pub fn compute(&mut self, tick: &[DynamicsTerms]) -> Result<&TickReport, ControllerError> {
+    pub fn compute(
+        &mut self,
+        state: &mut ShellState,
+        tick: &[DynamicsTerms],
+    ) -> Result<&TickReport, ControllerError> {
         self.valid = false;
         let start = Instant::now();
         let us = || start.elapsed().as_secs_f64() * 1e6;
-        let Pidc { config: cfg, descriptions, expected, references, targets, grasp, watch, report: r, ws, valid, accelerations, .. } = self;
-        // Degrade, never collapse: once the team has let go of the object, every hand is free.
-        watch.rearm(tick.iter().any(|t| t.hand_in_grasp));
-        r.team.hands_released = watch.released().is_some();
-        // §III-A: M, h, v, S, J_cf, J_ee of the team; the torque limits (eq. original_torque_limit).
-        r.team.assemble_into(tick, expected.as_deref(), cfg.fully_actuated)?;
-        torque_limits(&r.team, descriptions, cfg.fully_actuated, &mut r.actuated, &mut r.limits)?;
-        // The rigid grasp: G, J_c,ee, J_o (eqs. graspmatrix, jacobian_cee, obj_jacobian).
-        grasp.update(&r.team, cfg.object_pose_at_grasp, &cfg.planned_grasp, &mut r.grasp)?;
-        // Late robots' free hands keep clear of the object the others hold.
-        targets.keep_clear(&r.team, r.grasp.as_ref().map(|g| &g.object.translation.vector), cfg.release.retreat);
-        // Jdot_c v and J_c v (eq. jacobian_c); J_c itself only where it is needed (form_j_c).
-        ws.contact.j_c_formed = false;
-        contact_drift(&r.team, r.grasp.as_ref(), &mut r.jdv_c);
-        contact_velocity(&r.team, r.grasp.as_ref(), &mut r.jc_v);
+        self.assemble(state, tick)?;
         let t_asm = us();
-        // P, Pdot v, M_c, Mbar, [P S]^+, B (eqs. aghili_21, aghili_25, constraint_force,
-        // bmatrix): by the team's blocks, or by dense SVDs of J_c when asked or when the blocks
-        // decline.
-        if cfg.projections == ProjectionPath::Dense || !r.proj.by_blocks_into(&mut ws.proj, &r.team, r.grasp.as_ref(), &r.jdv_c) {
-            form_j_c(r, &mut ws.contact);
-            r.proj.compute_into(&mut ws.proj, &r.team, &ws.contact.j_c, &r.jdv_c)?;
-        }
-        ws.motion.compute_into(&r.proj, &r.team);
+        self.project()?;
         let t_proj = us();
-        // tau_M of the object, torso and swing-foot impedances (eqs. control_law,
-        // joint_space_tau_M) with the object's load J_x^T F_x; tau_0 = [P S]^+ P tau_M.
-        let tasks = TaskTorqueInput { team: &r.team, grasp: r.grasp.as_ref(), references: references.as_ref(), config: cfg, motion: ws.motion.view(&r.proj) };
-        task_torque(&tasks, targets, &mut ws.tasks, &mut r.tau_m, &mut r.load, &mut r.f_x, &mut ws.f_x_hold)?;
-        motion_torque(&r.proj, &r.team.s_diag, &r.tau_m, &mut r.tau0, &mut ws.torque);
+        self.motion(state)?;
         let t_imp = us();
-        let loads = references.as_ref().map_or(&[][..], |refs| &refs.foot_loads[..]);
-        let (build_us, qp_us) = contact_forces(r, ws, descriptions, cfg, loads)?;
+        let PidcLaw { config: cfg, report: r, ws, .. } = self;
+        let (build_us, qp_us) =
+            contact_forces(r, ws, &state.descriptions, cfg, state.foot_loads())?;
         // What the torque sent accelerates, the object a rigid body on the hands (eq.
         // aghili_25): the team's delay carries each state over it (crate::team::prediction).
-        if *accelerations {
-            let body = ObjectBody { mass: cfg.object_mass, inertia: cfg.object_inertia };
-            commanded_accelerations(&r.team, &r.proj, &r.tau, &ws.motion.mcinv_bias, r.grasp.as_ref().map(|g| (g, &body)), &mut r.qdd, &mut ws.acceleration);
+        if self.accelerations {
+            self.commanded_accelerations();
         }
+        let r = &mut self.report;
+        let fell_back = r.fallback.is_some();
         // Degrade, never collapse: let go of an object the team cannot hold.
-        let outcome = GraspObservation::of(tick[0].header.tick, &r.team, r.grasp.as_ref(), r.fallback.is_some());
-        set_note(&mut r.release, watch.after_tick(&cfg.release, outcome, &r.team, r.grasp.as_ref(), targets, grasp));
-        r.timing = Timing {
+        let team = (&r.team, r.grasp.as_ref());
+        state.watch_release(&self.config, tick, team, fell_back, &mut r.release);
+        self.report.timing = Timing {
             assembly_us: t_asm,
             projections_us: t_proj - t_asm,
             impedance_us: t_imp - t_proj,
@@ -230,19 +203,84 @@ impl Pidc {
             qp_us,
             total_us: us(),
         };
-        *valid = true;
+        self.valid = true;
         Ok(&self.report)
     }
 
-    /// Each robot's torque slice into `out` and the tick's diagnostics, reusing the previous
-    /// tick's messages (their strings and vectors) when the team is the same.
-    fn fill_outputs(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) {
-        if !self.valid {
-            return;
+    /// §III-A: M, h, v, S, J_cf, J_ee of the team, the torque limits, the grasp, the late
+    /// robots' targets, `Jdot_c v` and `J_c v`.
+    fn assemble(
+        &mut self,
+        state: &mut ShellState,
+        tick: &[DynamicsTerms],
+    ) -> Result<(), ControllerError> {
+        let PidcLaw { config: cfg, report: r, ws, .. } = self;
+        let team = TickTeam {
+            team: &mut r.team,
+            actuated: &mut r.actuated,
+            limits: &mut r.limits,
+            grasp: &mut r.grasp,
+        };
+        state.assemble_tick(tick, cfg, cfg.fully_actuated, team)?;
+        // Jdot_c v and J_c v (eq. jacobian_c); J_c itself only where it is needed (form_j_c).
+        ws.contact.j_c_formed = false;
+        contact_drift(&r.team, r.grasp.as_ref(), &mut r.jdv_c);
+        contact_velocity(&r.team, r.grasp.as_ref(), &mut r.jc_v);
+        Ok(())
+    }
+
+    /// P, Pdot v, M_c, Mbar, [P S]^+, B (eqs. aghili_21, aghili_25, constraint_force,
+    /// bmatrix): by the team's blocks, or by dense SVDs of J_c when asked or when the blocks
+    /// decline; then the tasks' motion-space terms.
+    fn project(&mut self) -> Result<(), ControllerError> {
+        let PidcLaw { config: cfg, report: r, ws, .. } = self;
+        if cfg.projections == ProjectionPath::Dense
+            || !r.proj.by_blocks_into(&mut ws.proj, &r.team, r.grasp.as_ref(), &r.jdv_c)
+        {
+            form_j_c(r, &mut ws.contact);
+            r.proj.compute_into(&mut ws.proj, &r.team, &ws.contact.j_c, &r.jdv_c)?;
         }
-        self.report.commands_into(tick, out);
-        let d = self.diagnostics.get_or_insert_with(|| TickDiagnostics::empty("", 0));
-        self.report.diagnostics_into(tick, d);
+        ws.motion.compute_into(&r.proj, &r.team);
+        Ok(())
+    }
+
+    /// tau_M of the object, torso and swing-foot impedances (eqs. control_law,
+    /// joint_space_tau_M) with the object's load J_x^T F_x; tau_0 = [P S]^+ P tau_M.
+    fn motion(&mut self, state: &mut ShellState) -> Result<(), ControllerError> {
+        let PidcLaw { config: cfg, report: r, ws, .. } = self;
+        let tasks = TaskTorqueInput {
+            team: &r.team,
+            grasp: r.grasp.as_ref(),
+            references: state.references.as_ref(),
+            config: cfg,
+            motion: ws.motion.view(&r.proj),
+        };
+        task_torque(
+            &tasks,
+            &mut state.targets,
+            &mut ws.tasks,
+            &mut r.tau_m,
+            &mut r.load,
+            &mut r.f_x,
+            &mut ws.f_x_hold,
+        )?;
+        motion_torque(&r.proj, &r.team.s_diag, &r.tau_m, &mut r.tau0, &mut ws.torque);
+        Ok(())
+    }
+
+    /// What the tick's torque accelerates (`report.qdd`), the object a rigid body on the hands.
+    fn commanded_accelerations(&mut self) {
+        let PidcLaw { config: cfg, report: r, ws, .. } = self;
+        let body = ObjectBody { mass: cfg.object_mass, inertia: cfg.object_inertia };
+        commanded_accelerations(
+            &r.team,
+            &r.proj,
+            &r.tau,
+            &ws.motion.mcinv_bias,
+            r.grasp.as_ref().map(|g| (g, &body)),
+            &mut r.qdd,
+            &mut ws.acceleration,
+        );
     }
 }
 
@@ -252,13 +290,20 @@ impl Pidc {
 /// real_torque_limit) on the real wrenches, `tau = tau_0 + Y F_c` (eq. ua_solution) and the
 /// wrenches for the torque sent. When the QP fails on a team that holds an object, the motion
 /// yields first ([`stages::yielding`]: the tick is solved at the largest share of the object's,
-/// then the torsos', motion the contacts carry). When even holding still fails and `tau_0` asks more of a joint than its
-/// limit ([`saturate`]: a push, a task far from its target), the QP is solved again with `tau_0`
-/// saturated, so that the contact forces are chosen for a torque the joints can give; then
-/// the least-violation fallback ([`fallback`]), robot by robot when no grasp couples the
-/// robots ([`stages::by_robot`]). Feet named in `loads` (the references'
-/// unloading ramps) have their normal force bounded. Returns the build and QP times, µs.
-fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMap<String, RobotDescription>, cfg: &PidcConfig, loads: &[FootLoad]) -> Result<(f64, f64), ControllerError> {
+/// then the torsos', motion the contacts carry). When even holding still fails and `tau_0`
+/// asks more of a joint than its limit ([`saturate`]: a push, a task far from its target), the
+/// QP is solved again with `tau_0` saturated, so that the contact forces are chosen for a
+/// torque the joints can give; then the least-violation fallback ([`fallback`]), robot by
+/// robot when no grasp couples the robots ([`stages::by_robot`]). Feet named in `loads` (the
+/// references' unloading ramps) have their normal force bounded. Returns the build and QP
+/// times, µs.
+fn contact_forces(
+    r: &mut TickReport,
+    ws: &mut Workspace,
+    descriptions: &BTreeMap<String, RobotDescription>,
+    cfg: &PidcConfig,
+    loads: &[FootLoad],
+) -> Result<(f64, f64), ControllerError> {
     let (mut build_us, mut qp_us) = (0.0, 0.0);
     let mut saturated = false;
     r.motion = MotionScale::FULL;
@@ -267,17 +312,8 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
     unload_feet(&r.team, loads, &mut r.contacts);
     build_us += t_list.elapsed().as_secs_f64() * 1e6;
     r.blocks_declined = None;
-    if cfg.qp_path.tries_blocks() {
-        let t0 = Instant::now();
-        let map = MapInput { team: &r.team, proj: &r.proj, j_c: &ws.contact.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
-        contact_offset(&map, &mut ws.map, &mut r.eta, &mut r.lambda_real);
-        let t1 = Instant::now();
-        build_us += (t1 - t0).as_secs_f64() * 1e6;
-        let solved = solve_by_blocks(r, ws, cfg);
-        qp_us += t1.elapsed().as_secs_f64() * 1e6;
-        if solved {
-            return Ok((build_us, qp_us));
-        }
+    if cfg.qp_path.tries_blocks() && hot_start(r, ws, cfg, &mut build_us, &mut qp_us) {
+        return Ok((build_us, qp_us));
     }
     form_j_c(r, &mut ws.contact);
     // A team holding an object yields when the QP is infeasible: the active set's proof of
@@ -296,37 +332,115 @@ fn contact_forces(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMa
         saturated = true;
         dense_qp(r, ws, cfg, (true, false), &mut build_us, &mut qp_us);
     }
+    fall_back(r, ws, cfg, saturated, &mut qp_us);
+    compose_and_wrenches(r, ws)?;
+    Ok((build_us, qp_us))
+}
+
+/// The QP's hot start by the robots' blocks ([`solve_by_blocks`]) on the tick's `eta` and
+/// `eta_real` (formed here); whether it answered. Adds its times to the build and QP times.
+fn hot_start(
+    r: &mut TickReport,
+    ws: &mut Workspace,
+    cfg: &PidcConfig,
+    build_us: &mut f64,
+    qp_us: &mut f64,
+) -> bool {
+    let t0 = Instant::now();
+    let map = MapInput {
+        team: &r.team,
+        proj: &r.proj,
+        j_c: &ws.contact.j_c,
+        tau0: &r.tau0,
+        load: &r.load,
+        grasp: r.grasp.as_ref(),
+        f_x: &r.f_x,
+    };
+    contact_offset(&map, &mut ws.map, &mut r.eta, &mut r.lambda_real);
+    let t1 = Instant::now();
+    *build_us += (t1 - t0).as_secs_f64() * 1e6;
+    let solved = solve_by_blocks(r, ws, cfg);
+    *qp_us += t1.elapsed().as_secs_f64() * 1e6;
+    solved
+}
+
+/// After the QP's last try: robot by robot when no grasp couples the robots and it failed,
+/// else the least-violation fallback when it failed ([`fallback`]); `F_c`, the fallback
+/// taken and whether `tau_0` was saturated into the report. Adds its time to the QP time.
+fn fall_back(
+    r: &mut TickReport,
+    ws: &mut Workspace,
+    cfg: &PidcConfig,
+    mut saturated: bool,
+    qp_us: &mut f64,
+) {
     let mut f_c = std::mem::replace(&mut r.f_c, DVector::zeros(0));
     let solved = matches!(r.qp.status, QpStatus::Solved | QpStatus::AlmostSolved);
     let fallback = if !solved && decoupled(&r.team) {
         let t = Instant::now();
         let by = by_robot(r, ws, cfg, &mut f_c);
-        qp_us += t.elapsed().as_secs_f64() * 1e6;
+        *qp_us += t.elapsed().as_secs_f64() * 1e6;
         (r.qp, saturated) = (by.outcome, by.saturated);
         by.fallback
     } else {
-        fallback(&mut ws.qp, &qp_input(r, &ws.contact, cfg), cfg.qp_max_iter, r.qp.status, saturated, &mut f_c)
+        fallback(
+            &mut ws.qp,
+            &qp_input(r, &ws.contact, cfg),
+            cfg.qp_max_iter,
+            r.qp.status,
+            saturated,
+            &mut f_c,
+        )
     };
     (r.f_c, r.fallback, r.saturated) = (f_c, fallback, saturated);
+}
+
+/// `tau = tau_0 + Y F_c` and the contact wrenches for the torque sent.
+fn compose_and_wrenches(r: &mut TickReport, ws: &mut Workspace) -> Result<(), ControllerError> {
     // tau = tau_0 + Y F_c (eq. ua_solution), clamped to the limits after a fallback.
     let clamp = r.fallback.is_some().then_some(Clamp { actuated: &r.actuated, limits: &r.limits });
     compose(&r.tau0, &ws.contact.y, &r.f_c, clamp, &mut r.tau)?;
     // lambda for the torque sent (eq. relation_between_lambda_and_Fc, or eq.
     // constraint_force for a clamped torque).
-    let sent = if r.fallback.is_some() { Actuation::Torque(&r.tau) } else { Actuation::ContactForces(&r.f_c) };
-    let wrench = WrenchInput { team: &r.team, proj: &r.proj, load: &r.load, rho: &ws.contact.rho, eta: &r.eta };
+    let sent = if r.fallback.is_some() {
+        Actuation::Torque(&r.tau)
+    } else {
+        Actuation::ContactForces(&r.f_c)
+    };
+    let wrench = WrenchInput {
+        team: &r.team,
+        proj: &r.proj,
+        load: &r.load,
+        rho: &ws.contact.rho,
+        eta: &r.eta,
+    };
     contact_wrenches(&wrench, sent, &mut ws.map, &mut r.lambda, &mut r.lambda_real);
-    Ok((build_us, qp_us))
+    Ok(())
 }
 
 /// The team's QP on the dense path at the tick's `tau_0`: the contact map (with `full`, `Y`
 /// and `rho` too; they do not depend on `tau_0`), then the QP of eq. wrench_optim2; whether
 /// it was solved. With `refuses`, the active set's proof of infeasibility is final
 /// (`QpSettings::active_set_refuses`). Adds its times to the build and QP times.
-fn dense_qp(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig, (full, refuses): (bool, bool), build_us: &mut f64, qp_us: &mut f64) -> bool {
+fn dense_qp(
+    r: &mut TickReport,
+    ws: &mut Workspace,
+    cfg: &PidcConfig,
+    (full, refuses): (bool, bool),
+    build_us: &mut f64,
+    qp_us: &mut f64,
+) -> bool {
     let t0 = Instant::now();
     let c = &mut ws.contact;
-    let map = MapInput { team: &r.team, proj: &r.proj, j_c: &c.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
+    let map = MapInput {
+        team: &r.team,
+        proj: &r.proj,
+        j_c: &c.j_c,
+        tau0: &r.tau0,
+        load: &r.load,
+        grasp: r.grasp.as_ref(),
+        f_x: &r.f_x,
+    };
     if full {
         contact_map(&map, &mut ws.map, &mut c.y, &mut c.rho, &mut r.eta, &mut r.lambda_real);
     } else {
@@ -350,7 +464,10 @@ fn dense_qp(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig, (full, ref
 fn yield_tick(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> Option<MotionScale> {
     let y = &mut ws.yielding;
     y.full.copy_from(&r.tau_m, &r.tau0, &r.load, &r.f_x);
-    for (scale, m) in [(MotionScale { object: 0.0, torso: 1.0, reserve: false }, &mut y.object_still), (MotionScale { object: 0.0, torso: 0.0, reserve: false }, &mut y.all_still)] {
+    for (scale, m) in [
+        (MotionScale { object: 0.0, torso: 1.0, reserve: false }, &mut y.object_still),
+        (MotionScale { object: 0.0, torso: 0.0, reserve: false }, &mut y.all_still),
+    ] {
         ws.tasks.joint_torque_yielding(&ws.motion.view(&r.proj), scale, &mut m.tau_m);
         motion_torque(&r.proj, &r.team.s_diag, &m.tau_m, &mut m.tau0, &mut ws.torque);
         m.f_x = ws.f_x_hold;
@@ -369,8 +486,16 @@ fn yield_tick(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> Optio
 /// A tick whose QP failed at its motion: solved with the motion yielding, or held still on
 /// the margins' reserve (`r.motion` says which); else the tick's motion and rows are put back
 /// and its QP solved again down the whole chain: whether that solved it.
-fn yield_or_restore(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMap<String, RobotDescription>, cfg: &PidcConfig, loads: &[FootLoad]) -> Result<bool, ControllerError> {
-    if let Some(scale) = yield_tick(r, ws, cfg).or_else(|| hold_on_reserve(r, ws, descriptions, cfg, loads)) {
+fn yield_or_restore(
+    r: &mut TickReport,
+    ws: &mut Workspace,
+    descriptions: &BTreeMap<String, RobotDescription>,
+    cfg: &PidcConfig,
+    loads: &[FootLoad],
+) -> Result<bool, ControllerError> {
+    if let Some(scale) =
+        yield_tick(r, ws, cfg).or_else(|| hold_on_reserve(r, ws, descriptions, cfg, loads))
+    {
         r.motion = scale;
         return Ok(true);
     }
@@ -389,12 +514,21 @@ fn yield_or_restore(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTree
 /// built again with it and the object (then everything) held still is tried; the scale held
 /// at, its `reserve` set. `None` when that fails too (the rows are left on the reserve).
 ///
-/// [`ContactMargins::reserve`]: crate::units::contact_margins::ContactMargins::reserve
-fn hold_on_reserve(r: &mut TickReport, ws: &mut Workspace, descriptions: &BTreeMap<String, RobotDescription>, cfg: &PidcConfig, loads: &[FootLoad]) -> Option<MotionScale> {
+/// [`ContactMargins::reserve`]: crate::building_blocks::contact_margins::ContactMargins::reserve
+fn hold_on_reserve(
+    r: &mut TickReport,
+    ws: &mut Workspace,
+    descriptions: &BTreeMap<String, RobotDescription>,
+    cfg: &PidcConfig,
+    loads: &[FootLoad],
+) -> Option<MotionScale> {
     contact_list(&r.team, descriptions, &cfg.contact_margins().reserve(), &mut r.contacts).ok()?;
     unload_feet(&r.team, loads, &mut r.contacts);
     let (mut build_us, mut qp_us) = (0.0, 0.0);
-    for still in [MotionScale { object: 0.0, torso: 1.0, reserve: true }, MotionScale { object: 0.0, torso: 0.0, reserve: true }] {
+    for still in [
+        MotionScale { object: 0.0, torso: 1.0, reserve: true },
+        MotionScale { object: 0.0, torso: 0.0, reserve: true },
+    ] {
         ws.yielding.blend_into(still, &mut r.tau_m, &mut r.tau0, &mut r.load, &mut r.f_x);
         if dense_qp(r, ws, cfg, (false, true), &mut build_us, &mut qp_us) {
             return Some(still);
@@ -420,8 +554,19 @@ fn form_j_c(r: &mut TickReport, c: &mut ContactMatrices) {
 fn solve_by_blocks(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> bool {
     let t = Instant::now();
     let (warm, shape) = ws.qp.warm();
-    let input = qp::BlockInput { team: &r.team, g: r.grasp.as_ref().map(|g| &g.g), contacts: &r.contacts, eta_real: &r.lambda_real, tau0: &r.tau0, actuated: &r.actuated, limits: &r.limits };
-    r.blocks_declined = ws.blocks.solve(&input, warm, shape, qp_settings(cfg).active_set_tol, qp::BLOCK_REPAIRS).err();
+    let input = qp::BlockInput {
+        team: &r.team,
+        g: r.grasp.as_ref().map(|g| &g.g),
+        contacts: &r.contacts,
+        eta_real: &r.lambda_real,
+        tau0: &r.tau0,
+        actuated: &r.actuated,
+        limits: &r.limits,
+    };
+    r.blocks_declined = ws
+        .blocks
+        .solve(&input, warm, shape, qp_settings(cfg).active_set_tol, qp::BLOCK_REPAIRS)
+        .err();
     if r.blocks_declined.is_some() {
         return false;
     }
@@ -437,7 +582,14 @@ fn solve_by_blocks(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> 
     r.lambda_real += &b.z;
     zeros_v(&mut r.f_c, b.z.len());
     let solve_us = t.elapsed().as_secs_f64() * 1e6;
-    r.qp = qp::QpOutcome { status: QpStatus::Solved, iterations: b.repairs, solve_us, setup_us: 0.0, rows: b.rows, solver: qp::by_blocks::SOLVER };
+    r.qp = qp::QpOutcome {
+        status: QpStatus::Solved,
+        iterations: b.repairs,
+        solve_us,
+        setup_us: 0.0,
+        rows: b.rows,
+        solver: qp::by_blocks::SOLVER,
+    };
     (r.fallback, r.saturated) = (None, false);
     true
 }
@@ -446,12 +598,25 @@ fn solve_by_blocks(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> 
 /// robot's block, then `tau_0` saturated on the robots whose block failed and their blocks
 /// again on the rebuilt contact map (it depends on `tau_0`), then the fallback on those that
 /// still fail.
-fn by_robot(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig, f_c: &mut DVector<f64>) -> ByRobot {
+fn by_robot(
+    r: &mut TickReport,
+    ws: &mut Workspace,
+    cfg: &PidcConfig,
+    f_c: &mut DVector<f64>,
+) -> ByRobot {
     let settings = qp_settings(cfg);
     ws.by_robot.solve(&r.team, &qp_input(r, &ws.contact, cfg), &settings, false, f_c);
     if ws.by_robot.saturate_failed(&r.team, &mut r.tau0, &r.actuated, &r.limits) {
         let c = &mut ws.contact;
-        let map = MapInput { team: &r.team, proj: &r.proj, j_c: &c.j_c, tau0: &r.tau0, load: &r.load, grasp: r.grasp.as_ref(), f_x: &r.f_x };
+        let map = MapInput {
+            team: &r.team,
+            proj: &r.proj,
+            j_c: &c.j_c,
+            tau0: &r.tau0,
+            load: &r.load,
+            grasp: r.grasp.as_ref(),
+            f_x: &r.f_x,
+        };
         contact_map(&map, &mut ws.map, &mut c.y, &mut c.rho, &mut r.eta, &mut r.lambda_real);
         ws.by_robot.solve(&r.team, &qp_input(r, &ws.contact, cfg), &settings, true, f_c);
     }
@@ -478,65 +643,42 @@ fn qp_input<'a>(r: &'a TickReport, c: &'a ContactMatrices, cfg: &PidcConfig) -> 
     }
 }
 
-impl TeamController for Pidc {
-    fn name(&self) -> &'static str {
+impl ControlLaw for PidcLaw {
+    fn law_name(&self) -> &'static str {
         "pidc (projected inverse dynamics + contact-force QP)"
     }
 
-    fn solve(&mut self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError> {
-        self.compute(tick)?;
-        self.fill_outputs(tick, out);
+    fn control(
+        &mut self,
+        state: &mut ShellState,
+        tick: &[DynamicsTerms],
+        out: &mut Vec<TorqueCommand>,
+    ) -> Result<(), ControllerError> {
+        self.compute(state, tick)?;
+        // Each robot's torque slice and the tick's diagnostics, reusing the previous tick's
+        // messages (their strings and vectors) when the team is the same.
+        self.report.commands_into(tick, out);
+        self.report.diagnostics_into(tick, state.diagnostics_mut());
         Ok(())
     }
 
-    fn diagnostics(&self) -> Option<&TickDiagnostics> {
-        self.diagnostics.as_ref()
-    }
-
-    fn used_fallback(&self) -> bool {
+    fn fell_back(&self) -> bool {
         self.last().is_some_and(|l| l.fallback.is_some())
     }
 
-    fn released_at(&self) -> Option<u64> {
-        self.watch.released().map(|r| r.tick)
-    }
-
-    fn set_description(&mut self, d: &RobotDescription) {
-        Pidc::set_description(self, d);
-    }
-
-    fn check_terms(&self, terms: &protocol::DynamicsTerms) -> Result<(), ControllerError> {
-        crate::team::terms_fit(terms, self.descriptions.get(terms.header.robot_id()))
-    }
-
-    fn keep_accelerations(&mut self, keep: bool) -> bool {
+    fn model_accelerations(&mut self, keep: bool) -> bool {
         self.accelerations = keep;
         true
     }
 
-    fn accelerations(&self, robot: &str) -> Option<&[f64]> {
-        let b = self.report.team.robots.iter().find(|b| b.id == robot).filter(|_| self.valid && self.accelerations)?;
+    fn accelerations_of(&self, robot: &str) -> Option<&[f64]> {
+        let b = self
+            .report
+            .team
+            .robots
+            .iter()
+            .find(|b| b.id == robot)
+            .filter(|_| self.valid && self.accelerations)?;
         self.report.qdd.as_slice().get(b.offset..b.offset + b.nv)
-    }
-
-    fn set_references(&mut self, r: &TaskReferences) {
-        Pidc::set_references(self, r);
-    }
-
-    fn set_late(&mut self, robots: &[String]) {
-        self.targets.set_late(robots);
-    }
-
-    fn set_members(&mut self, members: &[String]) {
-        self.set_expected(Some(members.to_vec()));
-    }
-
-    fn not_ready(&self, members: &[String]) -> Option<String> {
-        let missing: Vec<&String> = members.iter().filter(|m| !self.descriptions.contains_key(*m)).collect();
-        (!missing.is_empty()).then(|| format!("waiting for the descriptions of {missing:?}"))
-    }
-
-    fn ready(&self, robot: &str) -> bool {
-        self.has_description(robot)
     }
 }

@@ -6,15 +6,14 @@
 use std::ops::{Deref, DerefMut};
 
 use nalgebra::{DMatrix, DVector, Vector6};
-use protocol::{ContactWrench, DynamicsTerms, Header, TickDiagnostics, TorqueCommand};
+use protocol::{DynamicsTerms, TickDiagnostics, TorqueCommand};
 
-use crate::linalg::quat_wxyz;
-use crate::units::messages::{set_header, set_note, set_string};
+use crate::building_blocks::grasp::GraspTerms;
+use crate::building_blocks::impedance::MotionScale;
+use crate::building_blocks::projection::Projections;
+use crate::controller_shell::report::{diagnostics_into, torque_commands_into, TickOutputs};
 use crate::qp::{self, ContactKind};
 use crate::team::Team;
-use crate::units::grasp::GraspTerms;
-use crate::units::impedance::MotionScale;
-use crate::units::projection::Projections;
 
 /// What the last tick computed (kept for tests and reports): every field is written on every
 /// tick, none holds an earlier tick's value. Its buffers are overwritten in place by the next
@@ -69,7 +68,7 @@ pub struct TickReport {
     /// ([`super::stages::yielding`]).
     pub motion: MotionScale,
     /// Why the hands are free while the contact sets hold the object
-    /// ([`crate::units::release`]); `None` while the grasp holds.
+    /// ([`crate::building_blocks::release`]); `None` while the grasp holds.
     pub release: Option<String>,
     pub timing: Timing,
 }
@@ -128,57 +127,32 @@ impl TickReport {
     /// Each robot's torque slice (its actuated rows of `tau`) into `out`, reusing the previous
     /// tick's messages (their strings and vectors) when the team is the same.
     pub fn commands_into(&self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) {
-        out.truncate(self.team.robots.len());
-        for (k, (r, t)) in self.team.robots.iter().zip(tick).enumerate() {
-            if k == out.len() {
-                out.push(TorqueCommand { header: Header::new(&t.header.team, Some(&r.id), 0, 0), tau: Vec::new(), hold: false, delay_ticks: 0 });
-            }
-            let cmd = &mut out[k];
-            set_header(&mut cmd.header, &t.header.team, Some(&r.id), t.header.tick, 0);
-            // The message may be last tick's hold order (the service reuses the buffer).
-            cmd.hold = false;
-            cmd.tau.clear();
-            cmd.tau.extend(r.actuated.iter().map(|&j| self.tau[j]));
-        }
+        torque_commands_into(&self.team, tick, out, |r, tau| {
+            tau.extend(r.actuated.iter().map(|&j| self.tau[j]));
+        });
     }
 
     /// The tick's diagnostics into `d` (its strings and vectors reused): the real contact
     /// wrenches, the QP's status and time, `|J_c v|`, the object estimate and the fit's slip, the
-    /// fallback taken.
+    /// fallback taken, how much of the motion yielded.
     pub fn diagnostics_into(&self, tick: &[DynamicsTerms], d: &mut TickDiagnostics) {
-        let (team_id, tick_no) = match tick.first() {
-            Some(t) => (t.header.team.as_str(), t.header.tick),
-            None => ("", 0),
+        let outputs = TickOutputs {
+            team: &self.team,
+            grasp: self.grasp.as_ref(),
+            wrench: &self.lambda_real,
+            status: self.qp.status,
+            iterations: self.qp.iterations,
+            solve_us: self.qp.solve_us,
+            assembly_us: self.timing.assembly_us,
+            total_us: self.timing.total_us,
+            residual: self.jc_v.norm(),
+            note: self.fallback.as_deref().or(self.release.as_deref()),
         };
-        set_header(&mut d.header, team_id, None, tick_no, protocol::wall_clock_ns());
-        let nf = self.team.feet.len();
-        let frames = self.team.feet.iter().map(|f| (f, 3)).chain(self.team.hands.iter().map(|h| (h, 6)));
-        d.contacts.truncate(nf + self.team.hands.len());
-        let mut row = 0;
-        for (k, (f, dim)) in frames.enumerate() {
-            if k == d.contacts.len() {
-                d.contacts.push(ContactWrench { robot: String::new(), frame: String::new(), wrench: Vec::new() });
-            }
-            let c = &mut d.contacts[k];
-            set_string(&mut c.robot, &self.team.robots[f.robot].id);
-            set_string(&mut c.frame, &f.name);
-            c.wrench.clear();
-            c.wrench.extend(self.lambda_real.rows(row, dim).iter());
-            row += dim;
-        }
-        let residual = self.jc_v.norm();
-        d.qp_status = self.qp.status;
-        d.qp_iterations = self.qp.iterations;
-        d.qp_solve_us = self.qp.solve_us;
-        d.assembly_us = self.timing.assembly_us;
-        d.total_us = self.timing.total_us;
-        d.constraint_residual = if residual.is_finite() { residual } else { f64::MAX };
-        d.object_estimate = self.grasp.as_ref().map(|g| protocol::Pose {
-            position: g.object.translation.vector.into(),
-            orientation: quat_wxyz(&g.object.rotation.to_rotation_matrix()),
+        diagnostics_into(&outputs, tick, d);
+        d.motion_yield = (self.motion != MotionScale::FULL).then_some(protocol::MotionYield {
+            object: self.motion.object,
+            torso: self.motion.torso,
+            reserve: self.motion.reserve,
         });
-        d.grasp_slip = self.grasp.as_ref().map_or(0.0, |g| g.fit_residual);
-        set_note(&mut d.fallback, self.fallback.as_deref().or(self.release.as_deref()));
-        d.motion_yield = (self.motion != MotionScale::FULL).then_some(protocol::MotionYield { object: self.motion.object, torso: self.motion.torso, reserve: self.motion.reserve });
     }
 }

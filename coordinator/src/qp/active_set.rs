@@ -3,9 +3,9 @@
 //! [`super::DenseIpm`] (which, then Clarabel, finishes what it does not solve).
 //!
 //! ```text
-//! min_F  1/2 F^T P F,  P = 2 (Y^T Y + eps I)          (eq. wrench_optim2, regularised)
-//! s.t.   a_i F <= b_i                                  (eqs. unilateral_and_friction_cone_constraint,
-//!                                                       moment_constraint, real_torque_limit)
+//! min_F  1/2 F^T P F,  P = 2 (Y^T Y + eps I)     (eq. wrench_optim2, regularised)
+//! s.t.   a_i F <= b_i                             (eqs. unilateral_and_friction_cone_constraint,
+//!                                                  moment_constraint, real_torque_limit)
 //! ```
 //!
 //! `P` is strictly convex (the `eps I`), so the unconstrained minimum `F = 0` is a dual
@@ -36,7 +36,9 @@ use super::problem::QpProblem;
 use super::settings::QpSettings;
 use super::{QpOutcome, QpSolver};
 
-use crate::linalg::{cholesky_in_place, dot, gemm, lower_inverse, lower_solve_in_place, shape, zeros_v};
+use crate::linalg::{
+    cholesky_in_place, dot, gemm, lower_inverse, lower_solve_in_place, shape, zeros_v,
+};
 
 /// Why [`DualActiveSet`] stopped without an answer (the caller then runs the interior-point
 /// path).
@@ -128,7 +130,12 @@ impl QpSolver for DualActiveSet {
 
     /// Writes `x` only when it solved the QP; a failure's status is what the attempt alone
     /// would report (the caller goes on to the interior-point path).
-    fn solve_problem(&mut self, problem: &QpProblem, settings: &QpSettings, x: &mut DVector<f64>) -> QpOutcome {
+    fn solve_problem(
+        &mut self,
+        problem: &QpProblem,
+        settings: &QpSettings,
+        x: &mut DVector<f64>,
+    ) -> QpOutcome {
         let rows = problem.rows();
         let status = match self.solve(problem, settings) {
             Ok(()) => {
@@ -140,14 +147,25 @@ impl QpSolver for DualActiveSet {
             }
             Err(e) => e.status(),
         };
-        QpOutcome { status, iterations: self.iterations, solve_us: 0.0, setup_us: 0.0, rows, solver: self.name() }
+        QpOutcome {
+            status,
+            iterations: self.iterations,
+            solve_us: 0.0,
+            setup_us: 0.0,
+            rows,
+            solver: self.name(),
+        }
     }
 }
 
 impl DualActiveSet {
     /// Solve into [`DualActiveSet::x`], hot-started from the last successful solve's active
     /// rows when the problem has the same shape.
-    pub fn solve(&mut self, problem: &QpProblem, settings: &QpSettings) -> Result<(), ActiveSetError> {
+    pub fn solve(
+        &mut self,
+        problem: &QpProblem,
+        settings: &QpSettings,
+    ) -> Result<(), ActiveSetError> {
         self.iterations = 0;
         self.hot = false;
         let result = self.run(problem, settings);
@@ -186,7 +204,8 @@ impl DualActiveSet {
         }
         self.size(n, rows);
         self.l.copy_from(&problem.p);
-        cholesky_in_place(self.l.as_mut_slice(), n, n, 0.0).ok_or(ActiveSetError::NotPositiveDefinite)?;
+        cholesky_in_place(self.l.as_mut_slice(), n, n, 0.0)
+            .ok_or(ActiveSetError::NotPositiveDefinite)?;
         let tol = settings.active_set_tol;
         let hot = self.warm_shape == (n, rows) && !self.warm.is_empty();
         if hot && self.hot_answer(a, b, tol) {
@@ -256,7 +275,10 @@ impl DualActiveSet {
             }
         }
         self.equality_point(b);
-        while let Some(k) = (0..self.active.len()).filter(|&k| self.u[k] < 0.0).min_by(|&p, &q| self.u[p].total_cmp(&self.u[q])) {
+        while let Some(k) = (0..self.active.len())
+            .filter(|&k| self.u[k] < 0.0)
+            .min_by(|&p, &q| self.u[p].total_cmp(&self.u[q]))
+        {
             self.drop(k);
             self.equality_point(b);
         }
@@ -264,7 +286,12 @@ impl DualActiveSet {
 
     /// The slacks `s = b - A x` and the most violated row by distance (`|a_i|` scaled), if a
     /// row misses by more than the tolerance.
-    fn most_violated(&mut self, a: &DMatrix<f64>, b: &DVector<f64>, tol: f64) -> Result<Option<usize>, ActiveSetError> {
+    fn most_violated(
+        &mut self,
+        a: &DMatrix<f64>,
+        b: &DVector<f64>,
+        tol: f64,
+    ) -> Result<Option<usize>, ActiveSetError> {
         self.s.copy_from(b);
         self.s.gemv(-1.0, a, &self.x, 1.0);
         let mut p = None;
@@ -290,7 +317,13 @@ impl DualActiveSet {
 
     /// Step 2: move until row `p` holds (it enters the active set) or a multiplier reaches
     /// zero (its row leaves, and the step goes on).
-    fn add_violated(&mut self, a: &DMatrix<f64>, b: &DVector<f64>, p: usize, max_iter: u32) -> Result<(), ActiveSetError> {
+    fn add_violated(
+        &mut self,
+        a: &DMatrix<f64>,
+        b: &DVector<f64>,
+        p: usize,
+        max_iter: u32,
+    ) -> Result<(), ActiveSetError> {
         let n = a.ncols();
         self.set_np(a, p);
         let mut u_p = 0.0;
@@ -415,45 +448,17 @@ impl DualActiveSet {
         if q == 0 || q > n || self.warm.iter().any(|&i| i >= b.len()) {
             return false;
         }
-        // M's columns into `j` (scratch here: J is formed only if this fails).
-        let l = self.l.as_slice();
-        let mw = self.j.as_mut_slice();
-        for (k, &i) in self.warm.iter().enumerate() {
-            for (c, y) in mw[k * n..(k + 1) * n].iter_mut().enumerate() {
-                *y = -a[(i, c)];
-            }
-        }
-        lower_solve_in_place(l, n, n, mw, n, q);
-        // Gram matrix M^T M into `r`'s leading q x q block (one product), then its Cholesky
-        // factor.
-        let g = self.r.as_mut_slice();
-        {
-            let m_w = MatRef::from_column_major_slice_with_stride(&mw[..], n, q, n);
-            gemm(MatMut::from_column_major_slice_with_stride_mut(&mut g[..], q, q, n), 0.0, 1.0, m_w.transpose(), m_w);
-        }
-        if cholesky_in_place(g, n, q, 1e-12).is_none() {
+        if !self.warm_gram(a, n, q) {
             return false;
         }
-        // u: L_W L_W^T u = -b_W.
-        for k in 0..q {
-            self.u[k] = -b[self.warm[k]];
-        }
-        for k in 0..q {
-            let uk = self.u[k] / g[k * n + k];
-            self.u[k] = uk;
-            for i in k + 1..q {
-                self.u[i] -= uk * g[k * n + i];
-            }
-        }
-        for k in (0..q).rev() {
-            let dot: f64 = (k + 1..q).map(|i| g[k * n + i] * self.u[i]).sum();
-            self.u[k] = (self.u[k] - dot) / g[k * n + k];
-        }
+        self.warm_multipliers(b, n, q);
         let umax = (0..q).map(|k| self.u[k].abs()).fold(0.0, f64::max);
         if (0..q).any(|k| self.u[k].is_nan() || self.u[k] < -tol * (1.0 + umax)) {
             return false;
         }
         // x = L^{-T} (M u).
+        let l = self.l.as_slice();
+        let mw = self.j.as_slice();
         self.z.as_mut_slice().fill(0.0);
         for k in 0..q {
             let uk = self.u[k];
@@ -478,6 +483,55 @@ impl DualActiveSet {
         self.active.clear();
         self.active.extend_from_slice(&self.warm);
         true
+    }
+
+    /// `M = L^{-1} N_W` of the warm rows into `j`'s first `q` columns (scratch here: `J` is
+    /// formed only if the hot start fails), and the Cholesky factor `L_W` of the Gram matrix
+    /// `M^T M` into `r`'s leading q x q block; false when that Gram matrix is singular.
+    fn warm_gram(&mut self, a: &DMatrix<f64>, n: usize, q: usize) -> bool {
+        // -N_W's columns into `j`, then M = L^{-1} N_W in place.
+        let l = self.l.as_slice();
+        let mw = self.j.as_mut_slice();
+        for (k, &i) in self.warm.iter().enumerate() {
+            for (c, y) in mw[k * n..(k + 1) * n].iter_mut().enumerate() {
+                *y = -a[(i, c)];
+            }
+        }
+        lower_solve_in_place(l, n, n, mw, n, q);
+        // Gram matrix M^T M into `r`'s leading q x q block (one product), then its Cholesky
+        // factor.
+        let g = self.r.as_mut_slice();
+        {
+            let m_w = MatRef::from_column_major_slice_with_stride(&mw[..], n, q, n);
+            gemm(
+                MatMut::from_column_major_slice_with_stride_mut(&mut g[..], q, q, n),
+                0.0,
+                1.0,
+                m_w.transpose(),
+                m_w,
+            );
+        }
+        cholesky_in_place(g, n, q, 1e-12).is_some()
+    }
+
+    /// The warm rows' multipliers `u`: `L_W L_W^T u = -b_W`, with `L_W` from
+    /// [`DualActiveSet::warm_gram`].
+    fn warm_multipliers(&mut self, b: &DVector<f64>, n: usize, q: usize) {
+        let g = self.r.as_slice();
+        for k in 0..q {
+            self.u[k] = -b[self.warm[k]];
+        }
+        for k in 0..q {
+            let uk = self.u[k] / g[k * n + k];
+            self.u[k] = uk;
+            for i in k + 1..q {
+                self.u[i] -= uk * g[k * n + i];
+            }
+        }
+        for k in (0..q).rev() {
+            let dot: f64 = (k + 1..q).map(|i| g[k * n + i] * self.u[i]).sum();
+            self.u[k] = (self.u[k] - dot) / g[k * n + k];
+        }
     }
 
     /// `np = -a_i`.
@@ -565,7 +619,12 @@ impl DualActiveSet {
     }
 
     /// Every row within `tol` and every multiplier non-negative (to `tol` of the largest).
-    fn verify(&mut self, a: &DMatrix<f64>, b: &DVector<f64>, tol: f64) -> Result<(), ActiveSetError> {
+    fn verify(
+        &mut self,
+        a: &DMatrix<f64>,
+        b: &DVector<f64>,
+        tol: f64,
+    ) -> Result<(), ActiveSetError> {
         self.s.copy_from(b);
         self.s.gemv(-1.0, a, &self.x, 1.0);
         let mut worst: f64 = 0.0;

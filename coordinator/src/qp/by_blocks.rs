@@ -10,7 +10,9 @@
 //! min_z  |J_c^T z|^2                         (eq. wrench_optim2: |Y F|^2, without eps |F|^2)
 //! s.t.   (J_r^T z_r)_u = 0     per robot r   (no torque on an unactuated joint)
 //!        G z_h = 0                           (internal: z_h in N's range, eq. jacobian_cee)
-//!        C_k (eta + z)_k >= d_k              (the same contact rows, eqs. unilateral_and_friction_cone_constraint, moment_constraint)
+//!        C_k (eta + z)_k >= d_k              (the same contact rows, eqs.
+//!                                            unilateral_and_friction_cone_constraint,
+//!                                            moment_constraint)
 //!        |tau_0 - (J_c^T z)_a| <= tau_max    (eq. real_torque_limit)
 //! ```
 //!
@@ -34,7 +36,10 @@
 use nalgebra::{DMatrix, DVector, Matrix6, Vector6};
 
 use super::rows::{contact_rows, ContactKind};
-use crate::linalg::{cholesky_in_place, lower_solve_in_place, lower_transpose_solve_in_place, spd6_inverse, zeros, zeros_v};
+use crate::linalg::{
+    cholesky_in_place, lower_solve_in_place, lower_transpose_solve_in_place, spd6_inverse, zeros,
+    zeros_v,
+};
 use crate::team::Team;
 
 /// Smallest Cholesky pivot, relative to the largest diagonal entry, of a robot's blocks (the
@@ -47,7 +52,7 @@ pub struct BlockInput<'a> {
     /// The grasp matrix `G` (6 x 6B) when hands hold the object.
     pub g: Option<&'a DMatrix<f64>>,
     /// The QP's contacts, `(first row in lambda, kind)`, feet then hands (see
-    /// [`crate::units::contacts::contact_list`]).
+    /// [`crate::building_blocks::contacts::contact_list`]).
     pub contacts: &'a [(usize, ContactKind)],
     /// `eta` with the object's load on the hand rows (what the contact rows constrain at `z = 0`).
     pub eta_real: &'a DVector<f64>,
@@ -63,7 +68,10 @@ pub enum Decline {
     NoHotStart,
     #[error("the contact variables are not one block per robot")]
     NotByRobots,
-    #[error("robot {robot}'s contacts are not independent (J_r J_r^T or its active rows' Gram is singular)")]
+    #[error(
+        "robot {robot}'s contacts are not independent (J_r J_r^T or its active rows' Gram is \
+         singular)"
+    )]
     Singular { robot: usize },
     #[error("the grasp's coupling is singular on the active rows")]
     Coupling,
@@ -128,7 +136,11 @@ enum Verdict {
     Optimal,
     /// Not the optimum by `worst`: the active row with the most negative multiplier (`leave`)
     /// and the most violated inactive row (`enter`), when there are.
-    NotOptimal { worst: f64, leave: Option<usize>, enter: Option<usize> },
+    NotOptimal {
+        worst: f64,
+        leave: Option<usize>,
+        enter: Option<usize>,
+    },
     Declined(Decline),
 }
 
@@ -148,14 +160,16 @@ impl BlockHotStart {
     /// It declines (and the caller builds the team-sized QP) on a robot without contacts or
     /// with fewer contact variables than unactuated joints (its block has no solution), and on
     /// linearly dependent active rows, as when both bounds of a foot being unloaded bind.
-    pub fn solve(&mut self, inp: &BlockInput, warm: &[usize], warm_shape: (usize, usize), tol: f64, repairs: u32) -> Result<(), Decline> {
+    pub fn solve(
+        &mut self,
+        inp: &BlockInput,
+        warm: &[usize],
+        warm_shape: (usize, usize),
+        tol: f64,
+        repairs: u32,
+    ) -> Result<(), Decline> {
         let m = inp.eta_real.len();
-        self.row0.clear();
-        let mut nc = 0;
-        for (_, kind) in inp.contacts {
-            self.row0.push(nc);
-            nc += contact_rows(kind).len();
-        }
+        let nc = self.contact_row_starts(inp);
         let rows = nc + 2 * inp.actuated.len();
         self.rows = rows;
         self.repairs = 0;
@@ -175,26 +189,46 @@ impl BlockHotStart {
         self.active.clear();
         self.active.extend_from_slice(warm);
         loop {
-            self.in_w.iter_mut().for_each(|w| *w = false);
-            for &i in &self.active {
-                self.in_w[i] = true;
-            }
-            let active = std::mem::take(&mut self.active);
-            let rows_set = self.equality_rows(inp, &active, nc);
-            self.active = active;
-            rows_set?;
-            let nu_c = self.coupling(inp)?;
-            self.answer(inp, &nu_c);
+            self.minimize_on_active(inp, nc)?;
             match self.verify(inp, nc, tol) {
                 Verdict::Optimal => return Ok(()),
                 Verdict::Declined(d) => return Err(d),
-                Verdict::NotOptimal { worst, .. } if self.repairs >= repairs => return Err(Decline::NotOptimal(worst)),
+                Verdict::NotOptimal { worst, .. } if self.repairs >= repairs => {
+                    return Err(Decline::NotOptimal(worst))
+                }
                 Verdict::NotOptimal { leave: Some(i), .. } => self.active.retain(|&r| r != i),
                 Verdict::NotOptimal { enter: Some(i), .. } => self.active.push(i),
                 Verdict::NotOptimal { worst, .. } => return Err(Decline::NotOptimal(worst)),
             }
             self.repairs += 1;
         }
+    }
+
+    /// Each contact's first row into `row0`; the number of contact rows.
+    fn contact_row_starts(&mut self, inp: &BlockInput) -> usize {
+        self.row0.clear();
+        let mut nc = 0;
+        for (_, kind) in inp.contacts {
+            self.row0.push(nc);
+            nc += contact_rows(kind).len();
+        }
+        nc
+    }
+
+    /// The minimum with the rows in [`BlockHotStart::active`] held with equality, into
+    /// [`BlockHotStart::z`] and [`BlockHotStart::dtau`] (`nc` contact rows).
+    fn minimize_on_active(&mut self, inp: &BlockInput, nc: usize) -> Result<(), Decline> {
+        self.in_w.iter_mut().for_each(|w| *w = false);
+        for &i in &self.active {
+            self.in_w[i] = true;
+        }
+        let active = std::mem::take(&mut self.active);
+        let rows_set = self.equality_rows(inp, &active, nc);
+        self.active = active;
+        rows_set?;
+        let nu_c = self.coupling(inp)?;
+        self.answer(inp, &nu_c);
+        Ok(())
     }
 
     /// Every buffer at its shape for `m` variables, `n` joints and `rows` rows (reallocated only
@@ -245,7 +279,8 @@ impl BlockHotStart {
             let mr = rq.vars.len();
             zeros(&mut rq.jt, rq.nv, mr);
             for (v, &row) in rq.vars.iter().enumerate() {
-                let (src, i) = if row < 3 * nf { (&team.j_cf, row) } else { (&team.j_ee, row - 3 * nf) };
+                let (src, i) =
+                    if row < 3 * nf { (&team.j_cf, row) } else { (&team.j_ee, row - 3 * nf) };
                 for c in 0..rq.nv {
                     rq.jt[(c, v)] = src[(i, rq.offset + c)];
                 }
@@ -261,7 +296,12 @@ impl BlockHotStart {
 
     /// Each robot's equality rows (its base rows, then its rows of `W`) as the columns of
     /// `A_r^T`, and `V = L^{-1} A_r^T`.
-    fn equality_rows(&mut self, inp: &BlockInput, warm: &[usize], nc: usize) -> Result<(), Decline> {
+    fn equality_rows(
+        &mut self,
+        inp: &BlockInput,
+        warm: &[usize],
+        nc: usize,
+    ) -> Result<(), Decline> {
         let team = inp.team;
         let row0 = &self.row0;
         for (r, rq) in self.robots.iter_mut().enumerate() {
@@ -277,7 +317,8 @@ impl BlockHotStart {
         }
         for &i in warm {
             if i < nc {
-                let (start, kind, k) = contact_of_row(inp.contacts, row0, i).ok_or(Decline::NoHotStart)?;
+                let (start, kind, k) =
+                    contact_of_row(inp.contacts, row0, i).ok_or(Decline::NoHotStart)?;
                 let r = robot_of_contact(team, start).ok_or(Decline::NoHotStart)?;
                 let cr = contact_rows(&kind);
                 let (c, lo) = cr.iter().nth(k).ok_or(Decline::NoHotStart)?;
@@ -293,9 +334,17 @@ impl BlockHotStart {
                 // Torque row pair p: tau_0 - (J^T z)_j <= lim (even) and >= -lim (odd).
                 let p = (i - nc) / 2;
                 let (j, lim) = (inp.actuated[p], inp.limits[p]);
-                let r = team.robots.iter().position(|b| (b.offset..b.offset + b.nv).contains(&j)).ok_or(Decline::NoHotStart)?;
+                let r = team
+                    .robots
+                    .iter()
+                    .position(|b| (b.offset..b.offset + b.nv).contains(&j))
+                    .ok_or(Decline::NoHotStart)?;
                 let rq = &mut self.robots[r];
-                let (sign, beta) = if (i - nc) & 1 == 0 { (1.0, inp.tau0[j] - lim) } else { (-1.0, -(lim + inp.tau0[j])) };
+                let (sign, beta) = if (i - nc) & 1 == 0 {
+                    (1.0, inp.tau0[j] - lim)
+                } else {
+                    (-1.0, -(lim + inp.tau0[j]))
+                };
                 push_jt_row(rq, r, j - rq.offset, sign, beta, Some(i))?;
             }
         }
@@ -342,7 +391,8 @@ impl BlockHotStart {
             for a in 0..6 {
                 rhs[a] -= (0..k).map(|c| rq.x[(c, a)] * rq.y[c]).sum::<f64>();
                 for b in 0..=a {
-                    let s = (0..mr).map(|c| rq.u[(c, a)] * rq.u[(c, b)]).sum::<f64>() - (0..k).map(|c| rq.x[(c, a)] * rq.x[(c, b)]).sum::<f64>();
+                    let s = (0..mr).map(|c| rq.u[(c, a)] * rq.u[(c, b)]).sum::<f64>()
+                        - (0..k).map(|c| rq.x[(c, a)] * rq.x[(c, b)]).sum::<f64>();
                     schur[(a, b)] += s;
                     if a != b {
                         schur[(b, a)] += s;
@@ -389,6 +439,50 @@ impl BlockHotStart {
     /// with equality, the base rows and the coupling at zero, every multiplier of `W`
     /// non-negative (to `tol` of the largest).
     fn verify(&self, inp: &BlockInput, nc: usize, tol: f64) -> Verdict {
+        let Some((mut worst, enter)) = self.row_misses(inp, nc, tol) else {
+            return Verdict::Declined(Decline::NonFinite);
+        };
+        let equalities = self.equality_residual(inp);
+        if equalities.is_nan() || equalities > tol {
+            return Verdict::Declined(Decline::NotOptimal(equalities));
+        }
+        let multipliers = || {
+            self.robots
+                .iter()
+                .flat_map(|rq| rq.rows.iter().zip(rq.nu.iter()))
+                .filter_map(|(w, u)| w.map(|i| (i, *u)))
+        };
+        if multipliers().any(|(_, u)| !u.is_finite()) {
+            return Verdict::Declined(Decline::NonFinite);
+        }
+        let numax = multipliers().fold(0.0f64, |m, (_, u)| m.max(u.abs()));
+        let mut leave: Option<(usize, f64)> = None;
+        for (i, u) in multipliers() {
+            let miss = -u / (1.0 + numax);
+            worst = worst.max(miss);
+            if miss > tol && leave.is_none_or(|(_, m)| miss > m) {
+                leave = Some((i, miss));
+            }
+        }
+        if worst > tol || worst.is_nan() {
+            return Verdict::NotOptimal {
+                worst,
+                leave: leave.map(|l| l.0),
+                enter: enter.map(|e| e.0),
+            };
+        }
+        Verdict::Optimal
+    }
+
+    /// The rows' worst relative miss (slack `>= -tol (1 + |b_i|)`, `b_i` its value at `z = 0`;
+    /// the rows of `W` with equality) and the row outside `W` missed most beyond `tol`, or
+    /// `None` when a slack is not finite.
+    fn row_misses(
+        &self,
+        inp: &BlockInput,
+        nc: usize,
+        tol: f64,
+    ) -> Option<(f64, Option<(usize, f64)>)> {
         let mut worst: f64 = 0.0;
         let mut enter: Option<(usize, f64)> = None;
         let mut finite = true;
@@ -416,11 +510,13 @@ impl BlockHotStart {
             row(lim - t, lim - inp.tau0[j], nc + 2 * p);
             row(lim + t, lim + inp.tau0[j], nc + 2 * p + 1);
         }
-        if !finite {
-            return Verdict::Declined(Decline::NonFinite);
-        }
-        // The equalities hold by construction; checked against round-off at the scale of the
-        // answer.
+        finite.then_some((worst, enter))
+    }
+
+    /// The largest miss of the equalities (no torque on an unactuated joint, no coupling
+    /// wrench `G z_h`), relative to the scale of the answer. They hold by construction: this
+    /// checks them against round-off.
+    fn equality_residual(&self, inp: &BlockInput) -> f64 {
         let scale = 1.0 + self.dtau.amax() + self.z.amax();
         let mut equalities: f64 = 0.0;
         for rq in &self.robots {
@@ -437,26 +533,7 @@ impl BlockHotStart {
                 equalities = equalities.max(gz.abs() / scale);
             }
         }
-        if equalities.is_nan() || equalities > tol {
-            return Verdict::Declined(Decline::NotOptimal(equalities));
-        }
-        let multipliers = || self.robots.iter().flat_map(|rq| rq.rows.iter().zip(rq.nu.iter())).filter_map(|(w, u)| w.map(|i| (i, *u)));
-        if multipliers().any(|(_, u)| !u.is_finite()) {
-            return Verdict::Declined(Decline::NonFinite);
-        }
-        let numax = multipliers().fold(0.0f64, |m, (_, u)| m.max(u.abs()));
-        let mut leave: Option<(usize, f64)> = None;
-        for (i, u) in multipliers() {
-            let miss = -u / (1.0 + numax);
-            worst = worst.max(miss);
-            if miss > tol && leave.is_none_or(|(_, m)| miss > m) {
-                leave = Some((i, miss));
-            }
-        }
-        if worst > tol || worst.is_nan() {
-            return Verdict::NotOptimal { worst, leave: leave.map(|l| l.0), enter: enter.map(|e| e.0) };
-        }
-        Verdict::Optimal
+        equalities
     }
 }
 
@@ -464,7 +541,12 @@ impl BlockHotStart {
 /// problem's row `row` (`None` for a base row): its index, its entries left at zero for the
 /// caller to write; an error when the robot already has as many as it has variables (they
 /// cannot be independent).
-fn new_column(rq: &mut RobotQp, robot: usize, beta: f64, row: Option<usize>) -> Result<usize, Decline> {
+fn new_column(
+    rq: &mut RobotQp,
+    robot: usize,
+    beta: f64,
+    row: Option<usize>,
+) -> Result<usize, Decline> {
     let col = rq.rows.len();
     if col >= rq.vars.len() {
         return Err(Decline::Singular { robot });
@@ -475,7 +557,14 @@ fn new_column(rq: &mut RobotQp, robot: usize, beta: f64, row: Option<usize>) -> 
 }
 
 /// `sign` times row `c` of `J_r^T` as a new equality column ([`new_column`]).
-fn push_jt_row(rq: &mut RobotQp, robot: usize, c: usize, sign: f64, beta: f64, row: Option<usize>) -> Result<(), Decline> {
+fn push_jt_row(
+    rq: &mut RobotQp,
+    robot: usize,
+    c: usize,
+    sign: f64,
+    beta: f64,
+    row: Option<usize>,
+) -> Result<(), Decline> {
     let col = new_column(rq, robot, beta, row)?;
     for v in 0..rq.vars.len() {
         rq.at[(v, col)] = sign * rq.jt[(c, v)];
@@ -486,7 +575,11 @@ fn push_jt_row(rq: &mut RobotQp, robot: usize, c: usize, sign: f64, beta: f64, r
 /// The contact of the assembled problem's row `i` (`i` below the contacts' rows), with
 /// `row0` each contact's first row: its first row in `lambda`, its kind and the row's number
 /// among its rows.
-fn contact_of_row(contacts: &[(usize, ContactKind)], row0: &[usize], i: usize) -> Option<(usize, ContactKind, usize)> {
+fn contact_of_row(
+    contacts: &[(usize, ContactKind)],
+    row0: &[usize],
+    i: usize,
+) -> Option<(usize, ContactKind, usize)> {
     let c = row0.partition_point(|&first| first <= i).checked_sub(1)?;
     let (start, kind) = *contacts.get(c)?;
     (i - row0[c] < contact_rows(&kind).len()).then_some((start, kind, i - row0[c]))

@@ -8,7 +8,9 @@
 use std::time::Instant;
 
 use clarabel::algebra::CscMatrix;
-use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus, SupportedConeT};
+use clarabel::solver::{
+    DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus, SupportedConeT,
+};
 use nalgebra::{DMatrix, DVector};
 use protocol::QpStatus;
 
@@ -77,10 +79,22 @@ pub struct ClarabelRun {
 /// Solve `problem` with Clarabel (`max_iter` iterations, no presolve, quiet) and copy its
 /// answer into `x` (sized to the problem's variables if it is not) when `accept` allows it.
 /// `None` when Clarabel refuses the problem at setup.
-pub fn run(problem: &ConicProblem, max_iter: u32, accept: Accept, x: &mut DVector<f64>) -> Option<ClarabelRun> {
-    let settings = DefaultSettings::<f64> { verbose: false, max_iter, presolve_enable: false, ..DefaultSettings::default() };
+pub fn run(
+    problem: &ConicProblem,
+    max_iter: u32,
+    accept: Accept,
+    x: &mut DVector<f64>,
+) -> Option<ClarabelRun> {
+    let settings = DefaultSettings::<f64> {
+        verbose: false,
+        max_iter,
+        presolve_enable: false,
+        ..DefaultSettings::default()
+    };
     let setup_start = Instant::now();
-    let mut solver = DefaultSolver::new(problem.p, problem.q, problem.a, problem.b, problem.cones, settings).ok()?;
+    let mut solver =
+        DefaultSolver::new(problem.p, problem.q, problem.a, problem.b, problem.cones, settings)
+            .ok()?;
     let setup_us = setup_start.elapsed().as_secs_f64() * 1e6;
     solver.solve();
     let sol = &solver.solution;
@@ -105,7 +119,10 @@ fn status(s: SolverStatus) -> QpStatus {
     match s {
         SolverStatus::Solved => QpStatus::Solved,
         SolverStatus::AlmostSolved => QpStatus::AlmostSolved,
-        SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible | SolverStatus::DualInfeasible | SolverStatus::AlmostDualInfeasible => QpStatus::Infeasible,
+        SolverStatus::PrimalInfeasible
+        | SolverStatus::AlmostPrimalInfeasible
+        | SolverStatus::DualInfeasible
+        | SolverStatus::AlmostDualInfeasible => QpStatus::Infeasible,
         SolverStatus::MaxIterations | SolverStatus::MaxTime => QpStatus::MaxIterations,
         _ => QpStatus::NumericalError,
     }
@@ -118,17 +135,37 @@ impl QpSolver for Clarabel {
 
     /// Writes `x` whenever Clarabel returns a finite point of the right size, whatever its
     /// status (a setup error is a `NumericalError` with `x` untouched).
-    fn solve_problem(&mut self, problem: &QpProblem, settings: &QpSettings, x: &mut DVector<f64>) -> QpOutcome {
+    fn solve_problem(
+        &mut self,
+        problem: &QpProblem,
+        settings: &QpSettings,
+        x: &mut DVector<f64>,
+    ) -> QpOutcome {
         let t0 = Instant::now();
         let (m, rows) = (problem.n(), problem.rows());
         let p = to_csc(&problem.p, true);
         let a_csc = to_csc(&problem.a, false);
         let q = vec![0.0; m];
         let cones = [NonnegativeConeT(rows)];
-        let conic = ConicProblem { p: &p, q: &q, a: &a_csc, b: problem.b.as_slice(), cones: &cones };
+        let conic =
+            ConicProblem { p: &p, q: &q, a: &a_csc, b: problem.b.as_slice(), cones: &cones };
         let Some(run) = run(&conic, settings.max_iter, Accept::AnyStatus, x) else {
-            return QpOutcome { status: QpStatus::NumericalError, iterations: 0, solve_us: 0.0, setup_us: 0.0, rows, solver: "clarabel" };
+            return QpOutcome {
+                status: QpStatus::NumericalError,
+                iterations: 0,
+                solve_us: 0.0,
+                setup_us: 0.0,
+                rows,
+                solver: "clarabel",
+            };
         };
-        QpOutcome { status: run.status, iterations: run.iterations, solve_us: t0.elapsed().as_secs_f64() * 1e6, setup_us: run.setup_us, rows, solver: "clarabel" }
+        QpOutcome {
+            status: run.status,
+            iterations: run.iterations,
+            solve_us: t0.elapsed().as_secs_f64() * 1e6,
+            setup_us: run.setup_us,
+            rows,
+            solver: "clarabel",
+        }
     }
 }

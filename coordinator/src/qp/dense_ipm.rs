@@ -63,9 +63,22 @@ impl QpSolver for DenseIpm {
     }
 
     /// Writes `x` only when it converged (Solved, or AlmostSolved at reduced accuracy).
-    fn solve_problem(&mut self, problem: &QpProblem, settings: &QpSettings, x: &mut DVector<f64>) -> QpOutcome {
+    fn solve_problem(
+        &mut self,
+        problem: &QpProblem,
+        settings: &QpSettings,
+        x: &mut DVector<f64>,
+    ) -> QpOutcome {
         let (p, a, b) = (&problem.p, &problem.a, &problem.b);
-        let run = self.iterate(p, a, b, problem.pairs_from, settings.max_iter, settings.dense_tol, settings.reduced_tol);
+        let run = self.iterate(
+            p,
+            a,
+            b,
+            problem.pairs_from,
+            settings.max_iter,
+            settings.dense_tol,
+            settings.reduced_tol,
+        );
         let (status, iterations) = match run {
             Ok((it, reduced)) => {
                 if x.len() != self.x.len() {
@@ -76,7 +89,14 @@ impl QpSolver for DenseIpm {
             }
             Err(stop) => (stop.status, stop.iterations),
         };
-        QpOutcome { status, iterations, solve_us: 0.0, setup_us: 0.0, rows: problem.rows(), solver: self.name() }
+        QpOutcome {
+            status,
+            iterations,
+            solve_us: 0.0,
+            setup_us: 0.0,
+            rows: problem.rows(),
+            solver: self.name(),
+        }
     }
 }
 
@@ -92,14 +112,33 @@ impl DenseIpm {
     /// Rows from `pairs_from` on come in pairs `(a, -a)` (two-sided bounds, the torque limits):
     /// their terms of `A^T W A` are `(w_+ + w_-) a a^T`, so the normal matrix is formed from
     /// one row per pair (a third fewer rows for the paper's QP).
-    pub fn solve(&mut self, p: &DMatrix<f64>, a: &DMatrix<f64>, b: &DVector<f64>, pairs_from: usize, max_iter: u32, tol: f64) -> Option<(u32, bool)> {
+    pub fn solve(
+        &mut self,
+        p: &DMatrix<f64>,
+        a: &DMatrix<f64>,
+        b: &DVector<f64>,
+        pairs_from: usize,
+        max_iter: u32,
+        tol: f64,
+    ) -> Option<(u32, bool)> {
         self.iterate(p, a, b, pairs_from, max_iter, tol, REDUCED_TOL).ok()
     }
 
     /// [`DenseIpm::solve`] with the reduced-accuracy tolerance given; says why it stopped
     /// without an answer.
+    // The terms of the assembled QP and the settings it is solved with, one argument each as in
+    // `DenseIpm::solve` (the `QpSolver` path reads them from `QpProblem` and `QpSettings`).
     #[allow(clippy::too_many_arguments)]
-    fn iterate(&mut self, p: &DMatrix<f64>, a: &DMatrix<f64>, b: &DVector<f64>, pairs_from: usize, max_iter: u32, tol: f64, reduced_tol: f64) -> Result<(u32, bool), Stop> {
+    fn iterate(
+        &mut self,
+        p: &DMatrix<f64>,
+        a: &DMatrix<f64>,
+        b: &DVector<f64>,
+        pairs_from: usize,
+        max_iter: u32,
+        tol: f64,
+        reduced_tol: f64,
+    ) -> Result<(u32, bool), Stop> {
         let m = a.nrows();
         let pairs_from = pairs_from.min(m);
         let pairs = (m - pairs_from) / 2;
@@ -110,56 +149,91 @@ impl DenseIpm {
         self.start(a, b, pairs_from, pairs);
         let bnorm = 1.0 + b.amax();
         for it in 0..max_iter {
-            self.px.gemv(1.0, p, &self.x, 0.0);
-            self.atz.gemv_tr(1.0, a, &self.z, 0.0);
-            self.rd.copy_from(&self.px);
-            self.rd += &self.atz;
-            self.rp.copy_from(&self.s);
-            self.rp -= b;
-            self.rp.gemv(1.0, a, &self.x, 1.0);
-            let mu = self.s.dot(&self.z) / m as f64;
-            // Dual residual relative to its terms' size (as Clarabel does): `A^T z` can be large
-            // (stiff contact rows), and `P x + A^T z` then stalls at round-off of that size.
-            let dscale = 1.0 + self.px.amax().max(self.atz.amax());
-            let (rp_n, rd_n) = (self.rp.amax(), self.rd.amax());
+            let (rp_n, rd_n, mu, dscale) = self.residuals(p, a, b);
             if rp_n <= tol * bnorm && rd_n <= tol * dscale && mu <= tol * bnorm {
                 return Ok((it, false));
             }
             if it + 1 == max_iter {
-                let ok = rp_n <= reduced_tol * bnorm && rd_n <= reduced_tol * dscale && mu <= reduced_tol * bnorm;
-                return if ok { Ok((it, true)) } else { Err(Stop { status: QpStatus::MaxIterations, iterations: max_iter }) };
+                let ok = rp_n <= reduced_tol * bnorm
+                    && rd_n <= reduced_tol * dscale
+                    && mu <= reduced_tol * bnorm;
+                return if ok {
+                    Ok((it, true))
+                } else {
+                    Err(Stop { status: QpStatus::MaxIterations, iterations: max_iter })
+                };
             }
-            let numerical = Stop { status: QpStatus::NumericalError, iterations: it + 1 };
-            self.normal_matrix(p, pairs_from, reduced);
-            let k = std::mem::replace(&mut self.k, DMatrix::zeros(0, 0));
-            let Some(chol) = k.cholesky() else {
-                return Err(numerical);
-            };
-            // Predictor: rc = S z.
-            self.rc.copy_from(&self.s);
-            self.rc.component_mul_assign(&self.z);
-            self.direction(&chol, a);
-            let alpha_a = max_step(&self.s, &self.z, &self.ds, &self.dz);
-            let mut sz = 0.0;
-            for i in 0..m {
-                sz += (self.s[i] + alpha_a * self.ds[i]) * (self.z[i] + alpha_a * self.dz[i]);
-            }
-            let sigma = (sz / m as f64 / mu).powi(3).clamp(0.0, 1.0);
-            // Corrector: rc = S z + dS_a dz_a - sigma mu.
-            for i in 0..m {
-                self.rc[i] = self.s[i] * self.z[i] + self.ds[i] * self.dz[i] - sigma * mu;
-            }
-            self.direction(&chol, a);
-            self.k = chol.unpack_dirty();
-            let alpha = (0.99 * max_step(&self.s, &self.z, &self.ds, &self.dz)).min(1.0);
-            self.x.axpy(alpha, &self.dx, 1.0);
-            self.s.axpy(alpha, &self.ds, 1.0);
-            self.z.axpy(alpha, &self.dz, 1.0);
-            if !(all_finite(self.x.as_slice()) && self.s.iter().all(|v| v.is_finite() && *v > 0.0) && self.z.iter().all(|v| v.is_finite() && *v > 0.0)) {
-                return Err(numerical);
+            if !self.newton_step(p, a, pairs_from, reduced, mu) {
+                return Err(Stop { status: QpStatus::NumericalError, iterations: it + 1 });
             }
         }
         Err(Stop { status: QpStatus::MaxIterations, iterations: max_iter })
+    }
+
+    /// The residuals at the iterate: primal `A x + s - b` into `rp` and dual `P x + A^T z` into
+    /// `rd` (with `P x`, `A^T z`); returns their largest entries, the duality measure
+    /// `mu = s^T z / m` and the dual residual's scale.
+    fn residuals(
+        &mut self,
+        p: &DMatrix<f64>,
+        a: &DMatrix<f64>,
+        b: &DVector<f64>,
+    ) -> (f64, f64, f64, f64) {
+        let m = a.nrows();
+        self.px.gemv(1.0, p, &self.x, 0.0);
+        self.atz.gemv_tr(1.0, a, &self.z, 0.0);
+        self.rd.copy_from(&self.px);
+        self.rd += &self.atz;
+        self.rp.copy_from(&self.s);
+        self.rp -= b;
+        self.rp.gemv(1.0, a, &self.x, 1.0);
+        let mu = self.s.dot(&self.z) / m as f64;
+        // Dual residual relative to its terms' size (as Clarabel does): `A^T z` can be large
+        // (stiff contact rows), and `P x + A^T z` then stalls at round-off of that size.
+        let dscale = 1.0 + self.px.amax().max(self.atz.amax());
+        (self.rp.amax(), self.rd.amax(), mu, dscale)
+    }
+
+    /// One Mehrotra predictor-corrector step from the iterate with duality measure `mu`, kept
+    /// strictly inside the cone; false on a numerical failure (the normal matrix not positive
+    /// definite, or an iterate not finite).
+    fn newton_step(
+        &mut self,
+        p: &DMatrix<f64>,
+        a: &DMatrix<f64>,
+        pairs_from: usize,
+        reduced: usize,
+        mu: f64,
+    ) -> bool {
+        let m = a.nrows();
+        self.normal_matrix(p, pairs_from, reduced);
+        let k = std::mem::replace(&mut self.k, DMatrix::zeros(0, 0));
+        let Some(chol) = k.cholesky() else {
+            return false;
+        };
+        // Predictor: rc = S z.
+        self.rc.copy_from(&self.s);
+        self.rc.component_mul_assign(&self.z);
+        self.direction(&chol, a);
+        let alpha_a = max_step(&self.s, &self.z, &self.ds, &self.dz);
+        let mut sz = 0.0;
+        for i in 0..m {
+            sz += (self.s[i] + alpha_a * self.ds[i]) * (self.z[i] + alpha_a * self.dz[i]);
+        }
+        let sigma = (sz / m as f64 / mu).powi(3).clamp(0.0, 1.0);
+        // Corrector: rc = S z + dS_a dz_a - sigma mu.
+        for i in 0..m {
+            self.rc[i] = self.s[i] * self.z[i] + self.ds[i] * self.dz[i] - sigma * mu;
+        }
+        self.direction(&chol, a);
+        self.k = chol.unpack_dirty();
+        let alpha = (0.99 * max_step(&self.s, &self.z, &self.ds, &self.dz)).min(1.0);
+        self.x.axpy(alpha, &self.dx, 1.0);
+        self.s.axpy(alpha, &self.ds, 1.0);
+        self.z.axpy(alpha, &self.dz, 1.0);
+        all_finite(self.x.as_slice())
+            && self.s.iter().all(|v| v.is_finite() && *v > 0.0)
+            && self.z.iter().all(|v| v.is_finite() && *v > 0.0)
     }
 
     /// Sizes the iterates and scratch, copies `A`'s rows with one row per pair into `a_red`,
@@ -170,7 +244,16 @@ impl DenseIpm {
         for v in [&mut self.x, &mut self.px, &mut self.atz, &mut self.rd, &mut self.dx] {
             zeros_v(v, n);
         }
-        for v in [&mut self.s, &mut self.z, &mut self.rp, &mut self.rc, &mut self.t, &mut self.adx, &mut self.ds, &mut self.dz] {
+        for v in [
+            &mut self.s,
+            &mut self.z,
+            &mut self.rp,
+            &mut self.rc,
+            &mut self.t,
+            &mut self.adx,
+            &mut self.ds,
+            &mut self.dz,
+        ] {
             zeros_v(v, m);
         }
         zeros(&mut self.a_red, reduced, n);

@@ -57,7 +57,12 @@ struct NewtonRows<'a> {
 /// prices (1e9) against `H`'s regularisation (1e-6) can leave `K` numerically indefinite:
 /// Cholesky is retried with a ridge relative to `K`'s largest diagonal entry ([`RIDGES`]).
 /// Whether one of them factored.
-fn newton_step(rows: NewtonRows, k: &mut DMatrix<f64>, rhs: &mut DVector<f64>, f: &mut DVector<f64>) -> bool {
+fn newton_step(
+    rows: NewtonRows,
+    k: &mut DMatrix<f64>,
+    rhs: &mut DVector<f64>,
+    f: &mut DVector<f64>,
+) -> bool {
     let NewtonRows { h, a, b, weights, active } = rows;
     let m = h.nrows();
     // K = H + A_V^T W_V A_V, rhs = A_V^T W_V b_V.
@@ -100,65 +105,87 @@ fn newton_step(rows: NewtonRows, k: &mut DMatrix<f64>, rhs: &mut DVector<f64>, f
 /// `None` if a solve fails. It builds `H`, `A` and `b` into `ws` itself (as [`super::solve`]
 /// does), so it does not depend on what ran before; on this rare path that is cheap next to
 /// its solves.
-pub fn solve_least_violation(ws: &mut QpWorkspace, inp: &QpInput, max_iter: u32, f: &mut DVector<f64>) -> Option<f64> {
+pub fn solve_least_violation(
+    ws: &mut QpWorkspace,
+    inp: &QpInput,
+    max_iter: u32,
+    f: &mut DVector<f64>,
+) -> Option<f64> {
     solve_least_violation_with(ws, inp, &QpSettings { max_iter, ..QpSettings::default() }, f)
 }
 
 /// [`solve_least_violation`] with explicit settings (`max_iter`, `violation_weight`,
 /// `hard_row_factor`, `least_violation_min_iter`).
-pub fn solve_least_violation_with(ws: &mut QpWorkspace, inp: &QpInput, settings: &QpSettings, f: &mut DVector<f64>) -> Option<f64> {
+pub fn solve_least_violation_with(
+    ws: &mut QpWorkspace,
+    inp: &QpInput,
+    settings: &QpSettings,
+    f: &mut DVector<f64>,
+) -> Option<f64> {
     let m = inp.rho.ncols();
     let w = settings.violation_weight;
     ws.problem.assemble(inp);
     let QpWorkspace { problem: QpProblem { h, a, b, .. }, lv, .. } = ws;
-    let LeastViolation { k: lv_k, rhs: lv_rhs, r: lv_r, hf: lv_hf, best: lv_best, active: lv_active, now: lv_now, weights } = lv;
     if !(all_finite(b.as_slice()) && all_finite(a.as_slice()) && all_finite(h.as_slice())) {
         return None;
     }
     let rows = a.nrows();
-    row_weights(inp, w, settings.hard_row_factor, weights);
-    if weights.len() != rows {
+    row_weights(inp, w, settings.hard_row_factor, &mut lv.weights);
+    if lv.weights.len() != rows {
         return None;
     }
-    let weights = &*weights;
-    // Cost of F; leaves the residual A F - b in `r`.
-    let cost = |f: &DVector<f64>, r: &mut DVector<f64>, hf: &mut DVector<f64>| {
-        r.copy_from(b);
-        r.gemv(1.0, a, f, -1.0);
-        hf.gemv(1.0, h, f, 0.0);
-        f.dot(hf) + r.iter().zip(weights).map(|(v, wi)| wi * v.max(0.0).powi(2)).sum::<f64>()
-    };
+    let weights = &lv.weights[..];
+    let cost = ViolationCost { h, a, b, weights };
     zeros_v(f, m);
-    zeros_v(lv_r, rows);
-    zeros_v(lv_hf, m);
-    zeros_v(lv_rhs, m);
-    zeros_v(lv_best, m);
-    let mut best = cost(f, lv_r, lv_hf);
-    lv_active.clear();
-    lv_active.resize(rows, false);
+    zeros_v(&mut lv.r, rows);
+    zeros_v(&mut lv.hf, m);
+    zeros_v(&mut lv.rhs, m);
+    zeros_v(&mut lv.best, m);
+    let mut best = cost.of(f, &mut lv.r, &mut lv.hf);
+    lv.active.clear();
+    lv.active.resize(rows, false);
     let mut first = true;
     for _ in 0..settings.max_iter.max(settings.least_violation_min_iter) {
-        lv_now.clear();
-        lv_now.extend(lv_r.iter().map(|r| *r > 0.0));
-        let any = lv_now.iter().any(|x| *x);
-        if !first && lv_now == lv_active {
+        lv.now.clear();
+        lv.now.extend(lv.r.iter().map(|r| *r > 0.0));
+        let any = lv.now.iter().any(|x| *x);
+        if !first && lv.now == lv.active {
             break;
         }
         first = false;
-        std::mem::swap(lv_active, lv_now);
-        if !newton_step(NewtonRows { h, a, b, weights, active: lv_active }, lv_k, lv_rhs, f) {
+        std::mem::swap(&mut lv.active, &mut lv.now);
+        let violated = NewtonRows { h, a, b, weights, active: &lv.active };
+        if !newton_step(violated, &mut lv.k, &mut lv.rhs, f) {
             return None;
         }
-        let c = cost(f, lv_r, lv_hf);
+        let c = cost.of(f, &mut lv.r, &mut lv.hf);
         if c < best {
             best = c;
-            lv_best.copy_from(f);
+            lv.best.copy_from(f);
         }
         if !any {
             break;
         }
     }
-    f.copy_from(lv_best);
-    cost(f, lv_r, lv_hf);
-    Some(lv_r.iter().copied().fold(0.0, f64::max))
+    f.copy_from(&lv.best);
+    cost.of(f, &mut lv.r, &mut lv.hf);
+    Some(lv.r.iter().copied().fold(0.0, f64::max))
+}
+
+/// The least-violation cost `F^T H F + sum_i w_i max(0, (A F - b)_i)^2` of a problem's terms.
+struct ViolationCost<'a> {
+    h: &'a DMatrix<f64>,
+    a: &'a DMatrix<f64>,
+    b: &'a DVector<f64>,
+    weights: &'a [f64],
+}
+
+impl ViolationCost<'_> {
+    /// The cost of `f`; leaves the residual `A F - b` in `r` (and `H F` in `hf`).
+    fn of(&self, f: &DVector<f64>, r: &mut DVector<f64>, hf: &mut DVector<f64>) -> f64 {
+        r.copy_from(self.b);
+        r.gemv(1.0, self.a, f, -1.0);
+        hf.gemv(1.0, self.h, f, 0.0);
+        f.dot(hf) + r.iter().zip(self.weights).map(|(v, wi)| wi * v.max(0.0).powi(2)).sum::<f64>()
+    }
 }

@@ -2,9 +2,11 @@
 //!
 //! ```text
 //! min_F  F^T (J_c B^T B J_c^T + eps I) F
-//! s.t.   C_k (rho F + eta)_k >= d_k     friction + unilateral (eqn. unilateral_and_friction_cone_constraint)
+//! s.t.   C_k (rho F + eta)_k >= d_k     friction + unilateral
+//!                                       (eqn. unilateral_and_friction_cone_constraint)
 //!                                       and hand moments (eqn. moment_constraint), per contact k
-//!        tau_min - tau_0 <= Xi F <= tau_max - tau_0     (eq. real_torque_limit, Xi = S_ns^T B J_c^T)
+//!        tau_min - tau_0 <= Xi F <= tau_max - tau_0
+//!                                       (eq. real_torque_limit, Xi = S_ns^T B J_c^T)
 //! ```
 //!
 //! where `lambda = rho F + eta` (eq. relation_between_lambda_and_Fc) are the predicted real
@@ -13,17 +15,22 @@
 //!
 //! Laid out as Clarabel is, data apart from solvers, one file per concept:
 //!
-//! | file | job |
-//! | --- | --- |
-//! | [`rows`] | one contact's rows `c . lambda_k >= lo` ([`ContactKind`], [`contact_rows`]); the sign conventions, a palm's sliding and torsion in one cone and the tilt-moment pairing, which deviate from the paper |
-//! | [`problem`] | the controller's terms ([`QpInput`]) and the assembled `min 1/2 F^T P F, A F <= b` ([`QpProblem`], [`constraints_into`], [`objective_into`]) |
-//! | [`settings`] | [`QpSettings`]: where the solve starts ([`QpPath`]), iterations, tolerances, the fallback's price |
-//! | [`by_blocks`] | [`BlockHotStart`], the hot start by the robots' blocks in the wrenches' change `z = rho F`, tried before the team-sized QP is built |
-//! | [`active_set`] | [`DualActiveSet`], the Goldfarb–Idnani dual active-set method hot-started from the last tick, tried first on the team-sized QP |
-//! | [`dense_ipm`] | [`DenseIpm`], the dense interior-point method tried next |
-//! | [`clarabel`] | [`Clarabel`], the adapter to Clarabel 0.11 ([`to_csc`]) |
-//! | [`least_violation`] | [`solve_least_violation`], the fallback when the QP is infeasible |
-//! | here | the [`QpSolver`] interface, [`QpOutcome`], [`QpWorkspace`] and [`solve`] (down the [`QpPath`] chain: active set, dense, then Clarabel) |
+//! - [`rows`]: one contact's rows `c . lambda_k >= lo` ([`ContactKind`], [`contact_rows`]); the
+//!   sign conventions, a palm's sliding and torsion in one cone and the tilt-moment pairing,
+//!   which deviate from the paper.
+//! - [`problem`]: the controller's terms ([`QpInput`]) and the assembled
+//!   `min 1/2 F^T P F, A F <= b` ([`QpProblem`], [`constraints_into`], [`objective_into`]).
+//! - [`settings`]: [`QpSettings`]: where the solve starts ([`QpPath`]), iterations, tolerances,
+//!   the fallback's price.
+//! - [`by_blocks`]: [`BlockHotStart`], the hot start by the robots' blocks in the wrenches'
+//!   change `z = rho F`, tried before the team-sized QP is built.
+//! - [`active_set`]: [`DualActiveSet`], the Goldfarb–Idnani dual active-set method hot-started
+//!   from the last tick, tried first on the team-sized QP.
+//! - [`dense_ipm`]: [`DenseIpm`], the dense interior-point method tried next.
+//! - [`clarabel`]: [`Clarabel`], the adapter to Clarabel 0.11 ([`to_csc`]).
+//! - [`least_violation`]: [`solve_least_violation`], the fallback when the QP is infeasible.
+//! - here: the [`QpSolver`] interface, [`QpOutcome`], [`QpWorkspace`] and [`solve`] (down the
+//!   [`QpPath`] chain: active set, dense, then Clarabel).
 
 pub mod active_set;
 pub mod by_blocks;
@@ -46,7 +53,10 @@ pub use dense_ipm::DenseIpm;
 pub use least_violation::{solve_least_violation, solve_least_violation_with};
 pub use problem::{constraints_into, objective_into, QpInput, QpProblem};
 pub use rows::{contact_rows, ContactKind, ContactRows, FRICTION_SIGNS, MAX_CONTACT_ROWS};
-pub use settings::{QpPath, QpSettings, ACTIVE_SET_MAX_ITER, BLOCK_REPAIRS, ACTIVE_SET_TOL, DENSE_TOL, HARD_ROW_FACTOR, LEAST_VIOLATION_MIN_ITER, REDUCED_TOL, VIOLATION_WEIGHT};
+pub use settings::{
+    QpPath, QpSettings, ACTIVE_SET_MAX_ITER, ACTIVE_SET_TOL, BLOCK_REPAIRS, DENSE_TOL,
+    HARD_ROW_FACTOR, LEAST_VIOLATION_MIN_ITER, REDUCED_TOL, VIOLATION_WEIGHT,
+};
 
 use crate::linalg::zeros_v;
 use least_violation::LeastViolation;
@@ -57,7 +67,12 @@ pub trait QpSolver {
     fn name(&self) -> &'static str;
     /// Solve `problem` under `settings` into `x` (sized to `problem.n()` if it is not). Each
     /// solver says when it writes `x`; the outcome's `solve_us` is the solver's own time.
-    fn solve_problem(&mut self, problem: &QpProblem, settings: &QpSettings, x: &mut DVector<f64>) -> QpOutcome;
+    fn solve_problem(
+        &mut self,
+        problem: &QpProblem,
+        settings: &QpSettings,
+        x: &mut DVector<f64>,
+    ) -> QpOutcome;
 }
 
 /// The QP's outcome (the forces are written to the caller's vector).
@@ -75,7 +90,14 @@ pub struct QpOutcome {
 
 impl Default for QpOutcome {
     fn default() -> Self {
-        QpOutcome { status: QpStatus::NotRun, iterations: 0, solve_us: 0.0, setup_us: 0.0, rows: 0, solver: "none" }
+        QpOutcome {
+            status: QpStatus::NotRun,
+            iterations: 0,
+            solve_us: 0.0,
+            setup_us: 0.0,
+            rows: 0,
+            solver: "none",
+        }
     }
 }
 
@@ -110,7 +132,12 @@ impl QpWorkspace {
 ///
 /// The dense interior-point method runs in `ws` and allocates nothing once the team's shape
 /// is set; Clarabel, when it has to finish a tick, builds its problem anew (it allocates).
-pub fn solve(ws: &mut QpWorkspace, inp: &QpInput, max_iter: u32, f: &mut DVector<f64>) -> QpOutcome {
+pub fn solve(
+    ws: &mut QpWorkspace,
+    inp: &QpInput,
+    max_iter: u32,
+    f: &mut DVector<f64>,
+) -> QpOutcome {
     solve_with(ws, inp, &QpSettings::new(max_iter, QpPath::default()), f)
 }
 
@@ -120,17 +147,31 @@ pub fn solve(ws: &mut QpWorkspace, inp: &QpInput, max_iter: u32, f: &mut DVector
 /// it does not solve the QP, [`Clarabel`] when neither does (it also certifies
 /// infeasibility, so the status of an infeasible QP is always Clarabel's).
 /// `solve_us` is the whole call's time, assembly included.
-pub fn solve_with(ws: &mut QpWorkspace, inp: &QpInput, settings: &QpSettings, f: &mut DVector<f64>) -> QpOutcome {
+pub fn solve_with(
+    ws: &mut QpWorkspace,
+    inp: &QpInput,
+    settings: &QpSettings,
+    f: &mut DVector<f64>,
+) -> QpOutcome {
     let t0 = Instant::now();
     zeros_v(f, inp.rho.ncols());
     ws.problem.assemble(inp);
     if !ws.problem.is_finite() {
         let rows = ws.problem.rows();
-        return QpOutcome { status: QpStatus::NumericalError, iterations: 0, solve_us: 0.0, setup_us: 0.0, rows, solver: "clarabel" };
+        return QpOutcome {
+            status: QpStatus::NumericalError,
+            iterations: 0,
+            solve_us: 0.0,
+            setup_us: 0.0,
+            rows,
+            solver: "clarabel",
+        };
     }
     if settings.path.tries_active_set() {
         let out = ws.active_set.solve_problem(&ws.problem, settings, f);
-        if out.status == QpStatus::Solved || (settings.active_set_refuses && out.status == QpStatus::Infeasible) {
+        if out.status == QpStatus::Solved
+            || (settings.active_set_refuses && out.status == QpStatus::Infeasible)
+        {
             return QpOutcome { solve_us: t0.elapsed().as_secs_f64() * 1e6, ..out };
         }
     }

@@ -51,13 +51,21 @@ pub fn constraints_into(inp: &QpInput, a: &mut DMatrix<f64>, b: &mut DVector<f64
         let rows = contact_rows(kind);
         let (r, dim) = (rows.len(), kind.dim());
         for (k, (cr, lo)) in rows.iter().enumerate() {
-            b[i + k] = cr.iter().zip(inp.eta.rows(*start, dim).iter()).map(|(x, e)| x * e).sum::<f64>() - lo;
+            b[i + k] =
+                cr.iter().zip(inp.eta.rows(*start, dim).iter()).map(|(x, e)| x * e).sum::<f64>()
+                    - lo;
             for (d, x) in cr.iter().enumerate() {
                 c[d * r + k] = *x;
             }
         }
         let ck = MatRef::from_column_major_slice(&c[..r * dim], r, dim);
-        gemm(mat_mut(a).submatrix_mut(i, 0, r, m), 0.0, -1.0, ck, mat(inp.rho).submatrix(*start, 0, dim, m));
+        gemm(
+            mat_mut(a).submatrix_mut(i, 0, r, m),
+            0.0,
+            -1.0,
+            ck,
+            mat(inp.rho).submatrix(*start, 0, dim, m),
+        );
         i += r;
     }
     for (k, (&j, &lim)) in inp.actuated.iter().zip(inp.limits).enumerate() {
@@ -148,6 +156,8 @@ impl QpProblem {
 
     /// Every entry of `P`, `A` and `b` finite.
     pub fn is_finite(&self) -> bool {
-        all_finite(self.b.as_slice()) && all_finite(self.p.as_slice()) && all_finite(self.a.as_slice())
+        all_finite(self.b.as_slice())
+            && all_finite(self.p.as_slice())
+            && all_finite(self.a.as_slice())
     }
 }

@@ -46,7 +46,15 @@ pub enum ContactKind {
     Foot { mu: f64, f_min: f64, f_max: f64 },
     /// Flat hand: frame axes (world), friction, torsional coefficient, patch half-sizes
     /// `[delta_x, delta_y]` (along `tx`, along `ty`), minimum normal force.
-    Hand { tx: Vector3<f64>, ty: Vector3<f64>, n: Vector3<f64>, mu: f64, xi: f64, half: [f64; 2], f_min: f64 },
+    Hand {
+        tx: Vector3<f64>,
+        ty: Vector3<f64>,
+        n: Vector3<f64>,
+        mu: f64,
+        xi: f64,
+        half: [f64; 2],
+        f_min: f64,
+    },
 }
 
 impl ContactKind {
@@ -63,7 +71,16 @@ impl ContactKind {
 pub const MAX_CONTACT_ROWS: usize = 13;
 
 /// The sign combinations `(s_x, s_y, s_z)` of a hand's friction rows, in their order.
-pub const FRICTION_SIGNS: [(f64, f64, f64); 8] = [(1.0, 1.0, 1.0), (-1.0, 1.0, 1.0), (1.0, -1.0, 1.0), (-1.0, -1.0, 1.0), (1.0, 1.0, -1.0), (-1.0, 1.0, -1.0), (1.0, -1.0, -1.0), (-1.0, -1.0, -1.0)];
+pub const FRICTION_SIGNS: [(f64, f64, f64); 8] = [
+    (1.0, 1.0, 1.0),
+    (-1.0, 1.0, 1.0),
+    (1.0, -1.0, 1.0),
+    (-1.0, -1.0, 1.0),
+    (1.0, 1.0, -1.0),
+    (-1.0, 1.0, -1.0),
+    (1.0, -1.0, -1.0),
+    (-1.0, -1.0, -1.0),
+];
 
 /// The rows `c . lambda_k >= lo` of one contact, `c` with [`ContactKind::dim`] entries.
 #[derive(Debug, Clone, Copy)]

@@ -66,7 +66,12 @@ pub enum QpPath {
 
 impl QpPath {
     /// Every path with its name in files, in the chain's order.
-    pub const NAMES: [(QpPath, &'static str); 4] = [(QpPath::ByBlocks, "by-blocks"), (QpPath::ActiveSet, "active-set"), (QpPath::DenseIpm, "dense-ipm"), (QpPath::Clarabel, "clarabel")];
+    pub const NAMES: [(QpPath, &'static str); 4] = [
+        (QpPath::ByBlocks, "by-blocks"),
+        (QpPath::ActiveSet, "active-set"),
+        (QpPath::DenseIpm, "dense-ipm"),
+        (QpPath::Clarabel, "clarabel"),
+    ];
 
     /// The path's name in files (`qp_path = "by-blocks"`).
     pub fn name(self) -> &'static str {
@@ -96,7 +101,10 @@ impl std::str::FromStr for QpPath {
     fn from_str(s: &str) -> Result<Self, String> {
         match Self::NAMES.iter().find(|(_, n)| *n == s) {
             Some((p, _)) => Ok(*p),
-            None => Err(format!("unknown QP path `{s}` (one of: {})", Self::NAMES.map(|(_, n)| n).join(", "))),
+            None => Err(format!(
+                "unknown QP path `{s}` (one of: {})",
+                Self::NAMES.map(|(_, n)| n).join(", ")
+            )),
         }
     }
 }

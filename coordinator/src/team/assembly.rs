@@ -1,19 +1,20 @@
 //! Gathering one tick: every team member's dynamics terms of the same tick, with a deadline,
-//! and in real time, a member's latest terms reused when its own are late ([`Reuse`]).
+//! and in real time, a member's latest terms reused when its own are late ([`TermsReuse`]).
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 use protocol::DynamicsTerms;
 
-/// Reusing late terms (real time): a tick whose terms are incomplete [`Reuse::after`] its first
+/// Reusing late terms (real time): a tick whose terms are incomplete [`TermsReuse::after`] its
+/// first
 /// terms arrived is solved with each missing member's latest terms, if they are at most
-/// [`Reuse::max_age`] ticks older than the tick; a member whose latest are older (or who has
+/// [`TermsReuse::max_age`] ticks older than the tick; a member whose latest are older (or who has
 /// none) is silent, and the tick goes on without it ([`crate::team::membership::Roster`]).
 /// One late link then no longer delays every robot's command, and an agent that stopped
 /// answering is noticed at the first tick it misses and left out after `max_age` ticks.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Reuse {
+pub struct TermsReuse {
     pub after: Duration,
     pub max_age: u64,
 }
@@ -26,8 +27,8 @@ pub struct TickAssembler {
     pending: BTreeMap<u64, (Instant, BTreeMap<String, Option<DynamicsTerms>>)>,
     last_completed: Option<u64>,
     deadline: Duration,
-    reuse: Option<Reuse>,
-    /// Each robot's latest terms (any tick), kept for [`Reuse`].
+    reuse: Option<TermsReuse>,
+    /// Each robot's latest terms (any tick), kept for [`TermsReuse`].
     latest: BTreeMap<String, DynamicsTerms>,
     /// Each robot's newest tick added.
     newest: BTreeMap<String, u64>,
@@ -52,7 +53,7 @@ pub enum AssemblyStatus {
 
 /// A tick completed by [`TickAssembler::reuse_due`].
 #[derive(Debug, Clone, PartialEq)]
-pub enum Reused {
+pub enum ReusedTerms {
     /// Complete with the listed members' latest terms (robot, tick of the terms reused).
     Complete { tick: u64, terms: Vec<DynamicsTerms>, reused: Vec<(String, u64)> },
     /// These members' latest terms are too old (or missing): they are silent. The caller
@@ -62,11 +63,18 @@ pub enum Reused {
 
 impl TickAssembler {
     pub fn new(deadline: Duration) -> Self {
-        TickAssembler { pending: BTreeMap::new(), last_completed: None, deadline, reuse: None, latest: BTreeMap::new(), newest: BTreeMap::new() }
+        TickAssembler {
+            pending: BTreeMap::new(),
+            last_completed: None,
+            deadline,
+            reuse: None,
+            latest: BTreeMap::new(),
+            newest: BTreeMap::new(),
+        }
     }
 
-    /// Reuse late terms ([`Reuse`]); `None` waits for every member's own (lockstep).
-    pub fn with_reuse(mut self, reuse: Option<Reuse>) -> Self {
+    /// TermsReuse late terms ([`TermsReuse`]); `None` waits for every member's own (lockstep).
+    pub fn with_reuse(mut self, reuse: Option<TermsReuse>) -> Self {
         self.reuse = reuse;
         self
     }
@@ -79,7 +87,8 @@ impl TickAssembler {
     /// than [`MAX_LEAD_TICKS`] ahead of it (or of the last completed tick): such terms are
     /// refused. `None` when they are not, or when no other member has sent terms yet.
     pub fn ahead_of_team(&self, robot: &str, tick: u64, team: &[String]) -> Option<u64> {
-        let others = team.iter().filter(|m| m.as_str() != robot).filter_map(|m| self.newest.get(m)).copied();
+        let others =
+            team.iter().filter(|m| m.as_str() != robot).filter_map(|m| self.newest.get(m)).copied();
         let reference = others.chain(self.last_completed).max()?;
         (tick > reference.saturating_add(MAX_LEAD_TICKS)).then_some(reference)
     }
@@ -137,23 +146,30 @@ impl TickAssembler {
         self.last_completed = Some(tick);
     }
 
-    /// When the oldest pending tick is due for [`Reuse`] (none without reuse or pending ticks).
+    /// When the oldest pending tick is due for [`TermsReuse`] (none without reuse or pending
+    /// ticks).
     pub fn reuse_at(&self) -> Option<Instant> {
         let reuse = self.reuse?;
         self.pending.values().map(|(since, _)| *since + reuse.after).min()
     }
 
-    /// At `now`: the newest tick due for [`Reuse`] completed with the missing members' latest
+    /// At `now`: the newest tick due for [`TermsReuse`] completed with the missing members' latest
     /// terms, or the members too silent for it. Older due ticks are dropped (overtaken).
-    pub fn reuse_due(&mut self, now: Instant, team: &[String]) -> Option<Reused> {
+    pub fn reuse_due(&mut self, now: Instant, team: &[String]) -> Option<ReusedTerms> {
         let reuse = self.reuse?;
-        let tick = *self.pending.iter().rev().find(|(_, (since, _))| now >= *since + reuse.after)?.0;
+        let tick =
+            *self.pending.iter().rev().find(|(_, (since, _))| now >= *since + reuse.after)?.0;
         let got = &self.pending[&tick].1;
         let missing: Vec<&String> = team.iter().filter(|m| !got.contains_key(*m)).collect();
-        let fresh = |r: &String| self.latest.get(r).filter(|t| t.header.tick < tick && tick - t.header.tick <= reuse.max_age);
-        let silent: Vec<String> = missing.iter().filter(|r| fresh(r).is_none()).map(|r| r.to_string()).collect();
+        let fresh = |r: &String| {
+            self.latest
+                .get(r)
+                .filter(|t| t.header.tick < tick && tick - t.header.tick <= reuse.max_age)
+        };
+        let silent: Vec<String> =
+            missing.iter().filter(|r| fresh(r).is_none()).map(|r| r.to_string()).collect();
         if !silent.is_empty() {
-            return Some(Reused::Silent { tick, robots: silent });
+            return Some(ReusedTerms::Silent { tick, robots: silent });
         }
         let (_, mut got) = self.pending.remove(&tick).expect("present");
         let mut reused = Vec::with_capacity(missing.len());
@@ -165,7 +181,7 @@ impl TickAssembler {
             got.insert(r.clone(), Some(t));
         }
         self.complete(tick);
-        Some(Reused::Complete { tick, terms: solved(got, team), reused })
+        Some(ReusedTerms::Complete { tick, terms: solved(got, team), reused })
     }
 
     /// Pending ticks, oldest first.
@@ -226,7 +242,10 @@ mod tests {
         let t = team(&["r1", "r2"]);
         assert_eq!(a.add(terms("r2", 5), &t), AssemblyStatus::Pending);
         match a.add(terms("r1", 5), &t) {
-            AssemblyStatus::Complete(5, got) => assert_eq!(got.iter().map(|x| x.header.robot_id()).collect::<Vec<_>>(), ["r1", "r2"]),
+            AssemblyStatus::Complete(5, got) => assert_eq!(
+                got.iter().map(|x| x.header.robot_id()).collect::<Vec<_>>(),
+                ["r1", "r2"]
+            ),
             other => panic!("{other:?}"),
         }
         assert_eq!(a.add(terms("r1", 5), &t), AssemblyStatus::Stale(5));
@@ -246,12 +265,16 @@ mod tests {
         assert_eq!(a.ahead_of_team("r2", 1041, &t), Some(40));
         assert_eq!(a.ahead_of_team("r1", 5000, &t), None, "r1 is not compared with itself");
         a.add(terms("r2", 40), &t);
-        assert_eq!(a.ahead_of_team("r1", 5000, &t), Some(40), "once the tick completed, nor with the last completed tick");
+        assert_eq!(
+            a.ahead_of_team("r1", 5000, &t),
+            Some(40),
+            "once the tick completed, nor with the last completed tick"
+        );
     }
 
     #[test]
     fn late_terms_are_reused_within_their_age_and_older_ones_silence_the_member() {
-        let reuse = Reuse { after: Duration::from_millis(2), max_age: 3 };
+        let reuse = TermsReuse { after: Duration::from_millis(2), max_age: 3 };
         let mut a = TickAssembler::new(Duration::from_secs(1)).with_reuse(Some(reuse));
         let t = team(&["r1", "r2"]);
         for k in 10..=11 {
@@ -265,10 +288,14 @@ mod tests {
         assert_eq!(a.reuse_due(due - Duration::from_millis(1), &t), None, "not before it is due");
         let later = Instant::now() + Duration::from_millis(5);
         match a.reuse_due(later, &t) {
-            Some(Reused::Complete { tick: 13, terms, reused }) => {
+            Some(ReusedTerms::Complete { tick: 13, terms, reused }) => {
                 assert_eq!(reused, vec![("r2".to_string(), 11)], "r2's latest, of tick 11");
                 assert_eq!(terms.len(), 2);
-                assert_eq!((terms[1].header.tick, terms[1].state_tick), (13, 11), "answering 13 from the state of 11");
+                assert_eq!(
+                    (terms[1].header.tick, terms[1].state_tick),
+                    (13, 11),
+                    "answering 13 from the state of 11"
+                );
             }
             other => panic!("{other:?}"),
         }
@@ -277,11 +304,15 @@ mod tests {
         // r2 stays silent: at tick 16 its latest (12) is 4 ticks old.
         a.add(terms("r1", 16), &t);
         match a.reuse_due(Instant::now() + Duration::from_millis(5), &t) {
-            Some(Reused::Silent { tick: 16, robots }) => assert_eq!(robots, vec!["r2".to_string()]),
+            Some(ReusedTerms::Silent { tick: 16, robots }) => {
+                assert_eq!(robots, vec!["r2".to_string()])
+            }
             other => panic!("{other:?}"),
         }
         // Without r2 the tick completes.
-        assert!(matches!(a.try_complete(16, &team(&["r1"])), AssemblyStatus::Complete(16, got) if got.len() == 1));
+        assert!(
+            matches!(a.try_complete(16, &team(&["r1"])), AssemblyStatus::Complete(16, got) if got.len() == 1)
+        );
     }
 
     #[test]
@@ -291,7 +322,11 @@ mod tests {
         a.add(terms("r1", 7), &t);
         assert_eq!(a.hold("r3", 7, &t), AssemblyStatus::Pending);
         match a.add(terms("r2", 7), &t) {
-            AssemblyStatus::Complete(7, got) => assert_eq!(got.iter().map(|x| x.header.robot_id()).collect::<Vec<_>>(), ["r1", "r2"], "r3 holds"),
+            AssemblyStatus::Complete(7, got) => assert_eq!(
+                got.iter().map(|x| x.header.robot_id()).collect::<Vec<_>>(),
+                ["r1", "r2"],
+                "r3 holds"
+            ),
             other => panic!("{other:?}"),
         }
         assert_eq!(a.hold("r3", 7, &t), AssemblyStatus::Stale(7));
@@ -299,9 +334,12 @@ mod tests {
 
     #[test]
     fn a_member_never_heard_of_is_silent_not_reused() {
-        let mut a = TickAssembler::new(Duration::from_secs(1)).with_reuse(Some(Reuse { after: Duration::ZERO, max_age: 3 }));
+        let mut a = TickAssembler::new(Duration::from_secs(1))
+            .with_reuse(Some(TermsReuse { after: Duration::ZERO, max_age: 3 }));
         let t = team(&["r1", "r2"]);
         a.add(terms("r1", 1), &t);
-        assert!(matches!(a.reuse_due(Instant::now(), &t), Some(Reused::Silent { robots, .. }) if robots == ["r2"]));
+        assert!(
+            matches!(a.reuse_due(Instant::now(), &t), Some(ReusedTerms::Silent { robots, .. }) if robots == ["r2"])
+        );
     }
 }

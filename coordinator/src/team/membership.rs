@@ -32,7 +32,11 @@ impl Membership {
             MemberEvent::Joined(r) => {
                 let changed = self.members.insert(r.clone());
                 if changed {
-                    tracing::info!(robot = %r, members = self.members.len(), "robot joined the team");
+                    tracing::info!(
+                        robot = %r,
+                        members = self.members.len(),
+                        "robot joined the team"
+                    );
                 }
                 changed
             }
@@ -96,7 +100,7 @@ pub enum Admission {
 ///   agents one by one as they reconnect, and a team formed with some of them would take the
 ///   others for late joiners (or let go of a grasp left with one hand).
 /// * **Silent members.** A member whose terms stopped for longer than the coordinator reuses
-///   them ([`crate::team::assembly::Reuse`]) is left out ([`Roster::silence`]): the others are
+///   them ([`crate::team::assembly::TermsReuse`]) is left out ([`Roster::silence`]): the others are
 ///   solved without it, as if it had left, though its liveliness token holds.
 /// * **Late members.** A robot that joins a running team (a restarted agent), or a silent one
 ///   whose terms come again, is *late*: it is in the team from its first terms, with its hand
@@ -153,12 +157,19 @@ impl Roster {
         match event {
             MemberEvent::Left(r) if self.departing.contains_key(r) => return false,
             MemberEvent::Left(r) if self.started && self.in_team(r) => {
-                tracing::warn!(robot = %r, grace_ms = DEPARTURE_GRACE.as_millis() as u64, "a member's token vanished: it stays in the team while its link may come back");
+                tracing::warn!(
+                    robot = %r,
+                    grace_ms = DEPARTURE_GRACE.as_millis() as u64,
+                    "a member's token vanished: it stays in the team while its link may come back"
+                );
                 self.departing.insert(r.clone(), now + DEPARTURE_GRACE);
                 return false;
             }
             MemberEvent::Joined(r) if self.departing.remove(r).is_some() => {
-                tracing::info!(robot = %r, "a departing member's token is back: it never left the team");
+                tracing::info!(
+                    robot = %r,
+                    "a departing member's token is back: it never left the team"
+                );
                 return false;
             }
             _ => {}
@@ -173,7 +184,8 @@ impl Roster {
 
     /// The departures due at `now`: those members have left. Returns them.
     pub fn depart_due(&mut self, now: Instant) -> Vec<String> {
-        let due: Vec<String> = self.departing.iter().filter(|(_, at)| **at <= now).map(|(r, _)| r.clone()).collect();
+        let due: Vec<String> =
+            self.departing.iter().filter(|(_, at)| **at <= now).map(|(r, _)| r.clone()).collect();
         for r in &due {
             self.departing.remove(r);
             tracing::warn!(robot = %r, "a departing member's token did not come back");
@@ -221,7 +233,10 @@ impl Roster {
         }
         match event {
             MemberEvent::Joined(r) if self.started => {
-                tracing::info!(robot = %r, "robot joined a running team: it stands beside it, hand out of the grasp");
+                tracing::info!(
+                    robot = %r,
+                    "robot joined a running team: it stands beside it, hand out of the grasp"
+                );
                 self.late.insert(r.clone());
                 self.admitted.remove(r);
             }
@@ -244,12 +259,17 @@ impl Roster {
             return Admission::Stale;
         }
         if self.silent.remove(robot) {
-            tracing::warn!(robot, "a silent robot sends again: it comes back beside the team, hand out of the grasp");
+            tracing::warn!(
+                robot,
+                "a silent robot sends again: it comes back beside the team, hand out of the grasp"
+            );
             self.late.insert(robot.to_string());
             self.admitted.remove(robot);
         }
         if self.started && !ready {
-            return Admission::Hold(format!("robot {robot} cannot be commanded yet (no description)"));
+            return Admission::Hold(format!(
+                "robot {robot} cannot be commanded yet (no description)"
+            ));
         }
         if self.late.contains(robot) && self.admitted.insert(robot.to_string()) {
             tracing::info!(robot, "late robot admitted into the team, hand out of the grasp");
@@ -308,7 +328,9 @@ impl Roster {
             .members
             .set()
             .iter()
-            .filter(|r| !self.silent.contains(*r) && (!self.late.contains(*r) || self.admitted.contains(*r)))
+            .filter(|r| {
+                !self.silent.contains(*r) && (!self.late.contains(*r) || self.admitted.contains(*r))
+            })
             .cloned()
             .collect();
         let changed = team != self.team;
@@ -362,7 +384,9 @@ mod tests {
         assert_eq!(r.admit("r1", false, true), Admission::Team);
         assert_eq!(r.admit("r9", true, true), Admission::NotAMember);
         r.start();
-        assert!(matches!(r.admit("r2", false, true), Admission::Hold(why) if why.contains("description")));
+        assert!(
+            matches!(r.admit("r2", false, true), Admission::Hold(why) if why.contains("description"))
+        );
         // r3 joins the running team: in from its first terms, late.
         assert!(!r.apply(&joined("r3"), now()), "not in the team before its first terms");
         assert!(!r.in_team("r3"));
@@ -381,7 +405,10 @@ mod tests {
         assert_eq!(r.forming(t0), vec!["r1", "r2"]);
         r.apply(&joined("r1"), now());
         assert_eq!(r.forming(t0), vec!["r2"]);
-        assert!(r.forming(t0 + std::time::Duration::from_secs(2)).is_empty(), "not waited for past the deadline");
+        assert!(
+            r.forming(t0 + std::time::Duration::from_secs(2)).is_empty(),
+            "not waited for past the deadline"
+        );
         r.apply(&joined("r2"), now());
         assert!(r.forming(t0).is_empty());
         r.apply(&MemberEvent::Left("r2".into()), now());
@@ -453,7 +480,10 @@ mod tests {
     fn a_departing_member_whose_terms_stop_too_leaves_within_departure_ticks() {
         let t0 = Instant::now();
         let mut r = started(&["r1", "r2", "r3"], t0);
-        assert!(!r.reused("r3", DEPARTURE_TICKS + 5), "a member with its token (a slow link) is reused, not left out");
+        assert!(
+            !r.reused("r3", DEPARTURE_TICKS + 5),
+            "a member with its token (a slow link) is reused, not left out"
+        );
         r.apply(&left("r3"), t0);
         assert!(!r.reused("r3", DEPARTURE_TICKS - 1), "younger terms: still waited for");
         assert!(r.in_team("r3"));
@@ -474,13 +504,19 @@ mod tests {
         r.start();
         assert!(r.leave("r1"), "announced: out at once");
         assert!(!r.leave("r1"), "once");
-        assert!(!r.in_team("r1") && r.members().contains("r1"), "out of the team; its token still holds");
+        assert!(
+            !r.in_team("r1") && r.members().contains("r1"),
+            "out of the team; its token still holds"
+        );
         r.apply(&left("r2"), t0);
         assert!(r.leave("r2"), "announced while departing: out at once");
         assert!(!r.is_departing("r2") && !r.members().contains("r2"));
         assert!(r.silence("r3"));
         assert!(!r.apply(&left("r3"), t0), "a silent member is out of the team already");
-        assert!(!r.members().contains("r3") && !r.is_departing("r3"), "and it is no member any more");
+        assert!(
+            !r.members().contains("r3") && !r.is_departing("r3"),
+            "and it is no member any more"
+        );
         assert!(r.team().is_empty());
         // r1's token goes after its announcement: no member any more, no grace.
         assert!(!r.apply(&left("r1"), t0));

@@ -52,7 +52,12 @@ impl TeamFrame {
     pub fn velocity(&self, v: &DVector<f64>) -> Vector6<f64> {
         let (c0, nc) = self.cols;
         let mut out = Vector6::zeros();
-        out.rows_mut(0, self.jacobian.nrows()).gemv(1.0, &self.jacobian.columns(c0, nc), &v.rows(c0, nc), 0.0);
+        out.rows_mut(0, self.jacobian.nrows()).gemv(
+            1.0,
+            &self.jacobian.columns(c0, nc),
+            &v.rows(c0, nc),
+            0.0,
+        );
         out
     }
 }
@@ -103,7 +108,10 @@ struct FrameCounts {
 /// terms well-formed.
 fn check_tick(tick: &[DynamicsTerms], expected: Option<&[String]>) -> Result<(), ControllerError> {
     if tick.is_empty() {
-        return Err(ControllerError::Dimension { what: "tick".into(), detail: "no robot in the tick".into() });
+        return Err(ControllerError::Dimension {
+            what: "tick".into(),
+            detail: "no robot in the tick".into(),
+        });
     }
     if let Some(exp) = expected {
         for id in exp {
@@ -113,7 +121,9 @@ fn check_tick(tick: &[DynamicsTerms], expected: Option<&[String]>) -> Result<(),
         }
         for t in tick {
             if !exp.iter().any(|e| e == t.header.robot_id()) {
-                return Err(ControllerError::UnknownRobot { robot: t.header.robot_id().to_string() });
+                return Err(ControllerError::UnknownRobot {
+                    robot: t.header.robot_id().to_string(),
+                });
             }
         }
     }
@@ -128,13 +138,20 @@ impl Team {
     /// `expected` (sorted ids), when given, must match the robots of the tick.
     /// `fully_actuated` sets `S = I` (the \[Lin2018\] comparison). Every check runs before
     /// anything is written: on an error the team is unchanged.
-    pub fn assemble_into(&mut self, tick: &[DynamicsTerms], expected: Option<&[String]>, fully_actuated: bool) -> Result<(), ControllerError> {
+    pub fn assemble_into(
+        &mut self,
+        tick: &[DynamicsTerms],
+        expected: Option<&[String]>,
+        fully_actuated: bool,
+    ) -> Result<(), ControllerError> {
         check_tick(tick, expected)?;
         let n: usize = tick.iter().map(|t| t.nv()).sum();
         self.n = n;
         // M is written by its robots' blocks: the zeros between them are the last tick's
         // when the robots' sizes are.
-        let same_blocks = self.mass.shape() == (n, n) && self.robots.len() == tick.len() && self.robots.iter().zip(tick).all(|(r, t)| r.nv == t.nv());
+        let same_blocks = self.mass.shape() == (n, n)
+            && self.robots.len() == tick.len()
+            && self.robots.iter().zip(tick).all(|(r, t)| r.nv == t.nv());
         if !same_blocks {
             zeros(&mut self.mass, n, n);
         }
@@ -161,7 +178,14 @@ impl Team {
 
     /// Robot `k`'s terms `t` into the team's buffers at columns `off..`: its block of `M`, its
     /// `h`, `v` and `S`, its [`RobotBlock`] and its frames (counted in `counts`).
-    fn robot_into(&mut self, k: usize, t: &DynamicsTerms, off: usize, fully_actuated: bool, counts: &mut FrameCounts) {
+    fn robot_into(
+        &mut self,
+        k: usize,
+        t: &DynamicsTerms,
+        off: usize,
+        fully_actuated: bool,
+        counts: &mut FrameCounts,
+    ) {
         let n = self.n;
         let nv = t.nv();
         for j in 0..nv {
@@ -176,7 +200,13 @@ impl Team {
             self.s_diag.rows_mut(off, base).fill(0.0);
         }
         if k == self.robots.len() {
-            self.robots.push(RobotBlock { id: String::new(), offset: 0, nv: 0, actuated: Vec::new(), floating_base: false });
+            self.robots.push(RobotBlock {
+                id: String::new(),
+                offset: 0,
+                nv: 0,
+                actuated: Vec::new(),
+                floating_base: false,
+            });
         }
         let rb = &mut self.robots[k];
         if rb.id != t.header.robot_id() {
@@ -192,7 +222,9 @@ impl Team {
             let (list, count) = match f.role {
                 FrameRole::StanceFoot => (&mut self.feet, &mut counts.feet),
                 FrameRole::SwingFoot => (&mut self.swing_feet, &mut counts.swing),
-                FrameRole::Hand if t.hand_in_grasp && !self.hands_released => (&mut self.hands, &mut counts.hands),
+                FrameRole::Hand if t.hand_in_grasp && !self.hands_released => {
+                    (&mut self.hands, &mut counts.hands)
+                }
                 FrameRole::Hand => (&mut self.free_hands, &mut counts.free_hands),
                 FrameRole::Torso => (&mut self.torsos, &mut counts.torsos),
             };
@@ -217,12 +249,27 @@ impl Team {
 
 /// Whether a robot's terms fit what the team can use: consistent in themselves
 /// ([`check_terms`]) and, once its description arrived, the size and base it describes.
-pub fn terms_fit(t: &DynamicsTerms, description: Option<&RobotDescription>) -> Result<(), ControllerError> {
+pub fn terms_fit(
+    t: &DynamicsTerms,
+    description: Option<&RobotDescription>,
+) -> Result<(), ControllerError> {
     check_terms(t)?;
     let Some(d) = description else { return Ok(()) };
     let robot = t.header.robot_id();
-    if t.nv() != d.nv as usize || t.floating_base != d.floating_base || t.actuated() != d.joint_names.len() {
-        let detail = format!("nv {} ({} actuated, floating base {}) against the description's nv {} ({} joints, floating base {})", t.nv(), t.actuated(), t.floating_base, d.nv, d.joint_names.len(), d.floating_base);
+    if t.nv() != d.nv as usize
+        || t.floating_base != d.floating_base
+        || t.actuated() != d.joint_names.len()
+    {
+        let detail = format!(
+            "nv {} ({} actuated, floating base {}) against the description's nv {} ({} joints, \
+             floating base {})",
+            t.nv(),
+            t.actuated(),
+            t.floating_base,
+            d.nv,
+            d.joint_names.len(),
+            d.floating_base
+        );
         return Err(ControllerError::Dimension { what: format!("{robot}: terms"), detail });
     }
     Ok(())
@@ -231,28 +278,73 @@ pub fn terms_fit(t: &DynamicsTerms, description: Option<&RobotDescription>) -> R
 fn check_terms(t: &DynamicsTerms) -> Result<(), ControllerError> {
     let robot = t.header.robot_id();
     let nv = t.nv();
-    let dim = |what: &str, detail: String| ControllerError::Dimension { what: format!("{robot}: {what}"), detail };
+    let dim = |what: &str, detail: String| ControllerError::Dimension {
+        what: format!("{robot}: {what}"),
+        detail,
+    };
     if nv == 0 || (t.floating_base && nv <= 6) {
         return Err(dim("nv", format!("{nv} leaves no actuated joint")));
     }
-    if t.mass_matrix.rows() != nv || t.mass_matrix.cols() != nv || t.mass_matrix.data.len() != nv * nv {
-        return Err(dim("mass_matrix", format!("{}x{} for nv {nv}", t.mass_matrix.rows(), t.mass_matrix.cols())));
+    if t.mass_matrix.rows() != nv
+        || t.mass_matrix.cols() != nv
+        || t.mass_matrix.data.len() != nv * nv
+    {
+        return Err(dim(
+            "mass_matrix",
+            format!("{}x{} for nv {nv}", t.mass_matrix.rows(), t.mass_matrix.cols()),
+        ));
     }
     if t.bias.len() != nv || t.velocity.len() != nv {
-        return Err(dim("bias/velocity", format!("{}/{} for nv {nv}", t.bias.len(), t.velocity.len())));
+        return Err(dim(
+            "bias/velocity",
+            format!("{}/{} for nv {nv}", t.bias.len(), t.velocity.len()),
+        ));
     }
     let finite = |x: &[f64]| x.iter().all(|v| v.is_finite());
     if !finite(&t.mass_matrix.data) || !finite(&t.bias) || !finite(&t.velocity) {
-        return Err(ControllerError::NonFinite { robot: robot.to_string(), what: "M, h or v".into() });
+        return Err(ControllerError::NonFinite {
+            robot: robot.to_string(),
+            what: "M, h or v".into(),
+        });
     }
+    check_frames(t, robot, nv)
+}
+
+/// Each frame's Jacobian and drift sized for its role and `nv` and finite; one hand frame when
+/// the hand is in the grasp.
+fn check_frames(t: &DynamicsTerms, robot: &str, nv: usize) -> Result<(), ControllerError> {
+    let dim = |what: &str, detail: String| ControllerError::Dimension {
+        what: format!("{robot}: {what}"),
+        detail,
+    };
+    let finite = |x: &[f64]| x.iter().all(|v| v.is_finite());
     let mut hands = 0;
     for f in &t.frames {
         let d = f.role.dim();
-        if f.jacobian.rows() != d || f.jacobian.cols() != nv || f.jacobian.data.len() != d * nv || f.jdot_v.len() != d {
-            return Err(dim(&format!("frame {}", f.name), format!("jacobian {}x{}, jdot_v {} for a {d}-row frame and nv {nv}", f.jacobian.rows(), f.jacobian.cols(), f.jdot_v.len())));
+        if f.jacobian.rows() != d
+            || f.jacobian.cols() != nv
+            || f.jacobian.data.len() != d * nv
+            || f.jdot_v.len() != d
+        {
+            return Err(dim(
+                &format!("frame {}", f.name),
+                format!(
+                    "jacobian {}x{}, jdot_v {} for a {d}-row frame and nv {nv}",
+                    f.jacobian.rows(),
+                    f.jacobian.cols(),
+                    f.jdot_v.len()
+                ),
+            ));
         }
-        if !finite(&f.jacobian.data) || !finite(&f.jdot_v) || !finite(&f.position) || !finite(&f.rotation) {
-            return Err(ControllerError::NonFinite { robot: robot.to_string(), what: format!("frame {}", f.name) });
+        if !finite(&f.jacobian.data)
+            || !finite(&f.jdot_v)
+            || !finite(&f.position)
+            || !finite(&f.rotation)
+        {
+            return Err(ControllerError::NonFinite {
+                robot: robot.to_string(),
+                what: format!("frame {}", f.name),
+            });
         }
         hands += (f.role == FrameRole::Hand) as usize;
     }
@@ -290,7 +382,13 @@ fn team_frame_into(tf: &mut TeamFrame, robot: usize, f: &FrameTerms, off: usize,
 /// Rows `r0 ..+ d` of `a`, non-zero at most on the columns `written` (first, count), made
 /// zero outside `cols`: the columns written and not `cols` are cleared, and `written`
 /// becomes `cols`. The caller then writes `cols`.
-fn move_columns(a: &mut DMatrix<f64>, r0: usize, d: usize, written: &mut (usize, usize), cols: (usize, usize)) {
+fn move_columns(
+    a: &mut DMatrix<f64>,
+    r0: usize,
+    d: usize,
+    written: &mut (usize, usize),
+    cols: (usize, usize),
+) {
     if *written != cols {
         a.view_mut((r0, written.0), (d, written.1)).fill(0.0);
         *written = cols;
@@ -299,7 +397,14 @@ fn move_columns(a: &mut DMatrix<f64>, r0: usize, d: usize, written: &mut (usize,
 
 /// Frames' Jacobians and `Jdot*v` stacked (`d` rows each) into `j` and `jdv`, each frame on
 /// its robot's columns; `cols` records them for the next tick's (see [`move_columns`]).
-fn stack(frames: &[TeamFrame], d: usize, n: usize, j: &mut DMatrix<f64>, jdv: &mut DVector<f64>, cols: &mut Vec<(usize, usize)>) {
+fn stack(
+    frames: &[TeamFrame],
+    d: usize,
+    n: usize,
+    j: &mut DMatrix<f64>,
+    jdv: &mut DVector<f64>,
+    cols: &mut Vec<(usize, usize)>,
+) {
     let rows = d * frames.len();
     if j.shape() != (rows, n) || cols.len() != frames.len() {
         zeros(j, rows, n);

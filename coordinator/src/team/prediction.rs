@@ -93,7 +93,10 @@ impl DelayPredictor {
             // A late member's reused terms are of an older state: carried from there.
             let from = t.state_tick.clamp(tick.saturating_sub(OLDEST_CARRIED), tick);
             for at in from..tick.saturating_add(delay) {
-                if let Some(s) = solves.and_then(|r| r.applying_at(at)).filter(|s| s.qdd.len() == t.velocity.len()) {
+                if let Some(s) = solves
+                    .and_then(|r| r.applying_at(at))
+                    .filter(|s| s.qdd.len() == t.velocity.len())
+                {
                     t.velocity.iter_mut().zip(&s.qdd).for_each(|(v, a)| *v += self.period * a);
                 }
                 move_frames(t, self.period);
@@ -105,12 +108,21 @@ impl DelayPredictor {
     /// accelerations kept, from `controller` when the tick was solved. Without them (hold
     /// orders, a controller that gives none, non-finite values) the command still applies, and
     /// nothing is carried over it.
-    pub fn record(&mut self, tick: u64, delay: u64, terms: &[DynamicsTerms], controller: Option<&dyn TeamController>) {
+    pub fn record(
+        &mut self,
+        tick: u64,
+        delay: u64,
+        terms: &[DynamicsTerms],
+        controller: Option<&dyn TeamController>,
+    ) {
         for t in terms {
             let id = t.header.robot_id();
             let slot = self.next_slot(id, t.velocity.len());
             (slot.tick, slot.delay) = (tick, delay);
-            if let Some(qdd) = controller.and_then(|c| c.accelerations(id)).filter(|a| a.len() == t.velocity.len() && a.iter().all(|x| x.is_finite())) {
+            if let Some(qdd) = controller
+                .and_then(|c| c.accelerations(id))
+                .filter(|a| a.len() == t.velocity.len() && a.iter().all(|x| x.is_finite()))
+            {
                 slot.qdd.extend_from_slice(qdd);
             }
         }
@@ -129,7 +141,10 @@ impl DelayPredictor {
     fn next_slot(&mut self, robot: &str, nv: usize) -> &mut Slot {
         if !self.robots.contains_key(robot) {
             let slot = || Slot { tick: 0, delay: NEVER, qdd: Vec::with_capacity(nv) };
-            self.robots.insert(robot.to_string(), Solves { slots: (0..SOLVES_KEPT).map(|_| slot()).collect(), next: 0 });
+            self.robots.insert(
+                robot.to_string(),
+                Solves { slots: (0..SOLVES_KEPT).map(|_| slot()).collect(), next: 0 },
+            );
         }
         let solves = self.robots.get_mut(robot).expect("inserted above");
         let k = solves.next;
@@ -154,7 +169,8 @@ fn move_frames(t: &mut DynamicsTerms, dt: f64) {
             f.position[i] += rate(i);
         }
         if rows >= 6 {
-            let r = Rotation3::new(Vector3::new(rate(3), rate(4), rate(5))) * rotation_from_row_major(&f.rotation);
+            let r = Rotation3::new(Vector3::new(rate(3), rate(4), rate(5)))
+                * rotation_from_row_major(&f.rotation);
             for i in 0..3 {
                 for j in 0..3 {
                     f.rotation[3 * i + j] = r[(i, j)];
@@ -171,7 +187,11 @@ impl Solves {
     fn applying_at(&self, at: u64) -> Option<&Slot> {
         self.slots
             .iter()
-            .filter(|s| s.delay != NEVER && s.tick.saturating_add(s.delay) <= at && at - s.tick <= OLDEST_CARRIED)
+            .filter(|s| {
+                s.delay != NEVER
+                    && s.tick.saturating_add(s.delay) <= at
+                    && at - s.tick <= OLDEST_CARRIED
+            })
             .max_by_key(|s| s.tick)
     }
 }
@@ -190,7 +210,11 @@ mod tests {
         fn name(&self) -> &'static str {
             "told"
         }
-        fn solve(&mut self, _tick: &[DynamicsTerms], _out: &mut Vec<TorqueCommand>) -> Result<(), ControllerError> {
+        fn solve(
+            &mut self,
+            _tick: &[DynamicsTerms],
+            _out: &mut Vec<TorqueCommand>,
+        ) -> Result<(), ControllerError> {
             Ok(())
         }
         fn accelerations(&self, robot: &str) -> Option<&[f64]> {
@@ -219,9 +243,19 @@ mod tests {
     }
 
     /// Solve `ticks` in order, tick k commanding `qdd(k)` with the delay `delay`.
-    fn solved(p: &mut DelayPredictor, ticks: impl Iterator<Item = u64>, delay: u64, qdd: impl Fn(u64) -> f64) {
+    fn solved(
+        p: &mut DelayPredictor,
+        ticks: impl Iterator<Item = u64>,
+        delay: u64,
+        qdd: impl Fn(u64) -> f64,
+    ) {
         for k in ticks {
-            p.record(k, delay, &[terms("r1", k, &[0.0, 0.0])], Some(&told("r1", &[qdd(k), -2.0 * qdd(k)])));
+            p.record(
+                k,
+                delay,
+                &[terms("r1", k, &[0.0, 0.0])],
+                Some(&told("r1", &[qdd(k), -2.0 * qdd(k)])),
+            );
         }
     }
 
@@ -234,7 +268,12 @@ mod tests {
         let mut t = [terms("r1", 10, &[1.0, 1.0])];
         p.predict(10, 3, &mut t);
         let carried = 0.001 * 24.0;
-        assert!((t[0].velocity[0] - (1.0 + carried)).abs() < 1e-12 && (t[0].velocity[1] - (1.0 - 2.0 * carried)).abs() < 1e-12, "{:?}", t[0].velocity);
+        assert!(
+            (t[0].velocity[0] - (1.0 + carried)).abs() < 1e-12
+                && (t[0].velocity[1] - (1.0 - 2.0 * carried)).abs() < 1e-12,
+            "{:?}",
+            t[0].velocity
+        );
         // Without a delay nothing is in flight.
         let mut t = [terms("r1", 10, &[1.0, 1.0])];
         p.predict(10, 0, &mut t);
@@ -267,7 +306,11 @@ mod tests {
         solved(&mut p, 10..12, 3, |_| 5.0);
         let mut t = [terms("r1", 12, &[0.0, 0.0])];
         p.predict(12, 3, &mut t);
-        assert!((t[0].velocity[0] - 0.001 * (1.0 + 5.0 + 5.0)).abs() < 1e-12, "{:?}", t[0].velocity);
+        assert!(
+            (t[0].velocity[0] - 0.001 * (1.0 + 5.0 + 5.0)).abs() < 1e-12,
+            "{:?}",
+            t[0].velocity
+        );
     }
 
     #[test]
@@ -277,7 +320,10 @@ mod tests {
         // A robot never recorded, one of another size, and commands too old to apply.
         let mut t = [terms("r2", 5, &[1.0]), terms("r1", 5, &[1.0, 1.0, 1.0])];
         p.predict(5, 2, &mut t);
-        assert_eq!((t[0].velocity.clone(), t[1].velocity.clone()), (vec![1.0], vec![1.0, 1.0, 1.0]));
+        assert_eq!(
+            (t[0].velocity.clone(), t[1].velocity.clone()),
+            (vec![1.0], vec![1.0, 1.0, 1.0])
+        );
         let mut t = [terms("r1", 5 + OLDEST_CARRIED + 10, &[0.0, 0.0])];
         p.predict(5 + OLDEST_CARRIED + 10, 2, &mut t);
         assert_eq!(t[0].velocity, vec![0.0, 0.0], "a command older than {OLDEST_CARRIED} ticks");
@@ -298,10 +344,18 @@ mod tests {
         p.record_hold("r9", 10, 2);
         let mut t = [terms("r1", 11, &[0.0, 0.0])];
         p.predict(11, 2, &mut t);
-        assert_eq!(t[0].velocity, vec![0.0, 0.0], "11 and 12 get 9's and 10's: a tick not solved, a hold");
+        assert_eq!(
+            t[0].velocity,
+            vec![0.0, 0.0],
+            "11 and 12 get 9's and 10's: a tick not solved, a hold"
+        );
         let mut t = [terms("r1", 10, &[0.0, 0.0])];
         p.predict(10, 2, &mut t);
-        assert!((t[0].velocity[0] - 0.001).abs() < 1e-12, "10 gets 8's, 11 gets 9's: {:?}", t[0].velocity);
+        assert!(
+            (t[0].velocity[0] - 0.001).abs() < 1e-12,
+            "10 gets 8's, 11 gets 9's: {:?}",
+            t[0].velocity
+        );
     }
 
     #[test]
@@ -313,7 +367,11 @@ mod tests {
         let mut t = [terms("r1", 10, &[0.0, 0.0])];
         t[0].state_tick = 8;
         p.predict(10, 2, &mut t);
-        assert!((t[0].velocity[0] - 0.001 * (6.0 + 7.0 + 8.0 + 9.0)).abs() < 1e-12, "{:?}", t[0].velocity);
+        assert!(
+            (t[0].velocity[0] - 0.001 * (6.0 + 7.0 + 8.0 + 9.0)).abs() < 1e-12,
+            "{:?}",
+            t[0].velocity
+        );
     }
 
     #[test]
@@ -327,7 +385,11 @@ mod tests {
         let mut p = DelayPredictor::new(1.0 / dt);
         p.record(0, 2, &[terms("r1", 0, &[0.0; 3])], Some(&told("r1", &[1.0, 0.0, 2.0])));
         p.record(1, 2, &[terms("r1", 1, &[0.0; 3])], Some(&told("r1", &[1.0, 0.0, 2.0])));
-        let jacobian = |rows: &[[f64; 3]]| Matrix { rows: rows.len() as u32, cols: 3, data: rows.iter().flatten().copied().collect() };
+        let jacobian = |rows: &[[f64; 3]]| Matrix {
+            rows: rows.len() as u32,
+            cols: 3,
+            data: rows.iter().flatten().copied().collect(),
+        };
         let (v, a) = ([0.5, -0.2, 3.0], [1.0, 0.0, 2.0]);
         let mut t = terms("r1", 2, &v);
         let hand = FrameTerms {
@@ -335,21 +397,52 @@ mod tests {
             role: FrameRole::Hand,
             position: [1.0, 2.0, 3.0],
             rotation: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-            jacobian: jacobian(&[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
+            jacobian: jacobian(&[
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.0, 0.0, 0.0],
+                [0.0, 0.0, 0.0],
+                [0.0, 0.0, 0.0],
+                [0.0, 0.0, 1.0],
+            ]),
             jdot_v: vec![0.0; 6],
         };
-        let foot = FrameTerms { name: "foot".into(), role: FrameRole::StanceFoot, position: [0.0; 3], rotation: hand.rotation, jacobian: jacobian(&[[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]), jdot_v: vec![0.0; 3] };
+        let foot = FrameTerms {
+            name: "foot".into(),
+            role: FrameRole::StanceFoot,
+            position: [0.0; 3],
+            rotation: hand.rotation,
+            jacobian: jacobian(&[[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]),
+            jdot_v: vec![0.0; 3],
+        };
         t.frames = vec![hand, foot];
         let mut ts = [t];
         p.predict(2, 2, &mut ts);
         let moved = |j: usize| dt * ((v[j] + dt * a[j]) + (v[j] + 2.0 * dt * a[j]));
         let f = &ts[0].frames;
         let close = |x: f64, y: f64| (x - y).abs() < 1e-12;
-        assert!(close(f[0].position[0], 1.0 + moved(0)) && close(f[0].position[1], 2.0 + moved(1)) && close(f[0].position[2], 3.0), "{:?}", f[0].position);
+        assert!(
+            close(f[0].position[0], 1.0 + moved(0))
+                && close(f[0].position[1], 2.0 + moved(1))
+                && close(f[0].position[2], 3.0),
+            "{:?}",
+            f[0].position
+        );
         let yaw = moved(2);
         let r = &f[0].rotation;
-        assert!(close(r[0], yaw.cos()) && close(r[1], -yaw.sin()) && close(r[3], yaw.sin()) && close(r[4], yaw.cos()) && close(r[8], 1.0), "a turn of {yaw} rad about z: {r:?}");
-        assert!(close(f[1].position[0], moved(0)) && f[1].position[1] == 0.0, "the foot: {:?}", f[1].position);
+        assert!(
+            close(r[0], yaw.cos())
+                && close(r[1], -yaw.sin())
+                && close(r[3], yaw.sin())
+                && close(r[4], yaw.cos())
+                && close(r[8], 1.0),
+            "a turn of {yaw} rad about z: {r:?}"
+        );
+        assert!(
+            close(f[1].position[0], moved(0)) && f[1].position[1] == 0.0,
+            "the foot: {:?}",
+            f[1].position
+        );
         assert!(close(ts[0].velocity[2], v[2] + 2.0 * dt * a[2]));
     }
 }

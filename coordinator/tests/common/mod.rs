@@ -41,11 +41,24 @@ impl Fixture {
     }
 
     /// Terms of robot `id` at `(q, v)` with every foot in stance and the hand in grasp.
-    pub fn terms(&mut self, id: &str, q: &DVector<f64>, v: &DVector<f64>, tick: u64) -> DynamicsTerms {
+    pub fn terms(
+        &mut self,
+        id: &str,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        tick: u64,
+    ) -> DynamicsTerms {
         self.terms_with(id, q, v, tick, &ActiveContacts::all_stance(&self.robot))
     }
 
-    pub fn terms_with(&mut self, id: &str, q: &DVector<f64>, v: &DVector<f64>, tick: u64, contacts: &ActiveContacts) -> DynamicsTerms {
+    pub fn terms_with(
+        &mut self,
+        id: &str,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        tick: u64,
+        contacts: &ActiveContacts,
+    ) -> DynamicsTerms {
         let state = RobotState {
             header: Header::new(TEAM, Some(id), tick, 0),
             base_pose: Pose { position: [q[0], q[1], q[2]], orientation: [q[3], q[4], q[5], q[6]] },
@@ -77,7 +90,13 @@ impl Fixture {
     }
 
     /// A randomly perturbed configuration (joints +-amp rad, base +-amp/10 m and rad).
-    pub fn perturbed_q(&self, k: usize, count: usize, amp: f64, rng: &mut impl Rng) -> DVector<f64> {
+    pub fn perturbed_q(
+        &self,
+        k: usize,
+        count: usize,
+        amp: f64,
+        rng: &mut impl Rng,
+    ) -> DVector<f64> {
         let q0 = self.standing_q(k, count);
         let nv = self.robot.model.nv;
         let mut dv = DVector::zeros(nv);
@@ -127,7 +146,12 @@ pub fn nonnegative_least_squares(a: &DMatrix<f64>, g: &DVector<f64>) -> DVector<
     let mut rejected = None;
     for _ in 0..3 * k {
         let w = a.transpose() * (g - a * &x);
-        let Some(j) = (0..k).filter(|&i| !free[i] && Some(i) != rejected && w[i] > tol).max_by(|&i, &j| w[i].total_cmp(&w[j])) else { break };
+        let Some(j) = (0..k)
+            .filter(|&i| !free[i] && Some(i) != rejected && w[i] > tol)
+            .max_by(|&i, &j| w[i].total_cmp(&w[j]))
+        else {
+            break;
+        };
         free[j] = true;
         rejected = None;
         for _ in 0..k {
@@ -138,7 +162,10 @@ pub fn nonnegative_least_squares(a: &DMatrix<f64>, g: &DVector<f64>) -> DVector<
             }
             // The longest step from x towards s that keeps the free set non-negative (an x_i
             // already at zero with s_i <= 0 allows none).
-            let alpha = (0..k).filter(|&i| free[i] && s[i] <= 0.0).map(|i| if x[i] <= 0.0 { 0.0 } else { x[i] / (x[i] - s[i]) }).fold(1.0, f64::min);
+            let alpha = (0..k)
+                .filter(|&i| free[i] && s[i] <= 0.0)
+                .map(|i| if x[i] <= 0.0 { 0.0 } else { x[i] / (x[i] - s[i]) })
+                .fold(1.0, f64::min);
             x += (&s - &x) * alpha;
             let scale = x.amax().max(f64::MIN_POSITIVE);
             for i in 0..k {
@@ -178,16 +205,30 @@ impl Case {
 
 /// `ticks` consecutive ticks (1 ms apart) of `case`'s team, each robot's joints perturbed by
 /// up to 0.1 and moving at random joint velocities within `speed` (the bases at rest at first).
-pub fn moving_ticks(fx: &mut Fixture, case: Case, ticks: usize, speed: f64) -> Vec<Vec<DynamicsTerms>> {
+pub fn moving_ticks(
+    fx: &mut Fixture,
+    case: Case,
+    ticks: usize,
+    speed: f64,
+) -> Vec<Vec<DynamicsTerms>> {
     let mut rng = rng(case.seed);
     let nv = fx.robot.model.nv;
-    let qs: Vec<DVector<f64>> = (0..case.robots).map(|k| fx.perturbed_q(k, case.robots, 0.1, &mut rng)).collect();
-    let vs: Vec<DVector<f64>> = (0..case.robots).map(|_| DVector::from_fn(nv, |i, _| if i < 6 { 0.0 } else { rng.random_range(-speed..speed) })).collect();
+    let qs: Vec<DVector<f64>> =
+        (0..case.robots).map(|k| fx.perturbed_q(k, case.robots, 0.1, &mut rng)).collect();
+    let vs: Vec<DVector<f64>> = (0..case.robots)
+        .map(|_| {
+            DVector::from_fn(nv, |i, _| if i < 6 { 0.0 } else { rng.random_range(-speed..speed) })
+        })
+        .collect();
     (0..ticks)
         .map(|t| {
             (0..case.robots)
                 .map(|k| {
-                    let q = fx.robot.model.integrate(qs[k].as_slice(), vs[k].as_slice(), 1e-3 * t as f64);
+                    let q = fx.robot.model.integrate(
+                        qs[k].as_slice(),
+                        vs[k].as_slice(),
+                        1e-3 * t as f64,
+                    );
                     let set = case.contacts(fx, k);
                     fx.terms_with(&robot_id(k), &q, &vs[k], 1 + t as u64, &set)
                 })

@@ -62,14 +62,7 @@ pub fn write_all(
         "t [s]",
     )?;
     draw::panels(dir, "qp_timing", "coordinator timing", &qp_timing(plan, records), 1, "t [s]")?;
-    let (mut labels, mut values) = (Vec::new(), Vec::new());
-    for (r, joints) in &eval.metrics.torque_rms {
-        for (j, v) in joints {
-            labels.push(format!("{r} {j}"));
-            values.push(*v);
-        }
-    }
-    draw::bars(dir, "torque_rms", "commanded torque RMS per joint", "N m", &labels, &values)?;
+    draw_torque_rms(eval, dir)?;
     let mut figures: Vec<(&str, &str)> = FIGURES.to_vec();
     if eval.metrics.loop_timing.is_some() {
         draw::panels(
@@ -83,29 +76,44 @@ pub fn write_all(
         figures.push(LOOP_FIGURE);
     }
     if let Some(w) = &plan.references.walk {
-        let refs = &plan.references;
-        draw::panels(dir, "gait", "gait diagram", &walk::gait_diagram(w, records), 1, "t [s]")?;
-        draw::panels(
-            dir,
-            "foot_heights",
-            "foot heights",
-            &walk::foot_heights(w, records),
-            2,
-            "t [s]",
-        )?;
-        let torso = |i: usize, t: f64| refs.torso_at(i, Some(t)).pose.position;
-        let object = |t: f64| refs.object_at(Some(t)).pose.position;
-        draw::panels(
-            dir,
-            "torso_paths",
-            "paths from above",
-            &walk::torso_paths(w, records, torso, object),
-            1,
-            "x [m]",
-        )?;
+        draw_walk(plan, w, records, dir)?;
         figures.extend(walk::FIGURES);
     }
     write_index(eval, dir, &figures)
+}
+
+/// The bar chart of the commanded torque RMS of every joint, robot by robot.
+fn draw_torque_rms(eval: &Evaluation, dir: &Path) -> Result<(), ReportError> {
+    let (mut labels, mut values) = (Vec::new(), Vec::new());
+    for (r, joints) in &eval.metrics.torque_rms {
+        for (j, v) in joints {
+            labels.push(format!("{r} {j}"));
+            values.push(*v);
+        }
+    }
+    draw::bars(dir, "torque_rms", "commanded torque RMS per joint", "N m", &labels, &values)
+}
+
+/// The walk's figures: gait diagram, foot heights and the paths seen from above.
+fn draw_walk(
+    plan: &Plan,
+    w: &planner::walk::Walk,
+    records: &Records,
+    dir: &Path,
+) -> Result<(), ReportError> {
+    let refs = &plan.references;
+    draw::panels(dir, "gait", "gait diagram", &walk::gait_diagram(w, records), 1, "t [s]")?;
+    draw::panels(dir, "foot_heights", "foot heights", &walk::foot_heights(w, records), 2, "t [s]")?;
+    let torso = |i: usize, t: f64| refs.torso_at(i, Some(t)).pose.position;
+    let object = |t: f64| refs.object_at(Some(t)).pose.position;
+    draw::panels(
+        dir,
+        "torso_paths",
+        "paths from above",
+        &walk::torso_paths(w, records, torso, object),
+        1,
+        "x [m]",
+    )
 }
 
 fn column<'a>(s: &'a TimeSeries, name: &str) -> &'a [f64] {
@@ -267,7 +275,11 @@ fn qp_timing(plan: &Plan, records: &Records) -> Vec<Panel> {
 }
 
 /// A real-time run's figure: [`loop_timing`].
-pub const LOOP_FIGURE: (&str, &str) = ("loop_timing", "State-to-torque latency per robot against the control period; the ticks each robot's drive held its last torques");
+pub const LOOP_FIGURE: (&str, &str) = (
+    "loop_timing",
+    "State-to-torque latency per robot against the control period; \
+     the ticks each robot's drive held its last torques",
+);
 
 /// Per robot, the state-to-torque latency of each tick whose torques came in time, with the
 /// control period (the deadline) dashed; below, each robot's deadline misses counted up over
@@ -338,13 +350,20 @@ pub fn write_index(
         "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>{0}</title>\n",
         escape(&m.scenario)
     ));
-    h.push_str("<style>body{font-family:sans-serif;max-width:1700px;margin:auto}img{max-width:100%;border:1px solid #ddd}td,th{padding:2px 8px}.fail{color:#c00}</style></head><body>\n");
+    h.push_str(
+        "<style>body{font-family:sans-serif;max-width:1700px;margin:auto}\
+         img{max-width:100%;border:1px solid #ddd}td,th{padding:2px 8px}.fail{color:#c00}\
+         </style></head><body>\n",
+    );
     h.push_str(&format!(
         "<h1>{}</h1>\n<pre>{}</pre>\n",
         escape(&m.scenario),
         escape(&evaluate::summary(m, dir))
     ));
-    h.push_str("<h2>Acceptance checks</h2>\n<table><tr><th>check</th><th>value</th><th>bound</th><th></th></tr>\n");
+    h.push_str(
+        "<h2>Acceptance checks</h2>\n\
+         <table><tr><th>check</th><th>value</th><th>bound</th><th></th></tr>\n",
+    );
     for c in &m.checks {
         let (class, mark) = if c.passed { ("", "passed") } else { (" class=\"fail\"", "FAILED") };
         h.push_str(&format!(
@@ -354,9 +373,17 @@ pub fn write_index(
             c.bound
         ));
     }
-    h.push_str("</table>\n<p>Files: <a href=\"metrics.json\">metrics.json</a>, <a href=\"timeseries.csv\">timeseries.csv</a>, <a href=\"torques.csv\">torques.csv</a>, <a href=\"run.mcap\">run.mcap</a> (open in Foxglove; <code>team report run.mcap</code> rebuilds this page).</p>\n");
+    h.push_str(
+        "</table>\n<p>Files: <a href=\"metrics.json\">metrics.json</a>, \
+         <a href=\"timeseries.csv\">timeseries.csv</a>, <a href=\"torques.csv\">torques.csv</a>, \
+         <a href=\"run.mcap\">run.mcap</a> (open in Foxglove; \
+         <code>team report run.mcap</code> rebuilds this page).</p>\n",
+    );
     for (stem, caption) in figures {
-        h.push_str(&format!("<h2>{caption}</h2>\n<a href=\"{stem}.svg\"><img src=\"{stem}.png\" alt=\"{caption}\"></a>\n"));
+        h.push_str(&format!(
+            "<h2>{caption}</h2>\n\
+             <a href=\"{stem}.svg\"><img src=\"{stem}.png\" alt=\"{caption}\"></a>\n"
+        ));
     }
     h.push_str("</body></html>\n");
     let path = dir.join("report.html");

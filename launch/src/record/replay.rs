@@ -22,7 +22,10 @@ pub enum ReplayError {
     Io { path: PathBuf, reason: String },
     #[error("{path} is not a readable MCAP file: {reason}")]
     Mcap { path: PathBuf, reason: String },
-    #[error("{path} has no '{RUN_METADATA}' metadata record (not written by `team run`, or the run did not finish)")]
+    #[error(
+        "{path} has no '{RUN_METADATA}' metadata record \
+         (not written by `team run`, or the run did not finish)"
+    )]
     NoRunMetadata { path: PathBuf },
     #[error("{path}: message on {topic} does not decode: {reason}")]
     Message { path: PathBuf, topic: String, reason: String },

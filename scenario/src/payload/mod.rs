@@ -54,7 +54,10 @@ pub enum CheckError {
     Kinematics { robot: String, reason: String },
     #[error("robot {robot} cannot follow the references at t = {t:.2} s of the motion: {source}")]
     Reach { robot: String, t: f64, source: robot_model::ik::IkError },
-    #[error("at t = {t:.2} s of the motion (object at [{:.3}, {:.3}, {:.3}] m): {source}", object[0], object[1], object[2])]
+    #[error(
+        "at t = {t:.2} s of the motion (object at [{:.3}, {:.3}, {:.3}] m): {source}",
+        object[0], object[1], object[2]
+    )]
     AlongMotion { t: f64, object: [f64; 3], source: CapacityError },
     #[error("at the start pose: {0}")]
     Capacity(#[from] CapacityError),

@@ -1,5 +1,5 @@
 //! The lockstep loop's settings ([`LockstepConfig`], [`AgentLoss`]), what a run did
-//! ([`LockstepReport`]), what it does besides states and torques ([`Extras`]) and its errors.
+//! ([`LockstepReport`]), what it does besides states and torques ([`LoopDuties`]) and its errors.
 
 use std::time::Duration;
 
@@ -137,7 +137,7 @@ pub struct LockstepReport {
 
 /// What the loop does besides states and torques.
 #[derive(Debug, Default)]
-pub struct Extras {
+pub struct LoopDuties {
     /// Publish the plant's ground truth on `team/{team}/ground-truth` after every step.
     pub publish_ground_truth: bool,
     /// Keep the ground truth in memory (every `GroundTruthLog::every` ticks).

@@ -28,7 +28,7 @@ use members::coordinator_ready;
 
 pub use answers::LOST_DRIVE_TICKS;
 pub use config::{
-    AgentLoss, BridgeError, Extras, LockstepConfig, LockstepReport,
+    AgentLoss, BridgeError, LockstepConfig, LockstepReport, LoopDuties,
     DEFAULT_COORDINATOR_GRACE_TICKS, DEFAULT_DRIVE_TIMEOUT,
 };
 pub use tick_io::BridgeIo;
@@ -41,7 +41,7 @@ pub async fn run(
     plant: &mut impl Plant,
     stop: watch::Receiver<bool>,
 ) -> Result<LockstepReport, BridgeError> {
-    run_with(session, cfg, plant, &mut Extras::default(), stop).await
+    run_with(session, cfg, plant, &mut LoopDuties::default(), stop).await
 }
 
 /// Run `cfg.ticks` lockstep ticks of `plant`, with ground truth and perturbations as `extras` says.
@@ -49,7 +49,7 @@ pub async fn run_with(
     session: &Session,
     cfg: &LockstepConfig,
     plant: &mut impl Plant,
-    extras: &mut Extras,
+    extras: &mut LoopDuties,
     stop: watch::Receiver<bool>,
 ) -> Result<LockstepReport, BridgeError> {
     let robots: Vec<String> = plant.robots().to_vec();
@@ -64,7 +64,7 @@ pub async fn run_on(
     io: &mut BridgeIo,
     cfg: &LockstepConfig,
     plant: &mut impl Plant,
-    extras: &mut Extras,
+    extras: &mut LoopDuties,
     stop: watch::Receiver<bool>,
 ) -> Result<LockstepReport, BridgeError> {
     let BridgeIo { torques, states, side } = io;

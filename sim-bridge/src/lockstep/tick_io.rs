@@ -7,7 +7,7 @@ use protocol::transport::{self, decode_sample, Qos, TypedPublisher};
 use protocol::{GroundTruth, PerturbationRequest, RobotState};
 use zenoh::Session;
 
-use super::config::{BridgeError, Extras, LockstepConfig};
+use super::config::{BridgeError, LockstepConfig, LoopDuties};
 use super::members::wait_for_members;
 use crate::plant::{empty_state, Plant};
 
@@ -28,7 +28,7 @@ impl BridgeIo {
         session: &Session,
         cfg: &LockstepConfig,
         robots: &[String],
-        extras: &Extras,
+        extras: &LoopDuties,
         stop: &tokio::sync::watch::Receiver<bool>,
     ) -> Result<Self, BridgeError> {
         let side = TickSide::open(session, &cfg.team, extras).await?;
@@ -54,7 +54,7 @@ impl BridgeIo {
 
 /// What the lockstep and real-time loops do around every physics step: take the perturbation
 /// requests that arrived on the Zenoh key, step the plant, then publish and record the ground
-/// truth, as [`Extras`] asks.
+/// truth, as [`LoopDuties`] asks.
 pub(crate) struct TickSide {
     truth_pub: Option<TypedPublisher<GroundTruth>>,
     perturbations: Option<transport::SampleQueue>,
@@ -65,7 +65,7 @@ impl TickSide {
     pub(crate) async fn open(
         session: &Session,
         team: &str,
-        extras: &Extras,
+        extras: &LoopDuties,
     ) -> Result<Self, BridgeError> {
         let truth_pub = if extras.publish_ground_truth {
             Some(
@@ -111,7 +111,7 @@ impl TickSide {
         plant: &mut impl Plant,
         team: &str,
         tick: u64,
-        extras: &mut Extras,
+        extras: &mut LoopDuties,
     ) -> Result<(), BridgeError> {
         if let Some(q) = &self.perturbations {
             while let Ok(Some(sample)) = q.try_recv() {

@@ -4,12 +4,12 @@
 
 use std::path::{Path, PathBuf};
 
-use evaluation::records::Records;
 use evaluation::evaluate::{self, Metrics};
-use scenario::plan::{self, Plan};
+use evaluation::records::Records;
 use launch::record::{RecordOptions, ScenarioSource};
 use launch::run::{self, RunOptions};
 use scenario::file::Scenario;
+use scenario::plan::{self, Plan};
 
 /// The repository's root.
 pub fn repo() -> PathBuf {

@@ -4,9 +4,9 @@
 use std::path::Path;
 use std::time::Duration;
 
+use launch::processes::free_port;
 use protocol::access::{Identity, SecureConfig};
 use protocol::transport::{self, Role, ZenohArgs};
-use launch::processes::free_port;
 use zenoh::Session;
 
 /// Write `who`'s configuration into `dir` and return the arguments that use it. `acl: false`

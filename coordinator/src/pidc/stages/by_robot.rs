@@ -85,7 +85,14 @@ impl ByRobotScratch {
     /// Solve each robot's block of `inp` (a [`decoupled`] team's QP) into its range of `f_c`
     /// (m): every block when `retry` is false, else only the blocks whose `tau_0` was just
     /// saturated (their contact map was built again by the caller).
-    pub fn solve(&mut self, team: &Team, inp: &QpInput, settings: &QpSettings, retry: bool, f_c: &mut DVector<f64>) {
+    pub fn solve(
+        &mut self,
+        team: &Team,
+        inp: &QpInput,
+        settings: &QpSettings,
+        retry: bool,
+        f_c: &mut DVector<f64>,
+    ) {
         if !retry {
             zeros_v(f_c, inp.rho.ncols());
             self.blocks.resize_with(team.robots.len(), Block::default);
@@ -97,7 +104,11 @@ impl ByRobotScratch {
             if !retry {
                 b.vars = (3 * foot, 3 * feet);
                 b.saturated = false;
-                b.out = QpOutcome { status: QpStatus::Solved, solver: "by-robot", ..QpOutcome::default() };
+                b.out = QpOutcome {
+                    status: QpStatus::Solved,
+                    solver: "by-robot",
+                    ..QpOutcome::default()
+                };
             }
             foot += feet;
             if (retry && !b.saturated) || feet == 0 {
@@ -112,7 +123,13 @@ impl ByRobotScratch {
     /// Saturate `tau_0` at the limits ([`saturate`]) on the robots whose block failed (a robot
     /// without a stance foot has no block and is clamped when over); whether any entry
     /// changed. Only those robots' blocks are solved again.
-    pub fn saturate_failed(&mut self, team: &Team, tau0: &mut DVector<f64>, actuated: &[usize], limits: &[f64]) -> bool {
+    pub fn saturate_failed(
+        &mut self,
+        team: &Team,
+        tau0: &mut DVector<f64>,
+        actuated: &[usize],
+        limits: &[f64],
+    ) -> bool {
         let mut any = false;
         for (robot, b) in team.robots.iter().zip(&mut self.blocks) {
             if b.solved() && b.vars.1 > 0 {
@@ -127,19 +144,40 @@ impl ByRobotScratch {
 
     /// The fallback ([`fallback`]) on every block that still fails, on the `tau_0` it was
     /// last solved with; the tick's outcome and note.
-    pub fn finish(&mut self, team: &Team, inp: &QpInput, settings: &QpSettings, f_c: &mut DVector<f64>) -> ByRobot {
-        let mut outcome = QpOutcome { status: QpStatus::Solved, rows: 0, solver: "by-robot", ..QpOutcome::default() };
+    pub fn finish(
+        &mut self,
+        team: &Team,
+        inp: &QpInput,
+        settings: &QpSettings,
+        f_c: &mut DVector<f64>,
+    ) -> ByRobot {
+        let mut outcome = QpOutcome {
+            status: QpStatus::Solved,
+            rows: 0,
+            solver: "by-robot",
+            ..QpOutcome::default()
+        };
         let mut notes: Vec<String> = Vec::new();
         let mut saturated = false;
         for (robot, b) in team.robots.iter().zip(&mut self.blocks) {
             saturated |= b.saturated;
             if b.vars.1 == 0 {
                 if b.saturated {
-                    notes.push(format!("{}: no stance foot, tau_0 clamped to the torque limits", robot.id));
+                    notes.push(format!(
+                        "{}: no stance foot, tau_0 clamped to the torque limits",
+                        robot.id
+                    ));
                 }
                 continue;
             }
-            let note = fallback(&mut b.qp, &b.data.input(inp), settings.max_iter, b.out.status, b.saturated, &mut b.f);
+            let note = fallback(
+                &mut b.qp,
+                &b.data.input(inp),
+                settings.max_iter,
+                b.out.status,
+                b.saturated,
+                &mut b.f,
+            );
             f_c.rows_mut(b.vars.0, b.vars.1).copy_from(&b.f);
             outcome.iterations += b.out.iterations;
             outcome.solve_us += b.out.solve_us;
@@ -150,7 +188,9 @@ impl ByRobotScratch {
                 notes.push(format!("{}: {n}", robot.id));
             }
         }
-        let fallback = (!notes.is_empty()).then(|| format!("solved robot by robot (no grasp couples them); {}", notes.join("; ")));
+        let fallback = (!notes.is_empty()).then(|| {
+            format!("solved robot by robot (no grasp couples them); {}", notes.join("; "))
+        });
         ByRobot { outcome, fallback, saturated }
     }
 }
@@ -188,7 +228,12 @@ impl BlockData {
         zeros_v(&mut self.tau0, nv);
         self.tau0.copy_from(&inp.tau0.rows(offset, nv));
         self.contacts.clear();
-        self.contacts.extend(inp.contacts.iter().filter(|(row, _)| (v0..v0 + nvar).contains(row)).map(|(row, kind)| (row - v0, *kind)));
+        self.contacts.extend(
+            inp.contacts
+                .iter()
+                .filter(|(row, _)| (v0..v0 + nvar).contains(row))
+                .map(|(row, kind)| (row - v0, *kind)),
+        );
         let own = own_joints(inp.actuated, offset, nv);
         self.actuated.clear();
         self.actuated.extend(inp.actuated[own.clone()].iter().map(|j| j - offset));

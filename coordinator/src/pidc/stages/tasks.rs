@@ -1,21 +1,25 @@
 //! The motion tasks of a tick: each task's target ([`Targets`], from
-//! [`crate::units::targets`]), the carried object's load (the paper's `J_x^T F_x` of eq.
-//! js_dynamics, from [`crate::units::object_load`]), the motion-space terms every task shares
+//! [`crate::building_blocks::targets`]), the carried object's load (the paper's `J_x^T F_x` of eq.
+//! js_dynamics, from [`crate::building_blocks::object_load`]), the motion-space terms every task
+//! shares
 //! ([`MotionSpaceTerms`]) and the motion torque `tau_M` (eqs. control_law,
 //! joint_space_tau_M; [`task_torque`]).
 
-use nalgebra::{DVector, Vector3, Vector6};
+use nalgebra::{DVector, Vector6};
 use protocol::TaskReferences;
 
+use crate::building_blocks::block_projection::{vmat, vmat_mut, BlockOp, OpScratch};
+use crate::building_blocks::grasp::GraspTerms;
+use crate::building_blocks::impedance::{
+    HoldStill, MotionSpace, TaskError, TaskJacobian, TaskStack, Yields,
+};
+use crate::building_blocks::object_load::object_load;
+use crate::building_blocks::projection::{mass_times, Projections};
+pub use crate::building_blocks::targets::{frame_pose, PointTarget, PoseTarget, Targets};
+use crate::controller_shell::tasks::{task_row_count, walk_tasks, TaskSink};
 use crate::linalg::zeros_v;
 use crate::pidc::PidcConfig;
-use crate::team::Team;
-use crate::units::grasp::GraspTerms;
-use crate::units::block_projection::{vmat, vmat_mut, BlockOp, OpScratch};
-use crate::units::impedance::{point_error, pose_error, HoldStill, MotionSpace, TaskStack, Yields};
-use crate::units::object_load::object_load;
-use crate::units::projection::{mass_times, Projections};
-pub use crate::units::targets::{frame_pose, PointTarget, PoseTarget, Targets};
+use crate::team::{Team, TeamFrame};
 use crate::ControllerError;
 
 /// The motion-space term of the tasks' bias, `M_c^{-1} (P h - Pdot v)` (eq. control_law's
@@ -45,7 +49,12 @@ impl MotionSpaceTerms {
         zeros_v(&mut self.t, n);
         self.t.copy_from(&self.p_bias);
         mass_times(team, -1.0, vmat(&self.p_bias), 1.0, vmat_mut(&mut self.t));
-        proj.blocks.apply(BlockOp::Phi, vmat(&self.t), vmat_mut(&mut self.mcinv_bias), &mut self.ops);
+        proj.blocks.apply(
+            BlockOp::Phi,
+            vmat(&self.t),
+            vmat_mut(&mut self.mcinv_bias),
+            &mut self.ops,
+        );
         self.mcinv_bias += &self.p_bias;
     }
 
@@ -65,9 +74,10 @@ pub struct TaskTorqueInput<'a> {
 }
 
 /// `tau_M` (n): the superposition of the impedance tasks (eqn. joint_space_tau_M) of the
-/// object (when grasped), every torso, every swing foot and every free hand, with the operational-space
-/// inertia and non-linear terms of eq. control_law computed for the team's task space as a
-/// whole (every task's rows stacked; see [`crate::units::impedance`]). Also the object's load
+/// object (when grasped), every torso, every swing foot and every free hand
+/// ([`walk_tasks`]), with the operational-space inertia and non-linear terms of eq.
+/// control_law computed for the team's task space as a whole (every task's rows stacked; see
+/// [`crate::building_blocks::impedance`]). Also the object's load
 /// `F_x` (zero without a grasp) and `J_x^T F_x` (`load`, n). The object's and the torsos'
 /// tasks are pushed with what they command held still, for when the motion yields
 /// ([`crate::pidc::stages::yielding`]); the object's load held still is `F_x` at no
@@ -83,47 +93,79 @@ pub fn task_torque(
 ) -> Result<(), ControllerError> {
     let TaskTorqueInput { team, grasp, references: refs, config: cfg, motion } = inp;
     let n = team.n;
-    let frames = team.torsos.iter().chain(&team.swing_feet).chain(&team.free_hands);
-    let k_rows = grasp.map_or(0, |g| g.j_o.nrows()) + frames.map(|t| t.jacobian.nrows()).sum::<usize>();
-    stack.begin(k_rows, n);
+    stack.begin(task_row_count(team, *grasp), n);
     zeros_v(load, n);
     *f_x = Vector6::zeros();
     *f_x_hold = Vector6::zeros();
-    if let Some(g) = grasp {
-        let (x_d, tw_d, acc_d) = targets.object(*refs, &g.object);
-        let err = pose_error(&g.object, &g.object_twist, &x_d, &tw_d, &acc_d);
-        // Object load feed-forward w_ff and the load F_x = -w_ff on the robots.
-        let w_ff = object_load(&g.object, &g.object_twist, &acc_d, cfg.object_mass, &cfg.object_inertia);
-        let w_hold = object_load(&g.object, &g.object_twist, &[0.0; 6], cfg.object_mass, &cfg.object_inertia);
-        (*f_x, *f_x_hold) = (-w_ff, -w_hold);
-        let hold = HoldStill { yields: Yields::Object, velocity: &g.object_twist, feed_forward: Some(&w_hold) };
-        stack.push_yielding(&g.j_o, hands_columns(team), &g.jdv_o, &err, &cfg.object_gains, Some(&w_ff), hold)?;
-        load.gemv_tr(1.0, &g.j_o, f_x, 0.0);
-    }
-    for tf in &team.torsos {
-        let id = &team.robots[tf.robot].id;
-        let (x, twist) = frame_pose(tf, &team.velocity);
-        let (x_d, tw_d, acc_d) = targets.torso(*refs, id, &x);
-        let err = pose_error(&x, &twist, &x_d, &tw_d, &acc_d);
-        let hold = HoldStill { yields: Yields::Torso, velocity: &twist, feed_forward: None };
-        stack.push_yielding(&tf.jacobian, tf.cols, &tf.jdot_v, &err, &cfg.torso_gains, None, hold)?;
-    }
-    for tf in &team.swing_feet {
-        let id = &team.robots[tf.robot].id;
-        let (p_d, v_d, a_d) = targets.swing_foot(*refs, id, &tf.name, &tf.position);
-        let vel: Vector3<f64> = tf.velocity(&team.velocity).fixed_rows::<3>(0).into();
-        let err = point_error(&tf.position, &vel, &p_d, &v_d, &a_d);
-        stack.push(&tf.jacobian, tf.cols, &tf.jdot_v, &err, &cfg.swing_gains, None)?;
-    }
-    targets.keep_free_hands(team);
-    targets.keep_swing_feet(team);
-    for tf in &team.free_hands {
-        let (x, twist) = frame_pose(tf, &team.velocity);
-        let (x_d, tw_d, acc_d) = targets.free_hand(&team.robots[tf.robot].id, &x);
-        let err = pose_error(&x, &twist, &x_d, &tw_d, &acc_d);
-        stack.push(&tf.jacobian, tf.cols, &tf.jdot_v, &err, &cfg.hand_gains, None)?;
-    }
+    let mut sink = ImpedanceSink { team, cfg, stack, load, f_x, f_x_hold };
+    walk_tasks(team, *grasp, *refs, targets, &mut sink)?;
     stack.joint_torque(motion, tau_m)
+}
+
+/// Each task pushed as an impedance task on the stack, with its kind's gains; the object's
+/// with its load.
+struct ImpedanceSink<'a> {
+    team: &'a Team,
+    cfg: &'a PidcConfig,
+    stack: &'a mut TaskStack,
+    load: &'a mut DVector<f64>,
+    f_x: &'a mut Vector6<f64>,
+    f_x_hold: &'a mut Vector6<f64>,
+}
+
+impl TaskSink for ImpedanceSink<'_> {
+    fn object(
+        &mut self,
+        g: &GraspTerms,
+        err: &TaskError,
+        acc_d: &[f64; 6],
+    ) -> Result<(), ControllerError> {
+        let cfg = self.cfg;
+        // Object load feed-forward w_ff and the load F_x = -w_ff on the robots.
+        let w_ff =
+            object_load(&g.object, &g.object_twist, acc_d, cfg.object_mass, &cfg.object_inertia);
+        let w_hold = object_load(
+            &g.object,
+            &g.object_twist,
+            &[0.0; 6],
+            cfg.object_mass,
+            &cfg.object_inertia,
+        );
+        (*self.f_x, *self.f_x_hold) = (-w_ff, -w_hold);
+        let hold = HoldStill {
+            yields: Yields::Object,
+            velocity: &g.object_twist,
+            feed_forward: Some(&w_hold),
+        };
+        let cols = hands_columns(self.team);
+        let gains = &cfg.object_gains;
+        let task = TaskJacobian { j_x: &g.j_o, cols, jdv_x: &g.jdv_o };
+        self.stack.push_yielding(task, err, gains, Some(&w_ff), hold)?;
+        self.load.gemv_tr(1.0, &g.j_o, self.f_x, 0.0);
+        Ok(())
+    }
+
+    fn torso(
+        &mut self,
+        tf: &TeamFrame,
+        twist: &Vector6<f64>,
+        err: &TaskError,
+    ) -> Result<(), ControllerError> {
+        let hold = HoldStill { yields: Yields::Torso, velocity: twist, feed_forward: None };
+        let gains = &self.cfg.torso_gains;
+        let task = TaskJacobian { j_x: &tf.jacobian, cols: tf.cols, jdv_x: &tf.jdot_v };
+        self.stack.push_yielding(task, err, gains, None, hold)
+    }
+
+    fn swing_foot(&mut self, tf: &TeamFrame, err: &TaskError) -> Result<(), ControllerError> {
+        let gains = &self.cfg.swing_gains;
+        self.stack.push(&tf.jacobian, tf.cols, &tf.jdot_v, err, gains, None)
+    }
+
+    fn free_hand(&mut self, tf: &TeamFrame, err: &TaskError) -> Result<(), ControllerError> {
+        let gains = &self.cfg.hand_gains;
+        self.stack.push(&tf.jacobian, tf.cols, &tf.jdot_v, err, gains, None)
+    }
 }
 
 /// The team columns the hands in grasp's robots span (first, count): the object's Jacobian

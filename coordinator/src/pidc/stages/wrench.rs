@@ -13,11 +13,13 @@
 
 use nalgebra::{DMatrix, DVector, Vector6};
 
-use crate::linalg::{add_product, gemm, mat, mat_mut, product, shape, transpose_into, zeros, zeros_v};
+use crate::building_blocks::block_projection::{ActuationScratch, BlockOp, OpScratch};
+use crate::building_blocks::grasp::GraspTerms;
+use crate::building_blocks::projection::{Projections, WrenchScratch};
+use crate::linalg::{
+    add_product, gemm, mat, mat_mut, product, shape, transpose_into, zeros, zeros_v,
+};
 use crate::team::Team;
-use crate::units::block_projection::{ActuationScratch, BlockOp, OpScratch};
-use crate::units::grasp::GraspTerms;
-use crate::units::projection::{Projections, WrenchScratch};
 
 /// Scratch of the contact map: `S Y`, two `n x m` products, team-sized vectors.
 #[derive(Debug, Clone, Default)]
@@ -50,7 +52,14 @@ pub struct MapInput<'a> {
 
 /// `Y = B J_c^T` (n x m), `rho` (m x m), `eta` (m) and `eta_real` (m: `eta` with `G^+ F_x` on
 /// the hand rows) of eq. relation_between_lambda_and_Fc.
-pub fn contact_map(inp: &MapInput, ws: &mut ContactMapScratch, y: &mut DMatrix<f64>, rho: &mut DMatrix<f64>, eta: &mut DVector<f64>, eta_real: &mut DVector<f64>) {
+pub fn contact_map(
+    inp: &MapInput,
+    ws: &mut ContactMapScratch,
+    y: &mut DMatrix<f64>,
+    rho: &mut DMatrix<f64>,
+    eta: &mut DVector<f64>,
+    eta_real: &mut DVector<f64>,
+) {
     let MapInput { team, proj, j_c, .. } = inp;
     if proj.by_blocks {
         rho_by_blocks(team, proj, j_c, ws, y, rho);
@@ -63,7 +72,12 @@ pub fn contact_map(inp: &MapInput, ws: &mut ContactMapScratch, y: &mut DMatrix<f
 /// `eta` and `eta_real` of [`contact_map`] alone (the contact wrenches at `F_c = 0`), without
 /// `Y` and `rho`: what the QP's hot start by the robots' blocks reads
 /// ([`crate::qp::BlockHotStart`]).
-pub fn contact_offset(inp: &MapInput, ws: &mut ContactMapScratch, eta: &mut DVector<f64>, eta_real: &mut DVector<f64>) {
+pub fn contact_offset(
+    inp: &MapInput,
+    ws: &mut ContactMapScratch,
+    eta: &mut DVector<f64>,
+    eta_real: &mut DVector<f64>,
+) {
     let MapInput { team, proj, tau0, load, grasp, f_x, .. } = inp;
     let n = team.n;
     let m = team.contact_rows();
@@ -84,7 +98,14 @@ pub fn contact_offset(inp: &MapInput, ws: &mut ContactMapScratch, eta: &mut DVec
 
 /// `Y = B J_c^T` and `rho = (J_c^T)^+ K S Y` as written, `K = (I - P)(Mbar P - I)`, right to
 /// left (the dense path's, and the oracle of [`rho_by_blocks`]).
-fn rho_dense(team: &Team, proj: &Projections, j_c: &DMatrix<f64>, ws: &mut ContactMapScratch, y: &mut DMatrix<f64>, rho: &mut DMatrix<f64>) {
+fn rho_dense(
+    team: &Team,
+    proj: &Projections,
+    j_c: &DMatrix<f64>,
+    ws: &mut ContactMapScratch,
+    y: &mut DMatrix<f64>,
+    rho: &mut DMatrix<f64>,
+) {
     let (n, m) = (team.n, j_c.nrows());
     product(y, mat(&proj.b), mat(j_c).transpose()); // Y = B J_c^T
     scaled_rows(y, &team.s_diag, &mut ws.sy);
@@ -101,8 +122,15 @@ fn rho_dense(team: &Team, proj: &Projections, j_c: &DMatrix<f64>, ws: &mut Conta
 /// `Y = J_c^T + (B - I)_{:u} J_c[:, u]^T` (eq. bmatrix), where robot `r`'s feet rows of `J_c`
 /// meet only its own unactuated columns; `(J_c^T)^+ (I - P) = (J_c^T)^+` and
 /// `Mbar P = M M_c^{-1} P`, so `rho = (J_c^T)^+ (Mbar P S Y - S Y)` with both operators by
-/// blocks ([`crate::units::block_projection`]).
-fn rho_by_blocks(team: &Team, proj: &Projections, j_c: &DMatrix<f64>, ws: &mut ContactMapScratch, y: &mut DMatrix<f64>, rho: &mut DMatrix<f64>) {
+/// blocks ([`crate::building_blocks::block_projection`]).
+fn rho_by_blocks(
+    team: &Team,
+    proj: &Projections,
+    j_c: &DMatrix<f64>,
+    ws: &mut ContactMapScratch,
+    y: &mut DMatrix<f64>,
+    rho: &mut DMatrix<f64>,
+) {
     let (n, m, f) = (team.n, j_c.nrows(), &proj.blocks);
     let unact = f.b_minus_i_u(&mut ws.b_u, &mut ws.act);
     shape(&mut ws.jc_u, m, unact.len());
@@ -112,10 +140,22 @@ fn rho_by_blocks(team: &Team, proj: &Projections, j_c: &DMatrix<f64>, ws: &mut C
     transpose_into(j_c, y);
     for ((f0, nf), (u0, nu)) in f.feet_and_unactuated() {
         let jc_u = mat(&ws.jc_u).submatrix(f0, u0, nf, nu);
-        gemm(mat_mut(y).subcols_mut(f0, nf), 1.0, 1.0, mat(&ws.b_u).subcols(u0, nu), jc_u.transpose());
+        gemm(
+            mat_mut(y).subcols_mut(f0, nf),
+            1.0,
+            1.0,
+            mat(&ws.b_u).subcols(u0, nu),
+            jc_u.transpose(),
+        );
     }
     let nf3 = f.rows().1;
-    gemm(mat_mut(y).subcols_mut(nf3, m - nf3), 1.0, 1.0, mat(&ws.b_u), mat(&ws.jc_u).subrows(nf3, m - nf3).transpose());
+    gemm(
+        mat_mut(y).subcols_mut(nf3, m - nf3),
+        1.0,
+        1.0,
+        mat(&ws.b_u),
+        mat(&ws.jc_u).subrows(nf3, m - nf3).transpose(),
+    );
     scaled_rows(y, &team.s_diag, &mut ws.sy);
     // Both operators write every row of their output (the robots' blocks tile the rows):
     // shaped, not cleared.
@@ -132,7 +172,9 @@ fn scaled_rows(y: &DMatrix<f64>, s: &DVector<f64>, out: &mut DMatrix<f64>) {
     // (row views are strided).
     shape(out, y.nrows(), y.ncols());
     let n = y.nrows();
-    for (dst, src) in out.as_mut_slice().chunks_exact_mut(n.max(1)).zip(y.as_slice().chunks_exact(n.max(1))) {
+    for (dst, src) in
+        out.as_mut_slice().chunks_exact_mut(n.max(1)).zip(y.as_slice().chunks_exact(n.max(1)))
+    {
         for ((d, x), si) in dst.iter_mut().zip(src).zip(s.as_slice()) {
             *d = x * si;
         }
@@ -160,7 +202,13 @@ pub struct WrenchInput<'a> {
 
 /// The predicted contact wrenches `lambda` (m) for what was sent, and `lambda_real`, which
 /// holds `eta_real` on entry (see [`contact_map`]) and `lambda + (eta_real - eta)` on return.
-pub fn contact_wrenches(inp: &WrenchInput, sent: Actuation, ws: &mut ContactMapScratch, lambda: &mut DVector<f64>, lambda_real: &mut DVector<f64>) {
+pub fn contact_wrenches(
+    inp: &WrenchInput,
+    sent: Actuation,
+    ws: &mut ContactMapScratch,
+    lambda: &mut DVector<f64>,
+    lambda_real: &mut DVector<f64>,
+) {
     let WrenchInput { team, proj, load, rho, eta } = inp;
     zeros_v(lambda, eta.len());
     match sent {

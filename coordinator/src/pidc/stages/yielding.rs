@@ -11,10 +11,11 @@
 //! way may be past what even holding still allows within the controller's margins (the
 //! margins are a reserve, not the physics): then the object, and if need be everything, is
 //! held still on the margins' reserve ([`ContactMargins::reserve`]: three quarters of the
-//! palm, half the least squeeze). The grasp is let go ([`crate::units::release`]) only when that is
+//! palm, half the least squeeze). The grasp is let go ([`crate::building_blocks::release`]) only
+//! when that is
 //! infeasible too.
 //!
-//! [`ContactMargins::reserve`]: crate::units::contact_margins::ContactMargins::reserve
+//! [`ContactMargins::reserve`]: crate::building_blocks::contact_margins::ContactMargins::reserve
 //!
 //! **Why a share of the tick's task accelerations**, and not a time-scaling of the reference
 //! or a strict hierarchy of QPs: `tau_M`, hence `tau_0 = [P S]^+ P tau_M`, the object's load
@@ -30,8 +31,8 @@
 
 use nalgebra::{DVector, Vector6};
 
+pub use crate::building_blocks::impedance::MotionScale;
 use crate::linalg::zeros_v;
-pub use crate::units::impedance::MotionScale;
 
 /// Bisection steps on a share: `2^-5` of the motion (about 3 %).
 pub const YIELD_STEPS: u32 = 5;
@@ -43,7 +44,9 @@ pub const YIELD_STEPS: u32 = 5;
 /// still is infeasible), at everything held still.
 pub fn yield_motion(mut feasible: impl FnMut(MotionScale) -> bool) -> Option<MotionScale> {
     if feasible(MotionScale { object: 0.0, torso: 1.0, reserve: false }) {
-        if let Some(s) = largest_share(|s| feasible(MotionScale { object: s, torso: 1.0, reserve: false })) {
+        if let Some(s) =
+            largest_share(|s| feasible(MotionScale { object: s, torso: 1.0, reserve: false }))
+        {
             return Some(MotionScale { object: s, torso: 1.0, reserve: false });
         }
     }
@@ -84,8 +87,15 @@ pub struct TickMotion {
 
 impl TickMotion {
     /// A copy of these quantities, reusing the buffers.
-    pub fn copy_from(&mut self, tau_m: &DVector<f64>, tau0: &DVector<f64>, load: &DVector<f64>, f_x: &Vector6<f64>) {
-        for (dst, src) in [(&mut self.tau_m, tau_m), (&mut self.tau0, tau0), (&mut self.load, load)] {
+    pub fn copy_from(
+        &mut self,
+        tau_m: &DVector<f64>,
+        tau0: &DVector<f64>,
+        load: &DVector<f64>,
+        f_x: &Vector6<f64>,
+    ) {
+        for (dst, src) in [(&mut self.tau_m, tau_m), (&mut self.tau0, tau0), (&mut self.load, load)]
+        {
             zeros_v(dst, src.len());
             dst.copy_from(src);
         }
@@ -93,7 +103,13 @@ impl TickMotion {
     }
 
     /// These quantities back into the outputs.
-    pub fn restore(&self, tau_m: &mut DVector<f64>, tau0: &mut DVector<f64>, load: &mut DVector<f64>, f_x: &mut Vector6<f64>) {
+    pub fn restore(
+        &self,
+        tau_m: &mut DVector<f64>,
+        tau0: &mut DVector<f64>,
+        load: &mut DVector<f64>,
+        f_x: &mut Vector6<f64>,
+    ) {
         for (dst, src) in [(tau_m, &self.tau_m), (tau0, &self.tau0), (load, &self.load)] {
             zeros_v(dst, src.len());
             dst.copy_from(src);
@@ -115,7 +131,14 @@ pub struct YieldScratch {
 impl YieldScratch {
     /// The motion at `scale` (on the order of [`yield_motion`]: the object's share with the
     /// torsos whole, or the torsos' with the object still) into the outputs.
-    pub fn blend_into(&self, scale: MotionScale, tau_m: &mut DVector<f64>, tau0: &mut DVector<f64>, load: &mut DVector<f64>, f_x: &mut Vector6<f64>) {
+    pub fn blend_into(
+        &self,
+        scale: MotionScale,
+        tau_m: &mut DVector<f64>,
+        tau0: &mut DVector<f64>,
+        load: &mut DVector<f64>,
+        f_x: &mut Vector6<f64>,
+    ) {
         if scale.torso >= 1.0 {
             blend(&self.object_still, &self.full, scale.object, tau_m, tau0, load, f_x);
         } else {
@@ -126,8 +149,20 @@ impl YieldScratch {
 
 /// `out = still + s (moving - still)`, entry by entry (exact for the affine quantities of a
 /// motion scale, see the module docs).
-pub fn blend(still: &TickMotion, moving: &TickMotion, s: f64, tau_m: &mut DVector<f64>, tau0: &mut DVector<f64>, load: &mut DVector<f64>, f_x: &mut Vector6<f64>) {
-    for (out, a, b) in [(tau_m, &still.tau_m, &moving.tau_m), (tau0, &still.tau0, &moving.tau0), (load, &still.load, &moving.load)] {
+pub fn blend(
+    still: &TickMotion,
+    moving: &TickMotion,
+    s: f64,
+    tau_m: &mut DVector<f64>,
+    tau0: &mut DVector<f64>,
+    load: &mut DVector<f64>,
+    f_x: &mut Vector6<f64>,
+) {
+    for (out, a, b) in [
+        (tau_m, &still.tau_m, &moving.tau_m),
+        (tau0, &still.tau0, &moving.tau0),
+        (load, &still.load, &moving.load),
+    ] {
         zeros_v(out, a.len());
         for i in 0..a.len() {
             out[i] = a[i] + s * (b[i] - a[i]);
@@ -149,7 +184,10 @@ mod tests {
                 s <= limit
             })
             .expect("the share found solves again");
-            assert!(s <= limit && limit - s < 1.0 / f64::from(1u32 << YIELD_STEPS), "limit {limit}: share {s}");
+            assert!(
+                s <= limit && limit - s < 1.0 / f64::from(1u32 << YIELD_STEPS),
+                "limit {limit}: share {s}"
+            );
             assert_eq!(last, s, "the tick is left at the share found");
         }
     }
@@ -162,7 +200,8 @@ mod tests {
         assert_eq!(y.torso, 1.0);
         assert!((0.37..=0.4).contains(&y.object), "{y:?}");
         // Only with the object still and the torsos at most 60 %.
-        let y = yield_motion(|m| m.object == 0.0 && m.torso <= 0.6).expect("feasible with both yielding");
+        let y = yield_motion(|m| m.object == 0.0 && m.torso <= 0.6)
+            .expect("feasible with both yielding");
         assert_eq!(y.object, 0.0);
         assert!((0.57..=0.6).contains(&y.torso), "{y:?}");
         // Nothing is feasible: the last motion tried is everything held still.

@@ -27,10 +27,10 @@
 //!
 //! **Operators.** `P`, `Phi` and `Mbar P = M Phi` are each "blocks minus a coupling",
 //! `diag(D_r) - S W T^T` with `S`, `T` block-diagonal (k x 6 per robot) and `W` of 6B x 6B:
-//! applied to `c` columns they cost `sum_r k^2 c + 12 B k c + 108 B c` (`W` kept factored, `Coupling`) instead of `n^2 c`
-//! ([`BlockFactors::apply`]). `(J_c^T)^+` likewise ([`BlockFactors::jct_pinv_apply`]).
-//! [`BlockFactors::materialize`] forms the team-sized matrices from the same factors, for
-//! tests and reports only.
+//! applied to `c` columns they cost `sum_r k^2 c + 12 B k c + 108 B c` (`W` kept factored,
+//! `Coupling`) instead of `n^2 c` ([`BlockFactors::apply`]). `(J_c^T)^+` likewise
+//! ([`BlockFactors::jct_pinv_apply`]). [`BlockFactors::materialize`] forms the team-sized
+//! matrices from the same factors, for tests and reports only.
 //!
 //! Each inverse is of a Gram matrix whose Cholesky pivots pass [`crate::linalg::SPD_TOL`]:
 //! then every rank the dense path decides with [`crate::linalg::RANK_TOL`] is full, and both
@@ -41,10 +41,10 @@
 use faer::{MatMut, MatRef};
 use nalgebra::{DMatrix, DVector, Matrix6, Vector6};
 
+use crate::building_blocks::grasp::GraspTerms;
+use crate::building_blocks::projection::{complement, mbar_into, mc_into, symmetrise, Projections};
 use crate::linalg::{gemm, mat, mat_mut, shape, spd6_inverse, zeros, zeros_v, SpdInverse, SPD_TOL};
 use crate::team::Team;
-use crate::units::grasp::GraspTerms;
-use crate::units::projection::{complement, mbar_into, mc_into, symmetrise, Projections};
 
 /// One robot's blocks: its feet rows and hand row in the team's `J_c`, and its share of the
 /// recursion (see the module docs).
@@ -173,7 +173,10 @@ impl BlockFactors {
     fn layout(&mut self, team: &Team, b: usize, m: usize) -> Option<()> {
         let nf = team.feet.len();
         let hands_sorted = team.hands.windows(2).all(|w| w[0].robot < w[1].robot);
-        if m != 3 * nf + 6 * b || team.feet.windows(2).any(|w| w[0].robot > w[1].robot) || !hands_sorted {
+        if m != 3 * nf + 6 * b
+            || team.feet.windows(2).any(|w| w[0].robot > w[1].robot)
+            || !hands_sorted
+        {
             return None;
         }
         (self.m, self.nf3) = (m, 3 * nf);
@@ -186,7 +189,8 @@ impl BlockFactors {
             rb.feet = team.feet.iter().filter(|f| f.robot == r).count();
             rb.u0 = self.unact.iter().position(|&i| i >= rb.o).unwrap_or(self.unact.len());
             rb.nu = self.unact.iter().filter(|&&i| i >= rb.o && i < rb.o + rb.k).count();
-            let mut hands = team.hands.iter().enumerate().filter(|(_, h)| h.robot == r).map(|(i, _)| i);
+            let mut hands =
+                team.hands.iter().enumerate().filter(|(_, h)| h.robot == r).map(|(i, _)| i);
             rb.hand = if b == 0 { None } else { hands.next() };
             if b > 0 && hands.next().is_some() {
                 return None;
@@ -209,7 +213,8 @@ impl BlockFactors {
     /// `P S` to be full.
     fn actuation(&mut self) -> Option<()> {
         for rb in &self.robots {
-            let first_six = rb.nu == 6 && self.unact[rb.u0] == rb.o && self.unact[rb.u0 + 5] == rb.o + 5;
+            let first_six =
+                rb.nu == 6 && self.unact[rb.u0] == rb.o && self.unact[rb.u0 + 5] == rb.o + 5;
             if rb.nu != 0 && !first_six {
                 return None;
             }
@@ -243,7 +248,13 @@ impl BlockFactors {
         self.w_e.apply(mat(t), mat_mut(u), r, q);
         for rb in &self.robots {
             if let Some(h) = rb.hand {
-                gemm(mat_mut(pu).subrows_mut(rb.o, rb.k), 1.0, -1.0, mat(&rb.r_h), mat(u).subrows(6 * h, 6));
+                gemm(
+                    mat_mut(pu).subrows_mut(rb.o, rb.k),
+                    1.0,
+                    -1.0,
+                    mat(&rb.r_h),
+                    mat(u).subrows(6 * h, 6),
+                );
             }
         }
     }
@@ -253,11 +264,23 @@ impl BlockFactors {
     /// `out = op x` for `x` (n x c) (see [`BlockOp`]): each robot's block times its rows of
     /// `x`, minus `S_r (W (T^T x))_h` through its hand (module docs). `out` is n x c; every
     /// entry is written (the robots' blocks tile the rows), so it need not be cleared.
-    pub fn apply(&self, op: BlockOp, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>, s: &mut OpScratch) {
+    pub fn apply(
+        &self,
+        op: BlockOp,
+        x: MatRef<'_, f64>,
+        mut out: MatMut<'_, f64>,
+        s: &mut OpScratch,
+    ) {
         let w = if op == BlockOp::P { &self.w_e } else { &self.w_d };
         let (hb, c) = (w.rows, x.ncols());
         for rb in &self.robots {
-            gemm(out.as_mut().subrows_mut(rb.o, rb.k), 0.0, 1.0, mat(rb.operator(op)[0]), x.subrows(rb.o, rb.k));
+            gemm(
+                out.as_mut().subrows_mut(rb.o, rb.k),
+                0.0,
+                1.0,
+                mat(rb.operator(op)[0]),
+                x.subrows(rb.o, rb.k),
+            );
         }
         if hb == 0 {
             return;
@@ -266,13 +289,25 @@ impl BlockFactors {
         shape(&mut s.u, hb, c);
         for rb in &self.robots {
             if let Some(h) = rb.hand {
-                gemm(mat_mut(&mut s.t).subrows_mut(6 * h, 6), 0.0, 1.0, mat(rb.operator(op)[2]).transpose(), x.subrows(rb.o, rb.k));
+                gemm(
+                    mat_mut(&mut s.t).subrows_mut(6 * h, 6),
+                    0.0,
+                    1.0,
+                    mat(rb.operator(op)[2]).transpose(),
+                    x.subrows(rb.o, rb.k),
+                );
             }
         }
         w.apply(mat(&s.t), mat_mut(&mut s.u), &mut s.r, &mut s.q);
         for rb in &self.robots {
             if let Some(h) = rb.hand {
-                gemm(out.as_mut().subrows_mut(rb.o, rb.k), 1.0, -1.0, mat(rb.operator(op)[1]), mat(&s.u).subrows(6 * h, 6));
+                gemm(
+                    out.as_mut().subrows_mut(rb.o, rb.k),
+                    1.0,
+                    -1.0,
+                    mat(rb.operator(op)[1]),
+                    mat(&s.u).subrows(6 * h, 6),
+                );
             }
         }
     }
@@ -287,22 +322,46 @@ impl BlockFactors {
         shape(&mut s.u, hb, c);
         for rb in &self.robots {
             if let Some(h) = rb.hand.filter(|_| hb > 0) {
-                gemm(mat_mut(&mut s.t).subrows_mut(6 * h, 6), 0.0, 1.0, mat(&rb.r_h).transpose(), x.subrows(rb.o, rb.k));
+                gemm(
+                    mat_mut(&mut s.t).subrows_mut(6 * h, 6),
+                    0.0,
+                    1.0,
+                    mat(&rb.r_h).transpose(),
+                    x.subrows(rb.o, rb.k),
+                );
             }
         }
         self.w_e.apply(mat(&s.t), mat_mut(&mut s.u), &mut s.r, &mut s.q);
         for rb in &self.robots {
             let (f0, f) = (3 * rb.foot0, 3 * rb.feet);
-            gemm(out.as_mut().subrows_mut(f0, f), 0.0, 1.0, mat(&rb.a_pinv).transpose(), x.subrows(rb.o, rb.k));
+            gemm(
+                out.as_mut().subrows_mut(f0, f),
+                0.0,
+                1.0,
+                mat(&rb.a_pinv).transpose(),
+                x.subrows(rb.o, rb.k),
+            );
             if let Some(h) = rb.hand.filter(|_| hb > 0) {
-                gemm(out.as_mut().subrows_mut(f0, f), 1.0, -1.0, mat(&rb.jap).transpose(), mat(&s.u).subrows(6 * h, 6));
+                gemm(
+                    out.as_mut().subrows_mut(f0, f),
+                    1.0,
+                    -1.0,
+                    mat(&rb.jap).transpose(),
+                    mat(&s.u).subrows(6 * h, 6),
+                );
             }
         }
         out.subrows_mut(self.nf3, hb).copy_from(mat(&s.u));
     }
 
     /// `out = alpha J_c^+ y` (n) for `y` (m): `A^+ y_f + R W_E (y_h - J_ee A^+ y_f)`.
-    pub fn jc_pinv_apply(&self, alpha: f64, y: &DVector<f64>, out: &mut DVector<f64>, s: &mut OpScratch) {
+    pub fn jc_pinv_apply(
+        &self,
+        alpha: f64,
+        y: &DVector<f64>,
+        out: &mut DVector<f64>,
+        s: &mut OpScratch,
+    ) {
         let hb = self.w_e.rows;
         zeros_v(out, self.robots.iter().map(|rb| rb.k).sum());
         zeros(&mut s.t, hb, 1);
@@ -323,7 +382,12 @@ impl BlockFactors {
         self.w_e.apply(mat(&s.t), mat_mut(&mut s.u), &mut s.r, &mut s.q);
         for rb in &self.robots {
             if let Some(h) = rb.hand {
-                out.rows_mut(rb.o, rb.k).gemv(alpha, &rb.r_h, &s.u.fixed_view::<6, 1>(6 * h, 0), 1.0);
+                out.rows_mut(rb.o, rb.k).gemv(
+                    alpha,
+                    &rb.r_h,
+                    &s.u.fixed_view::<6, 1>(6 * h, 0),
+                    1.0,
+                );
             }
         }
     }
@@ -331,7 +395,14 @@ impl BlockFactors {
     /// `out = [P S]^+ x = S (P x + P_{:u} K P_{u:} x)` (eq. ua_solution) for a vector `x`, as
     /// `S P (x + E_u w)` with `w = K (P x)_u` (`P` is symmetric: `P_{u:} x = (P x)_u`): two
     /// applications of `P` and one of `K`'s factors; `px` is scratch.
-    pub fn ps_pinv_apply(&self, x: &DVector<f64>, s_diag: &DVector<f64>, out: &mut DVector<f64>, px: &mut DVector<f64>, s: &mut OpScratch) {
+    pub fn ps_pinv_apply(
+        &self,
+        x: &DVector<f64>,
+        s_diag: &DVector<f64>,
+        out: &mut DVector<f64>,
+        px: &mut DVector<f64>,
+        s: &mut OpScratch,
+    ) {
         let (n, nu) = (x.len(), self.unact.len());
         zeros_v(out, n);
         self.apply(BlockOp::P, vmat(x), vmat_mut(out), s);
@@ -366,7 +437,9 @@ impl BlockFactors {
 
     /// Each robot's feet rows of `J_c` (first row, count) and its unactuated columns in the
     /// team's unactuated list (first, count): the only columns where its feet rows meet `u`.
-    pub fn feet_and_unactuated(&self) -> impl Iterator<Item = ((usize, usize), (usize, usize))> + '_ {
+    pub fn feet_and_unactuated(
+        &self,
+    ) -> impl Iterator<Item = ((usize, usize), (usize, usize))> + '_ {
         self.robots.iter().map(|rb| ((3 * rb.foot0, 3 * rb.feet), (rb.u0, rb.nu)))
     }
 
@@ -407,7 +480,13 @@ impl BlockFactors {
     ///
     /// each sum robot by robot over the tasks whose columns meet its own (a torso's meet one
     /// robot, the object's every grasping robot): linear in the team but for the result.
-    pub fn task_gram(&self, j: MatRef<'_, f64>, spans: &[TaskSpan], out: &mut DMatrix<f64>, s: &mut GramScratch) {
+    pub fn task_gram(
+        &self,
+        j: MatRef<'_, f64>,
+        spans: &[TaskSpan],
+        out: &mut DMatrix<f64>,
+        s: &mut GramScratch,
+    ) {
         let rows = j.nrows();
         zeros(out, rows, rows);
         let coupled = !self.w_d.x_inv.is_empty();
@@ -422,35 +501,87 @@ impl BlockFactors {
                 d > 0 && c0 < rb.o + rb.k && rb.o < c0 + nc
             }));
             let j_r = j.subcols(rb.o, rb.k);
-            for &ti in &s.touching {
-                let (ri, di, ..) = spans[ti];
-                gemm(mat_mut(&mut s.b).submatrix_mut(0, 0, di, rb.k), 0.0, 1.0, j_r.subrows(ri, di), mat(&rb.phi_f));
-                for &tj in &s.touching {
-                    let (rj, dj, ..) = spans[tj];
-                    gemm(mat_mut(out).submatrix_mut(ri, rj, di, dj), 1.0, 1.0, mat(&s.b).submatrix(0, 0, di, rb.k), j_r.subrows(rj, dj).transpose());
-                }
-            }
+            robot_gram(rb, j_r, spans, out, s);
             let Some(h) = rb.hand.filter(|_| coupled) else { continue };
-            let (x_inv, y) = (&self.w_d.x_inv[h], &self.w_d.y[h]);
-            for &ti in &s.touching {
-                let (ri, di, ..) = spans[ti];
-                gemm(mat_mut(&mut s.q).subrows_mut(ri, di), 0.0, 1.0, j_r.subrows(ri, di), mat(&rb.l_h));
-            }
-            for &ti in &s.touching {
-                let (ri, di, ..) = spans[ti];
-                let q_i = mat(&s.q).subrows(ri, di);
-                gemm(mat_mut(&mut s.c).subrows_mut(0, di), 0.0, 1.0, q_i, m6(x_inv));
-                for &tj in &s.touching {
-                    let (rj, dj, ..) = spans[tj];
-                    gemm(mat_mut(out).submatrix_mut(ri, rj, di, dj), 1.0, -1.0, mat(&s.c).subrows(0, di), mat(&s.q).subrows(rj, dj).transpose());
-                }
-                gemm(mat_mut(&mut s.v).subrows_mut(ri, di), 1.0, 1.0, q_i, m6(y));
-            }
+            self.hand_gram(h, rb, j_r, spans, out, s);
         }
         if coupled {
             shape(&mut s.vf, rows, 6);
             gemm(mat_mut(&mut s.vf), 0.0, 1.0, mat(&s.v), m6(&self.w_d.f_inv));
             gemm(mat_mut(out), 1.0, 1.0, mat(&s.vf), mat(&s.v).transpose());
+        }
+    }
+
+    /// Hand `h`'s robot `rb`'s share of the grasp's coupling in [`BlockFactors::task_gram`]:
+    /// `- Q_h X_h^{-1} Q_h^T` into `out` and `Q_h Y_h` added to `s.v`, over the tasks
+    /// `s.touching` meeting its columns (`j_r`: the stack's columns of the robot).
+    fn hand_gram(
+        &self,
+        h: usize,
+        rb: &RobotBlocks,
+        j_r: MatRef<'_, f64>,
+        spans: &[TaskSpan],
+        out: &mut DMatrix<f64>,
+        s: &mut GramScratch,
+    ) {
+        let (x_inv, y) = (&self.w_d.x_inv[h], &self.w_d.y[h]);
+        for &ti in &s.touching {
+            let (ri, di, ..) = spans[ti];
+            gemm(
+                mat_mut(&mut s.q).subrows_mut(ri, di),
+                0.0,
+                1.0,
+                j_r.subrows(ri, di),
+                mat(&rb.l_h),
+            );
+        }
+        for &ti in &s.touching {
+            let (ri, di, ..) = spans[ti];
+            let q_i = mat(&s.q).subrows(ri, di);
+            gemm(mat_mut(&mut s.c).subrows_mut(0, di), 0.0, 1.0, q_i, m6(x_inv));
+            for &tj in &s.touching {
+                let (rj, dj, ..) = spans[tj];
+                gemm(
+                    mat_mut(out).submatrix_mut(ri, rj, di, dj),
+                    1.0,
+                    -1.0,
+                    mat(&s.c).subrows(0, di),
+                    mat(&s.q).subrows(rj, dj).transpose(),
+                );
+            }
+            gemm(mat_mut(&mut s.v).subrows_mut(ri, di), 1.0, 1.0, q_i, m6(y));
+        }
+    }
+}
+
+/// Robot `rb`'s own blocks in [`BlockFactors::task_gram`]: `J_r Phi_f,r J_r^T` added to `out`
+/// for every pair of the tasks `s.touching` meeting its columns (`j_r`: the stack's columns of
+/// the robot).
+fn robot_gram(
+    rb: &RobotBlocks,
+    j_r: MatRef<'_, f64>,
+    spans: &[TaskSpan],
+    out: &mut DMatrix<f64>,
+    s: &mut GramScratch,
+) {
+    for &ti in &s.touching {
+        let (ri, di, ..) = spans[ti];
+        gemm(
+            mat_mut(&mut s.b).submatrix_mut(0, 0, di, rb.k),
+            0.0,
+            1.0,
+            j_r.subrows(ri, di),
+            mat(&rb.phi_f),
+        );
+        for &tj in &s.touching {
+            let (rj, dj, ..) = spans[tj];
+            gemm(
+                mat_mut(out).submatrix_mut(ri, rj, di, dj),
+                1.0,
+                1.0,
+                mat(&s.b).submatrix(0, 0, di, rb.k),
+                j_r.subrows(rj, dj).transpose(),
+            );
         }
     }
 }
@@ -624,7 +755,13 @@ impl Coupling {
     }
 
     /// `u = W t` (`t`, `u`: 6B x c); `r`, `q` are scratch.
-    fn apply(&self, t: MatRef<'_, f64>, mut u: MatMut<'_, f64>, r: &mut DMatrix<f64>, q: &mut DMatrix<f64>) {
+    fn apply(
+        &self,
+        t: MatRef<'_, f64>,
+        mut u: MatMut<'_, f64>,
+        r: &mut DMatrix<f64>,
+        q: &mut DMatrix<f64>,
+    ) {
         let c = t.ncols();
         if self.x_inv.is_empty() {
             for j in 0..c {
@@ -637,7 +774,13 @@ impl Coupling {
         shape(r, 6, c);
         shape(q, 6, c);
         for (h, y) in self.y.iter().enumerate() {
-            gemm(mat_mut(r), if h == 0 { 0.0 } else { 1.0 }, 1.0, m6(y).transpose(), t.subrows(6 * h, 6));
+            gemm(
+                mat_mut(r),
+                if h == 0 { 0.0 } else { 1.0 },
+                1.0,
+                m6(y).transpose(),
+                t.subrows(6 * h, 6),
+            );
         }
         gemm(mat_mut(q), 0.0, 1.0, m6(&self.f_inv), mat(r));
         for (h, (xi, y)) in self.x_inv.iter().zip(&self.y).enumerate() {
@@ -682,7 +825,10 @@ impl UnactuatedInverse {
             if rb.nu == 6 {
                 let mut d = Matrix6::identity() - rb.n_f.fixed_view::<6, 6>(0, 0);
                 // The hand's unactuated rows of R_h (k x 6), when the grasp couples it.
-                let hand = rb.hand.filter(|_| self.coupled).map(|h| (h, rb.r_h.fixed_view::<6, 6>(0, 0).into_owned()));
+                let hand = rb
+                    .hand
+                    .filter(|_| self.coupled)
+                    .map(|h| (h, rb.r_h.fixed_view::<6, 6>(0, 0).into_owned()));
                 if let Some((h, r_u)) = hand {
                     d += r_u * w_e.x_inv[h] * r_u.transpose();
                 }
@@ -742,7 +888,13 @@ impl UnactuatedInverse {
             mat_mut(&mut s.k_t).copy_from(mat(a).subcols(rb.u0, 6));
             gemm(mat_mut(a).subcols_mut(rb.u0, 6), 0.0, 1.0, mat(&s.k_t), m6(&self.d_inv[r]));
             if self.coupled {
-                gemm(mat_mut(a).subcols_mut(rb.u0, 6), 1.0, 1.0, mat(&s.k_u), m6(&self.dv[r]).transpose());
+                gemm(
+                    mat_mut(a).subcols_mut(rb.u0, 6),
+                    1.0,
+                    1.0,
+                    mat(&s.k_u),
+                    m6(&self.dv[r]).transpose(),
+                );
             }
         }
     }

@@ -26,11 +26,19 @@ pub fn torque_limits(
     limits.clear();
     actuated.clear();
     for rb in &team.robots {
-        let d = descriptions.get(&rb.id).ok_or_else(|| ControllerError::MissingDescription { robot: rb.id.clone() })?;
+        let d = descriptions
+            .get(&rb.id)
+            .ok_or_else(|| ControllerError::MissingDescription { robot: rb.id.clone() })?;
         if d.torque_limits.len() != rb.actuated.len() || d.nv as usize != rb.nv {
             return Err(ControllerError::Dimension {
                 what: format!("{}: description", rb.id),
-                detail: format!("{} limits / nv {} vs {} actuated joints / nv {}", d.torque_limits.len(), d.nv, rb.actuated.len(), rb.nv),
+                detail: format!(
+                    "{} limits / nv {} vs {} actuated joints / nv {}",
+                    d.torque_limits.len(),
+                    d.nv,
+                    rb.actuated.len(),
+                    rb.nv
+                ),
             });
         }
         if fully_actuated {

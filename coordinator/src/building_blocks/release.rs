@@ -21,9 +21,9 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::building_blocks::grasp::{GraspTerms, GraspTracker};
+use crate::building_blocks::targets::Targets;
 use crate::team::Team;
-use crate::units::grasp::{GraspTerms, GraspTracker};
-use crate::units::targets::Targets;
 
 /// When the team lets go of the object. Either limit at 0 is never reached.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -105,7 +105,12 @@ pub struct GraspObservation {
 impl GraspObservation {
     /// The outcome of a tick of `team` (its hands in grasp as modelled) with `grasp`'s fit.
     pub fn of(tick: u64, team: &Team, grasp: Option<&GraspTerms>, qp_failed: bool) -> Self {
-        GraspObservation { tick, hands: team.hands.len(), qp_failed, fit_residual: grasp.map(|g| g.fit_residual) }
+        GraspObservation {
+            tick,
+            hands: team.hands.len(),
+            qp_failed,
+            fit_residual: grasp.map(|g| g.fit_residual),
+        }
     }
 }
 
@@ -135,7 +140,15 @@ impl GraspWatch {
     /// After a tick of `team` with `grasp` (the controllers' last step): [`GraspWatch::observe`];
     /// on the tick the team lets go, the hands' targets back away from the object
     /// ([`Targets::let_go`]) and the grasp is forgotten. The release in force, as its note.
-    pub fn after_tick(&mut self, policy: &ReleasePolicy, t: GraspObservation, team: &Team, grasp: Option<&GraspTerms>, targets: &mut Targets, tracker: &mut GraspTracker) -> Option<&str> {
+    pub fn after_tick(
+        &mut self,
+        policy: &ReleasePolicy,
+        t: GraspObservation,
+        team: &Team,
+        grasp: Option<&GraspTerms>,
+        targets: &mut Targets,
+        tracker: &mut GraspTracker,
+    ) -> Option<&str> {
         if let Some(release) = self.observe(policy, t) {
             tracing::warn!(tick = release.tick, "{}", release.note);
             if let Some(g) = grasp {
@@ -156,8 +169,8 @@ impl GraspWatch {
         }
         self.failed_run = if t.qp_failed { self.failed_run + 1 } else { 0 };
         let failed = policy.after_failed_ticks > 0 && self.failed_run >= policy.after_failed_ticks;
-        // Slip while the contact forces cannot be kept (the QP failing tick after tick) is a grasp being
-        // lost, not a palm rocking: let go at a share of the limit (SLIP_WHILE_FAILING).
+        // Slip while the contact forces cannot be kept (the QP failing tick after tick) is a grasp
+        // being lost, not a palm rocking: let go at a share of the limit (SLIP_WHILE_FAILING).
         let failing = t.qp_failed && self.failed_run >= SLIP_WHILE_FAILING_TICKS;
         let limit = policy.max_fit_residual * if failing { SLIP_WHILE_FAILING } else { 1.0 };
         let slipped = t.fit_residual.filter(|&r| policy.max_fit_residual > 0.0 && r > limit);
@@ -165,12 +178,26 @@ impl GraspWatch {
         // team, its hand went) cannot hold the object. Let go at once.
         let alone = t.hands == 1 && last_hands >= 2;
         let why = match (failed, slipped, alone) {
-            (_, _, true) => format!("one hand is left of the {last_hands} in grasp (a robot left the team), and one palm cannot hold the object"),
-            (_, Some(r), _) => format!("a hand is {:.1} mm from the fitted object (limit {:.1} mm{})", r * 1e3, limit * 1e3, if failing { " while the QP fails" } else { "" }),
-            (true, None, _) => format!("the contact-force QP failed {} ticks in a row", self.failed_run),
+            (_, _, true) => format!(
+                "one hand is left of the {last_hands} in grasp (a robot left the team), and one \
+                 palm cannot hold the object"
+            ),
+            (_, Some(r), _) => format!(
+                "a hand is {:.1} mm from the fitted object (limit {:.1} mm{})",
+                r * 1e3,
+                limit * 1e3,
+                if failing { " while the QP fails" } else { "" }
+            ),
+            (true, None, _) => {
+                format!("the contact-force QP failed {} ticks in a row", self.failed_run)
+            }
             (false, None, false) => return None,
         };
-        let note = format!("grasp released at tick {}: {why}; the hands back away and hold, the feet carry the robots", t.tick);
+        let note = format!(
+            "grasp released at tick {}: {why}; the hands back away and hold, the feet carry the \
+             robots",
+            t.tick
+        );
         Some(&*self.released.insert(Release { tick: t.tick, note }))
     }
 }
@@ -188,13 +215,20 @@ mod tests {
         let p = ReleasePolicy::default();
         let mut w = GraspWatch::default();
         // One hand closing before the other (a contact set a tick ahead) is not a loss.
-        assert!(w.observe(&p, GraspObservation { hands: 1, ..tick(1, false, Some(0.0)) }).is_none());
+        assert!(w
+            .observe(&p, GraspObservation { hands: 1, ..tick(1, false, Some(0.0)) })
+            .is_none());
         for t in 2..5 {
-            assert!(w.observe(&p, GraspObservation { hands: 3, ..tick(t, false, Some(0.0)) }).is_none());
+            assert!(w
+                .observe(&p, GraspObservation { hands: 3, ..tick(t, false, Some(0.0)) })
+                .is_none());
         }
         // Three to two: the rest still hold.
         assert!(w.observe(&p, tick(5, false, Some(0.0))).is_none());
-        let r = w.observe(&p, GraspObservation { hands: 1, ..tick(6, false, Some(0.0)) }).expect("one hand left").clone();
+        let r = w
+            .observe(&p, GraspObservation { hands: 1, ..tick(6, false, Some(0.0)) })
+            .expect("one hand left")
+            .clone();
         assert_eq!(r.tick, 6);
         assert!(r.note.contains("one hand is left of the 2"), "{}", r.note);
     }
@@ -205,10 +239,14 @@ mod tests {
         let mut w = GraspWatch::default();
         assert!(w.observe(&p, tick(1, true, Some(0.0))).is_none());
         assert!(w.observe(&p, tick(2, true, Some(0.0))).is_none());
-        assert!(w.observe(&p, tick(3, false, Some(0.0))).is_none(), "a solved tick restarts the count");
+        assert!(
+            w.observe(&p, tick(3, false, Some(0.0))).is_none(),
+            "a solved tick restarts the count"
+        );
         assert!(w.observe(&p, tick(4, true, Some(0.0))).is_none());
         assert!(w.observe(&p, tick(5, true, Some(0.0))).is_none());
-        let r = w.observe(&p, tick(6, true, Some(0.0))).expect("three failed ticks in a row").clone();
+        let r =
+            w.observe(&p, tick(6, true, Some(0.0))).expect("three failed ticks in a row").clone();
         assert_eq!(r.tick, 6);
         assert!(r.note.contains("failed 3 ticks"), "{}", r.note);
         assert!(w.observe(&p, tick(7, true, Some(0.0))).is_none(), "released once");
@@ -220,7 +258,11 @@ mod tests {
         let p = ReleasePolicy::default();
         let mut w = GraspWatch::default();
         assert!(w.observe(&p, tick(1, false, Some(0.019))).is_none());
-        assert!(w.observe(&p, tick(2, false, Some(0.021))).expect("past 2 cm").note.contains("21.0 mm"));
+        assert!(w
+            .observe(&p, tick(2, false, Some(0.021)))
+            .expect("past 2 cm")
+            .note
+            .contains("21.0 mm"));
         w.rearm(true);
         assert!(w.released().is_some(), "still in grasp: still released");
         w.rearm(false);
@@ -236,20 +278,38 @@ mod tests {
         // Ticks 1..n-1 fail (runs 1..n-1) past the share: the full limit still holds; tick n
         // (a run of exactly SLIP_WHILE_FAILING_TICKS) lets go.
         let mut w = GraspWatch::default();
-        assert!(w.observe(&p, tick(0, false, Some(1.5 * half))).is_none(), "a solved tick keeps the full limit");
+        assert!(
+            w.observe(&p, tick(0, false, Some(1.5 * half))).is_none(),
+            "a solved tick keeps the full limit"
+        );
         for k in 1..n {
-            assert!(w.observe(&p, tick(k, true, Some(1.5 * half))).is_none(), "a short run of failed ticks keeps the full limit (tick {k})");
+            assert!(
+                w.observe(&p, tick(k, true, Some(1.5 * half))).is_none(),
+                "a short run of failed ticks keeps the full limit (tick {k})"
+            );
         }
-        let r = w.observe(&p, tick(n, true, Some(1.1 * half))).expect("slip past the share once the QP has failed the run").clone();
+        let r = w
+            .observe(&p, tick(n, true, Some(1.1 * half)))
+            .expect("slip past the share once the QP has failed the run")
+            .clone();
         assert_eq!(r.tick, n);
         assert!(r.note.contains("while the QP fails"), "{}", r.note);
         // The same run below the share does not let go, and a solved tick restarts the run.
         let mut w = GraspWatch::default();
         for k in 1..=n {
-            assert!(w.observe(&p, tick(k, true, Some(0.9 * half))).is_none(), "below the share (tick {k})");
+            assert!(
+                w.observe(&p, tick(k, true, Some(0.9 * half))).is_none(),
+                "below the share (tick {k})"
+            );
         }
-        assert!(w.observe(&p, tick(n + 1, false, Some(1.5 * half))).is_none(), "a solved tick keeps the full limit");
-        assert!(w.observe(&p, tick(n + 2, true, Some(1.5 * half))).is_none(), "the run starts again");
+        assert!(
+            w.observe(&p, tick(n + 1, false, Some(1.5 * half))).is_none(),
+            "a solved tick keeps the full limit"
+        );
+        assert!(
+            w.observe(&p, tick(n + 2, true, Some(1.5 * half))).is_none(),
+            "the run starts again"
+        );
     }
 
     #[test]

@@ -2,20 +2,21 @@
 //! constraint inertia `Mbar = M M_c^{-1}` (eq. aghili_25, constraint_force), `[P S]^+` and
 //! `B` (eqs. ua_solution, bmatrix), all with rank-revealing pseudo-inverses (`docs/controller.md`).
 //!
-//! Two paths ([`ProjectionPath`]): by the team's blocks ([`crate::units::block_projection`], the default), which
-//! keeps factors and applies the projections as operators without forming a team-sized
-//! matrix, and by dense SVDs ([`Projections::compute_into`], the oracle), which fills every
-//! matrix below. [`Projections::materialize`] fills them on the block path too (tests,
-//! reports). `M` is block-diagonal (one block per robot), so `P M` and `M M_c^{-1}` are
+//! Two paths ([`ProjectionPath`]): by the team's blocks
+//! ([`crate::building_blocks::block_projection`], the default), which keeps
+//! factors and applies the projections as operators without forming
+//! a team-sized matrix, and by dense SVDs ([`Projections::compute_into`], the oracle), which
+//! fills every matrix below. [`Projections::materialize`] fills them on the block path too
+//! (tests, reports). `M` is block-diagonal (one block per robot), so `P M` and `M M_c^{-1}` are
 //! products by blocks.
 
 use faer::{MatMut, MatRef};
 use nalgebra::{DMatrix, DVector};
 
+use crate::building_blocks::block_projection::{vmat, vmat_mut, BlockFactors, BlockOp, OpScratch};
+use crate::building_blocks::grasp::GraspTerms;
 use crate::linalg::{gemm, mat, mat_mut, product, zeros, zeros_v, Inverse, Pinv, RANK_TOL};
 use crate::team::Team;
-use crate::units::block_projection::{vmat, vmat_mut, BlockFactors, BlockOp, OpScratch};
-use crate::units::grasp::GraspTerms;
 use crate::ControllerError;
 
 /// How the projections are computed. In TOML (`projections = ...`): `"by-blocks"` or
@@ -33,7 +34,8 @@ pub enum ProjectionPath {
 
 impl ProjectionPath {
     /// Every path with its name in files.
-    pub const NAMES: [(ProjectionPath, &'static str); 2] = [(ProjectionPath::ByBlocks, "by-blocks"), (ProjectionPath::Dense, "dense")];
+    pub const NAMES: [(ProjectionPath, &'static str); 2] =
+        [(ProjectionPath::ByBlocks, "by-blocks"), (ProjectionPath::Dense, "dense")];
 }
 
 impl std::str::FromStr for ProjectionPath {
@@ -43,7 +45,10 @@ impl std::str::FromStr for ProjectionPath {
     fn from_str(s: &str) -> Result<Self, String> {
         match Self::NAMES.iter().find(|(_, n)| *n == s) {
             Some((p, _)) => Ok(*p),
-            None => Err(format!("unknown projection path `{s}` (one of: {})", Self::NAMES.map(|(_, n)| n).join(", "))),
+            None => Err(format!(
+                "unknown projection path `{s}` (one of: {})",
+                Self::NAMES.map(|(_, n)| n).join(", ")
+            )),
         }
     }
 }
@@ -75,7 +80,7 @@ pub struct Projections {
     pub ps_pinv: DMatrix<f64>,
     /// `B = I - [(I - S)(I - P)]^+` (eq. bmatrix).
     pub b: DMatrix<f64>,
-    /// Whether the team's blocks made these ([`crate::units::block_projection`]) or the
+    /// Whether the team's blocks made these ([`crate::building_blocks::block_projection`]) or the
     /// dense SVDs ([`Projections::compute_into`]).
     pub by_blocks: bool,
     /// The block path's factors (valid when `by_blocks`).
@@ -111,7 +116,13 @@ impl Projections {
     /// `S tau` plus external `J_x^T F_x`): with `K = (I - P)(Mbar P - I)`,
     /// `lambda = (J_c^T)^+ [K u + (I - P)(Mbar (Pdot v - P h) + h)]
     ///         = (J_c^T)^+ (I - P) [Mbar (P (u - h) + Pdot v) + h - u]`, into `out`.
-    pub fn contact_wrench(&self, team: &Team, u: &DVector<f64>, out: &mut DVector<f64>, s: &mut WrenchScratch) {
+    pub fn contact_wrench(
+        &self,
+        team: &Team,
+        u: &DVector<f64>,
+        out: &mut DVector<f64>,
+        s: &mut WrenchScratch,
+    ) {
         let (n, h) = (team.n, &team.bias);
         let WrenchScratch { t1, t2, t3, ops } = s;
         for t in [&mut *t1, &mut *t2, &mut *t3] {
@@ -132,7 +143,8 @@ impl Projections {
         }
         let f = &self.blocks;
         f.apply(BlockOp::P, vmat(t2), vmat_mut(t1), ops);
-        *t1 += &self.pdot_v; // P (u - h) + Pdot v
+        // P (u - h) + Pdot v
+        *t1 += &self.pdot_v;
         // Mbar t1 = M M_c^{-1} t1 with M_c^{-1} = I + Phi - Phi M (eq. aghili_25).
         t3.copy_from(t1);
         mass_times(team, -1.0, vmat(t1), 1.0, vmat_mut(t3)); // t1 - M t1
@@ -149,7 +161,14 @@ impl Projections {
     }
 
     /// `out = [P S]^+ x` (eq. ua_solution) for a vector `x`; `px` is scratch.
-    pub fn ps_pinv_times(&self, x: &DVector<f64>, s_diag: &DVector<f64>, out: &mut DVector<f64>, px: &mut DVector<f64>, ops: &mut OpScratch) {
+    pub fn ps_pinv_times(
+        &self,
+        x: &DVector<f64>,
+        s_diag: &DVector<f64>,
+        out: &mut DVector<f64>,
+        px: &mut DVector<f64>,
+        ops: &mut OpScratch,
+    ) {
         if self.by_blocks {
             self.blocks.ps_pinv_apply(x, s_diag, out, px, ops);
         } else {
@@ -179,11 +198,18 @@ impl Projections {
         }
     }
 
-    /// All projections of the team by the team's blocks ([`crate::units::block_projection`];
+    /// All projections of the team by the team's blocks
+    /// ([`crate::building_blocks::block_projection`];
     /// `J_c` is not formed), with `Jdot_c v` (`jdv_c`). Returns whether the blocks answered:
     /// when they decline, run the dense SVDs ([`Projections::compute_into`]). Both give the
     /// same matrices (`coordinator/tests/structured.rs`).
-    pub fn by_blocks_into(&mut self, ws: &mut ProjectionWorkspace, team: &Team, grasp: Option<&GraspTerms>, jdv_c: &DVector<f64>) -> bool {
+    pub fn by_blocks_into(
+        &mut self,
+        ws: &mut ProjectionWorkspace,
+        team: &Team,
+        grasp: Option<&GraspTerms>,
+        jdv_c: &DVector<f64>,
+    ) -> bool {
         self.by_blocks = self.blocks.compute_into(team, grasp).is_some();
         if !self.by_blocks {
             return false;
@@ -191,7 +217,18 @@ impl Projections {
         self.jc_rank = self.blocks.jc_rank();
         // Pdot v = -J_c^+ (Jdot_c v) (see compute_into).
         self.blocks.jc_pinv_apply(-1.0, jdv_c, &mut self.pdot_v, &mut ws.ops);
-        for m in [&mut self.jc_pinv, &mut self.jct_pinv, &mut self.p, &mut self.ip, &mut self.mc, &mut self.mc_inv, &mut self.mcinv_p, &mut self.mbar, &mut self.ps_pinv, &mut self.b] {
+        for m in [
+            &mut self.jc_pinv,
+            &mut self.jct_pinv,
+            &mut self.p,
+            &mut self.ip,
+            &mut self.mc,
+            &mut self.mc_inv,
+            &mut self.mcinv_p,
+            &mut self.mbar,
+            &mut self.ps_pinv,
+            &mut self.b,
+        ] {
             zeros(m, 0, 0);
         }
         true
@@ -205,12 +242,21 @@ impl Projections {
     /// `Pdot v = -J^+ Jdot v` exactly; this needs only `Jdot*v` (what the agents send), not
     /// `Jdot`. The measured `|J_c v|` is reported in the diagnostics. Checked against a finite
     /// difference of `P` in time in `tests/controller.rs`.
-    pub fn compute_into(&mut self, ws: &mut ProjectionWorkspace, team: &Team, j_c: &DMatrix<f64>, jdv_c: &DVector<f64>) -> Result<(), ControllerError> {
+    pub fn compute_into(
+        &mut self,
+        ws: &mut ProjectionWorkspace,
+        team: &Team,
+        j_c: &DMatrix<f64>,
+        jdv_c: &DVector<f64>,
+    ) -> Result<(), ControllerError> {
         self.by_blocks = false;
         let n = team.n;
         let m = j_c.nrows();
         let singular = |what: &str| ControllerError::Singular { what: what.to_string() };
-        self.jc_rank = ws.jc.compute(mat(j_c), RANK_TOL, &mut self.jc_pinv).ok_or_else(|| singular("SVD of J_c"))?;
+        self.jc_rank = ws
+            .jc
+            .compute(mat(j_c), RANK_TOL, &mut self.jc_pinv)
+            .ok_or_else(|| singular("SVD of J_c"))?;
         zeros(&mut self.jct_pinv, m, n);
         self.jc_pinv.transpose_to(&mut self.jct_pinv);
         // P = I - J^+ J, symmetrised (P is symmetric in exact arithmetic).
@@ -228,6 +274,18 @@ impl Projections {
         ws.mc.compute(&self.mc, &mut self.mc_inv).ok_or_else(|| singular("M_c"))?;
         mbar_into(team, self);
         product(&mut self.mcinv_p, mat(&self.mc_inv), mat(&self.p));
+        self.actuation_into(ws, team)
+    }
+
+    /// `[P S]^+` and `B` (eqs. ua_solution, bmatrix) from `P` and `I - P`, by dense SVDs of
+    /// `P`'s actuated columns and of `I - P`'s unactuated rows.
+    fn actuation_into(
+        &mut self,
+        ws: &mut ProjectionWorkspace,
+        team: &Team,
+    ) -> Result<(), ControllerError> {
+        let n = team.n;
+        let singular = |what: &str| ControllerError::Singular { what: what.to_string() };
         // [P S]^+: S is a 0/1 diagonal, so P S keeps P's actuated columns; the pseudo-inverse
         // of the column-reduced matrix, placed on the actuated rows, is [P S]^+.
         let s = &team.s_diag;
@@ -236,7 +294,9 @@ impl Projections {
         for (k, j) in (0..n).filter(|&j| s[j] != 0.0).enumerate() {
             ws.pa.column_mut(k).copy_from(&self.p.column(j));
         }
-        ws.ps.compute(mat(&ws.pa), RANK_TOL, &mut ws.pa_pinv).ok_or_else(|| singular("SVD of P S"))?;
+        ws.ps
+            .compute(mat(&ws.pa), RANK_TOL, &mut ws.pa_pinv)
+            .ok_or_else(|| singular("SVD of P S"))?;
         zeros(&mut self.ps_pinv, n, n);
         for (k, j) in (0..n).filter(|&j| s[j] != 0.0).enumerate() {
             self.ps_pinv.row_mut(j).copy_from(&ws.pa_pinv.row(k));
@@ -246,7 +306,8 @@ impl Projections {
         for (k, i) in (0..n).filter(|&i| s[i] == 0.0).enumerate() {
             ws.xr.row_mut(k).copy_from(&self.ip.row(i));
         }
-        ws.x.compute(mat(&ws.xr), RANK_TOL, &mut ws.xr_pinv).ok_or_else(|| singular("SVD of (I-S)(I-P)"))?;
+        ws.x.compute(mat(&ws.xr), RANK_TOL, &mut ws.xr_pinv)
+            .ok_or_else(|| singular("SVD of (I-S)(I-P)"))?;
         zeros(&mut self.b, n, n);
         self.b.fill_with_identity();
         for (k, i) in (0..n).filter(|&i| s[i] == 0.0).enumerate() {
@@ -279,10 +340,22 @@ pub(crate) fn complement(p: &DMatrix<f64>, ip: &mut DMatrix<f64>) {
 }
 
 /// `out = beta out + alpha M x` for `x` (n x c), by `M`'s diagonal blocks.
-pub(crate) fn mass_times(team: &Team, alpha: f64, x: MatRef<'_, f64>, beta: f64, mut out: MatMut<'_, f64>) {
+pub(crate) fn mass_times(
+    team: &Team,
+    alpha: f64,
+    x: MatRef<'_, f64>,
+    beta: f64,
+    mut out: MatMut<'_, f64>,
+) {
     for r in &team.robots {
         let (o, k) = (r.offset, r.nv);
-        gemm(out.as_mut().subrows_mut(o, k), beta, alpha, mat(&team.mass).submatrix(o, o, k, k), x.subrows(o, k));
+        gemm(
+            out.as_mut().subrows_mut(o, k),
+            beta,
+            alpha,
+            mat(&team.mass).submatrix(o, o, k, k),
+            x.subrows(o, k),
+        );
     }
 }
 
@@ -305,6 +378,12 @@ pub(crate) fn mbar_into(team: &Team, proj: &mut Projections) {
     for r in &team.robots {
         let (o, k) = (r.offset, r.nv);
         let m_blk = mat(&team.mass).submatrix(o, o, k, k);
-        gemm(mat_mut(&mut proj.mbar).subrows_mut(o, k), 0.0, 1.0, m_blk, mat(&proj.mc_inv).subrows(o, k));
+        gemm(
+            mat_mut(&mut proj.mbar).subrows_mut(o, k),
+            0.0,
+            1.0,
+            m_blk,
+            mat(&proj.mc_inv).subrows(o, k),
+        );
     }
 }

@@ -18,8 +18,8 @@ pub struct EarlyCommands {
 
 /// What [`EarlyCommands::keep`] did with a command.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Kept {
-    /// Kept in a free slot.
+pub enum KeepOutcome {
+    /// KeepOutcome in a free slot.
     New,
     /// It replaced a command of the same tick, or the oldest one when every slot was taken.
     Replaced,
@@ -59,20 +59,20 @@ impl EarlyCommands {
     }
 
     /// Keep `cmd` (checked already for its robot and size) until its state arrives.
-    pub fn keep(&mut self, cmd: &TorqueCommand) -> Kept {
+    pub fn keep(&mut self, cmd: &TorqueCommand) -> KeepOutcome {
         let tick = cmd.header.tick;
         let waiting = &self.slots[..self.pending];
         let (slot, kept) = if let Some(i) = waiting.iter().position(|c| c.header.tick == tick) {
-            (i, Kept::Replaced)
+            (i, KeepOutcome::Replaced)
         } else if self.pending < self.slots.len() {
             self.pending += 1;
-            (self.pending - 1, Kept::New)
+            (self.pending - 1, KeepOutcome::New)
         } else {
             let oldest = (0..self.pending).min_by_key(|&i| self.slots[i].header.tick).unwrap_or(0);
             if self.slots[oldest].header.tick > tick {
-                return Kept::Dropped;
+                return KeepOutcome::Dropped;
             }
-            (oldest, Kept::Replaced)
+            (oldest, KeepOutcome::Replaced)
         };
         copy(cmd, &mut self.slots[slot]);
         kept
@@ -135,7 +135,7 @@ mod tests {
     fn the_newest_due_command_is_taken_and_older_due_ones_dropped() {
         let mut q = EarlyCommands::new("t", "r1", 3, 4);
         for k in [5, 3, 4] {
-            assert_eq!(q.keep(&cmd(k, k as f64)), Kept::New);
+            assert_eq!(q.keep(&cmd(k, k as f64)), KeepOutcome::New);
         }
         let mut o = out();
         assert_eq!(q.take_due(|t| t + 2 <= 4, &mut o), None, "tick 3 applies at 5, not 4");
@@ -156,9 +156,9 @@ mod tests {
         let mut q = EarlyCommands::new("t", "r1", 3, 2);
         q.keep(&cmd(7, 7.0));
         q.keep(&cmd(8, 8.0));
-        assert_eq!(q.keep(&cmd(8, -8.0)), Kept::Replaced, "same tick: the newer copy");
-        assert_eq!(q.keep(&cmd(6, 6.0)), Kept::Dropped, "older than every waiting one");
-        assert_eq!(q.keep(&cmd(9, 9.0)), Kept::Replaced, "tick 7 made room");
+        assert_eq!(q.keep(&cmd(8, -8.0)), KeepOutcome::Replaced, "same tick: the newer copy");
+        assert_eq!(q.keep(&cmd(6, 6.0)), KeepOutcome::Dropped, "older than every waiting one");
+        assert_eq!(q.keep(&cmd(9, 9.0)), KeepOutcome::Replaced, "tick 7 made room");
         let mut o = out();
         assert_eq!(q.take_due(|t| t <= 8, &mut o), Some(0));
         assert_eq!((o.header.tick, o.tau[0]), (8, -8.0));

@@ -23,7 +23,12 @@ impl Default for ContactMargins {
     /// The controllers' defaults: 5 N per foot, 30 N per hand, the inscribed friction pyramid
     /// (`1/sqrt(2)`), half the palm.
     fn default() -> Self {
-        ContactMargins { f_min_foot: 5.0, f_min_hand: 30.0, friction_margin: std::f64::consts::FRAC_1_SQRT_2, patch_margin: 0.5 }
+        ContactMargins {
+            f_min_foot: 5.0,
+            f_min_hand: 30.0,
+            friction_margin: std::f64::consts::FRAC_1_SQRT_2,
+            patch_margin: 0.5,
+        }
     }
 }
 
@@ -35,11 +40,15 @@ pub const RESERVE_PATCH: f64 = 0.75;
 impl ContactMargins {
     /// The margins' reserve, which a team holding an object uses only to hold it still when
     /// nothing is feasible within the margins (`crate::pidc::stages::yielding`): the centre of
-    /// pressure may use [`RESERVE_PATCH`] of the palm and the squeeze may drop to half its minimum; the
-    /// friction share and the feet's minimum stay (they are what keeps the contacts from
-    /// sliding and the feet on the ground).
+    /// pressure may use [`RESERVE_PATCH`] of the palm and the squeeze may drop to half its
+    /// minimum; the friction share and the feet's minimum stay (they are what keeps the contacts
+    /// from sliding and the feet on the ground).
     pub fn reserve(&self) -> ContactMargins {
-        ContactMargins { f_min_hand: 0.5 * self.f_min_hand, patch_margin: self.patch_margin.max(RESERVE_PATCH), ..*self }
+        ContactMargins {
+            f_min_hand: 0.5 * self.f_min_hand,
+            patch_margin: self.patch_margin.max(RESERVE_PATCH),
+            ..*self
+        }
     }
 
     /// Minimum forces finite and non-negative, margins in `(0, 1]` (the error names the field).
@@ -52,7 +61,9 @@ impl ContactMargins {
     pub fn check_forces(&self) -> Result<(), ControllerError> {
         for (what, x) in [("f_min_foot", self.f_min_foot), ("f_min_hand", self.f_min_hand)] {
             if !(x.is_finite() && x >= 0.0) {
-                return Err(ControllerError::Config(format!("{what}: {x} must be finite and non-negative")));
+                return Err(ControllerError::Config(format!(
+                    "{what}: {x} must be finite and non-negative"
+                )));
             }
         }
         Ok(())
@@ -60,7 +71,9 @@ impl ContactMargins {
 
     /// `friction_margin` and `patch_margin` in `(0, 1]`.
     pub fn check_margins(&self) -> Result<(), ControllerError> {
-        for (what, x) in [("friction_margin", self.friction_margin), ("patch_margin", self.patch_margin)] {
+        for (what, x) in
+            [("friction_margin", self.friction_margin), ("patch_margin", self.patch_margin)]
+        {
             if !(x.is_finite() && x > 0.0 && x <= 1.0) {
                 return Err(ControllerError::Config(format!("{what}: {x} must be in (0, 1]")));
             }

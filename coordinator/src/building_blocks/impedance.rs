@@ -17,9 +17,11 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3, Vector3, Vector6};
 
-use crate::linalg::{mat, product, rotation_error, spd_factor, spd_solve_in_place, zeros, zeros_v, Pinv, RANK_TOL};
-use crate::units::block_projection::{GramScratch, TaskSpan};
-use crate::units::projection::Projections;
+use crate::building_blocks::block_projection::{GramScratch, TaskSpan};
+use crate::building_blocks::projection::Projections;
+use crate::linalg::{
+    mat, product, rotation_error, spd_factor, spd_solve_in_place, zeros, zeros_v, Pinv, RANK_TOL,
+};
 use crate::ControllerError;
 
 /// Diagonal stiffness and damping of one task (3 or 6 entries).
@@ -38,7 +40,11 @@ impl Gains {
     /// `n` stiffness and `n` damping values, finite and non-negative; the error says which.
     pub fn check(&self, n: usize) -> Result<(), String> {
         if self.kp.len() != n || self.kd.len() != n {
-            return Err(format!("needs {n} stiffness and {n} damping values, has {} and {}", self.kp.len(), self.kd.len()));
+            return Err(format!(
+                "needs {n} stiffness and {n} damping values, has {} and {}",
+                self.kp.len(),
+                self.kd.len()
+            ));
         }
         if self.kp.iter().chain(&self.kd).any(|x| !(x.is_finite() && *x >= 0.0)) {
             return Err("gains must be finite and non-negative".into());
@@ -65,17 +71,39 @@ pub struct TaskError {
 }
 
 /// 6-D pose error `[p - p_d; log(R R_d^T)]` and twist error.
-pub fn pose_error(x: &Isometry3<f64>, twist: &Vector6<f64>, x_d: &Isometry3<f64>, twist_d: &[f64; 6], acc_d: &[f64; 6]) -> TaskError {
+pub fn pose_error(
+    x: &Isometry3<f64>,
+    twist: &Vector6<f64>,
+    x_d: &Isometry3<f64>,
+    twist_d: &[f64; 6],
+    acc_d: &[f64; 6],
+) -> TaskError {
     let dp: Vector3<f64> = x.translation.vector - x_d.translation.vector;
     let dr = rotation_error(&x.rotation.to_rotation_matrix(), &x_d.rotation.to_rotation_matrix());
     let e = Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z);
-    TaskError { dim: 6, e, edot: twist - Vector6::from_row_slice(twist_d), acc_d: Vector6::from_row_slice(acc_d) }
+    TaskError {
+        dim: 6,
+        e,
+        edot: twist - Vector6::from_row_slice(twist_d),
+        acc_d: Vector6::from_row_slice(acc_d),
+    }
 }
 
 /// 3-D point error `p - p_d` and velocity error.
-pub fn point_error(p: &Vector3<f64>, vel: &Vector3<f64>, p_d: &Vector3<f64>, v_d: &[f64; 3], a_d: &[f64; 3]) -> TaskError {
+pub fn point_error(
+    p: &Vector3<f64>,
+    vel: &Vector3<f64>,
+    p_d: &Vector3<f64>,
+    v_d: &[f64; 3],
+    a_d: &[f64; 3],
+) -> TaskError {
     let pad = |v: Vector3<f64>| Vector6::new(v.x, v.y, v.z, 0.0, 0.0, 0.0);
-    TaskError { dim: 3, e: pad(p - p_d), edot: pad(vel - Vector3::from_row_slice(v_d)), acc_d: pad(Vector3::from_row_slice(a_d)) }
+    TaskError {
+        dim: 3,
+        e: pad(p - p_d),
+        edot: pad(vel - Vector3::from_row_slice(v_d)),
+        acc_d: pad(Vector3::from_row_slice(a_d)),
+    }
 }
 
 /// Which tasks give way when the team's motion yields ([`TaskStack::joint_torque_yielding`],
@@ -128,6 +156,15 @@ pub struct HoldStill<'a> {
     pub yields: Yields,
     pub velocity: &'a Vector6<f64>,
     pub feed_forward: Option<&'a Vector6<f64>>,
+}
+
+/// A task's Jacobian `j_x` (d x n), zero outside the team columns `cols` (first, count), and
+/// its drift `Jdot_x v`.
+#[derive(Debug, Clone, Copy)]
+pub struct TaskJacobian<'a> {
+    pub j_x: &'a DMatrix<f64>,
+    pub cols: (usize, usize),
+    pub jdv_x: &'a DVector<f64>,
 }
 
 /// Every task of a tick, stacked (see the module docs), in buffers kept between ticks.
@@ -184,18 +221,36 @@ impl TaskStack {
             zeros(&mut self.j, k, n);
             self.spans.clear();
         }
-        for v in [&mut self.jdv, &mut self.e, &mut self.edot, &mut self.acc_d, &mut self.kp, &mut self.kd, &mut self.ff, &mut self.edot_hold, &mut self.ff_hold] {
+        for v in [
+            &mut self.jdv,
+            &mut self.e,
+            &mut self.edot,
+            &mut self.acc_d,
+            &mut self.kp,
+            &mut self.kd,
+            &mut self.ff,
+            &mut self.edot_hold,
+            &mut self.ff_hold,
+        ] {
             zeros_v(v, k);
         }
         self.yields.clear();
         self.yields.resize(k, Yields::Never);
     }
 
-    /// Add a task: Jacobian `j_x` (d x n, `d <= 6`), zero outside the columns `cols` (first, count: a
-    /// torso's, a swing foot's or a free hand's are its robot's, the object's span the
-    /// grasping robots'), `Jdot_x v`, its errors and gains, and an optional feed-forward
-    /// wrench added to its `F` (the object's load).
-    pub fn push(&mut self, j_x: &DMatrix<f64>, cols: (usize, usize), jdv_x: &DVector<f64>, err: &TaskError, gains: &Gains, feed_forward: Option<&Vector6<f64>>) -> Result<(), ControllerError> {
+    /// Add a task: Jacobian `j_x` (d x n, `d <= 6`), zero outside the columns `cols` (first,
+    /// count: a torso's, a swing foot's or a free hand's are its robot's, the object's span the
+    /// grasping robots'), `Jdot_x v`, its errors and gains, and an optional feed-forward wrench
+    /// added to its `F` (the object's load).
+    pub fn push(
+        &mut self,
+        j_x: &DMatrix<f64>,
+        cols: (usize, usize),
+        jdv_x: &DVector<f64>,
+        err: &TaskError,
+        gains: &Gains,
+        feed_forward: Option<&Vector6<f64>>,
+    ) -> Result<(), ControllerError> {
         let at = self.at;
         self.push_task(j_x, cols, jdv_x, err, gains, feed_forward)?;
         let d = j_x.nrows();
@@ -208,7 +263,15 @@ impl TaskStack {
 
     /// [`TaskStack::push`] for a task that yields ([`Yields`]) when the motion does, held still
     /// as `hold` says.
-    pub fn push_yielding(&mut self, j_x: &DMatrix<f64>, cols: (usize, usize), jdv_x: &DVector<f64>, err: &TaskError, gains: &Gains, feed_forward: Option<&Vector6<f64>>, hold: HoldStill) -> Result<(), ControllerError> {
+    pub fn push_yielding(
+        &mut self,
+        task: TaskJacobian,
+        err: &TaskError,
+        gains: &Gains,
+        feed_forward: Option<&Vector6<f64>>,
+        hold: HoldStill,
+    ) -> Result<(), ControllerError> {
+        let TaskJacobian { j_x, cols, jdv_x } = task;
         let at = self.at;
         self.push_task(j_x, cols, jdv_x, err, gains, feed_forward)?;
         let d = j_x.nrows();
@@ -220,13 +283,39 @@ impl TaskStack {
         Ok(())
     }
 
-    fn push_task(&mut self, j_x: &DMatrix<f64>, cols: (usize, usize), jdv_x: &DVector<f64>, err: &TaskError, gains: &Gains, feed_forward: Option<&Vector6<f64>>) -> Result<(), ControllerError> {
+    fn push_task(
+        &mut self,
+        j_x: &DMatrix<f64>,
+        cols: (usize, usize),
+        jdv_x: &DVector<f64>,
+        err: &TaskError,
+        gains: &Gains,
+        feed_forward: Option<&Vector6<f64>>,
+    ) -> Result<(), ControllerError> {
         let d = j_x.nrows();
         let (c0, nc) = cols;
-        if d > 6 || j_x.ncols() != self.n || c0 + nc > self.n || jdv_x.len() != d || err.dim != d || gains.kp.len() != d || gains.kd.len() != d || self.at + d > self.j.nrows() {
+        if d > 6
+            || j_x.ncols() != self.n
+            || c0 + nc > self.n
+            || jdv_x.len() != d
+            || err.dim != d
+            || gains.kp.len() != d
+            || gains.kd.len() != d
+            || self.at + d > self.j.nrows()
+        {
             return Err(ControllerError::Dimension {
                 what: "impedance task".into(),
-                detail: format!("{d}-row task with {} columns (non-zero on {c0}..{}), error {}, gains {}/{}, {} of {} rows used", j_x.ncols(), c0 + nc, err.dim, gains.kp.len(), gains.kd.len(), self.at, self.j.nrows()),
+                detail: format!(
+                    "{d}-row task with {} columns (non-zero on {c0}..{}), error {}, gains {}/{}, \
+                     {} of {} rows used",
+                    j_x.ncols(),
+                    c0 + nc,
+                    err.dim,
+                    gains.kp.len(),
+                    gains.kd.len(),
+                    self.at,
+                    self.j.nrows()
+                ),
             });
         }
         let at = self.at;
@@ -256,11 +345,18 @@ impl TaskStack {
 
     /// `tau_M = J^T F` (n) for the stacked tasks, `F = mu_c + Lambda_c a_d - K_d edot - K_p e`
     /// (eq. control_law) plus the feed-forward.
-    pub fn joint_torque(&mut self, ms: &MotionSpace, tau_m: &mut DVector<f64>) -> Result<(), ControllerError> {
+    pub fn joint_torque(
+        &mut self,
+        ms: &MotionSpace,
+        tau_m: &mut DVector<f64>,
+    ) -> Result<(), ControllerError> {
         let k = self.j.nrows();
         zeros_v(tau_m, self.n);
         if self.at != k {
-            return Err(ControllerError::Dimension { what: "impedance tasks".into(), detail: format!("{} of {k} task rows filled", self.at) });
+            return Err(ControllerError::Dimension {
+                what: "impedance tasks".into(),
+                detail: format!("{} of {k} task rows filled", self.at),
+            });
         }
         if k == 0 {
             return Ok(());
@@ -275,7 +371,12 @@ impl TaskStack {
     /// velocity, [`HoldStill`]) and its feed-forward blended likewise; `mu_c` stays whole.
     /// Linear in each share. Call after [`TaskStack::joint_torque`] of the same tick (it
     /// reuses that call's `Lambda_c`).
-    pub fn joint_torque_yielding(&mut self, ms: &MotionSpace, scale: MotionScale, tau_m: &mut DVector<f64>) {
+    pub fn joint_torque_yielding(
+        &mut self,
+        ms: &MotionSpace,
+        scale: MotionScale,
+        tau_m: &mut DVector<f64>,
+    ) {
         zeros_v(tau_m, self.n);
         if self.j.nrows() > 0 && self.at == self.j.nrows() {
             self.torque_at(ms, scale, tau_m);
@@ -291,7 +392,12 @@ impl TaskStack {
             self.u[i] = scale.of(self.yields[i]) * self.acc_d[i] - self.jdv[i];
         }
         for &(r0, d, c0, nc) in &self.spans[..self.tasks] {
-            self.u.rows_mut(r0, d).gemv(1.0, &self.j.view((r0, c0), (d, nc)), &ms.mcinv_bias.rows(c0, nc), 1.0);
+            self.u.rows_mut(r0, d).gemv(
+                1.0,
+                &self.j.view((r0, c0), (d, nc)),
+                &ms.mcinv_bias.rows(c0, nc),
+                1.0,
+            );
         }
         zeros_v(&mut self.f, k);
         if self.factored {
@@ -302,35 +408,53 @@ impl TaskStack {
         }
         for i in 0..k {
             let s = scale.of(self.yields[i]);
-            let (edot, ff) = (s * self.edot[i] + (1.0 - s) * self.edot_hold[i], s * self.ff[i] + (1.0 - s) * self.ff_hold[i]);
+            let (edot, ff) = (
+                s * self.edot[i] + (1.0 - s) * self.edot_hold[i],
+                s * self.ff[i] + (1.0 - s) * self.ff_hold[i],
+            );
             self.f[i] += ff - self.kd[i] * edot - s * self.kp[i] * self.e[i];
         }
         for &(r0, d, c0, nc) in &self.spans[..self.tasks] {
-            tau_m.rows_mut(c0, nc).gemv_tr(1.0, &self.j.view((r0, c0), (d, nc)), &self.f.rows(r0, d), 1.0);
+            tau_m.rows_mut(c0, nc).gemv_tr(
+                1.0,
+                &self.j.view((r0, c0), (d, nc)),
+                &self.f.rows(r0, d),
+                1.0,
+            );
         }
     }
 
     /// `Lambda_c = (J M_c^{-1} P J^T)^+` (eq. control_law): into `lambda`, or factored. Dense
     /// path: the projections' `M_c^{-1} P` and an SVD (the oracle). Block path:
     /// `J M_c^{-1} P J^T` by the robots' blocks and the grasp's coupling
-    /// ([`crate::units::block_projection::BlockFactors::task_gram`]), and the Cholesky factor of the result when its pivots
-    /// pass [`crate::linalg::SPD_TOL`] (the pseudo-inverse is then the inverse, applied by
-    /// two triangular solves), the SVD otherwise.
+    /// ([`crate::building_blocks::block_projection::BlockFactors::task_gram`]), and the Cholesky
+    /// factor of
+    /// the result when its pivots pass [`crate::linalg::SPD_TOL`] (the pseudo-inverse is then the
+    /// inverse, applied by two triangular solves), the SVD otherwise.
     fn lambda_c(&mut self, proj: &Projections) -> Result<(), ControllerError> {
         let singular = || ControllerError::Singular { what: "operational-space inertia".into() };
         self.factored = false;
         if !proj.by_blocks {
             product(&mut self.j_mcinv_p, mat(&self.j), mat(&proj.mcinv_p));
             product(&mut self.lambda_inv, mat(&self.j_mcinv_p), mat(&self.j).transpose());
-            self.pinv.compute(mat(&self.lambda_inv), RANK_TOL, &mut self.lambda).ok_or_else(singular)?;
+            self.pinv
+                .compute(mat(&self.lambda_inv), RANK_TOL, &mut self.lambda)
+                .ok_or_else(singular)?;
             return Ok(());
         }
-        proj.blocks.task_gram(mat(&self.j), &self.spans[..self.tasks], &mut self.lambda_inv, &mut self.gram);
+        proj.blocks.task_gram(
+            mat(&self.j),
+            &self.spans[..self.tasks],
+            &mut self.lambda_inv,
+            &mut self.gram,
+        );
         if spd_factor(mat(&self.lambda_inv), &mut self.chol).is_some() {
             self.factored = true;
             return Ok(());
         }
-        self.pinv.compute(mat(&self.lambda_inv), RANK_TOL, &mut self.lambda).ok_or_else(singular)?;
+        self.pinv
+            .compute(mat(&self.lambda_inv), RANK_TOL, &mut self.lambda)
+            .ok_or_else(singular)?;
         Ok(())
     }
 }
@@ -341,16 +465,29 @@ mod tests {
 
     /// A `d`-row task on columns `cols` of 10 (entries `seed + i + j / 10`, zero elsewhere).
     fn task(d: usize, cols: (usize, usize), seed: f64) -> DMatrix<f64> {
-        DMatrix::from_fn(d, 10, |i, j| if (cols.0..cols.0 + cols.1).contains(&j) { seed + i as f64 + j as f64 / 10.0 } else { 0.0 })
+        DMatrix::from_fn(d, 10, |i, j| {
+            if (cols.0..cols.0 + cols.1).contains(&j) {
+                seed + i as f64 + j as f64 / 10.0
+            } else {
+                0.0
+            }
+        })
     }
 
     fn push_all(stack: &mut TaskStack, tasks: &[(usize, (usize, usize), f64)]) {
         let k = tasks.iter().map(|t| t.0).sum();
         stack.begin(k, 10);
         for &(d, cols, seed) in tasks {
-            let err = TaskError { dim: d, e: Vector6::zeros(), edot: Vector6::zeros(), acc_d: Vector6::zeros() };
+            let err = TaskError {
+                dim: d,
+                e: Vector6::zeros(),
+                edot: Vector6::zeros(),
+                acc_d: Vector6::zeros(),
+            };
             let gains = Gains::new(&vec![1.0; d], &vec![1.0; d]);
-            stack.push(&task(d, cols, seed), cols, &DVector::zeros(d), &err, &gains, None).expect("task");
+            stack
+                .push(&task(d, cols, seed), cols, &DVector::zeros(d), &err, &gains, None)
+                .expect("task");
         }
     }
 
@@ -370,7 +507,21 @@ mod tests {
         }
         // A task with more than six rows is refused (the stack's products assume six at most).
         stack.begin(7, 10);
-        let err = TaskError { dim: 7, e: Vector6::zeros(), edot: Vector6::zeros(), acc_d: Vector6::zeros() };
-        assert!(stack.push(&DMatrix::zeros(7, 10), (0, 10), &DVector::zeros(7), &err, &Gains::new(&[1.0; 7], &[1.0; 7]), None).is_err());
+        let err = TaskError {
+            dim: 7,
+            e: Vector6::zeros(),
+            edot: Vector6::zeros(),
+            acc_d: Vector6::zeros(),
+        };
+        assert!(stack
+            .push(
+                &DMatrix::zeros(7, 10),
+                (0, 10),
+                &DVector::zeros(7),
+                &err,
+                &Gains::new(&[1.0; 7], &[1.0; 7]),
+                None
+            )
+            .is_err());
     }
 }

@@ -40,7 +40,12 @@ impl Targets {
     }
 
     /// Robot `id`'s torso target; without a reference, its pose `x` when first seen.
-    pub fn torso(&mut self, refs: Option<&TaskReferences>, id: &str, x: &Isometry3<f64>) -> PoseTarget {
+    pub fn torso(
+        &mut self,
+        refs: Option<&TaskReferences>,
+        id: &str,
+        x: &Isometry3<f64>,
+    ) -> PoseTarget {
         match refs.and_then(|r| r.torsos.iter().find(|t| t.robot == id)) {
             Some(t) => pose_ref(&t.reference),
             None => match self.held_torsos.get(id) {
@@ -52,9 +57,19 @@ impl Targets {
 
     /// The target of robot `id`'s swing foot `frame`; without a reference, its position `p`
     /// when first seen.
-    pub fn swing_foot(&mut self, refs: Option<&TaskReferences>, id: &str, frame: &str, p: &Vector3<f64>) -> PointTarget {
+    pub fn swing_foot(
+        &mut self,
+        refs: Option<&TaskReferences>,
+        id: &str,
+        frame: &str,
+        p: &Vector3<f64>,
+    ) -> PointTarget {
         match refs.and_then(|r| r.swing_feet.iter().find(|s| s.robot == id && s.frame == frame)) {
-            Some(s) => (Vector3::from(s.reference.position), s.reference.velocity, s.reference.acceleration),
+            Some(s) => (
+                Vector3::from(s.reference.position),
+                s.reference.velocity,
+                s.reference.acceleration,
+            ),
             None => match self.held_feet.iter().find(|(r, f, _)| r == id && f == frame) {
                 Some((_, _, p)) => (*p, [0.0; 3], [0.0; 3]),
                 None => {
@@ -116,12 +131,15 @@ impl Targets {
     /// that swings again without a reference holds where it lifts off next time, not where it
     /// lifted off first.
     pub fn keep_swing_feet(&mut self, team: &Team) {
-        self.held_feet.retain(|(r, f, _)| team.swing_feet.iter().any(|s| s.name == *f && team.robots[s.robot].id == *r));
+        self.held_feet.retain(|(r, f, _)| {
+            team.swing_feet.iter().any(|s| s.name == *f && team.robots[s.robot].id == *r)
+        });
     }
 
     /// Forget the held poses of hands that are no longer free (they closed on the object).
     pub fn keep_free_hands(&mut self, team: &Team) {
-        self.held_hands.retain(|(r, _)| team.free_hands.iter().any(|h| team.robots[h.robot].id == *r));
+        self.held_hands
+            .retain(|(r, _)| team.free_hands.iter().any(|h| team.robots[h.robot].id == *r));
     }
 
     /// Forget the held object pose (the grasp was released).
@@ -135,17 +153,27 @@ fn away_from(h: &TeamFrame, centre: &Vector3<f64>, retreat: f64) -> Isometry3<f6
     let mut away = h.position - centre;
     away.z = 0.0;
     let step = away.try_normalize(1e-9).map_or(Vector3::zeros(), |d| d * retreat);
-    Isometry3::from_parts(Translation3::from(h.position + step), UnitQuaternion::from_rotation_matrix(&h.rotation))
+    Isometry3::from_parts(
+        Translation3::from(h.position + step),
+        UnitQuaternion::from_rotation_matrix(&h.rotation),
+    )
 }
 
 /// A pose reference as a target.
 fn pose_ref(r: &PoseReference) -> PoseTarget {
     let rot = UnitQuaternion::from_rotation_matrix(&rotation_from_wxyz(&r.pose.orientation));
-    (Isometry3::from_parts(Translation3::from(Vector3::from(r.pose.position)), rot), r.twist, r.acceleration)
+    (
+        Isometry3::from_parts(Translation3::from(Vector3::from(r.pose.position)), rot),
+        r.twist,
+        r.acceleration,
+    )
 }
 
 /// A 6-row frame's pose and twist `J v` (world, `[linear; angular]`).
 pub fn frame_pose(tf: &TeamFrame, velocity: &DVector<f64>) -> (Isometry3<f64>, Vector6<f64>) {
-    let x = Isometry3::from_parts(Translation3::from(tf.position), UnitQuaternion::from_rotation_matrix(&tf.rotation));
+    let x = Isometry3::from_parts(
+        Translation3::from(tf.position),
+        UnitQuaternion::from_rotation_matrix(&tf.rotation),
+    );
     (x, tf.velocity(velocity))
 }

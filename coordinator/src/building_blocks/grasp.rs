@@ -11,9 +11,13 @@
 //! The object is NOT in the generalized coordinates: the grasp constraint only constrains
 //! the hands' relative motion (`J_c,ee = (I - G^+ G) J_ee`, symmetric projector since
 //! `G^T (G^+)^T = G^+ G`). The object's weight and inertia enter as a known external wrench
-//! at the object centre (the paper's `J_x^T F_x` term with `J_x = J_o`), see [`crate::units::object_load`].
+//! at the object centre (the paper's `J_x^T F_x` term with `J_x = J_o`), see
+//! [`crate::building_blocks::object_load`].
 
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix6, Rotation3, Translation3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{
+    DMatrix, DVector, Isometry3, Matrix3, Matrix6, Rotation3, Translation3, UnitQuaternion,
+    Vector3, Vector6,
+};
 
 use faer::{MatMut, MatRef};
 
@@ -55,14 +59,25 @@ impl PlannedHand {
     pub fn new(robot: &str, frame: &str, hand: &Isometry3<f64>, object: &Isometry3<f64>) -> Self {
         let c = object.inverse_transform_point(&hand.translation.vector.into()).coords;
         let q = hand.rotation.inverse() * object.rotation;
-        PlannedHand { robot: robot.to_string(), frame: frame.to_string(), contact_in_object: [c.x, c.y, c.z], hand_to_object: [q.w, q.i, q.j, q.k] }
+        PlannedHand {
+            robot: robot.to_string(),
+            frame: frame.to_string(),
+            contact_in_object: [c.x, c.y, c.z],
+            hand_to_object: [q.w, q.i, q.j, q.k],
+        }
     }
 
     /// Finite numbers and a unit quaternion (within 1e-6).
     pub fn check(&self) -> Result<(), String> {
         let n2: f64 = self.hand_to_object.iter().map(|x| x * x).sum();
-        if !self.contact_in_object.iter().chain(&self.hand_to_object).all(|x| x.is_finite()) || (n2 - 1.0).abs() > 1e-6 {
-            return Err(format!("planned hand {} of {}: contact and rotation must be finite, the rotation a unit quaternion", self.frame, self.robot));
+        if !self.contact_in_object.iter().chain(&self.hand_to_object).all(|x| x.is_finite())
+            || (n2 - 1.0).abs() > 1e-6
+        {
+            return Err(format!(
+                "planned hand {} of {}: contact and rotation must be finite, the rotation a unit \
+                 quaternion",
+                self.frame, self.robot
+            ));
         }
         Ok(())
     }
@@ -92,7 +107,9 @@ impl GraspOffsets {
         let mut contact_in_object = Vec::new();
         for h in &team.hands {
             hands.push((team.robots[h.robot].id.clone(), h.name.clone()));
-            hand_to_object.push(UnitQuaternion::from_rotation_matrix(&h.rotation).inverse() * object.rotation);
+            hand_to_object.push(
+                UnitQuaternion::from_rotation_matrix(&h.rotation).inverse() * object.rotation,
+            );
             contact_in_object.push(object.inverse_transform_point(&h.position.into()).coords);
         }
         GraspOffsets { hands, hand_to_object, contact_in_object }
@@ -100,13 +117,18 @@ impl GraspOffsets {
 
     /// The offsets of the team's grasping hands as `planned`, if every one of them is planned.
     pub fn planned(team: &Team, planned: &[PlannedHand]) -> Option<Self> {
-        let mut out = GraspOffsets { hands: Vec::new(), hand_to_object: Vec::new(), contact_in_object: Vec::new() };
+        let mut out = GraspOffsets {
+            hands: Vec::new(),
+            hand_to_object: Vec::new(),
+            contact_in_object: Vec::new(),
+        };
         for h in &team.hands {
             let robot = &team.robots[h.robot].id;
             let p = planned.iter().find(|p| p.robot == *robot && p.frame == h.name)?;
             let [w, x, y, z] = p.hand_to_object;
             out.hands.push((robot.clone(), h.name.clone()));
-            out.hand_to_object.push(UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z)));
+            out.hand_to_object
+                .push(UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z)));
             out.contact_in_object.push(Vector3::from(p.contact_in_object));
         }
         Some(out)
@@ -115,7 +137,11 @@ impl GraspOffsets {
     /// Whether these offsets belong to the team's current set of grasping hands.
     pub fn matches(&self, team: &Team) -> bool {
         self.hands.len() == team.hands.len()
-            && self.hands.iter().zip(&team.hands).all(|((r, f), h)| *r == team.robots[h.robot].id && *f == h.name)
+            && self
+                .hands
+                .iter()
+                .zip(&team.hands)
+                .all(|((r, f), h)| *r == team.robots[h.robot].id && *f == h.name)
     }
 
     /// The object pose from the hands by weighted least squares over SE(3): the rotation `R`
@@ -129,17 +155,27 @@ impl GraspOffsets {
         let p_mean = team.hands.iter().fold(Vector3::zeros(), |a, h| a + h.position) / b;
         let c_mean = self.contact_in_object.iter().fold(Vector3::zeros(), |a, c| a + c) / b;
         let mut h_mat = Matrix3::zeros();
-        for ((h, c), q) in team.hands.iter().zip(&self.contact_in_object).zip(&self.hand_to_object) {
+        for ((h, c), q) in team.hands.iter().zip(&self.contact_in_object).zip(&self.hand_to_object)
+        {
             h_mat += (h.position - p_mean) * (c - c_mean).transpose();
-            h_mat += ORIENTATION_WEIGHT * (UnitQuaternion::from_rotation_matrix(&h.rotation) * q).to_rotation_matrix().into_inner();
+            h_mat += ORIENTATION_WEIGHT
+                * (UnitQuaternion::from_rotation_matrix(&h.rotation) * q)
+                    .to_rotation_matrix()
+                    .into_inner();
         }
         let svd = h_mat.svd(true, true);
-        let (u, v_t) = (svd.u.unwrap_or_else(Matrix3::identity), svd.v_t.unwrap_or_else(Matrix3::identity));
+        let (u, v_t) =
+            (svd.u.unwrap_or_else(Matrix3::identity), svd.v_t.unwrap_or_else(Matrix3::identity));
         let d = (u * v_t).determinant().signum();
         let r = u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * v_t;
         let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
         let p = p_mean - rot * c_mean;
-        let residual = team.hands.iter().zip(&self.contact_in_object).map(|(h, c)| (h.position - p - rot * c).norm()).fold(0.0, f64::max);
+        let residual = team
+            .hands
+            .iter()
+            .zip(&self.contact_in_object)
+            .map(|(h, c)| (h.position - p - rot * c).norm())
+            .fold(0.0, f64::max);
         ObjectFit { pose: Isometry3::from_parts(Translation3::from(p), rot), residual }
     }
 }
@@ -172,7 +208,13 @@ impl GraspTracker {
     /// before any estimate, the `planned` offsets if they cover every grasping hand, else with
     /// the object at `pose_at_grasp`, else at the hands' centroid with world axes), the object
     /// pose from the hands, and the terms of [`GraspTerms::compute_into`].
-    pub fn update(&mut self, team: &Team, pose_at_grasp: Option<Isometry3<f64>>, planned: &[PlannedHand], terms: &mut Option<GraspTerms>) -> Result<(), ControllerError> {
+    pub fn update(
+        &mut self,
+        team: &Team,
+        pose_at_grasp: Option<Isometry3<f64>>,
+        planned: &[PlannedHand],
+        terms: &mut Option<GraspTerms>,
+    ) -> Result<(), ControllerError> {
         if team.hands.is_empty() {
             self.offsets = None;
             *terms = None;
@@ -185,7 +227,8 @@ impl GraspTracker {
                 let offsets = match first.then(|| GraspOffsets::planned(team, planned)).flatten() {
                     Some(o) => o,
                     None => {
-                        let known = if self.released { None } else { self.last_object.or(pose_at_grasp) };
+                        let known =
+                            if self.released { None } else { self.last_object.or(pose_at_grasp) };
                         GraspOffsets::capture(team, &known.unwrap_or_else(|| centroid_pose(team)))
                     }
                 };
@@ -197,7 +240,8 @@ impl GraspTracker {
         self.last_object = Some(fit.pose);
         let g = terms.get_or_insert_with(GraspTerms::default);
         g.fit_residual = fit.residual;
-        g.compute_into(team, fit.pose).ok_or_else(|| ControllerError::Singular { what: "grasp matrix".into() })
+        g.compute_into(team, fit.pose)
+            .ok_or_else(|| ControllerError::Singular { what: "grasp matrix".into() })
     }
 
     /// Forget the offsets and the object's pose: when the hands next close, the offsets are
@@ -208,7 +252,6 @@ impl GraspTracker {
         self.released = true;
     }
 }
-
 
 /// The grasp quantities of one tick.
 #[derive(Debug, Clone, Default)]
@@ -225,7 +268,7 @@ pub struct GraspTerms {
     pub n: DMatrix<f64>,
     /// `J_c,ee v = N J_ee v` and `d/dt(J_c,ee) v = Ndot J_ee v + N Jdot_ee v` (eq.
     /// jacobian_cee), by the hands' sums. `J_c,ee` itself (6B x n) is formed only where `J_c`
-    /// is ([`crate::units::contact_jacobian::contact_jacobian`]).
+    /// is ([`crate::building_blocks::contact_jacobian::contact_jacobian`]).
     pub jcee_v: DVector<f64>,
     pub jdv_cee: DVector<f64>,
     /// `J_o = (G^+)^T J_ee` (eq. obj_jacobian) and `d/dt(J_o) v`.
@@ -326,9 +369,11 @@ impl GraspTerms {
         // With Ndot_ij = -(d(G^+)_i G_j + G^+_i Gdot_j) and N_ij = delta_ij I - G^+_i G_j, hand
         // i's rows are -(d(G^+)_i (G ee) + G^+_i (Gdot ee)) + jd_i - G^+_i (G jd) (ee = J_ee v,
         // jd = Jdot_ee v): three 6-vectors summed over the hands once, not B^2 blocks.
-        let (mut g_ee, mut gdot_ee, mut g_jd) = (Vector6::zeros(), Vector6::zeros(), Vector6::zeros());
+        let (mut g_ee, mut gdot_ee, mut g_jd) =
+            (Vector6::zeros(), Vector6::zeros(), Vector6::zeros());
         for j in 0..b {
-            let (g, ee, jd) = (gi(j), self.ee_twist.fixed_rows::<6>(6 * j), team.jdv_ee.fixed_rows::<6>(6 * j));
+            let (g, ee, jd) =
+                (gi(j), self.ee_twist.fixed_rows::<6>(6 * j), team.jdv_ee.fixed_rows::<6>(6 * j));
             g_ee += g * ee;
             gdot_ee += gdot(j) * ee;
             g_jd += g * jd;
@@ -342,7 +387,8 @@ impl GraspTerms {
             let cee_v = self.ee_twist.fixed_rows::<6>(6 * i) - gp_i * g_ee;
             self.jcee_v.fixed_rows_mut::<6>(6 * i).copy_from(&cee_v);
             let dgp_i = dgp(i);
-            let acc = -(dgp_i * g_ee + gp_i * gdot_ee) + team.jdv_ee.fixed_rows::<6>(6 * i) - gp_i * g_jd;
+            let acc =
+                -(dgp_i * g_ee + gp_i * gdot_ee) + team.jdv_ee.fixed_rows::<6>(6 * i) - gp_i * g_jd;
             self.jdv_cee.fixed_rows_mut::<6>(6 * i).copy_from(&acc);
             let ee_i = self.ee_twist.fixed_rows::<6>(6 * i);
             let jdv_i = team.jdv_ee.fixed_rows::<6>(6 * i);
@@ -360,6 +406,12 @@ pub fn times_hand_jacobians(team: &Team, x: MatRef<'_, f64>, mut out: MatMut<'_,
     for (i, h) in team.hands.iter().enumerate() {
         let rb = &team.robots[h.robot];
         let dst = out.as_mut().submatrix_mut(0, rb.offset, x.nrows(), rb.nv);
-        gemm(dst, 1.0, 1.0, x.subcols(6 * i, 6), mat(&team.j_ee).submatrix(6 * i, rb.offset, 6, rb.nv));
+        gemm(
+            dst,
+            1.0,
+            1.0,
+            x.subcols(6 * i, 6),
+            mat(&team.j_ee).submatrix(6 * i, rb.offset, 6, rb.nv),
+        );
     }
 }

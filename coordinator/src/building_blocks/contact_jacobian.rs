@@ -3,16 +3,21 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::building_blocks::grasp::{times_hand_jacobians, GraspTerms};
 use crate::linalg::{mat, mat_mut, shape, zeros_v};
 use crate::team::Team;
-use crate::units::grasp::{times_hand_jacobians, GraspTerms};
 
 /// `J_c = [J_cf; J_c,ee]` (eq. jacobian_c, `J_c,ee = N J_ee`, eq. jacobian_cee) and
 /// `Jdot_c v` ([`contact_drift`]) into `j_c` (`3 nf + 6 B` x n) and `jdv_c`: the stance
 /// feet's rows, then the grasp's (zero rows for the hands in grasp when there is no grasp).
 /// The block path does not need `J_c` on the tick: `Pidc` forms it only for the dense
 /// projections and the team-sized QP.
-pub fn contact_jacobian(team: &Team, grasp: Option<&GraspTerms>, j_c: &mut DMatrix<f64>, jdv_c: &mut DVector<f64>) {
+pub fn contact_jacobian(
+    team: &Team,
+    grasp: Option<&GraspTerms>,
+    j_c: &mut DMatrix<f64>,
+    jdv_c: &mut DVector<f64>,
+) {
     let n = team.n;
     let nf = team.feet.len();
     let m = team.contact_rows();

@@ -8,25 +8,39 @@ use std::collections::BTreeMap;
 
 use protocol::{FootLoad, RobotDescription};
 
+use crate::building_blocks::contact_margins::ContactMargins;
 use crate::qp::ContactKind;
 use crate::team::Team;
-use crate::units::contact_margins::ContactMargins;
 use crate::ControllerError;
 
 /// The QP's contacts into `out`: `(first row in J_c, kind)` for every stance foot (friction
 /// pyramid and minimum normal force) and every hand in grasp (its contact frame's axes, the
-/// sliding-and-torsion, normal-force and centre-of-pressure rows), with the robot's friction and patch sizes
-/// scaled by the `margins`.
-pub fn contact_list(team: &Team, descriptions: &BTreeMap<String, RobotDescription>, margins: &ContactMargins, out: &mut Vec<(usize, ContactKind)>) -> Result<(), ControllerError> {
+/// sliding-and-torsion, normal-force and centre-of-pressure rows), with the robot's friction and
+/// patch sizes scaled by the `margins`.
+pub fn contact_list(
+    team: &Team,
+    descriptions: &BTreeMap<String, RobotDescription>,
+    margins: &ContactMargins,
+    out: &mut Vec<(usize, ContactKind)>,
+) -> Result<(), ControllerError> {
     let description = |robot: usize| {
         let id = &team.robots[robot].id;
-        descriptions.get(id).ok_or_else(|| ControllerError::MissingDescription { robot: id.clone() })
+        descriptions
+            .get(id)
+            .ok_or_else(|| ControllerError::MissingDescription { robot: id.clone() })
     };
     let nf = team.feet.len();
     out.clear();
     for (k, f) in team.feet.iter().enumerate() {
         let d = description(f.robot)?;
-        out.push((3 * k, ContactKind::Foot { mu: d.foot_mu * margins.friction_margin, f_min: margins.f_min_foot, f_max: f64::INFINITY }));
+        out.push((
+            3 * k,
+            ContactKind::Foot {
+                mu: d.foot_mu * margins.friction_margin,
+                f_min: margins.f_min_foot,
+                f_max: f64::INFINITY,
+            },
+        ));
     }
     for (k, h) in team.hands.iter().enumerate() {
         let d = description(h.robot)?;
@@ -39,7 +53,10 @@ pub fn contact_list(team: &Team, descriptions: &BTreeMap<String, RobotDescriptio
                 n: rot.column(2).into(),
                 mu: d.hand_mu * margins.friction_margin,
                 xi: d.hand_xi * margins.friction_margin,
-                half: [d.hand_half_size[0] * margins.patch_margin, d.hand_half_size[1] * margins.patch_margin],
+                half: [
+                    d.hand_half_size[0] * margins.patch_margin,
+                    d.hand_half_size[1] * margins.patch_margin,
+                ],
                 f_min: margins.f_min_hand,
             },
         ));
@@ -57,7 +74,9 @@ pub fn unload_feet(team: &Team, loads: &[FootLoad], out: &mut [(usize, ContactKi
     }
     for (f, (_, kind)) in team.feet.iter().zip(out.iter_mut()) {
         let id = &team.robots[f.robot].id;
-        if let (Some(l), ContactKind::Foot { f_max, .. }) = (loads.iter().find(|l| l.robot == *id && l.frame == f.name), kind) {
+        if let (Some(l), ContactKind::Foot { f_max, .. }) =
+            (loads.iter().find(|l| l.robot == *id && l.frame == f.name), kind)
+        {
             *f_max = l.max_normal_force;
         }
     }

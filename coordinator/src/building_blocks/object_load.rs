@@ -9,9 +9,9 @@
 //! `F_o = (eq. control_law) + w_ff`. `J_o^T F_x = J_ee^T G^+ F_x`, so the real wrench the object
 //! exerts on hand `i` is `lambda_ee,i + (G^+ F_x)_i` (the internal part from the constraint
 //! plus the load distribution); that sum is what the diagnostics report and what the QP
-//! constrains (see `crate::pidc::stages::wrench`). The hands push the object with the negative of it, so
-//! their net wrench on the object is `-G (G^+ F_x) = w_ff`: it balances the weight in a
-//! static hold.
+//! constrains (see `crate::pidc::stages::wrench`). The hands push the object with the negative
+//! of it, so their net wrench on the object is `-G (G^+ F_x) = w_ff`: it balances the weight in
+//! a static hold.
 
 use nalgebra::{Isometry3, Matrix3, Vector3, Vector6};
 use protocol::conventions::GRAVITY_VECTOR;
@@ -20,7 +20,13 @@ use protocol::conventions::GRAVITY_VECTOR;
 /// its centre (world): `object` its pose, `twist` its twist `[v; omega]`, `acc_d` the reference
 /// acceleration `[a_d; alpha_d]`, `inertia` about the centre in the object's frame. The load
 /// on the robots is `F_x = -w_ff` (see the module docs).
-pub fn object_load(object: &Isometry3<f64>, twist: &Vector6<f64>, acc_d: &[f64; 6], mass: f64, inertia: &Matrix3<f64>) -> Vector6<f64> {
+pub fn object_load(
+    object: &Isometry3<f64>,
+    twist: &Vector6<f64>,
+    acc_d: &[f64; 6],
+    mass: f64,
+    inertia: &Matrix3<f64>,
+) -> Vector6<f64> {
     let r_o = object.rotation.to_rotation_matrix();
     let i_w = r_o.matrix() * *inertia * r_o.matrix().transpose();
     let w = twist.fixed_rows::<3>(3).into_owned();
