@@ -1,5 +1,6 @@
 //! Linear algebra of the tick: rank-revealing pseudo-inverse (`docs/controller.md`), LU inverse and
-//! matrix products into preallocated buffers, SO(3) maps.
+//! matrix products into preallocated buffers (rotation maps are in
+//! `robot_model::spatial`).
 //!
 //! The team's matrices are nalgebra `DMatrix` (column-major); the decompositions run in faer
 //! on zero-copy views of them ([`mat`], [`mat_mut`]), because faer's decompositions take
@@ -18,7 +19,7 @@ use std::cell::Cell;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::svd::{svd, svd_scratch, ComputeSvdVectors};
 use faer::{ColMut, MatMut, MatRef, Par};
-use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix6};
 
 /// Relative tolerance of the pseudo-inverses: singular values below `RANK_TOL * sigma_max`
 /// are treated as zero. `J_c,ee` has rank `6(B-1)` (not `6B`), so this matters.
@@ -592,42 +593,22 @@ pub fn lower_inverse(l: &[f64], n: usize, x: &mut [f64]) {
     }
 }
 
+/// Make `p` exactly symmetric: each pair of entries replaced by their mean.
+pub fn symmetrise(p: &mut DMatrix<f64>) {
+    for i in 0..p.nrows() {
+        for j in 0..i {
+            let s = 0.5 * (p[(i, j)] + p[(j, i)]);
+            p[(i, j)] = s;
+            p[(j, i)] = s;
+        }
+    }
+}
+
 /// Inverse of a symmetric positive definite 6 x 6 matrix (a hand's block), with the pivot
 /// rule of [`SpdInverse`].
 pub fn spd6_inverse(a: &Matrix6<f64>) -> Option<Matrix6<f64>> {
     let chol = a.cholesky()?;
     pivots_ok(chol.l_dirty().diagonal().iter().copied()).then(|| chol.inverse())
-}
-
-/// Cross-product matrix: `skew(a) b = a x b`.
-pub fn skew(a: &Vector3<f64>) -> Matrix3<f64> {
-    Matrix3::new(0.0, -a.z, a.y, a.z, 0.0, -a.x, -a.y, a.x, 0.0)
-}
-
-/// Row-major 3x3 (protocol) to a rotation.
-pub fn rotation_from_row_major(r: &[f64; 9]) -> Rotation3<f64> {
-    Rotation3::from_matrix_unchecked(Matrix3::from_row_slice(r))
-}
-
-/// Orientation error as a world-frame rotation vector: `log(R R_d^T)` (zero when `R = R_d`).
-///
-/// Taken through the quaternion, whose angle is `2 atan2(|v|, |w|)`: `Rotation3::scaled_axis`
-/// takes `acos((tr R - 1) / 2)`, which is NaN when rounding puts the trace of a rotation within
-/// an ulp of the identity above 3 (four robots holding a cube at rest hit it on the 4th tick).
-pub fn rotation_error(r: &Rotation3<f64>, r_d: &Rotation3<f64>) -> Vector3<f64> {
-    UnitQuaternion::from_rotation_matrix(&(r * r_d.inverse())).scaled_axis()
-}
-
-/// Quaternion `(w, x, y, z)` of a rotation.
-pub fn quat_wxyz(r: &Rotation3<f64>) -> [f64; 4] {
-    let q = UnitQuaternion::from_rotation_matrix(r);
-    [q.w, q.i, q.j, q.k]
-}
-
-/// Rotation of a quaternion `(w, x, y, z)` (normalised first).
-pub fn rotation_from_wxyz(q: &[f64; 4]) -> Rotation3<f64> {
-    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]))
-        .to_rotation_matrix()
 }
 
 #[cfg(test)]
@@ -689,40 +670,6 @@ mod tests {
         assert!((&slow * &a * &slow - &slow).amax() < 1e-10 * slow.amax(), "A+ A A+ = A+");
         assert!((&a * &slow - (&a * &slow).transpose()).amax() < 1e-10, "A A+ symmetric");
         assert!((&slow - &fast).amax() < 1e-8 * slow.amax(), "both paths agree");
-    }
-
-    /// `exp(w) R_d` against `R_d` gives back `w` for angles below pi (the exponential map is
-    /// nalgebra's `from_scaled_axis`, an independent formula).
-    #[test]
-    fn rotation_error_inverts_the_exponential() {
-        let mut worst = 0.0f64;
-        for i in 0..2000 {
-            let t = i as f64;
-            let r_d = Rotation3::from_euler_angles(0.37 * t, -0.11 * t + 0.2, 0.05 * t);
-            let axis = Vector3::new((0.7 * t).sin(), (1.3 * t).cos(), (0.3 * t).sin()).normalize();
-            let w = axis * (3.1 * ((0.1 * t).sin()).abs());
-            let r = Rotation3::from_scaled_axis(w) * r_d;
-            worst = worst.max((rotation_error(&r, &r_d) - w).norm());
-        }
-        assert!(worst < 1e-9, "log(exp(w)) differs from w by {worst}");
-    }
-
-    /// A rotation within rounding of the identity whose trace rounds above 3 (what the
-    /// four-robot hold produced): `Rotation3::scaled_axis` gave NaN there.
-    #[test]
-    fn rotation_error_is_finite_when_the_trace_rounds_above_three() {
-        let mut m = Matrix3::identity();
-        m[(0, 0)] = 1.0 + f64::EPSILON;
-        m[(1, 1)] = 1.0 + f64::EPSILON;
-        m[(1, 0)] = 1e-12;
-        m[(0, 1)] = -1e-12;
-        let r = Rotation3::from_matrix_unchecked(m);
-        assert!(r.scaled_axis().x.is_nan(), "the case no longer reproduces nalgebra's NaN");
-        let e = rotation_error(&r, &Rotation3::identity());
-        assert!(
-            e.iter().all(|x| x.is_finite()) && (e - Vector3::new(0.0, 0.0, 1e-12)).norm() < 1e-15,
-            "error {e:?}"
-        );
     }
 
     /// Against nalgebra's own SVD and the Moore-Penrose conditions, on a rank-deficient matrix.

@@ -10,6 +10,11 @@ use nalgebra::{DMatrix, DVector, Vector3};
 use protocol::{DynamicsTerms, QpStatus};
 use robot_agent::terms::ActiveContacts;
 
+/// The protocol's `(w, x, y, z)` of a rotation.
+fn quat_wxyz(r: &nalgebra::Rotation3<f64>) -> [f64; 4] {
+    protocol::conventions::quat_to_wxyz(&nalgebra::UnitQuaternion::from_rotation_matrix(r))
+}
+
 fn controller(descs: &[protocol::RobotDescription], cfg: PidcConfig) -> Pidc {
     let mut c = Pidc::new(cfg);
     for d in descs {
@@ -232,10 +237,7 @@ fn static_team_holds_the_object() {
     let refs = protocol::TaskReferences {
         header: protocol::Header::new(common::TEAM, None, 1, 0),
         object: Some(protocol::PoseReference {
-            pose: pose(
-                obj.translation.vector,
-                coordinator::linalg::quat_wxyz(&obj.rotation.to_rotation_matrix()),
-            ),
+            pose: pose(obj.translation.vector, quat_wxyz(&obj.rotation.to_rotation_matrix())),
             twist: [0.0; 6],
             acceleration: [0.0; 6],
         }),
@@ -244,7 +246,7 @@ fn static_team_holds_the_object() {
             .map(|(id, p, r)| protocol::TorsoReference {
                 robot: id.clone(),
                 reference: protocol::PoseReference {
-                    pose: pose(*p, coordinator::linalg::quat_wxyz(r)),
+                    pose: pose(*p, quat_wxyz(r)),
                     twist: [0.0; 6],
                     acceleration: [0.0; 6],
                 },
@@ -356,7 +358,7 @@ fn a_motion_the_contacts_cannot_carry_yields_the_object_first_and_keeps_every_ro
         object: Some(protocol::PoseReference {
             pose: protocol::Pose {
                 position: above.into(),
-                orientation: coordinator::linalg::quat_wxyz(&obj.rotation.to_rotation_matrix()),
+                orientation: quat_wxyz(&obj.rotation.to_rotation_matrix()),
             },
             twist: [0.0; 6],
             acceleration: [0.0, 0.0, 50.0, 0.0, 0.0, 0.0],

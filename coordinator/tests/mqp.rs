@@ -13,6 +13,7 @@ use nalgebra::{DMatrix, DVector, Matrix3, Vector3, Vector6};
 use protocol::conventions::GRAVITY_VECTOR;
 use protocol::{DynamicsTerms, FrameRole, QpStatus, RobotDescription};
 use rand::Rng;
+use robot_model::spatial::skew;
 
 /// A 2-robot team at a random perturbed configuration (`amp`) with a velocity that keeps the
 /// contacts (the PIDC projector applied to a random velocity of size `vel`).
@@ -60,10 +61,6 @@ fn frames(t: &DynamicsTerms, role: FrameRole) -> Vec<(DMatrix<f64>, DVector<f64>
             )
         })
         .collect()
-}
-
-fn skew(r: &Vector3<f64>) -> Matrix3<f64> {
-    Matrix3::new(0.0, -r.z, r.y, r.z, 0.0, -r.x, -r.y, r.x, 0.0)
 }
 
 /// The team's equations written out from the robots' terms: the residuals

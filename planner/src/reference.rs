@@ -6,9 +6,10 @@
 //! orientation reference is `exp([x(t)]) R0` (`x` a rotation vector in the world frame), whose
 //! angular velocity is `J_l(x) xdot` (the left Jacobian of SO(3)).
 
-use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 use protocol::conventions::quat_to_wxyz;
 use protocol::{Pose, PoseReference};
+use robot_model::spatial::left_jacobian;
 use serde::Deserialize;
 use std::f64::consts::TAU;
 
@@ -268,22 +269,6 @@ impl PoseMotion {
             acceleration: [p.xdd.x, p.xdd.y, p.xdd.z, wd.x, wd.y, wd.z],
         }
     }
-}
-
-fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
-    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
-}
-
-/// Left Jacobian of SO(3): the world angular velocity of `exp([x])` is `J_l(x) xdot`.
-pub fn left_jacobian(x: &Vector3<f64>) -> Matrix3<f64> {
-    let a = x.norm();
-    let k = skew(x);
-    let (c1, c2) = if a < 1e-4 {
-        (0.5 - a * a / 24.0, 1.0 / 6.0 - a * a / 120.0)
-    } else {
-        ((1.0 - a.cos()) / (a * a), (a - a.sin()) / (a * a * a))
-    };
-    Matrix3::identity() + c1 * k + c2 * k * k
 }
 
 /// Rotation, angular velocity and angular acceleration (world frame) of `exp([x(t)])`. The

@@ -13,7 +13,7 @@
 //! * Contact and task Jacobians are taken at the frame origin with axes aligned with the
 //!   world; rows `[linear; angular]`. Point feet constrain 3 rows, flat hands 6.
 
-use nalgebra::{Quaternion, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3, Vector6};
 
 /// Standard gravity magnitude, m/s², acting along -z of the world.
 pub const GRAVITY: f64 = 9.81;
@@ -33,6 +33,11 @@ pub fn quat_from_wxyz(q: [f64; 4]) -> UnitQuaternion<f64> {
 /// The protocol's `(w, x, y, z)` array of a unit quaternion.
 pub fn quat_to_wxyz(q: &UnitQuaternion<f64>) -> [f64; 4] {
     [q.w, q.i, q.j, q.k]
+}
+
+/// Rotation of the protocol's row-major 3x3 array (a frame's axes, as sent; not re-orthogonalised).
+pub fn rotation_from_row_major(r: &[f64; 9]) -> Rotation3<f64> {
+    Rotation3::from_matrix_unchecked(Matrix3::from_row_slice(r))
 }
 
 /// MuJoCo free-joint velocity (`qvel[0..6]`: linear in world, angular in body) to the

@@ -23,6 +23,27 @@ pub fn rpy_to_matrix(roll: f64, pitch: f64, yaw: f64) -> Matrix3<f64> {
     Rotation3::from_euler_angles(roll, pitch, yaw).into_inner()
 }
 
+/// Orientation error as a world-frame rotation vector: `log(R R_d^T)` (zero when `R = R_d`).
+///
+/// Taken through the quaternion, whose angle is `2 atan2(|v|, |w|)`: `Rotation3::scaled_axis`
+/// takes `acos((tr R - 1) / 2)`, which is NaN when rounding puts the trace of a rotation within
+/// an ulp of the identity above 3 (four robots holding a cube at rest hit it on the 4th tick).
+pub fn rotation_error(r: &Rotation3<f64>, r_d: &Rotation3<f64>) -> Vector3<f64> {
+    UnitQuaternion::from_rotation_matrix(&(r * r_d.inverse())).scaled_axis()
+}
+
+/// Left Jacobian of SO(3): the world angular velocity of `exp([x])` is `J_l(x) xdot`.
+pub fn left_jacobian(x: &Vector3<f64>) -> Matrix3<f64> {
+    let a = x.norm();
+    let k = skew(x);
+    let (c1, c2) = if a < 1e-4 {
+        (0.5 - a * a / 24.0, 1.0 / 6.0 - a * a / 120.0)
+    } else {
+        ((1.0 - a.cos()) / (a * a), (a - a.sin()) / (a * a * a))
+    };
+    Matrix3::identity() + c1 * k + c2 * k * k
+}
+
 /// Rigid transform `aMb`: maps coordinates in frame b to frame a,
 /// `p_a = rot * p_b + trans`. `rot` is b's axes seen in a; `trans` is b's origin in a.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -382,5 +403,39 @@ mod tests {
         let e = SE3::exp6(&Vector3::zeros(), &w);
         let r = Rotation3::from_scaled_axis(w).into_inner();
         assert!((e.rot - r).norm() < 1e-14);
+    }
+
+    /// `exp(w) R_d` against `R_d` gives back `w` for angles below pi (the exponential map is
+    /// nalgebra's `from_scaled_axis`, an independent formula).
+    #[test]
+    fn rotation_error_inverts_the_exponential() {
+        let mut worst = 0.0f64;
+        for i in 0..2000 {
+            let t = i as f64;
+            let r_d = Rotation3::from_euler_angles(0.37 * t, -0.11 * t + 0.2, 0.05 * t);
+            let axis = Vector3::new((0.7 * t).sin(), (1.3 * t).cos(), (0.3 * t).sin()).normalize();
+            let w = axis * (3.1 * ((0.1 * t).sin()).abs());
+            let r = Rotation3::from_scaled_axis(w) * r_d;
+            worst = worst.max((rotation_error(&r, &r_d) - w).norm());
+        }
+        assert!(worst < 1e-9, "log(exp(w)) differs from w by {worst}");
+    }
+
+    /// A rotation within rounding of the identity whose trace rounds above 3 (what the
+    /// four-robot hold produced): `Rotation3::scaled_axis` gave NaN there.
+    #[test]
+    fn rotation_error_is_finite_when_the_trace_rounds_above_three() {
+        let mut m = Matrix3::identity();
+        m[(0, 0)] = 1.0 + f64::EPSILON;
+        m[(1, 1)] = 1.0 + f64::EPSILON;
+        m[(1, 0)] = 1e-12;
+        m[(0, 1)] = -1e-12;
+        let r = Rotation3::from_matrix_unchecked(m);
+        assert!(r.scaled_axis().x.is_nan(), "the case no longer reproduces nalgebra's NaN");
+        let e = rotation_error(&r, &Rotation3::identity());
+        assert!(
+            e.iter().all(|x| x.is_finite()) && (e - Vector3::new(0.0, 0.0, 1e-12)).norm() < 1e-15,
+            "error {e:?}"
+        );
     }
 }

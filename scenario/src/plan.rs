@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use coordinator::building_blocks::grasp::PlannedHand;
-use coordinator::{ControllerSpec, MqpConfig, PidcConfig};
+use coordinator::{ControllerSpec, MqpConfig, PidcConfig, ShellConfig};
 use nalgebra::{Isometry3, Matrix3, Translation3, Vector3};
 use protocol::conventions::quat_from_wxyz;
 use robot_model::{DescriptionError, Robot, RobotCache};
@@ -248,30 +248,36 @@ struct GraspAtStart {
     planned_grasp: Vec<PlannedHand>,
 }
 
-/// The PIDC configuration of the scenario: its gains, object, minimum forces and margins.
+/// The shared controller settings of the scenario (its gains, object, grasp, minimum forces
+/// and release policy) over a controller's `defaults`.
+fn shell_config(s: &Scenario, grasp: &GraspAtStart, defaults: ShellConfig) -> ShellConfig {
+    let swing_gains = s.gains.feet.as_ref().map(|f| f.gains());
+    ShellConfig {
+        object_gains: s.gains.object.gains(),
+        torso_gains: s.gains.torso.gains(),
+        swing_gains: swing_gains.unwrap_or_else(|| defaults.swing_gains.clone()),
+        object_mass: s.object.mass,
+        object_inertia: Matrix3::from_diagonal(&Vector3::from(grasp.principal)),
+        // Where the object is when the grasp closes, and where each hand holds it.
+        object_pose_at_grasp: Some(grasp.object_at_grasp),
+        planned_grasp: grasp.planned_grasp.clone(),
+        f_min_foot: s.min_foot_force,
+        f_min_hand: s.min_hand_force,
+        release: s.release,
+        ..defaults
+    }
+}
+
+/// The PIDC configuration of the scenario: the shared settings and the scenario's friction
+/// and palm-patch margins.
 fn pidc_config(s: &Scenario, grasp: &GraspAtStart) -> PidcConfig {
     let defaults = PidcConfig::default();
+    let shell = shell_config(s, grasp, defaults.shell.clone());
     PidcConfig {
-        shell: coordinator::ShellConfig {
-            object_gains: s.gains.object.gains(),
-            torso_gains: s.gains.torso.gains(),
-            swing_gains: s
-                .gains
-                .feet
-                .as_ref()
-                .map(|f| f.gains())
-                .unwrap_or_else(|| defaults.swing_gains.clone()),
-            object_mass: s.object.mass,
-            object_inertia: Matrix3::from_diagonal(&Vector3::from(grasp.principal)),
-            // Where the object is when the grasp closes, and where each hand holds it.
-            object_pose_at_grasp: Some(grasp.object_at_grasp),
-            planned_grasp: grasp.planned_grasp.clone(),
-            f_min_foot: s.min_foot_force,
-            f_min_hand: s.min_hand_force,
+        shell: ShellConfig {
             friction_margin: s.friction_margin,
             patch_margin: s.patch_margin,
-            release: s.release,
-            ..defaults.shell.clone()
+            ..shell
         },
         ..defaults
     }
@@ -287,31 +293,12 @@ fn controller_spec(
     Ok(match ControllerSpec::of_kind(&s.controller)? {
         ControllerSpec::Pidc(_) => ControllerSpec::Pidc(pidc.clone()),
         // MQP: the same gains (as acceleration gains, see MqpConfig), object and minimum
-        // forces; its velocity bound looks one control period ahead.
+        // forces, its own friction and patch margins; its velocity bound looks one control
+        // period ahead.
         ControllerSpec::Mqp(_) => {
             let defaults = MqpConfig::default();
-            ControllerSpec::Mqp(MqpConfig {
-                shell: coordinator::ShellConfig {
-                    object_gains: s.gains.object.gains(),
-                    torso_gains: s.gains.torso.gains(),
-                    swing_gains: s
-                        .gains
-                        .feet
-                        .as_ref()
-                        .map(|f| f.gains())
-                        .unwrap_or_else(|| defaults.swing_gains.clone()),
-                    object_mass: s.object.mass,
-                    object_inertia: Matrix3::from_diagonal(&Vector3::from(grasp.principal)),
-                    f_min_foot: s.min_foot_force,
-                    f_min_hand: s.min_hand_force,
-                    release: s.release,
-                    object_pose_at_grasp: Some(grasp.object_at_grasp),
-                    planned_grasp: grasp.planned_grasp,
-                    ..defaults.shell.clone()
-                },
-                dt: s.clock().dt(),
-                ..defaults
-            })
+            let shell = shell_config(s, &grasp, defaults.shell.clone());
+            ControllerSpec::Mqp(MqpConfig { shell, dt: s.clock().dt(), ..defaults })
         }
         other => other,
     })

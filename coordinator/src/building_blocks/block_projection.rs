@@ -29,7 +29,7 @@
 //! `diag(D_r) - S W T^T` with `S`, `T` block-diagonal (k x 6 per robot) and `W` of 6B x 6B:
 //! applied to `c` columns they cost `sum_r k^2 c + 12 B k c + 108 B c` (`W` kept factored,
 //! `Coupling`) instead of `n^2 c` ([`BlockFactors::apply`]). `(J_c^T)^+` likewise
-//! ([`BlockFactors::jct_pinv_apply`]). [`BlockFactors::materialize`] forms the team-sized
+//! ([`BlockFactors::jct_pinv_apply`]). [`BlockFactors::dense_operators`] forms the team-sized
 //! matrices from the same factors, for tests and reports only.
 //!
 //! Each inverse is of a Gram matrix whose Cholesky pivots pass [`crate::linalg::SPD_TOL`]:
@@ -42,8 +42,9 @@ use faer::{MatMut, MatRef};
 use nalgebra::{DMatrix, DVector, Matrix6, Vector6};
 
 use crate::building_blocks::grasp::GraspTerms;
-use crate::building_blocks::projection::{complement, mbar_into, mc_into, symmetrise, Projections};
-use crate::linalg::{gemm, mat, mat_mut, shape, spd6_inverse, zeros, zeros_v, SpdInverse, SPD_TOL};
+use crate::linalg::{
+    gemm, mat, mat_mut, shape, spd6_inverse, symmetrise, zeros, zeros_v, SpdInverse, SPD_TOL,
+};
 use crate::team::Team;
 
 /// One robot's blocks: its feet rows and hand row in the team's `J_c`, and its share of the
@@ -586,13 +587,26 @@ fn robot_gram(
     }
 }
 
+/// The team-sized operators of the block path (see [`BlockFactors::dense_operators`]).
+#[derive(Debug, Clone)]
+pub struct DenseOperators {
+    /// `P`, symmetrised.
+    pub p: DMatrix<f64>,
+    /// `Phi = M_c^{-1} P`, symmetrised.
+    pub mcinv_p: DMatrix<f64>,
+    /// `(J_c^T)^+` (m x n).
+    pub jct_pinv: DMatrix<f64>,
+    /// `[P S]^+`.
+    pub ps_pinv: DMatrix<f64>,
+    /// `B`.
+    pub b: DMatrix<f64>,
+}
+
 impl BlockFactors {
-    /// The team-sized matrices of `proj` from these factors, each operator applied to the
-    /// identity (it allocates: for tests and reports, never on the tick):
-    /// `P`, `I - P`, `J_c^+`, `M_c^{-1} P`, `M_c^{-1} = I + Phi - Phi M`, `M_c`, `Mbar`,
+    /// The team-sized operators from these factors, each applied to the identity (it
+    /// allocates: for tests and reports, never on the tick): `P`, `M_c^{-1} P`, `(J_c^T)^+`,
     /// `[P S]^+ = S (P + P_{:u} K P_{u:})` and `B = I + (B - I)_{:u}`.
-    pub fn materialize(&self, team: &Team, proj: &mut Projections) {
-        let n = team.n;
+    pub fn dense_operators(&self, n: usize) -> DenseOperators {
         let id = DMatrix::<f64>::identity(n, n);
         let mut s = OpScratch::default();
         let mut op = |which: BlockOp| {
@@ -601,34 +615,28 @@ impl BlockFactors {
             symmetrise(&mut out);
             out
         };
-        proj.p = op(BlockOp::P);
-        proj.mcinv_p = op(BlockOp::Phi);
-        complement(&proj.p, &mut proj.ip);
-        let mut jct = DMatrix::zeros(self.m, n);
-        self.jct_pinv_apply(mat(&id), mat_mut(&mut jct), &mut s);
-        proj.jc_pinv = jct.transpose();
-        proj.jct_pinv = jct;
-        proj.mc_inv = &id + &proj.mcinv_p - &proj.mcinv_p * &team.mass;
-        mc_into(team, proj);
-        mbar_into(team, proj);
+        let p = op(BlockOp::P);
+        let mcinv_p = op(BlockOp::Phi);
+        let mut jct_pinv = DMatrix::zeros(self.m, n);
+        self.jct_pinv_apply(mat(&id), mat_mut(&mut jct_pinv), &mut s);
         let mut pu = DMatrix::zeros(0, 0);
         let mut act = ActuationScratch::default();
         self.unit_columns(n, &mut pu, &mut act);
         // K itself: I K (K is symmetric).
         let mut k = DMatrix::identity(self.unact.len(), self.unact.len());
         self.k.right_apply(&self.robots, &mut k, &mut act);
-        let mut ps = &proj.p + &pu * k * pu.transpose();
+        let mut ps_pinv = &p + &pu * k * pu.transpose();
         for &i in &self.unact {
-            ps.row_mut(i).fill(0.0);
+            ps_pinv.row_mut(i).fill(0.0);
         }
-        proj.ps_pinv = ps;
         let mut z = DMatrix::zeros(0, 0);
         self.b_minus_i_u(&mut z, &mut act);
-        proj.b = id;
+        let mut b = id;
         for (c, &j) in self.unact.iter().enumerate() {
-            let mut col = proj.b.column_mut(j);
+            let mut col = b.column_mut(j);
             col += z.column(c);
         }
+        DenseOperators { p, mcinv_p, jct_pinv, ps_pinv, b }
     }
 }
 

@@ -21,7 +21,9 @@ use nalgebra::{
 
 use faer::{MatMut, MatRef};
 
-use crate::linalg::{gemm, mat, mat_mut, skew, zeros, zeros_v};
+use robot_model::spatial::skew;
+
+use crate::linalg::{gemm, mat, mat_mut, zeros, zeros_v};
 use crate::team::Team;
 use crate::ControllerError;
 

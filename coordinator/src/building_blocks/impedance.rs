@@ -16,12 +16,11 @@
 //! and the object: 18 = 48 - 24 foot rows - 6 grasp rows) a static team has no such error.
 
 use nalgebra::{DMatrix, DVector, Isometry3, Vector3, Vector6};
+use robot_model::spatial::rotation_error;
 
 use crate::building_blocks::block_projection::{GramScratch, TaskSpan};
 use crate::building_blocks::projection::Projections;
-use crate::linalg::{
-    mat, product, rotation_error, spd_factor, spd_solve_in_place, zeros, zeros_v, Pinv, RANK_TOL,
-};
+use crate::linalg::{mat, product, spd_factor, spd_solve_in_place, zeros, zeros_v, Pinv, RANK_TOL};
 use crate::ControllerError;
 
 /// Diagonal stiffness and damping of one task (3 or 6 entries).

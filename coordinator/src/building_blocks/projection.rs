@@ -15,7 +15,9 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::building_blocks::block_projection::{vmat, vmat_mut, BlockFactors, BlockOp, OpScratch};
 use crate::building_blocks::grasp::GraspTerms;
-use crate::linalg::{gemm, mat, mat_mut, product, zeros, zeros_v, Inverse, Pinv, RANK_TOL};
+use crate::linalg::{
+    gemm, mat, mat_mut, product, symmetrise, zeros, zeros_v, Inverse, Pinv, RANK_TOL,
+};
 use crate::team::Team;
 use crate::ControllerError;
 
@@ -189,12 +191,20 @@ impl Projections {
 
     /// The team-sized matrices of the block path from its factors (each operator applied to
     /// the identity; it allocates): for tests and reports, never on the tick. Nothing to do
-    /// on the dense path.
+    /// on the dense path. `I - P`, `J_c^+`, `M_c^{-1} = I + Phi - Phi M`, `M_c` and `Mbar`
+    /// follow from the block path's
+    /// [`DenseOperators`](crate::building_blocks::block_projection::DenseOperators).
     pub fn materialize(&mut self, team: &Team) {
         if self.by_blocks {
-            let f = std::mem::take(&mut self.blocks);
-            f.materialize(team, self);
-            self.blocks = f;
+            let d = self.blocks.dense_operators(team.n);
+            let id = DMatrix::<f64>::identity(team.n, team.n);
+            complement(&d.p, &mut self.ip);
+            self.jc_pinv = d.jct_pinv.transpose();
+            self.mc_inv = &id + &d.mcinv_p - &d.mcinv_p * &team.mass;
+            (self.p, self.mcinv_p, self.jct_pinv) = (d.p, d.mcinv_p, d.jct_pinv);
+            (self.ps_pinv, self.b) = (d.ps_pinv, d.b);
+            mc_into(team, self);
+            mbar_into(team, self);
         }
     }
 
@@ -318,19 +328,8 @@ impl Projections {
     }
 }
 
-/// Make `p` exactly symmetric: each pair of entries replaced by their mean.
-pub(crate) fn symmetrise(p: &mut DMatrix<f64>) {
-    for i in 0..p.nrows() {
-        for j in 0..i {
-            let s = 0.5 * (p[(i, j)] + p[(j, i)]);
-            p[(i, j)] = s;
-            p[(j, i)] = s;
-        }
-    }
-}
-
 /// `ip = I - p`.
-pub(crate) fn complement(p: &DMatrix<f64>, ip: &mut DMatrix<f64>) {
+fn complement(p: &DMatrix<f64>, ip: &mut DMatrix<f64>) {
     let n = p.nrows();
     zeros(ip, n, n);
     *ip -= p;
@@ -360,7 +359,7 @@ pub(crate) fn mass_times(
 }
 
 /// `M_c = P M + I - P` (eq. aghili_25) from `proj.p` and `proj.ip`, by `M`'s diagonal blocks.
-pub(crate) fn mc_into(team: &Team, proj: &mut Projections) {
+fn mc_into(team: &Team, proj: &mut Projections) {
     let n = team.n;
     zeros(&mut proj.mc, n, n);
     proj.mc.copy_from(&proj.ip);
@@ -372,7 +371,7 @@ pub(crate) fn mc_into(team: &Team, proj: &mut Projections) {
 }
 
 /// `Mbar = M M_c^{-1}` (eq. constraint_force) from `proj.mc_inv`, by `M`'s diagonal blocks.
-pub(crate) fn mbar_into(team: &Team, proj: &mut Projections) {
+fn mbar_into(team: &Team, proj: &mut Projections) {
     let n = team.n;
     zeros(&mut proj.mbar, n, n);
     for r in &team.robots {

@@ -8,8 +8,8 @@ use std::collections::BTreeMap;
 use nalgebra::{DVector, Isometry3, Translation3, UnitQuaternion, Vector3, Vector6};
 use protocol::{PoseReference, TaskReferences};
 
-use crate::linalg::rotation_from_wxyz;
 use crate::team::{Team, TeamFrame};
+use protocol::conventions::quat_from_wxyz;
 
 /// A pose target: pose, twist and acceleration (world, `[linear; angular]`).
 pub type PoseTarget = (Isometry3<f64>, [f64; 6], [f64; 6]);
@@ -161,7 +161,9 @@ fn away_from(h: &TeamFrame, centre: &Vector3<f64>, retreat: f64) -> Isometry3<f6
 
 /// A pose reference as a target.
 fn pose_ref(r: &PoseReference) -> PoseTarget {
-    let rot = UnitQuaternion::from_rotation_matrix(&rotation_from_wxyz(&r.pose.orientation));
+    let rot = UnitQuaternion::from_rotation_matrix(
+        &quat_from_wxyz(r.pose.orientation).to_rotation_matrix(),
+    );
     (
         Isometry3::from_parts(Translation3::from(Vector3::from(r.pose.position)), rot),
         r.twist,

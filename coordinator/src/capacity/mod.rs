@@ -33,11 +33,13 @@
 //! * [`solve`]: Clarabel on the hard problem and on the relaxed one, the bisection;
 //! * [`report`]: [`CapacityError`], [`BindingLimit`].
 
+pub mod limits;
 pub mod problem;
 pub mod report;
 pub mod solve;
 
-pub use problem::{Limit, LimitRow, Place, StaticProblem};
+pub use limits::{Limit, LimitRow, Place};
+pub use problem::StaticProblem;
 pub use report::{BindingLimit, CapacityError};
 pub use solve::{
     Capacity, Relaxed, StaticSolution, CAPACITY_TOLERANCE, FEASIBILITY_TOL, REACHED_TOL,

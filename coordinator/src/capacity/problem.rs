@@ -1,5 +1,6 @@
 //! The static team problem's rows: equalities `E lambda = e0 + m e1` (robots' base rows, the
-//! object's wrench balance), limit rows `A lambda <= b` each with its name ([`LimitRow`]), and
+//! object's wrench balance), limit rows `A lambda <= b` each with its name
+//! ([`super::limits::LimitRow`]), and
 //! the objective (the torques relative to their limits, least squares).
 
 use std::collections::BTreeMap;
@@ -8,6 +9,7 @@ use nalgebra::{DMatrix, DVector, Isometry3, Vector3, Vector6};
 use protocol::conventions::GRAVITY_VECTOR;
 use protocol::{DynamicsTerms, RobotDescription};
 
+use super::limits::{Limit, LimitRow, Place};
 use super::report::CapacityError;
 use crate::building_blocks::contact_margins::ContactMargins;
 use crate::building_blocks::contacts::contact_list;
@@ -21,49 +23,6 @@ pub const REST_SPEED: f64 = 1e-9;
 
 /// Weight of the least-squares regularisation of `lambda` in the objective, per N^2.
 const LAMBDA_REGULARISATION: f64 = 1e-9;
-
-/// Where a limit acts: a joint or a contact frame of a robot.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Place {
-    Joint(String),
-    Contact(String),
-}
-
-/// Which limit a row is.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Limit {
-    /// `tau <= tau_max` (`upper`) or `-tau <= tau_max`, Nm.
-    Torque { upper: bool, max: f64 },
-    /// Tangential force along the contact's `x` or `y` axis (`+` or `-`) within `mu f_n`, N.
-    Friction { axis: char, positive: bool },
-    /// Normal force at least `f_min`, N.
-    MinNormal { f_min: f64 },
-    /// A hand's sliding and torsional friction together, `s_x t_x.f / mu + s_y t_y.f / mu +
-    /// s_z n.m / xi <= f_n` (`x`, `y`, `torsion`: the signs `s` are `+`), in N of `mu f_n`.
-    FrictionAndTorsion { x: bool, y: bool, torsion: bool },
-    /// Centre of pressure within the palm patch along `axis` (the tilt moment), Nm.
-    CentreOfPressure { axis: char, positive: bool },
-}
-
-impl Limit {
-    /// The unit of the row's excess.
-    pub fn unit(&self) -> &'static str {
-        match self {
-            Limit::Friction { .. } | Limit::FrictionAndTorsion { .. } | Limit::MinNormal { .. } => {
-                "N"
-            }
-            _ => "Nm",
-        }
-    }
-}
-
-/// A named limit row of `A lambda <= b`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LimitRow {
-    pub robot: String,
-    pub place: Place,
-    pub limit: Limit,
-}
 
 /// The names of [`contact_rows`]' rows, in its order.
 fn contact_limits(kind: &ContactKind) -> Vec<Limit> {

@@ -4,7 +4,7 @@
 
 use std::fmt;
 
-use super::problem::{Limit, Place};
+use super::limits::{Limit, Place};
 use crate::ControllerError;
 
 /// Binding limits shown in an error message (all are in [`CapacityError::Infeasible`]).

@@ -9,7 +9,8 @@ use clarabel::solver::{
 };
 use nalgebra::{DMatrix, DVector};
 
-use super::problem::{Limit, StaticProblem};
+use super::limits::Limit;
+use super::problem::StaticProblem;
 use super::report::{BindingLimit, CapacityError};
 use crate::qp::to_csc;
 

@@ -3,12 +3,12 @@
 //! slice ([`torque_commands_into`]) and the diagnostics' shared part ([`diagnostics_into`]:
 //! the real contact wrenches, the solver's figures, the object estimate, the fallback taken).
 
-use nalgebra::DVector;
+use nalgebra::{DVector, UnitQuaternion};
+use protocol::conventions::quat_to_wxyz;
 use protocol::{ContactWrench, DynamicsTerms, Header, QpStatus, TickDiagnostics, TorqueCommand};
 
 use crate::building_blocks::grasp::GraspTerms;
 use crate::building_blocks::messages::{set_header, set_note, set_string};
-use crate::linalg::quat_wxyz;
 use crate::team::{RobotBlock, Team};
 
 /// Each robot's torque command into `out`, its torques written by `slice` (which extends the
@@ -73,7 +73,9 @@ pub fn diagnostics_into(o: &TickOutputs, tick: &[DynamicsTerms], d: &mut TickDia
     d.constraint_residual = if o.residual.is_finite() { o.residual } else { f64::MAX };
     d.object_estimate = o.grasp.map(|g| protocol::Pose {
         position: g.object.translation.vector.into(),
-        orientation: quat_wxyz(&g.object.rotation.to_rotation_matrix()),
+        orientation: quat_to_wxyz(&UnitQuaternion::from_rotation_matrix(
+            &g.object.rotation.to_rotation_matrix(),
+        )),
     });
     d.grasp_slip = o.grasp.map_or(0.0, |g| g.fit_residual);
     set_note(&mut d.fallback, o.note);

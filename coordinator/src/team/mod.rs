@@ -17,7 +17,9 @@ pub mod prediction;
 use nalgebra::{DMatrix, DVector, Rotation3, Vector3, Vector6};
 use protocol::{DynamicsTerms, FrameRole, FrameTerms, RobotDescription};
 
-use crate::linalg::{rotation_from_row_major, zeros, zeros_v};
+use protocol::conventions::rotation_from_row_major;
+
+use crate::linalg::{zeros, zeros_v};
 use crate::ControllerError;
 
 /// One robot's block in the team vectors.

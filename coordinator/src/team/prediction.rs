@@ -41,7 +41,9 @@ use std::collections::BTreeMap;
 use nalgebra::{Rotation3, Vector3};
 use protocol::{DynamicsTerms, MAX_TEAM_DELAY_TICKS};
 
-use crate::linalg::{dot, rotation_from_row_major};
+use protocol::conventions::rotation_from_row_major;
+
+use crate::linalg::dot;
 use crate::TeamController;
 
 /// Solved ticks kept per robot: enough to find the command applying at every tick of the
