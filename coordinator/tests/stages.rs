@@ -282,6 +282,94 @@ fn grasp_tracker_captures_the_object_at_the_hands_centroid_or_where_told() {
     assert!(terms_out.is_none());
 }
 
+/// The robots' measured object, as `protocol::Pose`.
+fn measured(at: &Isometry3<f64>) -> protocol::Pose {
+    let q = at.rotation;
+    protocol::Pose { position: at.translation.vector.into(), orientation: [q.w, q.i, q.j, q.k] }
+}
+
+#[test]
+fn a_grasp_that_slid_on_the_measured_object_is_refitted_to_it() {
+    let mut fx = Fixture::new();
+    let (mut terms, _) = fx.static_team(2);
+    let at = Isometry3::from_parts(
+        Translation3::new(0.0, 0.02, 0.61),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, 0.05),
+    );
+    let mut team = Team::default();
+    let mut tracker = GraspTracker::default();
+    let mut out: Option<GraspTerms> = None;
+    let mut tick_at = |object: Isometry3<f64>, tracker: &mut GraspTracker| {
+        terms.iter_mut().for_each(|t| t.object_pose = Some(measured(&object)));
+        team.assemble_into(&terms, None, false).expect("team");
+        let measured = team.object_measured.expect("the robots measure the object");
+        assert!((measured.translation.vector - object.translation.vector).amax() < 1e-12);
+        tracker.update_refitting(&team, (Some(at), &[]), 5e-4, &mut out).expect("grasp");
+        out.clone().expect("grasp terms")
+    };
+    // The grasp closes with the object where the robots measure it.
+    let g = tick_at(at, &mut tracker);
+    assert_eq!(g.refits, 0);
+    assert!((g.object.translation.vector - at.translation.vector).amax() < 1e-12);
+    // The object sinks 0.3 mm between the palms: within the re-fit distance the model stays.
+    let sunk = |m: f64| {
+        Isometry3::from_parts(
+            Translation3::from(at.translation.vector - Vector3::z() * m),
+            at.rotation,
+        )
+    };
+    let g = tick_at(sunk(0.3e-3), &mut tracker);
+    assert_eq!(g.refits, 0);
+    assert!((g.object.translation.vector - at.translation.vector).amax() < 1e-12);
+    assert_eq!(g.slip_since_closed, 0.0);
+    // 2 mm: the hands have slid on the object; the model follows the measured object.
+    let low = sunk(2e-3);
+    let g = tick_at(low, &mut tracker);
+    assert_eq!(g.refits, 1);
+    assert!((g.object.translation.vector - low.translation.vector).amax() < 1e-9);
+    assert!(g.object.rotation.angle_to(&low.rotation) < 1e-9);
+    assert!(g.fit_residual < 1e-9, "the hands agree with the re-fitted model");
+    assert!((g.slip_since_closed - 2e-3).abs() < 1e-9, "{}", g.slip_since_closed);
+    // Without the measurement the model stays where it was re-fitted.
+    terms.iter_mut().for_each(|t| t.object_pose = None);
+    team.assemble_into(&terms, None, false).expect("team");
+    assert!(team.object_measured.is_none());
+    tracker.update_refitting(&team, (Some(at), &[]), 5e-4, &mut out).expect("grasp");
+    let g = out.expect("grasp terms");
+    assert_eq!(g.refits, 1);
+    assert!((g.object.translation.vector - low.translation.vector).amax() < 1e-9);
+}
+
+#[test]
+fn the_team_measures_the_object_as_the_mean_of_its_robots_measurements() {
+    let mut fx = Fixture::new();
+    let (mut terms, _) = fx.static_team(2);
+    let a = Isometry3::from_parts(
+        Translation3::new(0.0, 0.0, 0.60),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, 0.10),
+    );
+    let b = Isometry3::from_parts(
+        Translation3::new(0.0, 0.002, 0.60),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, 0.12),
+    );
+    terms[0].object_pose = Some(measured(&a));
+    // The same rotation as the other hemisphere's quaternion.
+    let mut mb = measured(&b);
+    mb.orientation.iter_mut().for_each(|x| *x = -*x);
+    terms[1].object_pose = Some(mb);
+    let mut team = Team::default();
+    team.assemble_into(&terms, None, false).expect("team");
+    let m = team.object_measured.expect("measured");
+    assert!((m.translation.vector - Vector3::new(0.0, 0.001, 0.60)).amax() < 1e-12);
+    let (_, _, yaw) = m.rotation.euler_angles();
+    assert!((yaw - 0.11).abs() < 1e-6, "yaw {yaw}");
+    // A robot whose hand is not in grasp does not count.
+    terms[1].hand_in_grasp = false;
+    team.assemble_into(&terms, None, false).expect("team");
+    let m = team.object_measured.expect("measured");
+    assert!((m.translation.vector - a.translation.vector).amax() < 1e-12);
+}
+
 #[test]
 fn a_tracker_started_mid_carry_fits_the_object_from_the_planned_grasp() {
     // The plan: the object at `at` with the hands where the fixture stands them.

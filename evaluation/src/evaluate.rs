@@ -1,6 +1,8 @@
 //! From a run's records to the report: every measure of success (`metrics.json`; see
 //! `docs/scenarios.md`), the time series (`timeseries.csv`, `torques.csv`) and the
-//! acceptance checks of the team demo. Measured values come from the ground truth only.
+//! acceptance checks of the team demo. Measured values come from the ground truth only. A run
+//! that ended in an error is measured over the ticks it saw, the error named in the report
+//! ([`evaluate_failed`]).
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -110,6 +112,9 @@ impl YieldReport {
 pub struct Metrics {
     pub scenario: String,
     pub mode: String,
+    /// The error the run ended in (`None`: it ran to its end). A run with one is measured over
+    /// the ticks it saw and never passes.
+    pub error: Option<String>,
     pub duration_s: f64,
     pub control_hz: f64,
     pub physics_hz: f64,
@@ -123,6 +128,9 @@ pub struct Metrics {
     /// The gains the agents sent with their drive commands (`none`, `inertia`).
     pub drive_gains: String,
     pub samples: usize,
+    /// Ticks the run saw (ground truth, settling included), of the ticks it planned.
+    pub ticks_seen: u64,
+    pub ticks_planned: u64,
     pub object: Tracking,
     pub torsos: BTreeMap<String, Tracking>,
     pub drop: DropReport,
@@ -141,6 +149,12 @@ pub struct Metrics {
     pub motion_yield: Option<YieldReport>,
     /// Largest residual of the controller's object-pose fit (its own slip signal), m.
     pub grasp_fit_residual_max_m: f64,
+    /// How often the controller re-fitted its grasp model to the measured object, and the
+    /// largest distance a hand's contact moved on the object since the grasp closed, m.
+    pub grasp_refits: u64,
+    pub grasp_slip_since_closed_max_m: f64,
+    /// Why and at which tick the team let go of the object (the coordinator's note), if it did.
+    pub release: Option<String>,
     pub qp_iterations: Percentiles,
     pub qp_solve_us: Percentiles,
     pub controller_tick_us: Percentiles,
@@ -183,18 +197,52 @@ pub struct Evaluation {
 
 /// Evaluate the records of a run of `plan`.
 pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
+    evaluate_with(plan, records, mode, None)
+}
+
+/// Evaluate the records of a run of `plan` that ended in `error` after the ticks it saw: every
+/// measure over those ticks (a walk judged up to the last sample, the real-time factor over
+/// the scenario time seen), the error in the metrics and as a failed check. It never passes.
+pub fn evaluate_failed(plan: &Plan, records: &Records, mode: &str, error: &str) -> Evaluation {
+    evaluate_with(plan, records, mode, Some(error))
+}
+
+/// [`evaluate`], or [`evaluate_failed`] with an `error`.
+fn evaluate_with(plan: &Plan, records: &Records, mode: &str, error: Option<&str>) -> Evaluation {
     let refs = references_sent(plan, records);
-    let run =
-        RunView { plan, refs: &refs, robots: plan.robots.iter().map(|r| r.id.clone()).collect() };
+    let robots = plan.robots.iter().map(|r| r.id.clone()).collect();
+    let run = RunView { plan, refs: &refs, robots, mode };
     let truth: Vec<&GroundTruth> = records.truth.iter().filter(|g| g.object.is_some()).collect();
     let every = refs.clock.ticks_per_sample(SERIES_HZ) as usize;
     let pass = TruthPass::over(&run, &truth, every);
     let (torque_rms, torques) = torque_series(plan, records, &refs, every);
+    // A failed run is judged up to its last sample (scenario time; 0 without one).
+    let until = error.map(|_| records.truth.last().map_or(0.0, |g| g.time));
+    let mut metrics = measures(&run, records, &truth, &pass, torque_rms, until);
+    metrics.error = error.map(str::to_string);
+    metrics.checks = acceptance(&run, &metrics);
+    metrics.passed = metrics.checks.iter().all(|c| c.passed);
+    Evaluation { metrics, series: pass.series, torques }
+}
+
+/// Every measure of the run (no error, no checks yet), from the pass over the ground truth,
+/// the torques' RMS and the records; a run judged `until` a scenario time ended there.
+fn measures(
+    run: &RunView,
+    records: &Records,
+    truth: &[&GroundTruth],
+    pass: &TruthPass,
+    torque_rms: BTreeMap<String, Vec<(String, f64)>>,
+    until: Option<f64>,
+) -> Metrics {
+    let (plan, refs) = (run.plan, run.refs);
     let n = truth.len().max(1) as f64;
-    let sim = refs.clock.scenario_duration();
-    let mut metrics = Metrics {
+    let sim = until.unwrap_or_else(|| refs.clock.scenario_duration());
+    let walk = refs.walk.as_ref();
+    Metrics {
         scenario: plan.scenario.name.clone(),
-        mode: mode.to_string(),
+        mode: run.mode.to_string(),
+        error: None,
         duration_s: plan.scenario.duration,
         control_hz: plan.scenario.control_hz,
         physics_hz: plan.scenario.physics_hz,
@@ -203,18 +251,13 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
         team_delay_auto: plan.scenario.team_delay_ticks.adapts(),
         drive_gains: plan.scenario.drive_gains.to_string(),
         samples: truth.len(),
+        ticks_seen: records.ticks_seen,
+        ticks_planned: plan.total_ticks(),
         object: tracking(&pass.obj_pos_err, &pass.obj_ang_err),
         torsos: per_robot(&run.robots, |i| {
             tracking(&pass.torso_pos_err[i], &pass.torso_ang_err[i])
         }),
-        drop: metrics::detect_drop(
-            &pass.times,
-            &pass.object_z,
-            refs.object_start.0.z,
-            &pass.hand_contact,
-            0.05,
-            0.10,
-        ),
+        drop: pass.drop(refs.object_start.0.z),
         slip_m: per_robot(&run.robots, |i| metrics::slip(&pass.palm_in_object[i])),
         mean_squeeze_n: per_robot(&run.robots, |i| pass.squeeze_sum[i] / n),
         torque_rms,
@@ -222,23 +265,23 @@ pub fn evaluate(plan: &Plan, records: &Records, mode: &str) -> Evaluation {
         fallback_ticks: fallback_counts(records),
         motion_yield: YieldReport::of(records),
         grasp_fit_residual_max_m: grasp_fit_residual_max(records),
+        grasp_refits: records.diagnostics.iter().map(|d| d.grasp_refits).max().unwrap_or(0),
+        grasp_slip_since_closed_max_m: grasp_slip_since_closed_max(records),
+        release: release_note(records),
         qp_iterations: diagnostics_percentiles(records, |d| d.qp_iterations as f64),
         qp_solve_us: diagnostics_percentiles(records, |d| d.qp_solve_us),
         controller_tick_us: diagnostics_percentiles(records, |d| d.total_us),
         coordinator_deadline_misses: records.last_status.as_ref().map(|s| s.deadline_misses),
         loop_timing: crate::loop_timing::LoopReport::from_truth(&records.truth),
         coordinator_fallbacks: records.last_status.as_ref().map(|s| s.fallbacks),
-        recoveries: recoveries(&run, &pass),
-        walk: refs.walk.as_ref().map(|w| crate::walking::evaluate(w, &truth, refs.walk_halted_at)),
+        recoveries: recoveries(run, pass),
+        walk: walk.map(|w| crate::walking::evaluate(w, truth, refs.walk_halted_at, until)),
         settle_wall_s: records.settle_wall.as_secs_f64(),
         run_wall_s: records.run_wall.as_secs_f64(),
         real_time_factor: real_time_factor(sim, records.run_wall),
         checks: Vec::new(),
         passed: false,
-    };
-    metrics.checks = acceptance(&run, &metrics);
-    metrics.passed = metrics.checks.iter().all(|c| c.passed);
-    Evaluation { metrics, series: pass.series, torques }
+    }
 }
 
 /// The team's delay, robot ticks: the scenario's, or with `auto` the longest any agent came to.
@@ -263,6 +306,16 @@ fn diagnostics_percentiles(
 }
 
 /// Largest residual of the controller's object-pose fit over the run, m.
+/// The coordinator's note on the tick it let go of the object: its tick and its cause.
+fn release_note(records: &Records) -> Option<String> {
+    let notes = records.diagnostics.iter().filter_map(|d| d.fallback.as_deref());
+    notes.into_iter().find(|f| f.starts_with("grasp released at tick")).map(str::to_string)
+}
+
+fn grasp_slip_since_closed_max(records: &Records) -> f64 {
+    records.diagnostics.iter().map(|d| d.grasp_slip_since_closed).fold(0.0, f64::max)
+}
+
 fn grasp_fit_residual_max(records: &Records) -> f64 {
     records.diagnostics.iter().map(|d| d.grasp_slip).fold(0.0, f64::max)
 }
@@ -285,11 +338,13 @@ fn references_sent(plan: &Plan, records: &Records) -> ReferencePlan {
     halted
 }
 
-/// The run being evaluated: its plan, the references it sent and its robots' ids.
+/// The run being evaluated: its plan, the references it sent, its robots' ids and its mode's
+/// name.
 struct RunView<'a> {
     plan: &'a Plan,
     refs: &'a ReferencePlan,
     robots: Vec<String>,
+    mode: &'a str,
 }
 
 impl RunView<'_> {
@@ -375,6 +430,12 @@ impl TruthPass {
             }
         }
         pass
+    }
+
+    /// Whether and when the object was dropped ([`metrics::detect_drop`]: a hand without
+    /// contact for 50 ms, or the object 10 cm below `z0`, its start height).
+    fn drop(&self, z0: f64) -> DropReport {
+        metrics::detect_drop(&self.times, &self.object_z, z0, &self.hand_contact, 0.05, 0.10)
     }
 
     /// The object's reference and measured pose (rotations as rotation vectors from the start
@@ -596,6 +657,9 @@ fn acceptance(run: &RunView, m: &Metrics) -> Vec<Check> {
     let mut check = |name: String, value: f64, bound: f64| {
         checks.push(Check { passed: value < bound, name, value, bound })
     };
+    if let Some(e) = &m.error {
+        check(format!("run ended without an error (1 = it ended in one: {e})"), 1.0, 0.5);
+    }
     check("object never dropped (1 = dropped)".into(), if m.drop.dropped { 1.0 } else { 0.0 }, 0.5);
     for (r, s) in m.slip_m.iter().filter(|(r, _)| !run.faulted(r)) {
         check(format!("{r} palm slip [m]"), *s, MAX_SLIP);
@@ -647,6 +711,13 @@ pub fn write_report(_plan: &Plan, eval: &Evaluation, dir: &Path) -> Result<(), R
 /// A short human summary of the metrics.
 pub fn summary(m: &Metrics, dir: &Path) -> String {
     let mut s = summary_heading(m);
+    if let Some(e) = &m.error {
+        s.push_str(&format!(
+            "  RUN FAILED after {} of {} ticks (settling included): {e}; the measures are over \
+             the ticks it saw\n",
+            m.ticks_seen, m.ticks_planned
+        ));
+    }
     push_tracking_lines(&mut s, m);
     s.push_str(&format!(
         "  QP: {:?}, solve p50 {:.0} us p99 {:.0} us; controller tick p50 {:.0} us \
@@ -665,9 +736,15 @@ pub fn summary(m: &Metrics, dir: &Path) -> String {
         s.push_str(&y.summary());
     }
     s.push_str(&format!(
-        "  controller's grasp-fit residual: max {:.3} mm\n",
-        m.grasp_fit_residual_max_m * 1e3
+        "  controller's grasp-fit residual: max {:.3} mm; {} re-fits to the measured object, \
+         a hand moved at most {:.3} mm on it\n",
+        m.grasp_fit_residual_max_m * 1e3,
+        m.grasp_refits,
+        m.grasp_slip_since_closed_max_m * 1e3
     ));
+    if let Some(r) = &m.release {
+        s.push_str(&format!("  {r}\n"));
+    }
     for r in &m.recoveries {
         if let Some(e) = r.object_error_after_m {
             s.push_str(&format!(
@@ -868,6 +945,56 @@ mod tests {
             serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap())
                 .unwrap();
         assert_eq!(json["passed"], false);
+        assert!(json["error"].is_null(), "a run that ran to its end has no error: {json}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A run that ended in an error 40 % into its ticks: measured over the ticks it saw
+    /// without a panic, the error in the metrics, the summary, a failed check and the report;
+    /// the same ticks with no error pass. With no scenario tick at all (failed while
+    /// settling) it still evaluates and reports.
+    #[test]
+    fn a_run_that_ended_in_an_error_is_measured_over_its_ticks_and_fails() {
+        let plan = s4_plan();
+        let mut rec = records(&plan, |_| 0.0, |_| true);
+        let seen = plan.total_ticks() * 2 / 5;
+        rec.truth.truncate(seen as usize);
+        rec.ticks_seen = seen;
+        let error = "robot r1's agent left the team at tick 400";
+        let eval = evaluate_failed(&plan, &rec, "embedded", error);
+        let m = &eval.metrics;
+        assert_eq!(m.error.as_deref(), Some(error));
+        assert!(!m.passed);
+        assert_eq!((m.ticks_seen, m.ticks_planned), (seen, plan.total_ticks()));
+        assert_eq!(m.samples, seen as usize);
+        assert!(m.object.position_rms_m < 1e-12 && !m.drop.dropped, "tracked while it ran");
+        let failed: Vec<&Check> = m.checks.iter().filter(|c| !c.passed).collect();
+        assert!(failed.len() == 1 && failed[0].name.contains(error), "{failed:?}");
+        let dir = std::env::temp_dir().join(format!("evaluate-failed-{}", std::process::id()));
+        let text = summary(m, &dir);
+        assert!(text.contains("RUN FAILED") && text.contains(error), "{text}");
+        assert!(text.contains(&format!("after {seen} of {} ticks", plan.total_ticks())), "{text}");
+        let completed = evaluate(&plan, &rec, "embedded").metrics;
+        assert!(completed.passed && completed.error.is_none(), "{:?}", completed.checks);
+
+        std::fs::create_dir_all(&dir).unwrap();
+        write_report(&plan, &eval, &dir).unwrap();
+        crate::plots::write_all(&plan, &eval, &rec, &dir).unwrap();
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap())
+                .unwrap();
+        assert_eq!((json["error"].as_str(), json["passed"].as_bool()), (Some(error), Some(false)));
+        assert_eq!(json["ticks_seen"].as_u64(), Some(seen));
+        let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+        assert!(html.contains("ended in an error") && html.contains("agent left the team"));
+
+        let nothing = Records { ticks_seen: 3, ..Default::default() };
+        let empty = evaluate_failed(&plan, &nothing, "embedded", error);
+        let m = &empty.metrics;
+        assert!(!m.passed && m.samples == 0 && m.real_time_factor == 0.0, "{m:?}");
+        assert!(m.object.position_rms_m == 0.0 && !m.drop.dropped);
+        write_report(&plan, &empty, &dir).unwrap();
+        crate::plots::write_all(&plan, &empty, &nothing, &dir).unwrap();
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

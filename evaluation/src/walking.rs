@@ -220,11 +220,19 @@ fn stance_lift(
 }
 
 /// The walk's report from the run's ground truth (scenario samples, in time order), for a
-/// walk halted at `halted_at` (s) if the team let go.
-pub fn evaluate(walk: &Walk, truth: &[&GroundTruth], halted_at: Option<f64>) -> WalkReport {
+/// walk halted at `halted_at` (s) if the team let go, judged `until` the run's end (s) if it
+/// ended early (an error): the steps planned are then those that landed by then, and each
+/// torso's goal its planned pose then.
+pub fn evaluate(
+    walk: &Walk,
+    truth: &[&GroundTruth],
+    halted_at: Option<f64>,
+    until: Option<f64>,
+) -> WalkReport {
     let times: Vec<f64> = truth.iter().map(|g| g.time).collect();
-    let end = halted_at.unwrap_or(f64::INFINITY);
-    let planned: Vec<&Step> = walk.gait.steps().iter().filter(|s| s.liftoff < end).collect();
+    let (end, landed_by) = (halted_at.unwrap_or(f64::INFINITY), until.unwrap_or(f64::INFINITY));
+    let planned: Vec<&Step> =
+        walk.gait.steps().iter().filter(|s| s.liftoff < end && s.touchdown <= landed_by).collect();
     let least_margin_m = planned.iter().map(|s| s.margin).fold(f64::INFINITY, f64::min);
     let mut rep = WalkReport {
         touchdown_offset_ms: [f64::INFINITY, f64::NEG_INFINITY],
@@ -254,23 +262,13 @@ pub fn evaluate(walk: &Walk, truth: &[&GroundTruth], halted_at: Option<f64>) -> 
             rep.stance_lift_ms
                 .insert(id.clone(), 1e3 * stance_lift(walk, truth, &times, i, &planned));
         }
-        for s in planned.iter().filter(|s| s.robot == i) {
-            let track = foot_track(
-                truth,
-                id,
-                &walk.feet[i][s.foot],
-                &walk.foot_links[i][s.foot],
-                walk.foot_radius[i],
-            );
-            if let Some(dt) = first_contact_after(&times, &track.contact, s.liftoff)
-                .map(|t| 1e3 * (t - s.touchdown))
-            {
-                let o = &mut rep.touchdown_offset_ms;
-                (o[0], o[1]) = (o[0].min(dt), o[1].max(dt));
-            }
+        for dt in touchdown_offsets(walk, truth, &times, i, &planned) {
+            let o = &mut rep.touchdown_offset_ms;
+            (o[0], o[1]) = (o[0].min(dt), o[1].max(dt));
         }
         rep.stance_slide_m.insert(id.clone(), slide);
-        if let Some((m, deg)) = final_torso_error(walk, truth, i, halted_at) {
+        let goal_at = halted_at.into_iter().chain(until).reduce(f64::min);
+        if let Some((m, deg)) = final_torso_error(walk, truth, i, goal_at) {
             rep.final_torso_m.insert(id.clone(), m);
             rep.final_torso_deg.insert(id.clone(), deg);
         }
@@ -278,18 +276,40 @@ pub fn evaluate(walk: &Walk, truth: &[&GroundTruth], halted_at: Option<f64>) -> 
     rep
 }
 
+/// Each landing of robot `i`'s `planned` steps: its first ground contact minus its planned
+/// touchdown, ms (steps that never landed are left out).
+fn touchdown_offsets(
+    walk: &Walk,
+    truth: &[&GroundTruth],
+    times: &[f64],
+    i: usize,
+    planned: &[&Step],
+) -> Vec<f64> {
+    let id = &walk.robots[i];
+    planned
+        .iter()
+        .filter(|s| s.robot == i)
+        .filter_map(|s| {
+            let (frame, link) = (&walk.feet[i][s.foot], &walk.foot_links[i][s.foot]);
+            let track = foot_track(truth, id, frame, link, walk.foot_radius[i]);
+            first_contact_after(times, &track.contact, s.liftoff).map(|t| 1e3 * (t - s.touchdown))
+        })
+        .collect()
+}
+
 /// Walking robot `i`'s torso at the end of the run against its goal (the gait's final pose,
-/// or its pose where the walk halted): position error, m, and angle error, deg.
+/// or its pose at `goal_at`, where the walk halted or the run ended early): position error,
+/// m, and angle error, deg.
 fn final_torso_error(
     walk: &Walk,
     truth: &[&GroundTruth],
     i: usize,
-    halted_at: Option<f64>,
+    goal_at: Option<f64>,
 ) -> Option<(f64, f64)> {
     let id = &walk.robots[i];
     let last = truth.last().and_then(|g| g.torsos.iter().find(|b| &b.name == id));
     let (true, Some(b)) = (walk.walking[i], last) else { return None };
-    let goal = halted_at.map_or(walk.gait.final_torso(i), |t| walk.gait.torso(i, t).0);
+    let goal = goal_at.map_or(walk.gait.final_torso(i), |t| walk.gait.torso(i, t).0);
     let at = Isometry3::from_parts(
         Translation3::from(Vector3::from(b.pose.position)),
         protocol::conventions::quat_from_wxyz(b.pose.orientation),

@@ -334,23 +334,39 @@ impl Driver {
     }
 
     /// Run until the ground truth of the last tick arrived, or `stop` turns true. The first
-    /// window of references went out before ([`Driver::send_first_window`]).
-    pub async fn run(mut self, mut stop: watch::Receiver<bool>) -> Result<Records, TransportError> {
+    /// window of references went out before ([`Driver::send_first_window`]). What it recorded,
+    /// and the error that ended it early if one did (the records of the ticks seen are kept
+    /// either way).
+    pub async fn run(
+        mut self,
+        mut stop: watch::Receiver<bool>,
+    ) -> (Records, Result<(), TransportError>) {
         let mut st = RunState::new(self.plan.clock.settle_ticks, self.lookahead.min(self.total));
+        let driven = self.drive(&mut st, &mut stop).await;
+        (self.finish(st).await, driven)
+    }
+
+    /// The run's loop: every sample heard, until the last tick's ground truth, `stop`, a
+    /// queue that closed, or a publisher's error.
+    async fn drive(
+        &mut self,
+        st: &mut RunState,
+        stop: &mut watch::Receiver<bool>,
+    ) -> Result<(), TransportError> {
         loop {
             tokio::select! {
                 _ = stop.changed() => { if *stop.borrow() { break; } }
                 c = self.coordinator.recv_async() => {
                     let Ok(sample) = c else { break };
-                    self.on_coordinator(&mut st, &sample).await?;
+                    self.on_coordinator(st, &sample).await?;
                 }
                 s = self.status.recv_async() => {
                     let Ok(sample) = s else { break };
-                    self.on_status(&mut st, &sample).await?;
+                    self.on_status(st, &sample).await?;
                 }
                 s = self.truth.recv_async() => {
                     let Ok(sample) = s else { break };
-                    if self.on_truth(&mut st, &sample).await? {
+                    if self.on_truth(st, &sample).await? {
                         break;
                     }
                 }
@@ -368,7 +384,7 @@ impl Driver {
                 }
             }
         }
-        self.finish(st).await
+        Ok(())
     }
 
     /// The coordinator's liveliness changed: one that comes back after it was seen to go is a
@@ -472,7 +488,7 @@ impl Driver {
 
     /// After the loop: the torques the bridge took that the driver still lacks, whatever else
     /// already arrived, the wall time.
-    async fn finish(mut self, st: RunState) -> Result<Records, TransportError> {
+    async fn finish(mut self, st: RunState) -> Records {
         let RunState { mut rec, settle, run_started, .. } = st;
         self.await_applied_torques(&mut rec, settle).await;
         // Whatever else already arrived (torques and diagnostics of the last ticks).
@@ -487,7 +503,7 @@ impl Driver {
         }
         rec.run_wall = run_started.map(|s| s.elapsed()).unwrap_or_default();
         self.progress.finish_and_clear();
-        Ok(rec)
+        rec
     }
 }
 

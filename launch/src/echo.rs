@@ -122,6 +122,7 @@ mod tests {
             joint_velocities: vec![0.0],
             time: 0.005,
             foot_forces: Vec::new(),
+            object_pose: None,
         };
         let v = line(
             "team/t/robot/r1/state",

@@ -13,7 +13,8 @@ use thiserror::Error;
 use crate::driver::Driver;
 use crate::hosts::TestHosts;
 use crate::launcher::{
-    AgentArgs, AgentModel, BridgeArgs, CoordinatorArgs, Launch, LaunchError, RunMode, Running,
+    AgentArgs, AgentModel, BridgeArgs, BridgeOutcome, CoordinatorArgs, Launch, LaunchError,
+    RunMode, Running,
 };
 use crate::record::{self, RecordError, RecordOptions, Recorder, RecordingSummary, RunFacts};
 use evaluation::records::Records;
@@ -79,6 +80,60 @@ pub enum RunError {
     Task { what: String, reason: String },
     #[error(transparent)]
     Record(#[from] RecordError),
+}
+
+/// A run that ended in an error, with what its driver recorded until then: a failed run's
+/// ticks can still be evaluated and reported. Its message is the error's.
+pub struct FailedRun {
+    pub error: RunError,
+    /// The records of the ticks seen (`None`: the run failed before a tick was seen).
+    pub records: Option<Box<Records>>,
+    /// The run's recording, closed after the error (`None` without one, or if it could not be
+    /// closed).
+    pub recording: Option<Box<RecordingSummary>>,
+}
+
+impl FailedRun {
+    /// `error` after the ticks in `records`, kept if a tick was seen.
+    fn after(error: RunError, records: Option<Records>) -> FailedRun {
+        let records = records.filter(|r| r.ticks_seen > 0).map(Box::new);
+        FailedRun { error, records, recording: None }
+    }
+
+    /// The error alone, for a caller that only wants to know why.
+    pub fn into_error(self) -> RunError {
+        self.error
+    }
+}
+
+impl std::fmt::Debug for FailedRun {
+    /// The error and how many ticks the records hold, not the records (a run's samples).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FailedRun")
+            .field("error", &self.error)
+            .field("ticks_seen", &self.records.as_ref().map(|r| r.ticks_seen))
+            .field("recording", &self.recording)
+            .finish()
+    }
+}
+
+impl std::fmt::Display for FailedRun {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        std::fmt::Display::fmt(&self.error, f)
+    }
+}
+
+impl std::error::Error for FailedRun {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        self.error.source()
+    }
+}
+
+impl From<RunError> for FailedRun {
+    /// A run that failed before a tick was seen.
+    fn from(error: RunError) -> FailedRun {
+        FailedRun { error, records: None, recording: None }
+    }
 }
 
 /// How to run.
@@ -208,18 +263,19 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
 }
 
 /// Run the plan; `out` is the report folder (the distributed run writes its component files
-/// there).
+/// there). A failed run's error only ([`run_recorded`] keeps its records).
 pub fn run(plan: &Plan, opts: &RunOptions, out: &Path) -> Result<Records, RunError> {
-    run_recorded(plan, opts, out, None).map(|(records, _)| records)
+    run_recorded(plan, opts, out, None).map(|(records, _)| records).map_err(FailedRun::into_error)
 }
 
-/// [`run`], recording the run as MCAP (and serving it live) when `record` is given.
+/// [`run`], recording the run as MCAP (and serving it live) when `record` is given. A run that
+/// fails after ticks were seen returns their records with the error ([`FailedRun`]).
 pub fn run_recorded(
     plan: &Plan,
     opts: &RunOptions,
     out: &Path,
     record: Option<&RecordOptions>,
-) -> Result<(Records, Option<RecordingSummary>), RunError> {
+) -> Result<(Records, Option<RecordingSummary>), FailedRun> {
     run_recorded_secure(plan, opts, None, out, record)
 }
 
@@ -240,7 +296,7 @@ pub fn run_recorded_secure(
     tls: Option<&Path>,
     out: &Path,
     record: Option<&RecordOptions>,
-) -> Result<(Records, Option<RecordingSummary>), RunError> {
+) -> Result<(Records, Option<RecordingSummary>), FailedRun> {
     if let (true, Some(ca)) = (opts.hosts, tls) {
         // Before any host is made: the run's certificates need the test CA's key.
         TestHosts::check_ca(ca).map_err(|e| RunError::Task {
@@ -337,37 +393,70 @@ pub fn run_recorded_in(
     opts: &RunOptions,
     mode: &RunMode,
     record: Option<&RecordOptions>,
-) -> Result<(Records, Option<RecordingSummary>), RunError> {
+) -> Result<(Records, Option<RecordingSummary>), FailedRun> {
     let rt = tokio::runtime::Runtime::new().map_err(|e| RunError::Task {
         what: "starting the async runtime".into(),
         reason: e.to_string(),
     })?;
     let recorder = match record {
-        Some(r) => Some(rt.block_on(Recorder::start(plan, r))?),
+        Some(r) => Some(rt.block_on(Recorder::start(plan, r)).map_err(RunError::from)?),
         None => None,
     };
     if let Some(port) = recorder.as_ref().and_then(Recorder::live_port) {
         println!("live: open Foxglove and connect to ws://127.0.0.1:{port}");
     }
-    let result = rt.block_on(run_in(plan, opts, mode, recorder.as_ref()));
-    // The recording is closed whatever happened: a failed run's recording shows why.
-    let facts = |r: &Records| RunFacts {
-        mode: mode.name().to_string(),
-        settle_wall: r.settle_wall,
-        run_wall: r.run_wall,
+    let result = rt.block_on(run_in_keeping(plan, opts, mode, recorder.as_ref()));
+    let recording = close_recording(recorder, &result, mode);
+    checked(plan, result, recording)
+}
+
+/// Close the recording whatever happened (a failed run's recording shows why), with the wall
+/// times of the ticks the run saw.
+fn close_recording(
+    recorder: Option<Recorder>,
+    result: &Result<Records, FailedRun>,
+    mode: &RunMode,
+) -> Result<Option<RecordingSummary>, RecordError> {
+    let Some(rec) = recorder else { return Ok(None) };
+    let records = match result {
+        Ok(r) => Some(r),
+        Err(f) => f.records.as_deref(),
     };
-    let summary = match recorder {
-        Some(rec) => Some(rec.finish(&result.as_ref().map(facts).unwrap_or_default())?),
-        None => None,
+    let facts = records
+        .map(|r| RunFacts {
+            mode: mode.name().to_string(),
+            settle_wall: r.settle_wall,
+            run_wall: r.run_wall,
+        })
+        .unwrap_or_default();
+    rec.finish(&facts).map(Some)
+}
+
+/// The run's outcome with its recording. A run that saw fewer ticks than planned failed
+/// ([`RunError::Incomplete`]); a recording that could not be closed fails a run that did not
+/// (its records kept); a failed run's error stays its own.
+fn checked(
+    plan: &Plan,
+    result: Result<Records, FailedRun>,
+    recording: Result<Option<RecordingSummary>, RecordError>,
+) -> Result<(Records, Option<RecordingSummary>), FailedRun> {
+    let (records, recording) = match (result, recording) {
+        (Err(mut failed), recording) => {
+            if let Err(e) = &recording {
+                tracing::warn!("the failed run's recording could not be closed: {e}");
+            }
+            failed.recording = recording.ok().flatten().map(Box::new);
+            return Err(failed);
+        }
+        (Ok(records), Err(e)) => return Err(FailedRun::after(e.into(), Some(records))),
+        (Ok(records), Ok(recording)) => (records, recording),
     };
-    let records = result?;
     if records.ticks_seen < plan.total_ticks() {
-        return Err(RunError::Incomplete {
-            seen: records.ticks_seen,
-            expected: plan.total_ticks(),
-        });
+        let error = RunError::Incomplete { seen: records.ticks_seen, expected: plan.total_ticks() };
+        let recording = recording.map(Box::new);
+        return Err(FailedRun { recording, ..FailedRun::after(error, Some(records)) });
     }
-    Ok((records, summary))
+    Ok((records, recording))
 }
 
 /// Launch the team in `mode`, drive the scenario until the bridge ends it, stop everything.
@@ -378,13 +467,62 @@ pub async fn run_in(
     mode: &RunMode,
     recorder: Option<&Recorder>,
 ) -> Result<Records, RunError> {
+    run_in_keeping(plan, opts, mode, recorder).await.map_err(FailedRun::into_error)
+}
+
+/// [`run_in`], keeping what the driver recorded when the run fails after it started (the
+/// bridge, a component or the driver's own link ended it): the error comes with the records
+/// of the ticks seen.
+pub async fn run_in_keeping(
+    plan: &Plan,
+    opts: &RunOptions,
+    mode: &RunMode,
+    recorder: Option<&Recorder>,
+) -> Result<Records, FailedRun> {
     if plan.scene.realtime {
         crate::priority::raise_for_realtime();
     }
     let (launch, bridge) = launch_of(plan);
     let started = Instant::now();
-    let mut running = launch.start(mode).await?;
-    let mut driver = start_driver(plan, opts, &running).await?;
+    let mut running = launch.start(mode).await.map_err(RunError::from)?;
+    let beside = start_beside(plan, opts, &running, recorder).await?;
+    let driver_task = tokio::spawn(beside.driver.run(running.stop_signal()));
+    let bridge_result = running.run_bridge(&bridge).await;
+    // The driver ends by itself at the ground truth of the last tick (which may still be
+    // crossing a process boundary); after a failed run, or if that sample never comes, it is
+    // stopped.
+    let drain = if bridge_result.is_ok() { DRIVER_DRAIN } else { Duration::ZERO };
+    let records = join_driver(&running, driver_task, drain).await?;
+    let _ = beside.record_stop.send(true);
+    for t in beside.fault_tasks {
+        t.abort();
+    }
+    for t in beside.record_tasks {
+        let _ = t.await;
+    }
+    let finished = running.finish().await;
+    tracing::debug!(wall = ?started.elapsed(), mode = mode.name(), "run ended");
+    ended(bridge_result, finished, records)
+}
+
+/// What runs beside the bridge: the driver (its first window of references sent), the
+/// recorder's subscriptions and how to stop them, the armed faults.
+struct Beside {
+    driver: Driver,
+    record_stop: tokio::sync::watch::Sender<bool>,
+    record_tasks: Vec<JoinHandle<()>>,
+    fault_tasks: Vec<JoinHandle<()>>,
+}
+
+/// Start what runs beside the bridge on the running team; an error if the coordinator did not
+/// come within [`COORDINATOR_WAIT`].
+async fn start_beside(
+    plan: &Plan,
+    opts: &RunOptions,
+    running: &Running,
+    recorder: Option<&Recorder>,
+) -> Result<Beside, RunError> {
+    let mut driver = start_driver(plan, opts, running).await?;
     let (record_stop, record_stopped) = tokio::sync::watch::channel(false);
     let mut record_tasks = Vec::new();
     if let Some(rec) = recorder {
@@ -392,32 +530,28 @@ pub async fn run_in(
         record_tasks =
             record::subscribe(running.session(), plan.team(), &rec.tap(), &record_stopped).await?;
     }
-    let fault_tasks = arm_faults(plan, &running).await?;
+    let fault_tasks = arm_faults(plan, running).await?;
     if !driver.send_first_window(COORDINATOR_WAIT).await? {
         return Err(RunError::Task {
             what: "starting the run".into(),
             reason: format!("the coordinator did not come within {COORDINATOR_WAIT:?}"),
         });
     }
-    let driver_task = tokio::spawn(driver.run(running.stop_signal()));
-    let bridge_result = running.run_bridge(&bridge).await;
-    // The driver ends by itself at the ground truth of the last tick (which may still be
-    // crossing a process boundary); after a failed run, or if that sample never comes, it is
-    // stopped.
-    let drain = if bridge_result.is_ok() { DRIVER_DRAIN } else { Duration::ZERO };
-    let records = join_driver(&running, driver_task, drain).await?;
-    let _ = record_stop.send(true);
-    for t in fault_tasks {
-        t.abort();
+    Ok(Beside { driver, record_stop, record_tasks, fault_tasks })
+}
+
+/// The run's outcome: the driver's records, or the first error (the bridge's, a component's,
+/// then the driver's own) with the records of the ticks seen.
+fn ended(
+    bridge: Result<BridgeOutcome, LaunchError>,
+    finished: Result<(), LaunchError>,
+    (records, driven): (Records, Result<(), protocol::transport::TransportError>),
+) -> Result<Records, FailedRun> {
+    let error = bridge.err().or(finished.err()).map(RunError::from);
+    match error.or(driven.err().map(RunError::from)) {
+        None => Ok(records),
+        Some(error) => Err(FailedRun::after(error, Some(records))),
     }
-    for t in record_tasks {
-        let _ = t.await;
-    }
-    let finished = running.finish().await;
-    tracing::debug!(wall = ?started.elapsed(), mode = mode.name(), "run ended");
-    bridge_result?;
-    finished?;
-    Ok(records?)
 }
 
 /// The scenario driver on the running team's session, paced in a real-time run.

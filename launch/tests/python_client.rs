@@ -109,6 +109,8 @@ async fn a_python_client_decodes_status_and_diagnostics() {
             constraint_residual: 1e-9,
             object_estimate: None,
             grasp_slip: 0.002,
+            grasp_refits: 0,
+            grasp_slip_since_closed: 0.0,
             fallback: None,
             motion_yield: None,
         };

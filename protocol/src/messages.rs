@@ -99,6 +99,11 @@ pub struct RobotState {
     /// simulator's contact forces, or a real robot's foot sensors); empty when the robot does
     /// not measure them. The agent confirms a touchdown with it ([`ContactSet`]).
     pub foot_forces: Vec<f64>,
+    /// The held object's pose as the robot measures it (motion capture or a camera; the
+    /// simulator gives MuJoCo's), `None` when it does not. The coordinator re-fits its grasp
+    /// model to it when the palms have slid on the object.
+    #[serde(default)]
+    pub object_pose: Option<Pose>,
 }
 
 impl Validate for RobotState {
@@ -123,7 +128,7 @@ impl Validate for RobotState {
                 format!("a normal force of {f} N (it pushes, >= 0)"),
             ));
         }
-        Ok(())
+        self.object_pose.map_or(Ok(()), |p| p.check("object_pose"))
     }
 }
 
@@ -196,6 +201,10 @@ pub struct DynamicsTerms {
     /// its configured delay, or the one its measured latency needs. The coordinator sends the
     /// largest its tick's robots ask for with every command ([`TorqueCommand::delay_ticks`]).
     pub team_delay_ticks: u64,
+    /// The held object's pose measured with the state of `state_tick`
+    /// ([`RobotState::object_pose`]), `None` when the robot does not measure it.
+    #[serde(default)]
+    pub object_pose: Option<Pose>,
 }
 
 /// The longest team delay, state ticks ([`DynamicsTerms::team_delay_ticks`],
@@ -263,7 +272,8 @@ impl Validate for DynamicsTerms {
                 "hand in grasp but no hand frame sent",
             ));
         }
-        check_delay(self.team_delay_ticks)
+        check_delay(self.team_delay_ticks)?;
+        self.object_pose.map_or(Ok(()), |p| p.check("object_pose"))
     }
 }
 
@@ -716,6 +726,13 @@ pub struct TickDiagnostics {
     /// Largest distance of a hand from where the fitted object pose puts it, m (the
     /// controller's own slip signal; 0 without a grasp).
     pub grasp_slip: f64,
+    /// How often the grasp model was re-fitted to the measured object since the run began.
+    #[serde(default)]
+    pub grasp_refits: u64,
+    /// Largest distance a hand's contact point has moved on the object since the grasp closed,
+    /// m (what the re-fits followed; 0 without a grasp).
+    #[serde(default)]
+    pub grasp_slip_since_closed: f64,
     /// Why this tick's command did not come from the controller's normal path (QP failed,
     /// controller error: what was sent instead); `None` on a normal tick.
     pub fallback: Option<String>,
@@ -752,6 +769,8 @@ impl TickDiagnostics {
             constraint_residual: 0.0,
             object_estimate: None,
             grasp_slip: 0.0,
+            grasp_refits: 0,
+            grasp_slip_since_closed: 0.0,
             fallback: None,
             motion_yield: None,
         }

@@ -18,6 +18,7 @@ fn state(nj: usize) -> RobotState {
         joint_velocities: vec![0.01; nj],
         time: 0.5,
         foot_forces: Vec::new(),
+        object_pose: None,
     }
 }
 
@@ -60,6 +61,7 @@ fn dynamics(nv: usize) -> DynamicsTerms {
         hand_in_grasp: true,
         state_tick: 42,
         team_delay_ticks: 0,
+        object_pose: None,
     }
 }
 
@@ -221,8 +223,8 @@ fn foot_loads_must_bound_a_pushing_force() {
         let text = serde_json::to_string(&refs(bad)).unwrap();
         assert!(from_json::<TaskReferences>(&text).is_err(), "bound {bad} accepted");
     }
-    // An older sender without the field: no foot is being unloaded.
-    let old = r#"{"header":{"version":3,"team":"t","robot":null,"tick":3,"stamp_ns":0},"object":null,"torsos":[],"swing_feet":[]}"#;
+    // A sender that leaves the field out: no foot is being unloaded.
+    let old = r#"{"header":{"version":4,"team":"t","robot":null,"tick":3,"stamp_ns":0},"object":null,"torsos":[],"swing_feet":[]}"#;
     assert!(from_json::<TaskReferences>(old).unwrap().foot_loads.is_empty());
 }
 

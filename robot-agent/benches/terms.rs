@@ -23,6 +23,7 @@ fn bench(c: &mut Criterion) {
         joint_velocities: (0..18).map(|i| 0.1 * (i as f64).sin()).collect(),
         time: 0.0,
         foot_forces: Vec::new(),
+        object_pose: None,
     };
     let contacts = ActiveContacts::all_stance(&robot);
     let mut terms = empty_terms("bench", "r1");

@@ -609,6 +609,7 @@ impl<S: DynamicsSource> AgentCore<S> {
                 self.terms.header.tick = tick;
                 self.terms.state_tick = tick;
                 self.terms.team_delay_ticks = self.delay.ticks();
+                self.terms.object_pose = state.object_pose;
                 self.counters.dynamics += 1;
                 self.make_gains(tick);
                 true

@@ -257,5 +257,6 @@ pub fn empty_terms(team: &str, id: &str) -> DynamicsTerms {
         hand_in_grasp: false,
         state_tick: 0,
         team_delay_ticks: 0,
+        object_pose: None,
     }
 }

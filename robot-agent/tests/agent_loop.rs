@@ -41,6 +41,7 @@ fn standing_state(robot: &Robot, team: &str, tick: u64, dq0: f64, qd: f64) -> Ro
         joint_velocities: vec![qd; robot.joints()],
         time: tick as f64 * 0.005,
         foot_forces: Vec::new(),
+        object_pose: None,
     }
 }
 

@@ -92,6 +92,7 @@ fn state(tick: u64, q: [f64; 3], v: [f64; 3]) -> RobotState {
         joint_velocities: v.to_vec(),
         time: tick as f64 * 0.005,
         foot_forces: Vec::new(),
+        object_pose: None,
     }
 }
 

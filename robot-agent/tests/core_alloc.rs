@@ -49,6 +49,7 @@ fn per_tick_calls_do_not_allocate() {
         joint_velocities: vec![0.2; n],
         time: 0.0,
         foot_forces: Vec::new(),
+        object_pose: None,
     };
     let (count, applied, held) =
         ticks_allocations(PlaceholderDynamics::floating(n), state, n, DriveGainsMode::None, (1, 0));
@@ -75,6 +76,7 @@ fn the_agents_tick_on_the_robots_model_does_not_allocate() {
         joint_velocities: vec![0.01; n],
         time: 0.0,
         foot_forces: Vec::new(),
+        object_pose: None,
     };
     let (count, applied, held) = ticks_allocations(
         ModelDynamics::new(robot.clone()).unwrap(),

@@ -22,6 +22,7 @@ fn state_of(robot: &Robot, q: &DVector<f64>, v: &DVector<f64>) -> RobotState {
         joint_velocities: v.as_slice()[6..6 + n].to_vec(),
         time: 0.0,
         foot_forces: Vec::new(),
+        object_pose: None,
     }
 }
 

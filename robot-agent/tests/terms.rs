@@ -22,6 +22,7 @@ fn terms_of_the_standing_robot_are_consistent_with_the_model() {
         joint_velocities: vec![0.05; 18],
         time: 0.0,
         foot_forces: Vec::new(),
+        object_pose: None,
     };
     b.load_state(&robot, &state).unwrap();
     let mut contacts = ActiveContacts::all_stance(&robot);

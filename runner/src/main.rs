@@ -13,7 +13,7 @@ use experiments::simulated_capacity;
 use launch::echo;
 use launch::launcher::RunMode;
 use launch::record::{self, RecordOptions, ScenarioSource};
-use launch::run::{self as scenario_run, RunOptions};
+use launch::run::{self as scenario_run, FailedRun, RunOptions};
 use launch::smoke::{self, SmokeConfig};
 use scenario::file::Scenario;
 use scenario::plan::{self, repo_root};
@@ -31,7 +31,8 @@ enum Command {
     /// Run a scenario (scenarios/*.toml) with the whole stack in the loop: MuJoCo, one agent
     /// per robot, the paper's coordinator. Writes a report folder (metrics.json, CSV time
     /// series, plots, report.html, the recording run.mcap) and prints a summary; exits with an
-    /// error if an acceptance check fails.
+    /// error if an acceptance check fails. A run that fails midway is reported over the ticks
+    /// it saw (its error in the report) and exits with its error.
     Run(RunArgs),
     /// Rebuild a run's report (metrics, time series, plots, report.html) from its recording
     /// alone (the run.mcap that `team run` wrote).
@@ -412,13 +413,19 @@ fn verbosity(command: &Command) -> Verbosity {
     }
 }
 
-/// `team run`: plan, run (recorded), evaluate, report; an error if a check failed.
+/// `team run`: plan, run (recorded), evaluate, report; an error if a check failed. A run that
+/// fails after ticks were seen is evaluated and reported over them; its error is then the
+/// command's.
 fn run_scenario(a: RunArgs) -> Result<()> {
-    let opts =
-        RunOptions { distributed: a.distributed, hosts: a.hosts, progress: !a.quiet, loss: a.loss };
+    let opts = RunOptions {
+        distributed: a.distributed,
+        hosts: a.hosts,
+        progress: !a.quiet,
+        loss: a.loss.clone(),
+    };
     let mode_name = mode_name(&opts, a.router.is_some(), a.tls.is_some(), a.realtime);
     let s = Scenario::load(&a.scenario, &a.set)?;
-    let dir = a.out.unwrap_or_else(|| scenario_run::default_report_dir(&a.scenario));
+    let dir = a.out.clone().unwrap_or_else(|| scenario_run::default_report_dir(&a.scenario));
     create_dir(&dir)?;
     if !a.quiet {
         println!("{}: planning (hands placed on the object by IK)...", s.name);
@@ -436,35 +443,86 @@ fn run_scenario(a: RunArgs) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("reading {}: {e}", a.scenario.display()))?;
     let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live: a.live };
     let rec = (!a.no_record).then_some(&rec);
-    let (records, recording) = match (&a.router, &a.tls) {
-        (Some(router), Some(certs)) => {
-            let mode = RunMode::Site {
-                dir: dir.clone(),
-                certs: std::path::absolute(certs)?,
-                router: router.clone(),
-            };
-            scenario_run::run_recorded_in(&plan, &opts, &mode, rec)?
-        }
-        _ => scenario_run::run_recorded_secure(&plan, &opts, a.tls.as_deref(), &dir, rec)?,
+    let ran = run_team(&a, &plan, &opts, &dir, rec)?;
+    report_run(&plan, &ran, &mode_name, &dir, a.no_record)
+}
+
+/// The run's evaluation (over the ticks it saw if it failed), its summary and report folder;
+/// the run's error first, then whatever could not be written, then failed checks.
+fn report_run(
+    plan: &plan::Plan,
+    ran: &Ran,
+    mode_name: &str,
+    dir: &Path,
+    no_record: bool,
+) -> Result<()> {
+    let eval = match &ran.error {
+        Some(e) => evaluate::evaluate_failed(plan, &ran.records, mode_name, &e.to_string()),
+        None => evaluate::evaluate(plan, &ran.records, mode_name),
     };
-    let eval = evaluate::evaluate(&plan, &records, &mode_name);
     // Whatever could not be written is named at the end, after the run's summary.
     let mut errors = Vec::new();
-    if let Err(e) = write_report(&plan, &eval, &records, &dir) {
+    if let Err(e) = write_report(plan, &eval, &ran.records, dir) {
         errors.push(format!("the report could not be written: {e:#}"));
     }
-    if a.no_record {
+    if no_record {
         println!("  recording: none (--no-record)");
     }
-    if let Some(r) = recording {
-        errors.extend(recording_summary(&r));
+    if let Some(r) = &ran.recording {
+        errors.extend(recording_summary(r));
     }
-    if !eval.metrics.passed {
-        errors
-            .push(format!("acceptance checks failed (see {})", dir.join("metrics.json").display()));
+    match &ran.error {
+        Some(e) => errors.insert(
+            0,
+            format!(
+                "{e} (the report of the {} ticks it saw is in {})",
+                ran.records.ticks_seen,
+                dir.display()
+            ),
+        ),
+        None if !eval.metrics.passed => errors
+            .push(format!("acceptance checks failed (see {})", dir.join("metrics.json").display())),
+        None => {}
     }
     anyhow::ensure!(errors.is_empty(), "{}", errors.join("; "));
     Ok(())
+}
+
+/// How a run ended: its records, its recording, and the error it ended in after them.
+struct Ran {
+    records: evaluation::records::Records,
+    recording: Option<record::RecordingSummary>,
+    error: Option<scenario_run::RunError>,
+}
+
+/// The run in the mode `a` asks for: over a site's router, or on loopback or test hosts. A run
+/// that failed after ticks were seen comes back with its error; one that failed before any is
+/// the error.
+fn run_team(
+    a: &RunArgs,
+    plan: &plan::Plan,
+    opts: &RunOptions,
+    dir: &Path,
+    rec: Option<&RecordOptions>,
+) -> Result<Ran> {
+    let outcome = match (&a.router, &a.tls) {
+        (Some(router), Some(certs)) => {
+            let mode = RunMode::Site {
+                dir: dir.to_path_buf(),
+                certs: std::path::absolute(certs)?,
+                router: router.clone(),
+            };
+            scenario_run::run_recorded_in(plan, opts, &mode, rec)
+        }
+        _ => scenario_run::run_recorded_secure(plan, opts, a.tls.as_deref(), dir, rec),
+    };
+    match outcome {
+        Ok((records, recording)) => Ok(Ran { records, recording, error: None }),
+        Err(FailedRun { error, records: Some(records), recording }) => {
+            Ok(Ran { records: *records, recording: recording.map(|r| *r), error: Some(error) })
+        }
+        Err(failed) => Err(failed.into_error().into()),
+    }
 }
 
 /// The run's mode as the summary names it.

@@ -94,9 +94,13 @@ pub struct Scenario {
     #[serde(default)]
     pub perturbations: Vec<PushSection>,
     /// MuJoCo's no-slip iterations (`sim_bridge::world::SolverParams::noslip_iterations`; 0:
-    /// off). Walking scenarios use 20: without them a standing robot's feet creep.
-    #[serde(default)]
+    /// off). Default 20: without them a standing robot's feet creep.
+    #[serde(default = "default_noslip")]
     pub noslip_iterations: u32,
+    /// What the simulated robots measure besides their own state (`[sensors]`; by default
+    /// the held object's pose too).
+    #[serde(default)]
+    pub sensors: sim_bridge::world::Sensors,
     /// Walking: who walks where, with which gait.
     #[serde(default)]
     pub walk: Option<WalkSpec>,
@@ -239,6 +243,10 @@ impl Fault {
     }
 }
 
+fn default_noslip() -> u32 {
+    sim_bridge::world::DEFAULT_NOSLIP_ITERATIONS
+}
+
 fn default_settle() -> f64 {
     1.0
 }
@@ -311,7 +319,7 @@ pub const OPTIONAL_NESTED_KEYS: [&str; 6] = [
 /// Top-level tables a scenario may leave out that `--set` may still reach into
 /// (`--set release.after_failed_ticks=50`, `--set references.ramp=0.5` on a walk); their own
 /// fields are checked when the file is read.
-pub const OPTIONAL_TABLES: [&str; 2] = ["release", "references"];
+pub const OPTIONAL_TABLES: [&str; 3] = ["release", "references", "sensors"];
 
 /// The carried box (`[object]`).
 #[derive(Debug, Clone, PartialEq, Deserialize)]

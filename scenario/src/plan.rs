@@ -196,6 +196,7 @@ fn world_spec(s: &Scenario, placements: Vec<RobotPlacement>, object: ObjectSpec)
         physics_hz: s.physics_hz,
         contact: ContactParams::default(),
         solver: SolverParams { noslip_iterations: s.noslip_iterations, ..SolverParams::default() },
+        sensors: s.sensors,
         seed: s.seed,
         initial_joint_noise: 0.0,
     }

@@ -50,6 +50,21 @@ pub const FREEZE_ERROR_AT_LIMIT: f64 = 0.05;
 unsafe impl Send for MujocoPlant {}
 
 impl MujocoPlant {
+    /// The object's pose as the robots measure it ([`crate::world::Sensors::object_pose`]): its
+    /// free joint's position and unit quaternion; `None` without an object or that sensor.
+    fn measured_object(&self) -> Option<Pose> {
+        let (_, a, _) = self.world.object?;
+        if !self.world.spec.sensors.object_pose {
+            return None;
+        }
+        let d = self.data.ffi();
+        let q = |k: usize| unsafe { *d.qpos.add(a + k) };
+        let mut quat = [q(3), q(4), q(5), q(6)];
+        let n = quat.iter().map(|x| x * x).sum::<f64>().sqrt();
+        quat.iter_mut().for_each(|x| *x /= n);
+        Some(Pose { position: [q(0), q(1), q(2)], orientation: quat })
+    }
+
     /// A plant at the world's initial condition (robots at their standing configuration with
     /// overrides and noise, zero velocities, object at its pose), forward-evaluated.
     pub fn new(world: World) -> Result<Self, WorldError> {
@@ -268,6 +283,7 @@ impl Plant for MujocoPlant {
         }
         out.time = self.time();
         foot_forces(self.world.model.ffi(), d, r, &mut out.foot_forces);
+        out.object_pose = self.measured_object();
     }
 
     fn set_torques(&mut self, robot: usize, tau: &[f64]) {

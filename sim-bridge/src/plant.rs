@@ -204,5 +204,6 @@ pub fn empty_state(team: &str, robot: &str) -> RobotState {
         joint_velocities: Vec::new(),
         time: 0.0,
         foot_forces: Vec::new(),
+        object_pose: None,
     }
 }

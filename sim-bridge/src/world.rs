@@ -189,8 +189,9 @@ pub struct SolverParams {
     pub tolerance: f64,
     /// MuJoCo's no-slip post-processing iterations (`noslip_iterations`, 0: off): without them
     /// its soft contacts let a foot under a steady tangential force creep (about 1 mm/s for a
-    /// standing robot's splayed feet), which real feet do not. Walking scenarios turn them on.
-    #[serde(default)]
+    /// standing robot's splayed feet, until the knees pass straight after about 150 s), which
+    /// real feet do not. On by default ([`DEFAULT_NOSLIP_ITERATIONS`]).
+    #[serde(default = "default_noslip")]
     pub noslip_iterations: u32,
 }
 
@@ -202,8 +203,31 @@ impl Default for SolverParams {
             impratio: 10.0,
             iterations: 100,
             tolerance: 1e-10,
-            noslip_iterations: 0,
+            noslip_iterations: DEFAULT_NOSLIP_ITERATIONS,
         }
+    }
+}
+
+/// MuJoCo's no-slip iterations by default: static friction at the feet and palms, as real
+/// contacts have it (docs/sim-bridge.md: what they cost per step, the creep that remains).
+pub const DEFAULT_NOSLIP_ITERATIONS: u32 = 20;
+
+fn default_noslip() -> u32 {
+    DEFAULT_NOSLIP_ITERATIONS
+}
+
+/// What the simulated robots measure besides their own state.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Sensors {
+    /// Each robot measures the held object's pose (`RobotState::object_pose`: motion capture or
+    /// a camera on a real team; here MuJoCo's pose of the object).
+    pub object_pose: bool,
+}
+
+impl Default for Sensors {
+    fn default() -> Self {
+        Sensors { object_pose: true }
     }
 }
 
@@ -219,6 +243,9 @@ pub struct WorldSpec {
     pub physics_hz: f64,
     pub contact: ContactParams,
     pub solver: SolverParams,
+    /// What the robots measure besides their own state.
+    #[serde(default)]
+    pub sensors: Sensors,
     /// Seed of the initial-condition noise.
     pub seed: u64,
     /// Standard deviation of the noise added to the initial joint positions, rad (0: none).
@@ -248,6 +275,7 @@ impl WorldSpec {
             physics_hz: 1000.0,
             contact: ContactParams::default(),
             solver: SolverParams::default(),
+            sensors: Sensors::default(),
             seed: 0,
             initial_joint_noise: 0.0,
         }

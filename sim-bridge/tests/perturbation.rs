@@ -81,3 +81,36 @@ fn a_push_on_a_robot_body_and_bad_targets() {
     plant.state(0, &mut s);
     assert!(s.base_pose.position[1] > 0.01, "base y {}", s.base_pose.position[1]);
 }
+
+#[test]
+fn every_robot_measures_the_object_where_the_ground_truth_has_it_unless_told_not_to() {
+    let mut spec = WorldSpec::paper_pair();
+    // The object alone, pushed so that it moves and turns.
+    spec.object.as_mut().unwrap().position = [0.3, 2.0, 0.3];
+    let world = World::build(&spec, &load_robots(&spec).unwrap()).unwrap();
+    let mut plant = MujocoPlant::new(world).unwrap();
+    plant.perturb(&req(PerturbationTarget::Object, 30.0, 0.0, 0.1)).unwrap();
+    // At rest again (the ground truth's poses are of the last step's start, the state's of its
+    // end: the same at rest).
+    for _ in 0..1000 {
+        plant.step();
+    }
+    let mut truth = sim_bridge::ground_truth::empty("t");
+    assert!(plant.ground_truth("t", 1000, &mut truth));
+    let body = truth.object.expect("the object's truth");
+    for robot in 0..2 {
+        let mut state = empty_state("t", "r1");
+        plant.state(robot, &mut state);
+        let seen = state.object_pose.expect("the object's pose is measured");
+        let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9);
+        assert!(close(&seen.position, &body.pose.position), "{seen:?} vs {:?}", body.pose);
+        assert!(close(&seen.orientation, &body.pose.orientation), "{seen:?} vs {:?}", body.pose);
+        assert!(seen.position[0] > 0.35, "the push moved it: {seen:?}");
+    }
+    spec.sensors.object_pose = false;
+    let world = World::build(&spec, &load_robots(&spec).unwrap()).unwrap();
+    let plant = MujocoPlant::new(world).unwrap();
+    let mut state = empty_state("t", "r1");
+    plant.state(0, &mut state);
+    assert!(state.object_pose.is_none(), "no object sensor");
+}

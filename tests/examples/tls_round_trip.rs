@@ -122,6 +122,7 @@ fn state(tick: u64, floats: usize) -> RobotState {
         joint_velocities: vec![0.0; floats / 2],
         time: 0.0,
         foot_forces: vec![0.0; 4],
+        object_pose: None,
     }
 }
 

@@ -162,6 +162,7 @@ fn state(team: &str, robot: &str, tick: u64) -> RobotState {
         joint_velocities: vec![0.0; JOINTS],
         time: tick as f64 * 0.005,
         foot_forces: Vec::new(),
+        object_pose: None,
     }
 }
 

@@ -31,6 +31,7 @@ fn empty_state() -> RobotState {
         joint_velocities: Vec::new(),
         time: 0.0,
         foot_forces: Vec::new(),
+        object_pose: None,
     }
 }
 

@@ -230,6 +230,7 @@ fn terms(team: &str, robot: &str, tick: u64) -> DynamicsTerms {
         hand_in_grasp: false,
         state_tick: tick,
         team_delay_ticks: 0,
+        object_pose: None,
     }
 }
 

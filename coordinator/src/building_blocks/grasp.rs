@@ -180,6 +180,32 @@ impl GraspOffsets {
             .fold(0.0, f64::max);
         ObjectFit { pose: Isometry3::from_parts(Translation3::from(p), rot), residual }
     }
+
+    /// Largest distance of a hand's contact point from where these offsets put it on the
+    /// object at `object`, m: how far the hands have slid on the measured object.
+    pub fn slip_from(&self, team: &Team, object: &Isometry3<f64>) -> f64 {
+        team.hands
+            .iter()
+            .zip(&self.contact_in_object)
+            .map(|(h, c)| (h.position - object.transform_point(&(*c).into()).coords).norm())
+            .fold(0.0, f64::max)
+    }
+
+    /// The offsets captured again, in place, with the object at `object` (the hands are the
+    /// same: [`GraspOffsets::matches`]).
+    pub fn refit(&mut self, team: &Team, object: &Isometry3<f64>) {
+        let offsets = self.hand_to_object.iter_mut().zip(&mut self.contact_in_object);
+        for (h, (q, c)) in team.hands.iter().zip(offsets) {
+            *q = UnitQuaternion::from_rotation_matrix(&h.rotation).inverse() * object.rotation;
+            *c = object.inverse_transform_point(&h.position.into()).coords;
+        }
+    }
+
+    /// Largest distance of a hand's contact point on the object from `before` (the same
+    /// hands' contacts), m.
+    pub fn moved_from(&self, before: &[Vector3<f64>]) -> f64 {
+        self.contact_in_object.iter().zip(before).map(|(c, b)| (c - b).norm()).fold(0.0, f64::max)
+    }
 }
 
 fn hand_centroid(team: &Team) -> Vector3<f64> {
@@ -199,9 +225,14 @@ pub fn centroid_pose(team: &Team) -> Isometry3<f64> {
 #[derive(Debug, Clone, Default)]
 pub struct GraspTracker {
     offsets: Option<GraspOffsets>,
+    /// Each hand's contact point on the object when the grasp closed (what slip is counted
+    /// from), in the order of `offsets`.
+    closed: Vec<Vector3<f64>>,
     last_object: Option<Isometry3<f64>>,
     /// The grasp was released: the object is no longer where the plan or the last estimate put it.
     released: bool,
+    /// Re-fits to the measured object since the tracker was made.
+    refits: u64,
 }
 
 impl GraspTracker {
@@ -209,7 +240,8 @@ impl GraspTracker {
     /// offsets (captured when the grasping hands changed, with the object at the last estimate;
     /// before any estimate, the `planned` offsets if they cover every grasping hand, else with
     /// the object at `pose_at_grasp`, else at the hands' centroid with world axes), the object
-    /// pose from the hands, and the terms of [`GraspTerms::compute_into`].
+    /// pose from the hands, and the terms of [`GraspTerms::compute_into`]. No re-fit to a
+    /// measured object ([`GraspTracker::update_refitting`] with 0).
     pub fn update(
         &mut self,
         team: &Team,
@@ -217,6 +249,21 @@ impl GraspTracker {
         planned: &[PlannedHand],
         terms: &mut Option<GraspTerms>,
     ) -> Result<(), ControllerError> {
+        self.update_refitting(team, (pose_at_grasp, planned), 0.0, terms)
+    }
+
+    /// [`GraspTracker::update`], and when the team measures the object
+    /// ([`Team::object_measured`]) and a hand is more than `refit_at` (m, 0: never) from where
+    /// the measured object puts its contact, the hands have slid on the object: the offsets are
+    /// re-fitted to the measured object first ([`GraspOffsets::refit`]).
+    pub fn update_refitting(
+        &mut self,
+        team: &Team,
+        grasp_plan: (Option<Isometry3<f64>>, &[PlannedHand]),
+        refit_at: f64,
+        terms: &mut Option<GraspTerms>,
+    ) -> Result<(), ControllerError> {
+        let (pose_at_grasp, planned) = grasp_plan;
         if team.hands.is_empty() {
             self.offsets = None;
             *terms = None;
@@ -235,13 +282,22 @@ impl GraspTracker {
                     }
                 };
                 self.released = false;
+                self.closed.clone_from(&offsets.contact_in_object);
                 slot.insert(offsets)
             }
         };
+        if let Some(measured) = team.object_measured.filter(|_| refit_at > 0.0) {
+            if offsets.slip_from(team, &measured) > refit_at {
+                offsets.refit(team, &measured);
+                self.refits += 1;
+            }
+        }
         let fit = offsets.fit(team);
         self.last_object = Some(fit.pose);
         let g = terms.get_or_insert_with(GraspTerms::default);
         g.fit_residual = fit.residual;
+        g.refits = self.refits;
+        g.slip_since_closed = offsets.moved_from(&self.closed);
         g.compute_into(team, fit.pose)
             .ok_or_else(|| ControllerError::Singular { what: "grasp matrix".into() })
     }
@@ -262,6 +318,10 @@ pub struct GraspTerms {
     pub object: Isometry3<f64>,
     /// The pose fit's residual ([`ObjectFit::residual`]), m.
     pub fit_residual: f64,
+    /// Re-fits of the grasp to the measured object so far ([`GraspTracker::update`]).
+    pub refits: u64,
+    /// Largest distance a hand's contact has moved on the object since the grasp closed, m.
+    pub slip_since_closed: f64,
     pub object_twist: Vector6<f64>,
     /// `G` (6 x 6B) and `G^+` (6B x 6).
     pub g: DMatrix<f64>,

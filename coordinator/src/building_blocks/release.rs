@@ -39,21 +39,40 @@ pub struct ReleasePolicy {
     /// from the object's centre): holding the palms where they were would keep the object
     /// pinched, its weight on arms that cannot carry it.
     pub retreat: f64,
+    /// A hand this far (m) from where the measured object puts its contact has slid on the
+    /// object: the grasp model is re-fitted to the measured object, and the slip alone never
+    /// lets go (`building_blocks::grasp::GraspTracker::update_refitting`; 0: never re-fitted).
+    pub refit_at: f64,
+    /// How far (m) a hand's contact may move on the object since the grasp closed, re-fits
+    /// included, before the team lets go: past it the palm is sliding off the object.
+    pub max_slip: f64,
 }
 
 impl Default for ReleasePolicy {
     fn default() -> Self {
         // 50 ms of failed ticks at 1 kHz (two robots with 1.5 times their payload: releasing
         // within 0.1 s kept both standing, from 0.15 s on they fell); 2 cm, four times the
-        // acceptance bound on palm slip; 5 cm clears the palms off the object.
-        ReleasePolicy { after_failed_ticks: 50, max_fit_residual: 0.02, retreat: 0.05 }
+        // acceptance bound on palm slip; 5 cm clears the palms off the object. A re-fit at
+        // 0.5 mm keeps the object's estimate within half a millimetre of the measured object.
+        ReleasePolicy {
+            after_failed_ticks: 50,
+            max_fit_residual: 0.02,
+            retreat: 0.05,
+            refit_at: 0.0005,
+            max_slip: 0.05,
+        }
     }
 }
 
 impl ReleasePolicy {
     /// Finite, non-negative residual.
     pub fn check(&self) -> Result<(), String> {
-        for (what, x) in [("max_fit_residual", self.max_fit_residual), ("retreat", self.retreat)] {
+        for (what, x) in [
+            ("max_fit_residual", self.max_fit_residual),
+            ("retreat", self.retreat),
+            ("refit_at", self.refit_at),
+            ("max_slip", self.max_slip),
+        ] {
             if !(x.is_finite() && x >= 0.0) {
                 return Err(format!("{what} {x} must be finite and non-negative"));
             }
@@ -100,6 +119,9 @@ pub struct GraspObservation {
     pub qp_failed: bool,
     /// The grasp fit's residual this tick (m), when a grasp was modelled.
     pub fit_residual: Option<f64>,
+    /// How far a hand's contact has moved on the object since the grasp closed (m), when a
+    /// grasp was modelled (what the re-fits to the measured object followed).
+    pub slip_since_closed: Option<f64>,
 }
 
 impl GraspObservation {
@@ -110,6 +132,7 @@ impl GraspObservation {
             hands: team.hands.len(),
             qp_failed,
             fit_residual: grasp.map(|g| g.fit_residual),
+            slip_since_closed: grasp.map(|g| g.slip_since_closed),
         }
     }
 }
@@ -174,9 +197,19 @@ impl GraspWatch {
         let failing = t.qp_failed && self.failed_run >= SLIP_WHILE_FAILING_TICKS;
         let limit = policy.max_fit_residual * if failing { SLIP_WHILE_FAILING } else { 1.0 };
         let slipped = t.fit_residual.filter(|&r| policy.max_fit_residual > 0.0 && r > limit);
+        let slid_off =
+            t.slip_since_closed.filter(|&d| policy.max_slip > 0.0 && d > policy.max_slip);
         // A flat palm pushes, it cannot pinch: one hand left of a grasp (a member left the
         // team, its hand went) cannot hold the object. Let go at once.
         let alone = t.hands == 1 && last_hands >= 2;
+        if let Some(d) = slid_off {
+            let why = format!(
+                "a hand has slid {:.1} mm on the object since the grasp closed (limit {:.1} mm)",
+                d * 1e3,
+                policy.max_slip * 1e3
+            );
+            return Some(self.latch(t.tick, &why));
+        }
         let why = match (failed, slipped, alone) {
             (_, _, true) => format!(
                 "one hand is left of the {last_hands} in grasp (a robot left the team), and one \
@@ -193,12 +226,16 @@ impl GraspWatch {
             }
             (false, None, false) => return None,
         };
+        Some(self.latch(t.tick, &why))
+    }
+
+    /// The release of `tick` for the reason `why`, latched.
+    fn latch(&mut self, tick: u64, why: &str) -> &Release {
         let note = format!(
-            "grasp released at tick {}: {why}; the hands back away and hold, the feet carry the \
-             robots",
-            t.tick
+            "grasp released at tick {tick}: {why}; the hands back away and hold, the feet carry \
+             the robots"
         );
-        Some(&*self.released.insert(Release { tick: t.tick, note }))
+        self.released.insert(Release { tick, note })
     }
 }
 
@@ -207,7 +244,7 @@ mod tests {
     use super::*;
 
     fn tick(tick: u64, qp_failed: bool, fit_residual: Option<f64>) -> GraspObservation {
-        GraspObservation { tick, hands: 2, qp_failed, fit_residual }
+        GraspObservation { tick, hands: 2, qp_failed, fit_residual, slip_since_closed: None }
     }
 
     #[test]
@@ -313,8 +350,28 @@ mod tests {
     }
 
     #[test]
+    fn slip_followed_on_the_object_lets_go_only_past_the_palm() {
+        let p = ReleasePolicy::default();
+        let slid = |t: u64, d: f64| GraspObservation {
+            slip_since_closed: Some(d),
+            ..tick(t, false, Some(0.0002))
+        };
+        let mut w = GraspWatch::default();
+        // Minutes of creep, re-fitted to the measured object: held.
+        for (t, d) in [(0, 0.0), (1, 0.002), (2, 0.02), (3, 0.9 * p.max_slip)] {
+            assert!(w.observe(&p, slid(t, d)).is_none(), "slip {d} m is within the palm");
+        }
+        let r = w.observe(&p, slid(4, 1.1 * p.max_slip)).expect("slid off the palm").clone();
+        assert_eq!(r.tick, 4);
+        assert!(r.note.contains("has slid 55.0 mm on the object"), "{}", r.note);
+        let off = ReleasePolicy { max_slip: 0.0, ..p };
+        assert!(GraspWatch::default().observe(&off, slid(0, 1.0)).is_none(), "0: no limit");
+    }
+
+    #[test]
     fn zero_limits_never_release() {
-        let p = ReleasePolicy { after_failed_ticks: 0, max_fit_residual: 0.0, retreat: 0.05 };
+        let p =
+            ReleasePolicy { after_failed_ticks: 0, max_fit_residual: 0.0, ..Default::default() };
         let mut w = GraspWatch::default();
         for t in 0..1000 {
             assert!(w.observe(&p, tick(t, true, Some(1.0))).is_none());

@@ -77,7 +77,8 @@ impl ShellState {
         team.hands_released = self.watch.released().is_some();
         team.assemble_into(tick, self.expected.as_deref(), fully_actuated)?;
         torque_limits(team, &self.descriptions, fully_actuated, actuated, limits)?;
-        self.grasp.update(team, cfg.object_pose_at_grasp, &cfg.planned_grasp, grasp)?;
+        let plan = (cfg.object_pose_at_grasp, &cfg.planned_grasp[..]);
+        self.grasp.update_refitting(team, plan, cfg.release.refit_at, grasp)?;
         // Late robots' free hands keep clear of the object the others hold.
         self.targets.keep_clear(
             team,

@@ -78,6 +78,8 @@ pub fn diagnostics_into(o: &TickOutputs, tick: &[DynamicsTerms], d: &mut TickDia
         )),
     });
     d.grasp_slip = o.grasp.map_or(0.0, |g| g.fit_residual);
+    d.grasp_refits = o.grasp.map_or(0, |g| g.refits);
+    d.grasp_slip_since_closed = o.grasp.map_or(0.0, |g| g.slip_since_closed);
     set_note(&mut d.fallback, o.note);
 }
 

@@ -229,6 +229,7 @@ mod tests {
             hand_in_grasp: false,
             state_tick: tick,
             team_delay_ticks: 0,
+            object_pose: None,
         }
     }
 

@@ -14,7 +14,10 @@ pub mod assembly;
 pub mod membership;
 pub mod prediction;
 
-use nalgebra::{DMatrix, DVector, Rotation3, Vector3, Vector6};
+use nalgebra::{
+    DMatrix, DVector, Isometry3, Quaternion, Rotation3, Translation3, UnitQuaternion, Vector3,
+    Vector6,
+};
 use protocol::{DynamicsTerms, FrameRole, FrameTerms, RobotDescription};
 
 use protocol::conventions::rotation_from_row_major;
@@ -64,6 +67,28 @@ impl TeamFrame {
     }
 }
 
+/// The object's pose from the measurements of the robots whose hand is in grasp: the mean of
+/// their positions and of their orientations (quaternions turned to the first one's
+/// hemisphere, summed and normalised: the chordal mean, exact for equal measurements).
+pub fn measured_object(tick: &[DynamicsTerms]) -> Option<Isometry3<f64>> {
+    let mut seen = tick.iter().filter(|t| t.hand_in_grasp).filter_map(|t| t.object_pose);
+    let first = seen.next()?;
+    let q0 = Quaternion::from(nalgebra::Vector4::from(wxyz_as_xyzw(first.orientation)));
+    let (mut p, mut q, mut count) = (Vector3::from(first.position), q0, 1.0);
+    for m in seen {
+        let qi = Quaternion::from(nalgebra::Vector4::from(wxyz_as_xyzw(m.orientation)));
+        q += if qi.dot(&q0) < 0.0 { -qi } else { qi };
+        p += Vector3::from(m.position);
+        count += 1.0;
+    }
+    Some(Isometry3::from_parts(Translation3::from(p / count), UnitQuaternion::from_quaternion(q)))
+}
+
+/// `(w, x, y, z)` as nalgebra's quaternion storage order `(x, y, z, w)`.
+fn wxyz_as_xyzw(q: [f64; 4]) -> [f64; 4] {
+    [q[1], q[2], q[3], q[0]]
+}
+
 /// The team of one tick.
 #[derive(Debug, Clone, Default)]
 pub struct Team {
@@ -84,6 +109,9 @@ pub struct Team {
     /// Whether the controller has let go of the object: [`Team::assemble_into`] then treats
     /// every hand as free, whatever the contact sets say.
     pub hands_released: bool,
+    /// The held object's pose as the robots with a hand in grasp measured it this tick (their
+    /// mean, [`measured_object`]); `None` when none of them measures it.
+    pub object_measured: Option<Isometry3<f64>>,
     pub torsos: Vec<TeamFrame>,
     pub swing_feet: Vec<TeamFrame>,
     /// `J_cf` (3 nf x n) and its `Jdot*v`; `J_ee` (6 B x n) and its `Jdot*v`.
@@ -175,6 +203,7 @@ impl Team {
         self.swing_feet.truncate(counts.swing);
         stack(&self.feet, 3, n, &mut self.j_cf, &mut self.jdv_cf, &mut self.cf_cols);
         stack(&self.hands, 6, n, &mut self.j_ee, &mut self.jdv_ee, &mut self.ee_cols);
+        self.object_measured = measured_object(tick);
         Ok(())
     }
 

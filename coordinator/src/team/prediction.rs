@@ -38,10 +38,10 @@
 
 use std::collections::BTreeMap;
 
-use nalgebra::{Rotation3, Vector3};
-use protocol::{DynamicsTerms, MAX_TEAM_DELAY_TICKS};
+use nalgebra::{Rotation3, UnitQuaternion, Vector3};
+use protocol::{DynamicsTerms, FrameRole, Pose, MAX_TEAM_DELAY_TICKS};
 
-use protocol::conventions::rotation_from_row_major;
+use protocol::conventions::{quat_from_wxyz, quat_to_wxyz, rotation_from_row_major};
 
 use crate::linalg::dot;
 use crate::TeamController;
@@ -167,6 +167,13 @@ fn move_frames(t: &mut DynamicsTerms, dt: f64) {
             continue;
         }
         let rate = |i: usize| dt * dot(&f.jacobian.data[i * nv..(i + 1) * nv], v);
+        let held = f.role == FrameRole::Hand && t.hand_in_grasp && rows >= 6;
+        if let Some(object) = t.object_pose.as_mut().filter(|_| held) {
+            // A held object moves rigidly with the hand.
+            let step = Vector3::new(rate(0), rate(1), rate(2));
+            let turn = Vector3::new(rate(3), rate(4), rate(5));
+            move_with_hand(object, &Vector3::from(f.position), &step, &turn);
+        }
         for i in 0..3 {
             f.position[i] += rate(i);
         }
@@ -180,6 +187,22 @@ fn move_frames(t: &mut DynamicsTerms, dt: f64) {
             }
         }
     }
+}
+
+/// `object` carried by a hand at `hand` that moves by `step` and turns by `turn` (a rotation
+/// vector, world): the object's centre turns about the hand's point, its axes turn with it.
+fn move_with_hand(
+    object: &mut Pose,
+    hand: &Vector3<f64>,
+    step: &Vector3<f64>,
+    turn: &Vector3<f64>,
+) {
+    let r = Rotation3::new(*turn);
+    let p = Vector3::from(object.position);
+    let moved = hand + step + r * (p - hand);
+    let q = UnitQuaternion::from_rotation_matrix(&r) * quat_from_wxyz(object.orientation);
+    object.position = moved.into();
+    object.orientation = quat_to_wxyz(&q);
 }
 
 impl Solves {
@@ -237,6 +260,7 @@ mod tests {
             hand_in_grasp: false,
             state_tick: tick,
             team_delay_ticks: 0,
+            object_pose: None,
         }
     }
 
@@ -418,6 +442,9 @@ mod tests {
             jdot_v: vec![0.0; 3],
         };
         t.frames = vec![hand, foot];
+        // The hand holds an object whose centre is 0.3 m along its x axis.
+        t.hand_in_grasp = true;
+        t.object_pose = Some(Pose { position: [1.3, 2.0, 3.0], orientation: [1.0, 0.0, 0.0, 0.0] });
         let mut ts = [t];
         p.predict(2, 2, &mut ts);
         let moved = |j: usize| dt * ((v[j] + dt * a[j]) + (v[j] + 2.0 * dt * a[j]));
@@ -446,5 +473,18 @@ mod tests {
             f[1].position
         );
         assert!(close(ts[0].velocity[2], v[2] + 2.0 * dt * a[2]));
+        // The held object moved rigidly with the hand: turned by the yaw about the hand's point.
+        let o = ts[0].object_pose.expect("the object's pose");
+        let (hx, hy) = (f[0].position[0], f[0].position[1]);
+        assert!(
+            close(o.position[0], hx + 0.3 * yaw.cos())
+                && close(o.position[1], hy + 0.3 * yaw.sin())
+                && close(o.position[2], 3.0),
+            "{:?}",
+            o.position
+        );
+        let half = yaw / 2.0;
+        let q = o.orientation;
+        assert!(close(q[0], half.cos()) && close(q[3], half.sin()) && q[1] == 0.0, "{q:?}");
     }
 }

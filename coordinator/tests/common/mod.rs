@@ -67,6 +67,7 @@ impl Fixture {
             joint_velocities: v.as_slice()[6..].to_vec(),
             time: 0.0,
             foot_forces: Vec::new(),
+            object_pose: None,
         };
         self.builder.load_state(&self.robot, &state).expect("state");
         let mut out = empty_terms(TEAM, id);

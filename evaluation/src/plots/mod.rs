@@ -355,11 +355,17 @@ pub fn write_index(
          img{max-width:100%;border:1px solid #ddd}td,th{padding:2px 8px}.fail{color:#c00}\
          </style></head><body>\n",
     );
-    h.push_str(&format!(
-        "<h1>{}</h1>\n<pre>{}</pre>\n",
-        escape(&m.scenario),
-        escape(&evaluate::summary(m, dir))
-    ));
+    h.push_str(&format!("<h1>{}</h1>\n", escape(&m.scenario)));
+    if let Some(e) = &m.error {
+        h.push_str(&format!(
+            "<p class=\"fail\"><b>The run ended in an error</b> after {} of {} ticks: {}. \
+             This report is of the ticks it saw.</p>\n",
+            m.ticks_seen,
+            m.ticks_planned,
+            escape(e)
+        ));
+    }
+    h.push_str(&format!("<pre>{}</pre>\n", escape(&evaluate::summary(m, dir))));
     h.push_str(
         "<h2>Acceptance checks</h2>\n\
          <table><tr><th>check</th><th>value</th><th>bound</th><th></th></tr>\n",

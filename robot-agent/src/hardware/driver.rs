@@ -156,6 +156,7 @@ impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
             joint_velocities: vec![0.0; joints],
             time: 0.0,
             foot_forces: Vec::new(),
+            object_pose: None,
         };
         let out = Written {
             drive: DriveCommand::torque(core.team(), core.robot(), 0, vec![0.0; joints]),

@@ -266,6 +266,7 @@ mod tests {
             joint_velocities: Vec::new(),
             time: 0.0,
             foot_forces: Vec::new(),
+            object_pose: None,
         }
     }
 

@@ -326,6 +326,7 @@ pub(super) fn rest_terms(
         joint_positions: joints,
         time: 0.0,
         foot_forces: Vec::new(),
+        object_pose: None,
     };
     let mut builder = TermsBuilder::new(robot).map_err(terms_err)?;
     builder.load_state(robot, &state).map_err(terms_err)?;
