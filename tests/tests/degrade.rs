@@ -98,16 +98,15 @@ fn the_mqp_baseline_lets_the_object_yield_too() {
 
 /// S4 with its 1 kg cube, pushed down by 300 N (thirty times its weight) for 0.6 s from 0.5 s
 /// into the circle: more than the grasp's friction can carry. The run goes on 5 s after the
-/// push, in lockstep or in real time.
-fn pushed_off(realtime: bool, name: &str) -> Metrics {
+/// push, in lockstep.
+fn pushed_off(name: &str) -> Metrics {
     let file = repo().join("scenarios/s4_object_circle.toml");
     let text = std::fs::read_to_string(&file).expect("scenario text")
         + "\n[[perturbations]]\non = \"object\"\nstart = 0.5\nduration = 0.6\n\
            wrench = [0.0, 0.0, -300.0, 0.0, 0.0, 0.0]\n";
     let sets: Vec<String> = vec!["duration=6.1".into(), "settle=0.3".into()];
     let pushed = Scenario::from_str_with(&text, &file, &sets).expect("scenario");
-    let mut plan = plan::plan(&pushed, &repo()).expect("plan");
-    plan.scene.realtime = realtime;
+    let plan = plan::plan(&pushed, &repo()).expect("plan");
     run_plan(&plan, name)
 }
 
@@ -134,5 +133,5 @@ fn assert_let_go_and_standing(m: &Metrics) {
 
 #[test]
 fn a_push_the_controller_did_not_plan_for_mid_run_leaves_the_team_standing() {
-    assert_let_go_and_standing(&pushed_off(false, "degrade-push"));
+    assert_let_go_and_standing(&pushed_off("degrade-push"));
 }

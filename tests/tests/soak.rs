@@ -12,8 +12,8 @@ use common::scenario::run_scenario_records;
 /// Seconds of each window compared: the first and the last of the run.
 const WINDOW: f64 = 30.0;
 
-/// RMS of column `name` over the samples with `from <= t < to` (scenario time).
-fn window_rms(series: &TimeSeries, name: &str, (from, to): (f64, f64)) -> f64 {
+/// The samples of column `name` with `from <= t < to` (scenario time).
+fn window(series: &TimeSeries, name: &str, (from, to): (f64, f64)) -> Vec<f64> {
     let column = series.column(name).unwrap_or_else(|| panic!("column {name}"));
     let picked: Vec<f64> = series
         .time
@@ -23,20 +23,19 @@ fn window_rms(series: &TimeSeries, name: &str, (from, to): (f64, f64)) -> f64 {
         .map(|(_, x)| *x)
         .collect();
     assert!(!picked.is_empty(), "samples of {name} in [{from}, {to})");
+    picked
+}
+
+/// RMS of column `name` over the window `range`.
+fn window_rms(series: &TimeSeries, name: &str, range: (f64, f64)) -> f64 {
+    let picked = window(series, name, range);
     (picked.iter().map(|x| x * x).sum::<f64>() / picked.len() as f64).sqrt()
 }
 
-/// How much column `name` grew over `[from, to)`: its last sample there minus its first.
-fn window_growth(series: &TimeSeries, name: &str, (from, to): (f64, f64)) -> f64 {
-    let column = series.column(name).unwrap_or_else(|| panic!("column {name}"));
-    let inside: Vec<f64> = series
-        .time
-        .iter()
-        .zip(column)
-        .filter(|(t, _)| **t >= from && **t < to)
-        .map(|(_, x)| *x)
-        .collect();
-    inside.last().expect("samples") - inside.first().expect("samples")
+/// How much column `name` grew over the window `range`: its last sample there minus its first.
+fn window_growth(series: &TimeSeries, name: &str, range: (f64, f64)) -> f64 {
+    let inside = window(series, name, range);
+    inside[inside.len() - 1] - inside[0]
 }
 
 #[test]
