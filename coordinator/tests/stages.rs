@@ -11,7 +11,7 @@ use std::collections::BTreeMap;
 use common::{robot_id, Fixture};
 use coordinator::building_blocks::contact_jacobian::{contact_jacobian, contact_velocity};
 use coordinator::building_blocks::contacts::contact_list;
-use coordinator::building_blocks::grasp::{GraspTerms, GraspTracker, PlannedHand};
+use coordinator::building_blocks::grasp::{GraspTerms, GraspTracker, PlannedHand, RefitRule};
 use coordinator::building_blocks::impedance::TaskStack;
 use coordinator::building_blocks::limits::{torque_limits, UNBOUNDED_BASE_LIMIT};
 use coordinator::building_blocks::object_load::object_load;
@@ -304,7 +304,14 @@ fn a_grasp_that_slid_on_the_measured_object_is_refitted_to_it() {
         team.assemble_into(&terms, None, false).expect("team");
         let measured = team.object_measured.expect("the robots measure the object");
         assert!((measured.translation.vector - object.translation.vector).amax() < 1e-12);
-        tracker.update_refitting(&team, (Some(at), &[]), 5e-4, &mut out).expect("grasp");
+        tracker
+            .update_refitting(
+                &team,
+                (Some(at), &[]),
+                RefitRule { at: 5e-4, min_ticks: 0 },
+                &mut out,
+            )
+            .expect("grasp");
         out.clone().expect("grasp terms")
     };
     // The grasp closes with the object where the robots measure it.
@@ -334,10 +341,49 @@ fn a_grasp_that_slid_on_the_measured_object_is_refitted_to_it() {
     terms.iter_mut().for_each(|t| t.object_pose = None);
     team.assemble_into(&terms, None, false).expect("team");
     assert!(team.object_measured.is_none());
-    tracker.update_refitting(&team, (Some(at), &[]), 5e-4, &mut out).expect("grasp");
+    tracker
+        .update_refitting(&team, (Some(at), &[]), RefitRule { at: 5e-4, min_ticks: 0 }, &mut out)
+        .expect("grasp");
     let g = out.expect("grasp terms");
     assert_eq!(g.refits, 1);
     assert!((g.object.translation.vector - low.translation.vector).amax() < 1e-9);
+}
+
+#[test]
+fn slip_that_comes_faster_than_the_refit_interval_is_refitted_once_per_interval() {
+    let mut fx = Fixture::new();
+    let (mut terms, _) = fx.static_team(2);
+    let at = Isometry3::translation(0.0, 0.0, 0.61);
+    let rule = RefitRule { at: 5e-4, min_ticks: 3 };
+    let (mut team, mut tracker) = (Team::default(), GraspTracker::default());
+    let mut out: Option<GraspTerms> = None;
+    // The object sinks `mm` between the palms (the hands stay): (re-fits, object height).
+    let mut tick_sunk = |mm: f64| {
+        let object = Isometry3::translation(0.0, 0.0, 0.61 - mm * 1e-3);
+        terms.iter_mut().for_each(|t| t.object_pose = Some(measured(&object)));
+        team.assemble_into(&terms, None, false).expect("team");
+        tracker.update_refitting(&team, (Some(at), &[]), rule, &mut out).expect("grasp");
+        let g = out.as_ref().expect("grasp terms");
+        (g.refits, g.object.translation.z)
+    };
+    assert_eq!(tick_sunk(0.0).0, 0, "the grasp closes on the measured object");
+    // Two ticks from the start: the interval has not passed, the slip is not followed yet.
+    let (refits, z) = tick_sunk(2.0);
+    assert_eq!(refits, 0);
+    assert!((z - 0.61).abs() < 1e-12);
+    // The third: followed.
+    let (refits, z) = tick_sunk(2.0);
+    assert_eq!(refits, 1);
+    assert!((z - 0.608).abs() < 1e-9, "{z}");
+    // It slides on: the model waits the interval out before it follows again.
+    for _ in 0..2 {
+        let (refits, z) = tick_sunk(4.0);
+        assert_eq!(refits, 1);
+        assert!((z - 0.608).abs() < 1e-9, "{z}");
+    }
+    let (refits, z) = tick_sunk(4.0);
+    assert_eq!(refits, 2);
+    assert!((z - 0.606).abs() < 1e-9, "{z}");
 }
 
 #[test]

@@ -233,6 +233,25 @@ pub struct GraspTracker {
     released: bool,
     /// Re-fits to the measured object since the tracker was made.
     refits: u64,
+    /// Ticks since the last re-fit (saturating; from the start before the first).
+    since_refit: u32,
+}
+
+/// When the grasp model is re-fitted to the measured object ([`GraspTracker::update_refitting`];
+/// the `release` policy's `refit_at` and `refit_min_ticks`).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RefitRule {
+    /// A hand this far (m) from where the measured object puts its contact has slid (0: never).
+    pub at: f64,
+    /// Ticks at least from one re-fit to the next. Creep passes `at` every few seconds; a hand
+    /// dragged along the object passes it every few ticks, and re-fitted that often the fit's
+    /// residual, which the release watches, would never show it.
+    pub min_ticks: u32,
+}
+
+impl RefitRule {
+    /// Never re-fit.
+    pub const NEVER: RefitRule = RefitRule { at: 0.0, min_ticks: 0 };
 }
 
 impl GraspTracker {
@@ -241,7 +260,7 @@ impl GraspTracker {
     /// before any estimate, the `planned` offsets if they cover every grasping hand, else with
     /// the object at `pose_at_grasp`, else at the hands' centroid with world axes), the object
     /// pose from the hands, and the terms of [`GraspTerms::compute_into`]. No re-fit to a
-    /// measured object ([`GraspTracker::update_refitting`] with 0).
+    /// measured object ([`GraspTracker::update_refitting`] with [`RefitRule::NEVER`]).
     pub fn update(
         &mut self,
         team: &Team,
@@ -249,18 +268,18 @@ impl GraspTracker {
         planned: &[PlannedHand],
         terms: &mut Option<GraspTerms>,
     ) -> Result<(), ControllerError> {
-        self.update_refitting(team, (pose_at_grasp, planned), 0.0, terms)
+        self.update_refitting(team, (pose_at_grasp, planned), RefitRule::NEVER, terms)
     }
 
     /// [`GraspTracker::update`], and when the team measures the object
-    /// ([`Team::object_measured`]) and a hand is more than `refit_at` (m, 0: never) from where
-    /// the measured object puts its contact, the hands have slid on the object: the offsets are
-    /// re-fitted to the measured object first ([`GraspOffsets::refit`]).
+    /// ([`Team::object_measured`]) and a hand is more than `refit.at` from where the measured
+    /// object puts its contact, the hands have slid on the object: the offsets are re-fitted to
+    /// the measured object first ([`GraspOffsets::refit`]), at most once in `refit.min_ticks`.
     pub fn update_refitting(
         &mut self,
         team: &Team,
         grasp_plan: (Option<Isometry3<f64>>, &[PlannedHand]),
-        refit_at: f64,
+        refit: RefitRule,
         terms: &mut Option<GraspTerms>,
     ) -> Result<(), ControllerError> {
         let (pose_at_grasp, planned) = grasp_plan;
@@ -286,10 +305,13 @@ impl GraspTracker {
                 slot.insert(offsets)
             }
         };
-        if let Some(measured) = team.object_measured.filter(|_| refit_at > 0.0) {
-            if offsets.slip_from(team, &measured) > refit_at {
+        self.since_refit = self.since_refit.saturating_add(1);
+        let due = refit.at > 0.0 && self.since_refit >= refit.min_ticks;
+        if let Some(measured) = team.object_measured.filter(|_| due) {
+            if offsets.slip_from(team, &measured) > refit.at {
                 offsets.refit(team, &measured);
                 self.refits += 1;
+                self.since_refit = 0;
             }
         }
         let fit = offsets.fit(team);

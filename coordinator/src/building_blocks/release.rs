@@ -21,7 +21,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::building_blocks::grasp::{GraspTerms, GraspTracker};
+use crate::building_blocks::grasp::{GraspTerms, GraspTracker, RefitRule};
 use crate::building_blocks::targets::Targets;
 use crate::team::Team;
 
@@ -43,6 +43,9 @@ pub struct ReleasePolicy {
     /// object: the grasp model is re-fitted to the measured object, and the slip alone never
     /// lets go (`building_blocks::grasp::GraspTracker::update_refitting`; 0: never re-fitted).
     pub refit_at: f64,
+    /// Ticks at least from one re-fit to the next ([`RefitRule::min_ticks`]): slip that comes
+    /// faster is left to the fit's residual and [`ReleasePolicy::max_fit_residual`].
+    pub refit_min_ticks: u32,
     /// How far (m) a hand's contact may move on the object since the grasp closed, re-fits
     /// included, before the team lets go: past it the palm is sliding off the object.
     pub max_slip: f64,
@@ -53,18 +56,26 @@ impl Default for ReleasePolicy {
         // 50 ms of failed ticks at 1 kHz (two robots with 1.5 times their payload: releasing
         // within 0.1 s kept both standing, from 0.15 s on they fell); 2 cm, four times the
         // acceptance bound on palm slip; 5 cm clears the palms off the object. A re-fit at
-        // 0.5 mm keeps the object's estimate within half a millimetre of the measured object.
+        // 0.5 mm keeps the object's estimate within half a millimetre of the measured object;
+        // 250 ticks apart follows creep (0.5 mm takes seconds) and not a hand being dragged
+        // off the object (0.3-0.6 mm per tick).
         ReleasePolicy {
             after_failed_ticks: 50,
             max_fit_residual: 0.02,
             retreat: 0.05,
             refit_at: 0.0005,
+            refit_min_ticks: 250,
             max_slip: 0.05,
         }
     }
 }
 
 impl ReleasePolicy {
+    /// When the grasp model follows the measured object.
+    pub fn refit(&self) -> RefitRule {
+        RefitRule { at: self.refit_at, min_ticks: self.refit_min_ticks }
+    }
+
     /// Finite, non-negative residual.
     pub fn check(&self) -> Result<(), String> {
         for (what, x) in [
@@ -150,6 +161,15 @@ impl GraspWatch {
     /// The release in force, if the team has let go.
     pub fn released(&self) -> Option<&Release> {
         self.released.as_ref()
+    }
+
+    /// Whether slip is followed by re-fitting the grasp model to the measured object: not once
+    /// the QP has failed [`SLIP_WHILE_FAILING_TICKS`] in a row. Slip while the contact forces
+    /// cannot be kept is the grasp being lost (a robot pushed away with its hand on the
+    /// object): re-fitted, the fit would never show it, and the team would follow the hand
+    /// until the palm slid off, dragging the others after it.
+    pub fn follows_slip(&self) -> bool {
+        self.failed_run < SLIP_WHILE_FAILING_TICKS
     }
 
     /// Before a tick: clear the latch when no hand is in grasp any more (the grasp was opened).
@@ -245,6 +265,19 @@ mod tests {
 
     fn tick(tick: u64, qp_failed: bool, fit_residual: Option<f64>) -> GraspObservation {
         GraspObservation { tick, hands: 2, qp_failed, fit_residual, slip_since_closed: None }
+    }
+
+    #[test]
+    fn slip_is_not_followed_while_the_qp_keeps_failing() {
+        let p = ReleasePolicy::default();
+        let mut w = GraspWatch::default();
+        for t in 0..SLIP_WHILE_FAILING_TICKS {
+            assert!(w.follows_slip(), "tick {t}");
+            w.observe(&p, tick(u64::from(t), true, Some(0.0)));
+        }
+        assert!(!w.follows_slip());
+        w.observe(&p, tick(99, false, Some(0.0)));
+        assert!(w.follows_slip(), "a solved tick ends the run of failures");
     }
 
     #[test]

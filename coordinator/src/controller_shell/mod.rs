@@ -22,7 +22,7 @@ use protocol::{
 
 pub use config::ShellConfig;
 
-use crate::building_blocks::grasp::{GraspTerms, GraspTracker};
+use crate::building_blocks::grasp::{GraspTerms, GraspTracker, RefitRule};
 use crate::building_blocks::limits::torque_limits;
 use crate::building_blocks::messages::set_note;
 use crate::building_blocks::release::{GraspObservation, GraspWatch};
@@ -78,7 +78,8 @@ impl ShellState {
         team.assemble_into(tick, self.expected.as_deref(), fully_actuated)?;
         torque_limits(team, &self.descriptions, fully_actuated, actuated, limits)?;
         let plan = (cfg.object_pose_at_grasp, &cfg.planned_grasp[..]);
-        self.grasp.update_refitting(team, plan, cfg.release.refit_at, grasp)?;
+        let refit = if self.watch.follows_slip() { cfg.release.refit() } else { RefitRule::NEVER };
+        self.grasp.update_refitting(team, plan, refit, grasp)?;
         // Late robots' free hands keep clear of the object the others hold.
         self.targets.keep_clear(
             team,
