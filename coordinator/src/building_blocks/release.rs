@@ -29,8 +29,9 @@ use crate::team::Team;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ReleasePolicy {
-    /// Consecutive ticks whose contact-force QP was not solved (a fallback was sent) before
-    /// the hands let go. A push makes a few; an object the team cannot hold makes them all.
+    /// How long (in the robots' ticks, from the first failed tick of a run with no tick solved
+    /// between) the contact-force QP may fail (a fallback sent) before the hands let go. A push
+    /// makes a few; an object the team cannot hold makes them all.
     pub after_failed_ticks: u32,
     /// Largest grasp-fit residual (m): a hand this far from where the fitted object pose puts it
     /// means the grasp is no longer rigid (the object slipped out or the palms came apart).
@@ -112,7 +113,7 @@ pub struct Release {
 /// (`tests/tests/degrade.rs`, README "Degrade, never collapse").
 pub const SLIP_WHILE_FAILING: f64 = 0.5;
 
-/// Failed ticks in a row before [`SLIP_WHILE_FAILING`] applies (counted in ticks: 10 ms at
+/// How long the QP has failed before [`SLIP_WHILE_FAILING`] applies (in the robots' ticks: 10 ms at
 /// 1 kHz, 80 ms at 125 Hz): a push that the contact forces cannot meet fails tick after tick
 /// (the 300 N push above from 27 ms into it on), a robot whose
 /// terms came late fails one or two (a three-robot team at 125 Hz with one agent stalled
@@ -151,6 +152,12 @@ impl GraspObservation {
 /// The latch of [`ReleasePolicy`] (see the module docs).
 #[derive(Debug, Clone, Default)]
 pub struct GraspWatch {
+    /// The tick whose QP failed first in the current run of failed ticks.
+    failing_since: Option<u64>,
+    /// The run's length in the robots' ticks (its last tick - its first + 1): the time the QP
+    /// has been failing, not the count of ticks solved. In real time a failing tick takes
+    /// longer, the coordinator skips the ticks overtaken meanwhile (S4 at 1 kHz, a 300 N push:
+    /// it solved one tick in 4-12) and a count of solved ticks let the slip run on to 31 mm.
     failed_run: u32,
     /// Hands in grasp on the last tick observed.
     last_hands: usize,
@@ -175,6 +182,7 @@ impl GraspWatch {
     /// Before a tick: clear the latch when no hand is in grasp any more (the grasp was opened).
     pub fn rearm(&mut self, hands_in_grasp: bool) {
         if !hands_in_grasp {
+            self.failing_since = None;
             self.failed_run = 0;
             self.released = None;
         }
@@ -207,10 +215,11 @@ impl GraspWatch {
     pub fn observe(&mut self, policy: &ReleasePolicy, t: GraspObservation) -> Option<&Release> {
         let last_hands = std::mem::replace(&mut self.last_hands, t.hands);
         if self.released.is_some() || t.hands == 0 {
+            self.failing_since = None;
             self.failed_run = 0;
             return None;
         }
-        self.failed_run = if t.qp_failed { self.failed_run + 1 } else { 0 };
+        self.count_failed(t);
         let failed = policy.after_failed_ticks > 0 && self.failed_run >= policy.after_failed_ticks;
         // Slip while the contact forces cannot be kept (the QP failing tick after tick) is a grasp
         // being lost, not a palm rocking: let go at a share of the limit (SLIP_WHILE_FAILING).
@@ -242,11 +251,22 @@ impl GraspWatch {
                 if failing { " while the QP fails" } else { "" }
             ),
             (true, None, _) => {
-                format!("the contact-force QP failed {} ticks in a row", self.failed_run)
+                format!("the contact-force QP has failed for {} ticks", self.failed_run)
             }
             (false, None, false) => return None,
         };
         Some(self.latch(t.tick, &why))
+    }
+
+    /// The run of failed ticks with `t`'s outcome, in the robots' ticks from its first.
+    fn count_failed(&mut self, t: GraspObservation) {
+        if !t.qp_failed {
+            self.failing_since = None;
+            self.failed_run = 0;
+            return;
+        }
+        let since = *self.failing_since.get_or_insert(t.tick);
+        self.failed_run = u32::try_from(t.tick.saturating_sub(since) + 1).unwrap_or(u32::MAX);
     }
 
     /// The release of `tick` for the reason `why`, latched.
@@ -278,6 +298,28 @@ mod tests {
         assert!(!w.follows_slip());
         w.observe(&p, tick(99, false, Some(0.0)));
         assert!(w.follows_slip(), "a solved tick ends the run of failures");
+    }
+
+    #[test]
+    fn a_run_of_failures_is_counted_in_the_robots_ticks_not_in_ticks_solved() {
+        let p = ReleasePolicy::default();
+        let half = SLIP_WHILE_FAILING * p.max_fit_residual;
+        let n = u64::from(SLIP_WHILE_FAILING_TICKS);
+        let mut w = GraspWatch::default();
+        // Three failed ticks solved, the ticks between them overtaken: the QP has been failing
+        // for n ticks at the third.
+        assert!(w.observe(&p, tick(100, true, Some(1.5 * half))).is_none());
+        assert!(w.observe(&p, tick(100 + n / 2, true, Some(1.5 * half))).is_none());
+        assert!(w.follows_slip());
+        let r = w.observe(&p, tick(100 + n - 1, true, Some(1.5 * half))).expect("failing").clone();
+        assert!(r.note.contains("while the QP fails"), "{}", r.note);
+        // The longer limit likewise.
+        let p = ReleasePolicy { after_failed_ticks: 50, max_fit_residual: 0.0, ..p };
+        let mut w = GraspWatch::default();
+        assert!(w.observe(&p, tick(0, true, Some(0.0))).is_none());
+        assert!(w.observe(&p, tick(48, true, Some(0.0))).is_none());
+        let r = w.observe(&p, tick(49, true, Some(0.0))).expect("failed for 50 ticks").clone();
+        assert!(r.note.contains("failed for 50 ticks"), "{}", r.note);
     }
 
     #[test]
@@ -318,7 +360,7 @@ mod tests {
         let r =
             w.observe(&p, tick(6, true, Some(0.0))).expect("three failed ticks in a row").clone();
         assert_eq!(r.tick, 6);
-        assert!(r.note.contains("failed 3 ticks"), "{}", r.note);
+        assert!(r.note.contains("failed for 3 ticks"), "{}", r.note);
         assert!(w.observe(&p, tick(7, true, Some(0.0))).is_none(), "released once");
         assert_eq!(w.released(), Some(&r));
     }

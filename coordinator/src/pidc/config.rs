@@ -26,7 +26,7 @@ pub struct PidcConfig {
     /// dense-ipm -> clarabel` ([`QpPath`]). The default, `by-blocks`, tries the last tick's
     /// active rows by the robots' blocks first; the dual active-set method it falls back to
     /// (and that the release relies on: it lets go at half its slip limit once the QP has
-    /// failed 10 ticks in a row, `building_blocks::release::SLIP_WHILE_FAILING`) kept
+    /// failed for 10 ticks, `building_blocks::release::SLIP_WHILE_FAILING`) kept
     /// `tests/tests/degrade.rs`'s 300 N push standing as the interior point's 1e-7 answers do.
     pub qp_path: QpPath,
     /// `S = I` (treat the base as actuated): the \[Lin2018\] comparison only.
