@@ -154,9 +154,44 @@ pub fn recovery_error(
         .reduce(f64::max)
 }
 
+/// How much a long run's error grew: its RMS over the last `window` s less its RMS over the
+/// first `window` s (`times` in s, one per error), when the run is at least three windows long.
+pub fn growth(times: &[f64], errors: &[f64], window: f64) -> Option<f64> {
+    let (first, last) = (*times.first()?, *times.last()?);
+    if last - first < 3.0 * window {
+        return None;
+    }
+    let over = |from: f64, to: f64| {
+        rms(times.iter().zip(errors).filter(|(t, _)| **t >= from && **t < to).map(|(_, e)| *e))
+    };
+    Some(over(last - window, f64::INFINITY) - over(first, first + window))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn growth_compares_the_last_window_with_the_first_in_long_runs_only() {
+        let times: Vec<f64> = (0..=900).map(|k| f64::from(k) * 0.1).collect();
+        // Linear from 0 to 9 over 90 s.
+        let errors: Vec<f64> = times.iter().map(|t| t * 0.1).collect();
+        let rms_of = |a: f64, b: f64| {
+            let xs: Vec<f64> = times
+                .iter()
+                .zip(&errors)
+                .filter(|(t, _)| **t >= a && **t < b)
+                .map(|(_, e)| *e)
+                .collect();
+            (xs.iter().map(|x| x * x).sum::<f64>() / xs.len() as f64).sqrt()
+        };
+        let g = growth(&times, &errors, 30.0).expect("a run of three windows");
+        assert!((g - (rms_of(60.0, 91.0) - rms_of(0.0, 30.0))).abs() < 1e-12, "{g}");
+        assert!(g > 5.0);
+        let flat = vec![1e-3; times.len()];
+        assert!(growth(&times, &flat, 30.0).expect("long").abs() < 1e-15);
+        assert_eq!(growth(&times[..800], &errors[..800], 30.0), None, "under three windows");
+    }
 
     #[test]
     fn rms_and_percentiles_of_known_series() {
