@@ -422,13 +422,15 @@ fn close_recording(
         Ok(r) => Some(r),
         Err(f) => f.records.as_deref(),
     };
+    let error = result.as_ref().err().map(|f| f.error.to_string());
     let facts = records
         .map(|r| RunFacts {
             mode: mode.name().to_string(),
             settle_wall: r.settle_wall,
             run_wall: r.run_wall,
+            error: error.clone(),
         })
-        .unwrap_or_default();
+        .unwrap_or(RunFacts { error, ..RunFacts::default() });
     rec.finish(&facts).map(Some)
 }
 

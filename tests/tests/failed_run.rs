@@ -2,8 +2,8 @@
 //! die 0.5 s into the scenario (no restart): a robot whose agent dies goes on unpowered, and
 //! once every agent has left the bridge ends the run ("robot ..'s agent left the team at tick
 //! .."). The run returns that error with the records of the ticks it saw; evaluated over them,
-//! the report names the error and never passes. `team run` writes that report and exits with
-//! the error.
+//! the report names the error and never passes, and so does its recording read back (`team
+//! report run.mcap`). `team run` writes that report and exits with the error.
 //!
 //! The second test runs the `team` binary: it needs the release binaries
 //! (`cargo build --release --bins`).
@@ -13,6 +13,7 @@ use std::process::Command;
 
 use evaluation::evaluate;
 use launch::processes::sibling_binary;
+use launch::record::{RecordOptions, ScenarioSource};
 use launch::run::{self, RunOptions};
 use scenario::file::Scenario;
 use scenario::plan::{self, Plan};
@@ -77,7 +78,14 @@ fn a_run_that_loses_every_agent_returns_its_error_with_the_ticks_it_saw() {
     let plan = losing_every_agent();
     let dir = fresh("failed-run");
     let opts = RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() };
-    let failed = run::run_recorded(&plan, &opts, &dir, None).expect_err("the run ends in an error");
+    let sets: Vec<String> = SETS.iter().map(|s| s.to_string()).collect();
+    let rec = RecordOptions {
+        path: dir.join("run.mcap"),
+        scenario: ScenarioSource::read(&repo().join(SCENARIO), &sets).expect("scenario file"),
+        live: None,
+    };
+    let failed =
+        run::run_recorded(&plan, &opts, &dir, Some(&rec)).expect_err("the run ends in an error");
     let error = failed.error.to_string();
     assert!(error.contains(LEFT), "the bridge's error: {error}");
     assert_eq!(failed.to_string(), error, "a failed run reads as its error");
@@ -91,6 +99,13 @@ fn a_run_that_loses_every_agent_returns_its_error_with_the_ticks_it_saw() {
     let json = metrics(&dir);
     assert_failed_report(&json, &plan);
     assert_eq!(json["ticks_seen"].as_u64(), Some(records.ticks_seen));
+    // `team report run.mcap` reads the recording as the failed run it was.
+    let mcap = failed.recording.expect("the failed run's recording is closed").path;
+    let (_, replayed, eval) =
+        launch::record::replay::evaluate_recording(&mcap, &repo()).expect("the recording reads");
+    assert_eq!(replayed.ticks_seen, records.ticks_seen, "the ticks the run saw");
+    assert_eq!(eval.metrics.error.as_deref(), Some(error.as_str()), "the run's error, replayed");
+    assert!(!eval.metrics.passed, "a failed run's recording never passes");
 }
 
 #[test]

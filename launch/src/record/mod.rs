@@ -151,6 +151,8 @@ pub struct RunFacts {
     pub mode: String,
     pub settle_wall: std::time::Duration,
     pub run_wall: std::time::Duration,
+    /// The error the run ended in (`None`: it ran to its end).
+    pub error: Option<String>,
 }
 
 /// A recording in progress: the writer thread and its queue.
@@ -308,6 +310,9 @@ fn run_metadata(
     m.insert("mode".into(), facts.mode.clone());
     m.insert("settle_wall_ns".into(), facts.settle_wall.as_nanos().to_string());
     m.insert("run_wall_ns".into(), facts.run_wall.as_nanos().to_string());
+    if let Some(e) = &facts.error {
+        m.insert("error".into(), e.clone());
+    }
     m.insert("messages".into(), counts.messages.to_string());
     m.insert("dropped".into(), dropped.to_string());
     m.insert("failed".into(), counts.failed.to_string());

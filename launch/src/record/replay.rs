@@ -43,7 +43,9 @@ impl From<PlanError> for ReplayError {
 }
 
 /// Evaluate a recording as `team run` evaluated the run: the recorded scenario planned again
-/// (robot descriptions from `root`), the driver's records rebuilt from the messages.
+/// (robot descriptions from `root`), the driver's records rebuilt from the messages. A run
+/// that ended in an error, or a recording short of its plan, is evaluated as failed
+/// ([`evaluate::evaluate_failed`]): its report names the error and never passes.
 pub fn evaluate_recording(
     path: &Path,
     root: &Path,
@@ -59,8 +61,23 @@ pub fn evaluate_recording(
         Scenario::from_str_with(&rec.scenario.text, &rec.scenario.path, &rec.scenario.overrides)?;
     let plan = plan::plan(&s, root)?;
     let records = rec.records(plan.references.clock.settle_ticks);
-    let eval = evaluate::evaluate(&plan, &records, &rec.facts.mode);
+    let eval = match rec.facts.error.clone().or_else(|| cut_short(&plan, &records)) {
+        Some(e) => evaluate::evaluate_failed(&plan, &records, &rec.facts.mode, &e),
+        None => evaluate::evaluate(&plan, &records, &rec.facts.mode),
+    };
     Ok((plan, records, eval))
+}
+
+/// Why a recording without an error is short of its plan, if it is: the run stopped before
+/// its end without saying why (a recording of an older version, or one closed by hand).
+fn cut_short(plan: &Plan, records: &Records) -> Option<String> {
+    (records.ticks_seen < plan.total_ticks()).then(|| {
+        format!(
+            "the recording ends after {} of the {} ticks planned",
+            records.ticks_seen,
+            plan.total_ticks()
+        )
+    })
 }
 
 /// What a recording holds for the evaluation.
@@ -136,6 +153,7 @@ pub fn read(path: &Path) -> Result<Recording, ReplayError> {
         mode: get("mode"),
         settle_wall: nanos("settle_wall_ns"),
         run_wall: nanos("run_wall_ns"),
+        error: meta.get("error").cloned(),
     };
     rec.dropped = get("dropped").parse().unwrap_or(0);
     for message in mcap::MessageStream::new(&bytes).map_err(mcap_err)? {
