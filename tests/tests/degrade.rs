@@ -13,18 +13,10 @@ use scenario::file::Scenario;
 use scenario::plan;
 
 mod common;
+use common::push::{assert_release_named, assert_team_standing, s4_pushed_off};
 use common::scenario::{repo, run_plan};
 
 const RELEASED: &str = "grasp released (hands free, feet only)";
-
-/// The bound of the issue, on the ground truth: every torso within 5 cm and 10 deg of its hold.
-fn assert_team_standing(m: &Metrics, robots: usize) {
-    assert_eq!(m.torsos.len(), robots, "every torso evaluated");
-    for (r, t) in &m.torsos {
-        assert!(t.position_max_m < 0.05, "torso {r} moved {:.3} m from its hold", t.position_max_m);
-        assert!(t.orientation_max_deg < 10.0, "torso {r} tilted {:.2} deg", t.orientation_max_deg);
-    }
-}
 
 /// Two robots given 1.5 times their payload capacity, from the first tick (so that every failed
 /// tick is in the evaluated window), with `controller`.
@@ -100,10 +92,7 @@ fn the_mqp_baseline_lets_the_object_yield_too() {
 /// into the circle: more than the grasp's friction can carry. The run goes on 5 s after the
 /// push, in lockstep.
 fn pushed_off(name: &str) -> Metrics {
-    let file = repo().join("scenarios/s4_object_circle.toml");
-    let text = std::fs::read_to_string(&file).expect("scenario text")
-        + "\n[[perturbations]]\non = \"object\"\nstart = 0.5\nduration = 0.6\n\
-           wrench = [0.0, 0.0, -300.0, 0.0, 0.0, 0.0]\n";
+    let (file, text) = s4_pushed_off();
     let sets: Vec<String> = vec!["duration=6.1".into(), "settle=0.3".into()];
     let pushed = Scenario::from_str_with(&text, &file, &sets).expect("scenario");
     let plan = plan::plan(&pushed, &repo()).expect("plan");
@@ -122,12 +111,7 @@ fn assert_let_go_and_standing(m: &Metrics) {
         "and the team let go: {:?}",
         m.fallback_ticks
     );
-    let note = m.release.as_deref().expect("the report names the release");
-    let (tick, cause) = note
-        .strip_prefix("grasp released at tick ")
-        .and_then(|rest| rest.split_once(": "))
-        .unwrap_or_else(|| panic!("the release's tick and cause: {note}"));
-    assert!(tick.parse::<u64>().is_ok() && !cause.is_empty(), "{note}");
+    assert_release_named(m);
     assert_team_standing(m, 2);
 }
 

@@ -597,28 +597,20 @@ fn an_agent_killed_in_real_time_is_noticed_within_three_ticks_and_the_others_hol
 fn a_push_the_team_cannot_hold_in_real_time_is_let_go_and_every_robot_stands() {
     let _one = serial();
     let repo = common::scenario::repo();
-    let file = repo.join("scenarios/s4_object_circle.toml");
-    let text = std::fs::read_to_string(&file).expect("scenario text")
-        + "\n[[perturbations]]\non = \"object\"\nstart = 0.5\nduration = 0.6\n\
-           wrench = [0.0, 0.0, -300.0, 0.0, 0.0, 0.0]\n";
-    let sets = ["duration=6.1", "settle=0.3", "drive_gains=inertia", "team_hz=250"]
-        .into_iter()
-        .chain(["team_delay_ticks=auto"])
-        .map(String::from)
-        .collect::<Vec<_>>();
+    let (file, text) = common::push::s4_pushed_off();
+    let sets: Vec<String> = [
+        "duration=6.1",
+        "settle=0.3",
+        "drive_gains=inertia",
+        "team_hz=250",
+        "team_delay_ticks=auto",
+    ]
+    .map(String::from)
+    .to_vec();
     let s = Scenario::from_str_with(&text, &file, &sets).expect("scenario");
     let mut plan = plan::plan(&s, &repo).expect("plan");
     plan.scene.realtime = true;
     let (_, m) = run_here(&plan, false, "embedded, real time", "realtime_push_release");
-    let note = m.release.as_deref().expect("the team let go, and the report says when and why");
-    let (tick, cause) = note
-        .strip_prefix("grasp released at tick ")
-        .and_then(|rest| rest.split_once(": "))
-        .unwrap_or_else(|| panic!("the release's tick and cause: {note}"));
-    assert!(tick.parse::<u64>().is_ok() && !cause.is_empty(), "{note}");
-    assert_eq!(m.torsos.len(), 2, "every torso evaluated");
-    for (r, t) in &m.torsos {
-        assert!(t.position_max_m < 0.05, "torso {r} moved {:.3} m from its hold", t.position_max_m);
-        assert!(t.orientation_max_deg < 10.0, "torso {r} tilted {:.2} deg", t.orientation_max_deg);
-    }
+    common::push::assert_release_named(&m);
+    common::push::assert_team_standing(&m, 2);
 }

@@ -4,6 +4,7 @@
 
 pub mod certs;
 pub mod hosts;
+pub mod push;
 pub mod scenario;
 pub mod team;
 pub mod tls;
