@@ -35,10 +35,7 @@ if [ $# -eq 0 ]; then
         busy+=($!)
     done
     trap 'kill "${busy[@]}" 2>/dev/null || true' EXIT
-    # Not the 1 kHz run across four processes with the delay from the latency: beside two busy
-    # loops on a two-core machine an agent can starve past the bridge's 50 ms drive timeout and
-    # its robot's drives go unpowered (docs/realtime.md); it runs in the idle pass above.
-    cargo test --release --workspace --locked --no-fail-fast --test faults --test realtime --test hosts -- --skip delay_from_the_latency || status=$?
+    cargo test --release --workspace --locked --no-fail-fast --test faults --test realtime --test hosts || status=$?
     kill "${busy[@]}" 2>/dev/null || true
 fi
 

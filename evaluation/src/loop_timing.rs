@@ -28,6 +28,8 @@ pub struct RobotLoop {
     pub late: u64,
     /// Ticks whose torques were never applied, on time or late.
     pub lost: u64,
+    /// Physics steps on which the drives had no valid command (drive gaps).
+    pub drive_gaps: u64,
 }
 
 /// The loop of a real-time run, by robot.
@@ -47,6 +49,7 @@ impl LoopReport {
             streak: u64,
             longest: u64,
             late: u64,
+            gaps: u64,
             seen: BTreeSet<u64>,
             applied: BTreeSet<u64>,
         }
@@ -56,6 +59,7 @@ impl LoopReport {
                 let a = acc.entry(t.robot.clone()).or_default();
                 a.ticks += 1;
                 a.late += u64::from(t.late);
+                a.gaps += u64::from(t.gap_steps);
                 a.seen.insert(g.header.tick);
                 if let Some(k) = t.applied_tick {
                     a.applied.insert(k);
@@ -89,6 +93,7 @@ impl LoopReport {
                         longest_hold_ticks: a.longest,
                         late: a.late,
                         lost,
+                        drive_gaps: a.gaps,
                     },
                 )
             })
@@ -102,7 +107,8 @@ impl LoopReport {
         for (r, l) in &self.robots {
             s.push_str(&format!(
                 "  loop {r}: state-to-torque p50 {:.0} us, p99 {:.0} us, max {:.0} us; \
-                 deadline misses {} of {} (longest hold {} ticks), late {}, lost {}\n",
+                 deadline misses {} of {} (longest hold {} ticks), late {}, lost {}; \
+                 drive gaps {} steps\n",
                 l.latency_us.p50,
                 l.latency_us.p99,
                 l.latency_us.max,
@@ -110,7 +116,8 @@ impl LoopReport {
                 l.ticks,
                 l.longest_hold_ticks,
                 l.late,
-                l.lost
+                l.lost,
+                l.drive_gaps
             ));
         }
         s
@@ -126,12 +133,19 @@ mod tests {
         let mut g = sim_bridge::ground_truth::empty("t");
         g.header = Header::new("t", None, k, 0);
         g.loop_timing = vec![
-            LoopTiming { robot: "r1".into(), latency_us: r1.0, applied_tick: r1.1, late: r1.2 },
+            LoopTiming {
+                robot: "r1".into(),
+                latency_us: r1.0,
+                applied_tick: r1.1,
+                late: r1.2,
+                gap_steps: 0,
+            },
             LoopTiming {
                 robot: "r2".into(),
                 latency_us: Some(100.0 + k as f64),
                 applied_tick: Some(k),
                 late: 0,
+                gap_steps: 2,
             },
         ];
         g
@@ -157,6 +171,7 @@ mod tests {
         assert_eq!((r1.latency_us.count, r1.latency_us.p50, r1.latency_us.max), (3, 400.0, 500.0));
         let r2 = &rep.robots["r2"];
         assert_eq!((r2.deadline_misses, r2.longest_hold_ticks, r2.late, r2.lost), (0, 0, 0, 0));
+        assert_eq!((r1.drive_gaps, r2.drive_gaps), (0, 12), "drive gaps summed over the ticks");
         assert_eq!(r2.latency_us.max, 115.0);
         assert!(rep.summary().contains("loop r1: state-to-torque p50 400 us"), "{}", rep.summary());
     }

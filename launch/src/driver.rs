@@ -579,6 +579,7 @@ mod tests {
                 latency_us: in_time.then_some(900.0),
                 applied_tick: Some(tick),
                 late: 0,
+                gap_steps: 0,
             })
             .collect();
         GroundTruth {

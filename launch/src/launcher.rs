@@ -382,8 +382,6 @@ pub struct AgentArgs {
     pub command_deadline_ticks: u64,
     /// The gains sent to the drives with each command.
     pub drive_gains: DriveGainsMode,
-    /// The rate the robot's drives run their law at (the simulator's physics rate), Hz.
-    pub drive_hz: Option<f64>,
     /// The team answers every this many state ticks.
     pub team_every: u64,
     /// The team's command for a state applies this many state ticks later.
@@ -411,9 +409,6 @@ impl AgentArgs {
         args.extend(["--drive-gains".into(), self.drive_gains.to_string()]);
         args.extend(["--team-every".into(), self.team_every.to_string()]);
         args.extend(["--team-delay".into(), self.team_delay.to_string()]);
-        if let Some(hz) = self.drive_hz {
-            args.extend(["--drive-hz".into(), hz.to_string()]);
-        }
         args.extend(zenoh.to_cli());
         args
     }
@@ -428,7 +423,6 @@ impl AgentArgs {
             .with_deadline_time(self.command_deadline)
             .with_deadline_ticks(self.command_deadline_ticks);
         cfg.drive_gains = self.drive_gains;
-        cfg.drive_hz = self.drive_hz;
         cfg.team_every = self.team_every;
         cfg.team_delay = self.team_delay;
         let session = session.clone();
@@ -963,7 +957,6 @@ mod tests {
             command_deadline: Duration::from_secs(3),
             command_deadline_ticks: 7,
             drive_gains: DriveGainsMode::Inertia,
-            drive_hz: Some(2000.0),
             team_every: 4,
             team_delay: robot_agent::delay::TeamDelay::Ticks(2),
         };
@@ -974,7 +967,6 @@ mod tests {
             ["--command-deadline-ms", "3000"],
             ["--command-deadline-ticks", "7"],
             ["--drive-gains", "inertia"],
-            ["--drive-hz", "2000"],
             ["--team-every", "4"],
             ["--team-delay", "2"],
         ] {

@@ -251,7 +251,6 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
             command_deadline,
             command_deadline_ticks,
             drive_gains: plan.scenario.drive_gains,
-            drive_hz: Some(plan.scenario.physics_hz),
             // Checked when the scenario loaded.
             team_every: plan.scenario.team_every().unwrap_or(1),
             team_delay: plan.scenario.team_delay_ticks,

@@ -84,7 +84,6 @@ impl SmokeConfig {
                 command_deadline: SMOKE_COMMAND_DEADLINE,
                 command_deadline_ticks: LOCKSTEP_DEADLINE_TICKS,
                 drive_gains: DriveGainsMode::None,
-                drive_hz: None,
                 team_every: 1,
                 team_delay: robot_agent::delay::TeamDelay::Ticks(0),
             })

@@ -343,6 +343,14 @@ impl Validate for TorqueCommand {
 /// arms, and ros2_control's effort-plus-position interfaces. Without gains (`kp` and `kd` empty)
 /// it is the torque `tau_ff`; a command late from the team leaves the drives following the last
 /// one, never a stale constant torque when it has gains.
+///
+/// The targets may be a short trajectory rather than a point: with `ref_time` they are the
+/// joints' state at that time of the robot's clock (`RobotState::time`), which the drives carry
+/// forward at every drive step along `qdd_des` ([`DriveCommand::targets_at`]), as a vendor's
+/// low-level interface interpolates between packets. Then the drives need nothing from the agent
+/// between two commands of the team. `valid_until` is the last time the sender vouches for the
+/// command: a drive step after it has no valid command (a drive gap), and the drives hold the
+/// trajectory's last point instead of carrying it on.
 #[derive(Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct DriveCommand {
@@ -358,6 +366,13 @@ pub struct DriveCommand {
     pub kp: Vec<f64>,
     /// Damping, N·m·s/rad, non-negative; empty, or one per joint.
     pub kd: Vec<f64>,
+    /// The time the targets are at, s of the robot's clock; none: the targets are constant.
+    pub ref_time: Option<f64>,
+    /// Acceleration the targets are carried with from `ref_time`, rad/s² (m/s²); empty (none),
+    /// or as many as `kd`.
+    pub qdd_des: Vec<f64>,
+    /// The last time the command is valid, s of the robot's clock; none: until the next one.
+    pub valid_until: Option<f64>,
 }
 
 /// `clone_from` reuses the vectors' storage: a drive that keeps the last command copies each new
@@ -371,6 +386,9 @@ impl Clone for DriveCommand {
             qd_des: self.qd_des.clone(),
             kp: self.kp.clone(),
             kd: self.kd.clone(),
+            ref_time: self.ref_time,
+            qdd_des: self.qdd_des.clone(),
+            valid_until: self.valid_until,
         }
     }
 
@@ -385,6 +403,9 @@ impl Clone for DriveCommand {
         self.qd_des.clone_from(&src.qd_des);
         self.kp.clone_from(&src.kp);
         self.kd.clone_from(&src.kd);
+        self.ref_time = src.ref_time;
+        self.qdd_des.clone_from(&src.qdd_des);
+        self.valid_until = src.valid_until;
     }
 }
 
@@ -398,6 +419,9 @@ impl DriveCommand {
             qd_des: Vec::new(),
             kp: Vec::new(),
             kd: Vec::new(),
+            ref_time: None,
+            qdd_des: Vec::new(),
+            valid_until: None,
         }
     }
 
@@ -406,17 +430,39 @@ impl DriveCommand {
         !self.kp.is_empty() || !self.kd.is_empty()
     }
 
-    /// The drive law at joint positions `q` and velocities `qd` (the actuated joints', velocity
-    /// order), into `out`: `tau_ff + kp (q_des - q) + kd (qd_des - qd)`, before the drive's
-    /// clamp. The sizes are the command's (checked by [`Validate`]); `q`, `qd` and `out` must
-    /// have as many entries as `tau_ff`.
-    pub fn effort(&self, q: &[f64], qd: &[f64], out: &mut [f64]) {
+    /// Whether the command is past its `valid_until` at robot time `t`.
+    pub fn expired(&self, t: f64) -> bool {
+        self.valid_until.is_some_and(|end| t > end)
+    }
+
+    /// Joint `j`'s position and velocity targets at robot time `t`: `q_des`, `qd_des` carried
+    /// from `ref_time` along `qdd_des` (`q + qd s + a s^2 / 2`, `qd + a s` with `s = t -
+    /// ref_time`, not before `ref_time`), up to `valid_until`, after which the targets stay at
+    /// the trajectory's last position with no velocity. Constant targets without `ref_time`.
+    pub fn targets_at(&self, j: usize, t: f64) -> (Option<f64>, Option<f64>) {
+        let (q, qd) = (self.q_des.get(j).copied(), self.qd_des.get(j).copied());
+        let Some(t0) = self.ref_time else { return (q, qd) };
+        let end = self.valid_until.unwrap_or(f64::INFINITY);
+        let s = (t.min(end) - t0).max(0.0);
+        let (v, a) = (qd.unwrap_or(0.0), self.qdd_des.get(j).copied().unwrap_or(0.0));
+        let q = q.map(|q| q + v * s + 0.5 * a * s * s);
+        let qd = if t > end { qd.map(|_| 0.0) } else { qd.map(|v| v + a * s) };
+        (q, qd)
+    }
+
+    /// The drive law at robot time `t` and joint positions `q` and velocities `qd` (the
+    /// actuated joints', velocity order), into `out`: `tau_ff + kp (q_des(t) - q) + kd (qd_des(t)
+    /// - qd)` ([`DriveCommand::targets_at`]), before the drive's clamp. The sizes are the
+    /// command's (checked by [`Validate`]); `q`, `qd` and `out` must have as many entries as
+    /// `tau_ff`.
+    pub fn effort(&self, t: f64, q: &[f64], qd: &[f64], out: &mut [f64]) {
         for (j, o) in out.iter_mut().enumerate().take(self.tau_ff.len()) {
             let mut tau = self.tau_ff[j];
-            if let (Some(kp), Some(qs)) = (self.kp.get(j), self.q_des.get(j)) {
+            let (qs, qds) = self.targets_at(j, t);
+            if let (Some(kp), Some(qs)) = (self.kp.get(j), qs) {
                 tau += kp * (qs - q[j]);
             }
-            if let (Some(kd), Some(qds)) = (self.kd.get(j), self.qd_des.get(j)) {
+            if let (Some(kd), Some(qds)) = (self.kd.get(j), qds) {
                 tau += kd * (qds - qd[j]);
             }
             *o = tau;
@@ -453,6 +499,37 @@ impl Validate for DriveCommand {
                 return Err(ProtocolError::invalid(
                     gname,
                     format!("joint {j}: {} is negative", gain[j]),
+                ));
+            }
+        }
+        self.check_trajectory()
+    }
+}
+
+impl DriveCommand {
+    /// `ref_time`, `qdd_des` and `valid_until`: finite, sized as `kd`, the end not before the
+    /// start.
+    fn check_trajectory(&self) -> Result<(), ProtocolError> {
+        if !self.qdd_des.is_empty() && self.qdd_des.len() != self.kd.len() {
+            return Err(ProtocolError::invalid(
+                "qdd_des",
+                format!("{} accelerations for {} gains", self.qdd_des.len(), self.kd.len()),
+            ));
+        }
+        if !self.qdd_des.is_empty() && self.ref_time.is_none() {
+            return Err(ProtocolError::invalid("qdd_des", "accelerations without ref_time"));
+        }
+        check_finite("qdd_des", &self.qdd_des)?;
+        for (name, t) in [("ref_time", self.ref_time), ("valid_until", self.valid_until)] {
+            if t.is_some_and(|t| !t.is_finite()) {
+                return Err(ProtocolError::invalid(name, "not finite"));
+            }
+        }
+        if let (Some(t0), Some(end)) = (self.ref_time, self.valid_until) {
+            if end < t0 {
+                return Err(ProtocolError::invalid(
+                    "valid_until",
+                    format!("{end} s is before ref_time {t0} s"),
                 ));
             }
         }
@@ -1056,6 +1133,10 @@ pub struct LoopTiming {
     pub applied_tick: Option<u64>,
     /// Torques of earlier ticks that arrived while this tick waited (late messages).
     pub late: u32,
+    /// Physics steps of this tick whose drives had no valid command (past its `valid_until`,
+    /// or the drives lost for want of commands): drive gaps.
+    #[serde(default)]
+    pub gap_steps: u32,
 }
 
 impl Validate for GroundTruth {

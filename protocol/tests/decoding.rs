@@ -224,7 +224,7 @@ fn foot_loads_must_bound_a_pushing_force() {
         assert!(from_json::<TaskReferences>(&text).is_err(), "bound {bad} accepted");
     }
     // A sender that leaves the field out: no foot is being unloaded.
-    let old = r#"{"header":{"version":4,"team":"t","robot":null,"tick":3,"stamp_ns":0},"object":null,"torsos":[],"swing_feet":[]}"#;
+    let old = r#"{"header":{"version":5,"team":"t","robot":null,"tick":3,"stamp_ns":0},"object":null,"torsos":[],"swing_feet":[]}"#;
     assert!(from_json::<TaskReferences>(old).unwrap().foot_loads.is_empty());
 }
 
@@ -374,12 +374,12 @@ fn a_drive_command_round_trips_and_its_law_is_the_pd_law_written_out() {
     let d = drive(3, true);
     let (q, qd) = ([0.05, -0.1, 0.3], [0.0, 1.0, -0.5]);
     let mut out = [0.0; 3];
-    d.effort(&q, &qd, &mut out);
+    d.effort(0.0, &q, &qd, &mut out);
     for j in 0..3 {
         let written = d.tau_ff[j] + 100.0 * (0.1 * j as f64 - q[j]) + 5.0 * (0.2 - qd[j]);
         assert!((out[j] - written).abs() < 1e-12, "joint {j}: {} against {written}", out[j]);
     }
-    drive(3, false).effort(&q, &qd, &mut out);
+    drive(3, false).effort(0.0, &q, &qd, &mut out);
     assert_eq!(out, [1.0, 2.0, 3.0], "no gains: the torque as it is");
 }
 
@@ -427,4 +427,57 @@ fn a_drive_command_of_the_first_protocol_version_is_refused() {
         "{:?}",
         decode::<DriveCommand>(&bytes)
     );
+}
+
+#[test]
+fn a_drive_trajectory_is_carried_from_its_time_and_held_after_its_end() {
+    let mut d = drive(2, true);
+    d.ref_time = Some(1.0);
+    d.qdd_des = vec![4.0, -2.0];
+    d.valid_until = Some(1.01);
+    assert!(protocol::Validate::validate(&d).is_ok());
+    // Joint 1 at 1.005 s: q = 0.1 + 0.2 s + 0.5 (-2) s^2, qd = 0.2 - 2 s, s = 5 ms.
+    let s: f64 = 0.005;
+    let (q, qd) = d.targets_at(1, 1.0 + s);
+    assert!((q.unwrap() - (0.1 + 0.2 * s - s * s)).abs() < 1e-15);
+    assert!((qd.unwrap() - (0.2 - 2.0 * s)).abs() < 1e-15);
+    // Before its time the targets are the state's; after its end, the end's position at rest.
+    assert_eq!(d.targets_at(0, 0.5), (Some(0.0), Some(0.2)));
+    let end: f64 = 0.01;
+    let (q, qd) = d.targets_at(0, 2.0);
+    assert!((q.unwrap() - (0.2 * end + 2.0 * end * end)).abs() < 1e-15);
+    assert_eq!(qd, Some(0.0));
+    assert!(!d.expired(1.01) && d.expired(1.0101));
+    // The law follows the carried targets: at the trajectory's point it is the torque.
+    let (q0, qd0) = d.targets_at(0, 1.0 + s);
+    let (q1, qd1) = d.targets_at(1, 1.0 + s);
+    let mut out = [0.0; 2];
+    d.effort(1.0 + s, &[q0.unwrap(), q1.unwrap()], &[qd0.unwrap(), qd1.unwrap()], &mut out);
+    assert!((out[0] - 1.0).abs() < 1e-9 && (out[1] - 2.0).abs() < 1e-9, "{out:?}");
+    // Without ref_time the targets are constant, as before.
+    assert_eq!(drive(2, true).targets_at(1, 5.0), (Some(0.1), Some(0.2)));
+}
+
+#[test]
+fn a_drive_trajectory_that_does_not_add_up_is_refused() {
+    let base = || {
+        let mut d = drive(2, true);
+        d.ref_time = Some(1.0);
+        d
+    };
+    type Edit = Box<dyn Fn(&mut DriveCommand)>;
+    let cases: [(&str, Edit); 5] = [
+        ("qdd_des", Box::new(|d| d.qdd_des = vec![1.0])),
+        ("qdd_des", Box::new(|d| d.qdd_des = vec![f64::NAN, 0.0])),
+        ("qdd_des", Box::new(|d| (d.ref_time, d.qdd_des) = (None, vec![0.0, 0.0]))),
+        ("ref_time", Box::new(|d| d.ref_time = Some(f64::INFINITY))),
+        ("valid_until", Box::new(|d| d.valid_until = Some(0.5))),
+    ];
+    for (field, edit) in cases {
+        let mut d = base();
+        edit(&mut d);
+        let e = protocol::Validate::validate(&d).expect_err(field).to_string();
+        assert!(e.contains(field), "{field}: {e}");
+        assert!(encode(&d).is_err(), "{field}: not sent");
+    }
 }

@@ -48,8 +48,15 @@ fn sample() -> GroundTruth {
                 latency_us: Some(412.5),
                 applied_tick: Some(42),
                 late: 0,
+                gap_steps: 0,
             },
-            LoopTiming { robot: "r2".into(), latency_us: None, applied_tick: Some(40), late: 1 },
+            LoopTiming {
+                robot: "r2".into(),
+                latency_us: None,
+                applied_tick: Some(40),
+                late: 1,
+                gap_steps: 0,
+            },
         ],
     }
 }

@@ -80,9 +80,6 @@ pub struct AgentConfig {
     pub coordinator_grace: Duration,
     /// The gains sent with each command ([`crate::drive_gains`]); default none (the torque).
     pub drive_gains: DriveGainsMode,
-    /// The rate the robot's drives run their law at, Hz (the simulator's physics rate); `None`:
-    /// much faster than the team. Sets the reference's lead ([`crate::drive_gains::lead`]).
-    pub drive_hz: Option<f64>,
     /// The team answers every this many state ticks (its rate is the robot's divided by it;
     /// default 1). Between, the agent answers each state alone with the last command's torque
     /// and, with drive gains, the reference at that state. The tick deadline and the
@@ -121,7 +118,6 @@ impl AgentConfig {
             fall: FallLimits::default(),
             coordinator_grace: COORDINATOR_GRACE,
             drive_gains: DriveGainsMode::None,
-            drive_hz: None,
             team_every: 1,
             team_delay: TeamDelay::default(),
         }
@@ -290,6 +286,9 @@ pub struct AgentCore<S: DynamicsSource> {
     state_time: f64,
     /// What drive commands' references are carried from ([`drive_gains::Reference`]).
     reference: drive_gains::Reference,
+    /// How long a drive command stays valid after the state it answers: the command deadline
+    /// ([`AgentCore::valid_until`]).
+    validity: CommandDeadline,
     /// Every how many state ticks the team answers (a team tick); the states between are
     /// answered by the agent alone ([`Apply::Servo`]).
     team_every: u64,
@@ -359,11 +358,8 @@ fn checked_hold_gains(
     Ok(gains)
 }
 
-/// Checks the drive rate, the team's rate and the team's delay.
+/// Checks the team's rate and the team's delay.
 fn check_timing(cfg: &AgentConfig) -> Result<(), CoreError> {
-    if let Some(hz) = cfg.drive_hz.filter(|hz| !(hz.is_finite() && *hz > 0.0)) {
-        return Err(CoreError::Config(format!("drive rate {hz} Hz: must be positive and finite")));
-    }
     if cfg.team_every == 0 {
         return Err(CoreError::Config("the team must answer every 1 or more ticks, not 0".into()));
     }
@@ -453,7 +449,8 @@ impl<S: DynamicsSource> AgentCore<S> {
             hold_tau: Vec::with_capacity(joints),
             last_command: Vec::with_capacity(joints),
             state_time: 0.0,
-            reference: drive_gains::Reference::new(joints, cfg.drive_hz.map(|hz| 1.0 / hz)),
+            reference: drive_gains::Reference::new(joints),
+            validity: cfg.deadline,
             team_every: cfg.team_every,
             delay: AdaptiveDelay::new(cfg.team_delay),
             newest_command: None,
@@ -1062,6 +1059,9 @@ impl<S: DynamicsSource> AgentCore<S> {
         description: bool,
     ) -> Outputs<'_> {
         let drive = self.fill_drive(apply);
+        if drive {
+            self.drive.valid_until = self.valid_until();
+        }
         let status = self.board.status.mode != mode_before;
         if status {
             self.last_status = Some(now);
@@ -1073,6 +1073,21 @@ impl<S: DynamicsSource> AgentCore<S> {
             status,
             leave_team: false,
         }
+    }
+
+    /// The end of a drive command's validity: the latest state's time plus the command
+    /// deadline (the shorter of its time and its ticks at the measured period), after which
+    /// the agent would hold its posture. The drives count a step past it as a drive gap.
+    fn valid_until(&self) -> Option<f64> {
+        let by_time = self.validity.time.map(|d| d.as_secs_f64());
+        let period = self.reference.period();
+        let ticks = self.validity.ticks.saturating_mul(self.team_every);
+        let by_ticks = (ticks > 0 && period > 0.0).then_some(ticks as f64 * period);
+        let horizon = match (by_time, by_ticks) {
+            (Some(a), Some(b)) => a.min(b),
+            (a, b) => a.or(b)?,
+        };
+        Some(self.state_time + horizon)
     }
 
     /// Fill the drive command with the torques `apply` yields; whether there are any (none
@@ -1179,7 +1194,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         let Some(g) = &self.gains else {
             return self.torque_only();
         };
-        self.reference.fill(&mut self.drive.q_des, &mut self.drive.qd_des);
+        self.reference.fill_trajectory(&mut self.drive);
         self.drive.kp.clone_from(&g.kp);
         self.drive.kd.clone_from(&g.kd);
     }
@@ -1198,6 +1213,8 @@ impl<S: DynamicsSource> AgentCore<S> {
     fn torque_only(&mut self) {
         self.drive.q_des.clear();
         self.drive.qd_des.clear();
+        self.drive.qdd_des.clear();
+        self.drive.ref_time = None;
         self.drive.kp.clear();
         self.drive.kd.clear();
     }

@@ -14,19 +14,17 @@
 //!
 //! with `kp` capped so that an error of [`FULL_TORQUE_ERROR`] reaches the joint's torque limit.
 //!
-//! The reference ([`Reference`]) is the latest measured state carried forward over [`lead`]:
-//! the drives hold one `q_des` until the next state's command while the joint moves on, so the
-//! reference is where the joint is, on average, at the drive steps of that period. The
-//! acceleration it is carried with is the one measured over the last two states. On that
-//! trajectory the law adds nothing on average to `tau_ff`; a drive left with the command (a
-//! late command) pulls the joint back to it instead of applying a stale torque open loop. With
-//! the team slower than the robot (`crate::core::AgentConfig::team_every`) the agent answers
-//! each state between team ticks with the last team torque and the reference at that state.
+//! The reference ([`Reference`]) is a trajectory: the latest measured state at its time and the
+//! acceleration measured over the last two states, which the drives carry forward at every
+//! step (`protocol::DriveCommand::targets_at`). On it the law adds nothing to `tau_ff`; a drive
+//! left with the command (a late command) pulls the joint back to it instead of applying a
+//! stale torque open loop. With the team slower than the robot in lockstep
+//! (`crate::core::AgentConfig::team_every`) the agent answers each state between team ticks
+//! with the last team torque and the trajectory from that state.
 //!
-//! The bandwidth is a trade: the law acts within each team period too, where the reference is
-//! only on average right. S4 in lockstep (2 s, 1 kHz team, 2 kHz drives) keeps an object RMS
-//! of 0.073 mm without gains; 0.083 mm at 5 Hz, 0.15 mm at 10 Hz, 0.33 mm at 20 Hz (and 1.7 mm
-//! at 20 Hz with the state itself as the reference).
+//! S4 at 250 Hz (2 kHz drives) keeps an object RMS of 0.10 mm with these gains, as without
+//! them; with the reference held constant over each period at the drive steps' mean time it was
+//! 0.66 mm: the law fought the motion inside every period.
 
 use std::fmt;
 use std::str::FromStr;
@@ -89,40 +87,13 @@ pub struct DriveGains {
     pub kd: Vec<f64>,
 }
 
-/// How far ahead of the latest state the reference is, s: the mean offset of the drive steps
-/// within a team period `h`, `(h - drive_period) / 2` (drive steps at `0, dt, ..., h - dt`;
-/// `None`: drives much faster than the team, `h / 2`). Drives that step once per team period
-/// get the state itself: the law is then exactly the torque.
-pub fn lead(h: f64, drive_period: Option<f64>) -> f64 {
-    ((h - drive_period.unwrap_or(0.0)) / 2.0).max(0.0)
-}
-
-/// `q + qd lead + a lead^2 / 2` into `q_des` and `qd + a lead` into `qd_des`: a state carried
-/// `lead` s at the acceleration `a`.
-pub fn carry(
-    q: &[f64],
-    qd: &[f64],
-    a: &[f64],
-    lead: f64,
-    q_des: &mut Vec<f64>,
-    qd_des: &mut Vec<f64>,
-) {
-    q_des.clear();
-    qd_des.clear();
-    for j in 0..q.len() {
-        q_des.push(q[j] + qd[j] * lead + 0.5 * a[j] * lead * lead);
-        qd_des.push(qd[j] + a[j] * lead);
-    }
-}
-
-/// The reference a drive command goes with: the latest measured state, carried over [`lead`]
-/// at the acceleration measured from the state before it. On ticks between team ticks too:
-/// carrying the team tick's state over the ticks since instead pulled the joints towards an
-/// extrapolation that the team's next torques did not follow (S4 with the team at 100 Hz:
-/// object RMS 1.35 mm against 0.21 mm).
+/// The reference a drive command goes with: a trajectory from the latest measured state at the
+/// acceleration measured from the state before it, which the drives carry forward at every
+/// step. On ticks between team ticks too (lockstep's two rates): carrying the team tick's state
+/// over the ticks since instead pulled the joints towards an extrapolation that the team's next
+/// torques did not follow (S4 with the team at 100 Hz: object RMS 1.35 mm against 0.21 mm).
 #[derive(Debug, Clone)]
 pub struct Reference {
-    drive_period: Option<f64>,
     /// Time of the latest state; the period from the one before (0: none yet).
     last: Option<f64>,
     period: f64,
@@ -132,11 +103,10 @@ pub struct Reference {
 }
 
 impl Reference {
-    /// For `joints` joints whose drives run at `drive_period` s (`None`: much faster than the
-    /// team). Every buffer is allocated here.
-    pub fn new(joints: usize, drive_period: Option<f64>) -> Self {
+    /// For `joints` joints. Every buffer is allocated here.
+    pub fn new(joints: usize) -> Self {
         let z = || vec![0.0; joints];
-        Reference { drive_period, last: None, period: 0.0, q: z(), qd: z(), a: z() }
+        Reference { last: None, period: 0.0, q: z(), qd: z(), a: z() }
     }
 
     /// A new state (not a repeat of the latest) at `time`.
@@ -153,13 +123,21 @@ impl Reference {
         self.qd.copy_from_slice(qd);
     }
 
-    /// The reference at the latest state into `q_des`, `qd_des` (nothing before a state).
-    pub fn fill(&self, q_des: &mut Vec<f64>, qd_des: &mut Vec<f64>) {
-        if self.last.is_none() {
-            return;
-        }
-        let ahead = if self.period > 0.0 { lead(self.period, self.drive_period) } else { 0.0 };
-        carry(&self.q, &self.qd, &self.a, ahead, q_des, qd_des);
+    /// The reference as a trajectory from the latest state into `cmd`: `q_des`, `qd_des` the
+    /// state's, `qdd_des` the acceleration measured, `ref_time` the state's time; the drives
+    /// carry it forward at every drive step ([`protocol::DriveCommand::targets_at`]). Nothing
+    /// before a state.
+    pub fn fill_trajectory(&self, cmd: &mut protocol::DriveCommand) {
+        let Some(t) = self.last else { return };
+        cmd.q_des.clone_from(&self.q);
+        cmd.qd_des.clone_from(&self.qd);
+        cmd.qdd_des.clone_from(&self.a);
+        cmd.ref_time = Some(t);
+    }
+
+    /// The period between the last two states, s (0 before two).
+    pub fn period(&self) -> f64 {
+        self.period
     }
 }
 
@@ -230,18 +208,6 @@ mod tests {
         assert!(loop_of(2.0, g.kp[0], g.kd[0]).1 > 1.0);
     }
 
-    #[test]
-    fn the_lead_is_the_mean_offset_of_the_drive_steps() {
-        let h = 1e-3;
-        for n in [1u32, 2, 4, 10] {
-            let dt = h / f64::from(n);
-            let mean = (0..n).map(|i| f64::from(i) * dt).sum::<f64>() / f64::from(n);
-            assert!((lead(h, Some(dt)) - mean).abs() < 1e-15, "{n} drive steps per period");
-        }
-        assert_eq!(lead(h, Some(h)), 0.0, "one drive step per period: the state itself");
-        assert_eq!(lead(h, None), h / 2.0);
-    }
-
     /// `q(t) = q0 + v0 t + a t^2 / 2` of two joints, with its velocity.
     fn trajectory(t: f64) -> (Vec<f64>, Vec<f64>) {
         let (q0, v0, a) = ([0.3, -1.0], [0.5, 2.0], [4.0, -10.0]);
@@ -249,28 +215,33 @@ mod tests {
     }
 
     #[test]
-    fn at_constant_acceleration_the_reference_is_the_trajectory_ahead() {
-        // States 1 ms apart on the trajectory; drives at 4 kHz: the lead is 0.375 ms.
+    fn at_constant_acceleration_the_drives_follow_the_trajectory_itself() {
+        // States 1 ms apart on the trajectory; the drives evaluate the command at 4 kHz.
         let (h, dt) = (1e-3, 2.5e-4);
-        let ahead = lead(h, Some(dt));
-        let (mut q_des, mut qd_des) = (Vec::new(), Vec::new());
-        let mut r = Reference::new(2, Some(dt));
+        let mut cmd = protocol::DriveCommand::torque("t", "r1", 0, vec![0.0; 2]);
+        (cmd.kp, cmd.kd) = (vec![1.0; 2], vec![1.0; 2]);
+        let mut r = Reference::new(2);
         for k in 0..4u32 {
             let t = 0.2 + f64::from(k) * h;
             let (q, qd) = trajectory(t);
             r.on_state(t, &q, &qd);
-            r.fill(&mut q_des, &mut qd_des);
+            r.fill_trajectory(&mut cmd);
+            assert_eq!(cmd.ref_time, Some(t));
             if k == 0 {
-                // No state before it: carried at constant velocity, over no lead.
-                assert_eq!((q_des.clone(), qd_des.clone()), (q, qd));
+                // No state before it: no acceleration measured.
+                assert_eq!(cmd.qdd_des, vec![0.0; 2]);
                 continue;
             }
-            let (qt, vt) = trajectory(t + ahead);
-            for j in 0..2 {
-                assert!(
-                    (q_des[j] - qt[j]).abs() < 1e-12 && (qd_des[j] - vt[j]).abs() < 1e-9,
-                    "state {k}, joint {j}: {q_des:?} {qd_des:?} vs {qt:?} {vt:?}"
-                );
+            for step in 0..4u32 {
+                let at = t + f64::from(step) * dt;
+                let (qt, vt) = trajectory(at);
+                for j in 0..2 {
+                    let (qs, vs) = cmd.targets_at(j, at);
+                    assert!(
+                        (qs.unwrap() - qt[j]).abs() < 1e-12 && (vs.unwrap() - vt[j]).abs() < 1e-9,
+                        "state {k}, step {step}, joint {j}: {qs:?} {vs:?} vs {qt:?} {vt:?}"
+                    );
+                }
             }
         }
     }

@@ -68,10 +68,6 @@ struct RunCmd {
     /// loop; see `robot_agent::drive_gains`).
     #[arg(long, value_name = "GAINS", default_value = "none")]
     drive_gains: robot_agent::drive_gains::DriveGainsMode,
-    /// The rate the robot's drives run their law at, Hz (the simulator's physics rate); default:
-    /// much faster than the team. Sets how far ahead of the latest state the reference is.
-    #[arg(long, value_name = "HZ")]
-    drive_hz: Option<f64>,
     /// The team answers every N-th state tick (the team loop at the robot's rate divided by N);
     /// the agent answers the states between alone, with the last command's torque and, with
     /// drive gains, the reference carried to each state.
@@ -103,10 +99,6 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
     protocol::validate_id("team", &cmd.team)?;
     anyhow::ensure!(cmd.command_deadline_ms > 0, "--command-deadline-ms must be positive");
     anyhow::ensure!(
-        cmd.drive_hz.is_none_or(|hz| hz.is_finite() && hz > 0.0),
-        "--drive-hz must be a positive rate (Hz)"
-    );
-    anyhow::ensure!(
         cmd.touchdown_force.is_none_or(|f| f.is_finite() && f > 0.0),
         "--touchdown-force must be a positive force (N)"
     );
@@ -128,7 +120,6 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
         .with_deadline_ticks(cmd.command_deadline_ticks);
     cfg.coordinator_grace = Duration::from_millis(cmd.coordinator_grace_ms);
     cfg.drive_gains = cmd.drive_gains;
-    cfg.drive_hz = cmd.drive_hz;
     cfg.team_every = cmd.team_every;
     cfg.team_delay = cmd.team_delay;
     if let Some(f) = cmd.touchdown_force {

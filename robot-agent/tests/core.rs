@@ -553,20 +553,25 @@ fn commands_carry_the_drive_gains_about_the_latest_state_and_the_hold_does_not()
     let _ = c.on_state(&state(0, q0, [0.0; 3]), t0).unwrap();
     let _ = c.on_state(&state(1, q1, v1), t0 + ms(5)).unwrap();
     assert!(c.drive_gains().is_some(), "made from the first terms");
-    // The command of tick 0 arrives after the state of tick 1: its reference is tick 1's state
-    // carried half a period (drives much faster than the team) at the acceleration measured
-    // from tick 0 to 1, 5 ms apart.
+    // The command of tick 0 arrives after the state of tick 1: its reference is the trajectory
+    // from tick 1's state (at its time, 5 ms) at the acceleration measured from tick 0 to 1,
+    // 5 ms apart, valid for the command deadline (5 ticks of 5 ms, within 25 ms).
     let out = c.on_command(&command(ID, 0, &[1.0, -0.5, 0.25]), t0 + ms(6)).unwrap();
     let d = out.drive.unwrap().clone();
-    let (h, lead) = (0.005, 0.0025);
+    let (h, t1) = (0.005, 0.005);
+    assert_eq!(d.ref_time, Some(t1));
+    assert!((d.valid_until.unwrap() - (t1 + 0.025)).abs() < 1e-12, "{:?}", d.valid_until);
     for j in 0..3 {
         let a = v1[j] / h;
-        let (q, v) = (q1[j] + v1[j] * lead + 0.5 * a * lead * lead, v1[j] + a * lead);
+        assert_eq!((d.q_des[j], d.qd_des[j]), (q1[j], v1[j]), "joint {j}: the state");
+        assert!((d.qdd_des[j] - a).abs() < 1e-9, "joint {j}: {:?}", d.qdd_des);
+        // 2.5 ms on, the drives' targets are the state carried at that acceleration.
+        let s = 0.0025;
+        let (q, v) = (q1[j] + v1[j] * s + 0.5 * a * s * s, v1[j] + a * s);
+        let (qs, vs) = d.targets_at(j, t1 + s);
         assert!(
-            (d.q_des[j] - q).abs() < 1e-12 && (d.qd_des[j] - v).abs() < 1e-12,
-            "joint {j}: {:?} {:?}",
-            d.q_des,
-            d.qd_des
+            (qs.unwrap() - q).abs() < 1e-12 && (vs.unwrap() - v).abs() < 1e-9,
+            "joint {j}: {qs:?} {vs:?}"
         );
     }
     // Each joint a critically damped loop at the bandwidth on its inertia (stiffness and
@@ -584,10 +589,10 @@ fn commands_carry_the_drive_gains_about_the_latest_state_and_the_hold_does_not()
     assert!(protocol::Validate::validate(&d).is_ok());
     // At the reference the law is the command's torque; away from it, it pulls back.
     let mut tau = [0.0; 3];
-    d.effort(&d.q_des, &d.qd_des, &mut tau);
+    d.effort(t1, &d.q_des, &d.qd_des, &mut tau);
     assert_eq!(tau, [1.0, -0.5, 0.25]);
     let pushed = [d.q_des[0] + 0.01, d.q_des[1], d.q_des[2]];
-    d.effort(&pushed, &d.qd_des, &mut tau);
+    d.effort(t1, &pushed, &d.qd_des, &mut tau);
     assert!((tau[0] - (1.0 - d.kp[0] * 0.01)).abs() < 1e-12, "{tau:?}");
 
     // The same state again (the lockstep bridge republishes it while it waits): the
@@ -632,19 +637,18 @@ fn between_team_ticks_the_agent_answers_alone_with_the_last_torque() {
     assert_eq!(summary(c.on_state(&state(0, q(0), v), t0).unwrap()).0, Some(0));
     let tau = [1.0, -0.5, 0.25];
     assert!(c.on_command(&command(ID, 0, &tau), t0).unwrap().drive.is_some());
-    // Ticks 1-3: no terms; the drive command of the tick, the last torque, the reference at
-    // the state (its position and velocity, carried over the lead).
+    // Ticks 1-3: no terms; the drive command of the tick, the last torque, the reference from
+    // the state (its position and velocity at its time).
     for k in 1..4 {
         let out = c.on_state(&state(k, q(k), v), t0 + ms(5 * k)).unwrap();
         assert!(out.terms.is_none(), "tick {k}: no terms between team ticks");
         let d = out.drive.expect("answered alone");
         assert_eq!((d.header.tick, d.tau_ff.as_slice()), (k, &tau[..]), "tick {k}");
         assert!(d.has_gains());
-        assert!(
-            (d.q_des[0] - (q(k)[0] + v[0] * 0.0025)).abs() < 1e-12 && d.qd_des[0] == v[0],
-            "tick {k}: {:?} {:?}",
-            d.q_des,
-            d.qd_des
+        assert_eq!(
+            (d.q_des[0], d.qd_des[0], d.ref_time),
+            (q(k)[0], v[0], Some(k as f64 * 0.005)),
+            "tick {k}"
         );
     }
     // Tick 4, a team tick: terms, and it waits for the team's command.

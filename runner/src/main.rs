@@ -424,7 +424,8 @@ fn run_scenario(a: RunArgs) -> Result<()> {
         loss: a.loss.clone(),
     };
     let mode_name = mode_name(&opts, a.router.is_some(), a.tls.is_some(), a.realtime);
-    let s = Scenario::load(&a.scenario, &a.set)?;
+    let pace = if a.realtime { scenario::Pace::Realtime } else { scenario::Pace::Lockstep };
+    let s = Scenario::load_paced(&a.scenario, &a.set, pace)?;
     let dir = a.out.clone().unwrap_or_else(|| scenario_run::default_report_dir(&a.scenario));
     create_dir(&dir)?;
     if !a.quiet {
@@ -439,7 +440,7 @@ fn run_scenario(a: RunArgs) -> Result<()> {
             s.name, s.settle, s.duration, s.control_hz, mode_name
         );
     }
-    let source = ScenarioSource::read(&a.scenario, &a.set)
+    let source = ScenarioSource::read(&a.scenario, &a.set, pace)
         .map_err(|e| anyhow::anyhow!("reading {}: {e}", a.scenario.display()))?;
     let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live: a.live };
     let rec = (!a.no_record).then_some(&rec);

@@ -18,6 +18,8 @@ use planner::reference::PoseMotion;
 use planner::walk::WalkSpec;
 use robot_agent::delay::TeamDelay;
 
+use crate::pace::Pace;
+
 /// What can be wrong with a scenario.
 #[derive(Debug, Error)]
 pub enum ScenarioError {
@@ -123,7 +125,9 @@ pub struct Scenario {
     /// (a whole number, 1 to [`MAX_TEAM_EVERY`]); the robots' own loop stays at `control_hz`
     /// and each agent answers the ticks between alone
     /// (`robot_agent::core::AgentConfig::team_every`).
-    /// Default: `control_hz`, the paper's single loop.
+    /// Default: `control_hz`, the paper's single loop. In real time the team loop is the only
+    /// one on the network: its rate (default [`crate::pace::TEAM_HZ`]) becomes the control rate
+    /// and the drives fill the physics steps between ([`crate::pace`]).
     #[serde(default)]
     pub team_hz: Option<f64>,
     /// The team's delay, in robot ticks (0 to `robot_agent::core::MAX_TEAM_DELAY`), or
@@ -473,27 +477,54 @@ pub struct PushSection {
 }
 
 impl Scenario {
-    /// Load a scenario file and apply `--set` overrides (`key=value`).
+    /// Load a scenario file and apply `--set` overrides (`key=value`), for a lockstep run.
     pub fn load(path: impl AsRef<Path>, overrides: &[String]) -> Result<Scenario, ScenarioError> {
+        Self::load_paced(path, overrides, Pace::Lockstep)
+    }
+
+    /// Load a scenario file and apply `--set` overrides for a run at `pace`: a real-time run
+    /// gets the real-time loop's defaults where the file and the overrides say nothing
+    /// ([`crate::pace`]).
+    pub fn load_paced(
+        path: impl AsRef<Path>,
+        overrides: &[String],
+        pace: Pace,
+    ) -> Result<Scenario, ScenarioError> {
         let path = path.as_ref();
         let text = std::fs::read_to_string(path)
             .map_err(|e| ScenarioError::Io { path: path.to_path_buf(), reason: e.to_string() })?;
-        Self::from_str_with(&text, path, overrides)
+        Self::from_str_paced(&text, path, overrides, pace)
     }
 
-    /// Parse scenario text (named `path` in errors) and apply overrides.
+    /// Parse scenario text (named `path` in errors) and apply overrides, for a lockstep run.
     pub fn from_str_with(
         text: &str,
         path: &Path,
         overrides: &[String],
+    ) -> Result<Scenario, ScenarioError> {
+        Self::from_str_paced(text, path, overrides, Pace::Lockstep)
+    }
+
+    /// Parse scenario text (named `path` in errors) and apply overrides, for a run at `pace`.
+    pub fn from_str_paced(
+        text: &str,
+        path: &Path,
+        overrides: &[String],
+        pace: Pace,
     ) -> Result<Scenario, ScenarioError> {
         let toml_err = |e: String| ScenarioError::Toml { path: path.to_path_buf(), reason: e };
         let mut value: toml::Value = toml::from_str(text).map_err(|e| toml_err(e.to_string()))?;
         for o in overrides {
             apply_override(&mut value, o)?;
         }
+        if pace == Pace::Realtime {
+            crate::pace::realtime_defaults(&mut value);
+        }
         let mut s: Scenario =
             value.try_into().map_err(|e: toml::de::Error| toml_err(e.to_string()))?;
+        if pace == Pace::Realtime {
+            crate::pace::realtime_rate(&mut s.control_hz, &mut s.team_hz);
+        }
         let invalid = |reason: String| ScenarioError::Invalid { path: path.to_path_buf(), reason };
         match (&s.team, s.robots.is_empty()) {
             (Some(t), true) => s.robots = t.robots(&s.object).map_err(invalid)?,

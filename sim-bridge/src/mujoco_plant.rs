@@ -29,6 +29,8 @@ pub struct MujocoPlant {
     drive_q: Vec<f64>,
     drive_qd: Vec<f64>,
     drive_tau: Vec<f64>,
+    /// Each robot's drive gaps so far ([`Plant::drive_gap_steps`]).
+    gaps: Vec<u64>,
 }
 
 /// A robot's drives after they lost their commands: unpowered, or each joint held at `q_hold`
@@ -72,6 +74,7 @@ impl MujocoPlant {
         let data = MjData::new(model);
         let ids = world.robots.iter().map(|r| r.id.clone()).collect();
         let lost = vec![None; world.robots.len()];
+        let gaps = vec![0; world.robots.len()];
         let drives = vec![DriveTargets::new(); world.robots.len()];
         let most = world.robots.iter().map(|r| r.actuator.len()).max().unwrap_or(0);
         let (drive_q, drive_qd, drive_tau) = (vec![0.0; most], vec![0.0; most], vec![0.0; most]);
@@ -86,6 +89,7 @@ impl MujocoPlant {
             drive_q,
             drive_qd,
             drive_tau,
+            gaps,
         };
         for i in 0..p.world.robots.len() {
             let q = p.world.robots[i].initial_q.clone();
@@ -221,7 +225,11 @@ impl MujocoPlant {
     /// The drive law of every robot whose command has gains, for the coming physics step
     /// ([`DriveCommand::effort`] at the current joint state; MuJoCo clamps to `ctrlrange`).
     fn drive_commands(&mut self) {
+        let t = self.data.ffi().time;
         for (i, drive) in self.drives.iter().enumerate() {
+            if self.lost[i].is_some() || drive.expired(t) {
+                self.gaps[i] += 1;
+            }
             if !drive.active || self.lost[i].is_some() {
                 continue;
             }
@@ -234,7 +242,7 @@ impl MujocoPlant {
                     self.drive_qd[k] = *d.qvel.add(va);
                 }
             }
-            drive.cmd.effort(&self.drive_q[..n], &self.drive_qd[..n], &mut self.drive_tau[..n]);
+            drive.cmd.effort(t, &self.drive_q[..n], &self.drive_qd[..n], &mut self.drive_tau[..n]);
             for (k, &a) in r.actuator.iter().enumerate() {
                 let t = self.drive_tau[k];
                 unsafe { *d.ctrl.add(a) = if t.is_finite() { t } else { 0.0 } };
@@ -324,6 +332,10 @@ impl Plant for MujocoPlant {
 
     fn drives_lost(&self, robot: usize) -> bool {
         self.lost[robot].is_some()
+    }
+
+    fn drive_gap_steps(&self, robot: usize) -> u64 {
+        self.gaps[robot]
     }
 
     fn step(&mut self) {

@@ -41,6 +41,9 @@ pub trait Plant: Send {
     fn restore_drives(&mut self, robot: usize);
     /// Whether robot `robot`'s drives are lost.
     fn drives_lost(&self, robot: usize) -> bool;
+    /// Physics steps so far on which robot `robot`'s drives had no valid command: its last one
+    /// past its [`DriveCommand::valid_until`], or its drives lost (drive gaps).
+    fn drive_gap_steps(&self, robot: usize) -> u64;
     /// Advance one control period.
     fn step(&mut self);
     /// Simulated time, s.
@@ -66,31 +69,45 @@ pub struct PlaceholderPlant {
     /// Each robot's drive command, run at every step while it has gains.
     drives: Vec<DriveTargets>,
     lost: Vec<Option<DriveLoss>>,
+    gaps: Vec<u64>,
     dt: f64,
     steps: u64,
 }
 
 /// A robot's drive command kept by a plant, run at every physics step while `active` (it has
-/// gains). Preallocated: taking a command of the same size allocates nothing.
+/// gains), and how long the last command is valid. Preallocated: taking a command of the same
+/// size allocates nothing.
 #[derive(Debug, Clone)]
 pub struct DriveTargets {
     pub cmd: DriveCommand,
     pub active: bool,
+    /// The last command's [`DriveCommand::valid_until`], with gains or without.
+    pub valid_until: Option<f64>,
 }
 
 impl DriveTargets {
     /// No command yet.
     pub fn new() -> Self {
-        DriveTargets { cmd: DriveCommand::torque("", "", 0, Vec::new()), active: false }
+        DriveTargets {
+            cmd: DriveCommand::torque("", "", 0, Vec::new()),
+            active: false,
+            valid_until: None,
+        }
     }
 
     /// Keep `cmd` if it has gains (then `true`); a command without gains ends the law.
     pub fn take(&mut self, cmd: &DriveCommand) -> bool {
         self.active = cmd.has_gains();
+        self.valid_until = cmd.valid_until;
         if self.active {
             self.cmd.clone_from(cmd);
         }
         self.active
+    }
+
+    /// Whether the last command is past its validity at time `t` (a drive gap).
+    pub fn expired(&self, t: f64) -> bool {
+        self.valid_until.is_some_and(|end| t > end)
     }
 }
 
@@ -111,6 +128,7 @@ impl PlaceholderPlant {
             tau: vec![vec![0.0; joints]; n],
             drives: vec![DriveTargets::new(); n],
             lost: vec![None; n],
+            gaps: vec![0; n],
             dt,
             steps: 0,
         }
@@ -171,15 +189,23 @@ impl Plant for PlaceholderPlant {
         self.lost[robot].is_some()
     }
 
+    fn drive_gap_steps(&self, robot: usize) -> u64 {
+        self.gaps[robot]
+    }
+
     fn step(&mut self) {
+        let t = self.time();
         for r in 0..self.robots.len() {
+            if self.lost[r].is_some() || self.drives[r].expired(t) {
+                self.gaps[r] += 1;
+            }
             if self.lost[r] == Some(DriveLoss::Freeze) {
                 // Unit-inertia joints held where they are.
                 self.v[r].iter_mut().for_each(|v| *v = 0.0);
                 continue;
             }
             if self.drives[r].active {
-                self.drives[r].cmd.effort(&self.q[r], &self.v[r], &mut self.tau[r]);
+                self.drives[r].cmd.effort(t, &self.q[r], &self.v[r], &mut self.tau[r]);
             }
             for j in 0..self.q[r].len() {
                 self.v[r][j] += self.dt * self.tau[r][j];

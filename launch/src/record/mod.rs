@@ -77,23 +77,36 @@ pub struct Item {
     pub message: RecordedMessage,
 }
 
-/// The scenario as the run loaded it: file, text and `--set` overrides (replayed by
+/// The scenario as the run loaded it: file, text, `--set` overrides and pace (replayed by
 /// `team report`).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ScenarioSource {
     pub path: PathBuf,
     pub text: String,
     pub overrides: Vec<String>,
+    /// Lockstep or real time: a real-time run loads the scenario with the real-time loop's
+    /// defaults ([`scenario::pace`]).
+    pub pace: scenario::Pace,
 }
 
 impl ScenarioSource {
-    /// Read the scenario file.
-    pub fn read(path: &Path, overrides: &[String]) -> std::io::Result<ScenarioSource> {
+    /// Read the scenario file of a run at `pace`.
+    pub fn read(
+        path: &Path,
+        overrides: &[String],
+        pace: scenario::Pace,
+    ) -> std::io::Result<ScenarioSource> {
         Ok(ScenarioSource {
             path: path.to_path_buf(),
             text: std::fs::read_to_string(path)?,
             overrides: overrides.to_vec(),
+            pace,
         })
+    }
+
+    /// The scenario as the run loaded it.
+    pub fn load(&self) -> Result<scenario::Scenario, scenario::ScenarioError> {
+        scenario::Scenario::from_str_paced(&self.text, &self.path, &self.overrides, self.pace)
     }
 }
 
@@ -307,6 +320,7 @@ fn run_metadata(
         "overrides".into(),
         serde_json::to_string(&s.overrides).unwrap_or_else(|_| "[]".into()),
     );
+    m.insert("pace".into(), s.pace.as_str().into());
     m.insert("mode".into(), facts.mode.clone());
     m.insert("settle_wall_ns".into(), facts.settle_wall.as_nanos().to_string());
     m.insert("run_wall_ns".into(), facts.run_wall.as_nanos().to_string());

@@ -12,7 +12,7 @@ use thiserror::Error;
 use super::{RunFacts, ScenarioSource, RUN_METADATA};
 use evaluation::evaluate::{self, Evaluation};
 use evaluation::records::Records;
-use scenario::file::{Scenario, ScenarioError};
+use scenario::file::ScenarioError;
 use scenario::plan::{self, Plan, PlanError};
 
 /// Errors reading a recording.
@@ -57,8 +57,7 @@ pub fn evaluate_recording(
             "the recording misses messages: the metrics may differ from the run's"
         );
     }
-    let s =
-        Scenario::from_str_with(&rec.scenario.text, &rec.scenario.path, &rec.scenario.overrides)?;
+    let s = rec.scenario.load()?;
     let plan = plan::plan(&s, root)?;
     let records = rec.records(plan.references.clock.settle_ticks);
     let eval = match rec.facts.error.clone().or_else(|| cut_short(&plan, &records)) {
@@ -148,6 +147,7 @@ pub fn read(path: &Path) -> Result<Recording, ReplayError> {
         path: PathBuf::from(get("scenario_path")),
         text: get("scenario_text"),
         overrides: serde_json::from_str(&get("overrides")).unwrap_or_default(),
+        pace: scenario::Pace::parse(&get("pace")),
     };
     rec.facts = RunFacts {
         mode: get("mode"),
@@ -189,12 +189,5 @@ pub fn read(path: &Path) -> Result<Recording, ReplayError> {
 
 /// A torque command of the first protocol version, as the drive command without gains it was.
 fn torque_as_drive(t: TorqueCommand) -> DriveCommand {
-    DriveCommand {
-        header: t.header,
-        tau_ff: t.tau,
-        q_des: Vec::new(),
-        qd_des: Vec::new(),
-        kp: Vec::new(),
-        kd: Vec::new(),
-    }
+    DriveCommand { header: t.header, ..DriveCommand::torque("", "", 0, t.tau) }
 }

@@ -82,6 +82,8 @@ pub struct MockHardware {
     history: Option<Vec<MockStep>>,
     /// From this read on, the base reports this pose (a robot that tipped over).
     tipped: Option<(u64, Pose)>,
+    /// The first read's time: the mock's clock starts there, as the loop's does.
+    first_read: Option<Instant>,
 }
 
 impl MockHardware {
@@ -94,6 +96,7 @@ impl MockHardware {
             drive: DriveCommand::torque("", "", 0, vec![0.0; n]),
             dt: cfg.dt,
             reads: 0,
+            first_read: None,
             writes: 0,
             lifecycle: Lifecycle::Unconfigured,
             faults: Vec::new(),
@@ -198,12 +201,13 @@ impl RobotHardware for MockHardware {
         Ok(())
     }
 
-    fn read(&mut self, _now: Instant, state: &mut RobotState) -> HwStatus {
+    fn read(&mut self, now: Instant, state: &mut RobotState) -> HwStatus {
         if self.lifecycle == Lifecycle::Unconfigured {
             return HwStatus::Error;
         }
+        let t = now.duration_since(*self.first_read.get_or_insert(now)).as_secs_f64();
         if self.reads > 0 {
-            self.drive.effort(&self.q, &self.v, &mut self.tau);
+            self.drive.effort(t, &self.q, &self.v, &mut self.tau);
             for j in 0..self.q.len() {
                 self.v[j] += self.dt * self.tau[j];
                 self.q[j] += self.dt * self.v[j];

@@ -59,6 +59,8 @@ pub(crate) struct TickSide {
     truth_pub: Option<TypedPublisher<GroundTruth>>,
     perturbations: Option<transport::SampleQueue>,
     truth: GroundTruth,
+    /// Each robot's drive gaps counted before this tick's step (real time).
+    gaps_before: Vec<u64>,
 }
 
 impl TickSide {
@@ -84,7 +86,28 @@ impl TickSide {
         } else {
             None
         };
-        Ok(TickSide { truth_pub, perturbations, truth: crate::ground_truth::empty(team) })
+        Ok(TickSide {
+            truth_pub,
+            perturbations,
+            truth: crate::ground_truth::empty(team),
+            gaps_before: Vec::new(),
+        })
+    }
+
+    /// The drive gaps of the step just done into the loop timing (real time only: lockstep
+    /// carries none).
+    fn count_gaps(&mut self, plant: &impl Plant) {
+        let timing = &mut self.truth.loop_timing;
+        if timing.is_empty() {
+            return;
+        }
+        self.gaps_before.resize(timing.len(), 0);
+        for (i, t) in timing.iter_mut().enumerate() {
+            let now = plant.drive_gap_steps(i);
+            t.gap_steps =
+                u32::try_from(now.saturating_sub(self.gaps_before[i])).unwrap_or(u32::MAX);
+            self.gaps_before[i] = now;
+        }
     }
 
     /// The loop timing the next ground truth carries, one entry per robot (made on first use;
@@ -99,6 +122,7 @@ impl TickSide {
                     latency_us: None,
                     applied_tick: None,
                     late: 0,
+                    gap_steps: 0,
                 })
                 .collect();
         }
@@ -128,6 +152,7 @@ impl TickSide {
             }
         }
         plant.step();
+        self.count_gaps(plant);
         if (self.truth_pub.is_some() || extras.truth_log.is_some())
             && plant.ground_truth(team, tick, &mut self.truth)
         {

@@ -75,7 +75,8 @@ fn run_with(
     let opts = RunOptions { distributed, hosts: false, progress: false, loss: Vec::new() };
     let rec = mcap.then(|| RecordOptions {
         path: dir.join("run.mcap"),
-        scenario: ScenarioSource::read(&path, &sets).expect("scenario file"),
+        scenario: ScenarioSource::read(&path, &sets, scenario::Pace::Lockstep)
+            .expect("scenario file"),
         live: None,
     });
     let (records, summary) =
