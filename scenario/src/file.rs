@@ -78,7 +78,7 @@ pub struct Scenario {
     #[serde(default = "default_payload_margin")]
     pub payload_margin: f64,
     /// When the controller (PIDC or MQP) lets go of an object it cannot hold
-    /// (`release.after_failed_ticks`: control ticks of failed QPs in a row;
+    /// (`release.after_failed`: s of failed QPs in a row;
     /// `release.max_fit_residual`: m; 0 turns a limit off).
     #[serde(default)]
     pub release: coordinator::building_blocks::release::ReleasePolicy,
@@ -321,7 +321,7 @@ pub const OPTIONAL_NESTED_KEYS: [&str; 6] = [
     "walk.start",
 ];
 /// Top-level tables a scenario may leave out that `--set` may still reach into
-/// (`--set release.after_failed_ticks=50`, `--set references.ramp=0.5` on a walk); their own
+/// (`--set release.after_failed=0.05`, `--set references.ramp=0.5` on a walk); their own
 /// fields are checked when the file is read.
 pub const OPTIONAL_TABLES: [&str; 3] = ["release", "references", "sensors"];
 
@@ -859,15 +859,15 @@ mod tests {
         // So may the fields of the optional `release` table; a typo there is still an error.
         let s = Scenario::load(
             &p,
-            &["release.after_failed_ticks=7".into(), "release.retreat=0.1".into()],
+            &["release.after_failed=0.007".into(), "release.retreat=0.1".into()],
         )
         .unwrap();
-        assert_eq!((s.release.after_failed_ticks, s.release.retreat), (7, 0.1));
+        assert_eq!((s.release.after_failed, s.release.retreat), (0.007, 0.1));
         assert_eq!(
             s.release.max_fit_residual,
             coordinator::building_blocks::release::ReleasePolicy::default().max_fit_residual
         );
-        for bad in ["release.after_failed=7", "release=3", "release.retreat=[1]"] {
+        for bad in ["release.after_failed_ticks=7", "release=3", "release.retreat=[1]"] {
             assert!(Scenario::load(&p, &[bad.to_string()]).is_err(), "{bad} accepted");
         }
         // So may a layout's defaulted keys: four robots two per face, 0.4 m apart.

@@ -265,6 +265,7 @@ fn shell_config(s: &Scenario, grasp: &GraspAtStart, defaults: ShellConfig) -> Sh
         f_min_foot: s.min_foot_force,
         f_min_hand: s.min_hand_force,
         release: s.release,
+        robot_period: 1.0 / s.control_hz,
         ..defaults
     }
 }

@@ -238,7 +238,7 @@ pub struct GraspTracker {
 }
 
 /// When the grasp model is re-fitted to the measured object ([`GraspTracker::update_refitting`];
-/// the `release` policy's `refit_at` and `refit_min_ticks`).
+/// the `release` policy's `refit_at` and `refit_min_interval`).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct RefitRule {
     /// A hand this far (m) from where the measured object puts its contact has slid (0: never).

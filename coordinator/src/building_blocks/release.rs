@@ -29,10 +29,11 @@ use crate::team::Team;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ReleasePolicy {
-    /// How long (in the robots' ticks, from the first failed tick of a run with no tick solved
+    /// How long (s, in the robots' time from the first failed tick of a run with no tick solved
     /// between) the contact-force QP may fail (a fallback sent) before the hands let go. A push
-    /// makes a few; an object the team cannot hold makes them all.
-    pub after_failed_ticks: u32,
+    /// makes a few failed ticks; an object the team cannot hold makes them all. A time, not a
+    /// count of ticks: what the robots can stand is a time, whatever the loop's rate.
+    pub after_failed: f64,
     /// Largest grasp-fit residual (m): a hand this far from where the fitted object pose puts it
     /// means the grasp is no longer rigid (the object slipped out or the palms came apart).
     pub max_fit_residual: f64,
@@ -44,9 +45,9 @@ pub struct ReleasePolicy {
     /// object: the grasp model is re-fitted to the measured object, and the slip alone never
     /// lets go (`building_blocks::grasp::GraspTracker::update_refitting`; 0: never re-fitted).
     pub refit_at: f64,
-    /// Ticks at least from one re-fit to the next ([`RefitRule::min_ticks`]): slip that comes
+    /// Time at least from one re-fit to the next, s ([`RefitRule::min_ticks`]): slip that comes
     /// faster is left to the fit's residual and [`ReleasePolicy::max_fit_residual`].
-    pub refit_min_ticks: u32,
+    pub refit_min_interval: f64,
     /// How far (m) a hand's contact may move on the object since the grasp closed, re-fits
     /// included, before the team lets go: past it the palm is sliding off the object.
     pub max_slip: f64,
@@ -54,32 +55,34 @@ pub struct ReleasePolicy {
 
 impl Default for ReleasePolicy {
     fn default() -> Self {
-        // 50 ms of failed ticks at 1 kHz (two robots with 1.5 times their payload: releasing
-        // within 0.1 s kept both standing, from 0.15 s on they fell); 2 cm, four times the
-        // acceptance bound on palm slip; 5 cm clears the palms off the object. A re-fit at
-        // 0.5 mm keeps the object's estimate within half a millimetre of the measured object;
-        // 250 ticks apart follows creep (0.5 mm takes seconds) and not a hand being dragged
-        // off the object (0.3-0.6 mm per tick).
+        // 50 ms of failed ticks (two robots with 1.5 times their payload: releasing within
+        // 0.1 s kept both standing, from 0.15 s on they fell); 2 cm, four times the acceptance
+        // bound on palm slip; 5 cm clears the palms off the object. A re-fit at 0.5 mm keeps the
+        // object's estimate within half a millimetre of the measured object; 0.25 s apart
+        // follows creep (0.5 mm takes seconds) and not a hand being dragged off the object
+        // (0.3-0.6 mm per millisecond).
         ReleasePolicy {
-            after_failed_ticks: 50,
+            after_failed: 0.05,
             max_fit_residual: 0.02,
             retreat: 0.05,
             refit_at: 0.0005,
-            refit_min_ticks: 250,
+            refit_min_interval: 0.25,
             max_slip: 0.05,
         }
     }
 }
 
 impl ReleasePolicy {
-    /// When the grasp model follows the measured object.
-    pub fn refit(&self) -> RefitRule {
-        RefitRule { at: self.refit_at, min_ticks: self.refit_min_ticks }
+    /// When the grasp model follows the measured object, for robots ticking every `period` s.
+    pub fn refit(&self, period: f64) -> RefitRule {
+        RefitRule { at: self.refit_at, min_ticks: ticks_in(self.refit_min_interval, period) }
     }
 
-    /// Finite, non-negative residual.
+    /// Finite, non-negative lengths and times.
     pub fn check(&self) -> Result<(), String> {
         for (what, x) in [
+            ("after_failed", self.after_failed),
+            ("refit_min_interval", self.refit_min_interval),
             ("max_fit_residual", self.max_fit_residual),
             ("retreat", self.retreat),
             ("refit_at", self.refit_at),
@@ -91,6 +94,15 @@ impl ReleasePolicy {
         }
         Ok(())
     }
+}
+
+/// The robot ticks of `period` s that `time` s spans, at least one (rounded to the nearest:
+/// 0.05 s at 1 kHz is 50 ticks).
+fn ticks_in(time: f64, period: f64) -> u32 {
+    if !(period > 0.0 && time > 0.0) {
+        return 0;
+    }
+    ((time / period).round().max(1.0)).min(f64::from(u32::MAX)) as u32
 }
 
 /// Why and when the team let go.
@@ -113,18 +125,23 @@ pub struct Release {
 /// (`tests/tests/degrade.rs`, README "Degrade, never collapse").
 pub const SLIP_WHILE_FAILING: f64 = 0.5;
 
-/// How long the QP has failed before [`SLIP_WHILE_FAILING`] applies (in the robots' ticks: 10 ms at
-/// 1 kHz, 80 ms at 125 Hz): a push that the contact forces cannot meet fails tick after tick
-/// (the 300 N push above from 27 ms into it on), a robot whose
-/// terms came late fails one or two (a three-robot team at 125 Hz with one agent stalled
-/// 0.12 s: two infeasible ticks at 10-20 mm of residual, and letting go there dropped an
-/// object the team then held through the stall at the full limit).
-pub const SLIP_WHILE_FAILING_TICKS: u32 = 10;
+/// How long the QP has failed before [`SLIP_WHILE_FAILING`] applies, s of the robots' time: a
+/// push that the contact forces cannot meet fails tick after tick (the 300 N push above from
+/// 27 ms into it on), a robot whose terms came late fails one or two (a three-robot team at
+/// 125 Hz with one agent stalled 0.12 s: two infeasible ticks at 10-20 mm of residual, and
+/// letting go there dropped an object the team then held through the stall at the full limit).
+/// And at least [`SLIP_WHILE_FAILING_MIN_TICKS`], more than a late robot's one or two, at any
+/// rate.
+pub const SLIP_WHILE_FAILING_AFTER: f64 = 0.010;
+/// The fewest failed ticks in a row before [`SLIP_WHILE_FAILING`] applies.
+pub const SLIP_WHILE_FAILING_MIN_TICKS: u32 = 3;
 
 /// What one tick showed (see [`GraspWatch::observe`]).
 #[derive(Debug, Clone, Copy)]
 pub struct GraspObservation {
     pub tick: u64,
+    /// The robots' tick period, s.
+    pub period: f64,
     /// Hands in grasp as modelled this tick (0 once released).
     pub hands: usize,
     /// The contact-force QP was not solved and a fallback was sent.
@@ -137,10 +154,17 @@ pub struct GraspObservation {
 }
 
 impl GraspObservation {
-    /// The outcome of a tick of `team` (its hands in grasp as modelled) with `grasp`'s fit.
-    pub fn of(tick: u64, team: &Team, grasp: Option<&GraspTerms>, qp_failed: bool) -> Self {
+    /// The outcome of a tick of `team` (its hands in grasp as modelled, robots ticking every
+    /// `period` s) with `grasp`'s fit.
+    pub fn of(
+        (tick, period): (u64, f64),
+        team: &Team,
+        grasp: Option<&GraspTerms>,
+        qp_failed: bool,
+    ) -> Self {
         GraspObservation {
             tick,
+            period,
             hands: team.hands.len(),
             qp_failed,
             fit_residual: grasp.map(|g| g.fit_residual),
@@ -159,6 +183,8 @@ pub struct GraspWatch {
     /// longer, the coordinator skips the ticks overtaken meanwhile (S4 at 1 kHz, a 300 N push:
     /// it solved one tick in 4-12) and a count of solved ticks let the slip run on to 31 mm.
     failed_run: u32,
+    /// The run's length in time, s (`failed_run` robot periods).
+    failed_for: f64,
     /// Hands in grasp on the last tick observed.
     last_hands: usize,
     released: Option<Release>,
@@ -171,12 +197,20 @@ impl GraspWatch {
     }
 
     /// Whether slip is followed by re-fitting the grasp model to the measured object: not once
-    /// the QP has failed [`SLIP_WHILE_FAILING_TICKS`] in a row. Slip while the contact forces
+    /// the QP has failed for [`SLIP_WHILE_FAILING_AFTER`] in a row
+    /// ([`SLIP_WHILE_FAILING_MIN_TICKS`] at least). Slip while the contact forces
     /// cannot be kept is the grasp being lost (a robot pushed away with its hand on the
     /// object): re-fitted, the fit would never show it, and the team would follow the hand
     /// until the palm slid off, dragging the others after it.
     pub fn follows_slip(&self) -> bool {
-        self.failed_run < SLIP_WHILE_FAILING_TICKS
+        !self.failing_long()
+    }
+
+    /// Whether the run of failed ticks has lasted [`SLIP_WHILE_FAILING_AFTER`] and
+    /// [`SLIP_WHILE_FAILING_MIN_TICKS`].
+    fn failing_long(&self) -> bool {
+        self.failed_run >= SLIP_WHILE_FAILING_MIN_TICKS
+            && reached(self.failed_for, SLIP_WHILE_FAILING_AFTER)
     }
 
     /// Before a tick: clear the latch when no hand is in grasp any more (the grasp was opened).
@@ -184,6 +218,7 @@ impl GraspWatch {
         if !hands_in_grasp {
             self.failing_since = None;
             self.failed_run = 0;
+            self.failed_for = 0.0;
             self.released = None;
         }
     }
@@ -217,13 +252,14 @@ impl GraspWatch {
         if self.released.is_some() || t.hands == 0 {
             self.failing_since = None;
             self.failed_run = 0;
+            self.failed_for = 0.0;
             return None;
         }
         self.count_failed(t);
-        let failed = policy.after_failed_ticks > 0 && self.failed_run >= policy.after_failed_ticks;
+        let failed = policy.after_failed > 0.0 && reached(self.failed_for, policy.after_failed);
         // Slip while the contact forces cannot be kept (the QP failing tick after tick) is a grasp
         // being lost, not a palm rocking: let go at a share of the limit (SLIP_WHILE_FAILING).
-        let failing = t.qp_failed && self.failed_run >= SLIP_WHILE_FAILING_TICKS;
+        let failing = t.qp_failed && self.failing_long();
         let limit = policy.max_fit_residual * if failing { SLIP_WHILE_FAILING } else { 1.0 };
         let slipped = t.fit_residual.filter(|&r| policy.max_fit_residual > 0.0 && r > limit);
         let slid_off =
@@ -250,9 +286,11 @@ impl GraspWatch {
                 limit * 1e3,
                 if failing { " while the QP fails" } else { "" }
             ),
-            (true, None, _) => {
-                format!("the contact-force QP has failed for {} ticks", self.failed_run)
-            }
+            (true, None, _) => format!(
+                "the contact-force QP has failed for {:.0} ms ({} ticks)",
+                self.failed_for * 1e3,
+                self.failed_run
+            ),
             (false, None, false) => return None,
         };
         Some(self.latch(t.tick, &why))
@@ -263,10 +301,12 @@ impl GraspWatch {
         if !t.qp_failed {
             self.failing_since = None;
             self.failed_run = 0;
+            self.failed_for = 0.0;
             return;
         }
         let since = *self.failing_since.get_or_insert(t.tick);
         self.failed_run = u32::try_from(t.tick.saturating_sub(since) + 1).unwrap_or(u32::MAX);
+        self.failed_for = f64::from(self.failed_run) * t.period;
     }
 
     /// The release of `tick` for the reason `why`, latched.
@@ -279,12 +319,57 @@ impl GraspWatch {
     }
 }
 
+/// Whether `time` has reached `limit` (a sum of periods, within rounding).
+fn reached(time: f64, limit: f64) -> bool {
+    time >= limit * (1.0 - 1e-9)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    /// [`SLIP_WHILE_FAILING_AFTER`] in the ticks of [`tick`]'s 1 kHz.
+    const SLIP_WHILE_FAILING_TICKS: u32 = 10;
+
+    /// A tick of robots at 1 kHz.
     fn tick(tick: u64, qp_failed: bool, fit_residual: Option<f64>) -> GraspObservation {
-        GraspObservation { tick, hands: 2, qp_failed, fit_residual, slip_since_closed: None }
+        GraspObservation {
+            tick,
+            period: 0.001,
+            hands: 2,
+            qp_failed,
+            fit_residual,
+            slip_since_closed: None,
+        }
+    }
+
+    #[test]
+    fn the_release_waits_the_same_time_at_any_rate() {
+        let p = ReleasePolicy { max_fit_residual: 0.0, ..ReleasePolicy::default() };
+        // 50 ms of failed ticks: 50 at 1 kHz, 13 at 250 Hz (12.5 rounded up by the run's
+        // whole ticks), 7 at 125 Hz.
+        for (period, ticks) in [(0.001, 50), (0.004, 13), (0.008, 7)] {
+            let mut w = GraspWatch::default();
+            for k in 0..ticks - 1 {
+                let t = GraspObservation { period, ..tick(k, true, Some(0.0)) };
+                assert!(w.observe(&p, t).is_none(), "{period} s: tick {k}");
+            }
+            let t = GraspObservation { period, ..tick(ticks - 1, true, Some(0.0)) };
+            assert!(w.observe(&p, t).is_some(), "{period} s: let go after {ticks} ticks");
+        }
+        // Slip stops being followed after 10 ms: 10 ticks at 1 kHz, 3 at 250 Hz; never after
+        // fewer than three, however slow (a late robot's terms make one or two).
+        let never = ReleasePolicy { after_failed: 0.0, ..p };
+        for (period, ticks) in [(0.001, 10), (0.004, 3), (0.008, 3), (0.1, 3)] {
+            let mut w = GraspWatch::default();
+            for k in 0..ticks {
+                assert!(w.follows_slip(), "{period} s: tick {k}");
+                w.observe(&never, GraspObservation { period, ..tick(k, true, Some(0.0)) });
+            }
+            assert!(!w.follows_slip(), "{period} s: after {ticks} ticks");
+        }
+        assert_eq!(p.refit(0.001).min_ticks, 250);
+        assert_eq!(p.refit(0.004).min_ticks, 63);
     }
 
     #[test]
@@ -314,12 +399,12 @@ mod tests {
         let r = w.observe(&p, tick(100 + n - 1, true, Some(1.5 * half))).expect("failing").clone();
         assert!(r.note.contains("while the QP fails"), "{}", r.note);
         // The longer limit likewise.
-        let p = ReleasePolicy { after_failed_ticks: 50, max_fit_residual: 0.0, ..p };
+        let p = ReleasePolicy { after_failed: 0.05, max_fit_residual: 0.0, ..p };
         let mut w = GraspWatch::default();
         assert!(w.observe(&p, tick(0, true, Some(0.0))).is_none());
         assert!(w.observe(&p, tick(48, true, Some(0.0))).is_none());
         let r = w.observe(&p, tick(49, true, Some(0.0))).expect("failed for 50 ticks").clone();
-        assert!(r.note.contains("failed for 50 ticks"), "{}", r.note);
+        assert!(r.note.contains("failed for 50 ms (50 ticks)"), "{}", r.note);
     }
 
     #[test]
@@ -347,7 +432,7 @@ mod tests {
 
     #[test]
     fn a_run_of_failed_ticks_releases_and_a_solved_tick_restarts_the_count() {
-        let p = ReleasePolicy { after_failed_ticks: 3, ..ReleasePolicy::default() };
+        let p = ReleasePolicy { after_failed: 0.003, ..ReleasePolicy::default() };
         let mut w = GraspWatch::default();
         assert!(w.observe(&p, tick(1, true, Some(0.0))).is_none());
         assert!(w.observe(&p, tick(2, true, Some(0.0))).is_none());
@@ -360,7 +445,7 @@ mod tests {
         let r =
             w.observe(&p, tick(6, true, Some(0.0))).expect("three failed ticks in a row").clone();
         assert_eq!(r.tick, 6);
-        assert!(r.note.contains("failed for 3 ticks"), "{}", r.note);
+        assert!(r.note.contains("failed for 3 ms (3 ticks)"), "{}", r.note);
         assert!(w.observe(&p, tick(7, true, Some(0.0))).is_none(), "released once");
         assert_eq!(w.released(), Some(&r));
     }
@@ -445,8 +530,7 @@ mod tests {
 
     #[test]
     fn zero_limits_never_release() {
-        let p =
-            ReleasePolicy { after_failed_ticks: 0, max_fit_residual: 0.0, ..Default::default() };
+        let p = ReleasePolicy { after_failed: 0.0, max_fit_residual: 0.0, ..Default::default() };
         let mut w = GraspWatch::default();
         for t in 0..1000 {
             assert!(w.observe(&p, tick(t, true, Some(1.0))).is_none());

@@ -30,6 +30,8 @@ pub struct ShellConfig {
     pub hand_gains: Gains,
     /// When the team lets go of an object it cannot hold (degrade, never collapse).
     pub release: ReleasePolicy,
+    /// The robots' tick period, s (1 / `control_hz`): the release policy's times in ticks.
+    pub robot_period: f64,
     /// Carried object: mass, kg.
     pub object_mass: f64,
     /// Carried object: inertia about its centre in its own frame, kg m^2.
@@ -76,6 +78,7 @@ impl ShellConfig {
             swing_gains: Gains::new(&[3500.0, 3500.0, 3500.0], &[20.0, 20.0, 20.0]),
             hand_gains,
             release: ReleasePolicy::default(),
+            robot_period: 0.001,
             object_mass: 1.0,
             object_inertia: Matrix3::identity() * (1.0 * (0.36 + 0.36) / 12.0),
             object_pose_at_grasp: None,
@@ -132,6 +135,9 @@ impl ShellConfig {
         }
         if let Err(why) = self.release.check() {
             return bad("release", why);
+        }
+        if !(self.robot_period.is_finite() && self.robot_period > 0.0) {
+            return bad("robot_period", format!("{} s must be positive", self.robot_period));
         }
         Ok(())
     }

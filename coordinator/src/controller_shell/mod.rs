@@ -78,7 +78,11 @@ impl ShellState {
         team.assemble_into(tick, self.expected.as_deref(), fully_actuated)?;
         torque_limits(team, &self.descriptions, fully_actuated, actuated, limits)?;
         let plan = (cfg.object_pose_at_grasp, &cfg.planned_grasp[..]);
-        let refit = if self.watch.follows_slip() { cfg.release.refit() } else { RefitRule::NEVER };
+        let refit = if self.watch.follows_slip() {
+            cfg.release.refit(cfg.robot_period)
+        } else {
+            RefitRule::NEVER
+        };
         self.grasp.update_refitting(team, plan, refit, grasp)?;
         // Late robots' free hands keep clear of the object the others hold.
         self.targets.keep_clear(
@@ -101,7 +105,8 @@ impl ShellState {
         fell_back: bool,
         note: &mut Option<String>,
     ) {
-        let outcome = GraspObservation::of(tick[0].header.tick, team, grasp, fell_back);
+        let outcome =
+            GraspObservation::of((tick[0].header.tick, cfg.robot_period), team, grasp, fell_back);
         let ShellState { targets, grasp: tracker, watch, .. } = self;
         set_note(note, watch.after_tick(&cfg.release, outcome, team, grasp, targets, tracker));
     }
