@@ -121,7 +121,7 @@ pub struct Release {
 /// released at 20 mm 53 ticks into the push and one torso fell (0.67 m, with the exact QP
 /// optimum); at 10 mm from the first failed tick on, 43 ticks in, both stood within 5 mm, and
 /// likewise for 200 N, 450 N and a 2.5 kg object; with the run of
-/// [`SLIP_WHILE_FAILING_TICKS`], after 63 failed ticks, both stood within 5.0 mm
+/// [`SLIP_WHILE_FAILING_AFTER`] (10 ms), after 63 failed ticks, both stood within 5.0 mm
 /// (`tests/tests/degrade.rs`, README "Degrade, never collapse").
 pub const SLIP_WHILE_FAILING: f64 = 0.5;
 
