@@ -108,3 +108,51 @@ fn default_legged_manipulator_matches_mujoco() {
     let mj = MjRobot::new(&urdf, Some("base"));
     compare("default legged manipulator", &robot.model, &mj, 4);
 }
+
+/// A published URDF (`tests/data/unitree`, unitreerobotics/unitree_ros, BSD-3-Clause), as
+/// ROS tools load it: `<visual>` elements with several `<material>` children, which the parser
+/// leaves out with the other display parts (`parsers::urdf_filter`).
+fn unitree(name: &str) -> String {
+    std::fs::read_to_string(data_path(&format!("unitree/{name}"))).unwrap()
+}
+
+#[test]
+fn published_unitree_go2_loads_and_matches_mujoco() {
+    let urdf = unitree("go2_description.urdf");
+    assert!(urdf.contains("<material"), "the published file, materials and all");
+    let model = Model::from_urdf_str(&urdf, FloatingBase::Yes).unwrap();
+    assert_eq!((model.nv, model.nq), (18, 19), "a floating base and twelve joints");
+    compare("go2", &model, &MjRobot::new(&urdf, Some("base")), 10);
+}
+
+/// The sum of the `<mass value="...">` written in `urdf`, read as text.
+fn written_mass(urdf: &str) -> f64 {
+    urdf.split("<mass value=\"")
+        .skip(1)
+        .map(|rest| rest[..rest.find('"').unwrap()].parse::<f64>().unwrap())
+        .sum()
+}
+
+#[test]
+fn published_unitree_b2_loads_with_the_mass_it_writes() {
+    // MuJoCo refuses B2 as published (its lidar link weighs 4e-15 kg, an inertia below
+    // MuJoCo's threshold), so the oracle here is the file's own masses.
+    let urdf = unitree("b2_description.urdf");
+    let model = Model::from_urdf_str(&urdf, FloatingBase::Yes).unwrap();
+    assert_eq!((model.nv, model.nq), (18, 19), "a floating base and twelve joints");
+    let written = written_mass(&urdf);
+    assert!(written > 50.0, "B2 weighs tens of kg: {written}");
+    assert!(
+        (model.total_mass - written).abs() < 1e-9 * written,
+        "{} vs {written}",
+        model.total_mass
+    );
+}
+
+#[test]
+fn a_published_urdf_with_a_joint_we_do_not_model_is_refused_by_name() {
+    // unitree_ros's AS2 joins its base to the world with a `floating` joint.
+    let e = Model::from_urdf_str(&unitree("as2.urdf"), FloatingBase::Yes).unwrap_err();
+    let e = e.to_string();
+    assert!(e.contains("floating_base_joint") && e.contains("floating"), "{e}");
+}

@@ -210,7 +210,9 @@ impl ModelBuilder {
     }
 
     pub fn from_urdf_str(urdf: &str) -> Result<Self, ModelError> {
-        let robot = urdf_rs::read_from_string(urdf).map_err(|e| ModelError::Urdf(e.to_string()))?;
+        let urdf = super::urdf_filter::dynamics_only(urdf)?;
+        let robot =
+            urdf_rs::read_from_string(&urdf).map_err(|e| ModelError::Urdf(e.to_string()))?;
         Self::from_robot(&robot)
     }
 
