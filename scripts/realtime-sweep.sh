@@ -16,8 +16,10 @@
 #   SCENARIOS=s4_object_circle RATES=1000 TEAM_RATES=500 DELAYS="1 2" LOSS="0 5 10" \
 #       DURATION=10 MODE=--hosts ./scripts/realtime-sweep.sh            # x loss on r1's link (root)
 #
-# TEAM_RATES: the team loop's rates (`team_hz`, a whole divisor of the robot rate; "-" runs
-# the team at the robot rate). DELAYS: `team_delay_ticks` (`auto` prints as autoN, N the
+# Keys the sweep does not set take the real-time defaults (docs/realtime.md: drive gains with a
+# trajectory, the delay from the latency). TEAM_RATES: the team loop's rates (`team_hz`; in real
+# time the team's rate is the control rate and the drives fill the physics steps between, so
+# the run's rate is the team's; "-" runs at RATES). DELAYS: `team_delay_ticks` (`auto` prints as autoN, N the
 # longest delay an agent came to). LOSS: percent of robot r1's packets
 # dropped on its link (`team run --hosts --loss r1=P`; needs MODE=--hosts). SETS: more
 # scenario keys for every run (`SETS="predict_delay=false"`). RECORD=1 records
