@@ -32,6 +32,56 @@ pub struct RobotLoop {
     pub drive_gaps: u64,
 }
 
+/// One robot's loop as the ticks come.
+#[derive(Default)]
+struct Acc {
+    ticks: u64,
+    latencies: Vec<f64>,
+    misses: u64,
+    streak: u64,
+    longest: u64,
+    late: u64,
+    gaps: u64,
+    seen: BTreeSet<u64>,
+    applied: BTreeSet<u64>,
+}
+
+impl Acc {
+    /// The robot's timing `t` on `tick`.
+    fn add(&mut self, tick: u64, t: &protocol::LoopTiming) {
+        self.ticks += 1;
+        self.late += u64::from(t.late);
+        self.gaps += u64::from(t.gap_steps);
+        self.seen.insert(tick);
+        if let Some(k) = t.applied_tick {
+            self.applied.insert(k);
+        }
+        match t.latency_us {
+            Some(l) => {
+                self.latencies.push(l);
+                self.streak = 0;
+            }
+            None => {
+                self.misses += 1;
+                self.streak += 1;
+                self.longest = self.longest.max(self.streak);
+            }
+        }
+    }
+
+    fn into_loop(self) -> RobotLoop {
+        RobotLoop {
+            ticks: self.ticks,
+            latency_us: metrics::percentiles(&self.latencies),
+            deadline_misses: self.misses,
+            longest_hold_ticks: self.longest,
+            late: self.late,
+            lost: self.seen.difference(&self.applied).count() as u64,
+            drive_gaps: self.gaps,
+        }
+    }
+}
+
 /// The loop of a real-time run, by robot.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct LoopReport {
@@ -41,63 +91,16 @@ pub struct LoopReport {
 impl LoopReport {
     /// The report of the ticks in `truth` that carry loop timing (`None` if none does).
     pub fn from_truth(truth: &[GroundTruth]) -> Option<LoopReport> {
-        #[derive(Default)]
-        struct Acc {
-            ticks: u64,
-            latencies: Vec<f64>,
-            misses: u64,
-            streak: u64,
-            longest: u64,
-            late: u64,
-            gaps: u64,
-            seen: BTreeSet<u64>,
-            applied: BTreeSet<u64>,
-        }
         let mut acc: BTreeMap<String, Acc> = BTreeMap::new();
         for g in truth {
             for t in &g.loop_timing {
-                let a = acc.entry(t.robot.clone()).or_default();
-                a.ticks += 1;
-                a.late += u64::from(t.late);
-                a.gaps += u64::from(t.gap_steps);
-                a.seen.insert(g.header.tick);
-                if let Some(k) = t.applied_tick {
-                    a.applied.insert(k);
-                }
-                match t.latency_us {
-                    Some(l) => {
-                        a.latencies.push(l);
-                        a.streak = 0;
-                    }
-                    None => {
-                        a.misses += 1;
-                        a.streak += 1;
-                        a.longest = a.longest.max(a.streak);
-                    }
-                }
+                acc.entry(t.robot.clone()).or_default().add(g.header.tick, t);
             }
         }
         if acc.is_empty() {
             return None;
         }
-        let robots = acc
-            .into_iter()
-            .map(|(r, a)| {
-                let lost = a.seen.difference(&a.applied).count() as u64;
-                (
-                    r,
-                    RobotLoop {
-                        ticks: a.ticks,
-                        latency_us: metrics::percentiles(&a.latencies),
-                        deadline_misses: a.misses,
-                        longest_hold_ticks: a.longest,
-                        late: a.late,
-                        lost,
-                        drive_gaps: a.gaps,
-                    },
-                )
-            })
-            .collect();
+        let robots = acc.into_iter().map(|(r, a)| (r, a.into_loop())).collect();
         Some(LoopReport { robots })
     }
 

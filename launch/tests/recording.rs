@@ -40,7 +40,7 @@ fn a_recorded_run_reads_back_and_replays_to_the_same_metrics() {
     std::fs::create_dir_all(&dir).unwrap();
     let rec = RecordOptions {
         path: dir.join("run.mcap"),
-        scenario: ScenarioSource::read(&file, &sets, scenario::Pace::Lockstep).unwrap(),
+        scenario: ScenarioSource::read(&file, &sets, scenario::Pacing::Lockstep).unwrap(),
         live: None,
     };
     let (records, summary) = run::run_recorded(

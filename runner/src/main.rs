@@ -424,7 +424,7 @@ fn run_scenario(a: RunArgs) -> Result<()> {
         loss: a.loss.clone(),
     };
     let mode_name = mode_name(&opts, a.router.is_some(), a.tls.is_some(), a.realtime);
-    let pace = if a.realtime { scenario::Pace::Realtime } else { scenario::Pace::Lockstep };
+    let pace = if a.realtime { scenario::Pacing::Realtime } else { scenario::Pacing::Lockstep };
     let s = Scenario::load_paced(&a.scenario, &a.set, pace)?;
     let dir = a.out.clone().unwrap_or_else(|| scenario_run::default_report_dir(&a.scenario));
     create_dir(&dir)?;

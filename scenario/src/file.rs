@@ -18,7 +18,7 @@ use planner::reference::PoseMotion;
 use planner::walk::WalkSpec;
 use robot_agent::delay::TeamDelay;
 
-use crate::pace::Pace;
+use crate::pace::Pacing;
 
 /// What can be wrong with a scenario.
 #[derive(Debug, Error)]
@@ -479,7 +479,7 @@ pub struct PushSection {
 impl Scenario {
     /// Load a scenario file and apply `--set` overrides (`key=value`), for a lockstep run.
     pub fn load(path: impl AsRef<Path>, overrides: &[String]) -> Result<Scenario, ScenarioError> {
-        Self::load_paced(path, overrides, Pace::Lockstep)
+        Self::load_paced(path, overrides, Pacing::Lockstep)
     }
 
     /// Load a scenario file and apply `--set` overrides for a run at `pace`: a real-time run
@@ -488,7 +488,7 @@ impl Scenario {
     pub fn load_paced(
         path: impl AsRef<Path>,
         overrides: &[String],
-        pace: Pace,
+        pace: Pacing,
     ) -> Result<Scenario, ScenarioError> {
         let path = path.as_ref();
         let text = std::fs::read_to_string(path)
@@ -502,7 +502,7 @@ impl Scenario {
         path: &Path,
         overrides: &[String],
     ) -> Result<Scenario, ScenarioError> {
-        Self::from_str_paced(text, path, overrides, Pace::Lockstep)
+        Self::from_str_paced(text, path, overrides, Pacing::Lockstep)
     }
 
     /// Parse scenario text (named `path` in errors) and apply overrides, for a run at `pace`.
@@ -510,19 +510,19 @@ impl Scenario {
         text: &str,
         path: &Path,
         overrides: &[String],
-        pace: Pace,
+        pace: Pacing,
     ) -> Result<Scenario, ScenarioError> {
         let toml_err = |e: String| ScenarioError::Toml { path: path.to_path_buf(), reason: e };
         let mut value: toml::Value = toml::from_str(text).map_err(|e| toml_err(e.to_string()))?;
         for o in overrides {
             apply_override(&mut value, o)?;
         }
-        if pace == Pace::Realtime {
+        if pace == Pacing::Realtime {
             crate::pace::realtime_defaults(&mut value);
         }
         let mut s: Scenario =
             value.try_into().map_err(|e: toml::de::Error| toml_err(e.to_string()))?;
-        if pace == Pace::Realtime {
+        if pace == Pacing::Realtime {
             crate::pace::realtime_rate(&mut s.control_hz, &mut s.team_hz);
         }
         let invalid = |reason: String| ScenarioError::Invalid { path: path.to_path_buf(), reason };

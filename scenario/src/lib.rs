@@ -7,7 +7,7 @@
 //! From the bottom up:
 //!
 //! * [`file`]: scenario files (TOML) with `--set key=value` overrides ([`Scenario`]).
-//! * [`pace`]: lockstep or real time, and the loop each runs with ([`pace::Pace`]).
+//! * [`pace`]: lockstep or real time, and the loop each runs with ([`pace::Pacing`]).
 //! * [`layout`]: the planner on the simulator's world spec: where the robots stand and where
 //!   their hands go on the object, and the grasp handed to the controller.
 //! * [`references`]: the task references of a run as a function of the tick
@@ -27,7 +27,7 @@ pub mod references;
 pub mod team_capacity;
 
 pub use file::{Scenario, ScenarioError};
-pub use pace::Pace;
+pub use pace::Pacing;
 pub use plan::{plan, Plan, PlanError};
 pub use references::ReferencePlan;
 

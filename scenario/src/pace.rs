@@ -33,7 +33,7 @@ pub const REALTIME_DEFAULTS: [(&str, &str); 2] =
 /// How a run is clocked.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
-pub enum Pace {
+pub enum Pacing {
     /// Each tick waits for every robot's torques: deterministic, the paper's loop.
     #[default]
     Lockstep,
@@ -41,21 +41,21 @@ pub enum Pace {
     Realtime,
 }
 
-impl Pace {
+impl Pacing {
     pub fn as_str(self) -> &'static str {
         match self {
-            Pace::Lockstep => "lockstep",
-            Pace::Realtime => "realtime",
+            Pacing::Lockstep => "lockstep",
+            Pacing::Realtime => "realtime",
         }
     }
 
     /// The pace a recording's metadata names (lockstep for anything else, as recordings made
     /// before the pace was recorded were).
-    pub fn parse(s: &str) -> Pace {
+    pub fn parse(s: &str) -> Pacing {
         if s == "realtime" {
-            Pace::Realtime
+            Pacing::Realtime
         } else {
-            Pace::Lockstep
+            Pacing::Lockstep
         }
     }
 }
@@ -99,7 +99,7 @@ mod tests {
         let (mut c, mut t) = (100.0, None);
         realtime_rate(&mut c, &mut t);
         assert_eq!(c, 100.0, "a scenario slower than the default keeps its rate");
-        assert_eq!(Pace::parse("realtime"), Pace::Realtime);
-        assert_eq!(Pace::parse(""), Pace::Lockstep);
+        assert_eq!(Pacing::parse("realtime"), Pacing::Realtime);
+        assert_eq!(Pacing::parse(""), Pacing::Lockstep);
     }
 }

@@ -81,7 +81,7 @@ fn a_run_that_loses_every_agent_returns_its_error_with_the_ticks_it_saw() {
     let sets: Vec<String> = SETS.iter().map(|s| s.to_string()).collect();
     let rec = RecordOptions {
         path: dir.join("run.mcap"),
-        scenario: ScenarioSource::read(&repo().join(SCENARIO), &sets, scenario::Pace::Lockstep)
+        scenario: ScenarioSource::read(&repo().join(SCENARIO), &sets, scenario::Pacing::Lockstep)
             .expect("scenario file"),
         live: None,
     };

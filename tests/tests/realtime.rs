@@ -23,7 +23,7 @@ use robot_agent::delay::TeamDelay;
 use robot_agent::drive_gains::DriveGainsMode;
 use scenario::file::Scenario;
 use scenario::plan::{self, Plan};
-use scenario::Pace;
+use scenario::Pacing;
 
 /// The tests run one at a time: two real-time runs at once on two cores miss their deadlines.
 static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
@@ -236,7 +236,7 @@ fn a_real_time_run_without_a_settle_waits_for_its_first_torques() {
 fn s4_at_the_defaults() -> Plan {
     let repo = common::scenario::repo();
     let file = repo.join("scenarios/s4_object_circle.toml");
-    let s = Scenario::load_paced(file, &[], Pace::Realtime).expect("scenario");
+    let s = Scenario::load_paced(file, &[], Pacing::Realtime).expect("scenario");
     assert_eq!((s.duration, s.settle), (10.0, 1.0), "the scenario's own length");
     assert_eq!(
         (s.control_hz, s.team_hz, s.drive_gains, s.team_delay_ticks),
@@ -297,7 +297,7 @@ fn s4_at_its_full_length_holds_in_real_time_at_the_defaults_recorded() {
     let path = common::scenario::repo().join("scenarios/s4_object_circle.toml");
     let rec = RecordOptions {
         path: dir.join("run.mcap"),
-        scenario: ScenarioSource::read(&path, &[], Pace::Realtime).expect("scenario file"),
+        scenario: ScenarioSource::read(&path, &[], Pacing::Realtime).expect("scenario file"),
         live: None,
     };
     let (records, summary) = run::run_recorded(
@@ -614,7 +614,7 @@ fn a_push_the_team_cannot_hold_in_real_time_is_let_go_and_every_robot_stands() {
     let repo = common::scenario::repo();
     let (file, text) = common::push::s4_pushed_off();
     let sets: Vec<String> = ["duration=6.1", "settle=0.3"].map(String::from).to_vec();
-    let s = Scenario::from_str_paced(&text, &file, &sets, Pace::Realtime).expect("scenario");
+    let s = Scenario::from_str_paced(&text, &file, &sets, Pacing::Realtime).expect("scenario");
     let mut plan = plan::plan(&s, &repo).expect("plan");
     plan.scene.realtime = true;
     let (_, m) = run_here(&plan, false, "embedded, real time", "realtime_push_release");

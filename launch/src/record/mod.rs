@@ -86,7 +86,7 @@ pub struct ScenarioSource {
     pub overrides: Vec<String>,
     /// Lockstep or real time: a real-time run loads the scenario with the real-time loop's
     /// defaults ([`scenario::pace`]).
-    pub pace: scenario::Pace,
+    pub pace: scenario::Pacing,
 }
 
 impl ScenarioSource {
@@ -94,7 +94,7 @@ impl ScenarioSource {
     pub fn read(
         path: &Path,
         overrides: &[String],
-        pace: scenario::Pace,
+        pace: scenario::Pacing,
     ) -> std::io::Result<ScenarioSource> {
         Ok(ScenarioSource {
             path: path.to_path_buf(),

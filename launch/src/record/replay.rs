@@ -125,6 +125,26 @@ impl Recording {
     }
 }
 
+/// The run's metadata record into `rec`: the scenario as loaded, the run's facts, the
+/// messages dropped.
+fn run_metadata_into(meta: &BTreeMap<String, String>, rec: &mut Recording) {
+    let get = |k: &str| meta.get(k).cloned().unwrap_or_default();
+    let nanos = |k: &str| Duration::from_nanos(get(k).parse::<u64>().unwrap_or(0));
+    rec.scenario = ScenarioSource {
+        path: PathBuf::from(get("scenario_path")),
+        text: get("scenario_text"),
+        overrides: serde_json::from_str(&get("overrides")).unwrap_or_default(),
+        pace: scenario::Pacing::parse(&get("pace")),
+    };
+    rec.facts = RunFacts {
+        mode: get("mode"),
+        settle_wall: nanos("settle_wall_ns"),
+        run_wall: nanos("run_wall_ns"),
+        error: meta.get("error").cloned(),
+    };
+    rec.dropped = get("dropped").parse().unwrap_or(0);
+}
+
 /// Read `path`.
 pub fn read(path: &Path) -> Result<Recording, ReplayError> {
     let bytes = std::fs::read(path)
@@ -141,21 +161,7 @@ pub fn read(path: &Path) -> Result<Recording, ReplayError> {
         }
     }
     let meta = meta.ok_or_else(|| ReplayError::NoRunMetadata { path: path.to_path_buf() })?;
-    let get = |k: &str| meta.get(k).cloned().unwrap_or_default();
-    let nanos = |k: &str| Duration::from_nanos(get(k).parse::<u64>().unwrap_or(0));
-    rec.scenario = ScenarioSource {
-        path: PathBuf::from(get("scenario_path")),
-        text: get("scenario_text"),
-        overrides: serde_json::from_str(&get("overrides")).unwrap_or_default(),
-        pace: scenario::Pace::parse(&get("pace")),
-    };
-    rec.facts = RunFacts {
-        mode: get("mode"),
-        settle_wall: nanos("settle_wall_ns"),
-        run_wall: nanos("run_wall_ns"),
-        error: meta.get("error").cloned(),
-    };
-    rec.dropped = get("dropped").parse().unwrap_or(0);
+    run_metadata_into(&meta, &mut rec);
     for message in mcap::MessageStream::new(&bytes).map_err(mcap_err)? {
         let m = message.map_err(mcap_err)?;
         let topic = m.channel.topic.as_str();

@@ -75,7 +75,7 @@ fn run_with(
     let opts = RunOptions { distributed, hosts: false, progress: false, loss: Vec::new() };
     let rec = mcap.then(|| RecordOptions {
         path: dir.join("run.mcap"),
-        scenario: ScenarioSource::read(&path, &sets, scenario::Pace::Lockstep)
+        scenario: ScenarioSource::read(&path, &sets, scenario::Pacing::Lockstep)
             .expect("scenario file"),
         live: None,
     });
