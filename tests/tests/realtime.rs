@@ -12,10 +12,12 @@
 mod common;
 
 use std::collections::BTreeSet;
+use std::sync::Arc;
 
 use evaluation::evaluate::{self, Metrics};
 use evaluation::loop_timing::LoopReport;
 use evaluation::records::Records;
+use launch::hosts::TestHosts;
 use launch::launcher::RunMode;
 use launch::record::{RecordOptions, ScenarioSource};
 use launch::run::{self, RunOptions};
@@ -65,6 +67,22 @@ fn run_here(plan: &Plan, distributed: bool, mode: &str, name: &str) -> (Records,
     .expect("the run completes");
     let m = evaluated(plan, &records, mode, name);
     (records, m)
+}
+
+/// `plan` run with every component on its own host of `hosts`, reported into
+/// `target/test-reports/{name}`: its records.
+fn run_across_hosts(plan: &Plan, hosts: Arc<TestHosts>, name: &str) -> Records {
+    let dir = common::scenario::repo().join("target/test-reports").join(name);
+    std::fs::create_dir_all(&dir).expect("report dir");
+    let mode = RunMode::Hosts { dir, hosts, certs: None };
+    let rt = tokio::runtime::Runtime::new().expect("runtime");
+    rt.block_on(run::run_in(
+        plan,
+        &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() },
+        &mode,
+        None,
+    ))
+    .expect("the run completes")
 }
 
 fn evaluated(plan: &Plan, records: &Records, mode: &str, name: &str) -> Metrics {
@@ -349,18 +367,7 @@ fn s4_at_its_full_length_holds_in_real_time_at_the_defaults_across_hosts() {
     let Some(hosts) = common::hosts::hosts_or_skip(&ids, test) else {
         return;
     };
-    let dir = common::scenario::repo().join("target/test-reports/realtime_s4_full_hosts");
-    std::fs::create_dir_all(&dir).expect("report dir");
-    let mode = RunMode::Hosts { dir, hosts, certs: None };
-    let rt = tokio::runtime::Runtime::new().expect("runtime");
-    let records = rt
-        .block_on(run::run_in(
-            &plan,
-            &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() },
-            &mode,
-            None,
-        ))
-        .expect("the run completes");
+    let records = run_across_hosts(&plan, hosts, "realtime_s4_full_hosts");
     let m = evaluated(&plan, &records, "hosts, real time", "realtime_s4_full_hosts");
     assert_held_from_start_to_end(&plan, &records, &m, 0.05);
     assert_no_drive_gaps(&m);
@@ -398,8 +405,6 @@ fn s4_at_its_full_length_holds_in_real_time_at_1khz_with_the_team_two_ticks_behi
 fn s4_holds_in_real_time_across_hosts_with_five_percent_loss_on_one_link() {
     let _one = serial();
     let plan = s4_realtime(125.0, 3.0);
-    let dir = common::scenario::repo().join("target/test-reports/realtime_hosts_loss");
-    std::fs::create_dir_all(&dir).expect("report dir");
     let ids: Vec<String> = plan.robots.iter().map(|r| r.id.clone()).collect();
     let Some(hosts) = common::hosts::hosts_or_skip(
         &ids,
@@ -408,16 +413,7 @@ fn s4_holds_in_real_time_across_hosts_with_five_percent_loss_on_one_link() {
         return;
     };
     hosts.set_loss("r1", 5).expect("loss rule");
-    let mode = RunMode::Hosts { dir: dir.clone(), hosts: hosts.clone(), certs: None };
-    let rt = tokio::runtime::Runtime::new().expect("runtime");
-    let records = rt
-        .block_on(run::run_in(
-            &plan,
-            &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() },
-            &mode,
-            None,
-        ))
-        .expect("the run completes");
+    let records = run_across_hosts(&plan, hosts.clone(), "realtime_hosts_loss");
     let m = evaluated(&plan, &records, "hosts, real time", "realtime_hosts_loss");
     // Held, not tracked to the millimetre: the drives hold their last torques through the
     // gaps, so the tracking bounds of a clean run are not asked.

@@ -183,8 +183,8 @@ pub struct GraspWatch {
     /// longer, the coordinator skips the ticks overtaken meanwhile (S4 at 1 kHz, a 300 N push:
     /// it solved one tick in 4-12) and a count of solved ticks let the slip run on to 31 mm.
     failed_run: u32,
-    /// The run's length in time, s (`failed_run` robot periods).
-    failed_for: f64,
+    /// The robots' tick period of the last tick observed, s.
+    period: f64,
     /// Hands in grasp on the last tick observed.
     last_hands: usize,
     released: Option<Release>,
@@ -210,7 +210,12 @@ impl GraspWatch {
     /// [`SLIP_WHILE_FAILING_MIN_TICKS`].
     fn failing_long(&self) -> bool {
         self.failed_run >= SLIP_WHILE_FAILING_MIN_TICKS
-            && reached(self.failed_for, SLIP_WHILE_FAILING_AFTER)
+            && reached(self.failed_for(), SLIP_WHILE_FAILING_AFTER)
+    }
+
+    /// The run of failed ticks in time, s (`failed_run` robot periods).
+    fn failed_for(&self) -> f64 {
+        f64::from(self.failed_run) * self.period
     }
 
     /// Before a tick: clear the latch when no hand is in grasp any more (the grasp was opened).
@@ -218,7 +223,6 @@ impl GraspWatch {
         if !hands_in_grasp {
             self.failing_since = None;
             self.failed_run = 0;
-            self.failed_for = 0.0;
             self.released = None;
         }
     }
@@ -252,11 +256,10 @@ impl GraspWatch {
         if self.released.is_some() || t.hands == 0 {
             self.failing_since = None;
             self.failed_run = 0;
-            self.failed_for = 0.0;
             return None;
         }
         self.count_failed(t);
-        let failed = policy.after_failed > 0.0 && reached(self.failed_for, policy.after_failed);
+        let failed = policy.after_failed > 0.0 && reached(self.failed_for(), policy.after_failed);
         // Slip while the contact forces cannot be kept (the QP failing tick after tick) is a grasp
         // being lost, not a palm rocking: let go at a share of the limit (SLIP_WHILE_FAILING).
         let failing = t.qp_failed && self.failing_long();
@@ -288,7 +291,7 @@ impl GraspWatch {
             ),
             (true, None, _) => format!(
                 "the contact-force QP has failed for {:.0} ms ({} ticks)",
-                self.failed_for * 1e3,
+                self.failed_for() * 1e3,
                 self.failed_run
             ),
             (false, None, false) => return None,
@@ -301,12 +304,11 @@ impl GraspWatch {
         if !t.qp_failed {
             self.failing_since = None;
             self.failed_run = 0;
-            self.failed_for = 0.0;
             return;
         }
         let since = *self.failing_since.get_or_insert(t.tick);
         self.failed_run = u32::try_from(t.tick.saturating_sub(since) + 1).unwrap_or(u32::MAX);
-        self.failed_for = f64::from(self.failed_run) * t.period;
+        self.period = t.period;
     }
 
     /// The release of `tick` for the reason `why`, latched.
