@@ -17,6 +17,8 @@ use robot_agent::agent::{
     self, AgentConfig, AgentCounters, CommandDeadline, HoldGains, ModelDynamics,
 };
 use robot_model::{default_robot_path, Robot};
+use tokio::sync::watch;
+use tokio::task::JoinHandle;
 use zenoh::Session;
 
 const ID: &str = "r1";
@@ -62,7 +64,8 @@ struct Harness {
     torques: SampleQueue,
     status: SampleQueue,
     description: SampleQueue,
-    agent: agent::AgentThread,
+    stop: watch::Sender<bool>,
+    agent: JoinHandle<Result<AgentCounters, agent::AgentError>>,
 }
 
 impl Harness {
@@ -86,8 +89,10 @@ impl Harness {
         let mut c = AgentConfig::new(team, ID);
         c.status_period = Duration::from_millis(20);
         let c = cfg(c);
+        let (stop, rx) = watch::channel(false);
         let source = ModelDynamics::new(robot()).unwrap();
-        let agent = agent::spawn(&session, c, source).unwrap();
+        let s = session.clone();
+        let agent = tokio::spawn(async move { agent::run(&s, c, source, rx).await });
         let mut h = Harness {
             team: team.into(),
             session,
@@ -98,6 +103,7 @@ impl Harness {
             torques,
             status,
             description,
+            stop,
             agent,
         };
         // The first status comes after every subscription of the agent is declared.
@@ -155,8 +161,8 @@ impl Harness {
     }
 
     async fn stop(self) -> AgentCounters {
-        let joined = tokio::task::spawn_blocking(move || self.agent.join());
-        let counters = tokio::time::timeout(WAIT, joined).await.unwrap().unwrap().unwrap().counters;
+        self.stop.send(true).unwrap();
+        let counters = tokio::time::timeout(WAIT, self.agent).await.unwrap().unwrap().unwrap();
         self.session.close().await.unwrap();
         counters
     }

@@ -52,16 +52,12 @@ fn tilt_deg(q: [f64; 4]) -> f64 {
 fn spawn_agent(
     session: &zenoh::Session,
     cfg: AgentConfig,
-    mut stop: watch::Receiver<bool>,
+    stop: watch::Receiver<bool>,
 ) -> JoinHandle<Result<AgentCounters, AgentError>> {
-    let robot = robot_model::Robot::load(robot_model::default_robot_path()).unwrap();
-    let agent = agent::spawn(session, cfg, ModelDynamics::new(robot).unwrap());
+    let session = session.clone();
     tokio::spawn(async move {
-        let agent = agent?;
-        let _ = stop.wait_for(|s| *s).await;
-        let joined = tokio::task::spawn_blocking(move || agent.join()).await;
-        let report = joined.map_err(|e| AgentError::Thread(e.to_string()))??;
-        Ok(report.counters)
+        let robot = robot_model::Robot::load(robot_model::default_robot_path()).unwrap();
+        agent::run(&session, cfg, ModelDynamics::new(robot).unwrap(), stop).await
     })
 }
 

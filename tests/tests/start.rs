@@ -15,10 +15,12 @@ use coordinator::joint_damping::JointDamping;
 use coordinator::{ControllerError, TeamController};
 use protocol::{DynamicsTerms, TorqueCommand};
 use robot_agent::core::AgentConfig;
+use robot_agent::dynamics_source::PlaceholderDynamics;
 use robot_agent::safe_mode::FIRST_COMMAND;
+use tokio::sync::watch;
 
 mod common;
-use common::team::{agent_with_config, bridge, coordinator, session, stop, Component};
+use common::team::{bridge, coordinator, session, stop, Component, JOINTS};
 
 /// Joint damping whose first solve takes `pause` (a cold start: allocations, a first QP of
 /// its shape, a burst of references to decode).
@@ -52,7 +54,17 @@ fn realtime_agent(
     team: &str,
     robot: &str,
 ) -> Component<robot_agent::status::AgentCounters> {
-    agent_with_config(session, AgentConfig::new(team, robot))
+    let (stop, rx) = watch::channel(false);
+    let cfg = AgentConfig::new(team, robot);
+    let s = session.clone();
+    Component {
+        stop,
+        task: tokio::spawn(async move {
+            robot_agent::agent::run(&s, cfg, PlaceholderDynamics::floating(JOINTS), rx)
+                .await
+                .expect("agent runs")
+        }),
+    }
 }
 
 /// Runs a lockstep team of two whose coordinator's first solve takes `pause`; returns each

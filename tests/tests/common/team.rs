@@ -62,27 +62,17 @@ pub fn agent_with_deadline(
     robot: &str,
     deadline: CommandDeadline,
 ) -> Component<robot_agent::status::AgentCounters> {
+    let (stop, rx) = watch::channel(false);
     let mut cfg = AgentConfig::new(team, robot);
     cfg.deadline = deadline;
     cfg.max_command_age = Duration::from_secs(30);
-    agent_with_config(session, cfg)
-}
-
-/// The agent of `cfg.robot` on its own thread, over the placeholder dynamics.
-pub fn agent_with_config(
-    session: &Session,
-    cfg: AgentConfig,
-) -> Component<robot_agent::status::AgentCounters> {
-    let (stop, mut rx) = watch::channel(false);
-    let agent = robot_agent::agent::spawn(session, cfg, PlaceholderDynamics::floating(JOINTS))
-        .expect("agent starts");
+    let s = session.clone();
     Component {
         stop,
         task: tokio::spawn(async move {
-            // The agent's loop runs on its own thread: this task only carries the stop.
-            let _ = rx.wait_for(|s| *s).await;
-            let report = tokio::task::spawn_blocking(move || agent.join()).await;
-            report.expect("agent joins").expect("agent runs").counters
+            robot_agent::agent::run(&s, cfg, PlaceholderDynamics::floating(JOINTS), rx)
+                .await
+                .expect("agent runs")
         }),
     }
 }
