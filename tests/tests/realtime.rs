@@ -601,8 +601,8 @@ fn an_agent_killed_in_real_time_is_noticed_within_three_ticks_and_the_others_hol
 /// after the push every robot stands (torsos within 5 cm and 10 deg of their holds). Not met:
 /// in series of 10 runs on a two-core machine both robots stood in 9 and in 1 of 10. The team's
 /// 250 Hz loop sees the grasp every 4 ms while the hands slide 1-2 mm per millisecond, so the
-/// release comes at 10-26 mm; the failing ticks' solves are slow (up to 12 ms), commands are
-/// lost and the drives go without one. It stays out of CI until it holds every time (run it
+/// release comes at 10-26 mm; commands are lost while the QP fails (12-78 per robot) and the
+/// drives go without one. It stays out of CI until it holds every time (run it
 /// with `--ignored`; docs/results.md "Long holds").
 #[test]
 #[ignore = "a real-time release leaves every robot standing in 1-9 runs of 10, not every time"]
