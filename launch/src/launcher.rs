@@ -386,6 +386,8 @@ pub struct AgentArgs {
     pub team_every: u64,
     /// The team's command for a state applies this many state ticks later.
     pub team_delay: robot_agent::delay::TeamDelay,
+    /// The robot's drives take an answer within this long of its state (`None`: they wait).
+    pub answer_within: Option<Duration>,
 }
 
 impl AgentArgs {
@@ -409,6 +411,9 @@ impl AgentArgs {
         args.extend(["--drive-gains".into(), self.drive_gains.to_string()]);
         args.extend(["--team-every".into(), self.team_every.to_string()]);
         args.extend(["--team-delay".into(), self.team_delay.to_string()]);
+        if let Some(w) = self.answer_within {
+            args.extend(["--answer-within-us".into(), w.as_micros().to_string()]);
+        }
         args.extend(zenoh.to_cli());
         args
     }
@@ -425,6 +430,7 @@ impl AgentArgs {
         cfg.drive_gains = self.drive_gains;
         cfg.team_every = self.team_every;
         cfg.team_delay = self.team_delay;
+        cfg.answer_within = self.answer_within;
         let session = session.clone();
         Ok(match &self.model {
             AgentModel::Robot { robot, .. } => {
@@ -959,6 +965,7 @@ mod tests {
             drive_gains: DriveGainsMode::Inertia,
             team_every: 4,
             team_delay: robot_agent::delay::TeamDelay::Ticks(2),
+            answer_within: Some(Duration::from_micros(2500)),
         };
         let args = a.to_cli(&zenoh);
         for pair in [
@@ -969,6 +976,7 @@ mod tests {
             ["--drive-gains", "inertia"],
             ["--team-every", "4"],
             ["--team-delay", "2"],
+            ["--answer-within-us", "2500"],
         ] {
             assert!(
                 args.windows(2).any(|w| w[0] == pair[0] && w[1] == pair[1]),

@@ -52,6 +52,14 @@ pub fn realtime_reuse(clock: &protocol::RunClock) -> coordinator::team::assembly
     }
 }
 
+/// In real time a robot's drives take the answer to a state within half a control period of
+/// its arrival at the agent (`robot_agent::core::AgentConfig::answer_within`): the simulator
+/// waits for torques until the period ends, and the other half is the state's way to the agent
+/// and the answer's way back. A team delay of `auto` rises when too many commands come later.
+pub fn realtime_answer_within(clock: &protocol::RunClock) -> Duration {
+    Duration::from_secs_f64(clock.dt() / 2.0)
+}
+
 /// How long a member may send no terms in real time before the coordinator leaves it out of
 /// the team (a team of two then lets go of the object). Long against a lossy link's gaps: with
 /// 5 % of one agent's packets dropped, TCP's retransmissions held its torques for up to 72 ms
@@ -254,6 +262,7 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
             // Checked when the scenario loaded.
             team_every: plan.scenario.team_every().unwrap_or(1),
             team_delay: plan.scenario.team_delay_ticks,
+            answer_within: plan.scene.realtime.then(|| realtime_answer_within(clock)),
         })
         .collect();
     let bridge =

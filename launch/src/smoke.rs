@@ -86,6 +86,7 @@ impl SmokeConfig {
                 drive_gains: DriveGainsMode::None,
                 team_every: 1,
                 team_delay: robot_agent::delay::TeamDelay::Ticks(0),
+                answer_within: None,
             })
             .collect();
         let plant = SmokePlant {

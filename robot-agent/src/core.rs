@@ -93,6 +93,10 @@ pub struct AgentConfig {
     /// for a state whose command the team skipped, the agent answers alone as with
     /// [`AgentConfig::team_every`].
     pub team_delay: TeamDelay,
+    /// How long after a state the robot's drives take its answer (default `None`: they wait
+    /// for it, as the lockstep simulator does). With `auto`, a command at delay 0 that comes
+    /// later than this after its state counts as late ([`crate::delay`]).
+    pub answer_within: Option<Duration>,
 }
 
 pub use crate::delay::MAX_TEAM_DELAY;
@@ -120,6 +124,7 @@ impl AgentConfig {
             drive_gains: DriveGainsMode::None,
             team_every: 1,
             team_delay: TeamDelay::default(),
+            answer_within: None,
         }
     }
 
@@ -452,7 +457,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             reference: drive_gains::Reference::new(joints),
             validity: cfg.deadline,
             team_every: cfg.team_every,
-            delay: AdaptiveDelay::new(cfg.team_delay),
+            delay: AdaptiveDelay::new(cfg.team_delay, cfg.answer_within),
             newest_command: None,
             contacts: contact_switch(cfg, feet.len()),
             feet,
@@ -509,6 +514,7 @@ impl<S: DynamicsSource> AgentCore<S> {
         }
         self.counters.states += 1;
         self.state_at = Some(now);
+        self.delay.on_state(tick, now);
         self.state_time = state.time;
         self.watchdog.on_state(tick, now);
         self.q.copy_from_slice(&state.joint_positions);
@@ -670,7 +676,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             return Err(self.reject(r));
         }
         if cmd.header.robot_id() == self.robot {
-            self.measure_delay(cmd.header.tick);
+            self.measure_delay(cmd.header.tick, now);
             self.follow_delay(cmd);
         }
         match self.admit_command(cmd, now) {
@@ -693,16 +699,16 @@ impl<S: DynamicsSource> AgentCore<S> {
 
     /// With `auto` ([`crate::delay`]): a command of `tick` arrived now; the delay this robot
     /// asks the team for, from the next terms on.
-    fn measure_delay(&mut self, tick: u64) {
+    fn measure_delay(&mut self, tick: u64, now: Instant) {
         let Some(latest) = self.gate.latest_state_tick() else { return };
-        if let Some(d) = self.delay.on_command(tick, latest) {
+        if let Some(d) = self.delay.on_command(tick, now) {
             tracing::info!(
                 robot = %self.robot,
                 tick,
                 latest,
                 delay = d,
                 "asking the team for a delay of {d} ticks: commands came after the states they \
-                 apply at, or none would have for a while"
+                 apply at (or after the answer window), or none would have for a while"
             );
         }
     }

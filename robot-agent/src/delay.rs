@@ -2,26 +2,32 @@
 //! set from the latency the agent measures ([`TeamDelay::Auto`]).
 //!
 //! The team's command for the state of tick k applies at the state of tick k + d. It is on time
-//! when it is there before that state: when it arrives, the latest state is at most k + d - 1
-//! (at most k with d = 0, where the command answers the state it waits at). A command that
+//! when it is there before that state: when it arrives, the latest state is at most k + d - 1.
+//! With d = 0 the command answers the state it waits at, and the robot's drives take that
+//! answer only for so long: where they do not wait for it (real time), a command is also late
+//! when it comes more than the robot's answer window
+//! ([`crate::core::AgentConfig::answer_within`]) after its own state arrived. A command that
 //! comes later is answered alone ([`crate::core::AgentCore`]'s skipped commands), which is
-//! safe but loses the team's answer for a tick. With `auto`, [`AdaptiveDelay`] counts the
-//! commands that came late in a window of [`WINDOW`] commands; the [`LATE_TO_RAISE`]-th (a
-//! tenth of them) raises the delay by one tick, up to its most (`auto:N`; `auto` is
-//! [`AUTO_MAX`]). When in
-//! [`LOWER_WINDOW`] commands at most [`LATE_TO_KEEP`] would have been late a tick sooner, it
-//! lowers it by one (a start-up's bursts raise it, and a delay is what the team's tracking pays
-//! for latency). The delay covers the latency most commands see, not the rare long one: a lost
-//! packet's retransmission on a lossy link takes many ticks, and a delay that long costs the
-//! team's loop more than the commands it keeps (S4 with 5 % loss on one robot's link held with
-//! 3 ticks and fell with 8, fixed or come to). A
-//! change moves every command still waiting with it: a raise leaves one state without a team
-//! command (answered alone), a lowering applies two at one state (the newer one wins). The
-//! count is in state ticks, so it needs no clock: a lockstep run, whose simulator waits for
-//! every answer, never counts a command late at d = 0 and keeps it.
+//! safe but loses the team's answer for a tick.
+//!
+//! With `auto`, [`AdaptiveDelay`] counts the commands that came late in a window of [`WINDOW`]
+//! commands; the [`LATE_TO_RAISE`]-th (one in forty) raises the delay by one tick, up to its
+//! most (`auto:N`; `auto` is [`AUTO_MAX`]). When in [`LOWER_WINDOW`] commands at most
+//! [`LATE_TO_KEEP`] would have been late a tick sooner, it lowers it by one (a start-up's
+//! bursts raise it, and a delay is what the team's tracking pays for latency). The delay
+//! covers the latency most commands see, not the rare long one: a command that would have
+//! been late even at the most delay (a lost packet's retransmission on a lossy link takes many
+//! ticks) is not counted, because no delay it may come to would have kept it, and a delay that
+//! long costs the team's loop more than the commands it keeps (S4 with 5 % loss on one robot's
+//! link held with 3 ticks and fell with 8, fixed or come to). A change moves every command
+//! still waiting with it: a raise leaves one state without a team command (answered alone), a
+//! lowering applies two at one state (the newer one wins). Without an answer window the count
+//! is in state ticks and needs no clock: a lockstep run, whose simulator waits for every
+//! answer, never counts a command late at d = 0 and keeps it.
 
 use std::fmt;
 use std::str::FromStr;
+use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
@@ -33,8 +39,8 @@ pub const WINDOW: u32 = 200;
 /// The most `auto` raises the delay to, ticks (`auto:N` sets another, up to
 /// [`MAX_TEAM_DELAY`]).
 pub const AUTO_MAX: u64 = 4;
-/// Late commands in one window that raise the delay by a tick (a tenth of [`WINDOW`]).
-pub const LATE_TO_RAISE: u32 = 20;
+/// Late commands in one window that raise the delay by a tick (one in forty of [`WINDOW`]).
+pub const LATE_TO_RAISE: u32 = 5;
 /// Commands over which a delay a tick shorter is tried.
 pub const LOWER_WINDOW: u32 = 2000;
 /// At most this many of [`LOWER_WINDOW`] commands late for a delay a tick shorter lower it
@@ -153,6 +159,10 @@ impl From<TeamDelay> for RawDelay {
     }
 }
 
+/// States whose arrival is kept (the delay's lateness at d = 0 looks at a command's own
+/// state, at most [`MAX_TEAM_DELAY`] + 1 ticks back).
+const ARRIVALS: usize = MAX_TEAM_DELAY as usize + 2;
+
 /// The delay in use and, with `auto`, the count that raises it (see the module's docs).
 #[derive(Debug, Clone)]
 pub struct AdaptiveDelay {
@@ -161,6 +171,11 @@ pub struct AdaptiveDelay {
     floor: u64,
     max: u64,
     adapts: bool,
+    /// The robot's answer window (`None`: its drives wait for the answer).
+    within: Option<Duration>,
+    /// The latest state's tick, and when recent states arrived (by tick modulo [`ARRIVALS`]).
+    latest: Option<u64>,
+    arrivals: [(u64, Option<Instant>); ARRIVALS],
     seen: u32,
     late: u32,
     /// Commands since the delay last changed or was tried lower, and how many of them would
@@ -170,12 +185,17 @@ pub struct AdaptiveDelay {
 }
 
 impl AdaptiveDelay {
-    pub fn new(cfg: TeamDelay) -> Self {
+    /// The delay `cfg` for a robot whose drives take an answer within `within` of its state
+    /// (`None`: they wait for it).
+    pub fn new(cfg: TeamDelay, within: Option<Duration>) -> Self {
         AdaptiveDelay {
             delay: cfg.initial(),
             floor: cfg.initial(),
             max: cfg.max(),
             adapts: cfg.adapts(),
+            within,
+            latest: None,
+            arrivals: [(0, None); ARRIVALS],
             seen: 0,
             late: 0,
             seen_long: 0,
@@ -188,24 +208,34 @@ impl AdaptiveDelay {
         self.delay
     }
 
-    /// Whether a command of the state of `tick` that arrives when the latest state is `latest`
-    /// came late for the delay in use.
-    pub fn late(&self, tick: u64, latest: u64) -> bool {
-        late_for(self.delay, tick, latest)
+    /// The state of `tick` arrived at `now` (an older one than the latest is ignored).
+    pub fn on_state(&mut self, tick: u64, now: Instant) {
+        if self.latest.is_some_and(|l| tick < l) {
+            return;
+        }
+        self.latest = Some(tick);
+        self.arrivals[(tick % ARRIVALS as u64) as usize] = (tick, Some(now));
     }
 
-    /// A command of the state of `tick` arrived when the latest state was `latest`: the new
-    /// delay when this changes it.
-    pub fn on_command(&mut self, tick: u64, latest: u64) -> Option<u64> {
-        if !self.adapts {
+    /// Whether a command of the state of `tick` arriving at `now` came late for the delay in
+    /// use (never before any state).
+    pub fn late(&self, tick: u64, now: Instant) -> bool {
+        self.late_for(self.delay, tick, now)
+    }
+
+    /// A command of the state of `tick` arrived at `now`: the new delay when this changes it.
+    pub fn on_command(&mut self, tick: u64, now: Instant) -> Option<u64> {
+        if !self.adapts || self.latest.is_none() {
             return None;
         }
         self.seen += 1;
-        if self.late(tick, latest) {
+        // Late even at the most: no delay it may come to would have kept it (module docs).
+        let curable = !self.late_for(self.max, tick, now);
+        if curable && self.late(tick, now) {
             self.late += 1;
         }
         self.seen_long += 1;
-        if self.delay > self.floor && late_for(self.delay - 1, tick, latest) {
+        if self.delay > self.floor && curable && self.late_for(self.delay - 1, tick, now) {
             self.late_sooner += 1;
         }
         let before = self.delay;
@@ -225,12 +255,25 @@ impl AdaptiveDelay {
         }
         (self.delay != before).then_some(self.delay)
     }
-}
 
-/// Whether a command of `tick` arriving when the latest state is `latest` is late for a delay
-/// of `delay` ticks (module docs).
-fn late_for(delay: u64, tick: u64, latest: u64) -> bool {
-    latest.saturating_sub(tick) >= delay.max(1)
+    /// Whether a command of `tick` arriving at `now` is late for a delay of `delay` ticks: the
+    /// state it applies at came before it, or (d = 0, with an answer window) its own state
+    /// came longer than the window before it (module docs).
+    fn late_for(&self, delay: u64, tick: u64, now: Instant) -> bool {
+        let Some(latest) = self.latest else { return false };
+        if latest.saturating_sub(tick) >= delay.max(1) {
+            return true;
+        }
+        delay == 0 && self.waited(tick, now).zip(self.within).is_some_and(|(w, max)| w > max)
+    }
+
+    /// How long ago the state of `tick` arrived, if it is one of the states kept.
+    fn waited(&self, tick: u64, now: Instant) -> Option<Duration> {
+        match self.arrivals[(tick % ARRIVALS as u64) as usize] {
+            (t, Some(at)) if t == tick => Some(now.saturating_duration_since(at)),
+            _ => None,
+        }
+    }
 }
 
 #[cfg(test)]
@@ -259,54 +302,96 @@ mod tests {
         );
     }
 
+    /// A command of `tick` arriving when the latest state is `latest` (no answer window).
+    fn at(a: &mut AdaptiveDelay, tick: u64, latest: u64) -> Option<u64> {
+        a.latest = Some(latest);
+        a.on_command(tick, Instant::now())
+    }
+
     /// Written out again: a command is on time when its state's tick plus the delay is still
     /// ahead of the latest state (d = 0: the command of the latest state itself).
     #[test]
     fn a_command_is_late_when_the_state_it_applies_at_came_before_it() {
-        let mut a = AdaptiveDelay::new(TeamDelay::AUTO);
-        assert!(!a.late(10, 10) && a.late(10, 11), "d = 0");
+        let mut a = AdaptiveDelay::new(TeamDelay::AUTO, None);
+        let now = Instant::now();
+        assert!(!a.late(10, now), "before any state");
+        a.on_state(10, now);
+        assert!(!a.late(10, now + Duration::from_secs(1)), "d = 0, no window: waits");
+        a.on_state(11, now);
+        assert!(a.late(10, now), "d = 0");
         while a.ticks() < 3 {
             for _ in 0..LATE_TO_RAISE {
-                a.on_command(0, 100);
+                at(&mut a, 97, 100);
             }
         }
-        assert!(!a.late(10, 12) && a.late(10, 13) && a.late(10, 20), "d = 3");
-        assert!(!a.late(10, 5), "a command ahead of its state");
+        a.latest = Some(12);
+        assert!(!a.late(10, now), "d = 3");
+        a.latest = Some(13);
+        assert!(a.late(10, now), "d = 3");
+        a.latest = Some(5);
+        assert!(!a.late(10, now), "a command ahead of its state");
+    }
+
+    /// With an answer window, a command at d = 0 is late when it comes longer than the window
+    /// after its own state, and the delay rises; at d = 1 the same command is on time.
+    #[test]
+    fn at_no_delay_a_command_past_the_answer_window_is_late() {
+        let ms = Duration::from_millis;
+        let mut a = AdaptiveDelay::new(TeamDelay::AUTO, Some(ms(2)));
+        let t0 = Instant::now();
+        a.on_state(0, t0);
+        assert!(!a.late(0, t0 + ms(2)) && a.late(0, t0 + ms(3)));
+        let mut changes = Vec::new();
+        for k in 0..WINDOW as u64 {
+            let t = t0 + ms(4 * k);
+            a.on_state(k, t);
+            // One command in ten 3 ms after its state, the others after 1 ms.
+            let lag = if k % 10 == 9 { 3 } else { 1 };
+            if let Some(d) = a.on_command(k, t + ms(lag)) {
+                changes.push((k, d));
+            }
+        }
+        assert_eq!(changes, vec![(10 * LATE_TO_RAISE as u64 - 1, 1)]);
+        assert!(!a.late(WINDOW as u64 - 1, t0 + ms(4 * WINDOW as u64 + 2)), "d = 1");
+        // Without a window (lockstep) the same commands are all on time at d = 0.
+        let mut b = AdaptiveDelay::new(TeamDelay::AUTO, None);
+        for k in 0..WINDOW as u64 {
+            let t = t0 + ms(4 * k);
+            b.on_state(k, t);
+            assert_eq!(b.on_command(k, t + ms(if k % 10 == 9 { 3 } else { 1 })), None);
+        }
     }
 
     #[test]
-    fn auto_raises_by_a_tick_when_a_tenth_come_late_and_lowers_when_a_tick_less_would_do() {
+    fn auto_raises_by_a_tick_when_one_in_forty_come_late_and_lowers_when_a_tick_less_would_do() {
         let (raise, window, lower, keep) =
             (LATE_TO_RAISE as u64, WINDOW as u64, LOWER_WINDOW as u64, LATE_TO_KEEP as u64);
-        let mut a = AdaptiveDelay::new(TeamDelay::Auto { max: MAX_TEAM_DELAY });
+        let mut a = AdaptiveDelay::new(TeamDelay::Auto { max: MAX_TEAM_DELAY }, None);
         assert_eq!(a.ticks(), 0);
         // One fewer late than a raise in a window, then the window ends: the count restarts.
         for k in 0..window {
-            assert_eq!(a.on_command(k, if k < raise - 1 { k + 1 } else { k }), None, "command {k}");
+            let latest = if k < raise - 1 { k + 1 } else { k };
+            assert_eq!(at(&mut a, k, latest), None, "command {k}");
         }
         for k in 0..raise - 1 {
-            assert_eq!(a.on_command(k, k + 1), None, "a new window: {k}");
+            assert_eq!(at(&mut a, k, k + 1), None, "a new window: {k}");
         }
-        assert_eq!(
-            a.on_command(0, 1),
-            Some(1),
-            "the LATE_TO_RAISE-th late command of a window raises"
-        );
+        assert_eq!(at(&mut a, 0, 1), Some(1), "the LATE_TO_RAISE-th late command of a window");
         for k in 0..raise * 20 {
-            a.on_command(k, k + 50);
+            at(&mut a, k, k + MAX_TEAM_DELAY - 1);
         }
         assert_eq!(a.ticks(), MAX_TEAM_DELAY, "up to the most");
-        assert_eq!(a.on_command(0, 1000), None, "not beyond it");
-        let mut capped = AdaptiveDelay::new(TeamDelay::AUTO);
-        for k in 0..LATE_TO_RAISE as u64 * 20 {
-            capped.on_command(k, k + 50);
+        assert_eq!(at(&mut a, 0, 1000), None, "not beyond it");
+        let mut capped = AdaptiveDelay::new(TeamDelay::AUTO, None);
+        for k in 0..raise * 20 {
+            at(&mut capped, k, k + AUTO_MAX - 1);
         }
         assert_eq!(capped.ticks(), AUTO_MAX, "auto stops at its most");
         // Commands two ticks behind: on time for 3 ticks and more, late for 2 and less. It
         // comes down one tick per LOWER_WINDOW of them, to 3, and stays there.
         let mut changes = Vec::new();
         for k in 0..lower * 10 {
-            if let Some(d) = a.on_command(k, k + 2) {
+            if let Some(d) = at(&mut a, k, k + 2) {
                 changes.push((k + 1, d));
             }
         }
@@ -319,45 +404,49 @@ mod tests {
             changes[0].0 <= 2 * lower && changes.windows(2).all(|w| w[1].0 - w[0].0 == lower),
             "{changes:?}"
         );
-        // A lossy link: one command in 100 comes 12 ticks late, too few to raise; the rest one
-        // tick behind. LATE_TO_KEEP late for 2 in a LOWER_WINDOW still lower 3 to 2, one more
-        // does not; 2 stays.
-        let mut b = AdaptiveDelay::new(TeamDelay::AUTO);
+        // LATE_TO_KEEP late for 2 in a LOWER_WINDOW still lower 3 to 2, one more does not.
+        let mut b = AdaptiveDelay::new(TeamDelay::AUTO, None);
         for k in 0..raise * 3 {
-            b.on_command(k, k + 5);
+            at(&mut b, k, k + 3);
         }
         assert_eq!(b.ticks(), 3);
-        let lag = |k: u64| if k.is_multiple_of(100) { 12 } else { 1 };
         let mut changes = Vec::new();
-        for k in 1..=lower * 5 {
-            if let Some(d) = b.on_command(k, k + lag(k)) {
+        for k in 1..=lower {
+            if let Some(d) = at(&mut b, k, k + if k <= keep { 2 } else { 1 }) {
                 changes.push((k, d));
             }
         }
-        assert_eq!(
-            changes,
-            vec![(lower, 2)],
-            "20 late for 2 in the first window lower it; 20 late for 1 keep 2"
-        );
-        let mut c = AdaptiveDelay::new(TeamDelay::AUTO);
+        assert_eq!(changes, vec![(lower, 2)], "{keep} late for 2 lower it");
+        let mut c = AdaptiveDelay::new(TeamDelay::AUTO, None);
         for k in 0..raise * 3 {
-            c.on_command(k, k + 5);
+            at(&mut c, k, k + 3);
         }
         for k in 0..lower {
-            assert_eq!(
-                c.on_command(k, k + if k <= keep { 2 } else { 1 }),
-                None,
-                "{} late for 2 keep 3",
-                keep + 1
-            );
+            let latest = k + if k <= keep { 2 } else { 1 };
+            assert_eq!(at(&mut c, k, latest), None, "{} late for 2 keep 3", keep + 1);
         }
+    }
+
+    /// A lossy link: one command in twenty comes 12 ticks late (a retransmission), the rest on
+    /// time. No delay up to the most would have kept those: they do not raise it.
+    #[test]
+    fn commands_later_than_the_most_delay_do_not_raise_it() {
+        let mut a = AdaptiveDelay::new(TeamDelay::AUTO, None);
+        for k in 0..10 * WINDOW as u64 {
+            let lag = if k % 20 == 0 { 12 } else { 0 };
+            assert_eq!(at(&mut a, k, k + lag), None, "command {k}");
+        }
+        for k in 0..LATE_TO_RAISE as u64 {
+            at(&mut a, k, k + AUTO_MAX - 1);
+        }
+        assert_eq!(a.ticks(), 1, "late by what the most would keep: raised");
     }
 
     #[test]
     fn a_fixed_delay_stays_whatever_comes() {
-        let mut a = AdaptiveDelay::new(TeamDelay::Ticks(2));
+        let mut a = AdaptiveDelay::new(TeamDelay::Ticks(2), Some(Duration::ZERO));
         for k in 0..1000 {
-            assert_eq!(a.on_command(k, k + 7), None);
+            assert_eq!(at(&mut a, k, k + 7), None);
         }
         assert_eq!(a.ticks(), 2);
     }

@@ -85,6 +85,11 @@ struct RunCmd {
     /// time a tick sooner (robot_agent::delay).
     #[arg(long, value_name = "N|auto|auto:N", default_value = "0")]
     team_delay: robot_agent::delay::TeamDelay,
+    /// The robot's drives take the answer to a state within this many microseconds of it (a
+    /// real-time robot; unset: they wait for it). With `--team-delay auto`, a command at delay
+    /// 0 that comes later counts as late.
+    #[arg(long, value_name = "US", value_parser = clap::value_parser!(u64).range(1..))]
+    answer_within_us: Option<u64>,
     /// Smoke run only: placeholder dynamics (unit mass matrix, no frames, no limits) of this
     /// many joints instead of a robot model.
     #[arg(long, value_name = "N", conflicts_with = "robot", hide = true)]
@@ -122,6 +127,7 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
     cfg.drive_gains = cmd.drive_gains;
     cfg.team_every = cmd.team_every;
     cfg.team_delay = cmd.team_delay;
+    cfg.answer_within = cmd.answer_within_us.map(Duration::from_micros);
     if let Some(f) = cmd.touchdown_force {
         cfg.contacts.touchdown_force = f;
     }

@@ -807,7 +807,8 @@ fn a_skipped_command_is_answered_alone_when_a_newer_one_waits() {
 /// takes between two and three robot periods to answer) raise the delay a tick at a time to 3,
 /// where every command waits for its state, which is then answered at once with the command
 /// of three ticks before; the status says the delay, and the agent never enters safe mode.
-/// Commands that come before the next state (lockstep, or a fast team) keep it at 0.
+/// Commands that come before the next state (lockstep, or a fast team) keep it at 0, unless
+/// the robot's drives take an answer only within a window and they come later.
 #[test]
 fn auto_raises_the_delay_until_commands_come_before_their_states() {
     let t0 = Instant::now();
@@ -828,6 +829,27 @@ fn auto_raises_the_delay_until_commands_come_before_their_states() {
         assert_eq!(drive, Some((k, tau(k).to_vec())), "tick {k}: applied at its own state");
     }
     assert_eq!(fast.status().team_delay_ticks, 0, "commands on time keep the delay at 0");
+
+    // A robot whose drives take an answer within 2 ms of its state (states 4 ms apart):
+    // commands 3 ms after their state come before the next one but after the window. The
+    // delay rises to 1, where each state is answered at once with the command of the one
+    // before, and stays there (at 0 they would all be late again).
+    let mut windowed = cfg.clone();
+    windowed.answer_within = Some(ms(2));
+    let mut w = AgentCore::new(&windowed, stub()).unwrap();
+    let _ = w.start(t0);
+    let mut answers = Vec::new();
+    for k in 0..3000 {
+        let (_, drive, _) = summary(w.on_state(&state(k, q, v), t0 + ms(4 * k)).unwrap());
+        answers.push(drive);
+        let cmd = delayed(w.wanted_delay(), ID, k, &tau(k));
+        let _ = w.on_command(&cmd, t0 + ms(4 * k + 3));
+    }
+    assert_eq!((w.wanted_delay(), w.team_delay()), (1, 1), "raised past the window, kept");
+    for (k, drive) in answers.iter().enumerate().skip(100) {
+        let k = k as u64;
+        assert_eq!(drive.clone(), Some((k, tau(k - 1).to_vec())), "tick {k} at its arrival");
+    }
 
     let mut c = AgentCore::new(&cfg, stub()).unwrap();
     let _ = c.start(t0);
