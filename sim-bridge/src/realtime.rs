@@ -133,15 +133,26 @@ pub async fn run_on(
     Ok(arrivals.into_report(cfg.ticks, plant.time(), started.elapsed(), overruns, schedule.slipped))
 }
 
-/// Wait until `due`: sleeping while more than 2 ms are left, then yielding (Tokio's timers have
-/// 1 ms resolution).
+/// Wait until `due`: sleeping on Tokio's timer while more than 2 ms are left (it has 1 ms
+/// resolution), then on the thread ([`blocking`]).
 async fn wait_until(due: Instant) {
     while let Some(left) = due.checked_duration_since(Instant::now()).filter(|d| !d.is_zero()) {
         if left > Duration::from_millis(2) {
             tokio::time::sleep(left - Duration::from_millis(1)).await;
-        } else {
+        } else if blocking(|| std::thread::sleep(left)).is_none() {
             tokio::task::yield_now().await;
         }
+    }
+}
+
+/// Run `f` on this thread, blocking it, in a multi-thread runtime (its other tasks go to other
+/// workers meanwhile); `None` in a single-thread runtime, which must not block. The last
+/// milliseconds of a tick wait here rather than spin: a spinning loop held one of two cores
+/// that the robots' agents needed to answer.
+fn blocking<T>(f: impl FnOnce() -> T) -> Option<T> {
+    match tokio::runtime::Handle::current().runtime_flavor() {
+        tokio::runtime::RuntimeFlavor::MultiThread => Some(tokio::task::block_in_place(f)),
+        _ => None,
     }
 }
 
@@ -152,7 +163,8 @@ async fn poll_torques(
     left: Duration,
 ) -> Result<Option<Sample>, BridgeError> {
     // Tokio's timers have 1 ms resolution, as long as a 1 kHz period: wait on the queue
-    // only while more than 2 ms are left, then poll and yield until the deadline.
+    // asynchronously only while more than 2 ms are left, then on the thread ([`blocking`]), or
+    // poll and yield until the deadline where the runtime has one thread.
     match torques.try_recv() {
         Ok(Some(s)) => Ok(Some(s)),
         Ok(None) if left > Duration::from_millis(2) => {
@@ -163,10 +175,14 @@ async fn poll_torques(
                 Err(_) => Ok(None),
             }
         }
-        Ok(None) => {
-            tokio::task::yield_now().await;
-            Ok(None)
-        }
+        Ok(None) => match blocking(|| torques.recv_timeout(left)) {
+            Some(Ok(s)) => Ok(s),
+            Some(Err(_)) => Err(BridgeError::Stopped),
+            None => {
+                tokio::task::yield_now().await;
+                Ok(None)
+            }
+        },
         Err(_) => Err(BridgeError::Stopped),
     }
 }
