@@ -6,7 +6,7 @@
 //! controller manager, which asks for a real-time policy and goes on with a warning when it is
 //! refused, a real-time run raises its priority where it may ([`raise`]); the team's processes
 //! it starts afterwards inherit it. A nice value, not `SCHED_FIFO`: a real-time thread that
-//! spins (the bridge polls its last millisecond) would shut everything else out of its core.
+//! busy-waits, even briefly, would shut everything else out of its core.
 //! With the kernel's autogroups on, nice ranks threads only within their session: load from
 //! another session is not held back.
 //!
