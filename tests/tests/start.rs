@@ -15,12 +15,10 @@ use coordinator::joint_damping::JointDamping;
 use coordinator::{ControllerError, TeamController};
 use protocol::{DynamicsTerms, TorqueCommand};
 use robot_agent::core::AgentConfig;
-use robot_agent::dynamics_source::PlaceholderDynamics;
 use robot_agent::safe_mode::FIRST_COMMAND;
-use tokio::sync::watch;
 
 mod common;
-use common::team::{bridge, coordinator, session, stop, Component, JOINTS};
+use common::team::{agent_with_config, bridge, coordinator, session, stop};
 
 /// Joint damping whose first solve takes `pause` (a cold start: allocations, a first QP of
 /// its shape, a burst of references to decode).
@@ -47,26 +45,6 @@ impl TeamController for SlowFirstSolve {
     }
 }
 
-/// An agent with the real-time defaults: deadline 5 ticks or 25 ms, commands at most 5 ticks
-/// behind the latest state.
-fn realtime_agent(
-    session: &zenoh::Session,
-    team: &str,
-    robot: &str,
-) -> Component<robot_agent::status::AgentCounters> {
-    let (stop, rx) = watch::channel(false);
-    let cfg = AgentConfig::new(team, robot);
-    let s = session.clone();
-    Component {
-        stop,
-        task: tokio::spawn(async move {
-            robot_agent::agent::run(&s, cfg, PlaceholderDynamics::floating(JOINTS), rx)
-                .await
-                .expect("agent runs")
-        }),
-    }
-}
-
 /// Runs a lockstep team of two whose coordinator's first solve takes `pause`; returns each
 /// agent's counters after `ticks` ticks.
 async fn start_with_first_solve(
@@ -76,7 +54,8 @@ async fn start_with_first_solve(
 ) -> Vec<robot_agent::status::AgentCounters> {
     let s = session().await;
     let c = coordinator(&s, team, Box::new(SlowFirstSolve { pause, solved: false }));
-    let agents = [realtime_agent(&s, team, "r1"), realtime_agent(&s, team, "r2")];
+    // The real-time defaults: deadline 5 ticks or 25 ms, commands at most 5 ticks behind.
+    let agents = ["r1", "r2"].map(|r| agent_with_config(&s, AgentConfig::new(team, r)));
     let b = bridge(&s, team, &["r1", "r2"], ticks, 500);
     let report = tokio::time::timeout(Duration::from_secs(60), b.task)
         .await

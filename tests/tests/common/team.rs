@@ -62,10 +62,18 @@ pub fn agent_with_deadline(
     robot: &str,
     deadline: CommandDeadline,
 ) -> Component<robot_agent::status::AgentCounters> {
-    let (stop, rx) = watch::channel(false);
     let mut cfg = AgentConfig::new(team, robot);
     cfg.deadline = deadline;
     cfg.max_command_age = Duration::from_secs(30);
+    agent_with_config(session, cfg)
+}
+
+/// An agent of placeholder dynamics ([`JOINTS`] joints) configured by `cfg`.
+pub fn agent_with_config(
+    session: &Session,
+    cfg: AgentConfig,
+) -> Component<robot_agent::status::AgentCounters> {
+    let (stop, rx) = watch::channel(false);
     let s = session.clone();
     Component {
         stop,
