@@ -71,6 +71,15 @@ pub trait TeamController: Send {
     fn accelerations(&self, _robot: &str) -> Option<&[f64]> {
         None
     }
+
+    /// Real time: how long a tick may take to choose its contact forces, from its start, before
+    /// the controller's fallback answers (the steps of "degrade, never collapse" that would run
+    /// past it are not started, and a solver running stops at it). A tick the controller
+    /// cannot solve in time is sent as the fallback, not late: a late command is no command.
+    /// Returns whether the controller keeps a budget at all (PIDC does); `None` removes it.
+    fn set_solve_budget(&mut self, _budget: Option<std::time::Duration>) -> bool {
+        false
+    }
 }
 
 /// Why a controller could not produce torques for a tick, or could not be configured.

@@ -65,6 +65,11 @@ enum Command {
         /// where it is until references name it).
         #[arg(long, default_value_t = 0)]
         wait_for_references_ms: u64,
+        /// Real time: a tick's solve may take this long (µs) before the controller's fallback
+        /// answers (the steps after the first QP that would run past it are not started).
+        /// Without it every tick is solved to its end, however long that takes.
+        #[arg(long)]
+        solve_budget_us: Option<u64>,
         #[command(flatten)]
         zenoh: ZenohArgs,
     },
@@ -129,6 +134,7 @@ async fn main() -> Result<()> {
             expect,
             robot_hz,
             wait_for_references_ms,
+            solve_budget_us,
             zenoh,
         } => {
             anyhow::ensure!(
@@ -152,6 +158,7 @@ async fn main() -> Result<()> {
                 robot_hz,
                 wait_for_references: (wait_for_references_ms > 0)
                     .then(|| Duration::from_millis(wait_for_references_ms)),
+                solve_budget: solve_budget_us.map(Duration::from_micros),
             };
             let (tx, rx) = tokio::sync::watch::channel(false);
             tokio::spawn(async move {

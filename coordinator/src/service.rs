@@ -50,6 +50,9 @@ pub struct CoordinatorConfig {
     /// tasks toward the poses they happened to have. `None`: solve at once, each task held
     /// where it was first seen until references name it.
     pub wait_for_references: Option<Duration>,
+    /// Real time: how long a tick's solve may take before the controller's fallback answers
+    /// ([`TeamController::set_solve_budget`]). `None` (lockstep): every tick solved to its end.
+    pub solve_budget: Option<Duration>,
 }
 
 /// How long a coordinator of a run waits for its first references
@@ -70,6 +73,7 @@ impl CoordinatorConfig {
             expected: Vec::new(),
             robot_hz: None,
             wait_for_references: None,
+            solve_budget: None,
         }
     }
 }
@@ -155,6 +159,9 @@ pub async fn run(
     stop: watch::Receiver<bool>,
 ) -> Result<CoordinatorCounters, TransportError> {
     let mut io = Inputs::open(session, &cfg, stop).await?;
+    if cfg.solve_budget.is_some() && !controller.set_solve_budget(cfg.solve_budget) {
+        tracing::warn!(controller = controller.name(), "the controller keeps no solve budget");
+    }
     // Seen go by agents and bridge; declared last, so whoever sees it is heard (first references).
     let _alive = transport::declare_coordinator(session, &cfg.team).await?;
     let mut svc = Service::start(session, cfg).await?;

@@ -334,22 +334,9 @@ fn static_team_holds_the_object() {
     assert!(d_tau < 1e-4);
 }
 
-/// A motion the contacts cannot carry (the object's reference far above it, accelerating up at
-/// 5 g) yields before anything else gives: the tick is solved with the object's motion cut to
-/// the share the contact forces carry and the torsos tracked whole, every friction, moment and
-/// torque row kept (written out again by `worst_violation`), no fallback, and the diagnostics
-/// say how much of the motion was kept. The same team asked to hold still keeps its whole motion.
-#[test]
-fn a_motion_the_contacts_cannot_carry_yields_the_object_first_and_keeps_every_row() {
-    let mut fx = Fixture::new();
-    let (terms, descs) = fx.static_team(2);
-    let mut c = controller(&descs, PidcConfig::default());
-    c.compute(&terms).expect("tick");
-    assert_eq!(
-        c.last().expect("tick").motion,
-        coordinator::building_blocks::impedance::MotionScale::FULL,
-        "holding still needs no yield"
-    );
+/// References that ask the held object (the controller's last grasp) to be 0.5 m above where it
+/// is, accelerating up at 5 g: more than the contacts can carry.
+fn push_object_up(c: &mut Pidc) {
     let obj = c.last().and_then(|r| r.grasp.as_ref()).expect("grasp").object;
     let mut above = obj.translation.vector;
     above.z += 0.5;
@@ -368,6 +355,25 @@ fn a_motion_the_contacts_cannot_carry_yields_the_object_first_and_keeps_every_ro
         foot_loads: vec![],
     };
     c.set_references(&refs);
+}
+
+/// A motion the contacts cannot carry (the object's reference far above it, accelerating up at
+/// 5 g) yields before anything else gives: the tick is solved with the object's motion cut to
+/// the share the contact forces carry and the torsos tracked whole, every friction, moment and
+/// torque row kept (written out again by `worst_violation`), no fallback, and the diagnostics
+/// say how much of the motion was kept. The same team asked to hold still keeps its whole motion.
+#[test]
+fn a_motion_the_contacts_cannot_carry_yields_the_object_first_and_keeps_every_row() {
+    let mut fx = Fixture::new();
+    let (terms, descs) = fx.static_team(2);
+    let mut c = controller(&descs, PidcConfig::default());
+    c.compute(&terms).expect("tick");
+    assert_eq!(
+        c.last().expect("tick").motion,
+        coordinator::building_blocks::impedance::MotionScale::FULL,
+        "holding still needs no yield"
+    );
+    push_object_up(&mut c);
     let mut cmds = Vec::new();
     c.solve(&terms, &mut cmds).expect("tick");
     let d = c.diagnostics().expect("diagnostics").clone();
@@ -402,6 +408,37 @@ fn a_motion_the_contacts_cannot_carry_yields_the_object_first_and_keeps_every_ro
     let net = -(&g.g * r.lambda_real.rows(3 * nf, 12).into_owned());
     println!("net hand force on the object, z: {:.2} N (weight 9.81 N)", net[2]);
     assert!(r.motion.object == 0.0 || net[2] > 9.81, "{}", net[2]);
+}
+
+/// Real time: a tick with its solve budget spent answers with the fallback after its first QP.
+/// The motion of the test above, with no time to spend: no yield, no second solver down the
+/// chain (the active set's refusal stands, Clarabel never runs), the least-violation forces
+/// with the torques clamped to the limits. The budget removed, the same tick yields again.
+#[test]
+fn a_tick_past_its_solve_budget_answers_with_the_fallback() {
+    let mut fx = Fixture::new();
+    let (terms, descs) = fx.static_team(2);
+    let mut c = controller(&descs, PidcConfig::default());
+    assert!(c.set_solve_budget(Some(std::time::Duration::ZERO)), "PIDC keeps a budget");
+    c.compute(&terms).expect("tick");
+    let r = c.last().expect("tick");
+    assert!(r.fallback.is_none(), "holding still is solved by the first QP: {:?}", r.fallback);
+    push_object_up(&mut c);
+    let mut cmds = Vec::new();
+    c.solve(&terms, &mut cmds).expect("tick");
+    let d = c.diagnostics().expect("diagnostics").clone();
+    let r = c.materialized().expect("tick");
+    println!("QP {:?} by {}, fallback {:?}", r.qp.status, r.qp.solver, r.fallback);
+    assert_eq!(r.motion, coordinator::building_blocks::impedance::MotionScale::FULL);
+    assert!(d.motion_yield.is_none(), "{:?}", d.motion_yield);
+    assert!(r.fallback.is_some() && r.qp.solver != "clarabel", "{} {:?}", r.qp.solver, r.fallback);
+    let (_, wt) = worst_violation(&r);
+    assert!(wt < 1e-9, "torques within the limits: worst excess {wt:.2e} Nm");
+    assert!(cmds.iter().all(|t| t.tau.iter().all(|x| x.is_finite())));
+    c.set_solve_budget(None);
+    c.solve(&terms, &mut cmds).expect("tick");
+    let r = c.last().expect("tick");
+    assert!(r.motion.object < 1.0 && r.fallback.is_none(), "{:?} {:?}", r.motion, r.fallback);
 }
 
 #[test]

@@ -294,6 +294,9 @@ pub struct CoordinatorArgs {
     /// A driver sends the references: the robots hold until the first came, at most this
     /// long (`coordinator::service::CoordinatorConfig::wait_for_references`).
     pub wait_for_references: Option<Duration>,
+    /// Real time: how long a tick's solve may take before the fallback answers
+    /// (`coordinator::service::CoordinatorConfig::solve_budget`).
+    pub solve_budget: Option<Duration>,
 }
 
 impl CoordinatorArgs {
@@ -331,6 +334,9 @@ impl CoordinatorArgs {
         if let Some(w) = self.wait_for_references {
             args.extend(["--wait-for-references-ms".into(), w.as_millis().max(1).to_string()]);
         }
+        if let Some(b) = self.solve_budget {
+            args.extend(["--solve-budget-us".into(), b.as_micros().max(1).to_string()]);
+        }
         args.extend(zenoh.to_cli());
         Ok(args)
     }
@@ -349,6 +355,7 @@ impl CoordinatorArgs {
             expected: self.expected.clone(),
             robot_hz: self.robot_hz,
             wait_for_references: self.wait_for_references,
+            solve_budget: self.solve_budget,
         };
         let session = session.clone();
         Ok(tokio::spawn(async move {
@@ -932,6 +939,7 @@ mod tests {
             controller: ControllerSpec::of_kind("pidc").unwrap(),
             robot_hz: Some(500.0),
             wait_for_references: Some(Duration::from_secs(2)),
+            solve_budget: Some(Duration::from_micros(1000)),
         };
         let args = c.to_cli(&dir, &zenoh).unwrap();
         let written = std::fs::read_to_string(dir.join("controller.toml")).unwrap();
@@ -948,6 +956,7 @@ mod tests {
             ["--expect", "r1,r2"],
             ["--robot-hz", "500"],
             ["--wait-for-references-ms", "2000"],
+            ["--solve-budget-us", "1000"],
             ["--controller-config", &dir.join("controller.toml").display().to_string()],
         ] {
             assert!(

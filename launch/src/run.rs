@@ -60,6 +60,17 @@ pub fn realtime_answer_within(clock: &protocol::RunClock) -> Duration {
     Duration::from_secs_f64(clock.dt() / 2.0)
 }
 
+/// In real time a tick's solve may take a quarter of the control period before the
+/// controller's fallback answers (`coordinator::service::CoordinatorConfig::solve_budget`):
+/// the tick is solved a quarter period after its first terms ([`realtime_reuse`]) and its
+/// answer is due at the robot half a period after the state. A tick the QP cannot solve went
+/// down the whole of "degrade, never collapse" (the motion's yield, Clarabel's certificate,
+/// the QP again on saturated torques): 7-18 ms on S4 pushed beyond its grasp, three of
+/// its 4 ms ticks, and the robots went without commands while their grasp was let go.
+pub fn realtime_solve_budget(clock: &protocol::RunClock) -> Duration {
+    Duration::from_secs_f64(clock.dt() / 4.0)
+}
+
 /// How long a member may send no terms in real time before the coordinator leaves it out of
 /// the team (a team of two then lets go of the object). Long against a lossy link's gaps: with
 /// 5 % of one agent's packets dropped, TCP's retransmissions held its torques for up to 72 ms
@@ -248,6 +259,7 @@ pub fn launch_of(plan: &Plan) -> (Launch, BridgeArgs) {
         controller: plan.controller.clone(),
         robot_hz,
         wait_for_references,
+        solve_budget: plan.scene.realtime.then(|| realtime_solve_budget(clock)),
     };
     let agents = plan
         .robots

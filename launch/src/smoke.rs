@@ -73,6 +73,7 @@ impl SmokeConfig {
             controller: ControllerSpec::JointDamping(JointDampingConfig { damping: self.damping }),
             robot_hz: None,
             wait_for_references: None,
+            solve_budget: None,
         };
         let agents = self
             .robots

@@ -96,7 +96,8 @@ impl ShellState {
     /// Degrade, never collapse: after a tick (`fell_back`: its command came from the law's
     /// fallback), let go of an object the team cannot hold ([`crate::building_blocks::release`]);
     /// why
-    /// the hands are free into `note` (`None` while the grasp holds).
+    /// the hands are free into `note` (`None` while the grasp holds). Whether the team let go
+    /// on this tick.
     pub fn watch_release(
         &mut self,
         cfg: &ShellConfig,
@@ -104,11 +105,12 @@ impl ShellState {
         (team, grasp): (&Team, Option<&GraspTerms>),
         fell_back: bool,
         note: &mut Option<String>,
-    ) {
-        let outcome =
-            GraspObservation::of((tick[0].header.tick, cfg.robot_period), team, grasp, fell_back);
+    ) -> bool {
+        let now = tick[0].header.tick;
+        let outcome = GraspObservation::of((now, cfg.robot_period), team, grasp, fell_back);
         let ShellState { targets, grasp: tracker, watch, .. } = self;
         set_note(note, watch.after_tick(&cfg.release, outcome, team, grasp, targets, tracker));
+        watch.released().is_some_and(|r| r.tick == now)
     }
 
     /// Why the controller cannot run `members` yet: the descriptions still missing, if any.
@@ -160,6 +162,12 @@ pub trait ControlLaw: Send {
     /// ([`TeamController::accelerations`]).
     fn accelerations_of(&self, _robot: &str) -> Option<&[f64]> {
         None
+    }
+
+    /// How long a tick may take before its fallback answers; returns whether the law keeps
+    /// such a budget ([`TeamController::set_solve_budget`]).
+    fn solve_budget(&mut self, _budget: Option<std::time::Duration>) -> bool {
+        false
     }
 }
 
@@ -261,5 +269,9 @@ impl<L: ControlLaw> TeamController for Shell<L> {
 
     fn accelerations(&self, robot: &str) -> Option<&[f64]> {
         self.law.accelerations_of(robot)
+    }
+
+    fn set_solve_budget(&mut self, budget: Option<std::time::Duration>) -> bool {
+        self.law.solve_budget(budget)
     }
 }

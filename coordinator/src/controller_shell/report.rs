@@ -109,3 +109,33 @@ fn contact_wrenches_into(team: &Team, wrench: &DVector<f64>, d: &mut TickDiagnos
         row += dim;
     }
 }
+
+/// A tick's diagnostic note: the release on the tick the team let go (its tick and cause are
+/// the event of record), else the fallback taken, else the release in force.
+pub fn tick_note<'a>(
+    fallback: Option<&'a str>,
+    release: Option<&'a str>,
+    released_now: bool,
+) -> Option<&'a str> {
+    if released_now {
+        release.or(fallback)
+    } else {
+        fallback.or(release)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::tick_note;
+
+    #[test]
+    fn the_release_is_named_on_its_tick_even_when_the_tick_fell_back() {
+        let (fallback, release) =
+            (Some("QP Infeasible: ..."), Some("grasp released at tick 7: ..."));
+        assert_eq!(tick_note(fallback, release, true), release, "the release's own tick");
+        assert_eq!(tick_note(fallback, release, false), fallback, "a later tick that fell back");
+        assert_eq!(tick_note(None, release, false), release, "a later tick solved");
+        assert_eq!(tick_note(fallback, None, false), fallback);
+        assert_eq!(tick_note(None, None, false), None);
+    }
+}

@@ -109,7 +109,8 @@ impl MqpLaw {
         self.solve_qp();
         let (cfg, r) = (&self.config, &mut self.report);
         let fell_back = r.fallback.is_some();
-        state.watch_release(cfg, tick, (&r.team, r.grasp.as_ref()), fell_back, &mut r.release);
+        let team = (&r.team, r.grasp.as_ref());
+        r.released_now = state.watch_release(cfg, tick, team, fell_back, &mut r.release);
         r.timing = MqpTiming { build_us: t_build, solve_us: r.outcome.solve_us, total_us: us() };
         self.valid = true;
         Ok(&self.report)

@@ -5,7 +5,9 @@ use nalgebra::{DMatrix, DVector};
 use protocol::{DynamicsTerms, TickDiagnostics, TorqueCommand};
 
 use crate::building_blocks::grasp::GraspTerms;
-use crate::controller_shell::report::{diagnostics_into, torque_commands_into, TickOutputs};
+use crate::controller_shell::report::{
+    diagnostics_into, tick_note, torque_commands_into, TickOutputs,
+};
 use crate::linalg::zeros_v;
 use crate::mqp::object::ObjectTerms;
 use crate::mqp::problem::MqpProblem;
@@ -50,6 +52,10 @@ pub struct MqpReport {
     /// Why the hands are free while the contact sets hold the object
     /// ([`crate::building_blocks::release`]); `None` while the grasp holds.
     pub release: Option<String>,
+    /// The team let go on this tick: its diagnostics name the release (its tick and cause)
+    /// rather than the fallback the tick took, so that a release followed by fallbacks is
+    /// still on record.
+    pub released_now: bool,
     pub timing: MqpTiming,
 }
 
@@ -106,7 +112,7 @@ impl MqpReport {
             assembly_us: self.timing.build_us,
             total_us: self.timing.total_us,
             residual,
-            note: self.fallback.as_deref().or(self.release.as_deref()),
+            note: tick_note(self.fallback.as_deref(), self.release.as_deref(), self.released_now),
         };
         diagnostics_into(&outputs, tick, d);
     }

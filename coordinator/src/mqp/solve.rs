@@ -54,7 +54,7 @@ pub fn solve(problem: &MqpProblem, max_iter: u32, x: &mut DVector<f64>) -> Solve
         b: problem.b.as_slice(),
         cones: &cones,
     };
-    let Some(run) = clarabel::run(&conic, max_iter, Accept::Solved, x) else {
+    let Some(run) = clarabel::run(&conic, (max_iter, None), Accept::Solved, x) else {
         return SolveOutcome { status: QpStatus::NumericalError, iterations: 0, solve_us: us() };
     };
     // A solved status without a finite point of the right size is a numerical error.

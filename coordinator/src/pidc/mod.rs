@@ -16,7 +16,7 @@ pub mod report;
 pub mod stages;
 
 use std::collections::BTreeMap;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use nalgebra::DVector;
 use protocol::{DynamicsTerms, FootLoad, QpStatus, RobotDescription, TorqueCommand};
@@ -59,6 +59,16 @@ struct Workspace {
     /// The object's load `F_x` with the object held still (the motion yielding).
     f_x_hold: nalgebra::Vector6<f64>,
     yielding: YieldScratch,
+    /// When the tick's contact forces must be chosen ([`PidcLaw::solve_budget`] from the tick's
+    /// start): past it the QP's chain and the steps before the fallback are not started.
+    deadline: Option<Instant>,
+}
+
+impl Workspace {
+    /// Whether the tick's budget is spent (never without one).
+    fn out_of_time(&self) -> bool {
+        self.deadline.is_some_and(|d| Instant::now() >= d)
+    }
 }
 
 /// The PIDC team controller (paper §III): the shell with PIDC's law.
@@ -73,6 +83,9 @@ pub struct PidcLaw {
     /// Whether a tick computes what its torque accelerates (`report.qdd`,
     /// [`crate::TeamController::keep_accelerations`]).
     accelerations: bool,
+    /// How long a tick may take to choose its contact forces before the fallback answers
+    /// ([`crate::TeamController::set_solve_budget`]); `None`: every step runs to its end.
+    solve_budget: Option<Duration>,
     ws: Workspace,
 }
 
@@ -84,6 +97,7 @@ impl Shell<PidcLaw> {
             report: TickReport::default(),
             valid: false,
             accelerations: false,
+            solve_budget: None,
             ws: Workspace::default(),
         })
     }
@@ -175,6 +189,7 @@ impl PidcLaw {
     ) -> Result<&TickReport, ControllerError> {
         self.valid = false;
         let start = Instant::now();
+        self.ws.deadline = self.solve_budget.map(|b| start + b);
         let us = || start.elapsed().as_secs_f64() * 1e6;
         self.assemble(state, tick)?;
         let t_asm = us();
@@ -194,7 +209,7 @@ impl PidcLaw {
         let fell_back = r.fallback.is_some();
         // Degrade, never collapse: let go of an object the team cannot hold.
         let team = (&r.team, r.grasp.as_ref());
-        state.watch_release(&self.config, tick, team, fell_back, &mut r.release);
+        r.released_now = state.watch_release(&self.config, tick, team, fell_back, &mut r.release);
         self.report.timing = Timing {
             assembly_us: t_asm,
             projections_us: t_proj - t_asm,
@@ -295,8 +310,9 @@ impl PidcLaw {
 /// QP is solved again with `tau_0` saturated, so that the contact forces are chosen for a
 /// torque the joints can give; then the least-violation fallback ([`fallback`]), robot by
 /// robot when no grasp couples the robots ([`stages::by_robot`]). Feet named in `loads` (the
-/// references' unloading ramps) have their normal force bounded. Returns the build and QP
-/// times, µs.
+/// references' unloading ramps) have their normal force bounded. Past the tick's budget
+/// (`ws.deadline`) no step before the fallback is started and no solver down the QP's chain:
+/// the fallback answers in time. Returns the build and QP times, µs.
 fn contact_forces(
     r: &mut TickReport,
     ws: &mut Workspace,
@@ -321,8 +337,8 @@ fn contact_forces(
     // a QP nothing held still makes feasible is certified again before the steps after.
     let yields = r.grasp.is_some() && !decoupled(&r.team);
     let mut solved = dense_qp(r, ws, cfg, (true, yields), &mut build_us, &mut qp_us);
-    // The motion yields before anything else gives (stages::yielding).
-    if !solved && yields {
+    // The motion yields before anything else gives (stages::yielding), in the tick's budget.
+    if !solved && yields && !ws.out_of_time() {
         let t = Instant::now();
         solved = yield_or_restore(r, ws, descriptions, cfg, loads)?;
         qp_us += t.elapsed().as_secs_f64() * 1e6;
@@ -449,7 +465,7 @@ fn dense_qp(
     let t1 = Instant::now();
     // F_c is kept out of the report while the QP reads it (no allocation: an empty vector).
     let mut f_c = std::mem::replace(&mut r.f_c, DVector::zeros(0));
-    let settings = qp::QpSettings { active_set_refuses: refuses, ..qp_settings(cfg) };
+    let settings = qp::QpSettings { active_set_refuses: refuses, ..qp_settings(cfg, ws.deadline) };
     r.qp = qp::solve_with(&mut ws.qp, &qp_input(r, &ws.contact, cfg), &settings, &mut f_c);
     r.f_c = f_c;
     *build_us += (t1 - t0).as_secs_f64() * 1e6;
@@ -477,9 +493,10 @@ fn yield_tick(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> Optio
         }
     }
     let (mut build_us, mut qp_us) = (0.0, 0.0);
+    // A try past the tick's budget counts as refused.
     yield_motion(|scale| {
         ws.yielding.blend_into(scale, &mut r.tau_m, &mut r.tau0, &mut r.load, &mut r.f_x);
-        dense_qp(r, ws, cfg, (false, true), &mut build_us, &mut qp_us)
+        !ws.out_of_time() && dense_qp(r, ws, cfg, (false, true), &mut build_us, &mut qp_us)
     })
 }
 
@@ -530,7 +547,7 @@ fn hold_on_reserve(
         MotionScale { object: 0.0, torso: 0.0, reserve: true },
     ] {
         ws.yielding.blend_into(still, &mut r.tau_m, &mut r.tau0, &mut r.load, &mut r.f_x);
-        if dense_qp(r, ws, cfg, (false, true), &mut build_us, &mut qp_us) {
+        if !ws.out_of_time() && dense_qp(r, ws, cfg, (false, true), &mut build_us, &mut qp_us) {
             return Some(still);
         }
     }
@@ -565,7 +582,7 @@ fn solve_by_blocks(r: &mut TickReport, ws: &mut Workspace, cfg: &PidcConfig) -> 
     };
     r.blocks_declined = ws
         .blocks
-        .solve(&input, warm, shape, qp_settings(cfg).active_set_tol, qp::BLOCK_REPAIRS)
+        .solve(&input, warm, shape, qp_settings(cfg, None).active_set_tol, qp::BLOCK_REPAIRS)
         .err();
     if r.blocks_declined.is_some() {
         return false;
@@ -604,7 +621,7 @@ fn by_robot(
     cfg: &PidcConfig,
     f_c: &mut DVector<f64>,
 ) -> ByRobot {
-    let settings = qp_settings(cfg);
+    let settings = qp_settings(cfg, ws.deadline);
     ws.by_robot.solve(&r.team, &qp_input(r, &ws.contact, cfg), &settings, false, f_c);
     if ws.by_robot.saturate_failed(&r.team, &mut r.tau0, &r.actuated, &r.limits) {
         let c = &mut ws.contact;
@@ -623,9 +640,10 @@ fn by_robot(
     ws.by_robot.finish(&r.team, &qp_input(r, &ws.contact, cfg), &settings, f_c)
 }
 
-/// The QP's settings from the configuration (its iteration limit and path).
-fn qp_settings(cfg: &PidcConfig) -> qp::QpSettings {
-    qp::QpSettings::new(cfg.qp_max_iter, cfg.qp_path)
+/// The QP's settings from the configuration (its iteration limit and path) with the tick's
+/// deadline.
+fn qp_settings(cfg: &PidcConfig, deadline: Option<Instant>) -> qp::QpSettings {
+    qp::QpSettings { deadline, ..qp::QpSettings::new(cfg.qp_max_iter, cfg.qp_path) }
 }
 
 /// The QP's data from the tick's report and contact map (`lambda_real` holds `eta_real` until
@@ -668,6 +686,11 @@ impl ControlLaw for PidcLaw {
 
     fn model_accelerations(&mut self, keep: bool) -> bool {
         self.accelerations = keep;
+        true
+    }
+
+    fn solve_budget(&mut self, budget: Option<Duration>) -> bool {
+        self.solve_budget = budget;
         true
     }
 

@@ -11,7 +11,9 @@ use protocol::{DynamicsTerms, TickDiagnostics, TorqueCommand};
 use crate::building_blocks::grasp::GraspTerms;
 use crate::building_blocks::impedance::MotionScale;
 use crate::building_blocks::projection::Projections;
-use crate::controller_shell::report::{diagnostics_into, torque_commands_into, TickOutputs};
+use crate::controller_shell::report::{
+    diagnostics_into, tick_note, torque_commands_into, TickOutputs,
+};
 use crate::qp::{self, ContactKind};
 use crate::team::Team;
 
@@ -70,6 +72,10 @@ pub struct TickReport {
     /// Why the hands are free while the contact sets hold the object
     /// ([`crate::building_blocks::release`]); `None` while the grasp holds.
     pub release: Option<String>,
+    /// The team let go on this tick: its diagnostics name the release (its tick and cause)
+    /// rather than the fallback the tick took, so that a release followed by fallbacks is
+    /// still on record.
+    pub released_now: bool,
     pub timing: Timing,
 }
 
@@ -146,7 +152,7 @@ impl TickReport {
             assembly_us: self.timing.assembly_us,
             total_us: self.timing.total_us,
             residual: self.jc_v.norm(),
-            note: self.fallback.as_deref().or(self.release.as_deref()),
+            note: tick_note(self.fallback.as_deref(), self.release.as_deref(), self.released_now),
         };
         diagnostics_into(&outputs, tick, d);
         d.motion_yield = (self.motion != MotionScale::FULL).then_some(protocol::MotionYield {

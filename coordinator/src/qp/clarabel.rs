@@ -5,7 +5,7 @@
 //! only when the dense methods did not converge, or always on [`super::QpPath::Clarabel`],
 //! and certifies infeasibility.
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
@@ -76,18 +76,19 @@ pub struct ClarabelRun {
     pub written: bool,
 }
 
-/// Solve `problem` with Clarabel (`max_iter` iterations, no presolve, quiet) and copy its
-/// answer into `x` (sized to the problem's variables if it is not) when `accept` allows it.
-/// `None` when Clarabel refuses the problem at setup.
+/// Solve `problem` with Clarabel (`max_iter` iterations, within `time_limit` when given, no
+/// presolve, quiet) and copy its answer into `x` (sized to the problem's variables if it is
+/// not) when `accept` allows it. `None` when Clarabel refuses the problem at setup.
 pub fn run(
     problem: &ConicProblem,
-    max_iter: u32,
+    (max_iter, time_limit): (u32, Option<Duration>),
     accept: Accept,
     x: &mut DVector<f64>,
 ) -> Option<ClarabelRun> {
     let settings = DefaultSettings::<f64> {
         verbose: false,
         max_iter,
+        time_limit: time_limit.map_or(f64::INFINITY, |t| t.as_secs_f64()),
         presolve_enable: false,
         ..DefaultSettings::default()
     };
@@ -149,7 +150,8 @@ impl QpSolver for Clarabel {
         let cones = [NonnegativeConeT(rows)];
         let conic =
             ConicProblem { p: &p, q: &q, a: &a_csc, b: problem.b.as_slice(), cones: &cones };
-        let Some(run) = run(&conic, settings.max_iter, Accept::AnyStatus, x) else {
+        let limits = (settings.max_iter, settings.time_left());
+        let Some(run) = run(&conic, limits, Accept::AnyStatus, x) else {
             return QpOutcome {
                 status: QpStatus::NumericalError,
                 iterations: 0,

@@ -145,7 +145,9 @@ pub fn solve(
 /// start by the robots' blocks of [`QpPath::ByBlocks`] is the controller's, before this):
 /// [`DualActiveSet`] (hot-started from the last call's active rows), then [`DenseIpm`] when
 /// it does not solve the QP, [`Clarabel`] when neither does (it also certifies
-/// infeasibility, so the status of an infeasible QP is always Clarabel's).
+/// infeasibility, so the status of an infeasible QP is always Clarabel's). Past
+/// `settings.deadline` the chain stops after the solver that was running (its outcome is
+/// returned), and Clarabel stops at it.
 /// `solve_us` is the whole call's time, assembly included.
 pub fn solve_with(
     ws: &mut QpWorkspace,
@@ -167,20 +169,22 @@ pub fn solve_with(
             solver: "clarabel",
         };
     }
+    let timed = |out: QpOutcome| QpOutcome { solve_us: t0.elapsed().as_secs_f64() * 1e6, ..out };
     if settings.path.tries_active_set() {
         let out = ws.active_set.solve_problem(&ws.problem, settings, f);
         if out.status == QpStatus::Solved
             || (settings.active_set_refuses && out.status == QpStatus::Infeasible)
+            || settings.out_of_time()
         {
-            return QpOutcome { solve_us: t0.elapsed().as_secs_f64() * 1e6, ..out };
+            return timed(out);
         }
     }
     if settings.path.tries_dense_ipm() {
         let out = ws.ipm.solve_problem(&ws.problem, settings, f);
-        if matches!(out.status, QpStatus::Solved | QpStatus::AlmostSolved) {
-            return QpOutcome { solve_us: t0.elapsed().as_secs_f64() * 1e6, ..out };
+        if matches!(out.status, QpStatus::Solved | QpStatus::AlmostSolved) || settings.out_of_time()
+        {
+            return timed(out);
         }
     }
-    let out = Clarabel.solve_problem(&ws.problem, settings, f);
-    QpOutcome { solve_us: t0.elapsed().as_secs_f64() * 1e6, ..out }
+    timed(Clarabel.solve_problem(&ws.problem, settings, f))
 }

@@ -1,5 +1,6 @@
 //! [`QpSettings`]: how the QP is solved (where the solve starts, [`QpPath`]; iterations,
-//! tolerances, the fallback's price), apart from what is solved ([`super::problem`]).
+//! tolerances, the fallback's price, the time it may take), apart from what is solved
+//! ([`super::problem`]).
 //! Clarabel's `DefaultSettings` plays the same part for Clarabel; [`super::clarabel`] builds
 //! it from these.
 
@@ -39,6 +40,8 @@ pub const HARD_ROW_FACTOR: f64 = 1e3;
 /// Fewest active-set iterations [`super::solve_least_violation`] may take, whatever
 /// `max_iter` says.
 pub const LEAST_VIOLATION_MIN_ITER: u32 = 30;
+
+use std::time::{Duration, Instant};
 
 /// Where the contact-force QP's solve starts. Each path falls back down the chain
 /// `ByBlocks -> ActiveSet -> DenseIpm -> Clarabel`: a method that does not answer hands the
@@ -137,6 +140,11 @@ pub struct QpSettings {
     /// yield's bisection ([`crate::pidc::stages::yielding`]), where each infeasible try would
     /// otherwise cost Clarabel's milliseconds.
     pub active_set_refuses: bool,
+    /// When the chain must have answered (a real-time tick's budget): past it no further
+    /// solver of the chain is started (the outcome is the last one's: the active set's proof
+    /// of infeasibility, or the iterations it ran out of), and Clarabel, when it runs, stops at
+    /// it (`MaxIterations`). `None`: the chain runs to its end (lockstep).
+    pub deadline: Option<Instant>,
 }
 
 impl QpSettings {
@@ -160,6 +168,19 @@ impl Default for QpSettings {
             hard_row_factor: HARD_ROW_FACTOR,
             least_violation_min_iter: LEAST_VIOLATION_MIN_ITER,
             active_set_refuses: false,
+            deadline: None,
         }
+    }
+}
+
+impl QpSettings {
+    /// Whether the deadline has passed (never without one).
+    pub fn out_of_time(&self) -> bool {
+        self.deadline.is_some_and(|d| Instant::now() >= d)
+    }
+
+    /// The time left before the deadline (`None` without one; zero once it passed).
+    pub fn time_left(&self) -> Option<Duration> {
+        self.deadline.map(|d| d.saturating_duration_since(Instant::now()))
     }
 }
