@@ -67,7 +67,7 @@ struct Workspace {
 impl Workspace {
     /// Whether the tick's budget is spent (never without one).
     fn out_of_time(&self) -> bool {
-        self.deadline.is_some_and(|d| Instant::now() >= d)
+        qp::settings::passed(self.deadline)
     }
 }
 

@@ -173,10 +173,15 @@ impl Default for QpSettings {
     }
 }
 
+/// Whether `deadline` has passed (never without one): a real-time tick's budget spent.
+pub fn passed(deadline: Option<Instant>) -> bool {
+    deadline.is_some_and(|d| Instant::now() >= d)
+}
+
 impl QpSettings {
     /// Whether the deadline has passed (never without one).
     pub fn out_of_time(&self) -> bool {
-        self.deadline.is_some_and(|d| Instant::now() >= d)
+        passed(self.deadline)
     }
 
     /// The time left before the deadline (`None` without one; zero once it passed).
