@@ -176,6 +176,8 @@ pub struct Metrics {
     pub settle_wall_s: f64,
     pub run_wall_s: f64,
     pub real_time_factor: f64,
+    /// The machine's processors over the run: busy, and taken by the host.
+    pub machine: Option<crate::machine::MachineLoad>,
     pub checks: Vec<Check>,
     pub passed: bool,
 }
@@ -288,6 +290,7 @@ fn measures(
         settle_wall_s: records.settle_wall.as_secs_f64(),
         run_wall_s: records.run_wall.as_secs_f64(),
         real_time_factor: real_time_factor(sim, records.run_wall),
+        machine: records.machine,
         checks: Vec::new(),
         passed: false,
     }
@@ -791,6 +794,9 @@ pub fn summary(m: &Metrics, dir: &Path) -> String {
     }
     if let Some(l) = &m.loop_timing {
         s.push_str(&l.summary());
+        if let Some(machine) = &m.machine {
+            s.push_str(&machine.summary());
+        }
     }
     push_acceptance_lines(&mut s, m);
     s.push_str(&format!("  report: {}\n", dir.display()));

@@ -7,6 +7,7 @@
 //! * [`records`]: what a run recorded (ground truth, applied torques, diagnostics, statuses).
 //! * [`metrics`]: the measures of success (`docs/scenarios.md`).
 //! * [`loop_timing`]: the control loop of a real-time run, from the ground truth's stamps.
+//! * [`machine`]: the machine a run had (its processors' busy share, the host's steal).
 //! * [`walking`]: a walk's evaluation from the ground truth (steps, slides, final poses).
 //! * [`evaluate`]: a run's metrics, time series and acceptance checks ([`evaluate::Evaluation`]).
 //! * [`report`]: CSV time series and JSON files of a run.
@@ -14,6 +15,7 @@
 
 pub mod evaluate;
 pub mod loop_timing;
+pub mod machine;
 pub mod metrics;
 pub mod plots;
 pub mod records;

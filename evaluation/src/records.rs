@@ -26,6 +26,8 @@ pub struct Records {
     /// Wall time of the settling and of the scenario proper.
     pub settle_wall: Duration,
     pub run_wall: Duration,
+    /// The machine's processors over the scenario proper (`None` where they cannot be read).
+    pub machine: Option<crate::machine::MachineLoad>,
     /// Ticks seen (ground truth), settling included.
     pub ticks_seen: u64,
     /// The bridge's wall-clock stamp of the last settling tick's ground truth: the hand-over

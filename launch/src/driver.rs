@@ -30,6 +30,7 @@ use tokio::sync::watch;
 use zenoh::Session;
 
 use crate::record::{RecordedMessage, Tap};
+use evaluation::machine::CpuTimes;
 use evaluation::records::Records;
 use scenario::ReferencePlan;
 
@@ -459,6 +460,7 @@ impl Driver {
             if st.run_started.is_none() {
                 st.rec.settle_wall = st.started.elapsed();
                 st.run_started = Some(Instant::now());
+                st.cpu_at_start = CpuTimes::read();
                 self.progress.set_prefix("running");
             }
             st.rec.truth.push(gt);
@@ -489,7 +491,7 @@ impl Driver {
     /// After the loop: the torques the bridge took that the driver still lacks, whatever else
     /// already arrived, the wall time.
     async fn finish(mut self, st: RunState) -> Records {
-        let RunState { mut rec, settle, run_started, .. } = st;
+        let RunState { mut rec, settle, run_started, cpu_at_start, .. } = st;
         self.await_applied_torques(&mut rec, settle).await;
         // Whatever else already arrived (torques and diagnostics of the last ticks).
         while let Ok(Some(sample)) = self.torques.try_recv() {
@@ -502,6 +504,7 @@ impl Driver {
             rec.take_agent_status(&sample);
         }
         rec.run_wall = run_started.map(|s| s.elapsed()).unwrap_or_default();
+        rec.machine = cpu_at_start.zip(CpuTimes::read()).and_then(|(a, b)| b.since(&a));
         self.progress.finish_and_clear();
         rec
     }
@@ -515,6 +518,8 @@ struct RunState {
     started: Instant,
     /// When the first scenario tick's ground truth arrived.
     run_started: Option<Instant>,
+    /// The machine's processor counters when the scenario proper started.
+    cpu_at_start: Option<CpuTimes>,
     /// Tenths of the run logged so far (progress without a terminal).
     last_logged: u64,
     /// References of ticks below this are published.
@@ -531,6 +536,7 @@ impl RunState {
             settle,
             started: Instant::now(),
             run_started: None,
+            cpu_at_start: None,
             last_logged: 0,
             next_ref,
             coordinator_lost: false,

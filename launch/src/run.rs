@@ -448,6 +448,7 @@ fn close_recording(
             mode: mode.name().to_string(),
             settle_wall: r.settle_wall,
             run_wall: r.run_wall,
+            machine: r.machine,
             error: error.clone(),
         })
         .unwrap_or(RunFacts { error, ..RunFacts::default() });

@@ -55,34 +55,43 @@ fn team3_realtime(sets: &[&str]) -> Plan {
 }
 
 /// `plan` run on this computer, embedded or as processes on loopback, reported into
-/// `target/test-reports/{name}`: its records and metrics.
-fn run_here(plan: &Plan, distributed: bool, mode: &str, name: &str) -> (Records, Metrics) {
-    let dir = common::scenario::repo().join("target/test-reports").join(name);
-    std::fs::create_dir_all(&dir).expect("report dir");
-    let records = run::run(
-        plan,
-        &RunOptions { distributed, hosts: false, progress: false, loss: Vec::new() },
-        &dir,
-    )
-    .expect("the run completes");
-    let m = evaluated(plan, &records, mode, name);
-    (records, m)
+/// `target/test-reports/{name}`: its records and metrics, of a run the host left its
+/// processors (`None`: it never did, and the test is listed as skipped; `common::machine`).
+fn run_here(plan: &Plan, distributed: bool, mode: &str, name: &str) -> Option<(Records, Metrics)> {
+    common::machine::on_its_processors(&format!("realtime::{name}"), || {
+        let dir = common::scenario::repo().join("target/test-reports").join(name);
+        std::fs::create_dir_all(&dir).expect("report dir");
+        let records = run::run(
+            plan,
+            &RunOptions { distributed, hosts: false, progress: false, loss: Vec::new() },
+            &dir,
+        )
+        .expect("the run completes");
+        let m = evaluated(plan, &records, mode, name);
+        (records, m)
+    })
 }
 
 /// `plan` run with every component on its own host of `hosts`, reported into
-/// `target/test-reports/{name}`: its records.
-fn run_across_hosts(plan: &Plan, hosts: Arc<TestHosts>, name: &str) -> Records {
-    let dir = common::scenario::repo().join("target/test-reports").join(name);
-    std::fs::create_dir_all(&dir).expect("report dir");
-    let mode = RunMode::Hosts { dir, hosts, certs: None };
-    let rt = tokio::runtime::Runtime::new().expect("runtime");
-    rt.block_on(run::run_in(
-        plan,
-        &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() },
-        &mode,
-        None,
-    ))
-    .expect("the run completes")
+/// `target/test-reports/{name}`: its records, of a run the host left its processors (`None`:
+/// it never did; `common::machine`).
+fn run_across_hosts(plan: &Plan, hosts: Arc<TestHosts>, name: &str) -> Option<Records> {
+    let run = || {
+        let dir = common::scenario::repo().join("target/test-reports").join(name);
+        std::fs::create_dir_all(&dir).expect("report dir");
+        let mode = RunMode::Hosts { dir, hosts: hosts.clone(), certs: None };
+        let rt = tokio::runtime::Runtime::new().expect("runtime");
+        let records = rt
+            .block_on(run::run_in(
+                plan,
+                &RunOptions { distributed: true, hosts: true, progress: false, loss: Vec::new() },
+                &mode,
+                None,
+            ))
+            .expect("the run completes");
+        (records, ())
+    };
+    common::machine::on_its_processors(&format!("realtime::{name}"), run).map(|(r, ())| r)
 }
 
 fn evaluated(plan: &Plan, records: &Records, mode: &str, name: &str) -> Metrics {
@@ -163,7 +172,9 @@ fn assert_loop_consistent(plan: &Plan, records: &Records, report: &LoopReport) {
 fn s4_holds_in_real_time_and_reports_its_loop() {
     let _one = serial();
     let plan = s4_realtime(250.0, 2.0);
-    let (records, m) = run_here(&plan, false, "embedded, real time", "realtime_s4");
+    let Some((records, m)) = run_here(&plan, false, "embedded, real time", "realtime_s4") else {
+        return;
+    };
     for c in &m.checks {
         assert!(c.passed, "{} = {} not below {}", c.name, c.value, c.bound);
     }
@@ -227,7 +238,10 @@ fn a_real_time_run_without_a_settle_waits_for_its_first_torques() {
     .expect("scenario");
     let mut plan = plan::plan(&s, &common::scenario::repo()).expect("plan");
     plan.scene.realtime = true;
-    let (records, m) = run_here(&plan, false, "embedded, real time", "realtime_no_settle");
+    let Some((records, m)) = run_here(&plan, false, "embedded, real time", "realtime_no_settle")
+    else {
+        return;
+    };
     let first = records.truth.first().expect("ticks");
     assert_eq!(first.header.tick, 0);
     for t in &first.loop_timing {
@@ -318,13 +332,18 @@ fn s4_at_its_full_length_holds_in_real_time_at_the_defaults_recorded() {
         scenario: ScenarioSource::read(&path, &[], Pacing::Realtime).expect("scenario file"),
         live: None,
     };
-    let (records, summary) = run::run_recorded(
-        &plan,
-        &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() },
-        &dir,
-        Some(&rec),
-    )
-    .expect("the run completes");
+    let test = "realtime::s4_at_its_full_length_holds_in_real_time_at_the_defaults_recorded";
+    let Some((records, summary)) = common::machine::on_its_processors(test, || {
+        run::run_recorded(
+            &plan,
+            &RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() },
+            &dir,
+            Some(&rec),
+        )
+        .expect("the run completes")
+    }) else {
+        return;
+    };
     let summary = summary.expect("recorded");
     assert_eq!(
         (summary.dropped, summary.error.as_deref()),
@@ -349,8 +368,11 @@ fn s4_at_its_full_length_holds_in_real_time_at_the_defaults_recorded() {
 fn s4_at_its_full_length_holds_in_real_time_at_the_defaults_distributed() {
     let _one = serial();
     let plan = s4_at_the_defaults();
-    let (records, m) =
-        run_here(&plan, true, "distributed, real time", "realtime_s4_full_distributed");
+    let Some((records, m)) =
+        run_here(&plan, true, "distributed, real time", "realtime_s4_full_distributed")
+    else {
+        return;
+    };
     assert_held_from_start_to_end(&plan, &records, &m, 0.05);
     assert_no_drive_gaps(&m);
 }
@@ -367,7 +389,9 @@ fn s4_at_its_full_length_holds_in_real_time_at_the_defaults_across_hosts() {
     let Some(hosts) = common::hosts::hosts_or_skip(&ids, test) else {
         return;
     };
-    let records = run_across_hosts(&plan, hosts, "realtime_s4_full_hosts");
+    let Some(records) = run_across_hosts(&plan, hosts, "realtime_s4_full_hosts") else {
+        return;
+    };
     let m = evaluated(&plan, &records, "hosts, real time", "realtime_s4_full_hosts");
     assert_held_from_start_to_end(&plan, &records, &m, 0.05);
     assert_no_drive_gaps(&m);
@@ -389,7 +413,11 @@ fn s4_at_its_full_length_holds_in_real_time_at_1khz_with_the_team_two_ticks_behi
     assert_eq!((s.control_hz, s.duration), (1000.0, 10.0), "the scenario's own rate and length");
     let mut plan = plan::plan(&s, &repo).expect("plan");
     plan.scene.realtime = true;
-    let (records, m) = run_here(&plan, false, "embedded, real time", "realtime_s4_1khz_delay");
+    let Some((records, m)) =
+        run_here(&plan, false, "embedded, real time", "realtime_s4_1khz_delay")
+    else {
+        return;
+    };
     assert_eq!(m.team_delay_ticks, 2, "the report names the delay");
     // 248 and 602 of 10000 missed beside two busy loops, 7 idle.
     assert_held_from_start_to_end(&plan, &records, &m, 0.1);
@@ -413,7 +441,9 @@ fn s4_holds_in_real_time_across_hosts_with_five_percent_loss_on_one_link() {
         return;
     };
     hosts.set_loss("r1", 5).expect("loss rule");
-    let records = run_across_hosts(&plan, hosts.clone(), "realtime_hosts_loss");
+    let Some(records) = run_across_hosts(&plan, hosts.clone(), "realtime_hosts_loss") else {
+        return;
+    };
     let m = evaluated(&plan, &records, "hosts, real time", "realtime_hosts_loss");
     // Held, not tracked to the millimetre: the drives hold their last torques through the
     // gaps, so the tracking bounds of a clean run are not asked.
@@ -463,7 +493,9 @@ fn a_stalled_agent_is_noticed_at_once_and_the_team_rides_it_through() {
         "drive_loss=\"freeze\"",
         "faults=[{kind=\"agent-stalls\",robot=\"r3\",at=0.5,duration=0.12}]",
     ]);
-    let (records, m) = run_here(&plan, false, "embedded, real time", "realtime_stall");
+    let Some((records, m)) = run_here(&plan, false, "embedded, real time", "realtime_stall") else {
+        return;
+    };
     let clock = &plan.references.clock;
     let (struck, over) = (clock.first_tick_at(0.5), clock.first_tick_at(0.62));
     let r3 = "r3".to_string();
@@ -560,7 +592,10 @@ fn an_agent_killed_in_real_time_is_noticed_within_three_ticks_and_the_others_hol
         "drive_loss=\"freeze\"",
         "faults=[{kind=\"agent-stops\",robot=\"r3\",at=0.5}]",
     ]);
-    let (records, m) = run_here(&plan, true, "distributed, real time", "realtime_kill");
+    let Some((records, m)) = run_here(&plan, true, "distributed, real time", "realtime_kill")
+    else {
+        return;
+    };
     let struck = plan.references.clock.first_tick_at(0.5);
     let r3 = "r3".to_string();
     let out = records
@@ -613,7 +648,10 @@ fn a_push_the_team_cannot_hold_in_real_time_is_let_go_and_every_robot_stands() {
     let s = Scenario::from_str_paced(&text, &file, &sets, Pacing::Realtime).expect("scenario");
     let mut plan = plan::plan(&s, &repo).expect("plan");
     plan.scene.realtime = true;
-    let (_, m) = run_here(&plan, false, "embedded, real time", "realtime_push_release");
+    let Some((_, m)) = run_here(&plan, false, "embedded, real time", "realtime_push_release")
+    else {
+        return;
+    };
     common::push::assert_release_named(&m);
     common::push::assert_team_standing(&m, 2);
     assert_no_drive_gaps(&m);

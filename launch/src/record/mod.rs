@@ -164,6 +164,8 @@ pub struct RunFacts {
     pub mode: String,
     pub settle_wall: std::time::Duration,
     pub run_wall: std::time::Duration,
+    /// The machine's processors over the scenario proper.
+    pub machine: Option<evaluation::machine::MachineLoad>,
     /// The error the run ended in (`None`: it ran to its end).
     pub error: Option<String>,
 }
@@ -324,6 +326,10 @@ fn run_metadata(
     m.insert("mode".into(), facts.mode.clone());
     m.insert("settle_wall_ns".into(), facts.settle_wall.as_nanos().to_string());
     m.insert("run_wall_ns".into(), facts.run_wall.as_nanos().to_string());
+    if let Some(machine) = &facts.machine {
+        m.insert("machine_busy".into(), machine.busy.to_string());
+        m.insert("machine_steal".into(), machine.steal.to_string());
+    }
     if let Some(e) = &facts.error {
         m.insert("error".into(), e.clone());
     }

@@ -115,6 +115,7 @@ impl Recording {
                 .map(|s| s.header.tick),
             settle_wall: self.facts.settle_wall,
             run_wall: self.facts.run_wall,
+            machine: self.facts.machine,
             ticks_seen: self.truth.iter().map(|g| g.header.tick + 1).max().unwrap_or(0),
             ..Records::default()
         };
@@ -140,9 +141,19 @@ fn run_metadata_into(meta: &BTreeMap<String, String>, rec: &mut Recording) {
         mode: get("mode"),
         settle_wall: nanos("settle_wall_ns"),
         run_wall: nanos("run_wall_ns"),
+        machine: machine_load(meta),
         error: meta.get("error").cloned(),
     };
     rec.dropped = get("dropped").parse().unwrap_or(0);
+}
+
+/// The machine's figures of a recording's metadata (`None` in a recording without them).
+fn machine_load(meta: &BTreeMap<String, String>) -> Option<evaluation::machine::MachineLoad> {
+    let share = |k: &str| meta.get(k).and_then(|v| v.parse::<f64>().ok());
+    Some(evaluation::machine::MachineLoad {
+        busy: share("machine_busy")?,
+        steal: share("machine_steal")?,
+    })
 }
 
 /// Read `path`.

@@ -3,11 +3,9 @@
 //!
 //! Such a test fails when the hosts cannot be made here (not root, no `ip`, no nftables),
 //! naming the reason. Only with [`SKIP_VARIABLE`] set to `1` does it skip instead; it then says
-//! so on stderr and appends its name to [`skipped_list`], which `scripts/test.sh` prints in its
-//! last line. CI never sets the variable.
+//! so on stderr and lists itself with the skipped checks ([`super::skip`]). CI never sets the
+//! variable.
 
-use std::io::Write;
-use std::path::PathBuf;
 use std::sync::Arc;
 
 use launch::hosts::TestHosts;
@@ -16,11 +14,6 @@ use launch::launcher::host_names;
 /// The variable that lets the tests needing test hosts skip where they cannot be made.
 pub const SKIP_VARIABLE: &str = "TEAM_TESTS_SKIP_HOSTS";
 
-/// The file the skipped checks are listed in, one per line: `target/test-reports/skipped.txt`.
-pub fn skipped_list() -> PathBuf {
-    super::scenario::repo().join("target/test-reports/skipped.txt")
-}
-
 /// Whether test hosts can be made here for `test`: `false` when they cannot and
 /// [`SKIP_VARIABLE`] says to skip it. Panics, naming the reason, when they cannot otherwise.
 pub fn available_or_skip(test: &str) -> bool {
@@ -28,7 +21,7 @@ pub fn available_or_skip(test: &str) -> bool {
         Ok(()) => true,
         Err(e) if std::env::var(SKIP_VARIABLE).as_deref() == Ok("1") => {
             eprintln!("SKIPPED {test}: {e} ({SKIP_VARIABLE}=1)");
-            record_skip(test, &e.to_string());
+            super::skip::record(test, &e.to_string());
             false
         }
         Err(e) => panic!("{test} needs test hosts, and they cannot be made here: {e}. Run as root with `ip` and nftables (scripts/setup-testhosts.sh installs them), or set {SKIP_VARIABLE}=1 to skip the tests that need them"),
@@ -40,12 +33,4 @@ pub fn available_or_skip(test: &str) -> bool {
 pub fn hosts_or_skip(ids: &[String], test: &str) -> Option<Arc<TestHosts>> {
     available_or_skip(test)
         .then(|| Arc::new(TestHosts::up(&host_names(ids)).expect("test hosts up")))
-}
-
-fn record_skip(test: &str, why: &str) {
-    let path = skipped_list();
-    let _ = std::fs::create_dir_all(path.parent().expect("a folder"));
-    if let Ok(mut f) = std::fs::OpenOptions::new().create(true).append(true).open(&path) {
-        let _ = writeln!(f, "{test}: {why}");
-    }
 }

@@ -4,7 +4,9 @@
 
 pub mod certs;
 pub mod hosts;
+pub mod machine;
 pub mod push;
 pub mod scenario;
+pub mod skip;
 pub mod team;
 pub mod tls;
