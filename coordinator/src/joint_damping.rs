@@ -63,6 +63,7 @@ impl TeamController for JointDamping {
                 tau: v.iter().map(|qd| -self.damping * qd).collect(),
                 hold: false,
                 delay_ticks: 0,
+                qdd: Vec::new(),
             });
         }
         Ok(())

@@ -813,8 +813,10 @@ impl<'a> Service<'a> {
         }
         self.refs.drain(references, &mut self.counters);
         let delay = team_delay(&terms);
-        // The state carried to where the command applies is solved with that tick's references.
-        let predicting = self.predictor.is_some() && controller.keep_accelerations(delay > 0);
+        // What the torques accelerate goes with every command (the drives' trajectory follows
+        // it), and carries the state over the team's delay to where the command applies, which
+        // is solved with that tick's references.
+        let predicting = controller.keep_accelerations(true) && self.predictor.is_some();
         self.refs.apply(if predicting { tick.saturating_add(delay) } else { tick }, controller);
         let waiting = self.awaiting_references();
         if let Some(p) = self.predictor.as_ref().filter(|_| predicting) {

@@ -47,7 +47,13 @@ impl ControlLaw for FixedGainHold {
             let drift = self.drift.get_mut(id).expect("latched above");
             if k == out.len() {
                 let header = Header::new(&t.header.team, Some(id), 0, 0);
-                out.push(TorqueCommand { header, tau: Vec::new(), hold: false, delay_ticks: 0 });
+                out.push(TorqueCommand {
+                    header,
+                    tau: Vec::new(),
+                    hold: false,
+                    delay_ticks: 0,
+                    qdd: Vec::new(),
+                });
             }
             let cmd = &mut out[k];
             set_header(&mut cmd.header, &t.header.team, Some(id), t.header.tick, 0);

@@ -95,7 +95,7 @@ pub use messages::*;
 pub use validate::{validate_id, Validate};
 
 /// Version of the wire protocol. Bump it whenever a message type changes.
-pub const PROTOCOL_VERSION: u16 = 5;
+pub const PROTOCOL_VERSION: u16 = 6;
 
 /// Wall-clock time in nanoseconds since the Unix epoch, for [`Header::stamp_ns`] (0 if the
 /// clock is before the epoch).

@@ -295,6 +295,11 @@ pub struct TorqueCommand {
     /// The team's delay: the command applies at the state of tick `header.tick` +
     /// `delay_ticks` (at most [`MAX_TEAM_DELAY_TICKS`]). The same for every robot of a tick.
     pub delay_ticks: u64,
+    /// What `tau` accelerates the actuated joints by, rad/s² (m/s²), as the coordinator's
+    /// model of the team computes it: one per torque, or empty (a hold order, a controller
+    /// that does not model it). With drive gains the robot's drives follow a trajectory at
+    /// these accelerations until the next command ([`DriveCommand::qdd_des`]).
+    pub qdd: Vec<f64>,
 }
 
 impl TorqueCommand {
@@ -305,6 +310,7 @@ impl TorqueCommand {
             tau: Vec::new(),
             hold: true,
             delay_ticks: 0,
+            qdd: Vec::new(),
         }
     }
 }
@@ -327,12 +333,25 @@ impl Validate for TorqueCommand {
             if !self.tau.is_empty() {
                 return Err(ProtocolError::invalid("tau", "a hold command carries no torques"));
             }
+            if !self.qdd.is_empty() {
+                return Err(ProtocolError::invalid(
+                    "qdd",
+                    "a hold command carries no accelerations",
+                ));
+            }
             return Ok(());
         }
         if self.tau.is_empty() {
             return Err(ProtocolError::invalid("tau", "empty torque vector"));
         }
-        check_finite("tau", &self.tau)
+        if !self.qdd.is_empty() && self.qdd.len() != self.tau.len() {
+            return Err(ProtocolError::invalid(
+                "qdd",
+                format!("{} accelerations for {} torques", self.qdd.len(), self.tau.len()),
+            ));
+        }
+        check_finite("tau", &self.tau)?;
+        check_finite("qdd", &self.qdd)
     }
 }
 

@@ -66,7 +66,13 @@ fn dynamics(nv: usize) -> DynamicsTerms {
 }
 
 fn command(n: usize) -> TorqueCommand {
-    TorqueCommand { header: header(true), tau: vec![1.5; n], hold: false, delay_ticks: 0 }
+    TorqueCommand {
+        header: header(true),
+        tau: vec![1.5; n],
+        hold: false,
+        delay_ticks: 0,
+        qdd: Vec::new(),
+    }
 }
 
 fn raw<M: Message>(m: &M) -> Vec<u8> {
@@ -164,6 +170,31 @@ fn non_finite_numbers_are_named() {
     }
 }
 
+/// A command's accelerations: one per torque or none, finite, never on a hold order; a
+/// command with them reads back as it was.
+#[test]
+fn a_commands_accelerations_are_checked() {
+    let mut c = command(3);
+    c.qdd = vec![0.5, -1.0, 2.0];
+    assert_eq!(decode::<TorqueCommand>(&encode(&c).unwrap()).unwrap(), c);
+    let mut short = c.clone();
+    short.qdd.pop();
+    assert!(
+        matches!(decode::<TorqueCommand>(&raw(&short)), Err(ProtocolError::Invalid { field, .. }) if field == "qdd")
+    );
+    let mut nan = c.clone();
+    nan.qdd[1] = f64::NAN;
+    match decode::<TorqueCommand>(&raw(&nan)) {
+        Err(ProtocolError::NonFinite { field, index, .. }) => {
+            assert_eq!((field.as_str(), index), ("qdd", 1))
+        }
+        other => panic!("expected NonFinite, got {other:?}"),
+    }
+    let mut hold = TorqueCommand::hold("t", "r1", 3);
+    hold.qdd = vec![1.0];
+    assert!(decode::<TorqueCommand>(&raw(&hold)).is_err(), "a hold order moves nothing");
+}
+
 #[test]
 fn mismatched_dimensions_are_named() {
     let mut d = dynamics(8);
@@ -224,7 +255,7 @@ fn foot_loads_must_bound_a_pushing_force() {
         assert!(from_json::<TaskReferences>(&text).is_err(), "bound {bad} accepted");
     }
     // A sender that leaves the field out: no foot is being unloaded.
-    let old = r#"{"header":{"version":5,"team":"t","robot":null,"tick":3,"stamp_ns":0},"object":null,"torsos":[],"swing_feet":[]}"#;
+    let old = r#"{"header":{"version":6,"team":"t","robot":null,"tick":3,"stamp_ns":0},"object":null,"torsos":[],"swing_feet":[]}"#;
     assert!(from_json::<TaskReferences>(old).unwrap().foot_loads.is_empty());
 }
 

@@ -14,7 +14,7 @@ fn f(x: f64) -> [u8; 8] {
 fn robot_state_bytes_are_the_documented_ones() {
     let s = RobotState {
         header: Header {
-            version: 5,
+            version: 6,
             team: "t".into(),
             robot: Some("r1".into()),
             tick: 300,
@@ -28,8 +28,8 @@ fn robot_state_bytes_are_the_documented_ones() {
         foot_forces: vec![120.0],
         object_pose: None,
     };
-    let mut want: Vec<u8> = vec![0x54, 0x51, 0x05, 0x00, 0x01, 0x00];
-    want.extend([0x05, 0x01, 0x74, 0x01, 0x02, 0x72, 0x31, 0xFB, 0x2C, 0x01, 0x00]);
+    let mut want: Vec<u8> = vec![0x54, 0x51, 0x06, 0x00, 0x01, 0x00];
+    want.extend([0x06, 0x01, 0x74, 0x01, 0x02, 0x72, 0x31, 0xFB, 0x2C, 0x01, 0x00]);
     for x in [1.0, 2.0, 3.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0] {
         want.extend(f(x));
     }
@@ -73,10 +73,10 @@ fn tool_facing_messages_are_json_with_the_version_checked() {
     let v: serde_json::Value = serde_json::from_slice(&bytes).expect("plain JSON on the wire");
     assert_eq!(
         (v["mode"].as_str(), v["ticks"].as_u64(), v["header"]["version"].as_u64()),
-        (Some("Running"), Some(7), Some(5))
+        (Some("Running"), Some(7), Some(6))
     );
     assert_eq!(decode::<CoordinatorStatus>(&bytes).unwrap(), st);
-    assert_eq!(protocol::schema_id::<CoordinatorStatus>(), "team.CoordinatorStatus/v5");
+    assert_eq!(protocol::schema_id::<CoordinatorStatus>(), "team.CoordinatorStatus/v6");
     // A status from before the silent, stale and late lists (an old recording) still decodes.
     let mut old = v.clone();
     for k in ["stale", "silent", "late", "reused_terms"] {
@@ -101,21 +101,28 @@ fn tool_facing_messages_are_json_with_the_version_checked() {
 fn torque_command_bytes_are_the_documented_ones() {
     // WIRE.md's TorqueCommand examples: a hold order, then one torque of 1.5 N m at a team
     // delay of 2 ticks.
-    let head = [0x05, 0x01, 0x74, 0x01, 0x02, 0x72, 0x31, 0xFB, 0x2C, 0x01, 0x00];
+    let head = [0x06, 0x01, 0x74, 0x01, 0x02, 0x72, 0x31, 0xFB, 0x2C, 0x01, 0x00];
     let hold = protocol::TorqueCommand::hold("t", "r1", 300);
-    let mut want: Vec<u8> = vec![0x54, 0x51, 0x05, 0x00, 0x03, 0x00];
+    let mut want: Vec<u8> = vec![0x54, 0x51, 0x06, 0x00, 0x03, 0x00];
     want.extend(head);
-    want.extend([0x00, 0x01, 0x00]);
+    want.extend([0x00, 0x01, 0x00, 0x00]);
     assert_eq!(encode(&hold).unwrap(), want);
     assert_eq!(decode::<protocol::TorqueCommand>(&want).unwrap(), hold);
-    let torques =
-        protocol::TorqueCommand { tau: vec![1.5], hold: false, delay_ticks: 2, ..hold.clone() };
-    let mut want: Vec<u8> = vec![0x54, 0x51, 0x05, 0x00, 0x03, 0x00];
+    let torques = protocol::TorqueCommand {
+        tau: vec![1.5],
+        hold: false,
+        delay_ticks: 2,
+        qdd: vec![-2.0],
+        ..hold.clone()
+    };
+    let mut want: Vec<u8> = vec![0x54, 0x51, 0x06, 0x00, 0x03, 0x00];
     want.extend(head);
     want.push(0x01);
     want.extend(f(1.5));
     assert_eq!(&f(1.5), &[0, 0, 0, 0, 0, 0, 0xF8, 0x3F]);
-    want.extend([0x00, 0x02]);
+    want.extend([0x00, 0x02, 0x01]);
+    want.extend(f(-2.0));
+    assert_eq!(&f(-2.0), &[0, 0, 0, 0, 0, 0, 0, 0xC0]);
     assert_eq!(encode(&torques).unwrap(), want);
     // A delay over the longest is refused.
     assert!(encode(&protocol::TorqueCommand {
@@ -131,8 +138,8 @@ fn torque_command_bytes_are_the_documented_ones() {
 fn drive_command_bytes_are_the_documented_ones() {
     // WIRE.md's DriveCommand example: one joint, 1.5 N m, no gains.
     let drive = protocol::DriveCommand::torque("t", "r1", 300, vec![1.5]);
-    let mut want: Vec<u8> = vec![0x54, 0x51, 0x05, 0x00, 0x0C, 0x00];
-    want.extend([0x05, 0x01, 0x74, 0x01, 0x02, 0x72, 0x31, 0xFB, 0x2C, 0x01, 0x00]);
+    let mut want: Vec<u8> = vec![0x54, 0x51, 0x06, 0x00, 0x0C, 0x00];
+    want.extend([0x06, 0x01, 0x74, 0x01, 0x02, 0x72, 0x31, 0xFB, 0x2C, 0x01, 0x00]);
     want.push(0x01);
     want.extend(f(1.5));
     want.extend([0x00, 0x00, 0x00, 0x00]);

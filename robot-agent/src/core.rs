@@ -408,13 +408,14 @@ fn contact_switch(cfg: &AgentConfig, feet: usize) -> ContactSwitch {
     )
 }
 
-/// An empty torque command of `robot`, with room for `joints` torques.
+/// An empty torque command of `robot`, with room for `joints` torques and accelerations.
 fn empty_command(team: &str, robot: &str, joints: usize) -> TorqueCommand {
     TorqueCommand {
         header: Header::new(team, Some(robot), 0, 0),
         tau: Vec::with_capacity(joints),
         hold: false,
         delay_ticks: 0,
+        qdd: Vec::with_capacity(joints),
     }
 }
 
@@ -746,6 +747,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             tau: Vec::new(),
             hold: false,
             delay_ticks: 0,
+            qdd: Vec::new(),
         };
         let due = std::mem::replace(&mut self.due, empty);
         let admitted = self.admit_command(&due, now);
@@ -798,6 +800,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             return Err(CommandRejection::BeforeSafeMode { tick, entered });
         }
         self.drive.header.tick = tick;
+        self.reference.on_command(&cmd.qdd);
         self.gate.mark_applied(tick);
         self.applied = (cmd.header.stamp_ns, cmd.hold);
         self.counters.applied += 1;

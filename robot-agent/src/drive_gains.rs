@@ -88,10 +88,17 @@ pub struct DriveGains {
 }
 
 /// The reference a drive command goes with: a trajectory from the latest measured state at the
-/// acceleration measured from the state before it, which the drives carry forward at every
-/// step. On ticks between team ticks too (lockstep's two rates): carrying the team tick's state
-/// over the ticks since instead pulled the joints towards an extrapolation that the team's next
+/// accelerations the team's last command commands (`protocol::TorqueCommand::qdd`, the
+/// coordinator's model of what its torques do), which the drives carry forward at every step;
+/// without them (a hold order, a controller that does not model them) at the state's velocity.
+/// On ticks between team ticks too (lockstep's two rates): carrying the team tick's state over
+/// the ticks since instead pulled the joints towards an extrapolation that the team's next
 /// torques did not follow (S4 with the team at 100 Hz: object RMS 1.35 mm against 0.21 mm).
+///
+/// Not the acceleration measured between the last two states: carried past a late command's
+/// state by the drives' gains, a measured acceleration feeds back on itself (the damping alone
+/// adds `kd (t - t_ref) qdd`, a share `2 omega (t - t_ref)` of the joint's inertia), and a
+/// robot whose hands let go of its load across processes could not stop the motion it measured.
 #[derive(Debug, Clone)]
 pub struct Reference {
     /// Time of the latest state; the period from the one before (0: none yet).
@@ -99,6 +106,7 @@ pub struct Reference {
     period: f64,
     q: Vec<f64>,
     qd: Vec<f64>,
+    /// The last command's accelerations (zeros: none).
     a: Vec<f64>,
 }
 
@@ -111,11 +119,7 @@ impl Reference {
 
     /// A new state (not a repeat of the latest) at `time`.
     pub fn on_state(&mut self, time: f64, q: &[f64], qd: &[f64]) {
-        let h = self.last.map(|t| time - t).filter(|h| *h > 0.0);
-        for ((a, qd), qd_last) in self.a.iter_mut().zip(qd).zip(&self.qd) {
-            *a = h.map_or(0.0, |h| (qd - qd_last) / h);
-        }
-        if let Some(h) = h {
+        if let Some(h) = self.last.map(|t| time - t).filter(|h| *h > 0.0) {
             self.period = h;
         }
         self.last = Some(time);
@@ -123,8 +127,18 @@ impl Reference {
         self.qd.copy_from_slice(qd);
     }
 
+    /// A command of the team applies: its accelerations `qdd` (one per joint) from now on;
+    /// none (empty, or not one per joint) carries the state at its velocity.
+    pub fn on_command(&mut self, qdd: &[f64]) {
+        if qdd.len() == self.a.len() {
+            self.a.copy_from_slice(qdd);
+        } else {
+            self.a.fill(0.0);
+        }
+    }
+
     /// The reference as a trajectory from the latest state into `cmd`: `q_des`, `qd_des` the
-    /// state's, `qdd_des` the acceleration measured, `ref_time` the state's time; the drives
+    /// state's, `qdd_des` the last command's accelerations, `ref_time` the state's time; the drives
     /// carry it forward at every drive step ([`protocol::DriveCommand::targets_at`]). Nothing
     /// before a state.
     pub fn fill_trajectory(&self, cmd: &mut protocol::DriveCommand) {
@@ -215,7 +229,7 @@ mod tests {
     }
 
     #[test]
-    fn at_constant_acceleration_the_drives_follow_the_trajectory_itself() {
+    fn at_the_commanded_acceleration_the_drives_follow_the_trajectory_itself() {
         // States 1 ms apart on the trajectory; the drives evaluate the command at 4 kHz.
         let (h, dt) = (1e-3, 2.5e-4);
         let mut cmd = protocol::DriveCommand::torque("t", "r1", 0, vec![0.0; 2]);
@@ -228,8 +242,9 @@ mod tests {
             r.fill_trajectory(&mut cmd);
             assert_eq!(cmd.ref_time, Some(t));
             if k == 0 {
-                // No state before it: no acceleration measured.
+                // No command yet: the state carried at its velocity, whatever it measured.
                 assert_eq!(cmd.qdd_des, vec![0.0; 2]);
+                r.on_command(&[4.0, -10.0]);
                 continue;
             }
             for step in 0..4u32 {
@@ -243,6 +258,27 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    #[test]
+    fn a_command_without_accelerations_carries_the_state_at_its_velocity() {
+        let mut r = Reference::new(2);
+        let (q, qd) = trajectory(0.1);
+        r.on_state(0.1, &q, &qd);
+        r.on_command(&[4.0, -10.0]);
+        let mut cmd = protocol::DriveCommand::torque("t", "r1", 0, vec![0.0; 2]);
+        r.fill_trajectory(&mut cmd);
+        assert_eq!(cmd.qdd_des, vec![4.0, -10.0]);
+        // A hold order (no accelerations), then one of the wrong size: none carried.
+        for qdd in [&[][..], &[1.0, 2.0, 3.0][..]] {
+            r.on_command(&[4.0, -10.0]);
+            r.on_command(qdd);
+            r.fill_trajectory(&mut cmd);
+            assert_eq!(cmd.qdd_des, vec![0.0; 2], "{qdd:?}");
+            let (qs, vs) = cmd.targets_at(0, 0.11);
+            assert!((qs.unwrap() - (q[0] + qd[0] * 0.01)).abs() < 1e-12);
+            assert_eq!(vs, Some(qd[0]));
         }
     }
 

@@ -35,6 +35,7 @@ impl EarlyCommands {
             tau: Vec::with_capacity(joints),
             hold: false,
             delay_ticks: 0,
+            qdd: Vec::with_capacity(joints),
         };
         EarlyCommands { slots: (0..capacity.max(1)).map(|_| empty()).collect(), pending: 0 }
     }
@@ -105,13 +106,15 @@ impl EarlyCommands {
     }
 }
 
-/// `from`'s tick, stamp, hold flag and torques into `to` (same team and robot).
+/// `from`'s tick, stamp, hold flag, torques and accelerations into `to` (same team and robot).
 fn copy(from: &TorqueCommand, to: &mut TorqueCommand) {
     to.header.tick = from.header.tick;
     to.header.stamp_ns = from.header.stamp_ns;
     to.hold = from.hold;
     to.tau.clear();
     to.tau.extend_from_slice(&from.tau);
+    to.qdd.clear();
+    to.qdd.extend_from_slice(&from.qdd);
 }
 
 #[cfg(test)]
@@ -124,6 +127,7 @@ mod tests {
             tau: vec![tau; 3],
             hold: false,
             delay_ticks: 0,
+            qdd: Vec::new(),
         }
     }
 

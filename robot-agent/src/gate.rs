@@ -269,6 +269,7 @@ mod tests {
             tau,
             hold: false,
             delay_ticks: 0,
+            qdd: Vec::new(),
         }
     }
 

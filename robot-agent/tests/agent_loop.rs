@@ -51,6 +51,7 @@ fn command(team: &str, robot: &str, tick: u64, tau: Vec<f64>) -> TorqueCommand {
         tau,
         hold: false,
         delay_ticks: 0,
+        qdd: Vec::new(),
     }
 }
 

@@ -102,6 +102,7 @@ fn command(robot: &str, tick: u64, tau: &[f64]) -> TorqueCommand {
         tau: tau.to_vec(),
         hold: false,
         delay_ticks: 0,
+        qdd: Vec::new(),
     }
 }
 
@@ -554,17 +555,20 @@ fn commands_carry_the_drive_gains_about_the_latest_state_and_the_hold_does_not()
     let _ = c.on_state(&state(1, q1, v1), t0 + ms(5)).unwrap();
     assert!(c.drive_gains().is_some(), "made from the first terms");
     // The command of tick 0 arrives after the state of tick 1: its reference is the trajectory
-    // from tick 1's state (at its time, 5 ms) at the acceleration measured from tick 0 to 1,
-    // 5 ms apart, valid for the command deadline (5 ticks of 5 ms, within 25 ms).
-    let out = c.on_command(&command(ID, 0, &[1.0, -0.5, 0.25]), t0 + ms(6)).unwrap();
+    // from tick 1's state (at its time, 5 ms) at the accelerations the command carries (not
+    // the 80, -20 and 4 rad/s^2 measured from tick 0 to 1), valid for the command deadline (5
+    // ticks of 5 ms, within 25 ms).
+    let qdd = [3.0, -1.5, 0.5];
+    let cmd = TorqueCommand { qdd: qdd.to_vec(), ..command(ID, 0, &[1.0, -0.5, 0.25]) };
+    let out = c.on_command(&cmd, t0 + ms(6)).unwrap();
     let d = out.drive.unwrap().clone();
-    let (h, t1) = (0.005, 0.005);
+    let t1 = 0.005;
     assert_eq!(d.ref_time, Some(t1));
     assert!((d.valid_until.unwrap() - (t1 + 0.025)).abs() < 1e-12, "{:?}", d.valid_until);
     for j in 0..3 {
-        let a = v1[j] / h;
+        let a = qdd[j];
         assert_eq!((d.q_des[j], d.qd_des[j]), (q1[j], v1[j]), "joint {j}: the state");
-        assert!((d.qdd_des[j] - a).abs() < 1e-9, "joint {j}: {:?}", d.qdd_des);
+        assert_eq!(d.qdd_des[j], a, "joint {j}: {:?}", d.qdd_des);
         // 2.5 ms on, the drives' targets are the state carried at that acceleration.
         let s = 0.0025;
         let (q, v) = (q1[j] + v1[j] * s + 0.5 * a * s * s, v1[j] + a * s);
@@ -636,9 +640,10 @@ fn between_team_ticks_the_agent_answers_alone_with_the_last_torque() {
     // Tick 0, a team tick: terms, then its command.
     assert_eq!(summary(c.on_state(&state(0, q(0), v), t0).unwrap()).0, Some(0));
     let tau = [1.0, -0.5, 0.25];
-    assert!(c.on_command(&command(ID, 0, &tau), t0).unwrap().drive.is_some());
+    let cmd = TorqueCommand { qdd: vec![2.0, 0.0, -1.0], ..command(ID, 0, &tau) };
+    assert!(c.on_command(&cmd, t0).unwrap().drive.is_some());
     // Ticks 1-3: no terms; the drive command of the tick, the last torque, the reference from
-    // the state (its position and velocity at its time).
+    // the state (its position and velocity at its time) at the last command's accelerations.
     for k in 1..4 {
         let out = c.on_state(&state(k, q(k), v), t0 + ms(5 * k)).unwrap();
         assert!(out.terms.is_none(), "tick {k}: no terms between team ticks");
@@ -650,6 +655,7 @@ fn between_team_ticks_the_agent_answers_alone_with_the_last_torque() {
             (q(k)[0], v[0], Some(k as f64 * 0.005)),
             "tick {k}"
         );
+        assert_eq!(d.qdd_des, cmd.qdd, "tick {k}");
     }
     // Tick 4, a team tick: terms, and it waits for the team's command.
     let (terms, drive, _) = summary(c.on_state(&state(4, q(4), v), t0 + ms(20)).unwrap());

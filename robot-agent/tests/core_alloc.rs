@@ -136,6 +136,7 @@ fn ticks_allocations(
         tau: vec![1.0; n],
         hold: false,
         delay_ticks: team_delay,
+        qdd: vec![0.5; n],
     };
     let t0 = Instant::now();
     let _ = core.start(t0);

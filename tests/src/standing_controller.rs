@@ -317,6 +317,7 @@ pub async fn serve(
         tau: Vec::new(),
         hold: false,
         delay_ticks: 0,
+        qdd: Vec::new(),
     };
     let mut count = 0u64;
     loop {

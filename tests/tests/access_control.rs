@@ -175,6 +175,7 @@ fn command(team: &str, robot: &str, tick: u64) -> TorqueCommand {
         tau: TAU.to_vec(),
         hold: false,
         delay_ticks: 0,
+        qdd: Vec::new(),
     }
 }
 

@@ -178,6 +178,7 @@ async fn forge_as_coordinator(c: Session, team: String, sent: Arc<Sent>) {
             tau: vec![50.0; JOINTS],
             hold: false,
             delay_ticks: 0,
+            qdd: Vec::new(),
         };
         c.put(&command, protocol::encode(&cmd).unwrap()).await.expect("put");
         sent.impersonated_commands.fetch_add(1, Ordering::Relaxed);

@@ -56,6 +56,7 @@ impl TeamController for FailsEvery {
                 tau: v.iter().map(|qd| -2.0 * qd).collect(),
                 hold: false,
                 delay_ticks: 0,
+                qdd: Vec::new(),
             });
         }
         Ok(())

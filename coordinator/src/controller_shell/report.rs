@@ -11,13 +11,15 @@ use crate::building_blocks::grasp::GraspTerms;
 use crate::building_blocks::messages::{set_header, set_note, set_string};
 use crate::team::{RobotBlock, Team};
 
-/// Each robot's torque command into `out`, its torques written by `slice` (which extends the
-/// cleared `tau` with the robot's actuated torques, in the order of its robots).
+/// Each robot's torque command into `out`, its torques and accelerations written by `slice`
+/// (which extends the cleared `tau` with the robot's actuated torques, in the order of its
+/// robots, and the cleared `qdd` with what they accelerate its actuated joints by, or leaves it
+/// empty).
 pub fn torque_commands_into(
     team: &Team,
     tick: &[DynamicsTerms],
     out: &mut Vec<TorqueCommand>,
-    mut slice: impl FnMut(&RobotBlock, &mut Vec<f64>),
+    mut slice: impl FnMut(&RobotBlock, &mut Vec<f64>, &mut Vec<f64>),
 ) {
     out.truncate(team.robots.len());
     for (k, (r, t)) in team.robots.iter().zip(tick).enumerate() {
@@ -27,6 +29,7 @@ pub fn torque_commands_into(
                 tau: Vec::new(),
                 hold: false,
                 delay_ticks: 0,
+                qdd: Vec::new(),
             });
         }
         let cmd = &mut out[k];
@@ -34,7 +37,8 @@ pub fn torque_commands_into(
         // The message may be last tick's hold order (the service reuses the buffer).
         cmd.hold = false;
         cmd.tau.clear();
-        slice(r, &mut cmd.tau);
+        cmd.qdd.clear();
+        slice(r, &mut cmd.tau, &mut cmd.qdd);
     }
 }
 

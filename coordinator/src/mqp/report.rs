@@ -88,7 +88,7 @@ impl MqpReport {
     /// Each robot's torque slice into `out` (messages reused when the team is the same).
     pub fn commands_into(&self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) {
         let mut k = 0;
-        torque_commands_into(&self.team, tick, out, |r, tau| {
+        torque_commands_into(&self.team, tick, out, |r, tau, _| {
             tau.extend(self.tau.rows(k, r.actuated.len()).iter());
             k += r.actuated.len();
         });

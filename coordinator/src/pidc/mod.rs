@@ -675,7 +675,7 @@ impl ControlLaw for PidcLaw {
         self.compute(state, tick)?;
         // Each robot's torque slice and the tick's diagnostics, reusing the previous tick's
         // messages (their strings and vectors) when the team is the same.
-        self.report.commands_into(tick, out);
+        self.report.commands_into(tick, self.accelerations, out);
         self.report.diagnostics_into(tick, state.diagnostics_mut());
         Ok(())
     }

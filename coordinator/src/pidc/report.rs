@@ -130,11 +130,22 @@ pub struct Timing {
 }
 
 impl TickReport {
-    /// Each robot's torque slice (its actuated rows of `tau`) into `out`, reusing the previous
-    /// tick's messages (their strings and vectors) when the team is the same.
-    pub fn commands_into(&self, tick: &[DynamicsTerms], out: &mut Vec<TorqueCommand>) {
-        torque_commands_into(&self.team, tick, out, |r, tau| {
+    /// Each robot's torque slice (its actuated rows of `tau`) into `out`, with what it
+    /// accelerates those joints by (the same rows of `qdd`) when `accelerations` says the tick
+    /// computed them and they are finite, reusing the previous tick's messages (their strings
+    /// and vectors) when the team is the same.
+    pub fn commands_into(
+        &self,
+        tick: &[DynamicsTerms],
+        accelerations: bool,
+        out: &mut Vec<TorqueCommand>,
+    ) {
+        torque_commands_into(&self.team, tick, out, |r, tau, qdd| {
             tau.extend(r.actuated.iter().map(|&j| self.tau[j]));
+            let finite = r.actuated.iter().all(|&j| self.qdd.get(j).is_some_and(|a| a.is_finite()));
+            if accelerations && finite {
+                qdd.extend(r.actuated.iter().map(|&j| self.qdd[j]));
+            }
         });
     }
 
