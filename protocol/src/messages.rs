@@ -299,6 +299,7 @@ pub struct TorqueCommand {
     /// model of the team computes it: one per torque, or empty (a hold order, a controller
     /// that does not model it). With drive gains the robot's drives follow a trajectory at
     /// these accelerations until the next command ([`DriveCommand::qdd_des`]).
+    #[serde(default)]
     pub qdd: Vec<f64>,
 }
 

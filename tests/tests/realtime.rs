@@ -642,14 +642,7 @@ fn an_agent_killed_in_real_time_is_noticed_within_three_ticks_and_the_others_hol
 #[test]
 fn a_push_the_team_cannot_hold_in_real_time_is_let_go_and_every_robot_stands() {
     let _one = serial();
-    let plan = s4_pushed_off_in_real_time();
-    let name = "realtime_push_release";
-    let Some((_, m)) = run_here(&plan, false, "embedded, real time", name) else {
-        return;
-    };
-    common::push::assert_release_named(&m);
-    common::push::assert_team_standing(&m, 2);
-    assert_no_drive_gaps(&m);
+    pushed_off_in_real_time(false, "embedded, real time", "realtime_push_release");
 }
 
 /// The same push with every component its own process: the team lets go and every robot
@@ -661,23 +654,23 @@ fn a_push_the_team_cannot_hold_in_real_time_is_let_go_and_every_robot_stands() {
 #[test]
 fn a_push_the_team_cannot_hold_is_let_go_across_processes_and_every_robot_stands() {
     let _one = serial();
-    let plan = s4_pushed_off_in_real_time();
     let name = "realtime_push_release_distributed";
-    let Some((_, m)) = run_here(&plan, true, "distributed, real time", name) else {
-        return;
-    };
-    common::push::assert_release_named(&m);
-    common::push::assert_team_standing(&m, 2);
-    assert_no_drive_gaps(&m);
+    pushed_off_in_real_time(true, "distributed, real time", name);
 }
 
 /// S4 pushed beyond its grasp (`common::push`), running on 5 s after the push, at the
-/// real-time defaults against the wall clock.
-fn s4_pushed_off_in_real_time() -> Plan {
+/// real-time defaults against the wall clock, embedded or as processes: released and named,
+/// both robots standing, no drive gap.
+fn pushed_off_in_real_time(distributed: bool, mode: &str, name: &str) {
     let (file, text) = common::push::s4_pushed_off();
     let sets: Vec<String> = ["duration=6.1", "settle=0.3"].map(String::from).to_vec();
     let s = Scenario::from_str_paced(&text, &file, &sets, Pacing::Realtime).expect("scenario");
     let mut plan = plan::plan(&s, &common::scenario::repo()).expect("plan");
     plan.scene.realtime = true;
-    plan
+    let Some((_, m)) = run_here(&plan, distributed, mode, name) else {
+        return;
+    };
+    common::push::assert_release_named(&m);
+    common::push::assert_team_standing(&m, 2);
+    assert_no_drive_gaps(&m);
 }
