@@ -76,16 +76,16 @@ pub async fn echo(
     };
     let next = || async {
         match (&events, &samples) {
-            (Some(q), _) => q.recv_async().await,
-            (_, Some(q)) => q.recv_async().await,
-            (None, None) => Err("no subscription".into()),
+            (Some(q), _) => q.recv_async().await.ok(),
+            (_, Some(q)) => q.recv_async().await.ok(),
+            (None, None) => None,
         }
     };
     let mut printed = 0u64;
     while opts.count.is_none_or(|n| printed < n) {
         let sample = match tokio::time::timeout(opts.wait, next()).await {
-            Ok(Ok(s)) => s,
-            Ok(Err(_)) => break,
+            Ok(Some(s)) => s,
+            Ok(None) => break,
             Err(_) if printed == 0 => {
                 return Err(EchoError::Silent { key: opts.key.clone(), waited: opts.wait })
             }

@@ -286,8 +286,14 @@ pub const QUEUE_CAPACITY: usize = 1024;
 /// real time a sample that old is useless anyway (the loop counts what it misses).
 pub type SampleQueue = Subscriber<zenoh::handlers::RingChannelHandler<Sample>>;
 
-/// Liveliness events (joins and leaves): first in, first out, never dropped ([`watch_liveliness`]).
-pub type EventQueue = Subscriber<zenoh::handlers::FifoChannelHandler<Sample>>;
+/// Liveliness events (joins and leaves): first in, first out, never dropped while it is read
+/// ([`watch_liveliness`]).
+///
+/// A watcher may go while Zenoh still delivers to it: a token's history and its declaration
+/// both arrive, and the one who waited for the members drops the queue after the first. Zenoh
+/// undeclares a dropped subscriber without waiting for a delivery in progress, and its own FIFO
+/// handler logs an ERROR for an event sent to a reader that is gone; this queue lets it go.
+pub type EventQueue = Subscriber<flume::Receiver<Sample>>;
 
 /// Subscribe to `key` with a queue of [`QUEUE_CAPACITY`] samples ([`SampleQueue`]).
 pub async fn subscribe(session: &Session, key: String) -> Result<SampleQueue, TransportError> {
@@ -382,8 +388,15 @@ pub async fn watch_liveliness(
     key: String,
 ) -> Result<EventQueue, TransportError> {
     let liveliness = session.liveliness();
-    declared(|| liveliness.declare_subscriber(key.clone()).history(true).wait())
+    let builder = liveliness.declare_subscriber(key.clone()).history(true);
+    declared(|| builder.with(event_channel()).wait())
         .map_err(|e| zenoh_err("liveliness subscriber", &key, e))
+}
+
+/// An unbounded channel whose sending side ignores a reader that is gone ([`EventQueue`]).
+fn event_channel() -> (impl Fn(Sample) + Send + Sync + 'static, flume::Receiver<Sample>) {
+    let (sender, receiver) = flume::unbounded();
+    (move |sample| drop(sender.send(sample)), receiver)
 }
 
 /// Whether a sample of [`watch_coordinator`] says the coordinator is alive.

@@ -114,7 +114,7 @@ impl Liveness {
     /// Before `tick`: drain what arrived, and fail when the coordinator has been gone for
     /// `grace` ticks.
     pub(super) fn check(&mut self, tick: u64, grace: u64) -> Result<(), BridgeError> {
-        while let Ok(Some(s)) = self.coordinator.try_recv() {
+        while let Ok(s) = self.coordinator.try_recv() {
             self.take(LivenessEvent::Coordinator(s), tick, &[])?;
         }
         match self.coordinator_lost {
