@@ -205,6 +205,23 @@ impl RunMode {
         }
     }
 
+    /// The session of this process (the scenario driver's), a member connecting to `hub`, and
+    /// where a client on this machine reaches the team: on loopback without access control it
+    /// also listens on the default endpoint if it can ([`transport::open_discoverable`]), else
+    /// the hub is the place. Test hosts, TLS and sites name their endpoints themselves.
+    async fn open_driver(
+        &self,
+        hub: &str,
+        ids: &TeamIds,
+    ) -> Result<(Session, Option<String>), LaunchError> {
+        let args = self.zenoh_args(None, hub, ids)?;
+        if !matches!(self, RunMode::Distributed { .. }) {
+            return Ok((transport::open(&args, Role::Member).await?, None));
+        }
+        let (session, endpoint) = transport::open_discoverable(&args, Role::Member).await?;
+        Ok((session, Some(endpoint.unwrap_or_else(|| hub.to_string()))))
+    }
+
     /// The Zenoh arguments of the coordinator, which listens on `hub`.
     fn hub_args(&self, hub: &str, ids: &TeamIds) -> Result<ZenohArgs, LaunchError> {
         match self {
@@ -550,6 +567,8 @@ pub struct Running {
     connect: ZenohArgs,
     /// The coordinator, then each agent by robot id (what faults kill, stall and restart).
     components: Vec<(String, Component)>,
+    /// Where a client on this machine reaches the team ([`Running::endpoint`]).
+    endpoint: Option<String>,
 }
 
 /// The name [`Running::component`] gives the coordinator.
@@ -745,7 +764,8 @@ impl Launch {
         stop_tx: watch::Sender<bool>,
         stop_rx: watch::Receiver<bool>,
     ) -> Result<Running, LaunchError> {
-        let session = transport::open(&ZenohArgs::default(), Role::Alone).await?;
+        let (session, endpoint) =
+            transport::open_discoverable(&ZenohArgs::default(), Role::Alone).await?;
         let c = (self.coordinator.clone(), session.clone());
         let mut components = vec![(
             COORDINATOR.to_string(),
@@ -771,6 +791,7 @@ impl Launch {
             mode: mode.clone(),
             connect: ZenohArgs::default(),
             components,
+            endpoint,
         })
     }
 
@@ -801,7 +822,7 @@ impl Launch {
         );
         let mut components =
             vec![(COORDINATOR.to_string(), Component::new(COORDINATOR, &stop_rx, coordinator)?)];
-        let session = transport::open(&mode.zenoh_args(None, &hub, &ids)?, Role::Member).await?;
+        let (session, endpoint) = mode.open_driver(&hub, &ids).await?;
         for a in &self.agents {
             let starter =
                 process(&a.id, "robot-agent", a.to_cli(&mode.zenoh_args(Some(&a.id), &hub, &ids)?));
@@ -811,7 +832,7 @@ impl Launch {
             ));
         }
         let connect = mode.zenoh_args(Some(SIM_HOST), &hub, &ids)?;
-        Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect, components })
+        Ok(Running { session, stop_tx, stop_rx, mode: mode.clone(), connect, components, endpoint })
     }
 }
 
@@ -834,6 +855,13 @@ impl Running {
     /// and starts again (`None`: no such component).
     pub fn component(&self, name: &str) -> Option<Component> {
         self.components.iter().find(|(r, _)| r == name).map(|(_, c)| c.clone())
+    }
+
+    /// Where a client on this machine reaches the running team (`team echo --connect`, the
+    /// Python client): the default endpoint when this run holds it, which clients use without
+    /// flags; `None` when nothing outside the run can reach it.
+    pub fn endpoint(&self) -> Option<&str> {
+        self.endpoint.as_deref()
     }
 
     /// Turns true when the run is being stopped.

@@ -508,6 +508,16 @@ pub async fn run_in_keeping(
     let (launch, bridge) = launch_of(plan);
     let started = Instant::now();
     let mut running = launch.start(mode).await.map_err(RunError::from)?;
+    if opts.progress {
+        match (running.endpoint(), mode) {
+            (Some(e), _) => println!("team: clients on this machine connect at {e}"),
+            (None, RunMode::Embedded) => println!(
+                "team: no client can connect: another process holds {}",
+                protocol::transport::DEFAULT_ENDPOINT
+            ),
+            _ => {}
+        }
+    }
     let beside = start_beside(plan, opts, &running, recorder).await?;
     let driver_task = tokio::spawn(beside.driver.run(running.stop_signal()));
     let bridge_result = running.run_bridge(&bridge).await;

@@ -28,8 +28,11 @@ use zenoh::{Session, Wait};
 
 use crate::{decode, keys, Message, ProtocolError};
 
-/// The default rendezvous of a single-machine team.
+/// The default rendezvous of a single-machine team, where a client started without flags
+/// (`team echo`, the Python client) connects ([`open_discoverable`]).
 pub const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7447";
+/// The port of [`DEFAULT_ENDPOINT`].
+pub const DEFAULT_PORT: u16 = 7447;
 
 /// Errors opening a session or talking on it.
 #[derive(Debug, Error)]
@@ -63,6 +66,18 @@ pub enum Role {
     /// Neither listens nor connects unless told to: every component in one process on one
     /// session (the embedded mode).
     Alone,
+}
+
+impl Role {
+    /// Where the role listens unless told otherwise: loopback only. Members listen on a
+    /// random loopback port so that peers met through gossip can connect to them directly.
+    fn listens(self) -> &'static [&'static str] {
+        match self {
+            Role::Hub => &[DEFAULT_ENDPOINT],
+            Role::Member => &["tcp/127.0.0.1:0"],
+            Role::Alone => &[],
+        }
+    }
 }
 
 /// The Zenoh flags every binary shares.
@@ -115,6 +130,25 @@ impl ZenohArgs {
         out
     }
 
+    /// These arguments listening on [`DEFAULT_ENDPOINT`] too, where the role would listen
+    /// elsewhere or not at all; `None` when a configuration file sets the session up (its
+    /// access control is the file's to open), when they listen there already, or when another
+    /// process holds the port.
+    pub fn discoverable(&self, role: Role) -> Option<ZenohArgs> {
+        let mut listen: Vec<String> = if self.listen.is_empty() {
+            role.listens().iter().map(|l| l.to_string()).collect()
+        } else {
+            self.listen.clone()
+        };
+        if self.config.is_some() || listen.iter().any(|l| l == DEFAULT_ENDPOINT) {
+            return None;
+        }
+        // Bound and let go at once: a taken port is skipped without Zenoh logging an error.
+        std::net::TcpListener::bind(("127.0.0.1", DEFAULT_PORT)).ok()?;
+        listen.push(DEFAULT_ENDPOINT.to_string());
+        Some(ZenohArgs { listen, ..self.clone() })
+    }
+
     /// The Zenoh configuration these arguments describe.
     pub fn to_config(&self, role: Role) -> Result<zenoh::Config, TransportError> {
         let mut config = match &self.config {
@@ -125,14 +159,7 @@ impl ZenohArgs {
                 let mut c = zenoh::Config::default();
                 set(&mut c, "mode", "\"peer\"")?;
                 set(&mut c, "scouting/multicast/enabled", "false")?;
-                // Loopback only, unless told otherwise. Members listen on a random loopback
-                // port so that peers met through gossip can connect to them directly.
-                let listen: &[&str] = match role {
-                    Role::Hub => &[DEFAULT_ENDPOINT],
-                    Role::Member => &["tcp/127.0.0.1:0"],
-                    Role::Alone => &[],
-                };
-                set(&mut c, "listen/endpoints", &json_list(listen))?;
+                set(&mut c, "listen/endpoints", &json_list(role.listens()))?;
                 if role == Role::Member {
                     set(&mut c, "connect/endpoints", &json_list(&[DEFAULT_ENDPOINT]))?;
                 }
@@ -171,7 +198,25 @@ fn set(c: &mut zenoh::Config, key: &str, value: &str) -> Result<(), TransportErr
     })
 }
 
-/// Open a session from the arguments. The only function in the project that opens one.
+/// Open a session from the arguments that also listens on [`DEFAULT_ENDPOINT`] if it can
+/// ([`ZenohArgs::discoverable`]), so that a client started on this machine without flags finds
+/// it. Returns the session and, if it listens there, that endpoint.
+pub async fn open_discoverable(
+    args: &ZenohArgs,
+    role: Role,
+) -> Result<(Session, Option<String>), TransportError> {
+    if let Some(with) = args.discoverable(role) {
+        match open(&with, role).await {
+            Ok(session) => return Ok((session, Some(DEFAULT_ENDPOINT.to_string()))),
+            // Taken in the moment since the port was found free.
+            Err(e) => tracing::debug!("not listening on {DEFAULT_ENDPOINT}: {e}"),
+        }
+    }
+    Ok((open(args, role).await?, None))
+}
+
+/// Open a session from the arguments. The only function in the project that opens one
+/// ([`open_discoverable`] opens through it).
 pub async fn open(args: &ZenohArgs, role: Role) -> Result<Session, TransportError> {
     let config = args.to_config(role)?;
     let session = zenoh::open(config).await.map_err(|e| TransportError::Open(e.to_string()))?;
