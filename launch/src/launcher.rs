@@ -206,8 +206,8 @@ impl RunMode {
     }
 
     /// The session of this process (the scenario driver's), a member connecting to `hub`, and
-    /// where a client on this machine reaches the team: on loopback without access control it
-    /// also listens on the default endpoint if it can ([`transport::open_discoverable`]), else
+    /// where a tool on this machine reaches the team: on loopback without access control it
+    /// also listens on the tools' endpoint if it can ([`transport::open_discoverable`]), else
     /// the hub is the place. Test hosts, TLS and sites name their endpoints themselves.
     async fn open_driver(
         &self,
@@ -857,9 +857,10 @@ impl Running {
         self.components.iter().find(|(r, _)| r == name).map(|(_, c)| c.clone())
     }
 
-    /// Where a client on this machine reaches the running team (`team echo --connect`, the
-    /// Python client): the default endpoint when this run holds it, which clients use without
-    /// flags; `None` when nothing outside the run can reach it.
+    /// Where a tool on this machine reaches the running team: the tools' endpoint when this
+    /// run holds it (`team echo` looks there without flags), else a distributed run's hub
+    /// (`team echo --connect`); `None` for an embedded run beside a held port, and for runs
+    /// whose configuration names their endpoints (test hosts, TLS, sites).
     pub fn endpoint(&self) -> Option<&str> {
         self.endpoint.as_deref()
     }

@@ -510,10 +510,10 @@ pub async fn run_in_keeping(
     let mut running = launch.start(mode).await.map_err(RunError::from)?;
     if opts.progress {
         match (running.endpoint(), mode) {
-            (Some(e), _) => println!("team: clients on this machine connect at {e}"),
+            (Some(e), _) => println!("team: tools on this machine connect at {e}"),
             (None, RunMode::Embedded) => println!(
-                "team: no client can connect: another process holds {}",
-                protocol::transport::DEFAULT_ENDPOINT
+                "team: no tool can connect: another process holds {}",
+                protocol::transport::TOOLS_ENDPOINT
             ),
             _ => {}
         }

@@ -7,7 +7,8 @@
 //! ([`Role::Member`]) connect to it and retry until it is there; they listen on a random
 //! loopback port, and gossip lets peers meet and connect directly (peers do not route for each
 //! other). Across hosts, give members a routable `--listen` (e.g. `tcp/0.0.0.0:0`) or use a
-//! Zenoh router and client mode.
+//! Zenoh router and client mode. A `team run` also listens on [`TOOLS_ENDPOINT`] when the
+//! port is free ([`open_discoverable`]), so that a tool started with no flags finds it.
 //! Flags override the file; the file overrides the defaults.
 //!
 //! Hot-path messages (state, dynamics, command, torque) are published with
@@ -28,11 +29,15 @@ use zenoh::{Session, Wait};
 
 use crate::{decode, keys, Message, ProtocolError};
 
-/// The default rendezvous of a single-machine team, where a client started without flags
-/// (`team echo`, the Python client) connects ([`open_discoverable`]).
+/// The default rendezvous of a single-machine team: the hub listens here and the team's
+/// other binaries connect here when started without flags.
 pub const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7447";
-/// The port of [`DEFAULT_ENDPOINT`].
-pub const DEFAULT_PORT: u16 = 7447;
+/// Where tools started without flags (`team echo`, [`Role::Tool`]) find a running team: a
+/// `team run` listens here if it can ([`open_discoverable`]). A port of its own, which the
+/// team's binaries never connect to: an agent started by hand must not join a simulated team.
+pub const TOOLS_ENDPOINT: &str = "tcp/127.0.0.1:7449";
+/// The port of [`TOOLS_ENDPOINT`].
+pub const TOOLS_PORT: u16 = 7449;
 
 /// Errors opening a session or talking on it.
 #[derive(Debug, Error)]
@@ -64,8 +69,11 @@ pub enum Role {
     /// Connects to [`DEFAULT_ENDPOINT`].
     Member,
     /// Neither listens nor connects unless told to: every component in one process on one
-    /// session (the embedded mode).
+    /// session (the embedded mode; [`open_discoverable`] adds the tools' endpoint).
     Alone,
+    /// A tool that looks at a team: connects to [`TOOLS_ENDPOINT`] (a `team run`) and to
+    /// [`DEFAULT_ENDPOINT`] (a hub started by hand), whichever is there.
+    Tool,
 }
 
 impl Role {
@@ -74,8 +82,17 @@ impl Role {
     fn listens(self) -> &'static [&'static str] {
         match self {
             Role::Hub => &[DEFAULT_ENDPOINT],
-            Role::Member => &["tcp/127.0.0.1:0"],
+            Role::Member | Role::Tool => &["tcp/127.0.0.1:0"],
             Role::Alone => &[],
+        }
+    }
+
+    /// Where the role connects unless told otherwise.
+    fn connects(self) -> &'static [&'static str] {
+        match self {
+            Role::Member => &[DEFAULT_ENDPOINT],
+            Role::Tool => &[TOOLS_ENDPOINT, DEFAULT_ENDPOINT],
+            Role::Hub | Role::Alone => &[],
         }
     }
 }
@@ -130,9 +147,9 @@ impl ZenohArgs {
         out
     }
 
-    /// These arguments listening on [`DEFAULT_ENDPOINT`] too, where the role would listen
-    /// elsewhere or not at all; `None` when a configuration file sets the session up (its
-    /// access control is the file's to open), when they listen there already, or when another
+    /// These arguments listening on [`TOOLS_ENDPOINT`] too; `None` when a configuration file
+    /// sets the session up (its access control is the file's to open), in client mode (a
+    /// client listens nowhere), when they name the endpoint themselves, or when another
     /// process holds the port.
     pub fn discoverable(&self, role: Role) -> Option<ZenohArgs> {
         let mut listen: Vec<String> = if self.listen.is_empty() {
@@ -140,12 +157,13 @@ impl ZenohArgs {
         } else {
             self.listen.clone()
         };
-        if self.config.is_some() || listen.iter().any(|l| l == DEFAULT_ENDPOINT) {
+        let client = self.mode == Some(Mode::Client);
+        if self.config.is_some() || client || listen.iter().any(|l| l == TOOLS_ENDPOINT) {
             return None;
         }
-        // Bound and let go at once: a taken port is skipped without Zenoh logging an error.
-        std::net::TcpListener::bind(("127.0.0.1", DEFAULT_PORT)).ok()?;
-        listen.push(DEFAULT_ENDPOINT.to_string());
+        // Bound and let go at once: a taken port is skipped without Zenoh logging about it.
+        std::net::TcpListener::bind(("127.0.0.1", TOOLS_PORT)).ok()?;
+        listen.push(TOOLS_ENDPOINT.to_string());
         Some(ZenohArgs { listen, ..self.clone() })
     }
 
@@ -160,8 +178,8 @@ impl ZenohArgs {
                 set(&mut c, "mode", "\"peer\"")?;
                 set(&mut c, "scouting/multicast/enabled", "false")?;
                 set(&mut c, "listen/endpoints", &json_list(role.listens()))?;
-                if role == Role::Member {
-                    set(&mut c, "connect/endpoints", &json_list(&[DEFAULT_ENDPOINT]))?;
+                if !role.connects().is_empty() {
+                    set(&mut c, "connect/endpoints", &json_list(role.connects()))?;
                 }
                 c
             }
@@ -198,18 +216,24 @@ fn set(c: &mut zenoh::Config, key: &str, value: &str) -> Result<(), TransportErr
     })
 }
 
-/// Open a session from the arguments that also listens on [`DEFAULT_ENDPOINT`] if it can
-/// ([`ZenohArgs::discoverable`]), so that a client started on this machine without flags finds
-/// it. Returns the session and, if it listens there, that endpoint.
+/// Serialises this process's [`open_discoverable`] calls from the port's probe to its bind:
+/// runs started in parallel threads take the port in turn.
+static DISCOVERY: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
+/// Open a session from the arguments that also listens on [`TOOLS_ENDPOINT`] if it can
+/// ([`ZenohArgs::discoverable`]), so that a tool started on this machine without flags finds
+/// it. Returns the session and, if it listens there, that endpoint. Another process that binds
+/// the port between the probe and the bind makes Zenoh warn that it could not listen; the
+/// session then opens without it.
 pub async fn open_discoverable(
     args: &ZenohArgs,
     role: Role,
 ) -> Result<(Session, Option<String>), TransportError> {
+    let _turn = DISCOVERY.lock().await;
     if let Some(with) = args.discoverable(role) {
         match open(&with, role).await {
-            Ok(session) => return Ok((session, Some(DEFAULT_ENDPOINT.to_string()))),
-            // Taken in the moment since the port was found free.
-            Err(e) => tracing::debug!("not listening on {DEFAULT_ENDPOINT}: {e}"),
+            Ok(session) => return Ok((session, Some(TOOLS_ENDPOINT.to_string()))),
+            Err(e) => tracing::debug!("not listening on {TOOLS_ENDPOINT}: {e}"),
         }
     }
     Ok((open(args, role).await?, None))
@@ -471,6 +495,26 @@ mod tests {
         let alone = ZenohArgs::default().to_config(Role::Alone).unwrap();
         assert_eq!(alone.get_json("listen/endpoints").unwrap(), "[]");
         assert_eq!(alone.get_json("connect/endpoints").unwrap(), "[]");
+        let tool = ZenohArgs::default().to_config(Role::Tool).unwrap();
+        let connects = tool.get_json("connect/endpoints").unwrap();
+        assert!(connects.contains("127.0.0.1:7449") && connects.contains("127.0.0.1:7447"));
+        assert_eq!(TOOLS_ENDPOINT, format!("tcp/127.0.0.1:{TOOLS_PORT}"));
+    }
+
+    /// Runs set up by a configuration file (TLS, sites: the file's access control) and clients
+    /// never get the tools' plain TCP port; nor do arguments that already listen there.
+    #[test]
+    fn the_tools_port_is_added_only_where_no_configuration_decides() {
+        let file = ZenohArgs { config: Some("zenoh-tls.json5".into()), ..ZenohArgs::default() };
+        assert!(file.discoverable(Role::Member).is_none());
+        let client = ZenohArgs { mode: Some(Mode::Client), ..ZenohArgs::default() };
+        assert!(client.discoverable(Role::Member).is_none());
+        let named = ZenohArgs::listening(TOOLS_ENDPOINT);
+        assert!(named.discoverable(Role::Alone).is_none());
+        // Where the port is free, the role's own endpoints stay and the tools' is added.
+        if let Some(args) = ZenohArgs::default().discoverable(Role::Member) {
+            assert_eq!(args.listen, ["tcp/127.0.0.1:0", TOOLS_ENDPOINT]);
+        }
     }
 
     #[test]

@@ -46,8 +46,8 @@ enum Command {
     /// Print every message on a Zenoh key as JSON lines (wildcards allowed), like
     /// `ros2 topic echo`: e.g. `team echo team/team/coordinator/status --count 1`. Liveliness
     /// keys (team/team/member/*, team/team/coordinator/alive) print their tokens' comings and
-    /// goings as {"key", "alive"}. Connects to the hub of a distributed run by default (see
-    /// --connect).
+    /// goings as {"key", "alive"}. Finds a running `team run` on this machine, or a hub
+    /// started by hand, without flags (see --connect).
     Echo {
         /// Key expression, e.g. team/team/robot/*/state.
         key: String,
@@ -590,7 +590,7 @@ fn echo_key(
     let rt = tokio::runtime::Runtime::new()?;
     let opts = echo::EchoOptions { key, count, wait: std::time::Duration::from_secs_f64(wait) };
     rt.block_on(async {
-        let session = protocol::transport::open(zenoh, protocol::transport::Role::Member).await?;
+        let session = protocol::transport::open(zenoh, protocol::transport::Role::Tool).await?;
         let result = echo::echo(&session, &opts, &mut std::io::stdout().lock()).await;
         let _ = session.close().await;
         result.map(|_| ()).map_err(anyhow::Error::from)

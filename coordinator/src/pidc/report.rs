@@ -142,8 +142,9 @@ impl TickReport {
     ) {
         torque_commands_into(&self.team, tick, out, |r, tau, qdd| {
             tau.extend(r.actuated.iter().map(|&j| self.tau[j]));
-            let finite = r.actuated.iter().all(|&j| self.qdd.get(j).is_some_and(|a| a.is_finite()));
-            if accelerations && finite {
+            let finite =
+                || r.actuated.iter().all(|&j| self.qdd.get(j).is_some_and(|a| a.is_finite()));
+            if accelerations && finite() {
                 qdd.extend(r.actuated.iter().map(|&j| self.qdd[j]));
             }
         });
