@@ -7,15 +7,15 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use protocol::{GroundTruth, Pose, PoseReference};
+use protocol::GroundTruth;
 use robot_agent::delay::TeamDelay;
 use serde::Serialize;
 
-use crate::metrics::{self, DropReport, Percentiles};
+use crate::metrics::{DropReport, Percentiles, RunningRms};
 use crate::records::Records;
 use crate::report::{self, ReportError, TimeSeries};
-use scenario::{Plan, ReferencePlan};
+use crate::tally::{RunView, Tally};
+use scenario::Plan;
 
 /// Bounds of the acceptance checks of the team demo.
 pub const MAX_SLIP: f64 = 0.005;
@@ -80,21 +80,21 @@ pub struct YieldReport {
 }
 
 impl YieldReport {
-    fn of(records: &Records) -> Option<YieldReport> {
-        let yields: Vec<(u64, protocol::MotionYield)> = records
-            .diagnostics
-            .iter()
-            .filter_map(|d| d.motion_yield.map(|y| (d.header.tick, y)))
-            .collect();
-        let (first, last) = (yields.first()?.0, yields.last()?.0);
-        Some(YieldReport {
-            ticks: yields.len() as u64,
-            first_tick: first,
-            last_tick: last,
-            least_object_share: yields.iter().map(|(_, y)| y.object).fold(1.0, f64::min),
-            object_still_ticks: yields.iter().filter(|(_, y)| y.object == 0.0).count() as u64,
-            torso_ticks: yields.iter().filter(|(_, y)| y.torso < 1.0).count() as u64,
-        })
+    /// A tick whose motion yielded by `y`, into `report`.
+    pub(crate) fn add(report: &mut Option<YieldReport>, tick: u64, y: &protocol::MotionYield) {
+        let r = report.get_or_insert(YieldReport {
+            ticks: 0,
+            first_tick: tick,
+            last_tick: tick,
+            least_object_share: 1.0,
+            object_still_ticks: 0,
+            torso_ticks: 0,
+        });
+        r.ticks += 1;
+        r.last_tick = tick;
+        r.least_object_share = r.least_object_share.min(y.object);
+        r.object_still_ticks += u64::from(y.object == 0.0);
+        r.torso_ticks += u64::from(y.torso < 1.0);
     }
 
     /// One line of the summary.
@@ -182,22 +182,6 @@ pub struct Metrics {
     pub passed: bool,
 }
 
-fn iso(p: &Pose) -> Isometry3<f64> {
-    Isometry3::from_parts(
-        Translation3::from(Vector3::from(p.position)),
-        protocol::conventions::quat_from_wxyz(p.orientation),
-    )
-}
-
-fn ref_iso(r: &PoseReference) -> Isometry3<f64> {
-    iso(&r.pose)
-}
-
-/// Rotation vector of `q` relative to `q0` in the world frame (`log(q q0^-1)`), for plots.
-fn rotvec(q: &UnitQuaternion<f64>, q0: &UnitQuaternion<f64>) -> Vector3<f64> {
-    (q * q0.inverse()).scaled_axis()
-}
-
 /// The evaluated run.
 pub struct Evaluation {
     pub metrics: Metrics,
@@ -219,39 +203,38 @@ pub fn evaluate_failed(plan: &Plan, records: &Records, mode: &str, error: &str) 
 
 /// [`evaluate`], or [`evaluate_failed`] with an `error`.
 fn evaluate_with(plan: &Plan, records: &Records, mode: &str, error: Option<&str>) -> Evaluation {
-    let refs = references_sent(plan, records);
-    let robots = plan.robots.iter().map(|r| r.id.clone()).collect();
-    let run = RunView { plan, refs: &refs, robots, mode };
-    let truth: Vec<&GroundTruth> = records.truth.iter().filter(|g| g.object.is_some()).collect();
-    let every = refs.clock.ticks_per_sample(SERIES_HZ) as usize;
-    let pass = TruthPass::over(&run, &truth, every);
-    let (torque_rms, torques) = torque_series(plan, records, &refs, every);
+    let tally = records.tally.finished();
     // A failed run is judged up to its last sample (scenario time; 0 without one).
-    let until = error.map(|_| records.truth.last().map_or(0.0, |g| g.time));
-    let mut metrics = measures(&run, records, &truth, &pass, torque_rms, until);
+    let until = error.map(|_| tally.last_time().unwrap_or(0.0));
+    let walk = tally.run.refs.walk.as_ref().map(|w| {
+        let truth: Vec<&GroundTruth> =
+            records.truth.iter().filter(|g| g.object.is_some()).collect();
+        crate::walking::evaluate(w, &truth, tally.run.refs.walk_halted_at, until)
+    });
+    let mut metrics = measures(plan, mode, records, &tally, walk, until);
     metrics.error = error.map(str::to_string);
-    metrics.checks = acceptance(&run, &metrics);
+    metrics.checks = acceptance(&tally.run, &metrics);
     metrics.passed = metrics.checks.iter().all(|c| c.passed);
-    Evaluation { metrics, series: pass.series, torques }
+    let (series, torques) = tally.series();
+    Evaluation { metrics, series, torques }
 }
 
-/// Every measure of the run (no error, no checks yet), from the pass over the ground truth,
-/// the torques' RMS and the records; a run judged `until` a scenario time ended there.
+/// Every measure of the run (no error, no checks yet), from its tally and records; a run
+/// judged `until` a scenario time ended there.
 fn measures(
-    run: &RunView,
+    plan: &Plan,
+    mode: &str,
     records: &Records,
-    truth: &[&GroundTruth],
-    pass: &TruthPass,
-    torque_rms: BTreeMap<String, Vec<(String, f64)>>,
+    tally: &Tally,
+    walk: Option<crate::walking::WalkReport>,
     until: Option<f64>,
 ) -> Metrics {
-    let (plan, refs) = (run.plan, run.refs);
-    let n = truth.len().max(1) as f64;
-    let sim = until.unwrap_or_else(|| refs.clock.scenario_duration());
-    let walk = refs.walk.as_ref();
+    let (run, t, d) = (&tally.run, &tally.truth, &tally.diagnostics);
+    let n = t.samples.max(1) as f64;
+    let sim = until.unwrap_or_else(|| run.refs.clock.scenario_duration());
     Metrics {
         scenario: plan.scenario.name.clone(),
-        mode: run.mode.to_string(),
+        mode: mode.to_string(),
         error: None,
         duration_s: plan.scenario.duration,
         control_hz: plan.scenario.control_hz,
@@ -260,33 +243,31 @@ fn measures(
         team_delay_ticks: team_delay_ticks(plan, records),
         team_delay_auto: plan.scenario.team_delay_ticks.adapts(),
         drive_gains: plan.scenario.drive_gains.to_string(),
-        samples: truth.len(),
+        samples: t.samples,
         ticks_seen: records.ticks_seen,
         ticks_planned: plan.total_ticks(),
-        object: tracking(&pass.obj_pos_err, &pass.obj_ang_err),
-        torsos: per_robot(&run.robots, |i| {
-            tracking(&pass.torso_pos_err[i], &pass.torso_ang_err[i])
-        }),
-        drop: pass.drop(refs.object_start.0.z),
-        slip_m: per_robot(&run.robots, |i| metrics::slip(&pass.palm_in_object[i])),
-        mean_squeeze_n: per_robot(&run.robots, |i| pass.squeeze_sum[i] / n),
-        torque_rms,
-        qp_status: qp_status_counts(records),
-        fallback_ticks: fallback_counts(records),
-        motion_yield: YieldReport::of(records),
-        grasp_fit_residual_max_m: grasp_fit_residual_max(records),
-        grasp_refits: records.diagnostics.iter().map(|d| d.grasp_refits).max().unwrap_or(0),
-        grasp_slip_since_closed_max_m: grasp_slip_since_closed_max(records),
-        object_error_growth_m: metrics::growth(&pass.times, &pass.obj_pos_err, GROWTH_WINDOW),
-        release: release_note(records),
-        qp_iterations: diagnostics_percentiles(records, |d| d.qp_iterations as f64),
-        qp_solve_us: diagnostics_percentiles(records, |d| d.qp_solve_us),
-        controller_tick_us: diagnostics_percentiles(records, |d| d.total_us),
+        object: tracking(&t.object_position, &t.object_angle),
+        torsos: per_robot(&run.robots, |i| tracking(&t.torso_position[i], &t.torso_angle[i])),
+        drop: t.drop_report(),
+        slip_m: per_robot(&run.robots, |i| t.slip[i]),
+        mean_squeeze_n: per_robot(&run.robots, |i| t.squeeze_sum[i] / n),
+        torque_rms: torque_rms(plan, tally),
+        qp_status: d.qp_status.clone(),
+        fallback_ticks: d.fallback_ticks.clone(),
+        motion_yield: d.motion_yield.clone(),
+        grasp_fit_residual_max_m: d.grasp_fit_residual_max,
+        grasp_refits: d.grasp_refits,
+        grasp_slip_since_closed_max_m: d.grasp_slip_since_closed_max,
+        object_error_growth_m: t.growth(),
+        release: d.release.clone(),
+        qp_iterations: d.qp_iterations.percentiles(),
+        qp_solve_us: d.qp_solve_us.percentiles(),
+        controller_tick_us: d.controller_tick_us.percentiles(),
         coordinator_deadline_misses: records.last_status.as_ref().map(|s| s.deadline_misses),
-        loop_timing: crate::loop_timing::LoopReport::from_truth(&records.truth),
+        loop_timing: tally.loop_timing.report(),
         coordinator_fallbacks: records.last_status.as_ref().map(|s| s.fallbacks),
-        recoveries: recoveries(run, pass),
-        walk: walk.map(|w| crate::walking::evaluate(w, truth, refs.walk_halted_at, until)),
+        recoveries: t.recoveries(),
+        walk,
         settle_wall_s: records.settle_wall.as_secs_f64(),
         run_wall_s: records.run_wall.as_secs_f64(),
         real_time_factor: real_time_factor(sim, records.run_wall),
@@ -309,27 +290,12 @@ fn per_robot<T>(robots: &[String], mut f: impl FnMut(usize) -> T) -> BTreeMap<St
     robots.iter().enumerate().map(|(i, r)| (r.clone(), f(i))).collect()
 }
 
-/// Percentiles of one quantity of the coordinator's tick diagnostics.
-fn diagnostics_percentiles(
-    records: &Records,
-    f: impl Fn(&protocol::TickDiagnostics) -> f64,
-) -> Percentiles {
-    metrics::percentiles(&records.diagnostics.iter().map(f).collect::<Vec<_>>())
-}
-
-/// Largest residual of the controller's object-pose fit over the run, m.
-/// The coordinator's note on the tick it let go of the object: its tick and its cause.
-fn release_note(records: &Records) -> Option<String> {
-    let notes = records.diagnostics.iter().filter_map(|d| d.fallback.as_deref());
-    notes.into_iter().find(|f| f.starts_with("grasp released at tick")).map(str::to_string)
-}
-
-fn grasp_slip_since_closed_max(records: &Records) -> f64 {
-    records.diagnostics.iter().map(|d| d.grasp_slip_since_closed).fold(0.0, f64::max)
-}
-
-fn grasp_fit_residual_max(records: &Records) -> f64 {
-    records.diagnostics.iter().map(|d| d.grasp_slip).fold(0.0, f64::max)
+/// Each joint's torque RMS by robot (robots never heard have none).
+fn torque_rms(plan: &Plan, tally: &Tally) -> BTreeMap<String, Vec<(String, f64)>> {
+    let rms = &tally.torques.rms;
+    let joints = |i: usize| plan.robots[i].joints.iter().cloned();
+    let named = |i: usize| joints(i).zip(rms[i].iter().map(|a| a.rms())).collect::<Vec<_>>();
+    (0..plan.robots.len()).map(|i| (plan.robots[i].id.clone(), named(i))).collect()
 }
 
 /// Simulated seconds per wall-clock second of the run (0 without a run).
@@ -341,325 +307,14 @@ fn real_time_factor(sim: f64, run_wall: std::time::Duration) -> f64 {
     }
 }
 
-/// The references the run sent: a walk halts when the team lets go (launch::driver).
-fn references_sent(plan: &Plan, records: &Records) -> ReferencePlan {
-    let mut halted = plan.references.clone();
-    if let Some(tick) = records.released_at {
-        halted.halt_walk(tick);
-    }
-    halted
-}
-
-/// The run being evaluated: its plan, the references it sent, its robots' ids and its mode's
-/// name.
-struct RunView<'a> {
-    plan: &'a Plan,
-    refs: &'a ReferencePlan,
-    robots: Vec<String>,
-    mode: &'a str,
-}
-
-impl RunView<'_> {
-    /// Whether a fault stops or stalls robot `r`'s agent: its drives lose their commands (they
-    /// fall, or freeze); its torso, palm and hand contact are reported, not judged.
-    fn faulted(&self, r: &str) -> bool {
-        self.plan.scenario.faults.iter().any(|f| f.robot() == Some(r))
-    }
-}
-
-/// The time series' columns: the object's and each torso's reference and measured pose, each
-/// hand's contact, and the object's errors.
-fn series_columns(robots: &[String]) -> Vec<String> {
-    let mut names: Vec<String> = Vec::new();
-    for a in ["x", "y", "z", "rx", "ry", "rz"] {
-        names.push(format!("object_{a}_des"));
-        names.push(format!("object_{a}_mrt"));
-    }
-    for r in robots {
-        for a in ["x", "y", "z"] {
-            names.push(format!("{r}_torso_{a}_des"));
-            names.push(format!("{r}_torso_{a}_mrt"));
-        }
-    }
-    for r in robots {
-        names.push(format!("{r}_hand_normal_force"));
-        names.push(format!("{r}_palm_slip"));
-        names.push(format!("{r}_palm_turn_deg"));
-        names.push(format!("{r}_hand_contacts"));
-    }
-    names.push("object_position_error".into());
-    names.push("object_orientation_error_deg".into());
-    names
-}
-
-/// What one pass over the ground truth gathers, sample by sample: the time series (every
-/// `every`-th sample) and every tick's errors, hand contacts and palms on the object.
-struct TruthPass {
-    series: TimeSeries,
-    times: Vec<f64>,
-    object_z: Vec<f64>,
-    obj_pos_err: Vec<f64>,
-    obj_ang_err: Vec<f64>,
-    torso_pos_err: Vec<Vec<f64>>,
-    torso_ang_err: Vec<Vec<f64>>,
-    /// Per sample, whether each robot not faulted has a hand on the object.
-    hand_contact: Vec<Vec<bool>>,
-    /// Each palm's position in the object frame, per sample.
-    palm_in_object: Vec<Vec<Vector3<f64>>>,
-    /// Each palm's first orientation relative to the object.
-    palm_rot0: Vec<Option<UnitQuaternion<f64>>>,
-    /// Sum over the samples of each hand's normal force, N.
-    squeeze_sum: Vec<f64>,
-}
-
-impl TruthPass {
-    /// Go through `truth` (references at the ground truth's time: the end of the tick's step).
-    fn over(run: &RunView, truth: &[&GroundTruth], every: usize) -> TruthPass {
-        let n = run.robots.len();
-        let names = series_columns(&run.robots);
-        let mut pass = TruthPass {
-            series: TimeSeries::with_columns(&names),
-            times: Vec::new(),
-            object_z: Vec::new(),
-            obj_pos_err: Vec::new(),
-            obj_ang_err: Vec::new(),
-            torso_pos_err: vec![Vec::new(); n],
-            torso_ang_err: vec![Vec::new(); n],
-            hand_contact: Vec::new(),
-            palm_in_object: vec![Vec::new(); n],
-            palm_rot0: vec![None; n],
-            squeeze_sum: vec![0.0; n],
-        };
-        for (sample, g) in truth.iter().enumerate() {
-            let mut row = Vec::with_capacity(names.len());
-            let (o, ep, ea) = pass.object_columns(run, g, &mut row);
-            pass.torso_columns(run, g, &mut row);
-            pass.hand_columns(run, g, &o, &mut row);
-            row.push(ep);
-            row.push(ea.to_degrees());
-            if sample % every == 0 {
-                pass.series.push(g.time, &row);
-            }
-        }
-        pass
-    }
-
-    /// Whether and when the object was dropped ([`metrics::detect_drop`]: a hand without
-    /// contact for 50 ms, or the object 10 cm below `z0`, its start height).
-    fn drop(&self, z0: f64) -> DropReport {
-        metrics::detect_drop(&self.times, &self.object_z, z0, &self.hand_contact, 0.05, 0.10)
-    }
-
-    /// The object's reference and measured pose (rotations as rotation vectors from the start
-    /// orientation); its measured pose and position and orientation errors.
-    fn object_columns(
-        &mut self,
-        run: &RunView,
-        g: &GroundTruth,
-        row: &mut Vec<f64>,
-    ) -> (Isometry3<f64>, f64, f64) {
-        let t = g.time;
-        let o_q0 = run.refs.object_start.1;
-        let o = iso(&g.object.as_ref().expect("filtered").pose);
-        let od = ref_iso(&run.refs.object_at(Some(t)));
-        let ep = (o.translation.vector - od.translation.vector).norm();
-        let ea = metrics::geodesic_angle(&o.rotation, &od.rotation);
-        self.obj_pos_err.push(ep);
-        self.obj_ang_err.push(ea);
-        self.times.push(t);
-        self.object_z.push(o.translation.vector.z);
-        let (rd, rm) = (rotvec(&od.rotation, &o_q0), rotvec(&o.rotation, &o_q0));
-        for a in 0..3 {
-            row.push(od.translation.vector[a]);
-            row.push(o.translation.vector[a]);
-        }
-        for a in 0..3 {
-            row.push(rd[a]);
-            row.push(rm[a]);
-        }
-        (o, ep, ea)
-    }
-
-    /// Each torso's reference and measured position, and its errors.
-    fn torso_columns(&mut self, run: &RunView, g: &GroundTruth, row: &mut Vec<f64>) {
-        for (i, r) in run.robots.iter().enumerate() {
-            let tr = ref_iso(&run.refs.torso_at(i, Some(g.time)));
-            let tm = g.torsos.iter().find(|b| &b.name == r).map(|b| iso(&b.pose)).unwrap_or(tr);
-            self.torso_pos_err[i].push((tm.translation.vector - tr.translation.vector).norm());
-            self.torso_ang_err[i].push(metrics::geodesic_angle(&tm.rotation, &tr.rotation));
-            for a in 0..3 {
-                row.push(tr.translation.vector[a]);
-                row.push(tm.translation.vector[a]);
-            }
-        }
-    }
-
-    /// Each hand's normal force on the object (`o`), how far its palm slid and turned on the
-    /// object since the start, and its contacts.
-    fn hand_columns(
-        &mut self,
-        run: &RunView,
-        g: &GroundTruth,
-        o: &Isometry3<f64>,
-        row: &mut Vec<f64>,
-    ) {
-        let mut flags = Vec::with_capacity(run.robots.len());
-        for (i, r) in run.robots.iter().enumerate() {
-            // Normal force: along the palm's outward normal (hand frame z), what the hand
-            // applies to the object.
-            let palm = g.hands.iter().find(|b| &b.name == r).map(|b| iso(&b.pose));
-            let n = palm.map(|p| p.rotation * Vector3::z()).unwrap_or_else(Vector3::zeros);
-            let f: f64 = g
-                .hand_contacts
-                .iter()
-                .filter(|c| &c.robot == r)
-                .map(|c| n.dot(&Vector3::new(c.wrench[0], c.wrench[1], c.wrench[2])))
-                .sum();
-            row.push(f);
-            self.squeeze_sum[i] += f;
-            if !run.faulted(r) {
-                flags.push(g.hand_contacts.iter().any(|c| &c.robot == r));
-            }
-            // Where the palm is on the object, and how far it turned on it, since the start.
-            let (mut slip_now, mut turn_now) = (0.0, 0.0);
-            if let Some(p) = palm {
-                let local = o.inverse_transform_point(&p.translation.vector.into()).coords;
-                slip_now = self.palm_in_object[i].first().map_or(0.0, |p0| (local - p0).norm());
-                self.palm_in_object[i].push(local);
-                let rel = o.rotation.inverse() * p.rotation;
-                turn_now = metrics::geodesic_angle(self.palm_rot0[i].get_or_insert(rel), &rel)
-                    .to_degrees();
-            }
-            row.push(slip_now);
-            row.push(turn_now);
-            row.push(g.hand_contacts.iter().filter(|c| &c.robot == r).count() as f64);
-        }
-        self.hand_contact.push(flags);
-    }
-}
-
-/// Tracking of a pose task from its position and orientation errors.
-fn tracking(pe: &[f64], ae: &[f64]) -> Tracking {
+/// Tracking of a pose task from its position and orientation errors, rad.
+fn tracking(position: &RunningRms, angle: &RunningRms) -> Tracking {
     Tracking {
-        position_rms_m: metrics::rms(pe.iter().copied()),
-        position_max_m: pe.iter().copied().fold(0.0, f64::max),
-        orientation_rms_deg: metrics::rms(ae.iter().copied()).to_degrees(),
-        orientation_max_deg: ae.iter().copied().fold(0.0, f64::max).to_degrees(),
+        position_rms_m: position.rms(),
+        position_max_m: position.max(),
+        orientation_rms_deg: angle.rms().to_degrees(),
+        orientation_max_deg: angle.max().to_degrees(),
     }
-}
-
-/// Torques: one sample per tick (the first applied for it), in joint order; each joint's RMS
-/// by robot, and the time series of every `every`-th tick all robots have.
-fn torque_series(
-    plan: &Plan,
-    records: &Records,
-    refs: &ReferencePlan,
-    every: usize,
-) -> (BTreeMap<String, Vec<(String, f64)>>, TimeSeries) {
-    let mut torque_rms = BTreeMap::new();
-    let mut torque_names = Vec::new();
-    let mut per_robot: Vec<BTreeMap<u64, &Vec<f64>>> = Vec::new();
-    for r in &plan.robots {
-        let (id, joints) = (&r.id, &r.joints);
-        let by_tick: BTreeMap<u64, &Vec<f64>> = records
-            .torques
-            .get(id)
-            .map(|v| v.iter().rev().map(|(t, tau)| (*t, tau)).collect())
-            .unwrap_or_default();
-        let samples: Vec<Vec<f64>> = by_tick.values().map(|v| (*v).clone()).collect();
-        let rms = metrics::torque_rms(&samples);
-        torque_rms.insert(id.clone(), joints.iter().cloned().zip(rms).collect::<Vec<_>>());
-        torque_names.extend(joints.iter().map(|j| format!("{id}_{j}")));
-        per_robot.push(by_tick);
-    }
-    let mut torques = TimeSeries::with_columns(&torque_names);
-    if let Some(first) = per_robot.first() {
-        for (&tick, _) in first.iter().step_by(every) {
-            let mut row = Vec::with_capacity(torque_names.len());
-            let complete = per_robot.iter().all(|m| m.contains_key(&tick));
-            if !complete {
-                continue;
-            }
-            for m in &per_robot {
-                row.extend(m[&tick].iter().copied());
-            }
-            if row.len() == torque_names.len() {
-                torques.push(refs.time_of_tick(tick).unwrap_or(0.0), &row);
-            }
-        }
-    }
-    (torque_rms, torques)
-}
-
-/// Ticks by the QP's status.
-fn qp_status_counts(records: &Records) -> BTreeMap<String, u64> {
-    let mut qp_status = BTreeMap::new();
-    for d in &records.diagnostics {
-        *qp_status.entry(format!("{:?}", d.qp_status)).or_insert(0u64) += 1;
-    }
-    qp_status
-}
-
-/// Ticks whose command did not come from the controller's normal path, grouped by what was
-/// done, not by the numbers in the message.
-fn fallback_counts(records: &Records) -> BTreeMap<String, u64> {
-    let mut fallback_ticks = BTreeMap::new();
-    for f in records.diagnostics.iter().filter_map(|d| d.fallback.as_deref()) {
-        let kind = if f.starts_with("controller error") {
-            "hold orders after a controller error"
-        } else if f.starts_with("controller not ready") {
-            "hold orders: controller not ready"
-        } else if f.starts_with("grasp released") {
-            "grasp released (hands free, feet only)"
-        } else {
-            "QP fallback"
-        };
-        *fallback_ticks.entry(kind.to_string()).or_insert(0u64) += 1;
-    }
-    fallback_ticks
-}
-
-/// Recovery after each push: from push end + [`RECOVERY_AFTER`] until the next push starts.
-fn recoveries(run: &RunView, pass: &TruthPass) -> Vec<Recovery> {
-    let pushes = &run.plan.scene.perturbations;
-    let mut recoveries = Vec::new();
-    for p in pushes {
-        let end = p.start + p.duration;
-        let next =
-            pushes.iter().map(|q| q.start).filter(|s| *s > p.start).fold(f64::INFINITY, f64::min);
-        let window = (next - end - RECOVERY_AFTER).max(0.0);
-        let (on, torso_err) = match &p.target {
-            protocol::PerturbationTarget::Object => ("object".to_string(), None),
-            protocol::PerturbationTarget::RobotBody { robot, body } => {
-                let i = run.robots.iter().position(|r| r == robot);
-                (
-                    format!("{robot}/{body}"),
-                    i.and_then(|i| {
-                        metrics::recovery_error(
-                            &pass.times,
-                            &pass.torso_pos_err[i],
-                            end,
-                            RECOVERY_AFTER,
-                            window,
-                        )
-                    }),
-                )
-            }
-        };
-        recoveries.push(Recovery {
-            on,
-            push_end_s: end,
-            object_error_after_m: metrics::recovery_error(
-                &pass.times,
-                &pass.obj_pos_err,
-                end,
-                RECOVERY_AFTER,
-                window,
-            ),
-            torso_error_after_m: torso_err,
-        });
-    }
-    recoveries
 }
 
 /// Each palm's slip on the object against [`MAX_SLIP`]. When the controller re-fitted its grasp
@@ -871,15 +526,21 @@ fn push_acceptance_lines(s: &mut String, m: &Metrics) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use protocol::{BodyTruth, ContactTruth, Header};
+    use crate::metrics;
+    use nalgebra::{UnitQuaternion, Vector3};
+    use protocol::{BodyTruth, ContactTruth, Header, Pose};
     use scenario::file::Scenario;
     use scenario::plan;
 
     fn s4_plan() -> Plan {
+        s4_plan_of(1.0)
+    }
+
+    fn s4_plan_of(duration: f64) -> Plan {
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf();
         let s = Scenario::load(
             root.join("scenarios/s4_object_circle.toml"),
-            &["duration=1.0".into(), "settle=0.0".into()],
+            &[format!("duration={duration}"), "settle=0.0".into()],
         )
         .unwrap();
         plan::plan(&s, &root).unwrap()
@@ -896,9 +557,19 @@ mod tests {
     /// Ground truth that follows the references exactly, palms fixed on the object; `fall(t)`
     /// lowers the object (and the palms with it) and `contact(t)` says whether the hands touch.
     fn records(plan: &Plan, fall: impl Fn(f64) -> f64, contact: impl Fn(f64) -> bool) -> Records {
-        let mut rec = Records::default();
+        records_of(plan, plan.scene.ticks, fall, contact)
+    }
+
+    /// [`records`] of the first `ticks` ticks.
+    fn records_of(
+        plan: &Plan,
+        ticks: u64,
+        fall: impl Fn(f64) -> f64,
+        contact: impl Fn(f64) -> bool,
+    ) -> Records {
+        let mut rec = Records::new(plan);
         let refs = &plan.references;
-        for k in 0..plan.scene.ticks {
+        for k in 0..ticks {
             // Settling is 0: the state after tick k's step is at scenario time (k + 1) / rate.
             let t = plan.references.clock.scenario_time(k + 1).expect("no settling");
             let o = refs.object_at(Some(t));
@@ -927,9 +598,9 @@ mod tests {
                     });
                 }
             }
-            rec.truth.push(g);
+            rec.keep_truth(g);
         }
-        rec.ticks_seen = plan.scene.ticks;
+        rec.ticks_seen = ticks;
         rec
     }
 
@@ -995,10 +666,8 @@ mod tests {
     #[test]
     fn a_run_that_ended_in_an_error_is_measured_over_its_ticks_and_fails() {
         let plan = s4_plan();
-        let mut rec = records(&plan, |_| 0.0, |_| true);
         let seen = plan.total_ticks() * 2 / 5;
-        rec.truth.truncate(seen as usize);
-        rec.ticks_seen = seen;
+        let rec = records_of(&plan, seen, |_| 0.0, |_| true);
         let error = "robot r1's agent left the team at tick 400";
         let eval = evaluate_failed(&plan, &rec, "embedded", error);
         let m = &eval.metrics;
@@ -1027,7 +696,8 @@ mod tests {
         let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
         assert!(html.contains("ended in an error") && html.contains("agent left the team"));
 
-        let nothing = Records { ticks_seen: 3, ..Default::default() };
+        let mut nothing = Records::new(&plan);
+        nothing.ticks_seen = 3;
         let empty = evaluate_failed(&plan, &nothing, "embedded", error);
         let m = &empty.metrics;
         assert!(!m.passed && m.samples == 0 && m.real_time_factor == 0.0, "{m:?}");
@@ -1035,5 +705,35 @@ mod tests {
         write_report(&plan, &empty, &dir).unwrap();
         crate::plots::write_all(&plan, &empty, &nothing, &dir).unwrap();
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A run far longer than the trace and the series hold: the trace and the series stay
+    /// within their bounds, and the measures are those of every tick (against the analytic
+    /// values of a constant offset that starts halfway, and the batch functions).
+    #[test]
+    fn a_long_run_is_measured_over_every_tick_in_bounded_memory() {
+        let plan = s4_plan_of(200.0);
+        let rec = records(&plan, |t| if t >= 100.0 { 1e-3 } else { 0.0 }, |_| true);
+        let ticks = plan.scene.ticks as usize;
+        let cap = crate::records::TRACE_ROBOT_SAMPLES / plan.robots.len();
+        assert!(ticks > 4 * cap, "longer than the trace: {ticks} ticks, {cap} kept");
+        assert!(rec.truth.len() <= cap && rec.truth.len() > cap / 2, "{}", rec.truth.len());
+        let eval = evaluate(&plan, &rec, "embedded");
+        let m = &eval.metrics;
+        assert_eq!(m.samples, ticks);
+        // Half the ticks 1 mm off: RMS 1 mm / sqrt(2) (to the tick on either side of 100 s).
+        let rms = m.object.position_rms_m;
+        assert!((rms - 1e-3 / 2f64.sqrt()).abs() < 1e-8, "{rms}");
+        assert!((m.object.position_max_m - 1e-3).abs() < 1e-12);
+        // The last 30 s at 1 mm against the first 30 at 0, as the batch measure gives it.
+        let times: Vec<f64> =
+            (1..=ticks as u64).map(|k| k as f64 / plan.scenario.control_hz).collect();
+        let errors: Vec<f64> = times.iter().map(|t| if *t >= 100.0 { 1e-3 } else { 0.0 }).collect();
+        let batch = metrics::growth(&times, &errors, GROWTH_WINDOW).expect("three windows");
+        let growth = m.object_error_growth_m.expect("a long run");
+        assert!((growth - batch).abs() < 1e-12 && (growth - 1e-3).abs() < 1e-12, "{growth}");
+        assert!(eval.series.len() <= crate::tally::SERIES_ROWS);
+        assert!(eval.series.len() > crate::tally::SERIES_ROWS / 4, "{}", eval.series.len());
+        assert!(eval.series.time.last().is_some_and(|t| *t > 199.0), "to the end");
     }
 }

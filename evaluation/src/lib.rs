@@ -9,6 +9,7 @@
 //! * [`loop_timing`]: the control loop of a real-time run, from the ground truth's stamps.
 //! * [`machine`]: the machine a run had (its processors' busy share, the host's steal).
 //! * [`walking`]: a walk's evaluation from the ground truth (steps, slides, final poses).
+//! * [`tally`]: a run's measures taken as its messages come, in bounded memory.
 //! * [`evaluate`]: a run's metrics, time series and acceptance checks ([`evaluate::Evaluation`]).
 //! * [`report`]: CSV time series and JSON files of a run.
 //! * [`plots`]: the figures of a report and its index page, `report.html`.
@@ -20,4 +21,5 @@ pub mod metrics;
 pub mod plots;
 pub mod records;
 pub mod report;
+pub mod tally;
 pub mod walking;

@@ -9,7 +9,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use protocol::GroundTruth;
 use serde::Serialize;
 
-use crate::metrics::{self, Percentiles};
+use crate::metrics::{Percentiles, Quantiles};
 
 /// One robot's loop over a run.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -32,18 +32,24 @@ pub struct RobotLoop {
     pub drive_gaps: u64,
 }
 
+/// Ticks of one robot not yet applied are looked for this many ticks back; older ones are
+/// lost.
+const LOST_AFTER: u64 = 4096;
+
 /// One robot's loop as the ticks come.
-#[derive(Default)]
+#[derive(Debug, Clone, Default)]
 struct Acc {
     ticks: u64,
-    latencies: Vec<f64>,
+    latencies: Quantiles,
     misses: u64,
     streak: u64,
     longest: u64,
     late: u64,
     gaps: u64,
-    seen: BTreeSet<u64>,
-    applied: BTreeSet<u64>,
+    /// Ticks seen whose torques were not applied yet, and ticks applied ahead of being seen.
+    unapplied: BTreeSet<u64>,
+    applied_ahead: BTreeSet<u64>,
+    lost: u64,
 }
 
 impl Acc {
@@ -52,13 +58,21 @@ impl Acc {
         self.ticks += 1;
         self.late += u64::from(t.late);
         self.gaps += u64::from(t.gap_steps);
-        self.seen.insert(tick);
+        if !self.applied_ahead.remove(&tick) {
+            self.unapplied.insert(tick);
+        }
         if let Some(k) = t.applied_tick {
-            self.applied.insert(k);
+            if !self.unapplied.remove(&k) && k > tick {
+                self.applied_ahead.insert(k);
+            }
+        }
+        while self.unapplied.first().is_some_and(|k| k + LOST_AFTER < tick) {
+            self.unapplied.pop_first();
+            self.lost += 1;
         }
         match t.latency_us {
             Some(l) => {
-                self.latencies.push(l);
+                self.latencies.add(l);
                 self.streak = 0;
             }
             None => {
@@ -69,16 +83,45 @@ impl Acc {
         }
     }
 
-    fn into_loop(self) -> RobotLoop {
+    fn to_loop(&self) -> RobotLoop {
         RobotLoop {
             ticks: self.ticks,
-            latency_us: metrics::percentiles(&self.latencies),
+            latency_us: self.latencies.percentiles(),
             deadline_misses: self.misses,
             longest_hold_ticks: self.longest,
             late: self.late,
-            lost: self.seen.difference(&self.applied).count() as u64,
+            lost: self.lost + self.unapplied.len() as u64,
             drive_gaps: self.gaps,
         }
+    }
+}
+
+/// The loop timing of a run taken tick by tick, in bounded memory: the lost ticks are those
+/// not applied within [`LOST_AFTER`] ticks, and the latencies' percentiles come from a
+/// [`Quantiles`].
+#[derive(Debug, Clone, Default)]
+pub struct LoopTally {
+    robots: BTreeMap<String, Acc>,
+}
+
+impl LoopTally {
+    /// One tick's ground truth.
+    pub fn add(&mut self, g: &GroundTruth) {
+        for t in &g.loop_timing {
+            match self.robots.get_mut(&t.robot) {
+                Some(a) => a.add(g.header.tick, t),
+                None => self.robots.entry(t.robot.clone()).or_default().add(g.header.tick, t),
+            }
+        }
+    }
+
+    /// The report (`None` if no tick carried loop timing: a lockstep run).
+    pub fn report(&self) -> Option<LoopReport> {
+        if self.robots.is_empty() {
+            return None;
+        }
+        let robots = self.robots.iter().map(|(r, a)| (r.clone(), a.to_loop())).collect();
+        Some(LoopReport { robots })
     }
 }
 
@@ -91,17 +134,9 @@ pub struct LoopReport {
 impl LoopReport {
     /// The report of the ticks in `truth` that carry loop timing (`None` if none does).
     pub fn from_truth(truth: &[GroundTruth]) -> Option<LoopReport> {
-        let mut acc: BTreeMap<String, Acc> = BTreeMap::new();
-        for g in truth {
-            for t in &g.loop_timing {
-                acc.entry(t.robot.clone()).or_default().add(g.header.tick, t);
-            }
-        }
-        if acc.is_empty() {
-            return None;
-        }
-        let robots = acc.into_iter().map(|(r, a)| (r, a.into_loop())).collect();
-        Some(LoopReport { robots })
+        let mut tally = LoopTally::default();
+        truth.iter().for_each(|g| tally.add(g));
+        tally.report()
     }
 
     /// One line per robot for the run's summary.

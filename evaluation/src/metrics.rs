@@ -47,6 +47,69 @@ pub struct DropReport {
     pub largest_fall: f64,
 }
 
+/// Drop detection sample by sample (see [`detect_drop`]).
+#[derive(Debug, Clone)]
+pub struct DropDetector {
+    z0: f64,
+    max_gap: f64,
+    max_fall: f64,
+    /// Per hand, since when it has been without contact.
+    lost_since: Vec<Option<f64>>,
+    report: DropReport,
+}
+
+impl DropDetector {
+    /// `hands` hands; `z0` the object's start height.
+    pub fn new(z0: f64, hands: usize, max_gap: f64, max_fall: f64) -> DropDetector {
+        DropDetector {
+            z0,
+            max_gap,
+            max_fall,
+            lost_since: vec![None; hands],
+            report: DropReport {
+                dropped: false,
+                at: None,
+                reason: None,
+                longest_gap: 0.0,
+                largest_fall: 0.0,
+            },
+        }
+    }
+
+    /// The sample at `t`: the object at height `z`, each hand's contact.
+    pub fn add(&mut self, t: f64, z: f64, contact: &[bool]) {
+        let report = &mut self.report;
+        let fall = self.z0 - z;
+        report.largest_fall = report.largest_fall.max(fall);
+        if fall > self.max_fall && !report.dropped {
+            report.dropped = true;
+            report.at = Some(t);
+            report.reason = Some(format!("object {fall:.3} m below its start height"));
+        }
+        for (h, lost) in self.lost_since.iter_mut().enumerate() {
+            let touching = contact.get(h).copied().unwrap_or(false);
+            match (touching, *lost) {
+                (true, _) => *lost = None,
+                (false, None) => *lost = Some(t),
+                (false, Some(t0)) => {
+                    let gap = t - t0;
+                    report.longest_gap = report.longest_gap.max(gap);
+                    if gap > self.max_gap && !report.dropped {
+                        report.dropped = true;
+                        report.at = Some(t);
+                        report.reason =
+                            Some(format!("hand {h} without contact for {:.0} ms", gap * 1e3));
+                    }
+                }
+            }
+        }
+    }
+
+    pub fn report(&self) -> DropReport {
+        self.report.clone()
+    }
+}
+
 /// Drop detection over samples `(t, object z, per-hand contact flags)`; `z0` is the object's
 /// start height (the fall is measured from it, not from the first sample).
 pub fn detect_drop(
@@ -57,37 +120,12 @@ pub fn detect_drop(
     max_gap: f64,
     max_fall: f64,
 ) -> DropReport {
-    let mut report =
-        DropReport { dropped: false, at: None, reason: None, longest_gap: 0.0, largest_fall: 0.0 };
     let hands = hand_contact.first().map_or(0, Vec::len);
-    let mut lost_since: Vec<Option<f64>> = vec![None; hands];
+    let mut d = DropDetector::new(z0, hands, max_gap, max_fall);
     for (k, &t) in times.iter().enumerate() {
-        let fall = z0 - object_z[k];
-        report.largest_fall = report.largest_fall.max(fall);
-        if fall > max_fall && !report.dropped {
-            report.dropped = true;
-            report.at = Some(t);
-            report.reason = Some(format!("object {fall:.3} m below its start height"));
-        }
-        for (h, lost) in lost_since.iter_mut().enumerate() {
-            let touching = hand_contact[k].get(h).copied().unwrap_or(false);
-            match (touching, *lost) {
-                (true, _) => *lost = None,
-                (false, None) => *lost = Some(t),
-                (false, Some(t0)) => {
-                    let gap = t - t0;
-                    report.longest_gap = report.longest_gap.max(gap);
-                    if gap > max_gap && !report.dropped {
-                        report.dropped = true;
-                        report.at = Some(t);
-                        report.reason =
-                            Some(format!("hand {h} without contact for {:.0} ms", gap * 1e3));
-                    }
-                }
-            }
-        }
+        d.add(t, object_z[k], &hand_contact[k]);
     }
-    report
+    d.report()
 }
 
 /// Slip: the largest displacement of a contact point on the object surface from where it
@@ -132,6 +170,126 @@ pub fn percentiles(xs: &[f64]) -> Percentiles {
         p99: at(0.99),
         max: v.last().copied().unwrap_or(0.0),
         mean: if v.is_empty() { 0.0 } else { v.iter().sum::<f64>() / v.len() as f64 },
+    }
+}
+
+/// Values kept exactly up to this many; past it a [`Quantiles`] keeps a histogram.
+pub const EXACT_QUANTILES: usize = 1 << 16;
+/// The histogram's buckets: each this much wider than the one below (a relative error of at
+/// most half of it, 0.5 %).
+const BUCKET_RATIO: f64 = 1.01;
+/// The histogram's smallest bucket; values at or below it count in it.
+const BUCKET_FLOOR: f64 = 1e-6;
+
+/// A distribution taken one value at a time in bounded memory: the values themselves while
+/// they are at most [`EXACT_QUANTILES`] (nearest-rank percentiles as [`percentiles`] gives),
+/// then a histogram of log-spaced buckets (percentiles within 0.5 %; count, mean and max stay
+/// exact). Non-finite values are left out, as [`percentiles`] leaves them.
+#[derive(Debug, Clone, Default)]
+pub struct Quantiles {
+    exact: Vec<f64>,
+    /// Counts per bucket once the values overflowed (empty before).
+    buckets: Vec<u64>,
+    count: usize,
+    sum: f64,
+    max: f64,
+}
+
+impl Quantiles {
+    pub fn add(&mut self, x: f64) {
+        if !x.is_finite() {
+            return;
+        }
+        self.max = if self.count == 0 { x } else { self.max.max(x) };
+        self.count += 1;
+        self.sum += x;
+        if self.buckets.is_empty() {
+            self.exact.push(x);
+            if self.exact.len() > EXACT_QUANTILES {
+                for v in std::mem::take(&mut self.exact) {
+                    self.bucket(v);
+                }
+            }
+        } else {
+            self.bucket(x);
+        }
+    }
+
+    fn bucket(&mut self, x: f64) {
+        let k = if x <= BUCKET_FLOOR {
+            0
+        } else {
+            1 + ((x / BUCKET_FLOOR).ln() / BUCKET_RATIO.ln()) as usize
+        };
+        if self.buckets.len() <= k {
+            self.buckets.resize(k + 1, 0);
+        }
+        self.buckets[k] += 1;
+    }
+
+    /// The value a bucket stands for: its geometric middle (the floor for the first).
+    fn bucket_value(k: usize) -> f64 {
+        match k {
+            0 => BUCKET_FLOOR,
+            _ => BUCKET_FLOOR * BUCKET_RATIO.powf(k as f64 - 0.5),
+        }
+    }
+
+    /// Nearest-rank percentiles of the values taken.
+    pub fn percentiles(&self) -> Percentiles {
+        if self.buckets.is_empty() {
+            return percentiles(&self.exact);
+        }
+        let n = self.count;
+        let at = |p: f64| {
+            let rank = ((p * n as f64).ceil() as usize).clamp(1, n) as u64;
+            let mut seen = 0;
+            for (k, c) in self.buckets.iter().enumerate() {
+                seen += c;
+                if seen >= rank {
+                    return Self::bucket_value(k).min(self.max);
+                }
+            }
+            self.max
+        };
+        Percentiles {
+            count: n,
+            p50: at(0.5),
+            p90: at(0.9),
+            p99: at(0.99),
+            max: self.max,
+            mean: self.sum / n as f64,
+        }
+    }
+}
+
+/// RMS and largest value of a series taken one value at a time.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RunningRms {
+    sum_sq: f64,
+    n: u64,
+    max: f64,
+}
+
+impl RunningRms {
+    pub fn add(&mut self, x: f64) {
+        self.sum_sq += x * x;
+        self.n += 1;
+        self.max = self.max.max(x);
+    }
+
+    /// The RMS (0 for no value).
+    pub fn rms(&self) -> f64 {
+        if self.n == 0 {
+            0.0
+        } else {
+            (self.sum_sq / self.n as f64).sqrt()
+        }
+    }
+
+    /// The largest value (0 for none; the series are errors and forces, at least 0).
+    pub fn max(&self) -> f64 {
+        self.max
     }
 }
 
@@ -201,6 +359,31 @@ mod tests {
         let p = percentiles(&xs);
         assert_eq!((p.p50, p.p90, p.p99, p.max), (50.0, 90.0, 99.0, 100.0));
         assert!((p.mean - 50.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn quantiles_are_exact_while_small_and_within_half_a_percent_after() {
+        let mut q = Quantiles::default();
+        for x in 1..=100 {
+            q.add(f64::from(x));
+        }
+        q.add(f64::NAN);
+        assert_eq!(q.percentiles(), percentiles(&(1..=100).map(f64::from).collect::<Vec<_>>()));
+        // Past the exact store: a known distribution (uniform on 1..=200_000 us).
+        let mut q = Quantiles::default();
+        let xs: Vec<f64> = (1..=200_000).map(f64::from).collect();
+        for x in xs.iter().rev() {
+            q.add(*x);
+        }
+        let (got, want) = (q.percentiles(), percentiles(&xs));
+        assert_eq!((got.count, got.max), (want.count, want.max));
+        assert!((got.mean - want.mean).abs() < 1e-6 * want.mean);
+        for (g, w) in [(got.p50, want.p50), (got.p90, want.p90), (got.p99, want.p99)] {
+            assert!((g - w).abs() <= 0.005 * w + 1.0, "{g} against {w}");
+        }
+        let mut r = RunningRms::default();
+        [3.0, 4.0].into_iter().for_each(|x| r.add(x));
+        assert!((r.rms() - rms([3.0, 4.0])).abs() < 1e-15 && r.max() == 4.0);
     }
 
     #[test]

@@ -42,6 +42,29 @@ impl TimeSeries {
         }
     }
 
+    /// Keep every other row (the first, the third, ...): half the rate over the same span.
+    pub fn halve(&mut self) {
+        fn every_other(v: &mut Vec<f64>) {
+            let mut k = 0;
+            v.retain(|_| {
+                k += 1;
+                k % 2 == 1
+            });
+        }
+        every_other(&mut self.time);
+        for (_, c) in &mut self.columns {
+            every_other(c);
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.time.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.time.is_empty()
+    }
+
     pub fn column(&self, name: &str) -> Option<&[f64]> {
         self.columns.iter().find(|(n, _)| n == name).map(|(_, v)| v.as_slice())
     }
@@ -85,6 +108,49 @@ impl TimeSeries {
     }
 }
 
+/// A time series of bounded length: of the rows offered it keeps one in `keep_every`, and
+/// whenever it holds more than its cap it drops every other row and keeps half as many from
+/// then on. A run of any length ends with between half the cap and the cap, evenly spread.
+#[derive(Debug, Clone)]
+pub struct BoundedSeries {
+    series: TimeSeries,
+    keep_every: u64,
+    offered: u64,
+    cap: usize,
+}
+
+impl BoundedSeries {
+    pub fn new(names: &[String], keep_every: u64, cap: usize) -> BoundedSeries {
+        BoundedSeries {
+            series: TimeSeries::with_columns(names),
+            keep_every: keep_every.max(1),
+            offered: 0,
+            cap: cap.max(2),
+        }
+    }
+
+    /// Offer one row (one value per column, in order).
+    pub fn offer(&mut self, t: f64, row: &[f64]) {
+        if self.offered.is_multiple_of(self.keep_every) {
+            self.series.push(t, row);
+            if self.series.len() > self.cap {
+                self.series.halve();
+                self.keep_every *= 2;
+            }
+        }
+        self.offered += 1;
+    }
+
+    /// Columns of a row.
+    pub fn width(&self) -> usize {
+        self.series.columns.len()
+    }
+
+    pub fn series(&self) -> &TimeSeries {
+        &self.series
+    }
+}
+
 /// Write any serialisable value as pretty JSON.
 pub fn write_json<T: serde::Serialize>(value: &T, path: &Path) -> Result<(), ReportError> {
     let io = |e: String| ReportError::Io { path: path.display().to_string(), reason: e };
@@ -95,6 +161,22 @@ pub fn write_json<T: serde::Serialize>(value: &T, path: &Path) -> Result<(), Rep
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_bounded_series_keeps_an_even_spread_under_its_cap() {
+        let mut b = BoundedSeries::new(&["x".to_string()], 2, 100);
+        for k in 0..10_000u32 {
+            b.offer(f64::from(k), &[f64::from(k)]);
+        }
+        let s = b.series();
+        assert!(s.len() > 50 && s.len() <= 100, "{}", s.len());
+        let steps: std::collections::BTreeSet<u64> =
+            s.time.windows(2).map(|w| (w[1] - w[0]) as u64).collect();
+        assert_eq!(steps.len(), 1, "one spacing: {steps:?}");
+        assert_eq!(s.time[0], 0.0);
+        assert!(s.time[s.len() - 1] > 9_000.0, "up to the end");
+        assert_eq!(s.column("x").expect("x"), s.time.as_slice());
+    }
 
     #[test]
     fn csv_is_written() {

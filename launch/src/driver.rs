@@ -15,7 +15,7 @@
 //! ([`CoordinatorMode::Released`]), a walk halts (at once before a lift-off, else at its next
 //! quiet point) ([`ReferencePlan::halt_walk`]): robots without the object do not walk on.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::io::IsTerminal;
 use std::time::{Duration, Instant};
 
@@ -32,7 +32,7 @@ use zenoh::Session;
 use crate::record::{RecordedMessage, Tap};
 use evaluation::machine::CpuTimes;
 use evaluation::records::Records;
-use scenario::ReferencePlan;
+use scenario::{Plan, ReferencePlan};
 
 /// References are published this many ticks ahead of the last simulated tick (10 s at 2 kHz;
 /// below the coordinator's reference queue, `coordinator::service::REFERENCE_QUEUE`).
@@ -78,7 +78,7 @@ impl Keep for Records {
                 tap.send(sample.key_expr().as_str(), RecordedMessage::Diagnostics(d.clone()));
             }
             if d.header.tick >= settle {
-                self.diagnostics.push(d);
+                self.keep_diagnostics(d);
             }
         }
     }
@@ -102,6 +102,8 @@ pub struct Driver {
     /// The team's name on the bus.
     team: String,
     plan: ReferencePlan,
+    /// The records the run starts with (empty; taken by [`Driver::run`]).
+    records: Records,
     total: u64,
     progress: ProgressBar,
     log_progress: bool,
@@ -164,10 +166,10 @@ impl Driver {
     pub async fn start(
         session: &Session,
         team: &str,
-        plan: ReferencePlan,
-        total_ticks: u64,
+        run: &Plan,
         show_progress: bool,
     ) -> Result<Driver, TransportError> {
+        let (plan, total_ticks) = (run.references.clone(), run.total_ticks());
         // What the report is made of: room for seconds of a real-time run whose driver fell
         // behind (a queue drops its oldest when full, see `transport::SampleQueue`).
         let truth =
@@ -207,6 +209,7 @@ impl Driver {
             next_contact: 0,
             contact_pubs,
             plan,
+            records: Records::new(run),
             total: total_ticks,
             progress,
             log_progress: show_progress && !terminal,
@@ -292,16 +295,13 @@ impl Driver {
     /// (no loop timing) the bridge waited at the last tick for every robot that answered the
     /// tick before. Waits at most [`FINAL_GRACE`].
     async fn await_applied_torques(&mut self, rec: &mut Records, settle: u64) {
-        let mut waiting = applied_not_recorded(rec);
+        let mut waiting = rec.owed_drives();
         let until = tokio::time::Instant::now() + FINAL_GRACE;
         while !waiting.is_empty() {
             match tokio::time::timeout_at(until, self.torques.recv_async()).await {
                 Ok(Ok(sample)) => {
                     rec.take_torques(&sample, settle, self.tap.as_ref());
-                    // A command just taken is the last of its robot's records.
-                    waiting.retain(|(r, tick)| {
-                        rec.torques.get(r).and_then(|v| v.last()).is_none_or(|(t, _)| t != tick)
-                    });
+                    waiting.retain(|(r, tick)| !rec.has_drive(r, *tick));
                 }
                 Ok(Err(_)) => return,
                 Err(_) => {
@@ -342,7 +342,10 @@ impl Driver {
         mut self,
         mut stop: watch::Receiver<bool>,
     ) -> (Records, Result<(), TransportError>) {
-        let mut st = RunState::new(self.plan.clock.settle_ticks, self.lookahead.min(self.total));
+        let empty = self.records.empty();
+        let rec = std::mem::replace(&mut self.records, empty);
+        let mut st =
+            RunState::new(rec, self.plan.clock.settle_ticks, self.lookahead.min(self.total));
         let driven = self.drive(&mut st, &mut stop).await;
         (self.finish(st).await, driven)
     }
@@ -419,12 +422,12 @@ impl Driver {
         if let Some(tap) = &self.tap {
             tap.send(sample.key_expr().as_str(), RecordedMessage::Status(status.clone()));
         }
-        if status.mode == CoordinatorMode::Released && st.rec.released_at.is_none() {
-            st.rec.released_at = Some(status.header.tick);
-            self.halt_walk(status.header.tick, st.next_ref).await?;
+        let released = status.mode == CoordinatorMode::Released && st.rec.released_at.is_none();
+        let tick = status.header.tick;
+        st.rec.keep_status(status);
+        if released {
+            self.halt_walk(tick, st.next_ref).await?;
         }
-        st.rec.statuses.push(status.clone());
-        st.rec.last_status = Some(status);
         Ok(())
     }
 
@@ -463,7 +466,7 @@ impl Driver {
                 st.cpu_at_start = CpuTimes::read();
                 self.progress.set_prefix("running");
             }
-            st.rec.truth.push(gt);
+            st.rec.keep_truth(gt);
         }
         self.show_progress(st, tick);
         Ok(tick + 1 >= self.total)
@@ -530,9 +533,9 @@ struct RunState {
 }
 
 impl RunState {
-    fn new(settle: u64, next_ref: u64) -> RunState {
+    fn new(rec: Records, settle: u64, next_ref: u64) -> RunState {
         RunState {
-            rec: Records::default(),
+            rec,
             settle,
             started: Instant::now(),
             run_started: None,
@@ -541,94 +544,5 @@ impl RunState {
             next_ref,
             coordinator_lost: false,
         }
-    }
-}
-
-/// (robot, tick) of the torques the bridge took that the records lack: from the loop timing in
-/// real time, or in lockstep the last tick of every robot that answered the tick before.
-fn applied_not_recorded(rec: &Records) -> Vec<(String, u64)> {
-    let Some(last) = rec.truth.last() else { return Vec::new() };
-    if last.loop_timing.is_empty() {
-        let tick = last.header.tick;
-        let owes = |v: &Vec<(u64, Vec<f64>)>| v.last().is_some_and(|(t, _)| *t + 1 == tick);
-        return rec
-            .torques
-            .iter()
-            .filter(|(_, v)| owes(v))
-            .map(|(r, _)| (r.clone(), tick))
-            .collect();
-    }
-    let recorded: BTreeSet<(&str, u64)> = rec
-        .torques
-        .iter()
-        .flat_map(|(r, v)| v.iter().map(move |(t, _)| (r.as_str(), *t)))
-        .collect();
-    let applied = rec.truth.iter().flat_map(|g| {
-        g.loop_timing
-            .iter()
-            .filter(|t| t.latency_us.is_some())
-            .map(move |t| (t.robot.as_str(), g.header.tick))
-    });
-    applied.filter(|k| !recorded.contains(k)).map(|(r, tick)| (r.to_string(), tick)).collect()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use protocol::{GroundTruth, Header, LoopTiming};
-
-    fn truth(tick: u64, timing: &[(&str, bool)]) -> GroundTruth {
-        let loop_timing = timing
-            .iter()
-            .map(|(r, in_time)| LoopTiming {
-                robot: r.to_string(),
-                latency_us: in_time.then_some(900.0),
-                applied_tick: Some(tick),
-                late: 0,
-                gap_steps: 0,
-            })
-            .collect();
-        GroundTruth {
-            header: Header::new("t", None, tick, 0),
-            time: 0.0,
-            object: None,
-            torsos: vec![],
-            hand_contacts: vec![],
-            foot_contacts: vec![],
-            hands: vec![],
-            feet: vec![],
-            loop_timing,
-        }
-    }
-
-    fn torques(of: &[(&str, &[u64])]) -> BTreeMap<String, Vec<(u64, Vec<f64>)>> {
-        of.iter()
-            .map(|(r, ticks)| (r.to_string(), ticks.iter().map(|t| (*t, vec![0.0])).collect()))
-            .collect()
-    }
-
-    /// A robot that missed the last tick still owes the tick before, which the bridge took.
-    #[test]
-    fn real_time_owes_every_applied_tick_not_only_the_last() {
-        let rec = Records {
-            truth: vec![
-                truth(10, &[("r1", true), ("r2", true)]),
-                truth(11, &[("r1", false), ("r2", true)]),
-            ],
-            torques: torques(&[("r1", &[9]), ("r2", &[10, 11])]),
-            ..Default::default()
-        };
-        assert_eq!(applied_not_recorded(&rec), vec![("r1".to_string(), 10)]);
-    }
-
-    /// In lockstep the last tick is owed by every robot that answered the tick before.
-    #[test]
-    fn lockstep_owes_the_last_tick_of_who_answered_the_one_before() {
-        let rec = Records {
-            truth: vec![truth(10, &[]), truth(11, &[])],
-            torques: torques(&[("r1", &[10]), ("r2", &[10, 11]), ("r3", &[8])]),
-            ..Default::default()
-        };
-        assert_eq!(applied_not_recorded(&rec), vec![("r1".to_string(), 11)]);
     }
 }

@@ -593,14 +593,7 @@ async fn start_driver(
     opts: &RunOptions,
     running: &Running,
 ) -> Result<Driver, RunError> {
-    let driver = Driver::start(
-        running.session(),
-        plan.team(),
-        plan.references.clone(),
-        plan.total_ticks(),
-        opts.progress,
-    )
-    .await?;
+    let driver = Driver::start(running.session(), plan.team(), plan, opts.progress).await?;
     Ok(if plan.scene.realtime { driver.paced(plan.scenario.control_hz) } else { driver })
 }
 

@@ -29,6 +29,7 @@ async fn a_websocket_client_sees_the_channels_advertised() {
         path: dir.join("run.mcap"),
         scenario: ScenarioSource::default(),
         live: Some(0),
+        split: None,
     };
     let recorder = Recorder::start(&plan, &opts).await.expect("recorder with a live server");
     let port = recorder.live_port().expect("a port");

@@ -42,6 +42,7 @@ fn a_recorded_run_reads_back_and_replays_to_the_same_metrics() {
         path: dir.join("run.mcap"),
         scenario: ScenarioSource::read(&file, &sets, scenario::Pacing::Lockstep).unwrap(),
         live: None,
+        split: None,
     };
     let (records, summary) = run::run_recorded(
         &plan,
@@ -159,4 +160,56 @@ fn a_recorded_run_reads_back_and_replays_to_the_same_metrics() {
     }
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
     assert!(html.contains("object_error.png") && html.contains(&plan.scenario.name));
+}
+
+/// A recording split into files of 512 KiB: every file an MCAP of its own with the run's
+/// metadata and its segment number, `team report` over them all gives the live run's metrics,
+/// and with a file gone it refuses with the reason.
+#[test]
+fn a_split_recording_replays_whole_and_one_with_a_file_gone_is_refused() {
+    use record::segments::{segment_path, Split};
+    let file = repo().join("scenarios/s4_object_circle.toml");
+    let sets = vec!["duration=0.3".to_string(), "settle=0.1".to_string()];
+    let plan = plan::plan(&Scenario::load(&file, &sets).unwrap(), &repo()).unwrap();
+    let dir = repo().join("target/test-reports/recording-split");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("run.mcap");
+    let rec = RecordOptions {
+        path: path.clone(),
+        scenario: ScenarioSource::read(&file, &sets, scenario::Pacing::Lockstep).unwrap(),
+        live: None,
+        split: Some(Split { bytes: 512 << 10, keep: None }),
+    };
+    let opts = RunOptions { distributed: false, hosts: false, progress: false, loss: Vec::new() };
+    let (records, summary) =
+        run::run_recorded(&plan, &opts, &dir, Some(&rec)).expect("the run completes");
+    let summary = summary.expect("recorded");
+    assert_eq!((summary.dropped, summary.failed, summary.error), (0, 0, None));
+    let live = evaluate::evaluate(&plan, &records, "embedded");
+    let closed: Vec<PathBuf> =
+        (1..).map(|k| segment_path(&path, k)).take_while(|p| p.exists()).collect();
+    assert!(closed.len() >= 2, "split into several files: {closed:?}");
+    for (k, p) in closed.iter().enumerate() {
+        let bytes = std::fs::read(p).unwrap();
+        assert!(!channels(&bytes).is_empty(), "{} holds messages", p.display());
+        let meta = mcap::read::LinearReader::new(&bytes)
+            .unwrap()
+            .filter_map(|r| match r.unwrap() {
+                mcap::records::Record::Metadata(m) if m.name == record::RUN_METADATA => Some(m),
+                _ => None,
+            })
+            .next()
+            .expect("the run's metadata in every file");
+        assert_eq!(meta.metadata["segment"], (k + 1).to_string());
+        assert!(meta.metadata["scenario_text"].contains("object"));
+    }
+    let (_, _, replayed) = record::replay::evaluate_recording(&path, &repo()).expect("replay");
+    assert_eq!(
+        serde_json::to_value(&replayed.metrics).unwrap(),
+        serde_json::to_value(&live.metrics).unwrap()
+    );
+    std::fs::remove_file(&closed[0]).unwrap();
+    let err = record::replay::evaluate_recording(&path, &repo()).err().expect("refused");
+    assert!(err.to_string().contains("[1] are gone"), "{err}");
 }

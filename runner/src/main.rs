@@ -232,6 +232,16 @@ struct RunArgs {
     /// Do not record the run (no run.mcap): the report is written all the same.
     #[arg(long, conflicts_with = "live")]
     no_record: bool,
+    /// Split the recording into files of about this many MB: run.mcap is closed and renamed
+    /// run.0001.mcap, run.0002.mcap, ... as the run goes (team report reads them all).
+    #[arg(long, value_name = "MB", conflicts_with = "no_record",
+          value_parser = clap::value_parser!(u64).range(1..))]
+    record_split_mb: Option<u64>,
+    /// With --record-split-mb: keep only the newest N closed files (the disk a run takes is
+    /// then bounded whatever its length; team report needs them all).
+    #[arg(long, value_name = "N", requires = "record_split_mb",
+          value_parser = clap::value_parser!(u64).range(1..))]
+    record_keep: Option<u64>,
 }
 
 #[derive(Args)]
@@ -442,7 +452,10 @@ fn run_scenario(a: RunArgs) -> Result<()> {
     }
     let source = ScenarioSource::read(&a.scenario, &a.set, pace)
         .map_err(|e| anyhow::anyhow!("reading {}: {e}", a.scenario.display()))?;
-    let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live: a.live };
+    let split = a
+        .record_split_mb
+        .map(|mb| record::segments::Split { bytes: mb << 20, keep: a.record_keep });
+    let rec = RecordOptions { path: dir.join("run.mcap"), scenario: source, live: a.live, split };
     let rec = (!a.no_record).then_some(&rec);
     let ran = run_team(&a, &plan, &opts, &dir, rec)?;
     report_run(&plan, &ran, &mode_name, &dir, a.no_record)

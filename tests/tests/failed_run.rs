@@ -84,6 +84,7 @@ fn a_run_that_loses_every_agent_returns_its_error_with_the_ticks_it_saw() {
         scenario: ScenarioSource::read(&repo().join(SCENARIO), &sets, scenario::Pacing::Lockstep)
             .expect("scenario file"),
         live: None,
+        split: None,
     };
     let failed =
         run::run_recorded(&plan, &opts, &dir, Some(&rec)).expect_err("the run ends in an error");

@@ -331,6 +331,7 @@ fn s4_at_its_full_length_holds_in_real_time_at_the_defaults_recorded() {
         path: dir.join("run.mcap"),
         scenario: ScenarioSource::read(&path, &[], Pacing::Realtime).expect("scenario file"),
         live: None,
+        split: None,
     };
     let test = "realtime::s4_at_its_full_length_holds_in_real_time_at_the_defaults_recorded";
     let Some((records, summary)) = common::machine::on_its_processors(test, || {

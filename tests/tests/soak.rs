@@ -1,7 +1,12 @@
 //! A long hold: S4's circle for two minutes in lockstep, with the whole stack and MuJoCo in the
 //! loop. Over minutes the palms creep on the object and the object sinks between them; the
 //! controller re-fits its grasp model to the measured object, so the object's error does not
-//! grow with the creep, and nothing is let go.
+//! grow with the creep, and nothing is let go. The run's memory stays flat: the run is measured
+//! as it goes, and what it keeps of its messages is bounded.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use evaluation::evaluate;
 use evaluation::report::TimeSeries;
@@ -38,12 +43,45 @@ fn window_growth(series: &TimeSeries, name: &str, range: (f64, f64)) -> f64 {
     inside[inside.len() - 1] - inside[0]
 }
 
+/// How much this process's resident memory may grow from halfway through the run to its end
+/// (the run's trace is full a third of the way in), bytes.
+const MAX_MEMORY_GROWTH: u64 = 50 << 20;
+
+/// This process's resident memory, bytes (`None` where `/proc` cannot be read).
+fn resident() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmRSS:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb << 10)
+}
+
+/// Samples of [`resident`] every 200 ms while `f` runs: (seconds since the start, bytes).
+fn sampling_memory<T>(f: impl FnOnce() -> T) -> (T, Vec<(f64, u64)>) {
+    let done = Arc::new(AtomicBool::new(false));
+    let stop = done.clone();
+    let sampler = std::thread::spawn(move || {
+        let (start, mut samples) = (Instant::now(), Vec::new());
+        while !stop.load(Ordering::Relaxed) {
+            if let Some(r) = resident() {
+                samples.push((start.elapsed().as_secs_f64(), r));
+            }
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        samples
+    });
+    let out = f();
+    done.store(true, Ordering::Relaxed);
+    (out, sampler.join().expect("the sampler"))
+}
+
 #[test]
 fn two_minutes_of_s4_hold_the_object_without_growing_error() {
     let duration = 120.0;
     let set = format!("duration={duration}");
-    let (plan, metrics, records) =
-        run_scenario_records("s4_object_circle.toml", &[&set], false, "soak-s4");
+    let ((plan, metrics, records), memory) = sampling_memory(|| {
+        run_scenario_records("s4_object_circle.toml", &[&set], false, "soak-s4")
+    });
+    assert_flat_memory(&memory);
     assert!(metrics.passed, "every check: {:?}", metrics.checks);
     assert!(records.released_at.is_none(), "nothing let go");
     let eval = evaluate::evaluate(&plan, &records, "embedded");
@@ -74,4 +112,22 @@ fn two_minutes_of_s4_hold_the_object_without_growing_error() {
         // contacts' creep under S4's squeeze is about 0.012 mm/s).
         assert!(g1 <= 0.02e-3 * WINDOW, "palm {r} slid {:.3} mm in the last {WINDOW} s", g1 * 1e3);
     }
+}
+
+/// The resident memory of the run's second half grew less than [`MAX_MEMORY_GROWTH`] above
+/// what it was halfway.
+fn assert_flat_memory(memory: &[(f64, u64)]) {
+    let Some(&(end, _)) = memory.last() else {
+        println!("no /proc/self/status here: memory not measured");
+        return;
+    };
+    let half = memory.iter().find(|(t, _)| *t >= end / 2.0).map_or(0, |(_, r)| *r);
+    let peak = memory.iter().filter(|(t, _)| *t >= end / 2.0).map(|(_, r)| *r).max();
+    let grew = peak.unwrap_or(half).saturating_sub(half);
+    println!(
+        "resident memory: {} MB halfway through {end:.0} s, at most {} MB after",
+        half >> 20,
+        peak.unwrap_or(half) >> 20
+    );
+    assert!(grew < MAX_MEMORY_GROWTH, "memory grew {} MB in the run's second half", grew >> 20);
 }

@@ -20,6 +20,7 @@
 pub mod channels;
 pub mod replay;
 pub mod scene;
+pub mod segments;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -118,6 +119,8 @@ pub struct RecordOptions {
     pub scenario: ScenarioSource,
     /// Serve the run to Foxglove on this port (127.0.0.1; 0 picks a free port).
     pub live: Option<u16>,
+    /// Split the recording into files of bounded size ([`segments`]; `None`: one file).
+    pub split: Option<segments::Split>,
 }
 
 /// The producer side: cheap to clone, never blocks.
@@ -212,6 +215,12 @@ impl Recorder {
             Tap { tx, dropped: Arc::new(AtomicU64::new(0)), sent: Arc::new(AtomicU64::new(0)) };
         let view = scene::SceneBuilder::new(plan);
         let paced = plan.scene.realtime;
+        let handle = Arc::new(std::sync::Mutex::new(Some(handle)));
+        let rotation = opts.split.map(|split| Rotation {
+            segments: segments::Segments::new(&opts.path, split),
+            handle: handle.clone(),
+            scenario: opts.scenario.clone(),
+        });
         let writer = std::thread::Builder::new()
             .name("recorder".into())
             .spawn(move || {
@@ -220,13 +229,13 @@ impl Recorder {
                 // fast as the team computes; a writer below it fell behind and dropped a tenth
                 // of a walk's messages.
                 let _background = paced.then(crate::priority::background_thread);
-                write_loop(&ctx, rx, view)
+                write_loop(&ctx, rx, view, rotation)
             })
             .map_err(|e| RecordError::Writer(e.to_string()))?;
         Ok(Recorder {
             tap,
             writer: Some(writer),
-            handle: Arc::new(std::sync::Mutex::new(Some(handle))),
+            handle,
             live,
             scenario: opts.scenario.clone(),
             path: opts.path.clone(),
@@ -265,7 +274,11 @@ impl Recorder {
         let handle = self.handle.lock().map_err(|_| RecordError::Writer("poisoned".into()))?.take();
         if let Some(h) = handle {
             let closed = h
-                .write_metadata(RUN_METADATA, run_metadata(&self.scenario, facts, &counts, dropped))
+                .write_metadata(RUN_METADATA, {
+                    let mut m = run_metadata(&self.scenario, facts, &counts, dropped);
+                    m.insert("segments".into(), counts.segments.to_string());
+                    m
+                })
                 .map_err(|e| e.to_string())
                 .and_then(|_| h.close().map(|_| ()).map_err(|e| e.to_string()));
             if let Err(e) = closed {
@@ -339,11 +352,48 @@ fn run_metadata(
     m
 }
 
-/// The writer thread: until every [`Tap`] is gone.
+/// What a splitting recorder's writer needs to close a file and open the next.
+struct Rotation {
+    segments: segments::Segments,
+    /// The file being written (shared with [`Recorder::finish`], which closes the last).
+    handle: Arc<
+        std::sync::Mutex<Option<foxglove::McapWriterHandle<std::io::BufWriter<std::fs::File>>>>,
+    >,
+    scenario: ScenarioSource,
+}
+
+impl Rotation {
+    /// Close the file being written (its metadata names the scenario and the segment), rename
+    /// it, and go on in a new one at the recording's path.
+    fn rotate(&mut self, ctx: &Arc<foxglove::Context>, path: &Path) -> Result<(), RecordError> {
+        let err = |e: String| RecordError::Mcap { path: path.display().to_string(), reason: e };
+        let mut slot = self.handle.lock().map_err(|_| RecordError::Writer("poisoned".into()))?;
+        if let Some(h) = slot.take() {
+            let mut meta =
+                run_metadata(&self.scenario, &RunFacts::default(), &Default::default(), 0);
+            meta.insert("segment".into(), (self.segments.closed + 1).to_string());
+            h.write_metadata(RUN_METADATA, meta).map_err(|e| err(e.to_string()))?;
+            h.close().map_err(|e| err(e.to_string()))?;
+        }
+        let closed = self.segments.closed_one().map_err(|e| err(e.to_string()))?;
+        tracing::info!(file = %closed.display(), "recording split");
+        let file = std::fs::File::create(path).map_err(|e| err(e.to_string()))?;
+        let next = ctx
+            .mcap_writer_with_options(write_options())
+            .create(std::io::BufWriter::new(file))
+            .map_err(|e| err(e.to_string()))?;
+        *slot = Some(next);
+        Ok(())
+    }
+}
+
+/// The writer thread: until every [`Tap`] is gone; a splitting recorder closes its file and
+/// opens the next between two messages.
 fn write_loop(
     ctx: &Arc<foxglove::Context>,
     rx: Receiver<Item>,
     mut view: scene::SceneBuilder,
+    mut rotation: Option<Rotation>,
 ) -> Result<scene::WriterCounts, RecordError> {
     let mut chans = channels::Channels::new(ctx.clone());
     let mut counts = scene::WriterCounts::default();
@@ -357,6 +407,13 @@ fn write_loop(
             }
         }
         view.observe(ctx, &item.message, log_time);
+        if let Some(r) = rotation.as_mut() {
+            if r.segments.due() {
+                let path = r.segments.path().to_path_buf();
+                r.rotate(ctx, &path)?;
+                counts.segments = r.segments.closed;
+            }
+        }
     }
     Ok(counts)
 }

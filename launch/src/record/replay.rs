@@ -6,9 +6,10 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use protocol::{CoordinatorStatus, DriveCommand, GroundTruth, TickDiagnostics, TorqueCommand};
+use protocol::{DriveCommand, GroundTruth, TickDiagnostics, TorqueCommand};
 use thiserror::Error;
 
+use super::segments::segment_path;
 use super::{RunFacts, ScenarioSource, RUN_METADATA};
 use evaluation::evaluate::{self, Evaluation};
 use evaluation::records::Records;
@@ -27,6 +28,11 @@ pub enum ReplayError {
          (not written by `team run`, or the run did not finish)"
     )]
     NoRunMetadata { path: PathBuf },
+    #[error(
+        "{path} ends a recording split into {of} earlier files, of which {missing:?} are gone \
+         (removed past --record-keep): the report the run wrote is the whole run's"
+    )]
+    MissingSegments { path: PathBuf, missing: Vec<u64>, of: u64 },
     #[error("{path}: message on {topic} does not decode: {reason}")]
     Message { path: PathBuf, topic: String, reason: String },
     #[error("the recorded scenario: {0}")]
@@ -45,24 +51,27 @@ impl From<PlanError> for ReplayError {
 /// Evaluate a recording as `team run` evaluated the run: the recorded scenario planned again
 /// (robot descriptions from `root`), the driver's records rebuilt from the messages. A run
 /// that ended in an error, or a recording short of its plan, is evaluated as failed
-/// ([`evaluate::evaluate_failed`]): its report names the error and never passes.
+/// ([`evaluate::evaluate_failed`]): its report names the error and never passes. The files are
+/// read through a bounded buffer and the messages measured as they are read, so a recording of
+/// any length is evaluated in bounded memory.
 pub fn evaluate_recording(
     path: &Path,
     root: &Path,
 ) -> Result<(Plan, Records, Evaluation), ReplayError> {
-    let rec = read(path)?;
-    if rec.dropped > 0 {
+    let info = run_info(path)?;
+    if info.dropped > 0 {
         tracing::warn!(
-            dropped = rec.dropped,
+            dropped = info.dropped,
             "the recording misses messages: the metrics may differ from the run's"
         );
     }
-    let s = rec.scenario.load()?;
+    let files = files_of(path, info.segments)?;
+    let s = info.scenario.load()?;
     let plan = plan::plan(&s, root)?;
-    let records = rec.records(plan.references.clock.settle_ticks);
-    let eval = match rec.facts.error.clone().or_else(|| cut_short(&plan, &records)) {
-        Some(e) => evaluate::evaluate_failed(&plan, &records, &rec.facts.mode, &e),
-        None => evaluate::evaluate(&plan, &records, &rec.facts.mode),
+    let records = records_of(&files, &plan, &info.facts)?;
+    let eval = match info.facts.error.clone().or_else(|| cut_short(&plan, &records)) {
+        Some(e) => evaluate::evaluate_failed(&plan, &records, &info.facts.mode, &e),
+        None => evaluate::evaluate(&plan, &records, &info.facts.mode),
     };
     Ok((plan, records, eval))
 }
@@ -79,56 +88,72 @@ fn cut_short(plan: &Plan, records: &Records) -> Option<String> {
     })
 }
 
-/// What a recording holds for the evaluation.
+/// What a recording's metadata says of its run.
 #[derive(Debug, Clone, Default)]
-pub struct Recording {
+pub struct RunInfo {
     pub scenario: ScenarioSource,
     pub facts: RunFacts,
     /// Messages the recorder dropped while recording (0: the recording is complete).
     pub dropped: u64,
-    pub truth: Vec<GroundTruth>,
-    /// What the robots' drives were commanded (`torque` keys).
-    pub torques: Vec<DriveCommand>,
-    pub diagnostics: Vec<TickDiagnostics>,
-    pub statuses: Vec<CoordinatorStatus>,
-    /// Messages per channel topic.
-    pub counts: BTreeMap<String, u64>,
+    /// Files the recording was split into before this one ([`super::segments`]).
+    pub segments: u64,
 }
 
-impl Recording {
-    /// The driver's records, with the scenario proper starting at tick `settle`.
-    pub fn records(&self, settle: u64) -> Records {
-        let mut rec = Records {
-            truth: self.truth.iter().filter(|g| g.header.tick >= settle).cloned().collect(),
-            diagnostics: self
-                .diagnostics
-                .iter()
-                .filter(|d| d.header.tick >= settle)
-                .cloned()
-                .collect(),
-            last_status: self.statuses.last().cloned(),
-            statuses: self.statuses.clone(),
-            released_at: self
-                .statuses
-                .iter()
-                .find(|s| s.mode == protocol::CoordinatorMode::Released)
-                .map(|s| s.header.tick),
-            settle_wall: self.facts.settle_wall,
-            run_wall: self.facts.run_wall,
-            machine: self.facts.machine,
-            ticks_seen: self.truth.iter().map(|g| g.header.tick + 1).max().unwrap_or(0),
-            ..Records::default()
-        };
-        for c in self.torques.iter().filter(|c| c.header.tick >= settle) {
-            rec.keep_drive(c);
-        }
-        rec
+/// The driver's records of a run of `plan` from the recording's `files` (in the order they
+/// were written), by the driver's rules: scenario ticks only. The statuses go first: a release
+/// halts the walk's references before the ticks after it are measured, as the live run
+/// measured them.
+fn records_of(files: &[PathBuf], plan: &Plan, facts: &RunFacts) -> Result<Records, ReplayError> {
+    let settle = plan.references.clock.settle_ticks;
+    let mut rec = Records::new(plan);
+    rec.settle_wall = facts.settle_wall;
+    rec.run_wall = facts.run_wall;
+    rec.machine = facts.machine;
+    for f in files {
+        each_message(f, |m| {
+            if m.schema == "team.CoordinatorStatus" {
+                rec.keep_status(m.decode()?);
+            }
+            Ok(())
+        })?;
     }
+    for f in files {
+        each_message(f, |m| {
+            match m.schema {
+                "team.GroundTruth" => {
+                    let g: GroundTruth = m.decode()?;
+                    rec.ticks_seen = rec.ticks_seen.max(g.header.tick + 1);
+                    if g.header.tick >= settle {
+                        rec.keep_truth(g);
+                    }
+                }
+                "team.DriveCommand" | "team.TorqueCommand" if m.topic.ends_with("/torque") => {
+                    let c = match m.schema {
+                        "team.DriveCommand" => m.decode()?,
+                        // Recordings of the first protocol version: torques on the torque keys.
+                        _ => torque_as_drive(m.decode()?),
+                    };
+                    if c.header.tick >= settle {
+                        rec.keep_drive(&c);
+                    }
+                }
+                "team.TickDiagnostics" => {
+                    let d: TickDiagnostics = m.decode()?;
+                    if d.header.tick >= settle {
+                        rec.keep_diagnostics(d);
+                    }
+                }
+                _ => {}
+            }
+            Ok(())
+        })?;
+    }
+    Ok(rec)
 }
 
 /// The run's metadata record into `rec`: the scenario as loaded, the run's facts, the
 /// messages dropped.
-fn run_metadata_into(meta: &BTreeMap<String, String>, rec: &mut Recording) {
+fn run_metadata_into(meta: &BTreeMap<String, String>, rec: &mut RunInfo) {
     let get = |k: &str| meta.get(k).cloned().unwrap_or_default();
     let nanos = |k: &str| Duration::from_nanos(get(k).parse::<u64>().unwrap_or(0));
     rec.scenario = ScenarioSource {
@@ -145,6 +170,7 @@ fn run_metadata_into(meta: &BTreeMap<String, String>, rec: &mut Recording) {
         error: meta.get("error").cloned(),
     };
     rec.dropped = get("dropped").parse().unwrap_or(0);
+    rec.segments = get("segments").parse().unwrap_or(0);
 }
 
 /// The machine's figures of a recording's metadata (`None` in a recording without them).
@@ -156,52 +182,108 @@ fn machine_load(meta: &BTreeMap<String, String>) -> Option<evaluation::machine::
     })
 }
 
-/// Read `path`.
-pub fn read(path: &Path) -> Result<Recording, ReplayError> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| ReplayError::Io { path: path.to_path_buf(), reason: e.to_string() })?;
-    let mcap_err =
-        |e: mcap::McapError| ReplayError::Mcap { path: path.to_path_buf(), reason: e.to_string() };
-    let mut rec = Recording::default();
+/// What the recording at `path` says of its run (its [`RUN_METADATA`] record; chunks are
+/// skipped, not decompressed).
+pub fn run_info(path: &Path) -> Result<RunInfo, ReplayError> {
     let mut meta = None;
-    for record in mcap::read::LinearReader::new(&bytes).map_err(mcap_err)? {
-        if let mcap::records::Record::Metadata(m) = record.map_err(mcap_err)? {
+    each_record(path, true, |r| {
+        if let mcap::records::Record::Metadata(m) = r {
             if m.name == RUN_METADATA {
                 meta = Some(m.metadata);
             }
         }
-    }
+        Ok(())
+    })?;
     let meta = meta.ok_or_else(|| ReplayError::NoRunMetadata { path: path.to_path_buf() })?;
-    run_metadata_into(&meta, &mut rec);
-    for message in mcap::MessageStream::new(&bytes).map_err(mcap_err)? {
-        let m = message.map_err(mcap_err)?;
-        let topic = m.channel.topic.as_str();
-        *rec.counts.entry(topic.to_string()).or_default() += 1;
-        let schema = m.channel.schema.as_ref().map(|s| s.name.as_str()).unwrap_or("");
-        let bad = |e: serde_json::Error| ReplayError::Message {
-            path: path.to_path_buf(),
-            topic: topic.to_string(),
+    let mut info = RunInfo::default();
+    run_metadata_into(&meta, &mut info);
+    Ok(info)
+}
+
+/// The files of the recording at `path` in the order they were written: the `split` it was
+/// split into before it, then itself.
+fn files_of(path: &Path, split: u64) -> Result<Vec<PathBuf>, ReplayError> {
+    let missing: Vec<u64> = (1..=split).filter(|k| !segment_path(path, *k).exists()).collect();
+    if !missing.is_empty() {
+        return Err(ReplayError::MissingSegments { path: path.to_path_buf(), missing, of: split });
+    }
+    Ok((1..=split).map(|k| segment_path(path, k)).chain([path.to_path_buf()]).collect())
+}
+
+/// One message of a recording: its channel's topic and schema name, and its bytes.
+struct Message<'a> {
+    path: &'a Path,
+    topic: &'a str,
+    schema: &'a str,
+    data: &'a [u8],
+}
+
+impl Message<'_> {
+    fn decode<T: serde::de::DeserializeOwned>(&self) -> Result<T, ReplayError> {
+        serde_json::from_slice(self.data).map_err(|e| ReplayError::Message {
+            path: self.path.to_path_buf(),
+            topic: self.topic.to_string(),
             reason: e.to_string(),
-        };
-        match schema {
-            "team.GroundTruth" => rec.truth.push(serde_json::from_slice(&m.data).map_err(bad)?),
-            "team.DriveCommand" if topic.ends_with("/torque") => {
-                rec.torques.push(serde_json::from_slice(&m.data).map_err(bad)?)
+        })
+    }
+}
+
+/// Every message of the MCAP file at `path`, in file order.
+fn each_message(
+    path: &Path,
+    mut f: impl FnMut(Message) -> Result<(), ReplayError>,
+) -> Result<(), ReplayError> {
+    let mut schemas: BTreeMap<u16, String> = BTreeMap::new();
+    let mut channels: BTreeMap<u16, (String, String)> = BTreeMap::new();
+    each_record(path, false, |r| {
+        use mcap::records::Record;
+        match r {
+            Record::Schema { header, .. } => {
+                schemas.insert(header.id, header.name);
             }
-            // Recordings of the first protocol version: torques on the torque keys.
-            "team.TorqueCommand" if topic.ends_with("/torque") => {
-                rec.torques.push(torque_as_drive(serde_json::from_slice(&m.data).map_err(bad)?))
+            Record::Channel(c) => {
+                let schema = schemas.get(&c.schema_id).cloned().unwrap_or_default();
+                channels.insert(c.id, (c.topic, schema));
             }
-            "team.TickDiagnostics" => {
-                rec.diagnostics.push(serde_json::from_slice(&m.data).map_err(bad)?)
-            }
-            "team.CoordinatorStatus" => {
-                rec.statuses.push(serde_json::from_slice(&m.data).map_err(bad)?)
+            Record::Message { header, data } => {
+                if let Some((topic, schema)) = channels.get(&header.channel_id) {
+                    f(Message { path, topic, schema, data: &data })?;
+                }
             }
             _ => {}
         }
+        Ok(())
+    })
+}
+
+/// Every record of the MCAP file at `path`, read through a bounded buffer (`chunks`: chunk
+/// records as they are, else the records inside them).
+fn each_record(
+    path: &Path,
+    chunks: bool,
+    mut f: impl FnMut(mcap::records::Record) -> Result<(), ReplayError>,
+) -> Result<(), ReplayError> {
+    use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
+    use std::io::Read;
+    let io =
+        |e: std::io::Error| ReplayError::Io { path: path.to_path_buf(), reason: e.to_string() };
+    let mcap_err =
+        |e: mcap::McapError| ReplayError::Mcap { path: path.to_path_buf(), reason: e.to_string() };
+    let mut file = std::fs::File::open(path).map_err(io)?;
+    let mut reader =
+        LinearReader::new_with_options(LinearReaderOptions::default().with_emit_chunks(chunks));
+    while let Some(event) = reader.next_event() {
+        match event.map_err(mcap_err)? {
+            LinearReadEvent::ReadRequest(n) => {
+                let read = file.read(reader.insert(n)).map_err(io)?;
+                reader.notify_read(read);
+            }
+            LinearReadEvent::Record { data, opcode } => {
+                f(mcap::parse_record(opcode, data).map_err(mcap_err)?)?;
+            }
+        }
     }
-    Ok(rec)
+    Ok(())
 }
 
 /// A torque command of the first protocol version, as the drive command without gains it was.

@@ -29,6 +29,8 @@ pub const WORLD: &str = "world";
 pub struct WriterCounts {
     pub messages: u64,
     pub failed: u64,
+    /// Files a splitting recorder closed (`super::segments`).
+    pub segments: u64,
 }
 
 struct RobotView {

@@ -78,6 +78,7 @@ fn run_with(
         scenario: ScenarioSource::read(&path, &sets, scenario::Pacing::Lockstep)
             .expect("scenario file"),
         live: None,
+        split: None,
     });
     let (records, summary) =
         run::run_recorded(&plan, &opts, &dir, rec.as_ref()).expect("the run completes");
