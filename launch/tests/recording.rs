@@ -190,6 +190,10 @@ fn a_split_recording_replays_whole_and_one_with_a_file_gone_is_refused() {
     let closed: Vec<PathBuf> =
         (1..).map(|k| segment_path(&path, k)).take_while(|p| p.exists()).collect();
     assert!(closed.len() >= 2, "split into several files: {closed:?}");
+    assert_eq!(summary.segments, closed.len() as u64, "the summary counts the files");
+    let on_disk: u64 =
+        closed.iter().chain([&path]).map(|p| std::fs::metadata(p).unwrap().len()).sum();
+    assert_eq!(summary.bytes, on_disk, "the summary's size is every file's");
     for (k, p) in closed.iter().enumerate() {
         let bytes = std::fs::read(p).unwrap();
         assert!(!channels(&bytes).is_empty(), "{} holds messages", p.display());

@@ -557,8 +557,12 @@ fn recording_summary(r: &record::RecordingSummary) -> Option<String> {
     if let Some(e) = &r.error {
         return Some(format!("the recording {} is incomplete: {e}", r.path.display()));
     }
+    let files = match r.segments {
+        0 => String::new(),
+        n => format!(" in {} files", n + 1),
+    };
     println!(
-        "  recording: {} ({:.1} MB, {} messages, {} dropped)",
+        "  recording: {} ({:.1} MB{files}, {} messages, {} dropped)",
         r.path.display(),
         r.bytes as f64 / 1e6,
         r.messages,

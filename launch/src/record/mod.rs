@@ -155,7 +155,11 @@ pub struct RecordingSummary {
     pub dropped: u64,
     /// Messages that could not be written (encoding errors).
     pub failed: u64,
+    /// Bytes of every file of the recording (a split one's closed files still on disk
+    /// included).
     pub bytes: u64,
+    /// Files it was split into before the last (`segments`; 0: one file).
+    pub segments: u64,
     /// Why the recording could not be written whole (a full disk, an unwritable file), if so:
     /// the run itself went on (the recorder only ever drops what it cannot write).
     pub error: Option<String>,
@@ -291,7 +295,9 @@ impl Recorder {
         if let Some(live) = self.live.take() {
             drop(live.stop());
         }
-        let bytes = std::fs::metadata(&self.path).map(|m| m.len()).unwrap_or(0);
+        let size = |p: &Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
+        let closed = (1..=counts.segments).map(|k| size(&segments::segment_path(&self.path, k)));
+        let bytes = size(&self.path) + closed.sum::<u64>();
         if dropped > 0 {
             tracing::warn!(dropped, "the recorder dropped messages (queue of {QUEUE} full)");
         }
@@ -304,6 +310,7 @@ impl Recorder {
             dropped,
             failed: counts.failed,
             bytes,
+            segments: counts.segments,
             error,
         })
     }
