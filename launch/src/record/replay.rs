@@ -100,9 +100,9 @@ pub struct RunInfo {
 }
 
 /// The driver's records of a run of `plan` from the recording's `files` (in the order they
-/// were written), by the driver's rules: scenario ticks only. The statuses go first: a release
-/// halts the walk's references before the ticks after it are measured, as the live run
-/// measured them.
+/// were written), by the driver's rules: scenario ticks only, in one pass in the order the
+/// driver took them (the recorder wrote them as the driver handed them over), so that a
+/// release halts the walk's references where it did in the live run.
 fn records_of(files: &[PathBuf], plan: &Plan, facts: &RunFacts) -> Result<Records, ReplayError> {
     let settle = plan.references.clock.settle_ticks;
     let mut rec = Records::new(plan);
@@ -111,15 +111,8 @@ fn records_of(files: &[PathBuf], plan: &Plan, facts: &RunFacts) -> Result<Record
     rec.machine = facts.machine;
     for f in files {
         each_message(f, |m| {
-            if m.schema == "team.CoordinatorStatus" {
-                rec.keep_status(m.decode()?);
-            }
-            Ok(())
-        })?;
-    }
-    for f in files {
-        each_message(f, |m| {
             match m.schema {
+                "team.CoordinatorStatus" => rec.keep_status(m.decode()?),
                 "team.GroundTruth" => {
                     let g: GroundTruth = m.decode()?;
                     rec.ticks_seen = rec.ticks_seen.max(g.header.tick + 1);
