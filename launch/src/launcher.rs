@@ -455,30 +455,41 @@ impl AgentArgs {
         cfg.team_every = self.team_every;
         cfg.team_delay = self.team_delay;
         cfg.answer_within = self.answer_within;
-        let session = session.clone();
-        Ok(match &self.model {
+        let agent = match &self.model {
             AgentModel::Robot { robot, .. } => {
                 let source = ModelDynamics::shared(robot.clone()).map_err(|e| {
                     LaunchError::Agent { robot: self.id.clone(), reason: e.to_string() }
                 })?;
-                tokio::spawn(async move {
-                    agent_loop::run_stallable(&session, cfg, source, stop, stall)
-                        .await
-                        .map(|_| ())
-                        .map_err(|e| e.to_string())
-                })
+                agent_loop::spawn(session, cfg, source)
             }
             AgentModel::Placeholder { joints } => {
-                let source = PlaceholderDynamics::floating(*joints);
-                tokio::spawn(async move {
-                    agent_loop::run_stallable(&session, cfg, source, stop, stall)
-                        .await
-                        .map(|_| ())
-                        .map_err(|e| e.to_string())
-                })
+                agent_loop::spawn(session, cfg, PlaceholderDynamics::floating(*joints))
             }
-        })
+        }
+        .map_err(|e| LaunchError::Agent { robot: self.id.clone(), reason: e.to_string() })?;
+        Ok(tokio::spawn(watch_agent(agent, stop, stall)))
     }
+}
+
+/// Hand the task's stop and stall signals to the agent's thread until it stops or ends on its
+/// own, then its outcome.
+async fn watch_agent(
+    agent: agent_loop::AgentThread,
+    mut stop: watch::Receiver<bool>,
+    mut stall: watch::Receiver<bool>,
+) -> Result<(), String> {
+    let mut poll = tokio::time::interval(Duration::from_millis(50));
+    let mut stall_open = true;
+    while !*stop.borrow_and_update() && !agent.is_finished() {
+        agent.stall(*stall.borrow_and_update());
+        tokio::select! {
+            r = stop.changed() => if r.is_err() { break },
+            r = stall.changed(), if stall_open => stall_open = r.is_ok(),
+            _ = poll.tick() => {}
+        }
+    }
+    let joined = tokio::task::spawn_blocking(move || agent.join()).await;
+    joined.map_err(|e| e.to_string())?.map(|_| ()).map_err(|e| e.to_string())
 }
 
 /// The smoke run's state source: placeholder joints (`qdd = tau`), one per robot, in lockstep.

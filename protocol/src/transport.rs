@@ -13,8 +13,15 @@
 //!
 //! Hot-path messages (state, dynamics, command, torque) are published with
 //! [`Qos::HotPath`]: express (no batching), real-time priority, and congestion control
-//! `Block` so that a lockstep tick never loses a message. Status and diagnostics use
-//! [`Qos::Telemetry`]: data priority, dropped under congestion.
+//! `Block` so that a lockstep tick never loses a message. A real robot's own loop publishes
+//! with [`Qos::NeverWait`] instead: the same, but dropped under congestion rather than
+//! blocking the robot. Status and diagnostics use [`Qos::Telemetry`]: data priority, dropped
+//! under congestion.
+//!
+//! Every declaration and put has an `async` form for the components that run on Tokio and a
+//! synchronous one (`*_wait`, as Zenoh's `Wait`) for a robot's loop on a thread of its own;
+//! a synchronous reader is woken by the `notify` callback of [`subscribe_notifying`] and
+//! [`watch_liveliness_notifying`].
 
 use std::marker::PhantomData;
 use std::path::PathBuf;
@@ -22,6 +29,7 @@ use std::sync::Mutex;
 use std::time::Duration;
 
 use thiserror::Error;
+use zenoh::handlers::{IntoHandler, RingChannel};
 use zenoh::pubsub::{Publisher, Subscriber};
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::sample::{Sample, SampleKind};
@@ -270,6 +278,10 @@ pub async fn close(session: Session) -> Result<(), TransportError> {
 pub enum Qos {
     /// State, dynamics, commands, torques: express, real-time priority, never dropped.
     HotPath,
+    /// A real robot's hot path: express, real-time priority, dropped under congestion (after
+    /// Zenoh's short `wait_before_drop`) rather than blocking the robot's loop; its watchdog
+    /// protects the robot when messages go missing.
+    NeverWait,
     /// Status and diagnostics: data priority, may be dropped under congestion.
     Telemetry,
 }
@@ -300,6 +312,11 @@ pub struct TypedPublisher<M> {
 impl<M: Message> TypedPublisher<M> {
     /// Declare a publisher on `key`.
     pub async fn declare(session: &Session, key: String, qos: Qos) -> Result<Self, TransportError> {
+        Self::declare_wait(session, key, qos)
+    }
+
+    /// [`TypedPublisher::declare`] for a caller outside any async runtime (or inside one).
+    pub fn declare_wait(session: &Session, key: String, qos: Qos) -> Result<Self, TransportError> {
         let encoding = match M::WIRE {
             crate::codec::Wire::Json => zenoh::bytes::Encoding::APPLICATION_JSON,
             crate::codec::Wire::Binary => zenoh::bytes::Encoding::ZENOH_BYTES,
@@ -312,6 +329,10 @@ impl<M: Message> TypedPublisher<M> {
                 .express(true)
                 .priority(Priority::RealTime)
                 .congestion_control(CongestionControl::Block),
+            Qos::NeverWait => builder
+                .express(true)
+                .priority(Priority::RealTime)
+                .congestion_control(CongestionControl::Drop),
             Qos::Telemetry => {
                 builder.priority(Priority::Data).congestion_control(CongestionControl::Drop)
             }
@@ -325,15 +346,29 @@ impl<M: Message> TypedPublisher<M> {
     pub async fn put(&mut self, msg: &M) -> Result<(), TransportError> {
         msg.validate()?;
         crate::codec::encode_into(msg, &mut self.buffer)?;
-        let key = self.publisher.key_expr().to_string();
-        self.publisher.put(self.buffer.as_slice()).await.map_err(|e| zenoh_err("put", &key, e))
+        let put = self.publisher.put(self.buffer.as_slice()).await;
+        put.map_err(|e| zenoh_err("put", self.publisher.key_expr().as_str(), e))
+    }
+
+    /// [`TypedPublisher::put`] for a synchronous caller. Allocates nothing once the buffer has
+    /// grown to the message's size.
+    pub fn put_wait(&mut self, msg: &M) -> Result<(), TransportError> {
+        msg.validate()?;
+        crate::codec::encode_into(msg, &mut self.buffer)?;
+        let put = self.publisher.put(self.buffer.as_slice()).wait();
+        put.map_err(|e| zenoh_err("put", self.publisher.key_expr().as_str(), e))
     }
 
     /// Delete the key: its subscribers see that its publisher is gone for good (an agent that
     /// leaves the team deletes its dynamics key before it withdraws its token).
     pub async fn delete(&self) -> Result<(), TransportError> {
-        let key = self.publisher.key_expr().to_string();
-        self.publisher.delete().await.map_err(|e| zenoh_err("delete", &key, e))
+        self.delete_wait()
+    }
+
+    /// [`TypedPublisher::delete`] for a synchronous caller.
+    pub fn delete_wait(&self) -> Result<(), TransportError> {
+        let delete = self.publisher.delete().wait();
+        delete.map_err(|e| zenoh_err("delete", self.publisher.key_expr().as_str(), e))
     }
 
     pub fn key(&self) -> String {
@@ -378,6 +413,24 @@ pub async fn subscribe_with_capacity(
 ) -> Result<SampleQueue, TransportError> {
     let builder =
         session.declare_subscriber(key.clone()).with(zenoh::handlers::RingChannel::new(capacity));
+    declared(|| builder.wait()).map_err(|e| zenoh_err("declare_subscriber", &key, e))
+}
+
+/// [`subscribe_with_capacity`] for a synchronous reader: `notify` is called after each sample
+/// is queued (on Zenoh's thread: it must be short and never block), so that a loop waiting
+/// for any of several queues can wake up.
+pub fn subscribe_notifying(
+    session: &Session,
+    key: String,
+    capacity: usize,
+    notify: impl Fn() + Send + Sync + 'static,
+) -> Result<SampleQueue, TransportError> {
+    let (queue, handler) = RingChannel::new(capacity).into_handler();
+    let callback = move |sample: Sample| {
+        queue.call(sample);
+        notify();
+    };
+    let builder = session.declare_subscriber(key.clone()).with((callback, handler));
     declared(|| builder.wait()).map_err(|e| zenoh_err("declare_subscriber", &key, e))
 }
 
@@ -466,6 +519,37 @@ pub async fn watch_liveliness(
 fn event_channel() -> (impl Fn(Sample) + Send + Sync + 'static, flume::Receiver<Sample>) {
     let (sender, receiver) = flume::unbounded();
     (move |sample| drop(sender.send(sample)), receiver)
+}
+
+/// [`watch_liveliness`] for a synchronous reader, with [`subscribe_notifying`]'s `notify`;
+/// the oldest events are dropped beyond `capacity`.
+pub fn watch_liveliness_notifying(
+    session: &Session,
+    key: String,
+    capacity: usize,
+    notify: impl Fn() + Send + Sync + 'static,
+) -> Result<SampleQueue, TransportError> {
+    let (queue, handler) = RingChannel::new(capacity).into_handler();
+    let callback = move |sample: Sample| {
+        queue.call(sample);
+        notify();
+    };
+    let liveliness = session.liveliness();
+    let builder =
+        liveliness.declare_subscriber(key.clone()).history(true).with((callback, handler));
+    declared(|| builder.wait()).map_err(|e| zenoh_err("liveliness subscriber", &key, e))
+}
+
+/// [`declare_member`] for a synchronous caller.
+pub fn declare_member_wait(
+    session: &Session,
+    team: &str,
+    robot: &str,
+) -> Result<zenoh::liveliness::LivelinessToken, TransportError> {
+    let key = keys::member(team, robot)?;
+    let liveliness = session.liveliness();
+    declared(|| liveliness.declare_token(key.clone()).wait())
+        .map_err(|e| zenoh_err("declare_token", &key, e))
 }
 
 /// Whether a sample of [`watch_coordinator`] says the coordinator is alive.

@@ -18,7 +18,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use clap::Parser;
-use protocol::transport::{self, Role, ZenohArgs};
+use protocol::transport::{self, Qos, Role, ZenohArgs};
 use robot_agent::core::{AgentConfig, AgentCore};
 use robot_agent::dynamics_source::PlaceholderDynamics;
 use robot_agent::hardware::{driver, DriverConfig, MockConfig, MockHardware, ZenohLink};
@@ -50,7 +50,8 @@ fn main() -> anyhow::Result<()> {
         let _ = tokio::signal::ctrl_c().await;
         on_signal.store(true, Ordering::Release);
     });
-    let mut link = ZenohLink::declare(&session, &cfg.team, &cfg.robot)?;
+    // A real robot's loop never waits on the network: what cannot go out at once is dropped.
+    let mut link = ZenohLink::declare(&session, &cfg.team, &cfg.robot, Qos::NeverWait)?;
     let report = driver::run(&mut core, &mut robot, &mut link, &rate, &stop)?;
     println!("{report:?}\nfinal joint velocities {:?}", robot.velocities());
     Ok(())

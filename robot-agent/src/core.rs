@@ -21,8 +21,8 @@
 //! Each returns [`Outputs`]: references into the core's preallocated buffers that the caller
 //! stamps (`header.stamp_ns`) and sends or applies, in the field order, then reports back with
 //! [`AgentCore::sent`] (for the latencies and counters) and, if `status` is set, publishes
-//! [`AgentCore::status`]. The Zenoh shell ([`crate::agent`]) and the synchronous hardware
-//! loop ([`crate::hardware::driver`]) are the two callers; tests drive the core tick by tick.
+//! [`AgentCore::status`]. The robot's loop ([`crate::hardware::driver`], for a simulated robot
+//! and a real one alike) is the caller; tests drive the core tick by tick.
 
 use std::time::{Duration, Instant};
 
@@ -330,6 +330,8 @@ pub struct AgentCore<S: DynamicsSource> {
     /// copy of it.
     applied: (u64, bool),
     coordinator_grace: Duration,
+    /// How often [`AgentCore::on_timer`] is due ([`AgentConfig::housekeeping_period`]).
+    housekeeping: Duration,
     drive_gains: DriveGainsMode,
     /// The gains sent with commands, once made from the first terms ([`DriveGainsMode::Inertia`]).
     gains: Option<DriveGains>,
@@ -481,6 +483,7 @@ impl<S: DynamicsSource> AgentCore<S> {
             coordinator_lost: None,
             applied: (0, false),
             coordinator_grace: cfg.coordinator_grace,
+            housekeeping: cfg.housekeeping_period(),
             drive_gains: cfg.drive_gains,
             gains: None,
             source,
@@ -1293,6 +1296,11 @@ impl<S: DynamicsSource> AgentCore<S> {
             self.gate.latest_state_tick(),
             self.gate.last_applied_tick(),
         )
+    }
+
+    /// How often the caller should call [`AgentCore::on_timer`].
+    pub fn housekeeping_period(&self) -> Duration {
+        self.housekeeping
     }
 
     pub fn team(&self) -> &str {

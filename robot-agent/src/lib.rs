@@ -10,12 +10,12 @@
 //! * [`terms`]: the per-tick dynamics terms (M, h, frame Jacobians and Jdot*v) from the model.
 //! * [`core`]: the agent's logic without I/O ([`core::AgentCore`]: `on_state`, `on_command`,
 //!   `on_contacts`, `on_timer`, each returning what to send or apply).
-//! * [`agent`]: the Zenoh shell: receives, calls the core, publishes and applies what it
-//!   returns (`robot-agent run`, the simulated robot).
-//! * [`hardware`]: the robot behind a ros2_control-style [`hardware::RobotHardware`] trait,
-//!   the synchronous loop that drives it at the robot's rate ([`hardware::driver`]), its Zenoh
-//!   link, an in-memory mock robot, and the simulated robot over Zenoh
-//!   ([`hardware::zenoh_sim`]).
+//! * [`agent`]: a simulated robot's agent (`robot-agent run`, every agent of `team run`): the
+//!   robot's loop over the simulated robot, on a thread of its own.
+//! * [`hardware`]: the robot behind a ros2_control-style [`hardware::RobotHardware`] trait and
+//!   the one loop that drives every robot, simulated or real ([`hardware::driver`]), its Zenoh
+//!   link, the bell its waits share ([`hardware::Bell`]), an in-memory mock robot, and the
+//!   simulated robot over Zenoh ([`hardware::SimRobot`]).
 //! * [`dynamics_source`]: state to dynamics terms ([`dynamics_source::ModelDynamics`] over the
 //!   robot's model; [`dynamics_source::PlaceholderDynamics`] for the smoke run and the mock),
 //!   and the robot's protocol description ([`dynamics_source::robot_description`]).

@@ -132,20 +132,24 @@ fn run_agent(cmd: RunCmd) -> anyhow::Result<String> {
         cfg.contacts.touchdown_force = f;
     }
     let rt = tokio::runtime::Runtime::new()?;
-    rt.block_on(async move {
-        let session = transport::open(&cmd.zenoh, Role::Member).await?;
-        let (tx, rx) = tokio::sync::watch::channel(false);
-        tokio::spawn(async move {
-            let _ = tokio::signal::ctrl_c().await;
-            let _ = tx.send(true);
-        });
-        match source {
-            Source::Model(s) => agent::run(&session, cfg, *s, rx).await?,
-            Source::Placeholder(s) => agent::run(&session, cfg, s, rx).await?,
-        };
-        protocol::transport::close(session).await?;
-        Ok(String::new())
-    })
+    let session = rt.block_on(transport::open(&cmd.zenoh, Role::Member))?;
+    let agent = match source {
+        Source::Model(s) => agent::spawn(&session, cfg, *s)?,
+        Source::Placeholder(s) => agent::spawn(&session, cfg, s)?,
+    };
+    // Until Ctrl-C, or until the loop ends on its own (a hardware error, the session gone).
+    rt.block_on(async {
+        let mut poll = tokio::time::interval(Duration::from_millis(100));
+        loop {
+            tokio::select! {
+                _ = tokio::signal::ctrl_c() => break,
+                _ = poll.tick() => if agent.is_finished() { break },
+            }
+        }
+    });
+    agent.join()?;
+    rt.block_on(protocol::transport::close(session))?;
+    Ok(String::new())
 }
 
 #[derive(Args)]

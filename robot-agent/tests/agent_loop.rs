@@ -17,8 +17,6 @@ use robot_agent::agent::{
     self, AgentConfig, AgentCounters, CommandDeadline, HoldGains, ModelDynamics,
 };
 use robot_model::{default_robot_path, Robot};
-use tokio::sync::watch;
-use tokio::task::JoinHandle;
 use zenoh::Session;
 
 const ID: &str = "r1";
@@ -65,8 +63,7 @@ struct Harness {
     torques: SampleQueue,
     status: SampleQueue,
     description: SampleQueue,
-    stop: watch::Sender<bool>,
-    agent: JoinHandle<Result<AgentCounters, agent::AgentError>>,
+    agent: agent::AgentThread,
 }
 
 impl Harness {
@@ -90,10 +87,8 @@ impl Harness {
         let mut c = AgentConfig::new(team, ID);
         c.status_period = Duration::from_millis(20);
         let c = cfg(c);
-        let (stop, rx) = watch::channel(false);
         let source = ModelDynamics::new(robot()).unwrap();
-        let s = session.clone();
-        let agent = tokio::spawn(async move { agent::run(&s, c, source, rx).await });
+        let agent = agent::spawn(&session, c, source).unwrap();
         let mut h = Harness {
             team: team.into(),
             session,
@@ -104,7 +99,6 @@ impl Harness {
             torques,
             status,
             description,
-            stop,
             agent,
         };
         // The first status comes after every subscription of the agent is declared.
@@ -162,8 +156,8 @@ impl Harness {
     }
 
     async fn stop(self) -> AgentCounters {
-        self.stop.send(true).unwrap();
-        let counters = tokio::time::timeout(WAIT, self.agent).await.unwrap().unwrap().unwrap();
+        let joined = tokio::task::spawn_blocking(move || self.agent.join());
+        let counters = tokio::time::timeout(WAIT, joined).await.unwrap().unwrap().unwrap().counters;
         self.session.close().await.unwrap();
         counters
     }

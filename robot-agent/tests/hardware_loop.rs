@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use coordinator::service::{self, CoordinatorConfig};
 use coordinator::{JointDamping, TeamController};
 use protocol::keys::{self, RobotTopic};
-use protocol::transport::{self, decode_sample, Role, SampleQueue, TransportError, ZenohArgs};
+use protocol::transport::{self, decode_sample, Qos, Role, SampleQueue, TransportError, ZenohArgs};
 use protocol::{
     AgentMode, AgentStatus, ContactSet, CoordinatorStatus, DynamicsTerms, RobotDescription,
     TorqueCommand,
@@ -124,7 +124,14 @@ impl TeamLink for TeamInMemory {
     fn send_description(&mut self, _: &RobotDescription) -> Result<(), TransportError> {
         Ok(())
     }
-    fn recv_command(&mut self, _deadline: Instant) -> Inbound<TorqueCommand> {
+    fn wait(&mut self, deadline: Instant) {
+        // Commands arrive as the terms go out: with none queued, nothing comes before the
+        // deadline.
+        if self.commands.is_empty() {
+            std::thread::sleep(deadline.saturating_duration_since(Instant::now()));
+        }
+    }
+    fn try_recv_command(&mut self) -> Inbound<TorqueCommand> {
         self.commands.pop_front().map_or(Inbound::Empty, Inbound::Message)
     }
     fn try_recv_contacts(&mut self) -> Inbound<ContactSet> {
@@ -146,7 +153,7 @@ impl TeamLink for TeamInMemory {
 }
 
 fn fast() -> DriverConfig {
-    DriverConfig { period: Duration::from_millis(1), command_wait: Duration::ZERO }
+    DriverConfig::new(Duration::from_millis(1))
 }
 
 #[test]
@@ -285,7 +292,9 @@ fn cfg_grace() -> Duration {
 #[test]
 fn the_loop_stops_on_deactivate_and_on_hardware_error_in_safe_mode() {
     let deadline = CommandDeadline { ticks: 5, time: None };
-    // Deactivate asked by the write of tick 10: safe mode, deactivated, a normal exit.
+    // Deactivate asked by the first write of tick 10 (the latest command, written again after
+    // the read): safe mode, deactivated, a normal exit. Written before: tick 0's command, then
+    // at ticks 1..=9 the latest command after the read and the tick's own: 19 writes.
     let mut core = AgentCore::new(&agent_config("mem2", deadline), unit_joints()).unwrap();
     let mut link = TeamInMemory::new(1000, |_| true);
     let mut hw =
@@ -295,7 +304,7 @@ fn the_loop_stops_on_deactivate_and_on_hardware_error_in_safe_mode() {
     assert_eq!((report.exit, report.cycles), (DriverExit::Deactivated { tick: 10 }, 11));
     assert_eq!(
         (core.mode(), hw.lifecycle(), hw.writes()),
-        (AgentMode::SafeMode, Lifecycle::Inactive, 10)
+        (AgentMode::SafeMode, Lifecycle::Inactive, 19)
     );
     assert_eq!(link.statuses.last().unwrap().mode, AgentMode::SafeMode);
 
@@ -372,17 +381,14 @@ async fn mock_robot_with_a_real_coordinator_over_zenoh() {
     let driver = {
         let (session, stop) = (session.clone(), stop.clone());
         std::thread::spawn(move || {
-            let mut link = ZenohLink::declare(&session, team, ID).unwrap();
+            let mut link = ZenohLink::declare(&session, team, ID, Qos::NeverWait).unwrap();
             joined_tx.send(()).unwrap();
             go_rx.recv().unwrap();
             let mut core = AgentCore::new(&agent_config(team, deadline), unit_joints()).unwrap();
             let mut hw = mock();
-            // Period 10 ms; each tick's command is waited for up to 200 ms (it comes back in
-            // well under a millisecond on an idle machine).
-            let cfg = DriverConfig {
-                period: Duration::from_millis(10),
-                command_wait: Duration::from_millis(200),
-            };
+            // Period 10 ms; each command is written to the robot as soon as it arrives (it
+            // comes back in well under a millisecond on an idle machine).
+            let cfg = DriverConfig::new(Duration::from_millis(10));
             let report = driver::run(&mut core, &mut hw, &mut link, &cfg, &stop);
             (report, hw)
         })
@@ -395,8 +401,8 @@ async fn mock_robot_with_a_real_coordinator_over_zenoh() {
     go_tx.send(()).unwrap();
 
     // 150 ticks commanded, then the coordinator stops: safe mode at the tick deadline or when
-    // its token has been gone for the agent's grace (100 ms), whichever is first (each cycle
-    // here waits up to 200 ms for its command, so the grace usually is).
+    // its token has been gone for the agent's grace (100 ms), whichever is first (at 10 ms a
+    // tick, the tick deadline usually is).
     next_where::<AgentStatus>(&status, Duration::from_secs(30), |s| s.commands_applied >= 150)
         .await;
     stop_coordinator.send(true).unwrap();
@@ -423,7 +429,7 @@ async fn mock_robot_with_a_real_coordinator_over_zenoh() {
     let (report, hw) = tokio::task::spawn_blocking(move || driver.join().unwrap()).await.unwrap();
     let report = report.unwrap();
     assert_eq!(report.exit, DriverExit::Stopped);
-    assert_eq!(report.counters.rejected, 0);
+    assert_eq!(report.counters.rejected, 0, "{report:?}");
 
     // Every tick up to the last command: that tick's damping torque, and the velocity the
     // analytic discrete decay predicts.

@@ -52,12 +52,16 @@ fn tilt_deg(q: [f64; 4]) -> f64 {
 fn spawn_agent(
     session: &zenoh::Session,
     cfg: AgentConfig,
-    stop: watch::Receiver<bool>,
+    mut stop: watch::Receiver<bool>,
 ) -> JoinHandle<Result<AgentCounters, AgentError>> {
-    let session = session.clone();
+    let robot = robot_model::Robot::load(robot_model::default_robot_path()).unwrap();
+    let agent = agent::spawn(session, cfg, ModelDynamics::new(robot).unwrap());
     tokio::spawn(async move {
-        let robot = robot_model::Robot::load(robot_model::default_robot_path()).unwrap();
-        agent::run(&session, cfg, ModelDynamics::new(robot).unwrap(), stop).await
+        let agent = agent?;
+        let _ = stop.wait_for(|s| *s).await;
+        let joined = tokio::task::spawn_blocking(move || agent.join()).await;
+        let report = joined.map_err(|e| AgentError::Thread(e.to_string()))??;
+        Ok(report.counters)
     })
 }
 

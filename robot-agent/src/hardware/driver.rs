@@ -1,24 +1,34 @@
-//! The synchronous hardware loop: at the robot's rate, one cycle per tick,
+//! The robot's loop: the one loop that drives a robot, simulated or real, through its
+//! [`RobotHardware`]. Each turn:
 //!
-//! 1. `read` the robot ([`RobotHardware::read`]); the loop numbers the tick and stamps it;
-//! 2. [`AgentCore::on_state`]; publish the terms ([`TeamLink::send_terms`], non-blocking);
-//! 3. take the commands that have arrived, waiting at most [`DriverConfig::command_wait`] for
-//!    this tick's, each through [`AgentCore::on_command`];
-//! 4. take the contact sets that have arrived ([`AgentCore::on_contacts`]);
-//! 5. take the coordinator's comings and goings ([`AgentCore::on_coordinator`],
-//!    [`AgentCore::on_coordinator_lost`]: safe mode if it is not back within the core's grace,
-//!    as in the async agent);
-//! 6. housekeeping ([`AgentCore::on_timer`]: the watchdog by time, status, description);
-//! 7. `write` the torques of this cycle ([`RobotHardware::write`]): the last applied command,
-//!    or the posture hold in safe mode; a cycle without new torques writes the previous ones
-//!    again (nothing is written before the first command or safe mode);
-//! 8. sleep until the next period.
+//! 1. the robot's state, when it is due: every period of the loop's clock
+//!    ([`ReadTiming::Period`]: a real robot's drives, the mock; the loop numbers the tick and
+//!    stamps its time), or as the robot sends it ([`ReadTiming::Robot`]: a simulator, in lockstep
+//!    or real time, whose states carry their own tick and time). `read`, then
+//!    [`AgentCore::on_state`] and the terms out ([`TeamLink::send_terms`]);
+//! 2. the commands that have arrived ([`AgentCore::on_command`]), the contact sets
+//!    ([`AgentCore::on_contacts`]) and the coordinator's comings and goings
+//!    ([`AgentCore::on_coordinator`], [`AgentCore::on_coordinator_lost`]: safe mode if it is not
+//!    back within the core's grace);
+//! 3. housekeeping when due ([`AgentCore::on_timer`]: the watchdog by time, status,
+//!    description);
+//! 4. wait until the next state is due or anything arrives ([`TeamLink::wait`]; a robot that
+//!    sends its states rings the same [`super::Bell`]).
 //!
-//! Every wait is bounded: the command wait, the sleep (one period), Zenoh puts (they drop
-//! under congestion instead of waiting). The loop stops when `stop` is set (within a period
-//! plus the command wait), when the hardware asks to deactivate (safe mode, then
-//! [`DriverExit::Deactivated`]) and when it fails (safe mode, then [`DriverError::Hardware`]).
-//! Run it on a thread of its own, outside any async runtime.
+//! A drive command is written ([`RobotHardware::write`]) as soon as the core gives one (a
+//! team command, the posture hold of safe mode, the limp drives of a fall). A
+//! [`ReadTiming::Period`] robot is also written after every read, with the latest command (as a
+//! ros2_control loop writes every cycle; a command is a trajectory, so writing it again
+//! changes nothing), whether or not its team's answer to the previous state has come: two
+//! writes a cycle when the team answers, one when it does not. Nothing is written before the
+//! first command or safe mode.
+//!
+//! Every wait is bounded: the loop's wait (a period, or the housekeeping period), and Zenoh
+//! puts (per the link's QoS). The loop stops when `stop` is set (within a period), when the
+//! hardware asks to deactivate (safe mode, then [`DriverExit::Deactivated`]) and when it fails
+//! (safe mode, then [`DriverError::Hardware`]). While `stall` is set (a fault injector's hook)
+//! it handles nothing and stays a member, as a hung process would. Run it on a thread of its
+//! own, outside any async runtime.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -27,26 +37,22 @@ use protocol::{DriveCommand, Header, Pose, RobotState, Validate};
 use thiserror::Error;
 
 use super::link::{Inbound, Presence, TeamLink, INBOX};
-use super::{HardwareError, HwStatus, RobotHardware};
+use super::{HardwareError, HwStatus, ReadTiming, RobotHardware};
 use crate::core::{AgentCore, Outputs, Sent};
 use crate::dynamics_source::DynamicsSource;
 use crate::status::AgentCounters;
 
-/// Timing of the loop.
+/// ReadTiming of the loop.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct DriverConfig {
-    /// The robot's cycle (1 ms for a 1 kHz robot).
+    /// The robot's cycle (1 ms for a 1 kHz robot) for a [`ReadTiming::Period`] robot; a
+    /// [`ReadTiming::Robot`] robot sets its own pace and this is not used.
     pub period: Duration,
-    /// After publishing a tick's terms, wait at most this long for that tick's command (0:
-    /// take only what has already arrived). With a fast coordinator the command of a tick is
-    /// then written in the same cycle; a late one is applied in a later cycle.
-    pub command_wait: Duration,
 }
 
 impl DriverConfig {
-    /// Period `period`, waiting up to half of it for each tick's command.
     pub fn new(period: Duration) -> Self {
-        DriverConfig { period, command_wait: period / 2 }
+        DriverConfig { period }
     }
 }
 
@@ -95,16 +101,30 @@ pub fn run<S: DynamicsSource, H: RobotHardware, L: TeamLink>(
     cfg: &DriverConfig,
     stop: &AtomicBool,
 ) -> Result<DriverReport, DriverError> {
+    run_stallable(core, hardware, link, cfg, stop, &AtomicBool::new(false))
+}
+
+/// [`run`], stalled while `stall` is set: alive (a member of its team) but handling nothing,
+/// as a hung process would be. A fault injector's hook (`launch::faults`); a separate process
+/// is stalled with SIGSTOP instead.
+pub fn run_stallable<S: DynamicsSource, H: RobotHardware, L: TeamLink>(
+    core: &mut AgentCore<S>,
+    hardware: &mut H,
+    link: &mut L,
+    cfg: &DriverConfig,
+    stop: &AtomicBool,
+    stall: &AtomicBool,
+) -> Result<DriverReport, DriverError> {
     if hardware.joints() != core.joints() {
         return Err(DriverError::JointCount { hardware: hardware.joints(), model: core.joints() });
     }
-    if cfg.period.is_zero() {
+    if hardware.timing() == ReadTiming::Period && cfg.period.is_zero() {
         return Err(DriverError::Config("the period must be positive".into()));
     }
     hardware.configure().map_err(|source| DriverError::Lifecycle { op: "configure", source })?;
     hardware.activate().map_err(|source| DriverError::Lifecycle { op: "activate", source })?;
     let mut d = Driver::new(core, hardware, link, cfg);
-    let result = d.cycles(stop);
+    let result = d.turns(stop, stall);
     if let Err(e) = d.hardware.deactivate() {
         tracing::warn!(robot = %d.core.robot(), "hardware deactivate failed: {e}");
     }
@@ -116,7 +136,7 @@ pub fn run<S: DynamicsSource, H: RobotHardware, L: TeamLink>(
         link_errors: d.out.link_errors,
         counters: d.core.counters().clone(),
     };
-    tracing::info!(robot = %d.core.robot(), ?report, "hardware loop stopped");
+    tracing::info!(robot = %d.core.robot(), ?report, "robot loop stopped");
     Ok(report)
 }
 
@@ -126,19 +146,29 @@ struct Driver<'a, S: DynamicsSource, H, L> {
     hardware: &'a mut H,
     link: &'a mut L,
     cfg: DriverConfig,
+    timing: ReadTiming,
     state: RobotState,
     out: Written,
-    /// Ticks read so far (the next tick's number).
+    /// States read so far.
     tick: u64,
     overruns: u64,
+    /// When the next state is due ([`ReadTiming::Period`]) and the next housekeeping.
+    next_read: Instant,
+    next_housekeeping: Instant,
 }
 
 /// The drive command this loop writes, and the link's failures.
 struct Written {
     drive: DriveCommand,
+    /// A command has been given.
     have: bool,
+    /// It is to be written now.
+    fresh: bool,
     link_errors: u64,
 }
+
+/// What a step of the loop asks of it: go on, or stop (the hardware asked to deactivate).
+type Step = Result<Option<DriverExit>, DriverError>;
 
 impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
     fn new(
@@ -161,103 +191,192 @@ impl<'a, S: DynamicsSource, H: RobotHardware, L: TeamLink> Driver<'a, S, H, L> {
         let out = Written {
             drive: DriveCommand::torque(core.team(), core.robot(), 0, vec![0.0; joints]),
             have: false,
+            fresh: false,
             link_errors: 0,
         };
-        Driver { core, hardware, link, cfg: *cfg, state, out, tick: 0, overruns: 0 }
+        let timing = hardware.timing();
+        let now = Instant::now();
+        Driver {
+            core,
+            hardware,
+            link,
+            cfg: *cfg,
+            timing,
+            state,
+            out,
+            tick: 0,
+            overruns: 0,
+            next_read: now,
+            next_housekeeping: now,
+        }
     }
 
-    fn cycles(&mut self, stop: &AtomicBool) -> Result<DriverExit, DriverError> {
+    fn turns(&mut self, stop: &AtomicBool, stall: &AtomicBool) -> Result<DriverExit, DriverError> {
         let start = Instant::now();
         let out = self.core.start(start);
         let status = send(self.link, &mut self.out, out);
         self.done(status);
-        let mut next = start;
+        // What is already there first: a coordinator present is known before the first terms
+        // go out (else they would be sent it again, as unanswered).
+        if let Some(exit) = self.inbound()? {
+            return Ok(exit);
+        }
+        (self.next_read, self.next_housekeeping) = (start, start);
         while !stop.load(Ordering::Acquire) {
-            let now = Instant::now();
-            if let Some(exit) = self.cycle(now, start)? {
-                return Ok(exit);
+            if stall.load(Ordering::Acquire) {
+                self.stalled(stop, stall);
+                continue;
             }
-            next += self.cfg.period;
-            let end = Instant::now();
-            match next.checked_duration_since(end) {
-                Some(left) => std::thread::sleep(left),
-                None => {
-                    self.overruns += 1;
-                    next = end;
-                }
+            if let Some(exit) = self.turn(start)? {
+                return Ok(exit);
             }
         }
         Ok(DriverExit::Stopped)
     }
 
-    /// One tick; `Some` when the hardware asked to deactivate.
-    fn cycle(&mut self, now: Instant, start: Instant) -> Result<Option<DriverExit>, DriverError> {
-        let tick = self.tick;
-        let status = self.hardware.read(now, &mut self.state);
-        self.tick += 1;
-        if status != HwStatus::Ok {
-            return self.halt(status, "read", tick);
+    /// One turn: the robot's state if due, what the team sent, housekeeping if due, the wait.
+    fn turn(&mut self, start: Instant) -> Step {
+        if let Some(exit) = self.states(start)? {
+            return Ok(Some(exit));
         }
-        self.state.header.tick = tick;
-        self.state.header.stamp_ns = protocol::wall_clock_ns();
-        self.state.time = now.duration_since(start).as_secs_f64();
-        match self.state.validate() {
-            Ok(()) => {
-                if let Ok(out) = self.core.on_state(&self.state, now) {
-                    let leave = out.leave_team;
-                    let status = send(self.link, &mut self.out, out);
-                    self.done(status);
-                    // The robot fell: limp, and out of the team (crate::fall).
-                    if leave {
-                        if let Err(e) = self.link.leave_team() {
-                            tracing::warn!(
-                                robot = %self.core.robot(),
-                                "leaving the team after the fall: {e}"
-                            );
-                        }
-                    }
-                }
-            }
-            Err(e) => self.core.on_undecodable_state(&e.to_string()),
+        if let Some(exit) = self.inbound()? {
+            return Ok(Some(exit));
         }
-        // A fallen robot takes no commands: nothing to wait for.
-        let wait =
-            if self.core.fallen().is_some() { Duration::ZERO } else { self.cfg.command_wait };
-        self.commands(tick, now + wait);
-        self.contacts();
-        self.coordinator();
-        let out = self.core.on_timer(Instant::now());
-        let status = send(self.link, &mut self.out, out);
-        self.done(status);
-        if self.out.have {
-            let status = self.hardware.write(&self.out.drive);
-            if status != HwStatus::Ok {
-                return self.halt(status, "write", tick);
+        let now = Instant::now();
+        if now >= self.next_housekeeping {
+            self.next_housekeeping = now + self.core.housekeeping_period();
+            let out = self.core.on_timer(now);
+            let status = send(self.link, &mut self.out, out);
+            self.done(status);
+            if let Some(exit) = self.write_fresh()? {
+                return Ok(Some(exit));
             }
         }
+        let wake = match self.timing {
+            ReadTiming::Period => self.next_read.min(self.next_housekeeping),
+            ReadTiming::Robot => self.next_housekeeping,
+        };
+        self.link.wait(wake);
         Ok(None)
     }
 
-    /// The commands that arrive until `until` or until the command of `tick` is applied (at
-    /// most [`INBOX`] of them).
-    fn commands(&mut self, tick: u64, until: Instant) {
-        for _ in 0..INBOX {
-            if self.core.last_applied_tick() == Some(tick) {
-                return;
+    /// The states due: one per period ([`ReadTiming::Period`], counting the cycles that ended
+    /// after the next was due), or those the robot has sent ([`ReadTiming::Robot`], at most
+    /// [`INBOX`] a turn).
+    fn states(&mut self, start: Instant) -> Step {
+        if self.timing == ReadTiming::Robot {
+            for _ in 0..INBOX {
+                if !self.hardware.state_ready() {
+                    break;
+                }
+                if let Some(exit) = self.cycle(Instant::now(), start)? {
+                    return Ok(Some(exit));
+                }
             }
-            match self.link.recv_command(until) {
+            return Ok(None);
+        }
+        let now = Instant::now();
+        if now < self.next_read {
+            return Ok(None);
+        }
+        let exit = self.cycle(now, start)?;
+        self.next_read += self.cfg.period;
+        let end = Instant::now();
+        if self.next_read < end {
+            self.overruns += 1;
+            self.next_read = end;
+        }
+        Ok(exit)
+    }
+
+    /// The stall: nothing handled until it ends (or the loop stops), the membership kept.
+    fn stalled(&mut self, stop: &AtomicBool, stall: &AtomicBool) {
+        tracing::warn!(robot = %self.core.robot(), "stalled: handling nothing, still a member");
+        while stall.load(Ordering::Acquire) && !stop.load(Ordering::Acquire) {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        tracing::warn!(robot = %self.core.robot(), "stall over");
+        self.next_read = Instant::now();
+    }
+
+    /// One state: read it, hand it to the core, send what the core returns and write the
+    /// drives.
+    fn cycle(&mut self, now: Instant, start: Instant) -> Step {
+        let tick = self.tick;
+        let status = self.hardware.read(now, &mut self.state);
+        self.tick += 1;
+        match status {
+            HwStatus::Ok => {}
+            HwStatus::Unreadable => {
+                self.core.on_undecodable_state("the robot's reading was unusable");
+                return Ok(None);
+            }
+            HwStatus::Error | HwStatus::Deactivate => return self.halt(status, "read", tick),
+        }
+        if self.timing == ReadTiming::Period {
+            self.state.header.tick = tick;
+            self.state.header.stamp_ns = protocol::wall_clock_ns();
+            self.state.time = now.duration_since(start).as_secs_f64();
+        }
+        match self.state.validate() {
+            Ok(()) => self.on_state(now),
+            Err(e) => self.core.on_undecodable_state(&e.to_string()),
+        }
+        // A robot on the loop's clock is written every cycle: the latest command again.
+        if self.timing == ReadTiming::Period && self.out.have {
+            self.out.fresh = true;
+        }
+        self.write_fresh()
+    }
+
+    /// A valid state to the core, its outputs out; a robot that fell leaves the team.
+    fn on_state(&mut self, now: Instant) {
+        let Ok(out) = self.core.on_state(&self.state, now) else { return };
+        let leave = out.leave_team;
+        let status = send(self.link, &mut self.out, out);
+        self.done(status);
+        // The robot fell: limp, and out of the team (crate::fall).
+        if leave {
+            if let Err(e) = self.link.leave_team() {
+                tracing::warn!(robot = %self.core.robot(), "leaving the team after the fall: {e}");
+            }
+        }
+    }
+
+    /// Write the drive command the core just gave, if it gave one.
+    fn write_fresh(&mut self) -> Step {
+        if !std::mem::take(&mut self.out.fresh) {
+            return Ok(None);
+        }
+        match self.hardware.write(&self.out.drive) {
+            HwStatus::Ok | HwStatus::Unreadable => Ok(None),
+            status => self.halt(status, "write", self.tick.saturating_sub(1)),
+        }
+    }
+
+    /// What the team sent: commands (each drive written at once), contact sets, the
+    /// coordinator's comings and goings, at most [`INBOX`] of each.
+    fn inbound(&mut self) -> Step {
+        for _ in 0..INBOX {
+            match self.link.try_recv_command() {
                 Inbound::Message(cmd) => {
                     if let Ok(out) = self.core.on_command(&cmd, Instant::now()) {
                         let status = send(self.link, &mut self.out, out);
                         self.done(status);
                     }
+                    if let Some(exit) = self.write_fresh()? {
+                        return Ok(Some(exit));
+                    }
                 }
                 Inbound::Undecodable(reason) => {
                     self.core.on_undecodable_command(&reason);
                 }
-                Inbound::Empty => return,
+                Inbound::Empty => break,
             }
         }
+        self.contacts();
+        self.coordinator();
+        self.write_fresh()
     }
 
     /// The contact sets that have arrived (at most [`INBOX`]).
@@ -353,6 +472,7 @@ fn send<L: TeamLink>(link: &mut L, w: &mut Written, out: Outputs<'_>) -> (Sent, 
         d.header.stamp_ns = protocol::wall_clock_ns();
         w.drive.clone_from(d);
         w.have = true;
+        w.fresh = true;
     }
     (sent, out.status)
 }

@@ -1,19 +1,18 @@
-//! The synchronous loop's connection to its team: what the Zenoh shell's publishers and
-//! subscribers are to [`crate::agent`], without `async` and without blocking the robot's
-//! cycle. [`ZenohLink`] is the one over Zenoh; tests may put the team in memory.
+//! The loop's connection to its team, without `async` and without blocking the robot's
+//! cycle: terms, status and description out; commands, contact sets and the coordinator's
+//! presence in, each waking the loop's [`Bell`]. [`ZenohLink`] is the one over Zenoh; tests
+//! may put the team in memory.
 
-use std::marker::PhantomData;
 use std::time::Instant;
 
 use protocol::keys::{self, RobotTopic};
-use protocol::transport::{self, decode_sample, TransportError};
+use protocol::transport::{self, decode_sample, Qos, SampleQueue, TransportError, TypedPublisher};
 use protocol::{AgentStatus, ContactSet, DynamicsTerms, Message, RobotDescription, TorqueCommand};
-use zenoh::handlers::{RingChannel, RingChannelHandler};
 use zenoh::liveliness::LivelinessToken;
-use zenoh::pubsub::{Publisher, Subscriber};
-use zenoh::qos::{CongestionControl, Priority};
 use zenoh::sample::Sample;
 use zenoh::{Session, Wait};
+
+use super::bell::Bell;
 
 /// Commands and contact sets kept while the loop is busy; the oldest are dropped beyond.
 pub const INBOX: usize = 64;
@@ -37,15 +36,19 @@ pub enum Presence {
     Went,
 }
 
-/// The team as the synchronous loop sees it. Sending never blocks (a message may be dropped
-/// under congestion, and the error is for the log: the loop carries on and its watchdog
-/// protects the robot); receiving waits at most until the deadline given.
+/// The team as the robot's loop sees it. Sending does not wait on the network beyond the
+/// link's QoS (a message may be dropped under congestion, and the error is for the log: the
+/// loop carries on and its watchdog protects the robot); receiving never waits, and
+/// [`TeamLink::wait`] is the loop's one bounded wait.
 pub trait TeamLink {
     fn send_terms(&mut self, terms: &DynamicsTerms) -> Result<(), TransportError>;
     fn send_status(&mut self, status: &AgentStatus) -> Result<(), TransportError>;
     fn send_description(&mut self, description: &RobotDescription) -> Result<(), TransportError>;
-    /// The next command, waiting until `deadline` at most.
-    fn recv_command(&mut self, deadline: Instant) -> Inbound<TorqueCommand>;
+    /// Wait until something arrives (here or at the robot, when it shares the link's bell) or
+    /// until `deadline`, whichever comes first.
+    fn wait(&mut self, deadline: Instant);
+    /// The next command, if one is waiting.
+    fn try_recv_command(&mut self) -> Inbound<TorqueCommand>;
     /// The next contact set, if one is waiting.
     fn try_recv_contacts(&mut self) -> Inbound<ContactSet>;
     /// The next change of the coordinator's presence, if one is waiting.
@@ -56,98 +59,66 @@ pub trait TeamLink {
     fn leave_team(&mut self) -> Result<(), TransportError>;
 }
 
-/// A publisher of one message type for a synchronous caller: validates, encodes into a reused
-/// buffer, and puts without waiting (congestion control `Drop`, express, real-time priority).
-pub struct SyncPublisher<M> {
-    publisher: Publisher<'static>,
-    buffer: Vec<u8>,
-    _message: PhantomData<fn(&M)>,
-}
-
-impl<M: Message> SyncPublisher<M> {
-    pub fn declare(
-        session: &Session,
-        key: String,
-        priority: Priority,
-    ) -> Result<Self, TransportError> {
-        let publisher = session
-            .declare_publisher(key.clone())
-            .express(true)
-            .priority(priority)
-            .congestion_control(CongestionControl::Drop)
-            .wait()
-            .map_err(|e| zenoh_err("declare_publisher", &key, e))?;
-        Ok(SyncPublisher { publisher, buffer: Vec::with_capacity(1024), _message: PhantomData })
-    }
-
-    pub fn put(&mut self, msg: &M) -> Result<(), TransportError> {
-        msg.validate()?;
-        protocol::codec::encode_into(msg, &mut self.buffer)?;
-        self.publisher
-            .put(self.buffer.as_slice())
-            .wait()
-            .map_err(|e| zenoh_err("put", self.publisher.key_expr().as_str(), e))
-    }
-
-    /// Delete the key: its publisher is gone for good.
-    pub fn delete(&mut self) -> Result<(), TransportError> {
-        self.publisher
-            .delete()
-            .wait()
-            .map_err(|e| zenoh_err("delete", self.publisher.key_expr().as_str(), e))
-    }
-}
-
 /// The team over Zenoh: the robot's `command` and `contacts` keys and the coordinator's
-/// liveliness token in (each a ring of [`INBOX`] samples that never blocks Zenoh), `dynamics`,
-/// `status` and `description` out, and the membership token. Declare it from a thread outside
-/// any async runtime (it uses Zenoh's blocking API).
+/// liveliness token in (each a ring of [`INBOX`] samples that never blocks Zenoh and rings the
+/// link's [`Bell`]), `dynamics`, `status` and `description` out, and the membership token.
 pub struct ZenohLink {
-    commands: Subscriber<RingChannelHandler<Sample>>,
-    contacts: Subscriber<RingChannelHandler<Sample>>,
-    coordinator: Subscriber<RingChannelHandler<Sample>>,
-    dynamics: SyncPublisher<DynamicsTerms>,
-    status: SyncPublisher<AgentStatus>,
-    description: SyncPublisher<RobotDescription>,
+    commands: SampleQueue,
+    contacts: SampleQueue,
+    coordinator: SampleQueue,
+    dynamics: TypedPublisher<DynamicsTerms>,
+    status: TypedPublisher<AgentStatus>,
+    description: TypedPublisher<RobotDescription>,
+    bell: Bell,
     /// The membership, until [`TeamLink::leave_team`].
     token: Option<LivelinessToken>,
 }
 
 impl ZenohLink {
-    /// Subscribe, declare the publishers, then join the team (so that whoever sees the robot
-    /// join can already reach it).
-    pub fn declare(session: &Session, team: &str, robot: &str) -> Result<Self, TransportError> {
+    /// Subscribe, declare the publishers (the terms with `hot`: [`Qos::HotPath`] in a
+    /// simulation, where a lockstep tick must lose nothing; [`Qos::NeverWait`] on a real
+    /// robot), then join the team, so that whoever sees the robot join can already reach it.
+    pub fn declare(
+        session: &Session,
+        team: &str,
+        robot: &str,
+        hot: Qos,
+    ) -> Result<Self, TransportError> {
+        Self::declare_with_bell(session, team, robot, hot, Bell::new())
+    }
+
+    /// [`ZenohLink::declare`] ringing `bell`, shared with a robot that sends its own states
+    /// (declared first, so that the robot's states are already subscribed when it joins).
+    pub fn declare_with_bell(
+        session: &Session,
+        team: &str,
+        robot: &str,
+        hot: Qos,
+        bell: Bell,
+    ) -> Result<Self, TransportError> {
         let key = |t| keys::robot(team, robot, t);
-        let subscribe = |key: String| {
-            session
-                .declare_subscriber(key.clone())
-                .with(RingChannel::new(INBOX))
-                .wait()
-                .map_err(|e| zenoh_err("declare_subscriber", &key, e))
+        let ring = |b: &Bell| {
+            let b = b.clone();
+            move || b.ring()
         };
-        let commands = subscribe(key(RobotTopic::Command)?)?;
-        let contacts = subscribe(keys::contacts(team, robot)?)?;
-        // A coordinator already present is reported first (history), as the async agent's
-        // `transport::watch_coordinator` does.
+        let commands =
+            transport::subscribe_notifying(session, key(RobotTopic::Command)?, INBOX, ring(&bell))?;
+        let contacts = transport::subscribe_notifying(
+            session,
+            keys::contacts(team, robot)?,
+            INBOX,
+            ring(&bell),
+        )?;
+        // A coordinator already present is reported first (history).
         let alive = keys::coordinator_alive(team)?;
-        let coordinator = session
-            .liveliness()
-            .declare_subscriber(alive.clone())
-            .history(true)
-            .with(RingChannel::new(INBOX))
-            .wait()
-            .map_err(|e| zenoh_err("declare_liveliness_subscriber", &alive, e))?;
-        let dynamics =
-            SyncPublisher::declare(session, key(RobotTopic::Dynamics)?, Priority::RealTime)?;
-        let status = SyncPublisher::declare(session, key(RobotTopic::Status)?, Priority::Data)?;
+        let coordinator =
+            transport::watch_liveliness_notifying(session, alive, INBOX, ring(&bell))?;
+        let dynamics = TypedPublisher::declare_wait(session, key(RobotTopic::Dynamics)?, hot)?;
+        let status =
+            TypedPublisher::declare_wait(session, key(RobotTopic::Status)?, Qos::Telemetry)?;
         let description =
-            SyncPublisher::declare(session, key(RobotTopic::Description)?, Priority::Data)?;
-        let member = keys::member(team, robot)?;
-        let token = session
-            .liveliness()
-            .declare_token(member.clone())
-            .wait()
-            .map_err(|e| zenoh_err("declare_token", &member, e))?;
+            TypedPublisher::declare_wait(session, key(RobotTopic::Description)?, Qos::Telemetry)?;
+        let token = Some(transport::declare_member_wait(session, team, robot)?);
         Ok(ZenohLink {
             commands,
             contacts,
@@ -155,26 +126,37 @@ impl ZenohLink {
             dynamics,
             status,
             description,
-            token: Some(token),
+            bell,
+            token,
         })
+    }
+
+    /// The bell the link rings: a robot whose states arrive on their own (a simulator) rings
+    /// it too, so that the loop waits for both at once.
+    pub fn bell(&self) -> Bell {
+        self.bell.clone()
     }
 }
 
 impl TeamLink for ZenohLink {
     fn send_terms(&mut self, terms: &DynamicsTerms) -> Result<(), TransportError> {
-        self.dynamics.put(terms)
+        self.dynamics.put_wait(terms)
     }
 
     fn send_status(&mut self, status: &AgentStatus) -> Result<(), TransportError> {
-        self.status.put(status)
+        self.status.put_wait(status)
     }
 
     fn send_description(&mut self, description: &RobotDescription) -> Result<(), TransportError> {
-        self.description.put(description)
+        self.description.put_wait(description)
     }
 
-    fn recv_command(&mut self, deadline: Instant) -> Inbound<TorqueCommand> {
-        inbound(self.commands.handler().recv_deadline(deadline))
+    fn wait(&mut self, deadline: Instant) {
+        self.bell.wait_until(deadline);
+    }
+
+    fn try_recv_command(&mut self) -> Inbound<TorqueCommand> {
+        inbound(self.commands.handler().try_recv())
     }
 
     fn try_recv_contacts(&mut self) -> Inbound<ContactSet> {
@@ -196,7 +178,7 @@ impl TeamLink for ZenohLink {
             Some(t) => {
                 // Said first: a token that vanishes alone may be a link that comes back, which
                 // the coordinator waits for (`coordinator::team::membership::DEPARTURE_GRACE`).
-                self.dynamics.delete()?;
+                self.dynamics.delete_wait()?;
                 t.undeclare().wait().map_err(|e| zenoh_err("undeclare_token", "member", e))
             }
             None => Ok(()),
@@ -209,7 +191,7 @@ impl Drop for ZenohLink {
     /// leaving is said first, as [`TeamLink::leave_team`] says it, then the token goes with it.
     fn drop(&mut self) {
         if self.token.is_some() {
-            if let Err(e) = self.dynamics.delete() {
+            if let Err(e) = self.dynamics.delete_wait() {
                 tracing::warn!("leaving not announced: {e}");
             }
         }

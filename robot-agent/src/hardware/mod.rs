@@ -1,5 +1,7 @@
-//! Where the robot is: a [`RobotHardware`] driven by the synchronous loop of [`driver`], in
-//! the shape of ros2_control's hardware interface (`hardware_interface::SystemInterface`).
+//! Where the robot is: a [`RobotHardware`] driven by the robot's loop ([`driver`]), in the
+//! shape of ros2_control's hardware interface (`hardware_interface::SystemInterface`). The
+//! same loop drives the mock, the simulated robot and a real robot's driver: only the
+//! hardware differs.
 //!
 //! ros2_control's calls, what they are here, and what the robot does in each:
 //!
@@ -15,16 +17,21 @@
 //! - `on_deactivate`, [`RobotHardware::deactivate`]: stop taking torques; leave the robot safe
 //!   (brakes, damping).
 //! - `return_type {OK, ERROR, DEACTIVATE}`, [`HwStatus`]: `Error` stops the loop with
-//!   [`driver::DriverError`]; `Deactivate` stops it after safe mode.
+//!   [`driver::DriverError`]; `Deactivate` stops it after safe mode. [`HwStatus::Unreadable`]
+//!   is ours: a reading that arrived unusable (a corrupted packet) is counted and skipped.
+//! - ros2_control's controller manager calls `read` on its own clock. Here that is
+//!   [`ReadTiming::Period`]; a simulator whose states come at its own pace (lockstep or real time)
+//!   is [`ReadTiming::Robot`], and the loop reads each state as it arrives.
 //!
-//! * [`driver`]: the synchronous loop at the robot's rate: read, core, publish terms, command,
-//!   housekeeping, write.
+//! * [`driver`]: the robot's loop: state in, core, terms out, commands in, drive command out,
+//!   housekeeping, safe mode, fall, leave.
 //! * [`link`]: the loop's non-blocking connection to the team ([`link::TeamLink`]; Zenoh:
 //!   [`link::ZenohLink`]).
+//! * [`bell`]: the one wake-up the loop waits on, rung by each of its inputs.
 //! * [`mock`]: an in-memory robot (unit-inertia joints), ros2_control's
 //!   `mock_components::GenericSystem`, for tests and for trying the loop without a robot.
-//! * [`zenoh_sim`]: the simulated robot over Zenoh as the asynchronous Zenoh shell
-//!   ([`crate::agent`]) drives it (states from the sim-bridge, torques to it).
+//! * [`sim`]: the simulated robot: states from the sim-bridge, drive commands to its simulated
+//!   drives, over Zenoh.
 //!
 //! # Plugging in a robot
 //!
@@ -36,7 +43,7 @@
 //! use std::sync::atomic::AtomicBool;
 //! use std::time::{Duration, Instant};
 //!
-//! use protocol::transport::{self, Role, ZenohArgs};
+//! use protocol::transport::{self, Qos, Role, ZenohArgs};
 //! use protocol::{DriveCommand, RobotState};
 //! use robot_agent::core::{AgentConfig, AgentCore};
 //! use robot_model::Robot;
@@ -84,7 +91,7 @@
 //!     let mut core = AgentCore::new(&cfg, model)?;
 //!     let rt = tokio::runtime::Runtime::new()?;
 //!     let session = rt.block_on(transport::open(&ZenohArgs::default(), Role::Member))?;
-//!     let mut link = ZenohLink::declare(&session, &cfg.team, &cfg.robot)?;
+//!     let mut link = ZenohLink::declare(&session, &cfg.team, &cfg.robot, Qos::NeverWait)?;
 //!     let mut robot = MyRobot { q: vec![0.0; core.joints()], v: vec![0.0; core.joints()] };
 //!     let stop = AtomicBool::new(false); // set it from a signal handler to stop
 //!     let rate = DriverConfig::new(Duration::from_millis(1)); // 1 kHz
@@ -94,19 +101,22 @@
 //! }
 //! ```
 
+pub mod bell;
 pub mod driver;
 pub mod link;
 pub mod mock;
-pub mod zenoh_sim;
+pub mod sim;
 
 use std::time::Instant;
 
 use protocol::{DriveCommand, RobotState};
 use thiserror::Error;
 
+pub use bell::Bell;
 pub use driver::{DriverConfig, DriverError, DriverExit, DriverReport};
 pub use link::{Inbound, Presence, TeamLink, ZenohLink};
 pub use mock::{MockConfig, MockFault, MockHardware};
+pub use sim::SimRobot;
 
 /// What [`RobotHardware::read`] and [`RobotHardware::write`] report, as ros2_control's
 /// `hardware_interface::return_type`.
@@ -121,6 +131,22 @@ pub enum HwStatus {
     /// the loop enters safe mode, deactivates it and stops with
     /// [`driver::DriverExit::Deactivated`].
     Deactivate,
+    /// `read` only: this reading arrived unusable (a corrupted packet, a message that does not
+    /// decode). The loop counts it and goes on without a state this time.
+    Unreadable,
+}
+
+/// Who sets the loop's pace.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReadTiming {
+    /// The loop reads the robot once every period of its own clock
+    /// ([`driver::DriverConfig::period`]), numbers the ticks and stamps their time: a real
+    /// robot's drives, the mock.
+    Period,
+    /// The robot sends its states at its own pace, each with its tick and time (a simulator,
+    /// in lockstep or real time): the loop reads each as [`RobotHardware::state_ready`] says
+    /// it has arrived, woken by the bell the robot rings ([`Bell`]).
+    Robot,
 }
 
 /// Why a lifecycle transition ([`RobotHardware::configure`], `activate`, `deactivate`) failed.
@@ -134,9 +160,10 @@ impl HardwareError {
     }
 }
 
-/// A robot the synchronous loop ([`driver::run`]) can drive. The loop calls, in this order,
-/// `configure`, `activate`, then once per cycle `read` and `write`, and `deactivate` when it
-/// stops. None of them may block for longer than a fraction of the robot's period.
+/// A robot the loop ([`driver::run`]) can drive. The loop calls, in this order, `configure`,
+/// `activate`, then `read` once per state and `write` once per drive command, and
+/// `deactivate` when it stops. None of them may block for longer than a fraction of the
+/// robot's period.
 pub trait RobotHardware {
     /// Actuated joints, in the robot description's velocity order (checked against the model).
     fn joints(&self) -> usize;
@@ -152,14 +179,27 @@ pub trait RobotHardware {
     /// (ros2_control `on_deactivate`). Called when the loop stops, for whatever reason.
     fn deactivate(&mut self) -> Result<(), HardwareError>;
 
+    /// Who sets the loop's pace ([`ReadTiming::Period`] unless the robot sends its own states).
+    fn timing(&self) -> ReadTiming {
+        ReadTiming::Period
+    }
+
+    /// [`ReadTiming::Robot`]: whether a state has arrived that `read` has not yet returned. Never
+    /// waits.
+    fn state_ready(&mut self) -> bool {
+        true
+    }
+
     /// Write the measured state into `state` at the loop's time `now`: `joint_positions` and
     /// `joint_velocities` (one entry per actuated joint; the loop sizes them to `joints()`),
     /// `base_pose` and `base_twist` (base linear velocity in the base frame, as everywhere in
-    /// the project; a fixed-base robot leaves them as they are). The loop owns the header
-    /// (team, robot, tick, stamp) and `time`.
+    /// the project; a fixed-base robot leaves them as they are). On the loop's clock
+    /// ([`ReadTiming::Period`]) the loop owns the header (team, robot, tick, stamp) and `time`; a
+    /// [`ReadTiming::Robot`] robot writes the whole state, its tick and time included.
     fn read(&mut self, now: Instant, state: &mut RobotState) -> HwStatus;
 
-    /// Execute `cmd` until the next write: per actuated joint, at the drive's own rate,
+    /// Execute `cmd` until the next write (`HwStatus::Unreadable` counts as `Ok` here): per
+    /// actuated joint, at the drive's own rate,
     /// `tau = tau_ff + kp (q_des - q) + kd (qd_des - qd)` ([`DriveCommand::effort`]), clamped to
     /// the joint's torque limit. `tau_ff` is already checked and clamped; without gains (`kp`
     /// and `kd` empty) the command is the torque `tau_ff`. Sizes are the robot's (checked).

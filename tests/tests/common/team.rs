@@ -68,19 +68,21 @@ pub fn agent_with_deadline(
     agent_with_config(session, cfg)
 }
 
-/// An agent of placeholder dynamics ([`JOINTS`] joints) configured by `cfg`.
+/// The agent of `cfg.robot` on its own thread, over the placeholder dynamics.
 pub fn agent_with_config(
     session: &Session,
     cfg: AgentConfig,
 ) -> Component<robot_agent::status::AgentCounters> {
-    let (stop, rx) = watch::channel(false);
-    let s = session.clone();
+    let (stop, mut rx) = watch::channel(false);
+    let agent = robot_agent::agent::spawn(session, cfg, PlaceholderDynamics::floating(JOINTS))
+        .expect("agent starts");
     Component {
         stop,
         task: tokio::spawn(async move {
-            robot_agent::agent::run(&s, cfg, PlaceholderDynamics::floating(JOINTS), rx)
-                .await
-                .expect("agent runs")
+            // The agent's loop runs on its own thread: this task only carries the stop.
+            let _ = rx.wait_for(|s| *s).await;
+            let report = tokio::task::spawn_blocking(move || agent.join()).await;
+            report.expect("agent joins").expect("agent runs").counters
         }),
     }
 }
