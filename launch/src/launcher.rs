@@ -488,6 +488,8 @@ async fn watch_agent(
             _ = poll.tick() => {}
         }
     }
+    // At once, not from the blocking pool's thread: a killed agent answers nothing more.
+    agent.stop();
     let joined = tokio::task::spawn_blocking(move || agent.join()).await;
     joined.map_err(|e| e.to_string())?.map(|_| ()).map_err(|e| e.to_string())
 }

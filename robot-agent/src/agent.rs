@@ -44,9 +44,21 @@ pub fn run<S: DynamicsSource>(
     stop: &AtomicBool,
     stall: &AtomicBool,
 ) -> Result<DriverReport, AgentError> {
+    run_ringing(session, cfg, source, stop, stall, Bell::new())
+}
+
+/// [`run`] on the loop's `bell`, which whoever sets `stop` rings so that the loop sees it at
+/// once.
+fn run_ringing<S: DynamicsSource>(
+    session: &Session,
+    cfg: AgentConfig,
+    source: S,
+    stop: &AtomicBool,
+    stall: &AtomicBool,
+    bell: Bell,
+) -> Result<DriverReport, AgentError> {
     let mut core = AgentCore::new(&cfg, source)?;
     let (team, id) = (cfg.team.as_str(), cfg.robot.as_str());
-    let bell = Bell::new();
     let mut robot = SimRobot::declare(session, team, id, core.joints(), bell.clone())?;
     // In lockstep the coordinator waits for every robot's terms: nothing may be dropped.
     let mut link = ZenohLink::declare_with_bell(session, team, id, Qos::HotPath, bell)?;
@@ -69,6 +81,7 @@ pub fn run<S: DynamicsSource>(
 pub struct AgentThread {
     stop: Arc<AtomicBool>,
     stall: Arc<AtomicBool>,
+    bell: Bell,
     handle: Option<JoinHandle<Result<DriverReport, AgentError>>>,
 }
 
@@ -80,18 +93,20 @@ pub fn spawn<S: DynamicsSource + Send + 'static>(
 ) -> Result<AgentThread, AgentError> {
     let stop = Arc::new(AtomicBool::new(false));
     let stall = Arc::new(AtomicBool::new(false));
-    let (s, st, session) = (stop.clone(), stall.clone(), session.clone());
+    let bell = Bell::new();
+    let (s, st, b, session) = (stop.clone(), stall.clone(), bell.clone(), session.clone());
     let handle = std::thread::Builder::new()
         .name(format!("agent-{}", cfg.robot))
-        .spawn(move || run(&session, cfg, source, &s, &st))
+        .spawn(move || run_ringing(&session, cfg, source, &s, &st, b))
         .map_err(|e| AgentError::Thread(e.to_string()))?;
-    Ok(AgentThread { stop, stall, handle: Some(handle) })
+    Ok(AgentThread { stop, stall, bell, handle: Some(handle) })
 }
 
 impl AgentThread {
-    /// Ask the loop to stop (it does within its housekeeping period).
+    /// Ask the loop to stop: it does once the turn it is in ends.
     pub fn stop(&self) {
         self.stop.store(true, Ordering::Release);
+        self.bell.ring();
     }
 
     /// Stall the agent (alive, handling nothing) or let it go on.
