@@ -35,10 +35,7 @@ if [ $# -eq 0 ]; then
         busy+=($!)
     done
     trap 'kill "${busy[@]}" 2>/dev/null || true' EXIT
-    # Not S4 at the real-time defaults across five namespaces: beside two busy loops on a
-    # two-core machine one run in ten had an agent's process starved for 100 ms (157 physics
-    # steps without a valid drive command; docs/results.md); it runs in the idle pass above.
-    cargo test --release --workspace --locked --no-fail-fast --test faults --test realtime --test hosts -- --skip at_the_defaults_across_hosts || status=$?
+    cargo test --release --workspace --locked --no-fail-fast --test faults --test realtime --test hosts || status=$?
     kill "${busy[@]}" 2>/dev/null || true
 fi
 

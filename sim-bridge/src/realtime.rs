@@ -112,7 +112,8 @@ pub async fn run_on(
         states.publish(plant, tick).await?;
         let sent = Instant::now();
         arrivals.begin_tick(side);
-        arrivals.collect(torques, deadline, tick, sent, plant, side).await?;
+        let window = Window { deadline, lost: sent + period.mul_f64(LOST_DRIVES_WINDOW) };
+        arrivals.collect(torques, window, tick, sent, plant, side).await?;
         arrivals.end_tick(tick, side);
         arrivals.lose_silent_drives(cfg, plant, tick, timeout_ticks);
         side.step(plant, &cfg.team, tick, extras).await?;
@@ -258,19 +259,27 @@ impl Arrivals {
         }
     }
 
-    /// Take torques until every robot's for `tick` came or the `deadline` passed; the states
-    /// left at `sent`.
+    /// Take torques until every robot's for `tick` came or the window passed (for a robot
+    /// whose drives are lost, its shorter part); the states left at `sent`.
     async fn collect(
         &mut self,
         torques: &transport::SampleQueue,
-        deadline: Instant,
+        window: Window,
         tick: u64,
         sent: Instant,
         plant: &mut impl Plant,
         side: &mut TickSide,
     ) -> Result<(), BridgeError> {
-        while !self.got.iter().all(|g| *g) {
-            let left = deadline.saturating_duration_since(Instant::now());
+        loop {
+            let missing = |lost: bool| {
+                self.got.iter().enumerate().any(|(i, g)| !*g && plant.drives_lost(i) == lost)
+            };
+            let until = match (missing(false), missing(true)) {
+                (true, _) => window.deadline,
+                (false, true) => window.deadline.min(window.lost),
+                (false, false) => break,
+            };
+            let left = until.saturating_duration_since(Instant::now());
             if left.is_zero() {
                 break;
             }
@@ -368,6 +377,20 @@ impl Arrivals {
             }
         }
     }
+}
+
+/// How long a tick waits for the torques of a robot whose drives are lost, in control periods
+/// from its states: long enough for an agent that answers in time (a restarted one wakes its
+/// drives with a command of the tick, `Arrivals::take`), short enough that a dead agent does
+/// not hold every tick to its deadline and the physics step past the next tick's start.
+pub const LOST_DRIVES_WINDOW: f64 = 0.5;
+
+/// When a tick stops waiting for torques: at its `deadline`, or at `lost` if only robots whose
+/// drives are lost have not answered.
+#[derive(Debug, Clone, Copy)]
+struct Window {
+    deadline: Instant,
+    lost: Instant,
 }
 
 /// The least time a tick gives the robots to answer, in control periods: a tick that starts
