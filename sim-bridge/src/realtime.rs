@@ -1,7 +1,8 @@
 //! Real-time mode: the simulation is paced by the wall clock, one control tick per control
 //! period. Each tick publishes every robot's state, collects torques until the tick's wall-clock
-//! deadline, and steps. A robot whose torques for the tick did not arrive in time keeps its last
-//! torques, and the miss is counted per robot. A run that starts in real time, with no settle
+//! deadline (for a robot whose drives are lost, until [`LOST_DRIVES_WINDOW`]), and steps. A
+//! robot whose torques for the tick did not arrive in time keeps its last torques, and the miss
+//! is counted per robot. A run that starts in real time, with no settle
 //! before it, waits at its first tick for every robot's torques ([`Start`]); after a settle the
 //! robots are driven already and the first tick is paced like the others. Torques of older ticks
 //! that arrive late are taken as the newest available, also counted as misses of the tick.
@@ -16,7 +17,7 @@
 //!
 //! A robot whose torques have not come for [`LockstepConfig::drive_timeout`] (its agent died,
 //! stalled or lost its link) loses its drives as [`crate::lockstep::AgentLoss`] says (frozen
-//! or unpowered); the next torques of a tick in time drive it again.
+//! or unpowered); the next torques of a tick that come within its window drive it again.
 //!
 //! Every tick's ground truth carries the loop as measured here ([`protocol::LoopTiming`]): per
 //! robot, state-to-torque latency (one clock: the states leave and the torques arrive here),

@@ -24,11 +24,13 @@
 //! first command or safe mode.
 //!
 //! Every wait is bounded: the loop's wait (a period, or the housekeeping period), and Zenoh
-//! puts (per the link's QoS). The loop stops when `stop` is set (within a period), when the
-//! hardware asks to deactivate (safe mode, then [`DriverExit::Deactivated`]) and when it fails
-//! (safe mode, then [`DriverError::Hardware`]). While `stall` is set (a fault injector's hook)
-//! it handles nothing and stays a member, as a hung process would. Run it on a thread of its
-//! own, outside any async runtime.
+//! puts (per the link's QoS: the simulated robot's agent blocks under congestion, as lockstep
+//! needs). The loop stops when `stop` is set: within a period, or for a robot that sends its
+//! states at its next state or housekeeping, and at once when the bell is rung with it
+//! (`agent::AgentThread::stop` does); when the hardware asks to deactivate (safe mode, then
+//! [`DriverExit::Deactivated`]); and when it fails (safe mode, then [`DriverError::Hardware`]).
+//! While `stall` is set (a fault injector's hook) it handles nothing and stays a member, as a
+//! hung process would. Run it on a thread of its own, outside any async runtime.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
