@@ -17,7 +17,9 @@
 //!
 //! A robot whose torques have not come for [`LockstepConfig::drive_timeout`] (its agent died,
 //! stalled or lost its link) loses its drives as [`crate::lockstep::AgentLoss`] says (frozen
-//! or unpowered); the next torques of a tick that come within its window drive it again.
+//! or unpowered). Torques of the tick drive it again; one of an earlier tick that comes for
+//! them (a restarted agent answering through the coordinator, after the window) makes the next
+//! tick wait for it to the deadline.
 //!
 //! Every tick's ground truth carries the loop as measured here ([`protocol::LoopTiming`]): per
 //! robot, state-to-torque latency (one clock: the states leave and the torques arrive here),
@@ -202,6 +204,9 @@ struct Arrivals {
     last_fresh: Vec<u64>,
     /// Times the drives were lost for want of torques.
     drive_losses: Vec<u64>,
+    /// The tick during which torques of an earlier tick came for lost drives: their agent is
+    /// back, and the next tick waits for it to its deadline.
+    stirring: Vec<Option<u64>>,
     rejected: u64,
 }
 
@@ -215,6 +220,7 @@ impl Arrivals {
             last_tick: vec![None; n],
             last_fresh: vec![first_tick; n],
             drive_losses: vec![0; n],
+            stirring: vec![None; n],
             rejected: 0,
         }
     }
@@ -273,7 +279,8 @@ impl Arrivals {
     ) -> Result<(), BridgeError> {
         loop {
             let missing = |lost: bool| {
-                self.got.iter().enumerate().any(|(i, g)| !*g && plant.drives_lost(i) == lost)
+                let lost_now = |i| plant.drives_lost(i) && !self.stirred(i, tick);
+                self.got.iter().enumerate().any(|(i, g)| !*g && lost_now(i) == lost)
             };
             let until = match (missing(false), missing(true)) {
                 (true, _) => window.deadline,
@@ -325,7 +332,9 @@ impl Arrivals {
         }
         if plant.drives_lost(i) {
             if cmd.header.tick < tick {
-                return; // too old to wake the drives
+                // Too old to wake the drives; the next tick waits for its agent.
+                self.stirring[i] = Some(tick);
+                return;
             }
             tracing::info!(robot = %self.robots[i], tick, "the robot's drives take torques again");
             plant.restore_drives(i);
@@ -336,6 +345,12 @@ impl Arrivals {
         if self.got[i] {
             timing.latency_us = Some(sent.elapsed().as_secs_f64() * 1e6);
         }
+    }
+
+    /// Whether torques for robot `i`'s lost drives came late during the tick before `tick` or
+    /// during it.
+    fn stirred(&self, i: usize, tick: u64) -> bool {
+        self.stirring[i].is_some_and(|t| t + 1 >= tick)
     }
 
     /// The tick's deadline passed: the torques applied go in the loop timing, and a robot
